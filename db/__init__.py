@@ -1,0 +1,1 @@
+"""The station database: devices, captures, calibrations, drift (SQLite via sqlite-utils)."""

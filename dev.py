@@ -1,0 +1,73 @@
+#!/usr/bin/env python3
+"""Bootstrap and run the calibration station with nothing but Python 3.11.
+
+    python3 dev.py station [ARGS...]   run the station (no ARGS: the TUI on the simulated device)
+    python3 dev.py test [PYTEST ARGS]  run the whole test suite
+    python3 dev.py bench [NAME]        run the benchmarks in benchmarks/
+
+The first call makes `.venv/` beside this file and installs the project into it
+(editable, with its test extra). Later calls reuse it; it is reinstalled only when
+`pyproject.toml` changes (a hash is kept in `.venv/.station-stamp`).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+STAMP = VENV / ".station-stamp"
+
+
+def _venv_python() -> Path:
+    return VENV / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+
+
+def ensure_venv() -> Path:
+    want = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    py = _venv_python()
+    if py.exists() and STAMP.exists() and STAMP.read_text().strip() == want:
+        return py
+    if not py.exists():
+        print("dev.py: creating .venv (first run only)", file=sys.stderr)
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    print("dev.py: installing the station and its dependencies into .venv", file=sys.stderr)
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "-e", f"{ROOT}[test]"], check=True)
+    STAMP.write_text(want)
+    return py
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] in {"-h", "--help", "help"}:
+        print(__doc__)
+        return 0
+    cmd, rest = argv[0], argv[1:]
+    py = ensure_venv()
+    env = dict(os.environ)
+    if cmd == "station":
+        return subprocess.call([str(py), "-m", "station", *rest], env=env)
+    if cmd == "test":
+        args = rest or ["-q", "-n", "2"]
+        rc = subprocess.call([str(py), "-m", "pytest", *args], cwd=ROOT, env=env)
+        return rc
+    if cmd == "bench":
+        names = rest or sorted(p.stem for p in (ROOT / "benchmarks").glob("bench_*.py"))
+        rc = 0
+        for name in names:
+            path = ROOT / "benchmarks" / (name if name.endswith(".py") else f"{name}.py")
+            print(f"== {path.name}", flush=True)
+            rc |= subprocess.call([str(py), str(path)], cwd=ROOT, env=env)
+        return rc
+    if cmd == "setup":
+        return 0
+    print(f"dev.py: unknown command {cmd!r} (station, test, bench, setup)", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,79 @@
+"""`station` command line: a thin layer that parses, then calls library code.
+
+Subcommands live one per module in `station/commands/`; each module defines
+`register(subparsers)` and sets `func=handler(args) -> int` on its parser.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import pkgutil
+import sys
+
+from station import __version__
+from station.errors import StationError
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--db",
+        default=argparse.SUPPRESS,
+        help="station database file (default: $STATION_DB or ~/.local/share/station/station.db)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="station",
+        description="Calibration station for inertial and magnetic sensors. "
+        "With no command, starts the operator TUI on the built-in simulated device.",
+    )
+    parser.add_argument("--version", action="version", version=f"station {__version__}")
+    _common(parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    import station.commands as commands
+
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        module = importlib.import_module(f"station.commands.{info.name}")
+        register = getattr(module, "register", None)
+        if register is None:
+            continue
+        before = set(sub.choices)
+        register(sub)
+        for name in set(sub.choices) - before:
+            _common(sub.choices[name])
+    return parser
+
+
+def db_path(args: argparse.Namespace) -> str:
+    """The database path: --db, then $STATION_DB, then the XDG default."""
+    explicit = getattr(args, "db", None) or os.environ.get("STATION_DB")
+    if explicit:
+        return explicit
+    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local", "share")
+    return os.path.join(base, "station", "station.db")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    func = getattr(args, "func", None)
+    if func is None:
+        # No subcommand: the TUI on the simulated device when it exists, else the demo.
+        tui = parser._subparsers._group_actions[0].choices.get("tui") if parser._subparsers else None
+        if tui is not None:
+            args = parser.parse_args(["tui", *(argv or [])])
+        else:
+            args = parser.parse_args(["demo-cli"])
+        func = args.func
+    try:
+        return int(func(args) or 0)
+    except StationError as exc:
+        print(f"station: {exc}", file=sys.stderr)
+        return exc.exit_status
+    except KeyboardInterrupt:
+        print("station: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0

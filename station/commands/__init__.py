@@ -1,0 +1,1 @@
+"""One module per `station` subcommand; each defines `register(subparsers)`."""

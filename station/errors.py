@@ -1,0 +1,28 @@
+"""Errors that reach the operator as one line and exit status 2."""
+from __future__ import annotations
+
+import os
+
+
+class StationError(Exception):
+    """Base of every error the CLI turns into one line and exit status 2."""
+
+    exit_status = 2
+
+
+class InputError(StationError):
+    """A file (or argument) that breaks the rules: `file:line: message`."""
+
+    def __init__(self, path: str | os.PathLike | None, line: int | None, message: str):
+        self.path = None if path is None else os.fspath(path)
+        self.line = line
+        self.message = message
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        where = [p for p in (self.path, None if self.line is None else str(self.line)) if p]
+        return ":".join(where + [" " + self.message]) if where else self.message
+
+
+class UnsupportedError(StationError):
+    """A valid capture that cannot support the procedure (too few positions, ...)."""

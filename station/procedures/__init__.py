@@ -1,0 +1,1 @@
+"""UI-free procedure logic shared by the CLI and the TUI."""
