@@ -1,0 +1,237 @@
+"""MAVLink IMU input (and output for the simulated device) through pymavlink.
+
+Messages read, and the units the station gives them (docs/protocol.md, "MAVLink"):
+
+| message | accel | gyro | mag | temperature | time |
+|---|---|---|---|---|---|
+| HIGHRES_IMU | m/s^2 (as sent) | rad/s (as sent) | gauss (as sent) | degC | time_usec |
+| SCALED_IMU, SCALED_IMU2, SCALED_IMU3 | mG / 1000 -> `g` | mrad/s / 1000 -> `rad/s` | mgauss / 1000 -> `gauss` | cdegC / 100 | time_boot_ms |
+| RAW_IMU | raw `counts` (kept as counts) | `counts` | `counts` | cdegC / 100 | time_usec |
+
+A temperature of exactly 0 in SCALED_IMU*/RAW_IMU means "no sensor" (MAVLink spec) and
+becomes NaN. HIGHRES_IMU's `fields_updated` is not used: every field is kept.
+
+One stream is recorded: the message type (and HIGHRES_IMU/RAW_IMU `id`) named by
+`source`, or else the first IMU message seen. Gaps are counted from the MAVLink packet
+sequence number of that stream's system/component, over every message it sends: `gaps`
+counts lost packets of any type, an upper bound on lost IMU samples.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pymavlink.dialects.v20 import all as mavlink2
+
+from station.device.protocol import (
+    ERROR_KINDS,
+    Header,
+    ParseStats,
+    Restart,
+    SampleBlock,
+    Unknown,
+)
+
+# type -> (accel unit, gyro unit, mag unit, value factor, temperature factor, time factor to us)
+IMU_MESSAGES: dict[str, tuple[str, str, str, float, float, float]] = {
+    "HIGHRES_IMU": ("m/s^2", "rad/s", "gauss", 1.0, 1.0, 1.0),
+    "SCALED_IMU": ("g", "rad/s", "gauss", 1e-3, 1e-2, 1e3),
+    "SCALED_IMU2": ("g", "rad/s", "gauss", 1e-3, 1e-2, 1e3),
+    "SCALED_IMU3": ("g", "rad/s", "gauss", 1e-3, 1e-2, 1e3),
+    "RAW_IMU": ("counts", "counts", "counts", 1.0, 1e-2, 1.0),
+}
+_TIME_BOOT_MS_MODULO_US = (1 << 32) * 1000  # time_boot_ms is uint32
+HIGHRES_FIELDS_ALL = 0x1FFF  # acc, gyro, mag, pressures, pressure_alt, temperature
+
+
+def _instance(msg) -> int:
+    return int(getattr(msg, "id", 0) or 0)
+
+
+def parse_source(source: str | None) -> tuple[str | None, int | None]:
+    """'HIGHRES_IMU', 'RAW_IMU:1', None -> (type, instance id or None)."""
+    if not source:
+        return None, None
+    name, _, inst = source.upper().partition(":")
+    if name not in IMU_MESSAGES:
+        raise ValueError(f"unknown MAVLink IMU message {name!r} (one of {', '.join(IMU_MESSAGES)})")
+    return name, (int(inst) if inst else None)
+
+
+class MavlinkParser:
+    """Incremental MAVLink (1 and 2) parser with the same interface as StationParser.
+
+    `feed(chunk)` returns events (a synthetic Header when the stream is chosen,
+    Restart, Unknown for nothing); samples accumulate until `take()`. Errors by kind:
+    `noise` (bytes before a frame start), `checksum` (bad CRC), `malformed` (other
+    undecodable frames). Valid messages of other types count as `unknown`.
+    """
+
+    def __init__(self, source: str | None = None) -> None:
+        self.stats = ParseStats()
+        self.header: Header | None = None
+        self.want_type, self.want_id = parse_source(source)
+        self.source: str | None = None  # e.g. 'HIGHRES_IMU:0' once chosen
+        self.system: tuple[int, int] | None = None  # (sysid, compid) of the chosen stream
+        self.heartbeats: dict[tuple[int, int], int] = {}
+        self._new_mav()
+        self._rows: list[list[float]] = []
+        self._last_seq: int | None = None
+        self._last_t_us: float | None = None
+        self._t_offset_us = 0.0
+
+    def _new_mav(self) -> None:
+        self._mav = mavlink2.MAVLink(None)
+        self._mav.robust_parsing = True
+
+    def reset_stream(self) -> None:
+        self._new_mav()
+        self._last_seq = None
+        self._last_t_us = None
+
+    def take(self) -> SampleBlock | None:
+        rows = self._rows
+        if not rows:
+            return None
+        self._rows = []
+        arr = np.array(rows, dtype=np.float64)
+        return SampleBlock(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=arr[:, 2:])
+
+    def feed(self, data: bytes) -> list:
+        events: list = []
+        if not data:
+            return events
+        st = self.stats
+        st.bytes += len(data)
+        msgs = self._mav.parse_buffer(bytes(data)) or []
+        for m in msgs:
+            t = m.get_type()
+            if t == "BAD_DATA":
+                reason = str(getattr(m, "reason", ""))
+                kind = "noise" if "prefix" in reason else "checksum" if "CRC" in reason else "malformed"
+                st.errors[kind] += 1
+                continue
+            st.sentences += 1
+            key = (m.get_srcSystem(), m.get_srcComponent())
+            if t == "HEARTBEAT":
+                self.heartbeats[key] = self.heartbeats.get(key, 0) + 1
+            imu = t in IMU_MESSAGES and self._wanted(m, t, key, events)
+            if key == self.system:
+                seq = m.get_seq()
+                if self._last_seq is not None:
+                    step = (seq - self._last_seq) % 256
+                    if step == 0:
+                        st.duplicates += 1
+                        continue
+                    if step > 1:
+                        st.gaps += step - 1
+                        st.gap_events += 1
+                self._last_seq = seq
+            if imu:
+                self._sample(m, t, events)
+            else:
+                st.unknown += 1
+        return events
+
+    def _wanted(self, m, t: str, key: tuple[int, int], events: list) -> bool:
+        inst = _instance(m)
+        if self.source is None:
+            if self.want_type is not None and t != self.want_type:
+                return False
+            if self.want_id is not None and inst != self.want_id:
+                return False
+            self.source = f"{t}:{inst}"
+            self.system = key
+            acc, gyr, mag, *_ = IMU_MESSAGES[t]
+            self.header = Header(f"mavlink-{key[0]}-{key[1]}", acc, gyr, mag, math.nan, 2, self.stats.samples)
+            events.append(self.header)
+            return True
+        return self.source == f"{t}:{inst}" and self.system == key
+
+    def _sample(self, m, t: str, events: list) -> None:
+        st = self.stats
+        _, _, _, k, kt, ktime = IMU_MESSAGES[t]
+        if t.startswith("SCALED"):
+            t_us = float(m.time_boot_ms) * ktime
+        else:
+            t_us = float(m.time_usec)
+        temp = float(getattr(m, "temperature", 0) or 0)
+        temp_c = math.nan if (temp == 0 and t != "HIGHRES_IMU") else temp * kt
+        if self._last_t_us is not None and t_us < self._last_t_us - 1e6:
+            if t.startswith("SCALED") and self._last_t_us - t_us > _TIME_BOOT_MS_MODULO_US / 2:
+                self._t_offset_us += _TIME_BOOT_MS_MODULO_US  # time_boot_ms wrapped (49.7 days)
+            else:
+                st.restarts += 1
+                events.append(Restart(st.samples))
+                self._t_offset_us = 0.0
+        self._last_t_us = t_us
+        self._rows.append([
+            m.get_seq(), t_us + self._t_offset_us,
+            m.xacc * k, m.yacc * k, m.zacc * k,
+            m.xgyro * k, m.ygyro * k, m.zgyro * k,
+            m.xmag * k, m.ymag * k, m.zmag * k,
+            temp_c,
+        ])
+        st.samples += 1
+
+
+class MavlinkEncoder:
+    """MAVLink 2 HIGHRES_IMU (and optionally SCALED_IMU) frames for the simulated device.
+
+    Values must already be in HIGHRES_IMU units (m/s^2, rad/s, gauss, degC).
+    """
+
+    def __init__(self, system: int = 1, component: int = 1, scaled_too: bool = False) -> None:
+        self._mav = mavlink2.MAVLink(None, srcSystem=system, srcComponent=component)
+        self.scaled_too = scaled_too
+
+    def _pack(self, msg) -> bytes:
+        buf = msg.pack(self._mav)
+        self._mav.seq = (self._mav.seq + 1) % 256
+        return bytes(buf)
+
+    def skip(self, n: int = 1) -> None:
+        """Advance the packet sequence as if n frames were sent (device-side drops)."""
+        self._mav.seq = (self._mav.seq + n) % 256
+
+    def heartbeat(self) -> bytes:
+        return self._pack(self._mav.heartbeat_encode(
+            mavlink2.MAV_TYPE_GENERIC, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, mavlink2.MAV_STATE_ACTIVE
+        ))
+
+    def imu(self, t_us: int, acc_mps2, gyro_rad_s, mag_gauss, temp_c: float) -> bytes:
+        """One HIGHRES_IMU frame (plus SCALED_IMU when scaled_too); NaN fields sent as 0."""
+        a = [0.0 if v != v else float(v) for v in acc_mps2]
+        w = [0.0 if v != v else float(v) for v in gyro_rad_s]
+        b = [0.0 if v != v else float(v) for v in mag_gauss]
+        tc = 0.0 if temp_c != temp_c else float(temp_c)
+        out = self._pack(self._mav.highres_imu_encode(
+            int(t_us), *a, *w, *b, 0.0, 0.0, 0.0, tc, HIGHRES_FIELDS_ALL, 0
+        ))
+        if self.scaled_too:
+            g0 = 9.80665
+
+            def i16(x: float) -> int:
+                return max(-32768, min(32767, int(round(x))))
+
+            tcs = i16(tc * 100) or 1  # 0 would mean "no sensor"
+            out += self._pack(self._mav.scaled_imu_encode(
+                (int(t_us) // 1000) % (1 << 32),
+                *(i16(v / g0 * 1000) for v in a), *(i16(v * 1000) for v in w),
+                *(i16(v * 1000) for v in b), tcs,
+            ))
+        return out
+
+
+def set_message_interval(msg_name: str, rate_hz: float, target_system: int = 1, target_component: int = 1) -> bytes:
+    """A COMMAND_LONG MAV_CMD_SET_MESSAGE_INTERVAL asking a flight controller to stream msg_name."""
+    mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+    msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{msg_name.upper()}")
+    interval_us = 1e6 / rate_hz if rate_hz > 0 else -1
+    return bytes(mav.command_long_encode(
+        target_system, target_component, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+        msg_id, interval_us, 0, 0, 0, 0, 0,
+    ).pack(mav))
+
+
+__all__ = ["IMU_MESSAGES", "MavlinkParser", "MavlinkEncoder", "set_message_interval", "ERROR_KINDS", "Unknown"]
