@@ -1,0 +1,26 @@
+"""The application's door to the database: save a calibrate result with its capture."""
+from __future__ import annotations
+
+import getpass
+import socket
+
+from station import __version__
+
+
+def open_store(path: str):
+    from db.store import Store
+
+    return Store(path)
+
+
+def save_result(path: str, capture, result: dict, *, device_id: str | None = None,
+                operator: str | None = None, accepted: bool = True) -> int:
+    """Store ``capture`` and ``result`` in one transaction; returns the calibration id."""
+    store = open_store(path)
+    try:
+        operator = operator or getpass.getuser()
+    except Exception:
+        operator = operator or None
+    return store.save_calibration(result, meta=capture.meta, columns=capture.columns, device_id=device_id,
+                                  operator=operator, accepted=accepted, software_version=__version__,
+                                  host=socket.gethostname())
