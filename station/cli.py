@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         if tui is not None:
             args = parser.parse_args(["tui", *(argv or [])])
         else:
-            args = parser.parse_args(["demo-cli"])
+            args = parser.parse_args(["walkthrough"])
         func = args.func
     try:
         return int(func(args) or 0)
