@@ -64,7 +64,8 @@ class MavlinkParser:
     `feed(chunk)` returns events (a synthetic Header when the stream is chosen,
     Restart, Unknown for nothing); samples accumulate until `take()`. Errors by kind:
     `noise` (bytes before a frame start), `checksum` (bad CRC), `malformed` (other
-    undecodable frames). Valid messages of other types count as `unknown`.
+    undecodable frames). Valid messages of other types count as `unknown`. Bytes before
+the first valid frame of a stream (or after `reset_stream()`) are not counted.
     """
 
     def __init__(self, source: str | None = None) -> None:
@@ -79,15 +80,16 @@ class MavlinkParser:
         self._last_seq: int | None = None
         self._last_t_us: float | None = None
         self._t_offset_us = 0.0
+        self._synced = False  # a valid frame seen since the stream (re)started
 
     def _new_mav(self) -> None:
         self._mav = mavlink2.MAVLink(None)
         self._mav.robust_parsing = True
 
     def reset_stream(self) -> None:
+        """Drop the partial frame (after a reconnect); sequence continuity is kept."""
         self._new_mav()
-        self._last_seq = None
-        self._last_t_us = None
+        self._synced = False
 
     def take(self) -> SampleBlock | None:
         rows = self._rows
@@ -107,11 +109,14 @@ class MavlinkParser:
         for m in msgs:
             t = m.get_type()
             if t == "BAD_DATA":
+                if not self._synced:  # the tail of a frame sent before the port opened
+                    continue
                 reason = str(getattr(m, "reason", ""))
                 kind = "noise" if "prefix" in reason else "checksum" if "CRC" in reason else "malformed"
                 st.errors[kind] += 1
                 continue
             st.sentences += 1
+            self._synced = True
             key = (m.get_srcSystem(), m.get_srcComponent())
             if t == "HEARTBEAT":
                 self.heartbeats[key] = self.heartbeats.get(key, 0) + 1

@@ -209,10 +209,14 @@ class StationParser:
       a counter out of range;
     - `too_long`: more than MAX_LINE bytes without a line end.
 
+    Bytes before the first `$` of a stream (or after `reset_stream()`) are skipped
+    without counting: a reader that opens a port mid-stream sees the tail of a line.
+
     Sequence numbers give `gaps` (samples missed; a step of d > 1 adds d - 1),
     `duplicates` (same seq again, the repeat is dropped) and `restarts` (seq 0 right
-    after a header, or a step back of more than half the range: a new segment, no
-    gap counted). The device clock is unwrapped modulo 2**32 as a signed step.
+    after a header, a step of more than half the range, or the device clock going
+    backwards: a new segment, no gap counted). The device clock is unwrapped modulo
+    2**32 (steps of less than half the range, in either direction).
     """
 
     def __init__(self) -> None:
@@ -225,6 +229,7 @@ class StationParser:
         self._last_t_raw = 0
         self._t_us = 0
         self._header_just_seen = False
+        self._synced = False  # a `$` seen since the stream (re)started
 
     # -- public
 
@@ -265,11 +270,12 @@ class StationParser:
         return SampleBlock(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=arr[:, 2:])
 
     def reset_stream(self) -> None:
-        """Forget the partial line and the counters' continuity (after a reconnect)."""
+        """Drop the partial line (after a reconnect). Sequence and clock continuity are
+        kept: a device that ran on while unplugged gets its missed samples counted as a
+        gap; one that restarted is detected as a Restart."""
         self._buf = b""
         self._skipping = False
-        self._last_seq = None
-        self._header_just_seen = False
+        self._synced = False
 
     # -- internals
 
@@ -281,6 +287,11 @@ class StationParser:
         if not line:
             return
         d = line.rfind(b"$")
+        if not self._synced:
+            # the tail of a sentence sent before the port was opened: not an error
+            if d < 0:
+                return
+            self._synced = skipping = True
         if d < 0:
             if not skipping:
                 errors["noise"] += 1
@@ -335,11 +346,13 @@ class StationParser:
             self._t_us = t_raw
         else:
             step = (seq - last) % SEQ_MODULO
-            restart = (self._header_just_seen and seq == 0 and step != 1) or step > SEQ_MODULO // 2
             if step == 0:
                 st.duplicates += 1
                 return
-            if restart:
+            dt = (t_raw - self._last_t_raw) % TIME_MODULO
+            if dt >= TIME_MODULO // 2:
+                dt -= TIME_MODULO
+            if (self._header_just_seen and seq == 0 and step != 1) or step > SEQ_MODULO // 2 or dt < 0:
                 st.restarts += 1
                 events.append(Restart(st.samples))
                 self._t_us = t_raw
@@ -347,9 +360,6 @@ class StationParser:
                 if step > 1:
                     st.gaps += step - 1
                     st.gap_events += 1
-                dt = (t_raw - self._last_t_raw) % TIME_MODULO
-                if dt >= TIME_MODULO // 2:
-                    dt -= TIME_MODULO
                 self._t_us += dt
         self._last_seq = seq
         self._last_t_raw = t_raw
