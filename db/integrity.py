@@ -1,0 +1,28 @@
+"""Tamper evidence: each calibration row carries sha256 of its content and the previous hash.
+
+`hash = sha256(canonical JSON of every column of the row except `hash`)`, where the
+row includes `prev_hash` (the hash of the same device's previous calibration, by id;
+NULL for its first) and `capture_sha256` (the digest of the stored samples). Editing
+any stored field, a capture's samples, or deleting/inserting a record in the middle
+of a device's history is then visible to `Store.verify()`. It detects edits made
+with ordinary tools; it is not a signature (someone who rewrites every later hash
+with this code cannot be caught from inside the file).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+
+# Columns of `calibrations` that form the hashed content (everything but `hash`).
+HASHED_COLUMNS = (
+    "id", "device_id", "procedure", "time", "model", "params", "uncertainty",
+    "residual_rms", "n_positions", "warnings", "result_extra", "software_version",
+    "capture_id", "capture_sha256", "operator", "host", "accepted", "supersedes",
+    "saved_at", "record_version", "prev_hash",
+)
+
+
+def record_hash(row: dict) -> str:
+    content = {k: row.get(k) for k in HASHED_COLUMNS}
+    text = json.dumps(content, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()

@@ -1,0 +1,170 @@
+"""Calibration parameters as named scalars, JSON hygiene, tolerances and drift trends.
+
+Scalar names follow the JSON path without the leading `$.` (the same names SQLite's
+`json_tree` gives, so the `calibration_params` view agrees): `B[0]`, `M[1][2]`,
+`drift[2]`, `beam1.dK`, `reference.total_nT`. Strings and booleans are not
+parameters; `null` (a non-finite number when stored) has no value.
+
+Pure Python on purpose (no numpy): `station due` and `station history` must start
+fast.
+"""
+from __future__ import annotations
+
+import json
+import math
+from datetime import datetime, timezone
+
+DAYS_PER_YEAR = 365.25
+
+
+def clean_json(obj):
+    """Plain JSON types: numpy scalars/arrays -> Python, tuples -> lists, NaN/inf -> None.
+
+    SQLite's JSON functions reject `NaN`, and SQLite itself stores a NaN REAL as NULL,
+    so non-finite numbers are stored as null everywhere (documented in the README).
+    """
+    if obj is None or isinstance(obj, (bool, str)):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, int):
+        return int(obj)
+    if isinstance(obj, dict):
+        return {str(k): clean_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [clean_json(v) for v in obj]
+    tolist = getattr(obj, "tolist", None)  # numpy arrays and scalars
+    if tolist is not None:
+        value = tolist()
+        if type(value).__name__ == "bool":
+            return bool(value)
+        return clean_json(value)
+    raise ValueError(f"cannot store {type(obj).__name__} value {obj!r} as JSON")
+
+
+def dumps(obj) -> str:
+    """Canonical JSON text of already-clean data (stable key order, no NaN)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+
+
+def flatten(obj, prefix: str = "") -> dict[str, float | None]:
+    """Scalar parameters by name, in document order; None where the value is null."""
+    out: dict[str, float | None] = {}
+    if isinstance(obj, dict):
+        for key, value in obj.items():
+            out.update(flatten(value, f"{prefix}.{key}" if prefix else str(key)))
+    elif isinstance(obj, list):
+        for i, value in enumerate(obj):
+            out.update(flatten(value, f"{prefix}[{i}]"))
+    elif obj is None:
+        out[prefix] = None
+    elif isinstance(obj, bool) or isinstance(obj, str):
+        pass
+    elif isinstance(obj, (int, float)):
+        out[prefix] = float(obj)
+    return out
+
+
+def block_of(name: str) -> str:
+    """`B[1]` -> `B`, `M[0][2]` -> `M`; names without an index are their own block."""
+    i = name.find("[")
+    return name[:i] if i > 0 else name
+
+
+def matches(name: str, pattern: str) -> bool:
+    """A parameter selector: the exact name, or a block name (`B` selects `B[0]`..`B[2]`)."""
+    return name == pattern or (block_of(name) == pattern and name != pattern and "[" in name)
+
+
+def tolerance_for(name: str, tolerances: dict) -> float | None:
+    """The tolerance for one scalar: its exact name first, else its block's."""
+    if name in tolerances:
+        return float(tolerances[name])
+    block = block_of(name)
+    if block != name and block in tolerances:
+        return float(tolerances[block])
+    return None
+
+
+# --- time -----------------------------------------------------------------------------
+
+def parse_time(value) -> datetime:
+    """ISO 8601 date or date-time (str or datetime) -> aware UTC datetime; naive = UTC."""
+    if isinstance(value, datetime):
+        dt = value
+    else:
+        text = str(value).strip()
+        if not text:
+            raise ValueError("empty date")
+        try:
+            dt = datetime.fromisoformat(text[:-1] + "+00:00" if text[-1] in "Zz" else text)
+        except ValueError:
+            raise ValueError(f"date {text!r} is not an ISO 8601 date or date-time") from None
+    if dt.tzinfo is None:
+        dt = dt.replace(tzinfo=timezone.utc)
+    return dt.astimezone(timezone.utc)
+
+
+def iso(dt: datetime) -> str:
+    """The stored form: `YYYY-MM-DDTHH:MM:SSZ` (UTC, whole seconds, sorts as text)."""
+    return dt.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def normalize_time(value) -> str:
+    return iso(parse_time(value))
+
+
+def now_utc() -> datetime:
+    return datetime.now(timezone.utc)
+
+
+def years_between(a: datetime, b: datetime) -> float:
+    return (b - a).total_seconds() / 86400.0 / DAYS_PER_YEAR
+
+
+# --- trend ----------------------------------------------------------------------------
+
+def linear_trend(t_years: list[float], values: list[float], sigmas: list[float | None]) -> dict:
+    """Weighted least-squares line `value = a + rate * t` (t in years).
+
+    Weights 1/sigma^2 when every sigma is a positive number; otherwise unweighted, with
+    the scatter about the line as the noise (needs 3 points for a rate sigma). When the
+    weighted scatter exceeds the sigmas (chi^2/dof > 1) the covariance is scaled by
+    chi^2/dof (Birge ratio), so an unmodelled wobble widens the rate's sigma instead
+    of being ignored; it is never scaled down.
+
+    Returns rate (per year), rate_sigma, intercept at t=0, value_at(t) needs both,
+    chi2_per_dof (None without dof). rate is None with fewer than 2 distinct times.
+    """
+    n = len(values)
+    out = {"n": n, "rate": None, "rate_sigma": None, "intercept": None, "chi2_per_dof": None, "t_mean": None}
+    if n == 0:
+        return out
+    weighted = all(s is not None and s > 0 and math.isfinite(s) for s in sigmas)
+    w = [1.0 / (s * s) for s in sigmas] if weighted else [1.0] * n
+    sw = sum(w)
+    tm = sum(wi * ti for wi, ti in zip(w, t_years)) / sw
+    ym = sum(wi * yi for wi, yi in zip(w, values)) / sw
+    out["t_mean"] = tm
+    sxx = sum(wi * (ti - tm) ** 2 for wi, ti in zip(w, t_years))
+    if n < 2 or sxx <= 0.0 or not math.isfinite(sxx):
+        out["intercept"] = ym
+        return out
+    sxy = sum(wi * (ti - tm) * (yi - ym) for wi, ti, yi in zip(w, t_years, values))
+    rate = sxy / sxx
+    intercept = ym - rate * tm
+    chi2 = sum(wi * (yi - intercept - rate * ti) ** 2 for wi, ti, yi in zip(w, t_years, values))
+    dof = n - 2
+    var_rate = None
+    if weighted:
+        scale = max(1.0, chi2 / dof) if dof > 0 else 1.0
+        var_rate = scale / sxx
+    elif dof > 0:
+        var_rate = (chi2 / dof) / sxx
+    out.update(
+        rate=rate,
+        rate_sigma=None if var_rate is None else math.sqrt(var_rate),
+        intercept=intercept,
+        chi2_per_dof=(chi2 / dof) if dof > 0 else None,
+    )
+    return out

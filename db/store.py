@@ -1,0 +1,750 @@
+"""`Store`: the station's SQLite database of devices, captures and calibrations.
+
+One file, WAL journal, foreign keys on, a 30 s busy timeout so that two processes
+saving at once take turns instead of failing. Every write is one `BEGIN IMMEDIATE`
+transaction: a process killed mid-save leaves the previous state intact.
+
+Conventions:
+- Times are stored as UTC `YYYY-MM-DDTHH:MM:SSZ`; inputs may be any ISO 8601 date or
+  date-time (naive = UTC).
+- A calibration's time is the `time` argument, else the capture's `date`, else now.
+- Non-finite numbers in results are stored as JSON null (see `db.params.clean_json`).
+- Tolerances are per parameter name (`B[0]`) or per block (`B` = every element of B):
+  the largest change from the value in use (the last accepted calibration) that the
+  application can live with, in the parameter's own units.
+- Parameter drift rates are per year (365.25 d).
+
+Neither numpy nor sqlite-utils is imported at module level: opening an up-to-date
+database and reading history must stay fast for the CLI.
+"""
+from __future__ import annotations
+
+import json
+import os
+import socket
+import sqlite3
+import threading
+from contextlib import contextmanager
+from datetime import timedelta
+
+from db import params as P
+from db.codec import capture_digest, decode_column, encode_column
+from db.integrity import record_hash
+from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
+
+BUSY_TIMEOUT_S = 30.0
+
+# Sensor kinds each procedure calibrates (merged into devices.sensor_kinds on save).
+PROCEDURE_KINDS = {
+    "accel-tabletop": "accel",
+    "accel-centrifuge": "accel",
+    "compass": "mag",
+    "gyro-drift": "gyro",
+    "ldv": "ldv",
+}
+
+_RESULT_COLUMNS = ("procedure", "device", "model", "params", "uncertainty", "residual_rms", "n_positions", "warnings")
+
+
+class NotFound(LookupError):
+    """No such device, capture or calibration (message names it)."""
+
+    def __str__(self) -> str:  # LookupError would quote the message
+        return str(self.args[0]) if self.args else "not found"
+
+
+def default_db_path() -> str:
+    """`$STATION_DB`, else `${XDG_DATA_HOME:-~/.local/share}/station/station.db`."""
+    explicit = os.environ.get("STATION_DB")
+    if explicit:
+        return explicit
+    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local", "share")
+    return os.path.join(base, "station", "station.db")
+
+
+def _loads(text, default=None):
+    return default if text is None else json.loads(text)
+
+
+class Store:
+    """The station database. Thread-safe (one lock); open one per process."""
+
+    def __init__(self, path: str):
+        self.path = os.fspath(path)
+        memory = self.path == ":memory:" or self.path.startswith("file::memory:")
+        if not memory:
+            parent = os.path.dirname(os.path.abspath(self.path))
+            os.makedirs(parent, exist_ok=True)
+        self._lock = threading.RLock()
+        self.conn = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
+        self.conn.row_factory = sqlite3.Row
+        self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
+        self.conn.execute("PRAGMA foreign_keys = ON")
+        if not memory and self.conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+            self.conn.execute("PRAGMA journal_mode = WAL")
+        if self._pending_migrations():
+            from db.migrations import apply
+
+            apply(self.conn)
+
+    # --- plumbing -----------------------------------------------------------------------
+
+    def _pending_migrations(self) -> list[str]:
+        try:
+            rows = self.conn.execute(
+                "SELECT name FROM _sqlite_migrations WHERE migration_set = ?", [MIGRATION_SET]
+            ).fetchall()
+        except sqlite3.OperationalError:
+            return list(MIGRATION_NAMES)
+        done = {r[0] for r in rows}
+        return [n for n in MIGRATION_NAMES if n not in done]
+
+    @property
+    def database(self):
+        """This connection as a `sqlite_utils.Database` (imports sqlite-utils on first use)."""
+        from sqlite_utils import Database
+
+        return Database(self.conn)
+
+    @contextmanager
+    def _write(self):
+        """One write transaction holding the database's write lock from its start."""
+        with self._lock:
+            self.conn.execute("BEGIN IMMEDIATE")
+            try:
+                yield self.conn
+            except BaseException:
+                if self.conn.in_transaction:
+                    self.conn.execute("ROLLBACK")
+                raise
+            self.conn.execute("COMMIT")
+
+    def _query(self, sql: str, args=()) -> list[sqlite3.Row]:
+        with self._lock:
+            return self.conn.execute(sql, args).fetchall()
+
+    def close(self) -> None:
+        with self._lock:
+            self.conn.close()
+
+    def __enter__(self) -> "Store":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # --- devices ------------------------------------------------------------------------
+
+    @staticmethod
+    def _check_id(device_id) -> str:
+        if not isinstance(device_id, str) or not device_id.strip():
+            raise ValueError(f"device id must be a non-empty string, got {device_id!r}")
+        return device_id
+
+    @staticmethod
+    def _device_dict(row) -> dict:
+        return {
+            "id": row["id"],
+            "model": row["model"],
+            "sensor_kinds": _loads(row["sensor_kinds"], []),
+            "notes": row["notes"],
+            "interval_days": row["interval_days"],
+            "tolerances": _loads(row["tolerances"], {}),
+            "created": row["created"],
+        }
+
+    def _ensure_device(self, conn, device_id: str, kind: str | None = None) -> None:
+        row = conn.execute("SELECT sensor_kinds FROM devices WHERE id = ?", [device_id]).fetchone()
+        if row is None:
+            conn.execute(
+                "INSERT INTO devices (id, sensor_kinds, tolerances, created) VALUES (?, ?, '{}', ?)",
+                [device_id, json.dumps([kind] if kind else []), P.iso(P.now_utc())],
+            )
+            return
+        kinds = _loads(row["sensor_kinds"], [])
+        if kind and kind not in kinds:
+            conn.execute("UPDATE devices SET sensor_kinds = ? WHERE id = ?", [json.dumps(kinds + [kind]), device_id])
+
+    def add_device(
+        self,
+        device_id: str,
+        *,
+        model: str | None = None,
+        sensor_kinds: list[str] | None = None,
+        notes: str | None = None,
+        interval_days: float | None = None,
+        tolerances: dict | None = None,
+    ) -> dict:
+        """Add a device, or update the fields given (not None) of an existing one.
+
+        `tolerances` merges into the stored ones; a value of None removes that name.
+        Changing the interval or tolerances updates the device's recalibration schedule.
+        """
+        self._check_id(device_id)
+        if interval_days is not None:
+            interval_days = float(interval_days)
+            if not interval_days > 0:
+                raise ValueError(f"interval_days must be positive, got {interval_days}")
+        if tolerances is not None:
+            for name, value in tolerances.items():
+                if value is not None and not (isinstance(value, (int, float)) and value > 0):
+                    raise ValueError(f"tolerance {name!r} must be a positive number, got {value!r}")
+        with self._write() as conn:
+            self._ensure_device(conn, device_id)
+            row = conn.execute("SELECT * FROM devices WHERE id = ?", [device_id]).fetchone()
+            current = self._device_dict(row)
+            if model is not None:
+                current["model"] = model
+            if notes is not None:
+                current["notes"] = notes
+            if sensor_kinds is not None:
+                current["sensor_kinds"] = list(dict.fromkeys(str(k) for k in sensor_kinds))
+            if interval_days is not None:
+                current["interval_days"] = interval_days
+            if tolerances is not None:
+                tol = dict(current["tolerances"])
+                for name, value in tolerances.items():
+                    if value is None:
+                        tol.pop(str(name), None)
+                    else:
+                        tol[str(name)] = float(value)
+                current["tolerances"] = tol
+            conn.execute(
+                "UPDATE devices SET model = ?, sensor_kinds = ?, notes = ?, interval_days = ?, tolerances = ? WHERE id = ?",
+                [
+                    current["model"],
+                    json.dumps(current["sensor_kinds"], ensure_ascii=False),
+                    current["notes"],
+                    current["interval_days"],
+                    json.dumps(current["tolerances"], ensure_ascii=False, sort_keys=True),
+                    device_id,
+                ],
+            )
+            if interval_days is not None or tolerances is not None:
+                for (procedure,) in conn.execute(
+                    "SELECT DISTINCT procedure FROM calibrations WHERE device_id = ? AND accepted = 1", [device_id]
+                ).fetchall():
+                    self._update_schedule(conn, device_id, procedure)
+        return self.get_device(device_id)
+
+    def get_device(self, device_id: str) -> dict | None:
+        rows = self._query("SELECT * FROM devices WHERE id = ?", [device_id])
+        return self._device_dict(rows[0]) if rows else None
+
+    def list_devices(self) -> list[dict]:
+        """Every device, by id, with `n_calibrations` and `last_calibrated` (accepted only)."""
+        rows = self._query(
+            """
+            SELECT d.*, (SELECT count(*) FROM calibrations c WHERE c.device_id = d.id) AS n_calibrations,
+                   (SELECT max(s.last_calibrated) FROM schedule s WHERE s.device_id = d.id) AS last_calibrated
+            FROM devices d ORDER BY d.id
+            """
+        )
+        out = []
+        for r in rows:
+            d = self._device_dict(r)
+            d["n_calibrations"] = r["n_calibrations"]
+            d["last_calibrated"] = r["last_calibrated"]
+            out.append(d)
+        return out
+
+    # --- captures -----------------------------------------------------------------------
+
+    def _insert_capture(self, conn, *, device_id, procedure, meta, columns, operator, host) -> tuple[int, str]:
+        meta = {str(k): str(v) for k, v in dict(meta or {}).items()}
+        if not columns:
+            raise ValueError("a capture needs at least one column")
+        encoded = [encode_column(name, arr) for name, arr in columns.items()]
+        lengths = {c["length"] for c in encoded}
+        if len(lengths) != 1:
+            raise ValueError(f"capture columns differ in length: {sorted(lengths)}")
+        time = P.normalize_time(meta["date"]) if meta.get("date") else P.iso(P.now_utc())
+
+        def place(key):
+            try:
+                return float(meta[key]) if meta.get(key) not in (None, "") else None
+            except ValueError:
+                return None
+
+        header = {
+            "device_id": device_id,
+            "procedure": procedure,
+            "time": time,
+            "operator": operator,
+            "host": host,
+            "meta": json.dumps(meta, ensure_ascii=False),
+        }
+        digest = capture_digest(header, [(c["name"], c["dtype"], c["length"], c["sha256"]) for c in encoded])
+        cur = conn.execute(
+            """INSERT INTO captures (device_id, procedure, time, operator, host, latitude_deg, longitude_deg,
+                   altitude_m, n_rows, column_names, meta, raw_bytes, stored_bytes, sha256, saved_at)
+               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)""",
+            [
+                device_id, procedure, time, operator, host,
+                place("latitude_deg"), place("longitude_deg"), place("altitude_m"),
+                lengths.pop(), json.dumps([c["name"] for c in encoded], ensure_ascii=False), header["meta"],
+                sum(c["raw_bytes"] for c in encoded), sum(len(c["data"]) for c in encoded), digest,
+                P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+            ],
+        )
+        capture_id = cur.lastrowid
+        conn.executemany(
+            "INSERT INTO capture_columns (capture_id, ordinal, name, dtype, length, encoding, data) VALUES (?, ?, ?, ?, ?, ?, ?)",
+            [(capture_id, i, c["name"], c["dtype"], c["length"], c["encoding"], c["data"]) for i, c in enumerate(encoded)],
+        )
+        return capture_id, digest
+
+    def save_capture(self, *, device_id, procedure, meta: dict, columns: dict, operator=None, host=None) -> int:
+        """Store one capture losslessly (see `db.codec`); the device is created if unknown."""
+        self._check_id(device_id)
+        operator = operator if operator is not None else (meta or {}).get("operator")
+        host = host if host is not None else socket.gethostname()
+        with self._write() as conn:
+            self._ensure_device(conn, device_id, PROCEDURE_KINDS.get(procedure))
+            capture_id, _ = self._insert_capture(
+                conn, device_id=device_id, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
+            )
+        return capture_id
+
+    def _read_capture(self, capture_id):
+        with self._lock:
+            row = self.conn.execute("SELECT * FROM captures WHERE id = ?", [capture_id]).fetchone()
+            if row is None:
+                raise NotFound(f"no capture {capture_id}")
+            cols = self.conn.execute(
+                "SELECT name, dtype, length, encoding, data FROM capture_columns WHERE capture_id = ? ORDER BY ordinal",
+                [capture_id],
+            ).fetchall()
+        return row, cols
+
+    def load_capture(self, capture_id: int) -> tuple[dict, dict]:
+        """(meta, columns) exactly as saved: same column order, bit-identical arrays."""
+        row, cols = self._read_capture(capture_id)
+        meta = json.loads(row["meta"])
+        columns = {}
+        for c in cols:
+            columns[c["name"]], _ = decode_column(c["dtype"], c["length"], c["encoding"], c["data"])
+        return meta, columns
+
+    def capture_info(self, capture_id: int) -> dict:
+        """The capture's row without its samples."""
+        row, _ = self._read_capture(capture_id)
+        d = dict(row)
+        d["meta"] = json.loads(d["meta"])
+        d["column_names"] = json.loads(d["column_names"])
+        return d
+
+    # --- calibrations -------------------------------------------------------------------
+
+    def save_calibration(
+        self,
+        result: dict,
+        *,
+        meta: dict,
+        columns: dict,
+        device_id: str | None = None,
+        operator: str | None = None,
+        accepted: bool = True,
+        time=None,
+        software_version: str | None = None,
+        host: str | None = None,
+    ) -> int:
+        """Store a capture and its calibration result (calibrate.md shape) in one transaction.
+
+        The device is `device_id`, else `result['device']`, else `meta['device']`
+        (created if unknown). An accepted calibration supersedes the device's latest
+        accepted calibration of the same procedure at or before its time. Returns the
+        calibration id.
+        """
+        meta = dict(meta or {})
+        device = device_id or result.get("device") or meta.get("device")
+        if not device:
+            raise ValueError("no device: pass device_id, or give 'device' in the result or the capture")
+        self._check_id(device)
+        procedure = result.get("procedure") or meta.get("procedure")
+        if not procedure:
+            raise ValueError("no procedure in the result or the capture")
+        if not isinstance(result.get("params"), dict):
+            raise ValueError("the result has no 'params' object")
+        when = P.normalize_time(time if time is not None else (meta.get("date") or P.now_utc()))
+        operator = operator if operator is not None else meta.get("operator")
+        host = host if host is not None else socket.gethostname()
+        params = P.clean_json(result["params"])
+        uncertainty = P.clean_json(result.get("uncertainty") or {})
+        warnings = P.clean_json(list(result.get("warnings") or []))
+        extra = P.clean_json({k: v for k, v in result.items() if k not in _RESULT_COLUMNS})
+        residual = P.clean_json(result.get("residual_rms"))
+        n_pos = result.get("n_positions")
+        with self._write() as conn:
+            self._ensure_device(conn, device, PROCEDURE_KINDS.get(procedure))
+            capture_id, capture_sha = self._insert_capture(
+                conn, device_id=device, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
+            )
+            supersedes = None
+            if accepted:
+                prev = conn.execute(
+                    """SELECT id FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1 AND time <= ?
+                       ORDER BY time DESC, id DESC LIMIT 1""",
+                    [device, procedure, when],
+                ).fetchone()
+                supersedes = prev["id"] if prev else None
+            last = conn.execute(
+                "SELECT hash FROM calibrations WHERE device_id = ? ORDER BY id DESC LIMIT 1", [device]
+            ).fetchone()
+            cur = conn.execute(
+                """INSERT INTO calibrations (device_id, procedure, time, model, params, uncertainty, residual_rms,
+                       n_positions, warnings, result_extra, software_version, capture_id, capture_sha256, operator,
+                       host, accepted, supersedes, saved_at, record_version, prev_hash, hash)
+                   VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, '')""",
+                [
+                    device, procedure, when, result.get("model"), P.dumps(params), P.dumps(uncertainty), residual,
+                    None if n_pos is None else int(n_pos), P.dumps(warnings), P.dumps(extra), software_version,
+                    capture_id, capture_sha, operator, host, 1 if accepted else 0, supersedes,
+                    P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"), RECORD_VERSION, last["hash"] if last else None,
+                ],
+            )
+            cal_id = cur.lastrowid
+            row = conn.execute("SELECT * FROM calibrations WHERE id = ?", [cal_id]).fetchone()
+            conn.execute("UPDATE calibrations SET hash = ? WHERE id = ?", [record_hash(dict(row)), cal_id])
+            if accepted:
+                self._update_schedule(conn, device, procedure)
+        return cal_id
+
+    @staticmethod
+    def _cal_dict(row) -> dict:
+        return {
+            "id": row["id"],
+            "device_id": row["device_id"],
+            "time": row["time"],
+            "procedure": row["procedure"],
+            "model": row["model"],
+            "params": json.loads(row["params"]),
+            "uncertainty": json.loads(row["uncertainty"]),
+            "residual_rms": row["residual_rms"],
+            "n_positions": row["n_positions"],
+            "warnings": json.loads(row["warnings"]),
+            "extra": json.loads(row["result_extra"]),
+            "accepted": bool(row["accepted"]),
+            "capture_id": row["capture_id"],
+            "supersedes": row["supersedes"],
+            "software_version": row["software_version"],
+            "operator": row["operator"],
+            "host": row["host"],
+            "saved_at": row["saved_at"],
+        }
+
+    def history(self, device_id: str, procedure: str | None = None) -> list[dict]:
+        """The device's calibrations, oldest first (by time, then id); [] for an unknown device.
+
+        Each also says `superseded_by` (the later accepted calibration that replaced it).
+        """
+        sql = "SELECT * FROM calibrations WHERE device_id = ?"
+        args = [device_id]
+        if procedure is not None:
+            sql += " AND procedure = ?"
+            args.append(procedure)
+        rows = self._query(sql + " ORDER BY time, id", args)
+        out = [self._cal_dict(r) for r in rows]
+        if procedure is None:
+            replaced = {d["supersedes"]: d["id"] for d in out if d["supersedes"] is not None}
+        else:
+            replaced = {
+                r["supersedes"]: r["id"]
+                for r in self._query(
+                    "SELECT id, supersedes FROM calibrations WHERE device_id = ? AND procedure = ? AND supersedes IS NOT NULL",
+                    [device_id, procedure],
+                )
+            }
+        for d in out:
+            d["superseded_by"] = replaced.get(d["id"])
+        return out
+
+    def calibration(self, calibration_id: int) -> dict:
+        """One calibration with its `result` rebuilt in the calibrate.md shape, and its hashes."""
+        rows = self._query("SELECT * FROM calibrations WHERE id = ?", [calibration_id])
+        if not rows:
+            raise NotFound(f"no calibration {calibration_id}")
+        row = rows[0]
+        d = self._cal_dict(row)
+        d["hash"] = row["hash"]
+        d["prev_hash"] = row["prev_hash"]
+        d["capture_sha256"] = row["capture_sha256"]
+        d["record_version"] = row["record_version"]
+        result = {
+            "procedure": d["procedure"],
+            "device": d["device_id"],
+            "model": d["model"],
+            "params": d["params"],
+            "uncertainty": d["uncertainty"],
+            "residual_rms": d["residual_rms"],
+            "n_positions": d["n_positions"],
+            "warnings": d["warnings"],
+        }
+        result.update(d["extra"])
+        d["result"] = result
+        later = self._query("SELECT id FROM calibrations WHERE supersedes = ? ORDER BY id LIMIT 1", [calibration_id])
+        d["superseded_by"] = later[0]["id"] if later else None
+        return d
+
+    # --- drift and schedule -------------------------------------------------------------
+
+    @staticmethod
+    def _trends(rows, tolerances: dict, param: str | None = None) -> list[dict]:
+        """Per (procedure, scalar) trend over accepted calibration rows sorted by time."""
+        series: dict[tuple[str, str], dict] = {}
+        for r in rows:
+            values = P.flatten(json.loads(r["params"]))
+            sigmas = P.flatten(json.loads(r["uncertainty"]))
+            for name, value in values.items():
+                if value is None or (param is not None and not P.matches(name, param)):
+                    continue
+                s = series.setdefault((r["procedure"], name), {"ids": [], "times": [], "values": [], "sigmas": []})
+                s["ids"].append(r["id"])
+                s["times"].append(r["time"])
+                s["values"].append(value)
+                s["sigmas"].append(sigmas.get(name))
+        out = []
+        for (procedure, name), s in series.items():
+            dts = [P.parse_time(t) for t in s["times"]]
+            t0 = dts[0]
+            t_years = [P.years_between(t0, dt) for dt in dts]
+            fit = P.linear_trend(t_years, s["values"], s["sigmas"])
+            tol = P.tolerance_for(name, tolerances)
+            leaves = None
+            if tol is not None and fit["rate"]:
+                leaves = P.iso(dts[-1] + timedelta(days=tol / abs(fit["rate"]) * P.DAYS_PER_YEAR))
+            fitted_last = None
+            if fit["rate"] is not None:
+                fitted_last = fit["intercept"] + fit["rate"] * t_years[-1]
+            out.append(
+                {
+                    "procedure": procedure,
+                    "param": name,
+                    "n": len(s["values"]),
+                    "calibration_ids": s["ids"],
+                    "times": s["times"],
+                    "values": s["values"],
+                    "sigmas": s["sigmas"],
+                    "rate_per_year": fit["rate"],
+                    "rate_sigma_per_year": fit["rate_sigma"],
+                    "chi2_per_dof": fit["chi2_per_dof"],
+                    "value_in_use": s["values"][-1],
+                    "trend_value_at_last": fitted_last,
+                    "tolerance": tol,
+                    "leaves_tolerance": leaves,
+                }
+            )
+        return out
+
+    def drift(self, device_id: str, procedure: str | None = None, param: str | None = None) -> list[dict]:
+        """Trend of every scalar parameter over the device's accepted calibrations.
+
+        `param` selects one name (`B[0]`) or a block (`B`). Each entry: procedure,
+        param, times, values, sigmas, rate_per_year, rate_sigma_per_year (weighted
+        linear regression, see `db.params.linear_trend`), tolerance and
+        leaves_tolerance: when the trend carries the parameter `tolerance` away from
+        its value in use (last calibration time + tolerance / |rate|), or None.
+        """
+        device = self.get_device(device_id)
+        tolerances = device["tolerances"] if device else {}
+        sql = "SELECT id, procedure, time, params, uncertainty FROM calibrations WHERE device_id = ? AND accepted = 1"
+        args = [device_id]
+        if procedure is not None:
+            sql += " AND procedure = ?"
+            args.append(procedure)
+        rows = self._query(sql + " ORDER BY time, id", args)
+        return self._trends(rows, tolerances, param)
+
+    def _update_schedule(self, conn, device_id: str, procedure: str) -> None:
+        """Recompute the schedule row of one (device, procedure), inside a write."""
+        dev = conn.execute("SELECT interval_days, tolerances FROM devices WHERE id = ?", [device_id]).fetchone()
+        tolerances = _loads(dev["tolerances"], {})
+        last = conn.execute(
+            """SELECT id, time FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1
+               ORDER BY time DESC, id DESC LIMIT 1""",
+            [device_id, procedure],
+        ).fetchone()
+        if last is None:
+            conn.execute("DELETE FROM schedule WHERE device_id = ? AND procedure = ?", [device_id, procedure])
+            return
+        interval_due = None
+        if dev["interval_days"]:
+            interval_due = P.iso(P.parse_time(last["time"]) + timedelta(days=dev["interval_days"]))
+        drift_due = drift_param = drift_rate = None
+        if tolerances:
+            rows = conn.execute(
+                """SELECT id, procedure, time, params, uncertainty FROM calibrations
+                   WHERE device_id = ? AND procedure = ? AND accepted = 1 ORDER BY time, id""",
+                [device_id, procedure],
+            ).fetchall()
+            for t in self._trends(rows, tolerances):
+                if t["leaves_tolerance"] and (drift_due is None or t["leaves_tolerance"] < drift_due):
+                    drift_due, drift_param, drift_rate = t["leaves_tolerance"], t["param"], t["rate_per_year"]
+        due = min((d for d in (interval_due, drift_due) if d), default=None)
+        conn.execute(
+            """INSERT OR REPLACE INTO schedule (device_id, procedure, last_calibration_id, last_calibrated,
+                   interval_due, drift_due, drift_param, drift_rate_per_year, due)
+               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)""",
+            [device_id, procedure, last["id"], last["time"], interval_due, drift_due, drift_param, drift_rate, due],
+        )
+
+    def rebuild_schedule(self) -> int:
+        """Recompute every schedule row from devices and calibrations; returns the row count."""
+        with self._write() as conn:
+            conn.execute("DELETE FROM schedule")
+            pairs = conn.execute("SELECT DISTINCT device_id, procedure FROM calibrations WHERE accepted = 1").fetchall()
+            for device_id, procedure in pairs:
+                self._update_schedule(conn, device_id, procedure)
+        return len(pairs)
+
+    def due(self, within_days: float = 0, now=None) -> list[dict]:
+        """Devices due for recalibration by `now + within_days`, soonest first.
+
+        A (device, procedure) is due at the end of the device's interval since its
+        last accepted calibration, or earlier when a parameter's drift trend leaves
+        its tolerance first; a device with no accepted calibration is due now.
+        Each entry: device_id, model, due (time or None for never calibrated),
+        days_left (negative = overdue), status (`overdue`, `due`, `never calibrated`),
+        reason (one line) and reasons (one dict per procedure).
+        """
+        now_dt = P.parse_time(now) if now is not None else P.now_utc()
+        horizon = P.iso(now_dt + timedelta(days=float(within_days)))
+        rows = self._query(
+            """SELECT s.*, d.model, d.interval_days FROM schedule s JOIN devices d ON d.id = s.device_id
+               WHERE s.due IS NOT NULL AND s.due <= ? ORDER BY s.due, s.device_id""",
+            [horizon],
+        )
+        never = self._query(
+            """SELECT id, model FROM devices d WHERE NOT EXISTS (SELECT 1 FROM schedule s WHERE s.device_id = d.id)
+               ORDER BY id"""
+        )
+        devices: dict[str, dict] = {}
+        for r in rows:
+            due_dt = P.parse_time(r["due"])
+            days_left = (due_dt - now_dt).total_seconds() / 86400.0
+            by_drift = r["drift_due"] is not None and r["drift_due"] == r["due"] and (
+                r["interval_due"] is None or r["drift_due"] < r["interval_due"]
+            )
+            if by_drift:
+                text = (
+                    f"{r['procedure']}: drift of {r['drift_param']} ({r['drift_rate_per_year']:+.3g}/year) "
+                    f"leaves its tolerance on {r['due'][:10]} (last calibrated {r['last_calibrated'][:10]})"
+                )
+            else:
+                text = (
+                    f"{r['procedure']}: {r['interval_days']:g}-day interval since {r['last_calibrated'][:10]} "
+                    f"ends {r['due'][:10]}"
+                )
+            reason = {
+                "procedure": r["procedure"],
+                "kind": "drift" if by_drift else "interval",
+                "due": r["due"],
+                "days_left": days_left,
+                "last_calibration_id": r["last_calibration_id"],
+                "last_calibrated": r["last_calibrated"],
+                "param": r["drift_param"] if by_drift else None,
+                "text": text,
+            }
+            entry = devices.setdefault(
+                r["device_id"],
+                {"device_id": r["device_id"], "model": r["model"], "due": r["due"], "days_left": days_left, "reasons": []},
+            )
+            entry["reasons"].append(reason)
+        out = list(devices.values())
+        for e in out:
+            e["status"] = "overdue" if e["days_left"] < 0 else "due"
+            e["reason"] = "; ".join(x["text"] for x in e["reasons"])
+        for r in never:
+            out.append(
+                {
+                    "device_id": r["id"],
+                    "model": r["model"],
+                    "due": None,
+                    "days_left": None,
+                    "status": "never calibrated",
+                    "reason": "no accepted calibration",
+                    "reasons": [{"procedure": None, "kind": "never", "due": None, "text": "no accepted calibration"}],
+                }
+            )
+        return out
+
+    # --- integrity ----------------------------------------------------------------------
+
+    def verify(self, check_captures: bool = True) -> list[dict]:
+        """Records changed after they were written, or missing from a device's chain.
+
+        Each problem: kind (`tampered`, `chain broken`, `capture changed`),
+        calibration_id and/or capture_id, device_id, detail. [] when all is well.
+        """
+        problems = []
+        with self._lock:
+            cur = self.conn.execute("SELECT * FROM calibrations ORDER BY device_id, id")
+            prev_device, prev_hash = object(), None
+            capture_refs = {}
+            for row in cur:
+                d = dict(row)
+                if d["device_id"] != prev_device:
+                    prev_device, prev_hash = d["device_id"], None
+                if record_hash(d) != d["hash"]:
+                    problems.append(
+                        {
+                            "kind": "tampered",
+                            "calibration_id": d["id"],
+                            "device_id": d["device_id"],
+                            "detail": "its content no longer matches the hash written with it",
+                        }
+                    )
+                if d["prev_hash"] != prev_hash:
+                    problems.append(
+                        {
+                            "kind": "chain broken",
+                            "calibration_id": d["id"],
+                            "device_id": d["device_id"],
+                            "detail": "the record before it in this device's history was removed, added or changed",
+                        }
+                    )
+                prev_hash = d["hash"]
+                if d["capture_id"] is not None:
+                    capture_refs[d["capture_id"]] = (d["id"], d["device_id"], d["capture_sha256"])
+        if check_captures:
+            problems.extend(self._verify_captures(capture_refs))
+        return problems
+
+    def _verify_captures(self, capture_refs: dict) -> list[dict]:
+        problems = []
+        ids = [r[0] for r in self._query("SELECT id FROM captures ORDER BY id")]
+        for capture_id in ids:
+            row, cols = self._read_capture(capture_id)
+            header = {k: row[k] for k in ("device_id", "procedure", "time", "operator", "host", "meta")}
+            try:
+                digests = []
+                for c in cols:
+                    _, sha = decode_column(c["dtype"], c["length"], c["encoding"], c["data"])
+                    digests.append((c["name"], c["dtype"], c["length"], sha))
+                actual = capture_digest(header, digests)
+            except Exception as exc:  # undecodable BLOB: changed
+                actual = f"unreadable ({exc})"
+            ref = capture_refs.get(capture_id)
+            if actual != row["sha256"] or (ref is not None and ref[2] != row["sha256"]):
+                problems.append(
+                    {
+                        "kind": "capture changed",
+                        "capture_id": capture_id,
+                        "calibration_id": ref[0] if ref else None,
+                        "device_id": row["device_id"],
+                        "detail": "its samples or metadata no longer match the digest written with them",
+                    }
+                )
+        return problems
+
+    def counts(self) -> dict:
+        """Number of devices, captures and calibrations."""
+        r = self._query(
+            "SELECT (SELECT count(*) FROM devices) AS devices, (SELECT count(*) FROM captures) AS captures,"
+            " (SELECT count(*) FROM calibrations) AS calibrations"
+        )[0]
+        return dict(r)
+
+    def integrity_check(self) -> str:
+        """SQLite's own `PRAGMA integrity_check` ('ok' when the file is sound)."""
+        return "\n".join(r[0] for r in self._query("PRAGMA integrity_check"))
