@@ -1,0 +1,56 @@
+"""Shared plumbing of the database commands: open the store, map its errors to exit 2."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from contextlib import contextmanager
+
+from station.errors import InputError
+
+
+def add_db_option(parser: argparse.ArgumentParser) -> None:
+    """`--db` on a nested subcommand too (cli.py adds it to top-level commands only)."""
+    parser.add_argument("--db", default=argparse.SUPPRESS, help="station database file")
+
+
+@contextmanager
+def open_store(args):
+    """The Store at `station.cli.db_path(args)`; db-layer ValueError/NotFound -> InputError."""
+    from db.store import NotFound, Store
+    from station.cli import db_path
+
+    path = db_path(args)
+    try:
+        store = Store(path)
+    except Exception as exc:  # sqlite3.DatabaseError, OSError: not a usable database
+        raise InputError(path, None, f"cannot open the station database: {exc}") from None
+    try:
+        yield store
+    except NotFound as exc:
+        raise InputError(None, None, str(exc)) from None
+    except ValueError as exc:
+        raise InputError(None, None, str(exc)) from None
+    finally:
+        store.close()
+
+
+def require_device(store, device_id: str) -> dict:
+    device = store.get_device(device_id)
+    if device is None:
+        raise InputError(None, None, f"no device {json.dumps(device_id, ensure_ascii=False)} in the database")
+    return device
+
+
+def print_json(obj) -> None:
+    sys.stdout.write(json.dumps(obj, indent=2, ensure_ascii=False) + "\n")
+
+
+def fmt_num(value, digits: int = 6) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (int, float)):
+        return f"{value:.{digits}g}"
+    return str(value)

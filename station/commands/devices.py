@@ -1,0 +1,121 @@
+"""`station devices add|list|show`: the devices the station knows."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from station.commands._dbutil import add_db_option, fmt_num, open_store, print_json, require_device
+from station.errors import InputError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("devices", help="add, list and show devices")
+    sub = p.add_subparsers(dest="devices_command", metavar="ACTION", required=True)
+
+    add = sub.add_parser("add", help="add a device, or update the fields given of an existing one")
+    add.add_argument("id", metavar="ID", help="device id (serial number), stored verbatim")
+    add.add_argument("--model", help="device model")
+    add.add_argument("--interval-days", type=float, help="recalibration interval in days")
+    add.add_argument("--notes", help="free text")
+    add.add_argument("--kind", action="append", dest="kinds", metavar="KIND",
+                     help="sensor kind (accel, gyro, mag, ldv); repeatable")
+    add.add_argument(
+        "--tolerance", action="append", default=[], metavar="NAME=VALUE",
+        help="largest acceptable change of a parameter (B[0]) or block (B) from its calibrated value; repeatable",
+    )
+    add.set_defaults(func=_add)
+
+    ls = sub.add_parser("list", help="every device")
+    ls.add_argument("--json", action="store_true", help="a JSON list")
+    ls.set_defaults(func=_list)
+
+    show = sub.add_parser("show", help="one device and its latest calibrations")
+    show.add_argument("id", metavar="ID")
+    show.add_argument("--json", action="store_true", help="a JSON object")
+    show.set_defaults(func=_show)
+    for parser in (add, ls, show):
+        add_db_option(parser)
+
+
+def _tolerances(items: list[str]) -> dict | None:
+    if not items:
+        return None
+    out = {}
+    for item in items:
+        name, sep, value = item.rpartition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = None
+        if not sep or not name or number is None or not number > 0:
+            raise InputError(None, None, f"--tolerance {item!r}: expected NAME=VALUE with a positive number")
+        out[name] = number
+    return out
+
+
+def _add(args: argparse.Namespace) -> int:
+    if args.interval_days is not None and not args.interval_days > 0:
+        raise InputError(None, None, f"--interval-days must be positive, got {args.interval_days:g}")
+    with open_store(args) as store:
+        existed = store.get_device(args.id) is not None
+        device = store.add_device(
+            args.id,
+            model=args.model,
+            notes=args.notes,
+            interval_days=args.interval_days,
+            sensor_kinds=args.kinds,
+            tolerances=_tolerances(args.tolerance),
+        )
+    sys.stdout.write(f"{'updated' if existed else 'added'} device {device['id']}\n")
+    return 0
+
+
+def _list(args: argparse.Namespace) -> int:
+    with open_store(args) as store:
+        devices = store.list_devices()
+    if args.json:
+        print_json(devices)
+        return 0
+    if not devices:
+        sys.stdout.write("no devices\n")
+        return 0
+    rows = [("ID", "MODEL", "KINDS", "INTERVAL_D", "CALIBRATIONS", "LAST_CALIBRATED", "NOTES")]
+    for d in devices:
+        rows.append((
+            d["id"], d["model"] or "-", ",".join(d["sensor_kinds"]) or "-", fmt_num(d["interval_days"]),
+            str(d["n_calibrations"]), d["last_calibrated"] or "-", d["notes"] or "",
+        ))
+    widths = [max(len(r[i]) for r in rows) if i < 6 else 0 for i in range(7)]
+    for r in rows:
+        sys.stdout.write("  ".join(c.ljust(w) if w else c for c, w in zip(r, widths)).rstrip(" ") + "\n")
+    return 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    with open_store(args) as store:
+        device = require_device(store, args.id)
+        history = store.history(args.id)
+    latest = {}
+    for h in history:
+        if h["accepted"]:
+            latest[h["procedure"]] = h
+    if args.json:
+        device = dict(device)
+        device["n_calibrations"] = len(history)
+        device["latest"] = {p: {"id": h["id"], "time": h["time"]} for p, h in latest.items()}
+        print_json(device)
+        return 0
+    out = [
+        f"device: {device['id']}",
+        f"model: {device['model'] or '-'}",
+        f"sensor kinds: {', '.join(device['sensor_kinds']) or '-'}",
+        f"interval: {fmt_num(device['interval_days'])} days" if device["interval_days"] else "interval: -",
+        "tolerances: " + (", ".join(f"{k}={v:g}" for k, v in device["tolerances"].items()) or "-"),
+        f"created: {device['created']}",
+        f"calibrations: {len(history)}",
+    ]
+    for procedure, h in sorted(latest.items()):
+        out.append(f"latest {procedure}: #{h['id']} {h['time']}")
+    out.append(f"notes: {device['notes'] if device['notes'] is not None else '-'}")
+    sys.stdout.write("\n".join(out) + "\n")
+    return 0

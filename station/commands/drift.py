@@ -1,0 +1,102 @@
+"""`station drift ID [--param NAME] [--json]`: each coefficient's trend over time."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from station.commands._dbutil import fmt_num, open_store, print_json, require_device
+from station.errors import InputError
+
+MAX_PLOTS = 4
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("drift", help="trend of each calibration coefficient, rate per year ± sigma")
+    p.add_argument("id", metavar="ID", help="device id")
+    p.add_argument("--param", help="one coefficient (B[0], beam1.dK) or a block (B = all of B)")
+    p.add_argument("--procedure", help="only this procedure")
+    p.add_argument("--json", action="store_true", help="a JSON list, one object per coefficient")
+    p.add_argument("--no-plot", action="store_true", help="the table without the terminal plot")
+    p.set_defaults(func=run)
+
+
+def _significance(t: dict) -> float:
+    if t["rate_per_year"] is None:
+        return -1.0
+    if not t["rate_sigma_per_year"]:
+        return 0.0
+    return abs(t["rate_per_year"]) / t["rate_sigma_per_year"]
+
+
+def _plot(trends: list[dict]) -> str:
+    import plotext as plt
+
+    from db.params import parse_time
+
+    def year(text: str) -> float:
+        dt = parse_time(text)
+        start = dt.replace(month=1, day=1, hour=0, minute=0, second=0)
+        end = start.replace(year=start.year + 1)
+        return dt.year + (dt - start).total_seconds() / (end - start).total_seconds()
+
+    plt.clear_figure()
+    if not sys.stdout.isatty():
+        plt.theme("clear")
+    size = os.get_terminal_size(sys.stdout.fileno()) if sys.stdout.isatty() else os.terminal_size((100, 24))
+    width = min(size.columns, 120)
+    plt.subplots(len(trends), 1)
+    plt.plotsize(width, 12 * len(trends))
+    for i, t in enumerate(trends, start=1):
+        plt.subplot(i, 1)
+        xs = [year(x) for x in t["times"]]
+        ys = t["values"]
+        if all(s is not None for s in t["sigmas"]):
+            plt.error(xs, ys, yerr=t["sigmas"])
+        plt.scatter(xs, ys, marker="dot", label=t["param"])
+        if t["rate_per_year"] is not None and t["trend_value_at_last"] is not None:
+            y_last = t["trend_value_at_last"]
+            line = [y_last + t["rate_per_year"] * (x - xs[-1]) for x in xs]
+            plt.plot(xs, line, label="trend")
+        rate = "" if t["rate_per_year"] is None else (
+            f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} /year"
+        )
+        plt.title(f"{t['procedure']} {t['param']}{rate}")
+        plt.xlabel("year")
+    return plt.build()
+
+
+def run(args: argparse.Namespace) -> int:
+    with open_store(args) as store:
+        require_device(store, args.id)
+        trends = store.drift(args.id, procedure=args.procedure, param=args.param)
+    if args.param and not trends:
+        raise InputError(None, None, f"no coefficient named {args.param!r} in this device's accepted calibrations")
+    if args.json:
+        print_json(trends)
+        return 0
+    if not trends:
+        sys.stdout.write(f"device {args.id}: no accepted calibrations yet\n")
+        return 0
+    out = [f"device {args.id}: drift per year over its accepted calibrations (weighted linear fit)"]
+    header = ("PROCEDURE", "PARAM", "N", "IN_USE", "RATE/YEAR", "±SIGMA", "TOLERANCE", "LEAVES_TOLERANCE")
+    rows = [header]
+    for t in trends:
+        rows.append((
+            t["procedure"], t["param"], str(t["n"]), fmt_num(t["value_in_use"]),
+            fmt_num(t["rate_per_year"], 3), fmt_num(t["rate_sigma_per_year"], 2),
+            fmt_num(t["tolerance"]), (t["leaves_tolerance"] or "-")[:10],
+        ))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
+    out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    sys.stdout.write("\n".join(out) + "\n")
+    if not args.no_plot:
+        plottable = [t for t in trends if t["n"] >= 2]
+        if args.param:
+            chosen = plottable[:MAX_PLOTS]
+        else:
+            chosen = sorted(plottable, key=_significance, reverse=True)[:MAX_PLOTS]
+        if chosen:
+            note = "" if args.param else f" (the {len(chosen)} steepest relative to their sigma; --param NAME for others)"
+            sys.stdout.write(f"\nplot{note}:\n" + _plot(chosen) + "\n")
+    return 0

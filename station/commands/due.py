@@ -1,0 +1,49 @@
+"""`station due [--within DAYS] [--json]`: devices due for recalibration; exit 1 when any is.
+
+For cron and systemd timers: exit status 0 = nothing due, 1 = something due or
+overdue (listed on stdout), 2 = bad input.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from station.commands._dbutil import open_store, print_json
+from station.errors import InputError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "due", help="devices due for recalibration (exit 1 when any is)",
+        description="Devices due or overdue for recalibration: by their interval since the last accepted "
+        "calibration, and earlier when a coefficient's drift trend leaves its tolerance first. "
+        "Exit status 1 when anything is due, 0 when nothing is.",
+    )
+    p.add_argument("--within", type=float, default=0.0, metavar="DAYS", help="also list what falls due within DAYS")
+    p.add_argument("--now", help=argparse.SUPPRESS)  # ISO date-time, for reproducible runs
+    p.add_argument("--json", action="store_true", help="a JSON list, one object per device")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.within < 0:
+        raise InputError(None, None, f"--within must not be negative, got {args.within:g}")
+    with open_store(args) as store:
+        items = store.due(within_days=args.within, now=args.now)
+    if args.json:
+        print_json(items)
+    elif not items:
+        horizon = f" within {args.within:g} days" if args.within else ""
+        sys.stdout.write(f"nothing due{horizon}\n")
+    else:
+        for e in items:
+            if e["days_left"] is None:
+                when = "never calibrated"
+            elif e["days_left"] < 0:
+                when = f"overdue by {-e['days_left']:.0f} d (due {e['due'][:10]})"
+            else:
+                when = f"due in {e['days_left']:.0f} d ({e['due'][:10]})"
+            sys.stdout.write(f"{e['device_id']}: {when}\n")
+            for r in e["reasons"]:
+                sys.stdout.write(f"    {r['text']}\n")
+    return 1 if items else 0

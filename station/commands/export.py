@@ -1,0 +1,45 @@
+"""`station export CALIBRATION_ID --format json|ardupilot|px4|c-header`."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+
+from station.commands._dbutil import open_store
+
+FORMATS = ("json", "ardupilot", "px4", "c-header")  # = station.firmware_export.FORMATS (not imported: start-up time)
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "export", help="a stored calibration as JSON, ArduPilot or PX4 parameters, or a C header"
+    )
+    p.add_argument("calibration_id", metavar="CALIBRATION_ID", type=int)
+    p.add_argument("--format", required=True, choices=FORMATS)
+    p.add_argument("--instance", type=int, help="firmware sensor slot (ArduPilot 1-3, default 1; PX4 0-3, default 0)")
+    p.add_argument("-o", "--output", metavar="FILE", help="write to FILE (atomically) instead of stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from station.firmware_export import export
+
+    with open_store(args) as store:
+        cal = store.calibration(args.calibration_id)
+        meta = store.capture_info(cal["capture_id"])["meta"] if cal["capture_id"] is not None else {}
+    text = export(cal, meta, args.format, args.instance)
+    if args.output:
+        folder = os.path.dirname(os.path.abspath(args.output))
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".export-", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(text)
+            os.replace(tmp, args.output)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+    else:
+        sys.stdout.write(text)
+    return 0

@@ -1,0 +1,59 @@
+"""`station history ID [--procedure P] [--json]`: a device's calibrations, oldest first."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from station.commands._dbutil import fmt_num, open_store, print_json, require_device
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("history", help="a device's calibrations, oldest first")
+    p.add_argument("id", metavar="ID", help="device id")
+    p.add_argument("--procedure", help="only this procedure (accel-tabletop, compass, ...)")
+    p.add_argument("--json", action="store_true", help="a JSON list of calibration records")
+    p.set_defaults(func=run)
+
+
+def _param_lines(params: dict, uncertainty: dict) -> list[str]:
+    """One line per top-level parameter: `B: 0.1±0.001  0.2±0.001  ...`."""
+    from db.params import flatten
+
+    lines = []
+    for key, value in params.items():
+        if isinstance(value, str):
+            lines.append(f"{key}: {value}")
+            continue
+        vals = flatten({key: value})
+        sig = flatten({key: (uncertainty or {}).get(key)})
+        parts = []
+        for name, v in vals.items():
+            label = name[len(key):]
+            s = sig.get(name)
+            text = fmt_num(v) + (f"±{fmt_num(s, 2)}" if s is not None else "")
+            parts.append(f"{label}={text}" if label.startswith(".") else text)
+        lines.append(f"{key}: " + "  ".join(parts))
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    with open_store(args) as store:
+        require_device(store, args.id)
+        records = store.history(args.id, args.procedure)
+    if args.json:
+        print_json(records)
+        return 0
+    what = f" of {args.procedure}" if args.procedure else ""
+    out = [f"device {args.id}: {len(records)} calibration{'s' if len(records) != 1 else ''}{what}, oldest first"]
+    for r in records:
+        status = "accepted" if r["accepted"] else "rejected"
+        if r["superseded_by"] is not None:
+            status += f", superseded by #{r['superseded_by']}"
+        out.append(
+            f"#{r['id']}  {r['time']}  {r['procedure']}  {status}  residual_rms {fmt_num(r['residual_rms'], 4)}"
+            f"  software {r['software_version'] or '-'}"
+        )
+        out.extend("    " + line for line in _param_lines(r["params"], r["uncertainty"]))
+        out.extend(f"    warning: {w}" for w in r["warnings"])
+    sys.stdout.write("\n".join(out) + "\n")
+    return 0

@@ -1,0 +1,44 @@
+"""`station verify`: exit 1, naming the record, when a stored calibration or capture was changed."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from station.commands._dbutil import open_store
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "verify", help="check that no stored calibration was changed after it was written (exit 1 if one was)"
+    )
+    p.add_argument("--json", action="store_true", help="a JSON list of problems")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    with open_store(args) as store:
+        sound = store.integrity_check()
+        problems = store.verify()
+        counts = store.counts()
+    if sound != "ok":
+        problems.insert(0, {"kind": "corrupt file", "detail": f"PRAGMA integrity_check: {sound}"})
+    if args.json:
+        sys.stdout.write(json.dumps(problems, indent=2, ensure_ascii=False) + "\n")
+        return 1 if problems else 0
+    for p in problems:
+        what = []
+        if p.get("calibration_id") is not None:
+            what.append(f"calibration {p['calibration_id']}")
+        if p.get("capture_id") is not None:
+            what.append(f"capture {p['capture_id']}")
+        device = f" (device {p['device_id']})" if p.get("device_id") is not None else ""
+        sys.stdout.write(f"{p['kind']}: {' / '.join(what) or 'database'}{device}: {p['detail']}\n")
+    if problems:
+        sys.stderr.write(f"station: verify found {len(problems)} problem{'s' if len(problems) != 1 else ''}\n")
+        return 1
+    sys.stdout.write(
+        f"ok: {counts['calibrations']} calibrations and {counts['captures']} captures of "
+        f"{counts['devices']} devices unchanged since they were written\n"
+    )
+    return 0
