@@ -1,0 +1,115 @@
+"""The simulator: valid captures for every procedure and effect, read back identically,
+consistent with the forward models it is built on."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from solvers.models import accel
+from solvers.simulate import EFFECTS_BY_PROCEDURE, PROCEDURES, SimulationError, simulate
+from station.capture import Capture, read_capture, write_capture
+
+SMALL = {
+    "accel-tabletop": {"hold_s": 3.0, "move_s": 1.0},
+    "accel-centrifuge": {},
+    "compass": {"n_orientations": 10, "hold_s": 1.0, "move_s": 1.0},
+    "gyro-drift": {"duration_s": 20.0},
+    "ldv": {"duration_s": 60.0},
+}
+SIZES = {"temperature_bias": 0.01, "time_drift": 0.05, "quadratic": 1e-3, "scale_asymmetry": 1e-3,
+         "misalignment": 5e-4, "cubic": 1e-6, "lever_arm": 0.02, "g_sensitivity": 1e-4, "earth_rate": 1.0,
+         "mag_accel_misalignment": 0.02, "field_anomaly": 0.05, "time_varying_hard_iron": 2.0,
+         "time_delay": 0.05, "offset": 0.02}
+
+
+def _cases():
+    for proc in PROCEDURES:
+        yield proc, None
+        for eff in EFFECTS_BY_PROCEDURE[proc]:
+            yield proc, eff
+
+
+@pytest.mark.parametrize("procedure,effect", list(_cases()))
+def test_every_procedure_and_effect_round_trips_through_a_capture_file(tmp_path, procedure, effect):
+    effects = {effect: SIZES[effect]} if effect else None
+    sim = simulate(procedure, seed=7, effects=effects, **SMALL[procedure])
+    path = tmp_path / "c.csv"
+    write_capture(path, Capture(meta=sim.meta, columns=sim.columns, path=str(path)))
+    back = read_capture(path)
+    assert back.procedure == procedure
+    assert list(back.columns) == list(sim.columns)
+    for name, col in sim.columns.items():
+        if col.dtype == object:
+            assert list(back.columns[name]) == list(col)
+        else:
+            np.testing.assert_array_equal(back.columns[name], col)
+    json.dumps(sim.truth)  # the truth is JSON-able
+    if effect and effect != "earth_rate":
+        assert sim.truth["effects"] == {effect: SIZES[effect]}
+
+
+def test_same_seed_same_capture_other_seed_other_capture():
+    a = simulate("accel-tabletop", seed=1, hold_s=2.0, move_s=1.0)
+    b = simulate("accel-tabletop", seed=1, hold_s=2.0, move_s=1.0)
+    c = simulate("accel-tabletop", seed=2, hold_s=2.0, move_s=1.0)
+    np.testing.assert_array_equal(a.columns["ax"], b.columns["ax"])
+    assert not np.array_equal(a.columns["ax"], c.columns["ax"])
+
+
+def test_tabletop_static_rows_obey_the_truth_through_the_model_inverse():
+    """Held rows, calibrated with the true (B, M) by the same model's inverse, have |A| = g
+    within the simulated noise: the simulator really is the forward model."""
+    sim = simulate("accel-tabletop", seed=4, hold_s=5.0, move_s=2.0)
+    held = sim.columns["position"] != ""
+    V = np.column_stack([sim.columns[k][held] for k in ("ax", "ay", "az")])
+    A = accel.inverse(V, accel.p1_to_forward(sim.truth["B"], sim.truth["M"]))
+    norm = np.linalg.norm(A, axis=1)
+    # 0.01 m/s² white noise per axis (+ tiny bias instability, rounding to 1 µV)
+    assert abs(norm.mean() - sim.truth["g_mps2"]) < 0.002
+    assert 0.007 < norm.std() < 0.013
+    # the 12 source positions are all there, in order
+    labels = [p for i, p in enumerate(sim.columns["position"]) if p and sim.columns["position"][i - 1] != p]
+    assert labels == sim.truth["positions"] and len(labels) == 12
+
+
+def test_centrifuge_norm_condition_holds_at_truth():
+    sim = simulate("accel-centrifuge", seed=0, noise_g=0.0)
+    t = sim.truth
+    N = np.column_stack([sim.columns[k] for k in ("ax", "ay", "az")])
+    f = accel.inverse(N, {"S": np.array(t["S"]), "b": np.array(t["b"]), "D": np.array(t["D"])})
+    A = sim.columns["speed_rad_s"] ** 2 * t["radius_m"] / t["g_mps2"]
+    np.testing.assert_allclose(np.sum(f**2, axis=1), A**2 + 1, rtol=1e-9)
+
+
+def test_unknown_effect_for_procedure_is_refused():
+    with pytest.raises(SimulationError, match="does not apply"):
+        simulate("ldv", effects={"quadratic": 1.0})
+
+
+def test_cli_simulate_writes_capture_and_truth(tmp_path):
+    out, truth = tmp_path / "g.csv", tmp_path / "g.json"
+    r = subprocess.run([sys.executable, "-m", "station", "simulate", "--procedure", "gyro-drift", "--out", str(out),
+                        "--truth", str(truth), "--seed", "5", "--effect", "temperature_bias=1e-4",
+                        "--option", "duration_s=10"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert read_capture(out).procedure == "gyro-drift"
+    assert json.loads(truth.read_text())["effects"] == {"temperature_bias": 1e-4}
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--effect", "warp=1"], "does not apply"),
+    (["--effect", "temperature_bias=abc"], "not a number"),
+    (["--effect", "temperature_bias"], "NAME=VALUE"),
+    (["--option", "no_such_option=3"], "simulate:"),
+])
+def test_cli_simulate_bad_arguments_one_line_exit_2(tmp_path, args, needle):
+    out = tmp_path / "x.csv"
+    r = subprocess.run([sys.executable, "-m", "station", "simulate", "--procedure", "ldv", "--out", str(out), *args],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert needle in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not out.exists()
