@@ -97,6 +97,8 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
             return None
         self._rows = []
         arr = np.array(rows, dtype=np.float64)
+        vals = arr[:, 2:]
+        vals[np.isinf(vals)] = np.nan  # 'inf' from a device: no usable value
         return SampleBlock(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=arr[:, 2:])
 
     def feed(self, data: bytes) -> list:
@@ -162,7 +164,7 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
             t_us = float(m.time_usec)
         temp = float(getattr(m, "temperature", 0) or 0)
         temp_c = math.nan if (temp == 0 and t != "HIGHRES_IMU") else temp * kt
-        if self._last_t_us is not None and t_us < self._last_t_us - 1e6:
+        if self._last_t_us is not None and t_us < self._last_t_us:
             if t.startswith("SCALED") and self._last_t_us - t_us > _TIME_BOOT_MS_MODULO_US / 2:
                 self._t_offset_us += _TIME_BOOT_MS_MODULO_US  # time_boot_ms wrapped (49.7 days)
             else:

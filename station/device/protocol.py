@@ -209,6 +209,8 @@ class StationParser:
       a counter out of range;
     - `too_long`: more than MAX_LINE bytes without a line end.
 
+    Values: empty fields, `nan` and `inf` (as an Arduino prints them) become NaN.
+
     Bytes before the first `$` of a stream (or after `reset_stream()`) are skipped
     without counting: a reader that opens a port mid-stream sees the tail of a line.
 
@@ -267,6 +269,8 @@ class StationParser:
             return None
         self._rows = []
         arr = np.array(rows, dtype=np.float64)
+        vals = arr[:, 2:]
+        vals[np.isinf(vals)] = np.nan  # 'inf' from a device: no usable value
         return SampleBlock(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=arr[:, 2:])
 
     def reset_stream(self) -> None:

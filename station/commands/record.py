@@ -1,0 +1,88 @@
+"""`station record --port PORT --out FILE`: record a device into a capture, headless."""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+
+from station.errors import InputError
+
+PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "record",
+        help="record a device (serial port or pyserial URL) into a capture file",
+        description="Record samples from a device into a capture file until --seconds pass or "
+        "SIGINT/SIGTERM. Rows are written as they arrive to FILE.partial; the finished capture "
+        "replaces FILE atomically. --port takes a device path (/dev/ttyUSB0, /dev/pts/3) or a "
+        "pyserial URL (socket://host:port, rfc2217://host:port, loop://).",
+    )
+    p.add_argument("--port", help="device path or pyserial URL")
+    p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200; ignored by ptys and sockets)")
+    p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
+    p.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: until interrupted)")
+    p.add_argument("--out", help="capture file to write")
+    p.add_argument("--procedure", choices=PROCEDURES, help="the procedure this capture is for (metadata)")
+    p.add_argument("--meta", action="append", metavar="KEY=VALUE", help="extra metadata, e.g. latitude_deg=39.98")
+    p.add_argument("--mavlink-message", metavar="MSG[:ID]",
+                   help="MAVLink stream to record, e.g. HIGHRES_IMU, SCALED_IMU2, RAW_IMU:1 (default: first IMU message seen)")
+    p.add_argument("--recover", metavar="FILE.partial",
+                   help="finish the .partial file a killed recording left (drops a cut last line) and exit")
+    p.set_defaults(func=run)
+
+
+def _meta(items: list[str] | None) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise InputError(None, None, f"--meta {item!r}: expected KEY=VALUE")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from station.device.mavlink import parse_source
+    from station.device.record import recover_partial, record
+
+    if args.recover:
+        path = recover_partial(args.recover, args.out)
+        print(f"recovered {args.recover} -> {path}")
+        return 0
+    if not args.port:
+        raise InputError(None, None, "--port is required (a device path or a pyserial URL)")
+    if not args.out:
+        raise InputError(None, None, "--out is required")
+    if args.seconds is not None and not args.seconds > 0:
+        raise InputError(None, None, "--seconds must be positive")
+    if args.baud <= 0:
+        raise InputError(None, None, "--baud must be positive")
+    try:
+        parse_source(args.mavlink_message)
+    except ValueError as exc:
+        raise InputError(None, None, f"--mavlink-message: {exc}") from None
+    stop = threading.Event()
+
+    def _stop(signum, frame):  # noqa: ARG001
+        stop.set()
+
+    old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        res = record(
+            args.port, args.out, baud=args.baud, protocol=args.protocol, seconds=args.seconds,
+            procedure=args.procedure, extra_meta=_meta(args.meta), mavlink_source=args.mavlink_message,
+            stop=stop, warn=lambda msg: print(f"station record: {msg}", file=sys.stderr),
+        )
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    m = res.meta
+    print(
+        f"recorded {res.samples} samples ({m.get('duration_s', '?')} s, {m.get('sample_rate_hz', '?')} Hz) "
+        f"from {args.port} into {res.path}: gaps {m['gaps']}, parse errors {m['parse_errors']}, "
+        f"reconnects {m['reconnects']}, dropped {m['dropped']}"
+    )
+    return 0

@@ -1,0 +1,353 @@
+"""Headless recording of a device into a capture file (../shared/spec/capture-format.md).
+
+The recording is written as it arrives to `<out>.partial`, itself a capture file whose
+metadata says `complete: false`, flushed after every batch. At the end (the time is up,
+SIGINT/SIGTERM, the device changed) the final metadata are known; they are written with
+the rows copied from the partial file into a temporary file beside `<out>`, which is
+then renamed to `<out>` (atomic), and the partial file is removed. So a recording that
+is stopped leaves a complete capture; one that is killed outright (SIGKILL, power cut)
+leaves only `<out>.partial`, a valid capture up to its last line, which may be cut in
+the middle: `recover_partial()` (`station record --recover FILE.partial`) drops the cut
+line and finishes the file as `complete: false`.
+
+Columns: `t` (s, from the device clock, see reader.py), `segment` (0, 1, ...: a new
+segment after each reconnection or device restart, so a gap is visible in the data),
+then the sensor columns the device has (a header unit that is empty means absent) and
+`temp_c`. Metadata beyond the spec's keys: `recorded_at`, `source`, `protocol`,
+`samples`, `gaps` (samples missed, from sequence numbers), `parse_errors` (and
+`parse_errors_by_kind`), `dropped` (reader queue overflow), `reconnects`, `restarts`,
+`segments`, one `gap_<k>` line per break, `nominal_rate_hz`, `duration_s`, `complete`.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from station.device.protocol import SENSOR_FIELDS, Header
+from station.device.reader import Batch, GapEvent, Reader, ReaderStats
+from station.errors import InputError, StationError
+
+SENSOR_GROUPS = {"accel_unit": ("ax", "ay", "az"), "gyro_unit": ("gx", "gy", "gz"), "mag_unit": ("mx", "my", "mz")}
+PARTIAL_SUFFIX = ".partial"
+
+
+class RecordError(StationError):
+    """The recording could not produce a capture (no samples, cannot write, ...)."""
+
+
+@dataclass
+class RecordResult:
+    path: str
+    samples: int
+    meta: dict[str, str]
+    stats: ReaderStats
+    events: list[GapEvent] = field(default_factory=list)
+    stopped_because: str = ""
+
+
+def _known_units() -> dict[str, tuple[str, ...]]:
+    from station.capture import UNIT_KEYS
+
+    return UNIT_KEYS
+
+
+def columns_for(header: Header | None) -> list[str]:
+    """`t`, `segment`, the sensors the header says the device has (all without one), `temp_c`."""
+    cols = ["t", "segment"]
+    for key, names in SENSOR_GROUPS.items():
+        if header is None or getattr(header, key):
+            cols.extend(names)
+    cols.append("temp_c")
+    return cols
+
+
+def _fmt(x: float) -> str:
+    if x != x:
+        return ""
+    s = repr(x)
+    return s[:-2] if s.endswith(".0") else s
+
+
+def format_rows(batch: Batch, columns: list[str]) -> str:
+    """CSV rows for a batch: t to the microsecond, values as repr (round-trip exact)."""
+    idx = [SENSOR_FIELDS.index(c) for c in columns[2:]]
+    vals = batch.values[:, idx].tolist()
+    t = batch.t_s.tolist()
+    seg = batch.segment.tolist()
+    out = []
+    for i, row in enumerate(vals):
+        out.append("%.6f,%d,%s\n" % (t[i], seg[i], ",".join(["" if v != v else _fmt(v) for v in row])))
+    return "".join(out)
+
+
+class CaptureStream:
+    """Writes a capture incrementally to `<out>.partial`, then finishes it as `<out>`."""
+
+    def __init__(self, out: str, columns: list[str], meta: dict[str, str]) -> None:
+        self.out = os.fspath(out)
+        self.partial = self.out + PARTIAL_SUFFIX
+        self.columns = columns
+        self.rows = 0
+        head = dict(meta)
+        head["complete"] = "false"
+        try:
+            self._f = open(self.partial, "w", encoding="utf-8", newline="\n")
+        except OSError as exc:
+            raise InputError(self.partial, None, f"cannot write: {exc.strerror or exc}") from None
+        self._f.write(_head_text(head, columns))
+        self._f.flush()
+        try:  # the head must be one the capture reader accepts (units, --meta values)
+            from station.capture import iter_capture_chunks
+
+            iter_capture_chunks(self.partial)
+        except InputError:
+            self.abandon()
+            raise
+
+    def write(self, batch: Batch) -> None:
+        if not len(batch):
+            return
+        self._f.write(format_rows(batch, self.columns))
+        self._f.flush()
+        self.rows += len(batch)
+
+    def abandon(self) -> None:
+        self._f.close()
+        try:
+            os.unlink(self.partial)
+        except FileNotFoundError:
+            pass
+
+    def finish(self, meta: dict[str, str]) -> None:
+        """Final metadata + the partial file's rows -> temp file -> os.replace(out)."""
+        self._f.close()
+        _rewrite_head(self.partial, self.out, meta, self.columns)
+        os.unlink(self.partial)
+
+
+def _head_text(meta: dict[str, str], columns: list[str]) -> str:
+    lines = ["# station-capture: 1\n"]
+    for k, v in meta.items():
+        if k == "station-capture":
+            continue
+        v = " ".join(str(v).split())  # one line, no control characters
+        lines.append(f"# {k}: {v}\n")
+    lines.append(",".join(columns) + "\n")
+    return "".join(lines)
+
+
+def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str], *, cut_tail: bool = False) -> int:
+    """Copy src's data rows under a new head into dst atomically; returns rows copied."""
+    directory = os.path.dirname(os.path.abspath(dst))
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(dst)}.", suffix=".tmp", dir=directory)
+    rows = 0
+    try:
+        with open(src, "rb") as fin, os.fdopen(fd, "wb") as fout:
+            # skip the old head: metadata lines, then the header row
+            while True:
+                line = fin.readline()
+                if not line:
+                    raise InputError(src, None, "no header row: not a partial recording")
+                if not line.startswith(b"#"):
+                    break
+            fout.write(_head_text(meta, columns).encode("utf-8"))
+            tail = b""
+            while True:
+                block = fin.read(1 << 20)
+                if not block:
+                    break
+                block = tail + block
+                cut = block.rfind(b"\n") + 1
+                fout.write(block[:cut])
+                rows += block.count(b"\n", 0, cut)
+                tail = block[cut:]
+            if tail and not cut_tail:
+                raise InputError(src, None, "last line is cut short (use --recover)")
+            fout.flush()
+            os.fsync(fout.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, dst)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return rows
+
+
+def recover_partial(partial: str, out: str | None = None) -> str:
+    """Finish a `<out>.partial` left by a killed recording: drop a cut last line, keep
+    `complete: false`, add `recovered: true`; write `out` (default: the name without
+    `.partial`) atomically and remove the partial file."""
+    from station.capture import iter_capture_chunks
+
+    partial = os.fspath(partial)
+    if out is None:
+        if not partial.endswith(PARTIAL_SUFFIX):
+            raise InputError(partial, None, f"not a {PARTIAL_SUFFIX} file; give --out")
+        out = partial[: -len(PARTIAL_SUFFIX)]
+    meta, header, _ = iter_capture_chunks(partial)  # validates the head
+    meta = dict(meta)
+    meta["complete"] = "false"
+    meta["recovered"] = "true"
+    rows = _rewrite_head(partial, out, meta, header, cut_tail=True)
+    if rows == 0:
+        os.unlink(out)
+        raise InputError(partial, None, "no complete data row to recover")
+    os.unlink(partial)
+    return out
+
+
+def _median_dt(batch: Batch) -> float | None:
+    if len(batch) < 3:
+        return None
+    same = batch.segment[1:] == batch.segment[:-1]
+    d = np.diff(batch.t_s)[same]
+    d = d[d > 0]
+    return float(np.median(d)) if len(d) else None
+
+
+def record(
+    port: str,
+    out: str,
+    *,
+    baud: int = 115200,
+    protocol: str = "station",
+    seconds: float | None = None,
+    procedure: str | None = None,
+    extra_meta: dict[str, str] | None = None,
+    mavlink_source: str | None = None,
+    header_timeout_s: float = 3.0,
+    stop: threading.Event | None = None,
+    reader: Reader | None = None,
+    warn=None,
+) -> RecordResult:
+    """Record `port` into the capture `out` until `seconds` pass or `stop` is set.
+
+    Returns the final metadata and the reader's statistics. Raises PortError when the
+    port cannot be opened and RecordError when no sample arrived.
+    """
+    stop = stop or threading.Event()
+    warn = warn or (lambda msg: None)
+    out = os.fspath(out)
+    directory = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(directory):
+        raise InputError(out, None, "its folder does not exist")
+    own_reader = reader is None
+    if reader is None:
+        reader = Reader(port, baud=baud, protocol=protocol, mavlink_source=mavlink_source)
+        reader.start()
+    started = time.monotonic()
+    recorded_at = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0)
+    stream: CaptureStream | None = None
+    try:
+        header = reader.wait_header(header_timeout_s)
+        if header is None:
+            warn(f"no header from {port} in {header_timeout_s:g} s: recording all columns, units unknown")
+        columns = columns_for(header)
+        meta = _start_meta(header, procedure, recorded_at, port, protocol, baud, extra_meta, warn)
+        stream = CaptureStream(out, columns, meta)
+        dts: list[float] = []
+        stopped = "stopped"
+        while True:
+            if stop.wait(0.1):
+                stopped = "stopped"
+                break
+            b = reader.drain()
+            if b is not None:
+                stream.write(b)
+                d = _median_dt(b)
+                if d is not None:
+                    dts.append(d)
+            if reader.header_changes:
+                old, new = reader.header_changes[0]
+                warn(f"device changed ({old.device_id} {old.units} -> {new.device_id} {new.units}): recording stopped")
+                stopped = "device changed"
+                break
+            if seconds is not None and time.monotonic() - started >= seconds:
+                stopped = "time"
+                break
+        if own_reader:
+            reader.stop()
+        b = reader.drain()
+        if b is not None and stopped != "device changed":
+            stream.write(b)
+        if stream.rows == 0:
+            stream.abandon()
+            stream = None
+            raise RecordError(f"{port}: no samples received in {time.monotonic() - started:.1f} s")
+        stats = reader.stats()
+        events = reader.events()
+        final = dict(meta)
+        final.update(_end_meta(stats, events, stream.rows, dts, time.monotonic() - started))
+        stream.finish(final)
+        return RecordResult(out, stream.rows, final, stats, events, stopped)
+    except BaseException:
+        if own_reader:
+            reader.stop()
+        raise
+    finally:
+        # a partial file stays only if finishing failed after rows were written
+        if stream is not None and stream.rows == 0 and os.path.exists(stream.partial):
+            stream.abandon()
+
+
+def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, warn) -> dict[str, str]:
+    meta: dict[str, str] = {}
+    if procedure:
+        meta["procedure"] = procedure
+    meta["device"] = header.device_id if header and header.device_id else "unknown"
+    known = _known_units()
+    if header is not None:
+        for key in SENSOR_GROUPS:
+            unit = getattr(header, key)
+            if not unit:
+                continue
+            if unit in known[key]:
+                meta[key] = unit
+            else:
+                meta[f"device_{key}"] = unit
+                warn(f"{key} {unit!r} is not a capture unit; kept as device_{key}")
+        if header.rate_hz == header.rate_hz:
+            meta["nominal_rate_hz"] = f"{header.rate_hz:g}"
+    meta["date"] = recorded_at.date().isoformat()
+    meta["recorded_at"] = recorded_at.isoformat().replace("+00:00", "Z")
+    meta["source"] = port
+    meta["protocol"] = protocol
+    if not port.split(":", 1)[0].endswith(("socket", "loop", "rfc2217")):
+        meta["baud"] = str(baud)
+    for k, v in (extra or {}).items():
+        meta[k] = v
+    return meta
+
+
+def _end_meta(stats: ReaderStats, events: list[GapEvent], rows: int, dts: list[float], duration_s: float) -> dict[str, str]:
+    m: dict[str, str] = {}
+    if dts:
+        m["sample_rate_hz"] = f"{1.0 / float(np.median(dts)):.6g}"
+    m["samples"] = str(rows)
+    m["gaps"] = str(stats.gaps)
+    m["parse_errors"] = str(stats.parse_errors)
+    m["parse_errors_by_kind"] = " ".join(f"{k}={v}" for k, v in stats.errors.items())
+    m["dropped"] = str(stats.dropped)
+    m["reconnects"] = str(stats.reconnects)
+    m["restarts"] = str(stats.restarts)
+    m["segments"] = str(stats.segment + 1)
+    for k, ev in enumerate(events, 1):
+        missed = "unknown" if ev.missed < 0 else str(ev.missed)
+        before = "start" if math.isnan(ev.t_s) else f"{ev.t_s:.6f}"
+        m[f"gap_{k}"] = (
+            f"segment {ev.segment} {ev.reason}: t {before} -> {ev.t_resume_s:.6f} s, "
+            f"down {ev.down_s:.3f} s, missed {missed}"
+        )
+    m["duration_s"] = f"{duration_s:.3f}"
+    m["complete"] = "true"
+    return m
