@@ -1,0 +1,108 @@
+"""Allan deviation and the standard error of a mean under correlated noise.
+
+Overlapping Allan deviation of a *rate* series ``y`` sampled every ``dt_s`` seconds
+(IEEE Std 952, Eq. for the overlapping estimator), computed from the cumulative sum
+(the "phase" ``x_k = dt Σ y``)::
+
+    σ²(τ) = 1 / (2 τ² (N − 2m)) Σ_{k} (x_{k+2m} − 2 x_{k+m} + x_k)²,   τ = m dt
+
+It matches ``allantools.oadev(y, rate=1/dt, data_type='freq')`` (tests check it).
+
+Standard error of the mean of a record of length ``T``: for white noise
+``σ_mean = ADEV(τ) sqrt(τ / T)`` at every τ. With correlated noise (bias instability,
+flicker, random walk) ``ADEV(τ) sqrt(τ/T)`` grows with τ; :func:`mean_standard_error`
+takes its maximum over half-octave-spaced τ up to ``T / 3`` (the longest τ with a usable
+estimate), and never less than the white ``σ / sqrt(n)``. That is the 1-sigma the gyro drift
+reports, and the figure to compare with the accuracy asked.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["oadev", "octave_taus", "mean_standard_error", "MeanError", "time_needed_s"]
+
+
+def octave_taus(n: int, dt_s: float, max_fraction: float = 0.25, per_octave: int = 1) -> np.ndarray:
+    """Cluster sizes 1, 2, 4, ... (``per_octave`` steps per octave) up to ``max_fraction * n``
+    samples, and that top size itself, as τ in seconds."""
+    top = max(1, int(n * max_fraction))
+    m = np.rint(2.0 ** (np.arange(0, int(per_octave * math.log2(top)) + 1) / per_octave)).astype(int)
+    m = np.unique(np.append(m[m <= top], top))
+    return m.astype(float) * dt_s
+
+
+def oadev(y, dt_s: float, taus_s=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Overlapping Allan deviation of rate samples ``y`` (N,) or (N, k).
+
+    Returns ``(taus_s, adev, n_terms)``; ``adev`` has shape (len(taus), k) for 2-D input.
+    τ values that are not whole multiples of ``dt_s`` are rounded to the nearest; τ with
+    fewer than one term (2m ≥ N) are dropped.
+    """
+    y = np.asarray(y, dtype=float)
+    one_d = y.ndim == 1
+    Y = y[:, None] if one_d else y
+    n = Y.shape[0]
+    if taus_s is None:
+        taus_s = octave_taus(n, dt_s, 0.5)
+    m = np.unique(np.maximum(1, np.rint(np.asarray(taus_s, dtype=float) / dt_s).astype(int)))
+    m = m[2 * m < n]
+    x = np.vstack([np.zeros((1, Y.shape[1])), np.cumsum(Y, axis=0) * dt_s])
+    out = np.empty((len(m), Y.shape[1]))
+    terms = np.empty(len(m), dtype=int)
+    for i, mi in enumerate(m):
+        d = x[2 * mi:] - 2.0 * x[mi:-mi] + x[: -2 * mi]
+        tau = mi * dt_s
+        out[i] = np.sqrt(np.sum(d * d, axis=0) / (2.0 * tau * tau * d.shape[0]))
+        terms[i] = d.shape[0]
+    taus = m * dt_s
+    return taus, (out[:, 0] if one_d else out), terms
+
+
+@dataclass
+class MeanError:
+    """The mean of a rate record and its 1-sigma standard error (per axis)."""
+
+    mean: np.ndarray          # (k,)
+    se: np.ndarray            # (k,) the reported 1-sigma: max(white, Allan-based)
+    se_white: np.ndarray      # σ / sqrt(n), what uncorrelated noise alone would give
+    tau_at_max_s: np.ndarray  # τ where ADEV(τ) sqrt(τ/T) peaked
+    duration_s: float
+    taus_s: np.ndarray
+    adev: np.ndarray          # (len(taus), k)
+
+
+def mean_standard_error(y, dt_s: float, max_fraction: float = 1.0 / 3.0) -> MeanError:
+    """Mean of ``y`` (N,) or (N, k) and its standard error accounting for correlated
+    noise: ``max(σ/sqrt(n), max_τ ADEV(τ) sqrt(τ/T))`` over τ ≤ ``max_fraction`` T."""
+    y = np.asarray(y, dtype=float)
+    Y = y[:, None] if y.ndim == 1 else y
+    n = Y.shape[0]
+    T = n * dt_s
+    mean = Y.mean(axis=0)
+    se_white = Y.std(axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.full(Y.shape[1], np.inf)
+    taus, adev, _ = oadev(Y, dt_s, octave_taus(n, dt_s, max_fraction, per_octave=2))
+    if len(taus):
+        cand = adev * np.sqrt(taus / T)[:, None]
+        imax = np.argmax(cand, axis=0)
+        se_allan = cand[imax, np.arange(Y.shape[1])]
+        tau_at = taus[imax]
+    else:
+        se_allan, tau_at = np.zeros(Y.shape[1]), np.zeros(Y.shape[1])
+    se = np.maximum(se_white, se_allan)
+    return MeanError(mean=mean, se=se, se_white=se_white, tau_at_max_s=tau_at, duration_s=T,
+                     taus_s=taus, adev=adev)
+
+
+def time_needed_s(me: MeanError, accuracy: float) -> np.ndarray:
+    """Record length for a 1-sigma of ``accuracy`` (same unit as the data), per axis,
+    extrapolating the achieved error as white (``∝ 1/sqrt(T)``); ``inf`` where the
+    Allan curve has turned up (bias-instability floor) at a level above it."""
+    need = me.duration_s * (me.se / accuracy) ** 2
+    if len(me.taus_s) < 2:
+        return need
+    floor = np.min(me.adev, axis=0)
+    flattened = np.argmin(me.adev, axis=0) < len(me.taus_s) - 1  # the curve turned up
+    return np.where(flattened & (floor > accuracy), np.inf, need)
