@@ -1,0 +1,245 @@
+"""P3 compass calibration for the CLI and the TUI: a capture in, the calibrate.md dict out.
+
+The numerics are in ``solvers/compass.py`` (see its docstring for the chain, filters,
+Kalman noise, RLS linearisation). This module reads the capture's units and place, runs
+the chain, turns solver refusals into ``UnsupportedError`` (exit 2, one line) and writes
+the warnings an operator must see:
+
+- no place (``latitude_deg``/``longitude_deg``) → no IGRF: W is scaled to the data's own
+  mean field radius (not anchored to a reference);
+- accelerometer sign: metadata ``accel_sign: gravity | specific_force``, else detected from
+  the accelerometer–field angle against the expected inclination; a gravity-direction
+  accelerometer is flipped, with a warning, never silently;
+- misfit: residuals above the noise estimated from the data (second differences).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from solvers import compass as C
+from solvers.errors import SolverError
+from solvers.frames import G_STANDARD_MPS2
+from solvers.geomag import igrf_reference
+from solvers.units import si_factor
+from station.errors import InputError, UnsupportedError
+
+MODEL = "m = W (m_raw - h), |m| = F (IGRF total field at the capture's place and date)"
+REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
+METHODS = ("rls", "batch", "ellipsoid")
+
+
+def _xyz(capture, prefix: str) -> np.ndarray | None:
+    names = [prefix + a for a in "xyz"]
+    if not all(n in capture.columns for n in names):
+        return None
+    return np.column_stack([np.asarray(capture.columns[n], float) for n in names])
+
+
+def _reference(capture, warnings: list[str]) -> dict | None:
+    lat, lon = capture.float_meta("latitude_deg"), capture.float_meta("longitude_deg")
+    if lat is None or lon is None:
+        warnings.append("no place in the metadata (latitude_deg, longitude_deg): no IGRF reference; "
+                        "the field magnitude is normalised to the data's own mean radius, so the "
+                        "calibration is NOT IGRF-anchored (W's overall scale is relative)")
+        return None
+    date = capture.meta.get("date")
+    if not date:
+        raise InputError(capture.path, None, "metadata has latitude_deg/longitude_deg but no 'date': "
+                         "the IGRF field needs the date of the recording")
+    alt = capture.float_meta("altitude_m", 0.0)
+    try:
+        return igrf_reference(lat, lon, alt, date)
+    except ValueError as exc:
+        raise InputError(capture.path, capture.meta_lines.get("date"), f"metadata 'date': {exc}") from None
+
+
+def calibrate(capture, method: str | None = None) -> dict:
+    method = method or "rls"
+    if method not in METHODS:
+        raise InputError(None, None, f"compass: unknown method {method!r} (choose {', '.join(METHODS)})")
+    warnings: list[str] = []
+    y_all = _xyz(capture, "m")
+    if y_all is None:
+        capture.column("mx"), capture.column("my"), capture.column("mz")  # raises the one-line error
+    mag_unit = capture.meta.get("mag_unit")
+    mag_factor = si_factor("mag", mag_unit)
+    if mag_factor is None:
+        warnings.append(f"mag_unit {mag_unit!r} has no physical factor: the data radius is in raw units")
+    ref = _reference(capture, warnings)
+    good = np.all(np.isfinite(y_all), axis=1)
+    y = y_all[good]
+    noise_raw = None
+    t = None
+    if capture.is_time_series:
+        t = np.asarray(capture.columns["t"], float)
+        noise_raw = C.noise_from_second_differences(y)
+        if not math.isfinite(noise_raw) or noise_raw <= 0:
+            noise_raw = None
+    try:
+        cal = C.calibrate_mag(y, None if ref is None else ref["total_nT"], unit_factor_nT=mag_factor,
+                              method=method, noise_raw=noise_raw)
+    except SolverError as exc:
+        raise UnsupportedError(f"{capture.path or 'capture'}: compass: {exc}") from None
+    if cal.batch.misfit_scaled:
+        warnings.append(f"residuals are {math.sqrt(cal.batch.reduced_chi2):.1f}x the sensor noise "
+                        "(estimated from second differences): the ellipsoid model does not explain "
+                        "everything (time misalignment, field disturbances, nonlinearity); "
+                        "uncertainties are scaled up accordingly")
+    if cal.rls_minus_batch_sigma > 0.1:
+        warnings.append(f"the RLS differs from the batch solution by {cal.rls_minus_batch_sigma:.2f} sigma")
+    if ref is None:
+        reference = {k: None for k in REF_KEYS}
+    else:
+        reference = {k: float(ref[k]) for k in REF_KEYS}
+    result = {
+        "procedure": "compass",
+        "device": capture.meta.get("device"),
+        "model": MODEL,
+        "method": method,
+        "params": {"hard_iron": cal.h.tolist(), "soft_iron": cal.W.tolist(), "reference": reference},
+        "uncertainty": {"hard_iron": cal.h_sigma.tolist(), "soft_iron": cal.W_sigma.tolist(),
+                        "reference": {k: None for k in REF_KEYS}},
+        "residual_rms": cal.residual_rms_nT,
+        "n_positions": cal.n_distinct,
+        "warnings": warnings,
+        "igrf_anchored": ref is not None,
+        "field_nT": cal.field_nT,
+        "mag_unit": mag_unit,
+        "coverage": cal.coverage,
+        "n_samples": cal.n_samples,
+        "noise_raw": cal.noise_raw,
+        "field_magnitude_before_nT": cal.magnitude_before,
+        "field_magnitude_after_nT": cal.magnitude_after,
+        "rls_minus_batch_max_sigma": cal.rls_minus_batch_sigma,
+        "ellipsoid": {"hard_iron": cal.h_ellipsoid.tolist(), "soft_iron": cal.W_ellipsoid.tolist()},
+    }
+    _tilt_and_heading(capture, t, good, cal, ref, result, warnings)
+    return result
+
+
+def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
+    """Accelerometer sign, Kalman pitch/roll and tilt-compensated heading (per held
+    orientation for a time series, per row for a table of averages)."""
+    a = _xyz(capture, "a")
+    if a is None:
+        warnings.append("no accelerometer columns: no tilt, no heading")
+        return
+    a_factor = si_factor("accel", capture.meta.get("accel_unit"))
+    if a_factor is None:
+        warnings.append(f"accel_unit {capture.meta.get('accel_unit')!r} has no physical factor: "
+                        "no tilt, no heading (calibrate the accelerometer first)")
+        return
+    f_g = a * (a_factor / G_STANDARD_MPS2)
+    w = _xyz(capture, "g")
+    w_factor = si_factor("gyro", capture.meta.get("gyro_unit"))
+    if w is None and all(c in capture.columns for c in ("gx", "gy")):
+        w = np.column_stack([capture.columns["gx"], capture.columns["gy"], np.zeros(capture.n_rows)])
+    rate = None
+    y_all = _xyz(capture, "m")
+    if t is not None:
+        dt = np.diff(t)
+        rate = capture.float_meta("sample_rate_hz") or (1.0 / float(np.median(dt)) if len(dt) else None)
+    if rate:
+        f_f = C.lowpass(np.nan_to_num(f_g), C.ACCEL_CUTOFF_HZ, rate)
+        y_f = C.lowpass(np.where(np.isfinite(y_all), y_all, np.nanmean(y_all, axis=0)), C.MAG_CUTOFF_HZ, rate)
+    else:
+        f_f, y_f = f_g, y_all
+    m_cal = C.calibrated(y_f, cal.W, cal.h)
+    inc = None if ref is None else ref["inclination_deg"]
+    verdict = C.detect_accel_sign(f_f[good], m_cal[good], inc)
+    stated = (capture.meta.get("accel_sign") or "").strip().lower().replace("-", "_") or None
+    if stated not in (None, "gravity", "specific_force"):
+        raise InputError(capture.path, capture.meta_lines.get("accel_sign"),
+                         f"metadata 'accel_sign': {stated!r} is not 'gravity' or 'specific_force'")
+    sign = stated or verdict.sign
+    if stated and stated != verdict.sign:
+        warnings.append(f"metadata says accel_sign: {stated}, but the data suggest {verdict.sign} "
+                        f"({verdict.reason}); following the metadata")
+    if sign == "gravity":
+        src = "metadata accel_sign: gravity" if stated else "detected"
+        warnings.append(f"accelerometer reports the gravity direction, not specific force ({src}: "
+                        f"{verdict.reason}); flipped its sign for tilt and heading")
+        f_f = -f_f
+    result["accel_sign"] = {"used": sign, "stated": stated, "detected": verdict.sign,
+                            "accel_field_angle_deg": verdict.angle_deg,
+                            "expected_specific_force_deg": verdict.expected_deg}
+    decl = 0.0 if ref is None else ref["declination_deg"]
+    if ref is None:
+        warnings.append("no declination without a place: true heading = magnetic heading")
+    if t is None or rate is None:
+        pitch, roll = C.pitch_roll_from_accel(f_f)
+        mh, th = C.heading_deg(m_cal, pitch, roll, decl)
+        result["headings"] = [_heading_row(i, pitch[i], roll[i], mh[i], th[i]) for i in range(len(mh))]
+        return
+    if w is None or w_factor is None:
+        warnings.append("no usable gyro (columns or gyro_unit): pitch and roll from the accelerometer alone")
+        pitch, roll = C.pitch_roll_from_accel(f_f)
+    else:
+        w_f = C.lowpass(np.nan_to_num(w * w_factor), C.GYRO_CUTOFF_HZ, rate)
+        pitch, roll = C.kalman_pitch_roll(t, f_f, w_f)
+    mh, th = C.heading_deg(m_cal, pitch, roll, decl)
+    result["headings"] = _held_headings(t, f_g, w, pitch, roll, mh, th, warnings)
+    result["heading_frame"] = "body x forward, y right, z down; heading of body x from north"
+
+
+def _heading_row(i, pitch, roll, mh, th, t0=None, t1=None) -> dict:
+    row = {"index": int(i), "pitch_deg": math.degrees(pitch), "roll_deg": math.degrees(roll),
+           "heading_magnetic_deg": float(mh), "heading_true_deg": float(th)}
+    if t0 is not None:
+        row.update({"t_start_s": float(t0), "t_stop_s": float(t1)})
+    return row
+
+
+def _held_headings(t, f_g, w, pitch, roll, mh, th, warnings) -> list[dict]:
+    """Median tilt and circular-mean heading over each static interval (solvers.stillness)."""
+    try:
+        from solvers.stillness import detect_static_intervals
+
+        still = detect_static_intervals(t, np.nan_to_num(f_g), None if w is None else np.nan_to_num(w),
+                                        nan_policy="omit")
+    except (SolverError, ValueError) as exc:
+        warnings.append(f"no held orientations found for per-position headings ({exc})")
+        return []
+    rows = []
+    for k, iv in enumerate(still.intervals):
+        s = slice(iv.start, iv.stop)
+        rows.append(_heading_row(k, float(np.median(pitch[s])), _circ_rad(roll[s]),
+                                 C.circular_mean_deg(mh[s]), C.circular_mean_deg(th[s]),
+                                 iv.t_start_s, iv.t_stop_s))
+    return rows
+
+
+def _circ_rad(a) -> float:
+    return math.atan2(float(np.mean(np.sin(a))), float(np.mean(np.cos(a))))
+
+
+def format_text(result: dict) -> str:
+    from station.calibrate import format_text as _generic  # noqa: F401  (kept for symmetry)
+    from station.calibrate import _format_param
+
+    lines = [f"procedure  compass ({result.get('method')})", f"device     {result.get('device')}",
+             f"model      {result.get('model')}"]
+    p, u = result["params"], result["uncertainty"]
+    lines += _format_param("hard_iron", p["hard_iron"], u["hard_iron"])
+    lines += _format_param("soft_iron", p["soft_iron"], u["soft_iron"])
+    ref = p["reference"]
+    if result.get("igrf_anchored"):
+        lines.append(f"  IGRF: F {ref['total_nT']:.1f} nT, N {ref['north_nT']:.1f}, E {ref['east_nT']:.1f}, "
+                     f"D {ref['down_nT']:.1f} nT, inclination {ref['inclination_deg']:.2f}°, "
+                     f"declination {ref['declination_deg']:.2f}°")
+    else:
+        lines.append(f"  no IGRF reference: field normalised to {result['field_nT']:.6g} nT (data radius)")
+    b, a = result["field_magnitude_before_nT"], result["field_magnitude_after_nT"]
+    lines.append(f"|m| before {b['mean']:.6g} ± {b['std']:.3g} nT ({b['std_percent']:.2f} %), "
+                 f"after {a['mean']:.6g} ± {a['std']:.3g} nT ({a['std_percent']:.3f} %)")
+    lines.append(f"residual   {result['residual_rms']:.4g} nT RMS; coverage {100 * result['coverage']:.0f}% "
+                 f"of the sphere; {result['n_positions']} distinct orientations; "
+                 f"RLS − batch ≤ {result['rls_minus_batch_max_sigma']:.3f} σ")
+    for h in result.get("headings", [])[:40]:
+        lines.append(f"  held {h['index']:>2}: pitch {h['pitch_deg']:7.2f}°  roll {h['roll_deg']:7.2f}°  "
+                     f"heading {h['heading_magnetic_deg']:7.2f}° magnetic, {h['heading_true_deg']:7.2f}° true")
+    for w in result.get("warnings", []):
+        lines.append(f"warning    {w}")
+    return "\n".join(lines)
