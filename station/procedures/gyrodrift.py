@@ -1,0 +1,357 @@
+"""P4 gyro drift from a capture: mode A (reference IMU) and mode B (static base).
+
+``calibrate(capture, method=None, *, accuracy_deg_h=None) -> dict`` (calibrate.md).
+
+Mode: ``method`` ('reference' | 'static'), else the ``gyro_mode`` metadata, else
+'reference' when ``ref_gx ref_gy ref_gz`` are present. Metadata read:
+
+- ``gyro_unit`` (rad/s, deg/s, ...; ``counts`` needs ``gyro_counts_per_deg_s``, e.g. 131
+  for an MPU-6050 at ±250 °/s); ``accel_unit`` (any: only the direction is used);
+- ``latitude_deg``, ``heading_deg`` (default 0 with a warning), ``heading_sigma_deg``
+  (default 3), ``accuracy_deg_h`` (the 1-sigma asked; also the keyword argument);
+- ``reference_drift_deg_h``: the reference IMU's own drift, 1 sigma (default 1 °/h);
+- axis conventions, when the capture is not in P4's body frame: ``frame`` (e.g.
+  ``x forward, y left, z up``), ``accel_sign`` (``specific_force`` default, or
+  ``gravity`` for data that report the gravity direction), ``gyro_flip`` (axes whose sign
+  is reversed, e.g. ``x``). Known devices (``KNOWN_CONVENTIONS``) get theirs with a
+  warning. Every conversion is stated in ``warnings``; ``drift`` is in P4's body frame
+  (x fwd, y up, z right) and ``drift_raw`` in the capture's own axes and gyro unit.
+
+Positions (mode B): a ``position`` or per-row ``heading_deg`` column splits the record;
+without them, static intervals are found (solvers.stillness) and moving samples dropped;
+intervals of different orientation become positions. Two or more positions: ε and the
+Earth-rate scale together (solvers.gyrodrift.drift_multi).
+"""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from solvers import allan
+from solvers import gyrodrift as gd
+from solvers.errors import SolverError
+from solvers.units import si_factor
+from station.errors import InputError, UnsupportedError
+
+MODEL = "ω' = ω − ε (P4); mode B: ε^b = ω̄^b − C_b_n ω_ie^n, body x fwd, y up, z right, nav N-U-E"
+
+# Devices whose captures are known to break the conventions (their SOURCE.md).
+KNOWN_CONVENTIONS = {
+    "sunsided-mpu6050-hmc5883l": {"frame": "x forward, y left, z up", "accel_sign": "gravity",
+                                  "gyro_flip": "x"},
+}
+
+_DIRS = {"forward": (1, 0, 0), "fwd": (1, 0, 0), "front": (1, 0, 0), "back": (-1, 0, 0),
+         "backward": (-1, 0, 0), "up": (0, 1, 0), "down": (0, -1, 0), "right": (0, 0, 1),
+         "left": (0, 0, -1)}
+
+
+def frame_matrix(text: str) -> np.ndarray:
+    """``C_fur_cap``: the capture's axes (described as 'x forward, y left, z up') → P4's
+    body frame (x fwd, y up, z right). ValueError when not a right-handed triad."""
+    found = dict(re.findall(r"\b([xyz])\s*[:=]?\s*(forward|fwd|front|backward|back|up|down|right|left)\b",
+                            text.lower()))
+    if set(found) != {"x", "y", "z"}:
+        raise ValueError(f"frame {text!r}: say where x, y and z point (forward/back/up/down/left/right)")
+    M = np.column_stack([_DIRS[found[a]] for a in "xyz"]).astype(float)
+    if abs(np.linalg.det(M) - 1.0) > 1e-9:
+        raise ValueError(f"frame {text!r} is not a right-handed triad")
+    return M
+
+
+def _line(capture, key):
+    return capture.meta_lines.get(key) if hasattr(capture, "meta_lines") else None
+
+
+def _conventions(capture, warnings: list[str]):
+    """(C_fur_cap, accel_sign, gyro_signs) from metadata or the known-device table."""
+    meta = capture.meta
+    known = KNOWN_CONVENTIONS.get(meta.get("device", ""), {})
+    conv = {}
+    for key in ("frame", "accel_sign", "gyro_flip"):
+        if key in meta:
+            conv[key] = meta[key]
+        elif key in known:
+            conv[key] = known[key]
+            warnings.append(f"device {meta.get('device')!r}: {key} '{known[key]}' assumed from its known "
+                            "conventions (SOURCE.md); say so in the metadata to silence this")
+    C = np.eye(3)
+    if "frame" in conv:
+        try:
+            C = frame_matrix(conv["frame"])
+        except ValueError as exc:
+            raise InputError(capture.path, _line(capture, "frame"), str(exc)) from None
+        if not np.allclose(C, np.eye(3)):
+            warnings.append(f"capture axes '{conv['frame']}' rotated into P4's body frame "
+                            "(x forward, y up, z right)")
+    sign = conv.get("accel_sign", "specific_force").strip().lower().replace("-", "_").replace(" ", "_")
+    if sign not in ("specific_force", "gravity"):
+        raise InputError(capture.path, _line(capture, "accel_sign"),
+                         f"accel_sign {conv['accel_sign']!r}: use 'specific_force' or 'gravity'")
+    if sign == "gravity":
+        warnings.append("accelerometer reports the gravity direction (not specific force): sign flipped for tilt")
+    flips = np.ones(3)
+    for axis in re.findall(r"[xyz]", conv.get("gyro_flip", "").lower()):
+        flips["xyz".index(axis)] = -1.0
+    if (flips < 0).any():
+        warnings.append(f"gyro axis {conv['gyro_flip']} sign reversed to right-handed before use")
+    return C, (-1.0 if sign == "gravity" else 1.0), flips
+
+
+def _gyro_factor(capture, warnings: list[str]) -> float:
+    unit = capture.meta.get("gyro_unit")
+    if unit is None:
+        warnings.append("no gyro_unit: gyro taken as rad/s")
+        return 1.0
+    if unit == "counts":
+        lsb = capture.float_meta("gyro_counts_per_deg_s")
+        if lsb is None or lsb <= 0:
+            raise UnsupportedError(f"{capture.path}: gyro_unit is 'counts' and no 'gyro_counts_per_deg_s' gives "
+                                   "the scale (MPU-6050 at ±250 °/s: 131); add it to the metadata")
+        warnings.append(f"gyro in counts: nominal scale {lsb:g} counts per °/s used (its error scales the drift)")
+        return math.radians(1.0) / lsb
+    f = si_factor("gyro", unit)
+    if f is None:
+        raise InputError(capture.path, _line(capture, "gyro_unit"), f"gyro_unit {unit!r} is not a rate unit")
+    return f
+
+
+def _dt(capture) -> float:
+    if capture.is_time_series:
+        t = capture.columns["t"]
+        d = np.diff(t[np.isfinite(t)])
+        if len(d) and np.median(d) > 0:
+            return float(np.median(d))
+    rate = capture.float_meta("sample_rate_hz")
+    if rate is None or rate <= 0:
+        raise UnsupportedError(f"{capture.path}: gyro drift needs a time series ('t' column or sample_rate_hz)")
+    return 1.0 / rate
+
+
+def _need(capture, names):
+    missing = [c for c in names if c not in capture.columns]
+    if missing:
+        raise InputError(capture.path, capture.header_line,
+                         f"gyro-drift needs column(s) {', '.join(missing)} (have {', '.join(capture.columns)})")
+    return np.column_stack([capture.columns[c] for c in names]).astype(float)
+
+
+def _finite_rows(arrays, warnings, what):
+    ok = np.ones(len(arrays[0]), dtype=bool)
+    for a in arrays:
+        if a is not None:
+            ok &= np.all(np.isfinite(a), axis=1)
+    if not ok.all():
+        warnings.append(f"{int((~ok).sum())} rows with missing {what} values left out")
+    return ok
+
+
+def calibrate(capture, method: str | None = None, *, accuracy_deg_h: float | None = None) -> dict:
+    warnings: list[str] = []
+    mode = (method or capture.meta.get("gyro_mode") or
+            ("reference" if "ref_gx" in capture.columns else "static")).strip().lower()
+    if mode in ("a", "ref"):
+        mode = "reference"
+    if mode in ("b", "static-base"):
+        mode = "static"
+    if mode not in ("reference", "static"):
+        raise UnsupportedError(f"gyro-drift mode {mode!r}: use 'reference' (mode A) or 'static' (mode B)")
+    C, asign, flips = _conventions(capture, warnings)
+    k = _gyro_factor(capture, warnings)
+    raw = _need(capture, ["gx", "gy", "gz"])
+    w_b = (raw * flips * k) @ C.T                      # rad/s, P4 body frame
+    dt = _dt(capture)
+    if accuracy_deg_h is None:
+        accuracy_deg_h = capture.float_meta("accuracy_deg_h")
+    acc_rad_s = None if accuracy_deg_h is None else accuracy_deg_h * gd.DEG_H_RAD_S
+    try:
+        if mode == "reference":
+            res, me_for_acc, n_pos, resid = _mode_a(capture, w_b, C, flips, dt, warnings)
+        else:
+            res, me_for_acc, n_pos, resid = _mode_b(capture, w_b, C, asign, dt, warnings)
+    except SolverError as exc:
+        raise UnsupportedError(f"{capture.path}: {exc}") from None
+    warnings[:0] = []
+    warnings += res.warnings
+    acc, acc_w = gd.accuracy_statement(me_for_acc, res.sigma_rad_s, acc_rad_s)
+    warnings += acc_w
+    return _result(capture, res, mode, n_pos, resid, acc, me_for_acc, C, flips, k, warnings)
+
+
+def _mode_a(capture, w_b, C, flips, dt, warnings):
+    ref = _need(capture, ["ref_gx", "ref_gy", "ref_gz"])
+    ref_b = ref @ C.T  # reference in rad/s (capture-format.md), same axes as the gyro columns
+    ok = _finite_rows([w_b, ref_b], warnings, "gyro or reference")
+    ref_drift = capture.float_meta("reference_drift_deg_h", 1.0) * gd.DEG_H_RAD_S
+    res = gd.drift_reference(w_b[ok], ref_b[ok], dt, ref_drift)
+    resid = w_b[ok] - ref_b[ok] - res.drift_rad_s
+    return res, res.mean_error, 1, resid
+
+
+def _segments(capture, w_b, f_b, dt, ok, warnings):
+    """[(row mask, heading_deg, label)] for mode B."""
+    head0 = capture.float_meta("heading_deg")
+    if head0 is None:
+        head0 = 0.0
+        if capture.float_meta("latitude_deg") is not None and "heading_deg" not in capture.columns:
+            warnings.append("no heading_deg: forward axis taken as pointing north (heading 0)")
+    hcol = capture.columns.get("heading_deg")
+    pcol = capture.columns.get("position")
+    if pcol is not None and np.any(pcol != ""):
+        labels = [p for p in dict.fromkeys(pcol) if p != ""]
+        segs = []
+        for lab in labels:
+            m = ok & (pcol == lab)
+            h = hcol[m] if hcol is not None else np.array([head0])
+            h = h[np.isfinite(h)]
+            segs.append((m, float(np.median(h)) if len(h) else head0, str(lab)))
+        return segs
+    if hcol is not None and np.any(np.isfinite(hcol)):
+        vals = [v for v in dict.fromkeys(np.round(hcol[np.isfinite(hcol)], 6))]
+        return [(ok & (np.round(hcol, 6) == v), float(v), f"heading {v:g}") for v in vals]
+    if f_b is None or not capture.is_time_series:
+        return [(ok, head0, "1")]
+    from solvers.stillness import detect_static_intervals
+    idx = np.flatnonzero(ok)
+    try:
+        st = detect_static_intervals(capture.columns["t"][idx], f_b[idx], w_b[idx])
+    except SolverError as exc:
+        warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
+        return [(ok, head0, "1")]
+    if not st.intervals:
+        raise UnsupportedError(f"{capture.path}: no static interval found; mode B needs the unit at rest")
+    # group intervals of the same orientation (accelerometer direction within 5°)
+    groups: list[list] = []
+    for iv in st.intervals:
+        u = iv.accel_mean / np.linalg.norm(iv.accel_mean)
+        for g in groups:
+            if float(np.dot(u, g[0])) > math.cos(math.radians(5.0)):
+                g[1].append(iv)
+                break
+        else:
+            groups.append([u, [iv]])
+    segs = []
+    for j, (_, ivs) in enumerate(groups):
+        m = np.zeros(len(ok), dtype=bool)
+        for iv in ivs:
+            m[idx[iv.start:iv.stop]] = True
+        segs.append((m, head0, str(j + 1)))
+    used = sum(int(s[0].sum()) for s in segs)
+    if used < ok.sum():
+        warnings.append(f"{int(ok.sum()) - used} moving samples left out (stillness detection)")
+    if len(segs) > 1:
+        warnings.append(f"{len(segs)} static orientations found with no heading column: all taken as "
+                        f"heading {head0:g}°; the Earth-rate scale checks this")
+    return segs
+
+
+def _mode_b(capture, w_b, C, asign, dt, warnings):
+    have_acc = all(c in capture.columns for c in ("ax", "ay", "az"))
+    f_b = None
+    if have_acc:
+        f_b = (_need(capture, ["ax", "ay", "az"]) * asign) @ C.T
+        if capture.meta.get("accel_unit") == "counts":
+            warnings.append("accelerometer in counts: only its direction is used for pitch and roll "
+                            "(its bias, uncalibrated, tilts them)")
+    ok = _finite_rows([w_b, f_b], warnings, "gyro or accelerometer")
+    lat = capture.float_meta("latitude_deg")
+    hsig = capture.float_meta("heading_sigma_deg", 3.0)
+    segs = _segments(capture, w_b, f_b, dt, ok, warnings)
+    if len(segs) == 1:
+        m, head, _ = segs[0]
+        res = gd.drift_static(w_b[m], None if f_b is None else f_b[m], dt, lat, head,
+                              heading_sigma_deg=hsig)
+        e = res.earth_rate_body_rad_s if res.earth_rate_body_rad_s is not None else 0.0
+        return res, res.mean_error, 1, w_b[m] - res.drift_rad_s - e
+    positions = []
+    for m, head, lab in segs:
+        if m.sum() < 64:
+            warnings.append(f"position {lab}: {int(m.sum())} samples, too few; left out")
+            continue
+        positions.append(gd.Position(allan.mean_standard_error(w_b[m], dt),
+                                     None if f_b is None else allan.mean_standard_error(f_b[m], dt), head, lab))
+    if len(positions) == 1:
+        m = segs[0][0]
+        res = gd.drift_static(w_b[m], None if f_b is None else f_b[m], dt, lat, positions[0].heading_deg,
+                              heading_sigma_deg=hsig)
+        return res, res.mean_error, 1, w_b[m] - res.drift_rad_s
+    res = gd.drift_multi(positions, lat, heading_sigma_deg=hsig)
+    total = sum(p.omega.duration_s for p in positions)
+    if total < gd.SOURCE_DURATION_S:
+        warnings.append(f"static positions total {total:.0f} s, shorter than the 3 min P4 asks for")
+    # accuracy statement on the pooled record: the Allan curve of the longest position
+    me = max((p.omega for p in positions), key=lambda e: e.duration_s)
+    me = allan.MeanError(res.drift_rad_s, res.sigma_rad_s, me.se_white, me.tau_at_max_s, total, me.taus_s, me.adev)
+    resid = np.asarray(res.extra.pop("residuals_rad_s"))
+    return res, me, len(positions), resid
+
+
+def _f(x):
+    return None if x is None else float(x)
+
+
+def _result(capture, res: gd.DriftResult, mode, n_pos, resid, acc, me, C, flips, k, warnings) -> dict:
+    drift = np.asarray(res.drift_rad_s, dtype=float)
+    sig = np.asarray(res.sigma_rad_s, dtype=float)
+    raw_drift = (C.T @ drift) / (flips * k)  # back to the capture's axes and unit
+    raw_sig = np.abs((C.T @ sig) / (flips * k))
+    params = {"drift": drift, "mode": res.mode}
+    unc = {"drift": sig}
+    if mode == "static":
+        params.update({"pitch_deg": res.pitch_deg, "roll_deg": res.roll_deg,
+                       "earth_rate_body": res.earth_rate_body_rad_s})
+        unc.update({"pitch_deg": res.sigma_pitch_deg, "roll_deg": res.sigma_roll_deg,
+                    "earth_rate_body": res.sigma_earth_rate_body_rad_s})
+    out = {
+        "procedure": "gyro-drift",
+        "device": capture.meta.get("device"),
+        "model": MODEL,
+        "params": params,
+        "uncertainty": unc,
+        "residual_rms": float(np.sqrt(np.mean(np.asarray(resid) ** 2))) if np.size(resid) else 0.0,
+        "n_positions": n_pos,
+        "warnings": warnings,
+        "frame": "body x forward, y up, z right (rad/s)",
+        "drift_deg_h": drift / gd.DEG_H_RAD_S,
+        "drift_raw": {"value": raw_drift, "sigma": raw_sig, "unit": capture.meta.get("gyro_unit", "rad/s"),
+                      "axes": "the capture's gx gy gz"},
+        "accuracy": acc,
+        "allan": {"tau_s": me.taus_s, "adev_rad_s": me.adev.T if me.adev.size else []},
+    }
+    if res.extra:
+        out["fit"] = {k2: v for k2, v in res.extra.items()}
+    return out
+
+
+def format_text(result: dict) -> str:
+    p, u = result["params"], result["uncertainty"]
+    d, s = np.asarray(p["drift"]), np.asarray(u["drift"])
+    lines = [f"procedure  gyro-drift ({p['mode']})", f"device     {result.get('device')}",
+             f"model      {result['model']}",
+             "drift      " + "  ".join(f"{a} {v:+.4e} ± {e:.1e} rad/s ({v / gd.DEG_H_RAD_S:+.1f} °/h)"
+                                      for a, v, e in zip("xyz", d, s))]
+    if p.get("earth_rate_body") is not None:
+        e = np.asarray(p["earth_rate_body"])
+        lines.append("earth rate " + "  ".join(f"{a} {v:+.3e}" for a, v in zip("xyz", e)) + " rad/s removed")
+    if "pitch_deg" in p:
+        pr = p["pitch_deg"]
+        if isinstance(pr, list):
+            lines.append("tilt       " + "; ".join(f"pitch {a:.2f}° roll {b:.2f}°" for a, b in zip(pr, p["roll_deg"])))
+        else:
+            lines.append(f"tilt       pitch {pr:.2f}° roll {p['roll_deg']:.2f}°")
+    fit = result.get("fit", {})
+    if "earth_rate_scale" in fit:
+        lines.append(f"earth-rate scale {fit['earth_rate_scale']:.3f} ± {fit['sigma_earth_rate_scale']:.3f} (1 expected)")
+    acc = result.get("accuracy", {})
+    if acc:
+        lines.append(f"record     {acc['duration_s']:.0f} s; achieved 1σ "
+                     + ", ".join(f"{v:.3g}" for v in np.asarray(acc["achieved_sigma_deg_h"])) + " °/h"
+                     + (f"; asked {acc['accuracy_rad_s'] / gd.DEG_H_RAD_S:g} °/h: "
+                        + ("enough" if acc["enough"] else "NOT enough") if "accuracy_rad_s" in acc else ""))
+    lines.append(f"residual   {result['residual_rms']:.4g} rad/s RMS (noise about the model)")
+    lines.append(f"positions  {result['n_positions']}")
+    for w in result.get("warnings", []):
+        lines.append(f"warning    {w}")
+    return "\n".join(lines)
