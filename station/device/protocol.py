@@ -393,4 +393,6 @@ class StationParser:
             if len(fields) < 3 or fields[2] not in ("OK", "ERR"):
                 return None
             return Ack(fields[1].upper(), fields[2] == "OK", ",".join(fields[3:]), at)
+        if not kind:
+            return None
         return Unknown(tuple(fields), at)
