@@ -115,7 +115,8 @@ _INITIAL = [
     """,
     "CREATE INDEX schedule_due ON schedule(due)",
     # One row per scalar parameter: names like B[0], M[1][2], beam1.dK (json_tree's
-    # fullkey without the leading '$.'); sigma from the same path in `uncertainty`.
+    # fullkey without the leading '$.' and without the quotes some SQLite versions put
+    # around nested keys); sigma from the same path in `uncertainty`.
     """
     CREATE VIEW calibration_params AS
     SELECT c.id AS calibration_id,
@@ -123,7 +124,7 @@ _INITIAL = [
            c.procedure AS procedure,
            c.time AS time,
            c.accepted AS accepted,
-           substr(p.fullkey, 3) AS param,
+           replace(substr(p.fullkey, 3), '"', '') AS param,
            p.value AS value,
            (SELECT u.value FROM json_tree(c.uncertainty) AS u
              WHERE u.fullkey = p.fullkey AND u.type IN ('integer', 'real')) AS sigma
