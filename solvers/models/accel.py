@@ -144,3 +144,43 @@ def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict
     if name == "lever_arm":
         return {"dr": size * random_signs(rng, 3)}
     raise KeyError(f"unknown accelerometer effect {name!r}; known: {', '.join(EFFECTS)}")
+
+
+def p1_apply(V, B, M) -> np.ndarray:
+    """P1's calibration ``A = B + M V`` on rows (N, 3): the exact inverse of :func:`forward`
+    with ``K = M⁻¹``, ``b = −M⁻¹ B`` (no effect blocks), written directly for speed."""
+    return np.asarray(B, dtype=float) + np.atleast_2d(np.asarray(V, dtype=float)) @ np.asarray(M, dtype=float).T
+
+
+def p1_norm_jacobian(V, B, M) -> tuple[np.ndarray, np.ndarray]:
+    """``|A|`` of :func:`p1_apply` and its Jacobian (N, 12) w.r.t. ``(B[0..2], M[0][0], M[0][1], …, M[2][2])``
+    (row-major, the order of ``solvers.params``): ``∂|A|/∂B = û``, ``∂|A|/∂M_ij = û_i V_j``."""
+    V = np.atleast_2d(np.asarray(V, dtype=float))
+    A = p1_apply(V, B, M)
+    norm = np.linalg.norm(A, axis=1)
+    u = A / norm[:, None]
+    return norm, np.hstack([u, (u[:, :, None] * V[:, None, :]).reshape(len(V), 9)])
+
+
+def p2_norm_jacobian(y, params: dict) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """``|f|`` of :func:`inverse` (P2 blocks ``S``, ``b``, ``D``, optional ``gamma``; no other
+    effects) and its Jacobian w.r.t. those blocks, columns named like ``solvers.params``
+    (``S[0]``…, ``b[0]``…, ``D[0]``…, ``gamma[0]``…). Implicit differentiation of
+    ``forward(f) = y``: ``∂f/∂θ = −(K diag(1 + 2 D f))⁻¹ ∂forward/∂θ``."""
+    y = np.atleast_2d(np.asarray(y, dtype=float))
+    f = inverse(y, params)
+    norm = np.linalg.norm(f, axis=1)
+    u_hat = f / norm[:, None]
+    D = np.asarray(params.get("D", np.zeros(3)), dtype=float)
+    K = K_matrix(params)
+    G = np.linalg.solve((K * (1.0 + 2.0 * D * f)[:, None, :]).transpose(0, 2, 1), u_hat[:, :, None])[:, :, 0]
+    u = f + D * f * f                                   # input terms
+    S = np.asarray(params["S"], dtype=float)
+    phi = phi_matrix(params["gamma"]) if "gamma" in params else np.eye(3)
+    cols = [-G * (u @ phi.T), -G, -(G @ K) * f * f]
+    names = [f"S[{i}]" for i in range(3)] + [f"b[{i}]" for i in range(3)] + [f"D[{i}]" for i in range(3)]
+    if "gamma" in params:
+        pairs = [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]
+        cols.append(np.column_stack([-G[:, i] * S[i] * u[:, j] for i, j in pairs]))
+        names += [f"gamma[{k}]" for k in range(6)]
+    return norm, np.hstack(cols), names

@@ -1,0 +1,440 @@
+"""P1: accelerometer calibration on a level table (source 000, CN102636665A), re-done soundly.
+
+Calibration ``A = B + M V`` (``solvers.models.accel.p1_apply``; ``V`` raw, ``A`` m/s²).
+Input: static positions (mean raw output, its per-axis standard deviation and sample count,
+and, where the operator was told, the known specific-force direction).
+
+Two stages, as the source has them:
+
+- **Step 8** (:func:`step8`): at positions whose gravity direction ``u`` is known (the six
+  ±axis positions, or any label of ``solvers.positions.P1_POSITIONS``) ``B + M V_k = g u_k``:
+  3 linear equations per position, 12 unknowns, weighted least squares. Its error is
+  dominated by how well the operator placed the device (``σ = g·σ_place``).
+- **Step 10** (:func:`calibrate`): the norm condition ``|B + M V_k| = g`` over *all*
+  positions, Gauss-Newton (``solvers.fit``) from the step-8 values, each row weighted by the
+  measured noise of its average (``σ_k² = ûᵀ M Σ_V M ᵀû``, ``Σ_V = diag(std²/n)``).
+
+Gauge. ``|R(B + M V)| = |B + M V|`` for every rotation ``R``: the norm cannot see 3 of the
+12 coefficients (the source's Newton step on 12 equations is singular). Two gauges:
+
+- ``table`` (when labelled positions fix it): the orientation is the one the labelled
+  positions define. Each labelled position adds its two vector components *perpendicular*
+  to the expected direction, ``e₁·A_k = e₂·A_k = 0``, weighted by the placement error
+  (default σ 0.4° per component on flat faces, 1.1° on the 45°/135° blocks). The norm rows
+  (σ ~ 10⁻⁴ m/s²) fix everything else, the vector rows (σ ~ 0.07 m/s²) only the rotation,
+  so this is the statistically weighted union of steps 8 and 10 and all 12 parameters are
+  identifiable.
+- ``upper-triangular`` (no labels, or asked for): ``M`` is upper triangular (imu_tk's
+  convention: the frame's z axis is the sensor's z sensing axis, its y axis lies in the
+  sensor's y-z plane); 9 free parameters.
+
+Everything here is pure numerics; :mod:`station.procedures.tabletop` reads captures.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solvers.errors import NotIdentifiable, TooFewPositions
+from solvers.fit import FitResult, fit, linear_fit
+from solvers.models import accel
+from solvers.positions import P1_POSITIONS
+
+# Placement error per perpendicular component (rad): flat face on a table that is level to
+# ~0.5°, and a hand-held 45°/135° block (±3°).
+PLACEMENT_SIGMA_AXIS_RAD = math.radians(0.4)
+PLACEMENT_SIGMA_TILTED_RAD = math.radians(1.1)
+DISTINCT_ANGLE_DEG = 7.0       # two positions closer than this are one orientation
+MIN_DISTINCT = 9               # the norm fit's 9 identifiable parameters
+CONDITION_WARN = 200.0         # position-set condition above this: warn "too alike"
+
+# Source numbering (positions 1-6) and the station's order for 7-12; imucal's names.
+_ORDER = list(P1_POSITIONS)
+_ALIASES = {"x_p": "x_up", "x_a": "x_down", "y_p": "y_up", "y_a": "y_down", "z_p": "z_up",
+            "z_a": "z_down", "+x": "x_up", "-x": "x_down", "+y": "y_up", "-y": "y_down",
+            "+z": "z_up", "-z": "z_down", "x+": "x_up", "x-": "x_down", "y+": "y_up",
+            "y-": "y_down", "z+": "z_up", "z-": "z_down"}
+
+
+def known_direction(label: str | None) -> tuple[np.ndarray | None, float]:
+    """Unit specific-force direction and placement σ (rad) for a position label, or (None, nan).
+
+    Labels: the names of ``P1_POSITIONS``, integers 1-12 in that order (1-6 are the
+    source's X up, X down, Y up, Y down, Z up, Z down), and imucal's ``x_p``/``x_a``/….
+    """
+    if not label:
+        return None, math.nan
+    key = str(label).strip().lower()
+    if key.isdigit() and 1 <= int(key) <= len(_ORDER):
+        key = _ORDER[int(key) - 1]
+    key = _ALIASES.get(key, key)
+    if key not in P1_POSITIONS:
+        return None, math.nan
+    tilted = key[:2] in ("xy", "yz", "xz")
+    return P1_POSITIONS[key].copy(), PLACEMENT_SIGMA_TILTED_RAD if tilted else PLACEMENT_SIGMA_AXIS_RAD
+
+
+@dataclass
+class Position:
+    """One static position: raw mean (3,), per-axis sample std (3,) or None, sample count."""
+
+    label: str
+    mean: np.ndarray
+    std: np.ndarray | None = None
+    n: int = 1
+    t_start_s: float | None = None
+    t_stop_s: float | None = None
+    direction: np.ndarray | None = None      # known unit specific-force direction
+    placement_sigma_rad: float = math.nan
+
+
+@dataclass
+class P1Result:
+    B: np.ndarray
+    M: np.ndarray
+    sigma_B: np.ndarray
+    sigma_M: np.ndarray
+    method: str                       # 'norm' or 'six-position'
+    gauge: str                        # 'table', 'upper-triangular' or 'none' (step 8 only)
+    gauge_text: str
+    norm_residuals: np.ndarray        # |A_k| − g per position (m/s²)
+    norm_sigma: np.ndarray            # the σ_k used (m/s²)
+    residual_rms: float               # RMS of norm_residuals
+    n_distinct: int
+    clusters: np.ndarray              # orientation cluster index per position
+    position_condition: float         # condition of the norm Jacobian of the position set
+    fit: FitResult | None
+    step8: dict | None                # {'B','M','sigma_B','sigma_M','residual_rms'} when computed
+    noise_known: bool
+    warnings: list[str] = field(default_factory=list)
+    outliers: list[int] = field(default_factory=list)
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _perp_basis(u: np.ndarray) -> np.ndarray:
+    """Two unit vectors (2, 3) perpendicular to ``u`` and to each other."""
+    a = np.eye(3)[int(np.argmin(np.abs(u)))]
+    e1 = np.cross(u, a)
+    e1 /= np.linalg.norm(e1)
+    return np.vstack([e1, np.cross(u, e1)])
+
+
+def _pack(B, M) -> dict:
+    return {"B": np.asarray(B, dtype=float), "M": np.asarray(M, dtype=float)}
+
+
+def step8(positions: list[Position], g_mps2: float) -> dict:
+    """Step 8: weighted linear least squares ``B + M V_k = g u_k`` over the labelled positions.
+
+    Returns B, M, their σ, the fit and the vector residual RMS (m/s²). Raises TooFewPositions
+    when the labelled positions cannot determine the 12 coefficients (fewer than 4 with
+    independent readings)."""
+    known = [p for p in positions if p.direction is not None]
+    if len(known) < 4:
+        raise TooFewPositions(f"{len(known)} positions with a known gravity direction; step 8 needs at least 4 "
+                              "(the six ±axis positions)")
+    V = np.array([p.mean for p in known])
+    H1 = np.hstack([np.ones((len(known), 1)), V])
+    if np.linalg.matrix_rank(H1, tol=1e-9 * np.abs(H1).max()) < 4:
+        raise TooFewPositions("the labelled positions' readings do not span 3 axes: step 8 cannot solve")
+    # unknowns x = (B0, M00, M01, M02, B1, M10, ..., ) per axis blocks
+    H = np.zeros((3 * len(known), 12))
+    y = np.zeros(3 * len(known))
+    sig = np.zeros(3 * len(known))
+    for k, p in enumerate(known):
+        for i in range(3):
+            H[3 * k + i, 4 * i:4 * i + 4] = H1[k]
+            y[3 * k + i] = g_mps2 * p.direction[i]
+            sig[3 * k + i] = g_mps2 * p.placement_sigma_rad
+    res = linear_fit(H, y, sigma=sig)
+    x = res.params["x"]
+    sx = res.sigma["x"]
+    B = x[[0, 4, 8]]
+    M = np.vstack([x[1:4], x[5:8], x[9:12]])
+    sB = sx[[0, 4, 8]]
+    sM = np.vstack([sx[1:4], sx[5:8], sx[9:12]])
+    return {"B": B, "M": M, "sigma_B": sB, "sigma_M": sM, "fit": res,
+            "residual_rms": float(np.sqrt(np.mean(res.residuals ** 2)))}
+
+
+def ellipsoid_initial(V: np.ndarray, g_mps2: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Algebraic ellipsoid fit ``|B + M V|² = g²`` (10 linear coefficients; ≥ 10 positions),
+    returned in the upper-triangular gauge, or None when it is not a real ellipsoid."""
+    if len(V) < 10:
+        return None
+    x, y, z = V.T
+    H = np.column_stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z, np.ones(len(V))])
+    scale = np.abs(H).max(axis=0)
+    scale[scale == 0] = 1.0
+    th, *_ = np.linalg.lstsq(H / scale, np.full(len(V), g_mps2 ** 2), rcond=None)
+    th = th / scale
+    Q = np.array([[th[0], th[3], th[4]], [th[3], th[1], th[5]], [th[4], th[5], th[2]]])
+    q = th[6:9]
+    try:
+        v0 = -np.linalg.solve(Q, q)
+        r = g_mps2 ** 2 - th[9] + q @ np.linalg.solve(Q, q)
+        if r <= 0:
+            return None
+        L = np.linalg.cholesky(Q * g_mps2 ** 2 / r)
+    except np.linalg.LinAlgError:
+        return None
+    M = L.T
+    return -M @ v0, M
+
+
+def minmax_initial(V: np.ndarray, g_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis scale and offset from the extreme readings (each axis assumed to see ≈ ±g)."""
+    hi, lo = V.max(axis=0), V.min(axis=0)
+    half = np.where(hi - lo > 0, (hi - lo) / 2.0, 1.0)
+    s = g_mps2 / half
+    return -s * (hi + lo) / 2.0, np.diag(s)
+
+
+def to_upper(B, M) -> tuple[np.ndarray, np.ndarray]:
+    """The same norm model in the upper-triangular gauge: ``M = Q R`` → ``(Qᵀ B, R)``, diag(R) > 0."""
+    Q, R = np.linalg.qr(np.asarray(M, dtype=float))
+    s = np.sign(np.diag(R))
+    s[s == 0] = 1.0
+    Q, R = Q * s, (R.T * s).T
+    return Q.T @ np.asarray(B, dtype=float), R
+
+
+def orientation_clusters(A: np.ndarray, max_angle_deg: float = DISTINCT_ANGLE_DEG) -> np.ndarray:
+    """Cluster index per position: directions of ``A`` within ``max_angle_deg`` are one orientation."""
+    d = A / np.linalg.norm(A, axis=1, keepdims=True)
+    cos_t = math.cos(math.radians(max_angle_deg))
+    labels = -np.ones(len(d), dtype=int)
+    centres: list[np.ndarray] = []
+    for k in range(len(d)):
+        best, best_c = -1, cos_t
+        for j, c in enumerate(centres):
+            cc = float(d[k] @ c / np.linalg.norm(c))
+            if cc >= best_c:
+                best, best_c = j, cc
+        if best < 0:
+            centres.append(d[k].copy())
+            labels[k] = len(centres) - 1
+        else:
+            centres[best] = centres[best] + d[k]
+            labels[k] = best
+    return labels
+
+
+def position_condition(V: np.ndarray, B, M) -> float:
+    """Condition number of the column-scaled norm Jacobian in the upper-triangular gauge (9
+    parameters): how well the set of positions determines the calibration (∞ = cannot)."""
+    Bu, Mu = to_upper(B, M)
+    _, J = accel.p1_norm_jacobian(V, Bu, Mu)
+    keep = [0, 1, 2, 3, 4, 5, 7, 8, 11]  # B, M00 M01 M02, M11 M12, M22
+    J = J[:, keep]
+    J = J / np.linalg.norm(J, axis=0)
+    s = np.linalg.svd(J, compute_uv=False)
+    if len(V) < 9 or s[-1] <= 1e-12 * s[0]:
+        return math.inf
+    return float(s[0] / s[-1])
+
+
+def norm_sigma(positions: list[Position], B, M, noise_known: bool) -> np.ndarray:
+    """σ of ``|A_k|`` per position from the measured noise of each average (m/s²); ones when
+    the noise is unknown (the fit then takes its scale from the residuals)."""
+    if not noise_known:
+        return np.ones(len(positions))
+    V = np.array([p.mean for p in positions])
+    A = accel.p1_apply(V, B, M)
+    u = A / np.linalg.norm(A, axis=1, keepdims=True)
+    w = u @ np.asarray(M)                      # ∂|A|/∂V
+    var = np.array([(p.std ** 2 / max(p.n, 1)) for p in positions])
+    s = np.sqrt(np.sum(w * w * var, axis=1))
+    floor = 1e-6 * np.median(np.linalg.norm(A, axis=1))  # quantisation/rounding floor
+    return np.maximum(s, floor)
+
+
+# ----------------------------------------------------------------------------- the fit
+
+def _joint_residual_builder(V: np.ndarray, g: float, sig_n: np.ndarray, known: list[tuple[int, np.ndarray, float]]):
+    """Residual and Jacobian over blocks B, M: norm rows then the perpendicular vector rows."""
+    E = [(_perp_basis(u), k, s) for k, u, s in known]
+    sig_v = np.array([s for _, _, s in E for _ in range(2)])
+
+    def resid(p):
+        nrm = np.linalg.norm(accel.p1_apply(V, p["B"], p["M"]), axis=1) - g
+        if not E:
+            return nrm
+        A = accel.p1_apply(V, p["B"], p["M"])
+        vec = np.concatenate([e @ A[k] for e, k, _ in E])
+        return np.concatenate([nrm, vec])
+
+    def jac(p, free_idx):
+        _, Jn = accel.p1_norm_jacobian(V, p["B"], p["M"])
+        rows = [Jn]
+        for e, k, _ in E:
+            Jv = np.zeros((2, 12))
+            Jv[:, 0:3] = e
+            Jv[:, 3:] = (e[:, :, None] * V[k][None, None, :]).reshape(2, 9)
+            rows.append(Jv)
+        return np.vstack(rows)[:, free_idx]
+
+    sigma = np.concatenate([sig_n, sig_v]) if E else sig_n
+    return resid, jac, sigma
+
+
+def estimate_norm_noise(positions: list[Position], g_mps2: float, B0, M0) -> float | None:
+    """σ of ``|A_k|`` (m/s²) from the residuals of a norm-only fit (upper-triangular gauge),
+    for data without per-position noise; None when there are no degrees of freedom."""
+    res = refine(positions, g_mps2, B0, M0, gauge="upper-triangular", sig_n=np.ones(len(positions)))
+    if res.dof <= 0:
+        return None
+    return math.sqrt(max(float(res.residuals @ res.residuals) / res.dof, 1e-30))
+
+
+def refine(positions: list[Position], g_mps2: float, B0, M0, *, gauge: str, sig_n: np.ndarray) -> FitResult:
+    """Step 10: the norm condition over all positions (σ ``sig_n``), plus, in the table gauge,
+    the perpendicular vector rows of the labelled positions (σ from placement), Gauss-Newton
+    from ``(B0, M0)`` through ``solvers.fit``."""
+    V = np.array([p.mean for p in positions])
+    if gauge == "table":
+        known = [(k, p.direction, math.hypot(g_mps2 * p.placement_sigma_rad, float(sig_n[k])))
+                 for k, p in enumerate(positions) if p.direction is not None]
+        free = {"B": True, "M": True}
+        idx = list(range(12))
+    else:
+        known = []
+        B0, M0 = to_upper(B0, M0)
+        free = {"B": True, "M": np.triu(np.ones((3, 3), dtype=bool))}
+        idx = [0, 1, 2, 3, 4, 5, 7, 8, 11]
+    resid, jac, sigma = _joint_residual_builder(V, g_mps2, sig_n, known)
+    return fit(resid, _pack(B0, M0), free=free, sigma=sigma, jac=lambda p: jac(p, idx))
+
+
+def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm", gauge: str = "auto",
+              noise_known: bool = True) -> P1Result:
+    """The P1 calibration of ``positions`` (see the module docstring).
+
+    method: ``'norm'`` (step 8 when possible, then step 10) or ``'six-position'`` (step 8
+    only). gauge: ``'auto'`` (``table`` when at least 3 labelled positions with independent
+    directions, else ``upper-triangular``), ``'table'`` or ``'upper-triangular'``.
+    Raises TooFewPositions / NotIdentifiable with a message an operator can act on.
+    """
+    if method not in ("norm", "six-position"):
+        raise ValueError(f"unknown method {method!r}")
+    V = np.array([p.mean for p in positions], dtype=float).reshape(-1, 3)
+    warnings: list[str] = []
+    known = [p for p in positions if p.direction is not None]
+    s8 = None
+    if len(known) >= 4:
+        try:
+            s8 = step8(positions, g_mps2)
+        except TooFewPositions as exc:
+            warnings.append(f"step 8 not possible: {exc}")
+    if method == "six-position":
+        if s8 is None:
+            raise TooFewPositions(f"the six-position (step 8) solution needs the ±axis positions labelled; "
+                                  f"this capture has {len(known)} positions with a known direction")
+        return _step8_result(positions, g_mps2, s8, warnings, noise_known)
+
+    # provisional calibration, for clustering and the start
+    if s8 is not None:
+        B0, M0 = s8["B"], s8["M"]
+    else:
+        init = ellipsoid_initial(V, g_mps2)
+        B0, M0 = init if init is not None else minmax_initial(V, g_mps2)
+    clusters = orientation_clusters(accel.p1_apply(V, B0, M0))
+    n_distinct = int(clusters.max() + 1) if len(clusters) else 0
+    if n_distinct < MIN_DISTINCT:
+        hint = ""
+        if s8 is not None and len({tuple(np.round(p.direction, 3)) for p in known}) >= 6:
+            hint = "; the labelled ±axis positions allow the six-position linear solution (--method six-position)"
+        raise TooFewPositions(f"{n_distinct} distinct orientations in {len(positions)} static positions; the "
+                              f"norm-condition fit needs at least {MIN_DISTINCT}{hint}")
+    dirs = np.array([p.direction for p in known]) if known else np.zeros((0, 3))
+    rank_known = int(np.linalg.matrix_rank(dirs, tol=0.1)) if len(known) else 0
+    if gauge == "auto":
+        gauge = "table" if (len(known) >= 3 and rank_known >= 2) else "upper-triangular"
+    if gauge == "table" and (len(known) < 2 or rank_known < 2):
+        raise NotIdentifiable("the table gauge needs at least two labelled positions with different known directions")
+    cond = position_condition(V, B0, M0)
+    if not math.isfinite(cond):
+        raise NotIdentifiable(f"the {len(positions)} positions cannot determine the calibration (the norm "
+                              "condition's Jacobian is singular): the orientations are too alike; add positions "
+                              "spread over all directions")
+    if noise_known:
+        sig_n = norm_sigma(positions, B0, M0, True)
+    else:
+        s_est = estimate_norm_noise(positions, g_mps2, B0, M0)
+        if s_est is None:
+            s_est = 1e-3 * g_mps2
+            warnings.append("no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
+                            f"a norm noise of {s_est:.3g} m/s²")
+        sig_n = np.full(len(positions), s_est)
+    res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
+    if noise_known:  # second pass: weights at the solution
+        sig_n = norm_sigma(positions, res.params["B"], res.params["M"], True)
+        res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_n)
+    if res.unidentifiable:
+        raise NotIdentifiable(f"the positions cannot determine {', '.join(res.unidentifiable)} "
+                              f"(condition number {res.condition_number:.3g})")
+    B, M = res.params["B"], res.params["M"]
+    cond = position_condition(V, B, M)
+    if cond > CONDITION_WARN:
+        warnings.append(f"the positions are too alike (condition number {cond:.0f} > {CONDITION_WARN:.0f}): "
+                        "some coefficients are poorly determined; add positions with gravity along other directions")
+    n = len(positions)
+    r_n = res.residuals[:n]
+    s_n = sig_n
+    z = r_n / s_n
+    outliers = []
+    if n >= 5:
+        for k in range(n):
+            others = np.delete(np.abs(z), k)
+            scale = max(1.0, 1.4826 * float(np.median(others)))
+            if abs(z[k]) > 5.0 * scale and abs(r_n[k]) > 3.0 * float(np.median(np.abs(np.delete(r_n, k)))):
+                outliers.append(k)
+                p = positions[k]
+                when = f" (t {p.t_start_s:.1f}–{p.t_stop_s:.1f} s)" if p.t_start_s is not None else ""
+                warnings.append(f"position {p.label or k + 1}{when} disagrees with the rest: norm residual "
+                                f"{r_n[k]:+.4g} m/s², {abs(z[k]):.0f}σ; was it still, or touching something?")
+    if noise_known and res.misfit_scaled:
+        warnings.append(f"the residuals are {math.sqrt(res.reduced_chi2):.1f}× the measured noise (reduced χ² "
+                        f"{res.reduced_chi2:.3g}): A = B + M V does not explain everything (temperature, "
+                        "non-linearity, moving positions?); uncertainties are scaled up by that factor")
+    if not noise_known:
+        warnings.append(f"no per-position noise given: the norm noise is estimated from the residuals "
+                        f"({s_n[0]:.3g} m/s²), so uncertainties include any model misfit")
+    if gauge == "table":
+        sig_deg = sorted({round(math.degrees(p.placement_sigma_rad), 2) for p in known})
+        gauge_text = ("table: the rotation the norm cannot see is fixed by the labelled positions' known gravity "
+                      f"directions (vector condition, placement σ {'/'.join(str(s) for s in sig_deg)}° per "
+                      "component), everything else by the norm condition")
+    else:
+        gauge_text = ("upper-triangular: M[1][0] = M[2][0] = M[2][1] = 0 (imu_tk's convention: frame z = the "
+                      "sensor's z axis, frame y in its y-z plane); no labelled positions fix the orientation")
+    return P1Result(B=B, M=M, sigma_B=res.sigma["B"], sigma_M=res.sigma["M"], method="norm", gauge=gauge,
+                    gauge_text=gauge_text, norm_residuals=r_n, norm_sigma=s_n,
+                    residual_rms=float(np.sqrt(np.mean(r_n ** 2))), n_distinct=n_distinct, clusters=clusters,
+                    position_condition=cond, fit=res, step8=_s8_summary(s8), noise_known=noise_known,
+                    warnings=warnings, outliers=outliers)
+
+
+def _s8_summary(s8):
+    if s8 is None:
+        return None
+    return {k: s8[k] for k in ("B", "M", "sigma_B", "sigma_M", "residual_rms")}
+
+
+def _step8_result(positions, g_mps2, s8, warnings, noise_known) -> P1Result:
+    V = np.array([p.mean for p in positions])
+    B, M = s8["B"], s8["M"]
+    r = np.linalg.norm(accel.p1_apply(V, B, M), axis=1) - g_mps2
+    clusters = orientation_clusters(accel.p1_apply(V, B, M))
+    warnings = warnings + ["six-position (step 8) linear solution only: its accuracy is limited by how well the "
+                           "device was placed (σ ≈ 0.4° → ~0.07 m/s²), not by the sensor noise; the norm-condition "
+                           f"refinement needs at least {MIN_DISTINCT} distinct orientations"]
+    return P1Result(B=B, M=M, sigma_B=s8["sigma_B"], sigma_M=s8["sigma_M"], method="six-position", gauge="none",
+                    gauge_text="step 8: the labelled positions' known gravity directions define the frame",
+                    norm_residuals=r, norm_sigma=norm_sigma(positions, B, M, noise_known),
+                    residual_rms=float(np.sqrt(np.mean(r ** 2))), n_distinct=int(clusters.max() + 1),
+                    clusters=clusters, position_condition=position_condition(V, B, M), fit=s8["fit"],
+                    step8=_s8_summary(s8), noise_known=noise_known, warnings=warnings)
