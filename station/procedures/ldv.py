@@ -1,0 +1,205 @@
+"""P5 laser velocimeter calibration from a capture (calibrate.md, procedure ``ldv``).
+
+``calibrate(capture, method=None, *, reference=None) -> dict``.
+
+Columns: ``vl1 vl2 vl3`` (beam outputs, m/s) at times ``t``; the reference velocity either
+
+- in the body frame: ``vx vy vz`` (m/s; the angles come out relative to these axes), or
+- in the navigation frame with attitude: ``vn ve vd`` (NED, m/s) and ``roll_deg
+  pitch_deg yaw_deg``, rotated into the body with ``v_b = C_n_bᵀ v_n``, ``C_n_b =
+  Rz(yaw) Ry(pitch) Rx(roll)`` (aerospace z-y-x Euler angles, body x forward, y right,
+  z down; :func:`solvers.frames.euler_to_C_n_b`).
+
+Two streams with different clocks (the reference usually comes from the INS/DGPS at its
+own rate). Conventions, in order:
+
+1. a separate reference capture: the keyword ``reference`` (path) or the metadata key
+   ``reference_file`` (relative to the capture's folder); its ``t`` is the reference clock;
+2. in the same file, a ``ref_t`` column giving the reference samples' times (rows need not
+   pair up: empty fields where one stream has no sample);
+3. in the same file, one ``t`` column with the streams interleaved (LDV rows with empty
+   reference fields and vice versa).
+
+``reference_time_offset_s`` (metadata, default 0) is the reference clock minus the LDV
+clock; the reference is rotated into the body at its own samples, then its body velocity
+is linearly interpolated to the LDV times. LDV samples outside the reference span, or
+inside a reference gap longer than 5 reference intervals, are left out (counted in a
+warning). When every row holds both streams and there is no ``ref_t``, rows pair as they
+are.
+
+``method``: ``force`` computes even when the velocity set is ill-conditioned (loud
+warning); otherwise such a capture is refused. Metadata ``reference_sigma_mps``: the
+reference velocity noise, which switches on the errors-in-variables correction.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from solvers import frames
+from solvers import ldv as ldv_solver
+from solvers.errors import SolverError
+from station.errors import InputError, UnsupportedError
+
+MODEL = "V_L = (1 + δK)(V_x cos α + V_y cos β + V_z cos γ) (P5), per beam"
+NAV_COLS = ("vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg")
+BODY_COLS = ("vx", "vy", "vz")
+
+
+def _cols(capture, names):
+    return np.column_stack([np.asarray(capture.columns[c], dtype=float) for c in names])
+
+
+def _reference_body(cap, tcol: str):
+    """(t_ref, v_body (n,3), kind) from a capture holding the reference columns."""
+    if all(c in cap.columns for c in BODY_COLS):
+        v = _cols(cap, BODY_COLS)
+        kind = "body"
+    elif all(c in cap.columns for c in NAV_COLS):
+        nav = _cols(cap, NAV_COLS)
+        ok = np.all(np.isfinite(nav), axis=1)
+        v = np.full((len(nav), 3), np.nan)
+        r, p, y = np.radians(nav[ok, 3]), np.radians(nav[ok, 4]), np.radians(nav[ok, 5])
+        C = np.stack([frames.euler_to_C_n_b(a, b, c) for a, b, c in zip(r, p, y)])
+        v[ok] = np.einsum("nji,nj->ni", C, nav[ok, :3])    # C_n_bᵀ v_n
+        kind = "nav"
+    else:
+        have = ", ".join(cap.columns)
+        raise InputError(cap.path, cap.header_line, "ldv needs a reference velocity: columns vx vy vz (body) "
+                         f"or vn ve vd with roll_deg pitch_deg yaw_deg (have {have})")
+    t = np.asarray(cap.columns[tcol], dtype=float) if tcol in cap.columns else None
+    return t, v, kind
+
+
+def _interp(t_ref, v_ref, t_out, warnings):
+    ok = np.isfinite(t_ref) & np.all(np.isfinite(v_ref), axis=1)
+    t_ref, v_ref = t_ref[ok], v_ref[ok]
+    order = np.argsort(t_ref, kind="stable")
+    t_ref, v_ref = t_ref[order], v_ref[order]
+    if len(t_ref) < 2:
+        raise UnsupportedError("fewer than 2 reference samples: nothing to interpolate")
+    out = np.column_stack([np.interp(t_out, t_ref, v_ref[:, k]) for k in range(3)])
+    dt = float(np.median(np.diff(t_ref)))
+    i = np.clip(np.searchsorted(t_ref, t_out), 1, len(t_ref) - 1)
+    gap = t_ref[i] - t_ref[i - 1]
+    inside = (t_out >= t_ref[0]) & (t_out <= t_ref[-1]) & (gap <= 5 * dt)
+    if (~inside).any():
+        warnings.append(f"{int((~inside).sum())} LDV samples outside the reference span or in its gaps left out")
+    out[~inside] = np.nan
+    return out
+
+
+def _resolve(path_text: str, capture) -> str:
+    if os.path.isabs(path_text):
+        return path_text
+    base = os.path.dirname(os.fspath(capture.path)) if capture.path else ""
+    cand = os.path.join(base, path_text)
+    return cand if os.path.exists(cand) or not os.path.exists(path_text) else path_text
+
+
+def aligned_velocities(capture, reference=None, warnings=None):
+    """(v_body (n,3), vl (n,3), info) paired on the LDV clock (module docstring)."""
+    warnings = [] if warnings is None else warnings
+    missing = [c for c in ("vl1", "vl2", "vl3") if c not in capture.columns]
+    if missing:
+        raise InputError(capture.path, capture.header_line,
+                         f"ldv needs beam column(s) {', '.join(missing)} (have {', '.join(capture.columns)})")
+    vl = _cols(capture, ("vl1", "vl2", "vl3"))
+    offset = capture.float_meta("reference_time_offset_s", 0.0)
+    ref_path = reference or capture.meta.get("reference_file")
+    info = {}
+    if ref_path:
+        from station.capture import read_capture
+
+        ref_cap = read_capture(_resolve(os.fspath(ref_path), capture))
+        if "t" not in ref_cap.columns or "t" not in capture.columns:
+            raise InputError(ref_cap.path, None, "a separate reference stream needs a 't' column in both files")
+        t_ref, v_ref, kind = _reference_body(ref_cap, "t")
+        info["alignment"] = f"reference file {os.path.basename(os.fspath(ref_path))}, interpolated to LDV times"
+    else:
+        tcol = "ref_t" if "ref_t" in capture.columns else "t"
+        t_ref, v_ref, kind = _reference_body(capture, tcol)
+        if t_ref is None:
+            t_ref = None
+        both = np.all(np.isfinite(vl), axis=1) & np.all(np.isfinite(v_ref), axis=1)
+        if tcol == "t" and (t_ref is None or both.all()):
+            info["alignment"] = "rows paired as recorded"
+            ok = np.all(np.isfinite(vl), axis=1) & np.all(np.isfinite(v_ref), axis=1)
+            if (~ok).any():
+                warnings.append(f"{int((~ok).sum())} rows with missing values left out")
+            return v_ref[ok], vl[ok], dict(info, reference=kind)
+        if t_ref is None:
+            raise UnsupportedError(f"{capture.path}: rows hold either LDV or reference samples but there is no "
+                                   "time column to align them")
+        info["alignment"] = ("'ref_t' column" if tcol == "ref_t" else "interleaved rows on 't'") + \
+            ", reference interpolated to LDV times"
+    if "t" not in capture.columns:
+        raise InputError(capture.path, capture.header_line, "aligning two streams needs a 't' column")
+    t = np.asarray(capture.columns["t"], dtype=float)
+    ldv_ok = np.all(np.isfinite(vl), axis=1) & np.isfinite(t)
+    v_at = _interp(t_ref - offset, v_ref, t[ldv_ok], warnings)
+    good = np.all(np.isfinite(v_at), axis=1)
+    if offset:
+        info["reference_time_offset_s"] = offset
+    return v_at[good], vl[ldv_ok][good], dict(info, reference=kind)
+
+
+def calibrate(capture, method: str | None = None, *, reference=None) -> dict:
+    warnings: list[str] = []
+    force = (method or "").strip().lower() == "force"
+    if method and not force:
+        raise UnsupportedError(f"ldv: unknown method {method!r} (only 'force')")
+    v_b, vl, info = aligned_velocities(capture, reference, warnings)
+    ref_sigma = capture.float_meta("reference_sigma_mps")
+    try:
+        res = ldv_solver.calibrate_ldv(v_b, vl, ref_sigma_mps=ref_sigma, force=force)
+    except SolverError as exc:
+        raise UnsupportedError(f"{capture.path}: {exc}") from None
+    warnings += res.warnings
+    params, unc, fit = {}, {}, {}
+    for j, b in enumerate(res.beams):
+        key = f"beam{j + 1}"
+        params[key] = {"dK": b.dK, "alpha_deg": b.angles_deg[0], "beta_deg": b.angles_deg[1],
+                       "gamma_deg": b.angles_deg[2], "sigma_mps": b.sigma_mps}
+        unc[key] = {"dK": b.sigma_dK, "alpha_deg": b.sigma_angles_deg[0], "beta_deg": b.sigma_angles_deg[1],
+                    "gamma_deg": b.sigma_angles_deg[2],
+                    "sigma_mps": b.sigma_mps / np.sqrt(2.0 * max(res.n - 3, 1))}
+        fit[key] = {"X": b.X, "cov_X": b.cov_X, "eiv_bias_X": b.eiv_bias_X}
+        cosines = np.cos(np.radians(b.angles_deg))
+        if abs(float(cosines @ cosines) - 1.0) > 1e-9:
+            warnings.append(f"{key}: direction cosines do not form a unit vector")
+    params["condition_number"] = res.condition_number
+    unc["condition_number"] = 0.0
+    resid = np.concatenate([b.residuals for b in res.beams])
+    return {
+        "procedure": "ldv",
+        "device": capture.meta.get("device"),
+        "model": MODEL,
+        "params": params,
+        "uncertainty": unc,
+        "residual_rms": float(np.sqrt(np.mean(resid ** 2))),
+        "n_positions": res.n,
+        "warnings": warnings,
+        "reference": info.get("reference"),
+        "euler_convention": "C_n_b = Rz(yaw) Ry(pitch) Rx(roll), NED, body x fwd y right z down",
+        "alignment": info.get("alignment"),
+        "estimator": "errors-in-variables corrected" if ref_sigma else "ordinary least squares",
+        "fit": fit,
+    }
+
+
+def format_text(result: dict) -> str:
+    p, u = result["params"], result["uncertainty"]
+    lines = [f"procedure  ldv", f"device     {result.get('device')}", f"model      {result['model']}",
+             f"reference  {result.get('reference')} ({result.get('alignment')}); {result.get('estimator')}",
+             f"cond(HᵀH)  {p['condition_number']:.3g}  ({result['n_positions']} epochs)"]
+    for j in (1, 2, 3):
+        b, s = p[f"beam{j}"], u[f"beam{j}"]
+        lines.append(f"beam{j}      δK {b['dK']:+.5f} ± {s['dK']:.1e}  α {b['alpha_deg']:.3f} ± {s['alpha_deg']:.3f}°"
+                     f"  β {b['beta_deg']:.3f} ± {s['beta_deg']:.3f}°  γ {b['gamma_deg']:.3f} ± {s['gamma_deg']:.3f}°"
+                     f"  σ {b['sigma_mps']:.4f} m/s")
+    lines.append(f"residual   {result['residual_rms']:.4g} m/s RMS")
+    for w in result.get("warnings", []):
+        lines.append(f"warning    {w}")
+    return "\n".join(lines)
