@@ -1,0 +1,188 @@
+"""P2 centrifuge norm-observation calibration for the CLI and the TUI (source 001, Wang & Li 2021).
+
+Numerics in ``solvers/centrifuge.py``. The capture is a table of averages (one row per
+orientation and speed: ``speed_rad_s``, ``ax ay az``, optional ``n`` and ``<col>_std``) or a
+time series (each run of one ``position``/``speed_rad_s`` pair is averaged). Metadata:
+``radius_m`` (required), ``g_mps2`` (else normal gravity at ``latitude_deg``, else standard).
+
+Methods: ``exact`` (default; exact nonlinear fit of ``|f(N)|² = A² + 1``), ``exact-gamma``
+(also the 3 identifiable installation angles), ``paper`` (the paper's eqs 13-22 with its
+own second-order coefficients, printing errors corrected), ``paper-3rd`` (the same closed
+forms with consistent third-order coefficients). Each takes the suffix ``-all`` to fit every
+row; otherwise rows that disagree with the model far beyond the others (found by a robust
+fit, ``solvers.centrifuge.screen_rows``) are left out, and each is named in ``warnings`` and
+``rejected_rows`` with the sign flip that would make it agree, if one does. Nothing in the
+data is changed.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from solvers import centrifuge as C
+from solvers import frames
+from solvers.errors import SolverError
+from station.errors import InputError, UnsupportedError
+
+MODEL = "N = S Φ [f + D f∘f] + b,  |f|² = A² + 1,  A = ω²R/g"
+BASES = ("exact", "exact-gamma", "paper", "paper-3rd")
+
+
+def _where(capture) -> str:
+    return capture.path or "capture"
+
+
+def _rows(capture):
+    """(N (n,3), speed (n,), labels, sigma_N (n,3) or None, data line numbers)."""
+    a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
+    w = np.asarray(capture.column("speed_rad_s"), dtype=float)
+    pos = capture.columns.get("position")
+    first = (capture.header_line or 0) + 1
+    if not capture.is_time_series:
+        lines = [first + k for k in range(len(a))]
+        stds = [capture.columns.get(c + "_std") for c in ("ax", "ay", "az")]
+        n = capture.columns.get("n")
+        sig = None
+        if all(s is not None for s in stds) and n is not None:
+            sig = np.column_stack(stds) / np.sqrt(np.asarray(n, float))[:, None]
+            if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
+                sig = None
+        labels = [str(p) for p in pos] if pos is not None else [str(k + 1) for k in range(len(a))]
+        for k in range(len(a)):
+            if not (np.all(np.isfinite(a[k])) and np.isfinite(w[k])):
+                raise InputError(capture.path, lines[k], "row has an empty ax/ay/az/speed_rad_s")
+        return a, w, labels, sig, lines
+    key = [(str(pos[k]) if pos is not None else "", w[k]) for k in range(len(a))]
+    N, W, L, S, lines = [], [], [], [], []
+    k = 0
+    while k < len(a):
+        j = k + 1
+        while j < len(a) and key[j] == key[k]:
+            j += 1
+        seg = a[k:j][np.all(np.isfinite(a[k:j]), axis=1)]
+        if len(seg) >= 2 and np.isfinite(w[k]) and (pos is None or key[k][0]):
+            N.append(seg.mean(axis=0))
+            W.append(w[k])
+            L.append(key[k][0] or str(len(N)))
+            S.append(seg.std(axis=0, ddof=1) / math.sqrt(len(seg)))
+            lines.append(first + k)
+        k = j
+    return np.array(N).reshape(-1, 3), np.array(W), L, np.array(S).reshape(-1, 3), lines
+
+
+def calibrate(capture, method: str | None = None) -> dict:
+    """The calibrate.md result for an ``accel-centrifuge`` capture."""
+    key = method or "exact"
+    all_rows = key.endswith("-all")
+    base = key[:-4] if all_rows else key
+    if base not in BASES:
+        raise UnsupportedError(f"accel-centrifuge: unknown method {key!r} (methods: {', '.join(BASES)}, "
+                               "each optionally with -all)")
+    warnings: list[str] = []
+    unit = capture.meta.get("accel_unit") or "raw"
+    R = capture.float_meta("radius_m")
+    if R is None or R <= 0:
+        raise InputError(capture.path, capture.meta_lines.get("radius_m"), "metadata needs 'radius_m' (the centrifuge "
+                         "radius, m) for A = ω²R/g")
+    g = capture.float_meta("g_mps2")
+    if g is None:
+        lat = capture.float_meta("latitude_deg")
+        if lat is not None:
+            g = frames.normal_gravity_mps2(lat, capture.float_meta("altitude_m", 0.0))
+        else:
+            g = frames.G_STANDARD_MPS2
+            warnings.append("no g_mps2 or latitude_deg: using standard gravity 9.80665 m/s²")
+    N, w, labels, sigma_N, lines = _rows(capture)
+    rho = C.norm_target(w, R, g)
+    n_all = len(N)
+    if len(np.unique(np.round(w, 9))) < 2:
+        warnings.append("one centrifuge speed only: the quadratic term D is poorly separated from the scale "
+                        "factor; use several speeds")
+    used = np.ones(n_all, bool)
+    rejected = []
+    try:
+        if not all_rows and n_all >= 15:
+            scr = C.screen_rows(N, rho, gamma=(base == "exact-gamma"))
+            if (~scr.used).sum() and scr.used.sum() >= max(15, n_all // 2):
+                used = scr.used
+                for k in np.flatnonzero(~used):
+                    rejected.append({"row": int(k + 1), "line": lines[k], "position": labels[k],
+                                     "speed_rad_s": float(w[k]), "residual_g": float(scr.residuals[k]),
+                                     "hint": scr.hints.get(int(k))})
+                spread = scr.scale
+                warnings.append(f"{len(rejected)} of {n_all} rows disagree with the model far beyond the others "
+                                f"(|f| off by {np.min(np.abs([r['residual_g'] for r in rejected])):.2g}–"
+                                f"{np.max(np.abs([r['residual_g'] for r in rejected])):.2g} g against a spread of "
+                                f"{spread:.2g} g) and are left out of the fit (use --method {base}-all to keep them)")
+                for r in rejected:
+                    warnings.append(f"line {r['line']} (position {r['position']}, ω {r['speed_rad_s']:.4g} rad/s): "
+                                    f"|f| − ρ = {r['residual_g']:+.3g} g" + (f"; {r['hint']}" if r["hint"] else ""))
+        Nu, ru = N[used], rho[used]
+        sN = sigma_N[used] if sigma_N is not None else None
+        if base in ("exact", "exact-gamma"):
+            res = C.exact_fit(Nu, ru, sigma_N=sN, gamma=(base == "exact-gamma"))
+        else:
+            res = C.paper_fit(Nu, ru, variant="paper" if base == "paper" else "third-order")
+    except SolverError as exc:
+        raise UnsupportedError(f"{_where(capture)}: accel-centrifuge: {exc}") from None
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise UnsupportedError(f"{_where(capture)}: accel-centrifuge: the fit failed: {exc}") from None
+    if res.fit is not None:
+        if res.noise_known and res.fit.misfit_scaled:
+            warnings.append(f"residuals are {math.sqrt(res.fit.reduced_chi2):.1f}× the measured noise: the model "
+                            "does not explain everything (installation angles, lever arm, cubic term?); "
+                            "uncertainties scaled up")
+        if not res.noise_known:
+            warnings.append("no per-row noise (n, *_std columns): uncertainties come from the residual scatter")
+    if base.startswith("paper"):
+        warnings.append("the paper's method truncates the inverse's series (error O(D³x⁵)) and fits 13 lumped "
+                        "coefficients without weights; its uncertainties are propagated from that fit")
+    params = {k: v for k, v in res.params.items()}
+    result = {
+        "procedure": "accel-centrifuge",
+        "device": capture.meta.get("device"),
+        "model": MODEL,
+        "params": params,
+        "uncertainty": res.sigma,
+        "residual_rms": res.residual_rms,
+        "n_positions": int(used.sum()),
+        "warnings": warnings,
+        "method": key,
+        "units": {"f": "g", "N": unit, "S": f"{unit} per g", "b": unit, "D": "g/g^2", "gamma": "rad",
+                  "residual_rms": "g (|f| − sqrt(A² + 1))"},
+        "g_mps2": g,
+        "radius_m": R,
+        "n_rows": n_all,
+        "rows_used": int(used.sum()),
+        "rejected_rows": rejected,
+        "noise": "measured (std/sqrt(n))" if res.noise_known else "estimated from the residuals",
+    }
+    if base == "exact-gamma":
+        result["gamma_gauge"] = ("γxy = γxz = γyz = 0: the norm cannot see a rotation of the whole triad, so the "
+                                 "frame's x axis is the x accelerometer's and its y axis lies in the x-y input plane")
+    if res.fit is not None:
+        result["reduced_chi2"] = res.fit.reduced_chi2
+        result["condition_number"] = res.fit.condition_number
+    if base.startswith("paper"):
+        result["paper_coefficients"] = {"C0": res.extra["coefficients"][0],
+                                        "C1": res.extra["coefficients"][1:4], "C2": res.extra["coefficients"][4:7],
+                                        "C3": res.extra["coefficients"][7:10], "C4": res.extra["coefficients"][10:13]}
+    return result
+
+
+def format_text(result: dict) -> str:
+    from station.calibrate import _format_param, jsonable
+
+    r = jsonable(result)
+    u = r["units"]
+    lines = [f"procedure  accel-centrifuge (P2, {r['method']})", f"device     {r.get('device')}",
+             f"model      {r['model']}   (f in g, N in {u['N']})"]
+    for k in ("S", "b", "D", "gamma"):
+        if k in r["params"]:
+            lines += _format_param(f"{k} [{u[k]}]", r["params"][k], r["uncertainty"].get(k))
+    lines.append(f"residual   {r['residual_rms']:.3g} g RMS of |f| − sqrt(A²+1)")
+    lines.append(f"rows       {r['rows_used']} used of {r['n_rows']} (R = {r['radius_m']} m, g = {r['g_mps2']} m/s²)")
+    for w in r["warnings"]:
+        lines.append(f"warning    {w}")
+    return "\n".join(lines)

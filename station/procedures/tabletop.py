@@ -1,0 +1,218 @@
+"""P1 level-table accelerometer calibration for the CLI and the TUI: capture in, calibrate.md dict out.
+
+The numerics are in ``solvers/tabletop.py`` (step 8, step 10, the gauge). This module:
+
+- finds the static positions: a table of averages (one row per position, optional ``n`` and
+  ``<col>_std``); a time series with a ``position`` column (each run of one label is a
+  position); a time series without one (``solvers.stillness.detect_static_intervals``, with
+  the gyro when the capture has one);
+- knows each labelled position's gravity direction (``solvers.tabletop.known_direction``);
+- refuses, with the reason, what cannot be calibrated: a saturated axis, fewer than 9
+  distinct orientations (``--method six-position`` then offers step 8 alone when the six
+  ±axis positions are labelled), positions too alike to determine the coefficients;
+- reports every position used with its time span and norm residual.
+
+Methods: ``norm`` (default: step 8 where labels allow, then the norm fit in the ``table``
+gauge, or ``upper-triangular`` without labels), ``upper-triangular`` (that gauge even with
+labels), ``six-position`` (step 8 only).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from solvers import frames
+from solvers import tabletop as T
+from solvers.errors import SolverError
+from solvers.units import ACCEL_UNITS
+from station.errors import InputError, UnsupportedError
+
+MODEL = "A = B + M V"
+METHODS = {"norm": ("norm", "auto"), "upper-triangular": ("norm", "upper-triangular"),
+           "six-position": ("six-position", "auto"), "step8": ("six-position", "auto")}
+
+
+def _where(capture) -> str:
+    return capture.path or "capture"
+
+
+def gravity(capture, warnings: list[str]) -> float:
+    g = capture.float_meta("g_mps2")
+    if g is not None:
+        if not 9.7 < g < 9.9:
+            raise InputError(capture.path, capture.meta_lines.get("g_mps2"), f"g_mps2 {g} m/s² is not a local gravity")
+        return g
+    lat = capture.float_meta("latitude_deg")
+    if lat is not None:
+        return frames.normal_gravity_mps2(lat, capture.float_meta("altitude_m", 0.0))
+    warnings.append("no g_mps2 and no latitude_deg: using standard gravity 9.80665 m/s² (local g differs by up "
+                    "to 0.3 %, which goes straight into the scale factors)")
+    return frames.G_STANDARD_MPS2
+
+
+def _accel(capture) -> np.ndarray:
+    return np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
+
+
+def _runs(labels: np.ndarray) -> list[tuple[int, int, str]]:
+    """Contiguous runs of one non-empty label: (start, stop, label)."""
+    out, k, n = [], 0, len(labels)
+    while k < n:
+        lab = labels[k]
+        j = k + 1
+        while j < n and labels[j] == lab:
+            j += 1
+        if lab:
+            out.append((k, j, str(lab)))
+        k = j
+    return out
+
+
+def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], str, bool]:
+    """The positions of a capture, how they were found, and whether their noise is measured."""
+    a = _accel(capture)
+    labels = capture.columns.get("position")
+    if not capture.is_time_series:
+        stds = [capture.columns.get(c + "_std") for c in ("ax", "ay", "az")]
+        n = capture.columns.get("n")
+        noise_known = all(s is not None for s in stds) and n is not None
+        out = []
+        for k in range(len(a)):
+            if not np.all(np.isfinite(a[k])):
+                raise InputError(capture.path, None, f"row {k + 1}: accelerometer average is missing")
+            lab = str(labels[k]) if labels is not None else str(k + 1)
+            d, s = T.known_direction(lab)
+            std = np.array([float(x[k]) for x in stds]) if noise_known else None
+            nk = int(n[k]) if noise_known and np.isfinite(n[k]) else 1
+            if noise_known and (not np.all(np.isfinite(std)) or nk < 2):
+                noise_known = False
+            out.append(T.Position(lab, a[k], std, nk, direction=d, placement_sigma_rad=s))
+        if not noise_known:
+            for p in out:
+                p.std = None
+        return out, "table of averages", noise_known
+    t = np.asarray(capture.column("t"), dtype=float)
+    if labels is not None and any(labels):
+        out = []
+        for start, stop, lab in _runs(labels):
+            seg = a[start:stop]
+            good = np.all(np.isfinite(seg), axis=1)
+            seg = seg[good]
+            if len(seg) < 2:
+                continue
+            d, s = T.known_direction(lab)
+            out.append(T.Position(lab, seg.mean(axis=0), seg.std(axis=0, ddof=1), len(seg),
+                                  float(t[start]), float(t[stop - 1]), d, s))
+        return out, "position column", True
+    from solvers.stillness import detect_static_intervals
+
+    gyro = None
+    if all(c in capture.columns for c in ("gx", "gy", "gz")):
+        gyro = np.column_stack([np.asarray(capture.columns[c], dtype=float) for c in ("gx", "gy", "gz")])
+    try:
+        st = detect_static_intervals(t, a, gyro, nan_policy="omit")
+    except (SolverError, ValueError) as exc:
+        raise UnsupportedError(f"{_where(capture)}: accel-tabletop: cannot find static positions: {exc}") from None
+    warnings += [f"stillness: {w}" for w in st.warnings]
+    out = [T.Position(str(k + 1), np.asarray(iv.accel_mean, float), np.asarray(iv.accel_std, float), int(iv.n),
+                      float(iv.t_start_s), float(iv.t_stop_s)) for k, iv in enumerate(st.intervals)]
+    return out, "static intervals found automatically (no position column)", True
+
+
+def check_saturation(capture, positions: list[T.Position]) -> None:
+    """Refuse when an axis sits at its range limit: within a position the axis is exactly
+    constant at the capture's extreme reading while the other axes show noise."""
+    a = _accel(capture)
+    hi, lo = np.nanmax(a, axis=0), np.nanmin(a, axis=0)
+    for p in positions:
+        if p.std is None:
+            continue
+        noisy = p.std > 0
+        for i in range(3):
+            if p.std[i] == 0 and noisy.sum() >= 1 and p.mean[i] in (hi[i], lo[i]) and p.n >= 2:
+                where = f" (t {p.t_start_s:.1f}–{p.t_stop_s:.1f} s)" if p.t_start_s is not None else ""
+                raise UnsupportedError(
+                    f"{_where(capture)}: accel-tabletop: axis {'xyz'[i]} is saturated in position {p.label}{where}: "
+                    f"stuck at {p.mean[i]:g} {capture.meta.get('accel_unit', '')}, its extreme reading, while the "
+                    "other axes are noisy; the range is too small for 1 g (or the sensor clips): cannot calibrate")
+
+
+def calibrate(capture, method: str | None = None) -> dict:
+    """The calibrate.md result for an ``accel-tabletop`` capture."""
+    key = method or "norm"
+    if key not in METHODS:
+        raise UnsupportedError(f"accel-tabletop: unknown method {key!r} (methods: {', '.join(METHODS)})")
+    est, gauge = METHODS[key]
+    warnings: list[str] = []
+    unit = capture.meta.get("accel_unit") or "raw"
+    g = gravity(capture, warnings)
+    positions, found, noise_known = static_positions(capture, warnings)
+    if not positions:
+        raise UnsupportedError(f"{_where(capture)}: accel-tabletop: no static positions found")
+    check_saturation(capture, positions)
+    try:
+        res = T.calibrate(positions, g, method=est, gauge=gauge, noise_known=noise_known)
+    except SolverError as exc:
+        raise UnsupportedError(f"{_where(capture)}: accel-tabletop: {exc}") from None
+    warnings += res.warnings
+    if unit in ACCEL_UNITS and est == "norm":
+        s = ACCEL_UNITS[unit]
+        dev = np.abs(np.diag(res.M) / s - 1.0)
+        if np.any(dev > 0.2):
+            warnings.append(f"scale factors differ from the nominal {s:g} m/s² per {unit} by up to "
+                            f"{100 * dev.max():.0f} %: check accel_unit")
+    t_known = [p for p in positions if p.direction is not None]
+    rows = []
+    for k, p in enumerate(positions):
+        rows.append({"label": p.label, "t_start_s": p.t_start_s, "t_stop_s": p.t_stop_s, "n": p.n,
+                     "mean_raw": p.mean, "residual_mps2": float(res.norm_residuals[k]),
+                     "sigma_mps2": float(res.norm_sigma[k]),
+                     "known_direction": p.direction if p.direction is not None else None,
+                     "orientation": int(res.clusters[k]), "outlier": k in res.outliers})
+    result = {
+        "procedure": "accel-tabletop",
+        "device": capture.meta.get("device"),
+        "model": MODEL,
+        "params": {"B": res.B, "M": res.M},
+        "uncertainty": {"B": res.sigma_B, "M": res.sigma_M},
+        "residual_rms": res.residual_rms,
+        "n_positions": len(positions),
+        "warnings": warnings,
+        "method": res.method,
+        "gauge": res.gauge,
+        "gauge_description": res.gauge_text,
+        "units": {"V": unit, "A": "m/s^2", "B": "m/s^2", "M": f"m/s^2 per {unit}", "residual_rms": "m/s^2"},
+        "g_mps2": g,
+        "positions_found_by": found,
+        "n_labelled_positions": len(t_known),
+        "n_distinct_orientations": res.n_distinct,
+        "position_set_condition": res.position_condition,
+        "noise": "measured per position (std/sqrt(n))" if noise_known else "estimated from the residuals",
+        "reduced_chi2": res.fit.reduced_chi2 if res.fit is not None else None,
+        "positions": rows,
+        "step8": res.step8,
+    }
+    return result
+
+
+def format_text(result: dict) -> str:
+    from station.calibrate import _format_param, jsonable
+
+    r = jsonable(result)
+    unit = r["units"]["V"]
+    lines = [f"procedure  accel-tabletop (P1, {r['method']})", f"device     {r.get('device')}",
+             f"model      {r['model']}   (V in {unit}, A in m/s²)",
+             f"gauge      {r['gauge_description']}"]
+    lines += _format_param("B [m/s²]", r["params"]["B"], r["uncertainty"]["B"])
+    lines += _format_param(f"M [m/s² per {unit}]", r["params"]["M"], r["uncertainty"]["M"])
+    lines.append(f"residual   {r['residual_rms']:.3g} m/s² RMS of |A| − g (g = {r['g_mps2']:.5f} m/s²)")
+    lines.append(f"positions  {r['n_positions']} ({r['positions_found_by']}), {r['n_distinct_orientations']} "
+                 f"distinct orientations, condition {r['position_set_condition']:.3g}")
+    for p in r["positions"]:
+        span = f"{p['t_start_s']:8.1f}–{p['t_stop_s']:8.1f} s" if p["t_start_s"] is not None else " " * 21
+        flag = "  <- disagrees" if p["outlier"] else ""
+        lines.append(f"  {p['label']:>8} {span} n={p['n']:<6} |A|−g = {p['residual_mps2']:+.2e} m/s²{flag}")
+    for w in r["warnings"]:
+        lines.append(f"warning    {w}")
+    return "\n".join(lines)
