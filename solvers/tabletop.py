@@ -48,7 +48,7 @@ PLACEMENT_SIGMA_AXIS_RAD = math.radians(0.4)
 PLACEMENT_SIGMA_TILTED_RAD = math.radians(1.1)
 DISTINCT_ANGLE_DEG = 7.0       # two positions closer than this are one orientation
 MIN_DISTINCT = 9               # the norm fit's 9 identifiable parameters
-CONDITION_WARN = 200.0         # position-set condition above this: warn "too alike"
+CONDITION_WARN = 30.0          # position-set condition above this: warn "too alike"
 
 # Source numbering (positions 1-6) and the station's order for 7-12; imucal's names.
 _ORDER = list(P1_POSITIONS)
@@ -104,7 +104,7 @@ class P1Result:
     residual_rms: float               # RMS of norm_residuals
     n_distinct: int
     clusters: np.ndarray              # orientation cluster index per position
-    position_condition: float         # condition of the norm Jacobian of the position set
+    position_condition: float         # condition of the norm Jacobian of the position set (P1's 12: 1.6)
     fit: FitResult | None
     step8: dict | None                # {'B','M','sigma_B','sigma_M','residual_rms'} when computed
     noise_known: bool
@@ -225,7 +225,13 @@ def orientation_clusters(A: np.ndarray, max_angle_deg: float = DISTINCT_ANGLE_DE
 
 def position_condition(V: np.ndarray, B, M) -> float:
     """Condition number of the column-scaled norm Jacobian in the upper-triangular gauge (9
-    parameters): how well the set of positions determines the calibration (∞ = cannot)."""
+    parameters): how well the set of positions determines the calibration (∞ = cannot).
+    Computed on readings centred on their mean (``B + M V = (B + M V̄) + M (V − V̄)``), so that a
+    large offset (unsigned counts) does not count as a badly placed set."""
+    V = np.asarray(V, dtype=float)
+    Vbar = V.mean(axis=0)
+    B = np.asarray(B, dtype=float) + np.asarray(M, dtype=float) @ Vbar
+    V = V - Vbar
     Bu, Mu = to_upper(B, M)
     _, J = accel.p1_norm_jacobian(V, Bu, Mu)
     keep = [0, 1, 2, 3, 4, 5, 7, 8, 11]  # B, M00 M01 M02, M11 M12, M22

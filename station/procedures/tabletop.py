@@ -196,6 +196,10 @@ def calibrate(capture, method: str | None = None) -> dict:
     return result
 
 
+def _num(x) -> str:
+    return "∞ (singular)" if x is None else f"{x:.3g}"
+
+
 def format_text(result: dict) -> str:
     from station.calibrate import _format_param, jsonable
 
@@ -208,7 +212,7 @@ def format_text(result: dict) -> str:
     lines += _format_param(f"M [m/s² per {unit}]", r["params"]["M"], r["uncertainty"]["M"])
     lines.append(f"residual   {r['residual_rms']:.3g} m/s² RMS of |A| − g (g = {r['g_mps2']:.5f} m/s²)")
     lines.append(f"positions  {r['n_positions']} ({r['positions_found_by']}), {r['n_distinct_orientations']} "
-                 f"distinct orientations, condition {r['position_set_condition']:.3g}")
+                 f"distinct orientations, condition {_num(r['position_set_condition'])}")
     for p in r["positions"]:
         span = f"{p['t_start_s']:8.1f}–{p['t_stop_s']:8.1f} s" if p["t_start_s"] is not None else " " * 21
         flag = "  <- disagrees" if p["outlier"] else ""
