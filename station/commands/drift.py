@@ -40,15 +40,17 @@ def _plot(trends: list[dict]) -> str:
         end = start.replace(year=start.year + 1)
         return dt.year + (dt - start).total_seconds() / (end - start).total_seconds()
 
-    plt.clear_figure()
-    if not sys.stdout.isatty():
-        plt.theme("clear")
-    size = os.get_terminal_size(sys.stdout.fileno()) if sys.stdout.isatty() else os.terminal_size((100, 24))
-    width = min(size.columns, 120)
-    plt.subplots(len(trends), 1)
-    plt.plotsize(width, 12 * len(trends))
-    for i, t in enumerate(trends, start=1):
-        plt.subplot(i, 1)
+    tty = sys.stdout.isatty()
+    try:
+        width = min(os.get_terminal_size(sys.stdout.fileno()).columns if tty else 100, 120)
+    except OSError:
+        width = 100
+    figures = []
+    for t in trends:
+        plt.clear_figure()
+        if not tty:
+            plt.theme("clear")
+        plt.plotsize(width, 15)
         xs = [year(x) for x in t["times"]]
         ys = t["values"]
         if all(s is not None for s in t["sigmas"]):
@@ -56,14 +58,16 @@ def _plot(trends: list[dict]) -> str:
         plt.scatter(xs, ys, marker="dot", label=t["param"])
         if t["rate_per_year"] is not None and t["trend_value_at_last"] is not None:
             y_last = t["trend_value_at_last"]
-            line = [y_last + t["rate_per_year"] * (x - xs[-1]) for x in xs]
-            plt.plot(xs, line, label="trend")
+            ends = [xs[0], xs[-1]]
+            plt.plot(ends, [y_last + t["rate_per_year"] * (x - xs[-1]) for x in ends], label="trend")
         rate = "" if t["rate_per_year"] is None else (
             f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} /year"
         )
         plt.title(f"{t['procedure']} {t['param']}{rate}")
         plt.xlabel("year")
-    return plt.build()
+        text = plt.build()
+        figures.append(text if tty else plt.uncolorize(text))
+    return "\n".join(figures)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     sys.stdout.write("\n".join(out) + "\n")
     if not args.no_plot:
-        plottable = [t for t in trends if t["n"] >= 2]
+        plottable = [t for t in trends if t["n"] >= 2 and len(set(t["values"])) > 1]
         if args.param:
             chosen = plottable[:MAX_PLOTS]
         else:

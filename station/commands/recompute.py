@@ -29,6 +29,20 @@ def _calibrator():
     return fn
 
 
+def _capture(Capture, meta: dict, columns: dict, path: str):
+    """A Capture from stored meta/columns, with line numbers as `write_capture` would lay the file out
+    (one metadata line per key, then the header), so messages that cite lines match the export."""
+    import dataclasses
+
+    names = {f.name for f in dataclasses.fields(Capture)}
+    extra = {}
+    if "meta_lines" in names:
+        extra["meta_lines"] = {key: i + 1 for i, key in enumerate(meta)}
+    if "header_line" in names:
+        extra["header_line"] = len(meta) + 1
+    return Capture(meta=meta, columns=columns, path=path, **extra)
+
+
 def differences(stored: dict, new: dict) -> list[dict]:
     """Per scalar parameter: stored value and sigma, recomputed value and sigma, delta, delta/stored sigma."""
     from db.params import clean_json, flatten
@@ -60,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         if cal["capture_id"] is None:
             raise UnsupportedError(f"calibration {cal['id']} was stored without its capture: nothing to recompute")
         meta, columns = store.load_capture(cal["capture_id"])
-    capture = Capture(meta=meta, columns=columns, path=f"{db_path(args)}#capture={cal['capture_id']}")
+    capture = _capture(Capture, meta, columns, f"{db_path(args)}#capture={cal['capture_id']}")
     from solvers.errors import SolverError
 
     try:

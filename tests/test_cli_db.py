@@ -1,0 +1,196 @@
+"""The database commands end to end: devices, history, drift, due, verify (real files, real CLI)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import pytest
+
+from db import Store
+from db_testdata import accel_result, compass_result, small_capture
+from station.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+NASTY_ID = "IMU \"7\"; DROP TABLE devices; -- Ω温\nsecond line"
+NASTY_NOTES = "it's \"fine\"\n\tSELECT * FROM calibrations;\nüñí 🙂"
+
+
+def run(capsys, *argv) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture
+def db(tmp_path):
+    return str(tmp_path / "station.db")
+
+
+@pytest.fixture
+def filled(db):
+    with Store(db) as s:
+        s.add_device("IMU-1", model="ADXL355", interval_days=365, tolerances={"B[0]": 0.01})
+        meta, cols = small_capture(device="IMU-1")
+        for k, date in enumerate(["2024-01-01", "2024-07-01", "2025-01-01"]):
+            s.save_calibration(accel_result(B=(0.1 + 0.01 * k, 0.2, 0.3)), meta=dict(meta, date=date), columns=cols,
+                               software_version="0.1.0")
+        s.save_calibration(compass_result(device="IMU-1"), meta=dict(meta, date="2024-03-01", procedure="compass"),
+                           columns=cols)
+    return db
+
+
+# --- devices ---------------------------------------------------------------------------
+
+def test_devices_add_list_show(capsys, db):
+    code, out, _ = run(capsys, "devices", "add", "IMU-2", "--model", "BMI088", "--interval-days", "90",
+                       "--notes", "rack B", "--tolerance", "B=0.05", "--tolerance", "M[0][0]=0.001", "--db", db)
+    assert code == 0 and out == "added device IMU-2\n"
+    code, out, _ = run(capsys, "devices", "add", "IMU-2", "--notes", "rack C", "--db", db)
+    assert code == 0 and out == "updated device IMU-2\n"
+    code, out, _ = run(capsys, "devices", "list", "--db", db)
+    assert code == 0 and "IMU-2" in out and "BMI088" in out and "rack C" in out
+    code, out, _ = run(capsys, "devices", "show", "IMU-2", "--json", "--db", db)
+    d = json.loads(out)
+    assert d["interval_days"] == 90 and d["tolerances"] == {"B": 0.05, "M[0][0]": 0.001} and d["notes"] == "rack C"
+    code, out, _ = run(capsys, "devices", "list", "--json", "--db", db)
+    assert [x["id"] for x in json.loads(out)] == ["IMU-2"]
+
+
+def test_db_option_before_the_action_and_env(capsys, db, monkeypatch):
+    assert run(capsys, "devices", "--db", db, "add", "A")[0] == 0
+    assert run(capsys, "--db", db, "devices", "add", "B")[0] == 0
+    monkeypatch.setenv("STATION_DB", db)
+    code, out, _ = run(capsys, "devices", "list", "--json")
+    assert [x["id"] for x in json.loads(out)] == ["A", "B"]
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["devices", "add", "X", "--tolerance", "B"], "--tolerance 'B'"),
+    (["devices", "add", "X", "--tolerance", "B=-1"], "positive"),
+    (["devices", "add", "X", "--interval-days", "0"], "--interval-days must be positive"),
+    (["devices", "add", " "], "non-empty"),
+    (["devices", "show", "nope"], 'no device "nope"'),
+    (["history", "nope"], 'no device "nope"'),
+    (["drift", "nope"], 'no device "nope"'),
+    (["due", "--within", "-3"], "--within must not be negative"),
+])
+def test_bad_input_one_line_exit_2(capsys, db, argv, needle):
+    code, out, err = run(capsys, *argv, "--db", db)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and needle in err and "Traceback" not in err
+
+
+def test_unusable_database_file_is_one_line(capsys, tmp_path):
+    bad = tmp_path / "not-a-db"
+    bad.write_text("hello, I am a text file, not SQLite\n" * 100)
+    code, _, err = run(capsys, "devices", "list", "--db", str(bad))
+    assert code == 2 and err.count("\n") == 1 and "cannot open the station database" in err
+
+
+def test_nasty_id_and_notes_shown_verbatim(capsys, db):
+    assert run(capsys, "devices", "add", NASTY_ID, "--notes", NASTY_NOTES, "--model", "m'x", "--db", db)[0] == 0
+    code, out, _ = run(capsys, "devices", "show", NASTY_ID, "--db", db)
+    assert code == 0 and f"device: {NASTY_ID}\n" in out and f"notes: {NASTY_NOTES}\n" in out
+    code, out, _ = run(capsys, "devices", "list", "--db", db)
+    assert NASTY_ID in out and NASTY_NOTES in out
+    code, out, _ = run(capsys, "devices", "list", "--json", "--db", db)
+    assert json.loads(out)[0]["id"] == NASTY_ID and json.loads(out)[0]["notes"] == NASTY_NOTES
+    with Store(db) as s:
+        meta, cols = small_capture(device=NASTY_ID)
+        s.save_calibration(accel_result(device=NASTY_ID), meta=meta, columns=cols)
+    code, out, _ = run(capsys, "history", NASTY_ID, "--db", db)
+    assert code == 0 and out.startswith(f"device {NASTY_ID}: 1 calibration")
+    code, out, _ = run(capsys, "history", NASTY_ID, "--json", "--db", db)
+    assert json.loads(out)[0]["device_id"] == NASTY_ID
+
+
+def test_nasty_id_verbatim_through_a_real_process(db):
+    env = dict(os.environ, STATION_DB=db, PYTHONIOENCODING="utf-8")
+    add = subprocess.run([sys.executable, "-m", "station", "devices", "add", NASTY_ID, "--notes", NASTY_NOTES],
+                         cwd=ROOT, env=env, capture_output=True)
+    assert add.returncode == 0, add.stderr
+    show = subprocess.run([sys.executable, "-m", "station", "devices", "show", NASTY_ID], cwd=ROOT, env=env,
+                          capture_output=True)
+    assert show.returncode == 0
+    text = show.stdout.decode("utf-8")
+    assert f"device: {NASTY_ID}\n" in text and f"notes: {NASTY_NOTES}\n" in text
+
+
+# --- history ---------------------------------------------------------------------------
+
+def test_history_json_oldest_first_with_required_fields(capsys, filled):
+    code, out, _ = run(capsys, "history", "IMU-1", "--json", "--db", filled)
+    records = json.loads(out)
+    assert code == 0 and [r["time"][:10] for r in records] == ["2024-01-01", "2024-03-01", "2024-07-01", "2025-01-01"]
+    for r in records:
+        assert {"id", "time", "procedure", "params", "uncertainty"} <= set(r)
+    assert records[0]["params"]["B"] == [0.1, 0.2, 0.3]
+    code, out, _ = run(capsys, "history", "IMU-1", "--procedure", "compass", "--json", "--db", filled)
+    assert [r["procedure"] for r in json.loads(out)] == ["compass"]
+
+
+def test_history_text(capsys, filled):
+    code, out, _ = run(capsys, "history", "IMU-1", "--procedure", "accel-tabletop", "--db", filled)
+    lines = out.splitlines()
+    assert code == 0 and lines[0] == "device IMU-1: 3 calibrations of accel-tabletop, oldest first"
+    assert "2024-01-01T00:00:00Z  accel-tabletop  accepted, superseded by #2" in lines[1]
+    assert lines[2].strip().startswith("B: 0.1±0.01  0.2±0.01  0.3±0.01")
+
+
+# --- drift -----------------------------------------------------------------------------
+
+def test_drift_json_and_text_with_plot(capsys, filled):
+    code, out, _ = run(capsys, "drift", "IMU-1", "--param", "B[0]", "--json", "--db", filled)
+    [t] = json.loads(out)
+    # 0.01 per half year: 0.02/year (2024-01-01 -> 2024-07-01 is 182 d, -> 2025-01-01 is 366 d)
+    days = [0, 182, 366]
+    years = [d / 365.25 for d in days]
+    ym = sum(years) / 3
+    rate = sum((y - ym) * (0.1 + 0.01 * k) for k, y in enumerate(years)) / sum((y - ym) ** 2 for y in years)
+    assert t["rate_per_year"] == pytest.approx(rate, rel=1e-9) and t["param"] == "B[0]"
+    assert t["tolerance"] == 0.01 and t["leaves_tolerance"] is not None
+    code, out, _ = run(capsys, "drift", "IMU-1", "--param", "B", "--db", filled)
+    assert code == 0
+    assert "accel-tabletop  B[0]" in out and "RATE/YEAR" in out
+    assert "plot" in out and "year" in out  # the plotext figure follows the table
+    assert "\x1b[" not in out  # no colour codes when not a terminal
+    code, _, err = run(capsys, "drift", "IMU-1", "--param", "Q[9]", "--db", filled)
+    assert code == 2 and "no coefficient named 'Q[9]'" in err
+
+
+# --- due -------------------------------------------------------------------------------
+
+def test_due_exit_status_for_cron(capsys, filled):
+    # IMU-1 last accel calibration 2025-01-01 with a 365-day interval; its compass one 2024-03-01
+    code, out, _ = run(capsys, "due", "--now", "2024-02-01", "--db", filled)
+    assert code == 0 and out == "nothing due\n"
+    # compass interval ends 2025-03-01; B[0] drifts 0.02/year against a 0.01 tolerance: accel due ~2025-07-02
+    code, out, _ = run(capsys, "due", "--now", "2025-03-20", "--db", filled)
+    assert code == 1 and out.startswith("IMU-1: overdue by 19 d (due 2025-03-01)")
+    assert "compass: 365-day interval" in out and "accel-tabletop" not in out
+    code, out, _ = run(capsys, "due", "--now", "2025-08-01", "--json", "--db", filled)
+    [e] = json.loads(out)
+    assert code == 1 and e["device_id"] == "IMU-1" and e["status"] == "overdue"
+    kinds = {r["procedure"]: r["kind"] for r in e["reasons"]}
+    assert kinds == {"compass": "interval", "accel-tabletop": "drift"}
+    assert run(capsys, "due", "--now", "2025-02-01", "--within", "20", "--db", filled)[0] == 0
+    code, out, _ = run(capsys, "due", "--now", "2025-02-01", "--within", "40", "--db", filled)
+    assert code == 1 and out.startswith("IMU-1: due in 28 d (2025-03-01)")
+
+
+def test_due_real_process_exit_codes(tmp_path):
+    db = str(tmp_path / "station.db")
+    env = dict(os.environ, STATION_DB=db)
+    quiet = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert quiet.returncode == 0 and quiet.stdout == "nothing due\n"
+    now = datetime.now(timezone.utc)
+    with Store(db) as s:
+        s.add_device("OLD", interval_days=30)
+        meta, cols = small_capture(device="OLD")
+        s.save_calibration(accel_result(device="OLD"), meta=meta, columns=cols, time=now - timedelta(days=45))
+    loud = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert loud.returncode == 1 and loud.stdout.startswith("OLD: overdue by 15 d")
