@@ -1,0 +1,261 @@
+"""P4 gyro drift: Earth-rate projection by hand, simulated truth within the reported
+uncertainty (modes A, B, several positions), conventions, refusals through the CLI, real data."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from solvers import frames
+from solvers import gyrodrift as gd
+from solvers.models.gyro import earth_rate_body
+from solvers.simulate import simulate
+from station.capture import Capture, read_capture, write_capture
+from station.procedures import gyrodrift as proc
+
+ROOT = Path(__file__).resolve().parents[1]
+W = 7.2921151e-5
+DEG = math.pi / 180
+
+
+def _cap(sim, path=None) -> Capture:
+    return Capture(dict(sim.meta), {k: np.asarray(v) for k, v in sim.columns.items()}, path)
+
+
+def _station(*args):
+    return subprocess.run([sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+
+
+# ------------------------------------------------------------------ known answers by hand
+
+@pytest.mark.parametrize("pitch, roll, heading, expected", [
+    # level, forward north, at 40° N: [Ω cos 40°, Ω sin 40°, 0] = [5.58608e-5, 4.68727e-5, 0]
+    (0, 0, 0, [5.58608e-5, 4.68727e-5, 0.0]),
+    # forward east: the right axis points south, so it sees −Ω cos L; up still Ω sin L
+    (0, 0, 90, [0.0, 4.68727e-5, -5.58608e-5]),
+    # nose up 30°: forward = cos30 N + sin30 U → Ω cos(40° − 30°) = Ω · 0.984808 = 7.18133e-5;
+    # up axis = −sin30 N + cos30 U → Ω(−0.5·0.766044 + 0.866025·0.642788) = 1.26625e-5
+    (30, 0, 0, [7.18133e-5, 1.26625e-5, 0.0]),
+    # right wing down 20°: right = cos20 E − sin20 U → −Ω sin40 sin20 = −1.60313e-5;
+    # up = cos20 U + sin20 E → Ω sin40 cos20 = 4.40460e-5
+    (0, 20, 0, [5.58608e-5, 4.40460e-5, -1.60313e-5]),
+])
+def test_earth_rate_projection_worked_by_hand(pitch, roll, heading, expected):
+    C = frames.p4_C_n_b(pitch * DEG, roll * DEG, heading * DEG)
+    np.testing.assert_allclose(earth_rate_body(40.0, C), expected, atol=2e-10)  # 6-digit hand values
+
+
+@pytest.mark.parametrize("f, pitch, roll", [
+    ([0.0, 9.8, 0.0], 0.0, 0.0),
+    ([9.8 * 0.5, 9.8 * math.sqrt(3) / 2, 0.0], 30.0, 0.0),        # nose up 30°: forward reads +g sin30
+    ([0.0, 9.8 * math.cos(20 * DEG), -9.8 * math.sin(20 * DEG)], 0.0, 20.0),  # right wing down
+])
+def test_pitch_roll_from_accel_by_hand(f, pitch, roll):
+    p, r = frames.p4_pitch_roll_from_accel(f)
+    assert math.degrees(p) == pytest.approx(pitch, abs=1e-9)
+    assert math.degrees(r) == pytest.approx(roll, abs=1e-9)
+
+
+def test_mode_b_known_answer_without_noise():
+    # a perfect static unit: ω̄ = ε + C_b_n ω_ie^n exactly; the drift must come back exactly
+    eps = np.array([1e-3, -2e-3, 5e-4])
+    C = frames.p4_C_n_b(5 * DEG, -3 * DEG, 0.0)
+    e = C.T @ frames.earth_rate_nue(40.0)
+    n = 6000
+    w = np.tile(eps + e, (n, 1))
+    f = np.tile(C.T @ [0.0, 9.8, 0.0], (n, 1))
+    res = gd.drift_static(w, f, 0.01, 40.0, 0.0)
+    np.testing.assert_allclose(res.drift_rad_s, eps, atol=1e-12)
+    assert res.pitch_deg == pytest.approx(5.0) and res.roll_deg == pytest.approx(-3.0)
+
+
+# ------------------------------------------------------------------ truth within uncertainty
+
+def _cols(c, names):
+    return np.column_stack([c[k] for k in names])
+
+
+def test_mode_a_truth_within_uncertainty_over_seeds():
+    z = []
+    for seed in range(30):
+        sim = simulate("gyro-drift", seed=seed, mode="reference")
+        c = sim.columns
+        res = gd.drift_reference(_cols(c, ["gx", "gy", "gz"]), _cols(c, ["ref_gx", "ref_gy", "ref_gz"]), 0.01)
+        z.append((res.drift_rad_s - sim.truth["drift"]) / res.sigma_rad_s)
+    z = np.abs(np.concatenate(z))
+    assert np.mean(z < 2) >= 0.88      # nominal 0.954; 90 values
+    assert np.mean(z < 3) >= 0.97
+
+
+def test_mode_b_truth_within_uncertainty_over_seeds():
+    z = []
+    for seed in range(30):
+        sim = simulate("gyro-drift", seed=100 + seed, mode="static")
+        c = sim.columns
+        res = gd.drift_static(_cols(c, ["gx", "gy", "gz"]), _cols(c, ["ax", "ay", "az"]), 0.01,
+                              float(sim.meta["latitude_deg"]), 0.0)
+        z.append((res.drift_rad_s - sim.truth["drift"]) / res.sigma_rad_s)
+        att = sim.truth["attitudes"][0]
+        assert res.pitch_deg == pytest.approx(att["pitch_deg"], abs=0.05)   # accel noise 0.01 m/s²
+        assert res.roll_deg == pytest.approx(att["roll_deg"], abs=0.05)
+    z = np.abs(np.concatenate(z))
+    assert np.mean(z < 2) >= 0.88
+    assert np.mean(z < 3) >= 0.97
+
+
+def test_multi_position_truth_and_earth_rate_scale_over_seeds():
+    z, zs = [], []
+    for seed in range(12):
+        sim = simulate("gyro-drift", seed=200 + seed, mode="static", headings_deg=[0, 90, 180, 270],
+                       duration_s=480)
+        out = proc.calibrate(_cap(sim))
+        assert out["params"]["mode"] == "static-multi" and out["n_positions"] == 4
+        z.append((np.array(out["params"]["drift"]) - sim.truth["drift"]) / np.array(out["uncertainty"]["drift"]))
+        zs.append((out["fit"]["earth_rate_scale"] - 1.0) / out["fit"]["sigma_earth_rate_scale"])
+    z = np.abs(np.concatenate(z))
+    assert np.mean(z < 2) >= 0.85      # 36 values
+    assert np.mean(z < 3) >= 0.95
+    assert np.mean(np.abs(zs) < 3) >= 0.9
+
+
+def test_procedure_result_follows_calibrate_md():
+    sim = simulate("gyro-drift", seed=1, mode="static")
+    out = proc.calibrate(_cap(sim))
+    p, u = out["params"], out["uncertainty"]
+    assert {"procedure", "device", "model", "params", "uncertainty", "residual_rms", "n_positions",
+            "warnings"} <= set(out)
+    assert p["mode"] == "static" and len(p["drift"]) == 3 and len(p["earth_rate_body"]) == 3
+    assert isinstance(p["pitch_deg"], float) and isinstance(p["roll_deg"], float)
+    assert len(u["drift"]) == 3 and u["pitch_deg"] > 0
+    np.testing.assert_allclose(p["earth_rate_body"], sim.truth["earth_rate_body_mean"], atol=5e-6)  # 3° heading
+
+
+def test_no_latitude_gives_plain_mean_with_warning():
+    sim = simulate("gyro-drift", seed=2, mode="static")
+    del sim.meta["latitude_deg"]
+    out = proc.calibrate(_cap(sim))
+    c = sim.columns
+    np.testing.assert_allclose(out["params"]["drift"], _cols(c, ["gx", "gy", "gz"]).mean(axis=0), atol=1e-12)
+    assert out["params"]["earth_rate_body"] is None
+    assert any("no latitude_deg" in w for w in out["warnings"])
+
+
+def test_missing_heading_warns_and_defaults_to_north():
+    sim = simulate("gyro-drift", seed=3, mode="static")
+    del sim.meta["heading_deg"]
+    out = proc.calibrate(_cap(sim))
+    assert any("heading 0" in w for w in out["warnings"])
+
+
+def test_accuracy_statement():
+    sim = simulate("gyro-drift", seed=4, mode="reference")
+    strict = proc.calibrate(_cap(sim), accuracy_deg_h=0.5)
+    loose = proc.calibrate(_cap(sim), accuracy_deg_h=100.0)
+    assert strict["accuracy"]["enough"] is False and loose["accuracy"]["enough"] is True
+    assert any("above the accuracy asked" in w for w in strict["warnings"])
+    # ~4 °/h achieved in 180 s; 0.5 °/h needs far more than 180 s (or is unreachable)
+    assert min(strict["accuracy"]["time_needed_s"]) > 180.0
+
+
+# ------------------------------------------------------------------ conventions
+
+def test_other_frame_gravity_sign_and_flipped_gyro_give_the_same_drift():
+    """The same static unit written as sunsided does (x fwd, y left, z up; accel = gravity
+    direction; gyro x reversed) in deg/s and g: declared in metadata, the P4 result must match."""
+    sim = simulate("gyro-drift", seed=5, mode="static")
+    ref = proc.calibrate(_cap(sim))
+    c = sim.columns
+    C_flu_fur = proc.frame_matrix("x forward, y left, z up").T
+    g = _cols(c, ["gx", "gy", "gz"]) @ C_flu_fur.T / DEG
+    a = -(_cols(c, ["ax", "ay", "az"]) @ C_flu_fur.T) / 9.80665
+    g[:, 0] *= -1
+    meta = dict(sim.meta, gyro_unit="deg/s", accel_unit="g", frame="x forward, y left, z up",
+                accel_sign="gravity", gyro_flip="x")
+    cols = dict(c, gx=g[:, 0], gy=g[:, 1], gz=g[:, 2], ax=a[:, 0], ay=a[:, 1], az=a[:, 2])
+    out = proc.calibrate(Capture(meta, cols))
+    np.testing.assert_allclose(out["params"]["drift"], ref["params"]["drift"], atol=1e-12)
+    assert out["params"]["pitch_deg"] == pytest.approx(ref["params"]["pitch_deg"], abs=1e-9)
+    text = " ".join(out["warnings"])
+    assert "gravity direction" in text and "sign reversed" in text and "rotated into P4" in text
+    np.testing.assert_allclose(out["drift_raw"]["value"][0], -np.degrees(ref["params"]["drift"][0]), rtol=1e-9)
+
+
+def test_frame_text_must_be_a_right_handed_triad():
+    with pytest.raises(ValueError):
+        proc.frame_matrix("x forward, y left, z down")
+    with pytest.raises(ValueError):
+        proc.frame_matrix("x forward, y up")
+
+
+# ------------------------------------------------------------------ refusals (CLI, exit 2)
+
+def _write(tmp_path, sim, name="c.csv"):
+    path = tmp_path / name
+    write_capture(path, _cap(sim))
+    return path
+
+
+def _one_line_refusal(r, *needles):
+    assert r.returncode == 2, r.stdout + r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr
+    for n in needles:
+        assert n in lines[0]
+
+
+def test_cli_refuses_too_short_a_record(tmp_path):
+    sim = simulate("gyro-drift", seed=6, mode="static", duration_s=10.0)
+    _one_line_refusal(_station("calibrate", _write(tmp_path, sim)), "too short", "3 min")
+
+
+def test_cli_refuses_missing_columns(tmp_path):
+    sim = simulate("gyro-drift", seed=7, mode="reference")
+    del sim.columns["ref_gz"]
+    _one_line_refusal(_station("calibrate", _write(tmp_path, sim)), "ref_gz")
+    sim2 = simulate("gyro-drift", seed=7, mode="static")
+    del sim2.columns["gy"]
+    _one_line_refusal(_station("calibrate", _write(tmp_path, sim2, "d.csv")), "gy")
+
+
+def test_cli_refuses_counts_without_a_scale_and_uses_one_given(tmp_path):
+    sim = simulate("gyro-drift", seed=8, mode="static")
+    for k in ("gx", "gy", "gz"):
+        sim.columns[k] = np.round(sim.columns[k] / DEG * 131.0)
+    sim.meta["gyro_unit"] = "counts"
+    _one_line_refusal(_station("calibrate", _write(tmp_path, sim)), "gyro_counts_per_deg_s")
+    sim.meta["gyro_counts_per_deg_s"] = "131"
+    r = _station("calibrate", _write(tmp_path, sim, "e.csv"), "--json")
+    assert r.returncode == 0, r.stderr
+    import json
+    out = json.loads(r.stdout)
+    # 1-count quantisation (7.6e-3 °/s) averages out well below the 3e-5 rad/s noise error
+    np.testing.assert_allclose(out["params"]["drift"], sim.truth["drift"], atol=1e-4)
+    assert any("counts" in w for w in out["warnings"])
+
+
+# ------------------------------------------------------------------ real data
+
+def test_sunsided_static_run(shared_data):
+    cap = read_capture(shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward_10min.capture.csv")
+    out = proc.calibrate(cap)
+    raw = np.array(out["drift_raw"]["value"])
+    # SOURCE.md: gyro bias (4.53, 0.05, 1.12) °/s in the capture's axes, σ 0.09–0.13 °/s per sample
+    np.testing.assert_allclose(raw, [4.53, 0.05, 1.12], atol=0.02)
+    # in P4's frame: x = −gx (reversed), y (up) = gz, z (right) = −gy
+    np.testing.assert_allclose(np.degrees(out["params"]["drift"]), [-raw[0], raw[2], -raw[1]], rtol=1e-9)
+    assert abs(out["params"]["pitch_deg"]) < 10 and abs(out["params"]["roll_deg"]) < 10  # z was up
+    text = " ".join(out["warnings"])
+    assert "known conventions" in text and "no latitude_deg" in text
+
+
+def test_mpu6050_static_run_in_counts(shared_data):
+    cap = read_capture(shared_data / "mpu6050_unc" / "mpu6050_unc_static_test.capture.csv")
+    cap.meta["gyro_counts_per_deg_s"] = "131"
+    out = proc.calibrate(cap)
+    # SOURCE.md: gyro bias about (−3.35, 1.09, −0.50) °/s across the unit's runs (within ~0.15)
+    np.testing.assert_allclose(out["drift_raw"]["value"], np.array([-3.35, 1.09, -0.50]) * 131, atol=0.2 * 131)
