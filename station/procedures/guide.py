@@ -609,3 +609,39 @@ def position_drawing(direction) -> list[str]:
         "        \\/  on its edge",
         " ============ table",
     ]
+
+
+class ScriptedOperator:
+    """The demo's operator: follows the prompts.
+
+    ``reaction_s`` (device time) after a new position is asked, it calls ``place(name)``.
+    ``mistakes`` maps an asked position to a wrong one placed first (for ``mistake_s``), so
+    a newcomer sees the orientation indicator catch it.
+    """
+
+    def __init__(self, place, *, reaction_s: float = 1.0, mistakes: dict[str, str] | None = None,
+                 mistake_s: float = 4.0):
+        self.place = place
+        self.reaction_s = reaction_s
+        self.mistakes = dict(mistakes or {})
+        self.mistake_s = mistake_s
+        self._asked: str | None = None
+        self._plan: list[tuple[float, str]] = []
+
+    def step(self, guide: P1Guide, t_s: float) -> str | None:
+        """Call after each update; returns the position placed now, if any."""
+        if guide.phase not in ("place", "settle", "average") or guide.step is None or not math.isfinite(t_s):
+            return None
+        name = guide.step.name
+        if name != self._asked:
+            self._asked = name
+            wrong = self.mistakes.pop(name, None)
+            if wrong:
+                self._plan = [(t_s + self.reaction_s, wrong), (t_s + self.reaction_s + self.mistake_s, name)]
+            else:
+                self._plan = [(t_s + self.reaction_s, name)]
+        if self._plan and t_s >= self._plan[0][0]:
+            _, where = self._plan.pop(0)
+            self.place(where)
+            return where
+        return None

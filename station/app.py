@@ -1,0 +1,155 @@
+"""The operator TUI: a thin Textual App and the ``make_app`` factory that the commands,
+tests, snapshots and benchmarks use.
+
+Screens (one file each in ``station/screens/``): Connect → Procedure → Results, History,
+Help. Device I/O and database reads run in thread workers that post the typed messages
+of ``station/messages.py``; the procedure logic is ``station.procedures.guide``.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+from textual import work
+from textual.app import App
+from textual.binding import Binding
+
+from station.messages import StoreLoaded
+
+
+@dataclass
+class Session:
+    """What the screens share: where the database is, the source, the device, the run."""
+
+    db_path: str | None = None
+    source: object | None = None  # a station.sources source, started on connect
+    device_id: str = ""
+    model: str = ""
+    procedure: str = "accel-tabletop"
+    average_s: float = 180.0
+    settle_s: float = 2.0
+    scripted: bool = False  # the demo's scripted operator follows the prompts
+    autosave: bool = False  # save the result without asking (the demo)
+    state_dir: str | None = None  # where resume files live (default: next to the database)
+    resume: bool = False
+    guide: object | None = None
+    refresh_hz: float = 15.0
+    exit_when_saved: bool = False
+    extra: dict = field(default_factory=dict)
+
+    def resume_dir(self) -> str | None:
+        """Where resume files live: --state-dir, else next to the database, else nowhere."""
+        if self.state_dir:
+            return self.state_dir
+        if self.db_path:
+            return os.path.dirname(os.path.abspath(self.db_path)) or "."
+        return None
+
+    def open_store(self):
+        """The database, or None when there is none yet (never created just by looking)."""
+        if not self.db_path or not os.path.exists(self.db_path):
+            return None
+        from db.store import Store
+
+        return Store(self.db_path)
+
+
+class StationApp(App):
+    """Thin: holds the session, shows the first screen, reminds of due devices."""
+
+    TITLE = "Calibration station"
+    SUB_TITLE = "operator console"
+    BINDINGS = [
+        Binding("f1", "help", "Help"),
+        Binding("f2", "history", "History", show=False),
+        Binding("ctrl+q", "quit", "Quit", priority=True),
+    ]
+
+    def __init__(self, session: Session, *, start: str = "connect") -> None:
+        super().__init__()
+        self.session = session
+        self.start = start
+
+    def on_mount(self) -> None:
+        from station.screens.connect import ConnectScreen
+
+        self.push_screen(ConnectScreen())
+        if self.start == "procedure":
+            from station.screens.procedure import ProcedureScreen
+
+            self.push_screen(ProcedureScreen())
+        elif self.start == "history":
+            from station.screens.history import HistoryScreen
+
+            self.push_screen(HistoryScreen())
+        self.load_due()
+
+    @work(thread=True, exclusive=True, group="due", exit_on_error=False, description="read due devices")
+    def load_due(self) -> None:
+        try:
+            store = self.session.open_store()
+            due = store.due(within_days=7) if store is not None else []
+            self.post_message(StoreLoaded("due", due))
+        except Exception as exc:  # noqa: BLE001 - a broken database must not stop the console
+            self.post_message(StoreLoaded("due", [], error=str(exc)))
+
+    def on_store_loaded(self, message: StoreLoaded) -> None:
+        if message.what != "due":
+            return
+        if message.error:
+            self.notify(f"database: {message.error}", severity="error", timeout=8)
+            return
+        overdue = [d for d in message.data if d["status"] == "overdue"]
+        soon = [d for d in message.data if d["status"] == "due"]
+        if overdue or soon:
+            parts = []
+            if overdue:
+                parts.append("overdue: " + ", ".join(d["device_id"] for d in overdue[:4]))
+            if soon:
+                parts.append("due within 7 days: " + ", ".join(d["device_id"] for d in soon[:4]))
+            self.notify("; ".join(parts) + "  (F2 history)", title="Recalibration",
+                        severity="warning", timeout=10)
+        self.due = message.data
+        for screen in self.screen_stack:
+            if hasattr(screen, "show_due"):
+                screen.show_due(message.data)
+
+    due: list = []
+
+    def action_history(self) -> None:
+        from station.screens.history import HistoryScreen
+
+        if not isinstance(self.screen, HistoryScreen):
+            self.push_screen(HistoryScreen())
+
+    def action_help(self) -> None:
+        from station.screens.help import HelpScreen
+
+        if not isinstance(self.screen, HelpScreen):
+            self.push_screen(HelpScreen())
+
+
+def make_app(db_path: str | None = None, device=None, *, demo: bool = False, average_s: float | None = None,
+             settle_s: float | None = None, device_id: str | None = None, model: str = "",
+             state_dir: str | None = None, start: str | None = None, resume: bool = False,
+             exit_when_saved: bool = False) -> StationApp:
+    """The station app.
+
+    db_path: the station database (None: nothing is saved or looked up).
+    device: a started-or-not source (``station.sources.SimSource`` / ``SerialSource``);
+        with it the Connect screen is pre-filled (and skipped for the demo).
+    demo: the scripted operator follows the prompts and the result is saved unasked.
+    average_s: averaging time per position (default 180 s, the source's 3–5 minutes;
+        the demo uses 3 s).
+    """
+    session = Session(db_path=db_path, source=device, scripted=demo, autosave=demo, state_dir=state_dir,
+                      resume=resume, exit_when_saved=exit_when_saved, model=model)
+    session.average_s = float(average_s if average_s is not None else (3.0 if demo else 180.0))
+    session.settle_s = float(settle_s if settle_s is not None else (1.0 if demo else 2.0))
+    if device is not None:
+        session.device_id = device_id or getattr(device, "device_id", "") or ""
+    elif device_id:
+        session.device_id = device_id
+    if start is None:
+        start = "procedure" if (demo and device is not None) else "connect"
+    return StationApp(session, start=start)

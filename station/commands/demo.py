@@ -1,0 +1,79 @@
+"""`station demo`: a whole P1 calibration on the simulated device, the scripted operator
+following the prompts, short averaging times, the result saved (in the TUI, or with
+--headless as plain lines)."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("demo", help="watch a whole P1 calibration on the simulated device (about 80 s)",
+                       description="The TUI on the simulated device with a scripted operator who follows "
+                       "the prompts; short averaging times; the result is saved to the database.")
+    p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
+    p.add_argument("--average-s", type=float, default=3.0, help="averaging time per position (default 3 s)")
+    p.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second (default 1)")
+    p.add_argument("--headless", action="store_true", help="no screen: run the same procedure, print lines")
+    p.add_argument("--exit-when-saved", action="store_true", help="quit the TUI once the result is saved")
+    p.add_argument("--no-save", action="store_true", help="do not store the result")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from station.cli import db_path
+    from station.errors import InputError
+
+    if not args.average_s > 0 or not args.speed > 0:
+        raise InputError(None, None, "--average-s and --speed must be positive")
+    if args.headless:
+        return headless(args, None if args.no_save else db_path(args))
+    from station.app import make_app
+    from station.sources import SimSource
+
+    device = SimSource(seed=args.seed, speed=args.speed)
+    app = make_app(None if args.no_save else db_path(args), device=device, demo=True, average_s=args.average_s,
+                   exit_when_saved=args.exit_when_saved)
+    app.run()
+    return 0
+
+
+def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) -> int:
+    """The demo without a screen, on a simulated clock (runs as fast as the CPU allows)."""
+    from station.calibrate import calibrate_capture, format_text
+    from station.procedures.guide import GuideConfig, P1Guide, ScriptedOperator
+    from station.sources import SimSource
+
+    now = [0.0]
+    src = SimSource(seed=args.seed, speed=1.0, clock=lambda: now[0]).start()
+    guide = P1Guide(sample_rate_hz=src.rate_hz, accel_unit=src.units["accel_unit"], device_id=src.device_id,
+                    config=GuideConfig(average_s=args.average_s, settle_s=1.0), nominal=src.nominal, site=src.site)
+    operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=3.0)
+    last_phase = None
+    while guide.phase not in ("done", "aborted") and now[0] < max_device_s:
+        now[0] += 0.05
+        b = src.drain()
+        if b is None:
+            continue
+        st = guide.update(b.t_s, b.accel, b.gyro, b.temp_c)
+        operator.step(guide, st.t_s)
+        for kind, detail in guide.take_events():
+            print(f"{st.t_s:7.1f} s  {kind:<9} {detail}", file=out)
+        if st.wrong_face and last_phase != "wrong":
+            print(f"{st.t_s:7.1f} s  wrong face up at {st.step_name} ({st.angle_deg:.0f}°)", file=out)
+            last_phase = "wrong"
+        elif not st.wrong_face and last_phase == "wrong":
+            last_phase = None
+    if guide.phase != "done":
+        from station.errors import UnsupportedError
+
+        raise UnsupportedError(f"demo did not finish within {max_device_s:g} s of device time")
+    capture = guide.capture(extra_meta={"simulated": "yes"})
+    result = calibrate_capture(capture)
+    print(format_text(result), file=out)
+    if db:
+        from station.store import save_result
+
+        cal_id = save_result(db, capture, result, device_id=src.device_id)
+        print(f"saved as calibration #{cal_id} in {db}", file=out)
+    return 0

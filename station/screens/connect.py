@@ -1,0 +1,280 @@
+"""Connect: choose the source (the built-in simulated device or a serial port and its
+protocol), the device under test (serial number, model; or one already registered) and
+the averaging time, then start P1 (or resume an interrupted run)."""
+from __future__ import annotations
+
+import os
+
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import Screen
+from textual.widgets import Button, Footer, Input, Label, Select, Static
+
+from station.widgets.title import TitleBar
+from station.messages import Connected, SourceFailed, StoreLoaded
+
+SIM = "sim"
+OTHER = "other"
+
+
+class ConnectScreen(Screen):
+    CSS = """
+    ConnectScreen #form { padding: 0 1; height: auto; }
+    ConnectScreen .row { height: 1; margin-bottom: 1; }
+    ConnectScreen .row Label { width: 16; }
+    ConnectScreen #source { width: 1fr; }
+    ConnectScreen #protocol { width: 20; }
+    ConnectScreen #port { width: 1fr; }
+    ConnectScreen #serial, ConnectScreen #model, ConnectScreen #known { width: 1fr; }
+    ConnectScreen #average { width: 12; }
+    ConnectScreen #buttons { height: 1; margin-top: 1; }
+    ConnectScreen #buttons Button { margin-right: 2; }
+    ConnectScreen #due { color: $warning; padding: 0 1; height: auto; }
+    ConnectScreen #status { padding: 0 1; height: auto; }
+    ConnectScreen #title { text-style: bold; padding: 0 1; margin-bottom: 1; }
+    """
+
+    BINDINGS = [
+        Binding("f5", "start", "Start P1"),
+        Binding("f6", "resume", "Resume"),
+        Binding("f2", "history", "History"),
+    ]
+
+    def compose(self) -> ComposeResult:
+        s = self.app.session
+        yield TitleBar("connect a device")
+        yield Static("Connect a device and start the accelerometer calibration (P1, level table)", id="title")
+        yield Static("", id="due")
+        with Vertical(id="form"):
+            with Horizontal(classes="row"):
+                yield Label("Source")
+                yield Select(self._source_options(), value=self._default_source(), allow_blank=False,
+                             id="source", compact=True)
+                yield Select([("station protocol", "station"), ("MAVLink", "mavlink")], value="station",
+                             allow_blank=False, id="protocol", compact=True)
+            with Horizontal(classes="row"):
+                yield Label("Port or URL")
+                yield Input(placeholder="/dev/ttyUSB0, socket://host:port (when Source is Other)", id="port",
+                            compact=True)
+            with Horizontal(classes="row"):
+                yield Label("Serial number")
+                yield Input(value=s.device_id, placeholder="device under test (default: what it reports)",
+                            id="serial", compact=True)
+            with Horizontal(classes="row"):
+                yield Label("Model")
+                yield Input(value=s.model, placeholder="e.g. ADXL335 triad", id="model", compact=True)
+            with Horizontal(classes="row"):
+                yield Label("Registered")
+                yield Select([], prompt="pick a registered device", id="known", compact=True)
+            with Horizontal(classes="row"):
+                yield Label("Average (s)")
+                yield Input(value=f"{s.average_s:g}", id="average", type="number", compact=True)
+                yield Label("  per position (source: 180–300 s)")
+            with Horizontal(id="buttons"):
+                yield Button("Start P1 [F5]", id="start", variant="primary", compact=True)
+                yield Button("Resume [F6]", id="resume", compact=True, disabled=True)
+                yield Button("History [F2]", id="history", compact=True)
+        yield Static("", id="status")
+        yield Footer()
+
+    def _source_options(self):
+        opts = [("Built-in simulated device", SIM)]
+        try:
+            from station.device.ports import list_ports
+
+            opts += [(f"{p.device}  {p.description}"[:60], p.device) for p in list_ports()]
+        except Exception:  # noqa: BLE001 - no port listing: the simulator and Other still work
+            pass
+        opts.append(("Other port or URL (below)", OTHER))
+        return opts
+
+    def _default_source(self):
+        src = self.app.session.source
+        if src is not None and getattr(src, "kind", "") == "serial":
+            return OTHER
+        return SIM
+
+    def on_mount(self) -> None:
+        src = self.app.session.source
+        if src is not None and getattr(src, "kind", "") == "serial":
+            self.query_one("#port", Input).value = src.port
+            self.query_one("#protocol", Select).value = src.protocol
+        self.load_devices()
+        self.show_due(getattr(self.app, "due", []))
+        self._check_resume()
+        self.query_one("#start", Button).focus()
+
+    def on_screen_resume(self) -> None:
+        self._check_resume()
+        self.load_devices()
+
+    # ------------------------------------------------------------ database
+
+    @work(thread=True, exclusive=True, group="connect-db", exit_on_error=False, description="list devices")
+    def load_devices(self) -> None:
+        try:
+            store = self.app.session.open_store()
+            devices = store.list_devices() if store is not None else []
+            self.post_message(StoreLoaded("devices", devices))
+        except Exception as exc:  # noqa: BLE001
+            self.post_message(StoreLoaded("devices", [], error=str(exc)))
+
+    def on_store_loaded(self, message: StoreLoaded) -> None:
+        if message.what == "devices":
+            known = self.query_one("#known", Select)
+            self._devices = {d["id"]: d for d in message.data}
+            known.set_options([(f"{d['id']}  {d.get('model') or ''}".strip(), d["id"]) for d in message.data])
+
+    def show_due(self, due) -> None:
+        bad = [d for d in due or [] if d["status"] in ("overdue", "due")]
+        text = ""
+        if bad:
+            text = "Recalibration " + "; ".join(
+                f"{d['device_id']} {d['status']}" + (f" ({-d['days_left']:.0f} d)" if d['status'] == 'overdue' else "")
+                for d in bad[:3]) + ("; …" if len(bad) > 3 else "")
+        self.query_one("#due", Static).update(text)
+
+    @on(Select.Changed, "#known")
+    def _known_picked(self, event: Select.Changed) -> None:
+        d = getattr(self, "_devices", {}).get(event.value)
+        if d:
+            self.query_one("#serial", Input).value = d["id"]
+            self.query_one("#model", Input).value = d.get("model") or ""
+            self._check_resume()
+
+    @on(Input.Changed, "#serial")
+    def _serial_changed(self) -> None:
+        self._check_resume()
+
+    # ------------------------------------------------------------ resume
+
+    def _resume_path(self) -> str | None:
+        from station.procedures.guide import default_state_path
+
+        s = self.app.session
+        if not s.resume_dir():
+            return None
+        serial = self.query_one("#serial", Input).value.strip() or (
+            getattr(s.source, "device_id", "") if s.source is not None else "")
+        if not serial and self.query_one("#source", Select).value == SIM:
+            from station.sources import SimSource
+
+            serial = SimSource(seed=0).device_id
+        if not serial:
+            return None
+        return default_state_path(serial, base=s.resume_dir())
+
+    def _check_resume(self) -> None:
+        path = self._resume_path()
+        button = self.query_one("#resume", Button)
+        ok = False
+        if path and os.path.exists(path):
+            try:
+                import json
+
+                with open(path, encoding="utf-8") as fh:
+                    state = json.load(fh)
+                n = sum(st["status"] == "captured" for st in state["steps"])
+                ok = state.get("phase") != "done" and n < len(state["steps"])
+                if ok:
+                    button.label = f"Resume {n}/{len(state['steps'])} [F6]"
+            except (OSError, ValueError, KeyError, TypeError):
+                ok = False
+        button.disabled = not ok
+        if not ok:
+            button.label = "Resume [F6]"
+
+    # ------------------------------------------------------------ start
+
+    @on(Button.Pressed, "#start")
+    def action_start(self) -> None:
+        self._connect(resume=False)
+
+    @on(Button.Pressed, "#resume")
+    def action_resume(self) -> None:
+        if not self.query_one("#resume", Button).disabled:
+            self._connect(resume=True)
+
+    @on(Button.Pressed, "#history")
+    def action_history(self) -> None:
+        from station.screens.history import HistoryScreen
+
+        self.app.push_screen(HistoryScreen())
+
+    @on(Input.Submitted)
+    def _submitted(self) -> None:
+        self._connect(resume=False)
+
+    def _connect(self, resume: bool) -> None:
+        s = self.app.session
+        try:
+            average = float(self.query_one("#average", Input).value)
+            if not average > 0:
+                raise ValueError
+        except ValueError:
+            self._status("Average (s) must be a positive number of seconds", error=True)
+            return
+        s.average_s = average
+        s.resume = resume
+        s.model = self.query_one("#model", Input).value.strip()
+        s.device_id = self.query_one("#serial", Input).value.strip()
+        choice = self.query_one("#source", Select).value
+        port = self.query_one("#port", Input).value.strip()
+        if choice == OTHER and not port and not (s.source is not None and s.source.kind == "serial"):
+            self._status("Type a port or URL, or choose the simulated device", error=True)
+            return
+        self.query_one("#start", Button).disabled = True
+        self._status("Connecting…")
+        self.open_source(choice, port, self.query_one("#protocol", Select).value)
+
+    def _status(self, text: str, error: bool = False) -> None:
+        self.query_one("#status", Static).update(f"[b red]{text}[/]" if error else text)
+
+    @work(thread=True, exclusive=True, group="connect", exit_on_error=False, description="open the device")
+    def open_source(self, choice, port: str, protocol: str) -> None:
+        s = self.app.session
+        try:
+            src = s.source
+            if choice == SIM:
+                from station.sources import SimSource
+
+                if src is None or src.kind != "sim":
+                    src = SimSource(seed=0)
+            else:
+                from station.sources import SerialSource
+
+                if src is None or src.kind != "serial" or (port and port != src.port):
+                    src = SerialSource(port or src.port, protocol=protocol)
+            if getattr(src, "_t0", None) is None and src.kind == "sim":
+                src.start()
+            elif src.kind == "serial" and not src.reader.running:
+                src.start()
+            device_id = s.device_id or src.device_id or "unknown"
+            store = None
+            if s.db_path:
+                from db.store import Store
+
+                store = Store(s.db_path)
+                known = store.get_device(device_id)
+                if known is None or (s.model and known.get("model") != s.model):
+                    store.add_device(device_id, model=s.model or None, sensor_kinds=["accel"])
+            self.post_message(Connected(src, device_id))
+        except Exception as exc:  # noqa: BLE001 - shown as one line
+            self.post_message(SourceFailed(str(exc)))
+
+    def on_source_failed(self, message: SourceFailed) -> None:
+        self.query_one("#start", Button).disabled = False
+        self._status(f"Cannot connect: {message.error}", error=True)
+
+    def on_connected(self, message: Connected) -> None:
+        from station.screens.procedure import ProcedureScreen
+
+        s = self.app.session
+        s.source = message.source
+        s.device_id = message.device_id
+        s.guide = None
+        self.query_one("#start", Button).disabled = False
+        self._status(f"Connected: {getattr(message.source, 'label', '')}, device {message.device_id}")
+        self.app.push_screen(ProcedureScreen())

@@ -1,0 +1,38 @@
+"""Help: keys and what each screen does (Escape or F1 closes it)."""
+from __future__ import annotations
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import VerticalScroll
+from textual.screen import ModalScreen
+from textual.widgets import Static
+
+HELP = """\
+[b]Calibration station: keys[/]
+
+[b]Everywhere[/]   F1 help · ctrl+q quit · tab / shift+tab move · enter choose
+[b]Connect[/]      F5 start P1 · F6 resume an interrupted run · F2 history
+[b]Procedure[/]    s skip the position · r redo (the current average, or the last
+             captured position when done) · enter on a step: redo that step ·
+             a abort (captured positions are kept for Resume) · f fit now (≥ 9)
+[b]Results[/]      s save · d discard · e export (capture CSV + result JSON) ·
+             n new run · F2 history
+[b]History[/]      up/down pick a device · p next parameter to plot · escape back
+
+[b]P1 in short[/]  Put the unit in each of the 12 positions the drawing shows and
+let go. When it is still and in position, the station waits a moment, then
+averages for the set time (the source asks 3–5 minutes) and moves on by itself.
+"Wrong face up" means the unit is upside down for this position.
+"""
+
+
+class HelpScreen(ModalScreen):
+    CSS = """
+    HelpScreen { align: center middle; }
+    HelpScreen #help { width: 78; max-height: 22; border: round $accent; background: $surface; padding: 0 1; }
+    """
+    BINDINGS = [Binding("escape", "app.pop_screen", "Close"), Binding("f1", "app.pop_screen", "Close")]
+
+    def compose(self) -> ComposeResult:
+        with VerticalScroll(id="help"):
+            yield Static(HELP)

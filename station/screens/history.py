@@ -1,0 +1,143 @@
+"""History: devices, their calibrations over time, a drift plot of one parameter, and
+the due and overdue reminders."""
+from __future__ import annotations
+
+import math
+
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Static
+from textual_plotext import PlotextPlot
+
+from station.widgets.title import TitleBar
+from station.messages import StoreLoaded
+
+
+class HistoryScreen(Screen):
+    SUB_TITLE = "devices and calibrations"
+    CSS = """
+    HistoryScreen #due { height: auto; padding: 0 1; color: $warning; }
+    HistoryScreen #devices { width: 36; height: 1fr; }
+    HistoryScreen #right { width: 1fr; height: 1fr; }
+    HistoryScreen #calibrations { height: 1fr; }
+    HistoryScreen #plot { height: 1fr; min-height: 8; }
+    """
+    BINDINGS = [
+        Binding("escape", "app.pop_screen", "Back"),
+        Binding("p", "next_param", "Next parameter"),
+    ]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.devices: list[dict] = []
+        self.due: list[dict] = []
+        self.history: list[dict] = []
+        self.drift: list[dict] = []
+        self.param_index = 0
+        self.device_id: str | None = None
+
+    def compose(self) -> ComposeResult:
+        yield TitleBar("devices and calibrations")
+        yield Static("", id="due")
+        with Horizontal():
+            yield DataTable(id="devices", cursor_type="row", zebra_stripes=True)
+            with Vertical(id="right"):
+                yield DataTable(id="calibrations", cursor_type="row", zebra_stripes=True)
+                yield PlotextPlot(id="plot")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        t = self.query_one("#devices", DataTable)
+        t.add_columns("device", "cals", "last", "status")
+        c = self.query_one("#calibrations", DataTable)
+        c.add_columns("#", "time", "procedure", "residual", "ok")
+        self.load()
+
+    @work(thread=True, exclusive=True, group="history", exit_on_error=False, description="read devices")
+    def load(self) -> None:
+        try:
+            store = self.app.session.open_store()
+            if store is None:
+                self.post_message(StoreLoaded("devices", {"devices": [], "due": []}))
+                return
+            self.post_message(StoreLoaded("devices", {"devices": store.list_devices(), "due": store.due(within_days=30)}))
+        except Exception as exc:  # noqa: BLE001
+            self.post_message(StoreLoaded("devices", {"devices": [], "due": []}, error=str(exc)))
+
+    @work(thread=True, exclusive=True, group="history-device", exit_on_error=False, description="read a device")
+    def load_device(self, device_id: str) -> None:
+        try:
+            store = self.app.session.open_store()
+            data = {"id": device_id, "history": store.history(device_id), "drift": store.drift(device_id)}
+            self.post_message(StoreLoaded("device-history", data))
+        except Exception as exc:  # noqa: BLE001
+            self.post_message(StoreLoaded("device-history", None, error=str(exc)))
+
+    def on_store_loaded(self, message: StoreLoaded) -> None:
+        if message.error:
+            self.query_one("#due", Static).update(f"[b red]database: {message.error}[/]")
+            return
+        if message.what == "devices":
+            self.devices = message.data["devices"]
+            self.due = message.data["due"]
+            status = {d["device_id"]: d for d in self.due}
+            t = self.query_one("#devices", DataTable)
+            t.clear()
+            for d in self.devices:
+                st = status.get(d["id"])
+                word = st["status"] if st else "ok"
+                if st and st["status"] in ("due", "overdue") and st["days_left"] is not None:
+                    word += f" {st['days_left']:+.0f}d"
+                t.add_row(d["id"], str(d["n_calibrations"]), (d["last_calibrated"] or "—")[:10], word, key=d["id"])
+            bad = [d for d in self.due if d["status"] in ("overdue", "due")]
+            text = "\n".join(f"{d['device_id']}: {d['status']} — {d['reason']}"[:200] for d in bad[:3])
+            if not self.devices:
+                text = "No devices yet: calibrate one (Connect → Start P1) or run `station demo`."
+            self.query_one("#due", Static).update(text)
+            if self.devices:
+                self.load_device(self.devices[0]["id"])
+        elif message.what == "device-history" and message.data:
+            self.device_id = message.data["id"]
+            self.history = message.data["history"]
+            self.drift = [d for d in message.data["drift"] if d["n"] >= 1]
+            c = self.query_one("#calibrations", DataTable)
+            c.clear()
+            for h in reversed(self.history):
+                res = h["residual_rms"]
+                c.add_row(str(h["id"]), h["time"][:16], h["procedure"],
+                          f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if h["accepted"] else "")
+            self.param_index = 0
+            self.plot()
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        if event.data_table.id == "devices" and event.row_key is not None and event.row_key.value != self.device_id:
+            self.load_device(event.row_key.value)
+
+    def action_next_param(self) -> None:
+        if self.drift:
+            self.param_index = (self.param_index + 1) % len(self.drift)
+            self.plot()
+
+    def plot(self) -> None:
+        w = self.query_one("#plot", PlotextPlot)
+        plt = w.plt
+        plt.clear_data()
+        plt.clear_figure()
+        if not self.drift:
+            plt.title(f"{self.device_id or ''}: no accepted calibrations to plot")
+            w.refresh()
+            return
+        d = self.drift[self.param_index]
+        x = list(range(1, len(d["values"]) + 1))
+        plt.plot(x, d["values"], marker="dot")
+        if all(isinstance(s, (int, float)) and math.isfinite(s) for s in d["sigmas"] or []) and d["sigmas"]:
+            plt.plot(x, [v + s for v, s in zip(d["values"], d["sigmas"])], color="gray")
+            plt.plot(x, [v - s for v, s in zip(d["values"], d["sigmas"])], color="gray")
+        rate = d.get("rate_per_year")
+        rate_txt = f", {rate:+.3g}/year" if isinstance(rate, (int, float)) else ""
+        plt.title(f"{self.device_id} {d['param']} ({self.param_index + 1}/{len(self.drift)}){rate_txt}  p: next")
+        plt.xlabel("calibration")
+        w.refresh()

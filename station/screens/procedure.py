@@ -1,0 +1,251 @@
+"""Procedure: the guided P1 step list with, for the current position, a drawing of how
+to place the unit, live readouts, the stability and orientation indicators and the
+averaging countdown. Capture is automatic (still, in position, settle time, average);
+the operator can skip, redo or abort.
+
+The source is drained and the guide fed on a thread worker; the screen gets a
+replaceable LiveUpdate ~15 times a second and a GuideEvent for each capture.
+"""
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import Screen
+from textual.widgets import Footer, OptionList, Static
+from textual.worker import get_current_worker
+
+from station.widgets.title import TitleBar
+from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
+from station.widgets.live import CountdownBar, OrientationIndicator, PlacementView, Readouts, StabilityBar
+from station.widgets.steps import StepList
+
+
+class ProcedureScreen(Screen):
+    SUB_TITLE = "P1 accelerometer, level table"
+    CSS = """
+    ProcedureScreen #steps { width: 22; height: 1fr; border: round $primary; }
+    ProcedureScreen #right { width: 1fr; height: 1fr; padding: 0 1; }
+    ProcedureScreen #placement { height: 9; }
+    ProcedureScreen #indicators { height: 3; }
+    ProcedureScreen #readouts { height: 4; margin-top: 1; }
+    ProcedureScreen #message { height: 1; text-style: bold; }
+    ProcedureScreen #progress { height: 1; color: $text-muted; }
+    """
+
+    BINDINGS = [
+        Binding("s", "skip", "Skip"),
+        Binding("r", "redo", "Redo"),
+        Binding("a", "abort", "Abort"),
+        Binding("f", "finish", "Fit now"),
+    ]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._lock = threading.Lock()
+        self.guide = None
+        self.last_status = None
+        self.updates = 0  # LiveUpdates drawn (the benchmark's refresh count)
+        self._fitting = False
+
+    def compose(self) -> ComposeResult:
+        yield TitleBar("P1 accelerometer, level table")
+        with Horizontal():
+            yield StepList(id="steps")
+            with Vertical(id="right"):
+                yield PlacementView(id="placement")
+                with Vertical(id="indicators"):
+                    yield StabilityBar(id="stability")
+                    yield OrientationIndicator(id="orientation")
+                    yield CountdownBar(id="countdown")
+                yield Readouts(id="readouts")
+                yield Static("", id="message")
+                yield Static("", id="progress")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.query_one("#steps").border_title = "Steps"
+        self.stream()
+
+    # ------------------------------------------------------------ the worker
+
+    def _make_guide(self):
+        from station.procedures.guide import GuideConfig, P1Guide, default_state_path
+
+        s = self.app.session
+        src = s.source
+        previous = None
+        store = s.open_store()
+        if store is not None:
+            hist = [c for c in store.history(s.device_id, "accel-tabletop") if c["accepted"]]
+            previous = hist[-1] if hist else None
+        folder = s.resume_dir()
+        state_path = default_state_path(s.device_id, base=folder) if folder else None
+        rate = float(getattr(src, "rate_hz", math.nan))
+        if not math.isfinite(rate) or rate <= 0:
+            rate = 100.0
+        kw = dict(nominal=getattr(src, "nominal", None), previous=previous)
+        if s.resume and state_path and os.path.exists(state_path):
+            guide = P1Guide.load(state_path, sample_rate_hz=rate, **kw)
+        else:
+            guide = P1Guide(sample_rate_hz=rate, accel_unit=src.units.get("accel_unit") or "counts",
+                            device_id=s.device_id, config=GuideConfig(average_s=s.average_s, settle_s=s.settle_s),
+                            site=getattr(src, "site", None), state_path=state_path, **kw)
+        guide.previous_calibration = previous
+        return guide
+
+    @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
+    def stream(self) -> None:
+        s = self.app.session
+        worker = get_current_worker()
+        src = s.source
+        try:
+            if src.kind == "sim" and getattr(src, "_t0", None) is None:
+                src.start()
+            with self._lock:
+                self.guide = s.guide if s.guide is not None else self._make_guide()
+                s.guide = self.guide
+        except Exception as exc:  # noqa: BLE001 - one line on screen
+            self.post_message(SourceFailed(str(exc)))
+            return
+        self.post_message(GuideEvent("ready"))
+        operator = None
+        if s.scripted:
+            from station.procedures.guide import ScriptedOperator
+
+            operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=3.0)
+        period = 1.0 / s.refresh_hz
+        next_post = 0.0
+        posts = 0
+        t_posts = time.monotonic()
+        while not worker.is_cancelled:
+            batch = src.drain()
+            if batch is not None and len(batch):
+                with self._lock:
+                    st = self.guide.update(batch.t_s, batch.accel, batch.gyro, batch.temp_c)
+                    events = self.guide.take_events()
+                    if operator is not None:
+                        operator.step(self.guide, st.t_s)
+                for kind, detail in events:
+                    self.post_message(GuideEvent(kind, detail))
+            now = time.monotonic()
+            if now >= next_post:
+                with self._lock:
+                    st = self.guide.status()
+                posts += 1
+                hz = posts / (now - t_posts) if now > t_posts else math.nan
+                self.post_message(LiveUpdate(st, src.stats(), hz))
+                next_post = now + period
+            time.sleep(0.01)
+
+    # ------------------------------------------------------------ drawing
+
+    def on_live_update(self, message: LiveUpdate) -> None:
+        st = message.status
+        self.last_status = st
+        self.updates += 1
+        s = self.app.session
+        g = self.guide
+        if g is None:
+            return
+        if st.step_name != getattr(self, "_drawn_step", None):
+            self._drawn_step = st.step_name
+            step = g.steps[st.step_index]
+            self.query_one(PlacementView).show(step.name, step.instruction, step.direction)
+        self.query_one(StabilityBar).show(st)
+        self.query_one(OrientationIndicator).show(st, g.config.angle_tol_deg)
+        self.query_one(CountdownBar).show(st, g.config.average_s)
+        self.query_one(Readouts).show(st, message.stats, s.source.units)
+        self.query_one("#message", Static).update(st.message)
+        self.query_one("#progress", Static).update(
+            f"{st.n_captured}/{st.n_steps} captured · t={st.t_s:.0f} s")
+
+    def on_guide_event(self, message: GuideEvent) -> None:
+        g = self.guide
+        if g is None:
+            return
+        with self._lock:
+            self.query_one(StepList).show(g.steps, g.index)
+        if message.kind == "captured":
+            self.notify(f"{message.detail} captured", timeout=2)
+        elif message.kind == "restarted":
+            self.notify(message.detail, severity="warning", timeout=3)
+        elif message.kind == "done":
+            self.fit()
+
+    def on_source_failed(self, message: SourceFailed) -> None:
+        self.notify(f"device: {message.error}", severity="error", timeout=10)
+        self.query_one("#message", Static).update(f"[b red]device: {message.error}[/]")
+
+    # ------------------------------------------------------------ operator actions
+
+    def action_skip(self) -> None:
+        if self.guide is not None:
+            with self._lock:
+                self.guide.skip()
+                events = self.guide.take_events()
+            for kind, detail in events:
+                self.post_message(GuideEvent(kind, detail))
+            self.post_message(GuideEvent("changed"))
+
+    def action_redo(self) -> None:
+        if self.guide is not None:
+            with self._lock:
+                self.guide.redo()
+            self.post_message(GuideEvent("changed"))
+
+    @on(OptionList.OptionSelected, "#steps")
+    def _step_selected(self, event: OptionList.OptionSelected) -> None:
+        if self.guide is not None and event.option.id is not None:
+            with self._lock:
+                self.guide.select(int(event.option.id))
+            self.post_message(GuideEvent("changed"))
+
+    def action_abort(self) -> None:
+        if self.guide is not None:
+            with self._lock:
+                self.guide.abort()
+                n = self.guide.n_captured
+        else:
+            n = 0
+        self.workers.cancel_group(self, "stream")
+        self.app.session.guide = None
+        self.app.notify(f"P1 aborted with {n} positions captured: Resume (F6) continues it", timeout=6)
+        self.app.pop_screen()
+
+    def action_finish(self) -> None:
+        """Fit with the positions captured so far (at least 9 make sense for P1)."""
+        if self.guide is not None and self.guide.n_captured >= 9:
+            self.fit()
+        else:
+            self.notify("P1 needs at least 9 captured positions to fit", severity="warning")
+
+    # ------------------------------------------------------------ the fit
+
+    @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P1")
+    def fit(self) -> None:
+        if self._fitting:
+            return
+        self._fitting = True
+        with self._lock:
+            capture = self.guide.capture(extra_meta={"operator_tool": "station tui"})
+        try:
+            from station.calibrate import calibrate_capture
+
+            result = calibrate_capture(capture)
+            self.post_message(CalibrationReady(capture, result))
+        except Exception as exc:  # noqa: BLE001 - shown on the results screen as one line
+            self.post_message(CalibrationReady(capture, None, error=str(exc)))
+
+    def on_calibration_ready(self, message: CalibrationReady) -> None:
+        from station.screens.results import ResultsScreen
+
+        self.workers.cancel_group(self, "stream")
+        previous = getattr(self.guide, "previous_calibration", None)
+        self.app.switch_screen(ResultsScreen(message.capture, message.result, message.error, previous))

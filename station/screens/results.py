@@ -1,0 +1,202 @@
+"""Results: coefficients ± 1σ, the change from the device's previous calibration (in
+sigma), pass or fail against the device's tolerances, the residual per position; save,
+discard or export."""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import tempfile
+
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Static
+
+from station.widgets.title import TitleBar
+from station.messages import Exported, Saved, StoreLoaded
+from station.procedures.review import p1_residuals, param_rows, verdict
+
+
+def _f(x, fmt=".6g") -> str:
+    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
+
+
+class ResultsScreen(Screen):
+    SUB_TITLE = "P1 result"
+    CSS = """
+    ResultsScreen #summary { height: auto; padding: 0 1; }
+    ResultsScreen #tables { height: 1fr; }
+    ResultsScreen #params { height: 2fr; }
+    ResultsScreen #residuals { height: 1fr; }
+    ResultsScreen #saved { height: auto; padding: 0 1; text-style: bold; }
+    """
+
+    BINDINGS = [
+        Binding("s", "save", "Save"),
+        Binding("d", "discard", "Discard"),
+        Binding("e", "export", "Export"),
+        Binding("n", "new", "New run"),
+        Binding("f2", "history", "History"),
+    ]
+
+    def __init__(self, capture, result: dict | None, error: str | None = None, previous: dict | None = None):
+        super().__init__()
+        self.capture = capture
+        self.result = result
+        self.error = error
+        self.previous = previous
+        self.tolerances: dict = {}
+        self.calibration_id: int | None = None
+        self.discarded = False
+
+    def compose(self) -> ComposeResult:
+        yield TitleBar("P1 result")
+        yield Static("", id="summary")
+        with Vertical(id="tables"):
+            yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
+            yield DataTable(id="residuals", zebra_stripes=True, cursor_type="row")
+        yield Static("", id="saved")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.load_device()
+
+    @work(thread=True, exclusive=True, group="results-db", exit_on_error=False, description="read the device")
+    def load_device(self) -> None:
+        try:
+            store = self.app.session.open_store()
+            dev = store.get_device(self.app.session.device_id) if store is not None else None
+            self.post_message(StoreLoaded("device", dev))
+        except Exception as exc:  # noqa: BLE001
+            self.post_message(StoreLoaded("device", None, error=str(exc)))
+
+    def on_store_loaded(self, message: StoreLoaded) -> None:
+        if message.what != "device":
+            return
+        self.tolerances = (message.data or {}).get("tolerances") or {}
+        self.draw()
+        if self.app.session.autosave and self.result is not None:
+            self.action_save()
+
+    def draw(self) -> None:
+        summary = self.query_one("#summary", Static)
+        params = self.query_one("#params", DataTable)
+        residuals = self.query_one("#residuals", DataTable)
+        if self.result is None:
+            summary.update(f"[b red]No calibration: {self.error}[/]\n"
+                           f"{self.capture.n_rows} positions captured; e exports them as a capture file.")
+            params.display = residuals.display = False
+            return
+        r = self.result
+        rows = param_rows(r, self.previous, self.tolerances)
+        word, reasons = verdict(rows, r, self.tolerances)
+        style = {"pass": "b green", "fail": "b white on red"}.get(word, "b")
+        prev = (f"previous #{self.previous['id']} of {self.previous['time'][:10]}" if self.previous
+                else "no previous calibration")
+        lines = [f"[{style}] {word.upper()} [/] residual {_f(r.get('residual_rms'), '.3g')} m/s² RMS · "
+                 f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
+        lines += [f"[red]{x}[/]" for x in reasons[:2]]
+        lines += [f"[yellow]warning: {w}[/]" for w in (r.get("warnings") or [])[:2]]
+        summary.update("\n".join(lines))
+        params.clear(columns=True)
+        params.add_columns("param", "value", "± 1σ", "previous", "Δ/σ", "tol", "ok")
+        for row in rows:
+            ok = {True: "✓", False: "✗", None: ""}[row.ok]
+            params.add_row(row.name, _f(row.value, ".7g"), _f(row.sigma, ".2g"), _f(row.previous, ".7g"),
+                           _f(row.change_sigma, "+.1f"), _f(row.tolerance, ".3g"), ok)
+        residuals.clear(columns=True)
+        residuals.add_columns("position", "|B+MV| m/s²", "residual mm/s²")
+        for name, norm, res in p1_residuals(self.capture, r):
+            residuals.add_row(name, _f(norm, ".5f"), _f(res * 1000.0, "+.2f"))
+
+    # ------------------------------------------------------------ actions
+
+    def action_save(self) -> None:
+        if self.result is None:
+            self.notify("Nothing to save: the fit failed", severity="error")
+            return
+        if self.calibration_id is not None:
+            self.notify(f"Already saved as calibration #{self.calibration_id}")
+            return
+        if not self.app.session.db_path:
+            self.notify("No database: start with --db PATH to save", severity="error")
+            return
+        self.query_one("#saved", Static).update("Saving…")
+        self.save()
+
+    @work(thread=True, exclusive=True, group="save", exit_on_error=False, description="save the calibration")
+    def save(self) -> None:
+        s = self.app.session
+        try:
+            from station.store import save_result
+
+            cal_id = save_result(s.db_path, self.capture, self.result, device_id=s.device_id)
+            guide = s.guide
+            if guide is not None and guide.state_path and os.path.exists(guide.state_path):
+                os.unlink(guide.state_path)
+            self.post_message(Saved(cal_id))
+        except Exception as exc:  # noqa: BLE001
+            self.post_message(Saved(None, error=str(exc)))
+
+    def on_saved(self, message: Saved) -> None:
+        label = self.query_one("#saved", Static)
+        if message.error:
+            label.update(f"[b red]Not saved: {message.error}[/]")
+            return
+        self.calibration_id = message.calibration_id
+        label.update(f"[b green]Saved as calibration #{message.calibration_id} for {self.app.session.device_id}[/]"
+                     "  · n new run · F2 history · ctrl+q quit")
+        if self.app.session.exit_when_saved:
+            self.set_timer(1.0, self.app.exit)
+
+    def action_discard(self) -> None:
+        if self.calibration_id is not None:
+            self.notify("Already saved; the history keeps it", severity="warning")
+            return
+        self.discarded = True
+        self.query_one("#saved", Static).update("Discarded (not saved).  n new run · ctrl+q quit")
+
+    def action_export(self) -> None:
+        self.export()
+
+    @work(thread=True, exclusive=True, group="export", exit_on_error=False, description="export")
+    def export(self) -> None:
+        s = self.app.session
+        folder = s.extra.get("export_dir") or os.getcwd()
+        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        base = os.path.join(folder, f"{s.device_id or 'device'}-p1-{stamp}")
+        try:
+            from station.calibrate import jsonable
+            from station.capture import write_capture
+
+            paths = [base + ".csv"]
+            write_capture(paths[0], self.capture)
+            if self.result is not None:
+                paths.append(base + ".json")
+                fd, tmp = tempfile.mkstemp(prefix=".export-", dir=folder)
+                with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                    json.dump(jsonable(self.result), fh, indent=2)
+                os.replace(tmp, paths[1])
+            self.post_message(Exported(paths))
+        except Exception as exc:  # noqa: BLE001
+            self.post_message(Exported([], error=str(exc)))
+
+    def on_exported(self, message: Exported) -> None:
+        if message.error:
+            self.notify(f"Export failed: {message.error}", severity="error")
+        else:
+            self.notify("Exported " + ", ".join(os.path.basename(p) for p in message.paths), timeout=6)
+            self.exported = message.paths
+
+    def action_new(self) -> None:
+        self.app.session.guide = None
+        self.app.pop_screen()
+
+    def action_history(self) -> None:
+        from station.screens.history import HistoryScreen
+
+        self.app.push_screen(HistoryScreen())

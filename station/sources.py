@@ -1,0 +1,165 @@
+"""Live sample sources for the TUI and `station demo`: one small interface over the
+built-in simulated device (in-process) and a serial port (station.device.reader).
+
+A source is started once, then ``drain()`` is called from a worker thread (never the UI
+thread); it returns every sample since the last call as a :class:`Samples` (or None)
+and never blocks for long. ``place(name)`` asks the bench to move to a named position:
+the simulated device moves; a serial device gets ``$STC,ORIENT,<name>`` (which the
+simulated device on a pty understands; a real device ignores it).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Samples:
+    """A batch: t_s (n,) device time [s], accel (n, 3) raw, gyro (n, 3) raw, temp_c (n,)."""
+
+    t_s: np.ndarray
+    accel: np.ndarray
+    gyro: np.ndarray
+    temp_c: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+
+@dataclass
+class SourceStats:
+    samples: int = 0
+    rate_hz: float = math.nan
+    parse_errors: int = 0
+    dropped: int = 0
+    connected: bool = False
+    last_error: str = ""
+
+
+class SimSource:
+    """The built-in simulated bench device (``solvers.simulate.LiveImu``), paced by a clock.
+
+    speed: device seconds per wall second (the tests run the bench faster than life).
+    clock: a monotonic clock in seconds (injectable for deterministic tests).
+    """
+
+    kind = "sim"
+    label = "built-in simulated device"
+    nominal = (1.65, 0.0855)  # the simulated triad's data-sheet zero [V] and sensitivity [V per m/s²]
+
+    def __init__(self, *, seed: int = 0, rate_hz: float = 100.0, speed: float = 1.0, clock=time.monotonic,
+                 max_batch_s: float = 1.0):
+        from solvers.simulate import LiveImu
+
+        self.imu = LiveImu(procedure="accel-tabletop", seed=seed, rate_hz=rate_hz, hold_s=1e9)
+        self.rate_hz = float(rate_hz)
+        self.speed = float(speed)
+        self.clock = clock
+        self.max_batch_s = max_batch_s
+        self.device_id = self.imu.device_id
+        self.units = dict(self.imu.units)
+        self.site = dict(self.imu.site)
+        self._lock = threading.Lock()
+        self._t0: float | None = None
+        self._produced = 0
+        self._stats = SourceStats()
+        self._rate_window: list[tuple[float, int]] = []
+
+    def start(self) -> "SimSource":
+        self._t0 = self.clock()
+        self._stats.connected = True
+        return self
+
+    def stop(self) -> None:
+        self._stats.connected = False
+
+    def drain(self) -> Samples | None:
+        if self._t0 is None:
+            return None
+        now = self.clock()
+        due = int((now - self._t0) * self.speed * self.rate_hz)
+        n = due - self._produced
+        if n <= 0:
+            return None
+        cap = int(self.max_batch_s * self.rate_hz * max(self.speed, 1.0))
+        if n > cap:  # a stalled consumer: the device ran on, the samples are lost
+            self._stats.dropped += n - cap
+            self._produced += n - cap
+            n = cap
+        with self._lock:
+            d = self.imu.read(n)
+        self._produced += n
+        self._stats.samples += n
+        w = self._rate_window
+        w.append((now, self._stats.samples))
+        while len(w) > 2 and now - w[0][0] > 2.0:
+            w.pop(0)
+        if len(w) >= 2 and w[-1][0] > w[0][0]:
+            self._stats.rate_hz = (w[-1][1] - w[0][1]) / (w[-1][0] - w[0][0]) / max(self.speed, 1e-9)
+        return Samples(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]),
+                       np.column_stack([d["gx"], d["gy"], d["gz"]]), d["temp_c"])
+
+    def place(self, name: str) -> None:
+        with self._lock:
+            self.imu.set_orientation(name)
+
+    def stats(self) -> SourceStats:
+        return SourceStats(**vars(self._stats))
+
+
+class SerialSource:
+    """A device on a serial port (or pyserial URL), read by ``station.device.reader.Reader``."""
+
+    kind = "serial"
+    nominal = None
+
+    def __init__(self, port: str, *, protocol: str = "station", baud: int = 115200, header_timeout_s: float = 3.0):
+        from station.device.reader import Reader
+
+        self.port = port
+        self.protocol = protocol
+        self.label = f"{port} ({protocol})"
+        self.reader = Reader(port, baud=baud, protocol=protocol)
+        self.header_timeout_s = header_timeout_s
+        self.device_id = ""
+        self.units = {"accel_unit": "", "gyro_unit": "", "mag_unit": ""}
+        self.rate_hz = math.nan
+        self.site: dict = {}
+
+    def start(self) -> "SerialSource":
+        """Open the port (raises station.device.reader.PortError) and wait for the header."""
+        self.reader.start()
+        h = self.reader.wait_header(self.header_timeout_s)
+        if h is not None:
+            self.device_id = h.device_id
+            self.units = dict(h.units)
+            self.rate_hz = float(h.rate_hz)
+        if not math.isfinite(self.rate_hz):
+            time.sleep(0.5)
+            self.rate_hz = self.reader.stats().rate_hz
+        if self.device_id.startswith("SIM-") and self.units.get("accel_unit") == "V":
+            self.nominal = SimSource.nominal  # `station sim-device`: the same simulated triad
+        return self
+
+    def stop(self) -> None:
+        self.reader.stop()
+
+    def drain(self) -> Samples | None:
+        b = self.reader.drain()
+        if b is None or len(b) == 0:
+            return None
+        c = b.columns
+        return Samples(b.t_s, np.column_stack([c["ax"], c["ay"], c["az"]]),
+                       np.column_stack([c["gx"], c["gy"], c["gz"]]), c["temp_c"])
+
+    def place(self, name: str) -> None:
+        self.reader.command("ORIENT", name)
+
+    def stats(self) -> SourceStats:
+        s = self.reader.stats()
+        return SourceStats(samples=s.samples, rate_hz=s.rate_hz, parse_errors=s.parse_errors, dropped=s.dropped,
+                           connected=s.connected, last_error=s.last_error)

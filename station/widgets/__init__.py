@@ -1,0 +1,1 @@
+"""Widgets of the operator TUI (one job each; screens compose them)."""

@@ -1,0 +1,117 @@
+"""Live indicators of a guided step: placement drawing, stability, orientation,
+averaging countdown, readouts. Each is a Static that redraws from a GuideStatus."""
+from __future__ import annotations
+
+import math
+
+from rich.text import Text
+from textual.widgets import Static
+
+from station.procedures.guide import position_drawing
+
+
+def bar(fraction: float, width: int) -> str:
+    """A text bar, ``fraction`` in 0..1 (NaN: empty)."""
+    if not math.isfinite(fraction):
+        fraction = 0.0
+    full = int(round(max(0.0, min(1.0, fraction)) * width))
+    return "█" * full + "░" * (width - full)
+
+
+def mmss(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "--:--"
+    s = int(math.ceil(seconds))
+    return f"{s // 60:d}:{s % 60:02d}"
+
+
+def _num(x: float, fmt: str) -> str:
+    return format(x, fmt) if math.isfinite(x) else "—"
+
+
+class PlacementView(Static):
+    """How to place the unit: the instruction and a drawing of the up face."""
+
+    def show(self, name: str, instruction: str, direction) -> None:
+        t = Text()
+        t.append(f"{name}", style="bold")
+        t.append(f"  {instruction}\n")
+        t.append("\n".join(position_drawing(direction)))
+        self.update(t)
+
+
+class StabilityBar(Static):
+    """Still or moving: a bar of the stillness detector's level (< 1 is still), seconds held."""
+
+    WIDTH = 14
+
+    def show(self, st) -> None:
+        t = Text("Stillness   ")
+        if st.calibrating:
+            t.append("measuring noise… hold still", style="yellow")
+        else:
+            # level: decision statistic / threshold; draw 1/level so a steady unit fills the bar
+            lvl = st.level
+            frac = 1.0 if lvl <= 0 else min(1.0, 1.0 / lvl) if math.isfinite(lvl) else 0.0
+            t.append(bar(frac, self.WIDTH), style="green" if st.is_still else "red")
+            if st.is_still:
+                t.append(f" still {st.still_for_s:4.1f} s", style="green")
+            else:
+                t.append(" moving", style="bold red")
+        self.update(t)
+
+
+class OrientationIndicator(Static):
+    """Angle between the measured and the asked direction; wrong face up when > 90°."""
+
+    def show(self, st, tol_deg: float) -> None:
+        t = Text("Orientation ")
+        a = st.angle_deg
+        if not math.isfinite(a):
+            t.append("not known yet (learned from the first positions)", style="yellow")
+        elif st.wrong_face:
+            t.append(f"{a:5.1f}° WRONG FACE UP", style="bold white on red")
+        elif a <= tol_deg:
+            t.append(f"{a:5.1f}° in position", style="green")
+        else:
+            t.append(f"{a:5.1f}° from the asked position", style="yellow")
+        self.update(t)
+
+
+class CountdownBar(Static):
+    """Averaging progress and time left."""
+
+    WIDTH = 14
+
+    def show(self, st, average_s: float) -> None:
+        t = Text("Average     ")
+        if st.phase == "average":
+            t.append(bar(st.progress, self.WIDTH), style="cyan")
+            t.append(f" {mmss(st.countdown_s)} left")
+        elif st.phase == "settle":
+            t.append(bar(0.0, self.WIDTH))
+            t.append(f" starts in {_num(st.settle_left_s, '.1f')} s")
+        elif st.phase == "done":
+            t.append(bar(1.0, self.WIDTH), style="green")
+            t.append(" all done")
+        else:
+            t.append(bar(0.0, self.WIDTH))
+            t.append(f" {mmss(average_s)} when still")
+        self.update(t)
+
+
+class Readouts(Static):
+    """Raw and calibrated-so-far values, |a|, rates, temperature, sample rate, parse errors."""
+
+    def show(self, st, stats, units: dict) -> None:
+        au = units.get("accel_unit") or "raw"
+        gu = units.get("gyro_unit") or "raw"
+        r, f, g = st.raw, st.f_mps2, st.gyro
+        lines = [
+            f"raw  {_num(r[0], '9.4f')} {_num(r[1], '9.4f')} {_num(r[2], '9.4f')} {au}",
+            f"f    {_num(f[0], '9.3f')} {_num(f[1], '9.3f')} {_num(f[2], '9.3f')} m/s²  |a| {_num(st.norm_mps2, '.3f')}",
+            f"rate {_num(g[0], '9.4f')} {_num(g[1], '9.4f')} {_num(g[2], '9.4f')} {gu}",
+            f"temp {_num(st.temp_c, '.1f')} °C   {_num(stats.rate_hz, '.0f')} Hz   "
+            f"errors {stats.parse_errors}   dropped {stats.dropped}",
+        ]
+        self.update("\n".join(lines))
