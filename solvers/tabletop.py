@@ -315,6 +315,44 @@ def refine(positions: list[Position], g_mps2: float, B0, M0, *, gauge: str, sig_
     return fit(resid, _pack(B0, M0), free=free, sigma=sigma, jac=lambda p: jac(p, idx))
 
 
+def _studentized(positions, B, M, res: FitResult, gauge: str, s_n) -> np.ndarray:
+    """Norm residuals over σ and sqrt(1 − leverage): a position the others pin down less is
+    not blamed for the fit bending towards it."""
+    V = np.array([p.mean for p in positions])
+    idx = list(range(12)) if gauge == "table" else [0, 1, 2, 3, 4, 5, 7, 8, 11]
+    Jw = accel.p1_norm_jacobian(V, B, M)[1][:, idx] / s_n[:, None]
+    cov_u = res.cov / (res.reduced_chi2 if res.misfit_scaled else 1.0)
+    h = np.clip(np.sum((Jw @ cov_u) * Jw, axis=1), 0.0, 1.0)
+    z = res.residuals[:len(positions)] / s_n
+    return z / np.sqrt(np.maximum(1.0 - h, 1e-3))
+
+
+def find_outliers(positions, g_mps2, res: FitResult, gauge: str, s_n, threshold: float = 5.0):
+    """Positions that disagree with the rest: repeatedly take the worst studentized residual
+    beyond ``threshold`` × the others' robust spread, refit without it, and judge it against
+    the others' fit. Returns ``[(index, z, residual_mps2)]``; needs ≥ 10 positions."""
+    n = len(positions)
+    active = list(range(n))
+    out = []
+    cur = res
+    while len(active) >= 10 and len(out) < n // 4:
+        pa = [positions[k] for k in active]
+        zd = _studentized(pa, cur.params["B"], cur.params["M"], cur, gauge, s_n[active])
+        j = int(np.argmax(np.abs(zd)))
+        scale = max(1.0, 1.4826 * float(np.median(np.delete(np.abs(zd), j))))
+        if abs(zd[j]) <= threshold * scale:
+            break
+        k = active.pop(j)
+        pa = [positions[i] for i in active]
+        try:
+            cur = refine(pa, g_mps2, cur.params["B"], cur.params["M"], gauge=gauge, sig_n=s_n[active])
+        except Exception:
+            break
+        rk = float(np.linalg.norm(accel.p1_apply(positions[k].mean[None], cur.params["B"], cur.params["M"]))[()] - g_mps2)
+        out.append((k, rk / s_n[k], rk))
+    return out
+
+
 def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm", gauge: str = "auto",
               noise_known: bool = True) -> P1Result:
     """The P1 calibration of ``positions`` (see the module docstring).
@@ -391,17 +429,14 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
     r_n = res.residuals[:n]
     s_n = sig_n
     z = r_n / s_n
-    outliers = []
-    if n >= 5:
-        for k in range(n):
-            others = np.delete(np.abs(z), k)
-            scale = max(1.0, 1.4826 * float(np.median(others)))
-            if abs(z[k]) > 5.0 * scale and abs(r_n[k]) > 3.0 * float(np.median(np.abs(np.delete(r_n, k)))):
-                outliers.append(k)
-                p = positions[k]
-                when = f" (t {p.t_start_s:.1f}–{p.t_stop_s:.1f} s)" if p.t_start_s is not None else ""
-                warnings.append(f"position {p.label or k + 1}{when} disagrees with the rest: norm residual "
-                                f"{r_n[k]:+.4g} m/s², {abs(z[k]):.0f}σ; was it still, or touching something?")
+    outliers = find_outliers(positions, g_mps2, res, gauge, s_n)
+    for k, zk, rk in outliers:
+        p = positions[k]
+        when = f" (t {p.t_start_s:.1f}–{p.t_stop_s:.1f} s)" if p.t_start_s is not None else ""
+        warnings.append(f"position {p.label or k + 1}{when} disagrees with the rest: |A| − g = {rk:+.3g} m/s² "
+                        f"against the fit of the others, {abs(zk):.0f}σ; was it still, or touching something? "
+                        "(it is kept in the fit)")
+    outliers = [k for k, _, _ in outliers]
     if noise_known and res.misfit_scaled:
         warnings.append(f"the residuals are {math.sqrt(res.reduced_chi2):.1f}× the measured noise (reduced χ² "
                         f"{res.reduced_chi2:.3g}): A = B + M V does not explain everything (temperature, "

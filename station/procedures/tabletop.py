@@ -128,9 +128,11 @@ def check_saturation(capture, positions: list[T.Position]) -> None:
     for p in positions:
         if p.std is None:
             continue
-        noisy = p.std > 0
+        tol = 1e-9 * np.maximum(1.0, np.abs(p.mean))
+        flat = p.std <= tol
         for i in range(3):
-            if p.std[i] == 0 and noisy.sum() >= 1 and p.mean[i] in (hi[i], lo[i]) and p.n >= 2:
+            at_edge = abs(p.mean[i] - hi[i]) <= tol[i] or abs(p.mean[i] - lo[i]) <= tol[i]
+            if flat[i] and not flat.all() and at_edge and p.n >= 2:
                 where = f" (t {p.t_start_s:.1f}–{p.t_stop_s:.1f} s)" if p.t_start_s is not None else ""
                 raise UnsupportedError(
                     f"{_where(capture)}: accel-tabletop: axis {'xyz'[i]} is saturated in position {p.label}{where}: "
