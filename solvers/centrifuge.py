@@ -120,18 +120,17 @@ def exact_fit(N, rho, *, sigma_N=None, gamma: bool = False, initial: dict | None
     noise_known = sigma_N is not None
 
     resid, jac = _residual_and_jacobian(N, rho, gamma)
+    # Weights at the start (the paper's closed forms are close: the weights change by far
+    # less than their own uncertainty at the solution).
     if noise_known:
-        sig = row_sigma(N, p0, sigma_N)
-        res = fit(resid, p0, free=free, sigma=sig, jac=jac)
-        sig = row_sigma(N, res.params, sigma_N)
-        res = fit(resid, res.params, free=free, sigma=sig, jac=jac)
+        res = fit(resid, p0, free=free, sigma=row_sigma(N, p0, sigma_N), jac=jac)
     else:
-        rel = row_sigma(N, p0, 1.0)
-        res = fit(resid, p0, free=free, sigma=rel, jac=jac)
-        rel = row_sigma(N, res.params, 1.0)
-        res = fit(resid, res.params, free=free, sigma=rel, jac=jac)
-        s = math.sqrt(res.chi2 / res.dof) if res.dof > 0 else 1.0
-        res = fit(resid, res.params, free=free, sigma=rel * max(s, 1e-300), jac=jac)
+        res = fit(resid, p0, free=free, sigma=row_sigma(N, p0, 1.0), jac=jac, scale_on_misfit=False)
+        if res.dof > 0:  # relative weights: the noise scale is what the residuals say
+            s = math.sqrt(res.reduced_chi2)
+            res.cov = res.cov * s * s
+            res.sigma = {k: v * s for k, v in res.sigma.items()}
+            res.misfit_scaled = True
     if res.unidentifiable:
         raise NotIdentifiable(f"the rows cannot determine {', '.join(res.unidentifiable)} (condition number "
                               f"{res.condition_number:.3g}): more orientations or speeds are needed")
