@@ -16,6 +16,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--device", default=None, help="device id (default: the capture's 'device')")
     p.add_argument("--save", action="store_true", help="store capture and result in the station database")
     p.add_argument("--operator", default=None, help="operator's name, stored with --save")
+    p.add_argument("--accuracy", type=float, default=None, metavar="DEG_H",
+                   help="gyro-drift: the 1-sigma drift accuracy asked, °/h (sets metadata accuracy_deg_h)")
+    p.add_argument("--reference", default=None, metavar="FILE",
+                   help="ldv: the reference velocity stream as a separate capture (sets reference_file)")
     p.set_defaults(func=run)
 
 
@@ -23,6 +27,12 @@ def run(args: argparse.Namespace) -> int:
     from station.capture import read_capture
 
     capture = read_capture(args.file)
+    if getattr(args, "accuracy", None) is not None:
+        capture.meta["accuracy_deg_h"] = repr(float(args.accuracy))
+    if getattr(args, "reference", None):
+        import os
+
+        capture.meta["reference_file"] = os.path.abspath(args.reference)
     result = calibrate_capture(capture, method=args.method)
     if args.device:
         result["device"] = args.device
