@@ -114,12 +114,16 @@ class P1Result:
 
 # ----------------------------------------------------------------------------- helpers
 
+def _cross(a, b) -> np.ndarray:
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def _perp_basis(u: np.ndarray) -> np.ndarray:
     """Two unit vectors (2, 3) perpendicular to ``u`` and to each other."""
     a = np.eye(3)[int(np.argmin(np.abs(u)))]
-    e1 = np.cross(u, a)
+    e1 = _cross(u, a)
     e1 /= np.linalg.norm(e1)
-    return np.vstack([e1, np.cross(u, e1)])
+    return np.vstack([e1, _cross(u, e1)])
 
 
 def _pack(B, M) -> dict:
@@ -261,29 +265,27 @@ def norm_sigma(positions: list[Position], B, M, noise_known: bool) -> np.ndarray
 # ----------------------------------------------------------------------------- the fit
 
 def _joint_residual_builder(V: np.ndarray, g: float, sig_n: np.ndarray, known: list[tuple[int, np.ndarray, float]]):
-    """Residual and Jacobian over blocks B, M: norm rows then the perpendicular vector rows."""
-    E = [(_perp_basis(u), k, s) for k, u, s in known]
-    sig_v = np.array([s for _, _, s in E for _ in range(2)])
+    """Residual and Jacobian over blocks B, M: norm rows, then two rows per labelled position
+    (the vector components perpendicular to its expected direction, target 0)."""
+    m = len(known)
+    E = np.array([_perp_basis(u) for _, u, _ in known]).reshape(2 * m, 3)     # (2m, 3)
+    Vk = np.repeat(np.array([V[k] for k, _, _ in known]).reshape(m, 3), 2, axis=0)  # (2m, 3)
+    sig_v = np.repeat(np.array([s for _, _, s in known], dtype=float), 2)
+    Jv = np.hstack([E, (E[:, :, None] * Vk[:, None, :]).reshape(2 * m, 9)])
 
     def resid(p):
-        nrm = np.linalg.norm(accel.p1_apply(V, p["B"], p["M"]), axis=1) - g
-        if not E:
-            return nrm
         A = accel.p1_apply(V, p["B"], p["M"])
-        vec = np.concatenate([e @ A[k] for e, k, _ in E])
-        return np.concatenate([nrm, vec])
+        nrm = np.sqrt(np.einsum("ij,ij->i", A, A)) - g
+        if not m:
+            return nrm
+        Ak = p["B"] + Vk @ p["M"].T
+        return np.concatenate([nrm, np.einsum("ij,ij->i", E, Ak)])
 
     def jac(p, free_idx):
-        _, Jn = accel.p1_norm_jacobian(V, p["B"], p["M"])
-        rows = [Jn]
-        for e, k, _ in E:
-            Jv = np.zeros((2, 12))
-            Jv[:, 0:3] = e
-            Jv[:, 3:] = (e[:, :, None] * V[k][None, None, :]).reshape(2, 9)
-            rows.append(Jv)
-        return np.vstack(rows)[:, free_idx]
+        Jn = accel.p1_norm_jacobian(V, p["B"], p["M"])[1]
+        return (np.vstack([Jn, Jv]) if m else Jn)[:, free_idx]
 
-    sigma = np.concatenate([sig_n, sig_v]) if E else sig_n
+    sigma = np.concatenate([sig_n, sig_v]) if m else sig_n
     return resid, jac, sigma
 
 
@@ -414,9 +416,11 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
                             f"a norm noise of {s_est:.3g} m/s²")
         sig_n = np.full(len(positions), s_est)
     res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
-    if noise_known:  # second pass: weights at the solution
-        sig_n = norm_sigma(positions, res.params["B"], res.params["M"], True)
-        res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_n)
+    if noise_known:  # weights at the solution; refit only if they moved (a far start)
+        sig_new = norm_sigma(positions, res.params["B"], res.params["M"], True)
+        if np.max(np.abs(sig_new / sig_n - 1.0)) > 0.05:
+            res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_new)
+        sig_n = sig_new
     if res.unidentifiable:
         raise NotIdentifiable(f"the positions cannot determine {', '.join(res.unidentifiable)} "
                               f"(condition number {res.condition_number:.3g})")
