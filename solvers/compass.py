@@ -18,7 +18,7 @@ The chain (procedures.md P3), each step a function here:
    (``θ̇ = q cos φ − r sin φ``, ``φ̇ = p + tan θ (q sin φ + r cos φ)``; without a z gyro, r = 0:
    the source's two-axis gyro), corrected by the accelerometer angle. Noise (documented in
    :class:`KalmanConfig`): angle random walk ``q_angle``, bias random walk ``q_bias``,
-   accelerometer-angle variance ``r_angle`` inflated while ``|f|`` departs from 1 g (the hand
+   accelerometer-angle error density ``r_angle`` inflated while ``|f|`` departs from 1 g (the hand
    accelerates) and, for roll, as ``1/cos²θ`` near ±90° pitch where roll is undefined.
 4. Magnetometer: raw → nT by W. The reference magnitude ``F`` is IGRF's total field at the
    capture's place and date (``solvers.geomag``). Model (``solvers.models.mag``, baseline):
@@ -80,6 +80,7 @@ DISTINCT_SEPARATION_DEG = 20.0
 COVERAGE_CELLS = 64
 MIN_COVERAGE = 0.30
 RLS_P0_INFLATION = 1e4
+RLS_RUNNING_P0_INFLATION = 100.0  # running form: a firmer prior keeps early samples from dragging it
 RLS_PASSES = 1
 HEADING_MAX_TILT_DEG = 70.0
 
@@ -163,19 +164,25 @@ def pitch_roll_from_accel(f) -> tuple[np.ndarray, np.ndarray]:
 class KalmanConfig:
     """Noise of the pitch/roll Kalman filters (per filter; state [angle rad, bias rad/s]).
 
-    q_angle_rad2_s: angle random-walk density: gyro white noise plus the Euler-rate
-        model error (1e-4 rad²/s ≈ 0.6°/√s).
+    q_angle_rad2_s: angle random-walk density of the gyro-propagated angle (1e-6 rad²/s ≈
+        0.06°/√s: MEMS angle random walk with margin).
     q_bias_rad2_s3: rate-bias random walk (1e-8 (rad/s)²/s: MEMS bias instability).
-    r_angle_rad2: variance of the accelerometer angle at rest ((0.02 rad)² ≈ (1.1°)²).
-    accel_dev_g: ``r`` is multiplied by ``1 + ((|f| − 1 g)/accel_dev_g)²`` (the hand
-        accelerating the unit corrupts the gravity direction).
+    r_angle_rad2_s: density of the accelerometer-angle error at rest (2.5e-7 rad²·s); the
+        per-sample variance is ``r / dt``, so the filter behaves the same at any rate; the
+        time constant at rest is ``sqrt(r / q_angle)`` = 0.5 s, about 5 s while turning at
+        0.5 rad/s.
+    accel_dev_g, rate_ref_rad_s: ``r`` is multiplied by
+        ``1 + ((|f| − 1 g)/accel_dev_g)² + (|ω|/rate_ref_rad_s)²``: while the hand turns the
+        unit (and so accelerates it) the gyro carries the angle; held still, the
+        accelerometer pulls it in with the time constant ``sqrt(r / q_angle)``.
     bias0_sigma_rad_s: initial bias uncertainty (0.05 rad/s ≈ 3°/s).
     """
 
-    q_angle_rad2_s: float = 1e-4
+    q_angle_rad2_s: float = 1e-6
     q_bias_rad2_s3: float = 1e-8
-    r_angle_rad2: float = 0.02 ** 2
+    r_angle_rad2_s: float = 2.5e-7
     accel_dev_g: float = 0.02
+    rate_ref_rad_s: float = 0.05
     bias0_sigma_rad_s: float = 0.05
 
 
@@ -189,8 +196,7 @@ class AngleKalman:
         self.wrap = wrap
         self.a = float(angle0)
         self.b = 0.0
-        r = config.r_angle_rad2
-        self.P = [r, 0.0, 0.0, config.bias0_sigma_rad_s ** 2]  # p00 p01 p10 p11
+        self.P = [0.05 ** 2, 0.0, 0.0, config.bias0_sigma_rad_s ** 2]  # p00 p01 p10 p11
 
     def step(self, rate: float, z: float, dt: float, r_scale: float = 1.0) -> float:
         c = self.c
@@ -204,7 +210,7 @@ class AngleKalman:
         y = z - a
         if self.wrap:
             y = (y + math.pi) % (2.0 * math.pi) - math.pi
-        s = p00 + c.r_angle_rad2 * r_scale
+        s = p00 + c.r_angle_rad2_s / max(dt, 1e-6) * r_scale
         k0, k1 = p00 / s, p10 / s
         a += k0 * y
         self.b += k1 * y
@@ -228,7 +234,8 @@ def kalman_pitch_roll(t_s, f, omega_rad_s, config: KalmanConfig | None = None,
     w[~np.isfinite(w)] = 0.0
     th_acc, ph_acc = pitch_roll_from_accel(f)
     dev = (np.linalg.norm(f, axis=1) / g_unit - 1.0) / config.accel_dev_g
-    r_scale = 1.0 + dev * dev
+    turn = np.linalg.norm(w, axis=1) / config.rate_ref_rad_s
+    r_scale = 1.0 + dev * dev + turn * turn
     kp = AngleKalman(th_acc[0], config)
     kr = AngleKalman(ph_acc[0], config, wrap=True)
     n = len(t)
