@@ -132,12 +132,24 @@ def mean_standard_error(y, dt_s: float, max_fraction: float = 1.0 / 3.0) -> Mean
 
 
 def time_needed_s(me: MeanError, accuracy: float) -> np.ndarray:
-    """Record length for a 1-sigma of ``accuracy`` (same unit as the data), per axis,
-    extrapolating the achieved error as white (``∝ 1/sqrt(T)``); ``inf`` where the
-    Allan curve has turned up (bias-instability floor) at a level above it."""
-    need = me.duration_s * (me.se / accuracy) ** 2
-    if len(me.taus_s) < 2:
+    """Record length for a 1-sigma of ``accuracy`` (same unit as the data), per axis.
+
+    The larger of: the achieved error extrapolated as white (``∝ 1/sqrt(T)``), and the
+    shortest ``T'`` with ``c0/T' + c1 + c2 T' <= accuracy²`` from the fitted noise model
+    (``inf`` when the model's floor — bias instability, rate random walk — never gets
+    there)."""
+    need = me.duration_s * (np.asarray(me.se, dtype=float) / accuracy) ** 2
+    if me.noise_model is None:
         return need
-    floor = np.min(me.adev, axis=0)
-    flattened = np.argmin(me.adev, axis=0) < len(me.taus_s) - 1  # the curve turned up
-    return np.where(flattened & (floor > accuracy), np.inf, need)
+    a2 = accuracy ** 2
+    out = need.copy()
+    for k, (c0, c1, c2) in enumerate(me.noise_model):
+        room = a2 - c1
+        if room <= 0:
+            out[k] = np.inf
+        elif c2 <= 0:
+            out[k] = max(need[k], c0 / room)
+        else:
+            disc = room * room - 4.0 * c2 * c0
+            out[k] = np.inf if disc < 0 else max(need[k], (room - np.sqrt(disc)) / (2.0 * c2))
+    return out

@@ -254,9 +254,8 @@ def accuracy_statement(me: allan.MeanError, achieved_rad_s, accuracy_rad_s: floa
     out["time_needed_s"] = need
     if not out["enough"]:
         worst = float(np.max(need))
-        floor = float(np.max(np.min(me.adev, axis=0))) / DEG_H_RAD_S if len(me.taus_s) else math.nan
-        what = (f"the Allan deviation stops falling at about {floor:.3g} °/h (bias instability), so a longer "
-                "record alone may not reach it" if not math.isfinite(worst) else f"about {worst:.0f} s needed")
+        what = ("the noise model fitted to the Allan deviation (bias instability, rate random walk) says no "
+                "record length reaches it" if not math.isfinite(worst) else f"about {worst:.0f} s needed")
         warnings.append(f"achieved 1σ {np.max(achieved) / DEG_H_RAD_S:.3g} °/h is above the accuracy asked "
                         f"({accuracy_rad_s / DEG_H_RAD_S:.3g} °/h) after {me.duration_s:.0f} s: {what}")
     return out, warnings
