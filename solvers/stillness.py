@@ -283,7 +283,10 @@ class _RowStore:
         return self.start + self.len
 
     def append(self, x: np.ndarray) -> None:
-        m = len(x)
+        self.extend(len(x))[:] = x
+
+    def extend(self, m: int) -> np.ndarray:
+        """Make room for m more rows and return them (uninitialised) to be filled."""
         if self.len + m > len(self.buf):
             k = self.len if self.keep is None else min(self.len, self.keep)
             old = self.buf[self.len - k:self.len]
@@ -295,8 +298,8 @@ class _RowStore:
                 self.buf[:k] = old.copy()
             self.start += self.len - k
             self.len = k
-        self.buf[self.len:self.len + m] = x
         self.len += m
+        return self.buf[self.len - m:self.len]
 
     def rows(self, i0: int, i1: int) -> np.ndarray:
         """Rows with absolute indices i0 .. i1-1 (a view)."""
@@ -378,7 +381,10 @@ class _WindowSums:
 
 def _norm3(v: np.ndarray) -> np.ndarray:
     """Row norms of an (n, 3) array, written out so every row is summed in one order."""
-    return np.sqrt((v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]) + v[:, 2] * v[:, 2])
+    sq = v * v
+    r = sq[:, 0] + sq[:, 1]
+    r += sq[:, 2]
+    return np.sqrt(r, out=r)
 
 
 @dataclass
@@ -407,7 +413,33 @@ class _Stats:
 
         return _Stats(cat("accel_var"), cat("gyro_var"), cat("gyro_mean"), cat("has_nan"))
 
+    @staticmethod
+    def empty(k: int, has_gyro: bool) -> "_Stats":
+        return _Stats(np.empty((k, 3)), np.empty((k, 3)) if has_gyro else None,
+                      np.empty((k, 3)) if has_gyro else None, np.empty(k, dtype=bool))
+
+    def put(self, i: int, part: "_Stats") -> None:
+        """Copy `part` into rows i .. i+len(part)-1."""
+        j = i + len(part)
+        self.accel_var[i:j] = part.accel_var
+        if self.gyro_var is not None:
+            self.gyro_var[i:j] = part.gyro_var
+            self.gyro_mean[i:j] = part.gyro_mean
+        self.has_nan[i:j] = part.has_nan
+
+    def where(self, mask: np.ndarray) -> "_Stats":
+        """The rows where mask is True (no copy when it is True everywhere)."""
+        if mask.all():
+            return self
+        return self.take(np.flatnonzero(mask))
+
     def take(self, idx) -> "_Stats":
+        if isinstance(idx, np.ndarray) and idx.dtype != bool:
+            def pick(x):
+                return None if x is None else np.take(x, idx, axis=0)
+
+            return _Stats(pick(self.accel_var), pick(self.gyro_var), pick(self.gyro_mean),
+                          self.has_nan[idx])
         return _Stats(self.accel_var[idx],
                       None if self.gyro_var is None else self.gyro_var[idx],
                       None if self.gyro_mean is None else self.gyro_mean[idx],
@@ -454,15 +486,16 @@ def _levels(stats: _Stats, noise: NoiseFloor, thr: Thresholds) -> tuple[np.ndarr
 
 def _valid_diffs(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
     """Differences of consecutive rows that are both valid."""
-    ok = ~(bad[1:] | bad[:-1])
-    return x[1:][ok] - x[:-1][ok]
+    d = np.diff(x, axis=0)
+    if not bad.any():
+        return d
+    return np.take(d, np.flatnonzero(~(bad[1:] | bad[:-1])), axis=0)
 
 
 def _lsb(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
     """Per axis, the smallest non-zero step between consecutive valid rows (0 if none)."""
     d = np.abs(_valid_diffs(x, bad))
-    d = np.where(d > 0, d, np.inf)
-    out = d.min(axis=0) if len(d) else np.full(x.shape[1], np.inf)
+    out = np.min(d, axis=0, where=d > 0, initial=np.inf)
     return np.where(np.isfinite(out), out, 0.0)
 
 
@@ -509,13 +542,13 @@ def _robust_noise(stats: _Stats, accel: np.ndarray, gyro: np.ndarray | None,
     valid = ~stats.has_nan
     if not valid.any():
         raise StillnessInputError("every window contains a NaN row: nothing to measure noise on")
-    v = stats.take(valid)
+    v = stats.where(valid)
     score = _norm3(v.accel_var) / _scale(_norm3(v.accel_var))
     if v.gyro_var is not None:
         g = _norm3(v.gyro_var)
         score = score + g / _scale(g)
     q = np.quantile(score, quantile)
-    ref = v.take(score <= 2.0 * q)
+    ref = v.where(score <= 2.0 * q)
     lsb_a = _lsb(accel, bad)
     lsb_g = None if gyro is None else _lsb(gyro, bad)
     noise = _noise_from_windows(ref, lsb_a, lsb_g, "robust")
@@ -572,6 +605,8 @@ def _check_inputs(t_s, accel, gyro, nan_policy: str, row0: int = 0, t_prev: floa
         if len(t) > 1 and not (t[1:] > t[:-1]).all():
             r = row0 + 1 + int(np.flatnonzero(t[1:] <= t[:-1])[0])
             raise StillnessInputError(f"row {r}: t_s does not increase", r)
+    if np.isfinite(a).all() and (g is None or np.isfinite(g).all()):
+        return t, a, g, np.zeros(len(t), dtype=bool)
     fin = np.isfinite(a).all(axis=1)
     if g is not None:
         fin &= np.isfinite(g).all(axis=1)
@@ -658,12 +693,13 @@ def detect_static_intervals(
 
     # windowed statistics, the same engine as the tracker, fed in chunks to bound memory
     engine = _WindowSums(w, cfg.block_n, 13 if has_gyro else 7)
-    parts = []
+    stats = _Stats.empty(n - w + 1, has_gyro)
+    k = 0
     for i in range(0, n, _BATCH_CHUNK):
         j = min(n, i + _BATCH_CHUNK)
         sums = engine.push(_channels(a[i:j], None if g is None else g[i:j], bad[i:j], ref_a, ref_g))
-        parts.append(_Stats.from_sums(sums, w, has_gyro, ref_g))
-    stats = _Stats.concat(parts)
+        stats.put(k, _Stats.from_sums(sums, w, has_gyro, ref_g))
+        k += len(sums)
 
     warnings: list[str] = []
     if init_rest_s:
@@ -713,7 +749,7 @@ def detect_static_intervals(
 def _initial_rest_noise(stats: _Stats, a, g, bad, n_init: int, w: int) -> NoiseFloor:
     """Noise from the windows lying wholly inside rows [0, n_init)."""
     ref = stats.take(slice(0, n_init - w + 1))
-    ref = ref.take(~ref.has_nan)
+    ref = ref.where(~ref.has_nan)
     if len(ref) == 0:
         raise StillnessInputError("every window of the initial rest contains a NaN row")
     lsb_a = _lsb(a[:n_init], bad[:n_init])
@@ -912,13 +948,12 @@ class StillnessTracker:
 
         sums = self._engine.push(_channels(a, g, bad, ref_a, ref_g))
         stats = _Stats.from_sums(sums, self._w, g is not None, ref_g)
-        rows = np.zeros((m, 8))
+        rows = self._rows.extend(m)
         rows[:, _T] = t
         rows[:, _BAD] = bad
         rows[:, _A] = a
         if g is not None:
             rows[:, _G] = g
-        self._rows.append(rows)
         self._t_last = float(t[-1])
 
         if self.thresholds is None:
