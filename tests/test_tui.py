@@ -1,0 +1,325 @@
+"""Pilot tests: each screen's story, on the real Textual app at 80x24, a real SQLite file,
+the simulated device (in-process, or on a real pty through the serial reader)."""
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from station.app import make_app
+from station.sources import SimSource
+
+SIZE = (80, 24)
+
+
+async def wait_for(pilot, cond, timeout_s=20.0, step_s=0.05):
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        await pilot.pause(step_s)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {cond}")
+
+
+def screen_name(app) -> str:
+    return type(app.screen).__name__
+
+
+def screen_lines(app) -> list[str]:
+    """The terminal as text (what the operator sees)."""
+    return [strip.text for strip in app.screen._compositor.render_strips()]
+
+
+def text_of(app, selector) -> str:
+    """The text shown in the widget's region of the screen."""
+    r = app.screen.query_one(selector).region
+    return "\n".join(line[r.x:r.right] for line in screen_lines(app)[r.y:r.bottom])
+
+
+def seed_history(db, device="IMU-7", n=3, tolerances=None, interval_days=None, start_year=2024):
+    """Accepted P1 calibrations of `device` from simulated captures (real solver, real db)."""
+    from solvers.simulate import simulate
+    from station.calibrate import calibrate_capture
+    from station.capture import Capture
+    from station.store import save_result
+    from db.store import Store
+
+    for k in range(n):
+        sim = simulate("accel-tabletop", seed=10 + k, averages=True)
+        meta = dict(sim.meta, device=device, date=f"{start_year + k}-03-01")
+        cap = Capture(meta=meta, columns=sim.columns)
+        save_result(db, cap, calibrate_capture(cap), device_id=device)
+    if tolerances or interval_days:
+        Store(db).add_device(device, tolerances=tolerances, interval_days=interval_days)
+
+
+# ---------------------------------------------------------------- Connect
+
+
+def test_connect_screen_starts_p1_on_the_simulator_and_registers_the_device(tmp_path):
+    db = str(tmp_path / "station.db")
+
+    async def story():
+        app = make_app(db, device=SimSource(seed=2, speed=10))
+        async with app.run_test(size=SIZE) as pilot:
+            assert screen_name(app) == "ConnectScreen"
+            assert "Built-in simulated device" in text_of(app, "#source")
+            assert "f5 Start P1" in screen_lines(app)[-1]  # the footer shows the keys
+            await pilot.click("#model")
+            await pilot.press(*"ADXL335")
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+            await wait_for(pilot, lambda: app.screen.last_status is not None and app.screen.updates > 3)
+            assert "x_up" in text_of(app, "#placement")
+            assert "Stillness" in text_of(app, "#stability")
+        return app
+
+    app = asyncio.run(story())
+    from db.store import Store
+
+    dev = Store(db).get_device("SIM-ACC-0002")
+    assert dev is not None and dev["model"] == "ADXL335"
+
+
+def test_connect_refuses_a_bad_averaging_time_and_a_missing_port():
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#average").value = "abc"
+            await pilot.press("f5")
+            await pilot.pause(0.1)
+            assert "positive number" in text_of(app, "#status")
+            app.screen.query_one("#average").value = "5"
+            app.screen.query_one("#source").value = "other"
+            await pilot.press("f5")
+            await pilot.pause(0.1)
+            assert "Type a port" in text_of(app, "#status")
+            assert screen_name(app) == "ConnectScreen"
+
+    asyncio.run(story())
+
+
+def test_help_opens_and_closes_with_the_keyboard():
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f1")
+            await pilot.pause(0.05)
+            assert screen_name(app) == "HelpScreen"
+            assert "s skip the position" in text_of(app, "HelpScreen Static")
+            await pilot.press("escape")
+            await pilot.pause(0.05)
+            assert screen_name(app) == "ConnectScreen"
+
+    asyncio.run(story())
+
+
+# ---------------------------------------------------------------- Procedure → Results
+
+
+def test_demo_runs_a_whole_p1_and_saves_it(tmp_path):
+    """The scripted operator follows the prompts; the result reaches the database."""
+    db = str(tmp_path / "station.db")
+
+    async def story():
+        app = make_app(db, device=SimSource(seed=4, speed=25), demo=True, average_s=1.0, settle_s=0.5)
+        seen = {"wrong": False, "average": False}
+        async with app.run_test(size=SIZE) as pilot:
+            def progressed():
+                st = getattr(app.screen, "last_status", None)
+                if st is not None:
+                    seen["wrong"] |= st.wrong_face and st.is_still
+                    seen["average"] |= st.phase == "average"
+                return screen_name(app) == "ResultsScreen"
+
+            await wait_for(pilot, progressed, timeout_s=30)
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None, timeout_s=10)
+            summary = text_of(app, "#summary")
+            params = app.screen.query_one("#params")
+            residuals = app.screen.query_one("#residuals")
+            assert params.row_count == 12 and residuals.row_count == 12
+            assert "Saved as calibration" in text_of(app, "#saved")
+            cal_id = app.screen.calibration_id
+        return seen, summary, cal_id
+
+    seen, summary, cal_id = asyncio.run(story())
+    assert seen["average"] and seen["wrong"]  # the demo's deliberate wrong-face placement was flagged
+    assert "no previous" in summary
+    from db.store import Store
+
+    hist = Store(db).history("SIM-ACC-0004")
+    assert [h["id"] for h in hist] == [cal_id] and hist[0]["procedure"] == "accel-tabletop"
+    assert hist[0]["n_positions"] == 12
+    assert not any(p.startswith("resume-") for p in os.listdir(tmp_path))  # saved: nothing to resume
+
+
+def test_wrong_face_up_is_shown_and_blocks_capture():
+    async def story():
+        src = SimSource(seed=1, speed=10)
+        app = make_app(None, device=src, start="procedure", average_s=60.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            src.place("x_down")  # asked for x_up
+            await wait_for(pilot, lambda: app.screen.last_status and app.screen.last_status.wrong_face
+                           and app.screen.last_status.is_still)
+            await pilot.pause(0.3)
+            assert "WRONG FACE UP" in text_of(app, "#orientation")
+            assert "Wrong face up" in text_of(app, "#message")
+            assert app.screen.guide.n_captured == 0
+
+    asyncio.run(story())
+
+
+def test_skip_redo_abort_and_resume(tmp_path):
+    db = str(tmp_path / "station.db")
+
+    async def story():
+        src = SimSource(seed=5, speed=20)
+        app = make_app(db, device=src, start="procedure", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            g = app.screen.guide
+            await wait_for(pilot, lambda: g.n_captured == 1)  # x_up: the unit starts there
+            await pilot.press("s")  # skip x_down
+            await pilot.pause(0.1)
+            assert g.steps[1].status == "skipped" and g.step.name == "y_up"
+            src.place("y_up")
+            await wait_for(pilot, lambda: g.steps[2].status == "captured")
+            steps = app.screen.query_one("#steps")
+            await wait_for(pilot, lambda: "✓" in str(steps.get_option_at_index(2).prompt))
+            await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            resume = app.screen.query_one("#resume")
+            await wait_for(pilot, lambda: not resume.disabled)
+            assert "2/12" in str(resume.label)
+            await pilot.press("f6")
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen" and app.screen.guide is not None)
+            g2 = app.screen.guide
+            assert g2 is not g and g2.n_captured == 2
+            assert [s.status for s in g2.steps[:3]] == ["captured", "skipped", "captured"]
+            assert g2.step.name == "y_down"
+
+    asyncio.run(story())
+
+
+def test_results_compare_with_the_previous_calibration_and_export(tmp_path):
+    """A device with history and a tolerance on B: the new result shows Δ/σ and pass/fail."""
+    from solvers.simulate import simulate
+    from station.calibrate import calibrate_capture
+    from station.capture import Capture, read_capture
+    from station.screens.results import ResultsScreen
+
+    db = str(tmp_path / "station.db")
+    seed_history(db, "IMU-7", n=1, tolerances={"B": 1e-6})  # nothing stays within 1e-6 m/s²
+    from db.store import Store
+
+    previous = [h for h in Store(db).history("IMU-7")][-1]
+    sim = simulate("accel-tabletop", seed=99, averages=True)
+    cap = Capture(meta=dict(sim.meta, device="IMU-7"), columns=sim.columns)
+    result = calibrate_capture(cap)
+
+    async def story():
+        app = make_app(db, device_id="IMU-7")
+        app.session.extra["export_dir"] = str(tmp_path)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, previous))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            summary = text_of(app, "#summary")
+            table = app.screen.query_one("#params")
+            row = table.get_row_at(0)  # B[0]
+            await pilot.press("e")
+            await wait_for(pilot, lambda: getattr(app.screen, "exported", None))
+            paths = app.screen.exported
+            await pilot.press("d")
+            await pilot.pause(0.05)
+            saved = text_of(app, "#saved")
+        return summary, row, paths, saved
+
+    summary, row, paths, saved = asyncio.run(story())
+    assert "FAIL" in summary and f"previous #{previous['id']}" in summary
+    assert row[0] == "B[0]" and row[6] == "✗"
+    b_new, b_old = result["params"]["B"][0], previous["params"]["B"][0]
+    s2 = result["uncertainty"]["B"][0] ** 2 + previous["uncertainty"]["B"][0] ** 2
+    assert float(row[4]) == pytest.approx((b_new - b_old) / np.sqrt(s2), abs=0.051)
+    assert "Discarded" in saved
+    back = read_capture(paths[0])
+    np.testing.assert_array_equal(back.columns["ax"], cap.columns["ax"])
+    assert json.load(open(paths[1]))["procedure"] == "accel-tabletop"
+    assert len(Store(db).history("IMU-7")) == 1  # discarded: not stored
+
+
+# ---------------------------------------------------------------- History, due reminders
+
+
+def test_history_lists_devices_calibrations_and_drift(tmp_path):
+    db = str(tmp_path / "station.db")
+    seed_history(db, "IMU-7", n=3, interval_days=365, start_year=2022)
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=(120, 40)) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen"
+                           and app.screen.query_one("#calibrations").row_count == 3)
+            devices = app.screen.query_one("#devices")
+            first = devices.get_row_at(0)
+            p0 = app.screen.param_index
+            await pilot.press("p")
+            p1 = app.screen.param_index
+            due = text_of(app, "#due")
+            notes = [n.message for n in app._notifications]
+        return first, p0, p1, due, notes
+
+    first, p0, p1, due, notes = asyncio.run(story())
+    assert first[0] == "IMU-7" and first[1] == "3"
+    assert first[3].startswith("overdue")  # last calibration 2024-03-01 + 365 d is long past
+    assert (p0, p1) == (0, 1)
+    assert "IMU-7: overdue" in due
+    assert any("overdue: IMU-7" in n for n in notes)  # the start-up reminder
+
+
+# ---------------------------------------------------------------- a serial device on a real pty
+
+
+def test_procedure_reads_the_simulated_device_over_a_real_pty():
+    from solvers.simulate import LiveImu
+    from station.device.simdevice import SimDevice
+    from station.sources import SerialSource
+
+    dev = SimDevice(LiveImu(seed=6, rate_hz=200, hold_s=1e9))
+    path = dev.open()
+    stop = threading.Event()
+    t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
+    t.start()
+    try:
+        async def story():
+            app = make_app(None, device=SerialSource(path))
+            async with app.run_test(size=SIZE) as pilot:
+                assert app.screen.query_one("#source").value == "other"
+                await pilot.press("f5")
+                await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen"
+                               and app.screen.last_status is not None
+                               and app.screen.last_status.n_captured >= 0 and app.screen.updates > 10)
+                await wait_for(pilot, lambda: not app.screen.last_status.calibrating, timeout_s=10)
+                readouts = text_of(app, "#readouts")
+                st = app.screen.last_status
+                src = app.session.source
+            src.stop()
+            return readouts, st, src
+
+        readouts, st, src = asyncio.run(story())
+    finally:
+        stop.set()
+        t.join(2)
+        dev.close()
+    assert src.device_id == "SIM-ACC-0006"
+    import re
+
+    rate = float(re.search(r"(\d+) Hz", readouts).group(1))
+    assert 180 <= rate <= 220  # 200 Hz device, rate estimated from host arrival times
+    assert "errors 0" in readouts
+    assert st.angle_deg < 5  # sim-device nominal: x_up from the start
