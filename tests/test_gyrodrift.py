@@ -259,3 +259,16 @@ def test_mpu6050_static_run_in_counts(shared_data):
     out = proc.calibrate(cap)
     # SOURCE.md: gyro bias about (−3.35, 1.09, −0.50) °/s across the unit's runs (within ~0.15)
     np.testing.assert_allclose(out["drift_raw"]["value"], np.array([-3.35, 1.09, -0.50]) * 131, atol=0.2 * 131)
+
+
+def test_static_intervals_found_without_position_column():
+    """Four tilts at one heading, no position/heading column: stillness detection splits the
+    record, the step between positions is dropped, and ε comes back within 3σ."""
+    sim = simulate("gyro-drift", seed=11, mode="static", headings_deg=[0, 0, 0, 0], duration_s=480)
+    cols = {k: v for k, v in sim.columns.items() if k not in ("position", "heading_deg")}
+    out = proc.calibrate(Capture(dict(sim.meta, heading_deg="0"), cols))
+    assert out["params"]["mode"] == "static-multi" and out["n_positions"] == 4
+    z = (np.array(out["params"]["drift"]) - sim.truth["drift"]) / np.array(out["uncertainty"]["drift"])
+    assert np.all(np.abs(z) < 3)
+    text = " ".join(out["warnings"])
+    assert "stillness detection" in text and "no heading column" in text
