@@ -1,0 +1,754 @@
+"""Capture files: read, validate and write the station's CSV format (../shared/spec/capture-format.md).
+
+A capture is ``# key: value`` metadata lines (the first is ``# station-capture: 1``), one header
+row of column names, then comma-separated data rows. Numeric columns become float64 arrays
+(an empty field is NaN); the text column ``position`` becomes an object array of ``str``
+(``''`` where empty).
+
+Every rule the reader enforces is reported as one :class:`~station.errors.InputError`
+``file:line: what is wrong``, with ``line`` the 1-based physical line of the file.
+
+Reading streams: the data are parsed in blocks of rows (numpy's C parser on each block, with a
+per-cell pass over a block only when it needs one: missing values, non-ASCII text, or an error
+whose line must be named), and each column grows block by block, so a large file is never held
+as text or as Python objects all at once.
+
+Writing is atomic (a temporary file in the same folder, then ``os.replace``) and refuses any
+capture that the reader would refuse or could not give back exactly: ``read_capture(p)`` after
+``write_capture(p, c)`` equals ``c`` (floats are written with ``repr``, which round-trips bit
+for bit; integer-valued floats are written without the ``.0``).
+"""
+from __future__ import annotations
+
+import codecs
+import datetime as _dt
+import io
+import math
+import os
+import re
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solvers.units import ACCEL_UNITS, GYRO_UNITS, MAG_UNITS, RAW_UNITS
+from station.errors import InputError
+
+FORMAT_VERSION = "1"
+PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv")
+TEXT_COLUMNS = frozenset({"position"})
+GYRO_MODES = ("reference", "static")
+
+# Units each raw-unit key accepts: the raw ones (a calibration supplies the factor) and the
+# physical ones solvers/units.py knows.
+_RAW_ORDER = ("V", "mV", "counts")
+UNIT_KEYS: dict[str, tuple[str, ...]] = {
+    "accel_unit": _RAW_ORDER + tuple(ACCEL_UNITS),
+    "gyro_unit": _RAW_ORDER + tuple(GYRO_UNITS),
+    "mag_unit": _RAW_ORDER + tuple(MAG_UNITS),
+}
+assert set(_RAW_ORDER) == set(RAW_UNITS)
+KNOWN_UNITS = frozenset(u for units in UNIT_KEYS.values() for u in units)
+_UNIT_KIND = {"accel_unit": "an acceleration", "gyro_unit": "an angular-rate", "mag_unit": "a magnetic-field"}
+
+# Metadata keys that must hold a finite number, with an optional validity check.
+_NUMERIC_META: dict[str, tuple] = {
+    "latitude_deg": (lambda x: -90.0 <= x <= 90.0, "must be between -90 and 90"),
+    "longitude_deg": (lambda x: -180.0 <= x <= 360.0, "must be between -180 and 360"),
+    "altitude_m": (None, ""),
+    "g_mps2": (lambda x: x > 0.0, "must be positive"),
+    "radius_m": (lambda x: x > 0.0, "must be positive"),
+    "heading_deg": (None, ""),
+    "sample_rate_hz": (lambda x: x > 0.0, "must be positive"),
+}
+
+# Units shown by `station inspect` for the columns the spec names.
+_COLUMN_UNITS = {
+    "t": "s", "temp_c": "°C", "speed_rad_s": "rad/s", "ref_gx": "rad/s", "ref_gy": "rad/s",
+    "ref_gz": "rad/s", "vl1": "m/s", "vl2": "m/s", "vl3": "m/s", "vx": "m/s", "vy": "m/s",
+    "vz": "m/s", "vn": "m/s", "ve": "m/s", "vd": "m/s", "roll_deg": "deg", "pitch_deg": "deg",
+    "yaw_deg": "deg", "wx": "rad/s", "wy": "rad/s", "wz": "rad/s", "heading_deg": "deg",
+    "n": "samples", "position": "label",
+}
+_RAW_COLUMN_UNIT_KEY = {c: k for k, cols in (("accel_unit", "ax ay az"), ("gyro_unit", "gx gy gz"),
+                                             ("mag_unit", "mx my mz")) for c in cols.split()}
+
+# A number as the format writes it: no nan/inf words, no underscores, no hex.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NONFINITE_WORDS = {"nan", "inf", "infinity"}
+# Bytes the numpy fast path may see: printable ASCII, tab, LF. Anything else takes the per-cell path.
+_FAST_BYTES = bytes(range(0x20, 0x7F)) + b"\t\n"
+_LABEL_WIDTH = 32  # fixed width of the text field in the fast path; longer labels take the slow path
+_MAX_HEAD_LINE = 1 << 20
+DEFAULT_CHUNK_ROWS = 65536
+
+
+# ------------------------------------------------------------------------------------ Capture
+
+@dataclass(eq=False)
+class Capture:
+    """One capture: metadata (file order) and columns (header order).
+
+    ``meta``: ``dict[str, str]`` with keys and values stripped, ``'station-capture'`` included.
+    ``columns``: name -> float64 array (NaN = empty field), or for ``position`` an object array
+    of ``str`` (``''`` = empty). ``meta_lines`` / ``header_line`` give the file's line numbers
+    (for messages) when the capture was read from a file.
+    """
+
+    meta: dict[str, str]
+    columns: dict[str, np.ndarray]
+    path: str | None = None
+    meta_lines: dict[str, int] = field(default_factory=dict, repr=False)
+    header_line: int | None = field(default=None, repr=False)
+
+    @property
+    def procedure(self) -> str | None:
+        return self.meta.get("procedure") or None
+
+    @property
+    def is_time_series(self) -> bool:
+        return "t" in self.columns
+
+    @property
+    def n_rows(self) -> int:
+        for arr in self.columns.values():
+            return int(len(arr))
+        return 0
+
+    def column(self, name: str) -> np.ndarray:
+        """The column ``name``; a missing column is an InputError naming the file."""
+        try:
+            return self.columns[name]
+        except KeyError:
+            have = ", ".join(self.columns) or "none"
+            raise InputError(self.path, self.header_line, f"no column '{name}' (columns: {have})") from None
+
+    def float_meta(self, key: str, default: float | None = None) -> float | None:
+        """Metadata ``key`` as a finite float, ``default`` when absent; InputError when not a number."""
+        value = self.meta.get(key)
+        if value is None:
+            return default
+        number = _meta_number(value)
+        if number is None:
+            raise InputError(self.path, self.meta_lines.get(key), f"metadata '{key}': {_show(value)} is not a number")
+        return number
+
+    def unit(self, name: str) -> str | None:
+        """The unit of column ``name`` (raw columns: the capture's ``*_unit``), or None if unknown."""
+        base = name[:-4] if name.endswith("_std") else name
+        key = _RAW_COLUMN_UNIT_KEY.get(base)
+        if key is not None:
+            return self.meta.get(key) or None
+        return _COLUMN_UNITS.get(base)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Capture):
+            return NotImplemented
+        if list(self.meta.items()) != list(other.meta.items()) or list(self.columns) != list(other.columns):
+            return False
+        return all(_same_array(self.columns[k], other.columns[k]) for k in self.columns)
+
+
+def _same_array(a: np.ndarray, b: np.ndarray) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape or (a.dtype == object) != (b.dtype == object):
+        return False
+    if a.dtype == object:
+        return a.tolist() == b.tolist()
+    nan = np.isnan(a)  # a NaN's sign is not kept: the file has only empty fields
+    return bool(np.array_equal(nan, np.isnan(b)) and np.array_equal(a[~nan], b[~nan])
+                and np.array_equal(np.signbit(a[~nan]), np.signbit(b[~nan])))
+
+
+# ----------------------------------------------------------------------------- small helpers
+
+def _show(value: str, limit: int = 40) -> str:
+    """A field value quoted for a message: 'abc', or repr() when it holds odd characters."""
+    if len(value) > limit:
+        value = value[:limit] + "…"
+    return f"'{value}'" if value.isprintable() and "'" not in value else repr(value)
+
+
+def _meta_number(value: str) -> float | None:
+    v = value.strip()
+    if not _NUMBER.fullmatch(v):
+        return None
+    x = float(v)
+    return x if math.isfinite(x) else None
+
+
+def _looks_numeric(text: str) -> bool:
+    return bool(_NUMBER.fullmatch(text.strip(" \t")))
+
+
+def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
+    """Known metadata keys hold valid values (procedure, units, numbers, date, gyro_mode)."""
+    def bad(key: str, message: str):
+        raise InputError(path, lines.get(key), message)
+
+    proc = meta.get("procedure")
+    if proc is not None and proc not in PROCEDURES:
+        bad("procedure", f"unknown procedure {_show(proc)} (expected one of {', '.join(PROCEDURES)})")
+    for key, allowed in UNIT_KEYS.items():
+        unit = meta.get(key)
+        if unit is None or unit in allowed:
+            continue
+        if unit in KNOWN_UNITS:
+            bad(key, f"{key} {_show(unit)} is not {_UNIT_KIND[key]} unit (expected one of {', '.join(allowed)})")
+        bad(key, f"unknown {key} {_show(unit)} (expected one of {', '.join(allowed)})")
+    for key, (ok, why) in _NUMERIC_META.items():
+        if key not in meta:
+            continue
+        x = _meta_number(meta[key])
+        if x is None:
+            bad(key, f"metadata '{key}': {_show(meta[key])} is not a number")
+        if ok is not None and not ok(x):
+            bad(key, f"metadata '{key}': {_show(meta[key])} {why}")
+    if "date" in meta:
+        try:
+            _dt.datetime.fromisoformat(meta["date"])
+        except ValueError:
+            bad("date", f"metadata 'date': {_show(meta['date'])} is not an ISO date (YYYY-MM-DD[THH:MM:SS])")
+    mode = meta.get("gyro_mode")
+    if mode is not None and mode not in GYRO_MODES:
+        bad("gyro_mode", f"unknown gyro_mode {_show(mode)} (expected one of {', '.join(GYRO_MODES)})")
+
+
+def _header_problem(names: list[str]) -> str | None:
+    """What is wrong with a header row (already split and stripped), or None."""
+    seen: dict[str, int] = {}
+    for j, name in enumerate(names, 1):
+        if not name:
+            return f"empty column name (column {j} of the header)"
+        if '"' in name or not name.isprintable():
+            return f"column name {_show(name)} is not plain text (no quotes or control characters)"
+        if name in seen:
+            return f"duplicate column '{name}' (columns {seen[name]} and {j})"
+        seen[name] = j
+    if all(_looks_numeric(n) for n in names):
+        return "no header row: this line holds numbers where the column names should be"
+    return None
+
+
+def _label_problem(label: str) -> str | None:
+    if '"' in label:
+        return f"column 'position': {_show(label)} holds a quote, which plain CSV cannot hold"
+    if not label.isprintable():
+        return f"column 'position': {_show(label)} holds a control character"
+    return None
+
+
+# ------------------------------------------------------------------------------------ reading
+
+class _Head:
+    """What precedes the data: metadata, header, and where the data start."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.meta: dict[str, str] = {}
+        self.meta_lines: dict[str, int] = {}
+        self.header: list[str] = []
+        self.header_line = 0
+        self.data_offset = 0
+
+
+def _open(path) -> io.BufferedReader:
+    try:
+        return open(path, "rb")
+    except FileNotFoundError:
+        raise InputError(path, None, "no such file") from None
+    except IsADirectoryError:
+        raise InputError(path, None, "is a directory, not a capture file") from None
+    except PermissionError:
+        raise InputError(path, None, "permission denied") from None
+    except OSError as exc:
+        raise InputError(path, None, f"cannot open: {exc.strerror or exc}") from None
+
+
+def _decode(path: str, raw: bytes, lineno: int) -> str:
+    """One physical line as text without its line ending; binary data is an InputError."""
+    nul = raw.find(b"\0")
+    if nul >= 0:
+        raise InputError(path, lineno, f"NUL byte at column {nul + 1}: binary data, not a text capture")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(path, lineno, f"not UTF-8 text: byte 0x{raw[exc.start]:02x} at column {exc.start + 1}") from None
+    if text.endswith("\n"):
+        text = text[:-1]
+    if text.endswith("\r"):
+        text = text[:-1]
+    if "\r" in text:
+        raise InputError(path, lineno, "stray carriage return (\\r) inside the line; use LF or CRLF line endings")
+    return text
+
+
+def _read_head(path: str) -> _Head:
+    head = _Head(path)
+    with _open(path) as f:
+        lineno = 0
+        saw_header = False
+        while True:
+            raw = f.readline(_MAX_HEAD_LINE)
+            lineno += 1
+            if not raw:
+                if lineno == 1:
+                    raise InputError(path, 1, "empty file")
+                raise InputError(path, lineno, "no header row (a line of column names must follow the metadata)")
+            if len(raw) == _MAX_HEAD_LINE and not raw.endswith(b"\n"):
+                raise InputError(path, lineno, f"line longer than {_MAX_HEAD_LINE} bytes: not a capture file")
+            if lineno == 1:
+                if raw.startswith(codecs.BOM_UTF8):
+                    raw = raw[len(codecs.BOM_UTF8):]
+                elif raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+                    raise InputError(path, 1, "UTF-16 text; capture files are UTF-8")
+            text = _decode(path, raw, lineno)
+            stripped = text.strip()
+            if lineno == 1:
+                _first_line(path, f, stripped)
+                head.meta["station-capture"] = FORMAT_VERSION
+                head.meta_lines["station-capture"] = 1
+                continue
+            if not stripped:
+                continue  # blank lines before the header are harmless
+            if stripped.startswith("#"):
+                key, sep, value = stripped[1:].partition(":")
+                key, value = key.strip(), value.strip()
+                if not sep or not key:
+                    raise InputError(path, lineno, f"metadata line without 'key: value': {_show(stripped)}")
+                if key in head.meta:
+                    raise InputError(path, lineno, f"duplicate metadata key '{key}' (first on line {head.meta_lines[key]})")
+                head.meta[key] = value
+                head.meta_lines[key] = lineno
+                continue
+            names = [c.strip() for c in text.split(",")]
+            problem = _header_problem(names)
+            if problem:
+                raise InputError(path, lineno, problem)
+            head.header = names
+            head.header_line = lineno
+            head.data_offset = f.tell()
+            saw_header = True
+            break
+    assert saw_header
+    _check_meta(path, head.meta, head.meta_lines)
+    return head
+
+
+def _first_line(path: str, f, stripped: str) -> None:
+    want = f"# station-capture: {FORMAT_VERSION}"
+    if not stripped.startswith("#"):
+        if not stripped and not f.read(1 << 16).strip():
+            raise InputError(path, 1, "empty file")
+        raise InputError(path, 1, f"missing first line '{want}': not a station capture file")
+    key, sep, value = stripped[1:].partition(":")
+    if key.strip() != "station-capture" or not sep:
+        raise InputError(path, 1, f"missing first line '{want}': not a station capture file")
+    if value.strip() != FORMAT_VERSION:
+        raise InputError(path, 1, f"unsupported capture version {_show(value.strip())} (this station reads version {FORMAT_VERSION})")
+
+
+class _Parser:
+    """Parses blocks of data lines into column arrays, carrying state (t, labels) across blocks."""
+
+    def __init__(self, path: str, names: list[str]):
+        self.path = path
+        self.names = names
+        self.ncols = len(names)
+        self.text = [j for j, n in enumerate(names) if n in TEXT_COLUMNS]
+        self.t_index = names.index("t") if "t" in names else None
+        self.n_index = names.index("n") if "n" in names else None
+        self.std_index = [j for j, n in enumerate(names) if n.endswith("_std") and n not in TEXT_COLUMNS]
+        self.prev_t = -math.inf
+        self.prev_t_text = ""
+        self.labels: dict[str, str] = {}  # one str object per distinct label
+        if self.text:
+            self.dtype = np.dtype([(f"f{j}", f"S{_LABEL_WIDTH}" if j in self.text else "f8") for j in range(self.ncols)])
+        else:
+            self.dtype = np.dtype("f8")
+
+    # -- the fast path: numpy's C parser on the whole block
+
+    def parse(self, block: bytes, n_lines: int, first_line: int, force_slow: bool = False) -> dict[str, np.ndarray]:
+        """Columns of ``block`` (``n_lines`` whole data lines, the first being ``first_line``)."""
+        out = None if force_slow else self._fast(block, n_lines)
+        if out is None:
+            lines = block.split(b"\n")
+            if block.endswith(b"\n"):
+                lines.pop()
+            out = self._slow(lines, first_line)
+        elif self.t_index is not None:
+            stop = len(block) - 1 if block.endswith(b"\n") else len(block)
+            last = block[block.rfind(b"\n", 0, stop) + 1:stop]
+            self.prev_t_text = last.split(b",")[self.t_index].strip().decode("ascii")
+            self.prev_t = float(self.prev_t_text)
+        return out
+
+    def _fast(self, data: bytes, n_lines: int) -> dict[str, np.ndarray] | None:
+        if b"\r" in data:
+            data = data.replace(b"\r\n", b"\n")
+            if data.endswith(b"\r"):
+                data = data[:-1]
+        if data.translate(None, _FAST_BYTES) or data.startswith((b"\n", b"#")) or b"\n\n" in data or b"\n#" in data:
+            return None  # control bytes, non-ASCII, blank or comment lines: the per-cell path says which
+        try:
+            arr = np.loadtxt(io.BytesIO(data), dtype=self.dtype, delimiter=",", comments=None,
+                             ndmin=1 if self.text else 2, encoding="ascii")
+        except Exception:  # noqa: BLE001 - any parse failure: the per-cell path finds and names it
+            return None
+        if len(arr) != n_lines or (not self.text and arr.shape[1] != self.ncols):
+            return None
+        cols: dict[str, np.ndarray] = {}
+        for j, name in enumerate(self.names):
+            if j in self.text:
+                labels = self._fast_labels(arr[f"f{j}"], first_column=(j == 0))
+                if labels is None:
+                    return None
+                cols[name] = labels
+                continue
+            col = np.ascontiguousarray(arr[f"f{j}"] if self.text else arr[:, j], dtype=np.float64)
+            if not np.isfinite(col).all():
+                return None
+            if j == self.t_index and (col[0] < self.prev_t or np.any(col[1:] < col[:-1])):
+                return None
+            if j == self.n_index and not np.all((col >= 1) & (col == np.floor(col))):
+                return None
+            if j in self.std_index and np.any(col < 0):
+                return None
+            cols[name] = col
+        return cols
+
+    def _fast_labels(self, raw: np.ndarray, first_column: bool) -> np.ndarray | None:
+        starts = np.flatnonzero(np.concatenate(([True], raw[1:] != raw[:-1])))
+        lengths = np.diff(np.append(starts, len(raw)))
+        heads = []
+        for value in raw[starts].tolist():
+            if len(value) >= _LABEL_WIDTH:
+                return None  # may have been cut at the field width
+            label = value.decode("ascii").strip()
+            if _label_problem(label) or (first_column and label.startswith("#")):
+                return None
+            heads.append(self.labels.setdefault(label, label))
+        runs = np.empty(len(heads), dtype=object)
+        runs[:] = heads
+        return np.repeat(runs, lengths)
+
+    # -- the per-cell path: every rule checked in file order, so the first bad line is named
+
+    def _slow(self, raw_lines: list[bytes], first_line: int) -> dict[str, np.ndarray]:
+        path, names, ncols = self.path, self.names, self.ncols
+        values: list[list] = [[] for _ in names]
+        for k, raw in enumerate(raw_lines):
+            lineno = first_line + k
+            text = _decode(path, raw, lineno)
+            stripped = text.strip()
+            if not stripped:
+                raise InputError(path, lineno, "blank line inside the data (only trailing blank lines are allowed)")
+            if stripped.startswith("#"):
+                raise InputError(path, lineno, "comment line inside the data (# lines must come before the header)")
+            fields = text.split(",")
+            if len(fields) != ncols:
+                few = "too few" if len(fields) < ncols else "too many"
+                raise InputError(path, lineno, f"{few} fields: {len(fields)} where the header has {ncols} columns")
+            for j, value in enumerate(fields):
+                if j in self.text:
+                    label = value.strip()
+                    problem = _label_problem(label)
+                    if problem:
+                        raise InputError(path, lineno, problem)
+                    values[j].append(self.labels.setdefault(label, label))
+                    continue
+                values[j].append(self._number(names[j], value, j, lineno))
+        cols: dict[str, np.ndarray] = {}
+        for j, name in enumerate(names):
+            if j in self.text:
+                arr = np.empty(len(values[j]), dtype=object)
+                arr[:] = values[j]
+            else:
+                arr = np.array(values[j], dtype=np.float64)
+            cols[name] = arr
+        return cols
+
+    def _number(self, name: str, value: str, j: int, lineno: int) -> float:
+        v = value.strip(" \t")
+        if not v:
+            if j == self.t_index:
+                raise InputError(self.path, lineno, "column 't': empty (every row of a time series needs its time)")
+            return math.nan
+        if not _NUMBER.fullmatch(v):
+            if v.lower().lstrip("+-") in _NONFINITE_WORDS:
+                raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is not allowed: leave the field empty for a missing value")
+            raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is not a number")
+        x = float(v)
+        if not math.isfinite(x):
+            raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is out of range")
+        if j == self.t_index:
+            if x < self.prev_t:
+                raise InputError(self.path, lineno, f"t goes backwards: {v} after {self.prev_t_text}")
+            self.prev_t, self.prev_t_text = x, v
+        elif j == self.n_index and (x < 1 or x != math.floor(x)):
+            raise InputError(self.path, lineno, f"column 'n': {_show(v)} is not a whole number of samples (1 or more)")
+        elif j in self.std_index and x < 0:
+            raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is negative (it is a standard deviation)")
+        return x
+
+
+def _blocks(f, block_bytes: int) -> Iterator[bytes]:
+    """Blocks of whole lines, about ``block_bytes`` long."""
+    while True:
+        block = f.read(block_bytes)
+        if not block:
+            return
+        if not block.endswith(b"\n"):
+            block += f.readline()
+        yield block
+
+
+def _count_lines(block: bytes) -> int:
+    return block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
+
+
+def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[dict[str, np.ndarray]]:
+    path = head.path
+    parser = _Parser(path, head.header)
+    with _open(path) as f:
+        f.seek(head.data_offset)
+        sample = f.readline(_MAX_HEAD_LINE)
+        f.seek(head.data_offset)
+        lineno = head.header_line + 1
+        pending_blank: int | None = None
+        n_rows = 0
+        for block in _blocks(f, max(1, rows * len(sample))):
+            first = lineno
+            lineno += _count_lines(block)
+            end = len(block.rstrip())
+            if end == 0:  # only blank lines: fine if nothing follows
+                pending_blank = first if pending_blank is None else pending_blank
+                continue
+            if pending_blank is not None:
+                raise InputError(path, pending_blank, "blank line inside the data (only trailing blank lines are allowed)")
+            nl = block.find(b"\n", end)
+            if 0 <= nl < len(block) - 1:  # trailing blank lines: an error only if data follow
+                block = block[:nl + 1]
+                pending_blank = first + _count_lines(block)
+            n_lines = _count_lines(block)
+            chunk = parser.parse(block, n_lines, first, force_slow=force_slow)
+            n_rows += n_lines
+            yield chunk
+    if n_rows == 0:
+        raise InputError(path, head.header_line + 1, "no data rows after the header")
+
+
+def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):
+    """Stream a capture: ``(meta, header, chunks)``.
+
+    ``meta`` and ``header`` are read and validated at once; ``chunks`` yields
+    ``dict[name, ndarray]`` blocks of up to ``rows`` rows, validating as it goes (an
+    InputError may come from any ``next``).
+    """
+    path = os.fspath(path)
+    head = _read_head(path)
+    return dict(head.meta), list(head.header), _data_chunks(head, max(1, int(rows)))
+
+
+def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = False) -> Capture:
+    """Read and validate a capture file; InputError ``file:line: what is wrong`` on bad input."""
+    path = os.fspath(path)
+    head = _read_head(path)
+    parts: dict[str, list[np.ndarray]] = {name: [] for name in head.header}
+    for chunk in _data_chunks(head, max(1, int(rows)), force_slow=_force_slow):
+        for name, arr in chunk.items():
+            parts[name].append(arr)
+    columns: dict[str, np.ndarray] = {}
+    for name in head.header:  # one column at a time, so the peak is the result plus one column
+        pieces = parts[name]
+        columns[name] = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+        pieces.clear()
+    return Capture(meta=head.meta, columns=columns, path=path, meta_lines=head.meta_lines,
+                   header_line=head.header_line)
+
+
+# ------------------------------------------------------------------------------------ writing
+
+def _fmt_float(x: float) -> str:
+    s = repr(x)
+    return s[:-2] if s.endswith(".0") else s
+
+
+def _meta_for_writing(path, meta: dict[str, str]) -> dict[str, str]:
+    out = {"station-capture": FORMAT_VERSION}
+    for key, value in meta.items():
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise InputError(path, None, f"metadata {key!r}: keys and values must be str")
+        if key == "station-capture":
+            if value != FORMAT_VERSION:
+                raise InputError(path, None, f"unsupported capture version {_show(value)} (this station writes version {FORMAT_VERSION})")
+            continue
+        if not key or key != key.strip() or ":" in key or not key.isprintable():
+            raise InputError(path, None, f"metadata key {_show(key)} cannot be written (empty, spaces at the ends, ':' or a control character)")
+        if value != value.strip() or not value.isprintable():
+            raise InputError(path, None, f"metadata '{key}': {_show(value)} cannot be written (spaces at the ends or a control character)")
+        out[key] = value
+    _check_meta(path, out, {})
+    return out
+
+
+def _label_text(v) -> str | None:
+    """A label value as the text the writer puts in the file (None: not a label)."""
+    if isinstance(v, str):
+        return v
+    if v is None:
+        return ""
+    if isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return "" if math.isnan(v) else _fmt_float(float(v))
+    return None
+
+
+def _text_cells(path, name: str, col: np.ndarray, start: int, first_column: bool) -> list[str]:
+    values = col.tolist()
+    try:
+        distinct = dict.fromkeys(values)
+    except TypeError:  # unhashable values
+        distinct = None
+    if distinct is None:
+        bad = next(i for i, v in enumerate(values) if _label_text(v) is None)
+        raise InputError(path, None, f"column '{name}', row {start + bad + 1}: {type(values[bad]).__name__} "
+                         "value is not a label")
+    for v in distinct:
+        s = _label_text(v)
+        problem = None
+        if s is None:
+            problem = f"{type(v).__name__} value {v!r} is not a label"
+        elif "," in s:
+            problem = f"label {_show(s)} holds a comma, which plain CSV cannot hold"
+        elif s != s.strip():
+            problem = f"label {_show(s)} has spaces at the ends, which the reader would strip"
+        elif first_column and s.startswith("#"):
+            problem = f"label {_show(s)} starts with '#' in the first column, which would read as a comment"
+        elif _label_problem(s):
+            problem = f"label {_show(s)} holds a quote or a control character, which plain CSV cannot hold"
+        if problem:
+            i = next(i for i, x in enumerate(values) if x is v or x == v)
+            raise InputError(path, None, f"column '{name}', row {start + i + 1}: {problem}")
+        distinct[v] = s
+    if all(type(v) is str for v in distinct):
+        return values
+    return [distinct[v] for v in values]
+
+
+def _number_cells(path, name: str, col: np.ndarray, start: int, prev_t: float, is_t: bool) -> list[str]:
+    finite = np.isfinite(col)
+    bad = ~finite & ~np.isnan(col)
+    if is_t:
+        bad |= np.isnan(col)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(path, None, f"column '{name}', row {start + i + 1}: {float(col[i])!r} cannot be written (only finite numbers{'' if is_t else ' or NaN'})")
+    if is_t:
+        back = np.flatnonzero(np.diff(np.concatenate(([prev_t], col))) < 0)
+        if back.size:
+            i = int(back[0])
+            before = prev_t if i == 0 else col[i - 1]
+            raise InputError(path, None, f"column 't', row {start + i + 1}: t goes backwards: {float(col[i])!r} after {float(before)!r}")
+    elif name == "n":
+        wrong = finite & ~((col >= 1) & (col == np.floor(col)))
+        if wrong.any():
+            i = int(np.flatnonzero(wrong)[0])
+            raise InputError(path, None, f"column 'n', row {start + i + 1}: {float(col[i])!r} is not a whole number of samples")
+    elif name.endswith("_std"):
+        wrong = finite & (col < 0)
+        if wrong.any():
+            i = int(np.flatnonzero(wrong)[0])
+            raise InputError(path, None, f"column '{name}', row {start + i + 1}: {float(col[i])!r} is negative")
+    # repr() round-trips bit for bit; whole numbers (not -0.0) are written as integers
+    whole = finite & (col == np.trunc(col)) & (np.abs(col) < 2.0**53) & ~((col == 0) & np.signbit(col))
+    if whole.all():
+        return list(map(str, col.astype(np.int64).tolist()))
+    cells = list(map(repr, col.tolist()))
+    for i in np.flatnonzero(whole).tolist():
+        cells[i] = cells[i][:-2]
+    if not finite.all():
+        for i in np.flatnonzero(~finite).tolist():
+            cells[i] = ""
+    return cells
+
+
+def write_capture(path, capture: Capture, *, rows: int = DEFAULT_CHUNK_ROWS) -> None:
+    """Write ``capture`` to ``path`` atomically; refuses what the reader could not give back.
+
+    Refused (InputError naming the column and 1-based row): labels with commas, quotes,
+    control characters or spaces at the ends; inf; NaN in ``t``; ``t`` going backwards;
+    metadata the reader would refuse. A failure at any point leaves ``path`` untouched.
+    """
+    path = os.fspath(path)
+    meta = _meta_for_writing(path, capture.meta)
+    names = list(capture.columns)
+    if not names:
+        raise InputError(path, None, "capture has no columns")
+    if not all(isinstance(n, str) for n in names):
+        raise InputError(path, None, "column names must be str")
+    if any(n != n.strip() or "," in n for n in names):
+        bad = next(n for n in names if n != n.strip() or "," in n)
+        raise InputError(path, None, f"column name {_show(bad)} cannot be written (a comma or spaces at the ends)")
+    problem = _header_problem(names)
+    if problem or names[0].startswith("#"):
+        raise InputError(path, None, problem or f"column name {_show(names[0])} would read as a comment")
+    arrays: list[np.ndarray] = []
+    for name in names:
+        col = np.asanyarray(capture.columns[name])
+        if col.ndim != 1:
+            raise InputError(path, None, f"column '{name}' is not one-dimensional (shape {col.shape})")
+        if name not in TEXT_COLUMNS:
+            if col.dtype.kind not in "fiub":
+                raise InputError(path, None, f"column '{name}' is not numeric (dtype {col.dtype})")
+            col = col.astype(np.float64, copy=False)
+        arrays.append(col)
+    n = len(arrays[0])
+    if any(len(a) != n for a in arrays):
+        lengths = ", ".join(f"{k}={len(a)}" for k, a in zip(names, arrays))
+        raise InputError(path, None, f"columns differ in length ({lengths})")
+    if n == 0:
+        raise InputError(path, None, "capture has no data rows")
+
+    directory = os.path.dirname(os.path.abspath(path))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
+    except OSError as exc:
+        raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.writelines(f"# {k}: {v}".rstrip() + "\n" for k, v in meta.items())
+            f.write(",".join(names) + "\n")
+            prev_t = -math.inf
+            for start in range(0, n, rows):
+                cells = []
+                for j, (name, col) in enumerate(zip(names, arrays)):
+                    part = col[start:start + rows]
+                    if name in TEXT_COLUMNS:
+                        cells.append(_text_cells(path, name, part, start, first_column=(j == 0)))
+                    else:
+                        cells.append(_number_cells(path, name, part, start, prev_t, is_t=(name == "t")))
+                        if name == "t":
+                            prev_t = float(part[-1])
+                lines = [",".join(r) for r in zip(*cells)]
+                if len(names) == 1 and not all(lines):
+                    i = start + lines.index("")
+                    raise InputError(path, None, f"column '{names[0]}', row {i + 1}: a one-column capture cannot hold a missing value (the line would be blank)")
+                f.write("\n".join(lines))
+                f.write("\n")
+            f.flush()
+            os.fsync(f.fileno())
+        mode = os.stat(path).st_mode & 0o7777 if os.path.isfile(path) else 0o644
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        if isinstance(exc, OSError):
+            raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
+        raise
