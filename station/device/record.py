@@ -241,6 +241,7 @@ def record(
     directory = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(directory):
         raise InputError(out, None, "its folder does not exist")
+    _check_extra_meta(directory, procedure, extra_meta)
     own_reader = reader is None
     if reader is None:
         reader = Reader(port, baud=baud, protocol=protocol, mavlink_source=mavlink_source)
@@ -298,6 +299,29 @@ def record(
         # a partial file stays only if finishing failed after rows were written
         if stream is not None and stream.rows == 0 and os.path.exists(stream.partial):
             stream.abandon()
+
+
+def _check_extra_meta(directory: str, procedure: str | None, extra: dict[str, str] | None) -> None:
+    """Refuse metadata the capture reader would refuse, before the port is opened."""
+    from station.capture import iter_capture_chunks
+
+    meta = {"procedure": procedure} if procedure else {}
+    meta.update(extra or {})
+    if not meta:
+        return
+    for k in meta:
+        if not k or ":" in k or k != k.strip() or not k.isprintable():
+            raise InputError(None, None, f"--meta {k!r}: not a usable key")
+    fd, tmp = tempfile.mkstemp(prefix=".station-record.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(_head_text(meta, ["t"]))
+        try:
+            iter_capture_chunks(tmp)
+        except InputError as exc:
+            raise InputError(None, None, f"--meta: {exc.message}") from None
+    finally:
+        os.unlink(tmp)
 
 
 def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, warn) -> dict[str, str]:

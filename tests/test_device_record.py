@@ -1,0 +1,239 @@
+"""`station sim-device` and `station record` end to end on real pseudo-terminals: the capture
+reads back, gaps are marked, a stopped or killed recording leaves nothing silently broken."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import tty
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station.capture import read_capture
+from station.device.protocol import Header, data_sentence, header_sentence
+from station.device.reader import Reader
+from station.device.record import RecordError, record
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def station(*args: str, **kw) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "station", *args], cwd=ROOT, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+
+
+@pytest.fixture
+def sim_device():
+    procs = []
+
+    def start(*args: str) -> str:
+        p = station("sim-device", *args)
+        procs.append(p)
+        line = p.stdout.readline().strip()
+        assert line.startswith("/dev/pts/"), (line, p.stderr.read() if p.poll() is not None else "")
+        return line
+
+    yield start
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+            assert p.wait(10) == 0  # a clean exit on SIGINT
+        p.stdout.close()
+        p.stderr.close()
+
+
+def test_record_from_sim_device_reads_back(sim_device, tmp_path):
+    path = sim_device("--rate", "500", "--seed", "7")
+    out = tmp_path / "cap.csv"
+    rec = station("record", "--port", path, "--seconds", "1.5", "--out", str(out),
+                  "--procedure", "accel-tabletop", "--meta", "latitude_deg=39.98")
+    stdout, stderr = rec.communicate(timeout=60)
+    assert rec.returncode == 0, stderr
+    assert "recorded" in stdout and stderr == ""
+    cap = read_capture(out)
+    m = cap.meta
+    assert m["device"] == "SIM-ACC-0007" and m["procedure"] == "accel-tabletop"
+    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == ("V", "rad/s", "uT")
+    assert m["gaps"] == "0" and m["parse_errors"] == "0" and m["dropped"] == "0" and m["complete"] == "true"
+    assert m["sample_rate_hz"] == "500" and m["segments"] == "1" and m["latitude_deg"] == "39.98"
+    assert list(cap.columns) == ["t", "segment", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c"]
+    assert 500 <= cap.n_rows <= 1000 and int(m["samples"]) == cap.n_rows
+    np.testing.assert_allclose(np.diff(cap.columns["t"]), 0.002, atol=1e-9)  # no sample lost
+    assert np.all(cap.columns["segment"] == 0)
+    assert not list(tmp_path.glob("*.partial")) and not list(tmp_path.glob(".*tmp"))
+
+
+def test_sigterm_ends_a_recording_with_a_complete_capture(sim_device, tmp_path):
+    path = sim_device("--rate", "200")
+    out = tmp_path / "c.csv"
+    rec = station("record", "--port", path, "--out", str(out))
+    partial = Path(str(out) + ".partial")
+    end = time.monotonic() + 30
+    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
+        time.sleep(0.05)
+    rec.send_signal(signal.SIGTERM)
+    assert rec.wait(20) == 0, rec.stderr.read()
+    rec.stdout.close()
+    rec.stderr.close()
+    cap = read_capture(out)
+    assert cap.meta["complete"] == "true" and cap.n_rows > 10 and not partial.exists()
+
+
+def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_device, tmp_path):
+    path = sim_device("--rate", "200")
+    out = tmp_path / "k.csv"
+    partial = Path(str(out) + ".partial")
+    rec = station("record", "--port", path, "--out", str(out))
+    end = time.monotonic() + 30
+    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
+        time.sleep(0.05)
+    rec.kill()
+    rec.wait(10)
+    rec.stdout.close()
+    rec.stderr.close()
+    assert not out.exists() and partial.exists()
+    with open(partial, "a") as f:
+        f.write("99.000000,0,2.41")  # a row cut by the kill
+    fix = station("record", "--recover", str(partial))
+    stdout, stderr = fix.communicate(timeout=60)
+    assert fix.returncode == 0, stderr
+    cap = read_capture(out)
+    assert cap.meta["complete"] == "false" and cap.meta["recovered"] == "true"
+    assert cap.n_rows > 10 and cap.columns["t"][-1] < 99.0 and not partial.exists()
+
+
+def test_sim_device_obeys_commands(tmp_path):
+    """ORIENT moves the simulated unit (x_up -> x_down flips ax), bad commands get ERR."""
+    import threading
+
+    from solvers.simulate import LiveImu
+    from station.device.simdevice import SimDevice
+
+    dev = SimDevice(LiveImu(procedure="accel-tabletop", seed=1, rate_hz=200.0))
+    stop = threading.Event()
+    with dev:
+        th = threading.Thread(target=dev.run, args=(stop,), daemon=True)
+        th.start()
+        try:
+            with Reader(dev.path) as r:
+                assert r.wait_header(5.0).device_id == "SIM-ACC-0001"
+                time.sleep(0.3)
+                before = r.drain().column("ax").mean()
+                assert r.command("ORIENT", "x_down") and r.command("ORIENT", "sideways")
+                assert r.command("AUTO", "compass") and r.command("TEMP", "hot") and r.command("RATE", "400")
+                time.sleep(1.8)  # the move takes 2.5 s; by 1.8 s it is most of the way
+                b = r.drain()
+                acks = list(r.acks)
+        finally:
+            stop.set()
+            th.join(5)
+    assert [(a.verb, a.ok) for a in acks] == [("ORIENT", True), ("ORIENT", False), ("AUTO", False),
+                                             ("TEMP", False), ("RATE", True)]
+    assert "sideways" in acks[1].text and "accel-tabletop" in acks[2].text
+    # 0.0855 V per m/s^2: x_up -> x_down is ~1.7 V; most of it after 1.8 s of 2.5
+    assert b.column("ax")[-20:].mean() < before - 1.0
+    assert np.median(np.diff(b.t_s[-50:])) == pytest.approx(1 / 400, abs=1e-6)
+
+
+def test_recording_across_an_unplug_marks_the_gap_in_the_capture(tmp_path):
+    link = str(tmp_path / "ttyACM-bench")
+    hdr = Header("BENCH-1", "g", "deg/s", "", 1000.0)
+
+    def plug():
+        m, s = os.openpty()
+        tty.setraw(s)
+        if os.path.lexists(link):
+            os.unlink(link)
+        os.symlink(os.ttyname(s), link)
+        return m, s
+
+    def rows(a, b):
+        return b"".join(data_sentence(k, 1000 * k, [k, 0, 1, 0, 0, 0, np.nan, np.nan, np.nan, 25]) for k in range(a, b))
+
+    m, s = plug()
+    stop = threading.Event()
+    result = {}
+    reader = Reader(link, backoff_s=0.02, backoff_max_s=0.1).start()
+
+    def go():
+        result["r"] = record(link, str(tmp_path / "u.csv"), stop=stop, reader=reader, header_timeout_s=5.0)
+
+    th = threading.Thread(target=go)
+    th.start()
+    time.sleep(0.2)
+    os.write(m, header_sentence(hdr) + rows(0, 100))
+    time.sleep(0.3)
+    os.unlink(link)
+    os.close(m)
+    os.close(s)
+    time.sleep(0.3)
+    m, s = plug()
+    end = time.monotonic() + 5
+    while not reader.stats().connected and time.monotonic() < end:
+        time.sleep(0.01)
+    os.write(m, header_sentence(hdr) + rows(130, 200))
+    time.sleep(0.3)
+    stop.set()
+    th.join(10)
+    reader.stop()
+    os.close(m)
+    os.close(s)
+    cap = read_capture(tmp_path / "u.csv")
+    assert list(cap.columns) == ["t", "segment", "ax", "ay", "az", "gx", "gy", "gz", "temp_c"]  # no magnetometer
+    assert cap.n_rows == 170 and cap.meta["gaps"] == "30" and cap.meta["reconnects"] == "1"
+    np.testing.assert_array_equal(cap.columns["ax"], np.r_[0:100, 130:200])
+    np.testing.assert_array_equal(cap.columns["segment"], np.r_[[0] * 100, [1] * 70])
+    assert cap.meta["gap_1"].startswith("segment 1 reconnect: t 0.099000 -> 0.130000 s") and "missed 30" in cap.meta["gap_1"]
+
+
+def test_no_samples_is_an_error_and_leaves_no_file(tmp_path):
+    m, s = os.openpty()
+    tty.setraw(s)
+    try:
+        with pytest.raises(RecordError, match="no samples"):
+            record(os.ttyname(s), str(tmp_path / "e.csv"), seconds=0.3, header_timeout_s=0.2)
+    finally:
+        os.close(m)
+        os.close(s)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args,message", [
+    (["record", "--port", "/dev/nonexistent-tty", "--out", "x.csv", "--seconds", "1"], "/dev/nonexistent-tty: cannot open"),
+    (["record", "--out", "x.csv"], "--port is required"),
+    (["sim-device", "--effect", "warp_drive=3"], "warp_drive"),
+    (["sim-device", "--rate", "0"], "--rate 0"),
+])
+def test_bad_arguments_get_one_line_and_exit_2(args, message, tmp_path):
+    p = subprocess.run([sys.executable, "-m", "station", *args], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=60, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 2 and p.stdout == ""
+    assert len(p.stderr.strip().splitlines()) == 1 and message in p.stderr, p.stderr
+
+
+def test_bad_metadata_is_refused_before_recording(tmp_path):
+    m, s = os.openpty()
+    tty.setraw(s)
+    try:
+        p = subprocess.run([sys.executable, "-m", "station", "record", "--port", os.ttyname(s), "--seconds", "1",
+                            "--out", str(tmp_path / "b.csv"), "--meta", "latitude_deg=north"],
+                           cwd=ROOT, capture_output=True, text=True, timeout=60)
+    finally:
+        os.close(m)
+        os.close(s)
+    assert p.returncode == 2 and "latitude_deg" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ports_lists_or_says_no_ports():
+    p = subprocess.run([sys.executable, "-m", "station", "ports"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    from serial.tools import list_ports
+
+    n = len(list_ports.comports())
+    assert p.returncode == 0
+    assert p.stdout.strip() == "no ports" if n == 0 else len(p.stdout.strip().splitlines()) == n
