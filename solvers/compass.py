@@ -82,6 +82,7 @@ MIN_COVERAGE = 0.30
 RLS_P0_INFLATION = 1e4
 RLS_RUNNING_P0_INFLATION = 100.0  # running form: a firmer prior keeps early samples from dragging it
 RLS_PASSES = 1
+NOISE_BIAS_CORRECTION = True  # see noise_bias_nT
 HEADING_MAX_TILT_DEG = 70.0
 
 UPPER = np.triu_indices(3)            # W's free elements, row-major: 00 01 02 11 12 22
@@ -397,16 +398,26 @@ def noise_from_second_differences(y) -> float:
     return float(np.sqrt(np.mean(s ** 2)))
 
 
+def noise_bias_nT(y, W, h, noise_raw: float) -> np.ndarray:
+    """Per-row ``E|W(y − h)| − |W(y_true − h)|`` for white raw noise: the noise across the
+    ellipsoid's normal lengthens the vector by ``σ² (‖W‖²_F − |Wᵀû|²) / (2 |m|)`` (second
+    order; ~0.4 nT for 150 nT noise on a 55,000 nT field, enough to bias W's scale by a
+    quarter sigma). Added to F in every fit so that the *true* field has magnitude F."""
+    n, _, gain = magnitude_jacobian(y, np.asarray(W, float), np.asarray(h, float))
+    return float(noise_raw) ** 2 * (np.sum(np.asarray(W, float) ** 2) - gain ** 2) / (2.0 * n)
+
+
 def batch_fit(y, W0, h0, field_nT: float, noise_raw: float, *, weights_at=None) -> FitResult:
-    """Nonlinear least squares of ``|W(y − h)| − F`` over W (upper) and h through
-    ``solvers.fit``. Per-row sigma ``noise_raw · |Wᵀû|`` at ``weights_at`` = (W, h) (default
+    """Nonlinear least squares of ``|W(y − h)| − (F + b)`` over W (upper) and h through
+    ``solvers.fit``, b the noise bias (:func:`noise_bias_nT`, when NOISE_BIAS_CORRECTION).
+    Per-row sigma ``noise_raw · |Wᵀû|``; sigma and b at ``weights_at`` = (W, h) (default
     the start): the raw noise along the ellipsoid normal. When the residuals exceed that
     noise the engine scales the covariance by the reduced χ² (``misfit_scaled``)."""
     y = np.asarray(y, float)
     Wa, ha = weights_at if weights_at is not None else (W0, h0)
     _, _, gain = magnitude_jacobian(y, np.asarray(Wa, float), np.asarray(ha, float))
     sigma = float(noise_raw) * gain
-    F = float(field_nT)
+    F = float(field_nT) + (noise_bias_nT(y, Wa, ha, noise_raw) if NOISE_BIAS_CORRECTION else 0.0)
 
     def resid(p):
         return np.linalg.norm(calibrated(y, p["W"], p["h"]), axis=1) - F
@@ -469,6 +480,8 @@ class MagRLS:
         n_ref, J, gain = magnitude_jacobian(Y, W_ref, h_ref)
         # pseudo-measurement of the linearised model: z = F − n_ref + J θ_ref = J θ
         z = (self.F - n_ref) + J @ self.theta_ref
+        if NOISE_BIAS_CORRECTION:
+            z += self.r0 * (np.sum(W_ref ** 2) - gain * gain) / (2.0 * n_ref)
         R = lam * self.r0 * gain * gain
         for H, zk, rk in zip(J, z.tolist(), R.tolist()):
             PH = P @ H
@@ -480,6 +493,7 @@ class MagRLS:
 
     def _process_running(self, Y: np.ndarray) -> None:
         th, P, F, r0, lam = self.theta, self.P, self.F, self.r0, self.lam
+        bias = NOISE_BIAS_CORRECTION
         H = np.empty(9)
         for y0, y1, y2 in Y.tolist():
             w00, w01, w02, w11, w12, w22, h0, h1, h2 = th.tolist()
@@ -494,9 +508,12 @@ class MagRLS:
             g2 = a0 * w02 + a1 * w12 + a2 * w22    # g = Wᵀ û
             H[:] = (a0 * d0, a0 * d1, a0 * d2, a1 * d1, a1 * d2, a2 * d2, -g0, -g1, -g2)
             PH = P @ H
-            s = lam * r0 * (g0 * g0 + g1 * g1 + g2 * g2) + H @ PH
+            g2 = g0 * g0 + g1 * g1 + g2 * g2
+            s = lam * r0 * g2 + H @ PH
             K = PH / s
-            th += K * (F - n)
+            b = r0 * (w00 * w00 + w01 * w01 + w02 * w02 + w11 * w11 + w12 * w12 + w22 * w22 - g2) / (2.0 * n) \
+                if bias else 0.0
+            th += K * (F + b - n)
             P -= np.outer(K, PH)
             if lam != 1.0:
                 P /= lam
