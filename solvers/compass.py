@@ -629,7 +629,7 @@ def calibrate_mag(y, field_nT: float | None, *, unit_factor_nT: float | None = N
     th_b = theta_of(Wb, hb)
     sig_b = np.concatenate([batch.sigma["W"][UPPER], batch.sigma["h"]])
     # RLS from the ellipsoid values
-    rls = rls_passes(y, W_e, h1, F, sig_raw, passes=RLS_PASSES)
+    rls = rls_passes(y, W_e, h1, F, noise_raw, passes=RLS_PASSES)  # same noise (and bias term) as the batch
     diff = float(np.max(np.abs(rls.theta - th_b) / sig_b))
     if method == "rls":
         W, h = rls.W, rls.h
