@@ -79,14 +79,18 @@ class Store:
         self._lock = threading.RLock()
         self.conn = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
         self.conn.row_factory = sqlite3.Row
-        self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
-        self.conn.execute("PRAGMA foreign_keys = ON")
-        if not memory and self.conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
-            self.conn.execute("PRAGMA journal_mode = WAL")
-        if self._pending_migrations():
-            from db.migrations import apply
+        try:
+            self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
+            self.conn.execute("PRAGMA foreign_keys = ON")
+            if not memory and self.conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+                self.conn.execute("PRAGMA journal_mode = WAL")
+            if self._pending_migrations():
+                from db.migrations import apply
 
-            apply(self.conn)
+                apply(self.conn)
+        except BaseException:
+            self.conn.close()
+            raise
 
     # --- plumbing -----------------------------------------------------------------------
 

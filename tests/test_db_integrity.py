@@ -34,8 +34,7 @@ def _writer(path: str, worker: int, n: int, shared: str) -> None:
 
 
 def test_two_processes_saving_at_once_lose_nothing(tmp_path):
-    path = str(tmp_path / "station.db")
-    Store(path).close()
+    path = str(tmp_path / "fresh" / "station.db")  # both create and migrate it at once, too
     ctx = multiprocessing.get_context("spawn")
     procs = [ctx.Process(target=_writer, args=(path, w, 50, "SHARED")) for w in (1, 2)]
     for p in procs:

@@ -57,6 +57,29 @@ def test_sqlite_utils_sees_the_migrations(tmp_path):
         assert [m.name for m in STATION_MIGRATIONS.applied(s.database)] == MIGRATION_NAMES
 
 
+def test_a_new_migration_is_applied_once_to_an_existing_database(tmp_path, monkeypatch):
+    import db.migrations as dm
+    import db.schema as ds
+    import db.store as dst
+
+    path = str(tmp_path / "s.db")
+    with Store(path) as s:
+        meta, cols = small_capture()
+        cid = s.save_calibration(accel_result(), meta=meta, columns=cols)
+    extra = ("9999_test_add_column", ["ALTER TABLE devices ADD COLUMN location TEXT"])
+    monkeypatch.setattr(dm, "MIGRATIONS", ds.MIGRATIONS + [extra])
+    monkeypatch.setattr(dst, "MIGRATION_NAMES", ds.MIGRATION_NAMES + [extra[0]])
+    monkeypatch.setattr(dm, "STATION_MIGRATIONS", dm._build())
+    for _ in range(2):
+        with Store(path) as s:
+            assert "location" in {r[1] for r in s.conn.execute("PRAGMA table_info(devices)")}
+            assert s.calibration(cid)["params"]["B"] == [0.1, -0.2, 0.3] and s.verify() == []
+    raw = sqlite3.connect(path)
+    names = [r[0] for r in raw.execute("SELECT name FROM _sqlite_migrations ORDER BY id")]
+    raw.close()
+    assert names == MIGRATION_NAMES + ["9999_test_add_column"]
+
+
 def test_default_path_follows_station_db_then_xdg(monkeypatch, tmp_path):
     monkeypatch.delenv("STATION_DB", raising=False)
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
