@@ -355,6 +355,29 @@ def find_outliers(positions, g_mps2, res: FitResult, gauge: str, s_n, threshold:
     return out
 
 
+def rotation_covariance(positions, B, M, g_mps2, sig_n) -> np.ndarray:
+    """Covariance (3x3, rad²) of the frame rotation the labelled positions fix: the vector rows'
+    information ``Σ (A_k × e)(A_k × e)ᵀ / σ_v²`` (``e·(ω × A) = ω·(A × e)``)."""
+    info = np.zeros((3, 3))
+    for k, p in enumerate(positions):
+        if p.direction is None:
+            continue
+        A = accel.p1_apply(p.mean[None], B, M)[0]
+        var = (g_mps2 * p.placement_sigma_rad) ** 2 + float(sig_n[k]) ** 2
+        for e in _perp_basis(p.direction):
+            j = _cross(A, e)
+            info += np.outer(j, j) / var
+    return np.linalg.inv(info)
+
+
+def debias_rotation(B, M, cov_w) -> tuple[np.ndarray, np.ndarray]:
+    """Remove the second-order bias an uncertain rotation puts on (B, M): with the frame
+    rotation error ε ~ (0, Σ), ``E[R(ε)] = I + (Σ − tr Σ I)/2``, so every estimate is shrunk
+    on average (e.g. the diagonal of M by ``M_ii (Σ_jj + Σ_kk)/2``); undo that on average."""
+    corr = np.eye(3) - (cov_w - np.trace(cov_w) * np.eye(3)) / 2.0
+    return corr @ B, corr @ M
+
+
 def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm", gauge: str = "auto",
               noise_known: bool = True) -> P1Result:
     """The P1 calibration of ``positions`` (see the module docstring).
@@ -425,6 +448,10 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
         raise NotIdentifiable(f"the positions cannot determine {', '.join(res.unidentifiable)} "
                               f"(condition number {res.condition_number:.3g})")
     B, M = res.params["B"], res.params["M"]
+    rotation_cov = None
+    if gauge == "table":
+        rotation_cov = rotation_covariance(positions, B, M, g_mps2, sig_n)
+        B, M = debias_rotation(B, M, rotation_cov)
     cond = position_condition(V, B, M)
     if cond > CONDITION_WARN:
         warnings.append(f"the positions are too alike (condition number {cond:.0f} > {CONDITION_WARN:.0f}): "
