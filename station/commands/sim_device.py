@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(s, h)
     print(
         f"sim-device: {stats.samples} samples sent, {stats.dropped} dropped (host not reading), "
-        f"{stats.commands} commands",
+        f"{stats.commands} commands, max lag {stats.behind_s * 1e3:.1f} ms",
         file=sys.stderr,
     )
     return 0

@@ -60,7 +60,7 @@ class SimStats:
     sent_bytes: int = 0
     dropped: int = 0  # samples dropped because the host did not read
     commands: int = 0
-    behind_s: float = 0.0  # worst lag behind real time
+    behind_s: float = 0.0  # worst lateness of a sample behind its real-time due moment
 
 
 class SimDevice:
@@ -72,7 +72,7 @@ class SimDevice:
         *,
         protocol: str = "station",
         header_every_s: float = 1.0,
-        max_pending_s: float = 0.25,
+        max_pending_s: float = 0.5,
         write_every_s: float = 0.002,
         mavlink_scaled: bool = False,
         digits: int = 7,
@@ -94,6 +94,8 @@ class SimDevice:
         self._head_written = 0  # bytes of the head chunk already written
         self._parser = StationParser()
         self._seq = 0
+        self._encoded_bytes = 0
+        self._encoded_samples = 0
         self._mav = None
         if protocol == "mavlink":
             from station.device.mavlink import MavlinkEncoder
@@ -176,7 +178,7 @@ class SimDevice:
             self._head_written = 0
 
     def _bytes_per_s(self) -> float:
-        per = 80.0 if self._mav is None else (80.0 if not self._mav.scaled_too else 125.0)
+        per = self._encoded_bytes / self._encoded_samples if self._encoded_samples else 120.0
         return per * self.imu.rate_hz
 
     def _flush(self) -> None:
@@ -282,8 +284,11 @@ class SimDevice:
             due = int((now - self._t0) * rate) - (self.stats.samples - self._sent_at_t0)
             if due > 0:
                 n = min(due, max(1, int(rate * 0.05)))  # at most 50 ms per step
-                self.stats.behind_s = max(self.stats.behind_s, (due - n) / rate)
-                self._queue(self._encode(self.imu.read(n)), n)
+                self.stats.behind_s = max(self.stats.behind_s, (due - 1) / rate)  # oldest due sample's lateness
+                data = self._encode(self.imu.read(n))
+                self._encoded_bytes += len(data)
+                self._encoded_samples += n
+                self._queue(data, n)
                 self.stats.samples += n
                 self._flush()
                 if due > n:
