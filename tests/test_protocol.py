@@ -3,6 +3,8 @@ with exact error and gap counts (docs/protocol.md)."""
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -53,14 +55,50 @@ def parse(data: bytes, chunks=None):
     return p, events, p.take()
 
 
-def test_checksum_of_the_documented_example():
-    # docs/protocol.md's worked example: XOR of "STD,0,0,1,2,3,,,,,,,25" is 0x0E... computed here by hand:
-    payload = b"STH,1,IMU-0042,V,deg/s,uT,100"
+DOC = Path(__file__).resolve().parents[1] / "docs" / "protocol.md"
+
+
+def doc_sentences() -> list[bytes]:
+    return [m.encode() for m in re.findall(r"\$ST[A-Z],[^*`\n]*\*[0-9A-F]{2}", DOC.read_text())]
+
+
+def test_every_sentence_in_the_protocol_doc_is_valid():
+    found = doc_sentences()
+    assert len(found) == 13  # header, 4 data, 6 commands, 2 answers
+    p = StationParser()
+    for s in found:
+        p.feed(s + b"\r\n")
+    assert p.stats.parse_errors == 0 and p.stats.sentences == len(found)
+
+
+def test_the_documented_worked_example():
+    lines = [s + b"\r\n" for s in doc_sentences()[:5]]
+    assert lines[0] == header_sentence(Header("IMU-0042", "V", "deg/s", "", 100.0))
     x = 0
-    for c in payload:
+    for c in b"STH,1,IMU-0042,V,deg/s,,100":
         x ^= c
-    assert checksum(payload) == x
-    assert header_sentence(HEADER) == b"$" + payload + b"*%02X\r\n" % x
+    assert x == checksum(b"STH,1,IMU-0042,V,deg/s,,100") == 0x59
+    p, ev, block = parse(b"".join(lines[:2]))
+    assert p.stats.parse_errors == 0 and ev[0].rate_hz == 100.0 and block.t_dev_us[0] == 1_000_000
+    np.testing.assert_array_equal(block.values[0, :6], [2.5012, 1.6633, 1.6621, 0.12, -0.05, 0.01])
+    assert np.isnan(block.values[0, 6:9]).all() and block.values[0, 9] == 24.91
+    # "much later": the wrap, and two sentences lost
+    p, ev, block = parse(b"".join(lines[2:]))
+    assert p.stats.parse_errors == 0 and p.stats.gaps == 2 and p.stats.gap_events == 1 and p.stats.restarts == 0
+    np.testing.assert_array_equal(block.seq, [65535, 0, 3])
+    assert np.diff(block.t_dev_us).tolist() == [10_000.0, 30_000.0]
+
+
+def test_the_documented_arduino_sentences_parse():
+    """The sketch's payloads, built the way its snprintf builds them."""
+    text = DOC.read_text()
+    assert '"STD,%u,%lu,%s,%s,%s,,,,,,,"' in text and '"STH,1,ARDU-01,V,,,100"' in text
+    data = sentence("STH", 1, "ARDU-01", "V", "", "", 100)
+    data += b"".join(b"$%s*%02X\r\n" % (pl, checksum(pl)) for pl in (
+        b"STD,%d,%d,%s,%s,%s,,,,,,," % (k, 10_000 * k, b"2.5012", b"1.6633", b"1.6621") for k in range(3)))
+    p, ev, block = parse(data)
+    assert p.stats.parse_errors == 0 and len(block) == 3 and ev[0].gyro_unit == "" and ev[0].accel_unit == "V"
+    assert np.isnan(block.values[:, 3:10]).all()
 
 
 def test_good_stream_in_any_chunking_gives_the_same_samples():
