@@ -229,11 +229,22 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
         wN, wU = x[3], x[4]
         res.extra.update({"earth_rate_north_rad_s": float(wN), "earth_rate_up_rad_s": float(wU),
                           "sigma_earth_rate_north_rad_s": float(sx[3]), "sigma_earth_rate_up_rad_s": float(sx[4]),
-                          "latitude_from_gyros_deg": math.degrees(math.atan2(wU, wN))})
+                          "latitude_from_gyros_deg": math.degrees(math.atan2(wU, wN)),
+                          "sigma_latitude_from_gyros_deg": _latitude_sigma_deg(wN, wU, fr.cov[3:5, 3:5]),
+                          "earth_rate_magnitude_ratio": math.hypot(wN, wU) / OMEGA_EARTH_RAD_S})
+        res.warnings.append("no latitude_deg: Earth rate fitted from the positions (north and up components); "
+                            f"implied latitude {math.degrees(math.atan2(wU, wN)):.1f}° "
+                            f"± {res.extra['sigma_latitude_from_gyros_deg']:.1f}°")
     if fr.misfit_scaled:
         res.warnings.append(f"positions disagree beyond their noise (reduced χ² {fr.reduced_chi2:.2f}); "
                             "uncertainties scaled up")
     return res
+
+
+def _latitude_sigma_deg(wN: float, wU: float, cov2: np.ndarray) -> float:
+    r2 = wN * wN + wU * wU
+    J = np.array([-wU / r2, wN / r2])  # d atan2(wU, wN) / d (wN, wU)
+    return math.degrees(math.sqrt(max(float(J @ cov2 @ J), 0.0)))
 
 
 def accuracy_statement(me: allan.MeanError, achieved_rad_s, accuracy_rad_s: float | None) -> tuple[dict, list[str]]:

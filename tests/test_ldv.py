@@ -24,9 +24,21 @@ def _cap(sim, path=None) -> Capture:
     return Capture(dict(sim.meta), {k: np.asarray(v) for k, v in sim.columns.items()}, path)
 
 
-def _station(*args):
-    return subprocess.run([sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120)
+def _station(*args, subprocess_run: bool = False):
+    """The real CLI: in a subprocess, or (faster, same code path: argparse, StationError →
+    one line on stderr, exit 2) through ``station.cli.main`` in this process."""
+    if subprocess_run:
+        return subprocess.run([sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True,
+                              text=True, timeout=120)
+    import contextlib
+    import io
+
+    from station.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main([str(a) for a in args])
+    return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
 
 
 def _z(out, truth):
@@ -90,7 +102,7 @@ def test_straight_driving_is_refused_and_forced_is_loud(tmp_path):
     sim = simulate("ldv", seed=4, maneuver="straight", duration_s=200.0)
     path = tmp_path / "straight.csv"
     write_capture(path, _cap(sim))
-    r = _station("calibrate", path)
+    r = _station("calibrate", path, subprocess_run=True)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert "ill-conditioned" in r.stderr and "straight" in r.stderr
     out = proc.calibrate(_cap(sim), method="force")
