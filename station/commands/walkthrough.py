@@ -29,7 +29,7 @@ def _flat(prefix, v):
 
 def run(args: argparse.Namespace) -> int:
     from solvers.simulate import simulate
-    from station.calibrate import calibrate_capture, format_text
+    from station.calibrate import calibrate_capture, format_text, jsonable
     from station.capture import Capture, read_capture, write_capture
 
     sim = simulate(args.procedure, seed=args.seed)
@@ -42,11 +42,23 @@ def run(args: argparse.Namespace) -> int:
     print("2. calibrated:\n")
     print(format_text(result))
     print("\n3. against the simulator's truth (estimate − truth, in σ):")
-    params, unc, truth = result.get("params", {}), result.get("uncertainty", {}), sim.truth
+    params, unc, truth = jsonable(result.get("params", {})), jsonable(result.get("uncertainty", {})), sim.truth
+    for j in (1, 2, 3):  # P5 reports per beam; the truth per quantity
+        beam = params.pop(f"beam{j}", None)
+        if isinstance(beam, dict):
+            for key in ("dK", "alpha_deg", "beta_deg", "gamma_deg"):
+                if key in beam and key in truth:
+                    params[f"beam{j}.{key}"] = beam[key]
+                    unc[f"beam{j}.{key}"] = unc.get(f"beam{j}", {}).get(key)
+                    truth = {**truth, f"beam{j}.{key}": truth[key][j - 1]}
     for name, value in params.items():
         if name not in truth or not isinstance(value, (list, float, int)):
             continue
-        est, sig, tru = _flat(name, value), _flat(name, unc.get(name, value)), _flat(name, truth[name])
+        sig_v = unc.get(name)
+        if sig_v is None:
+            continue
+        sig_v = np.where(np.asarray(sig_v, dtype=object) == None, np.nan, sig_v).astype(float)  # noqa: E711
+        est, sig, tru = _flat(name, value), _flat(name, sig_v), _flat(name, truth[name])
         zs = [(k, (est[k] - tru[k]) / sig[k]) for k in est if k in tru and sig.get(k) and np.isfinite(sig[k]) and sig[k] > 0]
         if zs:
             print("   " + name + ": " + ", ".join(f"{z:+.1f}" for _, z in zs))
