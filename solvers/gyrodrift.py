@@ -220,8 +220,9 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
         res.extra["earth_rate_scale"] = float(x[3])
         res.extra["sigma_earth_rate_scale"] = float(sx[3])
         # the time-weighted mean Earth rate the model removed
-        res.earth_rate_body_rad_s = float(x[3]) * np.average(np.array(e_list), axis=0,
-                                                             weights=[p.omega.duration_s for p in positions])
+        e_mean = np.average(np.array(e_list), axis=0, weights=[p.omega.duration_s for p in positions])
+        res.earth_rate_body_rad_s = float(x[3]) * e_mean
+        res.sigma_earth_rate_body_rad_s = float(sx[3]) * np.abs(e_mean)
         if abs(x[3] - 1.0) > 3 * sx[3]:
             res.warnings.append(f"Earth-rate scale {x[3]:.3f} ± {sx[3]:.3f} differs from 1 by more than 3σ: "
                                 "check latitude, headings and the body frame")
