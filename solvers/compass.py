@@ -53,10 +53,12 @@ The chain (procedures.md P3), each step a function here:
    ``m_l = R_y(θ) R_x(φ) m_b``, magnetic heading ``atan2(−m_l,y, m_l,x)``, true = magnetic +
    declination. Meaningless near ±90° pitch (reported NaN beyond ``HEADING_MAX_TILT_DEG``).
 
-Coverage (:func:`coverage`): share of ``COVERAGE_CELLS`` near-equal-area cells (Voronoi
-cells of a Fibonacci lattice) visited by the field direction in the body frame. Distinct
-orientations (:func:`distinct_directions`): the greedy count of field directions at least
-``DISTINCT_SEPARATION_DEG`` apart.
+Coverage (:func:`coverage`): share of the sphere within ``COVERAGE_RADIUS_DEG`` = 30° of a
+visited field direction (body frame), counted on ``COVERAGE_CELLS`` = 64 near-equal-area
+cells (Fibonacci lattice); refused below ``MIN_COVERAGE`` = 40 %. Spread (:func:`spread`):
+refused below 0.1 (all directions in one plane). Distinct orientations
+(:func:`distinct_directions`): the greedy count of field directions at least
+``DISTINCT_SEPARATION_DEG`` = 20° apart.
 """
 from __future__ import annotations
 
@@ -78,7 +80,9 @@ MIN_ELLIPSOID_ORIENTATIONS = 6
 MIN_RLS_ORIENTATIONS = 9
 DISTINCT_SEPARATION_DEG = 20.0
 COVERAGE_CELLS = 64
-MIN_COVERAGE = 0.30
+COVERAGE_RADIUS_DEG = 30.0
+MIN_COVERAGE = 0.40
+MIN_SPREAD = 0.10
 RLS_P0_INFLATION = 1e4
 RLS_RUNNING_P0_INFLATION = 100.0  # running form: a firmer prior keeps early samples from dragging it
 RLS_PASSES = 1
@@ -277,14 +281,33 @@ def unit_rows(v) -> np.ndarray:
     return v / np.where(n > 0, n, 1.0)
 
 
-def coverage(directions, n_cells: int = COVERAGE_CELLS) -> float:
-    """Share of ``n_cells`` equal-area sphere cells visited by the directions (rows)."""
+def coverage(directions, n_cells: int = COVERAGE_CELLS, radius_deg: float = COVERAGE_RADIUS_DEG) -> float:
+    """Share of the sphere within ``radius_deg`` of a visited direction: the share of
+    ``n_cells`` near-equal-area cells whose centre lies that close to some direction
+    (rows). The radius lets a few held orientations count for their neighbourhood as a
+    continuous sweep does: a full sweep or 24 spread orientations 1.0, 12 spread 0.77, 9
+    spread 0.59, a hemisphere 0.73, a single great circle 0.50."""
     u = unit_rows(directions)
     u = u[np.all(np.isfinite(u), axis=1)]
     if len(u) == 0:
         return 0.0
-    cells = np.argmax(u @ fibonacci_sphere(n_cells).T, axis=1)
-    return len(np.unique(cells)) / n_cells
+    cmin = math.cos(math.radians(radius_deg))
+    best = np.full(n_cells, -1.0)
+    cells = fibonacci_sphere(n_cells)
+    for block in np.array_split(u, max(1, len(u) // 20000 + 1)):
+        best = np.maximum(best, np.max(block @ cells.T, axis=0))
+    return float(np.mean(best >= cmin))
+
+
+def spread(directions) -> float:
+    """3 × the smallest eigenvalue of the directions' scatter matrix ``mean(u uᵀ)``: 1 for
+    directions spread evenly in 3-D, 0 when they all lie in one plane (a unit turned about
+    one axis only, seen about the midrange centre)."""
+    u = unit_rows(directions)
+    u = u[np.all(np.isfinite(u), axis=1)]
+    if len(u) < 3:
+        return 0.0
+    return float(3.0 * np.linalg.eigvalsh(u.T @ u / len(u))[0])
 
 
 def distinct_directions(directions, min_sep_deg: float = DISTINCT_SEPARATION_DEG) -> int:
@@ -586,10 +609,17 @@ def check_orientations(y, *, need: int = MIN_RLS_ORIENTATIONS, min_coverage: flo
             f"only {n_dist} distinct field directions (>= {DISTINCT_SEPARATION_DEG:.0f}° apart); "
             f"the {'RLS' if need >= MIN_RLS_ORIENTATIONS else 'ellipsoid fit'} needs at least {need}: "
             "turn the unit through more orientations")
+    sp = spread(u)
+    if sp < MIN_SPREAD:
+        raise CoverageTooLow(
+            f"the field directions lie in one plane (spread {sp:.2f}, need {MIN_SPREAD:.2f}; "
+            f"{100 * cov:.0f}% of the sphere): the unit was turned about one axis only; "
+            "turn it through all orientations, including upside down")
     if cov < min_coverage:
         raise CoverageTooLow(
-            f"the field direction visited {100 * cov:.0f}% of the sphere (need {100 * min_coverage:.0f}%): "
-            "turn the unit through all orientations, including upside down")
+            f"the field direction came within {COVERAGE_RADIUS_DEG:.0f}° of only {100 * cov:.0f}% of the "
+            f"sphere (need {100 * min_coverage:.0f}%): turn the unit through all orientations, "
+            "including upside down")
     return n_dist, cov
 
 

@@ -216,7 +216,6 @@ def _circ_rad(a) -> float:
 
 
 def format_text(result: dict) -> str:
-    from station.calibrate import format_text as _generic  # noqa: F401  (kept for symmetry)
     from station.calibrate import _format_param
 
     lines = [f"procedure  compass ({result.get('method')})", f"device     {result.get('device')}",
