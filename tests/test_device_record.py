@@ -27,28 +27,22 @@ def station(*args: str, **kw) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
 
 
-@pytest.fixture
-def sim_device():
-    procs = []
-
-    def start(*args: str) -> str:
-        p = station("sim-device", *args)
-        procs.append(p)
-        line = p.stdout.readline().strip()
-        assert line.startswith("/dev/pts/"), (line, p.stderr.read() if p.poll() is not None else "")
-        return line
-
-    yield start
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-            assert p.wait(10) == 0  # a clean exit on SIGINT
-        p.stdout.close()
-        p.stderr.close()
+@pytest.fixture(scope="module")
+def sim_path():
+    """One `station sim-device` (500 Hz, seed 7) for the module's recordings."""
+    p = station("sim-device", "--rate", "500", "--seed", "7")
+    line = p.stdout.readline().strip()
+    assert line.startswith("/dev/pts/"), (line, p.stderr.read() if p.poll() is not None else "")
+    yield line
+    p.send_signal(signal.SIGINT)
+    assert p.wait(20) == 0  # a clean exit on SIGINT
+    assert "samples sent" in p.stderr.read()
+    p.stdout.close()
+    p.stderr.close()
 
 
-def test_record_from_sim_device_reads_back(sim_device, tmp_path):
-    path = sim_device("--rate", "500", "--seed", "7")
+def test_record_from_sim_device_reads_back(sim_path, tmp_path):
+    path = sim_path
     out = tmp_path / "cap.csv"
     rec = station("record", "--port", path, "--seconds", "1.5", "--out", str(out),
                   "--procedure", "accel-tabletop", "--meta", "latitude_deg=39.98")
@@ -68,8 +62,8 @@ def test_record_from_sim_device_reads_back(sim_device, tmp_path):
     assert not list(tmp_path.glob("*.partial")) and not list(tmp_path.glob(".*tmp"))
 
 
-def test_sigterm_ends_a_recording_with_a_complete_capture(sim_device, tmp_path):
-    path = sim_device("--rate", "200")
+def test_sigterm_ends_a_recording_with_a_complete_capture(sim_path, tmp_path):
+    path = sim_path
     out = tmp_path / "c.csv"
     rec = station("record", "--port", path, "--out", str(out))
     partial = Path(str(out) + ".partial")
@@ -84,8 +78,8 @@ def test_sigterm_ends_a_recording_with_a_complete_capture(sim_device, tmp_path):
     assert cap.meta["complete"] == "true" and cap.n_rows > 10 and not partial.exists()
 
 
-def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_device, tmp_path):
-    path = sim_device("--rate", "200")
+def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_path, tmp_path):
+    path = sim_path
     out = tmp_path / "k.csv"
     partial = Path(str(out) + ".partial")
     rec = station("record", "--port", path, "--out", str(out))
@@ -206,27 +200,34 @@ def test_no_samples_is_an_error_and_leaves_no_file(tmp_path):
 @pytest.mark.parametrize("args,message", [
     (["record", "--port", "/dev/nonexistent-tty", "--out", "x.csv", "--seconds", "1"], "/dev/nonexistent-tty: cannot open"),
     (["record", "--out", "x.csv"], "--port is required"),
+    (["record", "--port", "loop://", "--out", "x.csv", "--mavlink-message", "GPS_RAW"], "GPS_RAW"),
     (["sim-device", "--effect", "warp_drive=3"], "warp_drive"),
+    (["sim-device", "--effect", "temperature_bias=big"], "'big' is not a number"),
     (["sim-device", "--rate", "0"], "--rate 0"),
 ])
-def test_bad_arguments_get_one_line_and_exit_2(args, message, tmp_path):
-    p = subprocess.run([sys.executable, "-m", "station", *args], cwd=tmp_path, capture_output=True, text=True,
-                       timeout=60, env={**os.environ, "PYTHONPATH": str(ROOT)})
-    assert p.returncode == 2 and p.stdout == ""
-    assert len(p.stderr.strip().splitlines()) == 1 and message in p.stderr, p.stderr
+def test_bad_arguments_get_one_line_and_exit_2(args, message, tmp_path, monkeypatch, capsys):
+    from station.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(args) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1 and message in err, err
+    assert list(tmp_path.iterdir()) == []
 
 
-def test_bad_metadata_is_refused_before_recording(tmp_path):
+def test_bad_metadata_is_refused_before_recording(tmp_path, capsys):
+    from station.cli import main
+
     m, s = os.openpty()
     tty.setraw(s)
     try:
-        p = subprocess.run([sys.executable, "-m", "station", "record", "--port", os.ttyname(s), "--seconds", "1",
-                            "--out", str(tmp_path / "b.csv"), "--meta", "latitude_deg=north"],
-                           cwd=ROOT, capture_output=True, text=True, timeout=60)
+        rc = main(["record", "--port", os.ttyname(s), "--seconds", "1", "--out", str(tmp_path / "b.csv"),
+                   "--meta", "latitude_deg=north"])
     finally:
         os.close(m)
         os.close(s)
-    assert p.returncode == 2 and "latitude_deg" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    err = capsys.readouterr().err
+    assert rc == 2 and "latitude_deg" in err and "'north' is not a number" in err and len(err.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []
 
 

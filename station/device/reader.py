@@ -178,6 +178,7 @@ class Reader:
         self._queue: collections.deque[Batch] = collections.deque()
         self._queued = 0
         self._callbacks: list[Callable[[Batch], None]] = []
+        self._out: collections.deque[bytes] = collections.deque(maxlen=1000)  # to the device
         self._events: list[GapEvent] = []
         self._stop = threading.Event()
         self._header_seen = threading.Event()
@@ -271,16 +272,20 @@ class Reader:
             return out
 
     def send(self, data: bytes) -> bool:
-        """Write raw bytes to the device; False if it is not connected."""
-        with self._wlock:
-            ser = self._ser
-            if ser is None:
-                return False
-            try:
+        """Queue raw bytes for the device; the reader thread writes them within ~`poll_s`.
+
+        Never blocks the caller. False if the port is not connected (nothing queued).
+        """
+        if self._ser is None:
+            return False
+        self._out.append(bytes(data))
+        return True
+
+    def _write_pending(self, ser) -> None:
+        while self._out:
+            data = self._out.popleft()
+            with self._wlock:
                 ser.write(data)
-                return True
-            except (serial.SerialException, OSError):
-                return False
 
     def command(self, verb: str, *args: object) -> bool:
         """Send `$STC,<verb>,<args>` (station protocol commands, docs/protocol.md)."""
@@ -328,6 +333,11 @@ class Reader:
                 continue
             if data:
                 self._ingest(data, time.monotonic())
+            if self._out:
+                try:
+                    self._write_pending(ser)
+                except (serial.SerialException, OSError) as exc:  # seen by the next read too
+                    self._stats.last_error = f"write: {exc}"
             with self._lock:
                 self._stats.cpu_s = time.thread_time() - cpu0
         with self._lock:
@@ -347,7 +357,11 @@ class Reader:
             self._stats.connected = True
         self.parser.reset_stream()
         if self.request_header:
-            self.command("HDR")
+            try:
+                with self._wlock:
+                    self._ser.write(command_sentence("HDR"))
+            except (serial.SerialException, OSError):
+                pass  # the next read will see a dead port
 
     def _mark_reconnect(self, down_s: float, error: str) -> None:
         with self._lock:
