@@ -79,8 +79,21 @@ def drift_reference(omega_rad_s, ref_rad_s, dt_s: float,
     warnings = _check_length(len(w), dt_s, "mode A")
     me = allan.mean_standard_error(w - r, dt_s)
     sigma = np.sqrt(me.se ** 2 + ref_drift_rad_s ** 2)
-    return DriftResult("reference", me.mean, sigma, me, extra={"ref_drift_rad_s": ref_drift_rad_s},
-                       warnings=warnings)
+    extra = {"ref_drift_rad_s": ref_drift_rad_s}
+    # Mounting check: regress the difference on the reference rate, d = ε + M Ω. A
+    # misalignment or scale error M biases the mean difference by M · mean(Ω).
+    R = r - r.mean(axis=0)
+    if np.linalg.matrix_rank(R.T @ R) == 3:
+        M = np.linalg.lstsq(R, (w - r) - (w - r).mean(axis=0), rcond=None)[0].T
+        extra["rate_coupling"] = M
+        bias = M @ r.mean(axis=0)
+        extra["rate_coupling_bias_rad_s"] = bias
+        if np.any(np.abs(bias) > 0.5 * sigma):
+            warnings.append("MEMS minus reference grows with the rate (misalignment or scale error, largest "
+                            f"{np.max(np.abs(M)):.3g} rad/rad): with a mean rate of "
+                            f"{np.linalg.norm(r.mean(axis=0)):.3g} rad/s it biases the drift by up to "
+                            f"{np.max(np.abs(bias)):.3g} rad/s")
+    return DriftResult("reference", me.mean, sigma, me, extra=extra, warnings=warnings)
 
 
 def _pitch_roll_sigma(f_mean, f_se) -> tuple[float, float, float, float]:

@@ -300,3 +300,23 @@ def test_several_positions_without_latitude_estimate_it():
         z = (np.array(out["params"]["drift"]) - sim.truth["drift"]) / np.array(out["uncertainty"]["drift"])
         assert np.all(np.abs(z) < 3.5)
         assert any("implied latitude" in w for w in out["warnings"])
+
+
+def test_mode_a_warns_when_misalignment_meets_a_mean_rate():
+    """Mounting check: a 2° misalignment on a turntable turning 0.2 rad/s on average biases
+    the mean difference by ~7e-3 rad/s; the station must say so. Zero-mean motion: no warning."""
+    rng = np.random.default_rng(9)
+    n = 18_000
+    t = np.arange(n) * 0.01
+    omega = np.column_stack([0.05 * np.sin(t / 3), 0.2 + 0.1 * np.sin(t / 7), 0.03 * np.cos(t / 5)])
+    eps = np.array([0.01, -0.02, 0.005])
+    C = frames.rotvec_to_matrix(np.radians([2.0, 0.0, 0.0]))
+    w = omega @ C.T + eps + rng.normal(scale=0.002, size=(n, 3))
+    ref = omega + rng.normal(scale=0.0002, size=(n, 3))
+    res = gd.drift_reference(w, ref, 0.01)
+    assert any("misalignment" in m for m in res.warnings)
+    assert np.max(np.abs(res.extra["rate_coupling_bias_rad_s"])) == pytest.approx(0.2 * math.sin(2 * DEG), rel=0.1)
+    zero_mean = omega - omega.mean(axis=0)
+    res0 = gd.drift_reference(zero_mean @ C.T + eps + rng.normal(scale=0.002, size=(n, 3)),
+                              zero_mean + rng.normal(scale=0.0002, size=(n, 3)), 0.01)
+    assert not any("misalignment" in m for m in res0.warnings)
