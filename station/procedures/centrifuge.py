@@ -53,7 +53,11 @@ def _rows(capture):
             if not (np.all(np.isfinite(a[k])) and np.isfinite(w[k])):
                 raise InputError(capture.path, lines[k], "row has an empty ax/ay/az/speed_rad_s")
         return a, w, labels, sig, lines
-    key = [(str(pos[k]) if pos is not None else "", w[k]) for k in range(len(a))]
+    if pos is None:
+        raise UnsupportedError(f"{_where(capture)}: accel-centrifuge: a time series needs a 'position' column to "
+                               "tell the orientations apart (or give a table of averages, one row per "
+                               "orientation and speed)")
+    key = [(str(pos[k]), w[k]) for k in range(len(a))]
     N, W, L, S, lines = [], [], [], [], []
     k = 0
     while k < len(a):
@@ -61,10 +65,10 @@ def _rows(capture):
         while j < len(a) and key[j] == key[k]:
             j += 1
         seg = a[k:j][np.all(np.isfinite(a[k:j]), axis=1)]
-        if len(seg) >= 2 and np.isfinite(w[k]) and (pos is None or key[k][0]):
+        if len(seg) >= 2 and np.isfinite(w[k]) and key[k][0]:
             N.append(seg.mean(axis=0))
             W.append(w[k])
-            L.append(key[k][0] or str(len(N)))
+            L.append(key[k][0])
             S.append(seg.std(axis=0, ddof=1) / math.sqrt(len(seg)))
             lines.append(first + k)
         k = j

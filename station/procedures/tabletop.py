@@ -81,7 +81,7 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
         for k in range(len(a)):
             if not np.all(np.isfinite(a[k])):
                 raise InputError(capture.path, None, f"row {k + 1}: accelerometer average is missing")
-            lab = str(labels[k]) if labels is not None else str(k + 1)
+            lab = str(labels[k]) if labels is not None and labels[k] else str(k + 1)
             d, s = T.known_direction(lab)
             std = np.array([float(x[k]) for x in stds]) if noise_known else None
             nk = int(n[k]) if noise_known and np.isfinite(n[k]) else 1
