@@ -20,7 +20,7 @@ class HistoryScreen(Screen):
     SUB_TITLE = "devices and calibrations"
     CSS = """
     HistoryScreen #due { height: auto; padding: 0 1; color: $warning; }
-    HistoryScreen #devices { width: 36; height: 1fr; }
+    HistoryScreen #devices { width: 34; height: 1fr; }
     HistoryScreen #right { width: 1fr; height: 1fr; }
     HistoryScreen #calibrations { height: 1fr; }
     HistoryScreen #plot { height: 1fr; min-height: 8; }
@@ -51,9 +51,9 @@ class HistoryScreen(Screen):
 
     def on_mount(self) -> None:
         t = self.query_one("#devices", DataTable)
-        t.add_columns("device", "cals", "last", "status")
+        t.add_columns("device", "cals", "status")
         c = self.query_one("#calibrations", DataTable)
-        c.add_columns("#", "time", "procedure", "residual", "ok")
+        c.add_columns("#", "date", "procedure", "residual", "in use")
         self.load()
 
     @work(thread=True, exclusive=True, group="history", exit_on_error=False, description="read devices")
@@ -89,9 +89,7 @@ class HistoryScreen(Screen):
             for d in self.devices:
                 st = status.get(d["id"])
                 word = st["status"] if st else "ok"
-                if st and st["status"] in ("due", "overdue") and st["days_left"] is not None:
-                    word += f" {st['days_left']:+.0f}d"
-                t.add_row(d["id"], str(d["n_calibrations"]), (d["last_calibrated"] or "—")[:10], word, key=d["id"])
+                t.add_row(d["id"], str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
             text = "\n".join(f"{d['device_id']}: {d['status']} — {d['reason']}"[:200] for d in bad[:3])
             if not self.devices:
@@ -107,8 +105,9 @@ class HistoryScreen(Screen):
             c.clear()
             for h in reversed(self.history):
                 res = h["residual_rms"]
-                c.add_row(str(h["id"]), h["time"][:16], h["procedure"],
-                          f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if h["accepted"] else "")
+                in_use = h["accepted"] and h.get("superseded_by") is None
+                c.add_row(str(h["id"]), h["time"][:10], h["procedure"],
+                          f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if in_use else "")
             self.param_index = 0
             self.plot()
 

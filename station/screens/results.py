@@ -148,8 +148,7 @@ class ResultsScreen(Screen):
             label.update(f"[b red]Not saved: {message.error}[/]")
             return
         self.calibration_id = message.calibration_id
-        label.update(f"[b green]Saved as calibration #{message.calibration_id} for {self.app.session.device_id}[/]"
-                     "  · n new run · F2 history · ctrl+q quit")
+        label.update(f"[b green]Saved as calibration #{message.calibration_id} for {self.app.session.device_id}[/]")
         if self.app.session.exit_when_saved:
             self.set_timer(1.0, self.app.exit)
 
