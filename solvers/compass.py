@@ -226,42 +226,92 @@ class AngleKalman:
         return a
 
 
+class TiltKalman:
+    """The two filters (pitch, roll) as one streaming object: ``process(t_s, f, ω)`` takes
+    a block of samples and carries the state to the next block, so a live stream fed in
+    pieces gives the same angles as the whole recording at once."""
+
+    def __init__(self, config: KalmanConfig | None = None, g_unit: float = 1.0):
+        self.config = config or KalmanConfig()
+        self.g_unit = float(g_unit)
+        self.kp: AngleKalman | None = None
+        self.kr: AngleKalman | None = None
+        self.t_last: float | None = None
+
+    def process(self, t_s, f, omega_rad_s) -> tuple[np.ndarray, np.ndarray]:
+        config = self.config
+        t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        f = np.atleast_2d(np.asarray(f, dtype=float))
+        w = np.atleast_2d(np.asarray(omega_rad_s, dtype=float)).copy()
+        if w.shape[1] < 3:
+            w = np.hstack([w, np.zeros((len(w), 3 - w.shape[1]))])
+        w[~np.isfinite(w)] = 0.0
+        n = len(t)
+        pitch, roll = np.empty(n), np.empty(n)
+        if n == 0:
+            return pitch, roll
+        th_acc, ph_acc = pitch_roll_from_accel(f)
+        dev = (np.linalg.norm(f, axis=1) / self.g_unit - 1.0) / config.accel_dev_g
+        turn = np.linalg.norm(w, axis=1) / config.rate_ref_rad_s
+        r_scale = 1.0 + dev * dev + turn * turn
+        k0 = 0
+        if self.kp is None:
+            self.kp = AngleKalman(th_acc[0], config)
+            self.kr = AngleKalman(ph_acc[0], config, wrap=True)
+            pitch[0], roll[0] = th_acc[0], ph_acc[0]
+            self.t_last = float(t[0])
+            k0 = 1
+        kp, kr = self.kp, self.kr
+        dts = np.diff(t, prepend=self.t_last)
+        lim = math.radians(85.0)
+        wl, thl, phl, rsl, dtl = w.tolist(), th_acc.tolist(), ph_acc.tolist(), r_scale.tolist(), dts.tolist()
+        for k in range(k0, n):
+            p_, q_, r_ = wl[k]
+            th, ph = kp.a, kr.a
+            sph, cph = math.sin(ph), math.cos(ph)
+            thc = min(max(th, -lim), lim)
+            th_dot = q_ * cph - r_ * sph
+            ph_dot = p_ + math.tan(thc) * (q_ * sph + r_ * cph)
+            dt = dtl[k]
+            rs = rsl[k]
+            cth = math.cos(thl[k])
+            pitch[k] = kp.step(th_dot, thl[k], dt, rs)
+            roll[k] = kr.step(ph_dot, phl[k], dt, rs / max(cth * cth, 1e-4))
+        self.t_last = float(t[-1])
+        return pitch, roll
+
+
 def kalman_pitch_roll(t_s, f, omega_rad_s, config: KalmanConfig | None = None,
                       g_unit: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Pitch and roll [rad] per sample from specific force ``f`` (rows, in units where 1 g =
     ``g_unit``) and body rates ``omega_rad_s`` (rows p, q, r; r may be NaN/absent → 0)."""
-    config = config or KalmanConfig()
-    t = np.asarray(t_s, dtype=float)
-    f = np.atleast_2d(np.asarray(f, dtype=float))
-    w = np.atleast_2d(np.asarray(omega_rad_s, dtype=float)).copy()
-    if w.shape[1] < 3:
-        w = np.hstack([w, np.zeros((len(w), 3 - w.shape[1]))])
-    w[~np.isfinite(w)] = 0.0
-    th_acc, ph_acc = pitch_roll_from_accel(f)
-    dev = (np.linalg.norm(f, axis=1) / g_unit - 1.0) / config.accel_dev_g
-    turn = np.linalg.norm(w, axis=1) / config.rate_ref_rad_s
-    r_scale = 1.0 + dev * dev + turn * turn
-    kp = AngleKalman(th_acc[0], config)
-    kr = AngleKalman(ph_acc[0], config, wrap=True)
-    n = len(t)
-    pitch, roll = np.empty(n), np.empty(n)
-    pitch[0], roll[0] = th_acc[0], ph_acc[0]
-    dts = np.diff(t, prepend=t[0])
-    lim = math.radians(85.0)
-    wl, thl, phl, rsl, dtl = w.tolist(), th_acc.tolist(), ph_acc.tolist(), r_scale.tolist(), dts.tolist()
-    for k in range(1, n):
-        p_, q_, r_ = wl[k]
-        th, ph = kp.a, kr.a
-        sph, cph = math.sin(ph), math.cos(ph)
-        thc = min(max(th, -lim), lim)
-        th_dot = q_ * cph - r_ * sph
-        ph_dot = p_ + math.tan(thc) * (q_ * sph + r_ * cph)
-        dt = dtl[k]
-        rs = rsl[k]
-        cth = math.cos(thl[k])
-        pitch[k] = kp.step(th_dot, thl[k], dt, rs)
-        roll[k] = kr.step(ph_dot, phl[k], dt, rs / max(cth * cth, 1e-4))
-    return pitch, roll
+    return TiltKalman(config, g_unit).process(t_s, f, omega_rad_s)
+
+
+class LiveCompass:
+    """The whole chain for a live stream: causal low-pass filters (accelerometer, gyro,
+    magnetometer), the tilt Kalman filters, the calibration ``m = W (y − h)`` and the
+    tilt-compensated heading. ``update(t_s, accel_g, gyro_rad_s, mag_raw)`` takes a block
+    (rows) and returns ``(pitch_rad, roll_rad, heading_magnetic_deg, heading_true_deg)``
+    per row. The accelerometer must read specific force in g (flip a gravity-direction
+    sensor before)."""
+
+    def __init__(self, rate_hz: float, W, h, declination_deg: float = 0.0,
+                 config: KalmanConfig | None = None):
+        self.W, self.h = np.asarray(W, float), np.asarray(h, float)
+        self.declination_deg = float(declination_deg)
+        self.f_acc = CausalLowpass(ACCEL_CUTOFF_HZ, rate_hz)
+        self.f_gyr = CausalLowpass(GYRO_CUTOFF_HZ, rate_hz)
+        self.f_mag = CausalLowpass(MAG_CUTOFF_HZ, rate_hz)
+        self.tilt = TiltKalman(config)
+
+    def update(self, t_s, accel_g, gyro_rad_s, mag_raw):
+        f = self.f_acc.process(np.atleast_2d(accel_g))
+        w = self.f_gyr.process(np.atleast_2d(gyro_rad_s))
+        y = self.f_mag.process(np.atleast_2d(mag_raw))
+        pitch, roll = self.tilt.process(t_s, f, w)
+        mag, true = heading_deg(calibrated(y, self.W, self.h), pitch, roll, self.declination_deg)
+        return pitch, roll, mag, true
 
 
 # ---------------------------------------------------------------- coverage
