@@ -41,7 +41,7 @@ def test_connect_snapshot(snap_compare, size):
 
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
 def test_procedure_snapshot(snap_compare, size):
-    """The demo mid-run: x_up and x_down captured, the operator has put y_up wrong face up."""
+    """The demo mid-run: x_up and x_down captured, y_up being averaged."""
     clock = FakeClock()
     src = SimSource(seed=0, clock=clock)
     app = make_app(None, device=src, demo=True, average_s=3.0, settle_s=1.0)
