@@ -234,6 +234,15 @@ def test_cli_refuses_missing_columns(tmp_path):
     _one_line_refusal(_station("calibrate", _write(tmp_path, sim2, "d.csv")), "gy")
 
 
+def test_table_of_averages_refused(tmp_path):
+    path = tmp_path / "avg.csv"
+    write_capture(path, Capture({"station-capture": "1", "procedure": "gyro-drift", "device": "X",
+                                 "gyro_unit": "rad/s", "sample_rate_hz": "100"},
+                                {"position": np.array(["1", "2"], dtype=object), "n": np.array([100.0, 100.0]),
+                                 "gx": np.array([0.01, 0.02]), "gy": np.zeros(2), "gz": np.zeros(2)}))
+    _one_line_refusal(_station("calibrate", path), "table of averages")
+
+
 def test_cli_refuses_counts_without_a_scale_and_uses_one_given(tmp_path):
     sim = simulate("gyro-drift", seed=8, mode="static")
     for k in ("gx", "gy", "gz"):

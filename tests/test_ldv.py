@@ -184,3 +184,10 @@ def test_two_clocks_ref_t_column_interleaved_rows_and_separate_file(tmp_path):
     out1 = json.loads(r.stdout)
     assert "reference file" in out1["alignment"]
     assert np.max(np.abs(_z(out1, truth))) < 4
+    # the same through --reference (no reference_file in the metadata)
+    bare = tmp_path / "ldv_bare.csv"
+    write_capture(bare, Capture(dict(sim.meta, reference_time_offset_s=str(offset)),
+                                {"t": t, "vl1": c["vl1"], "vl2": c["vl2"], "vl3": c["vl3"]}))
+    r2 = _station("calibrate", bare, "--reference", ref_file, "--json")
+    assert r2.returncode == 0, r2.stderr
+    assert json.loads(r2.stdout)["params"] == out1["params"]

@@ -119,6 +119,9 @@ def _gyro_factor(capture, warnings: list[str]) -> float:
 
 
 def _dt(capture) -> float:
+    if not capture.is_time_series and "n" in capture.columns:
+        raise UnsupportedError(f"{capture.path}: a table of averages cannot give a drift's error (Allan "
+                               "deviation): gyro-drift needs the time series")
     if capture.is_time_series:
         t = capture.columns["t"]
         d = np.diff(t[np.isfinite(t)])
