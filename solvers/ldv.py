@@ -72,6 +72,43 @@ def angle_jacobian(X) -> np.ndarray:
     return J
 
 
+EXCESS_WARN = 1.3
+
+
+def residual_excess(r) -> float:
+    """std(r) over its white part std(Δ²r)/sqrt(6): 1 for white residuals, larger when the
+    residual holds a slowly varying misfit the model does not explain."""
+    r = np.asarray(r, dtype=float)
+    if len(r) < 8:
+        return 1.0
+    white = float(np.std(np.diff(r, 2))) / math.sqrt(6.0)
+    return float(np.std(r)) / white if white > 0 else math.inf
+
+
+def hac_covariance(H, r, HtH_inv, max_lag: int | None = None) -> np.ndarray:
+    """Newey-West (Bartlett) covariance of a least-squares estimate with serially correlated
+    residuals: ``(HᵀH)⁻¹ S (HᵀH)⁻¹``, ``S = Σ_l w_l Σ_t (h_t r_t)(h_{t−l} r_{t−l})ᵀ + transpose``.
+    The bandwidth is 3x the lag where the residual autocorrelation first drops below 0.05
+    (at least 4, at most n/10)."""
+    H = np.asarray(H, dtype=float)
+    r = np.asarray(r, dtype=float)
+    n = len(r)
+    if max_lag is None:
+        rc = r - r.mean()
+        f = np.fft.rfft(rc, 2 * n)
+        acf = np.fft.irfft(f * np.conj(f))[: n // 10 + 1]
+        acf = acf / acf[0] if acf[0] > 0 else acf
+        below = np.flatnonzero(acf < 0.05)
+        max_lag = int(np.clip(3 * (below[0] if len(below) else n // 10), 4, max(4, n // 10)))
+    g = H * r[:, None]
+    S = g.T @ g
+    for lag in range(1, max_lag + 1):
+        w = 1.0 - lag / (max_lag + 1.0)
+        G = g[lag:].T @ g[:-lag]
+        S += w * (G + G.T)
+    return HtH_inv @ S @ HtH_inv
+
+
 def velocity_condition(v_body_mps) -> float:
     """cond(HᵀH) of the body velocity set."""
     H = np.asarray(v_body_mps, dtype=float)
@@ -117,6 +154,14 @@ def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None,
         r = Y[:, j] - H @ X                                  # V_L − V̂_L
         s2 = float(r @ r) / max(n - 3, 1)
         cov = s2 * HtH_inv
+        excess = residual_excess(r)
+        if excess > EXCESS_WARN:
+            cov_hac = hac_covariance(H, r, HtH_inv)
+            if np.trace(cov_hac) > np.trace(cov):
+                cov = cov_hac
+            warnings.append(f"beam{j + 1}: residuals are {excess:.2f}x their sample-to-sample noise (correlated in "
+                            "time): the model does not explain everything (time delay, lever arm, offset or "
+                            "drift?); uncertainties from a correlation-robust (Newey-West) covariance")
         a = ldv_model.angles_from_X(X[None, :])
         J = angle_jacobian(X)
         cov_a = J @ cov @ J.T
