@@ -1,0 +1,367 @@
+"""Per-procedure diagnosis problems: arrays in, a :class:`~solvers.diagnose.engine.Problem` out.
+
+Each builder writes ``residual(params) = model − data`` with the shared forward model of
+``solvers.models`` (the baseline blocks plus whatever effect blocks are present), so the
+fitted baseline "simulated under the capture's own conditions" is ``data + residual``.
+No physics here: only which rows, which conditions and which blocks.
+
+Thresholds (ΔBIC below −THRESHOLDS[procedure] to select) were measured on null
+simulations with ``python benchmarks/bench_diagnose.py --null-only --trials 200``: the
+smallest value giving a false-alarm rate ≤ 5 % per capture (docs/benchmarks.md, Diagnose).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from solvers import frames
+from solvers.diagnose.engine import Candidate, Problem
+from solvers.models import Conditions
+from solvers.models import accel as accel_model
+from solvers.models import gyro as gyro_model
+from solvers.models import ldv as ldv_model
+from solvers.models import mag as mag_model
+
+# ΔBIC thresholds from null simulations (bench_diagnose.py --null-only --trials 200).
+THRESHOLDS = {
+    "accel-tabletop": 10.0,
+    "accel-centrifuge": 10.0,
+    "compass": 10.0,
+    "gyro-drift": 10.0,
+    "ldv": 10.0,
+}
+MIN_TEMP_SPAN_C = 0.2   # a temperature that varies less than this cannot resolve a temperature term
+
+
+def _span(x) -> float:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.percentile(x, 95) - np.percentile(x, 5)) if x.size else 0.0
+
+
+def _temp_candidate(temp_c, width=3, block="bT") -> Candidate:
+    if temp_c is None or not np.all(np.isfinite(temp_c)):
+        return Candidate("temperature_bias", reason="no temperature in the capture (temp_c column)")
+    if _span(temp_c) < MIN_TEMP_SPAN_C:
+        return Candidate("temperature_bias", reason=f"temperature constant within {_span(temp_c):.2g} °C: "
+                         "a temperature term cannot be told from the bias")
+    return Candidate("temperature_bias", {block: np.zeros(width)})
+
+
+def _time_candidate(t_s, width=3) -> Candidate:
+    if t_s is None or not np.all(np.isfinite(t_s)):
+        return Candidate("time_drift", reason="no time in the capture (t or elapsed_s column)")
+    if _span(t_s) <= 0:
+        return Candidate("time_drift", reason="all rows at one time")
+    return Candidate("time_drift", {"bt": np.zeros(width)})
+
+
+def time_blocks(t_s: np.ndarray, n_blocks: int = 10) -> np.ndarray:
+    """Contiguous time blocks (CV groups) of equal duration."""
+    t = np.asarray(t_s, float)
+    span = t.max() - t.min()
+    if span <= 0:
+        return np.zeros(len(t), int)
+    return np.minimum(((t - t.min()) / span * n_blocks).astype(int), n_blocks - 1)
+
+
+def _ref(temp_c) -> float:
+    return float(np.nanmean(temp_c)) if temp_c is not None and np.any(np.isfinite(temp_c)) else 25.0
+
+
+# ---------------------------------------------------------------- P4 gyro drift
+
+def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C_b_n=None,
+                 max_rows: int = 400) -> Problem:
+    """Static gyro record(s) (P4 body frame, rad/s) as block means.
+
+    earth_body_rad_s: (N, 3) Earth rate in the body frame per sample (the mode-B baseline),
+    or None when the latitude is unknown: the baseline is then a constant bias and
+    ``earth_rate`` a candidate (its north and up components, needs ``C_b_n`` per sample).
+    positions: (N,) labels (one static orientation each).
+    """
+    t = np.asarray(t_s, float)
+    w = np.asarray(w_rad_s, float)
+    pos = np.asarray(positions, dtype=object)
+    n = len(t)
+    # block means within each position run
+    bounds = [0] + [k for k in range(1, n) if pos[k] != pos[k - 1]] + [n]
+    per = max(1, int(math.ceil(n / max_rows)))
+    blocks = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        for s in range(a, b, per):
+            e = min(b, s + per)
+            if e - s >= max(2, per // 2):
+                blocks.append((s, e))
+    idx = [np.arange(s, e) for s, e in blocks]
+    mean = lambda x: np.array([np.mean(x[i], axis=0) for i in idx])  # noqa: E731
+    tb, wb = mean(t), mean(w)
+    fb = mean(np.asarray(f_body, float)) if f_body is not None else None
+    Tb = mean(np.asarray(temp_c, float)) if temp_c is not None else None
+    Eb = mean(np.asarray(earth_body_rad_s, float)) if earth_body_rad_s is not None else np.zeros_like(wb)
+    Cb = mean(np.asarray(C_b_n, float)) if C_b_n is not None else None
+    sd = np.array([np.std(w[i], axis=0, ddof=1) / math.sqrt(len(i)) for i in idx])
+    sig_axis = np.median(sd, axis=0)
+    sig_axis = np.where(sig_axis > 0, sig_axis, 1e-9)
+    sigma = np.tile(sig_axis, (len(idx), 1)).ravel()
+    pb = np.array([pos[i[0]] for i in idx], dtype=object)
+    uniq = list(dict.fromkeys(pb))
+    multi = len(uniq) > 1
+    groups = time_blocks(tb)  # held-out time blocks: a position out would leave G unidentified
+    cond = Conditions(t_s=tb, temp_c=Tb, temp_ref_c=_ref(Tb), t_ref_s=float(tb.mean()), f_mps2=fb)
+
+    def residual(p):
+        omega = Eb
+        if "wE" in p:
+            omega = Eb + np.einsum("nij,j->ni", Cb[:, :, :2], p["wE"])
+        q = {k: v for k, v in p.items() if k != "wE"}
+        return (gyro_model.forward(omega, q, cond) - wb).ravel()
+
+    cands = [_temp_candidate(Tb), _time_candidate(tb)]
+    if fb is None:
+        cands.append(Candidate("g_sensitivity", reason="no accelerometer: the specific force is unknown"))
+    else:
+        cands.append(Candidate("g_sensitivity", {"G": np.zeros((3, 3))}))
+    if earth_body_rad_s is not None:
+        cands.append(Candidate("earth_rate", reason="part of the baseline here: the latitude is known and "
+                               "the Earth rate is removed (mode B)"))
+    elif Cb is None or not multi:
+        cands.append(Candidate("earth_rate", reason="one static orientation and no latitude: the Earth rate "
+                               "cannot be told from the bias"))
+    else:
+        cands.append(Candidate("earth_rate", {"wE": np.zeros(2)}))
+    return Problem("gyro-drift", "y = ω_E + ε (P4 mode B)" if earth_body_rad_s is not None else "y = ε",
+                   residual, sigma, np.repeat(groups, 3), {"eps": wb.mean(axis=0) - Eb.mean(axis=0)},
+                   {"eps": True}, cands, THRESHOLDS["gyro-drift"], unit="rad/s", time_ordered=True, channels=3,
+                   row_labels=[f"position {p} t={x:.1f} s {a}" for p, x in zip(pb, tb) for a in "xyz"],
+                   extended_model=lambda names: "y = ω_E + ε" + _suffix(names, GYRO_TERMS))
+
+
+GYRO_TERMS = {"temperature_bias": " + b_T (T − T_ref)", "time_drift": " + b_t (t − t_ref)",
+              "g_sensitivity": " + G f", "earth_rate": " + C_b_n ω_ie (fitted)"}
+ACCEL_TERMS = {"quadratic": "D f²", "cubic": "C3 f³", "scale_asymmetry": "A min(f, 0)",
+               "temperature_bias": "b_T (T − T_ref)", "time_drift": "b_t (t − t_ref)",
+               "misalignment": "Φ(γ)", "lever_arm": "ω² dr c"}
+
+
+def _suffix(names, terms) -> str:
+    return "".join(terms.get(n, f" + {n}") for n in names)
+
+
+# ---------------------------------------------------------------- P5 LDV
+
+def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=None,
+                max_rows: int = 20000) -> Problem:
+    """Paired reference velocity and beam outputs; baseline X (per beam), all beams stacked."""
+    t = np.asarray(t_s, float) if t_s is not None else None
+    v = np.asarray(v_body_mps, float)
+    y = np.asarray(vl_mps, float)
+    n = len(v)
+    step = max(1, int(math.ceil(n / max_rows)))
+    sel = np.arange(0, n, step)
+    v, y = v[sel], y[sel]
+    t = t[sel] if t is not None else None
+    T = np.asarray(temp_c, float)[sel] if temp_c is not None else None
+    W = np.asarray(omega_body_rad_s, float)[sel] if omega_body_rad_s is not None else None
+    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0,
+                      omega_body_rad_s=W)
+    r0 = v @ np.asarray(X0).T - y
+    sig_beam = np.maximum(np.std(r0, axis=0), 1e-12)
+
+    def residual(p):
+        return (ldv_model.forward(v, p, cond) - y).ravel()
+
+    cands = [_temp_candidate(T), _time_candidate(t)]
+    if t is None:
+        cands.append(Candidate("time_delay", reason="no time column: a delay cannot be measured"))
+    else:
+        cands.append(Candidate("time_delay", {"tau_s": np.array(0.0)}))
+    if W is None or not np.all(np.isfinite(W)):
+        cands.append(Candidate("lever_arm", reason="no body rate (wx wy wz columns): ω × r is unknown"))
+    else:
+        cands.append(Candidate("lever_arm", {"r": np.zeros(3)}))
+    cands.append(Candidate("offset", {"o": np.zeros(3)}))
+    groups = time_blocks(t) if t is not None else (np.arange(len(v)) * 10) // len(v)
+    return Problem("ldv", "V_L = X v (P5)", residual, np.tile(sig_beam, len(v)), np.repeat(groups, 3),
+                   {"X": np.asarray(X0, float)}, {"X": True}, cands, THRESHOLDS["ldv"], unit="m/s",
+                   time_ordered=True, channels=3,
+                   row_labels=[f"t={x:.2f} s beam {j + 1}" for x in (t if t is not None else np.arange(len(v)))
+                               for j in range(3)],
+                   extended_model=lambda names: "V_L = X (v(t − τ) + ω × r) + o + …" if names else "V_L = X v")
+
+
+# ---------------------------------------------------------------- P1 level table
+
+def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement_sigma_rad,
+                     t_s=None, temp_c=None, noise_known=True) -> Problem:
+    """Static positions: mean raw outputs V (m, 3); norm rows ``|f_k| − g`` and, for labelled
+    positions, the two components perpendicular to the known direction (σ = g·placement)."""
+    V = np.asarray(V, float)
+    m = len(V)
+    known = [k for k in range(m) if directions[k] is not None]
+    table = len(known) >= 3
+    E = []
+    for k in known:
+        u = np.asarray(directions[k], float)
+        a = np.eye(3)[int(np.argmin(np.abs(u)))]
+        e1 = np.cross(u, a)
+        e1 /= np.linalg.norm(e1)
+        E.append(np.vstack([e1, np.cross(u, e1)]))
+    T = np.asarray(temp_c, float) if temp_c is not None else None
+    t = np.asarray(t_s, float) if t_s is not None else None
+    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0)
+    # σ of |f_k| from the measured noise of each average
+    Kinv = np.linalg.inv(K0)
+    f0 = (V - b0) @ Kinv.T
+    u = f0 / np.linalg.norm(f0, axis=1, keepdims=True)
+    if noise_known and std is not None:
+        wgt = u @ Kinv
+        s_n = np.sqrt(np.sum(wgt * wgt * (np.asarray(std, float) ** 2 / np.maximum(np.asarray(n, float), 1)[:, None]),
+                             axis=1))
+        s_n = np.maximum(s_n, 1e-6 * g_mps2)
+    else:
+        s_n = np.full(m, 1e-3)
+    s_v = np.repeat([g_mps2 * placement_sigma_rad[k] for k in known], 2) if table else np.zeros(0)
+
+    def residual(p):
+        f = accel_model.inverse(V, p, cond)
+        nrm = np.linalg.norm(f, axis=1) - g_mps2
+        if not table:
+            return nrm
+        perp = np.concatenate([E[i] @ f[k] for i, k in enumerate(known)])
+        return np.concatenate([nrm, perp])
+
+    sigma = np.concatenate([s_n, s_v])
+    groups = np.concatenate([np.arange(m), np.repeat(known, 2) if table else np.zeros(0, int)])
+    freeK = np.ones((3, 3), bool) if table else np.triu(np.ones((3, 3), bool))
+    K0 = np.asarray(K0, float) if table else np.triu(np.asarray(K0, float))
+    cands = [_temp_candidate(T), _time_candidate(t),
+             Candidate("quadratic", {"D": np.zeros(3)}), Candidate("scale_asymmetry", {"A": np.zeros(3)})]
+    rows = [f"position {labels[k]} |f|" for k in range(m)]
+    rows += [f"position {labels[k]} direction {j + 1}" for k in known for j in range(2)] if table else []
+    prob = Problem("accel-tabletop", "y = K f + b  (P1: A = B + M V, M = K⁻¹, B = −M b)", residual, sigma,
+                   groups, {"K": K0, "b": np.asarray(b0, float)}, {"K": freeK, "b": True}, cands,
+                   THRESHOLDS["accel-tabletop"], unit="m/s^2", row_labels=rows,
+                   extended_model=lambda names: "y = K (f" + "".join(" + " + ACCEL_TERMS[x] for x in names
+                                                                  if x not in ("temperature_bias", "time_drift"))
+                   + ") + b" + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift")))
+    prob.row_types = np.concatenate([np.zeros(m, int), np.ones(len(s_v), int)])
+    return prob
+
+
+# ---------------------------------------------------------------- P2 centrifuge
+
+def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sigma_N=None, temp_c=None,
+                       elapsed_s=None) -> Problem:
+    """Table rows of mean outputs N (g) at speeds ω; the norm condition ``|f| = ρ``."""
+    N = np.asarray(N, float)
+    w = np.asarray(speed_rad_s, float)
+    rho = np.sqrt((w * w * radius_m / g_mps2) ** 2 + 1.0)
+    labels = [str(x) for x in labels]
+    # centripetal direction per mounting: the change of f with speed (f = −A c + up)
+    f0 = accel_model.inverse(N, params0)
+    c_dir = np.full((len(N), 3), np.nan)
+    for lab in dict.fromkeys(labels):
+        idx = [k for k, x in enumerate(labels) if x == lab]
+        if len(idx) >= 2 and np.ptp(w[idx]) > 0:
+            A = w[idx] ** 2 * radius_m / g_mps2
+            H = np.column_stack([-A, np.ones(len(idx))])
+            coef, *_ = np.linalg.lstsq(H, f0[idx], rcond=None)
+            c = coef[0] / max(np.linalg.norm(coef[0]), 1e-12)
+            c_dir[idx] = c
+    T = np.asarray(temp_c, float) if temp_c is not None else None
+    t = np.asarray(elapsed_s, float) if elapsed_s is not None else None
+    have_c = np.all(np.isfinite(c_dir))
+    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0,
+                      input_unit_mps2=g_mps2, omega_rad_s=w, centripetal_dir=np.nan_to_num(c_dir))
+
+    def residual(p):
+        return np.linalg.norm(accel_model.inverse(N, p, cond), axis=1) - rho
+
+    if sigma_N is not None:
+        from solvers.centrifuge import row_sigma
+        sigma = row_sigma(N, params0, sigma_N)
+    else:
+        sigma = np.full(len(N), 1e-5)
+    base = {k: np.asarray(params0[k], float) for k in ("S", "b", "D")}
+    from solvers.centrifuge import GAMMA_FREE
+    cands = [_temp_candidate(T), _time_candidate(t),
+             Candidate("misalignment", {"gamma": np.zeros(6)}, free={"gamma": GAMMA_FREE}),
+             Candidate("cubic", {"C3": np.zeros(3)})]
+    cands.append(Candidate("lever_arm", {"dr": np.zeros(3)}) if have_c else
+                 Candidate("lever_arm", reason="a mounting seen at one speed only: its centripetal direction is unknown"))
+    return Problem("accel-centrifuge", "N = S (f + D f∘f) + b, |f| = ρ (P2)", residual, sigma,
+                   np.array([list(dict.fromkeys(labels)).index(x) for x in labels]), base,
+                   {"S": True, "b": True, "D": True}, cands, THRESHOLDS["accel-centrifuge"], unit="g",
+                   row_labels=[f"position {x} ω={y:.3g} rad/s" for x, y in zip(labels, w)],
+                   extended_model=lambda names: "N = S Φ(γ) (f + D f∘f" + "".join(
+                       " + " + ACCEL_TERMS[x] for x in names if x in ("cubic", "lever_arm")) + ") + b" + "".join(
+                       " + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift")))
+
+
+# ---------------------------------------------------------------- P3 compass
+
+def compass_problem(t_s, y_raw, W0, h0, field_nT, inclination_deg, *, noise_raw, temp_c=None,
+                    static_f=None, static_y=None, static_t=None, static_temp=None, static_sigma=None,
+                    max_rows: int = 4000) -> Problem:
+    """Magnitude rows ``|W(y − h …)| − F`` on (decimated) samples, plus dip rows on static
+    holds: ``f̂ · m̂ − c`` (``c`` free, −sin I nominally), which ``mag_accel_misalignment``
+    changes with orientation."""
+    t = np.asarray(t_s, float)
+    y = np.asarray(y_raw, float)
+    step = max(1, int(math.ceil(len(y) / max_rows)))
+    sel = np.arange(0, len(y), step)
+    t, y = t[sel], y[sel]
+    T = np.asarray(temp_c, float)[sel] if temp_c is not None else None
+    tref = float(np.mean(t))
+    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=tref)
+    have_dip = static_f is not None and len(static_f) >= 4
+    if have_dip:
+        fh = np.asarray(static_f, float)
+        fh = fh / np.linalg.norm(fh, axis=1, keepdims=True)
+        ys = np.asarray(static_y, float)
+        Ts = np.asarray(static_temp, float) if static_temp is not None else None
+        cond_s = Conditions(t_s=np.asarray(static_t, float), temp_c=Ts, temp_ref_c=_ref(T), t_ref_s=tref)
+    else:
+        cond_s = None
+
+    def residual(p):
+        q = {k: v for k, v in p.items() if k not in ("c_dip", "field_scale")}
+        F = field_nT * float(p.get("field_scale", 1.0))
+        mag = np.linalg.norm(mag_model.inverse(y, q, cond), axis=1) - F
+        if not have_dip:
+            return mag
+        m = mag_model.inverse(ys, q, cond_s)
+        dip = np.einsum("ij,ij->i", fh, m / np.linalg.norm(m, axis=1, keepdims=True)) - p["c_dip"]
+        return np.concatenate([mag, dip])
+
+    W0 = np.triu(np.asarray(W0, float))
+    base = {"W": W0, "h": np.asarray(h0, float)}
+    free = {"W": np.triu(np.ones((3, 3), bool)), "h": True}
+    if have_dip:
+        base["c_dip"] = np.array(-math.sin(math.radians(inclination_deg)) if inclination_deg is not None else 0.0)
+        free["c_dip"] = True
+    # c_dip's start: the measured mean
+    s_mag = np.full(len(y), max(noise_raw, 1e-12) * float(np.linalg.norm(W0, 2)))
+    s_dip = np.asarray(static_sigma, float) if (have_dip and static_sigma is not None) else np.full(
+        len(static_f) if have_dip else 0, 1e-3)
+    sigma = np.concatenate([s_mag, s_dip])
+    g_mag = time_blocks(t)
+    g_dip = time_blocks(np.concatenate([t, np.asarray(static_t, float)]))[len(t):] if have_dip else np.zeros(0, int)
+    dur = float(t.max() - t.min())
+    cands = [_temp_candidate(T), _time_candidate(t),
+             Candidate("mag_accel_misalignment", {"rho": np.zeros(3)}) if have_dip else
+             Candidate("mag_accel_misalignment", reason="no static accelerometer holds: the dip angle cannot be checked"),
+             Candidate("field_anomaly", {"field_scale": np.array(1.0)}),
+             Candidate("time_varying_hard_iron", {"dh": np.zeros(3), "t_on_s": np.array(0.0)},
+                       free={"dh": True, "t_on_s": False},
+                       scan=("t_on_s", float(t.min()) + dur * np.linspace(0.1, 0.9, 33)))]
+    prob = Problem("compass", "m = W (y − h), |m| = F (P3)", residual, sigma, np.concatenate([g_mag, g_dip]),
+                   base, free, cands, THRESHOLDS["compass"], unit="nT", time_ordered=False,
+                   row_labels=[f"t={x:.2f} s |m|" for x in t] + [f"hold t={x:.1f} s dip" for x in
+                                                                 (static_t if have_dip else [])],
+                   extended_model=lambda names: "m = W R(ρ)ᵀ (y − h − Δh[t ≥ t_on] − …)" if names else
+                   "m = W (y − h)")
+    prob.row_types = np.concatenate([np.zeros(len(y), int), np.ones(len(s_dip), int)])
+    return prob
