@@ -99,7 +99,8 @@ def _resolve(path_text: str, capture) -> str:
 
 
 def aligned_velocities(capture, reference=None, warnings=None):
-    """(v_body (n,3), vl (n,3), info) paired on the LDV clock (module docstring)."""
+    """(v_body (n,3), vl (n,3), info) paired on the LDV clock (module docstring);
+    ``info["rows"]``: the capture rows (indices) the pairs come from."""
     warnings = [] if warnings is None else warnings
     missing = [c for c in ("vl1", "vl2", "vl3") if c not in capture.columns]
     if missing:
@@ -128,7 +129,7 @@ def aligned_velocities(capture, reference=None, warnings=None):
             ok = np.all(np.isfinite(vl), axis=1) & np.all(np.isfinite(v_ref), axis=1)
             if (~ok).any():
                 warnings.append(f"{int((~ok).sum())} rows with missing values left out")
-            return v_ref[ok], vl[ok], dict(info, reference=kind)
+            return v_ref[ok], vl[ok], dict(info, reference=kind, rows=np.flatnonzero(ok))
         if t_ref is None:
             raise UnsupportedError(f"{capture.path}: rows hold either LDV or reference samples but there is no "
                                    "time column to align them")
@@ -142,7 +143,7 @@ def aligned_velocities(capture, reference=None, warnings=None):
     good = np.all(np.isfinite(v_at), axis=1)
     if offset:
         info["reference_time_offset_s"] = offset
-    return v_at[good], vl[ldv_ok][good], dict(info, reference=kind)
+    return v_at[good], vl[ldv_ok][good], dict(info, reference=kind, rows=np.flatnonzero(ldv_ok)[good])
 
 
 def calibrate(capture, method: str | None = None, *, reference=None) -> dict:
