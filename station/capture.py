@@ -544,8 +544,8 @@ def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):
     """Stream a capture: ``(meta, header, chunks)``.
 
     ``meta`` and ``header`` are read and validated at once; ``chunks`` yields
-    ``dict[name, ndarray]`` blocks of up to ``rows`` rows, validating as it goes (an
-    InputError may come from any ``next``).
+    ``dict[name, ndarray]`` blocks of about ``rows`` rows (read as bytes, sized from the first
+    data line), validating as it goes: an InputError may come from any ``next``.
     """
     path = os.fspath(path)
     head = _read_head(path)

@@ -258,6 +258,8 @@ def test_iter_capture_chunks_checks_the_head_at_once(tmp_path):
 # ---------------------------------------------------------------------------- round trips
 
 _FLOATS = st.floats(allow_nan=True, allow_infinity=False)  # subnormals, ±1.8e308, -0.0, NaN
+_FINITE = st.floats(allow_nan=False, allow_infinity=False)  # no empty fields: the numpy fast path reads these
+_ASCII_LABEL = st.text(alphabet="abcxyz_+-019 ", max_size=8).map(str.strip)
 _LABEL = st.text(alphabet=st.characters(blacklist_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"),
                                         blacklist_characters=',"'), max_size=12).filter(
     lambda s: s == s.strip() and s.isprintable())
@@ -269,8 +271,8 @@ def test_write_then_read_gives_back_the_same_capture(tmp_path, data, n):
     t = np.sort(np.array(data.draw(st.lists(st.floats(-1e12, 1e12), min_size=n, max_size=n))))
     cols = {
         "t": t,
-        "position": np.array(data.draw(st.lists(_LABEL, min_size=n, max_size=n)), dtype=object),
-        "ax": np.array(data.draw(st.lists(_FLOATS, min_size=n, max_size=n))),
+        "position": np.array(data.draw(st.lists(st.one_of(_LABEL, _ASCII_LABEL), min_size=n, max_size=n)), dtype=object),
+        "ax": np.array(data.draw(st.lists(data.draw(st.sampled_from([_FLOATS, _FINITE])), min_size=n, max_size=n))),
         "temp_c": np.array(data.draw(st.lists(st.floats(-1e-300, 1e-300), min_size=n, max_size=n))),
     }
     meta = {"station-capture": "1", "procedure": "gyro-drift", "device": data.draw(_LABEL),
@@ -280,6 +282,7 @@ def test_write_then_read_gives_back_the_same_capture(tmp_path, data, n):
     write_capture(path, c)
     back = read_capture(path)
     assert back == c
+    assert read_capture(path, _force_slow=True) == c
     for name in ("t", "ax", "temp_c"):  # bit for bit, NaN where NaN
         a, b = cols[name], back.columns[name]
         nan = np.isnan(a)
@@ -299,6 +302,22 @@ def test_round_trip_of_extreme_and_integer_values(tmp_path):
     assert text[2 + 5].startswith("33108,") and text[2 + 9] == ",10"  # ints without '.0', NaN empty
     back = read_capture(path).columns["ax"]
     assert np.signbit(back[1]) and back[2] == 5e-324
+
+
+def test_fast_path_reads_extreme_values_bit_for_bit(tmp_path):
+    from station.capture import _Parser
+
+    x = np.array([0.0, -0.0, 5e-324, 2.2250738585072014e-308, -1.7976931348623157e308, 0.1, 1 / 3, 33108.0,
+                  -9007199254740993.0, 1e22, 123.456e-7])
+    c = Capture({"station-capture": "1"}, {"t": np.arange(len(x), dtype=float), "position": np.array(
+        ["a"] * 5 + ["b"] * 6, dtype=object), "ax": x})
+    path = tmp_path / "x.capture.csv"
+    write_capture(path, c)
+    block = path.read_bytes().split(b"\n", 2)[2]
+    assert _Parser(str(path), ["t", "position", "ax"])._fast(block, len(x)) is not None  # no fallback
+    back = read_capture(path)
+    assert back == c and back == read_capture(path, _force_slow=True)
+    assert np.array_equal(back.columns["ax"].view(np.int64), x.view(np.int64))
 
 
 def test_real_capture_round_trips(shared_data, tmp_path):
