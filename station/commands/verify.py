@@ -37,8 +37,11 @@ def run(args: argparse.Namespace) -> int:
     if problems:
         sys.stderr.write(f"station: verify found {len(problems)} problem{'s' if len(problems) != 1 else ''}\n")
         return 1
+    def n(count: int, word: str) -> str:
+        return f"{count} {word}{'' if count == 1 else 's'}"
+
     sys.stdout.write(
-        f"ok: {counts['calibrations']} calibrations and {counts['captures']} captures of "
-        f"{counts['devices']} devices unchanged since they were written\n"
+        f"ok: {n(counts['calibrations'], 'calibration')} and {n(counts['captures'], 'capture')} of "
+        f"{n(counts['devices'], 'device')} unchanged since they were written\n"
     )
     return 0
