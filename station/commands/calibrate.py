@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 
-from station.calibrate import calibrate_capture, format_text, to_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from station.calibrate import calibrate_capture, format_text, to_json
     from station.capture import read_capture
 
     capture = read_capture(args.file)

@@ -5,7 +5,6 @@ import argparse
 import json
 import math
 
-import numpy as np
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,6 +23,8 @@ def _num(x: float) -> float | None:
 
 def summary(capture) -> dict:
     """The summary `inspect` prints, as a JSON-ready dict (None where not applicable)."""
+    import numpy as np
+
     out: dict = {
         "file": capture.path,
         "procedure": capture.procedure,

@@ -9,7 +9,6 @@ import argparse
 import os
 import tempfile
 
-import numpy as np
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,6 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _flat(prefix, v):
+    import numpy as np
+
     a = np.asarray(v, dtype=float)
     if a.ndim == 0:
         return {prefix: float(a)}
@@ -28,6 +29,8 @@ def _flat(prefix, v):
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from solvers.simulate import simulate
     from station.calibrate import calibrate_capture, format_text, jsonable
     from station.capture import Capture, read_capture, write_capture
