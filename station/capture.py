@@ -676,14 +676,9 @@ def _number_cells(path, name: str, col: np.ndarray, start: int, prev_t: float, i
     return cells
 
 
-def write_capture(path, capture: Capture, *, rows: int = DEFAULT_CHUNK_ROWS) -> None:
-    """Write ``capture`` to ``path`` atomically; refuses what the reader could not give back.
-
-    Refused (InputError naming the column and 1-based row): labels with commas, quotes,
-    control characters or spaces at the ends; inf; NaN in ``t``; ``t`` going backwards;
-    metadata the reader would refuse. A failure at any point leaves ``path`` untouched.
-    """
-    path = os.fspath(path)
+def _prepare(path, capture: Capture) -> tuple[dict[str, str], list[str], list[np.ndarray], int]:
+    """Metadata, names, 1-D arrays and row count of ``capture``, checked as far as can be
+    without formatting every value (that happens block by block as it is written)."""
     meta = _meta_for_writing(path, capture.meta)
     names = list(capture.columns)
     if not names:
@@ -712,7 +707,51 @@ def write_capture(path, capture: Capture, *, rows: int = DEFAULT_CHUNK_ROWS) -> 
         raise InputError(path, None, f"columns differ in length ({lengths})")
     if n == 0:
         raise InputError(path, None, "capture has no data rows")
+    return meta, names, arrays, n
 
+
+def _emit(f, path, meta: dict[str, str], names: list[str], arrays: list[np.ndarray], n: int, rows: int) -> None:
+    f.writelines(f"# {k}: {v}".rstrip() + "\n" for k, v in meta.items())
+    f.write(",".join(names) + "\n")
+    prev_t = -math.inf
+    for start in range(0, n, rows):
+        cells = []
+        for j, (name, col) in enumerate(zip(names, arrays)):
+            part = col[start:start + rows]
+            if name in TEXT_COLUMNS:
+                cells.append(_text_cells(path, name, part, start, first_column=(j == 0)))
+            else:
+                cells.append(_number_cells(path, name, part, start, prev_t, is_t=(name == "t")))
+                if name == "t":
+                    prev_t = float(part[-1])
+        lines = [",".join(r) for r in zip(*cells)]
+        if len(names) == 1 and not all(lines):
+            i = start + lines.index("")
+            raise InputError(path, None, f"column '{names[0]}', row {i + 1}: a one-column capture cannot hold "
+                             "a missing value (the line would be blank)")
+        f.write("\n".join(lines))
+        f.write("\n")
+
+
+def format_capture(capture: Capture, stream, *, name: str = "<stdout>", rows: int = DEFAULT_CHUNK_ROWS) -> None:
+    """Write ``capture`` in the file format to a text ``stream`` (e.g. stdout), block by block.
+
+    The same checks as :func:`write_capture`; a refusal part-way leaves what was written so
+    far in the stream, so use :func:`write_capture` for files.
+    """
+    meta, names, arrays, n = _prepare(name, capture)
+    _emit(stream, name, meta, names, arrays, n, rows)
+
+
+def write_capture(path, capture: Capture, *, rows: int = DEFAULT_CHUNK_ROWS) -> None:
+    """Write ``capture`` to ``path`` atomically; refuses what the reader could not give back.
+
+    Refused (InputError naming the column and 1-based row): labels with commas, quotes,
+    control characters or spaces at the ends; inf; NaN in ``t``; ``t`` going backwards;
+    metadata the reader would refuse. A failure at any point leaves ``path`` untouched.
+    """
+    path = os.fspath(path)
+    meta, names, arrays, n = _prepare(path, capture)
     directory = os.path.dirname(os.path.abspath(path))
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
@@ -720,25 +759,7 @@ def write_capture(path, capture: Capture, *, rows: int = DEFAULT_CHUNK_ROWS) -> 
         raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.writelines(f"# {k}: {v}".rstrip() + "\n" for k, v in meta.items())
-            f.write(",".join(names) + "\n")
-            prev_t = -math.inf
-            for start in range(0, n, rows):
-                cells = []
-                for j, (name, col) in enumerate(zip(names, arrays)):
-                    part = col[start:start + rows]
-                    if name in TEXT_COLUMNS:
-                        cells.append(_text_cells(path, name, part, start, first_column=(j == 0)))
-                    else:
-                        cells.append(_number_cells(path, name, part, start, prev_t, is_t=(name == "t")))
-                        if name == "t":
-                            prev_t = float(part[-1])
-                lines = [",".join(r) for r in zip(*cells)]
-                if len(names) == 1 and not all(lines):
-                    i = start + lines.index("")
-                    raise InputError(path, None, f"column '{names[0]}', row {i + 1}: a one-column capture cannot hold a missing value (the line would be blank)")
-                f.write("\n".join(lines))
-                f.write("\n")
+            _emit(f, path, meta, names, arrays, n, rows)
             f.flush()
             os.fsync(f.fileno())
         mode = os.stat(path).st_mode & 0o7777 if os.path.isfile(path) else 0o644

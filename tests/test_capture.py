@@ -534,3 +534,25 @@ def test_inspect_json(shared_data, tmp_path):
 def test_inspect_missing_file_is_one_line(tmp_path):
     out = _station("inspect", str(tmp_path / "nope.csv"))
     assert out.returncode == 2 and out.stderr.count("\n") == 1 and "no such file" in out.stderr
+
+
+def test_export_capture_gives_back_the_stored_capture(shared_data, tmp_path):
+    from db.store import Store
+
+    original = read_capture(shared_data / "imucal_ferraris" / "imucal_ferraris_labelled.capture.csv")
+    db = tmp_path / "station.db"
+    store = Store(str(db))
+    try:
+        capture_id = store.save_capture(device_id="imucal-example-sensor", procedure=original.procedure,
+                                        meta=original.meta, columns=original.columns)
+    finally:
+        store.close()
+    out = tmp_path / "exported.capture.csv"
+    done = _station("export-capture", str(capture_id), "-o", str(out), "--db", str(db))
+    assert done.returncode == 0, done.stderr
+    assert read_capture(out) == original
+    to_stdout = _station("export-capture", str(capture_id), "--db", str(db))
+    assert to_stdout.returncode == 0 and to_stdout.stdout == out.read_text()
+    missing = _station("export-capture", str(capture_id + 1), "--db", str(db))
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "Traceback" not in missing.stderr
+    assert f"no capture {capture_id + 1}" in missing.stderr
