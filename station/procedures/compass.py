@@ -140,7 +140,10 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     y_all = _xyz(capture, "m")
     if t is not None:
         dt = np.diff(t)
-        rate = capture.float_meta("sample_rate_hz") or (1.0 / float(np.median(dt)) if len(dt) else None)
+        rate = capture.float_meta("sample_rate_hz")
+        if not rate or rate <= 0:
+            med = float(np.nanmedian(dt)) if len(dt) else 0.0
+            rate = 1.0 / med if med > 0 else None
     if rate:
         f_f = C.lowpass(np.nan_to_num(f_g), C.ACCEL_CUTOFF_HZ, rate)
         y_f = C.lowpass(np.where(np.isfinite(y_all), y_all, np.nanmean(y_all, axis=0)), C.MAG_CUTOFF_HZ, rate)
@@ -149,7 +152,7 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     m_cal = C.calibrated(y_f, cal.W, cal.h)
     inc = None if ref is None else ref["inclination_deg"]
     verdict = C.detect_accel_sign(f_f[good], m_cal[good], inc)
-    stated = (capture.meta.get("accel_sign") or "").strip().lower().replace("-", "_") or None
+    stated = (capture.meta.get("accel_sign") or "").strip().lower().replace("-", "_").replace(" ", "_") or None
     if stated not in (None, "gravity", "specific_force"):
         raise InputError(capture.path, capture.meta_lines.get("accel_sign"),
                          f"metadata 'accel_sign': {stated!r} is not 'gravity' or 'specific_force'")
