@@ -82,7 +82,7 @@ class StationApp(App):
             from station.screens.history import HistoryScreen
 
             self.push_screen(HistoryScreen())
-        self.load_due()
+        self.call_after_refresh(self.load_due)  # after the first paint: start-up stays fast
 
     @work(thread=True, exclusive=True, group="due", exit_on_error=False, description="read due devices")
     def load_due(self) -> None:

@@ -69,6 +69,11 @@ class SimSource:
         self._stats = SourceStats()
         self._rate_window: list[tuple[float, int]] = []
 
+    @staticmethod
+    def device_id_for(seed: int) -> str:
+        """The id the simulated device reports (as solvers.simulate.LiveImu names it)."""
+        return f"SIM-ACC-{seed:04d}"
+
     def start(self) -> "SimSource":
         self._t0 = self.clock()
         self._stats.connected = True

@@ -35,6 +35,7 @@ import numpy as np
 from solvers import frames
 from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS, angle_between_deg
 from solvers.stillness import StillnessTracker
+from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
 STATE_VERSION = 1
 PHASES = ("noise", "place", "settle", "average", "done", "aborted")
@@ -562,12 +563,6 @@ class P1Guide:
         with open(path, encoding="utf-8") as fh:
             state = json.load(fh)
         return cls.from_state(state, state_path=path, **kw)
-
-
-def default_state_path(device_id: str, procedure: str = "accel-tabletop", base: str | None = None) -> str:
-    """Where the resume file of (device, procedure) lives: next to the database by default."""
-    safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in device_id) or "device"
-    return os.path.join(base or ".", f"resume-{procedure}-{safe}.json")
 
 
 def position_drawing(direction) -> list[str]:

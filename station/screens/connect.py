@@ -101,7 +101,7 @@ class ConnectScreen(Screen):
         if src is not None and getattr(src, "kind", "") == "serial":
             self.query_one("#port", Input).value = src.port
             self.query_one("#protocol", Select).value = src.protocol
-        self.load_devices()
+        self.call_after_refresh(self.load_devices)
         self.show_due(getattr(self.app, "due", []))
         self._check_resume()
         self.query_one("#start", Button).focus()
@@ -151,7 +151,7 @@ class ConnectScreen(Screen):
     # ------------------------------------------------------------ resume
 
     def _resume_path(self) -> str | None:
-        from station.procedures.guide import default_state_path
+        from station.procedures.state import default_state_path
 
         s = self.app.session
         if not s.resume_dir():
@@ -161,7 +161,7 @@ class ConnectScreen(Screen):
         if not serial and self.query_one("#source", Select).value == SIM:
             from station.sources import SimSource
 
-            serial = SimSource(seed=0).device_id
+            serial = SimSource.device_id_for(0)
         if not serial:
             return None
         return default_state_path(serial, base=s.resume_dir())

@@ -76,7 +76,8 @@ class ProcedureScreen(Screen):
     # ------------------------------------------------------------ the worker
 
     def _make_guide(self):
-        from station.procedures.guide import GuideConfig, P1Guide, default_state_path
+        from station.procedures.guide import GuideConfig, P1Guide
+        from station.procedures.state import default_state_path
 
         s = self.app.session
         src = s.source
@@ -108,6 +109,9 @@ class ProcedureScreen(Screen):
         try:
             if src.kind == "sim" and getattr(src, "_t0", None) is None:
                 src.start()
+            elif src.kind == "serial" and not src.reader.running:
+                src.start()
+                s.device_id = s.device_id or src.device_id or "unknown"
             with self._lock:
                 self.guide = s.guide if s.guide is not None else self._make_guide()
                 s.guide = self.guide
