@@ -515,7 +515,8 @@ def test_inspect_prints_a_summary(shared_data):
     assert "rows:       51175" in text
     duration = re.search(r"duration:\s+([\d.]+) s", text)
     assert duration and abs(float(duration.group(1)) - 511.7) <= 0.05  # README: 511.7 s
-    assert re.search(r"rate:\s+100(\.0*)? Hz", text)
+    rate = re.search(r"rate:\s+([\d.]+) Hz", text)
+    assert rate and abs(float(rate.group(1)) - (51175 - 1) / 511.688) < 1e-3  # README: 100 Hz logger
     assert re.search(r"^  ax\s+counts\s+min", text, re.M)
     assert "  g_mps2: 9.81744" in text
 
@@ -529,6 +530,11 @@ def test_inspect_json(shared_data, tmp_path):
     assert [c["name"] for c in s["columns"]] == ["position", "speed_rad_s", "ax", "ay", "az"]
     assert {c["name"]: c["unit"] for c in s["columns"]}["ax"] == "g"
     assert s["metadata"]["radius_m"] == "1"
+    # sunsided's t is i / sample_rate_hz rounded to 10 µs: the record's rate gives that rate back
+    out = _station("inspect", str(shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv"), "--json")
+    s = json.loads(out.stdout)
+    assert abs(s["rate_hz"] - s["sample_rate_hz"]) < 1e-3 and s["sample_rate_hz"] == 99.3738
+    assert s["median_step_s"] == pytest.approx(0.01006, abs=1e-9)
 
 
 def test_inspect_missing_file_is_one_line(tmp_path):

@@ -31,16 +31,16 @@ def summary(capture) -> dict:
         "device": capture.meta.get("device") or None,
         "kind": "time series" if capture.is_time_series else "table of averages",
         "rows": capture.n_rows,
-        "t_start_s": None, "t_end_s": None, "duration_s": None, "rate_hz": None,
+        "t_start_s": None, "t_end_s": None, "duration_s": None, "rate_hz": None, "median_step_s": None,
         "sample_rate_hz": capture.float_meta("sample_rate_hz"),
         "positions": None,
     }
     if capture.is_time_series:
         t = capture.columns["t"]
         out.update(t_start_s=float(t[0]), t_end_s=float(t[-1]), duration_s=float(t[-1] - t[0]))
-        if len(t) > 1:
-            step = float(np.median(np.diff(t)))
-            out["rate_hz"] = 1.0 / step if step > 0 else None
+        if len(t) > 1:  # rate = intervals per second over the whole record (robust to rounded t)
+            out["median_step_s"] = float(np.median(np.diff(t)))
+            out["rate_hz"] = (len(t) - 1) / out["duration_s"] if out["duration_s"] > 0 else None
     if "position" in capture.columns:
         labels = [p for p in capture.columns["position"].tolist() if p]
         out["positions"] = len(dict.fromkeys(labels))
@@ -75,7 +75,8 @@ def format_text(s: dict) -> str:
     ]
     if s["duration_s"] is not None:
         lines.append(f"duration:   {_g(s['duration_s'])} s (t from {_g(s['t_start_s'])} to {_g(s['t_end_s'])} s)")
-        rate = f"{_g(s['rate_hz'], 5)} Hz (median step)" if s["rate_hz"] else "–"
+        rate = (f"{_g(s['rate_hz'])} Hz (rows per second over the duration; median step {_g(s['median_step_s'])} s)"
+                if s["rate_hz"] else "–")
         if s["sample_rate_hz"] is not None:
             rate += f"; metadata says {_g(s['sample_rate_hz'])} Hz"
         lines.append(f"rate:       {rate}")
