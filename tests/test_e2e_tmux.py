@@ -30,7 +30,7 @@ def test_station_demo_in_tmux_saves_a_calibration(tmp_path):
     sock = f"test-{os.getpid()}"
     db = tmp_path / "station.db"
     cmd = (f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station demo --db {db} "
-           f"--speed 8 --average-s 1; echo EXIT=$?; sleep 30")
+           f"--speed 12 --average-s 1; echo EXIT=$?; sleep 30")
     tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
     try:
         seen_procedure = False

@@ -111,7 +111,7 @@ def test_demo_runs_a_whole_p1_and_saves_it(tmp_path):
     db = str(tmp_path / "station.db")
 
     async def story():
-        app = make_app(db, device=SimSource(seed=4, speed=25), demo=True, average_s=1.0, settle_s=0.5)
+        app = make_app(db, device=SimSource(seed=4, speed=50), demo=True, average_s=1.0, settle_s=0.5)
         seen = {"wrong": False, "average": False}
         async with app.run_test(size=SIZE) as pilot:
             def progressed():
@@ -132,7 +132,7 @@ def test_demo_runs_a_whole_p1_and_saves_it(tmp_path):
         return seen, summary, cal_id
 
     seen, summary, cal_id = asyncio.run(story())
-    assert seen["average"]  # (the wrong-face moment is too short at 25x to be sure to see: own test)
+    assert seen["average"]  # (the wrong-face moment is too short at 50x to be sure to see: own test)
     assert "no previous" in summary
     from db.store import Store
 

@@ -1,6 +1,6 @@
 """Snapshot tests of every screen at 80x24 and 120x40 (pytest-textual-snapshot).
 
-Deterministic: seeded simulator on a fake clock that the test advances in 0.5 s steps
+Deterministic: seeded simulator on a fake clock that the test advances in 1 s steps
 (waiting until the worker has consumed each step), fixed captures and database dates,
 notifications cleared before the picture. Update after a deliberate UI change with
 ``pytest tests/test_tui_snapshots.py --snapshot-update`` and look at the report.
@@ -41,7 +41,7 @@ def test_connect_snapshot(snap_compare, size):
 
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
 def test_procedure_snapshot(snap_compare, size):
-    """The demo mid-run: x_up and x_down captured, y_up being averaged."""
+    """The demo mid-run: x_up and x_down captured, y_up still and in position."""
     clock = FakeClock()
     src = SimSource(seed=0, clock=clock)
     app = make_app(None, device=src, demo=True, average_s=3.0, settle_s=1.0)
@@ -49,8 +49,8 @@ def test_procedure_snapshot(snap_compare, size):
     async def run_before(pilot):
         await _settle(pilot, lambda: getattr(app.screen, "guide", None) is not None)
         guide = app.screen.guide
-        for k in range(1, 35):  # 17 s of device time in 0.5 s steps, each consumed before the next
-            clock.t = k * 0.5
+        for k in range(1, 18):  # 17 s of device time in 1 s steps, each consumed before the next
+            clock.t = float(k)
             await _settle(pilot, lambda: guide.status().t_s >= clock.t - 1e-6)
         await _settle(pilot, lambda: app.screen.last_status is not None
                       and app.screen.last_status.t_s >= clock.t - 1e-6)
