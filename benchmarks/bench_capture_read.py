@@ -113,15 +113,16 @@ def _run(code: str, path: str, **fmt) -> dict:
 _MAKE = _PRELUDE + """
 from benchmarks.bench_capture_read import make_capture
 from station.capture import write_capture
-cap = make_capture({rows})
+cap = make_capture({rows}, sparse={sparse})
 t0 = time.perf_counter()
 write_capture(path, cap)
 print(json.dumps({{"write_s": time.perf_counter() - t0}}))
 """
 
 
-def make_capture(rows: int, seed: int = 0):
-    """A synthetic 9-column time-series capture (station.capture.Capture)."""
+def make_capture(rows: int, seed: int = 0, sparse: bool = False):
+    """A synthetic 9-column time-series capture (station.capture.Capture); ``sparse``: temp_c
+    only in one row in ten (empty fields elsewhere), like a slow temperature sensor."""
     from station.capture import Capture
 
     rng = np.random.default_rng(seed)
@@ -131,6 +132,8 @@ def make_capture(rows: int, seed: int = 0):
     acc = np.round(1.65 + 0.8 * rng.standard_normal((rows, 3)) * 0.01 + rng.choice([-0.8, 0, 0.8], size=(1, 3)), 5)
     gyr = np.round(rng.standard_normal((rows, 3)) * 0.002, 6)
     temp = np.round(24.0 + np.cumsum(rng.standard_normal(rows)) * 1e-3, 3)
+    if sparse:
+        temp[np.arange(rows) % 10 != 0] = np.nan
     cols = {"t": t, "position": position, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2],
             "gx": gyr[:, 0], "gy": gyr[:, 1], "gz": gyr[:, 2], "temp_c": temp}
     meta = {"station-capture": "1", "procedure": "accel-tabletop", "device": "BENCH-0001",
@@ -164,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
         path = os.path.join(tmp, "big.capture.csv")
         # Made in a child process: ru_maxrss carries over from parent to child, so this
         # process stays small for the children's figures to mean something.
-        write_s = _run(_MAKE, path, rows=args.rows)["write_s"]
+        write_s = _run(_MAKE, path, rows=args.rows, sparse=False)["write_s"]
         size = os.path.getsize(path)
         print(f"file: {args.rows:,} rows x 9 columns, {_mib(size)}; written by write_capture in {write_s:.2f} s")
 
@@ -173,6 +176,9 @@ def main(argv: list[str] | None = None) -> int:
         usecols = [0] + list(range(2, 9))
         loadtxt = _run(_LOADTXT, path, usecols=usecols, skip=_head_lines(path))
         csvmod = _run(_CSV, path)
+        sparse_path = os.path.join(tmp, "sparse.capture.csv")
+        _run(_MAKE, sparse_path, rows=args.rows, sparse=True)
+        sparse = _run(_READ, sparse_path)
         try:
             import pandas  # noqa: F401
             pandas_r = _run(_PANDAS, path)
@@ -202,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{'PASS' if ratio <= TARGET_RATIO else 'FAIL'} (held after the read: {_mib(trace['current'])})",
         f"  ru_maxrss growth: {_mib(rss)} = {rss / numeric:.2f}x the numeric arrays (median; VmHWM growth "
         f"{_mib(hwm) if hwm is not None else '?'}; RSS also counts memory freed but kept by the allocator)",
+        f"  with missing values (temp_c empty in 9 rows of 10): wall {sparse['s']:.2f} s, CPU {sparse['cpu']:.2f} s",
         f"baseline numpy.loadtxt (numeric columns, no checks): {vs(loadtxt)}",
         f"baseline csv module -> arrays:                       {vs(csvmod)}",
     ]

@@ -349,6 +349,24 @@ def _first_line(path: str, f, stripped: str) -> None:
         raise InputError(path, 1, f"unsupported capture version {_show(value.strip())} (this station reads version {FORMAT_VERSION})")
 
 
+_NONFINITE_TEXT = re.compile(rb"(?i)nan|inf")
+
+
+def _has_empty_field(data: bytes) -> bool:
+    return data.startswith(b",") or data.endswith((b",", b",\n")) or b",," in data or b",\n" in data or b"\n," in data
+
+
+def _fill_empty_fields(data: bytes) -> bytes:
+    """Every empty field of a block (LF line ends, no blank lines) replaced by 'nan'."""
+    data = data.replace(b",,", b",nan,").replace(b",,", b",nan,")  # twice: ',,,' overlaps
+    data = data.replace(b"\n,", b"\nnan,").replace(b",\n", b",nan\n")
+    if data.startswith(b","):
+        data = b"nan" + data
+    if data.endswith(b","):
+        data += b"nan"
+    return data
+
+
 class _Parser:
     """Parses blocks of data lines into column arrays, carrying state (t, labels) across blocks."""
 
@@ -392,6 +410,11 @@ class _Parser:
                 data = data[:-1]
         if data.translate(None, _FAST_BYTES) or data.startswith((b"\n", b"#")) or b"\n\n" in data or b"\n#" in data:
             return None  # control bytes, non-ASCII, blank or comment lines: the per-cell path says which
+        empties = _has_empty_field(data)
+        if empties:  # empty fields become 'nan' for numpy; so no cell may say nan or inf itself
+            if _NONFINITE_TEXT.search(data):
+                return None
+            data = _fill_empty_fields(data)
         try:
             arr = np.loadtxt(io.BytesIO(data), dtype=self.dtype, delimiter=",", comments=None,
                              ndmin=1 if self.text else 2, encoding="ascii")
@@ -402,24 +425,24 @@ class _Parser:
         cols: dict[str, np.ndarray] = {}
         for j, name in enumerate(self.names):
             if j in self.text:
-                labels = self._fast_labels(arr[f"f{j}"], first_column=(j == 0))
+                labels = self._fast_labels(arr[f"f{j}"], first_column=(j == 0), empties=empties)
                 if labels is None:
                     return None
                 cols[name] = labels
                 continue
             col = np.ascontiguousarray(arr[f"f{j}"] if self.text else arr[:, j], dtype=np.float64)
-            if not np.isfinite(col).all():
+            if not (np.isfinite(col).all() if not empties or j == self.t_index else not np.isinf(col).any()):
                 return None
             if j == self.t_index and (col[0] < self.prev_t or np.any(col[1:] < col[:-1])):
                 return None
-            if j == self.n_index and not np.all((col >= 1) & (col == np.floor(col))):
+            if j == self.n_index and not np.all(np.isnan(col) | ((col >= 1) & (col == np.floor(col)))):
                 return None
             if j in self.std_index and np.any(col < 0):
                 return None
             cols[name] = col
         return cols
 
-    def _fast_labels(self, raw: np.ndarray, first_column: bool) -> np.ndarray | None:
+    def _fast_labels(self, raw: np.ndarray, first_column: bool, empties: bool) -> np.ndarray | None:
         starts = np.flatnonzero(np.concatenate(([True], raw[1:] != raw[:-1])))
         lengths = np.diff(np.append(starts, len(raw)))
         heads = []
@@ -427,6 +450,8 @@ class _Parser:
             if len(value) >= _LABEL_WIDTH:
                 return None  # may have been cut at the field width
             label = value.decode("ascii").strip()
+            if empties and label == "nan":  # an empty field filled in (the block has no literal nan)
+                label = ""
             if _label_problem(label) or (first_column and label.startswith("#")):
                 return None
             heads.append(self.labels.setdefault(label, label))
