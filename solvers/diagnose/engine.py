@@ -41,9 +41,10 @@ from scipy.special import gammaincc
 from solvers.fit import FitResult, fit
 from solvers.params import Packer, as_params
 
-DEAD_RTOL = 1e-4          # a column whose part outside the baseline's span is below this: not identifiable
+DEAD_RTOL = 1e-2          # a column whose part outside the baseline's span is below this fraction: not identifiable
 CONFUSION_CORR = 0.9      # |corr| of fitted signatures above this: the data cannot tell the two apart
 MAX_FOLDS = 10
+MIN_DOF = 3               # an extension must leave this many degrees of freedom
 
 
 @dataclass
@@ -93,6 +94,13 @@ class Diagnosis:
     model: str
     extended_model: str
     problem: Problem
+
+    def rms(self, fitres: FitResult) -> float:
+        """Residual RMS in data units over the primary rows (all rows of one kind)."""
+        r = fitres.residuals
+        if self.problem.row_types is not None:
+            r = r[np.asarray(self.problem.row_types) == 0]
+        return float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
 
 
 # ---------------------------------------------------------------- linear algebra helpers
@@ -151,14 +159,24 @@ def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, p
             At, rt = A[test], r[test]
             d = _solve_normal(G - At.T @ At, -(b - At.T @ rt))
             out[test] = rt + At @ d
-    e = out * sigma
     if primary is not None:
-        e = e[primary]
+        # rows of several kinds: weighted residuals in noise-equivalent units of the primary rows
+        e = out * float(np.median(sigma[primary]))
+    else:
+        e = out * sigma
     return float(np.sqrt(np.mean(e ** 2)))
 
 
 def bic(rss: float, n: int, k: int) -> float:
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
+
+
+def typed_fit_term(e: np.ndarray, types) -> float:
+    """``Σ_t n_t ln(RSS_t / n_t)``: the Gaussian profile likelihood term with an unknown noise
+    scale per kind of row (one kind when ``types`` is None)."""
+    if types is None:
+        return bic(float(e @ e), e.size, 0)
+    return sum(bic(float(e[types == t] @ e[types == t]), int((types == t).sum()), 0) for t in np.unique(types))
 
 
 def _orth(A: np.ndarray) -> np.ndarray:
@@ -309,6 +327,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     # greedy forward selection on the linearised problem
     A = J0
     rss_cur, cv_cur = rss0, cv0
+    types = None if problem.row_types is None else np.asarray(problem.row_types)
+    term_cur = typed_fit_term(r0, types)
     selected: list[_Cand] = []
     effects: list[dict] = []
     verdict: list[str] = []
@@ -320,7 +340,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             Ac = np.hstack([A, cc.J])
             d, rss = _lstsq_rss(Ac, r0)
             k = np.linalg.matrix_rank(Ac) - np.linalg.matrix_rank(A) if A.shape[1] else np.linalg.matrix_rank(Ac)
-            db = bic(rss, n, 0) - bic(rss_cur, n, 0) + max(k, 0) * math.log(n)
+            db = typed_fit_term(r0 + Ac @ d, types) - term_cur + max(k, 0) * math.log(n)
             cvc = cv_rms(Ac, r0, sigma, folds, primary)
             sig = cc.J @ d[A.shape[1]:]
             sig = sig - _orth(A) @ (_orth(A).T @ sig)
@@ -328,7 +348,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             if first_round:
                 entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": db, "cv_rms": cvc, "selected": False}
         first_round = False
-        passing = [r for r in rows if r[4] > 0 and r[1] < -problem.threshold and r[2] < cv_cur]
+        rank_cur = np.linalg.matrix_rank(A) if A.shape[1] else 0
+        passing = [r for r in rows if r[4] > 0 and r[1] < -problem.threshold and r[2] < cv_cur
+                   and n - rank_cur - r[4] >= MIN_DOF]
         if not passing:
             break
         best = min(passing, key=lambda r: r[1])
@@ -350,8 +372,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             verdict.append(c["name"])
         selected.append(cc)
         A = np.hstack([A, cc.J])
-        rss_cur, cv_cur = best[1] + rss_cur * 0 + 0.0, best[2]  # cv updated; rss below
-        _, rss_cur = _lstsq_rss(A, r0)
+        cv_cur = best[2]
+        d_cur, rss_cur = _lstsq_rss(A, r0)
+        term_cur = typed_fit_term(r0 + A @ d_cur, types)
         drop = {cc.cand.name} | {c["name"] for c in confused}
         remaining = [c for c in remaining if c.cand.name not in drop]
 

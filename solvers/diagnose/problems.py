@@ -121,6 +121,9 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
     cands = [_temp_candidate(Tb), _time_candidate(tb)]
     if fb is None:
         cands.append(Candidate("g_sensitivity", reason="no accelerometer: the specific force is unknown"))
+    elif not multi:
+        cands.append(Candidate("g_sensitivity", reason="one static orientation: the specific force does not "
+                               "change, so G f cannot be told from the bias"))
     else:
         cands.append(Candidate("g_sensitivity", {"G": np.zeros((3, 3))}))
     if earth_body_rad_s is not None:

@@ -261,11 +261,11 @@ def analyse(capture) -> tuple[dict, object, dict]:
     bp = diag.baseline
     out = {
         "procedure": capture.procedure,
-        "baseline": {"model": diag.model, "params": bp.params, "residual_rms": bp.rms,
+        "baseline": {"model": diag.model, "params": bp.params, "residual_rms": diag.rms(bp),
                      "cv_rms": diag.baseline_cv_rms},
         "candidates": diag.candidates,
         "effects": diag.effects,
-        "extended": {"model": diag.extended_model, "params": diag.extended.params, "residual_rms": diag.extended.rms,
+        "extended": {"model": diag.extended_model, "params": diag.extended.params, "residual_rms": diag.rms(diag.extended),
                      "cv_rms": diag.extended_cv_rms},
         "quality": _quality(capture, diag, explain),
         "verdict": diag.verdict,

@@ -1,0 +1,178 @@
+"""`station diagnose`: hidden effects found by name, nulls say nothing, confusion and
+unresolvable effects reported, quality findings, the diagnose.md JSON shape, bad input.
+
+Hidden-effect captures are written to real files and given to the CLI; the effect's name
+is drawn at random inside the test and never passed to the code under test. Sizes are 8σ
+of what each capture design resolves (σ measured by benchmarks/bench_diagnose.py,
+docs/benchmarks.md "Diagnose"), so a miss is a failure of the method, not bad luck
+(detection measured >= 95 % at 5σ there).
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from solvers.simulate import EFFECTS_BY_PROCEDURE, simulate
+from station.capture import Capture, write_capture
+from station.cli import main
+
+# 8 sigma of what the benchmark design resolves (bench_diagnose.py sigma_sizes × 8).
+SIZE_8SIGMA = {
+    "accel-tabletop": {"temperature_bias": 8 * 1.1e-3, "time_drift": 8 * 6e-3, "quadratic": 8 * 2.6e-5,
+                       "scale_asymmetry": 8 * 2.6e-4},
+    "gyro-drift": {"temperature_bias": 8 * 1.0e-5, "time_drift": 8 * 8e-4, "g_sensitivity": 8 * 4e-6},
+    "accel-centrifuge": {"temperature_bias": 8 * 4e-6, "time_drift": 8 * 6e-6, "misalignment": 8 * 5e-6,
+                         "cubic": 8 * 3e-10, "lever_arm": 8 * 5e-5},
+    "compass": {"temperature_bias": 8 * 0.15, "time_drift": 8 * 1.5, "mag_accel_misalignment": 8 * 2e-3,
+                "time_varying_hard_iron": 8 * 0.1},
+    "ldv": {"temperature_bias": 8 * 1e-4, "time_drift": 8 * 1e-3, "time_delay": 8 * 4e-4, "lever_arm": 8 * 5e-3,
+            "offset": 8 * 4e-4},
+}
+OPTIONS = {
+    "accel-tabletop": {"extra_positions": 12},
+    "gyro-drift": {"headings_deg": [0.0, 90.0, 180.0, 270.0]},
+    "accel-centrifuge": {},
+    "compass": {},
+    "ldv": {"duration_s": 300.0},
+}
+TOP_KEYS = {"procedure", "baseline", "candidates", "effects", "extended", "quality", "verdict"}
+FIT_KEYS = {"model", "params", "residual_rms", "cv_rms"}
+EFFECT_KEYS = {"name", "params", "uncertainty", "cv_rms_before", "cv_rms_after", "gain", "confused_with"}
+
+
+def _write(tmp_path, sim, name="c.csv") -> str:
+    p = tmp_path / name
+    write_capture(str(p), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
+    return str(p)
+
+
+def _diagnose(path, capsys) -> dict:
+    rc = main(["diagnose", path, "--json"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    return json.loads(out)
+
+
+def _named(result: dict) -> set[str]:
+    return set(result["verdict"])
+
+
+@pytest.mark.parametrize("procedure,seed", [("gyro-drift", 11), ("gyro-drift", 12), ("accel-tabletop", 21),
+                                            ("accel-tabletop", 22), ("accel-centrifuge", 31),
+                                            ("accel-centrifuge", 32), ("ldv", 41), ("compass", 51)])
+def test_hidden_effect_is_named(tmp_path, capsys, procedure, seed):
+    rng = np.random.default_rng(seed)
+    library = [e for e in EFFECTS_BY_PROCEDURE[procedure] if e in SIZE_8SIGMA[procedure]]
+    hidden = str(rng.choice(library))
+    sim = simulate(procedure, seed=seed, effects={hidden: SIZE_8SIGMA[procedure][hidden]}, **OPTIONS[procedure])
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    assert hidden in _named(res), (hidden, res["verdict"], res["candidates"])
+    eff = {e["name"]: e for e in res["effects"]}
+    named = hidden if hidden in eff else next(e for e in eff.values()
+                                               if hidden in [c["name"] for c in e["confused_with"]])["name"]
+    e = eff[named]
+    assert e["cv_rms_after"] < e["cv_rms_before"]
+    assert e["gain"] == pytest.approx(1 - e["cv_rms_after"] / e["cv_rms_before"])
+    assert res["extended"]["cv_rms"] < res["baseline"]["cv_rms"]
+
+
+@pytest.mark.parametrize("procedure,seed", [("gyro-drift", 101), ("accel-tabletop", 102), ("accel-centrifuge", 103),
+                                            ("ldv", 104), ("compass", 105)])
+def test_null_capture_verdict_is_empty(tmp_path, capsys, procedure, seed):
+    sim = simulate(procedure, seed=seed, **OPTIONS[procedure])
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    assert res["verdict"] == []
+    assert res["effects"] == []
+    assert not any(c["selected"] for c in res["candidates"])
+
+
+def test_warmup_confuses_temperature_with_time(tmp_path, capsys):
+    # one static position, a monotonic warm-up: temperature and time rise together
+    sim = simulate("gyro-drift", seed=7, effects={"temperature_bias": 1e-4})
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    assert {"temperature_bias", "time_drift"} <= _named(res)
+    e = res["effects"][0]
+    other = {"temperature_bias", "time_drift"} - {e["name"]}
+    conf = {c["name"]: c["correlation"] for c in e["confused_with"]}
+    assert set(conf) == other
+    assert abs(next(iter(conf.values()))) > 0.9
+
+
+def test_constant_temperature_is_unresolvable_not_absent(tmp_path, capsys):
+    sim = simulate("gyro-drift", seed=8)
+    sim.columns["temp_c"] = np.full_like(sim.columns["temp_c"], 24.5)
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    cand = {c["name"]: c for c in res["candidates"]}
+    assert cand["temperature_bias"]["resolvable"] is False
+    assert "temperature" in cand["temperature_bias"]["reason"]
+    assert cand["temperature_bias"]["selected"] is False
+    # one orientation: G f is a constant, also unresolvable
+    assert cand["g_sensitivity"]["resolvable"] is False
+
+
+def test_moved_position_and_gap_are_named(tmp_path, capsys):
+    sim = simulate("accel-tabletop", seed=9)
+    c = {k: np.array(v, copy=True) for k, v in sim.columns.items()}
+    pos = c["position"]
+    idx = np.flatnonzero(pos == "y_up")
+    mid = idx[len(idx) // 2 - 150: len(idx) // 2 + 150]           # 3 s of handling in the middle
+    wob = np.sin(np.linspace(0, 6 * np.pi, len(mid)))
+    c["ax"][mid] += 0.08 * wob
+    c["az"][mid] += 0.05 * wob
+    c["gx"][mid] += 0.4 * wob
+    cut = np.flatnonzero(pos == "z_down")
+    keep = np.ones(len(pos), bool)
+    keep[cut[500:900]] = False                                     # 4 s of samples lost
+    cols = {k: v[keep] for k, v in c.items()}
+    path = _write(tmp_path, type(sim)(sim.procedure, sim.meta, cols))
+    res = _diagnose(path, capsys)
+    kinds = {(q["kind"], q.get("position")) for q in res["quality"]}
+    assert ("moved", "y_up") in kinds
+    gaps = [q for q in res["quality"] if q["kind"] == "gap"]
+    assert len(gaps) == 1 and gaps[0]["duration_s"] == pytest.approx(4.01, abs=0.02)
+    assert isinstance(gaps[0]["line"], int)
+
+
+def test_json_shape_is_exactly_the_contract(tmp_path, capsys):
+    sim = simulate("ldv", seed=3, effects={"offset": 0.01}, duration_s=200.0)
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    assert set(res) == TOP_KEYS
+    assert res["procedure"] == "ldv"
+    assert set(res["baseline"]) == FIT_KEYS and set(res["extended"]) == FIT_KEYS
+    for c in res["candidates"]:
+        assert {"name", "delta_bic", "cv_rms", "selected"} <= set(c)
+        if c.get("resolvable") is False:
+            assert set(c) == {"name", "delta_bic", "cv_rms", "selected", "resolvable", "reason"}
+        else:
+            assert set(c) == {"name", "delta_bic", "cv_rms", "selected"}
+    assert {c["name"] for c in res["candidates"]} == set(EFFECTS_BY_PROCEDURE["ldv"])
+    assert res["verdict"] == ["offset"]
+    (e,) = res["effects"]
+    assert set(e) == EFFECT_KEYS
+    o, so = np.array(e["params"]["o"]), np.array(e["uncertainty"]["o"])
+    truth = np.array(sim.truth["effect_blocks"]["o"])
+    assert np.all(np.abs(o - truth) < 4 * so + 1e-9), (o, truth, so)   # truth within 4σ per beam
+
+
+def test_text_report_with_plots(tmp_path, capsys):
+    sim = simulate("accel-centrifuge", seed=4, effects={"lever_arm": 8 * 5e-5})
+    rc = main(["diagnose", _write(tmp_path, sim)])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "verdict" in out and "lever_arm" in out
+    assert "measured − simulated" in out
+
+
+def test_bad_input_one_line_exit_2(tmp_path, capsys):
+    p = tmp_path / "bad.csv"
+    p.write_text("# station-capture: 1\n# procedure: ldv\nt,vl1\n0,abc\n")
+    assert main(["diagnose", str(p), "--json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.csv:" in err[0]
+    q = tmp_path / "noproc.csv"
+    q.write_text("# station-capture: 1\nt,ax\n0,1\n")
+    assert main(["diagnose", str(q)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "procedure" in err[0]
