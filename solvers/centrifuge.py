@@ -8,10 +8,12 @@ Two estimators on the same rows:
 
 - :func:`exact_fit` (the station's default): weighted nonlinear least squares on
   ``|inverse(N)| − ρ`` (the exact inverse of the model, ``accel.inverse``), each row weighted
-  by its noise propagated to ``|f|``. Optional installation angles: the norm cannot see a
-  rotation of the whole triad, so only 3 of the 6 γ are identifiable; the gauge fixes
-  ``γxy = γxz = γyz = 0`` (frame x = the x accelerometer's input axis, frame y in the plane
-  of the x and y input axes) and fits ``γyx, γzx, γzy``.
+  by its noise propagated to ``|f|``. Optional installation angles: a norm cannot see a
+  rotation of the whole triad *except* through the quadratic term, which acts on the
+  sensor's own axes; at centrifuge levels (tens of g) that makes all 6 γ identifiable
+  (σ ~ 1e-4 rad in the paper's design), and all 6 are fitted. When they are not (small D or
+  g), the gauge ``γxy = γxz = γyz = 0`` (frame x = the x accelerometer's input axis, frame y
+  in the plane of the x and y input axes) leaves ``γyx, γzx, γzy``.
 - :func:`paper_fit` (the paper's eqs 13-22, re-derived): invert each axis' quadratic
   ``x = f + D f²`` with ``x = (N − b)/S`` by series reversion, ``f = x − D x² + 2D² x³ − …``,
   so ``f² = x² − 2D x³ + 5D² x⁴ + O(D³x⁵)``. Expanding ``x = (N − b)/S`` gives a polynomial in
@@ -105,21 +107,41 @@ def exact_fit(N, rho, *, sigma_N=None, gamma: bool = False, initial: dict | None
     """Weighted nonlinear least squares on ``|inverse(N)| = ρ`` (see module docstring).
 
     sigma_N: per-axis output noise, scalar or (n, 3); None = unknown (estimated from the
-    residuals: a first fit with equal output noise, then σ from its residuals)."""
+    residuals). gamma: also fit the installation angles: all 6 when the data identify them
+    (the quadratic term is defined on the sensor's axes, so with enough g a rotation of the
+    whole triad *is* visible, weakly), else the 3 of the triangular gauge (``extra['gamma_gauge']``)."""
     N = np.asarray(N, dtype=float)
     rho = np.asarray(rho, dtype=float)
-    n_par = 9 + (3 if gamma else 0)
-    if len(N) < n_par:
-        raise TooFewPositions(f"{len(N)} rows; the exact fit of {n_par} coefficients needs at least {n_par}")
+    if not gamma:
+        return _exact(N, rho, sigma_N, None, initial)
+    try:
+        res = _exact(N, rho, sigma_N, np.ones(6, bool), initial)
+        if res.fit.condition_number < 1e6 and np.all(res.sigma["gamma"] < GAMMA_SIGMA_MAX):
+            res.extra["gamma_gauge"] = "all"
+            return res
+    except NotIdentifiable:
+        pass
+    res = _exact(N, rho, sigma_N, GAMMA_FREE, initial)
+    res.extra["gamma_gauge"] = "triangular"
+    return res
+
+
+GAMMA_SIGMA_MAX = 1e-2   # rad: a γ known worse than this is not worth reporting as determined
+
+
+def _exact(N, rho, sigma_N, gamma_free, initial) -> P2Result:
+    n_par = 9 + (0 if gamma_free is None else int(gamma_free.sum()))
+    if len(N) <= n_par:
+        raise TooFewPositions(f"{len(N)} rows; the exact fit of {n_par} coefficients needs more than {n_par}")
     p0 = dict(initial) if initial is not None else paper_or_linear_start(N, rho)
     p0 = {k: np.asarray(p0[k], dtype=float) for k in ("S", "b", "D")}
     free = {"S": True, "b": True, "D": True}
-    if gamma:
+    if gamma_free is not None:
         p0["gamma"] = np.zeros(6)
-        free["gamma"] = GAMMA_FREE
+        free["gamma"] = gamma_free
     noise_known = sigma_N is not None
 
-    resid, jac = _residual_and_jacobian(N, rho, gamma)
+    resid, jac = _residual_and_jacobian(N, rho, gamma_free)
     # Weights at the start (the paper's closed forms are close: the weights change by far
     # less than their own uncertainty at the solution).
     if noise_known:
@@ -136,16 +158,16 @@ def exact_fit(N, rho, *, sigma_N=None, gamma: bool = False, initial: dict | None
                               f"{res.condition_number:.3g}): more orientations or speeds are needed")
     out = {k: res.params[k] for k in p0}
     sig_out = {k: res.sigma[k] for k in p0}
-    if gamma:
-        sig_out["gamma"] = np.where(GAMMA_FREE, sig_out["gamma"], 0.0)
+    if gamma_free is not None:
+        sig_out["gamma"] = np.where(gamma_free, sig_out["gamma"], 0.0)
     r = res.residuals
-    return P2Result(out, sig_out, "exact-gamma" if gamma else "exact", r, np.ones(len(N), bool),
+    return P2Result(out, sig_out, "exact" if gamma_free is None else "exact-gamma", r, np.ones(len(N), bool),
                     float(np.sqrt(np.mean(r ** 2))), res, noise_known,
                     extra={"reduced_chi2": res.reduced_chi2, "condition_number": res.condition_number})
 
 
-def _residual_and_jacobian(N, rho, gamma: bool):
-    cols = np.r_[np.ones(9, bool), GAMMA_FREE] if gamma else np.ones(9, bool)
+def _residual_and_jacobian(N, rho, gamma_free):
+    cols = np.ones(9, bool) if gamma_free is None else np.r_[np.ones(9, bool), gamma_free]
 
     def resid(p):
         return norm_residual(N, rho, p)
@@ -270,12 +292,20 @@ def screen_rows(N, rho, *, gamma: bool = False, threshold: float = 8.0) -> Scree
     minus sign in a transcribed table)."""
     N = np.asarray(N, dtype=float)
     rho = np.asarray(rho, dtype=float)
-    resid, jac = _residual_and_jacobian(N, rho, gamma)
-    p = exact_fit(N, rho, gamma=gamma).params
+    first = exact_fit(N, rho, gamma=gamma)
+    p = first.params
+    gfree = None
     free = {"S": True, "b": True, "D": True}
     if gamma:
-        free["gamma"] = GAMMA_FREE
+        gfree = np.ones(6, bool) if first.extra.get("gamma_gauge") == "all" else GAMMA_FREE
+        free["gamma"] = gfree
+    resid, jac = _residual_and_jacobian(N, rho, gfree)
     prev, prev_s = None, math.inf
+    rel = row_sigma(N, p, 1.0)
+    z = norm_residual(N, rho, p) / rel
+    s = max(1.4826 * float(np.median(np.abs(z))), 1e-300)
+    if np.all(np.abs(z) <= threshold * s):     # the least-squares fit already explains every row
+        return Screen(np.ones(len(N), bool), z * rel, s * float(np.median(rel)), {})
     for _ in range(15):
         rel = row_sigma(N, p, 1.0)
         z = norm_residual(N, rho, p) / rel

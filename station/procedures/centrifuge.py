@@ -163,8 +163,15 @@ def calibrate(capture, method: str | None = None) -> dict:
         "noise": "measured (std/sqrt(n))" if res.noise_known else "estimated from the residuals",
     }
     if base == "exact-gamma":
-        result["gamma_gauge"] = ("γxy = γxz = γyz = 0: the norm cannot see a rotation of the whole triad, so the "
-                                 "frame's x axis is the x accelerometer's and its y axis lies in the x-y input plane")
+        if res.extra.get("gamma_gauge") == "all":
+            result["gamma_gauge"] = ("all 6 angles fitted: the quadratic term acts on the sensor's own axes, which "
+                                     "makes a rotation of the whole triad visible at these accelerations")
+        else:
+            result["gamma_gauge"] = ("γxy = γxz = γyz = 0: these data cannot see a rotation of the whole triad, so "
+                                     "the frame's x axis is the x accelerometer's and its y axis lies in the x-y "
+                                     "input plane")
+            warnings.append("installation angles: only their non-orthogonal part is identifiable here; the triad's "
+                            "rotation is fixed by convention (γxy = γxz = γyz = 0)")
     if res.fit is not None:
         result["reduced_chi2"] = res.fit.reduced_chi2
         result["condition_number"] = res.fit.condition_number
