@@ -11,7 +11,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", help="capture file (station-capture CSV)")
     p.add_argument("--json", action="store_true", help="print one JSON object (calibrate.md)")
     p.add_argument("--method", default=None, help="estimator, where a procedure offers several "
-                   "(accel-centrifuge: exact | paper)")
+                   "(accel-tabletop: norm | upper-triangular | six-position; accel-centrifuge: exact | "
+                   "exact-gamma | paper | paper-3rd, each also -all)")
     p.add_argument("--device", default=None, help="device id (default: the capture's 'device')")
     p.add_argument("--save", action="store_true", help="store capture and result in the station database")
     p.add_argument("--operator", default=None, help="operator's name, stored with --save")

@@ -6,7 +6,7 @@ time series (each run of one ``position``/``speed_rad_s`` pair is averaged). Met
 ``radius_m`` (required), ``g_mps2`` (else normal gravity at ``latitude_deg``, else standard).
 
 Methods: ``exact`` (default; exact nonlinear fit of ``|f(N)|² = A² + 1``), ``exact-gamma``
-(also the 3 identifiable installation angles), ``paper`` (the paper's eqs 13-22 with its
+(also the installation angles: all 6 when identifiable), ``paper`` (the paper's eqs 13-22 with its
 own second-order coefficients, printing errors corrected), ``paper-3rd`` (the same closed
 forms with consistent third-order coefficients). Each takes the suffix ``-all`` to fit every
 row; otherwise rows that disagree with the model far beyond the others (found by a robust
