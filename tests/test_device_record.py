@@ -238,3 +238,25 @@ def test_ports_lists_or_says_no_ports():
     n = len(list_ports.comports())
     assert p.returncode == 0
     assert p.stdout.strip() == "no ports" if n == 0 else len(p.stdout.strip().splitlines()) == n
+
+
+def test_a_different_device_on_the_port_ends_the_recording_keeping_what_came_before(tmp_path):
+    m, s = os.openpty()
+    tty.setraw(s)
+    warnings = []
+    try:
+        reader = Reader(os.ttyname(s)).start()
+        a, b = Header("UNIT-A", "g", "", "", 100.0), Header("UNIT-B", "g", "", "", 100.0)
+        rows = b"".join(data_sentence(k, 10_000 * k, [k, 0, 1] + [np.nan] * 6 + [20]) for k in range(50))
+        timer = threading.Timer(0.3, lambda: os.write(m, header_sentence(a) + rows))
+        timer2 = threading.Timer(0.8, lambda: os.write(m, header_sentence(b) + data_sentence(0, 0, [9] * 10)))
+        timer.start()
+        timer2.start()
+        res = record(os.ttyname(s), str(tmp_path / "d.csv"), reader=reader, seconds=10, warn=warnings.append)
+        reader.stop()
+    finally:
+        os.close(m)
+        os.close(s)
+    cap = read_capture(tmp_path / "d.csv")
+    assert res.stopped_because == "device changed" and "UNIT-A" in warnings[0] and "UNIT-B" in warnings[0]
+    assert cap.meta["device"] == "UNIT-A" and cap.n_rows == 50 and list(cap.columns) == ["t", "segment", "ax", "ay", "az", "temp_c"]

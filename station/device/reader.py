@@ -74,6 +74,9 @@ class Batch:
         cols.update({name: self.values[:, i] for i, name in enumerate(SENSOR_FIELDS)})
         return cols
 
+    def select(self, mask) -> "Batch":
+        return Batch(self.t_s[mask], self.seq[mask], self.segment[mask], self.values[mask])
+
     @staticmethod
     def concat(batches: list["Batch"]) -> "Batch | None":
         if not batches:
@@ -99,7 +102,7 @@ class GapEvent:
     """
 
     segment: int
-    reason: str  # 'reconnect' | 'restart'
+    reason: str  # 'reconnect', 'restart', 'device changed', 'reconnect, device changed'
     t_s: float
     t_resume_s: float = math.nan
     down_s: float = 0.0
@@ -170,7 +173,9 @@ class Reader:
         self.request_header = request_header and protocol == "station"
         self.parser = make_parser(protocol, mavlink_source)
         self.header: Header | None = None
-        self.header_changes: list[tuple[Header, Header]] = []
+        # (old header, new header, first segment of the new device)
+        self.header_changes: list[tuple[Header, Header, int]] = []
+        self._cuts: dict[int, tuple[str, Header | None, Header | None]] = {}  # sample index -> break
         self.acks: collections.deque = collections.deque(maxlen=100)
         self._ser = None
         self._lock = threading.Lock()  # queue, stats, events
@@ -375,15 +380,15 @@ class Reader:
     def _ingest(self, data: bytes, host_now: float) -> None:
         events = self.parser.feed(data)
         block = self.parser.take()
-        restarts: list[int] = []
         for ev in events:
             if isinstance(ev, Header):
                 if self.header is not None and not ev.same_device(self.header):
-                    self.header_changes.append((self.header, ev))
+                    # another device on the port: a break before its first sample
+                    self._cuts[ev.at_sample] = ("device changed", self.header, ev)
                 self.header = ev
                 self._header_seen.set()
             elif isinstance(ev, Restart):
-                restarts.append(ev.at_sample)
+                self._cuts.setdefault(ev.at_sample, ("restart", None, None))
             elif type(ev).__name__ == "Ack":
                 self.acks.append(ev)
         if block is None:
@@ -391,6 +396,7 @@ class Reader:
         n = len(block)
         first = self._taken
         self._taken += n
+        mine = {max(0, i - first): self._cuts.pop(i) for i in sorted(self._cuts) if i < first + n}
         dev = block.t_dev_us
         # arrival time of the first sample of this block, from the device clock
         t_first_host = host_now - (dev[-1] - dev[0]) * 1e-6
@@ -398,34 +404,38 @@ class Reader:
             self._t0_host = t_first_host
         t_s = np.empty(n)
         seg = np.empty(n, dtype=np.int64)
-        cuts = sorted({r - first for r in restarts if first <= r < first + n} | {0, n})
+        cuts = sorted(set(mine) | {0, n})
         for a, b in zip(cuts[:-1], cuts[1:]):
-            is_restart = a > 0 or (first + a) in restarts
-            if is_restart or self._anchor_t_s is None:
+            cut = mine.get(a)
+            if cut is not None or self._anchor_t_s is None:
                 host_t = self._t0_host if self._anchor_t_s is None else (
                     host_now - (dev[b - 1] - dev[a]) * 1e-6
                 )
                 t_anchor = host_t - self._t0_host
                 if not math.isnan(self._last_t_s):
                     t_anchor = max(t_anchor, self._last_t_s + 1e-6)
-                if is_restart:
+                if cut is not None:
+                    reason, old, new = cut
                     with self._lock:
                         if self._pending_gap is None or not math.isnan(self._pending_gap.t_resume_s):
                             self._segment += 1
-                            self._pending_gap = GapEvent(self._segment, "restart", self._last_t_s)
-                        else:  # reconnected onto a restarted device: one break
+                            self._pending_gap = GapEvent(self._segment, reason, self._last_t_s)
+                        else:  # reconnected onto a restarted (or another) device: one break
                             self._pending_gap = GapEvent(
-                                self._pending_gap.segment, "reconnect", self._pending_gap.t_s,
-                                down_s=self._pending_gap.down_s, error=self._pending_gap.error,
+                                self._pending_gap.segment,
+                                "reconnect" if reason == "restart" else f"reconnect, {reason}",
+                                self._pending_gap.t_s, down_s=self._pending_gap.down_s, error=self._pending_gap.error,
                             )
                             self._gaps_before_break = -1
+                    if old is not None:
+                        self.header_changes.append((old, new, self._segment))
                 self._anchor_t_s = t_anchor
                 self._anchor_dev_us = dev[a]
             t_s[a:b] = self._anchor_t_s + (dev[a:b] - self._anchor_dev_us) * 1e-6
             seg[a:b] = self._segment
             if self._pending_gap is not None and math.isnan(self._pending_gap.t_resume_s):
                 g = self._pending_gap
-                missed = -1 if (g.reason == "restart" or self._gaps_before_break < 0) else (
+                missed = -1 if (g.reason != "reconnect" or self._gaps_before_break < 0) else (
                     self.parser.stats.gaps - self._gaps_before_break
                 )
                 with self._lock:

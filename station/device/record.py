@@ -263,13 +263,16 @@ def record(
                 stopped = "stopped"
                 break
             b = reader.drain()
-            if b is not None:
+            changes = list(reader.header_changes)  # registered before their samples are queued
+            if b is not None and changes:
+                b = b.select(b.segment < changes[0][2])
+            if b is not None and len(b):
                 stream.write(b)
                 d = _median_dt(b)
                 if d is not None:
                     dts.append(d)
-            if reader.header_changes:
-                old, new = reader.header_changes[0]
+            if changes:
+                old, new, _ = changes[0]
                 warn(f"device changed ({old.device_id} {old.units} -> {new.device_id} {new.units}): recording stopped")
                 stopped = "device changed"
                 break
@@ -280,6 +283,8 @@ def record(
             reader.stop()
         b = reader.drain()
         if b is not None and stopped != "device changed":
+            if reader.header_changes:
+                b = b.select(b.segment < reader.header_changes[0][2])
             stream.write(b)
         if stream.rows == 0:
             stream.abandon()
