@@ -248,18 +248,22 @@ def _averages(labels: np.ndarray, cols: dict[str, np.ndarray]) -> dict[str, np.n
 
 # ---------------------------------------------------------------- P2: centrifuge
 
+GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
+
+
+def fibonacci_directions(n: int) -> np.ndarray:
+    """``n`` unit vectors spread evenly over the sphere (a Fibonacci lattice), (n, 3)."""
+    k = np.arange(n)
+    z = 1.0 - 2.0 * (k + 0.5) / n
+    r = np.sqrt(1.0 - z * z)
+    return np.column_stack([r * np.cos(GOLDEN_ANGLE * k), r * np.sin(GOLDEN_ANGLE * k), z])
+
+
 def centrifuge_orientations(n: int = 20) -> list[np.ndarray]:
     """``n`` mounting attitudes (body → table frame: radial-out, tangential, up), spread
     over the sphere (Fibonacci directions for the body x axis, rolls stepped by 137.5°)."""
-    out = []
-    golden = math.pi * (3.0 - math.sqrt(5.0))
-    for k in range(n):
-        z = 1.0 - 2.0 * (k + 0.5) / n
-        r = math.sqrt(1.0 - z * z)
-        d = np.array([r * math.cos(golden * k), r * math.sin(golden * k), z])
-        C = frames.rotation_between([1.0, 0.0, 0.0], d) @ frames.rot_x(golden * k * 1.7)
-        out.append(C)
-    return out
+    return [frames.rotation_between([1.0, 0.0, 0.0], d) @ frames.rot_x(GOLDEN_ANGLE * k * 1.7)
+            for k, d in enumerate(fibonacci_directions(n))]
 
 
 def simulate_centrifuge(seed: int = 0, effects: dict[str, float] | None = None, *,
@@ -316,14 +320,8 @@ def simulate_centrifuge(seed: int = 0, effects: dict[str, float] | None = None, 
 
 def sphere_attitudes(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     """``n`` hand-held attitudes spread over the sphere (body → NED)."""
-    out = []
-    golden = math.pi * (3.0 - math.sqrt(5.0))
-    for k in range(n):
-        z = 1.0 - 2.0 * (k + 0.5) / n
-        r = math.sqrt(1.0 - z * z)
-        d = np.array([r * math.cos(golden * k), r * math.sin(golden * k), z])
-        out.append(C_n_b_for(d, rng.uniform(0, 2 * math.pi)) @ placement_error(rng, 10.0))
-    return out
+    return [C_n_b_for(d, rng.uniform(0, 2 * math.pi)) @ placement_error(rng, 10.0)
+            for d in fibonacci_directions(n)]
 
 
 def simulate_compass(seed: int = 0, effects: dict[str, float] | None = None, *, rate_hz: float = 50.0,
