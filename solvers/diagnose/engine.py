@@ -75,6 +75,7 @@ class Problem:
     row_labels: list[str] | None = None  # a name per row for quality findings
     extended_model: Callable[[list[str]], str] | None = None
     row_types: np.ndarray | None = None
+    drivers: dict = field(default_factory=dict)  # name → per-row value (time, temperature, input …) for plots
     channels: int = 1                       # time-ordered rows interleave this many channels (axes, beams)     # rows of different kinds get their own noise scale
 
 
@@ -240,6 +241,21 @@ def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.
     columns the baseline already spans removed (fixed at their null values)."""
     grid = [None] if c.scan is None else list(c.scan[1])
     best = None
+    if c.scan is not None and len(grid) > 2:
+        # coarse grid, then a fine one around the best coarse value
+        step = float(grid[1] - grid[0])
+        scores = []
+        for value in grid:
+            blocks = as_params(c.blocks)
+            blocks[c.scan[0]] = np.array(float(value))
+            params = {**base_params, **blocks}
+            free = {k: False for k in base_params}
+            free.update(_free_of(c))
+            J, _, _ = jacobian(problem, params, free)
+            perp = J - Q @ (Q.T @ J)
+            scores.append(_lstsq_rss(perp, r0 - Q @ (Q.T @ r0))[1])
+        v0 = float(grid[int(np.argmin(scores))])
+        grid = list(np.linspace(v0 - step, v0 + step, 21))
     for value in grid:
         blocks = as_params(c.blocks)
         if value is not None:
@@ -300,9 +316,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     if baseline_fit is None:
         baseline_fit = fit(problem.residual, problem.baseline, free=problem.free, sigma=sigma)
     if problem.row_types is not None:
-        # variance components: each kind of row gets the noise scale its baseline residuals show
+        # variance components: auxiliary rows (prior σ) get the noise scale their baseline residuals show
         rw = baseline_fit.weighted_residuals
         for k in np.unique(problem.row_types):
+            if k == 0:
+                continue  # the primary rows keep their measured noise (the χ² test is about them)
             sel = problem.row_types == k
             s = math.sqrt(float(np.mean(rw[sel] ** 2))) if sel.any() else 1.0
             if s > 0:

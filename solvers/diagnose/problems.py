@@ -134,11 +134,16 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
                                "cannot be told from the bias"))
     else:
         cands.append(Candidate("earth_rate", {"wE": np.zeros(2)}))
-    return Problem("gyro-drift", "y = ω_E + ε (P4 mode B)" if earth_body_rad_s is not None else "y = ε",
+    base_model = "y = ω_E + ε (P4 mode B)" if earth_body_rad_s is not None else "y = ε"
+    prob = Problem("gyro-drift", base_model,
                    residual, sigma, np.repeat(groups, 3), {"eps": wb.mean(axis=0) - Eb.mean(axis=0)},
                    {"eps": True}, cands, THRESHOLDS["gyro-drift"], unit="rad/s", time_ordered=True, channels=3,
                    row_labels=[f"position {p} t={x:.1f} s {a}" for p, x in zip(pb, tb) for a in "xyz"],
-                   extended_model=lambda names: "y = ω_E + ε" + _suffix(names, GYRO_TERMS))
+                   extended_model=lambda names: base_model.split(" (")[0] + _suffix(names, GYRO_TERMS))
+    prob.drivers = {"time [s]": np.repeat(tb, 3)}
+    if Tb is not None:
+        prob.drivers["temperature [°C]"] = np.repeat(Tb, 3)
+    return prob
 
 
 GYRO_TERMS = {"temperature_bias": " + b_T (T − T_ref)", "time_drift": " + b_t (t − t_ref)",
@@ -186,12 +191,18 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
         cands.append(Candidate("lever_arm", {"r": np.zeros(3)}))
     cands.append(Candidate("offset", {"o": np.zeros(3)}))
     groups = time_blocks(t) if t is not None else (np.arange(len(v)) * 10) // len(v)
-    return Problem("ldv", "V_L = X v (P5)", residual, np.tile(sig_beam, len(v)), np.repeat(groups, 3),
+    prob = Problem("ldv", "V_L = X v (P5)", residual, np.tile(sig_beam, len(v)), np.repeat(groups, 3),
                    {"X": np.asarray(X0, float)}, {"X": True}, cands, THRESHOLDS["ldv"], unit="m/s",
                    time_ordered=True, channels=3,
                    row_labels=[f"t={x:.2f} s beam {j + 1}" for x in (t if t is not None else np.arange(len(v)))
                                for j in range(3)],
                    extended_model=lambda names: "V_L = X (v(t − τ) + ω × r) + o + …" if names else "V_L = X v")
+    prob.drivers = {"speed |v| [m/s]": np.repeat(np.linalg.norm(v, axis=1), 3)}
+    if t is not None:
+        prob.drivers["time [s]"] = np.repeat(t, 3)
+    if T is not None:
+        prob.drivers["temperature [°C]"] = np.repeat(T, 3)
+    return prob
 
 
 # ---------------------------------------------------------------- P1 level table
@@ -250,6 +261,12 @@ def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement
                                                                   if x not in ("temperature_bias", "time_drift"))
                    + ") + b" + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift")))
     prob.row_types = np.concatenate([np.zeros(m, int), np.ones(len(s_v), int)])
+    pad = np.full(len(s_v), np.nan)
+    prob.drivers = {"position #": np.concatenate([np.arange(1.0, m + 1), pad])}
+    if t is not None:
+        prob.drivers["time [s]"] = np.concatenate([t, pad])
+    if T is not None:
+        prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
     return prob
 
 
@@ -294,13 +311,17 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
              Candidate("cubic", {"C3": np.zeros(3)})]
     cands.append(Candidate("lever_arm", {"dr": np.zeros(3)}) if have_c else
                  Candidate("lever_arm", reason="a mounting seen at one speed only: its centripetal direction is unknown"))
-    return Problem("accel-centrifuge", "N = S (f + D f∘f) + b, |f| = ρ (P2)", residual, sigma,
+    prob = Problem("accel-centrifuge", "N = S (f + D f∘f) + b, |f| = ρ (P2)", residual, sigma,
                    np.array([list(dict.fromkeys(labels)).index(x) for x in labels]), base,
                    {"S": True, "b": True, "D": True}, cands, THRESHOLDS["accel-centrifuge"], unit="g",
                    row_labels=[f"position {x} ω={y:.3g} rad/s" for x, y in zip(labels, w)],
                    extended_model=lambda names: "N = S Φ(γ) (f + D f∘f" + "".join(
                        " + " + ACCEL_TERMS[x] for x in names if x in ("cubic", "lever_arm")) + ") + b" + "".join(
                        " + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift")))
+    prob.drivers = {"input |f| [g]": rho, "mounting #": prob.groups.astype(float) + 1}
+    if T is not None:
+        prob.drivers["temperature [°C]"] = T
+    return prob
 
 
 # ---------------------------------------------------------------- P3 compass
@@ -367,4 +388,8 @@ def compass_problem(t_s, y_raw, W0, h0, field_nT, inclination_deg, *, noise_raw,
                    extended_model=lambda names: "m = W R(ρ)ᵀ (y − h − Δh[t ≥ t_on] − …)" if names else
                    "m = W (y − h)")
     prob.row_types = np.concatenate([np.zeros(len(y), int), np.ones(len(s_dip), int)])
+    pad = np.full(len(s_dip), np.nan)
+    prob.drivers = {"time [s]": np.concatenate([t, pad])}
+    if T is not None:
+        prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
     return prob

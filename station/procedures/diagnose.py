@@ -75,7 +75,12 @@ def _gyro(capture, base: dict):
 
     warnings: list[str] = []
     C, asign, flips = P4._conventions(capture, warnings)
-    k = P4._gyro_factor(capture, warnings)
+    unit = "rad/s"
+    try:
+        k = P4._gyro_factor(capture, warnings)
+    except UnsupportedError:
+        # counts without a scale: diagnose in the capture's own unit (effects are relative)
+        k, unit = 1.0, capture.meta.get("gyro_unit", "raw")
     w_b = (P4._need(capture, ["gx", "gy", "gz"]) * flips * k) @ C.T
     f_b = None
     if all(c in capture.columns for c in ("ax", "ay", "az")):
@@ -121,6 +126,7 @@ def _gyro(capture, base: dict):
     prob = DP.gyro_problem(t[order], w_b[order], f_mps2, _col(capture, "temp_c")[order]
                            if "temp_c" in capture.columns else None,
                            E[order] if (lat is not None or mode_ref) else None, label[order], C_b_n=Cbn[order])
+    prob.unit = unit
     return prob, {"rows": order}, None, "a block far off the others: a knock, the unit moved, or a bias jump"
 
 
@@ -252,7 +258,7 @@ def analyse(capture) -> tuple[dict, object, dict]:
     procedure_module(capture.procedure, capture.path)  # unknown/missing procedure → InputError
     if capture.procedure not in BUILDERS:
         raise UnsupportedError(f"{capture.procedure}: no diagnosis for this procedure")
-    base = calibrate_capture(capture)
+    base = None if capture.procedure == "gyro-drift" else calibrate_capture(capture)
     try:
         prob, drivers, _, explain = BUILDERS[capture.procedure](capture, base)
         diag = diagnose(prob)
@@ -313,26 +319,27 @@ def format_text(result: dict, diag, drivers: dict, plots: bool = True) -> str:
 
 
 def _plots(diag, drivers) -> str:
-    """Measured − simulated (the fitted baseline) against row order and the drivers."""
+    """Measured − simulated (the fitted baseline, primary rows) against each driver."""
     try:
         import plotext as plt
     except ImportError:  # pragma: no cover - plotext is a dependency
         return ""
+    prob = diag.problem
     res = -np.asarray(diag.baseline.residuals, float)  # measured − simulated
+    keep = np.ones(len(res), bool) if prob.row_types is None else np.asarray(prob.row_types) == 0
     out = []
-    x = np.arange(len(res))
-    plt.clear_figure()
-    plt.plot_size(78, 14)
-    plt.scatter(x.tolist(), res.tolist(), marker="dot")
-    plt.title(f"measured − simulated baseline [{diag.problem.unit}] by row (time order)")
-    out.append(plt.build())
-    for key in ("temp_c", "time_s"):
-        d = drivers.get(key)
-        if d is not None and len(d) and diag.problem.procedure == "accel-tabletop":
-            m = len(d)
-            plt.clear_figure()
-            plt.plot_size(78, 12)
-            plt.scatter(np.asarray(d, float).tolist(), res[:m].tolist(), marker="dot")
-            plt.title(f"measured − simulated |f| against {key}")
-            out.append(plt.build())
+    series = dict(prob.drivers) or {"row": np.arange(len(res), dtype=float)}
+    for name, x in list(series.items())[:3]:
+        x = np.asarray(x, float)
+        ok = keep & np.isfinite(x)
+        if ok.sum() < 2:
+            continue
+        step = max(1, int(ok.sum()) // 2000)
+        xs, ys = x[ok][::step], res[ok][::step]
+        plt.clear_figure()
+        plt.theme("clear")
+        plt.plot_size(78, 13)
+        plt.scatter(xs.tolist(), ys.tolist(), marker="dot")
+        plt.title(f"measured − simulated baseline [{prob.unit}] against {name}")
+        out.append(plt.build())
     return "\n".join(out)
