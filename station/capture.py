@@ -152,9 +152,10 @@ class Capture:
 
 def _same_array(a: np.ndarray, b: np.ndarray) -> bool:
     a, b = np.asarray(a), np.asarray(b)
-    if a.shape != b.shape or (a.dtype == object) != (b.dtype == object):
+    text_a, text_b = a.dtype.kind in "OUS", b.dtype.kind in "OUS"
+    if a.shape != b.shape or text_a != text_b:
         return False
-    if a.dtype == object:
+    if text_a:
         return a.tolist() == b.tolist()
     nan = np.isnan(a)  # a NaN's sign is not kept: the file has only empty fields
     return bool(np.array_equal(nan, np.isnan(b)) and np.array_equal(a[~nan], b[~nan])
