@@ -28,7 +28,11 @@ The chain (procedures.md P3), each step a function here:
 
    - :func:`ellipsoid_fit`: algebraic quadric fit (10 coefficients, smallest singular vector
      on centred, scaled data), centre ``h = −A⁻¹b/2``, ``A_n = A / (hᵀAh − c)`` must be
-     positive definite; ``W = F · chol(A_n)ᵀ`` (upper). Needs >= 6 distinct orientations.
+     positive definite; ``W = F · chol(A_n)ᵀ`` (upper). The source's counts are parameter
+     counts: 6 orientations determine the axis-aligned ellipsoid (diagonal W, h: 6
+     unknowns), 9 the full upper-triangular W and h. With >= 9 distinct orientations the
+     general ellipsoid starts the RLS; with 6–8 only the axis-aligned one is fitted
+     (``method='ellipsoid'``; the RLS is refused).
    - :class:`MagRLS`: recursive least squares on all 9 parameters (6 upper elements of W,
      h), started from the ellipsoid values. The measurement ``F = |W(y − h)|`` is
      nonlinear; each sample is linearised at the current estimate (extended RLS):
@@ -382,8 +386,11 @@ def midrange_directions(y) -> np.ndarray:
 
 # ---------------------------------------------------------------- 4. magnetometer
 
-def ellipsoid_fit(y, field_nT: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
-    """Algebraic ellipsoid fit of raw vectors ``y`` (N, 3).
+def ellipsoid_fit(y, field_nT: float | None = None, *,
+                  axis_aligned: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+    """Algebraic ellipsoid fit of raw vectors ``y`` (N, 3); ``axis_aligned``: the ellipsoid's
+    axes along the sensor axes (W diagonal: 3 scales + 3 centre = the source's 6 unknowns,
+    identifiable from 6 orientations), else general (9 unknowns).
 
     Returns ``(W, h, radius)``: W upper-triangular (positive diagonal) with
     ``|W (y − h)| ≈ field_nT``, h the centre [raw], radius the ellipsoid's geometric-mean
@@ -396,13 +403,19 @@ def ellipsoid_fit(y, field_nT: float | None = None) -> tuple[np.ndarray, np.ndar
     s = float(np.sqrt(np.mean(np.sum((y - mu) ** 2, axis=1)))) or 1.0
     x = (y - mu) / s
     X, Y, Z = x.T
-    D = np.column_stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z,
-                         2 * X, 2 * Y, 2 * Z, np.ones(len(x))])
+    one = np.ones(len(x))
+    if axis_aligned:
+        D = np.column_stack([X * X, Y * Y, Z * Z, 2 * X, 2 * Y, 2 * Z, one])
+    else:
+        D = np.column_stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z,
+                             2 * X, 2 * Y, 2 * Z, one])
     _, sv, Vt = np.linalg.svd(D, full_matrices=False)
     if sv[-2] <= 1e-9 * sv[0]:
         raise NotIdentifiable("the magnetometer vectors do not determine an ellipsoid "
                               "(they lie on a plane or a cone: turn the unit through more orientations)")
     v = Vt[-1]
+    if axis_aligned:
+        v = np.concatenate([v[:3], [0.0, 0.0, 0.0], v[3:]])
     A = np.array([[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]])
     b = v[6:9]
     if np.linalg.det(A) < 0 or np.trace(A) < 0:
@@ -480,7 +493,8 @@ def noise_bias_nT(y, W, h, noise_raw: float) -> np.ndarray:
     return float(noise_raw) ** 2 * (np.sum(np.asarray(W, float) ** 2) - gain ** 2) / (2.0 * n)
 
 
-def batch_fit(y, W0, h0, field_nT: float, noise_raw: float, *, weights_at=None) -> FitResult:
+def batch_fit(y, W0, h0, field_nT: float, noise_raw: float, *, weights_at=None,
+              W_free=W_FREE) -> FitResult:
     """Nonlinear least squares of ``|W(y − h)| − (F + b)`` over W (upper) and h through
     ``solvers.fit``, b the noise bias (:func:`noise_bias_nT`, when NOISE_BIAS_CORRECTION).
     Per-row sigma ``noise_raw · |Wᵀû|``; sigma and b at ``weights_at`` = (W, h) (default
@@ -495,11 +509,14 @@ def batch_fit(y, W0, h0, field_nT: float, noise_raw: float, *, weights_at=None) 
     def resid(p):
         return np.linalg.norm(calibrated(y, p["W"], p["h"]), axis=1) - F
 
+    W_free = np.asarray(W_free, bool)
+    cols = [k for k, (i, j) in enumerate(zip(*UPPER)) if W_free[i, j]] + [6, 7, 8]
+
     def jac(p):
-        return magnitude_jacobian(y, p["W"], p["h"])[1]
+        return magnitude_jacobian(y, p["W"], p["h"])[1][:, cols]
 
     return fit(resid, {"W": np.asarray(W0, float), "h": np.asarray(h0, float)},
-               free={"W": W_FREE, "h": True}, sigma=sigma, jac=jac, scale_on_misfit=True)
+               free={"W": W_free, "h": True}, sigma=sigma, jac=jac, scale_on_misfit=True)
 
 
 class MagRLS:
@@ -631,7 +648,7 @@ class MagCalibration:
     W_ellipsoid: np.ndarray
     h_ellipsoid: np.ndarray
     batch: FitResult
-    rls_minus_batch_sigma: float          # max |θ_rls − θ_batch| / σ_batch
+    rls_minus_batch_sigma: float          # max |θ_rls − θ_batch| / σ_batch (NaN: no RLS)
     noise_raw: float                      # raw noise estimate (per axis)
     residual_rms_nT: float
     n_samples: int
@@ -686,42 +703,53 @@ def calibrate_mag(y, field_nT: float | None, *, unit_factor_nT: float | None = N
     y = y[np.all(np.isfinite(y), axis=1)]
     if method not in ("rls", "batch", "ellipsoid"):
         raise ValueError(f"unknown compass method {method!r}: rls, batch or ellipsoid")
-    check_orientations(y, need=MIN_ELLIPSOID_ORIENTATIONS, min_coverage=min_coverage)
-    W1, h1, radius = ellipsoid_fit(y, 1.0)
+    n0, _ = check_orientations(y, need=MIN_ELLIPSOID_ORIENTATIONS, min_coverage=min_coverage)
+    full = n0 >= MIN_RLS_ORIENTATIONS
+    if not full and method != "ellipsoid":
+        raise TooFewPositions(
+            f"only {n0} distinct field directions (>= {DISTINCT_SEPARATION_DEG:.0f}° apart): the RLS "
+            f"(full upper-triangular W and h, 9 parameters) needs at least {MIN_RLS_ORIENTATIONS}; "
+            f"with {MIN_ELLIPSOID_ORIENTATIONS} to {MIN_RLS_ORIENTATIONS - 1} only the axis-aligned "
+            "ellipsoid (method 'ellipsoid', 6 parameters) can be fitted: turn the unit through more orientations")
+    W1, h1, radius = ellipsoid_fit(y, 1.0, axis_aligned=not full)
     if field_nT is None:
         F = radius * (unit_factor_nT if unit_factor_nT else 1.0)
     else:
         F = float(field_nT)
     W_e = W1 * F
     m_e = calibrated(y, W_e, h1)
-    n_dist, cov = check_orientations(y, need=MIN_RLS_ORIENTATIONS, min_coverage=min_coverage,
-                                     directions=m_e)
+    n_dist, cov = check_orientations(y, need=MIN_RLS_ORIENTATIONS if full else MIN_ELLIPSOID_ORIENTATIONS,
+                                     min_coverage=min_coverage, directions=m_e)
+    W_free = W_FREE if full else np.eye(3, dtype=bool)
     if noise_raw is None:
         _, _, gain_e = magnitude_jacobian(y, W_e, h1)
         r_e = (np.linalg.norm(m_e, axis=1) - F) / gain_e
-        noise_raw = float(np.sqrt(np.sum(r_e ** 2) / max(len(y) - 9, 1)))
-    batch = batch_fit(y, W_e, h1, F, noise_raw)
+        noise_raw = float(np.sqrt(np.sum(r_e ** 2) / max(len(y) - int(W_free.sum()) - 3, 1)))
+    batch = batch_fit(y, W_e, h1, F, noise_raw, W_free=W_free)
     if not batch.success or batch.unidentifiable:
         raise NotIdentifiable("the soft/hard-iron fit is not identifiable from these data "
                               f"({', '.join(batch.unidentifiable) or batch.message})")
     Wb, hb = batch.params["W"], batch.params["h"]
     sig_raw = float(noise_raw) * (math.sqrt(batch.reduced_chi2) if batch.misfit_scaled else 1.0)
-    th_b = theta_of(Wb, hb)
-    sig_b = np.concatenate([batch.sigma["W"][UPPER], batch.sigma["h"]])
-    # RLS from the ellipsoid values
-    rls = rls_passes(y, W_e, h1, F, noise_raw, passes=RLS_PASSES)  # same noise (and bias term) as the batch
-    diff = float(np.max(np.abs(rls.theta - th_b) / sig_b))
+    if full:
+        th_b = theta_of(Wb, hb)
+        sig_b = np.concatenate([batch.sigma["W"][UPPER], batch.sigma["h"]])
+        # RLS from the ellipsoid values, same noise (and bias term) as the batch
+        rls = rls_passes(y, W_e, h1, F, noise_raw, passes=RLS_PASSES)
+        diff = float(np.max(np.abs(rls.theta - th_b) / sig_b))
+    else:
+        rls, diff = None, math.nan
     if method == "rls":
         W, h = rls.W, rls.h
     elif method == "batch":
         W, h = Wb, hb
-    else:
-        W, h = W_e, h1
+    else:  # the ellipsoid: the batch optimum of the ellipsoid's own model when axis-aligned
+        W, h = (W_e, h1) if full else (Wb, hb)
     raw_mag = np.linalg.norm(y, axis=1) * (unit_factor_nT if unit_factor_nT else 1.0)
     after = np.linalg.norm(calibrated(y, W, h), axis=1)
     resid = after - F
     return MagCalibration(
-        W=W, h=h, W_sigma=batch.sigma["W"] * W_FREE, h_sigma=batch.sigma["h"], field_nT=F,
+        W=W, h=h, W_sigma=batch.sigma["W"] * W_free, h_sigma=batch.sigma["h"], field_nT=F,
         method=method, W_ellipsoid=W_e, h_ellipsoid=h1, batch=batch, rls_minus_batch_sigma=diff,
         noise_raw=sig_raw, residual_rms_nT=float(np.sqrt(np.mean(resid ** 2))), n_samples=len(y),
         n_distinct=n_dist, coverage=cov, magnitude_before=_spread(raw_mag),

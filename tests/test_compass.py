@@ -89,6 +89,11 @@ def test_ellipsoid_fit_exact_on_noiseless_data():
     np.testing.assert_allclose(We, W, rtol=1e-8, atol=1e-6)
     np.testing.assert_allclose(he, h, atol=1e-8)
     assert np.allclose(np.tril(We, -1), 0.0)
+    Wd = np.diag([1030.0, 980.0, 1005.0])
+    y = mag_model.forward(d[:6] * [[1, 1, 1]], {"W": Wd, "h": h})  # 6 vectors: the source's minimum
+    Wa, ha, _ = C.ellipsoid_fit(np.repeat(y, 2, axis=0), 50_000.0, axis_aligned=True)
+    np.testing.assert_allclose(Wa, Wd, rtol=1e-8)
+    np.testing.assert_allclose(ha, h, atol=1e-8)
 
 
 # ---------------------------------------------------------------- IGRF known answer
@@ -209,12 +214,12 @@ def test_kalman_rides_through_hand_acceleration_and_learns_bias():
 
 # ---------------------------------------------------------------- coverage and refusals
 
-def _capture_from_attitudes(atts, *, noise_uT=0.15, hold=60, seed=0):
+def _capture_from_attitudes(atts, *, noise_uT=0.15, hold=60, seed=0, params=None):
     """Held attitudes (body → NED), jumps between them; accel g, gyro 0, mag µT."""
     rng = np.random.default_rng(seed)
     ref = igrf_reference(SITE["latitude_deg"], SITE["longitude_deg"], SITE["altitude_m"], SITE["date"])
-    params = {"W": 1000.0 * (np.eye(3) + np.triu(rng.normal(scale=0.04, size=(3, 3)))),
-              "h": rng.normal(scale=8.0, size=3)}
+    params = params or {"W": 1000.0 * (np.eye(3) + np.triu(rng.normal(scale=0.04, size=(3, 3)))),
+                        "h": rng.normal(scale=8.0, size=3)}
     C_b_n = np.repeat(np.array([a.T for a in atts]), hold, axis=0)
     m = mag_model.forward(C_b_n @ field_ned(ref), params) + rng.normal(scale=noise_uT, size=(len(C_b_n), 3))
     f = C_b_n @ np.array([0.0, 0.0, -1.0]) + rng.normal(scale=0.002, size=(len(C_b_n), 3))
@@ -401,3 +406,26 @@ def test_live_compass_streams_and_settles_on_truth():
     errs = [((whole[3][i] - h + 180.0) % 360.0) - 180.0 for i, h in zip(ends, tr["heading_deg"])
             if np.isfinite(whole[3][i])]
     assert len(errs) >= 18 and np.median(np.abs(errs)) < 0.5 and np.max(np.abs(errs)) < 2.0
+
+
+def test_six_to_eight_orientations_axis_aligned_ellipsoid_only(tmp_path, capsys):
+    """The source's counts are parameter counts: 7 orientations fit the axis-aligned
+    ellipsoid (6 unknowns) but not the RLS's full W (9): refused by default, fitted with
+    --method ellipsoid, and a diagonal truth is recovered within the reported σ."""
+    params = {"W": np.diag([1040.0, 965.0, 1010.0]), "h": np.array([5.0, -9.0, 3.0])}
+    atts = [C.unit_rows(d)[0] for d in ([1, 0.1, 0.2], [-1, 0.2, 0.1], [0.1, 1, -0.2], [0.2, -1, 0.1],
+                                        [0.1, 0.2, 1], [-0.2, 0.1, -1], [0.6, 0.6, 0.5])]
+    from solvers.positions import C_n_b_for
+    Cs = [C_n_b_for(d, 0.3 * k) for k, d in enumerate(atts)]
+    path = _write(tmp_path, *_capture_from_attitudes(Cs, params=params, hold=100))
+    rc, out = _run_cli(path, capsys)
+    assert rc == 2 and "needs at least 9" in out.err and "ellipsoid" in out.err and out.err.count("\n") == 1
+    rc = cli_main(["calibrate", str(path), "--json", "--method", "ellipsoid"])
+    res = json.loads(capsys.readouterr().out)
+    assert rc == 0 and res["method"] == "ellipsoid" and res["n_positions"] == 7
+    W, sW = np.array(res["params"]["soft_iron"]), np.array(res["uncertainty"]["soft_iron"])
+    h, sh = np.array(res["params"]["hard_iron"]), np.array(res["uncertainty"]["hard_iron"])
+    assert np.all(W == np.diag(np.diag(W))) and np.all(sW == np.diag(np.diag(sW)))
+    assert np.all(np.abs(np.diag(W - params["W"]) / np.diag(sW)) < 4.0)
+    assert np.all(np.abs((h - params["h"]) / sh) < 4.0)
+    assert any("axis-aligned" in w for w in res["warnings"])

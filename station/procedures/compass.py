@@ -87,6 +87,9 @@ def calibrate(capture, method: str | None = None) -> dict:
                         "(estimated from second differences): the ellipsoid model does not explain "
                         "everything (time misalignment, field disturbances, nonlinearity); "
                         "uncertainties are scaled up accordingly")
+    if not math.isfinite(cal.rls_minus_batch_sigma):
+        warnings.append(f"only {cal.n_distinct} distinct orientations: axis-aligned ellipsoid (diagonal W) "
+                        "without RLS; the off-diagonal soft iron is not estimated")
     if cal.rls_minus_batch_sigma > 0.1:
         warnings.append(f"the RLS differs from the batch solution by {cal.rls_minus_batch_sigma:.2f} sigma")
     if ref is None:
