@@ -245,6 +245,8 @@ def format_text(result: dict) -> str:
     for h in result.get("headings", [])[:40]:
         lines.append(f"  held {h['index']:>2}: pitch {h['pitch_deg']:7.2f}°  roll {h['roll_deg']:7.2f}°  "
                      f"heading {h['heading_magnetic_deg']:7.2f}° magnetic, {h['heading_true_deg']:7.2f}° true")
+    if result.get("calibration_id") is not None:
+        lines.append(f"saved      calibration {result['calibration_id']}")
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)
