@@ -75,9 +75,7 @@ class StationApp(App):
 
         self.push_screen(ConnectScreen())
         if self.start == "procedure":
-            from station.screens.procedure import ProcedureScreen
-
-            self.push_screen(ProcedureScreen())
+            self.push_screen(procedure_screen(self.session.procedure))
         elif self.start == "history":
             from station.screens.history import HistoryScreen
 
@@ -129,6 +127,20 @@ class StationApp(App):
             self.push_screen(HelpScreen())
 
 
+def procedure_screen(procedure: str):
+    """The guided screen of a procedure (P1 and P3 so far)."""
+    if procedure == "compass":
+        from station.screens.compass import CompassScreen
+
+        return CompassScreen()
+    from station.screens.procedure import ProcedureScreen
+
+    return ProcedureScreen()
+
+
+GUIDED = {"accel-tabletop": "P1 accelerometer, level table", "compass": "P3 compass sweep"}
+
+
 def make_app(db_path: str | None = None, device=None, *, demo: bool = False, average_s: float | None = None,
              settle_s: float | None = None, device_id: str | None = None, model: str = "",
              state_dir: str | None = None, start: str | None = None, resume: bool = False,
@@ -148,6 +160,7 @@ def make_app(db_path: str | None = None, device=None, *, demo: bool = False, ave
     session.settle_s = float(settle_s if settle_s is not None else (1.0 if demo else 2.0))
     if device is not None:
         session.device_id = device_id or getattr(device, "device_id", "") or ""
+        session.procedure = getattr(device, "procedure", None) or session.procedure
     elif device_id:
         session.device_id = device_id
     if start is None:

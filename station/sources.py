@@ -19,12 +19,13 @@ import numpy as np
 
 @dataclass
 class Samples:
-    """A batch: t_s (n,) device time [s], accel (n, 3) raw, gyro (n, 3) raw, temp_c (n,)."""
+    """A batch: t_s (n,) device time [s], accel, gyro, mag (n, 3) raw, temp_c (n,)."""
 
     t_s: np.ndarray
     accel: np.ndarray
     gyro: np.ndarray
     temp_c: np.ndarray
+    mag: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -52,10 +53,12 @@ class SimSource:
     nominal = (1.65, 0.0855)  # the simulated triad's data-sheet zero [V] and sensitivity [V per m/s²]
 
     def __init__(self, *, seed: int = 0, rate_hz: float = 100.0, speed: float = 1.0, clock=time.monotonic,
-                 max_batch_s: float = 1.0):
+                 max_batch_s: float = 1.0, procedure: str = "accel-tabletop"):
         from solvers.simulate import LiveImu
 
-        self.imu = LiveImu(procedure="accel-tabletop", seed=seed, rate_hz=rate_hz, hold_s=1e9)
+        self.imu = LiveImu(procedure=procedure, seed=seed, rate_hz=rate_hz, hold_s=1e9)
+        self.procedure = procedure
+        self.positions = list(self.imu.positions)
         self.rate_hz = float(rate_hz)
         self.speed = float(speed)
         self.clock = clock
@@ -70,9 +73,9 @@ class SimSource:
         self._rate_window: list[tuple[float, int]] = []
 
     @staticmethod
-    def device_id_for(seed: int) -> str:
+    def device_id_for(seed: int, procedure: str = "accel-tabletop") -> str:
         """The id the simulated device reports (as solvers.simulate.LiveImu names it)."""
-        return f"SIM-ACC-{seed:04d}"
+        return f"SIM-{procedure.upper()[:3]}-{seed:04d}"
 
     def start(self) -> "SimSource":
         self._t0 = self.clock()
@@ -106,7 +109,8 @@ class SimSource:
         if len(w) >= 2 and w[-1][0] > w[0][0]:
             self._stats.rate_hz = (w[-1][1] - w[0][1]) / (w[-1][0] - w[0][0]) / max(self.speed, 1e-9)
         return Samples(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]),
-                       np.column_stack([d["gx"], d["gy"], d["gz"]]), d["temp_c"])
+                       np.column_stack([d["gx"], d["gy"], d["gz"]]), d["temp_c"],
+                       np.column_stack([d["mx"], d["my"], d["mz"]]))
 
     def place(self, name: str) -> None:
         with self._lock:
@@ -159,7 +163,8 @@ class SerialSource:
             return None
         c = b.columns
         return Samples(b.t_s, np.column_stack([c["ax"], c["ay"], c["az"]]),
-                       np.column_stack([c["gx"], c["gy"], c["gz"]]), c["temp_c"])
+                       np.column_stack([c["gx"], c["gy"], c["gz"]]), c["temp_c"],
+                       np.column_stack([c["mx"], c["my"], c["mz"]]))
 
     def place(self, name: str) -> None:
         self.reader.command("ORIENT", name)

@@ -12,6 +12,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="The TUI on the simulated device with a scripted operator who follows "
                        "the prompts; short averaging times; the result is saved to the database.")
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
+    p.add_argument("--procedure", choices=("accel-tabletop", "compass"), default="accel-tabletop",
+                   help="P1 (default) or the P3 compass sweep")
     p.add_argument("--average-s", type=float, default=3.0, help="averaging time per position (default 3 s)")
     p.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second (default 1)")
     p.add_argument("--headless", action="store_true", help="no screen: run the same procedure, print lines")
@@ -31,15 +33,18 @@ def run(args: argparse.Namespace) -> int:
     from station.app import make_app
     from station.sources import SimSource
 
-    device = SimSource(seed=args.seed, speed=args.speed)
+    device = SimSource(seed=args.seed, speed=args.speed, procedure=args.procedure)
     app = make_app(None if args.no_save else db_path(args), device=device, demo=True, average_s=args.average_s,
                    exit_when_saved=args.exit_when_saved)
+    app.session.extra["compass_min_s"] = 30.0
     app.run()
     return 0
 
 
 def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) -> int:
     """The demo without a screen, on a simulated clock (runs as fast as the CPU allows)."""
+    if getattr(args, "procedure", "accel-tabletop") == "compass":
+        return headless_compass(args, db, out, max_device_s)
     from station.calibrate import calibrate_capture, format_text
     from station.procedures.guide import GuideConfig, P1Guide, ScriptedOperator
     from station.sources import SimSource
@@ -68,6 +73,41 @@ def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) 
         from station.errors import UnsupportedError
 
         raise UnsupportedError(f"demo did not finish within {max_device_s:g} s of device time")
+    capture = guide.capture(extra_meta={"simulated": "yes"})
+    result = calibrate_capture(capture)
+    print(format_text(result), file=out)
+    if db:
+        from station.store import save_result
+
+        cal_id = save_result(db, capture, result, device_id=src.device_id)
+        print(f"saved as calibration #{cal_id} in {db}", file=out)
+    return 0
+
+
+def headless_compass(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) -> int:
+    """The P3 sweep without a screen: the scripted operator visits the sphere positions."""
+    from station.calibrate import calibrate_capture, format_text
+    from station.procedures.guide_compass import CompassConfig, CompassGuide, SweepOperator
+    from station.sources import SimSource
+
+    now = [0.0]
+    src = SimSource(seed=args.seed, clock=lambda: now[0], procedure="compass").start()
+    guide = CompassGuide(sample_rate_hz=src.rate_hz, units=src.units, device_id=src.device_id, site=src.site,
+                         config=CompassConfig(min_s=30.0))
+    from station.screens.compass import sweep_positions
+
+    operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
+    shown = -1
+    while guide.phase == "sweep" and now[0] < max_device_s:
+        now[0] += 0.05
+        b = src.drain()
+        if b is None:
+            continue
+        st = guide.update(b.t_s, b.accel, b.gyro, b.mag, b.temp_c)
+        operator.step(guide, st.t_s)
+        if int(st.coverage * 10) != shown:
+            shown = int(st.coverage * 10)
+            print(f"{st.t_s:7.1f} s  coverage {100 * st.coverage:3.0f} %", file=out)
     capture = guide.capture(extra_meta={"simulated": "yes"})
     result = calibrate_capture(capture)
     print(format_text(result), file=out)

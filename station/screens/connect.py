@@ -13,6 +13,7 @@ from textual.screen import Screen
 from textual.widgets import Button, Footer, Input, Label, Select, Static
 
 from station.widgets.title import TitleBar
+from station.app import GUIDED
 from station.messages import Connected, SourceFailed, StoreLoaded
 
 SIM = "sim"
@@ -37,7 +38,7 @@ class ConnectScreen(Screen):
     """
 
     BINDINGS = [
-        Binding("f5", "start", "Start P1"),
+        Binding("f5", "start", "Start"),
         Binding("f6", "resume", "Resume"),
         Binding("f2", "history", "History"),
     ]
@@ -45,7 +46,7 @@ class ConnectScreen(Screen):
     def compose(self) -> ComposeResult:
         s = self.app.session
         yield TitleBar("connect a device")
-        yield Static("Connect a device and start the accelerometer calibration (P1, level table)", id="title")
+        yield Static("Connect a device and start a guided calibration", id="title")
         yield Static("", id="due")
         with Vertical(id="form"):
             with Horizontal(classes="row"):
@@ -69,13 +70,17 @@ class ConnectScreen(Screen):
                 yield Label("Registered")
                 yield Select([], prompt="pick a registered device", id="known", compact=True)
             with Horizontal(classes="row"):
+                yield Label("Procedure")
+                yield Select([(v, k) for k, v in GUIDED.items()], value=s.procedure if s.procedure in GUIDED
+                             else "accel-tabletop", allow_blank=False, id="procedure", compact=True)
+            with Horizontal(classes="row"):
                 yield Label("Average (s)")
                 yield Input(value=f"{s.average_s:g}", id="average", type="number", compact=True)
                 yield Label("  per position (source: 180–300 s)")
             with Horizontal(id="buttons"):
-                yield Button("Start P1 [F5]", id="start", variant="primary", compact=True)
-                yield Button("Resume [F6]", id="resume", compact=True, disabled=True)
-                yield Button("History [F2]", id="history", compact=True)
+                yield Button("Start \\[F5]", id="start", variant="primary", compact=True)
+                yield Button("Resume \\[F6]", id="resume", compact=True, disabled=True)
+                yield Button("History \\[F2]", id="history", compact=True)
         yield Static("", id="status")
         yield Footer()
 
@@ -161,7 +166,7 @@ class ConnectScreen(Screen):
         if not serial and self.query_one("#source", Select).value == SIM:
             from station.sources import SimSource
 
-            serial = SimSource.device_id_for(0)
+            serial = SimSource.device_id_for(0, self.query_one("#procedure", Select).value)
         if not serial:
             return None
         return default_state_path(serial, base=s.resume_dir())
@@ -179,12 +184,12 @@ class ConnectScreen(Screen):
                 n = sum(st["status"] == "captured" for st in state["steps"])
                 ok = state.get("phase") != "done" and n < len(state["steps"])
                 if ok:
-                    button.label = f"Resume {n}/{len(state['steps'])} [F6]"
+                    button.label = f"Resume {n}/{len(state['steps'])} \\[F6]"
             except (OSError, ValueError, KeyError, TypeError):
                 ok = False
         button.disabled = not ok
         if not ok:
-            button.label = "Resume [F6]"
+            button.label = "Resume \\[F6]"
 
     # ------------------------------------------------------------ start
 
@@ -218,6 +223,7 @@ class ConnectScreen(Screen):
             return
         s.average_s = average
         s.resume = resume
+        s.procedure = self.query_one("#procedure", Select).value
         s.model = self.query_one("#model", Input).value.strip()
         s.device_id = self.query_one("#serial", Input).value.strip()
         choice = self.query_one("#source", Select).value
@@ -240,8 +246,8 @@ class ConnectScreen(Screen):
             if choice == SIM:
                 from station.sources import SimSource
 
-                if src is None or src.kind != "sim":
-                    src = SimSource(seed=0)
+                if src is None or src.kind != "sim" or src.procedure != s.procedure:
+                    src = SimSource(seed=0, procedure=s.procedure)
             else:
                 from station.sources import SerialSource
 
@@ -259,7 +265,7 @@ class ConnectScreen(Screen):
                 store = Store(s.db_path)
                 known = store.get_device(device_id)
                 if known is None or (s.model and known.get("model") != s.model):
-                    store.add_device(device_id, model=s.model or None, sensor_kinds=["accel"])
+                    store.add_device(device_id, model=s.model or None)
             self.post_message(Connected(src, device_id))
         except Exception as exc:  # noqa: BLE001 - shown as one line
             self.post_message(SourceFailed(str(exc)))
@@ -269,7 +275,7 @@ class ConnectScreen(Screen):
         self._status(f"Cannot connect: {message.error}", error=True)
 
     def on_connected(self, message: Connected) -> None:
-        from station.screens.procedure import ProcedureScreen
+        from station.app import procedure_screen
 
         s = self.app.session
         s.source = message.source
@@ -277,4 +283,4 @@ class ConnectScreen(Screen):
         s.guide = None
         self.query_one("#start", Button).disabled = False
         self._status(f"Connected: {getattr(message.source, 'label', '')}, device {message.device_id}")
-        self.app.push_screen(ProcedureScreen())
+        self.app.push_screen(procedure_screen(s.procedure))

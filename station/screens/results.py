@@ -54,7 +54,8 @@ class ResultsScreen(Screen):
         self.discarded = False
 
     def compose(self) -> ComposeResult:
-        yield TitleBar("P1 result")
+        proc = (self.result or {}).get("procedure") or self.capture.meta.get("procedure", "")
+        yield TitleBar({"accel-tabletop": "P1 result", "compass": "P3 compass result"}.get(proc, f"{proc} result"))
         yield Static("", id="summary")
         with Vertical(id="tables"):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
@@ -97,10 +98,11 @@ class ResultsScreen(Screen):
         style = {"pass": "b green", "fail": "b white on red"}.get(word, "b")
         prev = (f"previous #{self.previous['id']} of {self.previous['time'][:10]}" if self.previous
                 else "no previous calibration")
-        lines = [f"[{style}] {word.upper()} [/] residual {_f(r.get('residual_rms'), '.3g')} m/s² RMS · "
+        unit = {"accel-tabletop": "m/s²", "compass": "nT"}.get(r.get("procedure"), "")
+        lines = [f"[{style}] {word.upper()} [/] residual {_f(r.get('residual_rms'), '.3g')} {unit} RMS · "
                  f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
         lines += [f"[red]{x}[/]" for x in reasons[:2]]
-        lines += [f"[yellow]warning: {w}[/]" for w in (r.get("warnings") or [])[:2]]
+        lines += [f"[yellow]warning: {w if len(w) < 68 else w[:66] + '…'}[/]" for w in (r.get("warnings") or [])[:2]]
         summary.update("\n".join(lines))
         params.clear(columns=True)
         params.add_columns("param", "value", "± 1σ", "previous", "Δ/σ", "tol", "ok")
@@ -109,8 +111,10 @@ class ResultsScreen(Screen):
             params.add_row(row.name, _f(row.value, ".7g"), _f(row.sigma, ".2g"), _f(row.previous, ".7g"),
                            _f(row.change_sigma, "+.1f"), _f(row.tolerance, ".3g"), ok)
         residuals.clear(columns=True)
+        rows_res = p1_residuals(self.capture, r) if r.get("procedure") == "accel-tabletop" else []
+        residuals.display = bool(rows_res)
         residuals.add_columns("position", "|B+MV| m/s²", "residual mm/s²")
-        for name, norm, res in p1_residuals(self.capture, r):
+        for name, norm, res in rows_res:
             residuals.add_row(name, _f(norm, ".5f"), _f(res * 1000.0, "+.2f"))
 
     # ------------------------------------------------------------ actions
@@ -136,8 +140,9 @@ class ResultsScreen(Screen):
 
             cal_id = save_result(s.db_path, self.capture, self.result, device_id=s.device_id)
             guide = s.guide
-            if guide is not None and guide.state_path and os.path.exists(guide.state_path):
-                os.unlink(guide.state_path)
+            state_path = getattr(guide, "state_path", None)
+            if state_path and os.path.exists(state_path):
+                os.unlink(state_path)
             self.post_message(Saved(cal_id))
         except Exception as exc:  # noqa: BLE001
             self.post_message(Saved(None, error=str(exc)))
@@ -167,7 +172,8 @@ class ResultsScreen(Screen):
         s = self.app.session
         folder = s.extra.get("export_dir") or os.getcwd()
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        base = os.path.join(folder, f"{s.device_id or 'device'}-p1-{stamp}")
+        proc = self.capture.meta.get("procedure", "capture")
+        base = os.path.join(folder, f"{s.device_id or 'device'}-{proc}-{stamp}")
         try:
             from station.calibrate import jsonable
             from station.capture import write_capture

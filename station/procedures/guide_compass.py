@@ -1,0 +1,226 @@
+"""The guided P3 (compass) sweep as a UI-free state machine.
+
+The operator turns the unit slowly through every orientation while the station records
+the time series (t, accelerometer, gyro, magnetometer, temperature). Progress is the
+**sphere coverage**: the share of equal-area cells of the unit sphere that the measured
+magnetic field direction (body frame) has visited. The cells are ``n_bands`` bands
+uniform in z (so of equal area, Archimedes) times ``n_sectors`` sectors in azimuth;
+:meth:`CompassGuide.coverage_map` draws exactly the cells that are counted.
+
+Phases: ``sweep`` (recording) → ``done`` when coverage ≥ ``target_coverage`` and at least
+``min_s`` have been recorded (or the operator finishes early), ``aborted``. The recording
+becomes a time-series :class:`station.capture.Capture` for ``calibrate_capture``
+(``station/procedures/compass.py``). Times are the samples' own ``t_s``.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+PHASES = ("sweep", "done", "aborted")
+
+
+@dataclass
+class CompassConfig:
+    """target_coverage: share of sphere cells to visit (0..1). min_s / max_s: recording
+    length bounds [s]. n_bands x n_sectors: the equal-area cells."""
+
+    target_coverage: float = 0.8
+    min_s: float = 60.0
+    max_s: float = 900.0
+    n_bands: int = 6
+    n_sectors: int = 12
+
+    def __post_init__(self) -> None:
+        if not 0 < self.target_coverage <= 1:
+            raise ValueError(f"target_coverage must be in (0, 1], got {self.target_coverage!r}")
+        if not (self.min_s >= 0 and self.max_s > 0 and self.max_s >= self.min_s):
+            raise ValueError("min_s and max_s must satisfy 0 <= min_s <= max_s, max_s > 0")
+        if self.n_bands < 2 or self.n_sectors < 3:
+            raise ValueError("need at least 2 bands and 3 sectors")
+
+
+@dataclass(frozen=True)
+class CompassStatus:
+    phase: str
+    coverage: float
+    target: float
+    recorded_s: float
+    n_samples: int
+    field_raw: tuple[float, float, float]
+    field_norm_raw: float
+    turn_rate: float  # |gyro| in the gyro's raw unit
+    t_s: float
+    message: str
+
+
+class CompassGuide:
+    procedure = "compass"
+
+    def __init__(self, *, sample_rate_hz: float, units: dict, device_id: str = "", site: dict | None = None,
+                 config: CompassConfig | None = None):
+        self.config = config or CompassConfig()
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.units = dict(units)
+        self.device_id = device_id
+        self.site = dict(site or {})
+        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.phase = "sweep"
+        self._events: list[tuple[str, str]] = []
+        self._reset()
+
+    def _reset(self) -> None:
+        c = self.config
+        self.visited = np.zeros((c.n_bands, c.n_sectors), dtype=bool)
+        self._chunks: list[dict[str, np.ndarray]] = []
+        self._n = 0
+        self._t0 = math.nan
+        self._t1 = math.nan
+        self._center = None  # rough hard-iron centre for the direction (mid-range of each axis)
+        self._lo = np.full(3, np.inf)
+        self._hi = np.full(3, -np.inf)
+        self._last = None
+        self._message = "Turn the unit slowly through every orientation (all faces up, all headings)"
+
+    # ------------------------------------------------------------ cells
+
+    def cells(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(band, sector) of directions v (n, 3): bands uniform in z, sectors in azimuth."""
+        c = self.config
+        u = v / np.linalg.norm(v, axis=1, keepdims=True)
+        band = np.clip(((u[:, 2] + 1.0) / 2.0 * c.n_bands).astype(int), 0, c.n_bands - 1)
+        az = np.arctan2(u[:, 1], u[:, 0])
+        sector = np.clip(((az + math.pi) / (2 * math.pi) * c.n_sectors).astype(int), 0, c.n_sectors - 1)
+        return band, sector
+
+    @property
+    def coverage(self) -> float:
+        return float(self.visited.mean())
+
+    def coverage_map(self) -> list[str]:
+        """Rows from +z (top) to -z: '█' visited, '·' not yet."""
+        return ["".join("█" if x else "·" for x in row) for row in self.visited[::-1]]
+
+    # ------------------------------------------------------------ feeding
+
+    def update(self, t_s, accel, gyro, mag, temp_c=None) -> CompassStatus:
+        t_s = np.asarray(t_s, float)
+        if len(t_s) == 0 or self.phase != "sweep":
+            return self.status()
+        accel, gyro, mag = (np.asarray(x, float).reshape(-1, 3) for x in (accel, gyro, mag))
+        temp = np.full(len(t_s), np.nan) if temp_c is None else np.asarray(temp_c, float)
+        self._chunks.append({"t": t_s, "a": accel, "g": gyro, "m": mag, "temp": temp})
+        self._n += len(t_s)
+        if not math.isfinite(self._t0):
+            self._t0 = float(t_s[0])
+        self._t1 = float(t_s[-1])
+        ok = np.all(np.isfinite(mag), axis=1)
+        if ok.any():
+            m = mag[ok]
+            self._lo = np.minimum(self._lo, m.min(axis=0))
+            self._hi = np.maximum(self._hi, m.max(axis=0))
+            # The centre of an axis's range stands in for its hard iron once the range spans
+            # the field (the unit has been turned over on that axis); before, zero.
+            span = self._hi - self._lo
+            field = float(np.median(np.linalg.norm(m, axis=1)))
+            centre = np.where(span > 0.5 * field, (self._hi + self._lo) / 2, 0.0)
+            d = m - centre
+            keep = np.linalg.norm(d, axis=1) > 0
+            if keep.any():
+                b, s = self.cells(d[keep])
+                self.visited[b, s] = True
+        k = min(len(t_s), max(1, int(self.sample_rate_hz * 0.1)))
+        self._last = (mag[-k:].mean(axis=0), float(np.linalg.norm(np.nanmean(gyro[-k:], axis=0))), self._t1)
+        c = self.config
+        rec = self._t1 - self._t0
+        if self.coverage >= c.target_coverage and rec >= c.min_s:
+            self._finish(f"coverage {100 * self.coverage:.0f} % after {rec:.0f} s")
+        elif rec >= c.max_s:
+            self._finish(f"time limit {c.max_s:.0f} s reached at coverage {100 * self.coverage:.0f} %")
+        elif self.coverage >= c.target_coverage:
+            self._message = f"Coverage reached: keep turning for {c.min_s - rec:.0f} s more"
+        else:
+            self._message = "Turn the unit slowly through every orientation (all faces up, all headings)"
+        return self.status()
+
+    def _finish(self, why: str) -> None:
+        self.phase = "done"
+        self._message = f"Done: {why}"
+        self._events.append(("done", why))
+
+    def finish(self) -> None:
+        """The operator ends the recording now."""
+        if self.phase == "sweep":
+            self._finish(f"finished by the operator at coverage {100 * self.coverage:.0f} %")
+
+    def restart(self) -> None:
+        self.phase = "sweep"
+        self._reset()
+        self._events.append(("restarted", "recording restarted"))
+
+    def abort(self) -> None:
+        self.phase = "aborted"
+        self._message = "Aborted"
+        self._events.append(("aborted", ""))
+
+    def take_events(self) -> list[tuple[str, str]]:
+        ev, self._events = self._events, []
+        return ev
+
+    def status(self) -> CompassStatus:
+        m, rate, t = self._last if self._last is not None else (np.full(3, np.nan), math.nan, math.nan)
+        rec = (self._t1 - self._t0) if math.isfinite(self._t0) else 0.0
+        return CompassStatus(self.phase, self.coverage, self.config.target_coverage, rec, self._n,
+                             tuple(float(x) for x in m), float(np.linalg.norm(m)), rate, t, self._message)
+
+    # ------------------------------------------------------------ the capture
+
+    def capture(self, extra_meta: dict | None = None):
+        """The recording as a P3 time-series capture."""
+        from station.capture import Capture
+
+        ch = self._chunks
+        t = np.concatenate([c["t"] for c in ch]) if ch else np.zeros(0)
+        cols = {"t": t}
+        for key, names in (("a", ("ax", "ay", "az")), ("g", ("gx", "gy", "gz")), ("m", ("mx", "my", "mz"))):
+            arr = np.concatenate([c[key] for c in ch]) if ch else np.zeros((0, 3))
+            for i, n in enumerate(names):
+                cols[n] = arr[:, i]
+        temp = np.concatenate([c["temp"] for c in ch]) if ch else np.zeros(0)
+        if np.isfinite(temp).any():
+            cols["temp_c"] = temp
+        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
+                "date": self.started[:10], "sample_rate_hz": repr(self.sample_rate_hz)}
+        for k in ("accel_unit", "gyro_unit", "mag_unit"):
+            if self.units.get(k):
+                meta[k] = self.units[k]
+        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
+            if key in self.site:
+                meta[key] = repr(float(self.site[key]))
+        if "date" in self.site:
+            meta["date"] = str(self.site["date"])
+        meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
+        return Capture(meta=meta, columns=cols)
+
+
+class SweepOperator:
+    """The demo's operator for P3: visits the simulated device's sphere positions
+    (``s1``..``s12``) in turn, ``hold_s`` at each, until the guide is done."""
+
+    def __init__(self, place, positions: list[str], hold_s: float = 2.0):
+        self.place = place
+        self.positions = list(positions)
+        self.hold_s = hold_s
+        self._k = -1
+        self._next = -math.inf
+
+    def step(self, guide: CompassGuide, t_s: float) -> str | None:
+        if guide.phase != "sweep" or not math.isfinite(t_s) or t_s < self._next:
+            return None
+        self._k = (self._k + 1) % len(self.positions)
+        self.place(self.positions[self._k])
+        self._next = t_s + self.hold_s + 2.5  # the simulated move takes 2.5 s
+        return self.positions[self._k]
