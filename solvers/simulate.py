@@ -126,13 +126,19 @@ def _positions_column(labels: list[str]) -> np.ndarray:
 
 # ---------------------------------------------------------------- P1: level table
 
+# The simulated analogue triad's datasheet values: what a nominal (uncalibrated) reading assumes.
+NOMINAL_ACCEL_SCALE_V_PER_MPS2 = 0.0855
+NOMINAL_ACCEL_ZERO_V = 1.65
+NOMINAL_ACCEL_PARAMS = {"K": NOMINAL_ACCEL_SCALE_V_PER_MPS2 * np.eye(3), "b": np.full(3, NOMINAL_ACCEL_ZERO_V)}
+
+
 def nominal_tabletop_device(rng: np.random.Generator) -> dict:
     """An analogue accelerometer triad read in volts: ~0.0855 V per m/s², ~1.65 V at zero."""
-    scale = 0.0855 * (1.0 + rng.normal(scale=0.02, size=3))
+    scale = NOMINAL_ACCEL_SCALE_V_PER_MPS2 * (1.0 + rng.normal(scale=0.02, size=3))
     cross = rng.normal(scale=0.005, size=(3, 3))
     np.fill_diagonal(cross, 0.0)
     K = np.diag(scale) @ (np.eye(3) + cross)
-    b = 1.65 + rng.normal(scale=0.03, size=3)
+    b = NOMINAL_ACCEL_ZERO_V + rng.normal(scale=0.03, size=3)
     return {"K": K, "b": b}
 
 

@@ -51,7 +51,7 @@ from station.device.protocol import (
 # (V) to m/s^2 with the device family's nominal front end (solvers/simulate.py
 # `nominal_tabletop_device`: ~0.0855 V per m/s^2, ~1.65 V at zero), through the accel
 # model's own inverse: a factory scaling that leaves the unit's errors to calibrate.
-NOMINAL_ACCEL_V = {"K": 0.0855 * np.eye(3), "b": np.full(3, 1.65)}
+from solvers.simulate import NOMINAL_ACCEL_PARAMS as NOMINAL_ACCEL_V  # noqa: E402
 
 
 @dataclass
