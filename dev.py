@@ -21,6 +21,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 STAMP = VENV / ".station-stamp"
+# A path-based editable install: `station` resolves to this tree from any working folder,
+# even one that holds a folder named `station`.
+INSTALL_MODE = "editable_mode=compat"
 
 
 def _venv_python() -> Path:
@@ -28,7 +31,7 @@ def _venv_python() -> Path:
 
 
 def ensure_venv() -> Path:
-    want = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    want = hashlib.sha256((ROOT / "pyproject.toml").read_bytes() + INSTALL_MODE.encode()).hexdigest()
     py = _venv_python()
     if py.exists() and STAMP.exists() and STAMP.read_text().strip() == want:
         return py
@@ -37,7 +40,8 @@ def ensure_venv() -> Path:
         venv.EnvBuilder(with_pip=True).create(VENV)
     print("dev.py: installing the station and its dependencies into .venv", file=sys.stderr)
     subprocess.run([str(py), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
-    subprocess.run([str(py), "-m", "pip", "install", "-q", "-e", f"{ROOT}[test]"], check=True)
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--config-settings", INSTALL_MODE,
+                    "-e", f"{ROOT}[test]"], check=True)
     STAMP.write_text(want)
     return py
 
