@@ -46,12 +46,16 @@ class Session:
         return None
 
     def open_store(self):
-        """The database, or None when there is none yet (never created just by looking)."""
+        """The database (one Store per session: it is thread-safe), or None when there is
+        none yet (never created just by looking)."""
         if not self.db_path or not os.path.exists(self.db_path):
             return None
-        from db.store import Store
+        store = self.extra.get("_store")
+        if store is None:
+            from db.store import Store
 
-        return Store(self.db_path)
+            store = self.extra["_store"] = Store(self.db_path)
+        return store
 
 
 class StationApp(App):

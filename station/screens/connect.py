@@ -258,11 +258,11 @@ class ConnectScreen(Screen):
             elif src.kind == "serial" and not src.reader.running:
                 src.start()
             device_id = s.device_id or src.device_id or "unknown"
-            store = None
             if s.db_path:
                 from db.store import Store
 
-                store = Store(s.db_path)
+                store = s.open_store() or Store(s.db_path)
+                s.extra["_store"] = store
                 known = store.get_device(device_id)
                 if known is None or (s.model and known.get("model") != s.model):
                     store.add_device(device_id, model=s.model or None)

@@ -112,6 +112,6 @@ class Readouts(Static):
             f"f    {_num(f[0], '9.3f')} {_num(f[1], '9.3f')} {_num(f[2], '9.3f')} m/s²  |a| {_num(st.norm_mps2, '.3f')}",
             f"rate {_num(g[0], '9.4f')} {_num(g[1], '9.4f')} {_num(g[2], '9.4f')} {gu}",
             f"temp {_num(st.temp_c, '.1f')} °C   {_num(stats.rate_hz, '.0f')} Hz   "
-            f"errors {stats.parse_errors}   dropped {stats.dropped}",
+            f"errors {stats.parse_errors}   dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED"),
         ]
         self.update("\n".join(lines))
