@@ -91,7 +91,7 @@ def null_rates(procedures, trials, jobs, seed0=1000):
     from solvers.diagnose.problems import THRESHOLDS
 
     print(f"# null captures: {trials} per procedure")
-    print(f"{'procedure':<18} {'false alarms':>13} {'rate':>7} {'95% score':>10} {'threshold':>10} {'s/capture':>10} errors")
+    print(f"{'procedure':<18} {'false alarms':>13} {'rate':>7} {'95% score':>10} {'99% score':>10} {'threshold':>10} {'s/capture':>10} errors")
     for p in procedures:
         with ProcessPoolExecutor(jobs) as ex:
             res = list(ex.map(_job, [(p, seed0 + k) for k in range(trials)]))
@@ -99,8 +99,9 @@ def null_rates(procedures, trials, jobs, seed0=1000):
         fa = sum(1 for r in ok if r["verdict"])
         scores = np.array([r["score"] for r in ok])
         q95 = float(np.percentile(scores, 95)) if len(scores) else math.nan
+        q99 = float(np.percentile(scores, 99)) if len(scores) else math.nan
         secs = np.mean([r["seconds"] for r in ok]) if ok else math.nan
-        print(f"{p:<18} {fa:>6}/{len(ok):<6} {100 * fa / max(len(ok), 1):6.1f}% {q95:10.1f} {THRESHOLDS[p]:10.1f} "
+        print(f"{p:<18} {fa:>6}/{len(ok):<6} {100 * fa / max(len(ok), 1):6.1f}% {q95:10.1f} {q99:10.1f} {THRESHOLDS[p]:10.1f} "
               f"{secs:10.2f} {len(res) - len(ok)}", flush=True)
 
 
