@@ -132,17 +132,22 @@ class StationApp(App):
 
 
 def procedure_screen(procedure: str):
-    """The guided screen of a procedure (P1 and P3 so far)."""
+    """The guided screen of a procedure (P1, P3, P4 static so far)."""
     if procedure == "compass":
         from station.screens.compass import CompassScreen
 
         return CompassScreen()
+    if procedure == "gyro-drift":
+        from station.screens.hold import HoldScreen
+
+        return HoldScreen()
     from station.screens.procedure import ProcedureScreen
 
     return ProcedureScreen()
 
 
-GUIDED = {"accel-tabletop": "P1 accelerometer, level table", "compass": "P3 compass sweep"}
+GUIDED = {"accel-tabletop": "P1 accelerometer, level table", "compass": "P3 compass sweep",
+          "gyro-drift": "P4 gyro drift, static base"}
 
 
 def make_app(db_path: str | None = None, device=None, *, demo: bool = False, average_s: float | None = None,

@@ -163,6 +163,30 @@ def test_compass_sweep_from_connect_to_a_saved_result(tmp_path):
     assert len(hist) == 1 and hist[0]["procedure"] == "compass"
 
 
+def test_gyro_drift_hold_to_a_saved_result(tmp_path):
+    """P4 static base: the unit lies still, the countdown runs, the drift is fitted and saved."""
+    db = str(tmp_path / "station.db")
+
+    async def story():
+        src = SimSource(seed=5, speed=60, procedure="gyro-drift")
+        app = make_app(db, device=src, demo=True, average_s=180.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "HoldScreen" and app.screen.updates > 2)
+            await wait_for(pilot, lambda: app.screen.last_status is not None and app.screen.last_status.phase == "average")
+            assert "left" in text_of(app, "#countdown") and "still" in text_of(app, "#stability")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=40)
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            title = screen_lines(app)[0]
+        return title
+
+    title = asyncio.run(story())
+    assert "P4 gyro drift result" in title
+    from db.store import Store
+
+    hist = Store(db).history("SIM-GYR-0005")
+    assert len(hist) == 1 and hist[0]["procedure"] == "gyro-drift"
+
+
 def test_wrong_face_up_is_shown_and_blocks_capture():
     async def story():
         src = SimSource(seed=1, speed=10)

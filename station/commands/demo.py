@@ -12,8 +12,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="The TUI on the simulated device with a scripted operator who follows "
                        "the prompts; short averaging times; the result is saved to the database.")
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
-    p.add_argument("--procedure", choices=("accel-tabletop", "compass"), default="accel-tabletop",
-                   help="P1 (default) or the P3 compass sweep")
+    p.add_argument("--procedure", choices=("accel-tabletop", "compass", "gyro-drift"), default="accel-tabletop",
+                   help="P1 (default), the P3 compass sweep, or P4 on a static base (180 s: try --speed 6)")
     p.add_argument("--average-s", type=float, default=3.0, help="averaging time per position (default 3 s)")
     p.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second (default 1)")
     p.add_argument("--headless", action="store_true", help="no screen: run the same procedure, print lines")
@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
     from station.sources import SimSource
 
     device = SimSource(seed=args.seed, speed=args.speed, procedure=args.procedure)
-    app = make_app(None if args.no_save else db_path(args), device=device, demo=True, average_s=args.average_s,
+    average_s = max(args.average_s, 180.0) if args.procedure == "gyro-drift" else args.average_s
+    app = make_app(None if args.no_save else db_path(args), device=device, demo=True, average_s=average_s,
                    exit_when_saved=args.exit_when_saved)
     app.session.extra["compass_min_s"] = 30.0
     app.run()
@@ -45,6 +46,10 @@ def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) 
     """The demo without a screen, on a simulated clock (runs as fast as the CPU allows)."""
     if getattr(args, "procedure", "accel-tabletop") == "compass":
         return headless_compass(args, db, out, max_device_s)
+    if getattr(args, "procedure", "accel-tabletop") == "gyro-drift":
+        from station.errors import UnsupportedError
+
+        raise UnsupportedError("demo --headless: P1 and compass only; run the P4 demo in the TUI")
     from station.calibrate import calibrate_capture, format_text
     from station.procedures.guide import GuideConfig, P1Guide, ScriptedOperator
     from station.sources import SimSource

@@ -55,7 +55,8 @@ class ResultsScreen(Screen):
 
     def compose(self) -> ComposeResult:
         proc = (self.result or {}).get("procedure") or self.capture.meta.get("procedure", "")
-        yield TitleBar({"accel-tabletop": "P1 result", "compass": "P3 compass result"}.get(proc, f"{proc} result"))
+        yield TitleBar({"accel-tabletop": "P1 result", "compass": "P3 compass result",
+                        "gyro-drift": "P4 gyro drift result"}.get(proc, f"{proc} result"))
         yield Static("", id="summary")
         with Vertical(id="tables"):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
@@ -98,7 +99,7 @@ class ResultsScreen(Screen):
         style = {"pass": "b green", "fail": "b white on red"}.get(word, "b")
         prev = (f"previous #{self.previous['id']} of {self.previous['time'][:10]}" if self.previous
                 else "no previous calibration")
-        unit = {"accel-tabletop": "m/s²", "compass": "nT"}.get(r.get("procedure"), "")
+        unit = {"accel-tabletop": "m/s²", "compass": "nT", "gyro-drift": "rad/s"}.get(r.get("procedure"), "")
         lines = [f"[{style}] {word.upper()} [/] residual {_f(r.get('residual_rms'), '.3g')} {unit} RMS · "
                  f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
         lines += [f"[red]{x}[/]" for x in reasons[:2]]

@@ -1,0 +1,172 @@
+"""Gyro drift (P4, static base): place the unit level at a known heading and keep it
+still while the station records (P4 asks for at least 3 minutes). The stability bar and
+countdown are the P1 widgets; moving restarts the recording.
+
+Same pattern as the P1 screen: a thread worker drains the source and feeds the guide."""
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.screen import Screen
+from textual.widgets import Footer, Static
+from textual.worker import get_current_worker
+
+from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
+from station.widgets.live import CountdownBar, StabilityBar
+from station.widgets.title import TitleBar
+
+SIM_FRAME = "x forward, y left, z up"  # the simulated unit lies level with z up
+
+
+def _n(x, fmt):
+    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
+
+
+class HoldScreen(Screen):
+    CSS = """
+    HoldScreen #body { padding: 0 1; }
+    HoldScreen #instruction { height: 4; }
+    HoldScreen #indicators { height: 2; margin-top: 1; }
+    HoldScreen #readouts { height: 3; margin-top: 1; }
+    HoldScreen #message { height: 1; text-style: bold; margin-top: 1; }
+    """
+    BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "abort", "Abort")]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._lock = threading.Lock()
+        self.guide = None
+        self.last_status = None
+        self.updates = 0
+        self._fitting = False
+
+    def compose(self) -> ComposeResult:
+        yield TitleBar("P4 gyro drift, static base")
+        with Vertical(id="body"):
+            yield Static("Put the unit on a level, steady surface, forward (x) axis pointing north\n"
+                         "(heading 0°), and do not touch it: the station records the gyro at rest\n"
+                         "and removes the Earth's rotation. Walking on a wooden floor shows here.",
+                         id="instruction")
+            with Vertical(id="indicators"):
+                yield StabilityBar(id="stability")
+                yield CountdownBar(id="countdown")
+            yield Static("", id="readouts")
+            yield Static("", id="message")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.stream()
+
+    @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
+    def stream(self) -> None:
+        from station.procedures.guide_hold import HoldConfig, HoldGuide
+
+        s = self.app.session
+        worker = get_current_worker()
+        src = s.source
+        try:
+            if src.kind == "sim" and getattr(src, "_t0", None) is None:
+                src.start()
+            elif src.kind == "serial" and not src.reader.running:
+                src.start()
+            rate = float(getattr(src, "rate_hz", math.nan))
+            frame = s.extra.get("frame") or (SIM_FRAME if src.kind == "sim" else "")
+            cfg = HoldConfig(duration_s=s.average_s, settle_s=s.settle_s, frame=frame)
+            with self._lock:
+                self.guide = HoldGuide(sample_rate_hz=rate if math.isfinite(rate) and rate > 0 else 100.0,
+                                       units=src.units, device_id=s.device_id or src.device_id,
+                                       site=getattr(src, "site", None), config=cfg)
+                s.guide = self.guide
+        except Exception as exc:  # noqa: BLE001 - one line on screen
+            self.post_message(SourceFailed(str(exc)))
+            return
+        period = 1.0 / s.refresh_hz
+        next_post = 0.0
+        while not worker.is_cancelled:
+            b = src.drain()
+            if b is not None and len(b):
+                with self._lock:
+                    self.guide.update(b.t_s, b.accel, b.gyro, b.temp_c)
+                    events = self.guide.take_events()
+                for kind, detail in events:
+                    self.post_message(GuideEvent(kind, detail))
+            now = time.monotonic()
+            if now >= next_post:
+                with self._lock:
+                    st = self.guide.status()
+                self.post_message(LiveUpdate(st, src.stats()))
+                next_post = now + period
+            time.sleep(0.01)
+
+    def on_live_update(self, message: LiveUpdate) -> None:
+        st = message.status
+        self.last_status = st
+        self.updates += 1
+        g = self.guide
+        self.query_one(StabilityBar).show(st)
+        self.query_one(CountdownBar).show(st, g.config.duration_s if g else math.nan)
+        m, stats = st.gyro_mean, message.stats
+        unit = self.app.session.source.units.get("gyro_unit") or "raw"
+        self.query_one("#readouts", Static).update(
+            f"mean rate so far  {_n(m[0], '10.6f')} {_n(m[1], '10.6f')} {_n(m[2], '10.6f')} {unit}\n"
+            f"{st.n_samples} samples   temp {_n(st.temp_c, '.1f')} °C\n"
+            f"{_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
+            + ("" if stats.connected else "   DISCONNECTED"))
+        self.query_one("#message", Static).update(st.message)
+
+    def on_guide_event(self, message: GuideEvent) -> None:
+        if message.kind == "done":
+            self.fit()
+        elif message.kind == "restarted":
+            self.notify("The unit moved: recording restarted", severity="warning", timeout=3)
+
+    def on_source_failed(self, message: SourceFailed) -> None:
+        self.query_one("#message", Static).update(f"[b red]device: {message.error}[/]")
+
+    def action_restart(self) -> None:
+        if self.guide is not None:
+            with self._lock:
+                self.guide.restart()
+
+    def action_abort(self) -> None:
+        if self.guide is not None:
+            with self._lock:
+                self.guide.abort()
+        self.workers.cancel_group(self, "stream")
+        self.app.session.guide = None
+        self.app.notify("P4 aborted: nothing saved", timeout=4)
+        self.app.pop_screen()
+
+    @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P4")
+    def fit(self) -> None:
+        if self._fitting:
+            return
+        self._fitting = True
+        with self._lock:
+            capture = self.guide.capture(extra_meta={"operator_tool": "station tui"})
+        previous = None
+        try:
+            store = self.app.session.open_store()
+            if store is not None:
+                hist = [c for c in store.history(self.app.session.device_id, "gyro-drift") if c["accepted"]]
+                previous = hist[-1] if hist else None
+        except Exception:  # noqa: BLE001 - no comparison then
+            previous = None
+        try:
+            from station.calibrate import calibrate_capture
+
+            self.post_message(CalibrationReady(capture, calibrate_capture(capture), previous=previous))
+        except Exception as exc:  # noqa: BLE001 - one line on the results screen
+            self.post_message(CalibrationReady(capture, None, error=str(exc), previous=previous))
+
+    def on_calibration_ready(self, message: CalibrationReady) -> None:
+        from station.screens.results import ResultsScreen
+
+        self.workers.cancel_group(self, "stream")
+        self.app.switch_screen(ResultsScreen(message.capture, message.result, message.error, message.previous))
