@@ -434,6 +434,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     else:
         test = chi2_test(rw, ext.dof)
     cand_list = [entries[c.name] for c in problem.candidates]
-    ext_model = problem.extended_model([e["name"] for e in effects]) if problem.extended_model else problem.model
+    ext_model = problem.extended_model([e["name"] for e in effects]) if (problem.extended_model and effects) \
+        else problem.model
     return Diagnosis(problem.procedure, baseline_fit, cv0, cand_list, effects, verdict, ext, cv_ext,
                      [e["name"] for e in effects], test, stud, problem.model, ext_model, problem)

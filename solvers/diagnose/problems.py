@@ -319,7 +319,7 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
                    np.array([list(dict.fromkeys(labels)).index(x) for x in labels]), base,
                    {"S": True, "b": True, "D": True}, cands, THRESHOLDS["accel-centrifuge"], unit="g",
                    row_labels=[f"position {x} ω={y:.3g} rad/s" for x, y in zip(labels, w)],
-                   extended_model=lambda names: "N = S Φ(γ) (f + D f∘f" + "".join(
+                   extended_model=lambda names: "N = S " + ("Φ(γ) " if "misalignment" in names else "") + "(f + D f∘f" + "".join(
                        " + " + ACCEL_TERMS[x] for x in names if x in ("cubic", "lever_arm")) + ") + b" + "".join(
                        " + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift")))
     prob.drivers = {"input |f| [g]": rho, "mounting #": prob.groups.astype(float) + 1}

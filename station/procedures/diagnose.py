@@ -287,7 +287,7 @@ def format_text(result: dict, diag, drivers: dict, plots: bool = True) -> str:
     L = [f"procedure   {r['procedure']}",
          f"baseline    {r['baseline']['model']}",
          f"            residual {r['baseline']['residual_rms']:.4g} {unit} RMS, held-out {r['baseline']['cv_rms']:.4g}",
-         "candidates  (ΔBIC < −{:g} and a lower held-out RMS selects)".format(diag.problem.threshold)]
+         "candidates  (ΔBIC below {:+g} and a lower held-out RMS selects)".format(-diag.problem.threshold)]
     for c in r["candidates"]:
         if c.get("resolvable") is False:
             L.append(f"  {c['name']:<24} unresolvable: {c['reason']}")
