@@ -24,6 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import warnings
+
     from station.calibrate import calibrate_capture, format_text, to_json
     from station.capture import read_capture
 
@@ -34,14 +36,29 @@ def run(args: argparse.Namespace) -> int:
         import os
 
         capture.meta["reference_file"] = os.path.abspath(args.reference)
-    result = calibrate_capture(capture, method=args.method)
+    with warnings.catch_warnings():  # numpy's RuntimeWarnings are not for the operator: one line or a result
+        warnings.simplefilter("ignore", RuntimeWarning)
+        result = calibrate_capture(capture, method=args.method)
     if args.device:
         result["device"] = args.device
     if args.save:
-        from station.cli import db_path
-        from station.store import save_result
-
-        result["calibration_id"] = save_result(db_path(args), capture, result, device_id=args.device,
-                                               operator=args.operator)
+        result["calibration_id"] = _save(args, capture, result)
     print(to_json(result) if args.json else format_text(result))
     return 0
+
+
+def _save(args: argparse.Namespace, capture, result: dict) -> int:
+    """save_result with the database's errors as one line and exit 2 (as the db commands do)."""
+    import sqlite3
+
+    from station.cli import db_path
+    from station.errors import InputError
+    from station.store import save_result
+
+    path = db_path(args)
+    try:
+        return save_result(path, capture, result, device_id=args.device, operator=args.operator)
+    except (sqlite3.Error, OSError) as exc:
+        raise InputError(path, None, f"cannot save to the station database: {exc}") from None
+    except ValueError as exc:  # the store's refusals (e.g. an empty device id)
+        raise InputError(None, None, str(exc)) from None
