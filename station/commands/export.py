@@ -7,6 +7,7 @@ import sys
 import tempfile
 
 from station.commands._dbutil import open_store
+from station.errors import InputError
 
 FORMATS = ("json", "ardupilot", "px4", "c-header")  # = station.firmware_export.FORMATS (not imported: start-up time)
 
@@ -31,14 +32,19 @@ def run(args: argparse.Namespace) -> int:
     text = export(cal, meta, args.format, args.instance)
     if args.output:
         folder = os.path.dirname(os.path.abspath(args.output))
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".export-", suffix=".tmp")
+        try:
+            fd, tmp = tempfile.mkstemp(dir=folder, prefix=".export-", suffix=".tmp")
+        except OSError as exc:
+            raise InputError(args.output, None, f"cannot write: {exc.strerror or exc}") from None
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 f.write(text)
             os.replace(tmp, args.output)
-        except BaseException:
+        except BaseException as exc:
             if os.path.exists(tmp):
                 os.unlink(tmp)
+            if isinstance(exc, OSError):
+                raise InputError(args.output, None, f"cannot write: {exc.strerror or exc}") from None
             raise
     else:
         sys.stdout.write(text)
