@@ -38,36 +38,94 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+# What the command line can set, checked here so a bad value gets one line, not a traceback.
+_FLAGS = {"averages", "label_positions"}
+_COUNTS = {"extra_positions": 0, "n_orientations": 1}               # integer, at least this
+_CHOICES = {"mode": ("static", "reference"), "maneuver": ("varied", "straight"), "reference": ("body", "nav")}
+_POSITIVE = {"rate_hz", "hold_s", "duration_s", "radius_m", "g_mps2"}  # > 0; other numbers >= 0 unless angles
+_SIGNED = {"latitude_deg", "pitch_deg", "roll_deg", "table_tilt_deg"}  # any finite value
+_NOT_SETTABLE = {"seed", "effects", "site", "positions", "speeds_rad_s", "headings_deg", "truth_params"}
+
+
 def _option_value(name: str, value):
-    if isinstance(value, float) and name in {"averages", "label_positions"}:
-        return bool(value)
-    if isinstance(value, float) and name in {"extra_positions", "n_orientations"}:
+    import math
+
+    if name in _NOT_SETTABLE:
+        raise InputError(None, None, f"--option {name}: not settable from the command line")
+    if name in _FLAGS:
+        text = str(value).strip().lower()
+        flags = {"1": True, "1.0": True, "true": True, "yes": True, "0": False, "0.0": False, "false": False,
+                 "no": False}
+        if text not in flags:
+            raise InputError(None, None, f"--option {name}={value}: expected 0 or 1")
+        return flags[text]
+    if name in _CHOICES:
+        if value not in _CHOICES[name]:
+            raise InputError(None, None, f"--option {name}={value}: choose {' or '.join(_CHOICES[name])}")
+        return value
+    if isinstance(value, str):
+        if value.lower() in {"true", "false", "yes", "no"}:
+            return value.lower() in {"true", "yes"}
+        raise InputError(None, None, f"--option {name}={value!r}: not a number")
+    if not math.isfinite(value):
+        raise InputError(None, None, f"--option {name}={value}: must be a finite number")
+    if name in _COUNTS:
+        if value != int(value) or value < _COUNTS[name]:
+            raise InputError(None, None, f"--option {name}={value:g}: must be a whole number >= {_COUNTS[name]}")
         return int(value)
-    if isinstance(value, str) and value.lower() in {"true", "false", "yes", "no"}:
-        return value.lower() in {"true", "yes"}
+    if name in _POSITIVE and value <= 0:
+        raise InputError(None, None, f"--option {name}={value:g}: must be positive")
+    if name not in _SIGNED and not name.endswith("_deg") and value < 0:
+        raise InputError(None, None, f"--option {name}={value:g}: must not be negative")
     return value
+
+
+def _write_json(path: str, obj) -> None:
+    """Atomically (temp file in the same folder, then os.replace); OSError -> one line."""
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".truth-", suffix=".json")
+    except OSError as exc:
+        raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(obj, fh, indent=2)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
+        raise
 
 
 def run(args: argparse.Namespace) -> int:
     from solvers.simulate import SimulationError, simulate
     from station.capture import Capture, write_capture
 
+    import math
+
     effects = parse_assignments(args.effect, "--effect")
     for name, size in effects.items():
         if isinstance(size, str):
             raise InputError(None, None, f"--effect {name}: {size!r} is not a number")
+        if not math.isfinite(size):
+            raise InputError(None, None, f"--effect {name}: {size} is not a finite number")
     options = {k: _option_value(k, v) for k, v in parse_assignments(args.option, "--option").items()}
+    if options.get("averages") and options.get("label_positions") is False:
+        raise InputError(None, None, "--option label_positions=0 applies to time series: a table of averages "
+                         "(averages=1) always names its positions")
     try:
         sim = simulate(args.procedure, seed=args.seed, effects=effects, **options)
     except (SimulationError, TypeError) as exc:
         raise InputError(None, None, f"simulate: {exc}") from None
+    except MemoryError:
+        raise InputError(None, None, "simulate: the options ask for more samples than fit in memory") from None
+    except (ValueError, IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
+        raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
     write_capture(args.out, Capture(meta=sim.meta, columns=sim.columns, path=args.out))
     if args.truth:
-        folder = os.path.dirname(os.path.abspath(args.truth))
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".truth-", suffix=".json")
-        with os.fdopen(fd, "w") as fh:
-            json.dump(sim.truth, fh, indent=2)
-        os.replace(tmp, args.truth)
+        _write_json(args.truth, sim.truth)
     n = len(next(iter(sim.columns.values())))
     print(f"wrote {args.out}: {args.procedure}, {n} rows, device {sim.meta.get('device')}"
           + (f", effects {effects}" if effects else ""))
