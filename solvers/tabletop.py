@@ -208,14 +208,16 @@ def to_upper(B, M) -> tuple[np.ndarray, np.ndarray]:
 
 def orientation_clusters(A: np.ndarray, max_angle_deg: float = DISTINCT_ANGLE_DEG) -> np.ndarray:
     """Cluster index per position: directions of ``A`` within ``max_angle_deg`` are one orientation."""
-    d = A / np.linalg.norm(A, axis=1, keepdims=True)
+    norm = np.linalg.norm(A, axis=1, keepdims=True)
+    d = A / np.where(norm > 0, norm, 1.0)  # zero vectors stay zero: together one orientation
     cos_t = math.cos(math.radians(max_angle_deg))
     labels = -np.ones(len(d), dtype=int)
     centres: list[np.ndarray] = []
     for k in range(len(d)):
         best, best_c = -1, cos_t
         for j, c in enumerate(centres):
-            cc = float(d[k] @ c / np.linalg.norm(c))
+            nc = np.linalg.norm(c)
+            cc = float(d[k] @ c / nc) if nc > 0 else (1.0 if not d[k].any() else 0.0)
             if cc >= best_c:
                 best, best_c = j, cc
         if best < 0:

@@ -39,7 +39,11 @@ def procedure_module(procedure: str | None, path=None):
 def calibrate_capture(capture, method: str | None = None) -> dict:
     """The calibrate.md result for ``capture`` (a :class:`station.capture.Capture`)."""
     module = procedure_module(capture.procedure, capture.path)
-    return module.calibrate(capture, method=method)
+    try:
+        return module.calibrate(capture, method=method)
+    except np.linalg.LinAlgError as exc:  # NaN/inf reached a decomposition: degenerate or absurd data
+        raise UnsupportedError(f"{capture.path}: {capture.procedure}: the fit failed numerically ({exc}); "
+                               "check the data: constant, all zero or absurdly large values?") from None
 
 
 def jsonable(obj):
