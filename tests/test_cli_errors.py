@@ -236,3 +236,43 @@ def test_unknown_ids_in_the_database(tmp_path, capsys, db_with_calibration):
         code, _, err = run(capsys, "--db", db_with_calibration, *argv)
         assert code == 2 and says in one_line(err), argv
     assert os.path.getsize(db_with_calibration) > 0
+
+
+# --- missing values: used data may shrink, but never silently --------------------------
+
+def _with_holes(src: Path, dst: Path, column: str) -> Path:
+    cap = read_capture(src)
+    cols = {k: v.copy() for k, v in cap.columns.items()}
+    cols[column][::2] = np.nan  # every other row loses one value
+    write_capture(dst, Capture(meta=dict(cap.meta), columns=cols, path=dst))
+    return dst
+
+
+def test_tabletop_rows_with_missing_values_are_counted_in_warnings(tmp_path, capsys):
+    from solvers.simulate import simulate
+
+    sim = simulate("accel-tabletop", seed=4, hold_s=5.0)
+    src = tmp_path / "p1.csv"
+    write_capture(src, Capture(meta=sim.meta, columns=sim.columns, path=src))
+    path = _with_holes(src, tmp_path / "holes.csv", "ay")
+    code = main(["calibrate", str(path), "--json"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    n = read_capture(path).n_rows
+    import json
+
+    warnings_ = json.loads(out.out)["warnings"]
+    assert f"{(n + 1) // 2} of {n} rows with a missing accelerometer value left out" in warnings_  # was: none
+
+
+def test_ldv_rows_with_a_missing_beam_are_counted_in_warnings(tmp_path, capsys, ldv_capture):
+    import json
+
+    path = _with_holes(ldv_capture, tmp_path / "holes.csv", "vl2")
+    code = main(["calibrate", str(path), "--json"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    d = json.loads(out.out)
+    n = read_capture(path).n_rows
+    assert f"{(n + 1) // 2} LDV rows with a missing beam value or time left out" in d["warnings"]  # was: none
+    assert d["n_positions"] == n // 2

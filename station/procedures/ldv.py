@@ -139,6 +139,9 @@ def aligned_velocities(capture, reference=None, warnings=None):
         raise InputError(capture.path, capture.header_line, "aligning two streams needs a 't' column")
     t = np.asarray(capture.columns["t"], dtype=float)
     ldv_ok = np.all(np.isfinite(vl), axis=1) & np.isfinite(t)
+    partial = np.any(np.isfinite(vl), axis=1) & ~ldv_ok  # rows of the LDV stream that cannot be used
+    if partial.any():
+        warnings.append(f"{int(partial.sum())} LDV rows with a missing beam value or time left out")
     v_at = _interp(t_ref - offset, v_ref, t[ldv_ok], warnings)
     good = np.all(np.isfinite(v_at), axis=1)
     if offset:

@@ -93,6 +93,9 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
                 p.std = None
         return out, "table of averages", noise_known
     t = np.asarray(capture.column("t"), dtype=float)
+    missing = int((~np.all(np.isfinite(a), axis=1)).sum())
+    if missing:  # never a silently shortened dataset
+        warnings.append(f"{missing} of {len(a)} rows with a missing accelerometer value left out")
     if labels is not None and any(labels):
         out = []
         for start, stop, lab in _runs(labels):
