@@ -145,8 +145,8 @@ class ProcedureScreen(Screen):
                 posts += 1
                 hz = posts / (now - t_posts) if now > t_posts else math.nan
                 self.post_message(LiveUpdate(st, src.stats(), hz))
-                next_post = now + period
-            time.sleep(0.01)
+                next_post = max(next_post + period, now - period)  # 15 Hz on average
+            time.sleep(0.02)  # 50 batches a second: ~20 samples each at 1 kHz
 
     # ------------------------------------------------------------ drawing
 
