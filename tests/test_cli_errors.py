@@ -276,3 +276,23 @@ def test_ldv_rows_with_a_missing_beam_are_counted_in_warnings(tmp_path, capsys, 
     n = read_capture(path).n_rows
     assert f"{(n + 1) // 2} LDV rows with a missing beam value or time left out" in d["warnings"]  # was: none
     assert d["n_positions"] == n // 2
+
+
+def test_gyro_drift_with_a_dead_accelerometer_is_refused(tmp_path, capsys):
+    from solvers.simulate import simulate
+
+    sim = simulate("gyro-drift", seed=5, duration_s=60.0)
+    cols = dict(sim.columns, ax=np.zeros_like(sim.columns["ax"]), ay=np.zeros_like(sim.columns["ay"]),
+                az=np.zeros_like(sim.columns["az"]))
+    path = tmp_path / "dead.csv"
+    write_capture(path, Capture(meta=sim.meta, columns=cols, path=path))
+    code, out, err = run(capsys, "calibrate", path)  # was: exit 0, roll -180°, drift with null σ
+    assert code == 2 and out == ""
+    assert "accelerometer reads zero" in one_line(err)
+
+
+def test_gyro_drift_single_row_says_what_is_missing(tmp_path, capsys):
+    path = tmp_path / "one.csv"
+    path.write_text("# station-capture: 1\n# procedure: gyro-drift\n# gyro_unit: rad/s\nt,gx,gy,gz\n0,1,2,3\n")
+    code, _, err = run(capsys, "calibrate", path)  # was: "needs a time series ('t' column ...)" with a t column
+    assert code == 2 and "at least two increasing times" in one_line(err)

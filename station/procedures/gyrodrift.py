@@ -129,7 +129,8 @@ def _dt(capture) -> float:
             return float(np.median(d))
     rate = capture.float_meta("sample_rate_hz")
     if rate is None or rate <= 0:
-        raise UnsupportedError(f"{capture.path}: gyro drift needs a time series ('t' column or sample_rate_hz)")
+        raise UnsupportedError(f"{capture.path}: gyro drift needs a time series: a 't' column with at least two "
+                               "increasing times, or sample_rate_hz")
     return 1.0 / rate
 
 
@@ -259,6 +260,9 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
             warnings.append("accelerometer in counts: only its direction is used for pitch and roll "
                             "(its bias, uncalibrated, tilts them)")
     ok = _finite_rows([w_b, f_b], warnings, "gyro or accelerometer")
+    if f_b is not None and ok.any() and not np.linalg.norm(f_b[ok].mean(axis=0)) > 0:
+        raise UnsupportedError(f"{capture.path}: the accelerometer reads zero on average, so mode B has no "
+                               "pitch and roll (a dead or unconnected sensor?): check the ax ay az columns")
     lat = capture.float_meta("latitude_deg")
     hsig = capture.float_meta("heading_sigma_deg", 3.0)
     segs = _segments(capture, w_b, f_b, dt, ok, warnings)
