@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         # No subcommand: the TUI on the simulated device when it exists, else the demo.
         tui = parser._subparsers._group_actions[0].choices.get("tui") if parser._subparsers else None
         if tui is not None:
-            args = parser.parse_args(["tui", *(argv or [])])
+            args = parser.parse_args(["tui", *(sys.argv[1:] if argv is None else argv)])  # keep --db
         else:
             args = parser.parse_args(["walkthrough"])
         func = args.func

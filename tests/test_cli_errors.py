@@ -296,3 +296,16 @@ def test_gyro_drift_single_row_says_what_is_missing(tmp_path, capsys):
     path.write_text("# station-capture: 1\n# procedure: gyro-drift\n# gyro_unit: rad/s\nt,gx,gy,gz\n0,1,2,3\n")
     code, _, err = run(capsys, "calibrate", path)  # was: "needs a time series ('t' column ...)" with a t column
     assert code == 2 and "at least two increasing times" in one_line(err)
+
+
+def test_no_command_keeps_the_global_db_option(tmp_path, monkeypatch):
+    """`station --db X` starts the TUI on X (was: the options were dropped and the TUI opened the default
+    database). The TUI itself is not started here: its handler is replaced by a recorder of its args."""
+    import station.commands.tui as tui
+
+    seen = {}
+    monkeypatch.setattr(tui, "run", lambda args: seen.setdefault("db", getattr(args, "db", None)) and 0)
+    db = str(tmp_path / "bench.db")
+    monkeypatch.setattr(sys, "argv", ["station", "--db", db])
+    assert main() == 0
+    assert seen["db"] == db
