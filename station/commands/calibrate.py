@@ -11,8 +11,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", help="capture file (station-capture CSV)")
     p.add_argument("--json", action="store_true", help="print one JSON object (calibrate.md)")
     p.add_argument("--method", default=None, help="estimator, where a procedure offers several "
-                   "(accel-tabletop: norm | upper-triangular | six-position; accel-centrifuge: exact | "
-                   "exact-gamma | paper | paper-3rd, each also -all)")
+                   "(accel-tabletop: norm | upper-triangular | six-position | step8; accel-centrifuge: exact | "
+                   "exact-gamma | paper | paper-3rd, each also -all; compass: rls | batch | ellipsoid; "
+                   "gyro-drift: reference | static (mode A | B); ldv: force)")
     p.add_argument("--device", default=None, help="device id (default: the capture's 'device')")
     p.add_argument("--save", action="store_true", help="store capture and result in the station database")
     p.add_argument("--operator", default=None, help="operator's name, stored with --save")
