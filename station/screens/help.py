@@ -10,18 +10,20 @@ from textual.widgets import Static
 HELP = """\
 [b]Calibration station: keys[/]
 
-[b]Everywhere[/]   F1 help · ctrl+q quit · tab / shift+tab move · enter choose
-[b]Connect[/]      F5 start P1 · F6 resume an interrupted run · F2 history
-[b]Procedure[/]    s skip the position · r redo (the current average, or the last
-             captured position when done) · enter on a step: redo that step ·
-             a abort (captured positions are kept for Resume) · f fit now (≥ 9)
-[b]Results[/]      s save · d discard · e export (capture CSV + result JSON) ·
-             n new run · F2 history
-[b]History[/]      up/down pick a device · p next parameter to plot · escape back
+[b]Everywhere[/]  F1 help · ctrl+q quit · tab/shift+tab move · enter choose
+[b]Connect[/]     F5 start · F6 resume an interrupted P1 · F2 history
+[b]P1[/]          s skip · r redo (the current average, or the last captured
+            position when done) · enter on a step: redo it · a abort
+            (captured positions kept for Resume) · f fit now (≥ 9)
+[b]P3, P4[/]      f finish now (P3) · r restart the recording · a abort
+[b]Results[/]     s save · d discard · e export (CSV + JSON) · g diagnose ·
+            n new run · F2 history
+[b]History[/]     up/down device · p next parameter · tab to the calibrations,
+            g diagnose the one under the cursor · escape back
 
-[b]P1 in short[/]  Put the unit in each of the 12 positions the drawing shows and
-let go. When it is still and in position, the station waits a moment, then
-averages for the set time (the source asks 3–5 minutes) and moves on by itself.
+[b]P1 in short[/]  Put the unit in each of the 12 positions the drawing shows
+and let go. When it is still and in position the station waits a moment,
+then averages for the set time (the source asks 3–5 minutes) and moves on.
 "Wrong face up" means the unit is upside down for this position.
 """
 

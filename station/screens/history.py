@@ -28,6 +28,7 @@ class HistoryScreen(Screen):
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
         Binding("p", "next_param", "Next parameter"),
+        Binding("g", "diagnose", "Diagnose"),
     ]
 
     def __init__(self) -> None:
@@ -107,13 +108,25 @@ class HistoryScreen(Screen):
                 res = h["residual_rms"]
                 in_use = h["accepted"] and h.get("superseded_by") is None
                 c.add_row(str(h["id"]), h["time"][:10], h["procedure"],
-                          f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if in_use else "")
+                          f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if in_use else "",
+                          key=str(h["id"]))
             self.param_index = 0
             self.plot()
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         if event.data_table.id == "devices" and event.row_key is not None and event.row_key.value != self.device_id:
             self.load_device(event.row_key.value)
+
+    def action_diagnose(self) -> None:
+        """Diagnose the calibration under the cursor of the calibrations table."""
+        from station.screens.diagnose import DiagnoseScreen
+
+        table = self.query_one("#calibrations", DataTable)
+        if table.row_count == 0:
+            self.notify("No calibration to diagnose", severity="warning")
+            return
+        row = table.get_row_at(table.cursor_row)
+        self.app.push_screen(DiagnoseScreen(calibration_id=int(row[0])))
 
     def action_next_param(self) -> None:
         if self.drift:

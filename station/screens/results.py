@@ -39,6 +39,7 @@ class ResultsScreen(Screen):
         Binding("s", "save", "Save"),
         Binding("d", "discard", "Discard"),
         Binding("e", "export", "Export"),
+        Binding("g", "diagnose", "Diagnose"),
         Binding("n", "new", "New run"),
         Binding("f2", "history", "History"),
     ]
@@ -197,6 +198,11 @@ class ResultsScreen(Screen):
         else:
             self.notify("Exported " + ", ".join(os.path.basename(p) for p in message.paths), timeout=6)
             self.exported = message.paths
+
+    def action_diagnose(self) -> None:
+        from station.screens.diagnose import DiagnoseScreen
+
+        self.app.push_screen(DiagnoseScreen(capture=self.capture))
 
     def action_new(self) -> None:
         self.app.session.guide = None
