@@ -176,3 +176,19 @@ def test_bad_input_one_line_exit_2(tmp_path, capsys):
     assert main(["diagnose", str(q)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "procedure" in err[0]
+
+
+def test_earth_rate_named_when_a_constant_bias_was_fitted(tmp_path, capsys):
+    # four headings, no latitude: the baseline is a plain constant bias, and the Earth rate
+    # (north and up components, projected with each position's attitude) is what is missing
+    sim = simulate("gyro-drift", seed=2, headings_deg=[0.0, 90.0, 180.0, 270.0], duration_s=600.0,
+                   gyro_noise_rad_s=0.0005)
+    sim.meta.pop("latitude_deg")
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    assert "earth_rate" in res["verdict"]
+    eff = {e["name"]: e for e in res["effects"]}
+    if "earth_rate" in eff:
+        lat = np.radians(float(sim.truth["latitude_deg"]))
+        w_ie = 7.292115e-5
+        wE, s = np.array(eff["earth_rate"]["params"]["wE"]), np.array(eff["earth_rate"]["uncertainty"]["wE"])
+        assert np.all(np.abs(wE - w_ie * np.array([np.cos(lat), np.sin(lat)])) < 5 * s + 2e-6)
