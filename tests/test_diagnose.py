@@ -192,3 +192,15 @@ def test_earth_rate_named_when_a_constant_bias_was_fitted(tmp_path, capsys):
         w_ie = 7.292115e-5
         wE, s = np.array(eff["earth_rate"]["params"]["wE"]), np.array(eff["earth_rate"]["uncertainty"]["wE"])
         assert np.all(np.abs(wE - w_ie * np.array([np.cos(lat), np.sin(lat)])) < 5 * s + 2e-6)
+
+
+def test_row_far_beyond_the_noise_is_named_by_line(tmp_path, capsys):
+    sim = simulate("accel-centrifuge", seed=5)
+    sim.columns["ay"] = np.array(sim.columns["ay"], copy=True)
+    sim.columns["ay"][17] += 2e-3                     # 200σ of the table's 1e-5 g noise
+    path = _write(tmp_path, sim)
+    res = _diagnose(path, capsys)
+    out = [q for q in res["quality"] if q["kind"] == "outlier"]
+    assert out, res["quality"]
+    header = next(i for i, line in enumerate(open(path).read().splitlines(), start=1) if not line.startswith("#"))
+    assert out[0]["where"].startswith(f"line {header + 18} ")   # data row 18 (index 17)
