@@ -347,6 +347,42 @@ def test_diagnose_a_stored_calibration_from_history(tmp_path):
     assert back == "HistoryScreen"
 
 
+def test_import_an_ldv_file_with_its_conditioning_check(tmp_path):
+    """P5 comes as a file: a well-turned run calibrates; a straight run is refused in one line."""
+    from solvers.simulate import simulate
+    from station.capture import Capture, write_capture
+
+    good, bad = str(tmp_path / "ldv.csv"), str(tmp_path / "straight.csv")
+    for path, opts in ((good, {}), (bad, {"maneuver": "straight"})):
+        sim = simulate("ldv", seed=1, **opts)
+        write_capture(path, Capture(meta=sim.meta, columns=sim.columns))
+
+    async def story():
+        app = make_app(None)
+        out = {}
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f7")
+            await wait_for(pilot, lambda: screen_name(app) == "ImportScreen")
+            for path, key in ((str(tmp_path / "missing.csv"), "missing"), (bad, "bad")):
+                app.screen.query_one("#path").value = path
+                await pilot.press("enter")
+                await wait_for(pilot, lambda: "[" not in text_of(app, "#status") and "…" not in text_of(app, "#status")
+                               and text_of(app, "#status").strip() != "", timeout_s=30)
+                out[key] = " ".join(text_of(app, "#status").split())
+            app.screen.query_one("#path").value = good
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=30)
+            await pilot.pause(0.2)
+            out["title"] = screen_lines(app)[0]
+            out["summary"] = " ".join(text_of(app, "#summary").split())
+        return out
+
+    out = asyncio.run(story())
+    assert "missing.csv" in out["missing"]
+    assert "ill-conditioned" in out["bad"] and "straight.csv" in out["bad"]
+    assert "P5 LDV result" in out["title"] and "cond(HᵀH) =" in out["summary"]
+
+
 # ---------------------------------------------------------------- a serial device on a real pty
 
 

@@ -41,6 +41,7 @@ class ConnectScreen(Screen):
         Binding("f5", "start", "Start"),
         Binding("f6", "resume", "Resume"),
         Binding("f2", "history", "History"),
+        Binding("f7", "import_file", "Import file"),
     ]
 
     def compose(self) -> ComposeResult:
@@ -81,6 +82,7 @@ class ConnectScreen(Screen):
                 yield Button("Start \\[F5]", id="start", variant="primary", compact=True)
                 yield Button("Resume \\[F6]", id="resume", compact=True, disabled=True)
                 yield Button("History \\[F2]", id="history", compact=True)
+                yield Button("Import file \\[F7]", id="import", compact=True)
         yield Static("", id="status")
         yield Footer()
 
@@ -207,6 +209,12 @@ class ConnectScreen(Screen):
         from station.screens.history import HistoryScreen
 
         self.app.push_screen(HistoryScreen())
+
+    @on(Button.Pressed, "#import")
+    def action_import_file(self) -> None:
+        from station.screens.importfile import ImportScreen
+
+        self.app.push_screen(ImportScreen())
 
     @on(Input.Submitted)
     def _submitted(self) -> None:

@@ -57,7 +57,8 @@ class ResultsScreen(Screen):
     def compose(self) -> ComposeResult:
         proc = (self.result or {}).get("procedure") or self.capture.meta.get("procedure", "")
         yield TitleBar({"accel-tabletop": "P1 result", "compass": "P3 compass result",
-                        "gyro-drift": "P4 gyro drift result"}.get(proc, f"{proc} result"))
+                        "gyro-drift": "P4 gyro drift result", "accel-centrifuge": "P2 centrifuge result",
+                        "ldv": "P5 LDV result"}.get(proc, f"{proc} result"))
         yield Static("", id="summary")
         with Vertical(id="tables"):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
@@ -100,10 +101,13 @@ class ResultsScreen(Screen):
         style = {"pass": "b green", "fail": "b white on red"}.get(word, "b")
         prev = (f"previous #{self.previous['id']} of {self.previous['time'][:10]}" if self.previous
                 else "no previous calibration")
-        unit = {"accel-tabletop": "m/s²", "compass": "nT", "gyro-drift": "rad/s"}.get(r.get("procedure"), "")
+        unit = {"accel-tabletop": "m/s²", "compass": "nT", "gyro-drift": "rad/s", "ldv": "m/s"}.get(r.get("procedure"), "")
         lines = [f"[{style}] {word.upper()} [/] residual {_f(r.get('residual_rms'), '.3g')} {unit} RMS · "
                  f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
         lines += [f"[red]{x}[/]" for x in reasons[:2]]
+        cond = (r.get("params") or {}).get("condition_number") if r.get("procedure") == "ldv" else None
+        if isinstance(cond, (int, float)):
+            lines.append(f"velocity set: cond(HᵀH) = {cond:.3g} (well enough conditioned to separate the angles)")
         lines += [f"[yellow]warning: {w if len(w) < 68 else w[:66] + '…'}[/]" for w in (r.get("warnings") or [])[:2]]
         summary.update("\n".join(lines))
         params.clear(columns=True)
