@@ -11,7 +11,7 @@ HELP = """\
 [b]Calibration station: keys[/]
 
 [b]Everywhere[/]  F1 help · ctrl+q quit · tab/shift+tab move · enter choose
-[b]Connect[/]     F5 start · F6 resume an interrupted P1 · F2 history
+[b]Connect[/]     F5 start · F6 resume a P1 · F7 import a file · F2 history
 [b]P1[/]          s skip · r redo (the current average, or the last captured
             position when done) · enter on a step: redo it · a abort
             (captured positions kept for Resume) · f fit now (≥ 9)
