@@ -73,6 +73,7 @@ class StationApp(App):
         super().__init__()
         self.session = session
         self.start = start
+        self.due: list = []  # the due/overdue list read at start-up
 
     def on_mount(self) -> None:
         from station.screens.connect import ConnectScreen
@@ -115,8 +116,6 @@ class StationApp(App):
         for screen in self.screen_stack:
             if hasattr(screen, "show_due"):
                 screen.show_due(message.data)
-
-    due: list = []
 
     def action_history(self) -> None:
         from station.screens.history import HistoryScreen

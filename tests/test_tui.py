@@ -425,3 +425,27 @@ def test_procedure_reads_the_simulated_device_over_a_real_pty():
     assert src.rate_hz == 200.0  # from the device's header
     assert "errors 0" in readouts
     assert st.angle_deg < 5  # sim-device nominal: x_up from the start
+
+
+# ---------------------------------------------------------------- the commands
+
+
+def test_headless_demo_saves_a_p1(tmp_path, capsys):
+    from station.cli import main
+
+    db = str(tmp_path / "station.db")
+    assert main(["demo", "--headless", "--db", db]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert sum("captured" in line for line in lines) == 12
+    assert any("wrong face up at y_down" in line for line in lines)  # the scripted mistake, caught
+    assert lines[-1] == f"saved as calibration #1 in {db}"
+
+
+@pytest.mark.parametrize("argv", [["demo", "--average-s", "0"], ["demo", "--speed", "-1"],
+                                  ["tui", "--average-s", "-3"]])
+def test_bad_options_are_one_line_and_exit_2(argv, capsys):
+    from station.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "positive" in err

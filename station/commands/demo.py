@@ -60,6 +60,7 @@ def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) 
                     config=GuideConfig(average_s=args.average_s, settle_s=1.0), nominal=src.nominal, site=src.site)
     operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=3.0)
     last_phase = None
+    last_capture_t = 0.0
     while guide.phase not in ("done", "aborted") and now[0] < max_device_s:
         now[0] += 0.05
         b = src.drain()
@@ -69,7 +70,9 @@ def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) 
         operator.step(guide, st.t_s)
         for kind, detail in guide.take_events():
             print(f"{st.t_s:7.1f} s  {kind:<9} {detail}", file=out)
-        if st.wrong_face and last_phase != "wrong":
+            last_capture_t = st.t_s
+        # the unit still sits at the previous position right after a capture: not a mistake
+        if st.wrong_face and st.is_still and st.t_s - last_capture_t > 4.0 and last_phase != "wrong":
             print(f"{st.t_s:7.1f} s  wrong face up at {st.step_name} ({st.angle_deg:.0f}°)", file=out)
             last_phase = "wrong"
         elif not st.wrong_face and last_phase == "wrong":
