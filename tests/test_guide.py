@@ -221,3 +221,16 @@ def test_drawings_label_the_up_face():
     art = "\n".join(position_drawing([math.sqrt(0.5), math.sqrt(0.5), 0]))
     assert "+X" in art and "+Y" in art and "Z level" in art
     assert all(len(line) <= 30 for d in ([1, 0, 0], [0, -0.7, 0.7]) for line in position_drawing(d))
+
+
+def test_procedure_logic_does_not_load_textual():
+    """The guides, the review helpers and the sources are UI-free (checked in a fresh process)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, station.procedures.guide, station.procedures.guide_compass, "
+            "station.procedures.guide_hold, station.procedures.review, station.sources; "
+            "print('textual' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
