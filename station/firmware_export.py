@@ -61,6 +61,23 @@ def _unit(meta: dict, key: str, kind: str, fmt: str, procedure: str) -> tuple[st
     return unit, factor
 
 
+def _gyro_offsets_rad_s(cal: dict, factor: float, ex: Export) -> list[float]:
+    """The gyro offsets on the sensor's own axes gx gy gz, in rad/s, with the sensor's signs.
+
+    `params.drift` is in P4's body frame (x fwd, y up, z right), which differs from the sensor's
+    axes when the capture declared another `frame` or a `gyro_flip`; `drift_raw` (stored with the
+    result) is the same drift on the capture's axes in its gyro unit.
+    """
+    raw = (cal.get("extra") or {}).get("drift_raw")
+    if isinstance(raw, dict) and raw.get("axes") == "the capture's gx gy gz":
+        body = _vec(cal["params"], "drift")
+        offsets = [x * factor for x in _vec(raw, "value")]
+        if any(not math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-15) for a, b in zip(offsets, body)):
+            ex.note("drift mapped back from P4's body frame (x fwd, y up, z right) to the sensor's gx gy gz")
+        return offsets
+    return _vec(cal["params"], "drift")
+
+
 def _vec(params: dict, name: str, n: int = 3) -> list[float]:
     v = params.get(name)
     if not isinstance(v, list) or len(v) != n:
@@ -129,8 +146,8 @@ def _ardupilot(cal: dict, meta: dict, instance: int) -> Export:
         for i, a in enumerate(AXES):
             ex.set(f"INS_ACC{n}SCAL_{a}", scales[i])
     elif procedure == "gyro-drift":
-        unit, _ = _unit(meta, "gyro_unit", "gyro", "ardupilot", procedure)
-        drift = _vec(cal["params"], "drift")
+        unit, factor = _unit(meta, "gyro_unit", "gyro", "ardupilot", procedure)
+        drift = _gyro_offsets_rad_s(cal, factor, ex)
         gyr = "GYRO" if instance == 1 else f"GYR{instance}"
         for i, a in enumerate(AXES):
             ex.set(f"INS_{gyr}OFFS_{a}", drift[i])
@@ -166,8 +183,8 @@ def _px4(cal: dict, meta: dict, instance: int) -> Export:
         for i, a in enumerate(AXES):
             ex.set(f"CAL_ACC{instance}_{a}SCALE", scales[i])
     elif procedure == "gyro-drift":
-        _unit(meta, "gyro_unit", "gyro", "px4", procedure)
-        drift = _vec(cal["params"], "drift")
+        _, factor = _unit(meta, "gyro_unit", "gyro", "px4", procedure)
+        drift = _gyro_offsets_rad_s(cal, factor, ex)
         for i, a in enumerate(AXES):
             ex.set(f"CAL_GYRO{instance}_{a}OFF", drift[i])
         ex.note("CAL_GYRO_OFF = drift in rad/s, same sign (PX4 subtracts it); per raw axis gx, gy, gz")
