@@ -7,6 +7,7 @@ are imported from ``station/procedures/<name>.py``); the baseline starts from
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -313,9 +314,36 @@ def format_text(result: dict, diag, drivers: dict, plots: bool = True) -> str:
         line = f" line {q['line']}" if q.get("line") else ""
         L.append(f"quality     {q['kind']} {where}{line}: {q['explanation']}")
     L.append("verdict     " + (", ".join(r["verdict"]) if r["verdict"] else "none"))
+    L += _per_group(diag)
     if plots:
         L.append(_plots(diag, drivers))
     return "\n".join(L)
+
+
+def _per_group(diag) -> list[str]:
+    """Measured − simulated per CV group (position, mounting or time block), baseline and extended."""
+    prob = diag.problem
+    keep = np.ones(len(prob.sigma), bool) if prob.row_types is None else np.asarray(prob.row_types) == 0
+    g = np.asarray(prob.groups)
+    base, ext = -diag.baseline.residuals, -diag.extended.residuals
+    uniq = list(dict.fromkeys(g[keep].tolist()))
+    if not uniq or len(uniq) > 40:
+        return []
+    kind = {"accel-tabletop": "position", "accel-centrifuge": "mounting"}.get(prob.procedure, "time block")
+    out = [f"measured − simulated per {kind} [{prob.unit}]: mean (RMS), baseline → extended"]
+    for u in uniq:
+        m = keep & (g == u)
+        first = int(np.flatnonzero(m)[0])
+        name = prob.row_labels[first].split(" |f|")[0] if prob.row_labels else str(u)
+        hit = re.search(r"position ([^,) ]+)", name)
+        if hit:
+            name = f"position {hit.group(1)}"
+        if kind == "time block" and "time [s]" in prob.drivers:
+            tt = np.asarray(prob.drivers["time [s]"])[m]
+            name = f"t {np.nanmin(tt):8.1f}–{np.nanmax(tt):8.1f} s"
+        out.append(f"  {name:<28} {np.mean(base[m]):+.3e} ({np.sqrt(np.mean(base[m] ** 2)):.2e})  →  "
+                   f"{np.mean(ext[m]):+.3e} ({np.sqrt(np.mean(ext[m] ** 2)):.2e})")
+    return out
 
 
 def _plots(diag, drivers) -> str:
