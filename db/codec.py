@@ -59,7 +59,10 @@ def decode_column(dtype: str, length: int, encoding: str, data: bytes):
     """The inverse of `encode_column`; returns (array, sha256 of the raw bytes)."""
     import numpy as np
 
-    raw = zlib.decompress(data)
+    try:
+        raw = zlib.decompress(data)
+    except (zlib.error, TypeError) as exc:  # a changed or truncated BLOB
+        raise ValueError(f"stored column is corrupt: cannot decompress it ({exc})") from None
     digest = hashlib.sha256(raw).hexdigest()
     if encoding == "zlib":
         arr = np.frombuffer(raw, dtype=np.dtype(dtype)).copy()

@@ -328,7 +328,10 @@ class Store:
         meta = json.loads(row["meta"])
         columns = {}
         for c in cols:
-            columns[c["name"]], _ = decode_column(c["dtype"], c["length"], c["encoding"], c["data"])
+            try:
+                columns[c["name"]], _ = decode_column(c["dtype"], c["length"], c["encoding"], c["data"])
+            except (ValueError, TypeError) as exc:  # changed after it was written: `station verify` names it
+                raise ValueError(f"capture {capture_id}, column {c['name']!r}: {exc}") from None
         return meta, columns
 
     def capture_info(self, capture_id: int) -> dict:

@@ -309,3 +309,17 @@ def test_no_command_keeps_the_global_db_option(tmp_path, monkeypatch):
     monkeypatch.setattr(sys, "argv", ["station", "--db", db])
     assert main() == 0
     assert seen["db"] == db
+
+
+def test_corrupt_stored_capture_is_one_line(tmp_path, capsys, db_with_calibration):
+    import sqlite3
+
+    con = sqlite3.connect(db_with_calibration)
+    with con:
+        con.execute("UPDATE capture_columns SET data = zeroblob(10) WHERE capture_id = 1 AND name = 'vl1'")
+    con.close()
+    for argv in (("recompute", "1"), ("export-capture", "1")):  # was: zlib.error traceback
+        code, _, err = run(capsys, "--db", db_with_calibration, *argv)
+        assert code == 2 and "capture 1, column 'vl1': stored column is corrupt" in one_line(err), argv
+    code, out, _ = run(capsys, "--db", db_with_calibration, "verify")
+    assert code == 1 and "capture changed" in out
