@@ -64,7 +64,13 @@ def default_db_path() -> str:
 
 
 def _loads(text, default=None):
-    return default if text is None else json.loads(text)
+    if text is None:
+        return default
+    try:
+        return json.loads(text)
+    except ValueError as exc:  # edited outside the station
+        raise ValueError(f"the database holds a record that is not valid JSON ({exc}); "
+                         "`station verify` names the records changed after they were written") from None
 
 
 class Store:
@@ -325,7 +331,7 @@ class Store:
     def load_capture(self, capture_id: int) -> tuple[dict, dict]:
         """(meta, columns) exactly as saved: same column order, bit-identical arrays."""
         row, cols = self._read_capture(capture_id)
-        meta = json.loads(row["meta"])
+        meta = _loads(row["meta"])
         columns = {}
         for c in cols:
             try:
@@ -338,8 +344,8 @@ class Store:
         """The capture's row without its samples."""
         row, _ = self._read_capture(capture_id)
         d = dict(row)
-        d["meta"] = json.loads(d["meta"])
-        d["column_names"] = json.loads(d["column_names"])
+        d["meta"] = _loads(d["meta"])
+        d["column_names"] = _loads(d["column_names"])
         return d
 
     # --- calibrations -------------------------------------------------------------------
@@ -426,12 +432,12 @@ class Store:
             "time": row["time"],
             "procedure": row["procedure"],
             "model": row["model"],
-            "params": json.loads(row["params"]),
-            "uncertainty": json.loads(row["uncertainty"]),
+            "params": _loads(row["params"]),
+            "uncertainty": _loads(row["uncertainty"]),
             "residual_rms": row["residual_rms"],
             "n_positions": row["n_positions"],
-            "warnings": json.loads(row["warnings"]),
-            "extra": json.loads(row["result_extra"]),
+            "warnings": _loads(row["warnings"]),
+            "extra": _loads(row["result_extra"]),
             "accepted": bool(row["accepted"]),
             "capture_id": row["capture_id"],
             "supersedes": row["supersedes"],
@@ -501,8 +507,8 @@ class Store:
         """Per (procedure, scalar) trend over accepted calibration rows sorted by time."""
         series: dict[tuple[str, str], dict] = {}
         for r in rows:
-            values = P.flatten(json.loads(r["params"]))
-            sigmas = P.flatten(json.loads(r["uncertainty"]))
+            values = P.flatten(_loads(r["params"]))
+            sigmas = P.flatten(_loads(r["uncertainty"]))
             for name, value in values.items():
                 if value is None or (param is not None and not P.matches(name, param)):
                     continue

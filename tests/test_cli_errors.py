@@ -323,3 +323,15 @@ def test_corrupt_stored_capture_is_one_line(tmp_path, capsys, db_with_calibratio
         assert code == 2 and "capture 1, column 'vl1': stored column is corrupt" in one_line(err), argv
     code, out, _ = run(capsys, "--db", db_with_calibration, "verify")
     assert code == 1 and "capture changed" in out
+
+
+def test_record_edited_into_invalid_json_is_named(tmp_path, capsys, db_with_calibration):
+    import sqlite3
+
+    con = sqlite3.connect(db_with_calibration)
+    with con:
+        con.execute("UPDATE calibrations SET params = 'not json' WHERE id = 1")
+    con.close()
+    for argv in (("export", "1", "--format", "json"), ("recompute", "1")):  # was: "Expecting value: line 1 ..."
+        code, _, err = run(capsys, "--db", db_with_calibration, *argv)
+        assert code == 2 and "not valid JSON" in one_line(err) and "station verify" in err, argv
