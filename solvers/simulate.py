@@ -91,10 +91,9 @@ def move_attitudes(C0: np.ndarray, C1: np.ndarray, n: int, duration_s: float):
 
 def gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma: float, tau_s: float, dim: int = 3) -> np.ndarray:
     """First-order Gauss-Markov bias instability (steady-state σ, correlation time τ)."""
-    from scipy.signal import lfilter
-
     if sigma <= 0 or n == 0:
         return np.zeros((n, dim))
+    from scipy.signal import lfilter  # only when needed: slow to import
     a = math.exp(-dt / tau_s)
     q = sigma * math.sqrt(1.0 - a * a)
     w = rng.normal(size=(n, dim)) * q

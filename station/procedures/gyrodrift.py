@@ -254,9 +254,26 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
 def _mode_b(capture, w_b, C, asign, dt, warnings):
     have_acc = all(c in capture.columns for c in ("ax", "ay", "az"))
     f_b = None
+    unit = capture.meta.get("accel_unit")
+    offset = capture.meta.get("accel_offset")
+    if have_acc and unit in ("V", "mV") and offset is None:
+        have_acc = False
+        warnings.append(f"accelerometer in {unit} with no 'accel_offset' metadata: its zero-g output is "
+                        "unknown, so pitch and roll cannot be measured and are not used (give accel_offset: "
+                        "x, y, z in the accelerometer's unit, e.g. from its P1 calibration)")
     if have_acc:
-        f_b = (_need(capture, ["ax", "ay", "az"]) * asign) @ C.T
-        if capture.meta.get("accel_unit") == "counts":
+        raw = _need(capture, ["ax", "ay", "az"])
+        if offset is not None:
+            try:
+                off = np.array([float(v) for v in offset.replace(",", " ").split()])
+            except ValueError:
+                off = np.zeros(0)
+            if off.shape != (3,):
+                raise InputError(capture.path, _line(capture, "accel_offset"),
+                                 f"accel_offset {offset!r}: give three numbers x, y, z in {unit or 'the accelerometer unit'}")
+            raw = raw - off
+        f_b = (raw * asign) @ C.T
+        if unit == "counts" and offset is None:
             warnings.append("accelerometer in counts: only its direction is used for pitch and roll "
                             "(its bias, uncalibrated, tilts them)")
     ok = _finite_rows([w_b, f_b], warnings, "gyro or accelerometer")
