@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solvers.simulate import NOMINAL_ACCEL_SCALE_V_PER_MPS2, NOMINAL_ACCEL_ZERO_V
+
 
 @dataclass
 class Samples:
@@ -50,7 +52,8 @@ class SimSource:
 
     kind = "sim"
     label = "built-in simulated device"
-    nominal = (1.65, 0.0855)  # the simulated triad's data-sheet zero [V] and sensitivity [V per m/s²]
+    # the simulated triad's data-sheet zero [V] and sensitivity [V per m/s²]
+    nominal = (NOMINAL_ACCEL_ZERO_V, NOMINAL_ACCEL_SCALE_V_PER_MPS2)
 
     def __init__(self, *, seed: int = 0, rate_hz: float = 100.0, speed: float = 1.0, clock=time.monotonic,
                  max_batch_s: float = 1.0, procedure: str = "accel-tabletop"):

@@ -149,7 +149,12 @@ class HoldScreen(Screen):
             return
         self._fitting = True
         with self._lock:
-            capture = self.guide.capture(extra_meta={"operator_tool": "station tui"})
+            extra = {"operator_tool": "station tui"}
+            nominal = getattr(self.app.session.source, "nominal", None)
+            if nominal is not None and self.guide.units.get("accel_unit") in ("V", "mV"):
+                # the analogue triad's zero-g output, so P4 can take pitch and roll from it
+                extra["accel_offset"] = ", ".join([repr(float(nominal[0]))] * 3)
+            capture = self.guide.capture(extra_meta=extra)
         previous = None
         try:
             store = self.app.session.open_store()
