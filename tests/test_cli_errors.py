@@ -335,3 +335,24 @@ def test_record_edited_into_invalid_json_is_named(tmp_path, capsys, db_with_cali
     for argv in (("export", "1", "--format", "json"), ("recompute", "1")):  # was: "Expecting value: line 1 ..."
         code, _, err = run(capsys, "--db", db_with_calibration, *argv)
         assert code == 2 and "not valid JSON" in one_line(err) and "station verify" in err, argv
+
+
+def test_read_only_database_is_one_line(tmp_path, capsys, db_with_calibration):
+    """A database the user may read but not write: reads work, writes are one line and exit 2."""
+    import shutil
+
+    db = str(db_with_calibration)  # its -wal and -shm stay writable, as in a shared read-only install
+    if os.geteuid() != 0:
+        os.chmod(db, 0o444)
+        undo = lambda: os.chmod(db, 0o644)  # noqa: E731
+    elif shutil.which("chattr") and subprocess.run(["chattr", "+i", db], capture_output=True).returncode == 0:
+        undo = lambda: subprocess.run(["chattr", "-i", db], check=True)  # noqa: E731
+    else:
+        pytest.skip("cannot make a file read-only for root here")
+    try:
+        code, out, err = run(capsys, "--db", db, "history", "SIM-LDV-0003")
+        assert code == 0 and "1 calibration" in out, err
+        code, _, err = run(capsys, "--db", db, "devices", "add", "NEW-1")  # was: sqlite3 traceback
+        assert code == 2 and "readonly" in one_line(err).replace("read-only", "readonly")
+    finally:
+        undo()

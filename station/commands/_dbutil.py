@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sqlite3
 import sys
 from contextlib import contextmanager
 
@@ -31,6 +32,8 @@ def open_store(args):
         raise InputError(None, None, str(exc)) from None
     except ValueError as exc:
         raise InputError(None, None, str(exc)) from None
+    except sqlite3.Error as exc:  # e.g. a read-only file or folder, a full disk
+        raise InputError(path, None, f"station database: {exc}") from None
     finally:
         store.close()
 
