@@ -133,7 +133,25 @@ def _exact(N, rho, sigma_N, gamma_free, initial) -> P2Result:
     n_par = 9 + (0 if gamma_free is None else int(gamma_free.sum()))
     if len(N) <= n_par:
         raise TooFewPositions(f"{len(N)} rows; the exact fit of {n_par} coefficients needs more than {n_par}")
-    p0 = dict(initial) if initial is not None else paper_or_linear_start(N, rho)
+    if initial is not None:
+        return _exact_from(N, rho, sigma_N, gamma_free, initial)
+    # Two starts: the paper's closed forms can land the fit in a far local minimum (or a
+    # degenerate point) when the data hold more than the model; keep the smaller |f| misfit.
+    best, first_error = None, None
+    for p0 in (paper_or_linear_start(N, rho), initial_guess(N, rho)):
+        try:
+            res = _exact_from(N, rho, sigma_N, gamma_free, p0)
+        except NotIdentifiable as exc:
+            first_error = first_error or exc
+            continue
+        if best is None or res.residual_rms < best.residual_rms:
+            best = res
+    if best is None:
+        raise first_error
+    return best
+
+
+def _exact_from(N, rho, sigma_N, gamma_free, p0) -> P2Result:
     p0 = {k: np.asarray(p0[k], dtype=float) for k in ("S", "b", "D")}
     free = {"S": True, "b": True, "D": True}
     if gamma_free is not None:
