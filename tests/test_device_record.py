@@ -165,21 +165,26 @@ def test_recording_across_an_unplug_marks_the_gap_in_the_capture(tmp_path):
     def go():
         result["r"] = record(link, str(tmp_path / "u.csv"), stop=stop, reader=reader, header_timeout_s=5.0)
 
+    def wait_for(cond, what, timeout_s=10.0):
+        # conditions, not fixed sleeps: a loaded CI machine schedules the reader late
+        end = time.monotonic() + timeout_s
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            time.sleep(0.01)
+
     th = threading.Thread(target=go)
     th.start()
-    time.sleep(0.2)
+    wait_for(lambda: reader.stats().connected, "the first connection")
     os.write(m, header_sentence(hdr) + rows(0, 100))
-    time.sleep(0.3)
+    wait_for(lambda: reader.stats().samples >= 100, "the first 100 samples")
     os.unlink(link)
     os.close(m)
     os.close(s)
     time.sleep(0.3)
     m, s = plug()
-    end = time.monotonic() + 5
-    while not reader.stats().connected and time.monotonic() < end:
-        time.sleep(0.01)
+    wait_for(lambda: reader.stats().connected, "the reconnection")
     os.write(m, header_sentence(hdr) + rows(130, 200))
-    time.sleep(0.3)
+    wait_for(lambda: reader.stats().samples >= 170, "the samples after the reconnect")
     stop.set()
     th.join(10)
     reader.stop()

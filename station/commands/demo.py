@@ -42,8 +42,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) -> int:
+def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
     """The demo without a screen, on a simulated clock (runs as fast as the CPU allows)."""
+    out = out if out is not None else sys.stdout  # looked up now: stdout may have been replaced
     if getattr(args, "procedure", "accel-tabletop") == "compass":
         return headless_compass(args, db, out, max_device_s)
     if getattr(args, "procedure", "accel-tabletop") == "gyro-drift":
@@ -92,8 +93,9 @@ def headless(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) 
     return 0
 
 
-def headless_compass(args, db: str | None, out=sys.stdout, max_device_s: float = 900.0) -> int:
+def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
     """The P3 sweep without a screen: the scripted operator visits the sphere positions."""
+    out = out if out is not None else sys.stdout
     from station.calibrate import calibrate_capture, format_text
     from station.procedures.guide_compass import CompassConfig, CompassGuide, SweepOperator
     from station.sources import SimSource
