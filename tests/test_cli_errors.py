@@ -356,3 +356,11 @@ def test_read_only_database_is_one_line(tmp_path, capsys, db_with_calibration):
         assert code == 2 and "readonly" in one_line(err).replace("read-only", "readonly")
     finally:
         undo()
+
+
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf"])
+def test_calibrate_accuracy_must_be_positive(tmp_path, capsys, value):
+    path = tmp_path / "g.csv"
+    path.write_text("# station-capture: 1\n# procedure: gyro-drift\n# gyro_unit: rad/s\nt,gx,gy,gz\n0,1,2,3\n")
+    code, _, err = run(capsys, "calibrate", path, "--accuracy", value)  # was: -1 accepted, a nonsense warning
+    assert code == 2 and "--accuracy must be a positive number" in one_line(err)

@@ -30,6 +30,10 @@ def run(args: argparse.Namespace) -> int:
     from station.calibrate import calibrate_capture, format_text, to_json
     from station.capture import read_capture
 
+    if getattr(args, "accuracy", None) is not None and not 0 < args.accuracy < float("inf"):
+        from station.errors import InputError
+
+        raise InputError(None, None, f"--accuracy must be a positive number of °/h, got {args.accuracy:g}")
     capture = read_capture(args.file)
     if getattr(args, "accuracy", None) is not None:
         capture.meta["accuracy_deg_h"] = repr(float(args.accuracy))
