@@ -364,3 +364,18 @@ def test_calibrate_accuracy_must_be_positive(tmp_path, capsys, value):
     path.write_text("# station-capture: 1\n# procedure: gyro-drift\n# gyro_unit: rad/s\nt,gx,gy,gz\n0,1,2,3\n")
     code, _, err = run(capsys, "calibrate", path, "--accuracy", value)  # was: -1 accepted, a nonsense warning
     assert code == 2 and "--accuracy must be a positive number" in one_line(err)
+
+
+@pytest.mark.parametrize("argv", [
+    ("simulate", "--procedure", "ldv", "--out", "{tmp}/x.csv", "--seed", "-1"),  # was: ValueError traceback
+    ("walkthrough", "--procedure", "ldv", "--seed", "-1"),                      # was: ValueError traceback
+    ("devices", "add", "Y", "--kind", "bogus"),                                  # was: stored silently
+])
+def test_argument_errors_exit_2(tmp_path, capsys, argv):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    with pytest.raises(SystemExit) as exc:
+        main(["--db", str(tmp_path / "s.db"), *argv])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "error: argument" in err and "Traceback" not in err
+    assert not (tmp_path / "x.csv").exists()

@@ -17,7 +17,7 @@ def register(subparsers) -> None:
     add.add_argument("--model", help="device model")
     add.add_argument("--interval-days", type=float, help="recalibration interval in days")
     add.add_argument("--notes", help="free text")
-    add.add_argument("--kind", action="append", dest="kinds", metavar="KIND",
+    add.add_argument("--kind", action="append", dest="kinds", metavar="KIND", choices=("accel", "gyro", "mag", "ldv"),
                      help="sensor kind (accel, gyro, mag, ldv); repeatable")
     add.add_argument(
         "--tolerance", action="append", default=[], metavar="NAME=VALUE",
