@@ -379,3 +379,10 @@ def test_argument_errors_exit_2(tmp_path, capsys, argv):
     err = capsys.readouterr().err
     assert "error: argument" in err and "Traceback" not in err
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("command", ["history", "drift"])
+def test_unknown_procedure_filter_is_an_error(tmp_path, capsys, db_with_calibration, command):
+    with pytest.raises(SystemExit) as exc:  # was: exit 0 with '0 calibrations of nope'
+        main(["--db", str(db_with_calibration), command, "SIM-LDV-0003", "--procedure", "nope"])
+    assert exc.value.code == 2 and "invalid choice: 'nope'" in capsys.readouterr().err
