@@ -21,9 +21,11 @@ Method (docs/diagnose.md):
 4. Held-out validation: the linearised least-squares problem is solved leaving out one
    fold of groups at a time and the held-out rows are predicted; ``cv_rms`` is the RMS of
    those predictions (data units). For a linear model this is exact refitting.
-5. Greedy forward selection: a candidate is selected when ``ΔBIC < −threshold`` (the
-   threshold measured from null simulations per procedure, ``THRESHOLDS`` in
-   ``solvers.diagnose.problems``) *and* it lowers ``cv_rms``. Other candidates that also
+5. Greedy forward selection: a candidate with ``k`` identifiable parameters, one of ``m``,
+   is selected when ``ΔBIC < k ln n − F·χ²_k(1 − α/m)`` (a deviance test at level α/m
+   written as a ΔBIC bound; ``F``, the procedure's ``threshold``, is measured on null
+   simulations: ``THRESHOLDS`` in ``solvers.diagnose.problems``) *and* it lowers
+   ``cv_rms`` *and* leaves at least MIN_DOF degrees of freedom. Other candidates that also
    pass and whose fitted signatures correlate with the chosen one's by more than
    ``CONFUSION_CORR`` are reported with it (``confused_with``) and not fitted on top.
 6. The extended model is refitted nonlinearly (``solvers.fit``) with the selected blocks;
@@ -36,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.special import gammaincc
+from scipy.special import gammaincc, gammainccinv
 
 from solvers.fit import FitResult, fit
 from solvers.params import Packer, as_params
@@ -44,6 +46,7 @@ from solvers.params import Packer, as_params
 DEAD_RTOL = 1e-2          # a column whose part outside the baseline's span is below this fraction: not identifiable
 CONFUSION_CORR = 0.9      # |corr| of fitted signatures above this: the data cannot tell the two apart
 MAX_FOLDS = 10
+ALPHA = 0.05              # family-wise level the per-candidate deviance quantiles start from
 MIN_DOF = 3               # an extension must leave this many degrees of freedom
 
 
@@ -95,6 +98,7 @@ class Diagnosis:
     model: str
     extended_model: str
     problem: Problem
+    deviance: dict = field(default_factory=dict)   # first round: {name: {D, k, q, cv_lower}} (benchmark)
 
     def rms(self, fitres: FitResult) -> float:
         """Residual RMS in data units over the primary rows (all rows of one kind)."""
@@ -166,6 +170,18 @@ def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, p
     else:
         e = out * sigma
     return float(np.sqrt(np.mean(e ** 2)))
+
+
+def chi2_isf(p: float, k: int) -> float:
+    """Upper-tail quantile of χ²_k."""
+    return 2.0 * float(gammainccinv(k / 2.0, p))
+
+
+def selection_threshold(problem: "Problem", k: int, n: int, m: int) -> float:
+    """ΔBIC below which a k-parameter candidate (one of m) is selected:
+    ``k ln n − F·χ²_k(1 − α/m)`` — a deviance test at level α/m whose scale ``F`` (the
+    procedure's ``threshold``) is measured on null simulations, written as a ΔBIC bound."""
+    return k * math.log(n) - problem.threshold * chi2_isf(ALPHA / max(m, 1), max(k, 1))
 
 
 def bic(rss: float, n: int, k: int) -> float:
@@ -352,6 +368,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     verdict: list[str] = []
     remaining = [c for c in cands if c.reason is None]
     first_round = True
+    first_dev: dict | None = {}
+    deviance = first_dev
     while remaining:
         rows = []
         for cc in remaining:
@@ -367,8 +385,15 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": db, "cv_rms": cvc, "selected": False}
         first_round = False
         rank_cur = np.linalg.matrix_rank(A) if A.shape[1] else 0
-        passing = [r for r in rows if r[4] > 0 and r[1] < -problem.threshold and r[2] < cv_cur
-                   and n - rank_cur - r[4] >= MIN_DOF]
+        m = len(rows)
+        for r in rows:
+            if first_dev is not None and r[0].cand.name not in first_dev:
+                q = chi2_isf(ALPHA / max(m, 1), max(r[4], 1))
+                first_dev[r[0].cand.name] = {"D": max(r[4], 0) * math.log(n) - r[1], "k": int(r[4]), "q": q,
+                                             "cv_lower": bool(r[2] < cv_cur)}
+        first_dev = None
+        passing = [r for r in rows if r[4] > 0 and r[1] < selection_threshold(problem, r[4], n, m)
+                   and r[2] < cv_cur and n - rank_cur - r[4] >= MIN_DOF]
         if not passing:
             break
         best = min(passing, key=lambda r: r[1])
@@ -437,4 +462,4 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     ext_model = problem.extended_model([e["name"] for e in effects]) if (problem.extended_model and effects) \
         else problem.model
     return Diagnosis(problem.procedure, baseline_fit, cv0, cand_list, effects, verdict, ext, cv_ext,
-                     [e["name"] for e in effects], test, stud, problem.model, ext_model, problem)
+                     [e["name"] for e in effects], test, stud, problem.model, ext_model, problem, deviance)

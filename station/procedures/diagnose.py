@@ -288,7 +288,8 @@ def format_text(result: dict, diag, drivers: dict, plots: bool = True) -> str:
     L = [f"procedure   {r['procedure']}",
          f"baseline    {r['baseline']['model']}",
          f"            residual {r['baseline']['residual_rms']:.4g} {unit} RMS, held-out {r['baseline']['cv_rms']:.4g}",
-         "candidates  (ΔBIC below {:+g} and a lower held-out RMS selects)".format(-diag.problem.threshold)]
+         "candidates  (selected: ΔBIC < k ln n − F·χ²_k(1 − 0.05/m), F = {:g}, and a lower held-out RMS)".format(
+             diag.problem.threshold)]
     for c in r["candidates"]:
         if c.get("resolvable") is False:
             L.append(f"  {c['name']:<24} unresolvable: {c['reason']}")
