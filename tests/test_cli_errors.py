@@ -386,3 +386,14 @@ def test_unknown_procedure_filter_is_an_error(tmp_path, capsys, db_with_calibrat
     with pytest.raises(SystemExit) as exc:  # was: exit 0 with '0 calibrations of nope'
         main(["--db", str(db_with_calibration), command, "SIM-LDV-0003", "--procedure", "nope"])
     assert exc.value.code == 2 and "invalid choice: 'nope'" in capsys.readouterr().err
+
+
+def test_record_out_a_folder_or_missing_folder_is_one_line_before_recording(tmp_path):
+    import subprocess
+    import sys
+
+    for out, needle in ((tmp_path, "is a folder"), (tmp_path / "no" / "x.csv", "no folder")):
+        r = subprocess.run([sys.executable, "-m", "station", "record", "--port", "loop://", "--seconds", "1",
+                            "--out", str(out)], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and needle in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -56,6 +57,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, "--port is required (a device path or a pyserial URL)")
     if not args.out:
         raise InputError(None, None, "--out is required")
+    if os.path.isdir(args.out):
+        raise InputError(args.out, None, "is a folder: give --out a file name for the capture")
+    folder = os.path.dirname(os.path.abspath(args.out))
+    if not os.path.isdir(folder):
+        raise InputError(args.out, None, f"cannot write: no folder {folder}")
     if args.seconds is not None and not args.seconds > 0:
         raise InputError(None, None, "--seconds must be positive")
     if args.baud <= 0:

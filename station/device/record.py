@@ -97,6 +97,8 @@ class CaptureStream:
         self.rows = 0
         head = dict(meta)
         head["complete"] = "false"
+        if os.path.isdir(self.out):
+            raise InputError(self.out, None, "is a folder: give --out a file name for the capture")
         try:
             self._f = open(self.partial, "w", encoding="utf-8", newline="\n")
         except OSError as exc:
