@@ -69,6 +69,8 @@ def calibrate(capture, method: str | None = None) -> dict:
         warnings.append(f"mag_unit {mag_unit!r} has no physical factor: the data radius is in raw units")
     ref = _reference(capture, warnings)
     good = np.all(np.isfinite(y_all), axis=1)
+    if not good.all():
+        warnings.append(f"{int((~good).sum())} of {len(good)} rows left out: a magnetometer value is missing")
     y = y_all[good]
     noise_raw = None
     t = None
