@@ -101,7 +101,7 @@ def null_rates(procedures, trials, jobs, seed0=1000):
         q95 = float(np.percentile(scores, 95)) if len(scores) else math.nan
         q99 = float(np.percentile(scores, 99)) if len(scores) else math.nan
         secs = np.mean([r["seconds"] for r in ok]) if ok else math.nan
-        print(f"{p:<18} {fa:>6}/{len(ok):<6} {100 * fa / max(len(ok), 1):6.1f}% {q95:10.1f} {q99:10.1f} {THRESHOLDS[p]:10.1f} "
+        print(f"{p:<18} {fa:>6}/{len(ok):<6} {100 * fa / max(len(ok), 1):6.1f}% {q95:10.1f} {q99:10.1f} {THRESHOLDS[p]:10.2f} "
               f"{secs:10.2f} {len(res) - len(ok)}", flush=True)
 
 
