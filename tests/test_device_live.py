@@ -1,5 +1,6 @@
-"""Live detectors: orientation check, equal-area sphere coverage, and the glue that feeds
-reader batches from the project's simulator to the stillness tracker."""
+"""Live detectors: orientation check, the compass coverage (the calibration's own measure,
+solvers.detectors, shared with the guides), and the glue that feeds reader batches from
+the project's simulator to the stillness tracker."""
 from __future__ import annotations
 
 import math
@@ -9,7 +10,9 @@ import pytest
 
 from solvers.positions import P1_POSITIONS
 from solvers.simulate import LiveImu
-from station.device.live import LiveDetectors, SphereCoverage, eq_partition, orientation_check
+from solvers import compass as C
+from solvers.detectors import FieldCoverage
+from station.device.live import LiveDetectors, orientation_check
 from station.device.protocol import SENSOR_FIELDS
 from station.device.reader import Batch
 from station.device.simdevice import NOMINAL_ACCEL_V
@@ -41,24 +44,38 @@ def test_orientation_check_known_angles():
     assert c.angle_deg == pytest.approx(0.0, abs=1e-6)
 
 
-@pytest.mark.parametrize("n", [1, 2, 3, 12, 100, 400])
-def test_eq_partition_cells_have_equal_area(n):
-    edges, per_zone = eq_partition(n)
-    assert sum(per_zone) == n and edges[0] == 0 and edges[-1] == pytest.approx(math.pi)
-    areas = [2 * math.pi * (math.cos(edges[j]) - math.cos(edges[j + 1])) / per_zone[j] for j in range(len(per_zone))]
-    np.testing.assert_allclose(areas, 4 * math.pi / n, rtol=1e-12)
+def test_field_coverage_is_the_calibrations_measure():
+    """Every row kept (keep_hz = rate): exactly coverage(midrange_directions(rows)), the
+    number solvers.compass.check_orientations refuses below 40 %; subsampled, close."""
+    rng = np.random.default_rng(3)
+    h = np.array([12.0, -7.0, 30.0])  # hard iron, raw units
+    u = rng.normal(size=(3000, 3))
+    u[:, 2] = np.abs(u[:, 2])  # the upper hemisphere only: a partial sweep
+    rows = h + 50.0 * u / np.linalg.norm(u, axis=1, keepdims=True)
+    exact = C.coverage(C.midrange_directions(rows))
+    full = FieldCoverage(rate_hz=10.0, keep_hz=10.0)
+    for chunk in np.array_split(rows, 37):
+        full.update(chunk)
+    assert full.fraction == exact and 0.5 < exact < 1.0  # about its midrange a hemisphere spreads out
+    sub = FieldCoverage(rate_hz=100.0, keep_hz=10.0)
+    sub.update(rows)
+    assert sub.n_kept == 300 and abs(sub.fraction - exact) <= 2 / C.COVERAGE_CELLS
+    assert full.enough == (exact >= C.MIN_COVERAGE)
 
 
-def test_sphere_coverage_counts_cells():
-    s = SphereCoverage(100)
-    s.update([[0, 0, 2.0], [0, 0, 5.0]])
-    assert s.fraction == pytest.approx(0.01)
-    s.update([[0, 0, -1.0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [np.nan, 0, 0], [0, 0, 0]])
-    assert s.visited.sum() == 6
-    # uniform directions: every cell, with counts consistent with equal areas (Poisson, 4000 each)
-    u = SphereCoverage(100)
-    u.update(np.random.default_rng(0).normal(size=(400_000, 3)))
-    assert u.fraction == 1.0 and abs(u.counts - 4000).max() < 6 * math.sqrt(4000)
+def test_field_coverage_of_a_still_unit_is_one_direction_and_the_map_draws_it():
+    """Noise about a fixed field: axes never turned over keep centre 0 (one direction,
+    ~7 % of the sphere within 30°), not the noise's midrange (which would point anywhere)."""
+    rng = np.random.default_rng(0)
+    rows = np.array([0.0, 0.0, 45.0]) + 0.05 * rng.normal(size=(2000, 3))
+    cov = FieldCoverage(rate_hz=100.0)
+    cov.update(rows)
+    assert cov.fraction <= 4 / C.COVERAGE_CELLS and not cov.enough
+    grid = cov.grid(6, 12)
+    # the 30° cap about +z: part of every cell of the top band (z > 0.67, 0..48°), nothing else
+    assert np.all((grid[-1] > 0) & (grid[-1] < 1)) and not grid[:-1].any()
+    cov.update([[np.nan, 0, 0]])  # ignored
+    assert cov.n_kept == 200
 
 
 def test_stillness_and_orientation_from_the_simulator():
@@ -95,8 +112,8 @@ def test_compass_coverage_grows_as_the_scripted_operator_turns_the_unit():
     det = LiveDetectors(50.0, units=imu.units, init_rest_s=2.0)
     st = det.update(batch_from(imu, 2.0))
     at_rest = st.coverage
-    assert at_rest <= 0.03  # one direction plus noise: a cell or two of 100
+    assert at_rest <= 4 / C.COVERAGE_CELLS  # one direction: its 30° cap, ~7 % of the sphere
     imu.set_auto(True)
     for _ in range(12):
         st = det.update(batch_from(imu, 3.5))  # hold 1 s + move 2.5 s per position
-    assert st.coverage > 0.15 and st.coverage > 5 * at_rest
+    assert st.coverage > 0.5 and st.coverage > 5 * at_rest  # the 30° measure: 12 positions and the moves

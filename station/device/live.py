@@ -5,9 +5,12 @@
 - Orientation check: the measured specific-force direction against the one the position
   asks for (`solvers.positions.P1_POSITIONS`), the angle between them in degrees and
   `wrong_face_up` when it exceeds 90°.
-- Compass sphere coverage: the share of equal-area cells of the unit sphere (Leopardi's
-  recursive zonal equal-area partition, EQ(2, N)) that the magnetic field direction has
-  visited in the body frame.
+- Compass sphere coverage: `solvers.detectors.FieldCoverage`, the measure the compass
+  calibration refuses on (`solvers.compass.coverage`: share of the sphere within 30° of a
+  visited field direction about the midrange centre, need 40 %).
+
+The orientation check and the coverage are `solvers.detectors`, shared with the guides
+(`station/procedures/guide.py`, `guide_compass.py`).
 
 Raw accelerometer units: the direction of gravity needs outputs that are roughly
 proportional to specific force. Physical units (g, m/s^2, ...) are used as they are; raw
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solvers.detectors import FieldCoverage, OrientationCheck, orientation_check  # noqa: F401 - re-exported
 from solvers.positions import P1_POSITIONS
 from solvers.stillness import StillnessTracker, TrackerState
 from solvers.units import si_factor
@@ -29,32 +33,7 @@ from station.device.reader import Batch
 from station.errors import UnsupportedError
 
 # ------------------------------------------------------------------ orientation
-
-
-@dataclass(frozen=True)
-class OrientationCheck:
-    """Measured vs expected specific-force direction (unit vectors, body frame)."""
-
-    expected: np.ndarray
-    measured: np.ndarray
-    angle_deg: float
-    wrong_face_up: bool  # angle > 90°: the unit is the other way up
-    ok: bool  # angle <= tolerance_deg
-
-
-def orientation_check(f_body, expected, tolerance_deg: float = 10.0) -> OrientationCheck:
-    """Compare a specific force (any units proportional to it) with an expected direction.
-
-    `expected`: a unit vector, or a position name of P1 (`x_up`, `xy_45`, ...).
-    """
-    e = np.asarray(P1_POSITIONS[expected] if isinstance(expected, str) else expected, dtype=float)
-    f = np.asarray(f_body, dtype=float)
-    nf, ne = np.linalg.norm(f), np.linalg.norm(e)
-    if not (nf > 0 and ne > 0 and np.isfinite(nf)):
-        raise ValueError("orientation check needs a finite, non-zero measured and expected vector")
-    m, e = f / nf, e / ne
-    angle = math.degrees(math.atan2(np.linalg.norm(np.cross(m, e)), float(m @ e)))
-    return OrientationCheck(e, m, angle, angle > 90.0, angle <= tolerance_deg)
+# One orientation check for the guides and this module: solvers.detectors.
 
 
 class AccelToSpecificForce:
@@ -77,93 +56,6 @@ class AccelToSpecificForce:
 
     def __call__(self, raw: np.ndarray) -> np.ndarray:
         return raw @ self.M.T + self.B
-
-
-# ------------------------------------------------------------------ sphere coverage
-
-
-def _cap_area(theta: float) -> float:
-    return 4.0 * math.pi * math.sin(theta / 2.0) ** 2
-
-
-def _cap_angle(area: float) -> float:
-    return 2.0 * math.asin(math.sqrt(min(1.0, area / (4.0 * math.pi))))
-
-
-def eq_partition(n: int) -> tuple[np.ndarray, list[int]]:
-    """Leopardi's EQ(2, n): polar-angle boundaries of the zones and the cells per zone.
-
-    Returns (theta_edges (k+1,), cells per zone (k,)): zone j spans polar angles
-    theta_edges[j]..theta_edges[j+1] and is cut into that many equal longitude sectors.
-    Every cell has area 4*pi/n. Zone 0 and the last zone are the polar caps (1 cell).
-    """
-    if n < 1:
-        raise ValueError("n must be >= 1")
-    if n == 1:
-        return np.array([0.0, math.pi]), [1]
-    if n == 2:
-        return np.array([0.0, math.pi / 2, math.pi]), [1, 1]
-    area = 4.0 * math.pi / n
-    theta_c = _cap_angle(area)
-    delta = math.sqrt(area)  # ideal collar height
-    n_collars = max(1, round((math.pi - 2.0 * theta_c) / delta))
-    fitting = (math.pi - 2.0 * theta_c) / n_collars
-    ideal = [
-        (_cap_area(theta_c + (i + 1) * fitting) - _cap_area(theta_c + i * fitting)) / area
-        for i in range(n_collars)
-    ]
-    counts, carry = [], 0.0
-    for x in ideal:  # round while keeping the running total honest
-        c = round(x + carry)
-        carry += x - c
-        counts.append(int(c))
-    edges = [0.0, theta_c]
-    total = 1
-    for c in counts:
-        total += c
-        edges.append(_cap_angle(total * area))
-    edges[-1] = math.pi - theta_c
-    edges.append(math.pi)
-    return np.array(edges), [1, *counts, 1]
-
-
-class SphereCoverage:
-    """Which equal-area cells of the unit sphere the direction of a vector has visited."""
-
-    def __init__(self, n_cells: int = 100) -> None:
-        self.edges, self.per_zone = eq_partition(n_cells)
-        self.offsets = np.concatenate([[0], np.cumsum(self.per_zone)[:-1]])
-        self.n_cells = int(sum(self.per_zone))
-        self.visited = np.zeros(self.n_cells, dtype=bool)
-        self.counts = np.zeros(self.n_cells, dtype=np.int64)
-
-    def cells(self, v) -> np.ndarray:
-        """Cell index of each row's direction (rows with a zero or non-finite vector: -1)."""
-        v = np.atleast_2d(np.asarray(v, dtype=float))
-        norm = np.linalg.norm(v, axis=1)
-        good = np.isfinite(norm) & (norm > 0)
-        out = np.full(len(v), -1, dtype=np.int64)
-        if not good.any():
-            return out
-        u = v[good] / norm[good, None]
-        theta = np.arccos(np.clip(u[:, 2], -1.0, 1.0))
-        phi = np.mod(np.arctan2(u[:, 1], u[:, 0]), 2 * math.pi)
-        zone = np.clip(np.searchsorted(self.edges, theta, side="right") - 1, 0, len(self.per_zone) - 1)
-        per = np.asarray(self.per_zone)[zone]
-        sector = np.minimum((phi / (2 * math.pi) * per).astype(np.int64), per - 1)
-        out[good] = self.offsets[zone] + sector
-        return out
-
-    def update(self, v) -> float:
-        c = self.cells(v)
-        c = c[c >= 0]
-        np.add.at(self.counts, c, 1)
-        self.visited[c] = True
-        return self.fraction
-
-    @property
-    def fraction(self) -> float:
-        return float(self.visited.mean())
 
 
 # ------------------------------------------------------------------ glue
@@ -202,7 +94,6 @@ class LiveDetectors:
         accel_M=None,
         tolerance_deg: float = 10.0,
         orientation_window_s: float = 0.5,
-        coverage_cells: int = 100,
         mag_center=None,
         use_gyro: bool = True,
     ) -> None:
@@ -217,8 +108,8 @@ class LiveDetectors:
             self._to_f = AccelToSpecificForce(self.units.get("accel_unit"), accel_B, accel_M)
         except UnsupportedError as exc:
             self._to_f_error = str(exc)
-        self.coverage = SphereCoverage(coverage_cells)
         self.mag_center = None if mag_center is None else np.asarray(mag_center, dtype=float)
+        self.coverage = FieldCoverage(sample_rate_hz, center=self.mag_center)
         self._recent = max(1, int(round(orientation_window_s * sample_rate_hz)))
         self._recent_a = np.empty((0, 3))
         self._use_gyro = use_gyro
@@ -247,7 +138,7 @@ class LiveDetectors:
 
     @property
     def _has_mag(self) -> bool:
-        return bool(self.units.get("mag_unit")) or self.coverage.visited.any()
+        return bool(self.units.get("mag_unit")) or self.coverage.n_kept > 0
 
     def _feed(self, b: Batch) -> None:
         keep = b.t_s > self._last_t  # the tracker needs strictly increasing time
@@ -271,7 +162,7 @@ class LiveDetectors:
         m = b.values[keep][:, 6:9]
         m = m[np.isfinite(m).all(axis=1)]
         if len(m):
-            self.coverage.update(m - self.mag_center if self.mag_center is not None else m)
+            self.coverage.update(m)
 
     def _orientation(self) -> OrientationCheck | None:
         if self.expected is None or self._to_f is None:

@@ -13,7 +13,8 @@ Stillness comes from ``solvers.stillness.StillnessTracker`` (variance of a short
 against the noise of the initial rest). Orientation: the raw accelerometer output is
 mapped to specific force with the "calibrated-so-far" model ``f = B + M V`` (the device's
 previous calibration if given, else a nominal per-axis zero and scale, refined by least
-squares from the positions captured so far) and compared with the asked direction;
+squares from the positions captured so far) and compared with the asked direction by
+``solvers.detectors.orientation_check`` (the one check ``station/device/live.py`` uses);
 more than 90° off is "wrong face up".
 
 All times are the samples' own ``t_s`` (device clock), so a replay is deterministic.
@@ -33,7 +34,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from solvers import frames
-from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS, angle_between_deg
+from solvers.detectors import orientation_check
+from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS
 from solvers.stillness import StillnessTracker
 from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
@@ -306,8 +308,8 @@ class P1Guide:
         f = self.specific_force(raw)
         if not np.all(np.isfinite(f)) or np.linalg.norm(f) == 0:
             return math.nan, False, False
-        ang = angle_between_deg(f, step.direction)
-        return ang, ang <= self.config.angle_tol_deg, ang > 90.0
+        chk = orientation_check(f, step.direction, self.config.angle_tol_deg)
+        return chk.angle_deg, chk.ok, chk.wrong_face_up
 
     def _advance(self, st, t_s, accel, temp_c) -> None:
         c = self.config

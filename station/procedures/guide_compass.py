@@ -2,10 +2,12 @@
 
 The operator turns the unit slowly through every orientation while the station records
 the time series (t, accelerometer, gyro, magnetometer, temperature). Progress is the
-**sphere coverage**: the share of equal-area cells of the unit sphere that the measured
-magnetic field direction (body frame) has visited. The cells are ``n_bands`` bands
-uniform in z (so of equal area, Archimedes) times ``n_sectors`` sectors in azimuth;
-:meth:`CompassGuide.coverage_map` draws exactly the cells that are counted.
+**sphere coverage the calibration checks**: ``solvers.detectors.FieldCoverage``, i.e.
+``solvers.compass.coverage`` (share of the sphere within 30° of a visited field direction,
+about the midrange centre) — the number ``solvers.compass.check_orientations`` refuses
+below 40 %. :meth:`CompassGuide.coverage_map` draws the same measure on ``n_bands`` bands
+uniform in z times ``n_sectors`` sectors in azimuth (filled where the cell lies within 30°
+of a visited direction, half-filled where partly).
 
 Phases: ``sweep`` (recording) → ``done`` when coverage ≥ ``target_coverage`` and at least
 ``min_s`` have been recorded (or the operator finishes early), ``aborted``. The recording
@@ -20,13 +22,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solvers.compass import MIN_COVERAGE
+from solvers.detectors import FieldCoverage
+
 PHASES = ("sweep", "done", "aborted")
 
 
 @dataclass
 class CompassConfig:
-    """target_coverage: share of sphere cells to visit (0..1). min_s / max_s: recording
-    length bounds [s]. n_bands x n_sectors: the equal-area cells."""
+    """target_coverage: coverage (``solvers.compass.coverage``, 0..1) that ends the sweep; at
+    least the calibration's ``MIN_COVERAGE`` (0.40). min_s / max_s: recording length bounds
+    [s]. n_bands x n_sectors: the drawn map."""
 
     target_coverage: float = 0.8
     min_s: float = 60.0
@@ -35,8 +41,9 @@ class CompassConfig:
     n_sectors: int = 12
 
     def __post_init__(self) -> None:
-        if not 0 < self.target_coverage <= 1:
-            raise ValueError(f"target_coverage must be in (0, 1], got {self.target_coverage!r}")
+        if not MIN_COVERAGE <= self.target_coverage <= 1:
+            raise ValueError(f"target_coverage must be in [{MIN_COVERAGE}, 1] (the calibration refuses "
+                             f"below {100 * MIN_COVERAGE:.0f} %), got {self.target_coverage!r}")
         if not (self.min_s >= 0 and self.max_s > 0 and self.max_s >= self.min_s):
             raise ValueError("min_s and max_s must satisfy 0 <= min_s <= max_s, max_s > 0")
         if self.n_bands < 2 or self.n_sectors < 3:
@@ -46,8 +53,9 @@ class CompassConfig:
 @dataclass(frozen=True)
 class CompassStatus:
     phase: str
-    coverage: float
+    coverage: float  # solvers.compass.coverage of the directions so far
     target: float
+    enough: bool  # coverage >= the calibration's MIN_COVERAGE
     recorded_s: float
     n_samples: int
     field_raw: tuple[float, float, float]
@@ -74,35 +82,27 @@ class CompassGuide:
 
     def _reset(self) -> None:
         c = self.config
-        self.visited = np.zeros((c.n_bands, c.n_sectors), dtype=bool)
+        self.field = FieldCoverage(self.sample_rate_hz)
         self._chunks: list[dict[str, np.ndarray]] = []
         self._n = 0
         self._t0 = math.nan
         self._t1 = math.nan
-        self._center = None  # rough hard-iron centre for the direction (mid-range of each axis)
-        self._lo = np.full(3, np.inf)
-        self._hi = np.full(3, -np.inf)
         self._last = None
         self._message = "Turn the unit slowly through every orientation (all faces up, all headings)"
 
     # ------------------------------------------------------------ cells
 
-    def cells(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(band, sector) of directions v (n, 3): bands uniform in z, sectors in azimuth."""
-        c = self.config
-        u = v / np.linalg.norm(v, axis=1, keepdims=True)
-        band = np.clip(((u[:, 2] + 1.0) / 2.0 * c.n_bands).astype(int), 0, c.n_bands - 1)
-        az = np.arctan2(u[:, 1], u[:, 0])
-        sector = np.clip(((az + math.pi) / (2 * math.pi) * c.n_sectors).astype(int), 0, c.n_sectors - 1)
-        return band, sector
-
     @property
     def coverage(self) -> float:
-        return float(self.visited.mean())
+        """``solvers.compass.coverage`` of the field directions so far (0..1)."""
+        return self.field.fraction
 
     def coverage_map(self) -> list[str]:
-        """Rows from +z (top) to -z: '█' visited, '·' not yet."""
-        return ["".join("█" if x else "·" for x in row) for row in self.visited[::-1]]
+        """Rows from +z (top) to -z: '█' the cell lies within 30° of a visited direction,
+        '▒' partly, '·' not yet (the measure the percentage counts, drawn)."""
+        c = self.config
+        return ["".join("█" if x >= 0.75 else "▒" if x > 0 else "·" for x in row)
+                for row in self.field.grid(c.n_bands, c.n_sectors)[::-1]]
 
     # ------------------------------------------------------------ feeding
 
@@ -117,21 +117,7 @@ class CompassGuide:
         if not math.isfinite(self._t0):
             self._t0 = float(t_s[0])
         self._t1 = float(t_s[-1])
-        ok = np.all(np.isfinite(mag), axis=1)
-        if ok.any():
-            m = mag[ok]
-            self._lo = np.minimum(self._lo, m.min(axis=0))
-            self._hi = np.maximum(self._hi, m.max(axis=0))
-            # The centre of an axis's range stands in for its hard iron once the range spans
-            # the field (the unit has been turned over on that axis); before, zero.
-            span = self._hi - self._lo
-            field = float(np.median(np.linalg.norm(m, axis=1)))
-            centre = np.where(span > 0.5 * field, (self._hi + self._lo) / 2, 0.0)
-            d = m - centre
-            keep = np.linalg.norm(d, axis=1) > 0
-            if keep.any():
-                b, s = self.cells(d[keep])
-                self.visited[b, s] = True
+        self.field.update(mag)
         k = min(len(t_s), max(1, int(self.sample_rate_hz * 0.1)))
         self._last = (mag[-k:].mean(axis=0), float(np.linalg.norm(np.nanmean(gyro[-k:], axis=0))), self._t1)
         c = self.config
@@ -173,7 +159,8 @@ class CompassGuide:
     def status(self) -> CompassStatus:
         m, rate, t = self._last if self._last is not None else (np.full(3, np.nan), math.nan, math.nan)
         rec = (self._t1 - self._t0) if math.isfinite(self._t0) else 0.0
-        return CompassStatus(self.phase, self.coverage, self.config.target_coverage, rec, self._n,
+        cov = self.coverage
+        return CompassStatus(self.phase, cov, self.config.target_coverage, cov >= MIN_COVERAGE, rec, self._n,
                              tuple(float(x) for x in m), float(np.linalg.norm(m)), rate, t, self._message)
 
     # ------------------------------------------------------------ the capture

@@ -1,7 +1,7 @@
 """Compass (P3): the guided sweep. The operator turns the unit through every orientation;
-the screen shows a live sphere-coverage map (equal-area cells the magnetic field
-direction has visited), the recorded time, the field readouts and the turn rate. The
-recording ends by itself at the target coverage (f finishes early), then the fit runs.
+the screen shows a live sphere-coverage map (the compass calibration's own measure,
+solvers.compass.coverage: the sphere within 30° of a visited field direction), the
+recorded time, the field readouts and the turn rate. The recording ends by itself at the target coverage (f finishes early), then the fit runs.
 
 Same pattern as the P1 screen: a thread worker drains the source and feeds the guide,
 posting replaceable LiveUpdates (~15 Hz) and GuideEvents.
@@ -131,7 +131,8 @@ class CompassScreen(Screen):
         self.query_one("#map", Static).update("+z\n" + "\n".join(cov_map) + "\n-z")
         t = Text("Coverage ")
         t.append(bar(st.coverage / st.target if st.target else 0, 16), style="green" if st.coverage >= st.target else "cyan")
-        t.append(f" {100 * st.coverage:3.0f} % of {100 * st.target:.0f} %\nRecorded {st.recorded_s:5.0f} s, "
+        t.append(f" {100 * st.coverage:3.0f} % of {100 * st.target:.0f} %"
+                 + ("" if st.enough else " (fit needs 40 %)") + f"\nRecorded {st.recorded_s:5.0f} s, "
                  f"{st.n_samples} samples")
         self.query_one("#progress", Static).update(t)
         m = st.field_raw
