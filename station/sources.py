@@ -43,6 +43,85 @@ class SourceStats:
     last_error: str = ""
 
 
+class CentrifugeImu:
+    """A simulated P2 bench (``station sim``'s centrifuge): the triad of
+    ``solvers.simulate.simulate_centrifuge(seed)`` (its S, b, D, outputs in g) mounted in
+    one of ``solvers.simulate.centrifuge_orientations`` and spun at ω on radius R.
+
+    ``set_orientation("k@ω")`` asks for orientation k (1-based) at ω rad/s; the bench then
+    changes over like a real one: a speed change ramps for ``ramp_s``; a new orientation
+    first spins down, is handled (remounted) for ``handle_s``, then spins up. Specific force
+    in the table frame (radial out, tangential, up) is ``(−ω²R/g, 0, 1)`` g (the simulator's
+    convention); the forward model is ``solvers.models.accel.forward``. The gyro reads the
+    table's rate, ``(0, 0, ω)`` in the table frame, in rad/s."""
+
+    def __init__(self, *, seed: int = 0, rate_hz: float = 100.0, radius_m: float = 1.0, g_mps2: float = 9.8,
+                 noise_g: float = 1e-4, ramp_s: float = 2.0, handle_s: float = 3.0):
+        from solvers.simulate import centrifuge_orientations, simulate_centrifuge
+
+        sim = simulate_centrifuge(seed, radius_m=radius_m, g_mps2=g_mps2)
+        self.params = {k: np.asarray(sim.truth[k], float) for k in ("S", "b", "D")}
+        self.orients = centrifuge_orientations(20)
+        self.rate_hz, self.radius_m, self.g_mps2 = float(rate_hz), float(radius_m), float(g_mps2)
+        self.noise_g, self.ramp_s, self.handle_s = noise_g, ramp_s, handle_s
+        self.rng = np.random.default_rng(seed + 1)
+        self.device_id = f"SIM-CFG-{seed:04d}"
+        self.units = {"accel_unit": "g", "gyro_unit": "rad/s"}
+        self.site: dict = {}
+        self.positions = [f"{k}@0" for k in range(1, 21)]
+        self._i = 0  # samples produced
+        self._plan = [(-math.inf, 1, 0.0, 1, 0.0, "steady")]  # (t0, k0, w0, k1, w1, kind)
+        self.k, self.w = 1, 0.0
+
+    def truth(self) -> dict:
+        return {k: v.tolist() for k, v in self.params.items()}
+
+    def set_orientation(self, name: str) -> None:
+        k_s, _, w_s = str(name).partition("@")
+        k, w = int(k_s), float(w_s or 0.0)
+        if not 1 <= k <= len(self.orients) or not (math.isfinite(w) and w >= 0):
+            raise ValueError(f"unknown centrifuge setting {name!r}: 'k@omega', k in 1..{len(self.orients)}")
+        t = self._i / self.rate_hz
+        k0, w0 = self._state(t)[:2]
+        if k == k0:
+            self._plan = [(t, k0, w0, k, w, "ramp")]
+        else:
+            t1, t2 = t + self.ramp_s, t + 2 * self.ramp_s + self.handle_s
+            self._plan = [(t, k0, w0, k0, 0.0, "ramp"), (t1, k, 0.0, k, 0.0, "handle"),
+                          (t1 + self.handle_s, k, 0.0, k, w, "ramp"), (t2, k, w, k, w, "steady")]
+        self.k, self.w = k, w
+
+    def _state(self, t: float) -> tuple[int, float, bool]:
+        """(orientation, ω, handled) at device time t."""
+        seg = [p for p in self._plan if p[0] <= t] or self._plan[:1]
+        t0, k0, w0, k1, w1, kind = seg[-1]
+        if kind == "ramp":
+            x = min(max((t - t0) / self.ramp_s, 0.0), 1.0)
+            return k1, w0 + (w1 - w0) * x, False
+        return k1, w1, kind == "handle"
+
+    def read(self, n: int) -> dict:
+        from solvers.models import accel as accel_model
+
+        t = (self._i + np.arange(n)) / self.rate_hz
+        self._i += n
+        f = np.empty((n, 3))
+        g = np.empty((n, 3))
+        shake = np.zeros((n, 3))
+        for j, tj in enumerate(t):
+            k, w, handled = self._state(float(tj))
+            C_t_b = self.orients[k - 1]
+            f[j] = C_t_b.T @ np.array([-w * w * self.radius_m / self.g_mps2, 0.0, 1.0])
+            g[j] = C_t_b.T @ np.array([0.0, 0.0, w])
+            if handled:
+                shake[j] = self.rng.normal(scale=0.3, size=3)
+        y = accel_model.forward(f + shake, self.params) + self.rng.normal(scale=self.noise_g, size=(n, 3))
+        g = g + self.rng.normal(scale=1e-3, size=(n, 3))
+        nan = np.full(n, np.nan)
+        return {"t_s": t, "ax": y[:, 0], "ay": y[:, 1], "az": y[:, 2], "gx": g[:, 0], "gy": g[:, 1],
+                "gz": g[:, 2], "mx": nan, "my": nan, "mz": nan, "temp_c": np.full(n, 25.0)}
+
+
 class SimSource:
     """The built-in simulated bench device (``solvers.simulate.LiveImu``), paced by a clock.
 
@@ -59,7 +138,10 @@ class SimSource:
                  max_batch_s: float = 1.0, procedure: str = "accel-tabletop"):
         from solvers.simulate import LiveImu
 
-        self.imu = LiveImu(procedure=procedure, seed=seed, rate_hz=rate_hz, hold_s=1e9)
+        if procedure == "accel-centrifuge":
+            self.imu = CentrifugeImu(seed=seed, rate_hz=rate_hz)
+        else:
+            self.imu = LiveImu(procedure=procedure, seed=seed, rate_hz=rate_hz, hold_s=1e9)
         self.procedure = procedure
         self.positions = list(self.imu.positions)
         self.rate_hz = float(rate_hz)

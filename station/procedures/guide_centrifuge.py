@@ -1,0 +1,429 @@
+"""The guided P2 (centrifuge, Wang & Li 2021) run as a UI-free state machine.
+
+A step list: for each mounting orientation ``k`` (default the 20 attitudes of
+``solvers.simulate.centrifuge_orientations``) and each speed (default 2π, 4π, 6π rad/s),
+"mount in orientation k, spin at ω rad/s". Each step is filled either
+
+- **live**: the station averages the accelerometer stream once its output is steady at
+  speed (``solvers.stillness.StillnessTracker`` on the accelerometer alone: on a
+  centrifuge "still" means a constant output, the turning gyro is left out). After each
+  capture the output must change (the operator remounts or changes speed: the detector
+  sees motion) before the next step can be captured, so one steady run is never taken
+  twice (the same holds for the first step after the initial rest: the stopped centrifuge
+  is not a row); or
+- **manual**: the operator types the three averaged outputs and the measured speed
+  (:func:`parse_manual`: decimal numbers only, a speed > 0; one clear message otherwise).
+
+Phases: ``noise`` (initial rest, the centrifuge stopped: the detector learns the noise),
+``change`` (waiting for the output to change after a capture), ``place`` (waiting for a
+steady output), ``settle``, ``average`` (countdown), ``done``, ``aborted``. ``skip``,
+``redo(index)``, ``select(index)``, ``abort``. Times are the samples' own ``t_s``.
+
+At the end (or earlier, ``MIN_FIT_ROWS`` rows) :meth:`CentrifugeGuide.capture` is the P2
+table of averages (``position, speed_rad_s, ax, ay, az`` and, when every row was averaged
+live, ``n, ax_std, ay_std, az_std``; metadata ``procedure: accel-centrifuge``,
+``radius_m``, ``g_mps2``, ``accel_unit``) for ``station.calibrate.calibrate_capture``.
+The live speed written is the one asked for (the centrifuge's set speed); type the
+tachometer's reading with a manual entry when it differs.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solvers.stillness import StillnessTracker
+
+PHASES = ("noise", "change", "place", "settle", "average", "done", "aborted")
+STATUSES = ("pending", "captured", "skipped")
+DEFAULT_SPEEDS_RAD_S = (2 * math.pi, 4 * math.pi, 6 * math.pi)  # Wang & Li: 1, 2, 3 rev/s
+MIN_FIT_ROWS = 10  # the exact fit has 9 coefficients (S, b, D) and needs more rows than that
+_NUMBER = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?")
+
+
+class ManualEntryError(ValueError):
+    """A manual entry that is not four numbers (one line for the operator)."""
+
+
+def parse_manual(ax: str, ay: str, az: str, speed_rad_s: str) -> tuple[float, float, float, float]:
+    """Four typed fields → (ax, ay, az, speed_rad_s). Decimal numbers only (``1.5``,
+    ``-0.2e-3``); the speed must be > 0. Raises ManualEntryError naming the first bad field."""
+    out = []
+    for name, text in (("ax", ax), ("ay", ay), ("az", az), ("speed", speed_rad_s)):
+        s = (text or "").strip()
+        if not s:
+            raise ManualEntryError(f"{name}: empty; type the averaged value")
+        if not _NUMBER.fullmatch(s):
+            raise ManualEntryError(f"{name}: {s!r} is not a number (digits, '.', '-', 'e' only)")
+        v = float(s)
+        if not math.isfinite(v):
+            raise ManualEntryError(f"{name}: {s!r} is out of range")
+        out.append(v)
+    if out[3] <= 0:
+        raise ManualEntryError(f"speed: {speed_rad_s.strip()} rad/s; the centrifuge speed must be > 0")
+    return out[0], out[1], out[2], out[3]
+
+
+@dataclass
+class CentrifugeConfig:
+    """speeds_rad_s: the speeds asked at each orientation [rad/s]. n_orientations: mounting
+    attitudes (the paper's 20). radius_m: centrifuge radius to the triad [m]. g_mps2:
+    local gravity [m/s²]. average_s / settle_s: averaging time and steady time before it
+    [s]. init_rest_s / window_s: the stillness detector's initial rest and window [s]."""
+
+    speeds_rad_s: tuple[float, ...] = DEFAULT_SPEEDS_RAD_S
+    n_orientations: int = 20
+    radius_m: float = 1.0
+    g_mps2: float = 9.8
+    average_s: float = 60.0
+    settle_s: float = 2.0
+    init_rest_s: float = 2.0
+    window_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        self.speeds_rad_s = tuple(float(w) for w in self.speeds_rad_s)
+        if not self.speeds_rad_s or not all(math.isfinite(w) and w > 0 for w in self.speeds_rad_s):
+            raise ValueError(f"speeds_rad_s must be positive numbers, got {self.speeds_rad_s!r}")
+        if not (isinstance(self.n_orientations, int) and self.n_orientations >= 1):
+            raise ValueError(f"n_orientations must be a positive integer, got {self.n_orientations!r}")
+        for name in ("radius_m", "g_mps2", "average_s", "init_rest_s", "window_s"):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {getattr(self, name)!r}")
+        if not (math.isfinite(float(self.settle_s)) and self.settle_s >= 0):
+            raise ValueError(f"settle_s must be >= 0, got {self.settle_s!r}")
+
+
+@dataclass
+class CentrifugeStep:
+    """One row to fill: orientation ``k`` (1-based) at ``speed_rad_s`` (asked)."""
+
+    orientation: int
+    speed_rad_s: float
+    status: str = "pending"
+    how: str = ""  # "live" or "manual" once captured
+    values: list[float] | None = None  # averaged ax, ay, az (raw accel unit)
+    speed_measured_rad_s: float = math.nan
+    std: list[float] | None = None
+    n: int = 0
+
+    @property
+    def label(self) -> str:
+        return f"{self.orientation:2d} @ {self.speed_rad_s:5.2f} rad/s"
+
+    @property
+    def prompt(self) -> str:
+        return (f"Mount in orientation {self.orientation}, spin at {self.speed_rad_s:.3g} rad/s "
+                f"({self.speed_rad_s / (2 * math.pi):.3g} rev/s)")
+
+
+def centrifuge_steps(config: CentrifugeConfig) -> list[CentrifugeStep]:
+    """Orientation by orientation (a remount is slow), every speed at each."""
+    return [CentrifugeStep(k, w) for k in range(1, config.n_orientations + 1) for w in config.speeds_rad_s]
+
+
+@dataclass(frozen=True)
+class CentrifugeStatus:
+    phase: str
+    index: int | None
+    calibrating: bool
+    is_still: bool
+    still_for_s: float
+    level: float
+    settle_left_s: float
+    countdown_s: float
+    progress: float
+    raw: tuple[float, float, float]  # recent accelerometer mean (raw unit)
+    table_rate_rad_s: float  # |gyro| in rad/s when the gyro unit is known, else NaN
+    n_captured: int
+    n_skipped: int
+    t_s: float
+    message: str
+
+
+_GYRO_RAD_S = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
+
+
+class CentrifugeGuide:
+    procedure = "accel-centrifuge"
+
+    def __init__(self, *, sample_rate_hz: float, units: dict, device_id: str = "",
+                 config: CentrifugeConfig | None = None, steps: list[CentrifugeStep] | None = None):
+        self.config = config or CentrifugeConfig()
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.units = dict(units)
+        self.device_id = device_id
+        self.steps = steps if steps is not None else centrifuge_steps(self.config)
+        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        c = self.config
+        init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
+        self.tracker = StillnessTracker(self.sample_rate_hz, init_rest_s=init, window_s=c.window_s,
+                                        min_duration_s=0.0, margin_s=0.0, nan_policy="omit")
+        self.phase = "noise"
+        self.index: int | None = 0
+        self._need_change = True  # the rest is the stopped centrifuge: spin up first
+        self._events: list[tuple[str, str]] = []
+        self._message = "Centrifuge stopped: hold still while the noise is measured"
+        self._last = None
+        self._avg_reset()
+
+    # ------------------------------------------------------------ bookkeeping
+
+    def _avg_reset(self) -> None:
+        self._sum = np.zeros(3)
+        self._sq = np.zeros(3)
+        self._n = 0
+        self._t0 = math.nan
+        self._t1 = math.nan
+
+    @property
+    def step(self) -> CentrifugeStep | None:
+        return None if self.index is None else self.steps[self.index]
+
+    @property
+    def n_captured(self) -> int:
+        return sum(s.status == "captured" for s in self.steps)
+
+    @property
+    def can_fit(self) -> bool:
+        return self.n_captured >= MIN_FIT_ROWS
+
+    def take_events(self) -> list[tuple[str, str]]:
+        ev, self._events = self._events, []
+        return ev
+
+    # ------------------------------------------------------------ live stream
+
+    def update(self, t_s, accel, gyro=None, temp_c=None) -> CentrifugeStatus:
+        t_s = np.asarray(t_s, float)
+        if len(t_s) == 0 or self.phase in ("done", "aborted"):
+            return self.status()
+        accel = np.asarray(accel, float).reshape(-1, 3)
+        gyro = None if gyro is None else np.asarray(gyro, float).reshape(-1, 3)
+        step = max(1, int(self.sample_rate_hz * 0.1))
+        st = None
+        for a in range(0, len(t_s), step):
+            sl = slice(a, a + step)
+            st = self.tracker.update(t_s[sl], accel[sl], None)
+            self._advance(st, t_s[sl], accel[sl])
+            if self.phase in ("done", "aborted"):
+                break
+        k = min(len(t_s), step)
+        raw = np.nanmean(accel[-k:], axis=0)
+        rate = math.nan
+        f = _GYRO_RAD_S.get(self.units.get("gyro_unit") or "")
+        if gyro is not None and f is not None:
+            rate = float(np.linalg.norm(np.nanmean(gyro[-k:], axis=0))) * f
+        self._last = (raw, rate, float(t_s[-1]), st)
+        return self.status()
+
+    def _advance(self, st, t, a) -> None:
+        c = self.config
+        if self.index is None:
+            return
+        if st.calibrating:
+            self.phase = "noise"
+            return
+        if self._need_change:
+            if st.is_still:
+                self.phase = "change"
+                self._message = f"{self.step.prompt}: waiting for the change"
+                return
+            self._need_change = False
+        if self.phase == "average":
+            if not st.is_still:
+                self._avg_reset()
+                self.phase = "place"
+                self._message = "The output changed during the average: it starts again when steady"
+                self._events.append(("restarted", self.step.label))
+                return
+            self._avg_add(t, a)
+            if self._t1 - self._t0 >= c.average_s:
+                self._capture_live()
+            return
+        if st.is_still and st.still_for_s >= c.settle_s:
+            self.phase = "average"
+            self._avg_reset()
+            self._message = f"{self.step.prompt}: averaging, keep the speed steady"
+            self._avg_add(t, a)
+        elif st.is_still:
+            self.phase = "settle"
+            self._message = f"{self.step.prompt}: steady, averaging starts shortly"
+        else:
+            self.phase = "place"
+            self._message = f"{self.step.prompt}; waiting for a steady output"
+
+    def _avg_add(self, t, a) -> None:
+        ok = np.all(np.isfinite(a), axis=1)
+        a = a[ok]
+        if not len(a):
+            return
+        if not math.isfinite(self._t0):
+            self._t0 = float(t[ok][0])
+        self._t1 = float(t[ok][-1])
+        self._sum += a.sum(axis=0)
+        self._sq += (a * a).sum(axis=0)
+        self._n += len(a)
+
+    def _capture_live(self) -> None:
+        s = self.step
+        mean = self._sum / self._n
+        var = np.maximum(self._sq / self._n - mean ** 2, 0.0) * self._n / max(self._n - 1, 1)
+        s.values, s.std, s.n = [float(x) for x in mean], [float(x) for x in np.sqrt(var)], int(self._n)
+        s.speed_measured_rad_s, s.status, s.how = s.speed_rad_s, "captured", "live"
+        self._events.append(("captured", s.label))
+        self._after_capture(f"Captured {s.label.strip()}")
+
+    def _after_capture(self, said: str) -> None:
+        self._avg_reset()
+        self._need_change = True
+        self._next_pending(said)
+
+    def _next_pending(self, said: str) -> None:
+        n = len(self.steps)
+        start = 0 if self.index is None else self.index
+        for j in list(range(start + 1, n)) + list(range(0, start + 1)):
+            if self.steps[j].status == "pending":
+                self.index = j
+                self.phase = "change" if self._need_change else "place"
+                self._message = f"{said}. Next: {self.steps[j].prompt}"
+                return
+        self.index = None
+        self.phase = "done"
+        self._message = f"{said}. All steps done: {self.n_captured} captured"
+        self._events.append(("done", ""))
+
+    # ------------------------------------------------------------ operator
+
+    def enter_manual(self, ax: str, ay: str, az: str, speed_rad_s: str) -> CentrifugeStep:
+        """The operator's own averages for the current step (strings as typed).
+        Raises ManualEntryError (nothing changes) on bad input."""
+        if self.index is None or self.phase in ("done", "aborted"):
+            raise ManualEntryError("no step to fill: the run is over")
+        v = parse_manual(ax, ay, az, speed_rad_s)
+        s = self.step
+        s.values, s.speed_measured_rad_s, s.std, s.n = list(v[:3]), v[3], None, 0
+        s.status, s.how = "captured", "manual"
+        self._events.append(("captured", s.label + " (typed)"))
+        self._after_capture(f"Entered {s.label.strip()}")
+        return s
+
+    def skip(self) -> None:
+        if self.index is None or self.phase in ("done", "aborted"):
+            return
+        s = self.step
+        s.status = "skipped"
+        self._events.append(("skipped", s.label))
+        self._avg_reset()
+        self._next_pending(f"Skipped {s.label.strip()}")
+
+    def redo(self, index: int | None = None) -> None:
+        """Clear a step (default: the last captured or skipped one) and make it current; the
+        output need not change first (the operator chose it)."""
+        if self.phase == "aborted":
+            return
+        if index is None:
+            done = [i for i, s in enumerate(self.steps) if s.status != "pending"]
+            if not done:
+                return
+            index = done[-1] if self.index is None else max((i for i in done if i < self.index), default=done[-1])
+        s = self.steps[index]
+        s.status, s.how, s.values, s.std, s.n, s.speed_measured_rad_s = "pending", "", None, None, 0, math.nan
+        self.select(index)
+        self._message = f"Redo: {s.prompt}"
+
+    def select(self, index: int) -> None:
+        if self.phase == "aborted" or not 0 <= index < len(self.steps):
+            return
+        if self.steps[index].status != "pending":
+            self.redo(index)
+            return
+        self.index = index
+        self._need_change = False
+        self._avg_reset()
+        st = self.tracker.state
+        self.phase = "noise" if st.calibrating else "place"
+        self._message = self.steps[index].prompt
+
+    def abort(self) -> None:
+        self.phase = "aborted"
+        self._message = "Aborted"
+        self._events.append(("aborted", ""))
+
+    def finish(self) -> bool:
+        """End now with what is captured (at least MIN_FIT_ROWS rows)."""
+        if not self.can_fit or self.phase == "aborted":
+            return False
+        self.index = None
+        self.phase = "done"
+        self._message = f"Finished early: {self.n_captured} captured"
+        self._events.append(("done", "early"))
+        return True
+
+    # ------------------------------------------------------------ read-outs
+
+    def status(self) -> CentrifugeStatus:
+        c = self.config
+        raw, rate, t, st = self._last if self._last else (np.full(3, np.nan), math.nan, math.nan, None)
+        st = st if st is not None else self.tracker.state
+        rec = (self._t1 - self._t0) if self.phase == "average" and math.isfinite(self._t0) else 0.0
+        return CentrifugeStatus(
+            phase=self.phase, index=self.index, calibrating=st.calibrating, is_still=st.is_still,
+            still_for_s=float(st.still_for_s), level=float(st.level),
+            settle_left_s=max(c.settle_s - st.still_for_s, 0.0) if self.phase == "settle" else math.nan,
+            countdown_s=max(c.average_s - rec, 0.0) if self.phase == "average" else math.nan,
+            progress=min(rec / c.average_s, 1.0) if self.phase == "average" else 0.0,
+            raw=tuple(float(x) for x in raw), table_rate_rad_s=rate, n_captured=self.n_captured,
+            n_skipped=sum(s.status == "skipped" for s in self.steps), t_s=t,
+            message=self._message)
+
+    def capture(self, extra_meta: dict | None = None):
+        """The captured rows as a P2 table of averages (``station.capture.Capture``)."""
+        from station.capture import Capture
+
+        rows = [s for s in self.steps if s.status == "captured"]
+        v = np.array([s.values for s in rows], float).reshape(-1, 3)
+        cols = {"position": np.array([str(s.orientation) for s in rows], dtype=object),
+                "speed_rad_s": np.array([s.speed_measured_rad_s for s in rows], float),
+                "ax": v[:, 0], "ay": v[:, 1], "az": v[:, 2]}
+        if rows and all(s.how == "live" and s.n > 1 for s in rows):
+            sd = np.array([s.std for s in rows], float)
+            cols.update({"n": np.array([s.n for s in rows], float), "ax_std": sd[:, 0], "ay_std": sd[:, 1],
+                         "az_std": sd[:, 2]})
+        c = self.config
+        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
+                "accel_unit": self.units.get("accel_unit") or "raw", "radius_m": repr(float(c.radius_m)),
+                "g_mps2": repr(float(c.g_mps2)), "date": self.started[:10]}
+        if any(s.how == "manual" for s in rows):
+            meta["manual_rows"] = str(sum(s.how == "manual" for s in rows))
+        meta.update({k: str(x) for k, x in (extra_meta or {}).items()})
+        return Capture(meta=meta, columns=cols)
+
+
+@dataclass
+class CentrifugeOperator:
+    """The demo's operator: when the guide asks for a step, mounts and spins the simulated
+    centrifuge to it (``place("k@ω")``), after ``reaction_s`` of the samples' clock."""
+
+    place: object
+    reaction_s: float = 0.5
+    _asked: tuple | None = field(default=None)
+    _at: float = -math.inf
+
+    def step(self, guide: CentrifugeGuide, t_s: float) -> str | None:
+        s = guide.step
+        if s is None or guide.phase in ("noise", "done", "aborted") or not math.isfinite(t_s):
+            return None
+        key = (s.orientation, s.speed_rad_s)
+        if key != self._asked:
+            self._asked, self._at = key, t_s + self.reaction_s
+            return None
+        if self._at is not None and t_s >= self._at:
+            self._at = None
+            name = f"{s.orientation}@{s.speed_rad_s!r}"
+            self.place(name)
+            return name
+        return None
