@@ -12,10 +12,11 @@ percentile is the scale F giving a 5 % false-alarm rate — the THRESHOLDS of
 ``solvers/diagnose/problems.py`` come from this command with --null-only --trials 200
 (seeds from 1000); check them on other seeds with --null-seed0.
 
-Effect size in sigma: for each effect, a capture with a reference size gives the χ² drop
-of fitting the effect (Δχ² on the baseline-scaled noise, ≈ (size/σ_size)²); the size at
-k sigma is ``size_ref · k / sqrt(Δχ²)`` (median over 3 seeds). Detection = the hidden
-name (or a candidate reported confused with it) in the verdict.
+Effect size in sigma, per capture: the seed's capture with a reference size gives the
+deviance of fitting the effect (≈ (size/σ_size)² for that pattern and design); the same
+seed is then simulated at ``size_ref · k / sqrt(deviance)`` (``_trial``). Detection = the
+hidden name in the verdict (named itself or as confused with the chosen one). The 1σ
+printed is the median over the captures (``sigma_sizes`` gives a quick 3-seed estimate).
 """
 from __future__ import annotations
 
@@ -76,7 +77,8 @@ def run_one(procedure: str, seed: int, effects: dict | None = None) -> dict:
     for c in out["candidates"]:
         if c.get("delta_bic") is not None:
             dchi[c["name"]] = c["delta_bic"]
-    return {"verdict": out["verdict"], "score": score, "seconds": dt, "delta_bic": dchi, "n": n,
+    dev = {k: v["D"] for k, v in diag.deviance.items()}
+    return {"verdict": out["verdict"], "score": score, "seconds": dt, "delta_bic": dchi, "n": n, "deviance": dev,
             "confused": {e["name"]: [x["name"] for x in e["confused_with"]] for e in out["effects"]}}
 
 
@@ -122,24 +124,40 @@ def sigma_sizes(procedure: str) -> dict:
     return out
 
 
+def _trial(args):
+    """One capture's pattern at k sigma for each k: the reference size gives this seed's
+    deviance D_ref (≈ (size/σ)² when the effect dominates the noise), then the same seed
+    (same pattern, same noise) is simulated at ``ref · k / sqrt(D_ref)``."""
+    p, name, seed, ref, ks = args
+    r = _job((p, seed, {name: ref}))
+    if "error" in r or not r.get("deviance", {}).get(name):
+        return None
+    s1 = ref / math.sqrt(max(r["deviance"][name], 1e-12))
+    out = []
+    for k in ks:
+        rk = _job((p, seed, {name: k * s1}))
+        out.append(None if "error" in rk else (name in rk["verdict"]))
+    return s1, out
+
+
 def detection(procedures, trials, jobs, ks):
-    print(f"\n# detection rate against size (k sigma of what the data resolve), {trials} captures per cell")
+    print(f"\n# detection rate against size (k sigma of what each capture resolves), {trials} captures per cell")
     for p in procedures:
-        sig = sigma_sizes(p)
-        for name, s1 in sig.items():
+        for name, ref in REF_SIZES[p].items():
             if name in NOT_HIDEABLE:
                 continue
-            if not math.isfinite(s1):
-                print(f"{p:<18} {name:<24} unresolvable in this design (no σ)")
+            with ProcessPoolExecutor(jobs) as ex:
+                res = list(ex.map(_trial, [(p, name, 2000 + j, ref, ks) for j in range(trials)]))
+            res = [r for r in res if r is not None]
+            if not res:
+                print(f"{p:<18} {name:<24} unresolvable in this design (no σ)", flush=True)
                 continue
+            s1 = float(np.median([r[0] for r in res]))
             row = []
-            for k in ks:
-                with ProcessPoolExecutor(jobs) as ex:
-                    res = list(ex.map(_job, [(p, 2000 + j, {name: k * s1}) for j in range(trials)]))
-                ok = [r for r in res if "error" not in r]
-                hit = sum(1 for r in ok if name in r["verdict"])
-                row.append(f"{k:g}σ {100 * hit / max(len(ok), 1):5.1f}%")
-            print(f"{p:<18} {name:<24} 1σ = {s1:.3g}   " + "   ".join(row), flush=True)
+            for i, k in enumerate(ks):
+                hits = [r[1][i] for r in res if r[1][i] is not None]
+                row.append(f"{k:g}σ {100 * sum(hits) / max(len(hits), 1):5.1f}%")
+            print(f"{p:<18} {name:<24} 1σ ≈ {s1:.3g}   " + "   ".join(row), flush=True)
 
 
 def runtime():

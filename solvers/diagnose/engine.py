@@ -376,6 +376,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             Ac = np.hstack([A, cc.J])
             d, rss = _lstsq_rss(Ac, r0)
             k = np.linalg.matrix_rank(Ac) - np.linalg.matrix_rank(A) if A.shape[1] else np.linalg.matrix_rank(Ac)
+            if cc.cand.scan is not None and k > 0:
+                k += 1  # the scanned scalar (hard-iron step time) is a parameter too
             db = typed_fit_term(r0 + Ac @ d, types) - term_cur + max(k, 0) * math.log(n)
             cvc = cv_rms(Ac, r0, sigma, folds, primary)
             sig = cc.J @ d[A.shape[1]:]
