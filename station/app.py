@@ -131,7 +131,7 @@ class StationApp(App):
 
 
 def procedure_screen(procedure: str):
-    """The guided screen of a procedure (P1, P3, P4 static so far)."""
+    """The guided screen of a procedure (P1, P2, P3, P4 static, the gyro noise run)."""
     if procedure == "compass":
         from station.screens.compass import CompassScreen
 
@@ -140,13 +140,17 @@ def procedure_screen(procedure: str):
         from station.screens.hold import HoldScreen
 
         return HoldScreen()
+    if procedure == "accel-centrifuge":
+        from station.screens.centrifuge import CentrifugeScreen
+
+        return CentrifugeScreen()
     from station.screens.procedure import ProcedureScreen
 
     return ProcedureScreen()
 
 
-GUIDED = {"accel-tabletop": "P1 accelerometer, level table", "compass": "P3 compass sweep",
-          "gyro-drift": "P4 gyro drift, static base"}
+GUIDED = {"accel-tabletop": "P1 accelerometer, level table", "accel-centrifuge": "P2 accelerometer, centrifuge",
+          "compass": "P3 compass sweep", "gyro-drift": "P4 gyro drift, static base"}
 
 
 def make_app(db_path: str | None = None, device=None, *, demo: bool = False, average_s: float | None = None,

@@ -82,7 +82,8 @@ class CentrifugeImu:
         if not 1 <= k <= len(self.orients) or not (math.isfinite(w) and w >= 0):
             raise ValueError(f"unknown centrifuge setting {name!r}: 'k@omega', k in 1..{len(self.orients)}")
         t = self._i / self.rate_hz
-        k0, w0 = self._state(t)[:2]
+        k0, w0 = (float(x[0]) for x in self._state(t)[:2])
+        k0 = int(k0)
         if k == k0:
             self._plan = [(t, k0, w0, k, w, "ramp")]
         else:
@@ -91,30 +92,39 @@ class CentrifugeImu:
                           (t1 + self.handle_s, k, 0.0, k, w, "ramp"), (t2, k, w, k, w, "steady")]
         self.k, self.w = k, w
 
-    def _state(self, t: float) -> tuple[int, float, bool]:
-        """(orientation, ω, handled) at device time t."""
-        seg = [p for p in self._plan if p[0] <= t] or self._plan[:1]
-        t0, k0, w0, k1, w1, kind = seg[-1]
-        if kind == "ramp":
-            x = min(max((t - t0) / self.ramp_s, 0.0), 1.0)
-            return k1, w0 + (w1 - w0) * x, False
-        return k1, w1, kind == "handle"
+    def _state(self, t):
+        """(orientation, ω, handled) at device times t (arrays)."""
+        t = np.atleast_1d(np.asarray(t, float))
+        k = np.full(len(t), self._plan[0][3], dtype=int)
+        w = np.full(len(t), self._plan[0][4], dtype=float)
+        handled = np.zeros(len(t), dtype=bool)
+        for t0, k0, w0, k1, w1, kind in self._plan:
+            on = t >= t0
+            k[on] = k1
+            if kind == "ramp":
+                x = np.clip((t[on] - t0) / self.ramp_s, 0.0, 1.0)
+                w[on] = w0 + (w1 - w0) * x
+            else:
+                w[on] = w1
+            handled[on] = kind == "handle"
+        return k, w, handled
 
     def read(self, n: int) -> dict:
         from solvers.models import accel as accel_model
 
         t = (self._i + np.arange(n)) / self.rate_hz
         self._i += n
+        k, w, handled = self._state(t)
         f = np.empty((n, 3))
         g = np.empty((n, 3))
-        shake = np.zeros((n, 3))
-        for j, tj in enumerate(t):
-            k, w, handled = self._state(float(tj))
-            C_t_b = self.orients[k - 1]
-            f[j] = C_t_b.T @ np.array([-w * w * self.radius_m / self.g_mps2, 0.0, 1.0])
-            g[j] = C_t_b.T @ np.array([0.0, 0.0, w])
-            if handled:
-                shake[j] = self.rng.normal(scale=0.3, size=3)
+        for kk in np.unique(k):
+            sel = k == kk
+            C_t_b = self.orients[kk - 1]
+            ws = w[sel]
+            f_t = np.column_stack([-ws * ws * self.radius_m / self.g_mps2, np.zeros_like(ws), np.ones_like(ws)])
+            f[sel] = f_t @ C_t_b  # rows of C_t_bᵀ f_t
+            g[sel] = np.column_stack([np.zeros_like(ws), np.zeros_like(ws), ws]) @ C_t_b
+        shake = np.where(handled[:, None], self.rng.normal(scale=0.3, size=(n, 3)), 0.0)
         y = accel_model.forward(f + shake, self.params) + self.rng.normal(scale=self.noise_g, size=(n, 3))
         g = g + self.rng.normal(scale=1e-3, size=(n, 3))
         nan = np.full(n, np.nan)
@@ -160,6 +170,8 @@ class SimSource:
     @staticmethod
     def device_id_for(seed: int, procedure: str = "accel-tabletop") -> str:
         """The id the simulated device reports (as solvers.simulate.LiveImu names it)."""
+        if procedure == "accel-centrifuge":
+            return f"SIM-CFG-{seed:04d}"  # CentrifugeImu, simulate_centrifuge's triad
         return f"SIM-{procedure.upper()[:3]}-{seed:04d}"
 
     def start(self) -> "SimSource":

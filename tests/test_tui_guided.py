@@ -1,0 +1,84 @@
+"""Pilot tests for the P2 centrifuge and the gyro noise (Allan) screens at 80x24: each
+screen's story on the real Textual app, the simulated device, a real SQLite file."""
+from __future__ import annotations
+
+import asyncio
+
+from station.app import make_app
+from station.sources import SimSource
+from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for
+
+
+def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
+    """P2 picked on Connect; the operator types a row: a word is refused in one line and
+    nothing is captured; the corrected row is captured (✓); skip; abort back to Connect."""
+
+    async def story():
+        app = make_app(None, average_s=60.0)
+        now = [0.0]  # the bench clock: 5 s pass (the noise rest), then it stands still, so the
+        # pilot's key presses (which wait for an idle process) are not slowed by the stream
+        async with app.run_test(size=SIZE) as pilot:
+            assert "P2 accelerometer, centrifuge" in [str(o[0]) for o in app.screen.query_one("#procedure")._options]
+            app.screen.query_one("#procedure").value = "accel-centrifuge"
+            app.session.source = SimSource(seed=1, procedure="accel-centrifuge", clock=lambda: now[0])
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.guide is not None)
+            g = app.screen.guide
+            for _ in range(50):
+                now[0] += 0.1
+                await pilot.pause(0.01)
+            await wait_for(pilot, lambda: app.screen.last_status.phase == "change")
+            assert "Mount in orientation 1, spin at 6.28 rad/s" in text_of(app, "#prompt")
+            footer = screen_lines(app)[-1]
+            assert "m Type values" in footer and "s Skip" in footer and "f Fit now" in footer
+            await pilot.press("m")
+            await pilot.press(*"1.5", "enter", *"abc", "enter", *"0.2", "enter", *"6.28", "enter")
+            await pilot.pause(0.2)
+            assert "ay: 'abc' is not a number" in text_of(app, "#entry-error")
+            assert g.n_captured == 0 and g.index == 0
+            app.screen.query_one("#in-ay").value = "-0.25"
+            app.screen.query_one("#in-speed").focus()
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: g.n_captured == 1)
+            assert g.steps[0].how == "manual" and g.steps[0].values == [1.5, -0.25, 0.2]
+            assert text_of(app, "#entry-error").strip() == ""
+            steps = app.screen.query_one("#steps")
+            await wait_for(pilot, lambda: "✓" in str(steps.get_option_at_index(0).prompt))
+            await pilot.press("escape", "s")
+            await wait_for(pilot, lambda: g.steps[1].status == "skipped")
+            assert "Mount in orientation 1, spin at 18.8 rad/s" in text_of(app, "#prompt")
+            await pilot.press("f")  # 1 row: too few to fit
+            await pilot.pause(0.1)
+            assert screen_name(app) == "CentrifugeScreen"
+            await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+
+    asyncio.run(story())
+
+
+def test_centrifuge_live_run_to_a_saved_result(tmp_path):
+    """The demo operator mounts and spins the simulated centrifuge; each row is averaged at
+    speed; the table is fitted (P2 exact) and saved."""
+    db = str(tmp_path / "station.db")
+
+    async def story():
+        src = SimSource(seed=2, speed=40, procedure="accel-centrifuge")
+        app = make_app(db, device=src, demo=True, average_s=1.0, settle_s=0.5)
+        app.session.extra["n_orientations"] = 4  # 12 rows: the exact fit needs more than 9
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.updates > 2)
+            await wait_for(pilot, lambda: app.screen.last_status is not None
+                           and app.screen.last_status.phase == "average")
+            assert "left" in text_of(app, "#countdown")
+            await wait_for(pilot, lambda: "rad/s" in text_of(app, "#readouts")
+                           and app.screen.last_status.table_rate_rad_s > 6.0)
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=60)
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            return screen_lines(app)[0], app.screen.result
+
+    title, result = asyncio.run(story())
+    assert "P2 centrifuge result" in title and result["n_positions"] == 12
+    from db.store import Store
+
+    hist = Store(db).history("SIM-CFG-0002")
+    assert len(hist) == 1 and hist[0]["procedure"] == "accel-centrifuge"
