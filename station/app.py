@@ -140,6 +140,10 @@ def procedure_screen(procedure: str):
         from station.screens.hold import HoldScreen
 
         return HoldScreen()
+    if procedure == "gyro-noise":
+        from station.screens.allan import NoiseHoldScreen
+
+        return NoiseHoldScreen()
     if procedure == "accel-centrifuge":
         from station.screens.centrifuge import CentrifugeScreen
 
@@ -150,7 +154,8 @@ def procedure_screen(procedure: str):
 
 
 GUIDED = {"accel-tabletop": "P1 accelerometer, level table", "accel-centrifuge": "P2 accelerometer, centrifuge",
-          "compass": "P3 compass sweep", "gyro-drift": "P4 gyro drift, static base"}
+          "compass": "P3 compass sweep", "gyro-drift": "P4 gyro drift, static base",
+          "gyro-noise": "Gyro noise (Allan) run"}
 
 
 def make_app(db_path: str | None = None, device=None, *, demo: bool = False, average_s: float | None = None,

@@ -150,8 +150,9 @@ class SimSource:
 
         if procedure == "accel-centrifuge":
             self.imu = CentrifugeImu(seed=seed, rate_hz=rate_hz)
-        else:
-            self.imu = LiveImu(procedure=procedure, seed=seed, rate_hz=rate_hz, hold_s=1e9)
+        else:  # the gyro noise (Allan) run holds the unit still like P4
+            self.imu = LiveImu(procedure="gyro-drift" if procedure == "gyro-noise" else procedure, seed=seed,
+                               rate_hz=rate_hz, hold_s=1e9)
         self.procedure = procedure
         self.positions = list(self.imu.positions)
         self.rate_hz = float(rate_hz)

@@ -3,6 +3,10 @@ screen's story on the real Textual app, the simulated device, a real SQLite file
 from __future__ import annotations
 
 import asyncio
+import json
+
+import numpy as np
+import pytest
 
 from station.app import make_app
 from station.sources import SimSource
@@ -82,3 +86,48 @@ def test_centrifuge_live_run_to_a_saved_result(tmp_path):
 
     hist = Store(db).history("SIM-CFG-0002")
     assert len(hist) == 1 and hist[0]["procedure"] == "accel-centrifuge"
+
+
+def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
+    """Connect → "Gyro noise (Allan) run" → the still hold → the result: a log-log plot per
+    axis, ARW and bias instability per axis; typing an accuracy gives the P4 time; export
+    writes the recording and the report."""
+
+    async def story():
+        app = make_app(None, average_s=200.0)
+        app.session.extra["export_dir"] = str(tmp_path)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#procedure").value = "gyro-noise"
+            app.session.source = SimSource(seed=4, speed=60, procedure="gyro-noise")
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) == "NoiseHoldScreen" and app.screen.updates > 2)
+            assert "gyro noise (Allan) run" in screen_lines(app)[0]
+            await wait_for(pilot, lambda: screen_name(app) == "AllanScreen", timeout_s=40)
+            scr = app.screen
+            await wait_for(pilot, lambda: "ARW" in text_of(app, "#table"))
+            table = text_of(app, "#table")
+            assert all(f"   {ax}  " in table for ax in "xyz") and "P4 needs" in table
+            assert "Allan deviation" in "\n".join(screen_lines(app)[1:3])
+            await wait_for(pilot, lambda: "t Accuracy" in screen_lines(app)[-1])
+            assert "e Export" in screen_lines(app)[-1]
+            r = scr.report
+            assert r.duration_s >= 200.0 and np.all(np.isfinite(r.arw_deg_rt_h))
+            await pilot.press("t")
+            scr.query_one("#accuracy").value = ""
+            await pilot.press(*"abc", "enter")
+            assert "positive number" in text_of(app, "#status")
+            await pilot.press("t")
+            scr.query_one("#accuracy").value = ""
+            await pilot.press(*"5", "enter")
+            assert scr.accuracy_deg_h == 5.0 and "1σ ≤ 5 °/h" in text_of(app, "#status")
+            await pilot.press("e")
+            await wait_for(pilot, lambda: len(scr.exported) == 2)
+            return scr.exported, r
+
+    paths, report = asyncio.run(story())
+    from station.capture import read_capture
+
+    cap = read_capture(paths[0])
+    assert cap.meta["run"] == "gyro-noise" and cap.n_rows == pytest.approx(report.duration_s * 100, abs=2)
+    js = json.loads(open(paths[1], encoding="utf-8").read())
+    assert js["kind"] == "gyro-noise" and js["accuracy_deg_h"] == 5.0

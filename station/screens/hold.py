@@ -46,13 +46,16 @@ class HoldScreen(Screen):
         self.updates = 0
         self._fitting = False
 
+    SUBJECT = "P4 gyro drift, static base"
+    INSTRUCTION = ("Put the unit on a level, steady surface, forward (x) axis pointing north\n"
+                   "(heading 0°), and do not touch it: the station records the gyro at rest\n"
+                   "and removes the Earth's rotation. Walking on a wooden floor shows here.")
+    NAME = "P4"
+
     def compose(self) -> ComposeResult:
-        yield TitleBar("P4 gyro drift, static base")
+        yield TitleBar(self.SUBJECT)
         with Vertical(id="body"):
-            yield Static("Put the unit on a level, steady surface, forward (x) axis pointing north\n"
-                         "(heading 0°), and do not touch it: the station records the gyro at rest\n"
-                         "and removes the Earth's rotation. Walking on a wooden floor shows here.",
-                         id="instruction")
+            yield Static(self.INSTRUCTION, id="instruction")
             with Vertical(id="indicators"):
                 yield StabilityBar(id="stability")
                 yield CountdownBar(id="countdown")
@@ -140,7 +143,7 @@ class HoldScreen(Screen):
                 self.guide.abort()
         self.workers.cancel_group(self, "stream")
         self.app.session.guide = None
-        self.app.notify("P4 aborted: nothing saved", timeout=4)
+        self.app.notify(f"{self.NAME} aborted: nothing saved", timeout=4)
         self.app.pop_screen()
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P4")

@@ -1,0 +1,109 @@
+"""The gyro noise (Allan) run, UI-free: a still recording (``guide_hold.HoldGuide``) in,
+a noise report out.
+
+Numerics are ``solvers.allan``: the overlapping Allan deviation per axis, the noise
+model ``AVAR(τ) = c0/τ + c1 + c2 τ`` (:func:`solvers.allan.fit_noise_model`) and the
+record length a P4 run needs for a 1-sigma bias accuracy
+(:func:`solvers.allan.time_needed_s`, the figure P4's own accuracy statement uses).
+
+Reported per axis (IEEE Std 952 readings, rates converted to °/h):
+
+- angle random walk ``N = sqrt(c0)`` [rad/√s] → ``N · 180/π · 60`` [°/√h] (white rate
+  noise: ADEV(τ) = N/√τ; √h = 60 √s);
+- bias instability ``B = min_τ ADEV(τ) / 0.664`` [°/h] (the flat part of the curve) and
+  the τ where the minimum lies;
+- time needed for ``accuracy_deg_h`` (1-sigma of the mean over a still record): the
+  longer of the white extrapolation of the achieved error and the model's ``T`` with
+  ``c0/T + c1 + c2 T <= accuracy²``; ``inf`` when the floor never gets there.
+
+The Earth's rotation is a constant on a still unit: the Allan deviation does not see it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from solvers import allan
+from solvers.units import si_factor
+
+DEG_H_RAD_S = math.radians(1.0) / 3600.0  # 1 °/h in rad/s
+BIAS_INSTABILITY_FACTOR = 0.664  # ADEV floor = sqrt(2 ln 2 / π) · B (IEEE 952, flicker rate noise)
+AXES = ("x", "y", "z")
+
+
+@dataclass
+class NoiseReport:
+    """Allan analysis of a still gyro record. Rates in °/h unless named otherwise."""
+
+    duration_s: float
+    sample_rate_hz: float
+    taus_s: np.ndarray        # (m,)
+    adev_deg_h: np.ndarray    # (m, 3)
+    arw_deg_rt_h: np.ndarray  # (3,) angle random walk [°/√h]
+    bias_instability_deg_h: np.ndarray  # (3,)
+    bias_instability_tau_s: np.ndarray  # (3,) τ of the ADEV minimum
+    mean_deg_h: np.ndarray    # (3,) mean rate (includes the Earth's rate)
+    sigma_mean_deg_h: np.ndarray  # (3,) 1-sigma of the mean (solvers.allan.mean_standard_error)
+    noise_model: np.ndarray   # (3, 3) c0 [rad²/s], c1 [rad²/s²], c2 [rad²/s³] per axis
+    mean_error: allan.MeanError
+
+    def time_needed_s(self, accuracy_deg_h: float) -> np.ndarray:
+        """Record length per axis for a 1-sigma of ``accuracy_deg_h`` on the mean rate."""
+        if not (isinstance(accuracy_deg_h, (int, float)) and math.isfinite(accuracy_deg_h) and accuracy_deg_h > 0):
+            raise ValueError(f"accuracy must be a positive number of °/h, got {accuracy_deg_h!r}")
+        return allan.time_needed_s(self.mean_error, accuracy_deg_h * DEG_H_RAD_S)
+
+    def to_json(self, accuracy_deg_h: float | None = None) -> dict:
+        out = {"kind": "gyro-noise", "duration_s": self.duration_s, "sample_rate_hz": self.sample_rate_hz,
+               "tau_s": self.taus_s.tolist(), "adev_deg_h": self.adev_deg_h.T.tolist(),
+               "arw_deg_rt_h": self.arw_deg_rt_h.tolist(),
+               "bias_instability_deg_h": self.bias_instability_deg_h.tolist(),
+               "bias_instability_tau_s": self.bias_instability_tau_s.tolist(),
+               "mean_deg_h": self.mean_deg_h.tolist(), "sigma_mean_deg_h": self.sigma_mean_deg_h.tolist(),
+               "noise_model_c0_c1_c2": self.noise_model.tolist()}
+        if accuracy_deg_h is not None:
+            need = self.time_needed_s(accuracy_deg_h)
+            out["accuracy_deg_h"] = accuracy_deg_h
+            out["time_needed_s"] = [float(x) if math.isfinite(x) else None for x in need]
+        return out
+
+
+def noise_report(gyro, sample_rate_hz: float, gyro_unit: str | None) -> NoiseReport:
+    """The Allan analysis of a still record ``gyro`` (N, 3) in ``gyro_unit``.
+
+    Raises ValueError for a unit without a physical factor (counts: the rates could not
+    be given in °/h) or fewer than 30 rows (too short for three τ)."""
+    k = si_factor("gyro", gyro_unit)
+    if k is None:
+        raise ValueError(f"gyro_unit {gyro_unit or 'unknown'!r} has no physical factor: the Allan run needs "
+                         "rad/s or deg/s")
+    y = np.asarray(gyro, dtype=float).reshape(-1, 3)
+    y = y[np.all(np.isfinite(y), axis=1)] * k
+    if len(y) < 30:
+        raise ValueError(f"only {len(y)} samples: the Allan run needs a longer still record")
+    dt = 1.0 / float(sample_rate_hz)
+    me = allan.mean_standard_error(y, dt)
+    # the drawn curve: 4 τ per octave up to T/3; the model and the time needed are P4's own
+    # (mean_standard_error: 2 per octave, the same fit)
+    taus, adev, _ = allan.oadev(y, dt, allan.octave_taus(len(y), dt, 1.0 / 3.0, per_octave=4))
+    model = me.noise_model if me.noise_model is not None else np.zeros((3, 3))
+    imin = np.argmin(adev, axis=0)
+    arw = np.sqrt(model[:, 0]) * math.degrees(1.0) * 60.0
+    return NoiseReport(duration_s=me.duration_s, sample_rate_hz=float(sample_rate_hz), taus_s=taus,
+                       adev_deg_h=adev / DEG_H_RAD_S, arw_deg_rt_h=arw,
+                       bias_instability_deg_h=adev[imin, np.arange(3)] / BIAS_INSTABILITY_FACTOR / DEG_H_RAD_S,
+                       bias_instability_tau_s=taus[imin], mean_deg_h=me.mean / DEG_H_RAD_S,
+                       sigma_mean_deg_h=np.asarray(me.se) / DEG_H_RAD_S, noise_model=model, mean_error=me)
+
+
+def format_duration(seconds: float) -> str:
+    """'45 s', '12 min', '3.2 h', 'never' (inf)."""
+    if not math.isfinite(seconds):
+        return "never"
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
