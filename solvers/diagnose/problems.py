@@ -120,7 +120,7 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
     def residual(p):
         omega = Eb
         if "wE" in p:
-            omega = Eb + np.einsum("nij,j->ni", Cb[:, :, :2], p["wE"])
+            omega = Eb + gyro_model.project_nav_rate(Cb, np.r_[p["wE"], 0.0])  # north, up; east 0
         q = {k: v for k, v in p.items() if k != "wE"}
         return (gyro_model.forward(omega, q, cond) - wb).ravel()
 

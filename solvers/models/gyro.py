@@ -54,7 +54,16 @@ def inverse(y, params: dict, cond: Conditions | None = None) -> np.ndarray:
 
 def earth_rate_body(latitude_deg: float, C_n_b: np.ndarray) -> np.ndarray:
     """Earth rate in P4's body frame (x fwd, y up, z right): ``C_b_n ω_ie^n`` (NUE)."""
-    return np.asarray(C_n_b).T @ earth_rate_nue(latitude_deg)
+    return project_nav_rate(np.asarray(C_n_b).T, earth_rate_nue(latitude_deg))
+
+
+def project_nav_rate(C_b_n: np.ndarray, omega_nav_rad_s) -> np.ndarray:
+    """``C_b_n ω^n``: a navigation-frame rate seen by the body, for one (3x3) or many
+    (N, 3, 3) attitudes. With ``ω^n = ω_ie^n`` it is the Earth rate the gyros see; with
+    ``ω^n`` fitted (latitude unknown) it is diagnosis's ``earth_rate`` candidate."""
+    C = np.asarray(C_b_n, dtype=float)
+    w = np.asarray(omega_nav_rad_s, dtype=float)
+    return C @ w if C.ndim == 2 else np.einsum("nij,j->ni", C, w)
 
 
 def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict) -> dict:
