@@ -99,3 +99,52 @@ def test_history_snapshot(snap_compare, size, tmp_path):
 def test_help_snapshot(snap_compare):
     app = make_app(None)
     assert snap_compare(app, terminal_size=(80, 24), press=["f1"])
+
+
+def test_centrifuge_snapshot(snap_compare):
+    """P2 after the noise rest: row 1 typed by hand (✓), the guide waits for the change."""
+    clock = FakeClock()
+    src = SimSource(seed=0, clock=clock, procedure="accel-centrifuge")
+    app = make_app(None, device=src, start="procedure", average_s=30.0, settle_s=1.0)
+
+    async def run_before(pilot):
+        await _settle(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+        guide = app.screen.guide
+        for k in range(1, 6):
+            clock.t = float(k)
+            await _settle(pilot, lambda: guide.status().t_s >= clock.t - 0.011)
+        for name, value in zip(("ax", "ay", "az", "speed"), ("1.04291", "0.24922", "2.11027", "6.2832")):
+            app.screen.query_one(f"#in-{name}").value = value
+        app.screen.query_one("#in-speed").focus()
+        await pilot.press("enter", "escape")
+        await _settle(pilot, lambda: guide.n_captured == 1 and app.screen.last_status is not None
+                      and app.screen.last_status.n_captured == 1)
+        await pilot.pause(0.2)
+        app.clear_notifications()
+        await pilot.pause(0.05)
+
+    assert snap_compare(app, terminal_size=(80, 24), run_before=run_before)
+
+
+def test_allan_snapshot(snap_compare):
+    """The noise result for a fixed record: white noise plus a slow random walk (seeded)."""
+    import numpy as np
+
+    from station.capture import Capture
+    from station.procedures.noise import noise_report
+    from station.screens.allan import AllanScreen
+
+    rng = np.random.default_rng(7)
+    n, fs = 60_000, 100.0
+    y = rng.normal(scale=2e-4, size=(n, 3)) + np.cumsum(rng.normal(scale=2e-8, size=(n, 3)), axis=0)
+    report = noise_report(y, fs, "rad/s")
+    cap = Capture(meta={"station-capture": "1", "procedure": "gyro-drift", "gyro_unit": "rad/s"},
+                  columns={"t": np.arange(n) / fs, "gx": y[:, 0], "gy": y[:, 1], "gz": y[:, 2]})
+    app = make_app(None, device_id="IMU-0042")
+
+    async def run_before(pilot):
+        await app.push_screen(AllanScreen(cap, report))
+        await _settle(pilot, lambda: "P4 needs" in str(app.screen.query_one("#table").render()))
+        await pilot.pause(0.2)
+
+    assert snap_compare(app, terminal_size=(80, 24), run_before=run_before)

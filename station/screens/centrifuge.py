@@ -78,7 +78,7 @@ class CentrifugeScreen(Screen):
                     yield StabilityBar(id="stability")
                     yield CountdownBar(id="countdown")
                 yield Static("", id="readouts")
-                yield Static("m: type the averages and the speed in rad/s, Enter (Esc back)", id="manual-title")
+                yield Static("m: type ax ay az, speed (rad/s), Enter; Esc back", id="manual-title")
                 with Horizontal(id="manual"):
                     for name in FIELDS:
                         yield Input(placeholder=name, id=f"in-{name}", compact=True)
@@ -234,7 +234,7 @@ class CentrifugeScreen(Screen):
             self.query_one("#entry-error", Static).update(str(exc))
             return
         self.query_one("#entry-error", Static).update("")
-        for i in ids[:3]:
+        for i in ids:
             self.query_one(i, Input).value = ""
         self.query_one("#in-ax", Input).focus()
         self.notify(f"{step.label.strip()} entered by hand", timeout=2)

@@ -15,7 +15,10 @@ HELP = """\
 [b]P1[/]          s skip · r redo (the current average, or the last captured
             position when done) · enter on a step: redo it · a abort
             (captured positions kept for Resume) · f fit now (≥ 9)
+[b]P2[/]          m type a row (ax ay az speed, enter) · esc back · s skip
+            r redo · enter on a step: redo it · a abort · f fit (≥ 10)
 [b]P3, P4[/]      f finish now (P3) · r restart the recording · a abort
+[b]Noise run[/]   as P4; its result: t accuracy asked · e export · n new run
 [b]Results[/]     s save · d discard · e export (CSV + JSON) · g diagnose ·
             n new run · F2 history
 [b]History[/]     up/down device · p next parameter · tab to the calibrations,
