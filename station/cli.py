@@ -10,6 +10,7 @@ import importlib
 import os
 import pkgutil
 import sys
+import warnings
 
 from station import __version__
 from station.errors import StationError
@@ -67,13 +68,24 @@ def main(argv: list[str] | None = None) -> int:
         else:
             args = parser.parse_args(["walkthrough"])
         func = args.func
-    try:
-        return int(func(args) or 0)
-    except StationError as exc:
-        print(f"station: {exc}", file=sys.stderr)
-        return exc.exit_status
-    except KeyboardInterrupt:
-        print("station: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:
-        return 0
+    debug = bool(os.environ.get("STATION_DEBUG"))
+    with warnings.catch_warnings():
+        if not debug:  # numerics' RuntimeWarnings are not the operator's business: results carry warnings
+            warnings.simplefilter("ignore", RuntimeWarning)
+        try:
+            return int(func(args) or 0)
+        except StationError as exc:
+            print(f"station: {exc}", file=sys.stderr)
+            return exc.exit_status
+        except KeyboardInterrupt:
+            print("station: interrupted", file=sys.stderr)
+            return 130
+        except BrokenPipeError:
+            return 0
+        except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+            if debug:
+                raise
+            where = getattr(args, "file", None) or getattr(args, "command", None) or "station"
+            print(f"station: {where}: cannot process this input ({type(exc).__name__}: {exc}); "
+                  "STATION_DEBUG=1 shows the traceback", file=sys.stderr)
+            return 2

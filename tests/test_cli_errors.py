@@ -397,3 +397,47 @@ def test_record_out_a_folder_or_missing_folder_is_one_line_before_recording(tmp_
                             "--out", str(out)], capture_output=True, text=True, timeout=60)
         assert r.returncode == 2 and needle in r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def _gyro_capture(tmp_path, rows: int | None = None, zero_accel: bool = False):
+    from solvers.simulate import simulate
+    from station.capture import Capture, write_capture
+
+    sim = simulate("gyro-drift", seed=4, duration_s=20.0)
+    cols = {k: v[:rows] if rows else v.copy() for k, v in sim.columns.items()}
+    if zero_accel:
+        for k in ("ax", "ay", "az"):
+            cols[k] = cols[k] * 0.0
+    path = tmp_path / "g.csv"
+    write_capture(path, Capture(meta=sim.meta, columns=cols, path=str(path)))
+    return path
+
+
+@pytest.mark.parametrize("kind,needle", [("short", "static samples"), ("zero", "reads zero")])
+def test_diagnose_degenerate_gyro_captures_are_one_line(tmp_path, kind, needle):
+    import subprocess
+    import sys
+
+    path = _gyro_capture(tmp_path, rows=3 if kind == "short" else None, zero_accel=kind == "zero")
+    r = subprocess.run([sys.executable, "-m", "station", "diagnose", str(path)], capture_output=True, text=True)
+    assert r.returncode == 2 and needle in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_an_unexpected_error_is_still_one_line(monkeypatch, capsys):
+    """The CLI's last line of defence: a bug inside a command is one line and exit 2, and
+    STATION_DEBUG=1 brings the traceback back for a developer."""
+    import station.commands.walkthrough as wt
+    from station.cli import main
+
+    def boom(args):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(wt, "run", boom)
+    monkeypatch.delenv("STATION_DEBUG", raising=False)
+    assert main(["walkthrough"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "ZeroDivisionError" in err and "STATION_DEBUG" in err
+    monkeypatch.setenv("STATION_DEBUG", "1")
+    with pytest.raises(ZeroDivisionError):
+        main(["walkthrough"])

@@ -120,9 +120,15 @@ def _gyro(capture, base: dict):
             E[m] = gyro_model.earth_rate_body(lat, Cnb)
     use = label != ""
     order = np.flatnonzero(use)
+    if len(order) < 16:
+        raise UnsupportedError(f"{capture.path}: gyro-drift: {len(order)} static samples; diagnosis needs a "
+                               "static record (P4 asks for >= 3 min)")
     f_mps2 = None
     if f_b is not None:
         gnorm = float(np.median(np.linalg.norm(f_b[use], axis=1)))
+        if not gnorm > 0:
+            raise UnsupportedError(f"{capture.path}: the accelerometer reads zero on average (a dead or "
+                                   "unconnected sensor?): check the ax ay az columns")
         f_mps2 = f_b[use] * (frames.G_STANDARD_MPS2 / gnorm)
     prob = DP.gyro_problem(t[order], w_b[order], f_mps2, _col(capture, "temp_c")[order]
                            if "temp_c" in capture.columns else None,
