@@ -88,6 +88,7 @@ class Position:
     t_stop_s: float | None = None
     direction: np.ndarray | None = None      # known unit specific-force direction
     placement_sigma_rad: float = math.nan
+    se: np.ndarray | None = None             # standard error of the mean (3,), correlated noise included; None: std/sqrt(n)
 
 
 @dataclass
@@ -258,7 +259,7 @@ def norm_sigma(positions: list[Position], B, M, noise_known: bool) -> np.ndarray
     A = accel.p1_apply(V, B, M)
     u = A / np.linalg.norm(A, axis=1, keepdims=True)
     w = u @ np.asarray(M)                      # ∂|A|/∂V
-    var = np.array([(p.std ** 2 / max(p.n, 1)) for p in positions])
+    var = np.array([(p.se ** 2 if p.se is not None else p.std ** 2 / max(p.n, 1)) for p in positions])
     s = np.sqrt(np.sum(w * w * var, axis=1))
     floor = 1e-6 * np.median(np.linalg.norm(A, axis=1))  # quantisation/rounding floor
     return np.maximum(s, floor)

@@ -106,7 +106,7 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
                 continue
             d, s = T.known_direction(lab)
             out.append(T.Position(lab, seg.mean(axis=0), seg.std(axis=0, ddof=1), len(seg),
-                                  float(t[start]), float(t[stop - 1]), d, s))
+                                  float(t[start]), float(t[stop - 1]), d, s, se=_mean_se(seg, t[start:stop])))
         return out, "position column", True
     from solvers.stillness import detect_static_intervals
 
@@ -119,8 +119,29 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
         raise UnsupportedError(f"{_where(capture)}: accel-tabletop: cannot find static positions: {exc}") from None
     warnings += [f"stillness: {w}" for w in st.warnings]
     out = [T.Position(str(k + 1), np.asarray(iv.accel_mean, float), np.asarray(iv.accel_std, float), int(iv.n),
-                      float(iv.t_start_s), float(iv.t_stop_s)) for k, iv in enumerate(st.intervals)]
+                      float(iv.t_start_s), float(iv.t_stop_s), se=_mean_se(a[iv.start:iv.stop], t[iv.start:iv.stop]))
+           for k, iv in enumerate(st.intervals)]
     return out, "static intervals found automatically (no position column)", True
+
+
+def _mean_se(seg: np.ndarray, t: np.ndarray) -> np.ndarray | None:
+    """The standard error of a position's mean with correlated noise (bias instability)
+    included, from its Allan deviation (solvers/allan.py), as P4 does: std/sqrt(n) alone
+    understates it when the bias wanders during the hold."""
+    from solvers.allan import mean_standard_error
+
+    seg = seg[np.all(np.isfinite(seg), axis=1)]
+    if len(seg) < 16 or len(t) < 2:
+        return None
+    dt = float(np.median(np.diff(t)))
+    if not dt > 0:
+        return None
+    me = mean_standard_error(seg, dt)
+    if me.se_model is None:
+        return np.asarray(me.se_white, dtype=float)
+    # the fitted noise model (white + bias instability + random walk) at the hold's length:
+    # the raw Allan maximum over a few τ of one short hold scatters upward
+    return np.maximum(np.asarray(me.se_white, dtype=float), np.asarray(me.se_model, dtype=float))
 
 
 def check_saturation(capture, positions: list[T.Position]) -> None:
@@ -193,7 +214,10 @@ def calibrate(capture, method: str | None = None) -> dict:
         "n_labelled_positions": len(t_known),
         "n_distinct_orientations": res.n_distinct,
         "position_set_condition": res.position_condition,
-        "noise": "measured per position (std/sqrt(n))" if noise_known else "estimated from the residuals",
+        "noise": ("estimated from the residuals" if not noise_known else
+                  "measured per position: standard error of each hold's mean, bias instability included "
+                  "(fitted Allan noise model)" if any(p.se is not None for p in positions) else
+                  "measured per position (std/sqrt(n))"),
         "reduced_chi2": res.fit.reduced_chi2 if res.fit is not None else None,
         "positions": rows,
         "step8": res.step8,
