@@ -77,12 +77,12 @@ class FieldCoverage:
         self._kept: list[np.ndarray] = []
         self._n_kept = 0
         self._phase = 0  # rows seen modulo ``every``
-        self._cache: tuple[int, float] | None = None
+        self._best: dict = {}  # points key -> (centre used, rows done, max dot per point)
 
     def reset(self) -> None:
         self._lo[:] = np.inf
         self._hi[:] = -np.inf
-        self._kept, self._n_kept, self._phase, self._cache = [], 0, 0, None
+        self._kept, self._n_kept, self._phase, self._best = [], 0, 0, {}
 
     def update(self, mag) -> None:
         m = np.atleast_2d(np.asarray(mag, dtype=float))
@@ -96,7 +96,6 @@ class FieldCoverage:
         if len(idx):
             self._kept.append(m[idx])
             self._n_kept += len(idx)
-        self._cache = None
 
     def directions(self) -> np.ndarray:
         """Unit field directions about the centre (midrange unless given), (n, 3)."""
@@ -122,12 +121,34 @@ class FieldCoverage:
         """Directions kept so far (the subsample the fraction is computed on)."""
         return self._n_kept
 
+    def _max_dot(self, key, points: np.ndarray) -> np.ndarray:
+        """Per point, the largest cosine to a kept direction: incremental while the centre
+        stays put, recomputed from every kept row when it moves (as the calibration would
+        see the whole record about its final centre)."""
+        if not self._n_kept:
+            return np.full(len(points), -1.0)
+        if len(self._kept) > 1:
+            self._kept = [np.concatenate(self._kept)]
+        c = self.center if self.center is not None else self.midrange_centre()
+        used, done, best = self._best.get(key, (None, 0, None))
+        if used is None or not np.array_equal(used, c):
+            done, best = 0, np.full(len(points), -1.0)
+        new = self._kept[0][done:] - c
+        new = new[np.linalg.norm(new, axis=1) > 0]
+        for block in np.array_split(new, max(1, len(new) // 5000 + 1)) if len(new) else []:
+            best = np.maximum(best, np.max(C.unit_rows(block) @ points.T, axis=0))
+        self._best[key] = (c.copy(), self._n_kept, best)
+        return best
+
     @property
     def fraction(self) -> float:
-        """``solvers.compass.coverage`` of the directions so far (0..1)."""
-        if self._cache is None:
-            self._cache = (self._n_kept, C.coverage(self.directions()) if self._n_kept else 0.0)
-        return self._cache[1]
+        """``solvers.compass.coverage`` of the directions so far (0..1): the share of its
+        ``COVERAGE_CELLS`` cells within ``COVERAGE_RADIUS_DEG`` of a direction (kept
+        incrementally; a test checks it equals ``coverage(directions())``)."""
+        if not self._n_kept:
+            return 0.0
+        best = self._max_dot("cells", C.fibonacci_sphere(C.COVERAGE_CELLS))
+        return float(np.mean(best >= math.cos(math.radians(C.COVERAGE_RADIUS_DEG))))
 
     @property
     def enough(self) -> bool:
@@ -138,16 +159,11 @@ class FieldCoverage:
         """The same measure drawn: (n_bands, n_sectors) shares 0..1, band 0 at -z (bands
         uniform in z, sectors in azimuth from -180°): of ``sub`` x ``sub`` points spread
         over each cell, the share within ``COVERAGE_RADIUS_DEG`` of a visited direction."""
-        u = self.directions()
         nb, ns = n_bands * sub, n_sectors * sub
         z = -1.0 + (np.arange(nb) + 0.5) * 2.0 / nb
         az = -math.pi + (np.arange(ns) + 0.5) * 2.0 * math.pi / ns
         r = np.sqrt(1.0 - z ** 2)
         pts = np.column_stack([np.outer(r, np.cos(az)).ravel(), np.outer(r, np.sin(az)).ravel(), np.repeat(z, ns)])
-        if not len(u):
-            return np.zeros((n_bands, n_sectors))
-        best = np.full(len(pts), -1.0)
-        for block in np.array_split(u, max(1, len(u) // 5000 + 1)):
-            best = np.maximum(best, np.max(block @ pts.T, axis=0))
+        best = self._max_dot(("grid", n_bands, n_sectors, sub), pts)
         hit = (best >= math.cos(math.radians(C.COVERAGE_RADIUS_DEG))).reshape(n_bands, sub, n_sectors, sub)
         return hit.mean(axis=(1, 3))

@@ -56,6 +56,13 @@ def test_field_coverage_is_the_calibrations_measure():
     full = FieldCoverage(rate_hz=10.0, keep_hz=10.0)
     for chunk in np.array_split(rows, 37):
         full.update(chunk)
+        # kept incrementally while the centre stays, recomputed when it moves: always the
+        # calibration's function of the directions so far
+        assert full.fraction == C.coverage(full.directions())
+        full.grid()
+    once = FieldCoverage(rate_hz=10.0, keep_hz=10.0)
+    once.update(rows)
+    np.testing.assert_array_equal(full.grid(), once.grid())
     assert full.fraction == exact and 0.5 < exact < 1.0  # about its midrange a hemisphere spreads out
     sub = FieldCoverage(rate_hz=100.0, keep_hz=10.0)
     sub.update(rows)
