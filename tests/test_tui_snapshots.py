@@ -101,7 +101,8 @@ def test_help_snapshot(snap_compare):
     assert snap_compare(app, terminal_size=(80, 24), press=["f1"])
 
 
-def test_centrifuge_snapshot(snap_compare):
+@pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_centrifuge_snapshot(snap_compare, size):
     """P2 after the noise rest: row 1 typed by hand (✓), the guide waits for the change."""
     clock = FakeClock()
     src = SimSource(seed=0, clock=clock, procedure="accel-centrifuge")
@@ -123,10 +124,11 @@ def test_centrifuge_snapshot(snap_compare):
         app.clear_notifications()
         await pilot.pause(0.05)
 
-    assert snap_compare(app, terminal_size=(80, 24), run_before=run_before)
+    assert snap_compare(app, terminal_size=size, run_before=run_before)
 
 
-def test_allan_snapshot(snap_compare):
+@pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_allan_snapshot(snap_compare, size):
     """The noise result for a fixed record: white noise plus a slow random walk (seeded)."""
     import numpy as np
 
@@ -147,4 +149,4 @@ def test_allan_snapshot(snap_compare):
         await _settle(pilot, lambda: "P4 needs" in str(app.screen.query_one("#table").render()))
         await pilot.pause(0.2)
 
-    assert snap_compare(app, terminal_size=(80, 24), run_before=run_before)
+    assert snap_compare(app, terminal_size=size, run_before=run_before)

@@ -94,6 +94,9 @@ class CountdownBar(Static):
         elif st.phase == "done":
             t.append(bar(1.0, self.WIDTH), style="green")
             t.append(" all done")
+        elif st.phase == "change":  # P2: the last row is in; remount or change speed first
+            t.append(bar(0.0, self.WIDTH))
+            t.append(" after the change")
         else:
             t.append(bar(0.0, self.WIDTH))
             t.append(f" {mmss(average_s)} when still")
