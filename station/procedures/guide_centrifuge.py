@@ -115,6 +115,11 @@ class CentrifugeStep:
         return f"{self.orientation:2d} @ {self.speed_rad_s:5.2f} rad/s"
 
     @property
+    def name(self) -> str:
+        """Short, for the step list: orientation @ speed."""
+        return f"{self.orientation:2d} @ {self.speed_rad_s:5.2f}"
+
+    @property
     def prompt(self) -> str:
         return (f"Mount in orientation {self.orientation}, spin at {self.speed_rad_s:.3g} rad/s "
                 f"({self.speed_rad_s / (2 * math.pi):.3g} rev/s)")
