@@ -224,12 +224,14 @@ def test_drawings_label_the_up_face():
 
 
 def test_procedure_logic_does_not_load_textual():
-    """The guides, the review helpers and the sources are UI-free (checked in a fresh process)."""
+    """The guides, the review helpers, the noise report, the shared detectors, the device
+    layer's live detectors and the sources are UI-free (checked in a fresh process)."""
     import subprocess
     import sys
 
     code = ("import sys, station.procedures.guide, station.procedures.guide_compass, "
-            "station.procedures.guide_hold, station.procedures.review, station.sources; "
+            "station.procedures.guide_hold, station.procedures.guide_centrifuge, station.procedures.noise, "
+            "station.procedures.review, station.sources, solvers.detectors, station.device.live; "
             "print('textual' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
