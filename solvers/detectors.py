@@ -67,9 +67,15 @@ class FieldCoverage:
     ``coverage(midrange_directions(rows))`` of the kept rows.
 
     ``center``: a known hard-iron centre (raw units) to use instead of the midrange.
+    ``recentre_frac``: the centre in use follows the midrange once it has moved more than
+    this share of the field (default 1 %: directions shift < 0.6°); each move recomputes
+    from every kept row, in between the measure is kept incrementally. 0: follow exactly.
     """
 
-    def __init__(self, rate_hz: float = 100.0, keep_hz: float = 10.0, center=None) -> None:
+    def __init__(self, rate_hz: float = 100.0, keep_hz: float = 10.0, center=None,
+                 recentre_frac: float = 0.01) -> None:
+        self.recentre_frac = float(recentre_frac)
+        self._c_used: np.ndarray | None = None
         self.every = max(1, int(round(float(rate_hz) / keep_hz))) if rate_hz and math.isfinite(rate_hz) else 1
         self.center = None if center is None else np.asarray(center, dtype=float).reshape(3)
         self._lo = np.full(3, np.inf)
@@ -82,7 +88,7 @@ class FieldCoverage:
     def reset(self) -> None:
         self._lo[:] = np.inf
         self._hi[:] = -np.inf
-        self._kept, self._n_kept, self._phase, self._best = [], 0, 0, {}
+        self._kept, self._n_kept, self._phase, self._best, self._c_used = [], 0, 0, {}, None
 
     def update(self, mag) -> None:
         m = np.atleast_2d(np.asarray(mag, dtype=float))
@@ -97,24 +103,37 @@ class FieldCoverage:
             self._kept.append(m[idx])
             self._n_kept += len(idx)
 
-    def directions(self) -> np.ndarray:
-        """Unit field directions about the centre (midrange unless given), (n, 3)."""
-        if not self._n_kept:
-            return np.zeros((0, 3))
+    def centre(self) -> np.ndarray:
+        """The centre in use: ``center`` if given, else the midrange (guarded), updated when
+        it has moved more than ``recentre_frac`` of the field."""
         if len(self._kept) > 1:
             self._kept = [np.concatenate(self._kept)]
-        c = self.center if self.center is not None else self.midrange_centre()
+        if self.center is not None:
+            return self.center
+        c, field = self._midrange()
+        if self._c_used is None or np.linalg.norm(c - self._c_used) > self.recentre_frac * field:
+            self._c_used = c
+        return self._c_used
+
+    def directions(self) -> np.ndarray:
+        """Unit field directions about :meth:`centre`, (n, 3)."""
+        if not self._n_kept:
+            return np.zeros((0, 3))
+        c = self.centre()
         d = self._kept[0] - c
         return C.unit_rows(d[np.linalg.norm(d, axis=1) > 0])
 
     def midrange_centre(self) -> np.ndarray:
         """(max + min) / 2 per axis, 0 on axes not yet turned over (see the class docstring)."""
+        return self._midrange()[0]
+
+    def _midrange(self) -> tuple[np.ndarray, float]:
         if not self._n_kept:
-            return np.zeros(3)
+            return np.zeros(3), 0.0
         if len(self._kept) > 1:
             self._kept = [np.concatenate(self._kept)]
         field = float(np.median(np.linalg.norm(self._kept[0], axis=1)))
-        return np.where(self._hi - self._lo > 0.5 * field, (self._hi + self._lo) / 2.0, 0.0)
+        return np.where(self._hi - self._lo > 0.5 * field, (self._hi + self._lo) / 2.0, 0.0), field
 
     @property
     def n_kept(self) -> int:
@@ -127,9 +146,7 @@ class FieldCoverage:
         see the whole record about its final centre)."""
         if not self._n_kept:
             return np.full(len(points), -1.0)
-        if len(self._kept) > 1:
-            self._kept = [np.concatenate(self._kept)]
-        c = self.center if self.center is not None else self.midrange_centre()
+        c = self.centre()  # joins the kept blocks
         used, done, best = self._best.get(key, (None, 0, None))
         if used is None or not np.array_equal(used, c):
             done, best = 0, np.full(len(points), -1.0)

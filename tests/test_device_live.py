@@ -53,7 +53,7 @@ def test_field_coverage_is_the_calibrations_measure():
     u[:, 2] = np.abs(u[:, 2])  # the upper hemisphere only: a partial sweep
     rows = h + 50.0 * u / np.linalg.norm(u, axis=1, keepdims=True)
     exact = C.coverage(C.midrange_directions(rows))
-    full = FieldCoverage(rate_hz=10.0, keep_hz=10.0)
+    full = FieldCoverage(rate_hz=10.0, keep_hz=10.0, recentre_frac=0.0)  # follow the midrange exactly
     for chunk in np.array_split(rows, 37):
         full.update(chunk)
         # kept incrementally while the centre stays, recomputed when it moves: always the
@@ -63,7 +63,13 @@ def test_field_coverage_is_the_calibrations_measure():
     once = FieldCoverage(rate_hz=10.0, keep_hz=10.0)
     once.update(rows)
     np.testing.assert_array_equal(full.grid(), once.grid())
-    assert full.fraction == exact and 0.5 < exact < 1.0  # about its midrange a hemisphere spreads out
+    assert full.fraction == exact
+    lazy = FieldCoverage(rate_hz=10.0, keep_hz=10.0)  # default: re-centres after a 1 % move
+    for chunk in np.array_split(rows, 37):
+        lazy.update(chunk)
+        assert lazy.fraction == C.coverage(lazy.directions())
+    assert abs(lazy.fraction - exact) <= 1 / C.COVERAGE_CELLS
+    assert np.linalg.norm(lazy.centre() - lazy.midrange_centre()) <= 0.01 * 50.0 * 1.01 and 0.5 < exact < 1.0  # about its midrange a hemisphere spreads out
     sub = FieldCoverage(rate_hz=100.0, keep_hz=10.0)
     sub.update(rows)
     assert sub.n_kept == 300 and abs(sub.fraction - exact) <= 2 / C.COVERAGE_CELLS
@@ -124,3 +130,14 @@ def test_compass_coverage_grows_as_the_scripted_operator_turns_the_unit():
     for _ in range(12):
         st = det.update(batch_from(imu, 3.5))  # hold 1 s + move 2.5 s per position
     assert st.coverage > 0.5 and st.coverage > 5 * at_rest  # the 30° measure: 12 positions and the moves
+
+
+def test_field_coverage_with_a_known_centre_uses_every_block():
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(600, 3))
+    rows = [3.0, 4.0, -2.0] + 40.0 * u / np.linalg.norm(u, axis=1, keepdims=True)
+    cov = FieldCoverage(rate_hz=10.0, center=[3.0, 4.0, -2.0])
+    for chunk in np.array_split(rows, 6):
+        cov.update(chunk)
+    assert len(cov.directions()) == 600
+    assert cov.fraction == C.coverage(rows - [3.0, 4.0, -2.0]) == 1.0

@@ -142,7 +142,10 @@ def test_compass_sweep_from_connect_to_a_saved_result(tmp_path):
 
     async def story():
         app = make_app(db, demo=True)
-        app.session.extra["compass_min_s"] = 20.0
+        # 120 s of device time (3 s here): the shared coverage measure (30° per direction)
+        # passes 80 % within seconds, so a shorter minimum ended the run before the screen
+        # was looked at
+        app.session.extra["compass_min_s"] = 120.0
         async with app.run_test(size=SIZE) as pilot:
             app.screen.query_one("#procedure").value = "compass"
             app.session.source = SimSource(seed=3, speed=40, procedure="compass")
@@ -305,6 +308,7 @@ def test_history_lists_devices_calibrations_and_drift(tmp_path):
         async with app.run_test(size=(120, 40)) as pilot:
             await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen"
                            and app.screen.query_one("#calibrations").row_count == 3)
+            await wait_for(pilot, lambda: len(app.screen.drift) > 1)  # 'p' needs the drift loaded
             devices = app.screen.query_one("#devices")
             first = devices.get_row_at(0)
             p0 = app.screen.param_index
