@@ -99,6 +99,7 @@ class HistoryScreen(Screen):
             if self.devices:
                 self.load_device(self.devices[0]["id"])
         elif message.what == "device-history" and message.data:
+            same = message.data["id"] == self.device_id  # a second load of the same device
             self.device_id = message.data["id"]
             self.history = message.data["history"]
             self.drift = [d for d in message.data["drift"] if d["n"] >= 1]
@@ -110,7 +111,9 @@ class HistoryScreen(Screen):
                 c.add_row(str(h["id"]), h["time"][:10], h["procedure"],
                           f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if in_use else "",
                           key=str(h["id"]))
-            self.param_index = 0
+            # keep the parameter the operator chose when the same device is read again
+            # (the first row highlight can ask for it a second time)
+            self.param_index = self.param_index % len(self.drift) if (same and self.drift) else 0
             self.plot()
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
