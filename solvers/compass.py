@@ -668,6 +668,18 @@ def check_orientations(y, *, need: int = MIN_RLS_ORIENTATIONS, min_coverage: flo
                        directions=None) -> tuple[int, float]:
     """Distinct orientations and coverage of the field directions; raises TooFewPositions /
     CoverageTooLow with the reason."""
+    if directions is None:
+        y = np.asarray(y, float)
+        y = y[np.all(np.isfinite(y), axis=1)]
+        # About the midrange centre even sensor noise points everywhere: first ask whether
+        # the field itself turned (its range against its size, as a sweep makes ~2×).
+        span = float(np.max(np.ptp(y, axis=0))) if len(y) else 0.0
+        size = float(np.median(np.linalg.norm(y - np.median(y, axis=0), axis=1)) + np.linalg.norm(np.median(y, axis=0)))
+        if len(y) and span < 0.1 * max(size, 1e-300):
+            raise CoverageTooLow(
+                f"the field hardly changed direction (largest range {span:.3g} against a field of about "
+                f"{size:.3g} in raw units): the unit was not turned; turn it through all orientations, "
+                "including upside down")
     u = midrange_directions(y) if directions is None else unit_rows(directions)
     n_dist = distinct_directions(u)
     cov = coverage(u)
