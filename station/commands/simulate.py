@@ -24,7 +24,7 @@ def parse_assignments(items: list[str] | None, what: str) -> dict[str, float | s
     return out
 
 
-def _seed(text: str) -> int:
+def seed_arg(text: str) -> int:
     """argparse type: a seed is a whole number >= 0 (numpy's generators refuse negatives)."""
     try:
         value = int(text)
@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Simulate a capture of any procedure with the station's forward models.")
     p.add_argument("--procedure", required=True, choices=PROCEDURES)
     p.add_argument("--out", required=True, help="capture file to write")
-    p.add_argument("--seed", type=_seed, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--effect", action="append", metavar="NAME=VALUE",
                    help="switch on an effect of diagnose.md with a size (units: see docs/models.md)")
     p.add_argument("--truth", help="also write the truth (parameters, effects) as JSON here")

@@ -9,24 +9,13 @@ import argparse
 import os
 import tempfile
 
-
-
-def _seed(text: str) -> int:
-    """argparse type: a seed is a whole number >= 0 (numpy's generators refuse negatives)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{value} is negative; seeds are whole numbers >= 0")
-    return value
+from station.commands.simulate import PROCEDURES, seed_arg
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("walkthrough", help="simulate a capture, calibrate it and compare with the truth")
-    p.add_argument("--procedure", default="accel-tabletop",
-                   choices=("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv"))
-    p.add_argument("--seed", type=_seed, default=1)
+    p.add_argument("--procedure", default="accel-tabletop", choices=PROCEDURES)
+    p.add_argument("--seed", type=seed_arg, default=1)
     p.set_defaults(func=run)
 
 
