@@ -4,11 +4,8 @@ angle random walk, the bias instability and how long a P4 run must be for the ac
 typed in (``station.procedures.noise``, numerics in ``solvers.allan``)."""
 from __future__ import annotations
 
-import datetime as _dt
-import json
 import math
 import os
-import tempfile
 
 from textual import on, work
 from textual.app import ComposeResult
@@ -21,6 +18,7 @@ from textual_plotext import PlotextPlot
 
 from station.messages import Exported
 from station.procedures.noise import AXES, format_duration
+from station.screens._common import export_files
 from station.screens.hold import HoldScreen
 from station.widgets.title import TitleBar
 
@@ -175,24 +173,8 @@ class AllanScreen(Screen):
 
     @work(thread=True, exclusive=True, group="export", exit_on_error=False, description="export")
     def export(self) -> None:
-        s = self.app.session
-        folder = s.extra.get("export_dir") or os.getcwd()
-        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        base = os.path.join(folder, f"{s.device_id or 'device'}-gyro-noise-{stamp}")
-        try:
-            from station.capture import write_capture
-
-            paths = [base + ".csv"]
-            write_capture(paths[0], self.capture)
-            if self.report is not None:
-                paths.append(base + ".json")
-                fd, tmp = tempfile.mkstemp(prefix=".export-", dir=folder)
-                with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                    json.dump(self.report.to_json(self.accuracy_deg_h), fh, indent=2)
-                os.replace(tmp, paths[1])
-            self.post_message(Exported(paths))
-        except Exception as exc:  # noqa: BLE001
-            self.post_message(Exported([], error=str(exc)))
+        export_files(self, self.capture, "gyro-noise",
+                     lambda: None if self.report is None else self.report.to_json(self.accuracy_deg_h))
 
     def on_exported(self, message: Exported) -> None:
         if message.error:

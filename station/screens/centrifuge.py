@@ -9,9 +9,7 @@ Same pattern as the P1 screen: a thread worker drains the source and feeds the g
 """
 from __future__ import annotations
 
-import math
 import threading
-import time
 
 from textual import on, work
 from textual.app import ComposeResult
@@ -22,6 +20,7 @@ from textual.widgets import Footer, Input, Label, OptionList, Static
 from textual.worker import get_current_worker
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
+from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
 from station.widgets.steps import StepList
 from station.widgets.title import TitleBar
@@ -29,11 +28,7 @@ from station.widgets.title import TitleBar
 FIELDS = ("ax", "ay", "az", "speed")
 
 
-def _n(x, fmt):
-    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
-
-
-class CentrifugeScreen(Screen):
+class CentrifugeScreen(GuidedScreenMixin, Screen):
     CSS = """
     CentrifugeScreen #steps { width: 22; height: 1fr; border: round $primary; }
     CentrifugeScreen #right { width: 1fr; height: 1fr; padding: 0 1; }
@@ -98,10 +93,9 @@ class CentrifugeScreen(Screen):
         from station.procedures.guide_centrifuge import CentrifugeConfig, CentrifugeGuide
 
         s = self.app.session
-        rate = float(getattr(src, "rate_hz", math.nan))
         kw = {k: s.extra[k] for k in ("speeds_rad_s", "n_orientations", "radius_m", "g_mps2") if k in s.extra}
         cfg = CentrifugeConfig(average_s=s.average_s, settle_s=s.settle_s, **kw)
-        return CentrifugeGuide(sample_rate_hz=rate if math.isfinite(rate) and rate > 0 else 100.0,
+        return CentrifugeGuide(sample_rate_hz=source_rate_hz(src),
                                units=src.units, device_id=s.device_id or src.device_id, config=cfg)
 
     @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
@@ -109,16 +103,7 @@ class CentrifugeScreen(Screen):
         s = self.app.session
         worker = get_current_worker()
         src = s.source
-        try:
-            if src.kind == "sim" and getattr(src, "_t0", None) is None:
-                src.start()
-            elif src.kind == "serial" and not src.reader.running:
-                src.start()
-            with self._lock:
-                self.guide = self._make_guide(src)
-                s.guide = self.guide
-        except Exception as exc:  # noqa: BLE001 - one line on screen
-            self.post_message(SourceFailed(str(exc)))
+        if not self._start_guide(src, lambda: self._make_guide(src)):
             return
         self.post_message(GuideEvent("ready"))
         operator = None
@@ -126,25 +111,8 @@ class CentrifugeScreen(Screen):
             from station.procedures.guide_centrifuge import CentrifugeOperator
 
             operator = CentrifugeOperator(src.place)
-        period = 1.0 / s.refresh_hz
-        next_post = 0.0
-        while not worker.is_cancelled:
-            b = src.drain()
-            if b is not None and len(b):
-                with self._lock:
-                    st = self.guide.update(b.t_s, b.accel, b.gyro, b.temp_c)
-                    events = self.guide.take_events()
-                    if operator is not None:
-                        operator.step(self.guide, st.t_s)
-                for kind, detail in events:
-                    self.post_message(GuideEvent(kind, detail))
-            now = time.monotonic()
-            if now >= next_post:
-                with self._lock:
-                    st = self.guide.status()
-                self.post_message(LiveUpdate(st, src.stats()))
-                next_post = max(next_post + period, now - period)  # 15 Hz on average
-            time.sleep(0.02)
+        guide = self.guide
+        self._pump(worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.temp_c), guide.status, operator)
 
     # ------------------------------------------------------------ drawing
 
@@ -260,13 +228,7 @@ class CentrifugeScreen(Screen):
             self._changed()
 
     def action_abort(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.abort()
-        self.workers.cancel_group(self, "stream")
-        self.app.session.guide = None
-        self.app.notify("P2 aborted: nothing saved", timeout=4)
-        self.app.pop_screen()
+        self._abort("P2 aborted: nothing saved")
 
     def action_finish(self) -> None:
         from station.procedures.guide_centrifuge import MIN_FIT_ROWS
@@ -284,28 +246,7 @@ class CentrifugeScreen(Screen):
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P2")
     def fit(self) -> None:
-        if self._fitting:
-            return
-        self._fitting = True
-        with self._lock:
-            capture = self.guide.capture(extra_meta={"operator_tool": "station tui"})
-        previous = None
-        try:
-            store = self.app.session.open_store()
-            if store is not None:
-                hist = [c for c in store.history(self.app.session.device_id, "accel-centrifuge") if c["accepted"]]
-                previous = hist[-1] if hist else None
-        except Exception:  # noqa: BLE001 - no comparison then
-            previous = None
-        try:
-            from station.calibrate import calibrate_capture
-
-            self.post_message(CalibrationReady(capture, calibrate_capture(capture), previous=previous))
-        except Exception as exc:  # noqa: BLE001 - one line on the results screen
-            self.post_message(CalibrationReady(capture, None, error=str(exc), previous=previous))
+        self._fit("accel-centrifuge")
 
     def on_calibration_ready(self, message: CalibrationReady) -> None:
-        from station.screens.results import ResultsScreen
-
-        self.workers.cancel_group(self, "stream")
-        self.app.switch_screen(ResultsScreen(message.capture, message.result, message.error, message.previous))
+        self._show_results(message, message.previous)

@@ -8,9 +8,7 @@ posting replaceable LiveUpdates (~15 Hz) and GuideEvents.
 """
 from __future__ import annotations
 
-import math
 import threading
-import time
 
 from rich.text import Text
 from textual import work
@@ -22,6 +20,7 @@ from textual.widgets import Footer, Static
 from textual.worker import get_current_worker
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
+from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
 from station.widgets.live import bar
 from station.widgets.title import TitleBar
 
@@ -33,11 +32,7 @@ def sweep_positions(positions: list[str]) -> list[str]:
     return list(positions) + [p for p in P1_POSITIONS if p not in positions]
 
 
-def _n(x, fmt):
-    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
-
-
-class CompassScreen(Screen):
+class CompassScreen(GuidedScreenMixin, Screen):
     CSS = """
     CompassScreen #map { width: 30; height: 10; border: round $primary; padding: 0 1; }
     CompassScreen #right { width: 1fr; padding: 0 1; }
@@ -84,44 +79,20 @@ class CompassScreen(Screen):
         s = self.app.session
         worker = get_current_worker()
         src = s.source
-        try:
-            if src.kind == "sim" and getattr(src, "_t0", None) is None:
-                src.start()
-            elif src.kind == "serial" and not src.reader.running:
-                src.start()
-            rate = float(getattr(src, "rate_hz", math.nan))
+
+        def make_guide():
             cfg = CompassConfig(min_s=s.extra.get("compass_min_s", 60.0))
-            with self._lock:
-                self.guide = CompassGuide(sample_rate_hz=rate if math.isfinite(rate) and rate > 0 else 100.0,
-                                          units=src.units, device_id=s.device_id or src.device_id,
-                                          site=getattr(src, "site", None), config=cfg)
-                s.guide = self.guide
-        except Exception as exc:  # noqa: BLE001 - one line on screen
-            self.post_message(SourceFailed(str(exc)))
+            return CompassGuide(sample_rate_hz=source_rate_hz(src), units=src.units,
+                                device_id=s.device_id or src.device_id, site=getattr(src, "site", None), config=cfg)
+
+        if not self._start_guide(src, make_guide):
             return
         operator = None
         if s.scripted and getattr(src, "positions", None):
             operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
-        period = 1.0 / s.refresh_hz
-        next_post = 0.0
-        while not worker.is_cancelled:
-            b = src.drain()
-            if b is not None and len(b) and b.mag is not None:
-                with self._lock:
-                    st = self.guide.update(b.t_s, b.accel, b.gyro, b.mag, b.temp_c)
-                    events = self.guide.take_events()
-                    if operator is not None:
-                        operator.step(self.guide, st.t_s)
-                for kind, detail in events:
-                    self.post_message(GuideEvent(kind, detail))
-            now = time.monotonic()
-            if now >= next_post:
-                with self._lock:
-                    st = self.guide.status()
-                    st_map = self.guide.coverage_map()
-                self.post_message(LiveUpdate((st, st_map), src.stats()))
-                next_post = max(next_post + period, now - period)  # 15 Hz on average
-            time.sleep(0.02)  # 50 batches a second: ~20 samples each at 1 kHz
+        guide = self.guide
+        self._pump(worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.mag, b.temp_c),
+                   lambda: (guide.status(), guide.coverage_map()), operator, accept=lambda b: b.mag is not None)
 
     def on_live_update(self, message: LiveUpdate) -> None:
         st, cov_map = message.status
@@ -170,38 +141,11 @@ class CompassScreen(Screen):
             self.notify("Recording restarted", timeout=2)
 
     def action_abort(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.abort()
-        self.workers.cancel_group(self, "stream")
-        self.app.session.guide = None
-        self.app.notify("P3 aborted: nothing saved", timeout=4)
-        self.app.pop_screen()
+        self._abort("P3 aborted: nothing saved")
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P3")
     def fit(self) -> None:
-        if self._fitting:
-            return
-        self._fitting = True
-        with self._lock:
-            capture = self.guide.capture(extra_meta={"operator_tool": "station tui"})
-        previous = None
-        try:
-            store = self.app.session.open_store()
-            if store is not None:
-                hist = [c for c in store.history(self.app.session.device_id, "compass") if c["accepted"]]
-                previous = hist[-1] if hist else None
-        except Exception:  # noqa: BLE001 - no comparison then
-            previous = None
-        try:
-            from station.calibrate import calibrate_capture
-
-            self.post_message(CalibrationReady(capture, calibrate_capture(capture), previous=previous))
-        except Exception as exc:  # noqa: BLE001 - one line on the results screen
-            self.post_message(CalibrationReady(capture, None, error=str(exc), previous=previous))
+        self._fit("compass")
 
     def on_calibration_ready(self, message: CalibrationReady) -> None:
-        from station.screens.results import ResultsScreen
-
-        self.workers.cancel_group(self, "stream")
-        self.app.switch_screen(ResultsScreen(message.capture, message.result, message.error, message.previous))
+        self._show_results(message, message.previous)

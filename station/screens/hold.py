@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 
 from textual import work
 from textual.app import ComposeResult
@@ -18,17 +17,14 @@ from textual.widgets import Footer, Static
 from textual.worker import get_current_worker
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
+from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
 from station.widgets.title import TitleBar
 
 SIM_FRAME = "x forward, y left, z up"  # the simulated unit lies level with z up
 
 
-def _n(x, fmt):
-    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
-
-
-class HoldScreen(Screen):
+class HoldScreen(GuidedScreenMixin, Screen):
     CSS = """
     HoldScreen #body { padding: 0 1; }
     HoldScreen #instruction { height: 4; }
@@ -73,39 +69,17 @@ class HoldScreen(Screen):
         s = self.app.session
         worker = get_current_worker()
         src = s.source
-        try:
-            if src.kind == "sim" and getattr(src, "_t0", None) is None:
-                src.start()
-            elif src.kind == "serial" and not src.reader.running:
-                src.start()
-            rate = float(getattr(src, "rate_hz", math.nan))
+
+        def make_guide():
             frame = s.extra.get("frame") or (SIM_FRAME if src.kind == "sim" else "")
             cfg = HoldConfig(duration_s=s.average_s, settle_s=s.settle_s, frame=frame)
-            with self._lock:
-                self.guide = HoldGuide(sample_rate_hz=rate if math.isfinite(rate) and rate > 0 else 100.0,
-                                       units=src.units, device_id=s.device_id or src.device_id,
-                                       site=getattr(src, "site", None), config=cfg)
-                s.guide = self.guide
-        except Exception as exc:  # noqa: BLE001 - one line on screen
-            self.post_message(SourceFailed(str(exc)))
+            return HoldGuide(sample_rate_hz=source_rate_hz(src), units=src.units,
+                             device_id=s.device_id or src.device_id, site=getattr(src, "site", None), config=cfg)
+
+        if not self._start_guide(src, make_guide):
             return
-        period = 1.0 / s.refresh_hz
-        next_post = 0.0
-        while not worker.is_cancelled:
-            b = src.drain()
-            if b is not None and len(b):
-                with self._lock:
-                    self.guide.update(b.t_s, b.accel, b.gyro, b.temp_c)
-                    events = self.guide.take_events()
-                for kind, detail in events:
-                    self.post_message(GuideEvent(kind, detail))
-            now = time.monotonic()
-            if now >= next_post:
-                with self._lock:
-                    st = self.guide.status()
-                self.post_message(LiveUpdate(st, src.stats()))
-                next_post = max(next_post + period, now - period)  # 15 Hz on average
-            time.sleep(0.02)  # 50 batches a second: ~20 samples each at 1 kHz
+        guide = self.guide
+        self._pump(worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.temp_c), guide.status)
 
     def on_live_update(self, message: LiveUpdate) -> None:
         st = message.status
@@ -138,43 +112,19 @@ class HoldScreen(Screen):
                 self.guide.restart()
 
     def action_abort(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.abort()
-        self.workers.cancel_group(self, "stream")
-        self.app.session.guide = None
-        self.app.notify(f"{self.NAME} aborted: nothing saved", timeout=4)
-        self.app.pop_screen()
+        self._abort(f"{self.NAME} aborted: nothing saved")
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P4")
     def fit(self) -> None:
-        if self._fitting:
-            return
-        self._fitting = True
-        with self._lock:
-            extra = {"operator_tool": "station tui"}
-            nominal = getattr(self.app.session.source, "nominal", None)
-            if nominal is not None and self.guide.units.get("accel_unit") in ("V", "mV"):
-                # the analogue triad's zero-g output, so P4 can take pitch and roll from it
-                extra["accel_offset"] = ", ".join([repr(float(nominal[0]))] * 3)
-            capture = self.guide.capture(extra_meta=extra)
-        previous = None
-        try:
-            store = self.app.session.open_store()
-            if store is not None:
-                hist = [c for c in store.history(self.app.session.device_id, "gyro-drift") if c["accepted"]]
-                previous = hist[-1] if hist else None
-        except Exception:  # noqa: BLE001 - no comparison then
-            previous = None
-        try:
-            from station.calibrate import calibrate_capture
+        self._fit("gyro-drift")
 
-            self.post_message(CalibrationReady(capture, calibrate_capture(capture), previous=previous))
-        except Exception as exc:  # noqa: BLE001 - one line on the results screen
-            self.post_message(CalibrationReady(capture, None, error=str(exc), previous=previous))
+    def _capture_meta(self) -> dict:
+        extra = {"operator_tool": "station tui"}
+        nominal = getattr(self.app.session.source, "nominal", None)
+        if nominal is not None and self.guide.units.get("accel_unit") in ("V", "mV"):
+            # the analogue triad's zero-g output, so P4 can take pitch and roll from it
+            extra["accel_offset"] = ", ".join([repr(float(nominal[0]))] * 3)
+        return extra
 
     def on_calibration_ready(self, message: CalibrationReady) -> None:
-        from station.screens.results import ResultsScreen
-
-        self.workers.cancel_group(self, "stream")
-        self.app.switch_screen(ResultsScreen(message.capture, message.result, message.error, message.previous))
+        self._show_results(message, message.previous)

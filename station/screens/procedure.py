@@ -8,10 +8,8 @@ replaceable LiveUpdate ~15 times a second and a GuideEvent for each capture.
 """
 from __future__ import annotations
 
-import math
 import os
 import threading
-import time
 
 from textual import on, work
 from textual.app import ComposeResult
@@ -23,11 +21,12 @@ from textual.worker import get_current_worker
 
 from station.widgets.title import TitleBar
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
+from station.screens._common import GuidedScreenMixin, source_rate_hz, start_source
 from station.widgets.live import CountdownBar, OrientationIndicator, PlacementView, Readouts, StabilityBar
 from station.widgets.steps import StepList
 
 
-class ProcedureScreen(Screen):
+class ProcedureScreen(GuidedScreenMixin, Screen):
     SUB_TITLE = "P1 accelerometer, level table"
     CSS = """
     ProcedureScreen #steps { width: 22; height: 1fr; border: round $primary; }
@@ -88,9 +87,7 @@ class ProcedureScreen(Screen):
             previous = hist[-1] if hist else None
         folder = s.resume_dir()
         state_path = default_state_path(s.device_id, base=folder) if folder else None
-        rate = float(getattr(src, "rate_hz", math.nan))
-        if not math.isfinite(rate) or rate <= 0:
-            rate = 100.0
+        rate = source_rate_hz(src)
         kw = dict(nominal=getattr(src, "nominal", None), previous=previous)
         if s.resume and state_path and os.path.exists(state_path):
             guide = P1Guide.load(state_path, sample_rate_hz=rate, **kw)
@@ -107,10 +104,7 @@ class ProcedureScreen(Screen):
         worker = get_current_worker()
         src = s.source
         try:
-            if src.kind == "sim" and getattr(src, "_t0", None) is None:
-                src.start()
-            elif src.kind == "serial" and not src.reader.running:
-                src.start()
+            if start_source(src) and src.kind == "serial":
                 s.device_id = s.device_id or src.device_id or "unknown"
             with self._lock:
                 self.guide = s.guide if s.guide is not None else self._make_guide()
@@ -124,29 +118,9 @@ class ProcedureScreen(Screen):
             from station.procedures.guide import ScriptedOperator
 
             operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=3.0)
-        period = 1.0 / s.refresh_hz
-        next_post = 0.0
-        posts = 0
-        t_posts = time.monotonic()
-        while not worker.is_cancelled:
-            batch = src.drain()
-            if batch is not None and len(batch):
-                with self._lock:
-                    st = self.guide.update(batch.t_s, batch.accel, batch.gyro, batch.temp_c)
-                    events = self.guide.take_events()
-                    if operator is not None:
-                        operator.step(self.guide, st.t_s)
-                for kind, detail in events:
-                    self.post_message(GuideEvent(kind, detail))
-            now = time.monotonic()
-            if now >= next_post:
-                with self._lock:
-                    st = self.guide.status()
-                posts += 1
-                hz = posts / (now - t_posts) if now > t_posts else math.nan
-                self.post_message(LiveUpdate(st, src.stats(), hz))
-                next_post = max(next_post + period, now - period)  # 15 Hz on average
-            time.sleep(0.02)  # 50 batches a second: ~20 samples each at 1 kHz
+        guide = self.guide
+        self._pump(worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.temp_c), guide.status, operator,
+                   with_hz=True)
 
     # ------------------------------------------------------------ drawing
 
@@ -234,22 +208,7 @@ class ProcedureScreen(Screen):
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P1")
     def fit(self) -> None:
-        if self._fitting:
-            return
-        self._fitting = True
-        with self._lock:
-            capture = self.guide.capture(extra_meta={"operator_tool": "station tui"})
-        try:
-            from station.calibrate import calibrate_capture
-
-            result = calibrate_capture(capture)
-            self.post_message(CalibrationReady(capture, result))
-        except Exception as exc:  # noqa: BLE001 - shown on the results screen as one line
-            self.post_message(CalibrationReady(capture, None, error=str(exc)))
+        self._fit(None)  # the previous calibration rides on the guide (it also checks the steps)
 
     def on_calibration_ready(self, message: CalibrationReady) -> None:
-        from station.screens.results import ResultsScreen
-
-        self.workers.cancel_group(self, "stream")
-        previous = getattr(self.guide, "previous_calibration", None)
-        self.app.switch_screen(ResultsScreen(message.capture, message.result, message.error, previous))
+        self._show_results(message, getattr(self.guide, "previous_calibration", None))

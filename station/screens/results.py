@@ -3,11 +3,8 @@ sigma), pass or fail against the device's tolerances, the residual per position;
 discard or export."""
 from __future__ import annotations
 
-import datetime as _dt
-import json
 import math
 import os
-import tempfile
 
 from textual import work
 from textual.app import ComposeResult
@@ -16,6 +13,7 @@ from textual.containers import Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
+from station.screens._common import export_files
 from station.widgets.title import TitleBar
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures.review import p1_residuals, param_rows, verdict
@@ -175,26 +173,10 @@ class ResultsScreen(Screen):
 
     @work(thread=True, exclusive=True, group="export", exit_on_error=False, description="export")
     def export(self) -> None:
-        s = self.app.session
-        folder = s.extra.get("export_dir") or os.getcwd()
-        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        proc = self.capture.meta.get("procedure", "capture")
-        base = os.path.join(folder, f"{s.device_id or 'device'}-{proc}-{stamp}")
-        try:
-            from station.calibrate import jsonable
-            from station.capture import write_capture
+        from station.calibrate import jsonable
 
-            paths = [base + ".csv"]
-            write_capture(paths[0], self.capture)
-            if self.result is not None:
-                paths.append(base + ".json")
-                fd, tmp = tempfile.mkstemp(prefix=".export-", dir=folder)
-                with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                    json.dump(jsonable(self.result), fh, indent=2)
-                os.replace(tmp, paths[1])
-            self.post_message(Exported(paths))
-        except Exception as exc:  # noqa: BLE001
-            self.post_message(Exported([], error=str(exc)))
+        export_files(self, self.capture, self.capture.meta.get("procedure", "capture"),
+                     lambda: None if self.result is None else jsonable(self.result))
 
     def on_exported(self, message: Exported) -> None:
         if message.error:

@@ -1,0 +1,163 @@
+"""What the guided procedure screens (P1–P4) and the export actions share.
+
+``GuidedScreenMixin`` holds the thread-worker bodies: starting the source, the loop that
+drains it into the guide (posting GuideEvents and a replaceable LiveUpdate ~15 Hz), and the
+fit (capture, the device's previous accepted calibration, calibrate_capture, a
+CalibrationReady). Each screen keeps its own ``@work`` methods and message handlers and
+passes what differs. No message handlers live here: Textual calls the handlers of every
+class in the MRO.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import tempfile
+import time
+from typing import Callable
+
+from station.messages import CalibrationReady, Exported, GuideEvent, LiveUpdate, SourceFailed
+
+
+def _n(x, fmt):
+    """``x`` formatted, or an em dash when it is not a finite number."""
+    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
+
+
+def start_source(src) -> bool:
+    """Start a simulated or serial source that is not running yet; True if it was started."""
+    if src.kind == "sim" and getattr(src, "_t0", None) is None:
+        src.start()
+        return True
+    if src.kind == "serial" and not src.reader.running:
+        src.start()
+        return True
+    return False
+
+
+def source_rate_hz(src) -> float:
+    """The source's sample rate, 100 Hz when it reports none."""
+    rate = float(getattr(src, "rate_hz", math.nan))
+    return rate if math.isfinite(rate) and rate > 0 else 100.0
+
+
+class GuidedScreenMixin:
+    """For a Screen with ``_lock``, ``guide`` and ``_fitting`` (see ``__init__`` of the screens)."""
+
+    def _start_guide(self, src, make_guide: Callable) -> bool:
+        """Start ``src`` and set ``self.guide`` (and the session's) to ``make_guide()``;
+        False, with a SourceFailed posted, when either fails."""
+        try:
+            start_source(src)
+            with self._lock:
+                self.guide = make_guide()
+                self.app.session.guide = self.guide
+        except Exception as exc:  # noqa: BLE001 - one line on screen
+            self.post_message(SourceFailed(str(exc)))
+            return False
+        return True
+
+    def _pump(self, worker, src, update: Callable, status: Callable, operator=None,
+              accept: Callable | None = None, with_hz: bool = False) -> None:
+        """Drain ``src`` into the guide until ``worker`` is cancelled.
+
+        ``update(batch)`` feeds the guide and returns its status (under the lock);
+        ``status()`` is the LiveUpdate payload (under the lock); ``accept(batch)`` skips
+        batches the guide cannot use; ``with_hz`` adds the measured post rate."""
+        period = 1.0 / self.app.session.refresh_hz
+        next_post = 0.0
+        posts = 0
+        t_posts = time.monotonic()
+        while not worker.is_cancelled:
+            b = src.drain()
+            if b is not None and len(b) and (accept is None or accept(b)):
+                with self._lock:
+                    st = update(b)
+                    events = self.guide.take_events()
+                    if operator is not None:
+                        operator.step(self.guide, st.t_s)
+                for kind, detail in events:
+                    self.post_message(GuideEvent(kind, detail))
+            now = time.monotonic()
+            if now >= next_post:
+                with self._lock:
+                    payload = status()
+                if with_hz:
+                    posts += 1
+                    hz = posts / (now - t_posts) if now > t_posts else math.nan
+                    self.post_message(LiveUpdate(payload, src.stats(), hz))
+                else:
+                    self.post_message(LiveUpdate(payload, src.stats()))
+                next_post = max(next_post + period, now - period)  # 15 Hz on average
+            time.sleep(0.02)  # 50 batches a second: ~20 samples each at 1 kHz
+
+    def _capture_meta(self) -> dict:
+        """Extra metadata of the fitted capture (called under the lock)."""
+        return {"operator_tool": "station tui"}
+
+    def _fit(self, history_procedure: str | None) -> None:
+        """Capture the guide, calibrate it and post CalibrationReady (once per screen).
+
+        With ``history_procedure`` the device's last accepted calibration of that
+        procedure rides along as ``previous``."""
+        if self._fitting:
+            return
+        self._fitting = True
+        with self._lock:
+            capture = self.guide.capture(extra_meta=self._capture_meta())
+        previous = None
+        if history_procedure is not None:
+            try:
+                store = self.app.session.open_store()
+                if store is not None:
+                    hist = [c for c in store.history(self.app.session.device_id, history_procedure) if c["accepted"]]
+                    previous = hist[-1] if hist else None
+            except Exception:  # noqa: BLE001 - no comparison then
+                previous = None
+        try:
+            from station.calibrate import calibrate_capture
+
+            self.post_message(CalibrationReady(capture, calibrate_capture(capture), previous=previous))
+        except Exception as exc:  # noqa: BLE001 - one line on the results screen
+            self.post_message(CalibrationReady(capture, None, error=str(exc), previous=previous))
+
+    def _show_results(self, message: CalibrationReady, previous) -> None:
+        from station.screens.results import ResultsScreen
+
+        self.workers.cancel_group(self, "stream")
+        self.app.switch_screen(ResultsScreen(message.capture, message.result, message.error, previous))
+
+    def _abort(self, text: str) -> None:
+        """Abort the guide, stop the stream worker and go back (nothing saved)."""
+        if self.guide is not None:
+            with self._lock:
+                self.guide.abort()
+        self.workers.cancel_group(self, "stream")
+        self.app.session.guide = None
+        self.app.notify(text, timeout=4)
+        self.app.pop_screen()
+
+
+def export_files(screen, capture, what: str, payload: Callable) -> None:
+    """Write ``capture`` (CSV) and ``payload()`` (JSON, unless None) to the export folder
+    as ``<device>-<what>-<stamp>.*``, atomically; post Exported to ``screen``."""
+    s = screen.app.session
+    folder = s.extra.get("export_dir") or os.getcwd()
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    base = os.path.join(folder, f"{s.device_id or 'device'}-{what}-{stamp}")
+    try:
+        from station.capture import write_capture
+
+        paths = [base + ".csv"]
+        write_capture(paths[0], capture)
+        data = payload()
+        if data is not None:
+            paths.append(base + ".json")
+            fd, tmp = tempfile.mkstemp(prefix=".export-", dir=folder)
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump(data, fh, indent=2)
+            os.replace(tmp, paths[1])
+        screen.post_message(Exported(paths))
+    except Exception as exc:  # noqa: BLE001
+        screen.post_message(Exported([], error=str(exc)))
