@@ -92,14 +92,8 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
         self._synced = False
 
     def take(self) -> SampleBlock | None:
-        rows = self._rows
-        if not rows:
-            return None
-        self._rows = []
-        arr = np.array(rows, dtype=np.float64)
-        vals = arr[:, 2:]
-        vals[np.isinf(vals)] = np.nan  # 'inf' from a device: no usable value
-        return SampleBlock(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=arr[:, 2:])
+        rows, self._rows = self._rows, []
+        return SampleBlock.from_rows(rows)
 
     def feed(self, data: bytes) -> list:
         events: list = []

@@ -108,6 +108,17 @@ class SampleBlock:
     def __len__(self) -> int:
         return len(self.seq)
 
+    @classmethod
+    def from_rows(cls, rows: list) -> "SampleBlock | None":
+        """Rows ``[seq, t_dev_us, *values]`` as a block (None when there are none); an
+        'inf' from a device is no usable value: NaN."""
+        if not rows:
+            return None
+        arr = np.array(rows, dtype=np.float64)
+        vals = arr[:, 2:]
+        vals[np.isinf(vals)] = np.nan
+        return cls(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=vals)
+
 
 @dataclass
 class ParseStats:
@@ -264,14 +275,8 @@ class StationParser:
 
     def take(self) -> SampleBlock | None:
         """The samples parsed since the last call, or None."""
-        rows = self._rows
-        if not rows:
-            return None
-        self._rows = []
-        arr = np.array(rows, dtype=np.float64)
-        vals = arr[:, 2:]
-        vals[np.isinf(vals)] = np.nan  # 'inf' from a device: no usable value
-        return SampleBlock(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=arr[:, 2:])
+        rows, self._rows = self._rows, []
+        return SampleBlock.from_rows(rows)
 
     def reset_stream(self) -> None:
         """Drop the partial line (after a reconnect). Sequence and clock continuity are
