@@ -3,9 +3,6 @@ reference), the covariance propagation, conditioning refusal, two-clock alignmen
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,29 +13,10 @@ from solvers.simulate import simulate
 from station.capture import Capture, write_capture
 from station.procedures import ldv as proc
 
-ROOT = Path(__file__).resolve().parents[1]
+from station_run import capture_of as _cap
+from station_run import run_station as _station
+
 KEYS = ("dK", "alpha_deg", "beta_deg", "gamma_deg")
-
-
-def _cap(sim, path=None) -> Capture:
-    return Capture(dict(sim.meta), {k: np.asarray(v) for k, v in sim.columns.items()}, path)
-
-
-def _station(*args, subprocess_run: bool = False):
-    """The real CLI: in a subprocess, or (faster, same code path: argparse, StationError →
-    one line on stderr, exit 2) through ``station.cli.main`` in this process."""
-    if subprocess_run:
-        return subprocess.run([sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True,
-                              text=True, timeout=120)
-    import contextlib
-    import io
-
-    from station.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
 
 
 def _z(out, truth):
