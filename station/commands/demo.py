@@ -51,7 +51,6 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
         from station.errors import UnsupportedError
 
         raise UnsupportedError("demo --headless: P1 and compass only; run the P4 demo in the TUI")
-    from station.calibrate import calibrate_capture, format_text
     from station.procedures.guide import GuideConfig, P1Guide, ScriptedOperator
     from station.sources import SimSource
 
@@ -82,21 +81,12 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
         from station.errors import UnsupportedError
 
         raise UnsupportedError(f"demo did not finish within {max_device_s:g} s of device time")
-    capture = guide.capture(extra_meta={"simulated": "yes"})
-    result = calibrate_capture(capture)
-    print(format_text(result), file=out)
-    if db:
-        from station.store import save_result
-
-        cal_id = save_result(db, capture, result, device_id=src.device_id)
-        print(f"saved as calibration #{cal_id} in {db}", file=out)
-    return 0
+    return _calibrate_and_save(guide, src.device_id, db, out)
 
 
 def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
     """The P3 sweep without a screen: the scripted operator visits the sphere positions."""
     out = out if out is not None else sys.stdout
-    from station.calibrate import calibrate_capture, format_text
     from station.procedures.guide_compass import CompassConfig, CompassGuide, SweepOperator
     from station.sources import SimSource
 
@@ -118,12 +108,19 @@ def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0
         if int(st.coverage * 10) != shown:
             shown = int(st.coverage * 10)
             print(f"{st.t_s:7.1f} s  coverage {100 * st.coverage:3.0f} %", file=out)
+    return _calibrate_and_save(guide, src.device_id, db, out)
+
+
+def _calibrate_and_save(guide, device_id: str, db: str | None, out) -> int:
+    """The headless demos' end: calibrate the guide's capture, print it, save it if asked."""
+    from station.calibrate import calibrate_capture, format_text
+
     capture = guide.capture(extra_meta={"simulated": "yes"})
     result = calibrate_capture(capture)
     print(format_text(result), file=out)
     if db:
         from station.store import save_result
 
-        cal_id = save_result(db, capture, result, device_id=src.device_id)
+        cal_id = save_result(db, capture, result, device_id=device_id)
         print(f"saved as calibration #{cal_id} in {db}", file=out)
     return 0
