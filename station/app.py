@@ -3,7 +3,7 @@ tests, snapshots and benchmarks use.
 
 Screens (one file each in ``station/screens/``): Connect → Procedure → Results, History,
 Help. Device I/O and database reads run in thread workers that post the typed messages
-of ``station/messages.py``; the procedure logic is ``station.procedures.guide``.
+of ``station/messages.py``; the procedure logic is ``station.procedures.tabletop_guide``.
 """
 from __future__ import annotations
 
@@ -137,18 +137,18 @@ def procedure_screen(procedure: str):
 
         return CompassScreen()
     if procedure == "gyro-drift":
-        from station.screens.hold import HoldScreen
+        from station.screens.gyrodrift import HoldScreen
 
         return HoldScreen()
     if procedure == "gyro-noise":
-        from station.screens.allan import NoiseHoldScreen
+        from station.screens.noise import NoiseHoldScreen
 
         return NoiseHoldScreen()
     if procedure == "accel-centrifuge":
         from station.screens.centrifuge import CentrifugeScreen
 
         return CentrifugeScreen()
-    from station.screens.procedure import ProcedureScreen
+    from station.screens.tabletop import ProcedureScreen
 
     return ProcedureScreen()
 

@@ -40,7 +40,7 @@ def test_connect_snapshot(snap_compare, size):
 
 
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
-def test_procedure_snapshot(snap_compare, size):
+def test_tabletop_snapshot(snap_compare, size):
     """The demo mid-run: x_up and x_down captured, y_up still and in position."""
     clock = FakeClock()
     src = SimSource(seed=0, clock=clock)
@@ -128,13 +128,13 @@ def test_centrifuge_snapshot(snap_compare, size):
 
 
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
-def test_allan_snapshot(snap_compare, size):
+def test_noise_snapshot(snap_compare, size):
     """The noise result for a fixed record: white noise plus a slow random walk (seeded)."""
     import numpy as np
 
     from station.capture import Capture
     from station.procedures.noise import noise_report
-    from station.screens.allan import AllanScreen
+    from station.screens.noise import AllanScreen
 
     rng = np.random.default_rng(7)
     n, fs = 60_000, 100.0

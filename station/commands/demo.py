@@ -51,7 +51,7 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
         from station.errors import UnsupportedError
 
         raise UnsupportedError("demo --headless: P1 and compass only; run the P4 demo in the TUI")
-    from station.procedures.guide import GuideConfig, P1Guide, ScriptedOperator
+    from station.procedures.tabletop_guide import GuideConfig, P1Guide, ScriptedOperator
     from station.sources import SimSource
 
     now = [0.0]
@@ -87,7 +87,7 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
 def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
     """The P3 sweep without a screen: the scripted operator visits the sphere positions."""
     out = out if out is not None else sys.stdout
-    from station.procedures.guide_compass import CompassConfig, CompassGuide, SweepOperator
+    from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator
     from station.sources import SimSource
 
     now = [0.0]

@@ -10,7 +10,7 @@
   visited field direction about the midrange centre, need 40 %).
 
 The orientation check and the coverage are `solvers.detectors`, shared with the guides
-(`station/procedures/guide.py`, `guide_compass.py`).
+(`station/procedures/tabletop_guide.py`, `compass_guide.py`).
 
 Raw accelerometer units: the direction of gravity needs outputs that are roughly
 proportional to specific force. Physical units (g, m/s^2, ...) are used as they are; raw

@@ -1,4 +1,4 @@
-"""The gyro noise (Allan) run, UI-free: a still recording (``guide_hold.HoldGuide``) in,
+"""The gyro noise (Allan) run, UI-free: a still recording (``gyrodrift_guide.HoldGuide``) in,
 a noise report out.
 
 Numerics are ``solvers.allan``: the overlapping Allan deviation per axis, the noise

@@ -5,7 +5,7 @@ speed (``m``, then Enter). At the end, or ``f`` with at least 10 rows, the table
 averages is fitted and the Results screen shows it.
 
 Same pattern as the P1 screen: a thread worker drains the source and feeds the guide
-(``station.procedures.guide_centrifuge``), posting replaceable LiveUpdates and GuideEvents.
+(``station.procedures.centrifuge_guide``), posting replaceable LiveUpdates and GuideEvents.
 """
 from __future__ import annotations
 
@@ -90,7 +90,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
     # ------------------------------------------------------------ the worker
 
     def _make_guide(self, src):
-        from station.procedures.guide_centrifuge import CentrifugeConfig, CentrifugeGuide
+        from station.procedures.centrifuge_guide import CentrifugeConfig, CentrifugeGuide
 
         s = self.app.session
         kw = {k: s.extra[k] for k in ("speeds_rad_s", "n_orientations", "radius_m", "g_mps2") if k in s.extra}
@@ -108,7 +108,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         self.post_message(GuideEvent("ready"))
         operator = None
         if s.scripted:
-            from station.procedures.guide_centrifuge import CentrifugeOperator
+            from station.procedures.centrifuge_guide import CentrifugeOperator
 
             operator = CentrifugeOperator(src.place)
         guide = self.guide
@@ -185,7 +185,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
 
     @on(Input.Submitted)
     def _entered(self, event: Input.Submitted) -> None:
-        from station.procedures.guide_centrifuge import ManualEntryError
+        from station.procedures.centrifuge_guide import ManualEntryError
 
         if self.guide is None:
             return
@@ -231,7 +231,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         self._abort("P2 aborted: nothing saved")
 
     def action_finish(self) -> None:
-        from station.procedures.guide_centrifuge import MIN_FIT_ROWS
+        from station.procedures.centrifuge_guide import MIN_FIT_ROWS
 
         ok = False
         if self.guide is not None:

@@ -74,7 +74,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
 
     @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
     def stream(self) -> None:
-        from station.procedures.guide_compass import CompassGuide, CompassConfig, SweepOperator
+        from station.procedures.compass_guide import CompassGuide, CompassConfig, SweepOperator
 
         s = self.app.session
         worker = get_current_worker()

@@ -7,7 +7,7 @@ import math
 from rich.text import Text
 from textual.widgets import Static
 
-from station.procedures.guide import position_drawing
+from station.procedures.tabletop_guide import position_drawing
 
 
 def bar(fraction: float, width: int) -> str:

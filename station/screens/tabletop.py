@@ -75,7 +75,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
     # ------------------------------------------------------------ the worker
 
     def _make_guide(self):
-        from station.procedures.guide import GuideConfig, P1Guide
+        from station.procedures.tabletop_guide import GuideConfig, P1Guide
         from station.procedures.state import default_state_path
 
         s = self.app.session
@@ -115,7 +115,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
         self.post_message(GuideEvent("ready"))
         operator = None
         if s.scripted:
-            from station.procedures.guide import ScriptedOperator
+            from station.procedures.tabletop_guide import ScriptedOperator
 
             operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=3.0)
         guide = self.guide

@@ -1,4 +1,4 @@
-"""The UI-free P2 centrifuge guide (station.procedures.guide_centrifuge): the live path on
+"""The UI-free P2 centrifuge guide (station.procedures.centrifuge_guide): the live path on
 the simulated centrifuge, the manual path (typed averages) and its refusals, the step
 list's skip / redo / select / abort, and the table of averages calibrate_capture takes."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from solvers.simulate import simulate_centrifuge
 from station.calibrate import calibrate_capture
-from station.procedures.guide_centrifuge import (
+from station.procedures.centrifuge_guide import (
     MIN_FIT_ROWS, CentrifugeConfig, CentrifugeGuide, CentrifugeOperator, ManualEntryError, centrifuge_steps,
     parse_manual)
 from station.sources import SimSource

@@ -64,7 +64,7 @@ class HoldScreen(GuidedScreenMixin, Screen):
 
     @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
     def stream(self) -> None:
-        from station.procedures.guide_hold import HoldConfig, HoldGuide
+        from station.procedures.gyrodrift_guide import HoldConfig, HoldGuide
 
         s = self.app.session
         worker = get_current_worker()

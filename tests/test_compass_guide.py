@@ -1,11 +1,11 @@
-"""The UI-free P3 sweep guide (station.procedures.guide_compass) on the simulated device."""
+"""The UI-free P3 sweep guide (station.procedures.compass_guide) on the simulated device."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from solvers import compass as C
-from station.procedures.guide_compass import CompassConfig, CompassGuide, SweepOperator
+from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator
 from station.screens.compass import sweep_positions
 from station.sources import SimSource
 

@@ -1,10 +1,10 @@
-"""The UI-free P4 static-base hold (station.procedures.guide_hold) on the simulated device."""
+"""The UI-free P4 static-base hold (station.procedures.gyrodrift_guide) on the simulated device."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from station.procedures.guide_hold import HoldConfig, HoldGuide
+from station.procedures.gyrodrift_guide import HoldConfig, HoldGuide
 from station.sources import SimSource
 
 SIM_FRAME = "x forward, y left, z up"  # the simulated unit lies level with z up

@@ -1,4 +1,4 @@
-"""The UI-free P1 guide (station.procedures.guide) driven by the simulated bench device."""
+"""The UI-free P1 guide (station.procedures.tabletop_guide) driven by the simulated bench device."""
 from __future__ import annotations
 
 import json
@@ -9,7 +9,7 @@ import pytest
 
 from solvers.simulate import LiveImu
 from solvers.models import accel as accel_model
-from station.procedures.guide import GuideConfig, P1Guide, position_drawing
+from station.procedures.tabletop_guide import GuideConfig, P1Guide, position_drawing
 
 RATE_HZ = 100.0
 SITE = {"latitude_deg": 39.98, "altitude_m": 52.0}
@@ -229,8 +229,8 @@ def test_procedure_logic_does_not_load_textual():
     import subprocess
     import sys
 
-    code = ("import sys, station.procedures.guide, station.procedures.guide_compass, "
-            "station.procedures.guide_hold, station.procedures.guide_centrifuge, station.procedures.noise, "
+    code = ("import sys, station.procedures.tabletop_guide, station.procedures.compass_guide, "
+            "station.procedures.gyrodrift_guide, station.procedures.centrifuge_guide, station.procedures.noise, "
             "station.procedures.review, station.sources, solvers.detectors, station.device.live; "
             "print('textual' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
