@@ -339,13 +339,15 @@ def _read_head(path: str) -> _Head:
 
 def _first_line(path: str, f, stripped: str) -> None:
     want = f"# station-capture: {FORMAT_VERSION}"
+    # a log or another CSV has a way in: say which
+    way_in = "; for a log or another CSV use `station import FILE --procedure P --out CAPTURE` (README: Import)"
     if not stripped.startswith("#"):
         if not stripped and not f.read(1 << 16).strip():
             raise InputError(path, 1, "empty file")
-        raise InputError(path, 1, f"missing first line '{want}': not a station capture file")
+        raise InputError(path, 1, f"missing first line '{want}': not a station capture file{way_in}")
     key, sep, value = stripped[1:].partition(":")
     if key.strip() != "station-capture" or not sep:
-        raise InputError(path, 1, f"missing first line '{want}': not a station capture file")
+        raise InputError(path, 1, f"missing first line '{want}': not a station capture file{way_in}")
     if value.strip() != FORMAT_VERSION:
         raise InputError(path, 1, f"unsupported capture version {_show(value.strip())} (this station reads version {FORMAT_VERSION})")
 

@@ -37,13 +37,14 @@ def _good(extra: str = "") -> str:
     return HEAD + HDR + ROWS + extra
 
 
+WAY_IN = "; for a log or another CSV use `station import FILE --procedure P --out CAPTURE` (README: Import)"
 # (id, file content (str or bytes), line, message)
 BAD = [
     ("empty", b"", 1, "empty file"),
     ("only-blank", b"\n\n  \n", 1, "empty file"),
-    ("no-version-line", "t,ax\n0,1\n", 1, "missing first line '# station-capture: 1': not a station capture file"),
+    ("no-version-line", "t,ax\n0,1\n", 1, "missing first line '# station-capture: 1': not a station capture file" + WAY_IN),
     ("version-not-first", "# procedure: ldv\n# station-capture: 1\nt,ax\n0,1\n", 1,
-     "missing first line '# station-capture: 1': not a station capture file"),
+     "missing first line '# station-capture: 1': not a station capture file" + WAY_IN),
     ("version-2", "# station-capture: 2\nt,ax\n0,1\n", 1, "unsupported capture version '2' (this station reads version 1)"),
     ("meta-without-colon", HEAD + "# recorded on the bench\n" + HDR + ROWS, 5,
      "metadata line without 'key: value': '# recorded on the bench'"),

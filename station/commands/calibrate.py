@@ -6,9 +6,11 @@ import argparse
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from station.importers.options import add_arguments
+
     p = sub.add_parser("calibrate", help="calibrate a capture file (the procedure named in its metadata)",
                        description="Compute the calibration the capture's procedure asks for and print it.")
-    p.add_argument("file", help="capture file (station-capture CSV)")
+    p.add_argument("file", help="capture file (station-capture CSV), or a log: .ulg, .bin, .tlog, ROS bag/MCAP, EuRoC/Kalibr CSV")
     p.add_argument("--json", action="store_true", help="print one JSON object (calibrate.md)")
     p.add_argument("--method", default=None, help="estimator, where a procedure offers several "
                    "(accel-tabletop: norm | upper-triangular | six-position | step8; accel-centrifuge: exact | "
@@ -21,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="gyro-drift: the 1-sigma drift accuracy asked, °/h (sets metadata accuracy_deg_h)")
     p.add_argument("--reference", default=None, metavar="FILE",
                    help="ldv: the reference velocity stream as a separate capture (sets reference_file)")
+    add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -28,13 +31,13 @@ def run(args: argparse.Namespace) -> int:
     import warnings
 
     from station.calibrate import calibrate_capture, format_text, to_json
-    from station.capture import read_capture
+    from station.importers.load import load_for_command
 
     if getattr(args, "accuracy", None) is not None and not 0 < args.accuracy < float("inf"):
         from station.errors import InputError
 
         raise InputError(None, None, f"--accuracy must be a positive number of °/h, got {args.accuracy:g}")
-    capture = read_capture(args.file)
+    capture = load_for_command(args)  # a capture, or a log / EuRoC file read through the importer
     if getattr(args, "accuracy", None) is not None:
         capture.meta["accuracy_deg_h"] = repr(float(args.accuracy))
     if getattr(args, "reference", None):

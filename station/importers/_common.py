@@ -1,0 +1,201 @@
+"""What every log reader hands over, and how it becomes a capture.
+
+A reader returns an :class:`Imported`: one :class:`Stream` per sensor (its own time stamps,
+its own unit, as the log has them) and the metadata the log itself holds (firmware, whether
+the board had already corrected the data, parameters in use, date, place). :func:`to_capture`
+puts the streams on one time grid — the stream of the sensor the procedure calibrates — and
+builds the station capture (``../shared/spec/capture-format.md``).
+
+Aligning streams (documented in ``docs/import.md``): a stream at about the grid's rate
+(median periods within 25 %) is matched sample to sample by the nearest time stamp, so its
+noise is untouched; a stream at another rate is interpolated linearly. A grid time farther
+than 1.5 median periods from the stream's nearest sample (nearest) or between samples more
+than 3 median periods apart (linear) gets an empty cell. Rows outside the time span common to
+all streams are dropped, so the capture starts and ends with every sensor present.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from station.capture import Capture
+from station.errors import InputError
+from station.importers.options import IMPORTABLE, PRIMARY
+
+KINDS = ("accel", "gyro", "mag")
+COLUMNS = {"accel": ("ax", "ay", "az"), "gyro": ("gx", "gy", "gz"), "mag": ("mx", "my", "mz")}
+NAME = {"accel": "accelerometer", "gyro": "gyro", "mag": "magnetometer"}
+
+
+@dataclass
+class Stream:
+    """One sensor's samples as the log holds them.
+
+    ``t_s``: time in seconds (any origin, the same for every stream of one log), ``xyz``: (n, 3)
+    in ``unit``, ``temp_c``: (n,) sensor temperature or None. ``device_id`` and ``instance`` (the
+    index in the firmware's parameter names, e.g. n of ``CAL_ACCn_*``) where the log says.
+    """
+
+    kind: str
+    t_s: np.ndarray
+    xyz: np.ndarray
+    unit: str
+    source: str
+    device_id: int | None = None
+    instance: int | None = None
+    temp_c: np.ndarray | None = None
+
+
+@dataclass
+class Imported:
+    """Everything one reader found: streams by kind and metadata (``dict[str, str]``)."""
+
+    streams: dict[str, Stream]
+    meta: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+
+def fmt_param(value) -> str:
+    """A parameter value as the firmware stores it: integers as integers, floats as the
+    shortest text that gives back the same float32 (PX4 and ArduPilot keep float32)."""
+    if isinstance(value, (bool, np.bool_)):
+        return str(int(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    x = float(value)
+    if not math.isfinite(x):
+        return repr(x)
+    f32 = np.float32(x)
+    if float(f32) == x:  # a float32 value: its shortest form
+        text = np.format_float_positional(f32, unique=True, trim="-")
+        if len(text) > 16:
+            text = np.format_float_scientific(f32, unique=True, trim="-")
+        return text
+    return repr(x)
+
+
+def iso_utc(unix_s: float) -> str:
+    """A Unix time as the capture's ``date``: ISO date-time, UTC, whole seconds."""
+    return _dt.datetime.fromtimestamp(unix_s, _dt.UTC).replace(tzinfo=None).isoformat(timespec="seconds")
+
+
+def clean_stream(path, stream: Stream) -> Stream | None:
+    """Rows with a finite time, sorted by time (stable); None when nothing is left."""
+    t = np.asarray(stream.t_s, dtype=np.float64)
+    xyz = np.asarray(stream.xyz, dtype=np.float64).reshape(len(t), 3)
+    keep = np.isfinite(t)
+    order = np.argsort(t[keep], kind="stable")
+    t, xyz = t[keep][order], xyz[keep][order]
+    temp = None if stream.temp_c is None else np.asarray(stream.temp_c, dtype=np.float64)[keep][order]
+    if len(t) == 0:
+        return None
+    return Stream(stream.kind, t, xyz, stream.unit, stream.source, stream.device_id, stream.instance, temp)
+
+
+def _median_period(t: np.ndarray) -> float:
+    d = np.diff(t)
+    d = d[d > 0]
+    return float(np.median(d)) if len(d) else math.inf
+
+
+def align(grid_t: np.ndarray, t: np.ndarray, values: np.ndarray, grid_period: float) -> tuple[np.ndarray, str]:
+    """``values`` (n, k) sampled at ``t``, put on ``grid_t``: nearest sample when the rates
+    match (noise untouched), linear interpolation otherwise; empty (NaN) across gaps."""
+    period = _median_period(t)
+    out = np.full((len(grid_t), values.shape[1]), np.nan)
+    if len(t) == 1:
+        near = np.abs(grid_t - t[0]) <= 0.5 * grid_period
+        out[near] = values[0]
+        return out, "nearest"
+    same_rate = math.isfinite(period) and 0.8 <= period / grid_period <= 1.25
+    j = np.searchsorted(t, grid_t)
+    lo = np.clip(j - 1, 0, len(t) - 1)
+    hi = np.clip(j, 0, len(t) - 1)
+    if same_rate:
+        pick = np.where(np.abs(t[hi] - grid_t) < np.abs(grid_t - t[lo]), hi, lo)
+        ok = np.abs(t[pick] - grid_t) <= 1.5 * period
+        out[ok] = values[pick[ok]]
+        return out, "nearest"
+    span = t[hi] - t[lo]
+    inside = (grid_t >= t[0]) & (grid_t <= t[-1]) & (span <= 3 * period)
+    w = np.where(span > 0, (grid_t - t[lo]) / np.where(span > 0, span, 1.0), 0.0)[:, None]
+    interp = values[lo] * (1 - w) + values[hi] * w
+    out[inside] = interp[inside]
+    return out, "linear"
+
+
+def to_capture(path, imported: Imported, procedure: str, *, device: str | None = None,
+               kinds: tuple[str, ...] | None = None) -> Capture:
+    """The capture of ``imported`` for ``procedure``: rows at the primary sensor's samples."""
+    if procedure not in PRIMARY:
+        raise InputError(None, None, f"--procedure {procedure!r}: import makes captures for "
+                         f"{', '.join(IMPORTABLE)} (a log holds no LDV or centrifuge-speed data)")
+    streams = {}
+    for kind in KINDS:
+        s = imported.streams.get(kind)
+        if s is not None and (kinds is None or kind in kinds):
+            s = clean_stream(path, s)
+            if s is not None:
+                streams[kind] = s
+    primary = PRIMARY[procedure]
+    if primary not in streams:
+        found = ", ".join(NAME[k] for k in streams) or "no accelerometer, gyro or magnetometer"
+        raise InputError(path, None, f"{procedure} needs {NAME[primary]} data; this file has {found}")
+    grid = streams[primary]
+    if len(grid.t_s) < 2:
+        raise InputError(path, None, f"only {len(grid.t_s)} {NAME[primary]} sample in the file: nothing to calibrate")
+    # rows inside the span every stream covers
+    start = max(s.t_s[0] for s in streams.values())
+    end = min(s.t_s[-1] for s in streams.values())
+    if end < start:
+        others = ", ".join(f"{NAME[k]} {s.t_s[0]:.3f}–{s.t_s[-1]:.3f} s" for k, s in streams.items())
+        raise InputError(path, None, f"the sensors' time spans do not overlap ({others})")
+    rows = (grid.t_s >= start) & (grid.t_s <= end)
+    grid_t = grid.t_s[rows]
+    grid_period = _median_period(grid_t)
+    if len(grid_t) < 2 or not math.isfinite(grid_period):
+        raise InputError(path, None, f"fewer than 2 {NAME[primary]} samples where all sensors overlap")
+    # to the nanosecond: no log stamps finer, and no float noise from the subtraction in the file
+    columns: dict[str, np.ndarray] = {"t": np.round(grid_t - grid_t[0], 9)}
+    meta: dict[str, str] = {"station-capture": "1", "procedure": procedure}
+    if device:
+        meta["device"] = device
+    elif imported.meta.get("device"):
+        meta["device"] = imported.meta["device"]
+    how = []
+    for kind in KINDS:
+        s = streams.get(kind)
+        if s is None:
+            continue
+        if kind == primary or (len(s.t_s) == len(grid.t_s) and np.array_equal(s.t_s, grid.t_s)):
+            values = s.xyz[rows]  # the same samples (one message or one CSV row holds both)
+        else:
+            values, mode = align(grid_t, s.t_s, s.xyz, grid_period)
+            how.append(f"{kind} {mode}")
+        for j, name in enumerate(COLUMNS[kind]):
+            columns[name] = values[:, j]
+        meta[f"{kind}_unit"] = s.unit
+    temp = grid.temp_c[rows] if grid.temp_c is not None else None
+    if temp is not None and np.isfinite(temp).any():
+        columns["temp_c"] = temp
+    for key, value in imported.meta.items():
+        if key != "device":
+            meta.setdefault(key, value)
+    meta["sample_rate_hz"] = f"{1.0 / grid_period:.6g}"
+    if grid.device_id is not None:
+        meta["sensor_device_id"] = str(int(grid.device_id))
+    if grid.instance is not None:
+        meta["sensor_instance"] = str(int(grid.instance))
+    for kind, s in streams.items():
+        if s.device_id is not None:
+            meta[f"{kind}_device_id"] = str(int(s.device_id))
+    meta["import_source"] = "; ".join(streams[k].source for k in KINDS if k in streams)
+    if how:
+        meta["import_align"] = f"rows at the {primary} samples; " + ", ".join(how)
+    # parameters last, in name order, after the keys a reader looks for first
+    params = sorted(k for k in meta if k.startswith("param."))
+    meta = {k: v for k, v in meta.items() if not k.startswith("param.")} | {k: meta[k] for k in params}
+    return Capture(meta=meta, columns=columns, path=None if path is None else str(path))

@@ -1,0 +1,130 @@
+"""Which reader a file needs, and the capture it gives (for ``import``, ``calibrate``, ``diagnose``)."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from station.capture import Capture, read_capture, write_capture
+from station.errors import InputError
+from station.importers._common import NAME, Imported, to_capture
+from station.importers.options import (
+    FORMATS,
+    IMPORTABLE,
+    PRIMARY,
+    ImportOptions,
+    options_from_args,
+)
+
+_SUFFIX = {".ulg": "px4", ".bin": "ardupilot", ".tlog": "tlog"}
+
+
+def detect(path) -> str | None:
+    """The format of ``path`` by its name (and, for CSV, its header line); None for a station
+    capture or a file this cannot tell (then it is read as a capture, whose reader explains)."""
+    from station.importers import csvfiles, ros
+
+    p = Path(path)
+    fmt = _SUFFIX.get(p.suffix.lower())
+    if fmt:
+        return fmt
+    if ros.is_bag(p):
+        return "ros"
+    if p.is_file() and csvfiles.is_euroc(p):
+        return "euroc"
+    return None
+
+
+def read(path, opts: ImportOptions, fmt: str) -> Imported:
+    """The streams and metadata of ``path`` read as ``fmt``."""
+    if fmt not in FORMATS:
+        raise InputError(None, None, f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
+    if fmt != "px4" and opts.source != "auto":
+        raise InputError(None, None, "--source applies to PX4 logs only")
+    if fmt not in ("px4", "ardupilot", "tlog") and opts.instance is not None:
+        raise InputError(None, None, "--instance applies to PX4, ArduPilot and MAVLink logs only")
+    if fmt != "ros" and opts.topics:
+        raise InputError(None, None, "--topic applies to ROS bags and MCAP files only")
+    if fmt != "csv" and (opts.mapping or opts.units or opts.rate_hz is not None):
+        raise InputError(None, None, f"--map, --unit and --rate apply to plain CSV files (this is read as {fmt}: "
+                         "its units come from the file)")
+    if fmt == "px4":
+        from station.importers import px4
+
+        return px4.read(path, instance=opts.instance, source=opts.source)
+    if fmt in ("ardupilot", "tlog"):
+        from station.importers import ardupilot
+
+        reader = ardupilot.read_bin if fmt == "ardupilot" else ardupilot.read_tlog
+        return reader(path, instance=opts.instance)
+    if fmt == "ros":
+        from station.importers import ros
+
+        return ros.read(path, topics=opts.topics)
+    from station.importers import csvfiles
+
+    if fmt == "euroc":
+        return csvfiles.read_euroc(path)
+    return csvfiles.read_plain(path, mapping=opts.mapping, units=opts.units, rate_hz=opts.rate_hz)
+
+
+def infer_procedure(path, imported: Imported, fmt: str) -> str:
+    """The procedure when the data leave only one (a magnetometer alone: compass)."""
+    kinds = set(imported.streams)
+    if kinds == {"mag"}:
+        return "compass"
+    have = ", ".join(NAME[k] for k in imported.streams) or "no sensor data"
+    fits = [p for p in IMPORTABLE if PRIMARY[p] in kinds] or list(IMPORTABLE)
+    raise InputError(path, None, f"a {fmt} file with {have} data: say which procedure with --procedure "
+                     f"({', '.join(fits)})")
+
+
+def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
+    """``path`` as a capture (not yet written) and the reader's warnings."""
+    fmt = opts.fmt or detect(path) or "csv"
+    imported = read(path, opts, fmt)
+    procedure = opts.procedure or infer_procedure(path, imported, fmt)
+    device = opts.device
+    if device is None and fmt == "px4":
+        from station.importers import px4
+
+        device = px4.default_device(imported, PRIMARY[procedure])
+    return to_capture(path, imported, procedure, device=device), list(imported.warnings)
+
+
+def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
+    """What ``calibrate`` and ``diagnose`` read: a station capture as it is, or a file whose
+    format is clear (its name or header, or ``--format``) through the importer, then checked
+    by the capture reader exactly as ``station import`` followed by ``calibrate`` would be."""
+    fmt = opts.fmt or detect(path)
+    if fmt is None:
+        if opts.mapping or opts.units or opts.rate_hz is not None:
+            fmt = "csv"  # --map/--unit say it is a foreign CSV
+        else:
+            capture = read_capture(path)
+            if opts.procedure and capture.procedure and opts.procedure != capture.procedure:
+                raise InputError(path, capture.meta_lines.get("procedure"),
+                                 f"the capture says procedure {capture.procedure}; --procedure "
+                                 f"{opts.procedure} is for logs and other files read through the importer")
+            if opts.procedure and not capture.procedure:
+                capture.meta["procedure"] = opts.procedure
+            return capture, []
+    capture, warnings = import_file(path, ImportOptions(**{**opts.__dict__, "fmt": fmt}))
+    with tempfile.TemporaryDirectory(prefix="station-import-") as tmp:
+        tmp_path = os.path.join(tmp, "capture.csv")
+        write_capture(tmp_path, capture)
+        checked = read_capture(tmp_path)
+    checked.path = os.fspath(path)
+    checked.meta_lines = {}
+    checked.header_line = None
+    return checked, warnings
+
+
+def load_for_command(args: argparse.Namespace) -> Capture:
+    """``calibrate FILE`` / ``diagnose FILE``: the capture; the reader's warnings on stderr."""
+    capture, warnings = load_capture(args.file, options_from_args(args))
+    for w in warnings:
+        print(f"station: {args.file}: warning: {w}", file=sys.stderr)
+    return capture

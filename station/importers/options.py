@@ -1,0 +1,92 @@
+"""The command-line options that say how to read a log or a foreign CSV (import, calibrate,
+diagnose). Light on purpose: building the parser must not load numpy."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+
+from station.errors import InputError
+
+FORMATS = ("px4", "ardupilot", "tlog", "ros", "euroc", "csv")
+FORMAT_HELP = ("px4 (.ulg), ardupilot (.bin DataFlash), tlog (.tlog MAVLink), ros (.bag, .db3, .mcap, "
+               "rosbag2 folder), euroc (EuRoC/Kalibr imu CSV), csv (any CSV with --map/--unit)")
+# Procedures a log can feed: the sensor each calibrates gives the capture's rows.
+PRIMARY = {"accel-tabletop": "accel", "compass": "mag", "gyro-drift": "gyro"}
+IMPORTABLE = tuple(PRIMARY)
+TARGETS = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c")
+
+
+@dataclass
+class ImportOptions:
+    """What the command line says about reading a foreign file (all optional)."""
+
+    fmt: str | None = None
+    procedure: str | None = None
+    instance: int | None = None
+    source: str = "auto"
+    topics: dict[str, str] = field(default_factory=dict)
+    mapping: dict[str, str] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    rate_hz: float | None = None
+    device: str | None = None
+
+
+def parse_pairs(items: list[str] | None, what: str) -> dict[str, str]:
+    """``["t=time_s,ax=acc_x", "ay=acc_y"]`` → ``{"t": "time_s", "ax": "acc_x", "ay": "acc_y"}``."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        for part in item.split(","):
+            if not part.strip():
+                continue
+            key, sep, value = part.partition("=")
+            key, value = key.strip(), value.strip()
+            if not sep or not key or not value:
+                raise InputError(None, None, f"{what} {part.strip()!r}: expected NAME=VALUE")
+            if key in out:
+                raise InputError(None, None, f"{what}: {key} given twice")
+            out[key] = value
+    return out
+
+
+def add_arguments(parser: argparse.ArgumentParser, *, for_import: bool = False) -> None:
+    """Add the import options to ``parser`` (``--procedure`` required for ``station import``)."""
+    g = parser.add_argument_group("reading logs and other files (README: Import)")
+    g.add_argument("--format", dest="import_format", choices=FORMATS, default=None,
+                   help=f"the file's format (default: from its name or header): {FORMAT_HELP}")
+    g.add_argument("--procedure", dest="import_procedure", choices=IMPORTABLE, default=None,
+                   required=for_import,
+                   help="the procedure the data are for (sets the capture's rows: accel samples for "
+                        "accel-tabletop, gyro for gyro-drift, mag for compass)"
+                        + ("" if for_import else "; needed for a log unless it holds only magnetometer data"))
+    g.add_argument("--instance", type=int, default=None, metavar="N",
+                   help="PX4: uORB instance of sensor_accel/gyro/mag; ArduPilot/MAVLink: IMU and compass "
+                        "instance (0 = first; default 0)")
+    g.add_argument("--source", choices=("auto", "raw", "combined"), default="auto",
+                   help="PX4: raw sensor_* topics (before the board's calibration) or sensor_combined "
+                        "(after it); auto = raw where logged")
+    g.add_argument("--topic", action="append", default=None, metavar="KIND=TOPIC",
+                   help="ROS: which topic to read when there are several (imu=/imu0, mag=/mag, temp=/temp)")
+    g.add_argument("--map", action="append", default=None, metavar="COL=SOURCE,...",
+                   help=f"CSV: capture column = source column name or 1-based number ({', '.join(TARGETS)})")
+    g.add_argument("--unit", action="append", default=None, metavar="KIND=UNIT,...",
+                   help="CSV: units: accel=g|m/s^2|mg|counts|V, gyro=deg/s|rad/s|…, mag=uT|nT|gauss|…, t=s|ms|us|ns")
+    g.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="CSV without a time column: the sample rate")
+
+
+def options_from_args(args: argparse.Namespace) -> ImportOptions:
+    topics = parse_pairs(getattr(args, "topic", None), "--topic")
+    for key in topics:
+        if key not in ("imu", "mag", "temp"):
+            raise InputError(None, None, f"--topic {key}=…: expected imu, mag or temp")
+    return ImportOptions(
+        fmt=getattr(args, "import_format", None),
+        procedure=getattr(args, "import_procedure", None),
+        instance=getattr(args, "instance", None),
+        source=getattr(args, "source", "auto") or "auto",
+        topics=topics,
+        mapping=parse_pairs(getattr(args, "map", None), "--map"),
+        units=parse_pairs(getattr(args, "unit", None), "--unit"),
+        rate_hz=getattr(args, "rate", None),
+        device=getattr(args, "device", None),
+    )

@@ -1,0 +1,221 @@
+"""PX4 flight logs (ULog, ``.ulg``) through pyulog.
+
+Topics read (PX4's own message definitions, ``msg/SensorAccel.msg`` etc.):
+
+- ``sensor_accel`` / ``sensor_gyro`` / ``sensor_mag``: one uORB instance per sensor, with its
+  ``device_id``; ``x y z`` in m/s², rad/s and gauss, in the board frame. Since PX4 v1.11 these
+  are the drivers' output **before** the calibration: PX4's sensors module applies
+  ``CAL_<ACC|GYRO|MAG>n_*`` afterwards (``Correct(): R · ((data − thermal_offset − offset) ∘
+  scale)`` in ``src/lib/sensor_calibration``) to the slot ``n`` whose ``CAL_…n_ID`` equals the
+  ``device_id``. So ``corrected: false``. Older logs whose ``sensor_accel`` still has ``x_raw``
+  were calibrated inside the driver: ``corrected: true``.
+- ``sensor_combined`` (when the per-sensor topics are not logged, or ``--source combined``):
+  ``accelerometer_m_s2`` and ``gyro_rad`` (and ``magnetometer_ga`` in old logs) after the
+  calibration and the board rotation (``SENS_BOARD_ROT``): ``corrected: true``.
+
+Every ``CAL_*`` and ``SENS_BOARD_*`` parameter in the log goes into the metadata as
+``param.<NAME>`` with its value at the start of the imported data; parameters changed during
+the data are listed in ``params_changed``.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+
+import numpy as np
+
+from station.errors import InputError
+from station.importers._common import Imported, Stream, fmt_param, iso_utc
+
+RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
+CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
+UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
+COMBINED = {"accel": "accelerometer_m_s2", "gyro": "gyro_rad", "mag": "magnetometer_ga"}
+GPS_TOPICS = ("sensor_gps", "vehicle_gps_position")
+PARAM_PREFIXES = ("CAL_", "SENS_BOARD_")
+SOURCES = ("auto", "raw", "combined")
+
+
+def _load(path):
+    from pyulog import ULog
+
+    wanted = list(RAW_TOPICS.values()) + ["sensor_combined", "sensor_selection", *GPS_TOPICS]
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):  # pyulog reports oddities on stdout
+            return ULog(str(path), wanted)
+    except FileNotFoundError:
+        raise InputError(path, None, "no such file") from None
+    except IsADirectoryError:
+        raise InputError(path, None, "is a directory, not a ULog file") from None
+    except PermissionError:
+        raise InputError(path, None, "permission denied") from None
+    except Exception as exc:  # noqa: BLE001 - pyulog raises bare Exceptions on a bad header
+        raise InputError(path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})") from None
+
+
+def _topics(ulog, name: str) -> dict[int, object]:
+    return {d.multi_id: d for d in ulog.data_list if d.name == name and len(d.data.get("timestamp", ())) > 0}
+
+
+def _time_us(data: dict) -> np.ndarray:
+    ts = data.get("timestamp_sample")
+    if ts is None or not np.any(ts):
+        ts = data["timestamp"]
+    return np.asarray(ts, dtype=np.int64)
+
+
+def _slot(params: dict, kind: str, device_id: int | None) -> int | None:
+    """n of the CAL_<S>n_ID slot that holds ``device_id`` (the slot PX4 applies), or None."""
+    if not device_id:
+        return None
+    for n in range(8):
+        if params.get(f"{CAL_PREFIX[kind]}{n}_ID") == device_id:
+            return n
+    return None
+
+
+def read(path, *, instance: int | None = None, source: str = "auto", kinds=None) -> Imported:
+    """Streams and metadata of a ULog file. ``instance``: the uORB instance of each
+    ``sensor_*`` topic (default 0); ``source``: ``raw``, ``combined`` or ``auto`` (raw topics
+    where logged, else ``sensor_combined``)."""
+    if source not in SOURCES:
+        raise InputError(None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}")
+    ulog = _load(path)
+    params = dict(ulog.initial_parameters)
+    info = ulog.msg_info_dict
+    raw = {kind: _topics(ulog, topic) for kind, topic in RAW_TOPICS.items()}
+    wanted = tuple(kinds or RAW_TOPICS)
+    have_raw = any(raw[k] for k in wanted)
+    combined = _topics(ulog, "sensor_combined")
+    use_raw = source == "raw" or (source == "auto" and have_raw)
+    if source == "raw" and not have_raw:
+        raise InputError(path, None, "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic "
+                         "(try --source combined)")
+    if not use_raw and not combined:
+        raise InputError(path, None, "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag "
+                         "nor sensor_combined")
+    streams: dict[str, Stream] = {}
+    meta: dict[str, str] = {"firmware": "px4"}
+    warnings: list[str] = []
+    t0_us = None
+    if use_raw:
+        corrected = False
+        for kind, topics in raw.items():
+            if not topics:
+                continue
+            inst = 0 if instance is None else instance
+            if inst not in topics:
+                if instance is None:
+                    inst = min(topics)
+                else:
+                    raise InputError(path, None, f"--instance {instance}: {RAW_TOPICS[kind]} has instances "
+                                     f"{', '.join(map(str, sorted(topics)))}")
+            d = topics[inst].data
+            ids = np.unique(np.asarray(d.get("device_id", [0])))
+            if len(ids) > 1:
+                raise InputError(path, None, f"{RAW_TOPICS[kind]}[{inst}] changes device_id during the log "
+                                 f"({', '.join(map(str, ids))}): not one sensor")
+            device_id = int(ids[0]) or None
+            if "x_raw" in d:  # before PX4 v1.11 the driver applied the calibration
+                corrected = True
+            t_us = _time_us(d)
+            temp = d.get("temperature")
+            streams[kind] = Stream(kind, t_us.astype(np.float64), np.column_stack([d["x"], d["y"], d["z"]]),
+                                   UNITS[kind], f"{RAW_TOPICS[kind]}[{inst}]", device_id,
+                                   _slot(params, kind, device_id),
+                                   None if temp is None else np.asarray(temp, dtype=np.float64))
+            if device_id is not None and streams[kind].instance is None:
+                warnings.append(f"no {CAL_PREFIX[kind]}n_ID holds device id {device_id}: the board applies "
+                                "no calibration slot to this sensor")
+        meta["corrected"] = "true" if corrected else "false"
+        n_raw = max(len(s.t_s) for s in streams.values()) if streams else 0
+        n_comb = len(combined[min(combined)].data["timestamp"]) if combined else 0
+        if n_comb > 4 * n_raw:
+            warnings.append(f"the raw sensor topics hold {n_raw} samples, sensor_combined {n_comb}: "
+                            "--source combined reads those (already corrected by the board)")
+    else:
+        d = combined[min(combined)].data
+        t_us = np.asarray(d["timestamp"], dtype=np.int64)
+        selection = _topics(ulog, "sensor_selection")
+        sel = selection[min(selection)].data if selection else {}
+        for kind, field in COMBINED.items():
+            cols = [f"{field}[{j}]" for j in range(3)]
+            if not all(c in d for c in cols):
+                continue
+            ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
+            device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
+            streams[kind] = Stream(kind, t_us.astype(np.float64), np.column_stack([d[c] for c in cols]),
+                                   UNITS[kind], f"sensor_combined ({field})", device_id,
+                                   _slot(params, kind, device_id))
+        meta["corrected"] = "true"
+    if not streams:
+        raise InputError(path, None, "no accelerometer, gyro or magnetometer samples in the log")
+    t0_us = min(s.t_s[0] for s in streams.values())
+    t1_us = max(s.t_s[-1] for s in streams.values())
+    for s in streams.values():  # µs since boot → s since boot
+        s.t_s = s.t_s * 1e-6
+    # parameters in use at the start of the data; any change while the data run is listed
+    late: set[str] = set()
+    for ts, name, value in sorted(ulog.changed_parameters, key=lambda c: c[0]):
+        if not name.startswith(PARAM_PREFIXES):
+            continue
+        if ts <= t0_us:
+            params[name] = value
+        elif ts <= t1_us:
+            late.add(name)
+    if late:
+        meta["params_changed"] = ",".join(sorted(late))
+        warnings.append(f"parameters changed while the data were logged: {', '.join(sorted(late))} "
+                        "(param.* holds the values at the start)")
+    board = str(info.get("ver_hw") or "px4")
+    uid = str(info.get("sys_uuid") or "")
+    meta["board"] = board
+    if uid:
+        meta["board_uid"] = uid
+    if info.get("ver_sw"):
+        meta["firmware_version"] = str(info.get("ver_sw_branch") or info["ver_sw"])
+    _place_and_date(ulog, t0_us, meta)
+    for name in sorted(params):
+        if name.startswith(PARAM_PREFIXES):
+            meta[f"param.{name}"] = fmt_param(params[name])
+    return Imported(streams, meta, warnings)
+
+
+def default_device(imported: Imported, kind: str) -> str | None:
+    """``<board>[-<uid>]-<sensor><device id>``: one history per sensor of one board."""
+    s = imported.streams.get(kind)
+    board = imported.meta.get("board", "px4")
+    uid = imported.meta.get("board_uid")
+    name = f"{board}-{uid}" if uid else board
+    return f"{name}-{kind}{s.device_id}" if s is not None and s.device_id else name
+
+
+def _place_and_date(ulog, t0_us: float, meta: dict[str, str]) -> None:
+    """``date`` from the GPS's UTC time, ``latitude_deg``… from its 3-D fixes (median)."""
+    for name in GPS_TOPICS:
+        topics = _topics(ulog, name)
+        if not topics:
+            continue
+        d = topics[min(topics)].data
+        ts = np.asarray(d["timestamp"], dtype=np.float64)
+        utc = np.asarray(d.get("time_utc_usec", np.zeros(len(ts))), dtype=np.float64)
+        good = utc > 0
+        if good.any():
+            i = int(np.flatnonzero(good)[0])
+            meta["date"] = iso_utc((utc[i] - ts[i] + t0_us) * 1e-6)
+        fix = np.asarray(d.get("fix_type", np.zeros(len(ts))))
+        fixed = fix >= 3
+        if fixed.any():
+            if "latitude_deg" in d:
+                lat, lon = np.asarray(d["latitude_deg"])[fixed], np.asarray(d["longitude_deg"])[fixed]
+                alt = np.asarray(d.get("altitude_msl_m", np.full(len(ts), np.nan)))[fixed]
+            elif "lat" in d:
+                lat, lon = np.asarray(d["lat"])[fixed] * 1e-7, np.asarray(d["lon"])[fixed] * 1e-7
+                alt = np.asarray(d.get("alt", np.full(len(ts), np.nan)))[fixed] * 1e-3
+            else:
+                return
+            meta["latitude_deg"] = f"{float(np.median(lat)):.7f}"
+            meta["longitude_deg"] = f"{float(np.median(lon)):.7f}"
+            if np.isfinite(alt).any():
+                meta["altitude_m"] = f"{float(np.nanmedian(alt)):.2f}"
+        return
