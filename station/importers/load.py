@@ -50,6 +50,11 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
     if fmt != "csv" and (opts.mapping or opts.units or opts.rate_hz is not None):
         raise InputError(None, None, f"--map, --unit and --rate apply to plain CSV files (this is read as {fmt}: "
                          "its units come from the file)")
+    p = Path(path)
+    if not p.exists():
+        raise InputError(path, None, "no such file")
+    if p.is_file() and p.stat().st_size == 0:
+        raise InputError(path, None, "empty file")
     if fmt == "px4":
         from station.importers import px4
 
