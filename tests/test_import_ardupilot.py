@@ -35,7 +35,7 @@ class DataFlashWriter:
     def __init__(self, path, units: bool = True):
         self.enc = DFReader.DFReader_binary.__new__(DFReader.DFReader_binary)
         self.enc.formats = {0x80: DFReader.DFFormat(0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns")}
-        self.f = open(path, "wb")
+        self.f = open(path, "wb")  # noqa: SIM115 - closed by close(), like a writer object
         self.fmt = {}
         for name, fmt, cols in (("UNIT", "QbZ", "TimeUS,Id,Label"), ("MULT", "Qbd", "TimeUS,Id,Mult"),
                                 ("FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds"),

@@ -152,8 +152,8 @@ def read(path, *, instance: int | None = None, source: str = "auto", kinds=None)
         raise InputError(path, None, "no accelerometer, gyro or magnetometer samples in the log")
     t0_us = min(s.t_s[0] for s in streams.values())
     t1_us = max(s.t_s[-1] for s in streams.values())
-    for s in streams.values():  # µs since boot → s since boot
-        s.t_s = s.t_s * 1e-6
+    for s in streams.values():  # µs → s from the first sample (subtract first: SITL stamps are Unix µs)
+        s.t_s = (s.t_s - t0_us) * 1e-6
     # parameters in use at the start of the data; any change while the data run is listed
     late: set[str] = set()
     for ts, name, value in sorted(ulog.changed_parameters, key=lambda c: c[0]):

@@ -29,10 +29,11 @@ def is_bag(path) -> bool:
     return p.suffix.lower() in SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
 
 
-def _stamp(msg, fallback_ns: int) -> float:
+def _stamp(msg, fallback_ns: int) -> int:
+    """The header stamp in integer ns (the bag's receive time where it is zero)."""
     st = msg.header.stamp
     ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
-    return (ns if ns else fallback_ns) * 1e-9
+    return ns if ns else int(fallback_ns)
 
 
 def _pick(path, found: dict[str, int], want: str | None, what: str) -> str | None:
@@ -106,6 +107,9 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
         raise InputError(path, None, f"cannot read the bag ({type(exc).__name__}: {exc})") from None
     finally:
         reader.close()
+    # seconds from the earliest stamp, subtracted in integer ns (Unix ns in a float lose 0.2 µs)
+    origin = min((r[0] for rows in (acc, gyr, mag, temp) for r in rows[:1]), default=0)
+    acc, gyr, mag, temp = ([((r[0] - origin) * 1e-9, *r[1:]) for r in rows] for rows in (acc, gyr, mag, temp))
     streams: dict[str, Stream] = {}
     for kind, rows, unit, topic in (("accel", acc, "m/s^2", imu_topic), ("gyro", gyr, "rad/s", imu_topic),
                                     ("mag", mag, "nT", mag_topic)):
