@@ -192,7 +192,7 @@ def to_capture(path, imported: Imported, procedure: str, *, device: str | None =
     for kind, s in streams.items():
         if s.device_id is not None:
             meta[f"{kind}_device_id"] = str(int(s.device_id))
-    meta["import_source"] = "; ".join(streams[k].source for k in KINDS if k in streams)
+    meta["import_source"] = "; ".join(dict.fromkeys(streams[k].source for k in KINDS if k in streams))
     if how:
         meta["import_align"] = f"rows at the {primary} samples; " + ", ".join(how)
     # parameters last, in name order, after the keys a reader looks for first
