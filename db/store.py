@@ -35,15 +35,6 @@ from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
 BUSY_TIMEOUT_S = 30.0
 MAX_PREDICTION_YEARS = 1000.0  # a drift slower than tolerance per millennium predicts no exit
 
-# Sensor kinds each procedure calibrates (merged into devices.sensor_kinds on save).
-PROCEDURE_KINDS = {
-    "accel-tabletop": "accel",
-    "accel-centrifuge": "accel",
-    "compass": "mag",
-    "gyro-drift": "gyro",
-    "ldv": "ldv",
-}
-
 _RESULT_COLUMNS = ("procedure", "device", "model", "params", "uncertainty", "residual_rms", "n_positions", "warnings")
 
 
@@ -305,13 +296,16 @@ class Store:
         )
         return capture_id, digest
 
-    def save_capture(self, *, device_id, procedure, meta: dict, columns: dict, operator=None, host=None) -> int:
-        """Store one capture losslessly (see `db.codec`); the device is created if unknown."""
+    def save_capture(self, *, device_id, procedure, meta: dict, columns: dict, operator=None, host=None,
+                     sensor_kind: str | None = None) -> int:
+        """Store one capture losslessly (see `db.codec`); the device is created if unknown.
+        ``sensor_kind`` (accel, gyro, mag, ldv: the caller's procedure registry says which) is
+        merged into the device's ``sensor_kinds``."""
         self._check_id(device_id)
         operator = operator if operator is not None else (meta or {}).get("operator")
         host = host if host is not None else socket.gethostname()
         with self._write() as conn:
-            self._ensure_device(conn, device_id, PROCEDURE_KINDS.get(procedure))
+            self._ensure_device(conn, device_id, sensor_kind)
             capture_id, _ = self._insert_capture(
                 conn, device_id=device_id, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
             )
@@ -362,12 +356,14 @@ class Store:
         time=None,
         software_version: str | None = None,
         host: str | None = None,
+        sensor_kind: str | None = None,
     ) -> int:
         """Store a capture and its calibration result (calibrate.md shape) in one transaction.
 
         The device is `device_id`, else `result['device']`, else `meta['device']`
         (created if unknown). An accepted calibration supersedes the device's latest
-        accepted calibration of the same procedure at or before its time. Returns the
+        accepted calibration of the same procedure at or before its time. ``sensor_kind``
+        (accel, gyro, mag, ldv) is merged into the device's ``sensor_kinds``. Returns the
         calibration id.
         """
         meta = dict(meta or {})
@@ -390,7 +386,7 @@ class Store:
         residual = P.clean_json(result.get("residual_rms"))
         n_pos = result.get("n_positions")
         with self._write() as conn:
-            self._ensure_device(conn, device, PROCEDURE_KINDS.get(procedure))
+            self._ensure_device(conn, device, sensor_kind)
             capture_id, capture_sha = self._insert_capture(
                 conn, device_id=device, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
             )

@@ -15,6 +15,7 @@ from textual.app import App
 from textual.binding import Binding
 
 from station.messages import StoreLoaded
+from station.procedures import registry
 
 
 @dataclass
@@ -25,7 +26,7 @@ class Session:
     source: object | None = None  # a station.sources source, started on connect
     device_id: str = ""
     model: str = ""
-    procedure: str = "accel-tabletop"
+    procedure: str = registry.DEFAULT
     average_s: float = 180.0
     settle_s: float = 2.0
     scripted: bool = False  # the demo's scripted operator follows the prompts
@@ -80,7 +81,7 @@ class StationApp(App):
 
         self.push_screen(ConnectScreen())
         if self.start == "procedure":
-            self.push_screen(procedure_screen(self.session.procedure))
+            self.push_screen(registry.screen_for(self.session.procedure))
         elif self.start == "history":
             from station.screens.history import HistoryScreen
 
@@ -128,34 +129,6 @@ class StationApp(App):
 
         if not isinstance(self.screen, HelpScreen):
             self.push_screen(HelpScreen())
-
-
-def procedure_screen(procedure: str):
-    """The guided screen of a procedure (P1, P2, P3, P4 static, the gyro noise run)."""
-    if procedure == "compass":
-        from station.screens.compass import CompassScreen
-
-        return CompassScreen()
-    if procedure == "gyro-drift":
-        from station.screens.gyrodrift import HoldScreen
-
-        return HoldScreen()
-    if procedure == "gyro-noise":
-        from station.screens.noise import NoiseHoldScreen
-
-        return NoiseHoldScreen()
-    if procedure == "accel-centrifuge":
-        from station.screens.centrifuge import CentrifugeScreen
-
-        return CentrifugeScreen()
-    from station.screens.tabletop import ProcedureScreen
-
-    return ProcedureScreen()
-
-
-GUIDED = {"accel-tabletop": "P1 accelerometer, level table", "accel-centrifuge": "P2 accelerometer, centrifuge",
-          "compass": "P3 compass sweep", "gyro-drift": "P4 gyro drift, static base",
-          "gyro-noise": "Gyro noise (Allan) run"}
 
 
 def make_app(db_path: str | None = None, device=None, *, demo: bool = False, average_s: float | None = None,

@@ -1,46 +1,43 @@
 """`calibrate_capture`: a capture in, the calibrate.md result dict out.
 
-Each procedure's logic lives in ``station/procedures/<module>.py`` with
-``calibrate(capture, method=None) -> dict`` (and optionally ``format_text(result) -> str``
-for the person-readable report). This module only dispatches.
+Each procedure's logic lives in its module (``station/procedures/<stem>.py``, listed in
+``station.procedures.registry``; its shape is ``station.procedures.contract.ProcedureModule``).
+This module only dispatches.
 """
 from __future__ import annotations
 
-import importlib
 import json
 import math
 
 import numpy as np
 
 from station.errors import InputError, UnsupportedError
-
-CALIBRATORS = {
-    "accel-tabletop": "station.procedures.tabletop",
-    "accel-centrifuge": "station.procedures.centrifuge",
-    "compass": "station.procedures.compass",
-    "gyro-drift": "station.procedures.gyrodrift",
-    "ldv": "station.procedures.ldv",
-}
+from station.procedures import registry
 
 
 def procedure_module(procedure: str | None, path=None):
+    """The module of ``procedure`` (InputError naming ``path`` when there is none)."""
     if not procedure:
         raise InputError(path, None, "metadata has no 'procedure': say which procedure this capture is for")
-    if procedure not in CALIBRATORS:
+    entry = registry.get(procedure)
+    if entry is None:
         raise InputError(path, None, f"unknown procedure {procedure!r}")
     try:
-        return importlib.import_module(CALIBRATORS[procedure])
+        return entry.load()
     except ModuleNotFoundError as exc:
-        if exc.name == CALIBRATORS[procedure]:
+        if exc.name == entry.module:
             raise UnsupportedError(f"{procedure}: this station cannot calibrate it yet") from None
         raise
 
 
-def calibrate_capture(capture, method: str | None = None) -> dict:
-    """The calibrate.md result for ``capture`` (a :class:`station.capture.Capture`)."""
+def calibrate_capture(capture, method: str | None = None, *, prepared=None) -> dict:
+    """The calibrate.md result for ``capture`` (a :class:`station.capture.Capture`);
+    ``prepared``: the module's ``prepare(capture)``, when the caller has it already."""
     module = procedure_module(capture.procedure, capture.path)
     try:
-        return module.calibrate(capture, method=method)
+        if prepared is None:
+            return module.calibrate(capture, method=method)
+        return module.calibrate(capture, method=method, prepared=prepared)
     except np.linalg.LinAlgError as exc:  # NaN/inf reached a decomposition: degenerate or absurd data
         raise UnsupportedError(f"{capture.path}: {capture.procedure}: the fit failed numerically ({exc}); "
                                "check the data: constant, all zero or absurdly large values?") from None

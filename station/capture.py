@@ -34,9 +34,9 @@ import numpy as np
 
 from solvers.units import ACCEL_UNITS, GYRO_UNITS, MAG_UNITS, RAW_UNITS
 from station.errors import InputError
+from station.procedures.registry import NAMES as PROCEDURES
 
 FORMAT_VERSION = "1"
-PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv")
 TEXT_COLUMNS = frozenset({"position"})
 GYRO_MODES = ("reference", "static")
 

@@ -5,6 +5,7 @@ import getpass
 import socket
 
 from station import __version__
+from station.procedures import registry
 
 
 def open_store(path: str):
@@ -21,6 +22,7 @@ def save_result(path: str, capture, result: dict, *, device_id: str | None = Non
         operator = operator or getpass.getuser()
     except Exception:
         operator = operator or None
+    entry = registry.get(result.get("procedure") or capture.meta.get("procedure"))
     return store.save_calibration(result, meta=capture.meta, columns=capture.columns, device_id=device_id,
                                   operator=operator, accepted=accepted, software_version=__version__,
-                                  host=socket.gethostname())
+                                  host=socket.gethostname(), sensor_kind=entry.sensor_kind if entry else None)

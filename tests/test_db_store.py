@@ -223,7 +223,8 @@ def test_save_calibration_stores_capture_result_and_device(store):
     meta, cols = small_capture(device="IMU-9", date="2026-11-21")
     r = accel_result(device="IMU-9")
     r["uncertainty"]["B"][1] = float("nan")
-    cid = store.save_calibration(r, meta=meta, columns=cols, operator="bo", software_version="0.1.0")
+    cid = store.save_calibration(r, meta=meta, columns=cols, operator="bo", software_version="0.1.0",
+                                 sensor_kind="accel")
     cal = store.calibration(cid)
     assert cal["device_id"] == "IMU-9" and cal["time"] == "2026-11-21T00:00:00Z"
     assert cal["software_version"] == "0.1.0" and cal["operator"] == "bo" and cal["accepted"] is True

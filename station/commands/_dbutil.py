@@ -9,8 +9,6 @@ from contextlib import contextmanager
 
 from station.errors import InputError
 
-PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv")  # capture-format.md
-
 
 def add_db_option(parser: argparse.ArgumentParser) -> None:
     """`--db` on a nested subcommand too (cli.py adds it to top-level commands only)."""

@@ -23,6 +23,6 @@ def run(args: argparse.Namespace) -> int:
     from station.procedures.diagnose import analyse, format_text
 
     capture = load_for_command(args)  # a capture, or a log / EuRoC file read through the importer
-    result, diag, drivers = analyse(capture)
-    print(to_json(result) if args.json else format_text(result, diag, drivers, plots=not args.no_plots))
+    result, diag, inp = analyse(capture)
+    print(to_json(result) if args.json else format_text(result, diag, inp, plots=not args.no_plots))
     return 0

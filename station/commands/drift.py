@@ -5,7 +5,8 @@ import argparse
 import os
 import sys
 
-from station.commands._dbutil import PROCEDURES, fmt_num, open_store, print_json, require_device
+from station.commands._dbutil import fmt_num, open_store, print_json, require_device
+from station.procedures import registry
 from station.errors import InputError
 
 MAX_PLOTS = 4
@@ -15,7 +16,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("drift", help="trend of each calibration coefficient, rate per year ± sigma")
     p.add_argument("id", metavar="ID", help="device id")
     p.add_argument("--param", help="one coefficient (B[0], beam1.dK) or a block (B = all of B)")
-    p.add_argument("--procedure", choices=PROCEDURES, help="only this procedure")
+    p.add_argument("--procedure", choices=registry.NAMES, help="only this procedure")
     p.add_argument("--json", action="store_true", help="a JSON list, one object per coefficient")
     p.add_argument("--no-plot", action="store_true", help="the table without the terminal plot")
     p.set_defaults(func=run)

@@ -4,13 +4,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from station.commands._dbutil import PROCEDURES, fmt_num, open_store, print_json, require_device
+from station.commands._dbutil import fmt_num, open_store, print_json, require_device
+from station.procedures import registry
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("history", help="a device's calibrations, oldest first")
     p.add_argument("id", metavar="ID", help="device id")
-    p.add_argument("--procedure", choices=PROCEDURES, help="only this procedure")
+    p.add_argument("--procedure", choices=registry.NAMES, help="only this procedure")
     p.add_argument("--json", action="store_true", help="a JSON list of calibration records")
     p.set_defaults(func=run)
 

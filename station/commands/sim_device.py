@@ -11,8 +11,7 @@ import sys
 import threading
 
 from station.errors import InputError
-
-PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv")
+from station.procedures import registry
 
 
 def _effects(items: list[str] | None) -> dict[str, float]:
@@ -37,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "port (docs/protocol.md).",
     )
     p.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="sample rate (default 100)")
-    p.add_argument("--procedure", default="accel-tabletop", choices=PROCEDURES)
+    p.add_argument("--procedure", default=registry.DEFAULT, choices=registry.NAMES)
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--effect", action="append", metavar="NAME=VALUE", help="an effect of diagnose.md and its size")

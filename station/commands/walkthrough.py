@@ -9,12 +9,13 @@ import argparse
 import os
 import tempfile
 
-from station.commands.simulate import PROCEDURES, seed_arg
+from station.commands.simulate import seed_arg
+from station.procedures import registry
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("walkthrough", help="simulate a capture, calibrate it and compare with the truth")
-    p.add_argument("--procedure", default="accel-tabletop", choices=PROCEDURES)
+    p.add_argument("--procedure", default=registry.DEFAULT, choices=registry.NAMES)
     p.add_argument("--seed", type=seed_arg, default=1)
     p.set_defaults(func=run)
 

@@ -17,6 +17,7 @@ data is changed.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,8 +25,10 @@ from solvers import centrifuge as C
 from solvers import frames
 from solvers.errors import SolverError
 from station.errors import InputError, UnsupportedError
+from station.procedures.contract import DiagnosisInput
 
 MODEL = "N = S Φ [f + D f∘f] + b,  |f|² = A² + 1,  A = ω²R/g"
+DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
 BASES = ("exact", "exact-gamma", "paper", "paper-3rd")
 
 
@@ -75,16 +78,23 @@ def _rows(capture):
     return np.array(N).reshape(-1, 3), np.array(W), L, np.array(S).reshape(-1, 3), lines
 
 
-def calibrate(capture, method: str | None = None) -> dict:
-    """The calibrate.md result for an ``accel-centrifuge`` capture."""
-    key = method or "exact"
-    all_rows = key.endswith("-all")
-    base = key[:-4] if all_rows else key
-    if base not in BASES:
-        raise UnsupportedError(f"accel-centrifuge: unknown method {key!r} (methods: {', '.join(BASES)}, "
-                               "each optionally with -all)")
+@dataclass
+class Prepared:
+    """A P2 capture read once: the rows of mean outputs, the radius and local gravity."""
+
+    N: np.ndarray                 # mean outputs (n, 3), the capture's accel_unit
+    speed_rad_s: np.ndarray       # (n,)
+    labels: list[str]             # mounting (position) per row
+    sigma_N: np.ndarray | None    # standard error of each mean (n, 3), None when not measured
+    lines: list[int]              # the capture's line of each row
+    radius_m: float
+    g_mps2: float
+    warnings: list[str] = field(default_factory=list)
+
+
+def prepare(capture) -> Prepared:
+    """The radius, local gravity and averaged rows of ``capture`` (refusals as calibrate's)."""
     warnings: list[str] = []
-    unit = capture.meta.get("accel_unit") or "raw"
     R = capture.float_meta("radius_m")
     if R is None or R <= 0:
         raise InputError(capture.path, capture.meta_lines.get("radius_m"), "metadata needs 'radius_m' (the centrifuge "
@@ -98,6 +108,22 @@ def calibrate(capture, method: str | None = None) -> dict:
             g = frames.G_STANDARD_MPS2
             warnings.append("no g_mps2 or latitude_deg: using standard gravity 9.80665 m/s²")
     N, w, labels, sigma_N, lines = _rows(capture)
+    return Prepared(N, w, labels, sigma_N, lines, R, g, warnings)
+
+
+def calibrate(capture, method: str | None = None, *, prepared: Prepared | None = None) -> dict:
+    """The calibrate.md result for an ``accel-centrifuge`` capture."""
+    key = method or "exact"
+    all_rows = key.endswith("-all")
+    base = key[:-4] if all_rows else key
+    if base not in BASES:
+        raise UnsupportedError(f"accel-centrifuge: unknown method {key!r} (methods: {', '.join(BASES)}, "
+                               "each optionally with -all)")
+    unit = capture.meta.get("accel_unit") or "raw"
+    prep = prepared if prepared is not None else prepare(capture)
+    warnings = list(prep.warnings)
+    R, g = prep.radius_m, prep.g_mps2
+    N, w, labels, sigma_N, lines = prep.N, prep.speed_rad_s, prep.labels, prep.sigma_N, prep.lines
     rho = C.norm_target(w, R, g)
     n_all = len(N)
     if len(np.unique(np.round(w, 9))) < 2:
@@ -197,3 +223,22 @@ def format_text(result: dict) -> str:
     for w in r["warnings"]:
         lines.append(f"warning    {w}")
     return "\n".join(lines)
+
+
+def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
+    """The P2 diagnosis problem around the baseline ``base`` (a calibrate result)."""
+    from solvers.diagnose import problems as DP
+
+    prep = prepared if prepared is not None else prepare(capture)
+    N, w, labels, sigma_N, lines = prep.N, prep.speed_rad_s, prep.labels, prep.sigma_N, prep.lines
+    p0 = {k: np.asarray(v, float) for k, v in base["params"].items() if k in ("S", "b", "D")}
+    temp = np.asarray(capture.columns["temp_c"], float) if "temp_c" in capture.columns and \
+        not capture.is_time_series else None
+    el = np.asarray(capture.columns["elapsed_s"], float) if "elapsed_s" in capture.columns and \
+        not capture.is_time_series else None
+    prob = DP.centrifuge_problem(N, w, prep.radius_m, prep.g_mps2, p0, labels=labels, sigma_N=sigma_N,
+                                 temp_c=temp, elapsed_s=el)
+    prob.row_labels = [f"line {ln} (position {lab}, ω={x:.3g} rad/s)" for ln, lab, x in zip(lines, labels, w)]
+    return DiagnosisInput(prob, {"position": labels, "speed_rad_s": w},
+                          "a row that disagrees with the norm condition: a transcription error or a mounting "
+                          "that shifted", group_kind="mounting")

@@ -15,6 +15,7 @@ the warnings an operator must see:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,8 +25,10 @@ from solvers.frames import G_STANDARD_MPS2
 from solvers.geomag import igrf_reference
 from solvers.units import si_factor
 from station.errors import InputError, UnsupportedError
+from station.procedures.contract import DiagnosisInput
 
 MODEL = "m = W (m_raw - h), |m| = F (IGRF total field at the capture's place and date)"
+DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
 REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
 METHODS = ("rls", "batch", "ellipsoid")
 
@@ -55,27 +58,44 @@ def _reference(capture, warnings: list[str]) -> dict | None:
         raise InputError(capture.path, capture.meta_lines.get("date"), f"metadata 'date': {exc}") from None
 
 
-def calibrate(capture, method: str | None = None) -> dict:
+@dataclass
+class Prepared:
+    """A P3 capture read once: the raw magnetometer rows, which are complete, the times."""
+
+    y: np.ndarray             # raw magnetometer (n, 3), the capture's mag_unit
+    good: np.ndarray          # rows with all three components (n,)
+    t: np.ndarray | None      # times (n,) of a time series, else None
+    warnings: list[str] = field(default_factory=list)
+
+
+def prepare(capture) -> Prepared:
+    """The magnetometer columns of ``capture`` (a one-line error when one is missing)."""
+    y = _xyz(capture, "m")
+    if y is None:
+        capture.column("mx"), capture.column("my"), capture.column("mz")  # raises the one-line error
+    t = np.asarray(capture.columns["t"], float) if capture.is_time_series else None
+    return Prepared(y, np.all(np.isfinite(y), axis=1), t)
+
+
+def calibrate(capture, method: str | None = None, *, prepared: Prepared | None = None) -> dict:
     method = method or "rls"
     if method not in METHODS:
         raise InputError(None, None, f"compass: unknown method {method!r} (choose {', '.join(METHODS)})")
-    warnings: list[str] = []
-    y_all = _xyz(capture, "m")
-    if y_all is None:
-        capture.column("mx"), capture.column("my"), capture.column("mz")  # raises the one-line error
+    prep = prepared if prepared is not None else prepare(capture)
+    warnings = list(prep.warnings)
+    y_all = prep.y
     mag_unit = capture.meta.get("mag_unit")
     mag_factor = si_factor("mag", mag_unit)
     if mag_factor is None:
         warnings.append(f"mag_unit {mag_unit!r} has no physical factor: the data radius is in raw units")
     ref = _reference(capture, warnings)
-    good = np.all(np.isfinite(y_all), axis=1)
+    good = prep.good
     if not good.all():
         warnings.append(f"{int((~good).sum())} of {len(good)} rows left out: a magnetometer value is missing")
     y = y_all[good]
     noise_raw = None
-    t = None
-    if capture.is_time_series:
-        t = np.asarray(capture.columns["t"], float)
+    t = prep.t
+    if t is not None:
         noise_raw = C.noise_from_second_differences(y)
         if not math.isfinite(noise_raw) or noise_raw <= 0:
             noise_raw = None
@@ -252,3 +272,44 @@ def format_text(result: dict) -> str:
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)
+
+
+def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
+    """The P3 diagnosis problem around the baseline ``base`` (a calibrate result)."""
+    from solvers.diagnose import problems as DP
+    from solvers.stillness import detect_static_intervals
+
+    prep = prepared if prepared is not None else prepare(capture)
+    y, good, t = prep.y, prep.good, prep.t
+    if t is None:
+        t = np.asarray(capture.columns["t"], float) if "t" in capture.columns else None
+    if t is None:
+        raise UnsupportedError(f"{capture.path or 'capture'}: compass diagnosis needs a time series ('t' column)")
+    W0 = np.asarray(base["params"]["soft_iron"], float)
+    h0 = np.asarray(base["params"]["hard_iron"], float)
+    F = float(base["field_nT"])
+    incl = base["params"]["reference"].get("inclination_deg")
+    noise = base.get("noise_raw") or 1.0
+    temp = np.asarray(capture.columns["temp_c"], float) if "temp_c" in capture.columns else None
+    static = {}
+    a = _xyz(capture, "a")
+    if a is not None:
+        gyro = _xyz(capture, "g")
+        ok = good & np.all(np.isfinite(a), axis=1)
+        try:
+            st = detect_static_intervals(t[ok], a[ok], None if gyro is None else gyro[ok], nan_policy="omit")
+            idx = np.flatnonzero(ok)
+            ivs = [iv for iv in st.intervals if iv.n >= 5]
+            if len(ivs) >= 4:
+                static = {
+                    "static_f": np.array([iv.accel_mean for iv in ivs]),
+                    "static_y": np.array([y[idx[iv.start:iv.stop]].mean(axis=0) for iv in ivs]),
+                    "static_t": np.array([t[idx[iv.start:iv.stop]].mean() for iv in ivs]),
+                    "static_temp": None if temp is None else
+                    np.array([np.nanmean(temp[idx[iv.start:iv.stop]]) for iv in ivs]),
+                }
+        except (SolverError, ValueError):
+            static = {}
+    prob = DP.compass_problem(t[good], y[good], W0, h0, F, incl, noise_raw=noise,
+                              temp_c=None if temp is None else temp[good], **static)
+    return DiagnosisInput(prob, {}, "a sample far off the field sphere: a magnetic disturbance nearby or a glitch")

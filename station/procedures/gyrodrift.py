@@ -26,16 +26,20 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from solvers import allan
+from solvers import allan, frames
 from solvers import gyrodrift as gd
 from solvers.errors import SolverError
+from solvers.models import gyro as gyro_model
 from solvers.units import si_factor
 from station.errors import InputError, UnsupportedError
+from station.procedures.contract import DiagnosisInput
 
 MODEL = "ω' = ω − ε (P4); mode B: ε^b = ω̄^b − C_b_n ω_ie^n, body x fwd, y up, z right, nav N-U-E"
+DIAGNOSIS_BASELINE = False  # diagnosis_input fits its own baseline (the drift is a block of the problem)
 
 # Devices whose captures are known to break the conventions (their SOURCE.md).
 KNOWN_CONVENTIONS = {
@@ -152,8 +156,34 @@ def _finite_rows(arrays, warnings, what):
     return ok
 
 
-def calibrate(capture, method: str | None = None, *, accuracy_deg_h: float | None = None) -> dict:
+@dataclass
+class Prepared:
+    """A P4 capture read once: its axis conventions and the gyro rates in P4's body frame."""
+
+    C_fur_cap: np.ndarray        # the capture's axes → P4 body (x fwd, y up, z right)
+    accel_sign: float            # +1 specific force, −1 gravity direction
+    gyro_flips: np.ndarray       # per-axis sign making the gyro right-handed
+    gyro_factor: float           # capture's gyro unit → rad/s (1.0 when unknown, see gyro_unit_error)
+    gyro_unit_error: str | None  # why the gyro cannot be put in rad/s (counts without a scale), else None
+    w_b: np.ndarray              # gyro (n, 3) in P4's body frame: rad/s, or the raw unit with gyro_unit_error
+    warnings: list[str] = field(default_factory=list)
+
+
+def prepare(capture) -> Prepared:
+    """Axis conventions, the gyro unit and the rotated gyro rates of ``capture``."""
     warnings: list[str] = []
+    C, asign, flips = _conventions(capture, warnings)
+    err = None
+    try:
+        k = _gyro_factor(capture, warnings)
+    except UnsupportedError as exc:  # counts without a scale: calibrate refuses, diagnose works in counts
+        k, err = 1.0, str(exc)
+    w_b = (_need(capture, ["gx", "gy", "gz"]) * flips * k) @ C.T
+    return Prepared(C, asign, flips, k, err, w_b, warnings)
+
+
+def calibrate(capture, method: str | None = None, *, accuracy_deg_h: float | None = None,
+              prepared: Prepared | None = None) -> dict:
     mode = (method or capture.meta.get("gyro_mode") or
             ("reference" if "ref_gx" in capture.columns else "static")).strip().lower()
     if mode in ("a", "ref"):
@@ -162,10 +192,12 @@ def calibrate(capture, method: str | None = None, *, accuracy_deg_h: float | Non
         mode = "static"
     if mode not in ("reference", "static"):
         raise UnsupportedError(f"gyro-drift mode {mode!r}: use 'reference' (mode A) or 'static' (mode B)")
-    C, asign, flips = _conventions(capture, warnings)
-    k = _gyro_factor(capture, warnings)
-    raw = _need(capture, ["gx", "gy", "gz"])
-    w_b = (raw * flips * k) @ C.T                      # rad/s, P4 body frame
+    prep = prepared if prepared is not None else prepare(capture)
+    if prep.gyro_unit_error:
+        raise UnsupportedError(prep.gyro_unit_error)
+    warnings = list(prep.warnings)
+    C, asign, flips, k = prep.C_fur_cap, prep.accel_sign, prep.gyro_flips, prep.gyro_factor
+    w_b = prep.w_b                                      # rad/s, P4 body frame
     dt = _dt(capture)
     if accuracy_deg_h is None:
         accuracy_deg_h = capture.float_meta("accuracy_deg_h")
@@ -379,3 +411,63 @@ def format_text(result: dict) -> str:
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)
+
+
+def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None = None) -> DiagnosisInput:
+    """The P4 diagnosis problem (it fits its own baseline: ``base`` is not used)."""
+    from solvers.diagnose import problems as DP
+
+    prep = prepared if prepared is not None else prepare(capture)
+    warnings = list(prep.warnings)
+    C, asign = prep.C_fur_cap, prep.accel_sign
+    # counts without a scale: diagnose in the capture's own unit (effects are relative)
+    unit = "rad/s" if prep.gyro_unit_error is None else capture.meta.get("gyro_unit", "raw")
+    w_b = prep.w_b
+    f_b = None
+    if all(c in capture.columns for c in ("ax", "ay", "az")):
+        f_b = (_need(capture, ["ax", "ay", "az"]) * asign) @ C.T
+    if "ref_gx" in capture.columns:
+        w_b = w_b - _need(capture, ["ref_gx", "ref_gy", "ref_gz"]) @ C.T
+        lat = None
+        mode_ref = True
+    else:
+        lat = capture.float_meta("latitude_deg")
+        mode_ref = False
+    dt = _dt(capture)
+    ok = _finite_rows([w_b, f_b], warnings, "gyro or accelerometer")
+    segs = _segments(capture, w_b, f_b, dt, ok, warnings) if not mode_ref else [(ok, 0.0, "1")]
+    n = len(w_b)
+    t = np.asarray(capture.columns["t"], float) if "t" in capture.columns else np.arange(n) * dt
+    label = np.full(n, "", dtype=object)
+    E = np.zeros((n, 3))
+    Cbn = np.zeros((n, 3, 3))
+    for m, head, lab in segs:
+        if m.sum() < 8:
+            continue
+        label[m] = lab
+        if f_b is not None:
+            p, r = frames.p4_pitch_roll_from_accel(np.mean(f_b[m], axis=0))
+        else:
+            p, r = 0.0, 0.0
+        Cnb = frames.p4_C_n_b(p, r, math.radians(head))
+        Cbn[m] = Cnb.T
+        if lat is not None:
+            E[m] = gyro_model.earth_rate_body(lat, Cnb)
+    use = label != ""
+    order = np.flatnonzero(use)
+    if len(order) < 16:
+        raise UnsupportedError(f"{capture.path}: gyro-drift: {len(order)} static samples; diagnosis needs a "
+                               "static record (P4 asks for >= 3 min)")
+    f_mps2 = None
+    if f_b is not None:
+        gnorm = float(np.median(np.linalg.norm(f_b[use], axis=1)))
+        if not gnorm > 0:
+            raise UnsupportedError(f"{capture.path}: the accelerometer reads zero on average (a dead or "
+                                   "unconnected sensor?): check the ax ay az columns")
+        f_mps2 = f_b[use] * (frames.G_STANDARD_MPS2 / gnorm)
+    temp = np.asarray(capture.columns["temp_c"], float)[order] if "temp_c" in capture.columns else None
+    prob = DP.gyro_problem(t[order], w_b[order], f_mps2, temp,
+                           E[order] if (lat is not None or mode_ref) else None, label[order], C_b_n=Cbn[order])
+    prob.unit = unit
+    return DiagnosisInput(prob, {"rows": order},
+                          "a block far off the others: a knock, the unit moved, or a bias jump")

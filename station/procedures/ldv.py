@@ -34,6 +34,7 @@ reference velocity noise, which switches on the errors-in-variables correction.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,8 +42,10 @@ from solvers import frames
 from solvers import ldv as ldv_solver
 from solvers.errors import SolverError
 from station.errors import InputError, UnsupportedError
+from station.procedures.contract import DiagnosisInput
 
 MODEL = "V_L = (1 + δK)(V_x cos α + V_y cos β + V_z cos γ) (P5), per beam"
+DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
 NAV_COLS = ("vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg")
 BODY_COLS = ("vx", "vy", "vz")
 
@@ -149,12 +152,30 @@ def aligned_velocities(capture, reference=None, warnings=None):
     return v_at[good], vl[ldv_ok][good], dict(info, reference=kind, rows=np.flatnonzero(ldv_ok)[good])
 
 
-def calibrate(capture, method: str | None = None, *, reference=None) -> dict:
+@dataclass
+class Prepared:
+    """A P5 capture read once: reference and beam velocities paired on the LDV clock."""
+
+    v_body: np.ndarray    # reference velocity in the body frame (n, 3), m/s
+    vl: np.ndarray        # beam outputs (n, 3), m/s
+    info: dict            # alignment, reference kind, rows (capture row of each pair)
+    warnings: list[str] = field(default_factory=list)
+
+
+def prepare(capture, reference=None) -> Prepared:
+    """The paired velocities of ``capture`` (``reference``: a separate reference capture's path)."""
     warnings: list[str] = []
+    v_b, vl, info = aligned_velocities(capture, reference, warnings)
+    return Prepared(v_b, vl, info, warnings)
+
+
+def calibrate(capture, method: str | None = None, *, reference=None, prepared: Prepared | None = None) -> dict:
     force = (method or "").strip().lower() == "force"
     if method and not force:
         raise UnsupportedError(f"ldv: unknown method {method!r} (only 'force')")
-    v_b, vl, info = aligned_velocities(capture, reference, warnings)
+    prep = prepared if prepared is not None else prepare(capture, reference)
+    warnings = list(prep.warnings)
+    v_b, vl, info = prep.v_body, prep.vl, prep.info
     ref_sigma = capture.float_meta("reference_sigma_mps")
     try:
         res = ldv_solver.calibrate_ldv(v_b, vl, ref_sigma_mps=ref_sigma, force=force)
@@ -207,3 +228,22 @@ def format_text(result: dict) -> str:
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)
+
+
+def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
+    """The P5 diagnosis problem around the baseline ``base`` (a calibrate result)."""
+    from solvers.diagnose import problems as DP
+
+    prep = prepared if prepared is not None else prepare(capture)
+    v_b, vl, rows = prep.v_body, prep.vl, prep.info.get("rows")
+
+    def pick(name):
+        return None if name not in capture.columns or rows is None else \
+            np.asarray(capture.columns[name], float)[rows]
+
+    W = None
+    if rows is not None and all(c in capture.columns for c in ("wx", "wy", "wz")):
+        W = np.column_stack([pick(c) for c in ("wx", "wy", "wz")])
+    X0 = np.array([base["fit"][f"beam{j + 1}"]["X"] for j in range(3)], float)
+    prob = DP.ldv_problem(pick("t"), v_b, vl, X0, temp_c=pick("temp_c"), omega_body_rad_s=W)
+    return DiagnosisInput(prob, {"rows": rows}, "a sample far off: a dropout of the LDV or the reference")

@@ -19,16 +19,20 @@ labels), ``six-position`` (step 8 only).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from solvers import frames
 from solvers import tabletop as T
 from solvers.errors import SolverError
+from solvers.models import accel as accel_model
 from solvers.units import ACCEL_UNITS
 from station.errors import InputError, UnsupportedError
+from station.procedures.contract import DiagnosisInput
 
 MODEL = "A = B + M V"
+DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
 METHODS = {"norm": ("norm", "auto"), "upper-triangular": ("norm", "upper-triangular"),
            "six-position": ("six-position", "auto"), "step8": ("six-position", "auto")}
 
@@ -164,16 +168,35 @@ def check_saturation(capture, positions: list[T.Position]) -> None:
                     "other axes are noisy; the range is too small for 1 g (or the sensor clips): cannot calibrate")
 
 
-def calibrate(capture, method: str | None = None) -> dict:
+@dataclass
+class Prepared:
+    """A P1 capture read once: local gravity and the static positions (calibrate and diagnose)."""
+
+    g_mps2: float
+    positions: list[T.Position]
+    found_by: str
+    noise_known: bool
+    warnings: list[str] = field(default_factory=list)
+
+
+def prepare(capture) -> Prepared:
+    """Local gravity and the static positions of ``capture``, with the warnings they raise."""
+    warnings: list[str] = []
+    g = gravity(capture, warnings)
+    positions, found, noise_known = static_positions(capture, warnings)
+    return Prepared(g, positions, found, noise_known, warnings)
+
+
+def calibrate(capture, method: str | None = None, *, prepared: Prepared | None = None) -> dict:
     """The calibrate.md result for an ``accel-tabletop`` capture."""
     key = method or "norm"
     if key not in METHODS:
         raise UnsupportedError(f"accel-tabletop: unknown method {key!r} (methods: {', '.join(METHODS)})")
     est, gauge = METHODS[key]
-    warnings: list[str] = []
     unit = capture.meta.get("accel_unit") or "raw"
-    g = gravity(capture, warnings)
-    positions, found, noise_known = static_positions(capture, warnings)
+    prep = prepared if prepared is not None else prepare(capture)
+    warnings = list(prep.warnings)
+    g, positions, found, noise_known = prep.g_mps2, prep.positions, prep.found_by, prep.noise_known
     if not positions:
         raise UnsupportedError(f"{_where(capture)}: accel-tabletop: no static positions found")
     check_saturation(capture, positions)
@@ -249,3 +272,58 @@ def format_text(result: dict) -> str:
     for w in r["warnings"]:
         lines.append(f"warning    {w}")
     return "\n".join(lines)
+
+
+def _col(capture, name):
+    x = capture.columns.get(name)
+    return None if x is None else np.asarray(x, float)
+
+
+def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
+    """The P1 diagnosis problem around the baseline ``base`` (a calibrate result)."""
+    from solvers.diagnose import problems as DP
+
+    prep = prepared if prepared is not None else prepare(capture)
+    g, positions, noise_known = prep.g_mps2, prep.positions, prep.noise_known
+    B, M = np.asarray(base["params"]["B"], float), np.asarray(base["params"]["M"], float)
+    dirs = [p.direction for p in positions]
+    if sum(d is not None for d in dirs) < 3:
+        B, M = T.to_upper(B, M)
+    fw = accel_model.p1_to_forward(B, M)
+    t_mean, temp_mean = None, None
+    temp = _col(capture, "temp_c")
+    if capture.is_time_series:
+        t = _col(capture, "t")
+        t_mean = np.array([0.5 * (p.t_start_s + p.t_stop_s) for p in positions])
+        if temp is not None:
+            temp_mean = np.array([np.nanmean(temp[(t >= p.t_start_s) & (t <= p.t_stop_s)]) for p in positions])
+    else:
+        temp_mean = temp
+        t_mean = _col(capture, "t")
+    std = np.array([p.std if p.std is not None else np.full(3, np.nan) for p in positions])
+    prob = DP.tabletop_problem(np.array([p.mean for p in positions]), std if noise_known else None,
+                               np.array([p.n for p in positions]), g, fw["K"], fw["b"],
+                               labels=[p.label for p in positions], directions=dirs,
+                               placement_sigma_rad=[p.placement_sigma_rad for p in positions],
+                               t_s=t_mean, temp_c=temp_mean, noise_known=noise_known)
+    drivers = {"position": [p.label for p in positions], "time_s": t_mean, "temp_c": temp_mean}
+    return DiagnosisInput(prob, drivers,
+                          "a position that disagrees with the others: the unit moved, a wrong label, or a knock",
+                          group_kind="position", quality=tuple(_moved_positions(capture)))
+
+
+def _moved_positions(capture) -> list[dict]:
+    """Labelled positions of a time series during which the unit moved (rows: capture row indices)."""
+    if not (capture.is_time_series and "position" in capture.columns and any(capture.columns["position"])):
+        return []
+    from solvers.diagnose import quality as Q
+    from solvers.stillness import detect_static_intervals
+
+    a = _accel(capture)
+    g = np.column_stack([_col(capture, c) for c in ("gx", "gy", "gz")]) \
+        if all(c in capture.columns for c in ("gx", "gy", "gz")) else None
+    try:
+        st = detect_static_intervals(capture.columns["t"], a, g, nan_policy="omit")
+        return Q.moved_positions(st.still_mask, capture.columns["position"])
+    except (SolverError, ValueError):
+        return []

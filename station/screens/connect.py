@@ -13,7 +13,7 @@ from textual.screen import Screen
 from textual.widgets import Button, Footer, Input, Label, Select, Static
 
 from station.widgets.title import TitleBar
-from station.app import GUIDED
+from station.procedures import registry
 from station.messages import Connected, SourceFailed, StoreLoaded
 
 SIM = "sim"
@@ -72,8 +72,9 @@ class ConnectScreen(Screen):
                 yield Select([], prompt="pick a registered device", id="known", compact=True)
             with Horizontal(classes="row"):
                 yield Label("Procedure")
-                yield Select([(v, k) for k, v in GUIDED.items()], value=s.procedure if s.procedure in GUIDED
-                             else "accel-tabletop", allow_blank=False, id="procedure", compact=True)
+                guided = registry.guided()
+                yield Select([(v, k) for k, v in guided.items()], value=s.procedure if s.procedure in guided
+                             else registry.DEFAULT, allow_blank=False, id="procedure", compact=True)
             with Horizontal(classes="row"):
                 yield Label("Average (s)")
                 yield Input(value=f"{s.average_s:g}", id="average", type="number", compact=True)
@@ -283,12 +284,10 @@ class ConnectScreen(Screen):
         self._status(f"Cannot connect: {message.error}", error=True)
 
     def on_connected(self, message: Connected) -> None:
-        from station.app import procedure_screen
-
         s = self.app.session
         s.source = message.source
         s.device_id = message.device_id
         s.guide = None
         self.query_one("#start", Button).disabled = False
         self._status(f"Connected: {getattr(message.source, 'label', '')}, device {message.device_id}")
-        self.app.push_screen(procedure_screen(s.procedure))
+        self.app.push_screen(registry.screen_for(s.procedure))

@@ -49,8 +49,8 @@ class DiagnoseScreen(Screen):
                 capture = Capture(meta=meta, columns=columns)
             from station.procedures.diagnose import analyse, format_text
 
-            result, diag, drivers = analyse(capture)
-            self.post_message(StoreLoaded("diagnose", format_text(result, diag, drivers, plots=True)))
+            result, diag, inp = analyse(capture)
+            self.post_message(StoreLoaded("diagnose", format_text(result, diag, inp, plots=True)))
         except Exception as exc:  # noqa: BLE001 - one line on screen
             self.post_message(StoreLoaded("diagnose", None, error=str(exc)))
 

@@ -13,9 +13,10 @@ from textual.containers import Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
-from station.screens._common import export_files
+from station.screens.export import export_files
 from station.widgets.title import TitleBar
 from station.messages import Exported, Saved, StoreLoaded
+from station.procedures import registry
 from station.procedures.review import p1_residuals, param_rows, verdict
 
 
@@ -54,9 +55,7 @@ class ResultsScreen(Screen):
 
     def compose(self) -> ComposeResult:
         proc = (self.result or {}).get("procedure") or self.capture.meta.get("procedure", "")
-        yield TitleBar({"accel-tabletop": "P1 result", "compass": "P3 compass result",
-                        "gyro-drift": "P4 gyro drift result", "accel-centrifuge": "P2 centrifuge result",
-                        "ldv": "P5 LDV result"}.get(proc, f"{proc} result"))
+        yield TitleBar(registry.result_title(proc))
         yield Static("", id="summary")
         with Vertical(id="tables"):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
@@ -99,7 +98,8 @@ class ResultsScreen(Screen):
         style = {"pass": "b green", "fail": "b white on red"}.get(word, "b")
         prev = (f"previous #{self.previous['id']} of {self.previous['time'][:10]}" if self.previous
                 else "no previous calibration")
-        unit = {"accel-tabletop": "m/s²", "compass": "nT", "gyro-drift": "rad/s", "ldv": "m/s"}.get(r.get("procedure"), "")
+        entry = registry.get(r.get("procedure"))
+        unit = entry.result_unit if entry is not None else ""
         lines = [f"[{style}] {word.upper()} [/] residual {_f(r.get('residual_rms'), '.3g')} {unit} RMS · "
                  f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
         lines += [f"[red]{x}[/]" for x in reasons[:2]]

@@ -1,0 +1,46 @@
+"""The shape every procedure module has (``station/procedures/<stem>.py``).
+
+``prepare`` reads what both the calibration and the diagnosis need from a capture (units,
+signs, positions or rows, local gravity) once; ``calibrate`` returns the calibrate.md dict;
+``format_text`` prints it for a person; ``diagnosis_input`` turns the capture and its
+baseline calibration into the problem the diagnosis engine (``solvers.diagnose``) fits.
+A module satisfies :class:`ProcedureModule` structurally (``isinstance`` works on it: the
+protocol is runtime-checkable); ``tests/test_procedure_contract.py`` checks every module of
+the registry.
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+
+class DiagnosisInput(NamedTuple):
+    """What ``station diagnose`` needs from a procedure module."""
+
+    problem: Any                      # solvers.diagnose.engine.Problem
+    drivers: dict                     # what the plots draw the residuals against (per row)
+    explain: str                      # what an outlier row of this procedure usually means
+    group_kind: str = "time block"    # what one cross-validation group is ("position", "mounting")
+    quality: tuple = ()               # procedure-specific quality findings, rows as capture row indices
+
+
+@runtime_checkable
+class ProcedureModule(Protocol):
+    """A procedure module (a Python module satisfies a Protocol by its attributes)."""
+
+    MODEL: str
+    DIAGNOSIS_BASELINE: bool  # diagnosis_input needs the calibrate result (False: it fits its own)
+
+    def prepare(self, capture) -> Any:
+        """What calibrate and diagnose both need, read from ``capture`` once; holds its own
+        ``warnings`` (a list of str)."""
+
+    def calibrate(self, capture, method: str | None = None, *, prepared=None) -> dict:
+        """The calibrate.md result; ``prepared`` (from :meth:`prepare`) saves reading the
+        capture again."""
+
+    def format_text(self, result: dict) -> str:
+        """The result as plain text for a person."""
+
+    def diagnosis_input(self, capture, base: dict | None, prepared=None) -> DiagnosisInput:
+        """The diagnosis problem of ``capture`` around the baseline calibration ``base``
+        (None where the diagnosis fits its own baseline: P4)."""

@@ -1,0 +1,103 @@
+"""The station's procedures, once: every table, list and switch keyed by a procedure reads it.
+
+Kept free of numpy (and of everything but the standard library) so that the CLI's
+argument parser and the TUI's Connect screen can list the procedures without loading the
+numerics. A procedure's code lives under one file stem (``docs/ARCHITECTURE.md``,
+"Procedure map"):
+
+- ``station/procedures/<stem>.py``: the module of :class:`station.procedures.contract.ProcedureModule`
+  (``prepare``, ``calibrate``, ``format_text``, ``diagnosis_input``);
+- ``station/procedures/<stem>_guide.py`` and ``station/screens/<stem>.py`` when it is guided
+  in the TUI; ``docs/<doc>.md``; ``tests/test_<stem>.py``.
+
+Adding a procedure: one :class:`Procedure` entry in :data:`PROCEDURES` and its module.
+``solvers/simulate.py`` keeps its own list (solvers never import the station); a test holds
+the two equal.
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Procedure:
+    """One procedure: what the station calls it and where its parts live."""
+
+    name: str           # the capture's ``procedure:`` value (capture-format.md)
+    code: str           # P1…P5: the code of the source documents and the TUI
+    stem: str           # the file stem of its module, guide, screen and tests
+    title: str          # what it calibrates, how (the Connect screen's list: "<code> <title>")
+    short: str          # a word or two in result titles ("P3 compass result"); empty: the code alone
+    sensor_kind: str    # the database's sensor kind (devices.sensor_kinds): accel, gyro, mag, ldv
+    module: str         # the dotted module that satisfies contract.ProcedureModule
+    screen: str | None  # "module:Class" of its guided TUI screen, None when not guided
+    result_unit: str    # the unit of its calibrate result's ``residual_rms``
+    doc: str            # its page under docs/
+
+    def load(self):
+        """The procedure's module (imported on first use)."""
+        return importlib.import_module(self.module)
+
+
+@dataclass(frozen=True)
+class GuidedRun:
+    """A guided TUI run that is not a calibration procedure (the gyro noise run)."""
+
+    name: str
+    title: str
+    screen: str
+
+
+PROCEDURES: tuple[Procedure, ...] = (
+    Procedure("accel-tabletop", "P1", "tabletop", "accelerometer, level table", "", "accel",
+              "station.procedures.tabletop", "station.screens.tabletop:ProcedureScreen", "m/s²", "accel"),
+    Procedure("accel-centrifuge", "P2", "centrifuge", "accelerometer, centrifuge", "centrifuge", "accel",
+              "station.procedures.centrifuge", "station.screens.centrifuge:CentrifugeScreen", "g", "accel"),
+    Procedure("compass", "P3", "compass", "compass sweep", "compass", "mag",
+              "station.procedures.compass", "station.screens.compass:CompassScreen", "nT", "compass"),
+    Procedure("gyro-drift", "P4", "gyrodrift", "gyro drift, static base", "gyro drift", "gyro",
+              "station.procedures.gyrodrift", "station.screens.gyrodrift:HoldScreen", "rad/s", "gyrodrift"),
+    Procedure("ldv", "P5", "ldv", "laser velocimeter", "LDV", "ldv",
+              "station.procedures.ldv", None, "m/s", "ldv"),
+)
+
+GUIDED_RUNS: tuple[GuidedRun, ...] = (
+    GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen"),
+)
+
+NAMES: tuple[str, ...] = tuple(p.name for p in PROCEDURES)
+SENSOR_KINDS: tuple[str, ...] = tuple(dict.fromkeys(p.sensor_kind for p in PROCEDURES))
+DEFAULT = PROCEDURES[0].name
+
+_BY_NAME = {p.name: p for p in PROCEDURES}
+
+
+def get(name: str | None) -> Procedure | None:
+    """The procedure called ``name``, None when there is none."""
+    return _BY_NAME.get(name or "")
+
+
+def result_title(name: str | None) -> str:
+    """The Results screen's title: 'P1 result', 'P3 compass result', '<name> result'."""
+    p = get(name)
+    if p is None:
+        return f"{name} result"
+    return f"{p.code} {p.short} result" if p.short else f"{p.code} result"
+
+
+def guided() -> dict[str, str]:
+    """Every guided TUI run, name → the Connect screen's label, procedures first."""
+    out = {p.name: f"{p.code} {p.title}" for p in PROCEDURES if p.screen}
+    out.update({r.name: r.title for r in GUIDED_RUNS})
+    return out
+
+
+def screen_for(name: str):
+    """A new guided screen for procedure or run ``name`` (P1's when ``name`` has none)."""
+    spec = next((r.screen for r in GUIDED_RUNS if r.name == name), None)
+    if spec is None:
+        p = get(name)
+        spec = p.screen if p is not None and p.screen else PROCEDURES[0].screen
+    module, cls = spec.split(":")
+    return getattr(importlib.import_module(module), cls)()
