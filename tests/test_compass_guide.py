@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from solvers import compass as C
-from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator
-from station.screens.compass import sweep_positions
+from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator, sweep_positions
 from station.sources import SimSource
 
 

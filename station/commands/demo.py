@@ -6,13 +6,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+from station.procedures import registry
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="watch a whole P1 calibration on the simulated device (about 80 s)",
                        description="The TUI on the simulated device with a scripted operator who follows "
                        "the prompts; short averaging times; the result is saved to the database.")
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
-    p.add_argument("--procedure", choices=("accel-tabletop", "compass", "gyro-drift"), default="accel-tabletop",
+    p.add_argument("--procedure", choices=("accel-tabletop", "compass", "gyro-drift"), default=registry.DEFAULT,
                    help="P1 (default), the P3 compass sweep, or P4 on a static base (180 s: try --speed 6)")
     p.add_argument("--average-s", type=float, default=3.0, help="averaging time per position (default 3 s)")
     p.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second (default 1)")
@@ -87,15 +89,13 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
 def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
     """The P3 sweep without a screen: the scripted operator visits the sphere positions."""
     out = out if out is not None else sys.stdout
-    from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator
+    from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator, sweep_positions
     from station.sources import SimSource
 
     now = [0.0]
     src = SimSource(seed=args.seed, clock=lambda: now[0], procedure="compass").start()
     guide = CompassGuide(sample_rate_hz=src.rate_hz, units=src.units, device_id=src.device_id, site=src.site,
                          config=CompassConfig(min_s=30.0))
-    from station.screens.compass import sweep_positions
-
     operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
     shown = -1
     while guide.phase == "sweep" and now[0] < max_device_s:

@@ -193,6 +193,13 @@ class CompassGuide:
         return Capture(meta=meta, columns=cols)
 
 
+def sweep_positions(positions: list[str]) -> list[str]:
+    """The demo operator's tour: the simulator's sphere positions, then the P1 faces."""
+    from solvers.positions import P1_POSITIONS
+
+    return list(positions) + [p for p in P1_POSITIONS if p not in positions]
+
+
 class SweepOperator:
     """The demo's operator for P3: visits the simulated device's sphere positions
     (``s1``..``s12``) in turn, ``hold_s`` at each, until the guide is done."""

@@ -1,4 +1,4 @@
-"""What the guided procedure screens (P1–P4) and the export actions share.
+"""What the guided procedure screens (P1–P4) share.
 
 ``GuidedScreenMixin`` holds the thread-worker bodies: starting the source, the loop that
 drains it into the guide (posting GuideEvents and a replaceable LiveUpdate ~15 Hz), and the
@@ -9,15 +9,11 @@ class in the MRO.
 """
 from __future__ import annotations
 
-import datetime as _dt
-import json
 import math
-import os
-import tempfile
 import time
 from typing import Callable
 
-from station.messages import CalibrationReady, Exported, GuideEvent, LiveUpdate, SourceFailed
+from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 
 
 def _n(x, fmt):
@@ -137,27 +133,3 @@ class GuidedScreenMixin:
         self.app.session.guide = None
         self.app.notify(text, timeout=4)
         self.app.pop_screen()
-
-
-def export_files(screen, capture, what: str, payload: Callable) -> None:
-    """Write ``capture`` (CSV) and ``payload()`` (JSON, unless None) to the export folder
-    as ``<device>-<what>-<stamp>.*``, atomically; post Exported to ``screen``."""
-    s = screen.app.session
-    folder = s.extra.get("export_dir") or os.getcwd()
-    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    base = os.path.join(folder, f"{s.device_id or 'device'}-{what}-{stamp}")
-    try:
-        from station.capture import write_capture
-
-        paths = [base + ".csv"]
-        write_capture(paths[0], capture)
-        data = payload()
-        if data is not None:
-            paths.append(base + ".json")
-            fd, tmp = tempfile.mkstemp(prefix=".export-", dir=folder)
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump(data, fh, indent=2)
-            os.replace(tmp, paths[1])
-        screen.post_message(Exported(paths))
-    except Exception as exc:  # noqa: BLE001
-        screen.post_message(Exported([], error=str(exc)))

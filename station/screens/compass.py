@@ -25,13 +25,6 @@ from station.widgets.live import bar
 from station.widgets.title import TitleBar
 
 
-def sweep_positions(positions: list[str]) -> list[str]:
-    """The demo operator's tour: the simulator's sphere positions, then the P1 faces."""
-    from solvers.positions import P1_POSITIONS
-
-    return list(positions) + [p for p in P1_POSITIONS if p not in positions]
-
-
 class CompassScreen(GuidedScreenMixin, Screen):
     CSS = """
     CompassScreen #map { width: 30; height: 10; border: round $primary; padding: 0 1; }
@@ -74,7 +67,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
 
     @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
     def stream(self) -> None:
-        from station.procedures.compass_guide import CompassGuide, CompassConfig, SweepOperator
+        from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator, sweep_positions
 
         s = self.app.session
         worker = get_current_worker()

@@ -18,7 +18,7 @@ from textual_plotext import PlotextPlot
 
 from station.messages import Exported
 from station.procedures.noise import AXES, format_duration
-from station.screens._common import export_files
+from station.screens.export import export_files
 from station.screens.gyrodrift import HoldScreen
 from station.widgets.title import TitleBar
 

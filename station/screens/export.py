@@ -1,0 +1,34 @@
+"""The Results and noise screens' export action: the capture and its result as files."""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import tempfile
+from typing import Callable
+
+from station.messages import Exported
+
+
+def export_files(screen, capture, what: str, payload: Callable) -> None:
+    """Write ``capture`` (CSV) and ``payload()`` (JSON, unless None) to the export folder
+    as ``<device>-<what>-<stamp>.*``, atomically; post Exported to ``screen``."""
+    s = screen.app.session
+    folder = s.extra.get("export_dir") or os.getcwd()
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    base = os.path.join(folder, f"{s.device_id or 'device'}-{what}-{stamp}")
+    try:
+        from station.capture import write_capture
+
+        paths = [base + ".csv"]
+        write_capture(paths[0], capture)
+        data = payload()
+        if data is not None:
+            paths.append(base + ".json")
+            fd, tmp = tempfile.mkstemp(prefix=".export-", dir=folder)
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump(data, fh, indent=2)
+            os.replace(tmp, paths[1])
+        screen.post_message(Exported(paths))
+    except Exception as exc:  # noqa: BLE001
+        screen.post_message(Exported([], error=str(exc)))
