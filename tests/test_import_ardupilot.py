@@ -316,3 +316,38 @@ def test_units_in_the_docstrings_are_pymavlinks_own():
         u = cls.fieldunits_by_name
         for kind, field in (("accel", "xacc"), ("gyro", "xgyro"), ("mag", "xmag")):
             assert (kind, u[field]) in MAV_UNITS
+
+
+def test_tlog_from_px4_highres_imu_and_bytewise_parameters(tmp_path):
+    """PX4 streams HIGHRES_IMU (m/s², rad/s, gauss, already calibrated) and sends integer
+    parameters byte-wise inside PARAM_VALUE's float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    log_path = tmp_path / "px4.tlog"
+    log = mavutil.mavlogfile(str(log_path), write=True, source_system=1, source_component=1)
+    t0 = 1_710_773_350.0
+
+    def at(t):
+        log.write(struct.pack(">Q", int(t * 1e6)))
+
+    at(t0)
+    log.mav.heartbeat_send(2, 12, 0, 0, 4)  # MAV_AUTOPILOT_PX4
+    as_float = struct.unpack("<f", struct.pack("<i", 2424842))[0]
+    at(t0)
+    log.mav.param_value_send(b"CAL_ACC0_ID", as_float, 6, 2, 0)  # MAV_PARAM_TYPE_INT32
+    at(t0)
+    log.mav.param_value_send(b"CAL_ACC0_XOFF", 0.15803528, 9, 2, 1)
+    for k in range(40):
+        at(t0 + k * 0.004)
+        log.mav.highres_imu_send(5_000_000 + k * 4000, 0.02, -0.01, -9.79, 0.001, -0.002, 0.003,
+                                 0.21, 0.01, 0.43, 1013.0, 0.0, 100.0, 40.5, 0x1FFF)
+    log.close()
+    out = tmp_path / "px4.csv"
+    res = run_station("import", log_path, "--procedure", "accel-tabletop", "--out", out)
+    assert res.returncode == 0, res.stderr
+    c = read_capture(out)
+    m = c.meta
+    assert (m["firmware"], m["corrected"]) == ("px4", "true")
+    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == ("m/s^2", "rad/s", "gauss")
+    assert m["param.CAL_ACC0_ID"] == "2424842"  # decoded byte-wise, not 3.4e-39
+    assert np.float32(float(m["param.CAL_ACC0_XOFF"])) == np.float32(0.15803528)
+    assert np.all(c.columns["az"] == np.float32(-9.79)) and np.all(c.columns["temp_c"] == 40.5)
+    assert abs(float(m["sample_rate_hz"]) - 250) < 1e-6

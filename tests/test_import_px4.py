@@ -168,3 +168,15 @@ def test_out_must_not_be_the_log(tmp_path, px4_dir):
     res = run_station("import", log, "--procedure", "accel-tabletop", "--out", log)
     assert res.returncode == 2 and "--out is the input file" in res.stderr
     assert log.read_bytes() == (px4_dir / "sample_px4_events.ulg").read_bytes()
+
+
+def test_combined_compass_from_vehicle_magnetometer_with_place_and_date(tmp_path, px4_dir):
+    """PX4 ≥ 1.11 logs the calibrated compass as vehicle_magnetometer; the SITL log's GPS gives
+    PX4's default SITL home (47.397742 N, 8.545594 E, Zürich) and the UTC date of the flight."""
+    capture, _ = _import(tmp_path, px4_dir / "sample_px4_events.ulg", "--procedure", "compass", "--source", "combined")
+    meta = capture.meta
+    assert meta["corrected"] == "true" and "vehicle_magnetometer[0]" in meta["import_source"]
+    assert abs(float(meta["latitude_deg"]) - 47.397742) < 1e-4 and abs(float(meta["longitude_deg"]) - 8.545594) < 1e-4
+    assert meta["date"].startswith("2024-03-18")
+    b = np.linalg.norm(np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1)
+    assert 0.4 < np.median(b) < 0.55  # Zürich's field, about 0.48 gauss

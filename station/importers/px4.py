@@ -10,8 +10,9 @@ Topics read (PX4's own message definitions, ``msg/SensorAccel.msg`` etc.):
   ``device_id``. So ``corrected: false``. Older logs whose ``sensor_accel`` still has ``x_raw``
   were calibrated inside the driver: ``corrected: true``.
 - ``sensor_combined`` (when the per-sensor topics are not logged, or ``--source combined``):
-  ``accelerometer_m_s2`` and ``gyro_rad`` (and ``magnetometer_ga`` in old logs) after the
-  calibration and the board rotation (``SENS_BOARD_ROT``): ``corrected: true``.
+  ``accelerometer_m_s2`` and ``gyro_rad`` (and ``magnetometer_ga`` in old logs; since v1.11
+  the calibrated compass is ``vehicle_magnetometer.magnetometer_ga``) after the calibration and
+  the board rotation (``SENS_BOARD_ROT``): ``corrected: true``.
 
 Every ``CAL_*`` and ``SENS_BOARD_*`` parameter in the log goes into the metadata as
 ``param.<NAME>`` with its value at the start of the imported data; parameters changed during
@@ -39,7 +40,7 @@ SOURCES = ("auto", "raw", "combined")
 def _load(path):
     from pyulog import ULog
 
-    wanted = list(RAW_TOPICS.values()) + ["sensor_combined", "sensor_selection", *GPS_TOPICS]
+    wanted = list(RAW_TOPICS.values()) + ["sensor_combined", "vehicle_magnetometer", "sensor_selection", *GPS_TOPICS]
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # pyulog reports oddities on stdout
             return ULog(str(path), wanted)
@@ -147,6 +148,19 @@ def read(path, *, instance: int | None = None, source: str = "auto", kinds=None)
             streams[kind] = Stream(kind, t_us.astype(np.float64), np.column_stack([d[c] for c in cols]),
                                    UNITS[kind], f"sensor_combined ({field})", device_id,
                                    _slot(params, kind, device_id))
+        vmag = _topics(ulog, "vehicle_magnetometer")
+        if "mag" not in streams and vmag:  # PX4 ≥ 1.11: the calibrated compass has its own topic
+            inst = 0 if instance is None else instance
+            if inst not in vmag:
+                raise InputError(path, None, f"--instance {inst}: vehicle_magnetometer has instances "
+                                 f"{', '.join(map(str, sorted(vmag)))}")
+            d = vmag[inst].data
+            cols = [f"magnetometer_ga[{j}]" for j in range(3)]
+            ids = np.unique(np.asarray(d.get("device_id", [0])))
+            device_id = int(ids[0]) if len(ids) == 1 and ids[0] else None
+            streams["mag"] = Stream("mag", _time_us(d).astype(np.float64), np.column_stack([d[c] for c in cols]),
+                                    UNITS["mag"], f"vehicle_magnetometer[{inst}]", device_id,
+                                    _slot(params, "mag", device_id))
         meta["corrected"] = "true"
     if not streams:
         raise InputError(path, None, "no accelerometer, gyro or magnetometer samples in the log")
