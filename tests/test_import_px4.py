@@ -180,3 +180,14 @@ def test_combined_compass_from_vehicle_magnetometer_with_place_and_date(tmp_path
     assert meta["date"].startswith("2024-03-18")
     b = np.linalg.norm(np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1)
     assert 0.4 < np.median(b) < 0.55  # Zürich's field, about 0.48 gauss
+
+
+def test_inspect_shows_what_import_would_write_and_instance_spares_other_sensors(px4_dir):
+    """--instance 2 on a board with two compasses: the gyro-drift capture of IMU 2, no mag columns."""
+    res = run_station("inspect", px4_dir / "sample_log_small.ulg", "--procedure", "gyro-drift", "--instance", "2",
+                      "--json")
+    assert res.returncode == 0, res.stderr
+    s = json.loads(res.stdout)
+    assert s["metadata"]["sensor_device_id"] == "2621474"  # sensor_gyro[2], CAL_GYRO2_ID
+    assert [c["name"] for c in s["columns"] if c["name"].startswith("m")] == []
+    assert "no sensor_mag[2]" in res.stderr

@@ -8,12 +8,15 @@ import math
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from station.importers.options import add_arguments
+
     p = sub.add_parser("inspect", help="validate a capture file and print a summary",
                        description="Read a capture file with every check the station applies and print "
                        "its procedure, device, rows, duration, rate, columns (with units) and metadata. "
                        "Bad input: one line 'file:line: what is wrong' and exit status 2.")
     p.add_argument("file", help="capture file (station-capture CSV)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_arguments(p)  # a log or EuRoC file: the capture `station import` would write
     p.set_defaults(func=run)
 
 
@@ -98,8 +101,8 @@ def format_text(s: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from station.capture import read_capture
+    from station.importers.load import load_for_command
 
-    s = summary(read_capture(args.file))
+    s = summary(load_for_command(args))
     print(json.dumps(s, indent=2, ensure_ascii=False) if args.json else format_text(s))
     return 0

@@ -58,7 +58,7 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
     if fmt == "px4":
         from station.importers import px4
 
-        return px4.read(path, instance=opts.instance, source=opts.source)
+        return px4.read(path, instance=opts.instance, source=opts.source, primary=PRIMARY.get(opts.procedure or ""))
     if fmt in ("ardupilot", "tlog"):
         from station.importers import ardupilot
 

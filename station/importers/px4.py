@@ -75,10 +75,11 @@ def _slot(params: dict, kind: str, device_id: int | None) -> int | None:
     return None
 
 
-def read(path, *, instance: int | None = None, source: str = "auto", kinds=None) -> Imported:
+def read(path, *, instance: int | None = None, source: str = "auto", kinds=None, primary: str | None = None) -> Imported:
     """Streams and metadata of a ULog file. ``instance``: the uORB instance of each
-    ``sensor_*`` topic (default 0); ``source``: ``raw``, ``combined`` or ``auto`` (raw topics
-    where logged, else ``sensor_combined``)."""
+    ``sensor_*`` topic (default 0; a sensor without that instance is left out unless it is
+    ``primary``, the one the procedure calibrates); ``source``: ``raw``, ``combined`` or ``auto``
+    (raw topics where logged, else ``sensor_combined``)."""
     if source not in SOURCES:
         raise InputError(None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}")
     ulog = _load(path)
@@ -108,6 +109,9 @@ def read(path, *, instance: int | None = None, source: str = "auto", kinds=None)
             if inst not in topics:
                 if instance is None:
                     inst = min(topics)
+                elif primary is not None and kind != primary:
+                    warnings.append(f"--instance {instance}: no {RAW_TOPICS[kind]}[{instance}], so no {kind} columns")
+                    continue
                 else:
                     raise InputError(path, None, f"--instance {instance}: {RAW_TOPICS[kind]} has instances "
                                      f"{', '.join(map(str, sorted(topics)))}")
