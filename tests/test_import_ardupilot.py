@@ -7,6 +7,7 @@ message formats, units and multipliers of ArduPilot's ``LogStructure`` (IMU ``s#
 MAG ``s#GGGGGGGGG-s`` × ``C``); the .tlog with pymavlink's ``mavlogfile`` writer and its MAVLink
 encoder, each message preceded by its 8-byte arrival time as ``mavlogfile`` reads it back.
 """
+
 from __future__ import annotations
 
 import datetime as dt
@@ -24,8 +25,19 @@ from tests.station_run import run_station
 IMU_COLS = "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"
 MAG_COLS = "TimeUS,I,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOX,MOY,MOZ,Health,S"
 GPS_COLS = "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U"
-UNITS = {"s": "s", "#": "instance", "E": "rad/s", "o": "m/s/s", "O": "degC", "z": "Hz", "G": "Gauss",
-         "-": "", "D": "deglatitude", "U": "deglongitude", "m": "m"}
+UNITS = {
+    "s": "s",
+    "#": "instance",
+    "E": "rad/s",
+    "o": "m/s/s",
+    "O": "degC",
+    "z": "Hz",
+    "G": "Gauss",
+    "-": "",
+    "D": "deglatitude",
+    "U": "deglongitude",
+    "m": "m",
+}
 MULTS = {"-": 0.0, "0": 1.0, "C": 1e-3, "F": 1e-6, "G": 1e-7, "B": 1e-2}
 
 
@@ -34,14 +46,22 @@ class DataFlashWriter:
 
     def __init__(self, path, units: bool = True):
         self.enc = DFReader.DFReader_binary.__new__(DFReader.DFReader_binary)
-        self.enc.formats = {0x80: DFReader.DFFormat(0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns")}
+        self.enc.formats = {
+            0x80: DFReader.DFFormat(
+                0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns"
+            )
+        }
         self.f = open(path, "wb")  # noqa: SIM115 - closed by close(), like a writer object
         self.fmt = {}
-        for name, fmt, cols in (("UNIT", "QbZ", "TimeUS,Id,Label"), ("MULT", "Qbd", "TimeUS,Id,Mult"),
-                                ("FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds"),
-                                ("PARM", "QNff", "TimeUS,Name,Value,Default"),
-                                ("IMU", "QBffffffIIfBBHH", IMU_COLS), ("MAG", "QBhhhhhhhhhBI", MAG_COLS),
-                                ("GPS", "QBBIHBcLLeffffB", GPS_COLS)):
+        for name, fmt, cols in (
+            ("UNIT", "QbZ", "TimeUS,Id,Label"),
+            ("MULT", "Qbd", "TimeUS,Id,Mult"),
+            ("FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds"),
+            ("PARM", "QNff", "TimeUS,Name,Value,Default"),
+            ("IMU", "QBffffffIIfBBHH", IMU_COLS),
+            ("MAG", "QBhhhhhhhhhBI", MAG_COLS),
+            ("GPS", "QBBIHBcLLeffffB", GPS_COLS),
+        ):
             f = self.enc.add_format(DFReader.DFFormat(0, name, 0, fmt, cols))
             self.f.write(self.enc.make_format_msgbuf(f))
             self.fmt[name] = f
@@ -50,7 +70,10 @@ class DataFlashWriter:
                 self.write("UNIT", 0, ord(k), v.encode())
             for k, v in MULTS.items():
                 self.write("MULT", 0, ord(k), v)
-            for name, u, m in (("IMU", "s#EEEooo--O--zz", "F-000000-----00"), ("MAG", "s#GGGGGGGGG-s", "F-CCCCCCCCC-F")):
+            for name, u, m in (
+                ("IMU", "s#EEEooo--O--zz", "F-000000-----00"),
+                ("MAG", "s#GGGGGGGGG-s", "F-CCCCCCCCC-F"),
+            ):
                 self.write("FMTU", 0, self.fmt[name].type, u.encode(), m.encode())
 
     def write(self, name, *values):
@@ -67,8 +90,24 @@ class DataFlashWriter:
 
     def gps(self, t_us, lat_deg, lon_deg, alt_m):
         """GPS week 2300, 3000 ms into it, 3-D fix; scaled fields as stored: 'c' ×100, 'L' ×1e7, 'e' ×100."""
-        self.write("GPS", t_us, 0, 3, 3000, 2300, 12, 80, round(lat_deg * 1e7), round(lon_deg * 1e7),
-                   round(alt_m * 100), 0, 0, 0, 0, 1)
+        self.write(
+            "GPS",
+            t_us,
+            0,
+            3,
+            3000,
+            2300,
+            12,
+            80,
+            round(lat_deg * 1e7),
+            round(lon_deg * 1e7),
+            round(alt_m * 100),
+            0,
+            0,
+            0,
+            0,
+            1,
+        )
 
     def close(self):
         self.f.close()
@@ -78,10 +117,23 @@ def _f32(x):
     return np.asarray(x, dtype=np.float32).astype(np.float64)
 
 
-PARAMS = {"INS_ACCOFFS_X": 0.0512, "INS_ACCOFFS_Y": -0.1, "INS_ACCOFFS_Z": 0.2, "INS_ACCSCAL_X": 1.01,
-          "INS_ACC_ID": 2753028, "INS_ACC2_ID": 2818564, "INS_GYROFFS_X": 0.003, "INS_GYR_ID": 2752772,
-          "INS_GYR2_ID": 2818308, "COMPASS_OFS_X": 120.5, "COMPASS_DIA_X": 1.02, "COMPASS_ODI_X": 0.01,
-          "COMPASS_DEV_ID": 97539, "AHRS_ORIENTATION": 0, "SERIAL0_BAUD": 115}
+PARAMS = {
+    "INS_ACCOFFS_X": 0.0512,
+    "INS_ACCOFFS_Y": -0.1,
+    "INS_ACCOFFS_Z": 0.2,
+    "INS_ACCSCAL_X": 1.01,
+    "INS_ACC_ID": 2753028,
+    "INS_ACC2_ID": 2818564,
+    "INS_GYROFFS_X": 0.003,
+    "INS_GYR_ID": 2752772,
+    "INS_GYR2_ID": 2818308,
+    "COMPASS_OFS_X": 120.5,
+    "COMPASS_DIA_X": 1.02,
+    "COMPASS_ODI_X": 0.01,
+    "COMPASS_DEV_ID": 97539,
+    "AHRS_ORIENTATION": 0,
+    "SERIAL0_BAUD": 115,
+}
 
 
 def write_bin(path, n=200, units=True, late_param=False):
@@ -117,7 +169,11 @@ def test_bin_round_trip_units_parameters_date_place(tmp_path):
     m = c.meta
     assert (m["firmware"], m["corrected"]) == ("ardupilot", "true")
     # units from the log's own FMTU/UNIT/MULT: IMU rad/s and m/s/s, MAG Gauss × 1e-3
-    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == ("m/s^2", "rad/s", "mgauss")
+    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == (
+        "m/s^2",
+        "rad/s",
+        "mgauss",
+    )
     assert m["sensor_device_id"] == "2753028" and m["sensor_instance"] == "0"
     assert m["gyro_device_id"] == "2752772" and m["mag_device_id"] == "97539"
     for name, value in PARAMS.items():
@@ -128,8 +184,12 @@ def test_bin_round_trip_units_parameters_date_place(tmp_path):
     t_us, acc = truth[0][:, 0], truth[0][:, 4:7]
     first = int(np.flatnonzero(t_us >= 500_100)[0])
     last = int(np.flatnonzero(t_us <= t_us[-1])[-1])
-    np.testing.assert_array_equal(c.columns["ax"], _f32(acc[first:last + 1, 0])[: c.n_rows])
-    np.testing.assert_allclose(c.columns["t"], (t_us[first:first + c.n_rows] - t_us[first]) * 1e-6, atol=1e-9)
+    np.testing.assert_array_equal(
+        c.columns["ax"], _f32(acc[first : last + 1, 0])[: c.n_rows]
+    )
+    np.testing.assert_allclose(
+        c.columns["t"], (t_us[first : first + c.n_rows] - t_us[first]) * 1e-6, atol=1e-9
+    )
     assert abs(float(m["sample_rate_hz"]) - 400) < 1e-6
     # the 100 Hz compass is interpolated onto the 400 Hz rows; its mGauss values are whole numbers
     assert "mag linear" in m["import_align"]
@@ -140,23 +200,45 @@ def test_bin_round_trip_units_parameters_date_place(tmp_path):
     t_first_row = t_us[first] * 1e-6
     t_gps = (500_000 + 10 * 2500) * 1e-6
     want = gps_unix - t_gps + t_first_row
-    assert m["date"] == dt.datetime.fromtimestamp(int(want), dt.UTC).strftime("%Y-%m-%dT%H:%M:%S")
-    assert abs(float(m["latitude_deg"]) - 47.397742) < 1e-6 and abs(float(m["longitude_deg"]) - 8.545594) < 1e-6
+    assert m["date"] == dt.datetime.fromtimestamp(int(want), dt.UTC).strftime(
+        "%Y-%m-%dT%H:%M:%S"
+    )
+    assert (
+        abs(float(m["latitude_deg"]) - 47.397742) < 1e-6
+        and abs(float(m["longitude_deg"]) - 8.545594) < 1e-6
+    )
 
 
 def test_bin_second_instance_and_old_logs_without_units(tmp_path):
     log = tmp_path / "two.bin"
     truth = write_bin(log, units=False)
     out = tmp_path / "imu1.csv"
-    res = run_station("import", log, "--procedure", "gyro-drift", "--instance", "1", "--out", out)
+    res = run_station(
+        "import", log, "--procedure", "gyro-drift", "--instance", "1", "--out", out
+    )
     assert res.returncode == 0, res.stderr
     c = read_capture(out)
-    assert c.meta["sensor_device_id"] == "2818308" and c.meta["sensor_instance"] == "1"  # INS_GYR2_ID
+    assert (
+        c.meta["sensor_device_id"] == "2818308" and c.meta["sensor_instance"] == "1"
+    )  # INS_GYR2_ID
     assert set(c.columns["gx"]) <= set(_f32(truth[1][:, 1]))
     # no FMTU: ArduPilot's LogStructure units (IMU rad/s, m/s/s; MAG mGauss)
     assert (c.meta["gyro_unit"], c.meta["accel_unit"]) == ("rad/s", "m/s^2")
-    res = run_station("import", log, "--procedure", "gyro-drift", "--instance", "4", "--out", tmp_path / "x.csv")
-    assert res.returncode == 2 and "instances 0, 1" in res.stderr and not (tmp_path / "x.csv").exists()
+    res = run_station(
+        "import",
+        log,
+        "--procedure",
+        "gyro-drift",
+        "--instance",
+        "4",
+        "--out",
+        tmp_path / "x.csv",
+    )
+    assert (
+        res.returncode == 2
+        and "instances 0, 1" in res.stderr
+        and not (tmp_path / "x.csv").exists()
+    )
 
 
 def test_bin_parameter_changed_during_the_data_is_flagged(tmp_path):
@@ -166,14 +248,31 @@ def test_bin_parameter_changed_during_the_data_is_flagged(tmp_path):
     res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
     assert res.returncode == 0
     c = read_capture(out)
-    assert np.float32(float(c.meta["param.INS_ACCOFFS_X"])) == np.float32(0.0512)  # the value at the start
+    assert np.float32(float(c.meta["param.INS_ACCOFFS_X"])) == np.float32(
+        0.0512
+    )  # the value at the start
     assert c.meta["params_changed"] == "INS_ACCOFFS_X" and "INS_ACCOFFS_X" in res.stderr
 
 
 def _static_positions(rng, g, n_pos=12, hold_s=4.0, move_s=1.0, rate=100.0):
     """A tabletop run: 12 orientations held still, moved by hand between them."""
-    dirs = [np.array(v, float) for v in ((0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0),
-                                          (1, 1, 0), (1, 0, 1), (0, 1, 1), (-1, 1, 1), (1, -1, 1), (1, 1, -1))]
+    dirs = [
+        np.array(v, float)
+        for v in (
+            (0, 0, 1),
+            (0, 0, -1),
+            (1, 0, 0),
+            (-1, 0, 0),
+            (0, 1, 0),
+            (0, -1, 0),
+            (1, 1, 0),
+            (1, 0, 1),
+            (0, 1, 1),
+            (-1, 1, 1),
+            (1, -1, 1),
+            (1, 1, -1),
+        )
+    ]
     rows = []
     t = 0.0
     for k, d in enumerate(dirs[:n_pos]):
@@ -216,12 +315,18 @@ def test_bin_calibrates_directly_and_recovers_the_truth(tmp_path):
     assert np.all(np.abs(b - B) <= 5 * sb + 1e-4), (b, sb)
     np.testing.assert_allclose(np.array(r["params"]["M"]), M, atol=0.01)
     out = tmp_path / "tabletop.csv"
-    assert run_station("import", log, "--procedure", "accel-tabletop", "--out", out).returncode == 0
+    assert (
+        run_station(
+            "import", log, "--procedure", "accel-tabletop", "--out", out
+        ).returncode
+        == 0
+    )
     via = json.loads(run_station("calibrate", out, "--json").stdout)
     assert via["params"] == r["params"]
 
 
 # ------------------------------------------------------------------------------------------- tlog
+
 
 def write_tlog(path, autopilot=3, n=100, t0=1_700_000_000.0, second_imu=False):
     """A telemetry log as MAVProxy / Mission Planner keep it, written by pymavlink."""
@@ -236,7 +341,9 @@ def write_tlog(path, autopilot=3, n=100, t0=1_700_000_000.0, second_imu=False):
     ints = {"INS_ACC_ID": 6, "COMPASS_DEV_ID": 6, "AHRS_ORIENTATION": 2}
     for i, (name, value) in enumerate(PARAMS.items()):
         at(t0)
-        mav.param_value_send(name.encode(), float(value), ints.get(name, 9), len(PARAMS), i)
+        mav.param_value_send(
+            name.encode(), float(value), ints.get(name, 9), len(PARAMS), i
+        )
     rng = np.random.default_rng(5)
     sent = []
     for k in range(n):
@@ -263,21 +370,40 @@ def test_tlog_round_trip_units_from_pymavlink_definitions(tmp_path):
     c = read_capture(out)
     m = c.meta
     # RAW_IMU from ArduPilot: mG (milli-g), mrad/s, mgauss (pymavlink's fieldunits_by_name)
-    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == ("mg", "mrad/s", "mgauss")
+    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == (
+        "mg",
+        "mrad/s",
+        "mgauss",
+    )
     assert (m["firmware"], m["corrected"]) == ("ardupilot", "true")
     np.testing.assert_array_equal(c.columns["ax"], sent[:, 1])
     np.testing.assert_array_equal(c.columns["mz"], sent[:, 9])
     np.testing.assert_allclose(c.columns["t"], sent[:, 0], atol=1e-9)
-    assert m["date"] == "2023-11-14T22:13:20"  # the ground station's clock, t0 = 1.7e9 s
+    assert (
+        m["date"] == "2023-11-14T22:13:20"
+    )  # the ground station's clock, t0 = 1.7e9 s
     assert m["param.INS_ACC_ID"] == "2753028" and m["sensor_device_id"] == "2753028"
     assert np.float32(float(m["param.COMPASS_OFS_X"])) == np.float32(120.5)
     # |f| ≈ 1 g in mg: the unit is right
-    f = np.linalg.norm(np.column_stack([c.columns["ax"], c.columns["ay"], c.columns["az"]]), axis=1)
+    f = np.linalg.norm(
+        np.column_stack([c.columns["ax"], c.columns["ay"], c.columns["az"]]), axis=1
+    )
     assert abs(np.median(f) - 1000) < 5
-    res = run_station("import", log, "--procedure", "accel-tabletop", "--instance", "1", "--out", tmp_path / "i1.csv")
+    res = run_station(
+        "import",
+        log,
+        "--procedure",
+        "accel-tabletop",
+        "--instance",
+        "1",
+        "--out",
+        tmp_path / "i1.csv",
+    )
     assert res.returncode == 0, res.stderr
     c1 = read_capture(tmp_path / "i1.csv")
-    assert c1.meta["import_source"].startswith("SCALED_IMU2") and "mx" not in c1.columns  # no compass there
+    assert (
+        c1.meta["import_source"].startswith("SCALED_IMU2") and "mx" not in c1.columns
+    )  # no compass there
     assert np.all(c1.columns["az"] == -990)
 
 
@@ -286,24 +412,42 @@ def test_tlog_raw_imu_from_another_autopilot_is_counts(tmp_path):
     log = tmp_path / "generic.tlog"
     write_tlog(log, autopilot=0)
     out = tmp_path / "g.csv"
-    assert run_station("import", log, "--procedure", "gyro-drift", "--out", out).returncode == 0
+    assert (
+        run_station("import", log, "--procedure", "gyro-drift", "--out", out).returncode
+        == 0
+    )
     c = read_capture(out)
-    assert c.meta["accel_unit"] == "counts" and c.meta["corrected"] == "false" and "firmware" not in c.meta
+    assert (
+        c.meta["accel_unit"] == "counts"
+        and c.meta["corrected"] == "false"
+        and "firmware" not in c.meta
+    )
 
 
-@pytest.mark.parametrize("suffix, content, says", [
-    (".bin", b"\x00" * 10 + b"not a log", "no IMU or MAG messages"),
-    (".bin", b"", "empty file"),
-    (".tlog", b"garbage" * 50, "no RAW_IMU / SCALED_IMU / HIGHRES_IMU messages"),
-])
+@pytest.mark.parametrize(
+    "suffix, content, says",
+    [
+        (".bin", b"\x00" * 10 + b"not a log", "no IMU or MAG messages"),
+        (".bin", b"", "empty file"),
+        (".tlog", b"garbage" * 50, "no RAW_IMU / SCALED_IMU / HIGHRES_IMU messages"),
+    ],
+)
 def test_bad_logs_one_line_nothing_written(tmp_path, suffix, content, says):
     bad = tmp_path / f"bad{suffix}"
     bad.write_bytes(content)
-    for cmd in (("import", bad, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv"),
-                ("calibrate", bad, "--procedure", "accel-tabletop")):
+    for cmd in (
+        ("import", bad, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv"),
+        ("calibrate", bad, "--procedure", "accel-tabletop"),
+    ):
         res = run_station(*cmd)
-        assert res.returncode == 2 and res.stdout == "" and "Traceback" not in res.stderr
-        assert res.stderr.count("\n") == 1 and str(bad) in res.stderr and says in res.stderr, res.stderr
+        assert (
+            res.returncode == 2 and res.stdout == "" and "Traceback" not in res.stderr
+        )
+        assert (
+            res.stderr.count("\n") == 1
+            and str(bad) in res.stderr
+            and says in res.stderr
+        ), res.stderr
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -311,8 +455,11 @@ def test_units_in_the_docstrings_are_pymavlinks_own():
     """The units the reader declares are the ones pymavlink's message definitions carry."""
     from station.importers.ardupilot import MAV_UNITS
 
-    for cls in (mavutil.mavlink.MAVLink_raw_imu_message, mavutil.mavlink.MAVLink_scaled_imu2_message,
-                mavutil.mavlink.MAVLink_highres_imu_message):
+    for cls in (
+        mavutil.mavlink.MAVLink_raw_imu_message,
+        mavutil.mavlink.MAVLink_scaled_imu2_message,
+        mavutil.mavlink.MAVLink_highres_imu_message,
+    ):
         u = cls.fieldunits_by_name
         for kind, field in (("accel", "xacc"), ("gyro", "xgyro"), ("mag", "xmag")):
             assert (kind, u[field]) in MAV_UNITS
@@ -322,7 +469,9 @@ def test_tlog_from_px4_highres_imu_and_bytewise_parameters(tmp_path):
     """PX4 streams HIGHRES_IMU (m/s², rad/s, gauss, already calibrated) and sends integer
     parameters byte-wise inside PARAM_VALUE's float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
     log_path = tmp_path / "px4.tlog"
-    log = mavutil.mavlogfile(str(log_path), write=True, source_system=1, source_component=1)
+    log = mavutil.mavlogfile(
+        str(log_path), write=True, source_system=1, source_component=1
+    )
     t0 = 1_710_773_350.0
 
     def at(t):
@@ -337,8 +486,23 @@ def test_tlog_from_px4_highres_imu_and_bytewise_parameters(tmp_path):
     log.mav.param_value_send(b"CAL_ACC0_XOFF", 0.15803528, 9, 2, 1)
     for k in range(40):
         at(t0 + k * 0.004)
-        log.mav.highres_imu_send(5_000_000 + k * 4000, 0.02, -0.01, -9.79, 0.001, -0.002, 0.003,
-                                 0.21, 0.01, 0.43, 1013.0, 0.0, 100.0, 40.5, 0x1FFF)
+        log.mav.highres_imu_send(
+            5_000_000 + k * 4000,
+            0.02,
+            -0.01,
+            -9.79,
+            0.001,
+            -0.002,
+            0.003,
+            0.21,
+            0.01,
+            0.43,
+            1013.0,
+            0.0,
+            100.0,
+            40.5,
+            0x1FFF,
+        )
     log.close()
     out = tmp_path / "px4.csv"
     res = run_station("import", log_path, "--procedure", "accel-tabletop", "--out", out)
@@ -346,8 +510,14 @@ def test_tlog_from_px4_highres_imu_and_bytewise_parameters(tmp_path):
     c = read_capture(out)
     m = c.meta
     assert (m["firmware"], m["corrected"]) == ("px4", "true")
-    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == ("m/s^2", "rad/s", "gauss")
+    assert (m["accel_unit"], m["gyro_unit"], m["mag_unit"]) == (
+        "m/s^2",
+        "rad/s",
+        "gauss",
+    )
     assert m["param.CAL_ACC0_ID"] == "2424842"  # decoded byte-wise, not 3.4e-39
     assert np.float32(float(m["param.CAL_ACC0_XOFF"])) == np.float32(0.15803528)
-    assert np.all(c.columns["az"] == np.float32(-9.79)) and np.all(c.columns["temp_c"] == 40.5)
+    assert np.all(c.columns["az"] == np.float32(-9.79)) and np.all(
+        c.columns["temp_c"] == 40.5
+    )
     assert abs(float(m["sample_rate_hz"]) - 250) < 1e-6

@@ -5,6 +5,7 @@ dataset publishes it (``mav0/imu0/data.csv``: ``#timestamp [ns],w_RS_S_x [rad s^
 Kalibr's ``kalibr_bagcreater`` documents its ``imu0.csv`` (``timestamp,omega_x,…,alpha_z``; ns,
 rad/s, m/s²).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,14 +14,20 @@ import pytest
 from station.capture import read_capture
 from tests.station_run import run_station
 
-EUROC = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-         "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
+EUROC = (
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
+)
 KALIBR = "timestamp,omega_x,omega_y,omega_z,alpha_x,alpha_y,alpha_z"
 T0 = 1403636579758555392  # EuRoC MH_01's first IMU stamp (ns)
 
 
 def _imu_rows(rng, n=600, hz=200):
-    t = T0 + np.round(np.arange(n) * 1e9 / hz).astype(np.int64) + rng.integers(-300, 300, n)
+    t = (
+        T0
+        + np.round(np.arange(n) * 1e9 / hz).astype(np.int64)
+        + rng.integers(-300, 300, n)
+    )
     w = rng.normal(0, 0.002, (n, 3))
     a = np.array([8.15, -0.38, -2.40]) + rng.normal(0, 0.02, (n, 3))
     return t, w, a
@@ -30,8 +37,14 @@ def _imu_rows(rng, n=600, hz=200):
 def test_euroc_and_kalibr_round_trip(tmp_path, header):
     t, w, a = _imu_rows(np.random.default_rng(1))
     src = tmp_path / "data.csv"
-    src.write_text(header + "\n" + "".join(",".join([str(ti)] + [repr(x) for x in wi + ai]) + "\n"
-                                          for ti, wi, ai in zip(t.tolist(), w.tolist(), a.tolist())))
+    src.write_text(
+        header
+        + "\n"
+        + "".join(
+            ",".join([str(ti)] + [repr(x) for x in wi + ai]) + "\n"
+            for ti, wi, ai in zip(t.tolist(), w.tolist(), a.tolist())
+        )
+    )
     out = tmp_path / "c.csv"
     res = run_station("import", src, "--procedure", "gyro-drift", "--out", out)
     assert res.returncode == 0, res.stderr
@@ -43,16 +56,30 @@ def test_euroc_and_kalibr_round_trip(tmp_path, header):
     np.testing.assert_allclose(c.columns["t"], (t - t[0]) * 1e-9, rtol=0, atol=1e-12)
     # calibrate reads it directly; a file with accel and gyro needs the procedure named
     res = run_station("calibrate", src)
-    assert res.returncode == 2 and "--procedure" in res.stderr and res.stderr.count("\n") == 1
+    assert (
+        res.returncode == 2
+        and "--procedure" in res.stderr
+        and res.stderr.count("\n") == 1
+    )
     res = run_station("calibrate", src, "--procedure", "gyro-drift")
-    assert "Traceback" not in res.stderr and (res.returncode == 0 or res.stderr.count("\n") == 1)
+    assert "Traceback" not in res.stderr and (
+        res.returncode == 0 or res.stderr.count("\n") == 1
+    )
 
 
 def test_euroc_bad_cell_names_file_and_line(tmp_path):
     src = tmp_path / "data.csv"
-    src.write_text(EUROC + "\n" + f"{T0},0,0,0,0,0,9.8\n{T0 + 5_000_000},0,0,abc,0,0,9.8\n")
-    res = run_station("import", src, "--procedure", "gyro-drift", "--out", tmp_path / "o.csv")
-    assert res.returncode == 2 and res.stderr.strip() == f"station: {src}:3: column 'gz': 'abc' is not a number"
+    src.write_text(
+        EUROC + "\n" + f"{T0},0,0,0,0,0,9.8\n{T0 + 5_000_000},0,0,abc,0,0,9.8\n"
+    )
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--out", tmp_path / "o.csv"
+    )
+    assert (
+        res.returncode == 2
+        and res.stderr.strip()
+        == f"station: {src}:3: column 'gz': 'abc' is not a number"
+    )
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -63,9 +90,20 @@ def test_plain_csv_is_refused_by_calibrate_with_the_way_in(tmp_path):
     assert res.returncode == 2 and res.stderr.count("\n") == 1
     assert f"{src}:1:" in res.stderr and "station import" in res.stderr
     # station import takes it once the unit is known (the names already are the capture's)
-    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
+    res = run_station(
+        "import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv"
+    )
     assert res.returncode == 2 and "--unit accel=UNIT" in res.stderr
-    res = run_station("import", src, "--procedure", "accel-tabletop", "--unit", "accel=g", "--out", tmp_path / "o.csv")
+    res = run_station(
+        "import",
+        src,
+        "--procedure",
+        "accel-tabletop",
+        "--unit",
+        "accel=g",
+        "--out",
+        tmp_path / "o.csv",
+    )
     assert res.returncode == 0, res.stderr
     c = read_capture(tmp_path / "o.csv")
     assert c.meta["accel_unit"] == "g" and c.columns["az"].tolist() == [1.0, 1.0]
@@ -79,18 +117,40 @@ def test_plain_csv_with_map_units_and_time_in_ms(tmp_path):
     gyr = rng.normal(0, 0.1, (n, 3))
     mag = rng.normal(0, 0.5, (n, 3)) + [20, 0, -40]
     src = tmp_path / "logger.csv"
-    lines = ["# exported by the bench logger", "time_ms;temp;acc_x;acc_y;acc_z;gyr_x;gyr_y;gyr_z;mag_x;mag_y;mag_z"]
+    lines = [
+        "# exported by the bench logger",
+        "time_ms;temp;acc_x;acc_y;acc_z;gyr_x;gyr_y;gyr_z;mag_x;mag_y;mag_z",
+    ]
     lines += [""] * n
-    lines[2:] = [";".join(repr(float(x)) for x in [t_ms[i], 25.5, *acc[i], *gyr[i], *mag[i]]) for i in range(n)]
+    lines[2:] = [
+        ";".join(repr(float(x)) for x in [t_ms[i], 25.5, *acc[i], *gyr[i], *mag[i]])
+        for i in range(n)
+    ]
     src.write_text("\n".join(lines) + "\n")
     out = tmp_path / "o.csv"
-    res = run_station("import", src, "--procedure", "compass", "--out", out,
-                      "--map", "t=time_ms,ax=acc_x,ay=acc_y,az=acc_z,temp_c=2",
-                      "--map", "gx=gyr_x,gy=gyr_y,gz=gyr_z,mx=mag_x,my=mag_y,mz=mag_z",
-                      "--unit", "accel=g,gyro=deg/s,mag=uT,t=ms", "--device", "BENCH-7")
+    res = run_station(
+        "import",
+        src,
+        "--procedure",
+        "compass",
+        "--out",
+        out,
+        "--map",
+        "t=time_ms,ax=acc_x,ay=acc_y,az=acc_z,temp_c=2",
+        "--map",
+        "gx=gyr_x,gy=gyr_y,gz=gyr_z,mx=mag_x,my=mag_y,mz=mag_z",
+        "--unit",
+        "accel=g,gyro=deg/s,mag=uT,t=ms",
+        "--device",
+        "BENCH-7",
+    )
     assert res.returncode == 0, res.stderr
     c = read_capture(out)
-    assert (c.meta["accel_unit"], c.meta["gyro_unit"], c.meta["mag_unit"]) == ("g", "deg/s", "uT")
+    assert (c.meta["accel_unit"], c.meta["gyro_unit"], c.meta["mag_unit"]) == (
+        "g",
+        "deg/s",
+        "uT",
+    )
     assert c.meta["device"] == "BENCH-7"
     np.testing.assert_allclose(c.columns["t"], t_ms / 1000, atol=1e-12)
     np.testing.assert_array_equal(c.columns["mx"], mag[:, 0])
@@ -99,31 +159,80 @@ def test_plain_csv_with_map_units_and_time_in_ms(tmp_path):
 
 def test_plain_csv_without_time_uses_rate(tmp_path):
     src = tmp_path / "adc.csv"
-    src.write_text("x,y,z\n" + "".join(f"{2.5 + 0.001 * i},{1.6},{1.7}\n" for i in range(10)))
+    src.write_text(
+        "x,y,z\n" + "".join(f"{2.5 + 0.001 * i},{1.6},{1.7}\n" for i in range(10))
+    )
     out = tmp_path / "o.csv"
-    res = run_station("import", src, "--procedure", "accel-tabletop", "--map", "ax=x,ay=y,az=z",
-                      "--unit", "accel=V", "--out", out)
+    res = run_station(
+        "import",
+        src,
+        "--procedure",
+        "accel-tabletop",
+        "--map",
+        "ax=x,ay=y,az=z",
+        "--unit",
+        "accel=V",
+        "--out",
+        out,
+    )
     assert res.returncode == 2 and "--rate HZ" in res.stderr
-    res = run_station("import", src, "--procedure", "accel-tabletop", "--map", "ax=x,ay=y,az=z",
-                      "--unit", "accel=V", "--rate", "100", "--out", out)
+    res = run_station(
+        "import",
+        src,
+        "--procedure",
+        "accel-tabletop",
+        "--map",
+        "ax=x,ay=y,az=z",
+        "--unit",
+        "accel=V",
+        "--rate",
+        "100",
+        "--out",
+        out,
+    )
     assert res.returncode == 0, res.stderr
     np.testing.assert_allclose(read_capture(out).columns["t"], np.arange(10) / 100)
 
 
-@pytest.mark.parametrize("content, args, says", [
-    ("t,ax,ay,az\n0,1,2,3\n1,1,x,3\n", ("--unit", "accel=g"), ":3: column 'ay': 'x' is not a number"),
-    ("t,ax,ay,az\n0,1,2,3\n1,1,2\n", ("--unit", "accel=g"), ":3: 3 fields where the header has 4"),
-    ("t,ax,ay,az\n0,1,2,3\n-1,1,2,3\n", ("--unit", "accel=g"), ":3: time goes backwards"),
-    ("t,ax,ay,az\n0,1,2,3\n", ("--unit", "accel=furlongs"), "--unit accel=furlongs: not an accel unit"),
-    ("t,ax,ay\n0,1,2\n", ("--unit", "accel=g"), "map all three of ax, ay, az"),
-    ("t,ax,ay,az\n0,1,2,3\n", ("--unit", "accel=g", "--map", "ax=nope"), "no column 'nope' in the header"),
-    ("1,2,3\n4,5,6\n", ("--unit", "accel=g"), ":1: no header row"),
-])
+@pytest.mark.parametrize(
+    "content, args, says",
+    [
+        (
+            "t,ax,ay,az\n0,1,2,3\n1,1,x,3\n",
+            ("--unit", "accel=g"),
+            ":3: column 'ay': 'x' is not a number",
+        ),
+        (
+            "t,ax,ay,az\n0,1,2,3\n1,1,2\n",
+            ("--unit", "accel=g"),
+            ":3: 3 fields where the header has 4",
+        ),
+        (
+            "t,ax,ay,az\n0,1,2,3\n-1,1,2,3\n",
+            ("--unit", "accel=g"),
+            ":3: time goes backwards",
+        ),
+        (
+            "t,ax,ay,az\n0,1,2,3\n",
+            ("--unit", "accel=furlongs"),
+            "--unit accel=furlongs: not an accel unit",
+        ),
+        ("t,ax,ay\n0,1,2\n", ("--unit", "accel=g"), "map all three of ax, ay, az"),
+        (
+            "t,ax,ay,az\n0,1,2,3\n",
+            ("--unit", "accel=g", "--map", "ax=nope"),
+            "no column 'nope' in the header",
+        ),
+        ("1,2,3\n4,5,6\n", ("--unit", "accel=g"), ":1: no header row"),
+    ],
+)
 def test_plain_csv_bad_input_one_line(tmp_path, content, args, says):
     src = tmp_path / "in.csv"
     src.write_text(content)
     out = tmp_path / "o.csv"
-    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *args)
+    res = run_station(
+        "import", src, "--procedure", "accel-tabletop", "--out", out, *args
+    )
     assert res.returncode == 2 and res.stdout == "" and "Traceback" not in res.stderr
     assert res.stderr.count("\n") == 1 and says in res.stderr, res.stderr
     assert not out.exists()
@@ -131,5 +240,14 @@ def test_plain_csv_bad_input_one_line(tmp_path, content, args, says):
 
 def test_options_that_do_not_apply_are_refused(tmp_path, shared_data):
     log = shared_data / "px4_ulog" / "original" / "sample_px4_events.ulg"
-    res = run_station("import", log, "--procedure", "accel-tabletop", "--unit", "accel=g", "--out", tmp_path / "o.csv")
+    res = run_station(
+        "import",
+        log,
+        "--procedure",
+        "accel-tabletop",
+        "--unit",
+        "accel=g",
+        "--out",
+        tmp_path / "o.csv",
+    )
     assert res.returncode == 2 and "apply to plain CSV files" in res.stderr

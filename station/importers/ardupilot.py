@@ -20,6 +20,7 @@ Parameters come from ``PARAM_VALUE`` (ArduPilot sends integers as float values, 
 
 All of these are corrected by the board: ``corrected: true``.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -34,24 +35,52 @@ from station.importers._common import Imported, Stream, fmt_param, iso_utc
 
 PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
-DF_UNITS = {"rad/s": "rad/s", "m/s/s": "m/s^2", "m/s^2": "m/s^2", "mGauss": "mgauss", "Gauss": "gauss",
-            "mG": "mgauss", "G": "gauss"}
-DF_DEFAULT = {"accel": "m/s^2", "gyro": "rad/s", "mag": "mgauss"}  # ArduPilot LogStructure IMU/MAG
+DF_UNITS = {
+    "rad/s": "rad/s",
+    "m/s/s": "m/s^2",
+    "m/s^2": "m/s^2",
+    "mGauss": "mgauss",
+    "Gauss": "gauss",
+    "mG": "mgauss",
+    "G": "gauss",
+}
+DF_DEFAULT = {
+    "accel": "m/s^2",
+    "gyro": "rad/s",
+    "mag": "mgauss",
+}  # ArduPilot LogStructure IMU/MAG
 GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06T00:00:00Z
 GPS_LEAP_S = 18.0  # GPS − UTC since 2017-01-01
 MAV_AUTOPILOT = {3: "ardupilot", 12: "px4"}
 # pymavlink's unit strings → capture units (per sensor: 'mG' is milli-g in MAVLink)
-MAV_UNITS = {("accel", "mG"): "mg", ("accel", "m/s/s"): "m/s^2", ("gyro", "mrad/s"): "mrad/s",
-             ("gyro", "rad/s"): "rad/s", ("mag", "mgauss"): "mgauss", ("mag", "gauss"): "gauss"}
-MAV_FIELDS = {"accel": ("xacc", "yacc", "zacc"), "gyro": ("xgyro", "ygyro", "zgyro"), "mag": ("xmag", "ymag", "zmag")}
-IMU_MESSAGES = {0: ("RAW_IMU", "SCALED_IMU", "HIGHRES_IMU"), 1: ("SCALED_IMU2",), 2: ("SCALED_IMU3",)}
+MAV_UNITS = {
+    ("accel", "mG"): "mg",
+    ("accel", "m/s/s"): "m/s^2",
+    ("gyro", "mrad/s"): "mrad/s",
+    ("gyro", "rad/s"): "rad/s",
+    ("mag", "mgauss"): "mgauss",
+    ("mag", "gauss"): "gauss",
+}
+MAV_FIELDS = {
+    "accel": ("xacc", "yacc", "zacc"),
+    "gyro": ("xgyro", "ygyro", "zgyro"),
+    "mag": ("xmag", "ymag", "zmag"),
+}
+IMU_MESSAGES = {
+    0: ("RAW_IMU", "SCALED_IMU", "HIGHRES_IMU"),
+    1: ("SCALED_IMU2",),
+    2: ("SCALED_IMU3",),
+}
 INT_PARAM_TYPES = {1, 2, 3, 4, 5, 6, 7, 8}  # MAV_PARAM_TYPE_UINT8 … INT64
 
 
 @contextlib.contextmanager
 def _quiet():
     """pymavlink prints progress and oddities on stdout/stderr: not for the operator."""
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+    with (
+        contextlib.redirect_stdout(io.StringIO()),
+        contextlib.redirect_stderr(io.StringIO()),
+    ):
         yield
 
 
@@ -62,7 +91,9 @@ def _open_error(path, exc: Exception, what: str) -> InputError:
         return InputError(path, None, f"is a directory, not {what}")
     if isinstance(exc, PermissionError):
         return InputError(path, None, "permission denied")
-    return InputError(path, None, f"not a readable {what} ({type(exc).__name__}: {exc})")
+    return InputError(
+        path, None, f"not a readable {what} ({type(exc).__name__}: {exc})"
+    )
 
 
 def _params_meta(params: dict[str, float], meta: dict[str, str]) -> None:
@@ -74,12 +105,17 @@ def _params_meta(params: dict[str, float], meta: dict[str, str]) -> None:
 def _ap_device_id(params: dict, kind: str, instance: int) -> int | None:
     """The sensor's id from INS_ACC_ID / INS_ACC2_ID …, INS_GYR_ID …, COMPASS_DEV_ID / _DEV_ID2 …"""
     n = "" if instance == 0 else str(instance + 1)
-    name = {"accel": f"INS_ACC{n}_ID", "gyro": f"INS_GYR{n}_ID", "mag": f"COMPASS_DEV_ID{n}"}[kind]
+    name = {
+        "accel": f"INS_ACC{n}_ID",
+        "gyro": f"INS_GYR{n}_ID",
+        "mag": f"COMPASS_DEV_ID{n}",
+    }[kind]
     value = params.get(name)
     return int(value) if value else None
 
 
 # ------------------------------------------------------------------------------------- DataFlash
+
 
 def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     """IMU/MAG of one instance (default 0) and the parameters in use from a DataFlash log."""
@@ -92,8 +128,16 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     except Exception as exc:  # noqa: BLE001 - any reader failure is one line
         raise _open_error(path, exc, "ArduPilot DataFlash log") from None
     names = set(getattr(log, "name_to_id", {}))
-    imu_name = "IMU" if inst == 0 or "IMU" in names and f"IMU{inst + 1}" not in names else f"IMU{inst + 1}"
-    mag_name = "MAG" if inst == 0 or "MAG" in names and f"MAG{inst + 1}" not in names else f"MAG{inst + 1}"
+    imu_name = (
+        "IMU"
+        if inst == 0 or "IMU" in names and f"IMU{inst + 1}" not in names
+        else f"IMU{inst + 1}"
+    )
+    mag_name = (
+        "MAG"
+        if inst == 0 or "MAG" in names and f"MAG{inst + 1}" not in names
+        else f"MAG{inst + 1}"
+    )
     types = [imu_name, mag_name, "PARM", "GPS"]
     rows: dict[str, list] = {"accel": [], "gyro": [], "mag": []}
     temps: list[float] = []
@@ -115,14 +159,26 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 if name == "PARM":
                     if first_us is None:
                         params[d["Name"]] = d["Value"]
-                    elif str(d["Name"]).startswith(PARAM_PREFIXES) and params.get(d["Name"]) != d["Value"]:
+                    elif (
+                        str(d["Name"]).startswith(PARAM_PREFIXES)
+                        and params.get(d["Name"]) != d["Value"]
+                    ):
                         late.add(d["Name"])
                     continue
                 if name == "GPS":
                     _df_gps(d, fixes)
-                    if gps_utc_offset is None and d.get("GWk") and d.get("Status", 0) >= 3:
-                        gps_utc_offset = (GPS_EPOCH_UNIX_S + d["GWk"] * 604800.0 + d["GMS"] * 1e-3 - GPS_LEAP_S
-                                          - d["TimeUS"] * 1e-6)
+                    if (
+                        gps_utc_offset is None
+                        and d.get("GWk")
+                        and d.get("Status", 0) >= 3
+                    ):
+                        gps_utc_offset = (
+                            GPS_EPOCH_UNIX_S
+                            + d["GWk"] * 604800.0
+                            + d["GMS"] * 1e-3
+                            - GPS_LEAP_S
+                            - d["TimeUS"] * 1e-6
+                        )
                     continue
                 if "I" in d:
                     instances_seen[name].add(d["I"])
@@ -142,15 +198,23 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                     if "mag" not in units:
                         units["mag"] = m.fmt.get_unit("MagX") if m.fmt.units else ""
     except Exception as exc:  # noqa: BLE001
-        raise InputError(path, None, f"cannot read the DataFlash log ({type(exc).__name__}: {exc})") from None
+        raise InputError(
+            path, None, f"cannot read the DataFlash log ({type(exc).__name__}: {exc})"
+        ) from None
     finally:
         with contextlib.suppress(Exception):
             log.close()
     if not any(rows.values()):
         seen = {k: sorted(v) for k, v in instances_seen.items() if v}
         if seen:
-            raise InputError(path, None, f"--instance {inst}: the log has " + "; ".join(
-                f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items()))
+            raise InputError(
+                path,
+                None,
+                f"--instance {inst}: the log has "
+                + "; ".join(
+                    f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items()
+                ),
+            )
         raise InputError(path, None, "no IMU or MAG messages in the DataFlash log")
     streams = {}
     for kind, r in rows.items():
@@ -159,17 +223,30 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         arr = np.asarray(r, dtype=np.float64)
         unit = DF_UNITS.get(units.get(kind) or "", None)
         if units.get(kind) and unit is None:
-            raise InputError(path, None, f"{kind} unit {units[kind]!r} in the log's FMTU is not one the station knows")
-        stream = Stream(kind, arr[:, 0] * 1e-6, arr[:, 1:4], unit or DF_DEFAULT[kind],
-                        f"{imu_name if kind != 'mag' else mag_name}[{inst}]", _ap_device_id(params, kind, inst), inst,
-                        np.asarray(temps, dtype=np.float64) if kind == "accel" else None)
+            raise InputError(
+                path,
+                None,
+                f"{kind} unit {units[kind]!r} in the log's FMTU is not one the station knows",
+            )
+        stream = Stream(
+            kind,
+            arr[:, 0] * 1e-6,
+            arr[:, 1:4],
+            unit or DF_DEFAULT[kind],
+            f"{imu_name if kind != 'mag' else mag_name}[{inst}]",
+            _ap_device_id(params, kind, inst),
+            inst,
+            np.asarray(temps, dtype=np.float64) if kind == "accel" else None,
+        )
         streams[kind] = stream
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true"}
     warnings = []
     if late:
         meta["params_changed"] = ",".join(sorted(late))
-        warnings.append(f"parameters changed while the data were logged: {', '.join(sorted(late))} "
-                        "(param.* holds the values at the start)")
+        warnings.append(
+            f"parameters changed while the data were logged: {', '.join(sorted(late))} "
+            "(param.* holds the values at the start)"
+        )
     if gps_utc_offset is not None and first_us is not None:
         meta["date"] = iso_utc(gps_utc_offset + first_us * 1e-6)
     _place(fixes, meta)
@@ -194,6 +271,7 @@ def _place(fixes: list, meta: dict[str, str]) -> None:
 
 # ---------------------------------------------------------------------------------- MAVLink tlog
 
+
 def _param_value(msg, firmware: str | None) -> float | int:
     value = msg.param_value
     if msg.param_type in INT_PARAM_TYPES:
@@ -209,7 +287,11 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
 
     inst = 0 if instance is None else int(instance)
     if inst not in IMU_MESSAGES:
-        raise InputError(None, None, f"--instance {inst}: a MAVLink log carries IMU instances 0, 1, 2")
+        raise InputError(
+            None,
+            None,
+            f"--instance {inst}: a MAVLink log carries IMU instances 0, 1, 2",
+        )
     try:
         with _quiet():
             # mavmmaplog directly: mavlink_connection() would try to *execute* a path holding '/bin/'
@@ -229,12 +311,19 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     try:
         with _quiet():
             while True:
-                m = log.recv_match(type=wanted + ["PARAM_VALUE", "HEARTBEAT", "GPS_RAW_INT", "AUTOPILOT_VERSION"])
+                m = log.recv_match(
+                    type=wanted
+                    + ["PARAM_VALUE", "HEARTBEAT", "GPS_RAW_INT", "AUTOPILOT_VERSION"]
+                )
                 if m is None:
                     break
                 name = m.get_type()
                 if name == "HEARTBEAT":
-                    if firmware is None and m.autopilot in MAV_AUTOPILOT and m.get_srcComponent() == 1:
+                    if (
+                        firmware is None
+                        and m.autopilot in MAV_AUTOPILOT
+                        and m.get_srcComponent() == 1
+                    ):
                         firmware = MAV_AUTOPILOT[m.autopilot]
                 elif name == "PARAM_VALUE":
                     param_msgs.append((first_t is not None, m))
@@ -244,22 +333,36 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
                 elif name == "AUTOPILOT_VERSION":
                     board_uid = board_uid or (m.uid or None)
                 else:
-                    t = m.time_usec * 1e-6 if hasattr(m, "time_usec") else m.time_boot_ms * 1e-3
+                    t = (
+                        m.time_usec * 1e-6
+                        if hasattr(m, "time_usec")
+                        else m.time_boot_ms * 1e-3
+                    )
                     by_type[name].append((t, m))
                     arrivals.setdefault(name, m._timestamp)
                     msg_class[name] = type(m)
                     first_t = t if first_t is None else first_t
     except Exception as exc:  # noqa: BLE001
-        raise InputError(path, None, f"cannot read the MAVLink log ({type(exc).__name__}: {exc})") from None
+        raise InputError(
+            path, None, f"cannot read the MAVLink log ({type(exc).__name__}: {exc})"
+        ) from None
     finally:
         with contextlib.suppress(Exception):
             log.close()
     name = next((n for n in wanted if by_type[n]), None)
     if name is None:
-        raise InputError(path, None, f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})")
+        raise InputError(
+            path,
+            None,
+            f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})",
+        )
     late = set()
     for after_start, m in param_msgs:
-        pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+        pid = (
+            m.param_id
+            if isinstance(m.param_id, str)
+            else m.param_id.decode(errors="replace")
+        )
         pid = pid.rstrip("\x00")
         value = _param_value(m, firmware)
         if not after_start or pid not in params:
@@ -273,16 +376,29 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     for kind, fields in MAV_FIELDS.items():
         if kinds is not None and kind not in kinds:
             continue
-        values = np.array([[getattr(m, f) for f in fields] for _, m in samples], dtype=np.float64)
+        values = np.array(
+            [[getattr(m, f) for f in fields] for _, m in samples], dtype=np.float64
+        )
         if kind == "mag" and not np.any(values):
             continue  # no compass behind this IMU message
         unit = MAV_UNITS.get((kind, units.get(fields[0], "")))
         if name == "RAW_IMU" and firmware != "ardupilot":
             unit = "counts"  # the MAVLink standard's raw ADC values
         if unit is None:
-            raise InputError(path, None, f"{name}.{fields[0]}: unit {units.get(fields[0])!r} is not one the station knows")
-        streams[kind] = Stream(kind, t, values, unit, f"{name}", None if firmware != "ardupilot"
-                               else _ap_device_id(params, kind, inst), inst)
+            raise InputError(
+                path,
+                None,
+                f"{name}.{fields[0]}: unit {units.get(fields[0])!r} is not one the station knows",
+            )
+        streams[kind] = Stream(
+            kind,
+            t,
+            values,
+            unit,
+            f"{name}",
+            None if firmware != "ardupilot" else _ap_device_id(params, kind, inst),
+            inst,
+        )
     temps = [getattr(m, "temperature", None) for _, m in samples]
     if "accel" in streams and all(v is not None for v in temps) and any(temps):
         scale = 0.01 if units.get("temperature") == "cdegC" else 1.0
@@ -290,16 +406,22 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     meta: dict[str, str] = {}
     if firmware:
         meta["firmware"] = firmware
-    meta["corrected"] = "false" if (name == "RAW_IMU" and firmware != "ardupilot") else "true"
+    meta["corrected"] = (
+        "false" if (name == "RAW_IMU" and firmware != "ardupilot") else "true"
+    )
     if board_uid:
         meta["board_uid"] = str(board_uid)
-    if arrivals[name] > 946684800:  # the ground station's clock (UTC) when the first sample came
+    if (
+        arrivals[name] > 946684800
+    ):  # the ground station's clock (UTC) when the first sample came
         meta["date"] = iso_utc(arrivals[name])
     _place(fixes, meta)
     warnings = []
     if late:
         meta["params_changed"] = ",".join(sorted(late))
-        warnings.append(f"parameters changed while the data were logged: {', '.join(sorted(late))}")
+        warnings.append(
+            f"parameters changed while the data were logged: {', '.join(sorted(late))}"
+        )
     if firmware == "px4":
         for pname in sorted(params):
             if pname.startswith(("CAL_", "SENS_BOARD_")):

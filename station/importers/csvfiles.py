@@ -10,6 +10,7 @@ a number is a 1-based column position), ``--unit`` gives the units (``accel=m/s^
 mag=uT,t=ms``); without a time column ``--rate HZ`` numbers the rows. Lines starting with
 ``#`` are skipped; the delimiter (``,`` ``;`` tab or space) is detected from the header line.
 """
+
 from __future__ import annotations
 
 import csv
@@ -25,12 +26,27 @@ from station.importers.options import TARGETS
 
 KIND_OF = {c: k for k, cols in COLUMNS.items() for c in cols}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
-EUROC_COLUMNS = {"w_RS_S_x": "gx", "w_RS_S_y": "gy", "w_RS_S_z": "gz",
-                 "a_RS_S_x": "ax", "a_RS_S_y": "ay", "a_RS_S_z": "az",
-                 "omega_x": "gx", "omega_y": "gy", "omega_z": "gz",
-                 "alpha_x": "ax", "alpha_y": "ay", "alpha_z": "az", "timestamp": "t"}
+EUROC_COLUMNS = {
+    "w_RS_S_x": "gx",
+    "w_RS_S_y": "gy",
+    "w_RS_S_z": "gz",
+    "a_RS_S_x": "ax",
+    "a_RS_S_y": "ay",
+    "a_RS_S_z": "az",
+    "omega_x": "gx",
+    "omega_y": "gy",
+    "omega_z": "gz",
+    "alpha_x": "ax",
+    "alpha_y": "ay",
+    "alpha_z": "az",
+    "timestamp": "t",
+}
 EUROC_UNITS = {"ns": "ns", "rad s^-1": "rad/s", "m s^-2": "m/s^2"}
-KALIBR_UNITS = {"t": "ns", "accel": "m/s^2", "gyro": "rad/s"}  # kalibr_bagcreater's documented units
+KALIBR_UNITS = {
+    "t": "ns",
+    "accel": "m/s^2",
+    "gyro": "rad/s",
+}  # kalibr_bagcreater's documented units
 _NUMBER = re.compile(r"\s*[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\s*")
 
 
@@ -48,15 +64,17 @@ def _open_text(path) -> tuple[list[str], int]:
     except OSError as exc:
         raise InputError(path, None, f"cannot open: {exc.strerror or exc}") from None
     if b"\0" in data:
-        line = data[:data.index(b"\0")].count(b"\n") + 1
+        line = data[: data.index(b"\0")].count(b"\n") + 1
         raise InputError(path, line, "NUL byte: binary data, not a CSV file")
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        line = data[:exc.start].count(b"\n") + 1
-        raise InputError(path, line, f"not UTF-8 text: byte 0x{data[exc.start]:02x}") from None
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(
+            path, line, f"not UTF-8 text: byte 0x{data[exc.start]:02x}"
+        ) from None
     return text.splitlines(), len(data)
 
 
@@ -73,23 +91,37 @@ def is_euroc(path) -> bool:
     """An EuRoC (``#timestamp [ns],w_RS_S_x …``) or Kalibr (``timestamp,omega_x,…``) IMU file."""
     head = [c.strip() for c in first_line(path).lstrip("#").split(",")]
     names = {re.sub(r"\s*\[.*\]$", "", c) for c in head}
-    return bool(head) and re.sub(r"\s*\[.*\]$", "", head[0]) == "timestamp" and (
-        {"w_RS_S_x", "a_RS_S_x"} <= names or {"omega_x", "alpha_x"} <= names)
+    return (
+        bool(head)
+        and re.sub(r"\s*\[.*\]$", "", head[0]) == "timestamp"
+        and ({"w_RS_S_x", "a_RS_S_x"} <= names or {"omega_x", "alpha_x"} <= names)
+    )
 
 
 def _number(path, lineno: int, name: str, cell: str) -> float:
     if not _NUMBER.fullmatch(cell):
         if cell.strip() == "":
             return math.nan
-        raise InputError(path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number")
+        raise InputError(
+            path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number"
+        )
     x = float(cell)
     if not math.isfinite(x):
-        raise InputError(path, lineno, f"column '{name}': {cell.strip()!r} is out of range")
+        raise InputError(
+            path, lineno, f"column '{name}': {cell.strip()!r} is out of range"
+        )
     return x
 
 
-def _rows(path, lines: list[str], start: int, delimiter: str, ncols: int, cols: dict[str, int],
-          int_time: str | None = None) -> tuple[dict[str, np.ndarray], list[int]]:
+def _rows(
+    path,
+    lines: list[str],
+    start: int,
+    delimiter: str,
+    ncols: int,
+    cols: dict[str, int],
+    int_time: str | None = None,
+) -> tuple[dict[str, np.ndarray], list[int]]:
     """Parse data lines from index ``start``: ``{target: values}`` and each row's line number."""
     out: dict[str, list] = {t: [] for t in cols}
     linenos: list[int] = []
@@ -97,24 +129,39 @@ def _rows(path, lines: list[str], start: int, delimiter: str, ncols: int, cols: 
         text = lines[i]
         if not text.strip() or text.lstrip().startswith("#"):
             continue
-        cells = next(csv.reader([text], delimiter=delimiter, skipinitialspace=delimiter == " "))
+        cells = next(
+            csv.reader([text], delimiter=delimiter, skipinitialspace=delimiter == " ")
+        )
         if len(cells) != ncols:
-            raise InputError(path, i + 1, f"{len(cells)} fields where the header has {ncols}")
+            raise InputError(
+                path, i + 1, f"{len(cells)} fields where the header has {ncols}"
+            )
         for target, j in cols.items():
-            if target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
+            if (
+                target == int_time
+            ):  # nanosecond integers: keep every digit (float64 would round them)
                 cell = cells[j].strip()
                 if not re.fullmatch(r"[+-]?[0-9]+", cell):
-                    raise InputError(path, i + 1, f"column '{target}': {cell[:40]!r} is not a whole number of ns")
+                    raise InputError(
+                        path,
+                        i + 1,
+                        f"column '{target}': {cell[:40]!r} is not a whole number of ns",
+                    )
                 out[target].append(int(cell))
             else:
                 out[target].append(_number(path, i + 1, target, cells[j]))
         linenos.append(i + 1)
     if not linenos:
         raise InputError(path, start + 1, "no data rows after the header")
-    return {t: (np.asarray(v, dtype=object if t == int_time else np.float64)) for t, v in out.items()}, linenos
+    return {
+        t: (np.asarray(v, dtype=object if t == int_time else np.float64))
+        for t, v in out.items()
+    }, linenos
 
 
-def _time_seconds(path, t, linenos: list[int], factor: float, integer: bool) -> np.ndarray:
+def _time_seconds(
+    path, t, linenos: list[int], factor: float, integer: bool
+) -> np.ndarray:
     """Seconds from the first row; t must not go backwards (the line that does is named)."""
     if integer:
         t0 = t[0]
@@ -122,7 +169,9 @@ def _time_seconds(path, t, linenos: list[int], factor: float, integer: bool) -> 
     else:
         if np.isnan(t).any():
             i = int(np.flatnonzero(np.isnan(t))[0])
-            raise InputError(path, linenos[i], "the time column is empty (every row needs its time)")
+            raise InputError(
+                path, linenos[i], "the time column is empty (every row needs its time)"
+            )
         ts = (t - t[0]) * factor
     back = np.flatnonzero(np.diff(ts) < 0)
     if back.size:
@@ -131,16 +180,32 @@ def _time_seconds(path, t, linenos: list[int], factor: float, integer: bool) -> 
     return ts
 
 
-def _streams(path, values: dict[str, np.ndarray], t_s: np.ndarray, units: dict[str, str], source: str) -> dict:
+def _streams(
+    path,
+    values: dict[str, np.ndarray],
+    t_s: np.ndarray,
+    units: dict[str, str],
+    source: str,
+) -> dict:
     streams = {}
     for kind, cols in COLUMNS.items():
         present = [c for c in cols if c in values]
         if not present:
             continue
         if len(present) != 3:
-            raise InputError(None, None, f"{kind}: map all three of {', '.join(cols)} (got {', '.join(present)})")
-        streams[kind] = Stream(kind, t_s, np.column_stack([values[c] for c in cols]), units[kind], source,
-                               temp_c=values.get("temp_c") if kind == "accel" else None)
+            raise InputError(
+                None,
+                None,
+                f"{kind}: map all three of {', '.join(cols)} (got {', '.join(present)})",
+            )
+        streams[kind] = Stream(
+            kind,
+            t_s,
+            np.column_stack([values[c] for c in cols]),
+            units[kind],
+            source,
+            temp_c=values.get("temp_c") if kind == "accel" else None,
+        )
     if not streams:
         raise InputError(path, None, "no accelerometer, gyro or magnetometer columns")
     if "temp_c" in values and "accel" not in streams:
@@ -150,6 +215,7 @@ def _streams(path, values: dict[str, np.ndarray], t_s: np.ndarray, units: dict[s
 
 
 # ---------------------------------------------------------------------------------- EuRoC / Kalibr
+
 
 def read_euroc(path, *, kinds=None) -> Imported:
     lines, _ = _open_text(path)
@@ -165,21 +231,37 @@ def read_euroc(path, *, kinds=None) -> Imported:
         if target is None:
             continue
         if target in cols:
-            raise InputError(path, 1, f"two columns for {target} ('{header[cols[target]]}' and '{cell}')")
+            raise InputError(
+                path,
+                1,
+                f"two columns for {target} ('{header[cols[target]]}' and '{cell}')",
+            )
         cols[target] = j
         kind = "t" if target == "t" else KIND_OF[target]
         if unit is not None:
             u = EUROC_UNITS.get(unit.strip())
             if u is None or (kind == "t") != (u == "ns"):
-                raise InputError(path, 1, f"column '{cell}': unit [{unit}] is not one the station reads here "
-                                 f"(EuRoC writes [ns], [rad s^-1], [m s^-2])")
+                raise InputError(
+                    path,
+                    1,
+                    f"column '{cell}': unit [{unit}] is not one the station reads here "
+                    f"(EuRoC writes [ns], [rad s^-1], [m s^-2])",
+                )
             if units.setdefault(kind, u) != u:
-                raise InputError(path, 1, f"column '{cell}': [{unit}] differs from the other {kind} columns")
+                raise InputError(
+                    path,
+                    1,
+                    f"column '{cell}': [{unit}] differs from the other {kind} columns",
+                )
         else:
             units.setdefault(kind, KALIBR_UNITS[kind])
     missing = [c for c in ("t",) + COLUMNS["gyro"] + COLUMNS["accel"] if c not in cols]
     if missing:
-        raise InputError(path, 1, f"not an EuRoC/Kalibr IMU header: no column for {', '.join(missing)}")
+        raise InputError(
+            path,
+            1,
+            f"not an EuRoC/Kalibr IMU header: no column for {', '.join(missing)}",
+        )
     values, linenos = _rows(path, lines, 1, ",", len(header), cols, int_time="t")
     t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True)
     streams = _streams(path, values, t_s, units, "EuRoC/Kalibr CSV")
@@ -190,6 +272,7 @@ def read_euroc(path, *, kinds=None) -> Imported:
 
 # ------------------------------------------------------------------------------------- plain CSV
 
+
 def _sniff_delimiter(header: str) -> str:
     for d in (",", ";", "\t"):
         if d in header:
@@ -197,29 +280,63 @@ def _sniff_delimiter(header: str) -> str:
     return " "
 
 
-def read_plain(path, *, mapping: dict[str, str], units: dict[str, str], rate_hz: float | None = None,
-               kinds=None) -> Imported:
+def read_plain(
+    path,
+    *,
+    mapping: dict[str, str],
+    units: dict[str, str],
+    rate_hz: float | None = None,
+    kinds=None,
+) -> Imported:
     """A CSV with a header row, read through ``mapping`` (capture column → source column)."""
     for target in mapping:
         if target not in TARGETS:
-            raise InputError(None, None, f"--map {target}=…: {target!r} is not a capture column "
-                             f"(choose from {', '.join(TARGETS)})")
+            raise InputError(
+                None,
+                None,
+                f"--map {target}=…: {target!r} is not a capture column "
+                f"(choose from {', '.join(TARGETS)})",
+            )
     for key in units:
         if key not in ("t", "accel", "gyro", "mag"):
-            raise InputError(None, None, f"--unit {key}=…: expected t, accel, gyro or mag")
+            raise InputError(
+                None, None, f"--unit {key}=…: expected t, accel, gyro or mag"
+            )
     lines, _ = _open_text(path)
-    hi = next((i for i, s in enumerate(lines) if s.strip() and not s.lstrip().startswith("#")), None)
+    hi = next(
+        (
+            i
+            for i, s in enumerate(lines)
+            if s.strip() and not s.lstrip().startswith("#")
+        ),
+        None,
+    )
     if hi is None:
         raise InputError(path, 1, "empty file: no header row")
     delimiter = _sniff_delimiter(lines[hi])
-    header = [c.strip() for c in next(csv.reader([lines[hi]], delimiter=delimiter, skipinitialspace=delimiter == " "))]
+    header = [
+        c.strip()
+        for c in next(
+            csv.reader(
+                [lines[hi]], delimiter=delimiter, skipinitialspace=delimiter == " "
+            )
+        )
+    ]
     if all(_NUMBER.fullmatch(c) for c in header if c):
-        raise InputError(path, hi + 1, "no header row: this line holds numbers; the first line must name the columns")
+        raise InputError(
+            path,
+            hi + 1,
+            "no header row: this line holds numbers; the first line must name the columns",
+        )
     if not mapping:  # a header that already uses the capture's names
         mapping = {c: c for c in header if c in TARGETS}
         if not mapping:
-            raise InputError(path, hi + 1, f"no column is named like a capture column ({', '.join(TARGETS)}): "
-                             "say which is which with --map, e.g. --map t=time,ax=acc_x,ay=acc_y,az=acc_z")
+            raise InputError(
+                path,
+                hi + 1,
+                f"no column is named like a capture column ({', '.join(TARGETS)}): "
+                "say which is which with --map, e.g. --map t=time,ax=acc_x,ay=acc_y,az=acc_z",
+            )
     cols: dict[str, int] = {}
     for target, source in mapping.items():
         if source in header:
@@ -227,31 +344,58 @@ def read_plain(path, *, mapping: dict[str, str], units: dict[str, str], rate_hz:
         elif source.isdigit() and 1 <= int(source) <= len(header):
             cols[target] = int(source) - 1
         else:
-            raise InputError(path, hi + 1, f"--map {target}={source}: no column {source!r} in the header "
-                             f"({', '.join(header)})")
+            raise InputError(
+                path,
+                hi + 1,
+                f"--map {target}={source}: no column {source!r} in the header "
+                f"({', '.join(header)})",
+            )
     kinds_present = {KIND_OF[c] for c in cols if c in KIND_OF}
     for kind in sorted(kinds_present):
         unit = units.get(kind)
         allowed = UNIT_KEYS[f"{kind}_unit"]
         if unit is None:
-            raise InputError(None, None, f"give the {kind} unit: --unit {kind}=UNIT (one of {', '.join(allowed)})")
+            raise InputError(
+                None,
+                None,
+                f"give the {kind} unit: --unit {kind}=UNIT (one of {', '.join(allowed)})",
+            )
         if unit not in allowed:
-            raise InputError(None, None, f"--unit {kind}={unit}: not {'an' if kind == 'accel' else 'a'} {kind} "
-                             f"unit (one of {', '.join(allowed)})")
+            raise InputError(
+                None,
+                None,
+                f"--unit {kind}={unit}: not {'an' if kind == 'accel' else 'a'} {kind} "
+                f"unit (one of {', '.join(allowed)})",
+            )
     t_unit = units.get("t", "s")
     if t_unit not in TIME_UNITS:
-        raise InputError(None, None, f"--unit t={t_unit}: expected one of {', '.join(TIME_UNITS)}")
+        raise InputError(
+            None, None, f"--unit t={t_unit}: expected one of {', '.join(TIME_UNITS)}"
+        )
     if "t" not in cols and rate_hz is None:
-        raise InputError(None, None, "no time column: map one (--map t=COLUMN) or give the sample rate (--rate HZ)")
+        raise InputError(
+            None,
+            None,
+            "no time column: map one (--map t=COLUMN) or give the sample rate (--rate HZ)",
+        )
     if rate_hz is not None and not (0 < rate_hz < math.inf):
-        raise InputError(None, None, f"--rate must be a positive number of Hz, got {rate_hz:g}")
+        raise InputError(
+            None, None, f"--rate must be a positive number of Hz, got {rate_hz:g}"
+        )
     values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
     if "t" in values:
-        t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False)
+        t_s = _time_seconds(
+            path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False
+        )
     else:
         t_s = np.arange(len(linenos), dtype=np.float64) / rate_hz
-    streams = _streams(path, values, t_s, units, "CSV " + ", ".join(f"{k}={v}" for k, v in mapping.items()))
+    streams = _streams(
+        path,
+        values,
+        t_s,
+        units,
+        "CSV " + ", ".join(f"{k}={v}" for k, v in mapping.items()),
+    )
     if kinds is not None:
         streams = {k: s for k, s in streams.items() if k in kinds}
     return Imported(streams, {}, [])
-

@@ -1,4 +1,5 @@
 """Which reader a file needs, and the capture it gives (for ``import``, ``calibrate``, ``diagnose``)."""
+
 from __future__ import annotations
 
 import argparse
@@ -40,16 +41,24 @@ def detect(path) -> str | None:
 def read(path, opts: ImportOptions, fmt: str) -> Imported:
     """The streams and metadata of ``path`` read as ``fmt``."""
     if fmt not in FORMATS:
-        raise InputError(None, None, f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
+        raise InputError(
+            None, None, f"--format {fmt!r}: expected one of {', '.join(FORMATS)}"
+        )
     if fmt != "px4" and opts.source != "auto":
         raise InputError(None, None, "--source applies to PX4 logs only")
     if fmt not in ("px4", "ardupilot", "tlog") and opts.instance is not None:
-        raise InputError(None, None, "--instance applies to PX4, ArduPilot and MAVLink logs only")
+        raise InputError(
+            None, None, "--instance applies to PX4, ArduPilot and MAVLink logs only"
+        )
     if fmt != "ros" and opts.topics:
         raise InputError(None, None, "--topic applies to ROS bags and MCAP files only")
     if fmt != "csv" and (opts.mapping or opts.units or opts.rate_hz is not None):
-        raise InputError(None, None, f"--map, --unit and --rate apply to plain CSV files (this is read as {fmt}: "
-                         "its units come from the file)")
+        raise InputError(
+            None,
+            None,
+            f"--map, --unit and --rate apply to plain CSV files (this is read as {fmt}: "
+            "its units come from the file)",
+        )
     p = Path(path)
     if not p.exists():
         raise InputError(path, None, "no such file")
@@ -58,7 +67,12 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
     if fmt == "px4":
         from station.importers import px4
 
-        return px4.read(path, instance=opts.instance, source=opts.source, primary=PRIMARY.get(opts.procedure or ""))
+        return px4.read(
+            path,
+            instance=opts.instance,
+            source=opts.source,
+            primary=PRIMARY.get(opts.procedure or ""),
+        )
     if fmt in ("ardupilot", "tlog"):
         from station.importers import ardupilot
 
@@ -72,7 +86,9 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
 
     if fmt == "euroc":
         return csvfiles.read_euroc(path)
-    return csvfiles.read_plain(path, mapping=opts.mapping, units=opts.units, rate_hz=opts.rate_hz)
+    return csvfiles.read_plain(
+        path, mapping=opts.mapping, units=opts.units, rate_hz=opts.rate_hz
+    )
 
 
 def infer_procedure(path, imported: Imported, fmt: str) -> str:
@@ -82,8 +98,12 @@ def infer_procedure(path, imported: Imported, fmt: str) -> str:
         return "compass"
     have = ", ".join(NAME[k] for k in imported.streams) or "no sensor data"
     fits = [p for p in IMPORTABLE if PRIMARY[p] in kinds] or list(IMPORTABLE)
-    raise InputError(path, None, f"a {fmt} file with {have} data: say which procedure with --procedure "
-                     f"({', '.join(fits)})")
+    raise InputError(
+        path,
+        None,
+        f"a {fmt} file with {have} data: say which procedure with --procedure "
+        f"({', '.join(fits)})",
+    )
 
 
 def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
@@ -109,14 +129,23 @@ def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
             fmt = "csv"  # --map/--unit say it is a foreign CSV
         else:
             capture = read_capture(path)
-            if opts.procedure and capture.procedure and opts.procedure != capture.procedure:
-                raise InputError(path, capture.meta_lines.get("procedure"),
-                                 f"the capture says procedure {capture.procedure}; --procedure "
-                                 f"{opts.procedure} is for logs and other files read through the importer")
+            if (
+                opts.procedure
+                and capture.procedure
+                and opts.procedure != capture.procedure
+            ):
+                raise InputError(
+                    path,
+                    capture.meta_lines.get("procedure"),
+                    f"the capture says procedure {capture.procedure}; --procedure "
+                    f"{opts.procedure} is for logs and other files read through the importer",
+                )
             if opts.procedure and not capture.procedure:
                 capture.meta["procedure"] = opts.procedure
             return capture, []
-    capture, warnings = import_file(path, ImportOptions(**{**opts.__dict__, "fmt": fmt}))
+    capture, warnings = import_file(
+        path, ImportOptions(**{**opts.__dict__, "fmt": fmt})
+    )
     with tempfile.TemporaryDirectory(prefix="station-import-") as tmp:
         tmp_path = os.path.join(tmp, "capture.csv")
         write_capture(tmp_path, capture)

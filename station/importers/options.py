@@ -1,5 +1,6 @@
 """The command-line options that say how to read a log or a foreign CSV (import, calibrate,
 diagnose). Light on purpose: building the parser must not load numpy."""
+
 from __future__ import annotations
 
 import argparse
@@ -8,8 +9,10 @@ from dataclasses import dataclass, field
 from station.errors import InputError
 
 FORMATS = ("px4", "ardupilot", "tlog", "ros", "euroc", "csv")
-FORMAT_HELP = ("px4 (.ulg), ardupilot (.bin DataFlash), tlog (.tlog MAVLink), ros (.bag, .db3, .mcap, "
-               "rosbag2 folder), euroc (EuRoC/Kalibr imu CSV), csv (any CSV with --map/--unit)")
+FORMAT_HELP = (
+    "px4 (.ulg), ardupilot (.bin DataFlash), tlog (.tlog MAVLink), ros (.bag, .db3, .mcap, "
+    "rosbag2 folder), euroc (EuRoC/Kalibr imu CSV), csv (any CSV with --map/--unit)"
+)
 # Procedures a log can feed: the sensor each calibrates gives the capture's rows.
 PRIMARY = {"accel-tabletop": "accel", "compass": "mag", "gyro-drift": "gyro"}
 IMPORTABLE = tuple(PRIMARY)
@@ -41,7 +44,9 @@ def parse_pairs(items: list[str] | None, what: str) -> dict[str, str]:
             key, sep, value = part.partition("=")
             key, value = key.strip(), value.strip()
             if not sep or not key or not value:
-                raise InputError(None, None, f"{what} {part.strip()!r}: expected NAME=VALUE")
+                raise InputError(
+                    None, None, f"{what} {part.strip()!r}: expected NAME=VALUE"
+                )
             if key in out:
                 raise InputError(None, None, f"{what}: {key} given twice")
             out[key] = value
@@ -51,27 +56,70 @@ def parse_pairs(items: list[str] | None, what: str) -> dict[str, str]:
 def add_arguments(parser: argparse.ArgumentParser, *, for_import: bool = False) -> None:
     """Add the import options to ``parser`` (``--procedure`` required for ``station import``)."""
     g = parser.add_argument_group("reading logs and other files (README: Import)")
-    g.add_argument("--format", dest="import_format", choices=FORMATS, default=None,
-                   help=f"the file's format (default: from its name or header): {FORMAT_HELP}")
-    g.add_argument("--procedure", dest="import_procedure", choices=IMPORTABLE, default=None,
-                   required=for_import,
-                   help="the procedure the data are for (sets the capture's rows: accel samples for "
-                        "accel-tabletop, gyro for gyro-drift, mag for compass)"
-                        + ("" if for_import else "; needed for a log unless it holds only magnetometer data"))
-    g.add_argument("--instance", type=int, default=None, metavar="N",
-                   help="PX4: uORB instance of sensor_accel/gyro/mag; ArduPilot/MAVLink: IMU and compass "
-                        "instance (0 = first; default 0)")
-    g.add_argument("--source", choices=("auto", "raw", "combined"), default="auto",
-                   help="PX4: raw sensor_* topics (before the board's calibration) or sensor_combined "
-                        "(after it); auto = raw where logged")
-    g.add_argument("--topic", action="append", default=None, metavar="KIND=TOPIC",
-                   help="ROS: which topic to read when there are several (imu=/imu0, mag=/mag, temp=/temp)")
-    g.add_argument("--map", action="append", default=None, metavar="COL=SOURCE,...",
-                   help=f"CSV: capture column = source column name or 1-based number ({', '.join(TARGETS)})")
-    g.add_argument("--unit", action="append", default=None, metavar="KIND=UNIT,...",
-                   help="CSV: units: accel=g|m/s^2|mg|counts|V, gyro=deg/s|rad/s|…, mag=uT|nT|gauss|…, t=s|ms|us|ns")
-    g.add_argument("--rate", type=float, default=None, metavar="HZ",
-                   help="CSV without a time column: the sample rate")
+    g.add_argument(
+        "--format",
+        dest="import_format",
+        choices=FORMATS,
+        default=None,
+        help=f"the file's format (default: from its name or header): {FORMAT_HELP}",
+    )
+    g.add_argument(
+        "--procedure",
+        dest="import_procedure",
+        choices=IMPORTABLE,
+        default=None,
+        required=for_import,
+        help="the procedure the data are for (sets the capture's rows: accel samples for "
+        "accel-tabletop, gyro for gyro-drift, mag for compass)"
+        + (
+            ""
+            if for_import
+            else "; needed for a log unless it holds only magnetometer data"
+        ),
+    )
+    g.add_argument(
+        "--instance",
+        type=int,
+        default=None,
+        metavar="N",
+        help="PX4: uORB instance of sensor_accel/gyro/mag; ArduPilot/MAVLink: IMU and compass "
+        "instance (0 = first; default 0)",
+    )
+    g.add_argument(
+        "--source",
+        choices=("auto", "raw", "combined"),
+        default="auto",
+        help="PX4: raw sensor_* topics (before the board's calibration) or sensor_combined "
+        "(after it); auto = raw where logged",
+    )
+    g.add_argument(
+        "--topic",
+        action="append",
+        default=None,
+        metavar="KIND=TOPIC",
+        help="ROS: which topic to read when there are several (imu=/imu0, mag=/mag, temp=/temp)",
+    )
+    g.add_argument(
+        "--map",
+        action="append",
+        default=None,
+        metavar="COL=SOURCE,...",
+        help=f"CSV: capture column = source column name or 1-based number ({', '.join(TARGETS)})",
+    )
+    g.add_argument(
+        "--unit",
+        action="append",
+        default=None,
+        metavar="KIND=UNIT,...",
+        help="CSV: units: accel=g|m/s^2|mg|counts|V, gyro=deg/s|rad/s|…, mag=uT|nT|gauss|…, t=s|ms|us|ns",
+    )
+    g.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="CSV without a time column: the sample rate",
+    )
 
 
 def options_from_args(args: argparse.Namespace) -> ImportOptions:

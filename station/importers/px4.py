@@ -18,6 +18,7 @@ Every ``CAL_*`` and ``SENS_BOARD_*`` parameter in the log goes into the metadata
 ``param.<NAME>`` with its value at the start of the imported data; parameters changed during
 the data are listed in ``params_changed``.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -40,9 +41,16 @@ SOURCES = ("auto", "raw", "combined")
 def _load(path):
     from pyulog import ULog
 
-    wanted = list(RAW_TOPICS.values()) + ["sensor_combined", "vehicle_magnetometer", "sensor_selection", *GPS_TOPICS]
+    wanted = list(RAW_TOPICS.values()) + [
+        "sensor_combined",
+        "vehicle_magnetometer",
+        "sensor_selection",
+        *GPS_TOPICS,
+    ]
     try:
-        with contextlib.redirect_stdout(io.StringIO()):  # pyulog reports oddities on stdout
+        with contextlib.redirect_stdout(
+            io.StringIO()
+        ):  # pyulog reports oddities on stdout
             return ULog(str(path), wanted)
     except FileNotFoundError:
         raise InputError(path, None, "no such file") from None
@@ -51,11 +59,17 @@ def _load(path):
     except PermissionError:
         raise InputError(path, None, "permission denied") from None
     except Exception as exc:  # noqa: BLE001 - pyulog raises bare Exceptions on a bad header
-        raise InputError(path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})") from None
+        raise InputError(
+            path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})"
+        ) from None
 
 
 def _topics(ulog, name: str) -> dict[int, object]:
-    return {d.multi_id: d for d in ulog.data_list if d.name == name and len(d.data.get("timestamp", ())) > 0}
+    return {
+        d.multi_id: d
+        for d in ulog.data_list
+        if d.name == name and len(d.data.get("timestamp", ())) > 0
+    }
 
 
 def _time_us(data: dict) -> np.ndarray:
@@ -75,13 +89,22 @@ def _slot(params: dict, kind: str, device_id: int | None) -> int | None:
     return None
 
 
-def read(path, *, instance: int | None = None, source: str = "auto", kinds=None, primary: str | None = None) -> Imported:
+def read(
+    path,
+    *,
+    instance: int | None = None,
+    source: str = "auto",
+    kinds=None,
+    primary: str | None = None,
+) -> Imported:
     """Streams and metadata of a ULog file. ``instance``: the uORB instance of each
     ``sensor_*`` topic (default 0; a sensor without that instance is left out unless it is
     ``primary``, the one the procedure calibrates); ``source``: ``raw``, ``combined`` or ``auto``
     (raw topics where logged, else ``sensor_combined``)."""
     if source not in SOURCES:
-        raise InputError(None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}")
+        raise InputError(
+            None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}"
+        )
     ulog = _load(path)
     params = dict(ulog.initial_parameters)
     info = ulog.msg_info_dict
@@ -91,11 +114,19 @@ def read(path, *, instance: int | None = None, source: str = "auto", kinds=None,
     combined = _topics(ulog, "sensor_combined")
     use_raw = source == "raw" or (source == "auto" and have_raw)
     if source == "raw" and not have_raw:
-        raise InputError(path, None, "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic "
-                         "(try --source combined)")
+        raise InputError(
+            path,
+            None,
+            "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic "
+            "(try --source combined)",
+        )
     if not use_raw and not combined:
-        raise InputError(path, None, "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag "
-                         "nor sensor_combined")
+        raise InputError(
+            path,
+            None,
+            "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag "
+            "nor sensor_combined",
+        )
     streams: dict[str, Stream] = {}
     meta: dict[str, str] = {"firmware": "px4"}
     warnings: list[str] = []
@@ -110,34 +141,54 @@ def read(path, *, instance: int | None = None, source: str = "auto", kinds=None,
                 if instance is None:
                     inst = min(topics)
                 elif primary is not None and kind != primary:
-                    warnings.append(f"--instance {instance}: no {RAW_TOPICS[kind]}[{instance}], so no {kind} columns")
+                    warnings.append(
+                        f"--instance {instance}: no {RAW_TOPICS[kind]}[{instance}], so no {kind} columns"
+                    )
                     continue
                 else:
-                    raise InputError(path, None, f"--instance {instance}: {RAW_TOPICS[kind]} has instances "
-                                     f"{', '.join(map(str, sorted(topics)))}")
+                    raise InputError(
+                        path,
+                        None,
+                        f"--instance {instance}: {RAW_TOPICS[kind]} has instances "
+                        f"{', '.join(map(str, sorted(topics)))}",
+                    )
             d = topics[inst].data
             ids = np.unique(np.asarray(d.get("device_id", [0])))
             if len(ids) > 1:
-                raise InputError(path, None, f"{RAW_TOPICS[kind]}[{inst}] changes device_id during the log "
-                                 f"({', '.join(map(str, ids))}): not one sensor")
+                raise InputError(
+                    path,
+                    None,
+                    f"{RAW_TOPICS[kind]}[{inst}] changes device_id during the log "
+                    f"({', '.join(map(str, ids))}): not one sensor",
+                )
             device_id = int(ids[0]) or None
             if "x_raw" in d:  # before PX4 v1.11 the driver applied the calibration
                 corrected = True
             t_us = _time_us(d)
             temp = d.get("temperature")
-            streams[kind] = Stream(kind, t_us.astype(np.float64), np.column_stack([d["x"], d["y"], d["z"]]),
-                                   UNITS[kind], f"{RAW_TOPICS[kind]}[{inst}]", device_id,
-                                   _slot(params, kind, device_id),
-                                   None if temp is None else np.asarray(temp, dtype=np.float64))
+            streams[kind] = Stream(
+                kind,
+                t_us.astype(np.float64),
+                np.column_stack([d["x"], d["y"], d["z"]]),
+                UNITS[kind],
+                f"{RAW_TOPICS[kind]}[{inst}]",
+                device_id,
+                _slot(params, kind, device_id),
+                None if temp is None else np.asarray(temp, dtype=np.float64),
+            )
             if device_id is not None and streams[kind].instance is None:
-                warnings.append(f"no {CAL_PREFIX[kind]}n_ID holds device id {device_id}: the board applies "
-                                "no calibration slot to this sensor")
+                warnings.append(
+                    f"no {CAL_PREFIX[kind]}n_ID holds device id {device_id}: the board applies "
+                    "no calibration slot to this sensor"
+                )
         meta["corrected"] = "true" if corrected else "false"
         n_raw = max(len(s.t_s) for s in streams.values()) if streams else 0
         n_comb = len(combined[min(combined)].data["timestamp"]) if combined else 0
         if n_comb > 4 * n_raw:
-            warnings.append(f"the raw sensor topics hold {n_raw} samples, sensor_combined {n_comb}: "
-                            "--source combined reads those (already corrected by the board)")
+            warnings.append(
+                f"the raw sensor topics hold {n_raw} samples, sensor_combined {n_comb}: "
+                "--source combined reads those (already corrected by the board)"
+            )
     else:
         d = combined[min(combined)].data
         t_us = np.asarray(d["timestamp"], dtype=np.int64)
@@ -148,29 +199,55 @@ def read(path, *, instance: int | None = None, source: str = "auto", kinds=None,
             if not all(c in d for c in cols):
                 continue
             ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
-            device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
-            streams[kind] = Stream(kind, t_us.astype(np.float64), np.column_stack([d[c] for c in cols]),
-                                   UNITS[kind], f"sensor_combined ({field})", device_id,
-                                   _slot(params, kind, device_id))
+            device_id = (
+                int(ids[0])
+                if len(ids) and len(np.unique(ids)) == 1 and ids[0]
+                else None
+            )
+            streams[kind] = Stream(
+                kind,
+                t_us.astype(np.float64),
+                np.column_stack([d[c] for c in cols]),
+                UNITS[kind],
+                f"sensor_combined ({field})",
+                device_id,
+                _slot(params, kind, device_id),
+            )
         vmag = _topics(ulog, "vehicle_magnetometer")
-        if "mag" not in streams and vmag:  # PX4 ≥ 1.11: the calibrated compass has its own topic
+        if (
+            "mag" not in streams and vmag
+        ):  # PX4 ≥ 1.11: the calibrated compass has its own topic
             inst = 0 if instance is None else instance
             if inst not in vmag:
-                raise InputError(path, None, f"--instance {inst}: vehicle_magnetometer has instances "
-                                 f"{', '.join(map(str, sorted(vmag)))}")
+                raise InputError(
+                    path,
+                    None,
+                    f"--instance {inst}: vehicle_magnetometer has instances "
+                    f"{', '.join(map(str, sorted(vmag)))}",
+                )
             d = vmag[inst].data
             cols = [f"magnetometer_ga[{j}]" for j in range(3)]
             ids = np.unique(np.asarray(d.get("device_id", [0])))
             device_id = int(ids[0]) if len(ids) == 1 and ids[0] else None
-            streams["mag"] = Stream("mag", _time_us(d).astype(np.float64), np.column_stack([d[c] for c in cols]),
-                                    UNITS["mag"], f"vehicle_magnetometer[{inst}]", device_id,
-                                    _slot(params, "mag", device_id))
+            streams["mag"] = Stream(
+                "mag",
+                _time_us(d).astype(np.float64),
+                np.column_stack([d[c] for c in cols]),
+                UNITS["mag"],
+                f"vehicle_magnetometer[{inst}]",
+                device_id,
+                _slot(params, "mag", device_id),
+            )
         meta["corrected"] = "true"
     if not streams:
-        raise InputError(path, None, "no accelerometer, gyro or magnetometer samples in the log")
+        raise InputError(
+            path, None, "no accelerometer, gyro or magnetometer samples in the log"
+        )
     t0_us = min(s.t_s[0] for s in streams.values())
     t1_us = max(s.t_s[-1] for s in streams.values())
-    for s in streams.values():  # µs → s from the first sample (subtract first: SITL stamps are Unix µs)
+    for s in (
+        streams.values()
+    ):  # µs → s from the first sample (subtract first: SITL stamps are Unix µs)
         s.t_s = (s.t_s - t0_us) * 1e-6
     # parameters in use at the start of the data; any change while the data run is listed
     late: set[str] = set()
@@ -183,8 +260,10 @@ def read(path, *, instance: int | None = None, source: str = "auto", kinds=None,
             late.add(name)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
-        warnings.append(f"parameters changed while the data were logged: {', '.join(sorted(late))} "
-                        "(param.* holds the values at the start)")
+        warnings.append(
+            f"parameters changed while the data were logged: {', '.join(sorted(late))} "
+            "(param.* holds the values at the start)"
+        )
     board = str(info.get("ver_hw") or "px4")
     uid = str(info.get("sys_uuid") or "")
     meta["board"] = board
@@ -225,10 +304,18 @@ def _place_and_date(ulog, t0_us: float, meta: dict[str, str]) -> None:
         fixed = fix >= 3
         if fixed.any():
             if "latitude_deg" in d:
-                lat, lon = np.asarray(d["latitude_deg"])[fixed], np.asarray(d["longitude_deg"])[fixed]
-                alt = np.asarray(d.get("altitude_msl_m", np.full(len(ts), np.nan)))[fixed]
+                lat, lon = (
+                    np.asarray(d["latitude_deg"])[fixed],
+                    np.asarray(d["longitude_deg"])[fixed],
+                )
+                alt = np.asarray(d.get("altitude_msl_m", np.full(len(ts), np.nan)))[
+                    fixed
+                ]
             elif "lat" in d:
-                lat, lon = np.asarray(d["lat"])[fixed] * 1e-7, np.asarray(d["lon"])[fixed] * 1e-7
+                lat, lon = (
+                    np.asarray(d["lat"])[fixed] * 1e-7,
+                    np.asarray(d["lon"])[fixed] * 1e-7,
+                )
                 alt = np.asarray(d.get("alt", np.full(len(ts), np.nan)))[fixed] * 1e-3
             else:
                 return

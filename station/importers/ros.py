@@ -9,6 +9,7 @@ or the bag's receive time where the stamp is zero.
 
 Whether a driver calibrated its output is not recorded in a bag, so no ``corrected`` key.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,7 +27,9 @@ SUFFIXES = (".bag", ".db3", ".mcap")
 
 def is_bag(path) -> bool:
     p = Path(path)
-    return p.suffix.lower() in SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
+    return p.suffix.lower() in SUFFIXES or (
+        p.is_dir() and (p / "metadata.yaml").is_file()
+    )
 
 
 def _stamp(msg, fallback_ns: int) -> int:
@@ -40,11 +43,19 @@ def _pick(path, found: dict[str, int], want: str | None, what: str) -> str | Non
     if want is not None:
         if want not in found:
             listed = ", ".join(sorted(found)) or "none"
-            raise InputError(path, None, f"--topic {want}: no {what} topic of that name (the bag's {what} topics: {listed})")
+            raise InputError(
+                path,
+                None,
+                f"--topic {want}: no {what} topic of that name (the bag's {what} topics: {listed})",
+            )
         return want
     if len(found) > 1:
-        raise InputError(path, None, f"several {what} topics ({', '.join(sorted(found))}): choose one with "
-                         f"--topic {'imu' if what == 'Imu' else 'mag'}=NAME")
+        raise InputError(
+            path,
+            None,
+            f"several {what} topics ({', '.join(sorted(found))}): choose one with "
+            f"--topic {'imu' if what == 'Imu' else 'mag'}=NAME",
+        )
     return next(iter(found), None)
 
 
@@ -61,24 +72,42 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
     p = Path(path)
     if not p.exists():
         raise InputError(path, None, "no such file")
-    store = get_typestore(Stores.ROS1_NOETIC if p.suffix.lower() == ".bag" else Stores.LATEST)
+    store = get_typestore(
+        Stores.ROS1_NOETIC if p.suffix.lower() == ".bag" else Stores.LATEST
+    )
     try:
         reader = AnyReader([p], default_typestore=store)
         reader.open()
     except (AnyReaderError, Exception) as exc:  # noqa: BLE001 - any reader failure is one line
-        raise InputError(path, None, f"not a readable ROS bag or MCAP file ({type(exc).__name__}: {exc})") from None
+        raise InputError(
+            path,
+            None,
+            f"not a readable ROS bag or MCAP file ({type(exc).__name__}: {exc})",
+        ) from None
     try:
         by_type: dict[str, dict[str, int]] = {IMU: {}, MAG: {}, TEMP: {}}
         for c in reader.connections:
             if c.msgtype in by_type:
-                by_type[c.msgtype][c.topic] = by_type[c.msgtype].get(c.topic, 0) + c.msgcount
+                by_type[c.msgtype][c.topic] = (
+                    by_type[c.msgtype].get(c.topic, 0) + c.msgcount
+                )
         imu_topic = _pick(path, by_type[IMU], topics.get("imu"), "Imu")
         mag_topic = _pick(path, by_type[MAG], topics.get("mag"), "MagneticField")
-        temp_topic = _pick(path, by_type[TEMP], topics.get("temp"), "Temperature") if by_type[TEMP] else None
+        temp_topic = (
+            _pick(path, by_type[TEMP], topics.get("temp"), "Temperature")
+            if by_type[TEMP]
+            else None
+        )
         if imu_topic is None and mag_topic is None:
-            kinds_found = sorted({c.msgtype for c in reader.connections}) or ["no messages"]
-            raise InputError(path, None, "no sensor_msgs/Imu or sensor_msgs/MagneticField topic "
-                             f"(the bag holds {', '.join(kinds_found[:6])}{' …' if len(kinds_found) > 6 else ''})")
+            kinds_found = sorted({c.msgtype for c in reader.connections}) or [
+                "no messages"
+            ]
+            raise InputError(
+                path,
+                None,
+                "no sensor_msgs/Imu or sensor_msgs/MagneticField topic "
+                f"(the bag holds {', '.join(kinds_found[:6])}{' …' if len(kinds_found) > 6 else ''})",
+            )
         chosen = {t for t in (imu_topic, mag_topic, temp_topic) if t}
         conns = [c for c in reader.connections if c.topic in chosen]
         acc, gyr, mag, temp = [], [], [], []
@@ -104,24 +133,36 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001
-        raise InputError(path, None, f"cannot read the bag ({type(exc).__name__}: {exc})") from None
+        raise InputError(
+            path, None, f"cannot read the bag ({type(exc).__name__}: {exc})"
+        ) from None
     finally:
         reader.close()
     # seconds from the earliest stamp, subtracted in integer ns (Unix ns in a float lose 0.2 µs)
     origin = min((r[0] for rows in (acc, gyr, mag, temp) for r in rows[:1]), default=0)
-    acc, gyr, mag, temp = ([((r[0] - origin) * 1e-9, *r[1:]) for r in rows] for rows in (acc, gyr, mag, temp))
+    acc, gyr, mag, temp = (
+        [((r[0] - origin) * 1e-9, *r[1:]) for r in rows]
+        for rows in (acc, gyr, mag, temp)
+    )
     streams: dict[str, Stream] = {}
-    for kind, rows, unit, topic in (("accel", acc, "m/s^2", imu_topic), ("gyro", gyr, "rad/s", imu_topic),
-                                    ("mag", mag, "nT", mag_topic)):
+    for kind, rows, unit, topic in (
+        ("accel", acc, "m/s^2", imu_topic),
+        ("gyro", gyr, "rad/s", imu_topic),
+        ("mag", mag, "nT", mag_topic),
+    ):
         if rows and (kinds is None or kind in kinds):
             arr = np.asarray(rows, dtype=np.float64)
-            streams[kind] = Stream(kind, arr[:, 0], arr[:, 1:4], unit, f"{topic} ({kind})")
+            streams[kind] = Stream(
+                kind, arr[:, 0], arr[:, 1:4], unit, f"{topic} ({kind})"
+            )
     if temp and "accel" in streams:
         tt = np.asarray(temp, dtype=np.float64)
         a = streams["accel"]
         a.temp_c = np.interp(a.t_s, tt[:, 0], tt[:, 1], left=np.nan, right=np.nan)
     meta: dict[str, str] = {}
-    if first_ns and first_ns > 946684800 * 10**9:  # a bag's receive clock is UTC wall time
+    if (
+        first_ns and first_ns > 946684800 * 10**9
+    ):  # a bag's receive clock is UTC wall time
         meta["date"] = iso_utc(first_ns * 1e-9)
     frames.discard("")
     if len(frames) == 1:
