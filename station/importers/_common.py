@@ -175,6 +175,13 @@ def to_capture(
         if s is not None and (kinds is None or kind in kinds):
             s = clean_stream(path, s)
             if s is not None:
+                bad = np.isinf(s.xyz)  # a corrupt sample: an empty cell, said once
+                if bad.any():
+                    s.xyz[bad] = np.nan
+                    imported.warnings.append(
+                        f"{int(bad.any(axis=1).sum())} {NAME[kind]} samples hold "
+                        "infinite values: left empty"
+                    )
                 streams[kind] = s
     primary = PRIMARY[procedure]
     if primary not in streams:

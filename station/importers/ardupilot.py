@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import os
 import struct
 
 import numpy as np
@@ -122,11 +123,20 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     from pymavlink import DFReader
 
     inst = 0 if instance is None else int(instance)
+    # pymavlink's compiled indexer prints "bad header" lines straight to file descriptor 2, past
+    # any Python redirection: its pure-Python indexer (same result) prints through sys.stderr.
+    fast = os.environ.get("PYMAVLINK_FAST_INDEX")
+    os.environ["PYMAVLINK_FAST_INDEX"] = "0"
     try:
         with _quiet():
             log = DFReader.DFReader_binary(str(path), zero_time_base=True)
     except Exception as exc:  # noqa: BLE001 - any reader failure is one line
         raise _open_error(path, exc, "ArduPilot DataFlash log") from None
+    finally:
+        if fast is None:
+            os.environ.pop("PYMAVLINK_FAST_INDEX", None)
+        else:
+            os.environ["PYMAVLINK_FAST_INDEX"] = fast
     names = set(getattr(log, "name_to_id", {}))
     imu_name = (
         "IMU"
