@@ -521,3 +521,28 @@ def test_tlog_from_px4_highres_imu_and_bytewise_parameters(tmp_path):
         c.columns["temp_c"] == 40.5
     )
     assert abs(float(m["sample_rate_hz"]) - 250) < 1e-6
+
+
+def test_tlog_with_every_message_twice_keeps_each_sample_once(tmp_path):
+    """A ground station fed by two links logs each message twice (same stamp, same values)."""
+    once, twice = tmp_path / "once.tlog", tmp_path / "twice.tlog"
+    write_tlog(once)
+    data = once.read_bytes()
+    # every record (8-byte stamp + MAVLink v1 frame: 6-byte header, payload, 2-byte CRC) written twice
+    out, i = bytearray(), 0
+    while i < len(data):
+        n = 8 + 6 + data[i + 9] + 2
+        out += data[i : i + n] * 2
+        i += n
+    twice.write_bytes(bytes(out))
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert (
+        run_station("import", once, "--procedure", "gyro-drift", "--out", a).returncode
+        == 0
+    )
+    res = run_station("import", twice, "--procedure", "gyro-drift", "--out", b)
+    assert res.returncode == 0 and "100 repeated IMU messages" in res.stderr
+    assert read_capture(a) == read_capture(b)  # metadata and every column
+    np.testing.assert_array_equal(
+        read_capture(a).columns["gx"], read_capture(b).columns["gx"]
+    )

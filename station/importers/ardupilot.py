@@ -318,6 +318,8 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     fixes: list[tuple[float, float, float]] = []
     first_t = None
     msg_class = {}
+    seen: set = set()
+    duplicates = 0
     try:
         with _quiet():
             while True:
@@ -348,6 +350,13 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
                         if hasattr(m, "time_usec")
                         else m.time_boot_ms * 1e-3
                     )
+                    key = (name, tuple(m.to_dict().values()))
+                    if (
+                        key in seen
+                    ):  # the same message again (a log fed by two links): once
+                        duplicates += 1
+                        continue
+                    seen.add(key)
                     by_type[name].append((t, m))
                     arrivals.setdefault(name, m._timestamp)
                     msg_class[name] = type(m)
@@ -431,6 +440,10 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         meta["params_changed"] = ",".join(sorted(late))
         warnings.append(
             f"parameters changed while the data were logged: {', '.join(sorted(late))}"
+        )
+    if duplicates:
+        warnings.append(
+            f"{duplicates} repeated IMU messages (same time and values) read once"
         )
     if firmware == "px4":
         for pname in sorted(params):
