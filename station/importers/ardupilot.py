@@ -165,6 +165,36 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 if m is None:
                     break
                 name = m.get_type()
+                if name in (
+                    "IMU",
+                    "MAG",
+                    imu_name,
+                    mag_name,
+                ):  # the bulk: only the fields used
+                    cols = m.fmt.colhash
+                    if "I" in cols:
+                        i = m.I
+                        instances_seen[name].add(i)
+                        if i != inst and name in ("IMU", "MAG"):
+                            continue
+                    t_us = m.TimeUS
+                    first_us = t_us if first_us is None else first_us
+                    if name == imu_name:
+                        rows["gyro"].append((t_us, m.GyrX, m.GyrY, m.GyrZ))
+                        rows["accel"].append((t_us, m.AccX, m.AccY, m.AccZ))
+                        temps.append(m.T if "T" in cols else math.nan)
+                        if "accel" not in units:
+                            units["accel"] = (
+                                m.fmt.get_unit("AccX") if m.fmt.units else ""
+                            )
+                            units["gyro"] = (
+                                m.fmt.get_unit("GyrX") if m.fmt.units else ""
+                            )
+                    else:
+                        rows["mag"].append((t_us, m.MagX, m.MagY, m.MagZ))
+                        if "mag" not in units:
+                            units["mag"] = m.fmt.get_unit("MagX") if m.fmt.units else ""
+                    continue
                 d = m.to_dict()
                 if name == "PARM":
                     if first_us is None:
@@ -190,23 +220,6 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                             - d["TimeUS"] * 1e-6
                         )
                     continue
-                if "I" in d:
-                    instances_seen[name].add(d["I"])
-                    if d["I"] != inst and name in ("IMU", "MAG"):
-                        continue
-                t_us = d["TimeUS"]
-                first_us = t_us if first_us is None else first_us
-                if name == imu_name:
-                    rows["gyro"].append((t_us, d["GyrX"], d["GyrY"], d["GyrZ"]))
-                    rows["accel"].append((t_us, d["AccX"], d["AccY"], d["AccZ"]))
-                    temps.append(d.get("T", math.nan))
-                    if "accel" not in units:
-                        units["accel"] = m.fmt.get_unit("AccX") if m.fmt.units else ""
-                        units["gyro"] = m.fmt.get_unit("GyrX") if m.fmt.units else ""
-                else:
-                    rows["mag"].append((t_us, d["MagX"], d["MagY"], d["MagZ"]))
-                    if "mag" not in units:
-                        units["mag"] = m.fmt.get_unit("MagX") if m.fmt.units else ""
     except Exception as exc:  # noqa: BLE001
         raise InputError(
             path, None, f"cannot read the DataFlash log ({type(exc).__name__}: {exc})"
