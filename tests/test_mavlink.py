@@ -97,7 +97,8 @@ def test_scaled_imu2_milli_units_become_g_rad_s_gauss(pty_pair):
     assert s.gaps == 0  # the other messages fill the packet sequence: nothing lost
 
 
-def test_raw_imu_stays_in_counts_and_lost_packets_are_gaps():
+def test_raw_imu_in_ardupilot_milli_units_and_lost_packets_are_gaps():
+    """RAW_IMU as ArduPilot sends it (GCS_MAVLINK::send_raw_imu: mG, mrad/s, mGauss, cdegC)."""
     out = bytearray()
 
     class Buf:
@@ -108,7 +109,7 @@ def test_raw_imu_stays_in_counts_and_lost_packets_are_gaps():
     frames = []
     for k in range(6):
         start = len(out)
-        mav.raw_imu_send(1000 * k, -16384, 2, 16384, 10, -10, 0, 300, -300, 0, 0, 2100)
+        mav.raw_imu_send(1000 * k, -1000, 2, 1000, 10, -10, 0, 300, -300, 0, 0, 2100)
         frames.append((start, len(out)))
     corrupt = bytearray(out)
     corrupt[frames[2][0] + 12] ^= 0xFF  # frame 2 fails its CRC
@@ -116,11 +117,39 @@ def test_raw_imu_stays_in_counts_and_lost_packets_are_gaps():
     p = MavlinkParser()
     p.feed(bytes(lost))
     b = p.take()
-    assert (p.header.accel_unit, p.header.gyro_unit, p.header.mag_unit) == ("counts", "counts", "counts")
-    np.testing.assert_array_equal(b.values[0, :9], [-16384, 2, 16384, 10, -10, 0, 300, -300, 0])
+    assert (p.header.accel_unit, p.header.gyro_unit, p.header.mag_unit) == ("g", "rad/s", "gauss")
+    np.testing.assert_allclose(b.values[0, :9], [-1.0, 0.002, 1.0, 0.01, -0.01, 0.0, 0.3, -0.3, 0.0], rtol=1e-12)
     assert b.values[0, 9] == 21.0
     np.testing.assert_array_equal(b.seq, [0, 1, 3, 5])
     assert p.stats.errors["checksum"] == 1 and p.stats.gaps == 2
+
+
+def test_raw_imu_from_another_autopilot_stays_in_counts():
+    """A HEARTBEAT naming a non-ArduPilot autopilot before the stream: RAW_IMU kept as counts."""
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    data = mav.heartbeat_encode(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_PX4, 0, 0, 0).pack(mav)
+    mav.seq += 1
+    data += mav.raw_imu_encode(1000, -16384, 2, 16384, 10, -10, 0, 300, -300, 0, 0, 2100).pack(mav)
+    p = MavlinkParser()
+    p.feed(bytes(data))
+    b = p.take()
+    assert (p.header.accel_unit, p.header.gyro_unit, p.header.mag_unit) == ("counts", "counts", "counts")
+    np.testing.assert_array_equal(b.values[0, :9], [-16384, 2, 16384, 10, -10, 0, 300, -300, 0])
+
+
+def test_sender_whose_frames_all_carry_sequence_zero_loses_nothing():
+    """pymavlink's pack() without send() leaves seq at 0 in every frame: 200 Hz for 4 s must give
+    800 samples (it gave 1: each frame was taken as a repeat of the last); a frame sent twice
+    byte for byte is still one sample."""
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    frames = [bytes(mav.highres_imu_encode(5000 * k, 0.1, 0.2, 9.8, 0, 0, 0, 0.2, 0, 0.4, 0, 0, 0, 25.0,
+                                           0x1FFF, 0).pack(mav)) for k in range(800)]
+    assert {f[4] for f in frames} == {0}  # MAVLink 2 seq byte: all zero
+    p = MavlinkParser()
+    p.feed(b"".join(frames[:100] + [frames[99]] + frames[100:]))
+    b = p.take()
+    assert len(b.t_dev_us) == 800 and p.stats.duplicates == 1 and p.stats.gaps == 0
+    np.testing.assert_allclose(np.diff(b.t_dev_us), 5000.0)
 
 
 def test_record_from_the_simulated_flight_controller(tmp_path):

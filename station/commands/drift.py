@@ -41,7 +41,10 @@ def _plot(trends: list[dict]) -> str:
         end = start.replace(year=start.year + 1)
         return dt.year + (dt - start).total_seconds() / (end - start).total_seconds()
 
+    from station.term import color_enabled
+
     tty = sys.stdout.isatty()
+    color = color_enabled(sys.stdout)
     try:
         width = min(os.get_terminal_size(sys.stdout.fileno()).columns if tty else 100, 120)
     except OSError:
@@ -49,7 +52,7 @@ def _plot(trends: list[dict]) -> str:
     figures = []
     for t in trends:
         plt.clear_figure()
-        if not tty:
+        if not color:
             plt.theme("clear")
         plt.plotsize(width, 15)
         xs = [year(x) for x in t["times"]]
@@ -67,7 +70,7 @@ def _plot(trends: list[dict]) -> str:
         plt.title(f"{t['procedure']} {t['param']}{rate}")
         plt.xlabel("year")
         text = plt.build()
-        figures.append(text if tty else plt.uncolorize(text))
+        figures.append(text if color else plt.uncolorize(text))
     return "\n".join(figures)
 
 

@@ -6,7 +6,13 @@ Messages read, and the units the station gives them (docs/protocol.md, "MAVLink"
 |---|---|---|---|---|---|
 | HIGHRES_IMU | m/s^2 (as sent) | rad/s (as sent) | gauss (as sent) | degC | time_usec |
 | SCALED_IMU, SCALED_IMU2, SCALED_IMU3 | mG / 1000 -> `g` | mrad/s / 1000 -> `rad/s` | mgauss / 1000 -> `gauss` | cdegC / 100 | time_boot_ms |
-| RAW_IMU | raw `counts` (kept as counts) | `counts` | `counts` | cdegC / 100 | time_usec |
+| RAW_IMU | mG / 1000 -> `g` | mrad/s / 1000 -> `rad/s` | mgauss / 1000 -> `gauss` | cdegC / 100 | time_usec |
+
+RAW_IMU: the MAVLink spec says "raw values", but ArduPilot, the firmware that streams it,
+sends its first IMU already corrected in mG, mrad/s and milligauss
+(GCS_MAVLINK::send_raw_imu: `accel * 1000 / GRAVITY_MSS`, `gyro * 1000`, the compass field
+in mGauss). It is read in those units unless the sender's HEARTBEAT, seen before the
+stream was chosen, names another autopilot: then it stays in `counts`.
 
 A temperature of exactly 0 in SCALED_IMU*/RAW_IMU means "no sensor" (MAVLink spec) and
 becomes NaN. HIGHRES_IMU's `fields_updated` is not used: every field is kept.
@@ -14,7 +20,10 @@ becomes NaN. HIGHRES_IMU's `fields_updated` is not used: every field is kept.
 One stream is recorded: the message type (and HIGHRES_IMU/RAW_IMU `id`) named by
 `source`, or else the first IMU message seen. Gaps are counted from the MAVLink packet
 sequence number of that stream's system/component, over every message it sends: `gaps`
-counts lost packets of any type, an upper bound on lost IMU samples.
+counts lost packets of any type, an upper bound on lost IMU samples. A frame is a
+duplicate only when its sequence number, type and payload all repeat the previous
+frame's: a sender whose frames all carry the same sequence number (pymavlink's `pack()`
+without `send()`) loses nothing, since its IMU timestamps advance.
 """
 from __future__ import annotations
 
@@ -38,8 +47,9 @@ IMU_MESSAGES: dict[str, tuple[str, str, str, float, float, float]] = {
     "SCALED_IMU": ("g", "rad/s", "gauss", 1e-3, 1e-2, 1e3),
     "SCALED_IMU2": ("g", "rad/s", "gauss", 1e-3, 1e-2, 1e3),
     "SCALED_IMU3": ("g", "rad/s", "gauss", 1e-3, 1e-2, 1e3),
-    "RAW_IMU": ("counts", "counts", "counts", 1.0, 1e-2, 1.0),
+    "RAW_IMU": ("g", "rad/s", "gauss", 1e-3, 1e-2, 1.0),  # ArduPilot's units (see above)
 }
+RAW_IMU_COUNTS = ("counts", "counts", "counts", 1.0, 1e-2, 1.0)  # RAW_IMU from another autopilot
 _TIME_BOOT_MS_MODULO_US = (1 << 32) * 1000  # time_boot_ms is uint32
 HIGHRES_FIELDS_ALL = 0x1FFF  # acc, gyro, mag, pressures, pressure_alt, temperature
 
@@ -75,6 +85,9 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
         self.source: str | None = None  # e.g. 'HIGHRES_IMU:0' once chosen
         self.system: tuple[int, int] | None = None  # (sysid, compid) of the chosen stream
         self.heartbeats: dict[tuple[int, int], int] = {}
+        self.autopilots: dict[tuple[int, int], int] = {}  # MAV_AUTOPILOT_* from each sender's HEARTBEAT
+        self._units = None  # the chosen stream's IMU_MESSAGES row
+        self._last_frame: tuple | None = None  # (seq, type, payload) of the stream's previous frame
         self._new_mav()
         self._rows: list[list[float]] = []
         self._last_seq: int | None = None
@@ -116,12 +129,15 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
             key = (m.get_srcSystem(), m.get_srcComponent())
             if t == "HEARTBEAT":
                 self.heartbeats[key] = self.heartbeats.get(key, 0) + 1
+                self.autopilots[key] = int(m.autopilot)
             imu = t in IMU_MESSAGES and self._wanted(m, t, key, events)
             if key == self.system:
                 seq = m.get_seq()
+                frame = (seq, t, bytes(m.get_payload() or b""))
+                repeat, self._last_frame = frame == self._last_frame, frame
                 if self._last_seq is not None:
                     step = (seq - self._last_seq) % 256
-                    if step == 0:
+                    if repeat:
                         st.duplicates += 1
                         continue
                     if step > 1:
@@ -143,7 +159,12 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
                 return False
             self.source = f"{t}:{inst}"
             self.system = key
-            acc, gyr, mag, *_ = IMU_MESSAGES[t]
+            self._units = IMU_MESSAGES[t]
+            if t == "RAW_IMU" and self.autopilots.get(key, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA) not in (
+                mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, mavlink2.MAV_AUTOPILOT_GENERIC
+            ):
+                self._units = RAW_IMU_COUNTS
+            acc, gyr, mag, *_ = self._units
             self.header = Header(f"mavlink-{key[0]}-{key[1]}", acc, gyr, mag, math.nan, 2, self.stats.samples)
             events.append(self.header)
             return True
@@ -151,7 +172,7 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
 
     def _sample(self, m, t: str, events: list) -> None:
         st = self.stats
-        _, _, _, k, kt, ktime = IMU_MESSAGES[t]
+        _, _, _, k, kt, ktime = self._units
         if t.startswith("SCALED"):
             t_us = float(m.time_boot_ms) * ktime
         else:
