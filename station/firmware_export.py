@@ -3,21 +3,44 @@
 Formats:
 - `json`: the calibrate.md result plus its record (id, device, time, hash).
 - `ardupilot`: a Mission Planner / MAVProxy `.param` file (`NAME,VALUE`, `#` comments).
-  Accel `INS_ACCOFFS_*` (m/s², subtracted) and `INS_ACCSCAL_*` (multiplied after),
-  gyro `INS_GYROFFS_*` (rad/s, subtracted), compass `COMPASS_OFS_*` (milligauss,
-  ADDED), `COMPASS_DIA_*`/`COMPASS_ODI_*` (symmetric matrix applied after):
-  AP_InertialSensor_Backend::_rotate_and_correct_accel, AP_Compass_Backend::correct_field.
-- `px4`: NuttX shell `param set` lines. `CAL_ACC0_{X,Y,Z}OFF` (m/s², subtracted),
-  `CAL_ACC0_{X,Y,Z}SCALE` (multiplied after), `CAL_GYRO0_{X,Y,Z}OFF` (rad/s,
-  subtracted), `CAL_MAG0_{X,Y,Z}OFF` (gauss, subtracted), `CAL_MAG0_{X,Y,Z}SCALE`
-  and `CAL_MAG0_{X,Y,Z}ODIAG` (symmetric matrix applied after):
-  src/lib/sensor_calibration/{Accelerometer,Gyroscope,Magnetometer}.
-- `c-header`: every scalar of the result as `static const double` arrays.
+- `px4`: NuttX shell `param set` lines.
+- `qgc`: a QGroundControl `.params` file (PX4): `vehicle-id<TAB>component-id<TAB>name<TAB>value<TAB>type`,
+  type 9 = MAV_PARAM_TYPE_REAL32, 6 = INT32.
+- `c-header`: every scalar of the result as `float`, prefixed by the device, with the model and
+  units stated.
 
-Both firmwares apply these in the sensor frame, before the board rotation, and take
-the driver's output in SI-like units (m/s², rad/s, gauss or milligauss): a
-calibration of raw volts or counts has no meaning there and is refused, as are the
-procedures they have no parameters for (the LDV).
+What each firmware does with its parameters (read in its source; tests/test_firmware_names.py
+lists the files and commits):
+
+| firmware | sensor | applied to driver output in the sensor frame | parameters (instance n) |
+|---|---|---|---|
+| ArduPilot | accel | `a = (a_drv - INS_ACCOFFS) * INS_ACCSCAL` (m/s^2), then the board rotation (`AP_InertialSensor_Backend::_rotate_and_correct_accel`) | `INS_ACC{,2,3}OFFS_X/Y/Z`, `INS_ACC{,2,3}SCAL_X/Y/Z` |
+| ArduPilot | gyro | `w = w_drv - INS_GYROFFS` (rad/s) | `INS_GYROFFS_*`, `INS_GYR2OFFS_*`, `INS_GYR3OFFS_*` |
+| ArduPilot | compass | `m = [DIA/ODI] * (COMPASS_SCALE * (m_drv + COMPASS_OFS))` (mGauss, offsets ADDED; `AP_Compass_Backend::correct_field`) | `COMPASS_OFS{,2,3}_*`, `COMPASS_DIA{,2,3}_*`, `COMPASS_ODI{,2,3}_*` |
+| PX4 | accel | `a = R * ((a_drv - CAL_ACCn_OFF) .* CAL_ACCn_SCALE)` (m/s^2; `calibration::Accelerometer::Correct`) | `CAL_ACCn_{X,Y,Z}OFF`, `CAL_ACCn_{X,Y,Z}SCALE`, `CAL_ACCn_ID`, `_PRIO`, `_ROT` |
+| PX4 | gyro | `w = R * (w_drv - CAL_GYROn_OFF)` (rad/s) | `CAL_GYROn_{X,Y,Z}OFF`, `_ID`, `_PRIO`, `_ROT` |
+| PX4 | mag | `m = R * (S * (m_drv - CAL_MAGn_OFF))` (gauss, subtracted), `S` symmetric from `SCALE`/`ODIAG` | `CAL_MAGn_{X,Y,Z}OFF`, `{X,Y,Z}SCALE`, `{X,Y,Z}ODIAG`, `_ID`, `_PRIO`, `_ROT` |
+
+PX4 applies slot n only to the sensor whose device id is `CAL_*n_ID`: the export writes the
+id (from the capture's `sensor_device_id`/`<kind>_device_id`, the parameters in use, or
+`--device-id`) and refuses without one.
+
+Data already corrected by the board (capture metadata `corrected: true`, `firmware`, and the
+parameters in use as `param.<NAME>`): the fitted correction acts on top of the parameters in
+use, and the export composes the new absolute parameters from both (accel:
+`o = o_old + o_fit / s_old`, `s = s_old * s_fit`; gyro `o = o_old + o_fit`; compass through
+the matrices, below). It refuses, in one line, when the parameters in use are not in the
+capture, when they come from another firmware, or when the board rotation in use is not
+the identity (the corrected data are in the body frame, the parameters in the sensor frame).
+
+Bounds the firmware enforces are checked before anything is written: ArduPilot accel
+offsets within ±3.5 m/s^2 (the INS_ACCOFFS @Range and `_accel_max_abs_offsets`) and scales
+0.8..1.2 (`AccelCalibrator::accept_result`, the INS_ACCSCAL @Range); compass offsets below
+COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI| < 1
+(`CompassCalibrator::fit_acceptable`); PX4 scales positive and finite
+(`Accelerometer::set_scale`).
+
+Raw volts or counts and the LDV have no parameters in either firmware and are refused.
 """
 from __future__ import annotations
 
@@ -29,8 +52,16 @@ from solvers.frames import G_STANDARD_MPS2
 from solvers.units import si_factor
 from station.errors import UnsupportedError
 
-FORMATS = ("json", "ardupilot", "px4", "c-header")
+FORMATS = ("json", "ardupilot", "px4", "qgc", "c-header")
 AXES = "XYZ"
+ODIAG_PAIRS = ((0, 1), (0, 2), (1, 2))  # X, Y, Z off-diagonal: (row, col) of the symmetric matrix
+AP_ACC_OFFS_MAX_MPS2 = 3.5
+AP_ACC_SCALE_RANGE = (0.8, 1.2)
+AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS = 1800.0
+AP_COMPASS_DIA_RANGE = (0.2, 5.0)
+AP_COMPASS_ODI_MAX = 1.0
+PX4_DEFAULT_PRIORITY = 50  # calibration::Accelerometer::DEFAULT_PRIORITY (internal sensors)
+QGC_REAL32, QGC_INT32 = 9, 6  # MAV_PARAM_TYPE
 
 
 class Export:
@@ -39,7 +70,7 @@ class Export:
     def __init__(self, comment: str):
         self.comment = comment
         self.notes: list[str] = []
-        self.values: list[tuple[str, float]] = []
+        self.values: list[tuple[str, float | int]] = []
 
     def note(self, text: str) -> None:
         self.notes.append(text)
@@ -48,6 +79,9 @@ class Export:
         if value is None or not math.isfinite(value):
             raise UnsupportedError(f"{name} would be {value}: the calibration has no finite value for it")
         self.values.append((name, float(value)))
+
+    def set_int(self, name: str, value: int) -> None:
+        self.values.append((name, int(value)))
 
 
 def _unit(meta: dict, key: str, kind: str, fmt: str, procedure: str) -> tuple[str, float]:
@@ -92,7 +126,7 @@ def _mat(params: dict, name: str) -> list[list[float]]:
     return [[float("nan") if x is None else float(x) for x in r] for r in m]
 
 
-def _symmetric_part(w: list[list[float]]):
+def _symmetric_part(w):
     """P = sqrtm(Wᵀ W): the symmetric matrix with |P x| = |W x| (W = Q P, polar decomposition)."""
     import numpy as np
 
@@ -101,6 +135,62 @@ def _symmetric_part(w: list[list[float]]):
     if np.any(vals <= 0):
         raise UnsupportedError("the soft-iron matrix is singular")
     return vecs @ np.diag(np.sqrt(vals)) @ vecs.T
+
+
+# --- the parameters in use (capture metadata) --------------------------------------------
+
+class InUse:
+    """The firmware parameters a capture's data were corrected with (`param.<NAME>` metadata)."""
+
+    def __init__(self, meta: dict | None, fmt: str, firmware: str):
+        meta = meta or {}
+        self.fmt, self.firmware = fmt, firmware
+        self.corrected = str(meta.get("corrected", "")).strip().lower() in ("true", "1", "yes")
+        self.source_firmware = str(meta.get("firmware", "")).strip().lower() or None
+        self.params: dict[str, float] = {}
+        for key, value in meta.items():
+            if key.startswith("param."):
+                try:
+                    self.params[key[6:]] = float(value)
+                except (TypeError, ValueError):
+                    continue
+        if self.corrected and self.source_firmware and self.source_firmware != firmware:
+            other = "qgc or px4" if self.source_firmware == "px4" else self.source_firmware
+            raise UnsupportedError(
+                f"{fmt}: the capture's data were corrected by {self.source_firmware} parameters (corrected: true); "
+                f"only --format {other} can compose absolute parameters from them")
+
+    def get(self, name: str) -> float | None:
+        return self.params.get(name)
+
+    def need(self, names: list[str], what: str) -> list[float]:
+        """The values of `names`, or a one-line refusal naming the first one missing."""
+        missing = [n for n in names if n not in self.params]
+        if missing:
+            raise UnsupportedError(
+                f"{self.fmt}: the capture's data were already corrected by the board (corrected: true), but its "
+                f"metadata hold no param.{missing[0]}: the {what} in use are unknown, so no absolute parameters "
+                "can be composed (record over MAVLink, which reads them, or import the log that holds them)")
+        return [self.params[n] for n in names]
+
+    def identity_rotation(self, names: list[str], ex: Export) -> None:
+        """Refuse unless the board rotation parameters in use are all 0 (note when unknown)."""
+        known = {n: self.params[n] for n in names if n in self.params}
+        bad = {n: v for n, v in known.items() if abs(v) > 1e-3}  # PX4 SITL stores SENS_BOARD_X_OFF = 1e-6 deg
+        if bad:
+            n, v = next(iter(bad.items()))
+            raise UnsupportedError(
+                f"{self.fmt}: the board rotation in use is not the identity ({n} = {v:g}): the corrected data are in the "
+                "body frame and the parameters in the sensor frame; composing across a rotation is not supported")
+        if len(known) < len(names):
+            ex.note(f"assumed no board rotation ({', '.join(n for n in names if n not in known)} not in the capture)")
+
+
+def _check_range(fmt: str, name: str, value: float, lo: float | None, hi: float | None, why: str) -> None:
+    if not math.isfinite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
+        rng = f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (f"> {lo:g}" if lo is not None else f"< {hi:g}")
+        raise UnsupportedError(f"{fmt}: {name} = {value:.6g} is outside what the firmware accepts ({rng}, {why}); "
+                               "nothing written")
 
 
 # --- accelerometer ----------------------------------------------------------------------
@@ -135,76 +225,242 @@ def _accel_offsets_scales(cal: dict, meta: dict, fmt: str, ex: Export) -> tuple[
 
 # --- formats ----------------------------------------------------------------------------
 
-def _ardupilot(cal: dict, meta: dict, instance: int) -> Export:
-    ex = Export("#")
-    procedure = cal["procedure"]
-    n = "" if instance == 1 else str(instance)
-    if procedure in ("accel-tabletop", "accel-centrifuge"):
-        offsets, scales = _accel_offsets_scales(cal, meta, "ardupilot", ex)
-        for i, a in enumerate(AXES):
-            ex.set(f"INS_ACC{n}OFFS_{a}", offsets[i])
-        for i, a in enumerate(AXES):
-            ex.set(f"INS_ACC{n}SCAL_{a}", scales[i])
-    elif procedure == "gyro-drift":
-        unit, factor = _unit(meta, "gyro_unit", "gyro", "ardupilot", procedure)
+KIND = {"accel-tabletop": "accel", "accel-centrifuge": "accel", "gyro-drift": "gyro", "compass": "mag"}
+
+
+def _kind(cal: dict, fmt: str, firmware: str) -> str:
+    kind = KIND.get(cal["procedure"])
+    if kind is None:
+        raise UnsupportedError(f"{fmt}: procedure '{cal['procedure']}' has no parameters in {firmware}")
+    return kind
+
+
+def _device_id(meta: dict, kind: str) -> int | None:
+    for key in (f"{kind}_device_id", "sensor_device_id"):
+        v = (meta or {}).get(key)
+        if v not in (None, ""):
+            try:
+                return int(float(v))
+            except ValueError:
+                continue
+    return None
+
+
+def _ap_names(kind: str, n: int) -> dict:
+    s = "" if n == 1 else str(n)
+    if kind == "accel":
+        return {"off": [f"INS_ACC{s}OFFS_{a}" for a in AXES], "scale": [f"INS_ACC{s}SCAL_{a}" for a in AXES],
+                "id": f"INS_ACC{s}_ID"}
+    if kind == "gyro":
+        return {"off": [f"INS_GYR{s}OFFS_{a}" for a in AXES],  # INS_GYROFFS_X, INS_GYR2OFFS_X, ...
+                "id": f"INS_GYR{s}_ID"}
+    return {"off": [f"COMPASS_OFS{s}_{a}" for a in AXES], "dia": [f"COMPASS_DIA{s}_{a}" for a in AXES],
+            "odi": [f"COMPASS_ODI{s}_{a}" for a in AXES], "scale": f"COMPASS_SCALE{s}", "id": f"COMPASS_DEV_ID{s}"}
+
+
+def _px4_names(kind: str, i: int) -> dict:
+    k = {"accel": "ACC", "gyro": "GYRO", "mag": "MAG"}[kind]
+    out = {"off": [f"CAL_{k}{i}_{a}OFF" for a in AXES], "id": f"CAL_{k}{i}_ID", "prio": f"CAL_{k}{i}_PRIO",
+           "rot": f"CAL_{k}{i}_ROT"}
+    if kind in ("accel", "mag"):
+        out["scale"] = [f"CAL_{k}{i}_{a}SCALE" for a in AXES]
+    if kind == "mag":
+        out["odiag"] = [f"CAL_{k}{i}_{a}ODIAG" for a in AXES]
+    return out
+
+
+def _slot(in_use: InUse, device_id: int | None, names, slots) -> int | None:
+    """The slot whose `_ID` parameter in use holds `device_id` (the firmware's own lookup)."""
+    if device_id is None:
+        return None
+    for n in slots:
+        if in_use.get(names(n)["id"]) == device_id:
+            return n
+    return None
+
+
+def _sym(m) -> list[list[float]]:
+    return [[float(x) for x in row] for row in m]
+
+
+def _mag_fit(cal: dict, meta: dict, fmt: str, unit_per: float):
+    """(A, c·h): the fitted compass correction on data in the firmware's unit U (mGauss or
+    gauss): m_U = A (d_U − c h), A = W / (nT per U), from m_nT = W (d − h), d in mag_unit."""
+    import numpy as np
+
+    unit, nT_per_unit = _unit(meta, "mag_unit", "mag", fmt, cal["procedure"])
+    h, W = _vec(cal["params"], "hard_iron"), _mat(cal["params"], "soft_iron")
+    c = nT_per_unit / unit_per  # firmware units per capture unit
+    A = np.asarray(W, dtype=float) / (unit_per * c)
+    return unit, A, c * np.asarray(h, dtype=float)
+
+
+def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
+    import numpy as np
+
+    fmt = "ardupilot"
+    kind = _kind(cal, fmt, "ArduPilot")
+    use = InUse(meta, fmt, "ardupilot")
+    n = instance or _slot(use, _device_id(meta, kind), lambda k: _ap_names(kind, k), (1, 2, 3))
+    if n is None:
+        si = (meta or {}).get("sensor_instance")
+        n = int(si) + 1 if si not in (None, "") and use.source_firmware == "ardupilot" and 0 <= int(si) <= 2 else 1
+    names = _ap_names(kind, n)
+    if use.corrected:
+        use.identity_rotation(["AHRS_ORIENTATION"], ex)
+    if kind == "accel":
+        off, scale = _accel_offsets_scales(cal, meta, fmt, ex)
+        if use.corrected:
+            o_old = use.need(names["off"], "accelerometer offsets")
+            s_old = use.need(names["scale"], "accelerometer scales")
+            s_old = [s if s != 0 else 1.0 for s in s_old]  # 0 = never calibrated: AP_InertialSensor::init sets 1
+            off = [o_old[i] + off[i] / s_old[i] for i in range(3)]
+            scale = [s_old[i] * scale[i] for i in range(3)]
+            ex.note("composed with the parameters in use: OFFS = OFFS_in_use + OFFS_fit / SCAL_in_use, "
+                    "SCAL = SCAL_in_use * SCAL_fit")
+        for name, v in zip(names["off"], off):
+            _check_range(fmt, name, v, -AP_ACC_OFFS_MAX_MPS2, AP_ACC_OFFS_MAX_MPS2, "INS_ACCOFFS @Range")
+        for name, v in zip(names["scale"], scale):
+            _check_range(fmt, name, v, *AP_ACC_SCALE_RANGE, "AccelCalibrator::accept_result")
+        for name, v in zip(names["off"], off):
+            ex.set(name, v)
+        for name, v in zip(names["scale"], scale):
+            ex.set(name, v)
+    elif kind == "gyro":
+        _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
         drift = _gyro_offsets_rad_s(cal, factor, ex)
-        gyr = "GYRO" if instance == 1 else f"GYR{instance}"
-        for i, a in enumerate(AXES):
-            ex.set(f"INS_{gyr}OFFS_{a}", drift[i])
-        ex.note("INS_GYROFFS = drift in rad/s, same sign (ArduPilot subtracts it); per raw axis gx, gy, gz")
+        if use.corrected:
+            o_old = use.need(names["off"], "gyro offsets")
+            drift = [o_old[i] + drift[i] for i in range(3)]
+            ex.note("composed with the parameters in use: GYROFFS = GYROFFS_in_use + drift")
+        for name, v in zip(names["off"], drift):
+            ex.set(name, v)
+        ex.note(f"{names['off'][0][:-2]} = drift in rad/s, same sign (ArduPilot subtracts it); per raw axis gx, gy, gz")
         ex.note("ArduPilot re-estimates gyro offsets at every boot unless INS_GYR_CAL = 0")
-    elif procedure == "compass":
-        unit, nT_per_unit = _unit(meta, "mag_unit", "mag", "ardupilot", procedure)
-        h, W = _vec(cal["params"], "hard_iron"), _mat(cal["params"], "soft_iron")
-        c = nT_per_unit / 100.0  # milligauss per capture unit
-        P = _symmetric_part([[w / (100.0 * c) for w in row] for row in W])
-        suffix = "" if instance == 1 else str(instance)
-        for i, a in enumerate(AXES):
-            ex.set(f"COMPASS_OFS{suffix}_{a}", -c * h[i])
-        for i, a in enumerate(AXES):
-            ex.set(f"COMPASS_DIA{suffix}_{a}", P[i][i])
-        for name, (i, j) in zip(AXES, ((0, 1), (0, 2), (1, 2))):
-            ex.set(f"COMPASS_ODI{suffix}_{name}", P[i][j])
+    else:
+        unit, A, ch = _mag_fit(cal, meta, fmt, 100.0)  # nT per mGauss
+        ofs = -ch
+        if use.corrected:
+            o_old = np.asarray(use.need(names["off"], "compass offsets"))
+            dia = use.need(names["dia"], "compass soft-iron diagonal")
+            odi = use.need(names["odi"], "compass soft-iron off-diagonal")
+            dia = [d if d != 0 else 1.0 for d in dia]  # all zero = never set: correct_field uses 1
+            P_old = np.diag(dia)
+            for v, (i, j) in zip(odi, ODIAG_PAIRS):
+                P_old[i, j] = P_old[j, i] = v
+            sf = use.get(names["scale"]) or 1.0  # 0 = no scaling (COMPASS_SCALE @Description)
+            P_eff = sf * P_old
+            # m = A (P_eff (r + o_old) − c h) = A P_eff (r + o_old − P_eff⁻¹ c h)
+            ofs = o_old - np.linalg.solve(P_eff, ch)
+            A = A @ P_eff / sf  # the firmware keeps multiplying by COMPASS_SCALE in use
+            ex.note("composed with the parameters in use: DIA/ODI = symmetric part of (fit matrix x matrix in use), "
+                    "OFS = OFS_in_use - (matrix in use)^-1 * hard_iron")
+        P = _symmetric_part(A)
+        offs_max = use.get("COMPASS_OFFS_MAX") or AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS
+        for name, v in zip(names["off"], ofs):
+            _check_range(fmt, name, v, -offs_max, offs_max, "COMPASS_OFFS_MAX")
+        for name, i in zip(names["dia"], range(3)):
+            _check_range(fmt, name, P[i, i], *AP_COMPASS_DIA_RANGE, "CompassCalibrator::fit_acceptable")
+        for name, (i, j) in zip(names["odi"], ODIAG_PAIRS):
+            _check_range(fmt, name, P[i, j], -AP_COMPASS_ODI_MAX, AP_COMPASS_ODI_MAX, "CompassCalibrator::fit_acceptable")
+        for name, v in zip(names["off"], ofs):
+            ex.set(name, v)
+        for name, i in zip(names["dia"], range(3)):
+            ex.set(name, P[i, i])
+        for name, (i, j) in zip(names["odi"], ODIAG_PAIRS):
+            ex.set(name, P[i, j])
         ex.note(f"COMPASS_OFS = -hard_iron in milligauss (ArduPilot ADDS offsets); hard_iron was in {unit}")
         ex.note("COMPASS_DIA/ODI = symmetric part sqrtm(W^T W) of soft_iron, rescaled to map milligauss to milligauss; "
                 "it gives the same |m| as the station's upper-triangular W (they differ by a rotation the field norm cannot see)")
+
+
+def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex: Export) -> None:
+    import numpy as np
+
+    fmt = "px4"
+    kind = _kind(cal, fmt, "PX4")
+    use = InUse(meta, fmt, "px4")
+    dev = device_id if device_id is not None else _device_id(meta, kind)
+    slot = _slot(use, dev, lambda k: _px4_names(kind, k), (0, 1, 2, 3))
+    i = instance if instance is not None else slot
+    if i is None:
+        si = (meta or {}).get("sensor_instance")
+        i = int(si) if si not in (None, "") and use.source_firmware == "px4" and 0 <= int(si) <= 3 else 0
+    names = _px4_names(kind, i)
+    if dev is None:
+        dev_in_use = use.get(names["id"])
+        dev = int(dev_in_use) if dev_in_use else None
+    if dev is None:
+        raise UnsupportedError(
+            f"px4: the sensor's device id is unknown (no {kind}_device_id or sensor_device_id in the capture, no "
+            f"{names['id']} in use): PX4 applies {names['id'][:-3]}_* only to the sensor whose device id is "
+            f"{names['id']}; give --device-id (the device_id of the board's sensor_{kind})")
+    if use.corrected:
+        use.identity_rotation(["SENS_BOARD_ROT", "SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"], ex)
+    ex.set_int(names["id"], dev)
+    prio = use.get(names["prio"])
+    ex.set_int(names["prio"], int(prio) if prio is not None and 0 < prio <= 100 else PX4_DEFAULT_PRIORITY)
+    rot = use.get(names["rot"])
+    if rot is not None:
+        ex.set_int(names["rot"], int(rot))
     else:
-        raise UnsupportedError(f"ardupilot: procedure '{procedure}' has no parameters in ArduPilot")
-    return ex
-
-
-def _px4(cal: dict, meta: dict, instance: int) -> Export:
-    ex = Export("#")
-    procedure = cal["procedure"]
-    if procedure in ("accel-tabletop", "accel-centrifuge"):
-        offsets, scales = _accel_offsets_scales(cal, meta, "px4", ex)
-        for i, a in enumerate(AXES):
-            ex.set(f"CAL_ACC{instance}_{a}OFF", offsets[i])
-        for i, a in enumerate(AXES):
-            ex.set(f"CAL_ACC{instance}_{a}SCALE", scales[i])
-    elif procedure == "gyro-drift":
-        _, factor = _unit(meta, "gyro_unit", "gyro", "px4", procedure)
+        ex.note(f"{names['rot']} not written (not in use in the capture): -1 for an internal sensor, "
+                "the mounting rotation for an external one")
+    if kind == "accel":
+        off, scale = _accel_offsets_scales(cal, meta, fmt, ex)
+        if use.corrected:
+            o_old = use.need(names["off"], "accelerometer offsets")
+            s_old = use.need(names["scale"], "accelerometer scales")
+            off = [o_old[k] + off[k] / s_old[k] for k in range(3)]
+            scale = [s_old[k] * scale[k] for k in range(3)]
+            ex.note("composed with the parameters in use: OFF = OFF_in_use + OFF_fit / SCALE_in_use, "
+                    "SCALE = SCALE_in_use * SCALE_fit")
+        for name, v in zip(names["scale"], scale):
+            _check_range(fmt, name, v, 0.0, None, "Accelerometer::set_scale")
+        for name, v in zip(names["off"], off):
+            ex.set(name, v)
+        for name, v in zip(names["scale"], scale):
+            ex.set(name, v)
+    elif kind == "gyro":
+        _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
         drift = _gyro_offsets_rad_s(cal, factor, ex)
-        for i, a in enumerate(AXES):
-            ex.set(f"CAL_GYRO{instance}_{a}OFF", drift[i])
+        if use.corrected:
+            o_old = use.need(names["off"], "gyro offsets")
+            drift = [o_old[k] + drift[k] for k in range(3)]
+            ex.note("composed with the parameters in use: OFF = OFF_in_use + drift")
+        for name, v in zip(names["off"], drift):
+            ex.set(name, v)
         ex.note("CAL_GYRO_OFF = drift in rad/s, same sign (PX4 subtracts it); per raw axis gx, gy, gz")
-    elif procedure == "compass":
-        unit, nT_per_unit = _unit(meta, "mag_unit", "mag", "px4", procedure)
-        h, W = _vec(cal["params"], "hard_iron"), _mat(cal["params"], "soft_iron")
-        c = nT_per_unit / 1e5  # gauss per capture unit
-        P = _symmetric_part([[w * 1e-5 / c for w in row] for row in W])
-        for i, a in enumerate(AXES):
-            ex.set(f"CAL_MAG{instance}_{a}OFF", c * h[i])
-        for i, a in enumerate(AXES):
-            ex.set(f"CAL_MAG{instance}_{a}SCALE", P[i][i])
-        for name, (i, j) in zip(AXES, ((0, 1), (0, 2), (1, 2))):
-            ex.set(f"CAL_MAG{instance}_{name}ODIAG", P[i][j])
+    else:
+        unit, A, ch = _mag_fit(cal, meta, fmt, 1e5)  # nT per gauss
+        off = ch
+        if use.corrected:
+            o_old = np.asarray(use.need(names["off"], "magnetometer offsets"))
+            dia = use.need(names["scale"], "magnetometer scales")
+            odi = [use.get(n) or 0.0 for n in names["odiag"]]  # absent before PX4 v1.12: no off-diagonal
+            S_old = np.diag(dia)
+            for v, (r, c) in zip(odi, ODIAG_PAIRS):
+                S_old[r, c] = S_old[c, r] = v
+            # m = A (S_old (r − o_old) − c h) = A S_old (r − o_old − S_old⁻¹ c h)
+            off = o_old + np.linalg.solve(S_old, ch)
+            A = A @ S_old
+            ex.note("composed with the parameters in use: SCALE/ODIAG = symmetric part of (fit matrix x matrix in use), "
+                    "OFF = OFF_in_use + (matrix in use)^-1 * hard_iron")
+        P = _symmetric_part(A)
+        for name, k in zip(names["scale"], range(3)):
+            _check_range(fmt, name, P[k, k], 0.0, None, "Magnetometer scale")
+        for name, v in zip(names["off"], off):
+            ex.set(name, v)
+        for name, k in zip(names["scale"], range(3)):
+            ex.set(name, P[k, k])
+        for name, (r, c) in zip(names["odiag"], ODIAG_PAIRS):
+            ex.set(name, P[r, c])
         ex.note(f"CAL_MAG_OFF = hard_iron in gauss, same sign (PX4 subtracts it); hard_iron was in {unit}")
         ex.note("CAL_MAG_SCALE/ODIAG = symmetric part sqrtm(W^T W) of soft_iron, rescaled to map gauss to gauss; "
                 "same |m| as the station's upper-triangular W (they differ by a rotation the field norm cannot see)")
-    else:
-        raise UnsupportedError(f"px4: procedure '{procedure}' has no parameters in PX4")
-    return ex
+    if kind == "accel":
+        ex.note("PX4 takes a new CAL_ACC offset or scale only when it differs from the one in use by more than "
+                "0.01 (vector length; Accelerometer::set_offset/set_scale)")
 
 
 def _header(cal: dict) -> list[str]:
@@ -236,13 +492,23 @@ def _c_string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
+def _c_float(x: float) -> str:
+    """A float literal that gives back the float32 nearest to x (9 significant digits)."""
+    if not math.isfinite(x):
+        return "NAN" if x != x else ("INFINITY" if x > 0 else "-INFINITY")
+    text = f"{x:.9g}"
+    if "e" not in text and "." not in text:
+        text += ".0"
+    return text + "f"
+
+
 def _c_values(value) -> str | None:
     if isinstance(value, bool) or isinstance(value, str):
         return None
     if value is None:
         return "NAN"
     if isinstance(value, (int, float)):
-        return repr(float(value))
+        return _c_float(float(value))
     if isinstance(value, list):
         parts = [_c_values(v) for v in value]
         if any(p is None for p in parts):
@@ -259,17 +525,32 @@ def _dims(value) -> str:
     return dims
 
 
-def _c_header(cal: dict) -> str:
+C_UNITS = {
+    "accel-tabletop": "V in the capture's accel_unit ({accel_unit}), A in m/s^2; B in m/s^2, M in m/s^2 per {accel_unit}",
+    "accel-centrifuge": "f in g, N in the capture's accel_unit ({accel_unit}); b in {accel_unit}, D in g/g^2",
+    "compass": "m_raw and hard_iron in the capture's mag_unit ({mag_unit}); soft_iron maps {mag_unit} to nT",
+    "gyro-drift": "rates in rad/s; body axes x forward, y up, z right",
+    "ldv": "velocities in m/s, angles in degrees",
+}
+
+
+def _c_header(cal: dict, meta: dict | None = None) -> str:
+    meta = meta or {}
     guard = "STATION_CALIBRATION_" + str(cal["id"])
-    prefix = "station_" + _c_ident(cal["procedure"]).lower()
+    prefix = (_c_ident(str(cal["device_id"])).strip("_") or "device").lower() + "_" + _c_ident(cal["procedure"]).lower()
+    prefix = _c_ident(prefix)
+    units = C_UNITS.get(cal["procedure"], "SI unless the name says otherwise").format(
+        accel_unit=meta.get("accel_unit", "?"), mag_unit=meta.get("mag_unit", "?"))
     lines = [f"/* {_c_comment(line)} */" for line in _header(cal)]
     lines += [
-        "/* values as stored (SI unless the name says otherwise; NAN = not determined) */",
+        f"/* model: {_c_comment(str(cal.get('model') or cal['procedure']))} */",
+        f"/* units: {_c_comment(units)} */",
+        "/* float (single precision, as flight firmwares keep them); NAN = not determined; matrices are rows */",
         f"#ifndef {guard}_H",
         f"#define {guard}_H",
         "#include <math.h>",
         "",
-        f"static const char {prefix}_device[] = {_c_string(cal['device_id'])};",
+        f"static const char {prefix}_device[] = {_c_string(str(cal['device_id']))};",
         f"static const long {prefix}_calibration_id = {int(cal['id'])};",
     ]
 
@@ -284,21 +565,25 @@ def _c_header(cal: dict) -> str:
                 if isinstance(value, str):
                     lines.append(f"static const char {name}[] = {_c_string(value)};")
                 continue
-            lines.append(f"static const double {name}{_dims(value)} = {text};")
+            lines.append(f"static const float {name}{_dims(value)} = {text};")
 
     emit(cal["params"], prefix)
     emit({"sigma": cal["uncertainty"]}, prefix)
     if cal.get("residual_rms") is not None:
-        lines.append(f"static const double {prefix}_residual_rms = {float(cal['residual_rms'])!r};")
+        lines.append(f"static const float {prefix}_residual_rms = {_c_float(float(cal['residual_rms']))};")
     lines += ["", f"#endif /* {guard}_H */", ""]
     return "\n".join(lines)
 
 
-def export(cal: dict, meta: dict, fmt: str, instance: int | None = None) -> str:
+def export(cal: dict, meta: dict, fmt: str, instance: int | None = None, device_id: int | None = None,
+           vehicle: tuple[int, int] = (1, 1)) -> str:
     """The text of calibration `cal` (a `Store.calibration` dict) in format `fmt`.
 
-    `meta` is the stored capture's metadata (units). `instance` is the firmware's
-    sensor slot: ArduPilot 1..3 (default 1), PX4 0..3 (default 0).
+    `meta` is the stored capture's metadata (units; for data the board had already corrected,
+    `corrected`, `firmware` and the parameters in use as `param.<NAME>`). `instance` is the
+    firmware's sensor slot: ArduPilot 1..3, PX4 0..3 (default: the slot whose `_ID` in use
+    holds the capture's sensor device id, else 1 / 0). `device_id` is PX4's `CAL_*n_ID` when
+    the capture does not say it. `vehicle` is the QGroundControl file's (system, component).
     """
     if fmt == "json":
         doc = {
@@ -312,19 +597,25 @@ def export(cal: dict, meta: dict, fmt: str, instance: int | None = None) -> str:
         }
         return json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
     if fmt == "c-header":
-        return _c_header(cal)
+        return _c_header(cal, meta)
+    ex = Export("#")
     if fmt == "ardupilot":
-        instance = 1 if instance is None else instance
-        if instance not in (1, 2, 3):
+        if instance is not None and instance not in (1, 2, 3):
             raise UnsupportedError("ardupilot: --instance is 1, 2 or 3")
-        ex = _ardupilot(cal, meta, instance)
-        body = [f"{name},{value:.9g}" for name, value in ex.values]
-    elif fmt == "px4":
-        instance = 0 if instance is None else instance
-        if instance not in (0, 1, 2, 3):
-            raise UnsupportedError("px4: --instance is 0..3")
-        ex = _px4(cal, meta, instance)
-        body = [f"param set {name} {value:.9g}" for name, value in ex.values]
+        _ardupilot(cal, meta, instance, ex)
+        body = [f"{name},{value:.9g}" if isinstance(value, float) else f"{name},{value}" for name, value in ex.values]
+    elif fmt in ("px4", "qgc"):
+        if instance is not None and instance not in (0, 1, 2, 3):
+            raise UnsupportedError(f"{fmt}: --instance is 0..3")
+        _px4(cal, meta, instance, device_id, ex)
+        if fmt == "px4":
+            body = [f"param set {name} {value:.9g}" if isinstance(value, float) else f"param set {name} {value}"
+                    for name, value in ex.values]
+        else:
+            sysid, compid = vehicle
+            body = ["# Vehicle-Id Component-Id Name Value Type"]
+            body += [f"{sysid}\t{compid}\t{name}\t{value:.9g}\t{QGC_REAL32}" if isinstance(value, float)
+                     else f"{sysid}\t{compid}\t{name}\t{value}\t{QGC_INT32}" for name, value in ex.values]
     else:
         raise UnsupportedError(f"unknown export format '{fmt}' (one of {', '.join(FORMATS)})")
     head = [f"# {_c_comment(line)}" for line in _header(cal)]

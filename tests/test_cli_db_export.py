@@ -24,6 +24,7 @@ def run(capsys, *argv):
 def _save(db, result, **meta):
     m, cols = small_capture(device=result["device"], procedure=result["procedure"])
     m.pop("accel_unit")
+    m["sensor_device_id"] = "1310988"  # PX4 applies a CAL_*n slot only to the sensor with this id
     m.update(meta)
     with Store(db) as s:
         return s.save_calibration(result, meta=m, columns=cols)
@@ -54,7 +55,8 @@ B_TRUE = [0.12, -0.34, 0.56]
 @pytest.mark.parametrize("unit,k", [("m/s^2", 1.0), ("g", G0)])
 @pytest.mark.parametrize("fmt", ["ardupilot", "px4"])
 def test_accel_tabletop_offsets_and_scales_reproduce_the_diagonal_model(capsys, db, unit, k, fmt):
-    cid = _save(db, accel_result(device="A", B=B_TRUE, M=M_TRUE), accel_unit=unit)
+    M = [[m * k for m in row] for row in M_TRUE]  # A [m/s^2] = B + M V: M in m/s^2 per capture unit
+    cid = _save(db, accel_result(device="A", B=B_TRUE, M=M), accel_unit=unit)
     code, out, _ = run(capsys, "export", str(cid), "--format", fmt, "--db", db)
     assert code == 0
     p = _params(out, fmt)
@@ -67,9 +69,11 @@ def test_accel_tabletop_offsets_and_scales_reproduce_the_diagonal_model(capsys, 
             off = p[names[0] + ax] if fmt == "ardupilot" else p[names[0].format(ax)]
             scale = p[names[1] + ax] if fmt == "ardupilot" else p[names[1].format(ax)]
             firmware = (a_fw[i] - off) * scale  # both: subtract the offset, then scale
-            station = B_TRUE[i] + M_TRUE[i][i] * v_raw[i]  # A = B + M V without the cross terms
+            station = B_TRUE[i] + M[i][i] * v_raw[i]  # A = B + M V without the cross terms
             assert firmware == pytest.approx(station, abs=1e-7)
     assert "# converted:" in out and "dropped: off-diagonal" in out and "0.004" in out
+    if fmt == "px4":  # PX4 applies slot 0 only to the sensor whose id is CAL_ACC0_ID
+        assert "param set CAL_ACC0_ID 1310988" in out and "param set CAL_ACC0_PRIO 50" in out
 
 
 def test_accel_centrifuge_px4(capsys, db):
@@ -97,7 +101,7 @@ def test_compass_ardupilot_and_px4_reproduce_the_field_norm(capsys, db, unit, nT
     W = [[1.05, 0.02, -0.01], [0.0, 0.97, 0.03], [0.0, 0.0, 1.02]]
     W = [[w * 1.0 for w in row] for row in W]  # maps the capture unit to nT: scale by nT per unit
     W = [[w * nT / nT for w in row] for row in W]
-    h = [12.0, -7.0, 3.0]
+    h = [12e3 / nT, -7e3 / nT, 3e3 / nT]  # 12, -7, 3 uT in the capture's unit (within COMPASS_OFFS_MAX)
     Wn = [[w * nT for w in row] for row in W]  # unit -> nT
     cid = _save(db, compass_result(device="M", hard_iron=h, soft_iron=Wn), mag_unit=unit)
     rng = np.random.default_rng(3)
@@ -127,7 +131,8 @@ def test_compass_ardupilot_and_px4_reproduce_the_field_norm(capsys, db, unit, nT
 def test_gyro_offsets_and_instances(capsys, db):
     cid = _save(db, gyro_result(device="G", drift=(1e-4, -2e-4, 5e-5)), gyro_unit="deg/s")
     _, out, _ = run(capsys, "export", str(cid), "--format", "px4", "--instance", "1", "--db", db)
-    assert _params(out, "px4") == pytest.approx({"CAL_GYRO1_XOFF": 1e-4, "CAL_GYRO1_YOFF": -2e-4, "CAL_GYRO1_ZOFF": 5e-5})
+    assert _params(out, "px4") == pytest.approx({"CAL_GYRO1_XOFF": 1e-4, "CAL_GYRO1_YOFF": -2e-4, "CAL_GYRO1_ZOFF": 5e-5,
+                                                 "CAL_GYRO1_ID": 1310988, "CAL_GYRO1_PRIO": 50})
     _, out, _ = run(capsys, "export", str(cid), "--format", "ardupilot", "--instance", "2", "--db", db)
     assert set(_params(out, "ardupilot")) == {"INS_GYR2OFFS_X", "INS_GYR2OFFS_Y", "INS_GYR2OFFS_Z"}
     assert "# calibration warning: no temperature column" in out
@@ -164,17 +169,20 @@ def test_c_header_compiles_and_holds_the_values(capsys, db, tmp_path):
     cid = _save(db, ldv_result(device=device))
     code, out, _ = run(capsys, "export", str(cid), "--format", "c-header", "--db", db)
     assert code == 0
+    assert "static const float imu__q_ldv_beam2_alpha_deg = " in out  # names prefixed by the device
+    assert "/* model: " in out and "/* units: velocities in m/s, angles in degrees */" in out
     (tmp_path / "cal.h").write_text(out)
     (tmp_path / "main.c").write_text(
         '#include <stdio.h>\n#include "cal.h"\nint main(void){\n'
-        '  printf("%s|%.17g|%.17g|%.17g|%ld\\n", station_ldv_device, station_ldv_beam2_alpha_deg,\n'
-        '         station_ldv_sigma_beam3_dK, station_ldv_condition_number, station_ldv_calibration_id);\n'
+        '  printf("%s|%.9g|%.9g|%.9g|%ld\\n", imu__q_ldv_device, imu__q_ldv_beam2_alpha_deg,\n'
+        '         imu__q_ldv_sigma_beam3_dK, imu__q_ldv_condition_number, imu__q_ldv_calibration_id);\n'
         '  return 0;}\n')
     exe = tmp_path / "main"
     subprocess.run(["cc", "-Wall", "-Werror", "-Wno-unused-const-variable", "-o", str(exe), str(tmp_path / "main.c")],
                    check=True, capture_output=True)
     got = subprocess.run([str(exe)], check=True, capture_output=True).stdout.decode("utf-8").rstrip("\n")
-    assert got == f"{device}|60.100000000000001|0.001|3.2000000000000002|{cid}"
+    f32 = [f"{float(np.float32(x)):.9g}" for x in (60.1, 0.001, 3.2)]  # the values as float, printed back
+    assert got == f"{device}|{'|'.join(f32)}|{cid}"
 
 
 # --- recompute -------------------------------------------------------------------------

@@ -54,7 +54,7 @@ def captures(tmp_path_factory):
 
 
 @pytest.mark.parametrize("fmt, names", [
-    ("ardupilot", ("INS_GYROOFFS_X", "INS_GYROOFFS_Y", "INS_GYROOFFS_Z")),
+    ("ardupilot", ("INS_GYROFFS_X", "INS_GYROFFS_Y", "INS_GYROFFS_Z")),  # AP_InertialSensor.cpp @Param GYROFFS_X
     ("px4", ("CAL_GYRO0_XOFF", "CAL_GYRO0_YOFF", "CAL_GYRO0_ZOFF")),
 ])
 def test_gyro_offsets_are_on_the_sensor_axes(tmp_path, capsys, captures, fmt, names):
@@ -66,10 +66,11 @@ def test_gyro_offsets_are_on_the_sensor_axes(tmp_path, capsys, captures, fmt, na
     # the same drift in P4's frame either way (float round-off of the written columns only)
     np.testing.assert_allclose(d_sensor["params"]["drift"], d, rtol=1e-6, atol=1e-12)
 
-    same = _params(_run(capsys, "--db", db, "export", d_body["calibration_id"], "--format", fmt))
+    ids = ["--device-id", "1310988"] if fmt == "px4" else []
+    same = _params(_run(capsys, "--db", db, "export", d_body["calibration_id"], "--format", fmt, *ids))
     np.testing.assert_allclose([same[n] for n in names], d, rtol=1e-8)  # body frame = sensor frame here
 
-    text = _run(capsys, "--db", db, "export", d_sensor["calibration_id"], "--format", fmt)
+    text = _run(capsys, "--db", db, "export", d_sensor["calibration_id"], "--format", fmt, *ids)
     mounted = _params(text)
     np.testing.assert_allclose([mounted[n] for n in names], [-d[0], -d[2], d[1]], rtol=1e-6, atol=1e-12)
     assert "mapped back from P4's body frame" in text  # the file says what it converted

@@ -46,7 +46,7 @@ def _plot(trends: list[dict]) -> str:
     tty = sys.stdout.isatty()
     color = color_enabled(sys.stdout)
     try:
-        width = min(os.get_terminal_size(sys.stdout.fileno()).columns if tty else 100, 120)
+        width = min((os.get_terminal_size(sys.stdout.fileno()).columns if tty else 0) or 100, 120)  # 0: size unknown
     except OSError:
         width = 100
     figures = []
