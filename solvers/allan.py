@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["oadev", "octave_taus", "mean_standard_error", "MeanError", "time_needed_s"]
+__all__ = ["oadev", "octave_taus", "mean_standard_error", "MeanError", "time_needed_s", "noise_fit", "NoiseFit"]
 
 
 def octave_taus(n: int, dt_s: float, max_fraction: float = 0.25, per_octave: int = 1) -> np.ndarray:
@@ -153,3 +153,109 @@ def time_needed_s(me: MeanError, accuracy: float) -> np.ndarray:
             disc = room * room - 4.0 * c2 * c0
             out[k] = np.inf if disc < 0 else max(need[k], (room - np.sqrt(disc)) / (2.0 * c2))
     return out
+
+
+# --- noise parameters with their uncertainty (station noise, Kalibr's imu.yaml) -------------
+
+BIAS_INSTABILITY_FACTOR = 0.664  # ADEV floor = sqrt(2 ln 2 / π) · B (IEEE 952, flicker rate noise)
+CI_1SIGMA = 0.6826894921370859
+
+
+@dataclass
+class NoiseFit:
+    """Allan analysis of a still record of rates ``y`` (N, k) in unit u (e.g. rad/s, m/s²).
+
+    ``white`` N is the white-noise density (ADEV = N/√τ): u·√s = u/√Hz, Kalibr's
+    ``*_noise_density``; ``random_walk`` K is the rate random walk (ADEV = K √(τ/3)): u/√s =
+    u/s/√Hz, Kalibr's ``*_random_walk``; ``bias_instability`` B = min ADEV / 0.664 (u) at
+    ``bias_instability_tau_s``. N and K come from the weighted non-negative fit of
+    ``AVAR = N²/τ + c1 + K² τ/3``, each point weighted by its standard deviation
+    ``AVAR √(2/edf)`` (edf: Greenhall's algorithm, allantools.edf_greenhall, for the noise the
+    model says dominates at that τ). Their 1-sigma (``*_sigma``) is the scatter of the same fit
+    over ``n_boot`` records simulated from the fitted white noise and random walk (Kalibr's
+    discrete model): overlapping Allan estimates at neighbouring τ are strongly correlated, and
+    the fit's own covariance understated the scatter 2.6 (N) and 3.7 (K) times. Measured over
+    12 records of 600 s at 200 Hz the bootstrap sigma gives rms(error/sigma) 1.06 for N and
+    1.37 for K; over 6 records of 300 s, 1.07 for N but 4.5 for K: with a record only a few
+    times the white/random-walk crossover τ the random walk's sigma is understated.
+    When K fits to 0 it is not resolved (``random_walk_sigma`` is then the scatter of K over
+    records with none). ``adev_lo``/``adev_hi``: 68 % confidence interval of each ADEV point
+    (allantools.confidence_interval, chi-squared with that edf).
+    """
+
+    taus_s: np.ndarray
+    adev: np.ndarray        # (m, k)
+    adev_lo: np.ndarray     # (m, k)
+    adev_hi: np.ndarray     # (m, k)
+    edf: np.ndarray         # (m, k)
+    white: np.ndarray       # (k,)
+    white_sigma: np.ndarray
+    random_walk: np.ndarray
+    random_walk_sigma: np.ndarray
+    bias_instability: np.ndarray
+    bias_instability_tau_s: np.ndarray
+    model: np.ndarray       # (k, 3): c0 = N², c1, c2 = K²/3
+    duration_s: float
+    n: int
+
+
+def _alpha(c, tau: float) -> int:
+    """Frequency-noise exponent of the term that dominates AVAR at τ: white 0, flicker −1, random walk −2."""
+    terms = (c[0] / tau, c[1], c[2] * tau)
+    return (0, -1, -2)[int(np.argmax(terms))]
+
+
+def _wls(A0, av, sd):
+    from scipy.optimize import nnls
+
+    c, _ = nnls(A0 / sd[:, None], av / sd)
+    return c
+
+
+def noise_fit(y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3.0, n_boot: int = 20,
+              seed: int = 0) -> NoiseFit:
+    """White-noise density, bias instability and rate random walk of rates ``y`` (N,) or (N, k)."""
+    import allantools
+
+    y = np.asarray(y, dtype=float)
+    Y = y[:, None] if y.ndim == 1 else y
+    n, k = Y.shape
+    grid = octave_taus(n, dt_s, max_fraction, per_octave=per_octave)
+    taus, adev, terms = oadev(Y, dt_s, grid)
+    ms = np.maximum(np.rint(taus / dt_s), 1).astype(int)
+    model = fit_noise_model(taus, adev, terms, dt_s)
+    edf = np.ones_like(adev)
+    sds = np.ones_like(adev)
+    A0 = np.column_stack([1.0 / taus, np.ones_like(taus), taus])
+    for j in range(k):
+        av = adev[:, j] ** 2
+        if not np.all(av > 0):
+            continue
+        for _ in range(3):  # weights from the model's AVAR (not the noisy points), refit
+            c = model[j]
+            edf[:, j] = [allantools.edf_greenhall(alpha=_alpha(c, t), d=2, m=int(m), N=n + 1, overlapping=True)
+                         for t, m in zip(taus, ms)]
+            pred = A0 @ c if np.any(c > 0) else av
+            sds[:, j] = np.maximum(pred, 1e-300) * np.sqrt(2.0 / edf[:, j])
+            model[j] = _wls(A0, av, sds[:, j])
+    white, rw = np.sqrt(model[:, 0]), np.sqrt(3.0 * model[:, 2])
+    # parametric bootstrap: the same fit on records simulated from the fitted N and K
+    rng = np.random.default_rng(seed)
+    boot = np.empty((n_boot, k, 2))
+    for b in range(n_boot):
+        sim = white / math.sqrt(dt_s) * rng.normal(size=(n, k))
+        sim += np.cumsum(rw * math.sqrt(dt_s) * rng.normal(size=(n, k)), axis=0)
+        _, ad_b, _ = oadev(sim, dt_s, grid)
+        for j in range(k):
+            c = _wls(A0, ad_b[:, j] ** 2, sds[:, j])
+            boot[b, j] = math.sqrt(c[0]), math.sqrt(3.0 * c[2])
+    spread = boot.std(axis=0, ddof=1) if n_boot > 1 else np.full((k, 2), np.nan)
+    lo, hi = np.empty_like(adev), np.empty_like(adev)
+    for i in range(len(taus)):
+        for j in range(k):
+            lo[i, j], hi[i, j] = allantools.confidence_interval(adev[i, j], edf[i, j], ci=CI_1SIGMA)
+    imin = np.argmin(adev, axis=0)
+    return NoiseFit(taus_s=taus, adev=adev, adev_lo=lo, adev_hi=hi, edf=edf, white=white, white_sigma=spread[:, 0],
+                    random_walk=rw, random_walk_sigma=spread[:, 1],
+                    bias_instability=adev[imin, np.arange(k)] / BIAS_INSTABILITY_FACTOR,
+                    bias_instability_tau_s=taus[imin], model=model, duration_s=n * dt_s, n=n)

@@ -107,3 +107,93 @@ def format_duration(seconds: float) -> str:
     if seconds < 7200:
         return f"{seconds / 60:.0f} min"
     return f"{seconds / 3600:.1f} h"
+
+
+# --- station noise: gyro and accelerometer, Kalibr's imu.yaml --------------------------------
+
+SENSORS = {"gyro": (("gx", "gy", "gz"), "gyro_unit"), "accel": (("ax", "ay", "az"), "accel_unit")}
+SI_UNIT = {"gyro": "rad/s", "accel": "m/s^2"}
+
+
+def imu_noise(capture, n_boot: int = 20) -> dict:
+    """Allan analysis of each sensor of a still time-series capture (solvers.allan.noise_fit).
+
+    Returns {"sample_rate_hz", "duration_s", "sensors": {"gyro"|"accel": NoiseFit in SI}}. Raises
+    ValueError (one line) when the capture has no usable sensor: not a time series, raw
+    units without a physical factor, under 100 rows, no rate.
+    """
+    from station.errors import UnsupportedError
+
+    if not capture.is_time_series:
+        raise UnsupportedError("a table of averages has no noise to analyse: give a still time-series recording")
+    rate = capture.float_meta("sample_rate_hz")
+    t = capture.columns["t"]
+    if rate is None and len(t) > 2:
+        step = float(np.median(np.diff(t)))
+        rate = 1.0 / step if step > 0 else None
+    if not rate or not math.isfinite(rate) or rate <= 0:
+        raise UnsupportedError("no sample rate: the capture has no sample_rate_hz and its t column does not advance")
+    out: dict = {"sample_rate_hz": float(rate), "sensors": {}, "skipped": {}}
+    for kind, (cols, unit_key) in SENSORS.items():
+        if not all(c in capture.columns for c in cols):
+            continue
+        unit = capture.meta.get(unit_key)
+        k = si_factor(kind, unit)
+        if k is None:
+            out["skipped"][kind] = f"{unit_key} {unit or 'unknown'!r} has no physical factor"
+            continue
+        y = np.column_stack([capture.columns[c] for c in cols]) * k
+        y = y[np.all(np.isfinite(y), axis=1)]
+        if len(y) < 100:
+            out["skipped"][kind] = f"only {len(y)} samples"
+            continue
+        out["sensors"][kind] = allan.noise_fit(y, 1.0 / rate, n_boot=n_boot)
+        out["duration_s"] = len(y) / rate
+    if not out["sensors"]:
+        why = "; ".join(f"{k}: {v}" for k, v in out["skipped"].items()) or "no gx gy gz or ax ay az columns"
+        raise UnsupportedError(f"no gyro or accelerometer to analyse ({why})")
+    return out
+
+
+def noise_json(result: dict) -> dict:
+    """JSON-ready figures in Kalibr's units (rates in SI: rad/s, m/s^2)."""
+    doc = {"sample_rate_hz": result["sample_rate_hz"], "duration_s": result.get("duration_s"), "sensors": {}}
+    for kind, f in result["sensors"].items():
+        u = SI_UNIT[kind]
+        doc["sensors"][kind] = {
+            "unit": u,
+            "noise_density": f.white.tolist(), "noise_density_sigma": f.white_sigma.tolist(),
+            "noise_density_unit": f"{u}/sqrt(Hz)",
+            "random_walk": f.random_walk.tolist(), "random_walk_sigma": f.random_walk_sigma.tolist(),
+            "random_walk_unit": f"{u}/s/sqrt(Hz)",
+            "bias_instability": f.bias_instability.tolist(), "bias_instability_tau_s": f.bias_instability_tau_s.tolist(),
+            "bias_instability_unit": u,
+            "tau_s": f.taus_s.tolist(), "adev": f.adev.T.tolist(), "adev_lo_68": f.adev_lo.T.tolist(),
+            "adev_hi_68": f.adev_hi.T.tolist(),
+        }
+    return doc
+
+
+def kalibr_yaml(result: dict, rostopic: str = "/imu0") -> str:
+    """Kalibr's imu.yaml: one value per sensor, the largest of the three axes (conservative:
+    Kalibr models every axis with the same density), per-axis figures and 1-sigma in comments."""
+    lines = ["# IMU noise model for Kalibr (station noise): Allan deviation of a still record",
+             f"# {result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz; each value is the largest "
+             "of the three axes"]
+    body = []
+    for kind, key in (("accel", "accelerometer"), ("gyro", "gyroscope")):
+        f = result["sensors"].get(kind)
+        if f is None:
+            lines.append(f"# no {key} in the capture: {key} values are missing and Kalibr will refuse the file")
+            continue
+        u = "m/s^2" if kind == "accel" else "rad/s"
+        for name, v, s, unit in (("noise_density", f.white, f.white_sigma, f"{u}/sqrt(Hz)"),
+                                 ("random_walk", f.random_walk, f.random_walk_sigma, f"{u}/s/sqrt(Hz)")):
+            i = int(np.argmax(v))
+            per_axis = ", ".join(f"{a} {x:.4g} ± {e:.2g}" for a, x, e in zip("xyz", v, s))
+            body.append(f"{key}_{name}: {float(v[i]):.6g}  # {unit}; per axis {per_axis}")
+            if name == "random_walk" and not np.all(v > 0):
+                body[-1] += " (not resolved on some axis: record longer)"
+    body.append(f"update_rate: {result['sample_rate_hz']:.6g}  # Hz")
+    body.append(f"rostopic: {rostopic}")
+    return "\n".join(lines + body) + "\n"
