@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Record samples from a device into a capture file until --seconds pass or "
         "SIGINT/SIGTERM. Rows are written as they arrive to FILE.partial; the finished capture "
         "replaces FILE atomically. --port takes a device path (/dev/ttyUSB0, /dev/pts/3) or a "
-        "pyserial URL (socket://host:port, rfc2217://host:port, loop://).",
+        "pyserial URL (socket://host:port, rfc2217://host:port, loop://); with --protocol mavlink also a network "
+        "endpoint through pymavlink: udp:127.0.0.1:14550 (listen), udpout:HOST:PORT, tcp:HOST:5760, tcpin:HOST:PORT.",
     )
     p.add_argument("--port", help="device path or pyserial URL")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200; ignored by ptys and sockets)")
@@ -29,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--meta", action="append", metavar="KEY=VALUE", help="extra metadata, e.g. latitude_deg=39.98")
     p.add_argument("--mavlink-message", metavar="MSG[:ID]",
                    help="MAVLink stream to record, e.g. HIGHRES_IMU, SCALED_IMU2, RAW_IMU:1 (default: first IMU message seen)")
+    p.add_argument("--mavlink-rate", type=float, default=200.0, metavar="HZ",
+                   help="ask the flight controller to stream at HZ (REQUEST_DATA_STREAM and MAV_CMD_SET_MESSAGE_INTERVAL; "
+                   "also reads AUTOPILOT_VERSION and the calibration parameters); 0: ask nothing (default 200)")
     p.add_argument("--recover", metavar="FILE.partial",
                    help="finish the .partial file a killed recording left (drops a cut last line) and exit")
     p.set_defaults(func=run)
@@ -79,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
         res = record(
             args.port, args.out, baud=args.baud, protocol=args.protocol, seconds=args.seconds,
             procedure=args.procedure, extra_meta=_meta(args.meta), mavlink_source=args.mavlink_message,
+            mavlink_rate_hz=args.mavlink_rate or None,
             stop=stop, warn=lambda msg: print(f"station record: {msg}", file=sys.stderr),
         )
     finally:

@@ -78,10 +78,11 @@ class MavlinkParser:
 the first valid frame of a stream (or after `reset_stream()`) are not counted.
     """
 
-    def __init__(self, source: str | None = None) -> None:
+    def __init__(self, source: str | None = None, request_hz: float | None = None) -> None:
         self.stats = ParseStats()
         self.header: Header | None = None
         self.want_type, self.want_id = parse_source(source)
+        self.link = BoardLink(self.want_type, request_hz) if request_hz else None
         self.source: str | None = None  # e.g. 'HIGHRES_IMU:0' once chosen
         self.system: tuple[int, int] | None = None  # (sysid, compid) of the chosen stream
         self.heartbeats: dict[tuple[int, int], int] = {}
@@ -103,6 +104,17 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
         """Drop the partial frame (after a reconnect); sequence continuity is kept."""
         self._new_mav()
         self._synced = False
+
+    def take_outgoing(self) -> list[bytes]:
+        """Frames to send to the board (stream and identity requests), oldest first."""
+        if self.link is None or not self.link.outgoing:
+            return []
+        out, self.link.outgoing = self.link.outgoing, []
+        return out
+
+    def board_meta(self) -> dict[str, str]:
+        """What the board told about itself: firmware, uid, calibration parameters in use."""
+        return self.link.meta() if self.link is not None else {}
 
     def take(self) -> SampleBlock | None:
         rows, self._rows = self._rows, []
@@ -130,6 +142,8 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
             if t == "HEARTBEAT":
                 self.heartbeats[key] = self.heartbeats.get(key, 0) + 1
                 self.autopilots[key] = int(m.autopilot)
+            if self.link is not None:
+                self.link.on_message(m, t, key, st.samples > 0)
             imu = t in IMU_MESSAGES and self._wanted(m, t, key, events)
             if key == self.system:
                 seq = m.get_seq()
@@ -165,7 +179,8 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
             ):
                 self._units = RAW_IMU_COUNTS
             acc, gyr, mag, *_ = self._units
-            self.header = Header(f"mavlink-{key[0]}-{key[1]}", acc, gyr, mag, math.nan, 2, self.stats.samples)
+            name = self.link.device_name(key) if self.link is not None else f"mavlink-{key[0]}-{key[1]}"
+            self.header = Header(name, acc, gyr, mag, math.nan, 2, self.stats.samples)
             events.append(self.header)
             return True
         return self.source == f"{t}:{inst}" and self.system == key
@@ -257,3 +272,148 @@ def set_message_interval(msg_name: str, rate_hz: float, target_system: int = 1, 
 
 
 __all__ = ["IMU_MESSAGES", "MavlinkParser", "MavlinkEncoder", "set_message_interval", "ERROR_KINDS", "Unknown"]
+
+
+# --- network endpoints and the board's identity (pymavlink's connection layer) ---------------
+
+NETWORK_PREFIXES = ("udp:", "udpin:", "udpout:", "udpbcast:", "tcp:", "tcpin:")
+PARAM_PREFIXES = ("INS_ACC", "INS_GYR", "COMPASS_", "AHRS_ORIENTATION", "CAL_ACC", "CAL_GYRO", "CAL_MAG",
+                  "SENS_BOARD_")
+FIRMWARE = {mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA: "ardupilot", mavlink2.MAV_AUTOPILOT_PX4: "px4"}
+
+
+def is_network(port: str) -> bool:
+    """`udp:127.0.0.1:14550` (listen; MAVProxy's convention), `udpout:`, `tcp:host:5760`, `tcpin:`."""
+    return port.lower().startswith(NETWORK_PREFIXES)
+
+
+class NetworkPort:
+    """A pymavlink network connection (mavutil.mavlink_connection) with the read/write/close
+    interface the station's Reader uses for serial ports. `read` waits up to `timeout_s`."""
+
+    def __init__(self, url: str, timeout_s: float = 0.02) -> None:
+        from pymavlink import mavutil
+
+        self.url, self.timeout_s = url, timeout_s
+        self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=190, autoreconnect=True)
+
+    def read(self, n: int) -> bytes:
+        import select
+
+        sock = self.conn.port
+        if sock is None:
+            return b""
+        ready, _, _ = select.select([sock], [], [], self.timeout_s)
+        if not ready:
+            return b""
+        data = self.conn.recv(n)
+        return bytes(data) if data else b""
+
+    def write(self, data: bytes) -> int:
+        self.conn.write(bytes(data))
+        return len(data)
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def _param_value(value: float, ptype: int, firmware: str | None) -> float | int:
+    """PARAM_VALUE's float as the firmware stores the parameter: PX4 sends integer types
+    byte-wise inside the float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE), ArduPilot casts."""
+    import struct
+
+    ints = (mavlink2.MAV_PARAM_TYPE_INT32, mavlink2.MAV_PARAM_TYPE_UINT32, mavlink2.MAV_PARAM_TYPE_INT16,
+            mavlink2.MAV_PARAM_TYPE_UINT16, mavlink2.MAV_PARAM_TYPE_INT8, mavlink2.MAV_PARAM_TYPE_UINT8)
+    if ptype in ints:
+        if firmware == "px4":
+            fmt = "<I" if ptype == mavlink2.MAV_PARAM_TYPE_UINT32 else "<i"
+            return struct.unpack(fmt, struct.pack("<f", value))[0]
+        return int(round(value))
+    return float(value)
+
+
+class BoardLink:
+    """What the station asks a flight controller for, and what it learns about it.
+
+    On each HEARTBEAT from an autopilot: MAV_CMD_REQUEST_MESSAGE for AUTOPILOT_VERSION until it
+    answers; once the uid is known (or after two heartbeats without it), until IMU samples flow:
+    REQUEST_DATA_STREAM
+    (RAW_SENSORS, ArduPilot) and MAV_CMD_SET_MESSAGE_INTERVAL for the wanted message (PX4 and
+    newer ArduPilot); and once
+    PARAM_REQUEST_LIST (the calibration parameters in use). Frames to send are collected in
+    `outgoing` (the Reader writes them)."""
+
+    def __init__(self, want_type: str | None, rate_hz: float) -> None:
+        self.want = want_type or "HIGHRES_IMU"
+        self.rate_hz = rate_hz
+        self.mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.outgoing: list[bytes] = []
+        self.target: tuple[int, int] | None = None
+        self.firmware: str | None = None
+        self.uid: str | None = None
+        self.params: dict[str, float | int] = {}
+        self.param_count: int | None = None
+        self._asked_params = False
+        self._heartbeats = 0
+
+    def _send(self, msg) -> None:
+        self.outgoing.append(bytes(msg.pack(self.mav)))
+        self.mav.seq = (self.mav.seq + 1) % 256
+
+    def on_message(self, m, t: str, key: tuple[int, int], streaming: bool) -> None:
+        if t == "HEARTBEAT" and m.autopilot != mavlink2.MAV_AUTOPILOT_INVALID and m.type != mavlink2.MAV_TYPE_GCS:
+            self.target = self.target or key
+            self.firmware = self.firmware or FIRMWARE.get(int(m.autopilot))
+            if key != self.target:
+                return
+            s, c = key
+            self._heartbeats += 1
+            # the uid first (it names the device in the capture header), the stream after it or
+            # after two heartbeats without an answer
+            if not streaming and (self.uid is not None or self._heartbeats > 2):
+                self._send(self.mav.request_data_stream_encode(s, c, mavlink2.MAV_DATA_STREAM_RAW_SENSORS,
+                                                               int(round(self.rate_hz)), 1))
+                msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{self.want}")
+                self._send(self.mav.command_long_encode(s, c, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
+                                                        1e6 / self.rate_hz, 0, 0, 0, 0, 0))
+            if self.uid is None:
+                self._send(self.mav.command_long_encode(s, c, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                        mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0))
+            if not self._asked_params:
+                self._asked_params = True
+                self._send(self.mav.param_request_list_encode(s, c))
+        elif t == "AUTOPILOT_VERSION" and key == self.target:
+            uid2 = bytes(getattr(m, "uid2", b"") or b"")
+            if m.uid:
+                self.uid = f"{int(m.uid):016x}"
+            elif any(uid2):
+                self.uid = uid2.hex()
+        elif t == "PARAM_VALUE" and key == self.target:
+            name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode("ascii", "replace")
+            name = name.rstrip("\x00")
+            self.param_count = int(m.param_count)
+            if name.startswith(PARAM_PREFIXES):
+                self.params[name] = _param_value(float(m.param_value), int(m.param_type), self.firmware)
+
+    def device_name(self, key: tuple[int, int]) -> str:
+        if self.uid:
+            return f"{self.firmware or 'mavlink'}-{self.uid}"
+        return f"mavlink-{key[0]}-{key[1]}"
+
+    def meta(self) -> dict[str, str]:
+        out: dict[str, str] = {}
+        if self.firmware:
+            out["firmware"] = self.firmware
+            out["corrected"] = "true"  # RAW_IMU/SCALED_IMU*/HIGHRES_IMU of both firmwares: calibrated, rotated
+        if self.uid:
+            out["autopilot_uid"] = self.uid
+        for name in sorted(self.params):
+            v = self.params[name]  # floats as the shortest text of the float32 the board keeps
+            out[f"param.{name}"] = str(v) if isinstance(v, int) else np.format_float_positional(
+                np.float32(v), unique=True, trim="-")
+        ids = {"INS_ACC_ID": "accel_device_id", "INS_GYR_ID": "gyro_device_id", "COMPASS_DEV_ID": "mag_device_id",
+               "CAL_ACC0_ID": "accel_device_id", "CAL_GYRO0_ID": "gyro_device_id", "CAL_MAG0_ID": "mag_device_id"}
+        for p, key in ids.items():
+            if self.params.get(p):
+                out[key] = str(int(self.params[p]))
+        return out

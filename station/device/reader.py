@@ -128,18 +128,23 @@ class ReaderStats:
     last_error: str = ""
 
 
-def make_parser(protocol: str, mavlink_source: str | None = None):
+def make_parser(protocol: str, mavlink_source: str | None = None, request_hz: float | None = None):
     if protocol == "station":
         return StationParser()
     if protocol == "mavlink":
         from station.device.mavlink import MavlinkParser
 
-        return MavlinkParser(mavlink_source)
+        return MavlinkParser(mavlink_source, request_hz)
     raise ValueError(f"unknown protocol {protocol!r} (station or mavlink)")
 
 
 def open_port(port: str, baud: int = 115200, timeout_s: float = 0.02):
-    """A device path or any pyserial URL, opened, raw 8N1."""
+    """A device path or any pyserial URL, opened, raw 8N1; a MAVLink network endpoint
+    (`udp:HOST:PORT`, `udpout:`, `tcp:`, `tcpin:`) through pymavlink's connection layer."""
+    from station.device.mavlink import NetworkPort, is_network
+
+    if is_network(port):
+        return NetworkPort(port, timeout_s)
     return serial.serial_for_url(port, baudrate=baud, timeout=timeout_s, write_timeout=1.0)
 
 
@@ -159,6 +164,7 @@ class Reader:
         backoff_s: float = 0.05,
         backoff_max_s: float = 1.0,
         request_header: bool = True,
+        request_hz: float | None = None,
     ) -> None:
         if protocol not in PROTOCOLS:
             raise ValueError(f"unknown protocol {protocol!r} (station or mavlink)")
@@ -171,7 +177,7 @@ class Reader:
         self.backoff_s = backoff_s
         self.backoff_max_s = backoff_max_s
         self.request_header = request_header and protocol == "station"
-        self.parser = make_parser(protocol, mavlink_source)
+        self.parser = make_parser(protocol, mavlink_source, request_hz)
         self.header: Header | None = None
         # (old header, new header, first segment of the new device)
         self.header_changes: list[tuple[Header, Header, int]] = []
@@ -379,6 +385,8 @@ class Reader:
 
     def _ingest(self, data: bytes, host_now: float) -> None:
         events = self.parser.feed(data)
+        for frame in getattr(self.parser, "take_outgoing", lambda: [])():
+            self.send(frame)
         block = self.parser.take()
         for ev in events:
             if isinstance(ev, Header):

@@ -227,6 +227,7 @@ def record(
     procedure: str | None = None,
     extra_meta: dict[str, str] | None = None,
     mavlink_source: str | None = None,
+    mavlink_rate_hz: float | None = 200.0,
     header_timeout_s: float = 3.0,
     stop: threading.Event | None = None,
     reader: Reader | None = None,
@@ -246,7 +247,8 @@ def record(
     _check_extra_meta(directory, procedure, extra_meta)
     own_reader = reader is None
     if reader is None:
-        reader = Reader(port, baud=baud, protocol=protocol, mavlink_source=mavlink_source)
+        reader = Reader(port, baud=baud, protocol=protocol, mavlink_source=mavlink_source,
+                        request_hz=mavlink_rate_hz if protocol == "mavlink" else None)
         reader.start()
     started = time.monotonic()
     recorded_at = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0)
@@ -295,6 +297,8 @@ def record(
         stats = reader.stats()
         events = reader.events()
         final = dict(meta)
+        board = getattr(reader.parser, "board_meta", dict)()  # MAVLink: firmware, uid, parameters in use
+        final.update({k: v for k, v in board.items() if k not in final})
         final.update(_end_meta(stats, events, stream.rows, dts, time.monotonic() - started))
         stream.finish(final)
         return RecordResult(out, stream.rows, final, stats, events, stopped)
@@ -353,7 +357,7 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
     meta["recorded_at"] = recorded_at.isoformat().replace("+00:00", "Z")
     meta["source"] = port
     meta["protocol"] = protocol
-    if not port.split(":", 1)[0].endswith(("socket", "loop", "rfc2217")):
+    if not port.split(":", 1)[0].endswith(("socket", "loop", "rfc2217", "udp", "udpin", "udpout", "tcp", "tcpin")):
         meta["baud"] = str(baud)
     for k, v in (extra or {}).items():
         meta[k] = v
