@@ -177,7 +177,8 @@ class NoiseFit:
     the fit's own covariance understated the scatter 2.6 (N) and 3.7 (K) times. Measured over
     12 records of 600 s at 200 Hz the bootstrap sigma gives rms(error/sigma) 1.06 for N and
     1.37 for K; over 6 records of 300 s, 1.07 for N but 4.5 for K: with a record only a few
-    times the white/random-walk crossover τ the random walk's sigma is understated.
+    times the white/random-walk crossover τ the random walk's sigma is understated, so
+    ``random_walk_min_duration_s`` says how long a record K needs (the callers warn).
     When K fits to 0 it is not resolved (``random_walk_sigma`` is then the scatter of K over
     records with none). ``adev_lo``/``adev_hi``: 68 % confidence interval of each ADEV point
     (allantools.confidence_interval, chi-squared with that edf).
@@ -197,6 +198,9 @@ class NoiseFit:
     model: np.ndarray       # (k, 3): c0 = N², c1, c2 = K²/3
     duration_s: float
     n: int
+    # record length for which K's sigma holds: the longest τ (T/3) at least 4x the τ where
+    # white noise and random walk cross (√3 N / K); inf when K fits to 0
+    random_walk_min_duration_s: np.ndarray | None = None
 
 
 def _alpha(c, tau: float) -> int:
@@ -255,7 +259,10 @@ def noise_fit(y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3
         for j in range(k):
             lo[i, j], hi[i, j] = allantools.confidence_interval(adev[i, j], edf[i, j], ci=CI_1SIGMA)
     imin = np.argmin(adev, axis=0)
+    with np.errstate(divide="ignore"):
+        need = np.where(rw > 0, 12.0 * math.sqrt(3.0) * white / np.where(rw > 0, rw, 1.0), np.inf)
     return NoiseFit(taus_s=taus, adev=adev, adev_lo=lo, adev_hi=hi, edf=edf, white=white, white_sigma=spread[:, 0],
                     random_walk=rw, random_walk_sigma=spread[:, 1],
                     bias_instability=adev[imin, np.arange(k)] / BIAS_INSTABILITY_FACTOR,
-                    bias_instability_tau_s=taus[imin], model=model, duration_s=n * dt_s, n=n)
+                    bias_instability_tau_s=taus[imin], model=model, duration_s=n * dt_s, n=n,
+                    random_walk_min_duration_s=need)

@@ -1,14 +1,23 @@
 """A flight controller stand-in for tests: a pymavlink process that sends HEARTBEATs to a UDP
 endpoint and streams RAW_IMU (ArduPilot's mG/mrad/s/mGauss) only after it is asked
 (REQUEST_DATA_STREAM or MAV_CMD_SET_MESSAGE_INTERVAL); it answers MAV_CMD_REQUEST_MESSAGE for
-AUTOPILOT_VERSION and PARAM_REQUEST_LIST. Usage: python mavlink_peer.py PORT SECONDS"""
+AUTOPILOT_VERSION and PARAM_REQUEST_LIST. Usage: python mavlink_peer.py URL SECONDS
+(URL: udpout:127.0.0.1:PORT, or tcp:127.0.0.1:PORT to connect to a listening station)"""
 import sys
 import time
 
 from pymavlink import mavutil
 
-port, seconds = int(sys.argv[1]), float(sys.argv[2])
-conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+url, seconds = sys.argv[1], float(sys.argv[2])
+t_start = time.monotonic()
+while True:  # a TCP station may not listen yet
+    try:
+        conn = mavutil.mavlink_connection(url, source_system=1, source_component=1, retries=0)
+        break
+    except OSError:
+        if time.monotonic() - t_start > 20:
+            raise
+        time.sleep(0.1)
 mav = conn.mav
 PARAMS = [("INS_ACCOFFS_X", 0.05), ("INS_ACCOFFS_Y", -0.02), ("INS_ACCOFFS_Z", 0.11), ("INS_ACCSCAL_X", 1.001),
           ("INS_ACCSCAL_Y", 0.998), ("INS_ACCSCAL_Z", 1.003), ("INS_ACC_ID", 2753028), ("AHRS_ORIENTATION", 0),

@@ -186,7 +186,9 @@ def test_record_from_the_simulated_flight_controller(tmp_path):
     assert res.samples == cap.n_rows
 
 
-def test_record_over_udp_a_stream_it_had_to_request(tmp_path):
+@pytest.mark.parametrize("station_url,peer_url", [("udp:127.0.0.1:{}", "udpout:127.0.0.1:{}"),
+                                                  ("tcpin:127.0.0.1:{}", "tcp:127.0.0.1:{}")])
+def test_record_over_udp_a_stream_it_had_to_request(tmp_path, station_url, peer_url):
     """`station record --port udp:127.0.0.1:PORT` against a pymavlink peer process on this machine
     that streams RAW_IMU only once asked: the capture holds the requested stream in ArduPilot's
     units, is named by the board's AUTOPILOT_VERSION uid, and carries the parameters in use."""
@@ -197,15 +199,16 @@ def test_record_over_udp_a_stream_it_had_to_request(tmp_path):
 
     from station.capture import read_capture
 
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM if station_url.startswith("udp") else socket.SOCK_STREAM)
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()
     root = Path(__file__).resolve().parents[1]
     out = tmp_path / "udp.csv"
-    peer = subprocess.Popen([sys.executable, str(root / "tests" / "mavlink_peer.py"), str(port), "30"])
+    peer = subprocess.Popen([sys.executable, str(root / "tests" / "mavlink_peer.py"), peer_url.format(port), "30"],
+                            stdout=subprocess.DEVNULL)
     try:
-        rec = subprocess.run([sys.executable, "-m", "station", "record", "--port", f"udp:127.0.0.1:{port}",
+        rec = subprocess.run([sys.executable, "-m", "station", "record", "--port", station_url.format(port),
                               "--protocol", "mavlink", "--seconds", "3", "--out", str(out)],
                              cwd=root, capture_output=True, text=True, timeout=120)
     finally:
@@ -217,6 +220,7 @@ def test_record_over_udp_a_stream_it_had_to_request(tmp_path):
     assert cap.meta["corrected"] == "true" and cap.meta["param.INS_ACCOFFS_Z"] == "0.11"
     assert cap.meta["param.INS_ACC_ID"] == "2753028" and cap.meta["accel_device_id"] == "2753028"
     assert "param.BATT_CAPACITY" not in cap.meta  # only calibration parameters are kept
+    assert cap.meta["params_received"] == "9/9"
     assert cap.meta["accel_unit"] == "g" and cap.n_rows > 50
     np.testing.assert_allclose(cap.columns["az"], 1.0)  # 1000 mG
     np.testing.assert_allclose(cap.columns["gx"], 0.005)  # 5 mrad/s

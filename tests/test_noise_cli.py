@@ -78,6 +78,7 @@ def test_text_with_plot_and_bad_input(capsys, tmp_path, monkeypatch):
     code, out, err = run(capsys, "noise", cap)
     assert code == 0 and "rad/s/√Hz" in out and "m/s³/√Hz" in out and "Allan deviation" in out
     assert "\x1b[" not in out  # not a terminal: no colour
+    assert "random walk poorly resolved" in out  # 120 s is too short for K's sigma (crossover ~26-40 s)
     table = tmp_path / "table.csv"
     write_capture(table, Capture(meta={"procedure": "accel-tabletop", "device": "X", "accel_unit": "g"},
                                  columns={"position": np.array(["a", "b"], dtype=object),

@@ -68,6 +68,12 @@ def _text(result: dict) -> str:
                 out.append(f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} m/s²/√Hz"
                            f"  {_g(f.bias_instability[i])} m/s² at {_g(f.bias_instability_tau_s[i])} s"
                            f"  {_g(f.random_walk[i])} ± {_g(f.random_walk_sigma[i])} m/s³/√Hz")
+    from station.procedures.noise import random_walk_warning
+
+    for kind, f in result["sensors"].items():
+        w = random_walk_warning(f, kind)
+        if w:
+            out.append(f"warning: {w}")
     for kind, why in result.get("skipped", {}).items():
         out.append(f"{kind}: not analysed ({why})")
     return "\n".join(out) + "\n"

@@ -300,13 +300,16 @@ class NetworkPort:
     def read(self, n: int) -> bytes:
         import select
 
-        sock = self.conn.port
+        sock = self.conn.port or getattr(self.conn, "listen", None)  # tcpin: the listening socket until accepted
         if sock is None:
             return b""
         ready, _, _ = select.select([sock], [], [], self.timeout_s)
         if not ready:
             return b""
-        data = self.conn.recv(n)
+        try:
+            data = self.conn.recv(n)
+        except BlockingIOError:
+            return b""
         return bytes(data) if data else b""
 
     def write(self, data: bytes) -> int:
@@ -355,6 +358,7 @@ class BoardLink:
         self.param_count: int | None = None
         self._asked_params = False
         self._heartbeats = 0
+        self._param_indices: set[int] = set()
 
     def _send(self, msg) -> None:
         self.outgoing.append(bytes(msg.pack(self.mav)))
@@ -392,6 +396,7 @@ class BoardLink:
             name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode("ascii", "replace")
             name = name.rstrip("\x00")
             self.param_count = int(m.param_count)
+            self._param_indices.add(int(m.param_index))
             if name.startswith(PARAM_PREFIXES):
                 self.params[name] = _param_value(float(m.param_value), int(m.param_type), self.firmware)
 
@@ -407,6 +412,8 @@ class BoardLink:
             out["corrected"] = "true"  # RAW_IMU/SCALED_IMU*/HIGHRES_IMU of both firmwares: calibrated, rotated
         if self.uid:
             out["autopilot_uid"] = self.uid
+        if self.param_count is not None:  # PARAM_VALUEs received of the board's total (UDP may lose some)
+            out["params_received"] = f"{len(self._param_indices)}/{self.param_count}"
         for name in sorted(self.params):
             v = self.params[name]  # floats as the shortest text of the float32 the board keeps
             out[f"param.{name}"] = str(v) if isinstance(v, int) else np.format_float_positional(

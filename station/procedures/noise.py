@@ -168,10 +168,22 @@ def noise_json(result: dict) -> dict:
             "random_walk_unit": f"{u}/s/sqrt(Hz)",
             "bias_instability": f.bias_instability.tolist(), "bias_instability_tau_s": f.bias_instability_tau_s.tolist(),
             "bias_instability_unit": u,
+            "random_walk_min_duration_s": [x if math.isfinite(x) else None for x in f.random_walk_min_duration_s.tolist()],
             "tau_s": f.taus_s.tolist(), "adev": f.adev.T.tolist(), "adev_lo_68": f.adev_lo.T.tolist(),
             "adev_hi_68": f.adev_hi.T.tolist(),
         }
     return doc
+
+
+def random_walk_warning(f, kind: str) -> str | None:
+    """A sentence when the record is too short for the random walk's stated sigma to hold."""
+    need = float(np.max(f.random_walk_min_duration_s))
+    if f.duration_s >= need:
+        return None
+    if not math.isfinite(need):
+        return f"{kind} random walk not resolved on some axis (fitted 0): record longer"
+    return (f"{kind} random walk poorly resolved: its sigma holds for records of {need:.0f} s or more, "
+            f"this one is {f.duration_s:.0f} s")
 
 
 def kalibr_yaml(result: dict, rostopic: str = "/imu0") -> str:
@@ -192,8 +204,10 @@ def kalibr_yaml(result: dict, rostopic: str = "/imu0") -> str:
             i = int(np.argmax(v))
             per_axis = ", ".join(f"{a} {x:.4g} ± {e:.2g}" for a, x, e in zip("xyz", v, s))
             body.append(f"{key}_{name}: {float(v[i]):.6g}  # {unit}; per axis {per_axis}")
-            if name == "random_walk" and not np.all(v > 0):
-                body[-1] += " (not resolved on some axis: record longer)"
+            if name == "random_walk":
+                short = random_walk_warning(f, kind)
+                if short:
+                    lines.append(f"# {short}")
     body.append(f"update_rate: {result['sample_rate_hz']:.6g}  # Hz")
     body.append(f"rostopic: {rostopic}")
     return "\n".join(lines + body) + "\n"
