@@ -239,3 +239,52 @@ def test_px4_without_a_device_id_is_refused_and_device_id_option_works(capsys, d
     assert code == 2 and out == "" and err.count("\n") == 1 and "CAL_GYRO0_ID" in err and "--device-id" in err
     code, out, err = run(capsys, "export", cid, "--format", "px4", "--device-id", "2424842", "--db", db)
     assert code == 0 and "param set CAL_GYRO0_ID 2424842" in out
+
+
+def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
+    """Simulated P3 raw field r [uT] -> ArduPilot's correction in use d = P_old (r + o_old)
+    (mGauss, AP_Compass_Backend::correct_field) -> capture of d (gauss) marked corrected ->
+    calibrate -> compose. The truth in the firmware's form: OFS = -h (mGauss), DIA/ODI = the
+    symmetric part of W (from mGauss to mGauss), the same |m| as the simulator's W."""
+    from solvers.simulate import simulate
+
+    sim = simulate("compass", seed=2)
+    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
+    o_old = np.array([-35.0, 52.0, 18.0])
+    P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
+    d_gauss = (r_mG + o_old) @ P_old.T / 1000.0
+    meta = dict(sim.meta, mag_unit="gauss", corrected="true", firmware="ardupilot", mag_device_id="97539",
+                **{"param.AHRS_ORIENTATION": "0", "param.COMPASS_DEV_ID": "97539"},
+                **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+                **{f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i])) for i, a in enumerate(XYZ)},
+                **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))})
+    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
+    path = tmp_path / "mag.csv"
+    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
+    assert code == 0, err
+    res = json.loads(out)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 0, err
+    p = names_in(text, "ardupilot")
+    ofs = np.array([p[f"COMPASS_OFS_{a}"] for a in XYZ])
+    P = np.array([[p["COMPASS_DIA_X"], p["COMPASS_ODI_X"], p["COMPASS_ODI_Y"]],
+                  [p["COMPASS_ODI_X"], p["COMPASS_DIA_Y"], p["COMPASS_ODI_Z"]],
+                  [p["COMPASS_ODI_Y"], p["COMPASS_ODI_Z"], p["COMPASS_DIA_Z"]]])
+    h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
+    W_true = np.asarray(sim.truth["soft_iron"]) / 100.0 / 10.0  # uT -> nT, as mGauss -> mGauss
+    vals, vecs = np.linalg.eigh(W_true.T @ W_true)
+    P_true = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
+    # 1-sigma of the offsets: the fit's hard-iron sigma (gauss -> mGauss) through the matrix in use
+    sigma_ofs = np.abs(np.linalg.inv(P_old)) @ (np.asarray(res["uncertainty"]["hard_iron"]) * 1000.0)
+    assert np.all(np.abs(ofs + h_true_mG) < 4 * sigma_ofs + 0.05), (ofs + h_true_mG, sigma_ofs)
+    # the soft-iron matrix: the fit's relative sigma of W, ~1e-3 here; 5e-3 is several times that
+    assert np.abs(P - P_true).max() < 5e-3, P - P_true
+    # the fit alone, as absolute parameters, would be wrong by the parameters in use
+    A_alone = np.asarray(res["params"]["soft_iron"]) / 100.0 / 1000.0  # gauss -> nT, as mGauss -> mGauss
+    vals, vecs = np.linalg.eigh(A_alone.T @ A_alone)
+    P_alone = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
+    assert np.abs(P_alone - P_true).max() > 4 * 5e-3
+    assert np.all(np.abs(-np.asarray(res["params"]["hard_iron"]) * 1000.0 + h_true_mG) > 4 * sigma_ofs + 0.05)
+    assert "composed with the parameters in use" in text
