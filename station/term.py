@@ -4,6 +4,7 @@ Colour only on a terminal and only when the user has not asked for none: the `NO
 convention (https://no-color.org): set and not empty means no ANSI colour, whatever its
 value. Textual applies the same variable to the TUI itself (a monochrome filter).
 """
+
 from __future__ import annotations
 
 import os

@@ -5,6 +5,7 @@ The records follow Kalibr's own discrete-time IMU noise model (ethz-asl/kalibr w
 Model"): white noise n_d[k] = sigma / sqrt(dt) * w[k], and a bias random walk
 b_d[k] = b_d[k-1] + sigma_b * sqrt(dt) * w[k], w ~ N(0, 1), per axis.
 """
+
 from __future__ import annotations
 
 import json
@@ -16,13 +17,15 @@ from station.capture import Capture, write_capture
 from station.cli import main
 
 RATE_HZ = 200.0
-GYRO_N, GYRO_K = (3e-4, 4e-4, 5e-4), (2e-5, 4e-5, 3e-5)       # rad/s/√Hz, rad/s²/√Hz
+GYRO_N, GYRO_K = (3e-4, 4e-4, 5e-4), (2e-5, 4e-5, 3e-5)  # rad/s/√Hz, rad/s²/√Hz
 ACCEL_N, ACCEL_K = (2e-3, 1.5e-3, 2.5e-3), (1e-4, 2e-4, 3e-4)  # m/s²/√Hz, m/s³/√Hz
 
 
 def kalibr_noise(rng, n, density, random_walk, dt=1.0 / RATE_HZ):
     d, k = np.asarray(density), np.asarray(random_walk)
-    return d / np.sqrt(dt) * rng.normal(size=(n, 3)) + np.cumsum(k * np.sqrt(dt) * rng.normal(size=(n, 3)), axis=0)
+    return d / np.sqrt(dt) * rng.normal(size=(n, 3)) + np.cumsum(
+        k * np.sqrt(dt) * rng.normal(size=(n, 3)), axis=0
+    )
 
 
 def still_capture(path, seed, seconds=600.0):
@@ -30,10 +33,22 @@ def still_capture(path, seed, seconds=600.0):
     n = int(seconds * RATE_HZ)
     g = kalibr_noise(rng, n, GYRO_N, GYRO_K) + [0.001, -0.002, 0.0005]
     a = kalibr_noise(rng, n, ACCEL_N, ACCEL_K) + [0.1, -0.05, 9.81]
-    cols = {"t": np.arange(n) / RATE_HZ, "ax": a[:, 0], "ay": a[:, 1], "az": a[:, 2],
-            "gx": g[:, 0], "gy": g[:, 1], "gz": g[:, 2]}
-    meta = {"procedure": "gyro-drift", "device": "NOISE-1", "accel_unit": "m/s^2", "gyro_unit": "rad/s",
-            "sample_rate_hz": str(RATE_HZ)}
+    cols = {
+        "t": np.arange(n) / RATE_HZ,
+        "ax": a[:, 0],
+        "ay": a[:, 1],
+        "az": a[:, 2],
+        "gx": g[:, 0],
+        "gy": g[:, 1],
+        "gz": g[:, 2],
+    }
+    meta = {
+        "procedure": "gyro-drift",
+        "device": "NOISE-1",
+        "accel_unit": "m/s^2",
+        "gyro_unit": "rad/s",
+        "sample_rate_hz": str(RATE_HZ),
+    }
     write_capture(path, Capture(meta=meta, columns=cols, path=path))
     return path
 
@@ -44,10 +59,14 @@ def run(capsys, *argv):
     return code, out.out, out.err
 
 
-def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_yaml(capsys, tmp_path):
+def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_yaml(
+    capsys, tmp_path
+):
     cap = still_capture(tmp_path / "still.csv", seed=11)
     yaml_path = tmp_path / "imu.yaml"
-    code, out, err = run(capsys, "noise", cap, "--format", "kalibr", "--out", yaml_path, "--json")
+    code, out, err = run(
+        capsys, "noise", cap, "--format", "kalibr", "--out", yaml_path, "--json"
+    )
     assert code == 0, err
     doc = json.loads(out)
     for kind, N, K in (("gyro", GYRO_N, GYRO_K), ("accel", ACCEL_N, ACCEL_K)):
@@ -63,27 +82,55 @@ def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_
         if line and not line.startswith("#"):
             key, _, rest = line.partition(":")
             values[key] = rest.split("#")[0].strip()
-    assert set(values) == {"accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
-                           "gyroscope_random_walk", "update_rate", "rostopic"}
+    assert set(values) == {
+        "accelerometer_noise_density",
+        "accelerometer_random_walk",
+        "gyroscope_noise_density",
+        "gyroscope_random_walk",
+        "update_rate",
+        "rostopic",
+    }
     assert float(values["update_rate"]) == RATE_HZ and values["rostopic"] == "/imu0"
     # one value per sensor: the largest axis, in Kalibr's units (SI: rad/s/√Hz, m/s²/√Hz, ...)
-    assert float(values["gyroscope_noise_density"]) == pytest.approx(max(doc["sensors"]["gyro"]["noise_density"]), rel=1e-5)
-    assert float(values["accelerometer_random_walk"]) == pytest.approx(max(doc["sensors"]["accel"]["random_walk"]),
-                                                                       rel=1e-5)
+    assert float(values["gyroscope_noise_density"]) == pytest.approx(
+        max(doc["sensors"]["gyro"]["noise_density"]), rel=1e-5
+    )
+    assert float(values["accelerometer_random_walk"]) == pytest.approx(
+        max(doc["sensors"]["accel"]["random_walk"]), rel=1e-5
+    )
 
 
 def test_text_with_plot_and_bad_input(capsys, tmp_path, monkeypatch):
     monkeypatch.delenv("NO_COLOR", raising=False)
     cap = still_capture(tmp_path / "still.csv", seed=3, seconds=120.0)
     code, out, err = run(capsys, "noise", cap)
-    assert code == 0 and "rad/s/√Hz" in out and "m/s³/√Hz" in out and "Allan deviation" in out
+    assert (
+        code == 0
+        and "rad/s/√Hz" in out
+        and "m/s³/√Hz" in out
+        and "Allan deviation" in out
+    )
     assert "\x1b[" not in out  # not a terminal: no colour
-    assert "random walk poorly resolved" in out  # 120 s is too short for K's sigma (crossover ~26-40 s)
+    assert (
+        "random walk poorly resolved" in out
+    )  # 120 s is too short for K's sigma (crossover ~26-40 s)
     table = tmp_path / "table.csv"
-    write_capture(table, Capture(meta={"procedure": "accel-tabletop", "device": "X", "accel_unit": "g"},
-                                 columns={"position": np.array(["a", "b"], dtype=object),
-                                          "ax": np.zeros(2), "ay": np.zeros(2), "az": np.ones(2)}, path=table))
+    write_capture(
+        table,
+        Capture(
+            meta={"procedure": "accel-tabletop", "device": "X", "accel_unit": "g"},
+            columns={
+                "position": np.array(["a", "b"], dtype=object),
+                "ax": np.zeros(2),
+                "ay": np.zeros(2),
+                "az": np.ones(2),
+            },
+            path=table,
+        ),
+    )
     code, out, err = run(capsys, "noise", table)
-    assert code == 2 and out == "" and err.count("\n") == 1 and "table of averages" in err
+    assert (
+        code == 2 and out == "" and err.count("\n") == 1 and "table of averages" in err
+    )
     code, out, err = run(capsys, "noise", cap, "--out", tmp_path / "x.yaml")
     assert code == 2 and "--format kalibr" in err and not (tmp_path / "x.yaml").exists()

@@ -1,4 +1,5 @@
 """Scripting: `station ports --json` against pyserial's own answer; NO_COLOR on a real terminal."""
+
 from __future__ import annotations
 
 import json
@@ -9,9 +10,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from db_testdata import accel_result, small_capture
 
 from db import Store
-from db_testdata import accel_result, small_capture
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -19,12 +20,20 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_ports_json_is_what_pyserial_lists():
     from serial.tools import list_ports
 
-    p = subprocess.run([sys.executable, "-m", "station", "ports", "--json"], cwd=ROOT, capture_output=True,
-                       text=True, timeout=60)
+    p = subprocess.run(
+        [sys.executable, "-m", "station", "ports", "--json"],
+        check=False,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert p.returncode == 0 and p.stderr == ""
     got = json.loads(p.stdout)  # a list even when empty, never the "no ports" sentence
     assert isinstance(got, list)
-    assert sorted(x["device"] for x in got) == sorted(q.device for q in list_ports.comports())
+    assert sorted(x["device"] for x in got) == sorted(
+        q.device for q in list_ports.comports()
+    )
     assert all(set(x) == {"device", "description", "hwid"} for x in got)
 
 
@@ -32,8 +41,13 @@ def _on_a_terminal(argv, env) -> bytes:
     """Run the station with stdout on a real pseudo-terminal; everything it wrote there."""
     master, slave = pty.openpty()
     try:
-        p = subprocess.Popen([sys.executable, "-m", "station", *argv], cwd=ROOT, stdout=slave, stderr=subprocess.PIPE,
-                             env=env)
+        p = subprocess.Popen(
+            [sys.executable, "-m", "station", *argv],
+            cwd=ROOT,
+            stdout=slave,
+            stderr=subprocess.PIPE,
+            env=env,
+        )
         os.close(slave)
         out = bytearray()
         while True:
@@ -56,7 +70,11 @@ def test_no_color_turns_off_ansi_colour_on_a_terminal(tmp_path, no_color):
     with Store(db) as s:
         meta, cols = small_capture(device="IMU-1")
         for k, date in enumerate(["2024-01-01", "2024-07-01", "2025-01-01"]):
-            s.save_calibration(accel_result(B=(0.1 + 0.01 * k, 0.2, 0.3)), meta=dict(meta, date=date), columns=cols)
+            s.save_calibration(
+                accel_result(B=(0.1 + 0.01 * k, 0.2, 0.3)),
+                meta=dict(meta, date=date),
+                columns=cols,
+            )
     env = {k: v for k, v in os.environ.items() if k != "NO_COLOR"}
     if no_color is not None:
         env["NO_COLOR"] = no_color
@@ -71,4 +89,6 @@ def test_the_tui_honours_no_color(monkeypatch):
     from station.app import make_app
 
     app = make_app(db_path=":memory:")
-    assert app.no_color  # Textual then draws the whole app through its monochrome filter
+    assert (
+        app.no_color
+    )  # Textual then draws the whole app through its monochrome filter

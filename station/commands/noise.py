@@ -1,4 +1,5 @@
 """`station noise FILE [--format kalibr] [--out imu.yaml]`: IMU noise figures from a still record."""
+
 from __future__ import annotations
 
 import argparse
@@ -13,18 +14,33 @@ from station.errors import InputError
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "noise", help="Allan deviation, noise density, bias instability and random walk of a still IMU record",
+        "noise",
+        help="Allan deviation, noise density, bias instability and random walk of a still IMU record",
         description="Allan deviation of the gyro and accelerometer of a still time-series capture, with 68 %% "
         "confidence intervals; white-noise density, bias instability and rate random walk per axis, each "
         "with its 1-sigma; a terminal plot. --format kalibr writes Kalibr's imu.yaml (rad/s/sqrt(Hz), "
         "rad/s^2/sqrt(Hz), m/s^2/sqrt(Hz), m/s^3/sqrt(Hz), update_rate).",
     )
-    p.add_argument("file", help="capture file: a still recording with gx gy gz and/or ax ay az")
-    p.add_argument("--format", choices=("text", "kalibr"), default="text",
-                   help="kalibr: write imu.yaml (to --out, default imu.yaml) and print the figures")
-    p.add_argument("--out", metavar="FILE", help="where --format kalibr writes (default imu.yaml)")
-    p.add_argument("--rostopic", default="/imu0", help="the rostopic line of imu.yaml (default /imu0)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text")
+    p.add_argument(
+        "file", help="capture file: a still recording with gx gy gz and/or ax ay az"
+    )
+    p.add_argument(
+        "--format",
+        choices=("text", "kalibr"),
+        default="text",
+        help="kalibr: write imu.yaml (to --out, default imu.yaml) and print the figures",
+    )
+    p.add_argument(
+        "--out", metavar="FILE", help="where --format kalibr writes (default imu.yaml)"
+    )
+    p.add_argument(
+        "--rostopic",
+        default="/imu0",
+        help="the rostopic line of imu.yaml (default /imu0)",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="print one JSON object instead of the text"
+    )
     p.add_argument("--no-plot", action="store_true", help="no terminal plot")
     p.set_defaults(func=run)
 
@@ -43,7 +59,9 @@ def _write_atomic(path: str, text: str) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         if isinstance(exc, OSError):
-            raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
+            raise InputError(
+                path, None, f"cannot write: {exc.strerror or exc}"
+            ) from None
         raise
 
 
@@ -52,22 +70,34 @@ def _g(x: float) -> str:
 
 
 def _text(result: dict) -> str:
-    out = [f"{result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz (still record; Allan deviation, "
-           "68 % intervals in --json)"]
+    out = [
+        (
+            f"{result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz (still record; Allan deviation, "
+            "68 % intervals in --json)"
+        )
+    ]
     deg = 180.0 / math.pi
     for kind, f in result["sensors"].items():
         if kind == "gyro":
-            out.append("gyro          noise density           bias instability         random walk")
+            out.append(
+                "gyro          noise density           bias instability         random walk"
+            )
             for i, a in enumerate("xyz"):
-                out.append(f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} rad/s/√Hz ({_g(f.white[i] * deg * 60)} °/√h)"
-                           f"  {_g(f.bias_instability[i] * deg * 3600)} °/h at {_g(f.bias_instability_tau_s[i])} s"
-                           f"  {_g(f.random_walk[i])} ± {_g(f.random_walk_sigma[i])} rad/s²/√Hz")
+                out.append(
+                    f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} rad/s/√Hz ({_g(f.white[i] * deg * 60)} °/√h)"
+                    f"  {_g(f.bias_instability[i] * deg * 3600)} °/h at {_g(f.bias_instability_tau_s[i])} s"
+                    f"  {_g(f.random_walk[i])} ± {_g(f.random_walk_sigma[i])} rad/s²/√Hz"
+                )
         else:
-            out.append("accelerometer noise density           bias instability         random walk")
+            out.append(
+                "accelerometer noise density           bias instability         random walk"
+            )
             for i, a in enumerate("xyz"):
-                out.append(f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} m/s²/√Hz"
-                           f"  {_g(f.bias_instability[i])} m/s² at {_g(f.bias_instability_tau_s[i])} s"
-                           f"  {_g(f.random_walk[i])} ± {_g(f.random_walk_sigma[i])} m/s³/√Hz")
+                out.append(
+                    f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} m/s²/√Hz"
+                    f"  {_g(f.bias_instability[i])} m/s² at {_g(f.bias_instability_tau_s[i])} s"
+                    f"  {_g(f.random_walk[i])} ± {_g(f.random_walk_sigma[i])} m/s³/√Hz"
+                )
     from station.procedures.noise import random_walk_warning
 
     for kind, f in result["sensors"].items():
@@ -95,7 +125,9 @@ def _plot(result: dict) -> str:
         plt.yscale("log")
         for i, a in enumerate("xyz"):
             plt.plot(f.taus_s.tolist(), f.adev[:, i].tolist(), label=a, marker="dot")
-        plt.title(f"{kind} Allan deviation [{'rad/s' if kind == 'gyro' else 'm/s²'}] against τ [s]")
+        plt.title(
+            f"{kind} Allan deviation [{'rad/s' if kind == 'gyro' else 'm/s²'}] against τ [s]"
+        )
         text = plt.build()
         figs.append(text if color else plt.uncolorize(text))
     return "\n".join(figs) + "\n"
