@@ -141,9 +141,9 @@ def make_parser(protocol: str, mavlink_source: str | None = None, request_hz: fl
 def open_port(port: str, baud: int = 115200, timeout_s: float = 0.02):
     """A device path or any pyserial URL, opened, raw 8N1; a MAVLink network endpoint
     (`udp:HOST:PORT`, `udpout:`, `tcp:`, `tcpin:`) through pymavlink's connection layer."""
-    from station.device.mavlink import NetworkPort, is_network
+    if port.lower().startswith(("udp:", "udpin:", "udpout:", "udpbcast:", "tcp:", "tcpin:")):  # = mavlink.NETWORK_PREFIXES
+        from station.device.mavlink import NetworkPort  # pymavlink's import is slow: only for these
 
-    if is_network(port):
         return NetworkPort(port, timeout_s)
     return serial.serial_for_url(port, baudrate=baud, timeout=timeout_s, write_timeout=1.0)
 
