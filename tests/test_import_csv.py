@@ -251,3 +251,14 @@ def test_options_that_do_not_apply_are_refused(tmp_path, shared_data):
         tmp_path / "o.csv",
     )
     assert res.returncode == 2 and "apply to plain CSV files" in res.stderr
+
+
+def test_a_station_capture_needs_no_import(tmp_path):
+    src = tmp_path / "c.csv"
+    src.write_text(
+        "# station-capture: 1\n# procedure: accel-tabletop\n# accel_unit: g\nt,ax,ay,az\n0,0,0,1\n"
+    )
+    res = run_station(
+        "import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv"
+    )
+    assert res.returncode == 2 and f"{src}:1: already a station capture" in res.stderr

@@ -108,7 +108,17 @@ def infer_procedure(path, imported: Imported, fmt: str) -> str:
 
 def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     """``path`` as a capture (not yet written) and the reader's warnings."""
-    fmt = opts.fmt or detect(path) or "csv"
+    fmt = opts.fmt or detect(path)
+    if fmt is None:
+        from station.importers.csvfiles import first_line
+
+        if first_line(path).replace(" ", "").startswith("#station-capture:"):
+            raise InputError(
+                path,
+                1,
+                "already a station capture: calibrate, diagnose and inspect read it as it is",
+            )
+        fmt = "csv"
     imported = read(path, opts, fmt)
     procedure = opts.procedure or infer_procedure(path, imported, fmt)
     device = opts.device
