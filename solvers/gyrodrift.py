@@ -181,17 +181,30 @@ class Position:
 
 
 def drift_multi(positions: list[Position], latitude_deg: float | None, *,
-                heading_sigma_deg: float = 3.0) -> DriftResult:
+                heading_sigma_deg: float = 3.0, headings_known: bool = True) -> DriftResult:
     """Several static positions: ε and the Earth rate together (module docstring).
 
-    With a latitude, unknowns ε (3) and the Earth-rate scale ``s``; the heading error of
-    each position (σ ``heading_sigma_deg``, independent) enters its weight. Without one,
-    unknowns ε and the Earth rate's north and up components (east is 0 when headings are
-    from north); unidentifiable components are refused (NotIdentifiable).
+    The Earth rate a position sees is ``C_b_n,k ω_ie^n``: its vertical part ``Ω sin L`` lies
+    along that position's up direction (known from the accelerometer), its horizontal part
+    ``Ω cos L`` along the body's north, which only a known heading gives. So:
+
+    - latitude and headings known: ε and the Earth-rate scale ``s`` (1 expected); each
+      position's heading error (σ ``heading_sigma_deg``) enters its weight;
+    - latitude known, headings not: ε only; the vertical Earth rate is removed, the horizontal
+      one (magnitude ``Ω cos L``, direction unknown) is noise in each position's covariance;
+    - no latitude, headings known: ε and the Earth rate's north and up components;
+    - neither: ε and the up component; the horizontal part is noise as above.
+
+    Without a latitude the Earth-rate components carry their physical bounds as a weak prior
+    (``|ω| ≤ Ω``: up ``0 ± Ω/√3``, north ``2Ω/π ± Ω/2``), so a set of positions that cannot
+    separate them from ε still gives ε with an honest uncertainty (the Earth rate's size
+    in it) instead of nonsense. The latitude is reported only when the data, not the prior,
+    determine it (posterior σ of the components below Ω/4), and always within ±90°.
     """
     if len(positions) < 2:
         raise TooFewPositions("several-position solution needs at least 2 static positions")
-    rows, y, sig, tilts, e_list = [], [], [], [], []
+    W = OMEGA_EARTH_RAD_S
+    rows, y, covs, tilts, e_list = [], [], [], [], []
     for pos in positions:
         if pos.f is not None:
             p, r, sp, sr = _pitch_roll_sigma(pos.f.mean, pos.f.se)
@@ -199,20 +212,50 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
             p, r, sp, sr = 0.0, 0.0, 2.0, 2.0
         tilts.append((p, r, sp, sr))
         C = p4_C_n_b(math.radians(p), math.radians(r), math.radians(pos.heading_deg))
-        lat = latitude_deg if latitude_deg is not None else 45.0
-        e, se = earth_rate_body_sigma(lat, p, r, pos.heading_deg, (0.0, sp, sr, heading_sigma_deg))
-        e_list.append(e)
-        if latitude_deg is not None:
+        up = C.T[:, 1]                               # the body's view of "up" (NUE's U)
+        horiz = np.eye(3) - np.outer(up, up)
+        cov = np.diag(pos.omega.se ** 2)
+        if latitude_deg is not None and headings_known:
+            e, se = earth_rate_body_sigma(latitude_deg, p, r, pos.heading_deg, (0.0, sp, sr, heading_sigma_deg))
+            e_list.append(e)
             rows.append(np.column_stack([np.eye(3), e]))
-            s2 = pos.omega.se ** 2 + se ** 2
-        else:
+            cov = cov + np.diag(se ** 2)
+            y.append(pos.omega.mean)
+        elif latitude_deg is not None:
+            lat = math.radians(latitude_deg)
+            e_up = W * math.sin(lat) * up
+            e_list.append(e_up)
+            rows.append(np.eye(3))
+            cov = cov + 0.5 * (W * math.cos(lat)) ** 2 * horiz
+            y.append(pos.omega.mean - e_up)
+        elif headings_known:
             rows.append(np.column_stack([np.eye(3), C.T[:, :2]]))  # N and U columns of C_b_n
-            s2 = pos.omega.se ** 2 + (se * 0) ** 2
-        y.append(pos.omega.mean)
-        sig.append(np.sqrt(s2))
-    H, Y, S = np.vstack(rows), np.concatenate(y), np.concatenate(sig)
-    names = ["eps_x", "eps_y", "eps_z"] + (["s"] if latitude_deg is not None else ["w_N", "w_U"])
-    fr = linear_fit(H, Y, sigma=S, names=names)
+            y.append(pos.omega.mean)
+        else:
+            rows.append(np.column_stack([np.eye(3), up]))
+            cov = cov + 0.5 * W ** 2 * horiz
+            y.append(pos.omega.mean)
+        covs.append(cov)
+    # whiten each position's 3x3 covariance (the unknown horizontal Earth rate correlates axes)
+    H_w, y_w = [], []
+    for Hk, yk, ck in zip(rows, y, covs):
+        Lk = np.linalg.cholesky(ck + 1e-30 * np.eye(3))
+        H_w.append(np.linalg.solve(Lk, Hk))
+        y_w.append(np.linalg.solve(Lk, yk))
+    H, Y = np.vstack(H_w), np.concatenate(y_w)
+    if latitude_deg is not None:
+        names = ["eps_x", "eps_y", "eps_z"] + (["s"] if headings_known else [])
+    else:
+        names = ["eps_x", "eps_y", "eps_z"] + (["w_N", "w_U"] if headings_known else ["w_U"])
+        # the physical bounds as a weak prior (one row per Earth-rate component)
+        prior = [(2 * W / math.pi, W / 2)] if headings_known else []
+        prior.append((0.0, W / math.sqrt(3.0)))
+        for j, (m, s) in enumerate(prior):
+            row = np.zeros(H.shape[1])
+            row[3 + j] = 1.0 / s
+            H = np.vstack([H, row])
+            Y = np.append(Y, m / s)
+    fr = linear_fit(H, Y, sigma=np.ones(len(Y)), names=names)
     if fr.unidentifiable:
         raise NotIdentifiable("the static positions cannot separate " + ", ".join(fr.unidentifiable)
                               + ": add positions tilted about different axes")
@@ -225,34 +268,70 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
     res.roll_deg = [t[1] for t in tilts]
     res.sigma_pitch_deg = [t[2] for t in tilts]
     res.sigma_roll_deg = [t[3] for t in tilts]
+    n_data = 3 * len(positions)
     res.extra = {"reduced_chi2": fr.reduced_chi2, "misfit_scaled": fr.misfit_scaled,
-                 "condition_number": fr.condition_number, "residuals_rad_s": fr.residuals}
+                 "condition_number": fr.condition_number, "headings_known": headings_known,
+                 "residuals_rad_s": np.concatenate([np.asarray(yk) - Hk @ x for Hk, yk in zip(rows, y)])[:n_data]}
     res.earth_rate_body_rad_s = w_mean - x[:3]
     res.sigma_earth_rate_body_rad_s = sx[:3]
-    if latitude_deg is not None:
+    weights = [p.omega.duration_s for p in positions]
+    if latitude_deg is not None and headings_known:
         res.extra["earth_rate_scale"] = float(x[3])
         res.extra["sigma_earth_rate_scale"] = float(sx[3])
         # the time-weighted mean Earth rate the model removed
-        e_mean = np.average(np.array(e_list), axis=0, weights=[p.omega.duration_s for p in positions])
+        e_mean = np.average(np.array(e_list), axis=0, weights=weights)
         res.earth_rate_body_rad_s = float(x[3]) * e_mean
         res.sigma_earth_rate_body_rad_s = float(sx[3]) * np.abs(e_mean)
         if abs(x[3] - 1.0) > 3 * sx[3]:
             res.warnings.append(f"Earth-rate scale {x[3]:.3f} ± {sx[3]:.3f} differs from 1 by more than 3σ: "
                                 "check latitude, headings and the body frame")
+    elif latitude_deg is not None:
+        res.earth_rate_body_rad_s = np.average(np.array(e_list), axis=0, weights=weights)
+        res.sigma_earth_rate_body_rad_s = np.full(3, W * abs(math.cos(math.radians(latitude_deg))) / math.sqrt(2.0))
+        res.warnings.append("headings unknown: the vertical Earth rate (Ω sin L along each position's up) is "
+                            "removed; the horizontal part (Ω cos L, direction unknown) is in the uncertainty")
     else:
-        wN, wU = x[3], x[4]
-        res.extra.update({"earth_rate_north_rad_s": float(wN), "earth_rate_up_rad_s": float(wU),
-                          "sigma_earth_rate_north_rad_s": float(sx[3]), "sigma_earth_rate_up_rad_s": float(sx[4]),
-                          "latitude_from_gyros_deg": math.degrees(math.atan2(wU, wN)),
-                          "sigma_latitude_from_gyros_deg": _latitude_sigma_deg(wN, wU, fr.cov[3:5, 3:5]),
-                          "earth_rate_magnitude_ratio": math.hypot(wN, wU) / OMEGA_EARTH_RAD_S})
-        res.warnings.append("no latitude_deg: Earth rate fitted from the positions (north and up components); "
-                            f"implied latitude {math.degrees(math.atan2(wU, wN)):.1f}° "
-                            f"± {res.extra['sigma_latitude_from_gyros_deg']:.1f}°")
+        _no_latitude(res, x, fr.cov, headings_known)
     if fr.misfit_scaled:
         res.warnings.append(f"positions disagree beyond their noise (reduced χ² {fr.reduced_chi2:.2f}); "
                             "uncertainties scaled up")
     return res
+
+
+def _no_latitude(res: DriftResult, x: np.ndarray, cov: np.ndarray, headings_known: bool) -> None:
+    """What the positions say about the Earth rate without a latitude (``drift_multi``)."""
+    W = OMEGA_EARTH_RAD_S
+    if headings_known:
+        wN, wU = float(x[3]), float(x[4])
+        sN, sU = math.sqrt(cov[3, 3]), math.sqrt(cov[4, 4])
+        identifiable = max(sN, sU) < W / 4
+        lat = math.degrees(math.atan2(wU, max(wN, 0.0)))                   # cos L ≥ 0: within ±90°
+        s_lat = _latitude_sigma_deg(max(wN, 1e-12), wU, cov[3:5, 3:5]) if identifiable else None
+        res.extra.update({"earth_rate_north_rad_s": wN, "sigma_earth_rate_north_rad_s": sN,
+                          "earth_rate_magnitude_ratio": math.hypot(wN, wU) / W})
+    else:
+        wU = float(x[3])
+        sU = math.sqrt(cov[3, 3])
+        identifiable = sU < W / 4
+        ratio = max(-1.0, min(1.0, wU / W))
+        lat = math.degrees(math.asin(ratio))
+        s_lat = (min(90.0, math.degrees(sU / W / max(math.sqrt(1.0 - ratio * ratio), 1e-3)))
+                 if identifiable else None)
+    res.extra.update({"earth_rate_up_rad_s": wU, "sigma_earth_rate_up_rad_s": sU,
+                      "latitude_identifiable": identifiable,
+                      "latitude_from_gyros_deg": lat if identifiable else None,
+                      "sigma_latitude_from_gyros_deg": s_lat})
+    what = "north and up components" if headings_known else "its vertical component (headings unknown)"
+    if identifiable:
+        res.warnings.append(f"no latitude_deg: Earth rate fitted from the positions ({what}); implied latitude "
+                            f"{lat:.1f}° ± {s_lat:.1f}°")
+    else:
+        res.warnings.append(
+            f"no latitude_deg: the Earth rate ({what}: up {wU:.2e} ± {sU:.1e} rad/s against |Ω| = {W:.3g}) is not "
+            "identifiable from these positions, so no latitude can be inferred; the drift carries the Earth "
+            "rate's possible size in its uncertainty" + ("" if headings_known else
+                                                          " (headings unknown: only the vertical part is observable; "
+                                                          "give latitude_deg to remove it)"))
 
 
 def _latitude_sigma_deg(wN: float, wU: float, cov2: np.ndarray) -> float:

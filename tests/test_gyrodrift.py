@@ -307,3 +307,56 @@ def test_mode_a_warns_when_misalignment_meets_a_mean_rate():
     res0 = gd.drift_reference(zero_mean @ C.T + eps + rng.normal(scale=0.002, size=(n, 3)),
                               zero_mean + rng.normal(scale=0.0002, size=(n, 3)), 0.01)
     assert not any("misalignment" in m for m in res0.warnings)
+
+
+def _unknown_headings(sim, keep_latitude: bool) -> Capture:
+    """The capture of issue 14: several orientations, no heading column or metadata."""
+    meta = {k: v for k, v in sim.meta.items() if k != "heading_deg" and (keep_latitude or k != "latitude_deg")}
+    return Capture(meta, {k: v for k, v in sim.columns.items() if k != "heading_deg"})
+
+
+def test_several_orientations_unknown_headings_no_latitude_give_a_sane_drift():
+    """Four tilts at four unknown headings, no latitude (was: 'implied latitude 179.9°', a drift
+    of 0.028 ± 0.67 rad/s). Only the vertical Earth rate is observable, here not well enough to
+    infer a latitude: none is reported, the drift is within its σ of the truth, and σ carries
+    the Earth rate's possible size (a few 1e-5 rad/s), not nonsense."""
+    z = []
+    for seed in range(8):
+        sim = simulate("gyro-drift", seed=400 + seed, mode="static", headings_deg=[0, 90, 180, 270],
+                       duration_s=480)
+        out = proc.calibrate(_unknown_headings(sim, keep_latitude=False))
+        fit = out["fit"]
+        assert out["params"]["mode"] == "static-multi" and fit["headings_known"] is False
+        lat = fit["latitude_from_gyros_deg"]
+        assert lat is None or -90.0 <= lat <= 90.0
+        sig = np.array(out["uncertainty"]["drift"])
+        assert np.all(sig < 2e-4) and np.all(sig > frames.OMEGA_EARTH_RAD_S / 4)
+        z.append((np.array(out["params"]["drift"]) - sim.truth["drift"]) / sig)
+        assert any("not identifiable" in w or "implied latitude" in w for w in out["warnings"])
+    z = np.abs(np.concatenate(z))
+    assert np.mean(z < 2) >= 0.8 and np.all(z < 4)
+
+
+def test_several_orientations_unknown_headings_with_latitude_remove_the_vertical_rate():
+    z = []
+    for seed in range(6):
+        sim = simulate("gyro-drift", seed=500 + seed, mode="static", headings_deg=[0, 90, 180, 270],
+                       duration_s=480, gyro_noise_rad_s=5e-4, bias_instability_rad_s=2e-6)
+        out = proc.calibrate(_unknown_headings(sim, keep_latitude=True))
+        assert "earth_rate_scale" not in out["fit"]
+        z.append((np.array(out["params"]["drift"]) - sim.truth["drift"]) / np.array(out["uncertainty"]["drift"]))
+        assert any("headings unknown" in w for w in out["warnings"])
+    z = np.abs(np.concatenate(z))
+    assert np.mean(z < 2) >= 0.8 and np.all(z < 4)
+
+
+def test_latitude_from_known_headings_stays_within_90_degrees():
+    """Known headings, no latitude, the noisy default gyro: the north/up fit may come out with a
+    negative north component; the latitude is then not reported or within ±90°, never 179.9°."""
+    for seed in range(4):
+        sim = simulate("gyro-drift", seed=600 + seed, mode="static", headings_deg=[0, 90, 180, 270],
+                       duration_s=480)
+        meta = {k: v for k, v in sim.meta.items() if k != "latitude_deg"}
+        fit = proc.calibrate(Capture(meta, dict(sim.columns)))["fit"]
+        lat = fit["latitude_from_gyros_deg"]
+        assert lat is None or -90.0 <= lat <= 90.0

@@ -227,12 +227,14 @@ def _mode_a(capture, w_b, C, flips, dt, warnings):
 
 
 def _segments(capture, w_b, f_b, dt, ok, warnings):
-    """[(row mask, heading_deg, label)] for mode B."""
+    """[(row mask, heading_deg, label)] for mode B. Headings are known (for several
+    positions) when there is a ``heading_deg`` column or the metadata gives one for all."""
     head0 = capture.float_meta("heading_deg")
     if head0 is None:
         head0 = 0.0
         if capture.float_meta("latitude_deg") is not None and "heading_deg" not in capture.columns:
-            warnings.append("no heading_deg: forward axis taken as pointing north (heading 0)")
+            warnings.append("no heading_deg: forward axis taken as pointing north (heading 0) for a single "
+                            "position; with several positions the headings count as unknown")
     hcol = capture.columns.get("heading_deg")
     pcol = capture.columns.get("position")
     if pcol is not None and np.any(pcol != ""):
@@ -277,9 +279,9 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
     used = sum(int(s[0].sum()) for s in segs)
     if used < ok.sum():
         warnings.append(f"{int(ok.sum()) - used} moving samples left out (stillness detection)")
-    if len(segs) > 1:
+    if len(segs) > 1 and capture.float_meta("heading_deg") is not None:
         warnings.append(f"{len(segs)} static orientations found with no heading column: all taken as "
-                        f"heading {head0:g}°; the Earth-rate scale checks this")
+                        f"heading {head0:g}° (the metadata's); the Earth-rate scale checks this")
     return segs
 
 
@@ -333,7 +335,8 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
         res = gd.drift_static(w_b[m], None if f_b is None else f_b[m], dt, lat, positions[0].heading_deg,
                               heading_sigma_deg=hsig)
         return res, res.mean_error, 1, w_b[m] - res.drift_rad_s
-    res = gd.drift_multi(positions, lat, heading_sigma_deg=hsig)
+    known = "heading_deg" in capture.columns or capture.float_meta("heading_deg") is not None
+    res = gd.drift_multi(positions, lat, heading_sigma_deg=hsig, headings_known=known)
     total = sum(p.omega.duration_s for p in positions)
     if total < gd.SOURCE_DURATION_S:
         warnings.append(f"static positions total {total:.0f} s, shorter than the 3 min P4 asks for")
