@@ -147,8 +147,15 @@ def simulate_tabletop(seed: int = 0, effects: dict[str, float] | None = None, *,
                       placement_deg: float = 0.5, tilted_placement_deg: float = 3.0,
                       table_tilt_deg: float = 0.3, noise_mps2: float = 0.01,
                       bias_instability_mps2: float = 2e-4, averages: bool = False,
-                      label_positions: bool = True, site: dict | None = None) -> Simulation:
-    """P1 on a level table: 12 source positions (or ``positions``), plus random extra ones."""
+                      label_positions: bool = True, site: dict | None = None,
+                      gyro_scale_sigma: float = 0.0, gyro_misalignment_sigma_rad: float = 0.0,
+                      gyro_g_sensitivity: float = 0.0, gyro_noise_rad_s: float = 0.003) -> Simulation:
+    """P1 on a level table: 12 source positions (or ``positions``), plus random extra ones.
+
+    The gyro (rad/s) sees the moves and the Earth rate through ``y = K ω + ε + G f``: ``K`` =
+    I unless ``gyro_scale_sigma`` (relative) or ``gyro_misalignment_sigma_rad`` draw one, ``G``
+    (rad/s per m/s², each element ± ``gyro_g_sensitivity``) only when that is non-zero; these
+    draws use their own random stream, so the rest of a seed's capture is unchanged."""
     effects = _check_effects("accel-tabletop", effects)
     rng = np.random.default_rng(seed)
     site = dict(DEFAULT_SITE, **(site or {}))
@@ -207,7 +214,17 @@ def simulate_tabletop(seed: int = 0, effects: dict[str, float] | None = None, *,
     lat = site["latitude_deg"]
     w_earth = np.einsum("nji,j->ni", C_all, frames.earth_rate_ned(lat))
     gyro_bias = rng.normal(scale=0.01, size=3)
-    gyro = gyro_model.forward(w_all + w_earth, {"eps": gyro_bias}) + rng.normal(scale=0.003, size=(n, 3))
+    grng = np.random.default_rng([seed, 14])
+    gparams = {"eps": gyro_bias}
+    if gyro_scale_sigma or gyro_misalignment_sigma_rad:
+        cross = grng.normal(scale=gyro_misalignment_sigma_rad, size=(3, 3))
+        np.fill_diagonal(cross, 0.0)
+        gparams["K"] = np.diag(1.0 + grng.normal(scale=gyro_scale_sigma, size=3)) + cross
+    gcond = None
+    if gyro_g_sensitivity:
+        gparams["G"] = gyro_g_sensitivity * grng.uniform(-1.0, 1.0, size=(3, 3))
+        gcond = Conditions(f_mps2=f_true)
+    gyro = gyro_model.forward(w_all + w_earth, gparams, gcond) + rng.normal(scale=gyro_noise_rad_s, size=(n, 3))
     B, M = accel_model.forward_to_p1({"K": K, "b": params["b"]})
     truth = {
         "procedure": "accel-tabletop", "seed": seed, "g_mps2": g, "B": B, "M": M,
@@ -215,6 +232,7 @@ def simulate_tabletop(seed: int = 0, effects: dict[str, float] | None = None, *,
         "effect_blocks": {k: v for k, v in params.items() if k not in ("K", "b")},
         "positions": names, "placement_error_deg": placement, "table_tilt_deg": table_tilt_deg,
         "noise_mps2": noise_mps2, "gyro_bias_rad_s": gyro_bias,
+        "gyro": {"K": gparams.get("K", np.eye(3)), "eps": gyro_bias, "G": gparams.get("G", np.zeros((3, 3)))},
     }
     meta = {"station-capture": "1", "procedure": "accel-tabletop", "device": f"SIM-ACC-{seed:04d}",
             "accel_unit": "V", "gyro_unit": "rad/s", **_site_meta(site), "sample_rate_hz": _fmt(rate_hz),

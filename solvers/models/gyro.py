@@ -78,3 +78,75 @@ def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict
     if name == "earth_rate":
         return {}
     raise KeyError(f"unknown gyro effect {name!r}; known: {', '.join(EFFECTS)}")
+
+
+# ----------------------------------------------------------------- integration (rotations)
+
+def rotvec_matrices(phi) -> np.ndarray:
+    """``exp([φ]×)`` for rotation vectors (..., 3) → (..., 3, 3) (Rodrigues, exact)."""
+    phi = np.asarray(phi, dtype=float)
+    th = np.linalg.norm(phi, axis=-1)[..., None, None]
+    K = skew(phi)
+    small = th < 1e-8
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(ths) / ths)
+    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def right_jacobian(phi) -> np.ndarray:
+    """SO(3) right Jacobian ``J_r(φ)``: ``exp([φ + δ]×) ≈ exp([φ]×) exp([J_r δ]×)``, (..., 3, 3)."""
+    phi = np.asarray(phi, dtype=float)
+    th = np.linalg.norm(phi, axis=-1)[..., None, None]
+    K = skew(phi)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    b = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
+    return np.eye(3) - a * K + b * (K @ K)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """``[v]×`` for vectors (..., 3) → (..., 3, 3)."""
+    z = np.zeros(v.shape[:-1])
+    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
+                     np.stack([v[..., 2], z, -v[..., 0]], -1),
+                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
+def integrate_rates(omega_rad_s, t_s, *, with_jacobian: bool = False):
+    """Body rotation over a stretch of body rates: ``R = Π_j exp([φ_j]×)``, ``φ_j`` the
+    trapezoid ``(ω_j + ω_{j+1}) (t_{j+1} − t_j) / 2``.
+
+    ``R`` maps the end frame's coordinates to the start frame's (``C_end = C_start R``), so a
+    vector fixed in the world, ``v_start`` at the start, reads ``Rᵀ v_start`` at the end.
+    Batched: ``omega_rad_s`` (m, n, 3), ``t_s`` (m, n); shorter stretches padded with repeated
+    times (zero steps). With ``with_jacobian`` also returns ``Q`` (m, n−1, 3, 3) with
+    ``δθ = Σ_j Q_j δφ_j``: a change ``δφ_j`` of step j rotates the result by ``R exp([δθ]×)``
+    (``Q_j = P_jᵀ J_r(φ_j)``, ``P_j`` the product of the steps after j).
+    """
+    w = np.asarray(omega_rad_s, dtype=float)
+    t = np.asarray(t_s, dtype=float)
+    single = w.ndim == 2
+    if single:
+        w, t = w[None], t[None]
+    dt = np.diff(t, axis=1)[..., None]
+    phi = 0.5 * (w[:, 1:] + w[:, :-1]) * dt
+    S = rotvec_matrices(phi)                      # (m, n-1, 3, 3)
+    m, n1 = phi.shape[:2]
+    P = np.empty_like(S)                          # suffix products after step j
+    acc = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()
+    for j in range(n1 - 1, -1, -1):
+        P[:, j] = acc
+        acc = S[:, j] @ acc
+    R = acc
+    if not with_jacobian:
+        return R[0] if single else R
+    Q = np.swapaxes(P, -1, -2) @ right_jacobian(phi)
+    return (R[0], Q[0]) if single else (R, Q)
+
+
+def rotation_from_output(y, t_s, params: dict, cond: Conditions | None = None) -> np.ndarray:
+    """The rotation (``integrate_rates``) a gyro triad's raw output ``y`` (n, 3) implies under
+    ``params``: ω = :func:`inverse` (y), then integrated over ``t_s``."""
+    return integrate_rates(inverse(y, params, cond), t_s)

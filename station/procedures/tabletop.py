@@ -245,6 +245,11 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         "positions": rows,
         "step8": res.step8,
     }
+    from station.procedures import tabletop_gyro
+
+    gyro = tabletop_gyro.block(capture, positions, res.B, res.M, g)
+    if gyro is not None:  # the same session's rotations calibrate the gyro triad (docs/tabletop-gyro.md)
+        result["gyro"] = gyro
     return result
 
 
@@ -271,6 +276,10 @@ def format_text(result: dict) -> str:
         lines.append(f"  {p['label']:>8} {span} n={p['n']:<6} |A|−g = {p['residual_mps2']:+.2e} m/s²{flag}")
     for w in r["warnings"]:
         lines.append(f"warning    {w}")
+    if r.get("gyro") is not None:
+        from station.procedures.tabletop_gyro import format_lines
+
+        lines += format_lines(r["gyro"])
     return "\n".join(lines)
 
 

@@ -1,0 +1,176 @@
+"""The gyro half of a P1 tabletop session: the ``gyro`` block of the accel-tabletop result.
+
+A time series with ``gx gy gz`` holds the rotations between the static positions; with the
+accelerometer calibrated, each hold's gravity direction is known, and
+``solvers.tabletop_gyro`` fits the gyro's scale factors, misalignment, bias and (when the
+holds span enough orientations) g-sensitivity to them. This module turns the capture and
+the accelerometer result into its inputs and the block into plain data.
+
+Metadata read: ``gyro_unit`` (rad/s, deg/s, ... or ``counts``; for counts a
+``gyro_counts_per_rad_s`` or ``gyro_counts_per_deg_s`` starting scale, else one is searched
+for), ``latitude_deg`` (the Earth rate's vertical part removed where given).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from solvers import tabletop_gyro as TG
+from solvers.errors import SolverError
+from solvers.models import accel
+from solvers.units import si_factor
+
+MODEL = "y = K ω + ε + G f"
+
+
+def _gyro(capture) -> np.ndarray | None:
+    if not capture.is_time_series or not all(c in capture.columns for c in ("gx", "gy", "gz", "t")):
+        return None
+    return np.column_stack([np.asarray(capture.columns[c], dtype=float) for c in ("gx", "gy", "gz")])
+
+
+def _start_scale(capture, holds, motions, notes: list[str]) -> float:
+    unit = capture.meta.get("gyro_unit")
+    if unit == "counts":
+        per_rad = capture.float_meta("gyro_counts_per_rad_s")
+        per_deg = capture.float_meta("gyro_counts_per_deg_s")
+        if per_rad:
+            return per_rad
+        if per_deg:
+            return per_deg * 180.0 / math.pi
+        s = TG.scale_search(holds, motions)
+        notes.append(f"gyro in counts with no nominal scale: starting scale {s:.4g} counts per rad/s found by "
+                     "matching the rotations")
+        return s
+    f = si_factor("gyro", unit) if unit else 1.0
+    if f is None:
+        raise SolverError(f"gyro_unit {unit!r} is not a rate unit")
+    return 1.0 / f
+
+
+def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np.ndarray, list[str]] | None:
+    """Holds, motions between consecutive holds, the per-sample gyro noise and notes; None
+    when the capture has no gyro time series."""
+    from station.procedures.tabletop import _mean_se
+
+    y = _gyro(capture)
+    if y is None or not positions or any(p.t_start_s is None for p in positions):
+        return None
+    t = np.asarray(capture.columns["t"], dtype=float)
+    raw_a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
+    f_all = accel.p1_apply(raw_a, B, M)
+    notes: list[str] = []
+    holds, spans, stds = [], [], []
+    for p in sorted(positions, key=lambda q: q.t_start_s):
+        i0, i1 = int(np.searchsorted(t, p.t_start_s)), int(np.searchsorted(t, p.t_stop_s, side="right")) - 1
+        seg = y[i0:i1 + 1]
+        ok = np.all(np.isfinite(seg), axis=1)
+        if ok.sum() < 16:
+            continue
+        se = _mean_se(seg[ok], t[i0:i1 + 1][ok])
+        sd = seg[ok].std(axis=0, ddof=1)
+        se = se if se is not None else sd / math.sqrt(ok.sum())
+        f = accel.p1_apply(p.mean[None], B, M)[0]
+        a_se = p.se if p.se is not None else (p.std / math.sqrt(max(p.n, 1)) if p.std is not None else np.zeros(3))
+        dir_sig = float(np.linalg.norm(np.asarray(M) @ a_se) / np.linalg.norm(f) / math.sqrt(3.0))
+        holds.append(TG.Hold(p.label, seg[ok].mean(axis=0), se, f, dir_sig, p.t_start_s, p.t_stop_s))
+        spans.append((i0, i1))
+        stds.append(sd)
+    lo, hi = np.nanmin(y, axis=0), np.nanmax(y, axis=0)
+    motions = []
+    for k in range(len(holds) - 1):
+        a, b = spans[k][1], spans[k + 1][0]
+        seg = y[a:b + 1]
+        if b <= a or not np.all(np.isfinite(seg)) or not np.all(np.isfinite(f_all[a:b + 1])):
+            notes.append(f"gyro: the motion from hold {holds[k].label} to {holds[k + 1].label} has missing samples: "
+                         "left out")
+            continue
+        clipped = np.any((seg <= lo) | (seg >= hi), axis=0) & (hi - lo > 0) & _at_limit(capture, lo, hi)
+        if clipped.any():
+            notes.append(f"gyro: the motion from hold {holds[k].label} to {holds[k + 1].label} reaches the "
+                         f"range limit on {', '.join('xyz'[i] for i in np.flatnonzero(clipped))}: left out")
+            continue
+        motions.append(TG.Motion(k, k + 1, t[a:b + 1], seg, f_all[a:b + 1]))
+    noise = np.median(np.array(stds), axis=0) if stds else np.ones(3)
+    return holds, motions, noise, notes
+
+
+def _at_limit(capture, lo, hi) -> np.ndarray:
+    """Per axis: is the extreme reading a plausible range limit (the 16-bit ends for counts)?"""
+    if capture.meta.get("gyro_unit") == "counts":
+        return (lo <= 0) | (hi >= 65535) | (np.abs(lo) >= 32768) | (np.abs(hi) >= 32767)
+    return np.zeros(3, dtype=bool)
+
+
+def block(capture, positions, B, M, g_mps2: float) -> dict | None:
+    """The ``gyro`` block of the accel-tabletop result, or None when the capture has no gyro
+    time series. A gyro fit that cannot be done is a block with ``error`` (the accelerometer
+    result stands on its own)."""
+    got = inputs(capture, positions, B, M)
+    if got is None:
+        return None
+    holds, motions, noise, notes = got
+    unit = capture.meta.get("gyro_unit") or "rad/s"
+    lat = capture.float_meta("latitude_deg")
+    try:
+        K0 = np.eye(3) * _start_scale(capture, holds, motions, notes)
+        r = TG.calibrate(holds, motions, K0, noise_raw=noise, latitude_deg=lat)
+    except (SolverError, np.linalg.LinAlgError) as exc:
+        return {"procedure": "gyro-tabletop", "error": str(exc), "warnings": notes, "n_rotations": len(motions)}
+    warnings = notes + r.warnings
+    if lat is None:
+        warnings.append("gyro: no latitude_deg: the Earth rate (≤ 7.3e-5 rad/s) stays in the bias and in G's "
+                        "uncertainty (its vertical part is indistinguishable from a g-sensitivity)")
+    A = np.linalg.inv(r.K)
+    params = {"K": r.K, "eps": r.eps}
+    unc = {"K": r.sigma_K, "eps": r.sigma_eps}
+    if r.G is not None:
+        params["G"], unc["G"] = r.G, r.sigma_G
+    scale = np.diag(r.K)
+    return {
+        "procedure": "gyro-tabletop",
+        "model": MODEL,
+        "params": params,
+        "uncertainty": unc,
+        "units": {"y": unit, "K": f"{unit} per rad/s", "eps": unit, "G": f"{unit} per m/s^2",
+                  "omega": "rad/s", "f": "m/s^2 (calibrated accelerometer)"},
+        "frame": "the accelerometer calibration's frame (its gauge): K's off-diagonal is the gyro's misalignment "
+                 "to the accelerometer triad",
+        "scale": scale,
+        "sigma_scale": np.diag(r.sigma_K),
+        "misalignment": r.K / scale[:, None] - np.eye(3),
+        "inverse": {"A": A, "note": "ω = A (y − ε − G f), A = K⁻¹ (imu_tk's T·K)"},
+        "residual_rms": r.direction_rms_rad,
+        "direction_residual_deg": np.degrees(r.direction_residual_rad),
+        "direction_rms_deg": math.degrees(r.direction_rms_rad),
+        "n_holds": len(holds),
+        "n_rotations": len(motions),
+        "earth_rate": ({"removed_up_rad_s": r.earth_rate_up_rad_s, "latitude_deg": lat} if lat is not None else
+                       {"fitted_up_rad_s": r.earth_rate_up_rad_s, "sigma_up_rad_s": r.sigma_earth_rate_up_rad_s}),
+        "reduced_chi2": r.fit.reduced_chi2,
+        "g_sensitivity_fitted": r.G is not None,
+        "warnings": warnings,
+    }
+
+
+def format_lines(block: dict) -> list[str]:
+    """The gyro block in the plain report."""
+    from station.calibrate import _format_param, jsonable
+
+    if block is None:
+        return []
+    b = jsonable(block)
+    if "error" in b:
+        return [f"gyro       not calibrated: {b['error']}"] + [f"warning    {w}" for w in b.get("warnings", [])]
+    u = b["units"]
+    lines = [f"gyro       {b['model']} (y in {u['y']}, ω in rad/s, f in m/s²), from {b['n_rotations']} rotations "
+             f"between {b['n_holds']} holds"]
+    lines += _format_param(f"K [{u['K']}]", b["params"]["K"], b["uncertainty"]["K"])
+    lines += _format_param(f"ε [{u['eps']}]", b["params"]["eps"], b["uncertainty"]["eps"])
+    if "G" in b["params"]:
+        lines += _format_param(f"G [{u['G']}]", b["params"]["G"], b["uncertainty"]["G"])
+    lines.append(f"gyro residual {b['direction_rms_deg']:.3g}° RMS (gravity direction carried across each rotation)")
+    for w in b["warnings"]:
+        lines.append(f"warning    {w}")
+    return lines
