@@ -111,3 +111,4 @@ def test_imucal_ferraris_turns_held_out(shared_data):
         angle = math.degrees(np.trapezoid(w[:, ax], t[a:b]))
         sigma = 360.0 * gb["uncertainty"]["K"][ax][ax] / gb["params"]["K"][ax][ax]
         assert abs(angle + 360.0) < max(2.0 * sigma, 1.0), (ax, angle, sigma)
+
