@@ -132,7 +132,8 @@ def test_skipped_steps_come_back_after_the_rest():
     captured = [e[1] for e in events if e[0] == "captured"]
     assert captured[0] == "x_down" and guide.phase == "done"
     assert guide.steps[0].status == "skipped" and "x_up" not in captured
-    assert guide.capture().n_rows == 11
+    assert guide.capture(rotations=False).n_rows == 11
+    assert len(set(guide.capture().columns["position"]) - {""}) == 11
 
 
 def test_resume_from_the_state_file(tmp_path):
@@ -182,7 +183,7 @@ def test_capture_table_round_trips_through_a_file(tmp_path):
 
     sim, guide = make()
     feed(guide, sim, 150)
-    cap = guide.capture()
+    cap = guide.capture(rotations=False)
     assert cap.procedure == "accel-tabletop" and not cap.is_time_series and cap.n_rows == 12
     assert cap.meta["device"] == sim.device_id and cap.meta["accel_unit"] == "V"
     write_capture(str(tmp_path / "p1.csv"), cap)
@@ -236,3 +237,27 @@ def test_procedure_logic_does_not_load_textual():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
+
+
+def test_the_session_records_the_turns_and_calibrates_both_triads(tmp_path):
+    """With the gyro streamed, the guide's capture is the whole session (a position label on each
+    average): one tabletop session gives the accelerometer and the gyro calibration, and the
+    capture round-trips through a file."""
+    from station.calibrate import calibrate_capture
+    from station.capture import read_capture, write_capture
+
+    sim, guide = make(average_s=2.0, gyro_unit="rad/s")
+    feed(guide, sim, 250)
+    assert guide.phase == "done"
+    cap = guide.capture()
+    assert cap.is_time_series and cap.meta["gyro_unit"] == "rad/s"
+    assert [p for p in dict.fromkeys(cap.columns["position"]) if p] == [s.name for s in guide.steps]
+    write_capture(str(tmp_path / "p1.csv"), cap)
+    result = calibrate_capture(read_capture(str(tmp_path / "p1.csv")))
+    gb = result["gyro"]
+    assert gb["n_holds"] == 12 and gb["n_rotations"] == 11
+    truth = sim.truth["gyro"]
+    z = (np.asarray(gb["params"]["eps"]) - np.asarray(truth["eps"])) / np.asarray(gb["uncertainty"]["eps"])
+    assert np.all(np.abs(z) < 4)
+    np.testing.assert_allclose(np.diag(gb["params"]["K"]), np.diag(truth.get("K", np.eye(3))), atol=0.02)
+    assert gb["direction_rms_deg"] < 0.5

@@ -113,12 +113,13 @@ def test_demo_runs_a_whole_p1_and_saves_it(tmp_path):
     async def story():
         app = make_app(db, device=SimSource(seed=4, speed=50), demo=True, average_s=1.0, settle_s=0.5)
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=30)
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=90)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None, timeout_s=10)
             summary = text_of(app, "#summary")
             params = app.screen.query_one("#params")
             residuals = app.screen.query_one("#residuals")
-            assert params.row_count == 12 and residuals.row_count == 12
+            # both triads: B, M (12) and the gyro's K, eps, G (21) from the turns between positions
+            assert params.row_count == 12 + 21 and residuals.row_count == 12
             assert "Saved as calibration" in text_of(app, "#saved")
             cal_id = app.screen.calibration_id
             steps = app.session.guide.steps
@@ -126,12 +127,14 @@ def test_demo_runs_a_whole_p1_and_saves_it(tmp_path):
 
     steps, summary, cal_id = asyncio.run(story())
     assert all(s.status == "captured" and s.n >= 100 for s in steps)  # 1 s averages at 100 Hz
-    assert "no previous" in summary
+    assert "no previous" in summary and "gyro: 11 turns between 12 holds" in summary
     from db.store import Store
 
     hist = Store(db).history("SIM-ACC-0004")
     assert [h["id"] for h in hist] == [cal_id] and hist[0]["procedure"] == "accel-tabletop"
     assert hist[0]["n_positions"] == 12
+    gyro = Store(db).calibration(cal_id)["extra"]["gyro"]
+    assert gyro["n_rotations"] == 11 and len(gyro["params"]["K"]) == 3 and len(gyro["uncertainty"]["eps"]) == 3
     assert not any(p.startswith("resume-") for p in os.listdir(tmp_path))  # saved: nothing to resume
 
 

@@ -102,7 +102,13 @@ def p1_residuals(capture, result: dict) -> list[tuple[str, float, float]]:
             g = float(capture.meta.get("g_mps2"))
         except (TypeError, ValueError):
             g = math.nan
-    V = np.column_stack([capture.columns[c] for c in ("ax", "ay", "az")])
+    rows = result.get("positions")
+    if isinstance(rows, list) and rows and all(isinstance(p, dict) and "mean_raw" in p for p in rows):
+        # the positions the fit used (a time series has one row per sample, not per position)
+        V = np.array([p["mean_raw"] for p in rows], dtype=float)
+        names = [p.get("label") for p in rows]
+    else:
+        V = np.column_stack([capture.columns[c] for c in ("ax", "ay", "az")])
+        names = capture.columns.get("position", np.array([str(i + 1) for i in range(len(V))], dtype=object))
     norms = np.linalg.norm(V @ M.T + B, axis=1)
-    names = capture.columns.get("position", np.array([str(i + 1) for i in range(len(V))], dtype=object))
     return [(str(n), float(a), float(a - g)) for n, a in zip(names, norms)]

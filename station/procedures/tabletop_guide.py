@@ -88,6 +88,7 @@ class Step:
     n: int = 0
     temp_c: float | None = None
     t_s: float | None = None  # device time at the end of the average
+    t0_s: float | None = None  # device time at the start of the average
 
 
 @dataclass(frozen=True)
@@ -119,6 +120,9 @@ class GuideStatus:
     message: str
 
 
+MAX_RECORD_ROWS = 2_000_000   # ~5.5 h at 100 Hz: beyond, the guide keeps the averages only
+
+
 def p1_steps(names: list[str] | None = None) -> list[Step]:
     names = list(names or P1_POSITIONS)
     out = []
@@ -146,8 +150,14 @@ class P1Guide:
     def __init__(self, *, sample_rate_hz: float, accel_unit: str = "V", device_id: str = "",
                  config: GuideConfig | None = None, positions: list[str] | None = None,
                  nominal=None, previous: dict | None = None, site: dict | None = None,
-                 g_mps2: float | None = None, state_path: str | None = None):
+                 g_mps2: float | None = None, state_path: str | None = None, gyro_unit: str | None = None):
         self.config = config or GuideConfig()
+        self.gyro_unit = gyro_unit
+        # the whole stream with the gyro, so that the turns between positions calibrate the gyro
+        # triad too (docs/tabletop-gyro.md); dropped when a batch has no gyro or it grows too big
+        self._rec: list[tuple] = []
+        self._rec_rows = 0
+        self._rec_ok = True
         self.sample_rate_hz = float(sample_rate_hz)
         self.accel_unit = accel_unit
         self.device_id = device_id
@@ -280,6 +290,7 @@ class P1Guide:
         if self.phase in ("done", "aborted"):
             self._remember(t_s, accel, gyro, temp_c, None)
             return self.status()
+        self._record(t_s, accel, gyro, temp_c)
         # Feed the tracker in slices so that a phase change inside a batch lands on the
         # right sample (batches are ~50-100 ms: slices of 0.1 s are plenty).
         step_n = max(1, int(self.sample_rate_hz * 0.1))
@@ -292,6 +303,16 @@ class P1Guide:
                 break
         self._remember(t_s, accel, gyro, temp_c, st)
         return self.status()
+
+    def _record(self, t_s, accel, gyro, temp_c) -> None:
+        if not self._rec_ok:
+            return
+        if gyro is None or self._rec_rows + len(t_s) > MAX_RECORD_ROWS:
+            self._rec_ok, self._rec, self._rec_rows = False, [], 0
+            return
+        temp = np.full(len(t_s), np.nan) if temp_c is None else np.asarray(temp_c, dtype=float).reshape(-1)
+        self._rec.append((t_s.copy(), accel.copy(), gyro.copy(), temp.copy()))
+        self._rec_rows += len(t_s)
 
     def _remember(self, t_s, accel, gyro, temp_c, st) -> None:
         k = min(len(t_s), max(1, int(self.sample_rate_hz * 0.1)))
@@ -374,6 +395,7 @@ class P1Guide:
         step.n = int(n)
         step.temp_c = self._avg_temp / self._avg_temp_n if self._avg_temp_n else None
         step.t_s = self._avg_t
+        step.t0_s = self._avg_t0
         step.status = "captured"
         self._events.append(("captured", step.name))
         self._avg_reset()
@@ -486,11 +508,15 @@ class P1Guide:
 
     # ------------------------------------------------------------ the capture
 
-    def capture(self, extra_meta: dict | None = None):
-        """The captured positions as a P1 table of averages (``station.capture.Capture``)."""
+    def capture(self, extra_meta: dict | None = None, *, rotations: bool = True):
+        """The captured positions as a P1 capture (``station.capture.Capture``): the whole time
+        series with the gyro and a ``position`` column on each average's samples when the guide
+        saw the gyro for the whole session (so the turns between positions calibrate the gyro
+        too); otherwise (no gyro, a resumed session) the table of averages."""
         from station.capture import Capture
 
         caps = [s for s in self.steps if s.status == "captured"]
+        series = self._series(caps) if rotations else None
         meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
                 "accel_unit": self.accel_unit, "date": self.started[:10],
                 "g_mps2": repr(float(self.g_mps2))}
@@ -499,6 +525,11 @@ class P1Guide:
                 meta[key] = repr(float(self.site[key]))
         meta["averaging_s"] = repr(self.config.average_s)
         meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
+        if series is not None:
+            if self.gyro_unit:
+                meta["gyro_unit"] = self.gyro_unit
+            meta["sample_rate_hz"] = repr(self.sample_rate_hz)
+            return Capture(meta=meta, columns=series)
         cols: dict[str, np.ndarray] = {"position": np.array([s.name for s in caps], dtype=object)}
         for i, ax in enumerate(("ax", "ay", "az")):
             cols[ax] = np.array([s.mean[i] for s in caps], dtype=float)
@@ -508,6 +539,26 @@ class P1Guide:
         if any(s.temp_c is not None for s in caps):
             cols["temp_c"] = np.array([s.temp_c if s.temp_c is not None else math.nan for s in caps])
         return Capture(meta=meta, columns=cols)
+
+    def _series(self, caps) -> dict | None:
+        """Columns of the recorded stream with each captured average labelled, or None when the
+        recording does not cover every captured position (no gyro, resumed, too long)."""
+        if not self._rec_ok or not self._rec or len(caps) < 2:
+            return None
+        t = np.concatenate([r[0] for r in self._rec])
+        if any(s.t0_s is None or s.t0_s < t[0] or s.t_s > t[-1] for s in caps):
+            return None
+        a = np.concatenate([r[1] for r in self._rec])
+        g = np.concatenate([r[2] for r in self._rec])
+        temp = np.concatenate([r[3] for r in self._rec])
+        pos = np.full(len(t), "", dtype=object)
+        for s in caps:
+            pos[(t >= s.t0_s) & (t <= s.t_s)] = s.name
+        cols = {"t": t, "position": pos, "ax": a[:, 0], "ay": a[:, 1], "az": a[:, 2],
+                "gx": g[:, 0], "gy": g[:, 1], "gz": g[:, 2]}
+        if np.isfinite(temp).any():
+            cols["temp_c"] = temp
+        return cols
 
     # ------------------------------------------------------------ resume
 

@@ -91,9 +91,25 @@ def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np
             notes.append(f"gyro: the motion from hold {holds[k].label} to {holds[k + 1].label} reaches the "
                          f"range limit on {', '.join('xyz'[i] for i in np.flatnonzero(clipped))}: left out")
             continue
-        motions.append(TG.Motion(k, k + 1, t[a:b + 1], seg, f_all[a:b + 1]))
+        a, b = _moving_span(t, y, a, b, holds[k].y_mean, holds[k + 1].y_mean, stds[k])
+        motions.append(TG.Motion(k, k + 1, t[a:b + 1], y[a:b + 1], f_all[a:b + 1]))
     noise = np.median(np.array(stds), axis=0) if stds else np.ones(3)
     return holds, motions, noise, notes
+
+
+def _moving_span(t, y, a: int, b: int, y0, y1, sd, margin_s: float = 0.5) -> tuple[int, int]:
+    """The part of samples a..b where the unit turns (any axis beyond 6σ of both holds' means),
+    with ``margin_s`` either side: the still stretches around a turn (placing, settling) add
+    only noise and bias to the integral."""
+    seg = y[a:b + 1]
+    sd = np.maximum(np.asarray(sd, dtype=float), 1e-12)
+    moving = np.any(np.abs(seg - y0) > 6 * sd, axis=1) & np.any(np.abs(seg - y1) > 6 * sd, axis=1)
+    idx = np.flatnonzero(moving)
+    if len(idx) == 0:
+        return a, b
+    lo = int(np.searchsorted(t, t[a + idx[0]] - margin_s))
+    hi = int(np.searchsorted(t, t[a + idx[-1]] + margin_s, side="right")) - 1
+    return max(a, lo), min(b, hi)
 
 
 def _at_limit(capture, lo, hi) -> np.ndarray:

@@ -114,6 +114,18 @@ class ResultsScreen(Screen):
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
             params.add_row(row.name, _f(row.value, ".7g"), _f(row.sigma, ".2g"), _f(row.previous, ".7g"),
                            _f(row.change_sigma, "+.1f"), _f(row.tolerance, ".3g"), ok)
+        gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
+        if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
+            prev_g = ((self.previous or {}).get("extra") or {}).get("gyro")
+            for row in param_rows(gyro, prev_g if isinstance(prev_g, dict) else None):
+                params.add_row("gyro " + row.name, _f(row.value, ".7g"), _f(row.sigma, ".2g"), _f(row.previous, ".7g"),
+                               _f(row.change_sigma, "+.1f"), "", "")
+            lines.append(f"gyro: {gyro.get('n_rotations')} turns between {gyro.get('n_holds')} holds · gravity "
+                         f"carried to {_f(gyro.get('direction_rms_deg'), '.3g')}° RMS")
+            summary.update("\n".join(lines))
+        elif isinstance(gyro, dict) and gyro.get("error"):
+            lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
+            summary.update("\n".join(lines))
         residuals.clear(columns=True)
         rows_res = p1_residuals(self.capture, r) if r.get("procedure") == "accel-tabletop" else []
         residuals.display = bool(rows_res)

@@ -94,7 +94,8 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
         else:
             guide = P1Guide(sample_rate_hz=rate, accel_unit=src.units.get("accel_unit") or "counts",
                             device_id=s.device_id, config=GuideConfig(average_s=s.average_s, settle_s=s.settle_s),
-                            site=getattr(src, "site", None), state_path=state_path, **kw)
+                            site=getattr(src, "site", None), state_path=state_path,
+                            gyro_unit=src.units.get("gyro_unit") or None, **kw)
         guide.previous_calibration = previous
         return guide
 
