@@ -112,3 +112,17 @@ def test_imucal_ferraris_turns_held_out(shared_data):
         sigma = 360.0 * gb["uncertainty"]["K"][ax][ax] / gb["params"]["K"][ax][ax]
         assert abs(angle + 360.0) < max(2.0 * sigma, 1.0), (ax, angle, sigma)
 
+
+@pytest.mark.parametrize("g_sens, named", [(0.0, False), (3e-3, True)])
+def test_diagnosis_input_names_a_hidden_g_sensitivity(g_sens, named):
+    """The P1 session's gyro problem for the diagnosis engine: a g-sensitivity hidden in the
+    simulated gyro (not told to the problem) is named; without one nothing is."""
+    from solvers.diagnose import diagnose
+    from station.procedures import tabletop_gyro
+
+    sim = simulate("accel-tabletop", seed=5, extra_positions=8, hold_s=10, move_s=3, init_rest_s=20,
+                   gyro_g_sensitivity=g_sens)
+    cap = Capture(dict(sim.meta), dict(sim.columns))
+    inp = tabletop_gyro.diagnosis_input(cap, tabletop.calibrate(cap))
+    names = [e["name"] for e in diagnose(inp.problem).effects]
+    assert ("g_sensitivity" in names) is named

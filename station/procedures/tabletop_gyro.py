@@ -190,3 +190,36 @@ def format_lines(block: dict) -> list[str]:
     for w in b["warnings"]:
         lines.append(f"warning    {w}")
     return lines
+
+
+def diagnosis_input(capture, base: dict, prepared=None):
+    """The gyro problem of a P1 session for ``station diagnose`` (helper i12 wires it beside the
+    accelerometer's): the holds' gyro samples in rad/s through the session's fitted ``K``, the
+    calibrated specific force, one label per hold. The baseline is a constant bias; the gyro
+    model's effects (temperature, time drift, g-sensitivity, Earth rate) are the candidates
+    (``solvers.diagnose.problems.gyro_problem``). None when the result has no gyro block."""
+    from solvers.diagnose import problems as DP
+    from station.procedures import tabletop
+    from station.procedures.contract import DiagnosisInput
+
+    gb = (base or {}).get("gyro")
+    if not isinstance(gb, dict) or "params" not in gb:
+        return None
+    prep = prepared if prepared is not None else tabletop.prepare(capture)
+    B, M = np.asarray(base["params"]["B"], float), np.asarray(base["params"]["M"], float)
+    A = np.linalg.inv(np.asarray(gb["params"]["K"], float))
+    t = np.asarray(capture.columns["t"], dtype=float)
+    y = _gyro(capture)
+    raw_a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
+    temp = capture.columns.get("temp_c")
+    rows, labels = [], []
+    for p in sorted(prep.positions, key=lambda q: q.t_start_s):
+        i = np.flatnonzero((t >= p.t_start_s) & (t <= p.t_stop_s) & np.all(np.isfinite(y), axis=1))
+        rows.append(i)
+        labels += [p.label] * len(i)
+    idx = np.concatenate(rows)
+    prob = DP.gyro_problem(t[idx], y[idx] @ A.T, accel.p1_apply(raw_a[idx], B, M),
+                           None if temp is None else np.asarray(temp, float)[idx], None, np.array(labels, dtype=object))
+    drivers = {"position": labels, "time_s": t[idx]}
+    return DiagnosisInput(prob, drivers, "a hold whose gyro mean disagrees: the unit moved, or the bias jumped",
+                          group_kind="time block")
