@@ -272,8 +272,9 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
 
     res = fit(resid, init, free=free, sigma=sigma, jac=jac)
     if res.unidentifiable and fit_g and any(n.startswith("G") for n in res.unidentifiable):
-        warnings.append("g-sensitivity not identifiable from these holds: not fitted")
-        return calibrate(holds, motions, K0, noise_raw=noise_raw, latitude_deg=latitude_deg, fit_g=False)
+        out = calibrate(holds, motions, K0, noise_raw=noise_raw, latitude_deg=latitude_deg, fit_g=False)
+        out.warnings[:0] = ["g-sensitivity not identifiable from these holds: not fitted"]
+        return out
     if res.unidentifiable:
         raise NotIdentifiable(f"the rotations between the holds cannot determine {', '.join(res.unidentifiable)} "
                               "(turn the unit about all three axes between holds)")
