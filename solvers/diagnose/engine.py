@@ -60,6 +60,7 @@ class Candidate:
     free: dict | None = None
     scan: tuple[str, np.ndarray] | None = None
     reason: str | None = None
+    setup: Callable[[], None] | None = None   # generic candidates: write the driver basis into the conditions
 
 
 @dataclass
@@ -79,7 +80,12 @@ class Problem:
     extended_model: Callable[[list[str]], str] | None = None
     row_types: np.ndarray | None = None
     drivers: dict = field(default_factory=dict)  # name → per-row value (time, temperature, input …) for plots
-    channels: int = 1                       # time-ordered rows interleave this many channels (axes, beams)     # rows of different kinds get their own noise scale
+    channels: int = 1                       # time-ordered rows interleave this many channels (axes, beams)
+    series: np.ndarray | None = None        # per row: id of its time-ordered series (−1: none), for serial correlation
+    scale_free: dict = field(default_factory=dict)   # blocks freed only to measure auxiliary rows' noise scale
+    generic: list = field(default_factory=list)      # [(Conditions, {driver: per-sample values})] for residual:<driver>
+    generic_width: int = 3                  # outputs per sample the generic extension adds to (axes, beams)
+    generic_scale: float = 1.0              # the generic extension's margin over the canonical test (nulls)
 
 
 @dataclass
@@ -320,10 +326,252 @@ def _split_name(name: str):
     return block, idx
 
 
+# ---------------------------------------------------------------- serial correlation
+
+def _acf(x: np.ndarray, lags: int) -> np.ndarray:
+    """Autocorrelation ρ(0..lags) of a (mean-removed) series by FFT."""
+    n = len(x)
+    m = 1 << int(math.ceil(math.log2(max(2 * n, 2))))
+    f = np.fft.rfft(x, m)
+    ac = np.fft.irfft(f * np.conj(f), m)[: lags + 1]
+    return ac / ac[0] if ac[0] > 0 else np.zeros(lags + 1)
+
+
+def serial_inflation(e: np.ndarray, s: np.ndarray, series: np.ndarray | None) -> float:
+    """How much serial correlation of the residual ``e`` inflates the variance of the
+    statistic ``sᵀe`` (``s`` a fitted signature) over white noise: per time-ordered series,
+    ``1 + 2 Σ_k w_k ρ_e(k) ρ_s(k)`` with a Bartlett taper ``w_k = 1 − k/(L+1)``, L = n/4,
+    weighted by each series' share of ``|s|²``; rows outside a series (−1) count 1. At
+    least 1: a deviance is never made larger than the white-noise one."""
+    if series is None:
+        return 1.0
+    series = np.asarray(series)
+    num = den = 0.0
+    for sid in np.unique(series):
+        m = series == sid
+        ss = s[m]
+        w2 = float(ss @ ss)
+        if w2 <= 0:
+            continue
+        den += w2
+        n = int(m.sum())
+        if sid < 0 or n < 8:
+            num += w2
+            continue
+        L = max(2, n // 4)
+        ee = e[m] - np.mean(e[m])
+        taper = 1.0 - np.arange(1, L + 1) / (L + 1.0)
+        re, rs = _acf(ee, L), _acf(ss - np.mean(ss) if n > 1 else ss, L)
+        num += w2 * (1.0 + 2.0 * float(np.sum(taper * re[1:] * rs[1:])))
+    return max(1.0, num / den) if den > 0 else 1.0
+
+
+# ---------------------------------------------------------------- generic extension
+
+GENERIC_STEP_GRID = np.linspace(0.1, 0.9, 13)   # step positions, fractions of the driver's range
+GENERIC_PERIODS = 10                            # periods scanned, span/30 … span/1.5 (log)
+GENERIC_SMOOTH_KNOTS = (3, 5)                    # piecewise-linear bases (complexity chosen by CV)
+
+
+def _hat_basis(x: np.ndarray, knots: int) -> np.ndarray:
+    """Piecewise-linear (hat) functions on ``knots`` equally spaced knots over x's range, minus the constant."""
+    lo, hi = np.nanmin(x), np.nanmax(x)
+    c = np.linspace(lo, hi, knots)
+    h = (hi - lo) / max(knots - 1, 1)
+    B = np.clip(1.0 - np.abs(x[:, None] - c[None, :]) / h, 0.0, None)
+    return B[:, 1:] - B[:, 1:].mean(axis=0)
+
+
+def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
+    """The ``residual:<driver>`` candidates: (candidate, description) per driver and shape.
+    Each candidate's block ``bR`` (p × width) multiplies a basis of the driver that its
+    ``setup`` writes into every condition set of ``problem.generic`` (solvers.models.additive_terms)."""
+    out = []
+    if not problem.generic:
+        return out
+    conds = problem.generic
+    width = problem.generic_width
+    names = set()
+    for _, d in conds:
+        names |= {k for k, v in d.items() if v is not None}
+    for drv in sorted(names):
+        vals = [np.asarray(d.get(drv), float) if d.get(drv) is not None else None for _, d in conds]
+        if any(v is None or not np.all(np.isfinite(v)) for v in vals):
+            continue
+        allv = np.concatenate([v.reshape(len(v), -1)[:, 0] if v.ndim > 1 else v for v in vals])
+        lo, hi = float(np.min(allv)), float(np.max(allv))
+        span = hi - lo
+        if not span > 0 or np.unique(np.round(allv, 9)).size < 4:
+            continue
+        per_axis = drv.endswith("_axis")
+
+        def make(fn, p, desc, drv=drv, per_axis=per_axis):
+            def setup():
+                for cond, d in conds:
+                    x = np.asarray(d[drv], float)
+                    cond.extra["basis"] = fn(x)
+            blocks = {"bR": np.zeros((p, width))}
+            return (Candidate(f"residual:{drv}", blocks, setup=setup), dict(desc, driver=drv))
+
+        if per_axis:   # a scale linear in temperature / time acting on each axis' input
+            continue
+        base = drv.split(":")[0]
+        if base not in ("time", "temperature"):
+            out.append(make(lambda x, lo=lo, span=span: ((x - lo) / span - 0.5)[:, None], 1, {"shape": "linear"}))
+        if base in ("time", "temperature") and "input_axis" in names:
+            ia = [np.asarray(d["input_axis"], float) for _, d in conds]
+            if all(a is not None and a.ndim == 2 for a in ia):
+                def scale_fn_factory(drv=drv, lo=lo, span=span):
+                    def setup():
+                        for cond, d in conds:
+                            x = (np.asarray(d[drv], float) - lo) / span - 0.5
+                            cond.extra["basis"] = (x[:, None] * np.asarray(d["input_axis"], float))[:, None, :]
+                    return setup
+                out.append((Candidate(f"residual:{drv}", {"bR": np.zeros((1, width))}, setup=scale_fn_factory()),
+                            {"shape": "linear", "acts_on": "scale", "driver": drv}))
+        if base == "time":   # a bias that jumps (a current switched on, a knock)
+            family = []
+            for f in GENERIC_STEP_GRID:
+                x0 = lo + f * span
+                family.append(make(lambda x, x0=x0: (x >= x0).astype(float)[:, None] - 0.5, 1,
+                                   {"shape": "step", "at": x0}))
+            out.append(("scan", family))
+        if base == "time":
+            fam = []
+            for P in np.geomspace(span / 30.0, span / 1.5, GENERIC_PERIODS):
+                fam.append(make(lambda x, P=P: np.column_stack([np.sin(2 * np.pi * x / P), np.cos(2 * np.pi * x / P)]),
+                                2, {"shape": "periodic", "period": float(P)}))
+            out.append(("scan", fam))
+        for K in GENERIC_SMOOTH_KNOTS:
+            out.append(make(lambda x, K=K: _hat_basis(x, K), K - 1, {"shape": "smooth", "knots": K}))
+    return out
+
+
 # ---------------------------------------------------------------- the engine
 
+def _refit(problem: "Problem", params: dict, free: dict, sigma: np.ndarray) -> FitResult:
+    """Nonlinear refit from the linearised step at ``params``."""
+    Jx, _, packer = jacobian(problem, params, free)
+    d, _ = _lstsq_rss(Jx, _weighted(problem, params))
+    start = packer.unpack(packer.pack(packer.template) + d)
+    try:
+        res = fit(problem.residual, start, free=free, sigma=sigma)
+        if res.chi2 > float(np.sum(_weighted(problem, start) ** 2)) * 1.0001:
+            raise ValueError("refit worse than its start")
+    except Exception:
+        res = fit(problem.residual, start, free=free, sigma=sigma, max_nfev=1)
+    return res
+
+
+@dataclass
+class _Eval:
+    cc: _Cand
+    delta_bic: float
+    cv: float
+    sig: np.ndarray
+    k: int
+    D: float          # deviance (unknown noise scale per row kind)
+    infl: float       # serial-correlation inflation of that deviance
+    desc: dict | None = None
+
+    @property
+    def D_rob(self) -> float:
+        return self.D / self.infl
+
+
+def _gram_rank(G: np.ndarray) -> int:
+    """Rank of a Gram matrix (columns scaled first), as matrix_rank of the tall matrix would give."""
+    if G.shape[0] == 0:
+        return 0
+    d = np.sqrt(np.clip(np.diag(G), 0.0, None))
+    d = np.where(d > 0, d, 1.0)
+    w = np.linalg.eigvalsh(G / np.outer(d, d))
+    return int(np.sum(w > max(w.max(), 1e-300) * 1e-20)) if w.size else 0
+
+
+class _Round:
+    """One round of candidate tests at a fixed linearisation ``r0 + A δ``: the Gram blocks of
+    ``A`` (total and per CV fold) are formed once, each candidate adds only its own."""
+
+    def __init__(self, A, r0, sigma, folds, primary):
+        self.A, self.r0, self.sigma, self.primary = A, r0, sigma, primary
+        self.fold_ids = [np.flatnonzero(folds == f) for f in np.unique(folds)]
+        self.GA = A.T @ A
+        self.bA = A.T @ r0
+        self.GAf = [A[i].T @ A[i] for i in self.fold_ids]
+        self.bAf = [A[i].T @ r0[i] for i in self.fold_ids]
+        self.QA = _orth(A)
+
+    def solve(self, J):
+        """(δ, full residual e, held-out RMS) of ``r0 + [A J] δ``."""
+        A, r0 = self.A, self.r0
+        p0 = A.shape[1]
+        C = A.T @ J
+        G = np.block([[self.GA, C], [C.T, J.T @ J]])
+        b = np.concatenate([self.bA, J.T @ r0])
+        d = _solve_normal(G, -b)
+        e = r0 + A @ d[:p0] + J @ d[p0:]
+        out = r0.copy()
+        for i, GAf, bAf in zip(self.fold_ids, self.GAf, self.bAf):
+            Ai, Ji, ri = A[i], J[i], r0[i]
+            Cf = Ai.T @ Ji
+            Gf = np.block([[GAf, Cf], [Cf.T, Ji.T @ Ji]])
+            bf = np.concatenate([bAf, Ji.T @ ri])
+            df = _solve_normal(G - Gf, -(b - bf))
+            out[i] = ri + Ai @ df[:p0] + Ji @ df[p0:]
+        if self.primary is not None:
+            cv = out * float(np.median(self.sigma[self.primary]))
+        else:
+            cv = out * self.sigma
+        return d, e, float(np.sqrt(np.mean(cv ** 2)))
+
+
+def _gram_rank(G: np.ndarray) -> int:
+    """Rank of a Gram matrix (columns scaled first), as matrix_rank of the tall matrix would give."""
+    if G.shape[0] == 0:
+        return 0
+    d = np.sqrt(np.clip(np.diag(G), 0.0, None))
+    d = np.where(d > 0, d, 1.0)
+    w = np.linalg.eigvalsh(G / np.outer(d, d))
+    return int(np.sum(w > max(w.max(), 1e-300) * 1e-20)) if w.size else 0
+
+
+def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
+    A, QA = rnd.A, rnd.QA
+    Jp = cc.J - QA @ (QA.T @ cc.J)
+    k = _gram_rank(Jp.T @ Jp) if Jp.shape[1] else 0
+    d, e, cvc = rnd.solve(cc.J)
+    if cc.cand.scan is not None and k > 0:
+        k += 1  # the scanned scalar (hard-iron step time) is a parameter too
+    D = term_cur - typed_fit_term(e, types)
+    db = max(k, 0) * math.log(n) - D
+    sig = cc.J @ d[A.shape[1]:]
+    sig = sig - QA @ (QA.T @ sig)
+    infl = serial_inflation(e, sig, problem.series)
+    return _Eval(cc, db, cvc, sig, int(k), D, infl)
+
+
+def _passes(problem, ev: _Eval, m: int, cv_cur: float, rank_cur: int, n: int, scale: float = 1.0) -> bool:
+    if ev.k <= 0 or ev.cv >= cv_cur or n - rank_cur - ev.k < MIN_DOF:
+        return False
+    return ev.D_rob > scale * problem.threshold * chi2_isf(ALPHA / max(m, 1), max(ev.k, 1))
+
+
+def _confused(best: _Eval, others: list[_Eval]) -> list[dict]:
+    out = []
+    for r in others:
+        if r is best:
+            continue
+        a, b = best.sig, r.sig
+        den = float(np.linalg.norm(a) * np.linalg.norm(b))
+        corr = float(a @ b) / den if den > 0 else 0.0
+        if abs(corr) > CONFUSION_CORR:
+            out.append({"name": r.cc.cand.name, "correlation": corr})
+    return out
+
+
 def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnosis:
-    """Run steps 1–6 of the module docstring on ``problem``."""
+    """Run the method of the module docstring on ``problem``."""
     sigma = np.asarray(problem.sigma, dtype=float).ravel()
     problem.sigma = sigma
     n = sigma.size
@@ -332,8 +580,12 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     if baseline_fit is None:
         baseline_fit = fit(problem.residual, problem.baseline, free=problem.free, sigma=sigma)
     if problem.row_types is not None:
-        # variance components: auxiliary rows (prior σ) get the noise scale their baseline residuals show
-        rw = baseline_fit.weighted_residuals
+        # variance components: auxiliary rows (prior σ) get the noise scale their residuals show
+        # (with ``scale_free`` blocks freed for this step only: e.g. the compass dip constant)
+        sfit = baseline_fit
+        if problem.scale_free:
+            sfit = fit(problem.residual, baseline_fit.params, free={**problem.free, **problem.scale_free}, sigma=sigma)
+        rw = sfit.weighted_residuals
         for k in np.unique(problem.row_types):
             if k == 0:
                 continue  # the primary rows keep their measured noise (the χ² test is about them)
@@ -343,114 +595,230 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 sigma[sel] *= s
         problem.sigma = sigma
         baseline_fit = fit(problem.residual, baseline_fit.params, free=problem.free, sigma=sigma)
-    base_params = baseline_fit.params
-    r0 = _weighted(problem, base_params)
-    J0, _, _ = jacobian(problem, base_params, problem.free)
-    Q0 = _orth(J0)
-    rss0 = float(r0 @ r0)
-    cv0 = cv_rms(J0, r0, sigma, folds, primary)
-
-    cands = [_candidate_columns(problem, base_params, c, Q0, r0) if c.reason is None
-             else _Cand(c, {}, {}, np.zeros((n, 0)), [], c.reason) for c in problem.candidates]
-    entries: dict[str, dict] = {}
-    for cc in cands:
-        if cc.reason is not None:
-            entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": None, "cv_rms": None, "selected": False,
-                                     "resolvable": False, "reason": cc.reason}
-
-    # greedy forward selection on the linearised problem
-    A = J0
-    rss_cur, cv_cur = rss0, cv0
     types = None if problem.row_types is None else np.asarray(problem.row_types)
-    term_cur = typed_fit_term(r0, types)
-    selected: list[_Cand] = []
-    effects: list[dict] = []
+    base_params = baseline_fit.params
+    r_base = _weighted(problem, base_params)
+    J_base, _, _ = jacobian(problem, base_params, problem.free)
+    cv0 = cv_rms(J_base, r_base, sigma, folds, primary)
+
+    entries: dict[str, dict] = {}
+    for c in problem.candidates:
+        if c.reason is not None:
+            entries[c.name] = {"name": c.name, "delta_bic": None, "cv_rms": None, "selected": False,
+                               "resolvable": False, "reason": c.reason}
+    state, free = dict(base_params), dict(problem.free)
+    cur_fit = baseline_fit
+    cv_cur = cv0
+    picked: list[tuple[_Cand, dict]] = []   # (candidate columns, effect entry)
     verdict: list[str] = []
-    remaining = [c for c in cands if c.reason is None]
-    first_round = True
-    first_dev: dict | None = {}
-    deviance = first_dev
+    remaining = [c for c in problem.candidates if c.reason is None]
+    deviance: dict = {}
+    first = True
+    # greedy forward selection; after each pick the extended model is refitted nonlinearly and
+    # the rest are tested again against it (a candidate that only soaks up what another one's
+    # linearisation left behind does not pass then)
     while remaining:
-        rows = []
-        for cc in remaining:
-            Ac = np.hstack([A, cc.J])
-            d, rss = _lstsq_rss(Ac, r0)
-            k = np.linalg.matrix_rank(Ac) - np.linalg.matrix_rank(A) if A.shape[1] else np.linalg.matrix_rank(Ac)
-            if cc.cand.scan is not None and k > 0:
-                k += 1  # the scanned scalar (hard-iron step time) is a parameter too
-            db = typed_fit_term(r0 + Ac @ d, types) - term_cur + max(k, 0) * math.log(n)
-            cvc = cv_rms(Ac, r0, sigma, folds, primary)
-            sig = cc.J @ d[A.shape[1]:]
-            sig = sig - _orth(A) @ (_orth(A).T @ sig)
-            rows.append((cc, db, cvc, sig, k))
-            if first_round:
-                entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": db, "cv_rms": cvc, "selected": False}
-        first_round = False
-        rank_cur = np.linalg.matrix_rank(A) if A.shape[1] else 0
-        m = len(rows)
-        for r in rows:
-            if first_dev is not None and r[0].cand.name not in first_dev:
-                q = chi2_isf(ALPHA / max(m, 1), max(r[4], 1))
-                first_dev[r[0].cand.name] = {"D": max(r[4], 0) * math.log(n) - r[1], "k": int(r[4]), "q": q,
-                                             "cv_lower": bool(r[2] < cv_cur)}
-        first_dev = None
-        passing = [r for r in rows if r[4] > 0 and r[1] < selection_threshold(problem, r[4], n, m)
-                   and r[2] < cv_cur and n - rank_cur - r[4] >= MIN_DOF]
+        r0 = _weighted(problem, state)
+        J0, _, _ = jacobian(problem, state, free)
+        Q0 = _orth(J0)
+        term_cur = typed_fit_term(r0, types)
+        cv_cur = cv_rms(J0, r0, sigma, folds, primary)
+        cands = [_candidate_columns(problem, state, c, Q0, r0) for c in remaining]
+        rnd = _Round(J0, r0, sigma, folds, primary)
+        evals = []
+        for cc in cands:
+            if cc.reason is not None:
+                if first:
+                    entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": None, "cv_rms": None,
+                                             "selected": False, "resolvable": False, "reason": cc.reason}
+                continue
+            ev = _evaluate(problem, cc, rnd, term_cur, types, n)
+            evals.append(ev)
+            if first:
+                entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": ev.delta_bic, "cv_rms": ev.cv,
+                                         "selected": False}
+        m = len(evals)
+        rank_cur = _gram_rank(J0.T @ J0)
+        if first:
+            for ev in evals:
+                deviance[ev.cc.cand.name] = {"D": ev.D_rob, "k": ev.k, "q": chi2_isf(ALPHA / max(m, 1), max(ev.k, 1)),
+                                             "cv_lower": bool(ev.cv < cv_cur), "inflation": ev.infl}
+        first = False
+        passing = [ev for ev in evals if _passes(problem, ev, m, cv_cur, rank_cur, n)]
         if not passing:
             break
-        best = min(passing, key=lambda r: r[1])
-        confused = []
-        for r in passing:
-            if r is best:
-                continue
-            a, b = best[3], r[3]
-            den = float(np.linalg.norm(a) * np.linalg.norm(b))
-            corr = float(a @ b) / den if den > 0 else 0.0
-            if abs(corr) > CONFUSION_CORR:
-                confused.append({"name": r[0].cand.name, "correlation": corr})
-        cc = best[0]
+        best = min(passing, key=lambda ev: ev.delta_bic)
+        confused = _confused(best, passing)
+        cc = best.cc
         entries[cc.cand.name]["selected"] = True
-        effects.append({"name": cc.cand.name, "_cand": cc, "cv_rms_before": cv_cur, "cv_rms_after": best[2],
-                        "gain": 1.0 - best[2] / cv_cur if cv_cur > 0 else 0.0, "confused_with": confused})
-        verdict.append(cc.cand.name)
-        for c in confused:
-            verdict.append(c["name"])
-        selected.append(cc)
-        A = np.hstack([A, cc.J])
-        cv_cur = best[2]
-        d_cur, rss_cur = _lstsq_rss(A, r0)
-        term_cur = typed_fit_term(r0 + A @ d_cur, types)
+        picked.append((cc, {"name": cc.cand.name, "cv_rms_before": cv_cur, "confused_with": confused}))
+        state.update(cc.params)
+        free.update({k: v for k, v in cc.free.items() if k in cc.params})
+        cur_fit = _refit(problem, state, free, sigma)
+        state = dict(cur_fit.params)
         drop = {cc.cand.name} | {c["name"] for c in confused}
-        remaining = [c for c in remaining if c.cand.name not in drop]
+        remaining = [c for c in remaining if c.name not in drop]
 
-    # extended model: nonlinear refit with the selected blocks
-    ext_params = dict(base_params)
-    ext_free = dict(problem.free)
-    for cc in selected:
-        ext_params.update(cc.params)
-        ext_free.update({k: v for k, v in cc.free.items() if k in cc.params})
-    if selected:
-        # start from the linearised solution
-        Jx, names, packer = jacobian(problem, ext_params, ext_free)
-        d, _ = _lstsq_rss(Jx, _weighted(problem, ext_params))
-        start = packer.unpack(packer.pack(packer.template) + d)
-        try:
-            ext = fit(problem.residual, start, free=ext_free, sigma=sigma)
-            if ext.chi2 > float(np.sum(_weighted(problem, start) ** 2)) * 1.0001:
-                raise ValueError("refit worse than its start")
-        except Exception:
-            ext = fit(problem.residual, start, free=ext_free, sigma=sigma, max_nfev=1)
-        Je, _, _ = jacobian(problem, ext.params, ext_free)
-        cv_ext = cv_rms(Je, ext.weighted_residuals, sigma, folds, primary)
-    else:
-        ext, cv_ext = baseline_fit, cv0
-    for e in effects:
-        cc = e.pop("_cand")
+    # name only what still earns its place against all the others, refitted
+    if len(picked) > 1:
+        for item in list(picked):
+            cc = item[0]
+            others = [p for p in picked if p is not item]
+            st = dict(base_params)
+            fr = dict(problem.free)
+            for oc, _ in others:
+                st.update({k: cur_fit.params[k] for k in oc.params})
+                fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+            for k in base_params:
+                st[k] = cur_fit.params[k]
+            without = _refit(problem, st, fr, sigma)
+            r0 = without.weighted_residuals
+            J0, _, _ = jacobian(problem, without.params, fr)
+            Q0 = _orth(J0)
+            cand = _candidate_columns(problem, without.params, cc.cand, Q0, r0)
+            if cand.reason is not None:
+                ok = False
+            else:
+                ev = _evaluate(problem, cand, _Round(J0, r0, sigma, folds, primary), typed_fit_term(r0, types),
+                               types, n)
+                rank0 = _gram_rank(J0.T @ J0)
+                ok = _passes(problem, ev, len(problem.candidates), cv_rms(J0, r0, sigma, folds, primary), rank0, n)
+            if not ok:
+                picked.remove(item)
+                entries[cc.cand.name]["selected"] = False
+                cur_fit = without
+        state = dict(cur_fit.params)
+        free = dict(problem.free)
+        for oc, _ in picked:
+            free.update({k: v for k, v in oc.free.items() if k in oc.params})
+        state = {k: v for k, v in state.items() if k in base_params or any(k in oc.params for oc, _ in picked)}
+        if picked:
+            cur_fit = _refit(problem, state, free, sigma)
+            state = dict(cur_fit.params)
+        else:
+            cur_fit, state = baseline_fit, dict(base_params)
+
+    # effects outside the library: a smooth function of one driver (residual:<driver>)
+    generic_effect = None
+    gens = generic_candidates(problem)
+    if gens and _residual_test(problem, cur_fit).get("white") is False:
+        # only where the model so far leaves residuals far from noise (diagnose.md)
+        r0 = _weighted(problem, state)
+        J0, _, _ = jacobian(problem, state, free)
+        Q0 = _orth(J0)
+        term_cur = typed_fit_term(r0, types)
+        cv_g = cv_rms(J0, r0, sigma, folds, primary)
+        rank_cur = _gram_rank(J0.T @ J0)
+        evals = []
+        rp = r0 - Q0 @ (Q0.T @ r0)
+        rnd = _Round(J0, r0, sigma, folds, primary)
+        for item in gens:
+            family = item[1] if item[0] == "scan" else [item]
+            best_fam = None
+            for cand, desc in family:   # a scanned family: its best member by the residual it leaves
+                cand.setup()
+                cc = _candidate_columns(problem, state, cand, Q0, r0)
+                if cc.reason is not None:
+                    continue
+                Jp = cc.J - Q0 @ (Q0.T @ cc.J)
+                rss = _lstsq_rss(Jp, rp)[1]
+                if best_fam is None or rss < best_fam[0]:
+                    best_fam = (rss, cand, cc, desc)
+            if best_fam is None:
+                continue
+            _, cand, cc, desc = best_fam
+            if item[0] == "scan":
+                cand.setup()
+                cc = _candidate_columns(problem, state, cand, Q0, r0)
+            ev = _evaluate(problem, cc, rnd, term_cur, types, n)
+            ev.desc = desc
+            if item[0] == "scan":
+                ev.k += 1     # the scanned location or period
+            evals.append(ev)
+        # every basis tried counts as a test (a scanned family is as many tests as its members)
+        m = sum(len(item[1]) if item[0] == "scan" else 1 for item in gens)
+        passing = [ev for ev in evals if _passes(problem, ev, m, cv_g, rank_cur, n, problem.generic_scale)]
+        if passing:
+            best = min(passing, key=lambda ev: ev.cv)
+            # correlation with each canonical candidate's signature at this state
+            corr = {}
+            for c in problem.candidates:
+                if c.reason is not None or any(c.name == oc.cand.name for oc, _ in picked):
+                    continue
+                cc = _candidate_columns(problem, state, c, Q0, r0)
+                if cc.reason is not None or cc.J.shape[1] == 0:
+                    continue
+                P = _orth(np.hstack([J0, cc.J]))
+                proj = P @ (P.T @ best.sig)
+                nb = float(np.linalg.norm(best.sig))
+                corr[c.name] = float(np.linalg.norm(proj) / nb) if nb > 0 else 0.0
+            if not any(v > CONFUSION_CORR for v in corr.values()):
+                best.cc.cand.setup()
+                generic_effect = (best, corr, cv_g)
+                state.update(best.cc.params)
+                free.update({k: v for k, v in best.cc.free.items() if k in best.cc.params})
+                cur_fit = _refit(problem, state, free, sigma)
+                state = dict(cur_fit.params)
+
+    ext = cur_fit
+    Je, _, _ = jacobian(problem, ext.params, free)
+    cv_ext = cv_rms(Je, ext.weighted_residuals, sigma, folds, primary) if (picked or generic_effect) else cv0
+    if not picked and not generic_effect:
+        ext = baseline_fit
+    effects: list[dict] = []
+    for cc, e in picked:
+        e = dict(e)
         e["params"] = {k: ext.params[k] for k in cc.params}
         e["uncertainty"] = {k: ext.sigma[k] for k in cc.params}
+        effects.append(e)
+        verdict.append(e["name"])
+        verdict += [c["name"] for c in e["confused_with"]]
+    # gains in the order of selection, each against the model before it (refitted)
+    cvs = [cv0]
+    if effects:
+        st, fr = dict(base_params), dict(problem.free)
+        for k in base_params:
+            st[k] = ext.params[k]
+        for i, (cc, _) in enumerate(picked):
+            st.update({k: ext.params[k] for k in cc.params})
+            fr.update({k: v for k, v in cc.free.items() if k in cc.params})
+            if i == len(picked) - 1 and not generic_effect:
+                cvs.append(cv_ext)
+            else:
+                Jt, _, _ = jacobian(problem, st, fr)
+                cvs.append(cv_rms(Jt, _weighted(problem, st), sigma, folds, primary))
+        for i, e in enumerate(effects):
+            e["cv_rms_before"], e["cv_rms_after"] = cvs[i], cvs[i + 1]
+            e["gain"] = 1.0 - cvs[i + 1] / cvs[i] if cvs[i] > 0 else 0.0
+    if generic_effect:
+        best, corr, cv_g = generic_effect
+        desc = dict(best.desc)
+        drv = desc.pop("driver")
+        name = f"residual:{drv}"
+        effects.append({"name": name, "params": {"bR": ext.params["bR"], **{k: v for k, v in desc.items()
+                                                                             if k != "shape"}},
+                        "uncertainty": {"bR": ext.sigma["bR"]}, "cv_rms_before": cv_g, "cv_rms_after": cv_ext,
+                        "gain": 1.0 - cv_ext / cv_g if cv_g > 0 else 0.0, "confused_with": [],
+                        "shape": desc.get("shape"), "driver": drv, "correlation": corr})
+        verdict.append(name)
     rw = ext.weighted_residuals
     scale = math.sqrt(ext.chi2 / ext.dof) if ext.dof > 0 else 1.0
     stud = rw / max(scale, 1e-300)
+    test = _residual_test(problem, ext)
+    test["drivers"] = _driver_correlations(problem, ext.residuals)
+    cand_list = [entries[c.name] for c in problem.candidates]
+    names = [e["name"] for e in effects]
+    canon = [x for x in names if not x.startswith("residual:")]
+    ext_model = problem.extended_model(canon) if (problem.extended_model and canon) else problem.model
+    if generic_effect:
+        ext_model += f" + f_{effects[-1]['shape']}({effects[-1]['driver']})"
+    return Diagnosis(problem.procedure, baseline_fit, cv0, cand_list, effects, verdict, ext, cv_ext,
+                     names, test, stud, problem.model, ext_model, problem, deviance)
+
+
+def _residual_test(problem: "Problem", fitres: FitResult) -> dict:
+    """Ljung–Box per channel (Bonferroni) on time-ordered rows, else χ² of the weighted residuals."""
+    rw = fitres.weighted_residuals
     if problem.time_ordered:
         ch = max(1, int(problem.channels))
         tests = [ljung_box(rw.reshape(-1, ch)[:, j]) for j in range(ch)]
@@ -458,10 +826,32 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         if test["p_value"] is not None:
             test = dict(test, p_value=min(1.0, test["p_value"] * ch), channels=ch)
             test["white"] = bool(test["p_value"] > 0.01)
-    else:
-        test = chi2_test(rw, ext.dof)
-    cand_list = [entries[c.name] for c in problem.candidates]
-    ext_model = problem.extended_model([e["name"] for e in effects]) if (problem.extended_model and effects) \
-        else problem.model
-    return Diagnosis(problem.procedure, baseline_fit, cv0, cand_list, effects, verdict, ext, cv_ext,
-                     [e["name"] for e in effects], test, stud, problem.model, ext_model, problem, deviance)
+        return test
+    if problem.row_types is not None and problem.series is not None:
+        # a time series of primary rows next to auxiliary ones (compass): Ljung–Box on the series
+        sel = np.asarray(problem.series) == 0
+        if sel.sum() >= 10:
+            return ljung_box(rw[sel])
+    return chi2_test(rw, fitres.dof)
+
+
+def _driver_correlations(problem: "Problem", resid: np.ndarray) -> list[dict]:
+    """|correlation| of the residual (primary rows) with each driver and with its smoothed
+    trend (the residual averaged in 10 bins of the driver: structure, not only a slope), largest first."""
+    keep = np.ones(len(resid), bool) if problem.row_types is None else np.asarray(problem.row_types) == 0
+    out = []
+    for name, x in (problem.drivers or {}).items():
+        x = np.asarray(x, float)
+        ok = keep & np.isfinite(x)
+        if ok.sum() < 8 or np.ptp(x[ok]) <= 0:
+            continue
+        xr, rr = x[ok], resid[ok] - np.mean(resid[ok])
+        lin = float(np.corrcoef(xr, rr)[0, 1]) if np.std(rr) > 0 else 0.0
+        edges = np.quantile(xr, np.linspace(0, 1, 11))
+        b = np.clip(np.searchsorted(edges, xr, side="right") - 1, 0, 9)
+        means = np.array([rr[b == i].mean() if np.any(b == i) else 0.0 for i in range(10)])
+        trend = means[b]
+        explained = float(np.sum(trend ** 2) / max(np.sum(rr ** 2), 1e-300))
+        out.append({"driver": name, "correlation": lin, "explained_by_trend": explained})
+    out.sort(key=lambda d: -d["explained_by_trend"])
+    return out

@@ -149,6 +149,8 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
     prob.drivers = {"time [s]": np.repeat(tb, 3)}
     if Tb is not None:
         prob.drivers["temperature [°C]"] = np.repeat(Tb, 3)
+    prob.series = np.tile(np.arange(3), len(idx))
+    prob.generic = [(cond, {"time": tb, "temperature": Tb})]
     return prob
 
 
@@ -208,6 +210,10 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
         prob.drivers["time [s]"] = np.repeat(t, 3)
     if T is not None:
         prob.drivers["temperature [°C]"] = np.repeat(T, 3)
+    prob.series = np.tile(np.arange(3), len(v))
+    prob.generic = [(cond, {"time": t, "temperature": T, "input": np.linalg.norm(v, axis=1),
+                            "rate": None if W is None else np.linalg.norm(W, axis=1),
+                            "input_axis": v @ np.asarray(X0, float).T})]
     return prob
 
 
@@ -273,6 +279,7 @@ def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement
         prob.drivers["time [s]"] = np.concatenate([t, pad])
     if T is not None:
         prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
+    prob.generic = [(cond, {"time": t, "temperature": T, "input_axis": f0})]
     return prob
 
 
@@ -327,6 +334,9 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
     prob.drivers = {"input |f| [g]": rho, "mounting #": prob.groups.astype(float) + 1}
     if T is not None:
         prob.drivers["temperature [°C]"] = T
+    if t is not None:
+        prob.drivers["time [s]"] = t
+    prob.generic = [(cond, {"time": t, "temperature": T, "speed": w, "input_axis": f0})]
     return prob
 
 
@@ -357,21 +367,25 @@ def compass_problem(t_s, y_raw, W0, h0, field_nT, inclination_deg, *, noise_raw,
         cond_s = None
 
     def residual(p):
-        q = {k: v for k, v in p.items() if k not in ("c_dip", "field_scale")}
+        q = {k: v for k, v in p.items() if k not in ("c_dip", "field_scale", "dc_dip")}
         F = field_nT * float(p.get("field_scale", 1.0))
+        c_dip = p["c_dip"] + p["dc_dip"] if "dc_dip" in p else p.get("c_dip")
         mag = np.linalg.norm(mag_model.inverse(y, q, cond), axis=1) - F
         if not have_dip:
             return mag
         m = mag_model.inverse(ys, q, cond_s)
-        dip = np.einsum("ij,ij->i", fh, m / np.linalg.norm(m, axis=1, keepdims=True)) - p["c_dip"]
+        dip = np.einsum("ij,ij->i", fh, m / np.linalg.norm(m, axis=1, keepdims=True)) - c_dip
         return np.concatenate([mag, dip])
 
     W0 = np.triu(np.asarray(W0, float))
     base = {"W": W0, "h": np.asarray(h0, float)}
     free = {"W": np.triu(np.ones((3, 3), bool)), "h": True}
+    dip_known = have_dip and inclination_deg is not None
     if have_dip:
-        base["c_dip"] = np.array(-math.sin(math.radians(inclination_deg)) if inclination_deg is not None else 0.0)
-        free["c_dip"] = True
+        # the dip against IGRF's inclination: c fixed at −sin I where the site is known
+        base["c_dip"] = np.array(-math.sin(math.radians(inclination_deg)) if dip_known else
+                                 float(np.mean([0.0])))
+        free["c_dip"] = not dip_known
     # c_dip's start: the measured mean
     s_mag = np.full(len(y), max(noise_raw, 1e-12) * float(np.linalg.norm(W0, 2)))
     s_dip = np.asarray(static_sigma, float) if (have_dip and static_sigma is not None) else np.full(
@@ -383,7 +397,10 @@ def compass_problem(t_s, y_raw, W0, h0, field_nT, inclination_deg, *, noise_raw,
     cands = [_temp_candidate(T), _time_candidate(t),
              Candidate("mag_accel_misalignment", {"rho": np.zeros(3)}) if have_dip else
              Candidate("mag_accel_misalignment", reason="no static accelerometer holds: the dip angle cannot be checked"),
-             Candidate("field_anomaly", {"field_scale": np.array(1.0)}),
+             Candidate("field_anomaly", {"field_scale": np.array(1.0), "dc_dip": np.array(0.0)}) if dip_known else
+             Candidate("field_anomaly", reason="no static accelerometer holds or no site (latitude, longitude, date): "
+                       "the dip angle cannot be compared with IGRF's inclination, and a field magnitude that "
+                       "differs from IGRF is a common scale of W"),
              Candidate("time_varying_hard_iron", {"dh": np.zeros(3), "t_on_s": np.array(0.0)},
                        free={"dh": True, "t_on_s": False},
                        scan=("t_on_s", float(t.min()) + dur * np.linspace(0.1, 0.9, 33)))]
@@ -398,4 +415,12 @@ def compass_problem(t_s, y_raw, W0, h0, field_nT, inclination_deg, *, noise_raw,
     prob.drivers = {"time [s]": np.concatenate([t, pad])}
     if T is not None:
         prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
+    prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), -1)])
+    if dip_known:
+        prob.scale_free = {"c_dip": True}
+    m0 = (y - h0) @ W0.T
+    prob.generic = [(cond, {"time": t, "temperature": T, "input_axis": m0})]
+    if have_dip:
+        ms = (np.asarray(static_y, float) - h0) @ W0.T
+        prob.generic.append((cond_s, {"time": np.asarray(static_t, float), "temperature": Ts, "input_axis": ms}))
     return prob

@@ -46,9 +46,12 @@ def additive_terms(params: dict, cond: Conditions | None, n: int) -> np.ndarray:
 
     ``temperature_bias`` (block ``bT``) needs ``cond.temp_c``; ``time_drift`` (``bt``)
     needs ``cond.t_s``. A block present without its condition is an error, not a zero.
+    The generic ``residual:<driver>`` extension of diagnosis (block ``bR``, (p, k)) adds
+    ``Σ_p φ_p(x) bR[p]``: its basis ``cond.extra["basis"]``, (N, p) or per axis (N, p, k),
+    holds the smooth functions of the driver at each sample.
     """
     width = None
-    for key in ("bT", "bt"):
+    for key in ("bT", "bt", "bR"):
         if key in params:
             width = np.asarray(params[key]).shape[-1]
     if width is None:
@@ -62,6 +65,12 @@ def additive_terms(params: dict, cond: Conditions | None, n: int) -> np.ndarray:
         if cond is None or cond.t_s is None:
             raise ValueError("time_drift needs the time (cond.t_s)")
         out += np.outer(np.asarray(cond.t_s, dtype=float) - cond.t_ref_s, params["bt"])
+    if "bR" in params:
+        basis = None if cond is None else cond.extra.get("basis")
+        if basis is None:
+            raise ValueError("the generic extension needs its basis (cond.extra['basis'])")
+        B, c = np.asarray(basis, dtype=float), np.asarray(params["bR"], dtype=float)
+        out += B @ c if B.ndim == 2 else np.einsum("npk,pk->nk", B, c)
     return out
 
 
