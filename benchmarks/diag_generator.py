@@ -194,7 +194,7 @@ def tabletop_scenario(rng):
     return {"procedure": "accel-tabletop", "seed_rng": int(rng.integers(1 << 31)),
             "dirs": [dirs[k] for k in order], "labels": [labels[k] for k in order], "mode": str(mode),
             "unit": unit, "rate": rate, "hold": hold, "move": float(rng.uniform(2, 8)),
-            "white": white, "gm": white * float(rng.uniform(0.0, 0.08)), "tau": float(rng.uniform(20, 400)),
+            "white": white, "gm": white * float(rng.uniform(0.0, 0.04)), "tau": float(rng.uniform(20, 400)),
             "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk"])),
             "placement_deg": float(rng.uniform(0.1, 1.0)), "site": SITES[int(rng.integers(len(SITES)))],
             "K": (np.eye(3) + rng.normal(scale=0.01, size=(3, 3))) * ACCEL_UNITS[unit]
@@ -292,7 +292,7 @@ def gyro_scenario(rng):
     white = float(rng.uniform(5e-4, 5e-3))
     return {"procedure": "gyro-drift", "seed_rng": int(rng.integers(1 << 31)), "n_or": n_or, "total": total,
             "rate": float(rng.choice([20.0, 50.0, 100.0])), "unit": unit, "white": white,
-            "gm": white * float(rng.uniform(0.0, 0.02)), "tau": float(rng.uniform(30, 300)),
+            "gm": white * float(rng.uniform(0.0, 0.01)), "tau": float(rng.uniform(30, 300)),
             "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk"])),
             "site": SITES[int(rng.integers(len(SITES)))],
             "headings": [float(h) for h in rng.uniform(0, 360, n_or)],
@@ -413,7 +413,7 @@ def centrifuge_render(sc, effect=None, size=0.0, noise=True):
     if noise:
         y = y + rng.normal(scale=sc["noise"], size=(n, 3))
     meta = {"station-capture": "1", "procedure": "accel-centrifuge", "device": f"IND-P2-{sc['seed_rng'] % 10000}",
-            "accel_unit": "g", "radius_m": f"{sc['radius']:.4f}", "g_mps2": f"{sc['g']:.5f}"}
+            "accel_unit": "g", "radius_m": repr(sc["radius"]), "g_mps2": repr(sc["g"])}
     cols = {"position": np.array(lab, dtype=object), "speed_rad_s": ws, "ax": y[:, 0], "ay": y[:, 1],
             "az": y[:, 2], "temp_c": temp, "elapsed_s": el}
     u = f / np.linalg.norm(f, axis=1, keepdims=True)
@@ -436,7 +436,7 @@ def compass_scenario(rng):
     return {"procedure": "compass", "seed_rng": int(rng.integers(1 << 31)), "n_h": int(rng.integers(8, 21)),
             "hold": float(rng.uniform(2, 6)), "move": float(rng.uniform(1, 3)),
             "rate": float(rng.choice([25.0, 50.0, 100.0])), "unit": unit, "white_nT": float(rng.uniform(30, 200)),
-            "gm_nT": float(rng.uniform(0, 60)), "tau": float(rng.uniform(20, 200)),
+            "gm_nT": float(rng.uniform(0, 15)), "tau": float(rng.uniform(20, 200)),
             "temp": str(rng.choice(["constant", "warmup", "cycle", "walk"])),
             "site": SITES[int(rng.integers(len(SITES)))], "accel_unit": str(rng.choice(["g", "m/s^2"])),
             "W": np.eye(3) + np.triu(rng.normal(scale=0.05, size=(3, 3))),

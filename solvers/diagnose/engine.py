@@ -61,6 +61,7 @@ class Candidate:
     scan: tuple[str, np.ndarray] | None = None
     reason: str | None = None
     setup: Callable[[], None] | None = None   # generic candidates: write the driver basis into the conditions
+    folds: str | None = None   # the problem's fold set that validates it (None: the default groups)
 
 
 @dataclass
@@ -86,6 +87,8 @@ class Problem:
     generic: list = field(default_factory=list)      # [(Conditions, {driver: per-sample values})] for residual:<driver>
     generic_width: int = 3                  # outputs per sample the generic extension adds to (axes, beams)
     generic_scale: float = 1.0              # the generic extension's margin over the canonical test (nulls)
+    fold_sets: dict = field(default_factory=dict)    # other CV groupings by name (e.g. "time": blocks within holds)
+    screened: list = field(default_factory=list)     # quality findings of rows left out before the effect search
 
 
 @dataclass
@@ -382,6 +385,11 @@ def _hat_basis(x: np.ndarray, knots: int) -> np.ndarray:
     return B[:, 1:] - B[:, 1:].mean(axis=0)
 
 
+def _fold_for(driver: str) -> str | None:
+    """Temporal and thermal structure is validated on time blocks where a problem has them."""
+    return "time" if driver in ("time", "temperature") else None
+
+
 def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
     """The ``residual:<driver>`` candidates: (candidate, description) per driver and shape.
     Each candidate's block ``bR`` (p × width) multiplies a basis of the driver that its
@@ -411,7 +419,7 @@ def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
                     x = np.asarray(d[drv], float)
                     cond.extra["basis"] = fn(x)
             blocks = {"bR": np.zeros((p, width))}
-            return (Candidate(f"residual:{drv}", blocks, setup=setup), dict(desc, driver=drv))
+            return (Candidate(f"residual:{drv}", blocks, setup=setup, folds=_fold_for(drv)), dict(desc, driver=drv))
 
         if per_axis:   # a scale linear in temperature / time acting on each axis' input
             continue
@@ -427,7 +435,8 @@ def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
                             x = (np.asarray(d[drv], float) - lo) / span - 0.5
                             cond.extra["basis"] = (x[:, None] * np.asarray(d["input_axis"], float))[:, None, :]
                     return setup
-                out.append((Candidate(f"residual:{drv}", {"bR": np.zeros((1, width))}, setup=scale_fn_factory()),
+                out.append((Candidate(f"residual:{drv}", {"bR": np.zeros((1, width))}, setup=scale_fn_factory(),
+                                      folds=_fold_for(drv)),
                             {"shape": "linear", "acts_on": "scale", "driver": drv}))
         if base == "time":   # a bias that jumps (a current switched on, a knock)
             family = []
@@ -479,6 +488,30 @@ class _Eval:
         return self.D / self.infl
 
 
+class _Rounds:
+    """The rounds of one linearisation, one per fold set (made when first asked for)."""
+
+    def __init__(self, A, r0, sigma, fold_map, primary):
+        self.args = (A, r0, sigma, primary)
+        self.fold_map = fold_map
+        self.rounds: dict = {}
+        self.cvs: dict = {}
+
+    def get(self, key) -> _Round:
+        key = key if key in self.fold_map else None
+        if key not in self.rounds:
+            A, r0, sigma, primary = self.args
+            self.rounds[key] = _Round(A, r0, sigma, self.fold_map[key], primary)
+        return self.rounds[key]
+
+    def cv0(self, key) -> float:
+        key = key if key in self.fold_map else None
+        if key not in self.cvs:
+            A, r0, sigma, primary = self.args
+            self.cvs[key] = cv_rms(A, r0, sigma, self.fold_map[key], primary)
+        return self.cvs[key]
+
+
 def _gram_rank(G: np.ndarray) -> int:
     """Rank of a Gram matrix (columns scaled first), as matrix_rank of the tall matrix would give."""
     if G.shape[0] == 0:
@@ -524,6 +557,30 @@ class _Round:
         else:
             cv = out * self.sigma
         return d, e, float(np.sqrt(np.mean(cv ** 2)))
+
+
+class _Rounds:
+    """The rounds of one linearisation, one per fold set (made when first asked for)."""
+
+    def __init__(self, A, r0, sigma, fold_map, primary):
+        self.args = (A, r0, sigma, primary)
+        self.fold_map = fold_map
+        self.rounds: dict = {}
+        self.cvs: dict = {}
+
+    def get(self, key) -> _Round:
+        key = key if key in self.fold_map else None
+        if key not in self.rounds:
+            A, r0, sigma, primary = self.args
+            self.rounds[key] = _Round(A, r0, sigma, self.fold_map[key], primary)
+        return self.rounds[key]
+
+    def cv0(self, key) -> float:
+        key = key if key in self.fold_map else None
+        if key not in self.cvs:
+            A, r0, sigma, primary = self.args
+            self.cvs[key] = cv_rms(A, r0, sigma, self.fold_map[key], primary)
+        return self.cvs[key]
 
 
 def _gram_rank(G: np.ndarray) -> int:
@@ -576,6 +633,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     problem.sigma = sigma
     n = sigma.size
     folds = folds_of(problem.groups)
+    fold_map = {None: folds, **{k: folds_of(v) for k, v in problem.fold_sets.items()}}
     primary = None if problem.row_types is None else (np.asarray(problem.row_types) == 0)
     if baseline_fit is None:
         baseline_fit = fit(problem.residual, problem.baseline, free=problem.free, sigma=sigma)
@@ -624,7 +682,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         term_cur = typed_fit_term(r0, types)
         cv_cur = cv_rms(J0, r0, sigma, folds, primary)
         cands = [_candidate_columns(problem, state, c, Q0, r0) for c in remaining]
-        rnd = _Round(J0, r0, sigma, folds, primary)
+        rounds = _Rounds(J0, r0, sigma, fold_map, primary)
         evals = []
         for cc in cands:
             if cc.reason is not None:
@@ -632,7 +690,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": None, "cv_rms": None,
                                              "selected": False, "resolvable": False, "reason": cc.reason}
                 continue
-            ev = _evaluate(problem, cc, rnd, term_cur, types, n)
+            ev = _evaluate(problem, cc, rounds.get(cc.cand.folds), term_cur, types, n)
             evals.append(ev)
             if first:
                 entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": ev.delta_bic, "cv_rms": ev.cv,
@@ -642,9 +700,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         if first:
             for ev in evals:
                 deviance[ev.cc.cand.name] = {"D": ev.D_rob, "k": ev.k, "q": chi2_isf(ALPHA / max(m, 1), max(ev.k, 1)),
-                                             "cv_lower": bool(ev.cv < cv_cur), "inflation": ev.infl}
+                                             "cv_lower": bool(ev.cv < rounds.cv0(ev.cc.cand.folds)),
+                                             "inflation": ev.infl}
         first = False
-        passing = [ev for ev in evals if _passes(problem, ev, m, cv_cur, rank_cur, n)]
+        passing = [ev for ev in evals if _passes(problem, ev, m, rounds.cv0(ev.cc.cand.folds), rank_cur, n)]
         if not passing:
             break
         best = min(passing, key=lambda ev: ev.delta_bic)
@@ -679,10 +738,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             if cand.reason is not None:
                 ok = False
             else:
-                ev = _evaluate(problem, cand, _Round(J0, r0, sigma, folds, primary), typed_fit_term(r0, types),
-                               types, n)
+                rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
                 rank0 = _gram_rank(J0.T @ J0)
-                ok = _passes(problem, ev, len(problem.candidates), cv_rms(J0, r0, sigma, folds, primary), rank0, n)
+                ok = _passes(problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), rank0, n)
             if not ok:
                 picked.remove(item)
                 entries[cc.cand.name]["selected"] = False
@@ -711,7 +770,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         rank_cur = _gram_rank(J0.T @ J0)
         evals = []
         rp = r0 - Q0 @ (Q0.T @ r0)
-        rnd = _Round(J0, r0, sigma, folds, primary)
+        rounds = _Rounds(J0, r0, sigma, fold_map, primary)
         for item in gens:
             family = item[1] if item[0] == "scan" else [item]
             best_fam = None
@@ -730,14 +789,15 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             if item[0] == "scan":
                 cand.setup()
                 cc = _candidate_columns(problem, state, cand, Q0, r0)
-            ev = _evaluate(problem, cc, rnd, term_cur, types, n)
+            ev = _evaluate(problem, cc, rounds.get(cand.folds), term_cur, types, n)
             ev.desc = desc
             if item[0] == "scan":
                 ev.k += 1     # the scanned location or period
             evals.append(ev)
         # every basis tried counts as a test (a scanned family is as many tests as its members)
         m = sum(len(item[1]) if item[0] == "scan" else 1 for item in gens)
-        passing = [ev for ev in evals if _passes(problem, ev, m, cv_g, rank_cur, n, problem.generic_scale)]
+        passing = [ev for ev in evals if _passes(problem, ev, m, rounds.cv0(ev.cc.cand.folds), rank_cur, n,
+                                                 problem.generic_scale)]
         if passing:
             best = min(passing, key=lambda ev: ev.cv)
             # correlation with each canonical candidate's signature at this state

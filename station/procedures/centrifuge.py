@@ -236,9 +236,29 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         not capture.is_time_series else None
     el = np.asarray(capture.columns["elapsed_s"], float) if "elapsed_s" in capture.columns and \
         not capture.is_time_series else None
+    # the calibration's own screen (solvers.centrifuge.screen_rows): rows that disagree with the
+    # model far beyond the others are left out of the effect search too, and named by line
+    rejected = {r["line"]: r for r in base.get("rejected_rows") or []}
+    screened = []
+    if rejected:
+        keep = np.array([ln not in rejected for ln in lines])
+        N, w = N[keep], w[keep]
+        sigma_N = sigma_N[keep] if sigma_N is not None else None
+        labels = [x for x, k in zip(labels, keep) if k]
+        lines = [x for x, k in zip(lines, keep) if k]
+        temp = temp[keep] if temp is not None else None
+        el = el[keep] if el is not None else None
+        for ln, r in rejected.items():
+            screened.append({"kind": "outlier", "line": ln, "position": str(r["position"]),
+                             "where": f"line {ln} (position {r['position']}, ω={r['speed_rad_s']:.3g} rad/s)",
+                             "speed_rad_s": r["speed_rad_s"], "residual_g": r["residual_g"], "screened": True,
+                             "explanation": f"|f| − ρ = {r['residual_g']:+.3g} g, far beyond the other rows' spread "
+                                            "(the calibration leaves it out; so does the effect search)"
+                                            + (f"; {r['hint']}" if r.get("hint") else "")})
     prob = DP.centrifuge_problem(N, w, prep.radius_m, prep.g_mps2, p0, labels=labels, sigma_N=sigma_N,
                                  temp_c=temp, elapsed_s=el)
     prob.row_labels = [f"line {ln} (position {lab}, ω={x:.3g} rad/s)" for ln, lab, x in zip(lines, labels, w)]
+    prob.screened = screened
     return DiagnosisInput(prob, {"position": labels, "speed_rad_s": w},
                           "a row that disagrees with the norm condition: a transcription error or a mounting "
                           "that shifted", group_kind="mounting")

@@ -28,7 +28,7 @@ def _line(capture, row: int) -> int | None:
 # ---------------------------------------------------------------- quality
 
 def _quality(capture, diag, inp) -> list[dict]:
-    out: list[dict] = []
+    out: list[dict] = list(diag.problem.screened)   # rows the data-quality screen left out, by line
     if capture.is_time_series and "t" in capture.columns:
         for q in Q.gaps(capture.columns["t"]):
             q["line"] = _line(capture, q.pop("row"))
@@ -49,9 +49,14 @@ def _quality(capture, diag, inp) -> list[dict]:
         out.append(q)
     if diag.residual_test.get("white") is False:
         rt = diag.residual_test
+        drivers = [{"driver": d["driver"], "correlation": d["correlation"], "explained_by_trend": d["explained_by_trend"]}
+                   for d in rt.get("drivers", [])[:3]]
+        top = ", ".join(f"{d['driver']} ({100 * d['explained_by_trend']:.0f} % of the residual variance follows it)"
+                        for d in drivers) or "no driver of this capture"
         out.append({"kind": "residuals_not_white", "test": rt["test"], "p_value": rt.get("p_value"),
+                    "drivers": drivers,
                     "explanation": "the extended model's residuals are not noise-like: something remains that no "
-                                   "candidate of the library explains (or the noise is correlated)"})
+                                   f"candidate explains (or the noise is correlated); they follow most: {top}"})
     return out
 
 
@@ -91,11 +96,15 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True) -> 
 
     r = jsonable(result)
     unit = diag.problem.unit
-    L = [f"procedure   {r['procedure']}",
-         f"baseline    {r['baseline']['model']}",
-         f"            residual {r['baseline']['residual_rms']:.4g} {unit} RMS, held-out {r['baseline']['cv_rms']:.4g}",
-         "candidates  (selected: ΔBIC < k ln n − F·χ²_k(1 − 0.05/m), F = {:g}, and a lower held-out RMS)".format(
-             diag.problem.threshold)]
+    L = [f"procedure   {r['procedure']}"]
+    for q in r["quality"]:   # structured residuals are said first, before any verdict
+        if q["kind"] == "residuals_not_white":
+            L.append(f"WARNING     residuals not noise-like ({q['test']}, p = {q['p_value']:.3g}): "
+                     + q["explanation"].split("; ", 1)[-1])
+    L += [f"baseline    {r['baseline']['model']}",
+          f"            residual {r['baseline']['residual_rms']:.4g} {unit} RMS, held-out {r['baseline']['cv_rms']:.4g}",
+          "candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {:g}, "
+          "and a lower held-out RMS; refitted and re-tested after each pick)".format(diag.problem.threshold)]
     for c in r["candidates"]:
         if c.get("resolvable") is False:
             L.append(f"  {c['name']:<24} unresolvable: {c['reason']}")
@@ -107,6 +116,11 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True) -> 
                  f"(gain {100 * e['gain']:.1f} %)")
         for c in e["confused_with"]:
             L.append(f"            cannot be told apart from {c['name']} (correlation {c['correlation']:+.3f})")
+        if e["name"].startswith("residual:"):
+            corr = ", ".join(f"{k} {v:.2f}" for k, v in e.get("correlation", {}).items())
+            L.append(f"            outside the library: a {e.get('shape')} function of {e.get('driver')}"
+                     f"{' acting on the scale' if e['params'].get('acts_on') == 'scale' else ''}; "
+                     f"correlation with the library's signatures: {corr or 'none resolvable'}")
         for k, v in e["params"].items():
             L.append(f"            {k} = {np.round(np.asarray(v, dtype=float), 8).tolist()} ± "
                      f"{np.round(np.asarray(e['uncertainty'][k], dtype=float), 8).tolist()}")
@@ -117,7 +131,7 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True) -> 
         L.append(f"            residual test {rt['test']}: p = {rt['p_value']:.3g} "
                  f"({'noise-like' if rt['white'] else 'NOT noise-like'})")
     for q in r["quality"]:
-        where = q.get("position") or q.get("where") or q.get("column") or ""
+        where = q.get("where") if q.get("screened") else (q.get("position") or q.get("where") or q.get("column") or "")
         line = f" line {q['line']}" if q.get("line") else ""
         L.append(f"quality     {q['kind']} {where}{line}: {q['explanation']}")
     L.append("verdict     " + (", ".join(r["verdict"]) if r["verdict"] else "none"))

@@ -310,15 +310,50 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         temp_mean = temp
         t_mean = _col(capture, "t")
     std = np.array([p.std if p.std is not None else np.full(3, np.nan) for p in positions])
+    se = np.array([p.se for p in positions]) if all(p.se is not None for p in positions) else None
     prob = DP.tabletop_problem(np.array([p.mean for p in positions]), std if noise_known else None,
                                np.array([p.n for p in positions]), g, fw["K"], fw["b"],
                                labels=[p.label for p in positions], directions=dirs,
                                placement_sigma_rad=[p.placement_sigma_rad for p in positions],
-                               t_s=t_mean, temp_c=temp_mean, noise_known=noise_known)
+                               t_s=t_mean, temp_c=temp_mean, noise_known=noise_known, se=se,
+                               sub=_sub_holds(capture, positions) if capture.is_time_series else None)
     drivers = {"position": [p.label for p in positions], "time_s": t_mean, "temp_c": temp_mean}
     return DiagnosisInput(prob, drivers,
                           "a position that disagrees with the others: the unit moved, a wrong label, or a knock",
                           group_kind="position", quality=tuple(_moved_positions(capture)))
+
+
+SUB_HOLDS = 4          # parts a hold is cut into for diagnosis (time-resolved evidence)
+MIN_SUB_SAMPLES = 25   # a hold shorter than SUB_HOLDS × this stays one row
+
+
+def _sub_holds(capture, positions) -> dict | None:
+    """Each position's samples cut into SUB_HOLDS consecutive parts: their means and standard
+    errors from the same Allan model the calibration uses (solvers.allan.mean_standard_error)."""
+    from solvers.allan import mean_standard_error
+
+    t = _col(capture, "t")
+    a = _accel(capture)
+    temp = _col(capture, "temp_c")
+    out: dict[str, list] = {"V": [], "se": [], "pos": [], "part": [], "t": [], "temp": []}
+    for k, p in enumerate(positions):
+        if p.t_start_s is None or p.t_stop_s is None:
+            return None
+        idx = np.flatnonzero((t >= p.t_start_s) & (t <= p.t_stop_s) & np.all(np.isfinite(a), axis=1))
+        parts = SUB_HOLDS if len(idx) >= SUB_HOLDS * MIN_SUB_SAMPLES else 1
+        for j, chunk in enumerate(np.array_split(idx, parts)):
+            dt = float(np.median(np.diff(t[chunk]))) if len(chunk) > 1 else 1.0
+            me = mean_standard_error(a[chunk], dt)
+            out["V"].append(me.mean)
+            out["se"].append(me.se)
+            out["pos"].append(k)
+            out["part"].append(j)
+            out["t"].append(float(np.mean(t[chunk])))
+            out["temp"].append(float(np.nanmean(temp[chunk])) if temp is not None else np.nan)
+    res = {k: np.array(v) for k, v in out.items()}
+    if temp is None:
+        res["temp"] = None
+    return res
 
 
 def _moved_positions(capture) -> list[dict]:
