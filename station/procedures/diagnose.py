@@ -122,6 +122,9 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True) -> 
                      f"{' acting on the scale' if e['params'].get('acts_on') == 'scale' else ''}; "
                      f"correlation with the library's signatures: {corr or 'none resolvable'}")
         for k, v in e["params"].items():
+            if k not in e["uncertainty"]:   # a residual effect's description (step place, period, knots)
+                L.append(f"            {k} = {v}")
+                continue
             L.append(f"            {k} = {np.round(np.asarray(v, dtype=float), 8).tolist()} ± "
                      f"{np.round(np.asarray(e['uncertainty'][k], dtype=float), 8).tolist()}")
     L.append(f"extended    {r['extended']['model']}")
