@@ -230,8 +230,9 @@ class SerialSource:
         self.port = port
         self.protocol = protocol
         self.label = f"{port} ({protocol})"
-        self.reader = Reader(port, baud=baud, protocol=protocol)
-        self.header_timeout_s = header_timeout_s
+        # a flight controller is asked for its IMU stream, uid and parameters (station.device.mavlink.BoardLink)
+        self.reader = Reader(port, baud=baud, protocol=protocol, request_hz=200.0 if protocol == "mavlink" else None)
+        self.header_timeout_s = max(header_timeout_s, 6.0) if protocol == "mavlink" else header_timeout_s
         self.device_id = ""
         self.units = {"accel_unit": "", "gyro_unit": "", "mag_unit": ""}
         self.rate_hz = math.nan

@@ -224,3 +224,37 @@ def test_record_over_udp_a_stream_it_had_to_request(tmp_path, station_url, peer_
     assert cap.meta["accel_unit"] == "g" and cap.n_rows > 50
     np.testing.assert_allclose(cap.columns["az"], 1.0)  # 1000 mG
     np.testing.assert_allclose(cap.columns["gx"], 0.005)  # 5 mrad/s
+
+
+def test_px4_board_asked_for_highres_imu_and_its_integer_parameters_decoded_bytewise():
+    """A PX4 board (HEARTBEAT autopilot PX4) with no uid: the station asks for AUTOPILOT_VERSION,
+    then for the stream (MAV_CMD_SET_MESSAGE_INTERVAL of HIGHRES_IMU) and the parameter list;
+    CAL_ACC0_ID arrives as PX4 sends INT32 parameters, its bytes inside the float."""
+    import struct
+
+    board = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+
+    def frame(msg):
+        data = bytes(msg.pack(board))
+        board.seq = (board.seq + 1) % 256
+        return data
+
+    p = MavlinkParser(request_hz=250.0)
+    p.feed(frame(board.heartbeat_encode(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_PX4, 0, 0, 0)))
+    asked = MavlinkParser()  # decode what the station sent, with pymavlink
+    sent = [m for f in p.take_outgoing() for m in asked._mav.parse_buffer(f) or []]
+    assert [(m.get_type(), getattr(m, "command", None)) for m in sent] == [
+        ("COMMAND_LONG", mavlink2.MAV_CMD_REQUEST_MESSAGE), ("PARAM_REQUEST_LIST", None)]
+    p.feed(frame(board.autopilot_version_encode(0, 0, 0, 0, 0, b"\0" * 8, b"\0" * 8, b"\0" * 8, 0, 0, 0, b"\0" * 18)))
+    sent = [m for f in p.take_outgoing() for m in asked._mav.parse_buffer(f) or []]
+    interval = [m for m in sent if getattr(m, "command", None) == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL]
+    assert interval and interval[0].param1 == mavlink2.MAVLINK_MSG_ID_HIGHRES_IMU and interval[0].param2 == 4000.0
+    as_float = struct.unpack("<f", struct.pack("<i", 1310988))[0]
+    p.feed(frame(board.param_value_encode(b"CAL_ACC0_ID", as_float, mavlink2.MAV_PARAM_TYPE_INT32, 2, 0)))
+    p.feed(frame(board.param_value_encode(b"CAL_ACC0_XOFF", 0.0125, mavlink2.MAV_PARAM_TYPE_REAL32, 2, 1)))
+    p.feed(frame(board.highres_imu_encode(1000, 0, 0, 9.8, 0, 0, 0, 0.2, 0, 0.4, 0, 0, 0, 25.0, 0x1FFF, 0)))
+    meta = p.board_meta()
+    assert p.header.device_id == "mavlink-1-1"  # no uid on this board
+    assert meta["firmware"] == "px4" and meta["param.CAL_ACC0_ID"] == "1310988"
+    assert meta["param.CAL_ACC0_XOFF"] == "0.0125" and meta["accel_device_id"] == "1310988"
+    assert meta["params_received"] == "2/2" and meta["corrected"] == "true"

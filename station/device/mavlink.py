@@ -364,6 +364,14 @@ class BoardLink:
         self.outgoing.append(bytes(msg.pack(self.mav)))
         self.mav.seq = (self.mav.seq + 1) % 256
 
+    def _request_stream(self, key: tuple[int, int]) -> None:
+        s, c = key
+        self._send(self.mav.request_data_stream_encode(s, c, mavlink2.MAV_DATA_STREAM_RAW_SENSORS,
+                                                       int(round(self.rate_hz)), 1))
+        msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{self.want}")
+        self._send(self.mav.command_long_encode(s, c, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
+                                                1e6 / self.rate_hz, 0, 0, 0, 0, 0))
+
     def on_message(self, m, t: str, key: tuple[int, int], streaming: bool) -> None:
         if t == "HEARTBEAT" and m.autopilot != mavlink2.MAV_AUTOPILOT_INVALID and m.type != mavlink2.MAV_TYPE_GCS:
             self.target = self.target or key
@@ -375,11 +383,7 @@ class BoardLink:
             # the uid first (it names the device in the capture header), the stream after it or
             # after two heartbeats without an answer
             if not streaming and (self.uid is not None or self._heartbeats > 2):
-                self._send(self.mav.request_data_stream_encode(s, c, mavlink2.MAV_DATA_STREAM_RAW_SENSORS,
-                                                               int(round(self.rate_hz)), 1))
-                msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{self.want}")
-                self._send(self.mav.command_long_encode(s, c, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
-                                                        1e6 / self.rate_hz, 0, 0, 0, 0, 0))
+                self._request_stream(key)
             if self.uid is None:
                 self._send(self.mav.command_long_encode(s, c, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
                                                         mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0))
@@ -388,10 +392,15 @@ class BoardLink:
                 self._send(self.mav.param_request_list_encode(s, c))
         elif t == "AUTOPILOT_VERSION" and key == self.target:
             uid2 = bytes(getattr(m, "uid2", b"") or b"")
+            first = self.uid is None
             if m.uid:
                 self.uid = f"{int(m.uid):016x}"
             elif any(uid2):
                 self.uid = uid2.hex()
+            else:
+                self.uid = ""  # the board has no uid: named by sysid/compid
+            if first and not streaming:  # the name is known: ask for the stream now
+                self._request_stream(key)
         elif t == "PARAM_VALUE" and key == self.target:
             name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode("ascii", "replace")
             name = name.rstrip("\x00")

@@ -254,7 +254,9 @@ def record(
     recorded_at = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0)
     stream: CaptureStream | None = None
     try:
-        header = reader.wait_header(header_timeout_s)
+        # a flight controller asked for its stream answers after a heartbeat or two (1 Hz)
+        asked = protocol == "mavlink" and mavlink_rate_hz
+        header = reader.wait_header(max(header_timeout_s, 6.0) if asked else header_timeout_s)
         if header is None:
             warn(f"no header from {port} in {header_timeout_s:g} s: recording all columns, units unknown")
         columns = columns_for(header)
