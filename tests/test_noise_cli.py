@@ -73,6 +73,7 @@ def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_
         s = doc["sensors"][kind]
         z_n = (np.array(s["noise_density"]) - N) / np.array(s["noise_density_sigma"])
         z_k = (np.array(s["random_walk"]) - K) / np.array(s["random_walk_sigma"])
+        # N's sigma is honest; K's is understated ~2x (benchmarks/bench_noise.py): 3 sigma here
         assert np.all(np.abs(z_n) < 3) and np.all(np.abs(z_k) < 3), (kind, z_n, z_k)
         # the 68 % interval of each ADEV point brackets it
         adev, lo, hi = (np.array(s[k]) for k in ("adev", "adev_lo_68", "adev_hi_68"))
