@@ -522,3 +522,79 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
         > 4 * sigma_ofs + 0.05
     )
     assert "composed with the parameters in use" in text
+
+
+def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_path):
+    """The same for PX4: d = S_old (r - o_old) in gauss (calibration::Magnetometer::Correct,
+    offsets subtracted), slot found by CAL_MAG1_ID; truth: OFF = h, SCALE/ODIAG = sym(W)."""
+    from solvers.simulate import simulate
+
+    sim = simulate("compass", seed=5)
+    r_G = (
+        np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) / 100.0
+    )  # uT -> gauss
+    o_old = np.array([0.031, -0.045, 0.012])
+    S_old = np.array([[0.98, 0.01, 0.02], [0.01, 1.02, -0.015], [0.02, -0.015, 1.0]])
+    d_G = (r_G - o_old) @ S_old.T
+    odiag = {"X": (0, 1), "Y": (0, 2), "Z": (1, 2)}
+    meta = dict(
+        sim.meta,
+        mag_unit="gauss",
+        corrected="true",
+        firmware="px4",
+        mag_device_id="396809",
+        **{
+            "param.CAL_MAG1_ID": "396809",
+            "param.CAL_MAG1_PRIO": "75",
+            "param.CAL_MAG1_ROT": "0",
+        },
+        **{"param.CAL_MAG0_ID": "197388", "param.SENS_BOARD_ROT": "0"},
+        **{f"param.CAL_MAG1_{a}OFF": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+        **{
+            f"param.CAL_MAG1_{a}SCALE": repr(float(S_old[i, i]))
+            for i, a in enumerate(XYZ)
+        },
+        **{
+            f"param.CAL_MAG1_{a}ODIAG": repr(float(S_old[ij]))
+            for a, ij in odiag.items()
+        },
+    )
+    cols = dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])
+    path = tmp_path / "mag.csv"
+    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
+    assert code == 0, err
+    res = json.loads(out)
+    code, text, err = run(
+        capsys, "export", res["calibration_id"], "--format", "px4", "--db", db
+    )
+    assert code == 0, err
+    p = names_in(text, "px4")
+    assert (
+        p["CAL_MAG1_ID"] == 396809
+        and p["CAL_MAG1_PRIO"] == 75
+        and p["CAL_MAG1_ROT"] == 0
+    )
+    off = np.array([p[f"CAL_MAG1_{a}OFF"] for a in XYZ])
+    S = np.diag([p[f"CAL_MAG1_{a}SCALE"] for a in XYZ])
+    for a, (i, j) in odiag.items():
+        S[i, j] = S[j, i] = p[f"CAL_MAG1_{a}ODIAG"]
+    h_true_G = np.asarray(sim.truth["hard_iron"]) / 100.0
+    W_true = (
+        np.asarray(sim.truth["soft_iron"]) * 100.0 / 1e5
+    )  # uT -> nT, as gauss -> gauss
+    vals, vecs = np.linalg.eigh(W_true.T @ W_true)
+    S_true = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
+    sigma_off = np.abs(np.linalg.inv(S_old)) @ np.asarray(
+        res["uncertainty"]["hard_iron"]
+    )  # gauss
+    assert np.all(np.abs(off - h_true_G) < 4 * sigma_off + 5e-5), (
+        off - h_true_G,
+        sigma_off,
+    )
+    assert np.abs(S - S_true).max() < 5e-3, S - S_true
+    # the fit alone would miss the offsets in use by far more than its sigma
+    assert np.all(
+        np.abs(np.asarray(res["params"]["hard_iron"]) - h_true_G) > 4 * sigma_off + 5e-5
+    )
