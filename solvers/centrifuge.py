@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from solvers import linalg
 from solvers.errors import NotIdentifiable, TooFewPositions
 from solvers.fit import FitResult, fit, linear_fit
 from solvers.models import accel
@@ -94,7 +95,7 @@ def row_sigma(N, params, sigma_N) -> np.ndarray:
 def initial_guess(N: np.ndarray, rho: np.ndarray) -> dict:
     """Linear start: ``Σ_i (C2i N_i² + C1i N_i) + C0 = ρ²`` (an axis-aligned ellipsoid)."""
     H = np.column_stack([N ** 2, N, np.ones(len(N))])
-    c, *_ = np.linalg.lstsq(H, rho ** 2, rcond=None)
+    c, *_ = linalg.lstsq(H, rho ** 2, rcond=None)
     c2 = np.where(c[:3] > 0, c[:3], np.nan)
     S = 1.0 / np.sqrt(c2)
     b = -c[3:6] / (2.0 * c2)

@@ -71,6 +71,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from solvers import linalg
 from solvers.errors import NotIdentifiable, SolverError, TooFewPositions
 from solvers.fit import FitResult, fit
 from solvers.models import mag as mag_model
@@ -409,7 +410,7 @@ def ellipsoid_fit(y, field_nT: float | None = None, *,
     else:
         D = np.column_stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z,
                              2 * X, 2 * Y, 2 * Z, one])
-    _, sv, Vt = np.linalg.svd(D, full_matrices=False)
+    _, sv, Vt = linalg.svd(D, full_matrices=False)
     if sv[-2] <= 1e-9 * sv[0]:
         raise NotIdentifiable("the magnetometer vectors do not determine an ellipsoid "
                               "(they lie on a plane or a cone: turn the unit through more orientations)")

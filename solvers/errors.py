@@ -15,3 +15,7 @@ class NotIdentifiable(SolverError):
 
 class SaturatedInput(SolverError):
     """An axis sits at its range limit."""
+
+
+class NotFinite(SolverError, ValueError):
+    """NaN or infinity reached a decomposition (overflowing or absurd input)."""

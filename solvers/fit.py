@@ -26,6 +26,8 @@ from typing import Callable, Mapping
 import numpy as np
 from scipy.optimize import least_squares
 
+from solvers import linalg
+from solvers.errors import NotFinite
 from solvers.params import Packer, Params
 
 
@@ -103,7 +105,8 @@ def fit(
 
     r0 = fun(x0)
     if not np.all(np.isfinite(r0)):
-        raise ValueError("the residual is not finite at the starting point")
+        raise NotFinite("the residual is not finite at the starting point: values beyond what the model can "
+                        "carry (overflowing or absurd readings)")
     n, p = r0.size, x0.size
     if method is None:
         method = "lm" if (n >= p and loss == "linear") else "trf"
@@ -143,7 +146,7 @@ def summarise(packer: Packer, x: np.ndarray, fun, jac_arg, *, status: int, messa
     safe = np.where(dead, 1.0, colnorm)
     Js = J / safe
     if p:
-        U, s, Vt = np.linalg.svd(Js, full_matrices=False)
+        U, s, Vt = linalg.svd(Js, full_matrices=False)
     else:
         s, Vt = np.zeros(0), np.zeros((0, 0))
     smax = float(s.max()) if s.size else 0.0
@@ -196,7 +199,7 @@ def linear_fit(H: np.ndarray, y: np.ndarray, sigma: float | np.ndarray | None = 
     result type, one identifiability test): ``x`` comes back as block ``'x'``."""
     H = np.asarray(H, dtype=float)
     y = np.asarray(y, dtype=float)
-    x_ls, *_ = np.linalg.lstsq(H, y, rcond=None)
+    x_ls, *_ = linalg.lstsq(H, y, rcond=None)
     res = fit(lambda p: H @ p["x"] - y, {"x": x_ls}, sigma=sigma,
               jac=lambda p: H, **kw)
     if names is not None:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from solvers import linalg
 from solvers import allan
 from solvers.errors import NotIdentifiable, SolverError, TooFewPositions
 from solvers.fit import linear_fit
@@ -84,7 +85,7 @@ def drift_reference(omega_rad_s, ref_rad_s, dt_s: float,
     # misalignment or scale error M biases the mean difference by M · mean(Ω).
     R = r - r.mean(axis=0)
     if np.linalg.matrix_rank(R.T @ R) == 3:
-        M = np.linalg.lstsq(R, (w - r) - (w - r).mean(axis=0), rcond=None)[0].T
+        M = linalg.lstsq(R, (w - r) - (w - r).mean(axis=0), rcond=None)[0].T
         extra["rate_coupling"] = M
         bias = M @ r.mean(axis=0)
         extra["rate_coupling_bias_rad_s"] = bias

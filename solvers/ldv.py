@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from solvers import linalg
 from solvers.errors import NotIdentifiable, TooFewPositions
 from solvers.fit import linear_fit
 from solvers.models import ldv as ldv_model
@@ -112,7 +113,7 @@ def hac_covariance(H, r, HtH_inv, max_lag: int | None = None) -> np.ndarray:
 def velocity_condition(v_body_mps) -> float:
     """cond(HᵀH) of the body velocity set."""
     H = np.asarray(v_body_mps, dtype=float)
-    s = np.linalg.svd(H, compute_uv=False)
+    s = linalg.svd(H, compute_uv=False)
     return float((s[0] / s[-1]) ** 2) if s[-1] > 0 else math.inf
 
 

@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from solvers import linalg
 from solvers.errors import NotIdentifiable, SolverError, TooFewPositions
 
 __all__ = [
@@ -1079,12 +1080,12 @@ def _fit_sphere_centre(means: np.ndarray) -> np.ndarray:
             "orientations that are not all in one plane")
     a = np.hstack([2.0 * means, np.ones((len(means), 1))])
     b = np.sum(means * means, axis=1)
-    sv = np.linalg.svd(a, compute_uv=False)
+    sv = linalg.svd(a, compute_uv=False)
     if sv[-1] <= 1e-9 * sv[0]:
         raise NotIdentifiable(
             "the interval means lie in one plane: the zero-g offset cannot be fitted; "
             "pass offset= explicitly")
-    sol, *_ = np.linalg.lstsq(a, b, rcond=None)
+    sol, *_ = linalg.lstsq(a, b, rcond=None)
     return sol[:3]
 
 

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from solvers import linalg
 from solvers.errors import NotIdentifiable, TooFewPositions
 from solvers.fit import FitResult, fit, linear_fit
 from solvers.models import accel
@@ -174,7 +175,7 @@ def ellipsoid_initial(V: np.ndarray, g_mps2: float) -> tuple[np.ndarray, np.ndar
     H = np.column_stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z, np.ones(len(V))])
     scale = np.abs(H).max(axis=0)
     scale[scale == 0] = 1.0
-    th, *_ = np.linalg.lstsq(H / scale, np.full(len(V), g_mps2 ** 2), rcond=None)
+    th, *_ = linalg.lstsq(H / scale, np.full(len(V), g_mps2 ** 2), rcond=None)
     th = th / scale
     Q = np.array([[th[0], th[3], th[4]], [th[3], th[1], th[5]], [th[4], th[5], th[2]]])
     q = th[6:9]
@@ -244,7 +245,7 @@ def position_condition(V: np.ndarray, B, M) -> float:
     keep = [0, 1, 2, 3, 4, 5, 7, 8, 11]  # B, M00 M01 M02, M11 M12, M22
     J = J[:, keep]
     J = J / np.linalg.norm(J, axis=0)
-    s = np.linalg.svd(J, compute_uv=False)
+    s = linalg.svd(J, compute_uv=False)
     if len(V) < 9 or s[-1] <= 1e-12 * s[0]:
         return math.inf
     return float(s[0] / s[-1])

@@ -11,8 +11,10 @@ import math
 
 import numpy as np
 
+from solvers.errors import SolverError
 from station.errors import InputError, UnsupportedError
 from station.procedures import registry
+from station.guard import check_extremes, check_result, printed_warnings, quiet_stdout
 
 
 def procedure_module(procedure: str | None, path=None):
@@ -32,15 +34,38 @@ def procedure_module(procedure: str | None, path=None):
 
 def calibrate_capture(capture, method: str | None = None, *, prepared=None) -> dict:
     """The calibrate.md result for ``capture`` (a :class:`station.capture.Capture`);
-    ``prepared``: the module's ``prepare(capture)``, when the caller has it already."""
+    ``prepared``: the module's ``prepare(capture)``, when the caller has it already.
+
+    Guarded (``station.guard``): numbers no instrument produces and a time axis that does
+    not advance are refused before the fit; anything a dependency prints meanwhile becomes
+    a warning of the result (never stdout); a core parameter the data cannot determine
+    (non-finite) is a refusal, not a null.
+    """
     module = procedure_module(capture.procedure, capture.path)
+    check_extremes(capture)
+    kwargs = {} if prepared is None else {"prepared": prepared}
+    with quiet_stdout() as printed:
+        result = guarded(capture, module.calibrate, capture, method=method, **kwargs)
+    if printed:
+        result.setdefault("warnings", []).extend(printed_warnings(printed))
+    check_result(capture, result)
+    return result
+
+
+def guarded(capture, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` with numerical breakdowns as one-line refusals naming the capture."""
+    where = f"{capture.path or 'capture'}: {capture.procedure}"
     try:
-        if prepared is None:
-            return module.calibrate(capture, method=method)
-        return module.calibrate(capture, method=method, prepared=prepared)
+        with np.errstate(all="ignore"):
+            return fn(*args, **kwargs)
     except np.linalg.LinAlgError as exc:  # NaN/inf reached a decomposition: degenerate or absurd data
-        raise UnsupportedError(f"{capture.path}: {capture.procedure}: the fit failed numerically ({exc}); "
+        raise UnsupportedError(f"{where}: the fit failed numerically ({exc}); "
                                "check the data: constant, all zero or absurdly large values?") from None
+    except SolverError as exc:
+        raise UnsupportedError(f"{where}: {exc}") from None
+    except (OverflowError, FloatingPointError) as exc:
+        raise UnsupportedError(f"{where}: a number overflowed in the fit ({exc}): the data hold values "
+                               "far beyond the sensor's range") from None
 
 
 def jsonable(obj):

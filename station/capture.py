@@ -56,11 +56,11 @@ _UNIT_KIND = {"accel_unit": "an acceleration", "gyro_unit": "an angular-rate", "
 _NUMERIC_META: dict[str, tuple] = {
     "latitude_deg": (lambda x: -90.0 <= x <= 90.0, "must be between -90 and 90"),
     "longitude_deg": (lambda x: -180.0 <= x <= 360.0, "must be between -180 and 360"),
-    "altitude_m": (None, ""),
-    "g_mps2": (lambda x: x > 0.0, "must be positive"),
-    "radius_m": (lambda x: x > 0.0, "must be positive"),
-    "heading_deg": (None, ""),
-    "sample_rate_hz": (lambda x: x > 0.0, "must be positive"),
+    "altitude_m": (lambda x: -12000.0 <= x <= 1.0e6, "must be between -12000 and 1000000 (m above the ellipsoid)"),
+    "g_mps2": (lambda x: 0.0 < x <= 1000.0, "must be positive and at most 1000 m/s²"),
+    "radius_m": (lambda x: 0.0 < x <= 1.0e4, "must be positive and at most 10000 m"),
+    "heading_deg": (lambda x: -360.0 <= x <= 720.0, "must be between -360 and 720"),
+    "sample_rate_hz": (lambda x: 0.0 < x <= 1.0e9, "must be positive and at most 1e9"),
 }
 
 # Units shown by `station inspect` for the columns the spec names.
@@ -81,6 +81,8 @@ _NONFINITE_WORDS = {"nan", "inf", "infinity"}
 _FAST_BYTES = bytes(range(0x20, 0x7F)) + b"\t\n"
 _LABEL_WIDTH = 32  # fixed width of the text field in the fast path; longer labels take the slow path
 _MAX_HEAD_LINE = 1 << 20
+_MAX_DATA_LINE = 1 << 20  # a data line longer than this is refused (no capture row is 1 MiB)
+BLOCK_BYTES = 8 << 20  # the reader's text budget: a block is at most this plus one line
 DEFAULT_CHUNK_ROWS = 65536
 
 
@@ -520,14 +522,23 @@ class _Parser:
         return x
 
 
-def _blocks(f, block_bytes: int) -> Iterator[bytes]:
-    """Blocks of whole lines, about ``block_bytes`` long."""
+def _blocks(f, block_bytes: int, path: str, first_line: int) -> Iterator[bytes]:
+    """Blocks of whole lines, about ``block_bytes`` long (at most ``BLOCK_BYTES`` plus one
+    line of at most ``_MAX_DATA_LINE``): memory stays bounded whatever the line lengths."""
+    block_bytes = max(1, min(int(block_bytes), BLOCK_BYTES))
+    lineno = first_line
     while True:
         block = f.read(block_bytes)
         if not block:
             return
         if not block.endswith(b"\n"):
-            block += f.readline()
+            tail = f.readline(_MAX_DATA_LINE + 1)
+            block += tail
+            start = block.rfind(b"\n", 0, len(block) - 1) + 1
+            if len(block.rstrip(b"\r\n")) - start > _MAX_DATA_LINE:
+                raise InputError(path, lineno + block.count(b"\n", 0, start),
+                                 f"line longer than {_MAX_DATA_LINE} bytes: not a capture row")
+        lineno += block.count(b"\n")
         yield block
 
 
@@ -540,12 +551,14 @@ def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[d
     parser = _Parser(path, head.header)
     with _open(path) as f:
         f.seek(head.data_offset)
-        sample = f.readline(_MAX_HEAD_LINE)
+        sample = f.readline(_MAX_DATA_LINE + 1)
+        if len(sample) > _MAX_DATA_LINE:
+            raise InputError(path, head.header_line + 1, f"line longer than {_MAX_DATA_LINE} bytes: not a capture row")
         f.seek(head.data_offset)
         lineno = head.header_line + 1
         pending_blank: int | None = None
         n_rows = 0
-        for block in _blocks(f, max(1, rows * len(sample))):
+        for block in _blocks(f, rows * max(1, len(sample)), path, lineno):
             first = lineno
             lineno += _count_lines(block)
             end = len(block.rstrip())

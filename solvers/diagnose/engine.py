@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 from scipy.special import gammaincc, gammainccinv
 
+from solvers import linalg
 from solvers.fit import FitResult, fit
 from solvers.params import Packer, as_params
 
@@ -141,7 +142,7 @@ def _solve_normal(G: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Minimum-norm solution of ``G x = b`` (G a Gram matrix), columns scaled first."""
     d = np.sqrt(np.clip(np.diag(G), 0.0, None))
     d = np.where(d > 0, d, 1.0)
-    x, *_ = np.linalg.lstsq(G / np.outer(d, d), b / d, rcond=1e-12)
+    x, *_ = linalg.lstsq(G / np.outer(d, d), b / d, rcond=1e-12)
     return x / d
 
 
@@ -212,7 +213,7 @@ def _orth(A: np.ndarray) -> np.ndarray:
     d = np.linalg.norm(A, axis=0)
     d = np.where(d > 0, d, 1.0)
     As = A / d
-    w, V = np.linalg.eigh(As.T @ As)
+    w, V = linalg.eigh(As.T @ As)
     keep = w > 1e-12 * max(w.max(), 1e-300)
     return (As @ V[:, keep]) / np.sqrt(w[keep])
 

@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from solvers import linalg
 from solvers import frames
 from solvers.diagnose.engine import Candidate, Problem
 from solvers.models import Conditions
@@ -342,7 +343,7 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
         if len(idx) >= 2 and np.ptp(w[idx]) > 0:
             A = w[idx] ** 2 * radius_m / g_mps2
             H = np.column_stack([-A, np.ones(len(idx))])
-            coef, *_ = np.linalg.lstsq(H, f0[idx], rcond=None)
+            coef, *_ = linalg.lstsq(H, f0[idx], rcond=None)
             c = coef[0] / max(np.linalg.norm(coef[0]), 1e-12)
             c_dir[idx] = c
     T = np.asarray(temp_c, float) if temp_c is not None else None

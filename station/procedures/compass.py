@@ -22,7 +22,7 @@ import numpy as np
 from solvers import compass as C
 from solvers.errors import SolverError
 from solvers.frames import G_STANDARD_MPS2
-from solvers.geomag import igrf_reference
+from solvers.geomag import igrf_date, igrf_reference
 from solvers.units import si_factor
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
@@ -53,6 +53,9 @@ def _reference(capture, warnings: list[str]) -> dict | None:
                          "the IGRF field needs the date of the recording")
     alt = capture.float_meta("altitude_m", 0.0)
     try:
+        _, note = igrf_date(date)
+        if note:
+            warnings.append(note)
         return igrf_reference(lat, lon, alt, date)
     except ValueError as exc:
         raise InputError(capture.path, capture.meta_lines.get("date"), f"metadata 'date': {exc}") from None

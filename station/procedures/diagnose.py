@@ -64,18 +64,26 @@ def _quality(capture, diag, inp) -> list[dict]:
 
 def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
     """(diagnose.md dict, the engine's Diagnosis, the procedure's diagnosis input)."""
-    from station.calibrate import calibrate_capture, procedure_module
+    from station.calibrate import calibrate_capture, guarded, procedure_module
+    from station.guard import check_extremes, quiet_stdout
 
     module = procedure_module(capture.procedure, capture.path)  # unknown/missing procedure → InputError
     if not hasattr(module, "diagnosis_input"):
         raise UnsupportedError(f"{capture.procedure}: no diagnosis for this procedure")
-    prepared = module.prepare(capture)
+    check_extremes(capture)
+    with quiet_stdout():  # a dependency's print never reaches stdout (the result carries the findings)
+        prepared = guarded(capture, module.prepare, capture)
     base = calibrate_capture(capture, prepared=prepared) if module.DIAGNOSIS_BASELINE else None
-    try:
-        inp = module.diagnosis_input(capture, base, prepared)
-        diag = diagnose(inp.problem)
-    except SolverError as exc:
-        raise UnsupportedError(f"{_where(capture)}: {capture.procedure}: diagnosis failed: {exc}") from None
+
+    def run():
+        try:
+            inp = module.diagnosis_input(capture, base, prepared)
+            return inp, diagnose(inp.problem)
+        except SolverError as exc:
+            raise UnsupportedError(f"{_where(capture)}: {capture.procedure}: diagnosis failed: {exc}") from None
+
+    with quiet_stdout():
+        inp, diag = guarded(capture, run)
     bp = diag.baseline
     out = {
         "procedure": capture.procedure,

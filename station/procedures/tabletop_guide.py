@@ -228,7 +228,7 @@ class P1Guide:
         for i in range(3):
             d = np.array([s.direction[i] for s in caps])
             v = np.array([s.mean[i] for s in caps])
-            if len(caps) >= 2 and np.ptp(d) > 0.5:
+            if len(caps) >= 2 and np.ptp(d) > 0.5 and np.all(np.isfinite(v)):
                 A = np.column_stack([np.ones(len(d)), self.g_mps2 * d])
                 (b, k), *_ = np.linalg.lstsq(A, v, rcond=None)
                 if abs(k) > 0:
