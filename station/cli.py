@@ -6,6 +6,7 @@ Subcommands live one per module in `station/commands/`; each module defines
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import pkgutil
@@ -56,6 +57,27 @@ def db_path(args: argparse.Namespace) -> str:
     return os.path.join(base, "station", "station.db")
 
 
+# Commands that own the terminal (Textual draws it); everything else writes through SafeStream.
+_TERMINAL_APPS = ("tui", "demo")
+
+
+@contextlib.contextmanager
+def _safe_streams(args: argparse.Namespace):
+    """stdout/stderr escape terminal-active characters (station.textsafe) while a command runs."""
+    from station.textsafe import SafeStream
+
+    if getattr(args, "command", None) in _TERMINAL_APPS:
+        yield
+        return
+    as_json = bool(getattr(args, "json", False)) or getattr(args, "format", None) == "json"
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = SafeStream(out, json=as_json), SafeStream(err)
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = out, err
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -69,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
             args = parser.parse_args(["walkthrough"])
         func = args.func
     debug = bool(os.environ.get("STATION_DEBUG"))
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _safe_streams(args):
         if not debug:  # numerics' RuntimeWarnings are not the operator's business: results carry warnings
             warnings.simplefilter("ignore", RuntimeWarning)
         try:

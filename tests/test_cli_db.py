@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from db import Store
+from station.textsafe import safe
 from db_testdata import accel_result, compass_result, small_capture
 from station.cli import main
 
@@ -91,19 +92,21 @@ def test_unusable_database_file_is_one_line(capsys, tmp_path):
     assert code == 2 and err.count("\n") == 1 and "cannot open the station database" in err
 
 
-def test_nasty_id_and_notes_shown_verbatim(capsys, db):
+def test_nasty_id_and_notes_stored_verbatim_shown_with_control_characters_escaped(capsys, db):
     assert run(capsys, "devices", "add", NASTY_ID, "--notes", NASTY_NOTES, "--model", "m'x", "--db", db)[0] == 0
     code, out, _ = run(capsys, "devices", "show", NASTY_ID, "--db", db)
-    assert code == 0 and f"device: {NASTY_ID}\n" in out and f"notes: {NASTY_NOTES}\n" in out
+    # quotes, SQL and Unicode as they are; the newline and tab escaped so they cannot forge rows
+    assert code == 0 and f"device: {safe(NASTY_ID)}\n" in out and f"notes: {safe(NASTY_NOTES)}\n" in out
+    assert "\\nsecond line" in out and "\nsecond line" not in out
     code, out, _ = run(capsys, "devices", "list", "--db", db)
-    assert NASTY_ID in out and NASTY_NOTES in out
+    assert safe(NASTY_ID) in out and safe(NASTY_NOTES) in out and len(out.splitlines()) == 2
     code, out, _ = run(capsys, "devices", "list", "--json", "--db", db)
     assert json.loads(out)[0]["id"] == NASTY_ID and json.loads(out)[0]["notes"] == NASTY_NOTES
     with Store(db) as s:
         meta, cols = small_capture(device=NASTY_ID)
         s.save_calibration(accel_result(device=NASTY_ID), meta=meta, columns=cols)
     code, out, _ = run(capsys, "history", NASTY_ID, "--db", db)
-    assert code == 0 and out.startswith(f"device {NASTY_ID}: 1 calibration")
+    assert code == 0 and out.startswith(f"device {safe(NASTY_ID)}: 1 calibration")
     code, out, _ = run(capsys, "history", NASTY_ID, "--json", "--db", db)
     assert json.loads(out)[0]["device_id"] == NASTY_ID
 
@@ -117,7 +120,7 @@ def test_nasty_id_verbatim_through_a_real_process(db):
                           capture_output=True)
     assert show.returncode == 0
     text = show.stdout.decode("utf-8")
-    assert f"device: {NASTY_ID}\n" in text and f"notes: {NASTY_NOTES}\n" in text
+    assert f"device: {safe(NASTY_ID)}\n" in text and f"notes: {safe(NASTY_NOTES)}\n" in text
 
 
 # --- history ---------------------------------------------------------------------------

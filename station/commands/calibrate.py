@@ -51,7 +51,13 @@ def run(args: argparse.Namespace) -> int:
         result["device"] = args.device
     if args.save:
         result["calibration_id"] = _save(args, capture, result)
-    print(to_json(result) if args.json else format_text(result))
+    if args.json:
+        print(to_json(result))
+    else:
+        from station.textsafe import safe
+
+        shown = dict(result, device=safe(result["device"]) if result.get("device") is not None else None)
+        print(format_text(shown))
     return 0
 
 

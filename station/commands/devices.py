@@ -6,6 +6,7 @@ import sys
 
 from station.commands._dbutil import add_db_option, fmt_num, open_store, print_json, require_device
 from station.errors import InputError
+from station.textsafe import safe
 
 
 def register(subparsers) -> None:
@@ -66,7 +67,7 @@ def _add(args: argparse.Namespace) -> int:
             sensor_kinds=args.kinds,
             tolerances=_tolerances(args.tolerance),
         )
-    sys.stdout.write(f"{'updated' if existed else 'added'} device {device['id']}\n")
+    sys.stdout.write(f"{'updated' if existed else 'added'} device {safe(device['id'])}\n")
     return 0
 
 
@@ -82,8 +83,9 @@ def _list(args: argparse.Namespace) -> int:
     rows = [("ID", "MODEL", "KINDS", "INTERVAL_D", "CALIBRATIONS", "LAST_CALIBRATED", "NOTES")]
     for d in devices:
         rows.append((
-            d["id"], d["model"] or "-", ",".join(d["sensor_kinds"]) or "-", fmt_num(d["interval_days"]),
-            str(d["n_calibrations"]), d["last_calibrated"] or "-", d["notes"] or "",
+            safe(d["id"]), safe(d["model"] or "-"), safe(",".join(d["sensor_kinds"]) or "-"),
+            fmt_num(d["interval_days"]), str(d["n_calibrations"]), safe(d["last_calibrated"] or "-"),
+            safe(d["notes"] or ""),
         ))
     widths = [max(len(r[i]) for r in rows) if i < 6 else 0 for i in range(7)]
     for r in rows:
@@ -106,16 +108,16 @@ def _show(args: argparse.Namespace) -> int:
         print_json(device)
         return 0
     out = [
-        f"device: {device['id']}",
-        f"model: {device['model'] or '-'}",
-        f"sensor kinds: {', '.join(device['sensor_kinds']) or '-'}",
+        f"device: {safe(device['id'])}",
+        f"model: {safe(device['model'] or '-')}",
+        f"sensor kinds: {safe(', '.join(device['sensor_kinds']) or '-')}",
         f"interval: {fmt_num(device['interval_days'])} days" if device["interval_days"] else "interval: -",
-        "tolerances: " + (", ".join(f"{k}={v:g}" for k, v in device["tolerances"].items()) or "-"),
-        f"created: {device['created']}",
+        "tolerances: " + (", ".join(f"{safe(k)}={fmt_num(v)}" for k, v in device["tolerances"].items()) or "-"),
+        f"created: {safe(device['created'])}",
         f"calibrations: {len(history)}",
     ]
     for procedure, h in sorted(latest.items()):
-        out.append(f"latest {procedure}: #{h['id']} {h['time']}")
-    out.append(f"notes: {device['notes'] if device['notes'] is not None else '-'}")
+        out.append(f"latest {safe(procedure)}: #{h['id']} {safe(h['time'])}")
+    out.append(f"notes: {safe(device['notes']) if device['notes'] is not None else '-'}")
     sys.stdout.write("\n".join(out) + "\n")
     return 0

@@ -8,6 +8,7 @@ import sys
 from station.commands._dbutil import fmt_num, open_store, print_json, require_device
 from station.procedures import registry
 from station.errors import InputError
+from station.textsafe import safe
 
 MAX_PLOTS = 4
 
@@ -67,7 +68,7 @@ def _plot(trends: list[dict]) -> str:
         rate = "" if t["rate_per_year"] is None else (
             f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} /year"
         )
-        plt.title(f"{t['procedure']} {t['param']}{rate}")
+        plt.title(safe(f"{t['procedure']} {t['param']}{rate}"))
         plt.xlabel("year")
         text = plt.build()
         figures.append(text if color else plt.uncolorize(text))
@@ -84,16 +85,16 @@ def run(args: argparse.Namespace) -> int:
         print_json(trends)
         return 0
     if not trends:
-        sys.stdout.write(f"device {args.id}: no accepted calibrations yet\n")
+        sys.stdout.write(f"device {safe(args.id)}: no accepted calibrations yet\n")
         return 0
-    out = [f"device {args.id}: drift per year over its accepted calibrations (weighted linear fit)"]
+    out = [f"device {safe(args.id)}: drift per year over its accepted calibrations (weighted linear fit)"]
     header = ("PROCEDURE", "PARAM", "N", "IN_USE", "RATE/YEAR", "±SIGMA", "TOLERANCE", "LEAVES_TOLERANCE")
     rows = [header]
     for t in trends:
         rows.append((
-            t["procedure"], t["param"], str(t["n"]), fmt_num(t["value_in_use"]),
+            safe(t["procedure"]), safe(t["param"]), str(t["n"]), fmt_num(t["value_in_use"]),
             fmt_num(t["rate_per_year"], 3), fmt_num(t["rate_sigma_per_year"], 2),
-            fmt_num(t["tolerance"]), (t["leaves_tolerance"] or "-")[:10],
+            fmt_num(t["tolerance"]), safe((t["leaves_tolerance"] or "-")[:10]),
         ))
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
     out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
@@ -106,5 +107,7 @@ def run(args: argparse.Namespace) -> int:
             chosen = sorted(plottable, key=_significance, reverse=True)[:MAX_PLOTS]
         if chosen:
             note = "" if args.param else f" (the {len(chosen)} steepest relative to their sigma; --param NAME for others)"
-            sys.stdout.write(f"\nplot{note}:\n" + _plot(chosen) + "\n")
+            # the plot's own colour codes (a terminal only) pass; its titles were made safe above
+            write = getattr(sys.stdout, "write_trusted", sys.stdout.write)
+            write(f"\nplot{note}:\n" + _plot(chosen) + "\n")
     return 0

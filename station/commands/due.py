@@ -10,6 +10,7 @@ import sys
 
 from station.commands._dbutil import open_store, print_json
 from station.errors import InputError
+from station.textsafe import safe
 
 
 def register(subparsers) -> None:
@@ -43,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
                 when = f"overdue by {-e['days_left']:.0f} d (due {e['due'][:10]})"
             else:
                 when = f"due in {e['days_left']:.0f} d ({e['due'][:10]})"
-            sys.stdout.write(f"{e['device_id']}: {when}\n")
+            sys.stdout.write(f"{safe(e['device_id'])}: {when}\n")
             for r in e["reasons"]:
-                sys.stdout.write(f"    {r['text']}\n")
+                sys.stdout.write(f"    {safe(r['text'])}\n")
     return 1 if items else 0

@@ -6,6 +6,7 @@ import sys
 
 from station.commands._dbutil import fmt_num, open_store, print_json, require_device
 from station.procedures import registry
+from station.textsafe import safe
 
 
 def register(subparsers) -> None:
@@ -23,7 +24,7 @@ def _param_lines(params: dict, uncertainty: dict) -> list[str]:
     lines = []
     for key, value in params.items():
         if isinstance(value, str):
-            lines.append(f"{key}: {value}")
+            lines.append(f"{safe(key)}: {safe(value)}")
             continue
         vals = flatten({key: value})
         sig = flatten({key: (uncertainty or {}).get(key)})
@@ -32,8 +33,8 @@ def _param_lines(params: dict, uncertainty: dict) -> list[str]:
             label = name[len(key):]
             s = sig.get(name)
             text = fmt_num(v) + (f"±{fmt_num(s, 2)}" if s is not None else "")
-            parts.append(f"{label}={text}" if label.startswith(".") else text)
-        lines.append(f"{key}: " + "  ".join(parts))
+            parts.append(f"{safe(label)}={text}" if label.startswith(".") else text)
+        lines.append(f"{safe(key)}: " + "  ".join(parts))
     return lines
 
 
@@ -45,16 +46,16 @@ def run(args: argparse.Namespace) -> int:
         print_json(records)
         return 0
     what = f" of {args.procedure}" if args.procedure else ""
-    out = [f"device {args.id}: {len(records)} calibration{'s' if len(records) != 1 else ''}{what}, oldest first"]
+    out = [f"device {safe(args.id)}: {len(records)} calibration{'s' if len(records) != 1 else ''}{what}, oldest first"]
     for r in records:
         status = "accepted" if r["accepted"] else "rejected"
         if r["superseded_by"] is not None:
             status += f", superseded by #{r['superseded_by']}"
         out.append(
-            f"#{r['id']}  {r['time']}  {r['procedure']}  {status}  residual_rms {fmt_num(r['residual_rms'], 4)}"
-            f"  software {r['software_version'] or '-'}"
+            f"#{r['id']}  {safe(r['time'])}  {safe(r['procedure'])}  {status}  residual_rms "
+            f"{fmt_num(r['residual_rms'], 4)}  software {safe(r['software_version'] or '-')}"
         )
         out.extend("    " + line for line in _param_lines(r["params"], r["uncertainty"]))
-        out.extend(f"    warning: {w}" for w in r["warnings"])
+        out.extend(f"    warning: {safe(w)}" for w in r["warnings"])
     sys.stdout.write("\n".join(out) + "\n")
     return 0

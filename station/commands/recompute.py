@@ -6,6 +6,7 @@ import json
 import sys
 
 from station.commands._dbutil import fmt_num, open_store, print_json
+from station.textsafe import safe
 from station.errors import UnsupportedError
 
 
@@ -90,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     worst = max((abs(r["delta_in_sigma"]) for r in rows if r["delta_in_sigma"] is not None), default=None)
     out = [
-        f"calibration #{cal['id']} of device {cal['device_id']} ({cal['procedure']}, {cal['time']}), "
+        f"calibration #{cal['id']} of device {safe(cal['device_id'])} ({cal['procedure']}, {cal['time']}), "
         f"stored by software {cal['software_version'] or '-'}, recomputed now",
     ]
     header = ("PARAM", "STORED", "±SIGMA", "RECOMPUTED", "DELTA", "DELTA/SIGMA")

@@ -15,6 +15,7 @@ from textual.widgets import Button, Footer, Input, Label, Select, Static
 from station.widgets.title import TitleBar
 from station.procedures import registry
 from station.messages import Connected, SourceFailed, StoreLoaded
+from station.textsafe import tui_markup, tui_text
 
 SIM = "sim"
 OTHER = "other"
@@ -133,16 +134,17 @@ class ConnectScreen(Screen):
         if message.what == "devices":
             known = self.query_one("#known", Select)
             self._devices = {d["id"]: d for d in message.data}
-            known.set_options([(f"{d['id']}  {d.get('model') or ''}".strip(), d["id"]) for d in message.data])
+            known.set_options([(tui_text(f"{d['id']}  {d.get('model') or ''}".strip()), d["id"]) for d in message.data])
 
     def show_due(self, due) -> None:
         bad = [d for d in due or [] if d["status"] in ("overdue", "due")]
         text = ""
         if bad:
             text = "Recalibration " + "; ".join(
-                f"{d['device_id']} {d['status']}" + (f" ({-d['days_left']:.0f} d)" if d['status'] == 'overdue' else "")
+                f"{tui_markup(d['device_id'])} {d['status']}" + (f" ({-d['days_left']:.0f} d)" if d['status'] == 'overdue' else "")
                 for d in bad[:3]) + ("; …" if len(bad) > 3 else "")
-        self.query_one("#due", Static).update(text)
+        for label in self.query("#due"):  # none yet when the due list arrives before this screen is composed
+            label.update(text)
 
     @on(Select.Changed, "#known")
     def _known_picked(self, event: Select.Changed) -> None:

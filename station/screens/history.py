@@ -14,6 +14,7 @@ from textual_plotext import PlotextPlot
 
 from station.widgets.title import TitleBar
 from station.messages import StoreLoaded
+from station.textsafe import safe, tui_markup
 
 
 class HistoryScreen(Screen):
@@ -90,9 +91,9 @@ class HistoryScreen(Screen):
             for d in self.devices:
                 st = status.get(d["id"])
                 word = st["status"] if st else "ok"
-                t.add_row(d["id"], str(d["n_calibrations"]), word, key=d["id"])
+                t.add_row(tui_markup(d["id"]), str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
-            text = "\n".join(f"{d['device_id']}: {d['status']} — {d['reason']}"[:200] for d in bad[:3])
+            text = "\n".join(tui_markup(f"{d['device_id']}: {d['status']} — {d['reason']}"[:200]) for d in bad[:3])
             if not self.devices:
                 text = "No devices yet: calibrate one (Connect → Start P1) or run `station demo`."
             self.query_one("#due", Static).update(text)
@@ -108,7 +109,7 @@ class HistoryScreen(Screen):
             for h in reversed(self.history):
                 res = h["residual_rms"]
                 in_use = h["accepted"] and h.get("superseded_by") is None
-                c.add_row(str(h["id"]), h["time"][:10], h["procedure"],
+                c.add_row(str(h["id"]), tui_markup(h["time"][:10]), tui_markup(h["procedure"]),
                           f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if in_use else "",
                           key=str(h["id"]))
             # keep the parameter the operator chose when the same device is read again
@@ -142,7 +143,7 @@ class HistoryScreen(Screen):
         plt.clear_data()
         plt.clear_figure()
         if not self.drift:
-            plt.title(f"{self.device_id or ''}: no accepted calibrations to plot")
+            plt.title(safe(f"{self.device_id or ''}: no accepted calibrations to plot"))
             w.refresh()
             return
         d = self.drift[self.param_index]
@@ -153,6 +154,6 @@ class HistoryScreen(Screen):
             plt.plot(x, [v - s for v, s in zip(d["values"], d["sigmas"])], color="gray")
         rate = d.get("rate_per_year")
         rate_txt = f", {rate:+.3g}/year" if isinstance(rate, (int, float)) else ""
-        plt.title(f"{self.device_id} {d['param']} ({self.param_index + 1}/{len(self.drift)}){rate_txt}  p: next")
+        plt.title(f"{safe(self.device_id)} {safe(d['param'])} ({self.param_index + 1}/{len(self.drift)}){rate_txt}  p: next")
         plt.xlabel("calibration")
         w.refresh()

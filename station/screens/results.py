@@ -18,6 +18,7 @@ from station.widgets.title import TitleBar
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
 from station.procedures.review import p1_residuals, param_rows, verdict
+from station.textsafe import tui_markup
 
 
 def _f(x, fmt=".6g") -> str:
@@ -88,7 +89,7 @@ class ResultsScreen(Screen):
         params = self.query_one("#params", DataTable)
         residuals = self.query_one("#residuals", DataTable)
         if self.result is None:
-            summary.update(f"[b red]No calibration: {self.error}[/]\n"
+            summary.update(f"[b red]No calibration: {tui_markup(self.error)}[/]\n"
                            f"{self.capture.n_rows} positions captured; e exports them as a capture file.")
             params.display = residuals.display = False
             return
@@ -106,7 +107,7 @@ class ResultsScreen(Screen):
         cond = (r.get("params") or {}).get("condition_number") if r.get("procedure") == "ldv" else None
         if isinstance(cond, (int, float)):
             lines.append(f"velocity set: cond(HᵀH) = {cond:.3g} (well enough conditioned to separate the angles)")
-        lines += [f"[yellow]warning: {w if len(w) < 68 else w[:66] + '…'}[/]" for w in (r.get("warnings") or [])[:2]]
+        lines += [f"[yellow]warning: {tui_markup(w if len(w) < 68 else w[:66] + '…')}[/]" for w in (r.get("warnings") or [])[:2]]
         summary.update("\n".join(lines))
         params.clear(columns=True)
         params.add_columns("param", "value", "± 1σ", "previous", "Δ/σ", "tol", "ok")
@@ -166,10 +167,10 @@ class ResultsScreen(Screen):
     def on_saved(self, message: Saved) -> None:
         label = self.query_one("#saved", Static)
         if message.error:
-            label.update(f"[b red]Not saved: {message.error}[/]")
+            label.update(f"[b red]Not saved: {tui_markup(message.error)}[/]")
             return
         self.calibration_id = message.calibration_id
-        label.update(f"[b green]Saved as calibration #{message.calibration_id} for {self.app.session.device_id}[/]")
+        label.update(f"[b green]Saved as calibration #{message.calibration_id} for {tui_markup(self.app.session.device_id)}[/]")
         if self.app.session.exit_when_saved:
             self.set_timer(1.0, self.app.exit)
 
