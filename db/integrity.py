@@ -26,3 +26,26 @@ def record_hash(row: dict) -> str:
     content = {k: row.get(k) for k in HASHED_COLUMNS}
     text = json.dumps(content, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+# Columns of `anchors` that form an anchor's hash (everything but `hash`).
+ANCHOR_COLUMNS = (
+    "id", "time", "device_id", "event", "head_id", "head_hash", "n_calibrations", "settings_hash",
+    "capture_id", "prev_hash",
+)
+# Device columns under the anchors (everything a person could change to move a due date or
+# loosen a tolerance).
+SETTINGS_COLUMNS = ("id", "model", "sensor_kinds", "notes", "interval_days", "tolerances", "created")
+
+
+def _digest(content: dict) -> str:
+    text = json.dumps(content, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def anchor_hash(row: dict) -> str:
+    return _digest({k: row.get(k) for k in ANCHOR_COLUMNS})
+
+
+def settings_hash(device_row: dict) -> str:
+    return _digest({k: device_row.get(k) for k in SETTINGS_COLUMNS})

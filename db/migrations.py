@@ -28,18 +28,21 @@ def _build() -> Migrations:
 STATION_MIGRATIONS = _build()
 
 
-def apply(conn: sqlite3.Connection) -> list[str]:
+def apply(conn: sqlite3.Connection, post=None) -> list[str]:
     """Apply pending migrations under one write lock; returns the names applied.
 
     `BEGIN IMMEDIATE` first, so two processes opening a fresh database at once take
     turns: the second finds nothing pending (sqlite-utils' own `apply` would nest
-    its per-migration transactions inside ours as savepoints).
+    its per-migration transactions inside ours as savepoints). ``post(conn, names)`` runs
+    inside the same transaction after the SQL.
     """
     db = Database(conn)
     conn.execute("BEGIN IMMEDIATE")
     try:
         names = [m.name for m in STATION_MIGRATIONS.pending(db)]
         STATION_MIGRATIONS.apply(db)
+        if post is not None:  # data steps that need Python (e.g. the first anchors), same transaction
+            post(conn, names)
     except BaseException:
         if conn.in_transaction:
             conn.execute("ROLLBACK")

@@ -16,6 +16,8 @@ Tables (readable names so `sqlite3`, `sqlite-utils` and Datasette can query them
 - `schedule`: per (device, procedure) the last accepted calibration and when the
   device is next due; derived data, rebuilt by `Store.rebuild_schedule()`.
 - view `calibration_params`: one row per scalar calibration parameter.
+- `anchors`: append-only, hash-chained log of each device's chain head, calibration
+  count and settings hash after every change (`Store.verify` compares it with the tables).
 
 Times are UTC ISO 8601 text `YYYY-MM-DDTHH:MM:SSZ` (sortable as text).
 """
@@ -133,9 +135,35 @@ _INITIAL = [
     """,
 ]
 
+# Anchors (issue 16): an append-only, hash-chained log of each device's state after every
+# change the station makes: the head of its calibration chain (id, hash, count), the hash of
+# its settings (model, kinds, notes, interval, tolerances) and a capture stored on its own.
+# Deleting a device's newest calibration, or all of them, or editing its settings, leaves
+# the newest anchor disagreeing with the tables; deleting anchors breaks their own chain
+# (and `sqlite_sequence` still counts the ids issued). See `Store.verify`.
+_ANCHORS = [
+    """
+    CREATE TABLE anchors (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        time TEXT NOT NULL,
+        device_id TEXT NOT NULL,
+        event TEXT NOT NULL CHECK (event IN ('baseline', 'calibration', 'settings', 'capture')),
+        head_id INTEGER,
+        head_hash TEXT,
+        n_calibrations INTEGER NOT NULL,
+        settings_hash TEXT NOT NULL,
+        capture_id INTEGER,
+        prev_hash TEXT,
+        hash TEXT NOT NULL
+    )
+    """,
+    "CREATE INDEX anchors_device ON anchors(device_id, id)",
+]
+
 # (name, statements), applied in this order. Append only.
 MIGRATIONS: list[tuple[str, list[str]]] = [
     ("0001_initial", _INITIAL),
+    ("0002_anchors", _ANCHORS),
 ]
 
 MIGRATION_NAMES = [name for name, _ in MIGRATIONS]

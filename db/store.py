@@ -29,7 +29,7 @@ from datetime import timedelta
 
 from db import params as P
 from db.codec import capture_digest, decode_column, encode_column
-from db.integrity import record_hash
+from db.integrity import anchor_hash, record_hash, settings_hash
 from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
 
 BUSY_TIMEOUT_S = 30.0
@@ -84,7 +84,7 @@ class Store:
             if self._pending_migrations():
                 from db.migrations import apply
 
-                apply(self.conn)
+                apply(self.conn, post=self._after_migrations)
         except BaseException:
             self.conn.close()
             raise
@@ -100,6 +100,47 @@ class Store:
             return list(MIGRATION_NAMES)
         done = {r[0] for r in rows}
         return [n for n in MIGRATION_NAMES if n not in done]
+
+    def _after_migrations(self, conn, names: list[str]) -> None:
+        """The first anchors of a database that gets the anchors table now: its state as found."""
+        if "0002_anchors" in names:
+            for (device_id,) in conn.execute("SELECT id FROM devices ORDER BY id").fetchall():
+                self._append_anchor(conn, device_id, "baseline")
+
+    def _append_anchor(self, conn, device_id: str, event: str, capture_id: int | None = None) -> None:
+        """Append one anchor: the device's chain head, calibration count and settings hash now."""
+        dev = conn.execute("SELECT * FROM devices WHERE id = ?", [device_id]).fetchone()
+        head = conn.execute(
+            "SELECT id, hash FROM calibrations WHERE device_id = ? ORDER BY id DESC LIMIT 1", [device_id]
+        ).fetchone()
+        n = conn.execute("SELECT count(*) FROM calibrations WHERE device_id = ?", [device_id]).fetchone()[0]
+        prev = conn.execute("SELECT hash FROM anchors ORDER BY id DESC LIMIT 1").fetchone()
+        row = {
+            "time": P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+            "device_id": device_id,
+            "event": event,
+            "head_id": head["id"] if head else None,
+            "head_hash": head["hash"] if head else None,
+            "n_calibrations": int(n),
+            "settings_hash": settings_hash(dict(dev)) if dev is not None else "",
+            "capture_id": capture_id,
+            "prev_hash": prev["hash"] if prev else None,
+        }
+        cur = conn.execute(
+            f"INSERT INTO anchors ({', '.join(row)}, hash) VALUES ({', '.join('?' * len(row))}, '')", list(row.values())
+        )
+        row["id"] = cur.lastrowid
+        conn.execute("UPDATE anchors SET hash = ? WHERE id = ?", [anchor_hash(row), row["id"]])
+
+    def has_anchor(self, anchor: str) -> bool:
+        """Whether ``anchor`` (a hash shown in an export or report) is still in the anchors table."""
+        return bool(self._query("SELECT 1 FROM anchors WHERE hash = ? LIMIT 1", [anchor]))
+
+    def anchor_head(self) -> str | None:
+        """The newest anchor's hash: written into exports and reports, so that `station verify
+        --anchor HASH` can tell whether anchors were removed after they were shown."""
+        rows = self._query("SELECT hash FROM anchors ORDER BY id DESC LIMIT 1")
+        return rows[0]["hash"] if rows else None
 
     @property
     def database(self):
@@ -222,6 +263,7 @@ class Store:
                     device_id,
                 ],
             )
+            self._append_anchor(conn, device_id, "settings")
             if interval_days is not None or tolerances is not None:
                 for (procedure,) in conn.execute(
                     "SELECT DISTINCT procedure FROM calibrations WHERE device_id = ? AND accepted = 1", [device_id]
@@ -309,6 +351,7 @@ class Store:
             capture_id, _ = self._insert_capture(
                 conn, device_id=device_id, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
             )
+            self._append_anchor(conn, device_id, "capture", capture_id)
         return capture_id
 
     def _read_capture(self, capture_id):
@@ -418,6 +461,7 @@ class Store:
             conn.execute("UPDATE calibrations SET hash = ? WHERE id = ?", [record_hash(dict(row)), cal_id])
             if accepted:
                 self._update_schedule(conn, device, procedure)
+            self._append_anchor(conn, device, "calibration")
         return cal_id
 
     @staticmethod
@@ -480,6 +524,7 @@ class Store:
         d["prev_hash"] = row["prev_hash"]
         d["capture_sha256"] = row["capture_sha256"]
         d["record_version"] = row["record_version"]
+        d["anchor"] = self.anchor_head()  # the newest anchor when this was read (exports carry it)
         result = {
             "procedure": d["procedure"],
             "device": d["device_id"],
@@ -569,6 +614,20 @@ class Store:
 
     def _update_schedule(self, conn, device_id: str, procedure: str) -> None:
         """Recompute the schedule row of one (device, procedure), inside a write."""
+        row = self._schedule_row(conn, device_id, procedure)
+        if row is None:
+            conn.execute("DELETE FROM schedule WHERE device_id = ? AND procedure = ?", [device_id, procedure])
+            return
+        conn.execute(
+            """INSERT OR REPLACE INTO schedule (device_id, procedure, last_calibration_id, last_calibrated,
+                   interval_due, drift_due, drift_param, drift_rate_per_year, due)
+               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)""",
+            row,
+        )
+
+    def _schedule_row(self, conn, device_id: str, procedure: str) -> list | None:
+        """The schedule row one (device, procedure) should have, from devices and calibrations
+        (None: no accepted calibration, no row)."""
         dev = conn.execute("SELECT interval_days, tolerances FROM devices WHERE id = ?", [device_id]).fetchone()
         tolerances = _loads(dev["tolerances"], {})
         last = conn.execute(
@@ -576,9 +635,8 @@ class Store:
                ORDER BY time DESC, id DESC LIMIT 1""",
             [device_id, procedure],
         ).fetchone()
-        if last is None:
-            conn.execute("DELETE FROM schedule WHERE device_id = ? AND procedure = ?", [device_id, procedure])
-            return
+        if last is None or dev is None:
+            return None
         interval_due = None
         if dev["interval_days"]:
             interval_due = P.iso(P.parse_time(last["time"]) + timedelta(days=dev["interval_days"]))
@@ -593,12 +651,7 @@ class Store:
                 if t["leaves_tolerance"] and (drift_due is None or t["leaves_tolerance"] < drift_due):
                     drift_due, drift_param, drift_rate = t["leaves_tolerance"], t["param"], t["rate_per_year"]
         due = min((d for d in (interval_due, drift_due) if d), default=None)
-        conn.execute(
-            """INSERT OR REPLACE INTO schedule (device_id, procedure, last_calibration_id, last_calibrated,
-                   interval_due, drift_due, drift_param, drift_rate_per_year, due)
-               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)""",
-            [device_id, procedure, last["id"], last["time"], interval_due, drift_due, drift_param, drift_rate, due],
-        )
+        return [device_id, procedure, last["id"], last["time"], interval_due, drift_due, drift_param, drift_rate, due]
 
     def rebuild_schedule(self) -> int:
         """Recompute every schedule row from devices and calibrations; returns the row count."""
@@ -682,44 +735,203 @@ class Store:
 
     # --- integrity ----------------------------------------------------------------------
 
-    def verify(self, check_captures: bool = True) -> list[dict]:
-        """Records changed after they were written, or missing from a device's chain.
+    # Tables and columns verify reads; a missing one is a damaged schema (reported, not a crash).
+    _VERIFY_SCHEMA = {
+        "devices": ("id", "model", "sensor_kinds", "notes", "interval_days", "tolerances", "created"),
+        "calibrations": ("id", "device_id", "procedure", "time", "accepted", "capture_id", "capture_sha256",
+                         "prev_hash", "hash", "params", "uncertainty"),
+        "captures": ("id", "device_id", "procedure", "time", "operator", "host", "meta", "sha256"),
+        "capture_columns": ("capture_id", "ordinal", "name", "dtype", "length", "encoding", "data"),
+        "schedule": ("device_id", "procedure", "last_calibration_id", "last_calibrated", "interval_due",
+                     "drift_due", "drift_param", "drift_rate_per_year", "due"),
+        "anchors": ("id", "time", "device_id", "event", "head_id", "head_hash", "n_calibrations",
+                    "settings_hash", "capture_id", "prev_hash", "hash"),
+    }
 
-        Each problem: kind (`tampered`, `chain broken`, `capture changed`),
-        calibration_id and/or capture_id, device_id, detail. [] when all is well.
+    def _schema_problems(self) -> tuple[list[dict], set[str]]:
+        problems, broken = [], set()
+        for table, columns in self._VERIFY_SCHEMA.items():
+            have = {r[1] for r in self._query(f"PRAGMA table_info({table})")}
+            if not have:
+                problems.append({"kind": "schema damaged", "detail": f"table {table!r} is missing"})
+                broken.add(table)
+                continue
+            missing = [c for c in columns if c not in have]
+            if missing:
+                problems.append({"kind": "schema damaged",
+                                 "detail": f"table {table!r} lacks column{'s' if len(missing) > 1 else ''} "
+                                           f"{', '.join(missing)}"})
+                broken.add(table)
+        return problems, broken
+
+    def _issued(self, table: str) -> int | None:
+        """The largest id AUTOINCREMENT has issued for ``table`` (sqlite_sequence), or None."""
+        try:
+            rows = self._query("SELECT seq FROM sqlite_sequence WHERE name = ?", [table])
+        except sqlite3.Error:
+            return None
+        return int(rows[0][0]) if rows and rows[0][0] is not None else None
+
+    def verify(self, check_captures: bool = True) -> list[dict]:
+        """Records changed or removed after they were written; [] when all is well.
+
+        Each problem: kind, detail, and calibration_id / capture_id / device_id where one
+        applies. Kinds: `schema damaged`, `tampered`, `chain broken` (a device's calibration
+        chain), `capture changed`, `anchor tampered`, `anchors removed`, `calibration removed`
+        (a chain head or the newest records: the anchors or the id counter remember them),
+        `device removed`, `device added` (outside the station), `settings changed` (model,
+        notes, interval, tolerances), `schedule changed` (differs from the one recomputed from
+        the calibrations), `orphaned capture`, `capture missing`. Findings that follow from
+        an earlier one on the same device (its schedule after an edited calibration) are not
+        repeated.
         """
+        problems, broken = self._schema_problems()
+        flagged: set = set()  # devices with a primary problem: derived checks say nothing more
+        capture_refs = {}
+        heads: dict[str, tuple[int, str, int]] = {}  # device -> (last id, its hash, count)
+        if "calibrations" not in broken:
+            with self._lock:
+                cur = self.conn.execute("SELECT * FROM calibrations ORDER BY device_id, id")
+                prev_device, prev_hash = object(), None
+                for row in cur:
+                    d = dict(row)
+                    if d["device_id"] != prev_device:
+                        prev_device, prev_hash = d["device_id"], None
+                    if record_hash(d) != d["hash"]:
+                        flagged.add(d["device_id"])
+                        problems.append({"kind": "tampered", "calibration_id": d["id"], "device_id": d["device_id"],
+                                         "detail": "its content no longer matches the hash written with it"})
+                    if d["prev_hash"] != prev_hash:
+                        flagged.add(d["device_id"])
+                        problems.append({"kind": "chain broken", "calibration_id": d["id"], "device_id": d["device_id"],
+                                         "detail": "the record before it in this device's history was removed, added "
+                                                   "or changed"})
+                    prev_hash = d["hash"]
+                    n = heads.get(d["device_id"], (0, "", 0))[2] + 1
+                    heads[d["device_id"]] = (d["id"], d["hash"], n)
+                    if d["capture_id"] is not None:
+                        capture_refs[d["capture_id"]] = (d["id"], d["device_id"], d["capture_sha256"])
+        counter = None
+        if "calibrations" not in broken:
+            issued = self._issued("calibrations")
+            top = max((h[0] for h in heads.values()), default=0)
+            if issued is not None and issued > top:
+                counter = {"kind": "calibration removed", "calibration_id": issued,
+                           "detail": f"calibration ids were issued up to {issued} but the newest present is "
+                                     f"{top or 'none'}: the newest records were removed"}
+        if not broken & {"anchors", "devices", "calibrations"}:
+            found = self._verify_anchors(heads, flagged)
+            problems.extend(found)
+            if counter and any(p.get("calibration_id") == counter["calibration_id"] for p in found):
+                counter = None  # the anchors already name it, with its device
+        if counter:
+            problems.append(counter)
+        if not broken & {"schedule", "devices", "calibrations"}:
+            problems.extend(self._verify_schedule(flagged))
+        if check_captures and not broken & {"captures", "capture_columns", "calibrations"}:
+            problems.extend(self._verify_captures(capture_refs))
+            problems.extend(self._verify_orphans(capture_refs, "anchors" not in broken))
+        keys = ("kind", "calibration_id", "capture_id", "device_id", "detail")
+        return [{k: p.get(k) for k in keys} | p for p in problems]
+
+    def _verify_anchors(self, heads: dict, flagged: set) -> list[dict]:
+        problems = []
+        rows = [dict(r) for r in self._query("SELECT * FROM anchors ORDER BY id")]
+        prev = None
+        for a in rows:
+            if anchor_hash(a) != a["hash"]:
+                problems.append({"kind": "anchor tampered", "device_id": a["device_id"],
+                                 "detail": f"anchor {a['id']} no longer matches the hash written with it"})
+                flagged.add(a["device_id"])
+            if a["prev_hash"] != prev:
+                problems.append({"kind": "anchors removed", "device_id": a["device_id"],
+                                 "detail": f"the anchor before anchor {a['id']} was removed, added or changed"})
+            prev = a["hash"]
+        issued = self._issued("anchors")
+        if issued is not None and issued > (rows[-1]["id"] if rows else 0):
+            problems.append({"kind": "anchors removed",
+                             "detail": f"anchor ids were issued up to {issued} but the newest present is "
+                                       f"{rows[-1]['id'] if rows else 'none'}: the newest anchors were removed"})
+        latest: dict[str, dict] = {}
+        for a in rows:
+            latest[a["device_id"]] = a
+        devices = {r["id"]: dict(r) for r in self._query("SELECT * FROM devices")}
+        for device_id, a in latest.items():
+            dev = devices.get(device_id)
+            if dev is None:
+                problems.append({"kind": "device removed", "device_id": device_id,
+                                 "detail": "the device and its record were deleted from the devices table"})
+                continue
+            if device_id in flagged:
+                continue
+            head = heads.get(device_id)
+            have_id, have_hash, have_n = head if head else (None, None, 0)
+            if (a["head_id"], a["head_hash"]) != (have_id, have_hash) or a["n_calibrations"] != have_n:
+                gone = a["head_id"] is not None and (have_id is None or have_id < a["head_id"])
+                problems.append({
+                    "kind": "calibration removed" if gone or have_n < a["n_calibrations"] else "chain broken",
+                    "calibration_id": a["head_id"], "device_id": device_id,
+                    "detail": f"the anchors record {a['n_calibrations']} calibration(s) ending with "
+                              f"#{a['head_id']}; the table holds {have_n}"
+                              + (f" ending with #{have_id}" if have_id is not None else "")})
+                flagged.add(device_id)
+            if settings_hash(dev) != a["settings_hash"]:
+                problems.append({"kind": "settings changed", "device_id": device_id,
+                                 "detail": "model, notes, interval or tolerances differ from what the station last "
+                                           "wrote (changed outside `station devices add`)"})
+                flagged.add(device_id)
+        for device_id in devices:
+            if device_id not in latest:
+                problems.append({"kind": "device added", "device_id": device_id,
+                                 "detail": "the device has no anchor: it was added outside the station"})
+                flagged.add(device_id)
+        return problems
+
+    def _verify_schedule(self, flagged: set) -> list[dict]:
+        """The stored schedule against the one recomputed from devices and calibrations."""
         problems = []
         with self._lock:
-            cur = self.conn.execute("SELECT * FROM calibrations ORDER BY device_id, id")
-            prev_device, prev_hash = object(), None
-            capture_refs = {}
-            for row in cur:
-                d = dict(row)
-                if d["device_id"] != prev_device:
-                    prev_device, prev_hash = d["device_id"], None
-                if record_hash(d) != d["hash"]:
-                    problems.append(
-                        {
-                            "kind": "tampered",
-                            "calibration_id": d["id"],
-                            "device_id": d["device_id"],
-                            "detail": "its content no longer matches the hash written with it",
-                        }
-                    )
-                if d["prev_hash"] != prev_hash:
-                    problems.append(
-                        {
-                            "kind": "chain broken",
-                            "calibration_id": d["id"],
-                            "device_id": d["device_id"],
-                            "detail": "the record before it in this device's history was removed, added or changed",
-                        }
-                    )
-                prev_hash = d["hash"]
-                if d["capture_id"] is not None:
-                    capture_refs[d["capture_id"]] = (d["id"], d["device_id"], d["capture_sha256"])
-        if check_captures:
-            problems.extend(self._verify_captures(capture_refs))
+            stored = {(r["device_id"], r["procedure"]): list(r) for r in self.conn.execute(
+                """SELECT device_id, procedure, last_calibration_id, last_calibrated, interval_due, drift_due,
+                          drift_param, drift_rate_per_year, due FROM schedule""")}
+            pairs = self.conn.execute(
+                "SELECT DISTINCT device_id, procedure FROM calibrations WHERE accepted = 1").fetchall()
+            try:
+                expected = {(d, p): self._schedule_row(self.conn, d, p) for d, p in pairs}
+            except (ValueError, TypeError, KeyError):  # an edited record the trend cannot read: reported above
+                return problems
+        expected = {k: v for k, v in expected.items() if v is not None}
+
+        def same(a, b):
+            return all((x == y) or (isinstance(x, float) and isinstance(y, float) and abs(x - y) <= 1e-9 * max(
+                abs(x), abs(y))) for x, y in zip(a, b))
+
+        for key in sorted(set(stored) | set(expected), key=lambda k: (str(k[0]), str(k[1]))):
+            if key[0] in flagged:
+                continue
+            have, want = stored.get(key), expected.get(key)
+            if have is not None and want is not None and same(have, want):
+                continue
+            detail = (f"{key[1]}: stored due {have[8] if have else 'none'}, the calibrations give "
+                      f"{want[8] if want else 'none'}")
+            problems.append({"kind": "schedule changed", "device_id": key[0], "detail": detail})
+        return problems
+
+    def _verify_orphans(self, capture_refs: dict, anchors_ok: bool) -> list[dict]:
+        problems = []
+        standalone = set()
+        if anchors_ok:
+            standalone = {r[0] for r in self._query("SELECT capture_id FROM anchors WHERE event = 'capture'")}
+        for r in self._query("SELECT id, device_id FROM captures ORDER BY id"):
+            if r["id"] in capture_refs or r["id"] in standalone:
+                continue
+            problems.append({"kind": "orphaned capture", "capture_id": r["id"], "device_id": r["device_id"],
+                             "detail": "no calibration refers to it: the calibration saved with it was removed"})
+        present = {r[0] for r in self._query("SELECT id FROM captures")}
+        for capture_id, (cal_id, device_id, _) in sorted(capture_refs.items()):
+            if capture_id not in present:
+                problems.append({"kind": "capture missing", "capture_id": capture_id, "calibration_id": cal_id,
+                                 "device_id": device_id, "detail": "the capture this calibration was made from is gone"})
         return problems
 
     def _verify_captures(self, capture_refs: dict) -> list[dict]:

@@ -468,6 +468,7 @@ def _header(cal: dict) -> list[str]:
         f"station calibration {cal['id']}: device {json.dumps(cal['device_id'], ensure_ascii=False)}, "
         f"{cal['procedure']}, {cal['time']}",
         f"record hash {cal.get('hash', '')}",
+        f"station anchor {cal.get('anchor') or '-'} (`station verify --anchor HASH` checks the record still holds it)",
     ]
 
 
@@ -593,6 +594,7 @@ def export(cal: dict, meta: dict, fmt: str, instance: int | None = None, device_
             "accepted": cal["accepted"],
             "software_version": cal.get("software_version"),
             "hash": cal.get("hash"),
+            "anchor": cal.get("anchor"),
             "result": cal["result"],
         }
         return json.dumps(doc, indent=2, ensure_ascii=False) + "\n"

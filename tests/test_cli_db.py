@@ -80,6 +80,7 @@ def test_db_option_before_the_action_and_env(capsys, db, monkeypatch):
     (["due", "--within", "-3"], "--within must not be negative"),
 ])
 def test_bad_input_one_line_exit_2(capsys, db, argv, needle):
+    Store(db).close()  # an empty database: the refusal is about the argument, not a missing file
     code, out, err = run(capsys, *argv, "--db", db)
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and needle in err and "Traceback" not in err
@@ -188,6 +189,10 @@ def test_due_exit_status_for_cron(capsys, filled):
 def test_due_real_process_exit_codes(tmp_path):
     db = str(tmp_path / "station.db")
     env = dict(os.environ, STATION_DB=db)
+    missing = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert missing.returncode == 2 and missing.stdout == "" and "no station database" in missing.stderr
+    assert not os.path.exists(db)  # a mistyped path is not created
+    Store(db).close()
     quiet = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
     assert quiet.returncode == 0 and quiet.stdout == "nothing due\n"
     now = datetime.now(timezone.utc)

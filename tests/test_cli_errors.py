@@ -188,7 +188,7 @@ def test_absurd_values_fail_with_a_reason_not_a_traceback(tmp_path, capsys, ldv_
         code, _, err = run(capsys, "calibrate", path)  # was: LinAlgError traceback
     assert code == 2
     line = one_line(err)
-    assert str(path) in line and "ldv" in line
+    assert f"{path}:" in line and "column 'vl1'" in line and "beyond" in line  # file, line, column, reason
 
 
 def test_orientation_clusters_zero_vectors_are_one_orientation():

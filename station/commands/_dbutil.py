@@ -15,13 +15,33 @@ def add_db_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--db", default=argparse.SUPPRESS, help="station database file")
 
 
+def require_existing(path: str) -> None:
+    """A command that reads the database refuses a path with no database (a mistyped --db would
+    otherwise create an empty one, folders included, and report "nothing due")."""
+    import os
+
+    if path == ":memory:" or path.startswith("file:"):
+        return
+    if not os.path.exists(path):
+        raise InputError(path, None, "no station database here (mistyped --db or $STATION_DB?); "
+                         "`station devices add ID` or `station calibrate FILE --save` creates one")
+    if os.path.isdir(path):
+        raise InputError(path, None, "is a directory, not a station database")
+
+
 @contextmanager
-def open_store(args):
-    """The Store at `station.cli.db_path(args)`; db-layer ValueError/NotFound -> InputError."""
+def open_store(args, create: bool = False):
+    """The Store at `station.cli.db_path(args)`; db-layer ValueError/NotFound -> InputError.
+
+    ``create``: make the database (and its folder) when it does not exist; otherwise a missing
+    database is an InputError (exit 2), see :func:`require_existing`.
+    """
     from db.store import NotFound, Store
     from station.cli import db_path
 
     path = db_path(args)
+    if not create:
+        require_existing(path)
     try:
         store = Store(path)
     except Exception as exc:  # sqlite3.DatabaseError, OSError: not a usable database

@@ -57,7 +57,7 @@ def _tolerances(items: list[str]) -> dict | None:
 def _add(args: argparse.Namespace) -> int:
     if args.interval_days is not None and not args.interval_days > 0:
         raise InputError(None, None, f"--interval-days must be positive, got {args.interval_days:g}")
-    with open_store(args) as store:
+    with open_store(args, create=True) as store:  # adding a device is how a database is made
         existed = store.get_device(args.id) is not None
         device = store.add_device(
             args.id,

@@ -1,11 +1,14 @@
-"""`station verify`: exit 1, naming the record, when a stored calibration or capture was changed."""
+"""`station verify`: exit 1, naming the record, when a stored calibration, capture, device setting
+or schedule was changed or removed after it was written (`db.store.Store.verify`)."""
 from __future__ import annotations
 
 import argparse
 import json
+import sqlite3
 import sys
 
 from station.commands._dbutil import open_store
+from station.textsafe import safe
 
 
 def register(subparsers) -> None:
@@ -13,6 +16,8 @@ def register(subparsers) -> None:
         "verify", help="check that no stored calibration was changed after it was written (exit 1 if one was)"
     )
     p.add_argument("--json", action="store_true", help="a JSON list of problems")
+    p.add_argument("--anchor", action="append", default=[], metavar="HASH",
+                   help="an anchor hash from an export or report: a problem unless the record still holds it")
     p.set_defaults(func=run)
 
 
@@ -20,6 +25,15 @@ def run(args: argparse.Namespace) -> int:
     with open_store(args) as store:
         sound = store.integrity_check()
         problems = store.verify()
+        for anchor in args.anchor:
+            try:
+                held = store.has_anchor(anchor)
+            except sqlite3.Error:  # no anchors table: reported by verify as a damaged schema
+                held = False
+            if not held:
+                problems.append({"kind": "anchor missing", "calibration_id": None, "capture_id": None,
+                                 "device_id": None, "detail": f"anchor {anchor} (from an export or report) is not in "
+                                 "the record: anchors written after it was shown were removed or rewritten"})
         counts = store.counts()
     if sound != "ok":
         problems.insert(0, {"kind": "corrupt file", "detail": f"PRAGMA integrity_check: {sound}"})
@@ -32,8 +46,8 @@ def run(args: argparse.Namespace) -> int:
             what.append(f"calibration {p['calibration_id']}")
         if p.get("capture_id") is not None:
             what.append(f"capture {p['capture_id']}")
-        device = f" (device {p['device_id']})" if p.get("device_id") is not None else ""
-        sys.stdout.write(f"{p['kind']}: {' / '.join(what) or 'database'}{device}: {p['detail']}\n")
+        device = f" (device {safe(p['device_id'])})" if p.get("device_id") is not None else ""
+        sys.stdout.write(f"{p['kind']}: {' / '.join(what) or 'database'}{device}: {safe(p['detail'])}\n")
     if problems:
         sys.stderr.write(f"station: verify found {len(problems)} problem{'s' if len(problems) != 1 else ''}\n")
         return 1
