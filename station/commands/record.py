@@ -94,5 +94,6 @@ def run(args: argparse.Namespace) -> int:
         f"recorded {res.samples} samples ({m.get('duration_s', '?')} s, {m.get('sample_rate_hz', '?')} Hz) "
         f"from {args.port} into {res.path}: gaps {m['gaps']}, parse errors {m['parse_errors']}, "
         f"reconnects {m['reconnects']}, dropped {m['dropped']}"
+        + (f"; INCOMPLETE: {res.incomplete}" if res.incomplete else "")
     )
-    return 0
+    return 1 if res.incomplete else 0  # every sample is kept; the exit status says the data stop early

@@ -17,6 +17,11 @@ then the sensor columns the device has (a header unit that is empty means absent
 `samples`, `gaps` (samples missed, from sequence numbers), `parse_errors` (and
 `parse_errors_by_kind`), `dropped` (reader queue overflow), `reconnects`, `restarts`,
 `segments`, one `gap_<k>` line per break, `nominal_rate_hz`, `duration_s`, `complete`.
+
+A device that is lost and never comes back before the end, or that is connected but sends
+nothing for the last `SILENCE_S` seconds (after a reconnection: it came back silent), leaves
+a capture with every sample it did send, `complete: false`, `incomplete: <why>` and
+`last_data_s` (when the data stop, s from the start); `station record` exits 1.
 """
 from __future__ import annotations
 
@@ -50,6 +55,7 @@ class RecordResult:
     stats: ReaderStats
     events: list[GapEvent] = field(default_factory=list)
     stopped_because: str = ""
+    incomplete: str = ""  # why the capture is `complete: false` (device lost, or silent), "" when complete
 
 
 def _known_units() -> dict[str, tuple[str, ...]]:
@@ -264,6 +270,7 @@ def record(
         stream = CaptureStream(out, columns, meta)
         dts: list[float] = []
         stopped = "stopped"
+        last_rows_at: float | None = None  # host time the newest rows arrived
         while True:
             if stop.wait(0.1):
                 stopped = "stopped"
@@ -274,6 +281,7 @@ def record(
                 b = b.select(b.segment < changes[0][2])
             if b is not None and len(b):
                 stream.write(b)
+                last_rows_at = time.monotonic()
                 d = _median_dt(b)
                 if d is not None:
                     dts.append(d)
@@ -285,9 +293,12 @@ def record(
             if seconds is not None and time.monotonic() - started >= seconds:
                 stopped = "time"
                 break
+        ended_at, at_end = time.monotonic(), reader.stats()  # before stop() marks the port closed
         if own_reader:
             reader.stop()
         b = reader.drain()
+        if b is not None and len(b):
+            last_rows_at = ended_at
         if b is not None and stopped != "device changed":
             if reader.header_changes:
                 b = b.select(b.segment < reader.header_changes[0][2])
@@ -302,8 +313,14 @@ def record(
         board = getattr(reader.parser, "board_meta", dict)()  # MAVLink: firmware, uid, parameters in use
         final.update({k: v for k, v in board.items() if k not in final})
         final.update(_end_meta(stats, events, stream.rows, dts, time.monotonic() - started))
+        incomplete = _ending(at_end, last_rows_at, started, ended_at, dts, stopped)
+        if incomplete:
+            final["complete"] = "false"
+            final["incomplete"] = incomplete
+            final["last_data_s"] = f"{(last_rows_at or started) - started:.3f}"
+            warn(f"{port}: {incomplete}: the capture is marked complete: false")
         stream.finish(final)
-        return RecordResult(out, stream.rows, final, stats, events, stopped)
+        return RecordResult(out, stream.rows, final, stats, events, stopped, incomplete)
     except BaseException:
         if own_reader:
             reader.stop()
@@ -364,6 +381,29 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
     for k, v in (extra or {}).items():
         meta[k] = v
     return meta
+
+
+SILENCE_S = 2.0  # no rows for this long (and 20 sample periods) at the end: the device went silent
+
+
+def _ending(stats: ReaderStats, last_rows_at: float | None, started: float, ended_at: float, dts: list[float],
+            stopped: str) -> str:
+    """Why a recording that ran to its end is incomplete: the device was lost and never came
+    back, or it is connected but sends nothing (after a reconnection: came back silent). ""
+    when the data ran to the end."""
+    if stopped == "device changed":
+        return ""
+    last = last_rows_at if last_rows_at is not None else started
+    quiet_s = ended_at - last
+    period = float(np.median(dts)) if dts else 0.0
+    at = f"{last - started:.2f} s into the {ended_at - started:.2f} s recording"
+    if not stats.connected:
+        return f"device lost {at} and never came back"
+    if quiet_s > max(SILENCE_S, 20.0 * period):
+        if stats.reconnects:
+            return f"device came back silent: no data since {at}"
+        return f"device went silent: no data since {at}"
+    return ""
 
 
 def _end_meta(stats: ReaderStats, events: list[GapEvent], rows: int, dts: list[float], duration_s: float) -> dict[str, str]:
