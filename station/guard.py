@@ -110,13 +110,23 @@ def check_columns(capture) -> None:
                                    "row: a dead or saturated beam, its angles and scale factor cannot be determined")
 
 
-def check_result(capture, result: dict) -> None:
-    """Refuse a result whose parameters are not all finite numbers (a fit the data cannot carry).
+# The parameters each procedure exists to deliver; any of them non-finite is a refusal. Others
+# may be null on purpose (the IGRF reference without a place, the Earth rate without a latitude).
+_CORE = {
+    "accel-tabletop": ("B", "M"),
+    "accel-centrifuge": ("S", "b", "D"),
+    "compass": ("hard_iron", "soft_iron"),
+    "gyro-drift": ("drift",),
+    "ldv": ("beam1", "beam2", "beam3"),
+}
 
-    Parameters a procedure reports as null on purpose are named in ``result['_nullable']``
-    (removed here, never written). A result whose every uncertainty is null is refused too.
+
+def check_result(capture, result: dict) -> None:
+    """Refuse a result whose core parameters (``_CORE``) are not all finite numbers: a fit the
+    data cannot carry is a refusal naming the parameter, not a result with nulls. A result
+    whose every uncertainty is null is refused too.
     """
-    allowed = set(result.pop("_nullable", ()))
+    core = _CORE.get(capture.procedure)
 
     def walk(value, name):
         if isinstance(value, dict):
@@ -136,7 +146,7 @@ def check_result(capture, result: dict) -> None:
         raise UnsupportedError(f"{capture.path or 'capture'}: {capture.procedure}: no parameter's uncertainty can be "
                                "computed from these data: refused rather than reported without one")
     for name, value in walk(result.get("params") or {}, ""):
-        if name.split("[")[0].split(".")[0] in allowed or name in allowed:
+        if core is not None and name.split("[")[0].split(".")[0] not in core:
             continue
         if missing(value):
             raise UnsupportedError(f"{capture.path or 'capture'}: {capture.procedure}: the data cannot determine "

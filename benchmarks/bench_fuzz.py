@@ -1,0 +1,127 @@
+"""Fuzz and extreme-value campaign: mutated and valid-but-extreme captures of all five
+procedures through `calibrate` and `diagnose`, in-process, with a time limit per case.
+
+    nice -n 10 .venv/bin/python benchmarks/bench_fuzz.py [--mutated 10000] [--extreme 1000]
+        [--jobs 2] [--seed 16] [--timeout 60] [--out results.json] [--update-docs]
+
+Targets (issue 16): 0 hangs, 0 last-resort errors, 0 stray stdout, 0 crashes, 0 bad exits.
+The harness is `tests/fuzzkit.py` (its docstring says what each outcome means); the CI share
+is `tests/test_fuzz.py`. Prints one line of progress per 100 captures, then the figures, and
+each failure with the case that made it (reproducible: seed and case number).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests import fuzzkit as F  # noqa: E402
+
+
+def _shard(args: tuple) -> list:
+    job, n_mutated, n_extreme, seed, timeout_s, progress_path = args
+    folder = tempfile.mkdtemp(prefix=f"fuzz{job}-")
+    bases = F.make_bases(folder, seed=seed)
+    t0 = time.monotonic()
+
+    def progress(k, outcomes):
+        if k % 100 == 0:
+            bad = sum(1 for o in outcomes if o.kind in F.FAILURES)
+            line = f"job {job}: {k}/{n_mutated + n_extreme} captures, {bad} failures, {time.monotonic() - t0:.0f} s"
+            print(line, flush=True)
+            if progress_path:
+                with open(f"{progress_path}.{job}", "w") as f:
+                    json.dump([o.__dict__ for o in outcomes], f)
+
+    return F.run_campaign(folder, bases, n_mutated=n_mutated, n_extreme=n_extreme, seed=seed, timeout_s=timeout_s,
+                          progress=progress)
+
+
+def _shard_to_file(job: tuple, path: str) -> None:
+    outcomes = _shard(job)
+    with open(path, "w") as f:
+        json.dump([o.__dict__ for o in outcomes], f)
+
+
+def _split(n: int, k: int) -> list[int]:
+    return [n // k + (1 if i < n % k else 0) for i in range(k)]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--mutated", type=int, default=10000)
+    ap.add_argument("--extreme", type=int, default=1000)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=16)
+    ap.add_argument("--timeout", type=float, default=60.0)
+    ap.add_argument("--out", default=None, help="write every outcome as JSON here")
+    ap.add_argument("--update-docs", action="store_true", help="write the figures into docs/benchmarks.md")
+    a = ap.parse_args()
+    t0 = time.monotonic()
+    jobs = [(j, m, e, a.seed + 1000 * j, a.timeout, a.out) for j, (m, e) in
+            enumerate(zip(_split(a.mutated, a.jobs), _split(a.extreme, a.jobs)))]
+    if a.jobs == 1:
+        outcomes = _shard(jobs[0])
+    else:  # one process per job (each forks its own case worker), results through a file
+        folder = tempfile.mkdtemp(prefix="fuzz-results-")
+        ctx = mp.get_context("fork")
+        procs = [ctx.Process(target=_shard_to_file, args=(job, os.path.join(folder, f"{job[0]}.json")))
+                 for job in jobs]
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join()
+        outcomes = []
+        for job in jobs:
+            with open(os.path.join(folder, f"{job[0]}.json")) as f:
+                outcomes += [F.Outcome(**d) for d in json.load(f)]
+    wall = time.monotonic() - t0
+    s = F.summary(outcomes)
+    lines = [
+        f"captures: {s['captures']} ({s['mutated']} mutated, {s['extreme']} valid-but-extreme; "
+        f"{s['counts'].get('skipped', 0)} extreme edits the writer itself refused, not counted)",
+        f"runs (calibrate + diagnose): {s['runs']}: " + ", ".join(f"{k} {v}" for k, v in sorted(s["counts"].items())
+                                                                  if k != "skipped"),
+        "failures: " + ", ".join(f"{k} {s['counts'].get(k, 0)}" for k in F.FAILURES),
+        f"time per run: median {s['median_s']:.3f} s, max {s['max_s']:.1f} s (limit {a.timeout:g} s); "
+        f"wall {wall / 60:.1f} min with {a.jobs} jobs",
+        f"seed {a.seed}, {platform.machine()}, Python {platform.python_version()}",
+    ]
+    print("\n".join(lines))
+    for o in s["failures"]:
+        print(f"FAILURE {o.kind} {o.command} {o.case}: {o.detail}")
+    if a.out:
+        with open(a.out, "w") as f:
+            json.dump([o.__dict__ for o in outcomes], f)
+    if a.update_docs:
+        _update_docs(lines, a)
+    return 1 if s["failures"] else 0
+
+
+def _update_docs(lines: list[str], a) -> None:
+    path = ROOT / "docs" / "benchmarks.md"
+    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
+    head = "## Fuzz and extreme values"
+    body = (f"{head}\n\n`nice -n 10 .venv/bin/python benchmarks/bench_fuzz.py --mutated {a.mutated} "
+            f"--extreme {a.extreme} --jobs {a.jobs} --seed {a.seed} --timeout {a.timeout:g}`\n\n"
+            + "\n".join(f"- {line}" for line in lines) + "\n")
+    if head in text:
+        start = text.index(head)
+        nxt = text.find("\n## ", start + len(head))
+        text = text[:start] + body + (text[nxt:] if nxt >= 0 else "")
+    else:
+        text = text.rstrip("\n") + "\n\n" + body
+    path.write_text(text, encoding="utf-8")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
