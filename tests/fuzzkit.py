@@ -13,8 +13,8 @@ five procedures (realistic noise, timing and layout):
 
 Each case runs ``station.cli.main([command, file, '--json'])`` in a worker process (forked
 once, reused), with file descriptor 1 redirected so that stray C-level output is caught.
-The parent gives each case ``timeout_s``; a worker that does not answer is killed and the
-case is a **hang**. Outcomes: ``ok`` (exit 0, stdout one JSON document), ``refused`` (exit 2,
+The parent gives each case ``timeout_s`` of the worker's CPU time (or ten times that in wall
+time); a worker that does not answer is killed and the case is a **hang**. Outcomes: ``ok`` (exit 0, stdout one JSON document), ``refused`` (exit 2,
 stdout empty, one line on stderr with a reason), and the failures: ``hang``, ``last-resort``
 (the CLI's ``cannot process this input``), ``stray-stdout`` (anything on fd 1 but the JSON),
 ``bad-exit`` (another status or a multi-line error), ``crash`` (an exception out of main).
@@ -39,14 +39,14 @@ FAILURES = ("hang", "last-resort", "stray-stdout", "bad-exit", "crash")
 # Small but realistic bases: (name, procedure, simulator options). Sized so one calibrate plus
 # one diagnose takes about a second on one core.
 BASES = [
-    ("p1-series", "accel-tabletop", {"hold_s": 3.0, "move_s": 1.0, "rate_hz": 50.0}),
+    ("p1-series", "accel-tabletop", {"hold_s": 2.0, "move_s": 1.0, "rate_hz": 25.0}),
     ("p1-table", "accel-tabletop", {"averages": True}),
     ("p2-table", "accel-centrifuge", {}),
-    ("p3", "compass", {"n_orientations": 14, "hold_s": 1.0, "move_s": 1.0, "rate_hz": 25.0}),
-    ("p4-static", "gyro-drift", {"mode": "static", "duration_s": 200.0, "rate_hz": 10.0}),
-    ("p4-reference", "gyro-drift", {"mode": "reference", "duration_s": 200.0, "rate_hz": 10.0}),
-    ("p5-body", "ldv", {"duration_s": 60.0, "rate_hz": 5.0}),
-    ("p5-nav", "ldv", {"duration_s": 60.0, "rate_hz": 5.0, "reference": "nav"}),
+    ("p3", "compass", {"n_orientations": 12, "hold_s": 1.0, "move_s": 1.0, "rate_hz": 20.0}),
+    ("p4-static", "gyro-drift", {"mode": "static", "duration_s": 190.0, "rate_hz": 5.0}),
+    ("p4-reference", "gyro-drift", {"mode": "reference", "duration_s": 190.0, "rate_hz": 5.0}),
+    ("p5-body", "ldv", {"duration_s": 40.0, "rate_hz": 5.0}),
+    ("p5-nav", "ldv", {"duration_s": 40.0, "rate_hz": 5.0, "reference": "nav"}),
 ]
 
 
@@ -432,6 +432,21 @@ def _worker(conn) -> None:
         conn.send(classify(command, case, rc, out, err, stray, crash, time.monotonic() - t0))
 
 
+# A case is a hang when its worker spends more than the limit in CPU time (a machine shared
+# with other work stretches wall time, not CPU time), or ten times the limit in wall time.
+WALL_FACTOR = 10.0
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` (Linux /proc; wall-clock fallback elsewhere)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return time.monotonic()
+
+
 @dataclass
 class Runner:
     """A forked worker that runs cases one by one; killed and replaced after a hang."""
@@ -452,18 +467,25 @@ class Runner:
         if self._proc is None or not self._proc.is_alive():
             self._start()
         t0 = time.monotonic()
+        cpu0 = _cpu_s(self._proc.pid)
         self._conn.send((command, path, case))
-        if self._conn.poll(self.timeout_s):
-            try:
-                outcome = self._conn.recv()
-            except EOFError:
-                outcome = Outcome("crash", command, case, time.monotonic() - t0, "the worker died")
+        while True:
+            if self._conn.poll(0.25):
+                try:
+                    outcome = self._conn.recv()
+                except EOFError:
+                    outcome = Outcome("crash", command, case, time.monotonic() - t0, "the worker died")
+                    self._proc = None
+                break
+            cpu = _cpu_s(self._proc.pid) - cpu0
+            wall = time.monotonic() - t0
+            if cpu > self.timeout_s or wall > WALL_FACTOR * self.timeout_s:
+                self._proc.kill()
+                self._proc.join(10)
                 self._proc = None
-        else:
-            self._proc.kill()
-            self._proc.join(10)
-            self._proc = None
-            outcome = Outcome("hang", command, case, time.monotonic() - t0, f"no answer in {self.timeout_s:g} s")
+                outcome = Outcome("hang", command, case, wall,
+                                  f"no answer after {cpu:.0f} s of CPU ({wall:.0f} s wall); limit {self.timeout_s:g} s CPU")
+                break
         self.outcomes.append(outcome)
         return outcome
 

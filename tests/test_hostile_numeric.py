@@ -262,3 +262,31 @@ def test_a_data_line_longer_than_the_limit_is_refused_with_its_number(tmp_path):
     with pytest.raises(InputError) as e:
         read_capture(path, rows=10)
     assert e.value.line == 104 and "longer than" in e.value.message
+
+
+def test_every_least_squares_run_is_bounded(sims, tmp_path, monkeypatch):
+    """A P2 table whose `az` and `elapsed_s` headers were swapped (found by the fuzz harness:
+    diagnose ran eight fits of thousands of evaluations each, minutes on a loaded machine):
+    every fit now stops within 20 (p + 1) evaluations."""
+    import solvers.fit as fitmod
+
+    src = sims("accel-centrifuge")
+    text = src.read_text()
+    header = next(line for line in text.splitlines() if line.startswith("position,"))
+    names = header.split(",")
+    i, j = names.index("az"), names.index("elapsed_s")
+    names[i], names[j] = names[j], names[i]
+    bad = tmp_path / "swapped.csv"
+    bad.write_text(text.replace(header, ",".join(names), 1))
+    runs = []
+    real = fitmod.least_squares
+
+    def counting(fun, x0, **kw):
+        sol = real(fun, x0, **kw)
+        runs.append((len(x0), sol.nfev))
+        return sol
+
+    monkeypatch.setattr(fitmod, "least_squares", counting)
+    r = run_station("diagnose", bad, "--json")
+    assert r.returncode in (0, 2) and LAST_RESORT not in r.stderr
+    assert runs and all(nfev <= fitmod.MAX_NFEV_PER_PARAM * (p + 1) for p, nfev in runs), runs
