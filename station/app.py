@@ -16,6 +16,7 @@ from textual.binding import Binding
 
 from station.messages import StoreLoaded
 from station.procedures import registry
+from station.textsafe import tui_markup
 
 
 @dataclass
@@ -101,16 +102,16 @@ class StationApp(App):
         if message.what != "due":
             return
         if message.error:
-            self.notify(f"database: {message.error}", severity="error", timeout=8)
+            self.notify(f"database: {tui_markup(message.error)}", severity="error", timeout=8)
             return
         overdue = [d for d in message.data if d["status"] == "overdue"]
         soon = [d for d in message.data if d["status"] == "due"]
         if overdue or soon:
             parts = []
             if overdue:
-                parts.append("overdue: " + ", ".join(d["device_id"] for d in overdue[:4]))
+                parts.append("overdue: " + ", ".join(tui_markup(d["device_id"]) for d in overdue[:4]))
             if soon:
-                parts.append("due within 7 days: " + ", ".join(d["device_id"] for d in soon[:4]))
+                parts.append("due within 7 days: " + ", ".join(tui_markup(d["device_id"]) for d in soon[:4]))
             self.notify("; ".join(parts) + "  (F2 history)", title="Recalibration",
                         severity="warning", timeout=10)
         self.due = message.data

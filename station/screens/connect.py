@@ -247,6 +247,7 @@ class ConnectScreen(Screen):
         self.open_source(choice, port, self.query_one("#protocol", Select).value)
 
     def _status(self, text: str, error: bool = False) -> None:
+        text = tui_markup(text)  # device ids, ports and errors come from outside
         self.query_one("#status", Static).update(f"[b red]{text}[/]" if error else text)
 
     @work(thread=True, exclusive=True, group="connect", exit_on_error=False, description="open the device")
