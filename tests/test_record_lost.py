@@ -146,8 +146,18 @@ def test_a_recording_that_runs_to_its_end_is_complete(bench, tmp_path):
 
 def test_record_command_exits_1_when_the_device_is_lost(bench, tmp_path):
     out = tmp_path / "cli.csv"
-    proc = subprocess.Popen([sys.executable, "-m", "station", "record", "--port", bench.link, "--seconds", "4",
+    proc = subprocess.Popen([sys.executable, "-m", "station", "record", "--port", bench.link, "--seconds", "6",
                              "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    tty_name = os.ttyname(bench.fds[1])
+
+    def has_port_open():  # the recorder opened the port (opening flushes what was sent before)
+        try:
+            return any(os.readlink(f"/proc/{proc.pid}/fd/{fd}") == tty_name
+                       for fd in os.listdir(f"/proc/{proc.pid}/fd"))
+        except OSError:
+            return False
+
+    _wait(has_port_open, "the recorder to open the port", timeout_s=60)
     bench.send(header_sentence(HDR))
     k = 0
     t_end = time.monotonic() + 1.0
