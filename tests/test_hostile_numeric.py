@@ -290,3 +290,13 @@ def test_every_least_squares_run_is_bounded(sims, tmp_path, monkeypatch):
     r = run_station("diagnose", bad, "--json")
     assert r.returncode in (0, 2) and LAST_RESORT not in r.stderr
     assert runs and all(nfev <= fitmod.MAX_NFEV_PER_PARAM * (p + 1) for p, nfev in runs), runs
+
+
+def test_a_short_static_gyro_record_is_diagnosed_not_the_last_resort(sims):
+    """Found by the fuzz harness: a P4 static record of 100 rows (under the 400-row block
+    budget) made one-row blocks, all dropped, and diagnose fell to the last-resort error."""
+    src = sims("gyro-drift", "duration_s=20", "rate_hz=5")
+    r = run_station("diagnose", src, "--json")
+    assert LAST_RESORT not in r.stderr
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["procedure"] == "gyro-drift"

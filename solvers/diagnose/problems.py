@@ -23,6 +23,7 @@ import numpy as np
 from solvers import linalg
 from solvers import frames
 from solvers.diagnose.engine import Candidate, Problem
+from solvers.errors import TooFewPositions
 from solvers.models import Conditions
 from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
@@ -94,13 +95,17 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
     n = len(t)
     # block means within each position run
     bounds = [0] + [k for k in range(1, n) if pos[k] != pos[k - 1]] + [n]
-    per = max(1, int(math.ceil(n / max_rows)))
+    per = max(2, int(math.ceil(n / max_rows)))  # a block of one row has no spread to weigh it by
     blocks = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         for s in range(a, b, per):
             e = min(b, s + per)
             if e - s >= max(2, per // 2):
                 blocks.append((s, e))
+    if len(blocks) < 4:  # e.g. a position label that changes on every row
+        raise TooFewPositions(f"the static record breaks into {len(bounds) - 1} runs of one position too short to "
+                              f"average ({n} rows, {len(blocks)} blocks of 2 rows or more): diagnosis needs longer "
+                              "stretches at rest")
     idx = [np.arange(s, e) for s, e in blocks]
     mean = lambda x: np.array([np.mean(x[i], axis=0) for i in idx])  # noqa: E731
     tb, wb = mean(t), mean(w)
