@@ -82,7 +82,13 @@ def main() -> int:
             p.join()
         outcomes = []
         for job in jobs:
-            with open(os.path.join(folder, f"{job[0]}.json")) as f:
+            path = os.path.join(folder, f"{job[0]}.json")
+            if not os.path.exists(path):  # the job died: its last progress file, said plainly
+                print(f"job {job[0]} ended early; counting its outcomes up to its last progress file")
+                path = f"{a.out}.{job[0]}" if a.out else ""
+                if not os.path.exists(path):
+                    continue
+            with open(path) as f:
                 outcomes += [F.Outcome(**d) for d in json.load(f)]
     wall = time.monotonic() - t0
     s = F.summary(outcomes)

@@ -247,11 +247,16 @@ def mutate(text: str, rng: random.Random) -> tuple[str, bytes]:
     """(names of the mutators applied, the mutated file's bytes): one to three mutations."""
     names, data = [], text
     for _ in range(rng.choice([1, 1, 1, 2, 3])):
-        m = rng.choice(MUTATORS)
-        names.append(m.__name__[2:])
-        out = m(data if isinstance(data, str) else data.decode("utf-8", "replace"), rng)
-        data = out
-    return "+".join(names), (data if isinstance(data, bytes) else data.encode("utf-8", "surrogatepass"))
+        for _attempt in range(20):  # a mutator with nothing to act on (no data line left) gives way to another
+            m = rng.choice(MUTATORS)
+            try:
+                out = m(data if isinstance(data, str) else data.decode("utf-8", "replace"), rng)
+            except (ValueError, IndexError):
+                continue
+            names.append(m.__name__[2:])
+            data = out
+            break
+    return "+".join(names) or "none", (data if isinstance(data, bytes) else data.encode("utf-8", "surrogatepass"))
 
 
 # ------------------------------------------------------------------------------ extreme but valid

@@ -71,3 +71,10 @@ def test_mutators_change_the_file_and_keep_their_names():
         assert names and all(n in {m.__name__[2:] for m in F.MUTATORS} for n in names.split("+"))
         changed += data != text.encode()
     assert changed >= 190  # a mutator that does nothing would hide behind the count
+
+
+def test_mutating_a_file_cut_to_its_first_lines_still_works():
+    text = "# station-capture: 1\n# procedure: ldv\nt,vl1\n"
+    rng = random.Random(9)
+    for _ in range(300):  # every mutator meets a file with no data line
+        F.mutate(text[: rng.randrange(len(text))], rng)
