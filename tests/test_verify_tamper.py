@@ -200,8 +200,9 @@ def test_an_export_carries_the_anchor_that_exposes_a_rolled_back_file(capsys, tm
         second = s.save_calibration(accel_result(device="IMU-9", B=(0.2, -0.2, 0.3)), meta=meta, columns=cols)
     code, out, _ = _cli(capsys, "export", second, "--format", "json", "--db", path)
     anchor = json.loads(out)["anchor"]
-    code, out, _ = _cli(capsys, "export", second, "--format", "px4", "--db", path)
-    assert f"# station anchor {anchor}" in out
+    code, out, err = _cli(capsys, "export", second, "--format", "c-header", "--db", path)
+    assert code == 0, err
+    assert f"station anchor {anchor}" in out  # in the header comment of every text format
     assert _cli(capsys, "verify", "--anchor", anchor, "--db", path)[0] == 0
     for suffix in ("", "-wal", "-shm"):
         if os.path.exists(path + suffix):
