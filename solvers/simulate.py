@@ -571,15 +571,57 @@ def _jsonable(obj):
 
 # ---------------------------------------------------------------- live device
 
+# How a hand sets the unit down: a move of MOVE_S, then it rocks on its face, a damped
+# oscillation of WOBBLE_DEG (1.5° at the worst) at WOBBLE_HZ decaying with WOBBLE_TAU_S,
+# over within WOBBLE_S. The stillness detector sees the rocking (gyro ~0.3 rad/s at first).
+WOBBLE_HZ = 3.0
+WOBBLE_TAU_S = 0.5
+WOBBLE_DEG = (0.4, 1.5)
+WOBBLE_S = 3.5
+# Where a hand puts a unit asked to be in a position: within 1° of a flat face, within
+# 3° on the 45° block (its edge is hand-held against the block); any heading.
+PLACEMENT_FLAT_DEG = 1.0
+PLACEMENT_TILTED_DEG = 3.0
+
+
+def sweep_rate_rad_s(u_s: np.ndarray) -> np.ndarray:
+    """A hand turning a compass module through every orientation: body rates [rad/s]
+    at ``u_s`` seconds into the sweep, about 0.6 rad/s with an axis that keeps wandering
+    (the field direction covers 80 % of the sphere in about a minute)."""
+    u = np.asarray(u_s, float)[:, None]
+    w = np.hstack([np.sin(0.31 * u + 0.4), np.cos(0.23 * u), 0.7 * np.sin(0.13 * u + 1.0) + 0.3])
+    return 0.6 * w / np.linalg.norm(w, axis=1, keepdims=True)
+
+
+def rate_table_rad_s(u_s: np.ndarray) -> np.ndarray:
+    """A slow rate table carrying the unit and the reference IMU (P4 mode A): body rates
+    [rad/s], mostly about the vertical (z), a little about the level axes."""
+    u = np.asarray(u_s, float)[:, None]
+    return np.hstack([0.05 * np.sin(2 * np.pi * u / 7.0), 0.03 * np.sin(2 * np.pi * u / 5.0),
+                      0.2 * np.sin(2 * np.pi * u / 11.0)])
+
+
+DRIVES = {"sweep": sweep_rate_rad_s, "table": rate_table_rad_s}
+
+
 class LiveImu:
     """The simulated bench device, sample by sample: an IMU with accel (V), gyro (rad/s),
     mag (uT) and temperature that an operator (or the scripted operator) turns between
-    positions. Raw outputs come from the same forward models as :func:`simulate`."""
+    positions. Raw outputs come from the same forward models as :func:`simulate`.
+
+    ``set_orientation(name)`` is the operator's hand: a P1 position (``x_up`` ...), a
+    sphere attitude (``s1``..``s12``) or ``level``; the unit ends within a realistic
+    placement error of the asked attitude (a fresh one each time, any heading) and rocks
+    before it settles. ``sweep`` turns it continuously through every orientation (P3),
+    ``table`` runs the rate table (P4 mode A), ``still`` stops either where it is.
+    ``reference=True`` adds a navigation-grade reference IMU rigidly mounted with it
+    (``ref_gx..ref_gz`` rad/s, same axes; drift ~1 °/h, noise a tenth of the unit's)."""
 
     MOVE_S = 2.5
 
     def __init__(self, *, procedure: str = "accel-tabletop", seed: int = 0, rate_hz: float = 100.0,
-                 effects: dict[str, float] | None = None, hold_s: float = 8.0, site: dict | None = None):
+                 effects: dict[str, float] | None = None, hold_s: float = 8.0, site: dict | None = None,
+                 reference: bool = False):
         if procedure not in PROCEDURES:
             raise SimulationError(f"unknown procedure {procedure!r}")
         effects = _check_effects(procedure, effects)
@@ -602,17 +644,25 @@ class LiveImu:
                 self.mag.update(mag_model.effect_blocks(name, size, self.rng, self.mag, duration_s=300.0))
             elif name in gyro_model.EFFECTS:
                 self.gyro.update(gyro_model.effect_blocks(name, size, self.rng, self.gyro))
+        self.reference = bool(reference)
         self.units = {"accel_unit": "V", "gyro_unit": "rad/s", "mag_unit": "uT"}
         self.device_id = f"SIM-{procedure.upper()[:3]}-{seed:04d}"
         self.positions = list(P1_POSITIONS) if procedure.startswith("accel") else \
             [f"s{k + 1}" for k in range(12)] if procedure == "compass" else ["level"]
+        self._bases = {name: (P1_POSITIONS[name], name[:2] in ("xy", "yz", "xz")) for name in P1_POSITIONS}
+        self._bases["level"] = (np.array([0.0, 0.0, 1.0]), False)
+        # _targets: where the unit is (or was last put) for each name
         self._targets = {name: C_n_b_for(P1_POSITIONS[name], 0.3) @ placement_error(self.rng, 1.0)
                          for name in P1_POSITIONS}
         for k, C in enumerate(sphere_attitudes(self.rng, 12)):
             self._targets[f"s{k + 1}"] = C
         self._targets["level"] = C_n_b_for([0.0, 0.0, 1.0], 0.0)
         self.C = self._targets[self.positions[0]]
-        self._move: tuple[np.ndarray, np.ndarray, float, float] | None = None
+        # the reference IMU's own drift: ~1 °/h per axis (a fibre-optic unit)
+        self.ref_bias = np.radians(1.0 / 3600.0) * self.rng.normal(size=3)
+        # a move: (C0, C1, t0, T, wobble rotvec [rad]); kept until its rocking has died out
+        self._move: tuple[np.ndarray, np.ndarray, float, float, np.ndarray] | None = None
+        self._drive: tuple[str, float] | None = None  # (kind, start time)
         self.temp_c = 24.0
         self._temp_target = 24.0
         self.t_s = 0.0
@@ -623,12 +673,46 @@ class LiveImu:
     @property
     def truth(self) -> dict:
         B, M = accel_model.forward_to_p1(self.accel)
-        return _jsonable({"accel": {"B": B, "M": M, **self.accel}, "mag": self.mag, "gyro": self.gyro})
+        return _jsonable({"accel": {"B": B, "M": M, **self.accel}, "mag": self.mag, "gyro": self.gyro,
+                          "ref_bias_rad_s": self.ref_bias})
+
+    @property
+    def driving(self) -> str | None:
+        """'sweep' or 'table' while a continuous motion runs, else None."""
+        return self._drive[0] if self._drive else None
+
+    def _wobble(self) -> np.ndarray:
+        axis = self.rng.normal(size=3)
+        return axis / np.linalg.norm(axis) * math.radians(self.rng.uniform(*WOBBLE_DEG))
 
     def set_orientation(self, name: str) -> None:
+        """The operator's hand (class docstring)."""
+        if name in DRIVES:
+            self._settle_now()
+            self._drive = (name, self.t_s)
+            return
+        if name == "still":
+            if self._drive is not None:
+                self._settle_now()
+                self._move = (self.C, self.C, self.t_s, 0.0, self._wobble())
+            return
         if name not in self._targets:
-            raise SimulationError(f"unknown position {name!r}; known: {', '.join(self._targets)}")
-        self._move = (self.C, self._targets[name], self.t_s, self.MOVE_S)
+            raise SimulationError(f"unknown position {name!r}; known: {', '.join(self._targets)}, "
+                                  f"{', '.join(DRIVES)}, still")
+        self._settle_now()
+        if name in self._bases:  # a fresh placement each time: any heading, a small error
+            d, tilted = self._bases[name]
+            heading = self.rng.uniform(0.0, 2 * math.pi) if name != "level" else 0.0
+            err = PLACEMENT_TILTED_DEG if tilted else PLACEMENT_FLAT_DEG
+            self._targets[name] = C_n_b_for(d, heading) @ placement_error(self.rng, err)
+        self._move = (self.C, self._targets[name], self.t_s, self.MOVE_S, self._wobble())
+
+    def _settle_now(self) -> None:
+        """Freeze the attitude where it is now (ends a drive or a move half-way)."""
+        C, _ = self._attitude(np.array([self.t_s]), commit=False)
+        self.C = C[0]
+        self._drive = None
+        self._move = None
 
     def set_temperature(self, temp_c: float) -> None:
         self._temp_target = float(temp_c)
@@ -638,26 +722,51 @@ class LiveImu:
         self._auto_index = 0
         self._auto_next_s = self.t_s + self.hold_s
 
-    def _attitude(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _attitude(self, t: np.ndarray, commit: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Attitudes (body → NED) and body rates [rad/s] at the times ``t`` (ascending,
+        after ``self.t_s``); ``commit`` advances a drive's integrated attitude."""
         n = len(t)
+        if self._drive is not None:
+            kind, t0 = self._drive
+            w = DRIVES[kind](t - t0)
+            dt = np.diff(np.concatenate([[self.t_s], t]))
+            Cs = np.empty((n, 3, 3))
+            C = self.C
+            for k in range(n):
+                C = C @ rotvec_to_matrix(w[k] * dt[k])
+                Cs[k] = C
+            if commit and n:
+                self.C = C
+            return Cs, w
         if self._move is None:
             return np.repeat(self.C[None], n, axis=0), np.zeros((n, 3))
-        C0, C1, t0, T = self._move
+        C0, C1, t0, T, wob = self._move
         theta = matrix_to_rotvec(C0.T @ C1)
-        s = np.clip((t - t0) / T, 0.0, 1.0)
+        s = np.clip((t - t0) / T, 0.0, 1.0) if T > 0 else np.ones(n)
         Cs = np.stack([C0 @ rotvec_to_matrix(k * theta) for k in smoothstep(s)])
-        rate = np.where((s > 0) & (s < 1), 0.5 * np.pi * np.sin(np.pi * s) / T, 0.0)
-        return Cs, rate[:, None] * theta[None, :]
+        rate = np.where((s > 0) & (s < 1), 0.5 * np.pi * np.sin(np.pi * s) / T, 0.0) if T > 0 else np.zeros(n)
+        w = rate[:, None] * theta[None, :]
+        u = t - (t0 + T)
+        on = u > 0
+        if on.any():  # set down: it rocks, a damped oscillation about a random axis
+            wt = 2 * np.pi * WOBBLE_HZ * u[on]
+            env = np.exp(-u[on] / WOBBLE_TAU_S)
+            a = env * np.sin(wt)
+            da = env * (2 * np.pi * WOBBLE_HZ * np.cos(wt) - np.sin(wt) / WOBBLE_TAU_S)
+            Cs[on] = np.stack([C1 @ rotvec_to_matrix(x * wob) for x in a])
+            w[on] = da[:, None] * wob[None, :]
+        return Cs, w
 
     def read(self, n: int) -> dict[str, np.ndarray]:
-        """The next ``n`` samples in raw units: t_s, ax..az (V), gx..gz (rad/s), mx..mz (uT), temp_c."""
+        """The next ``n`` samples in raw units: t_s, ax..az (V), gx..gz (rad/s), mx..mz (uT),
+        temp_c (and ref_gx..ref_gz, rad/s, with the reference IMU)."""
         dt = 1.0 / self.rate_hz
         t = self.t_s + np.arange(1, n + 1) * dt
-        if self.auto and t[-1] >= self._auto_next_s and self._move is None:
+        if self.auto and t[-1] >= self._auto_next_s and self._move is None and self._drive is None:
             self._auto_index = (self._auto_index + 1) % len(self.positions)
             self.set_orientation(self.positions[self._auto_index])
         Cs, w = self._attitude(t)
-        if self._move is not None and t[-1] >= self._move[2] + self._move[3]:
+        if self._move is not None and t[-1] >= self._move[2] + self._move[3] + WOBBLE_S:
             self.C = self._move[1]
             self._move = None
             self._auto_next_s = t[-1] + self.hold_s
@@ -675,5 +784,101 @@ class LiveImu:
         gyr = gyro_model.forward(w_b, self.gyro, cond) + self.rng.normal(scale=0.003, size=(n, 3))
         mag = mag_model.forward(m_b, self.mag, cond) + self.rng.normal(scale=0.15, size=(n, 3))
         self.t_s = float(t[-1])
-        return {"t_s": t, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2], "gx": gyr[:, 0], "gy": gyr[:, 1],
-                "gz": gyr[:, 2], "mx": mag[:, 0], "my": mag[:, 1], "mz": mag[:, 2], "temp_c": temps}
+        out = {"t_s": t, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2], "gx": gyr[:, 0], "gy": gyr[:, 1],
+               "gz": gyr[:, 2], "mx": mag[:, 0], "my": mag[:, 1], "mz": mag[:, 2], "temp_c": temps}
+        if self.reference:
+            ref = w_b + self.ref_bias + self.rng.normal(scale=0.0003, size=(n, 3))
+            out.update({"ref_gx": ref[:, 0], "ref_gy": ref[:, 1], "ref_gz": ref[:, 2]})
+        return out
+
+
+class LiveVehicle:
+    """P5 live: a vehicle with INS/DGPS and a three-beam LDV (the beams of
+    :func:`simulate_ldv`), sample by sample, driven by the operator.
+
+    ``drive(on)`` starts (cruise about 10 m/s with speed changes) or stops (brakes to a
+    halt in ~10 s); ``turns(on)`` adds turns, hills and braking, which spread the body
+    velocity's direction (the lateral and vertical components ramp in over ~3 s). On a
+    straight road they are centimetres per second: the velocity set stays ill-conditioned
+    (the source's warning). Outputs: ``vl1..vl3`` (beams, m/s), ``vx vy vz`` (reference
+    body velocity, FRD, m/s), ``wx wy wz`` (body rates, rad/s), ``temp_c``."""
+
+    def __init__(self, *, seed: int = 0, rate_hz: float = 10.0, beam_noise_mps: float = 0.01,
+                 ref_noise_mps: float = 0.005, site: dict | None = None):
+        self.rng = np.random.default_rng(seed)
+        self.rate_hz = float(rate_hz)
+        self.site = dict(DEFAULT_SITE, **(site or {}))
+        self.device_id = f"SIM-LDV-{seed:04d}"
+        self.units = {"accel_unit": "", "gyro_unit": "rad/s", "mag_unit": ""}
+        self.positions: list[str] = []
+        dK = self.rng.normal(scale=0.005, size=3)
+        alpha = np.array([60.0, 60.0, 90.0]) + self.rng.normal(scale=0.5, size=3)
+        beta = np.array([90.0, 90.0, 60.0]) + self.rng.normal(scale=0.5, size=3)
+        gamma = np.degrees(np.arccos(np.sqrt(np.clip(
+            1 - np.cos(np.radians(alpha)) ** 2 - np.cos(np.radians(beta)) ** 2, 0, 1))))
+        alpha[1] = 180.0 - alpha[1]  # the second beam looks backward
+        self.params = {"X": ldv_model.X_from_angles(dK, alpha, beta, gamma)}
+        self.truth = _jsonable({"X": self.params["X"], "dK": dK, "alpha_deg": alpha, "beta_deg": beta,
+                                "gamma_deg": gamma})
+        self.beam_noise_mps, self.ref_noise_mps = beam_noise_mps, ref_noise_mps
+        self.ph = self.rng.uniform(0, 2 * np.pi, size=6)
+        self.t_s = 0.0
+        self.speed_mps = 0.0  # forward cruise speed (before the speed changes)
+        self.turn = 0.0  # 0 straight .. 1 full turns and hills
+        self._driving = False
+        self._turns = False
+        self.temp_c = 15.0
+
+    @property
+    def driving(self) -> bool:
+        return self._driving
+
+    @property
+    def turning(self) -> bool:
+        return self._turns
+
+    def drive(self, on: bool) -> None:
+        self._driving = bool(on)
+
+    def turns(self, on: bool) -> None:
+        self._turns = bool(on)
+
+    def set_orientation(self, name: str) -> None:
+        """Commands by name (the bench interface): ``drive``, ``stop``, ``turns``, ``straight``."""
+        actions = {"drive": lambda: self.drive(True), "stop": lambda: self.drive(False),
+                   "turns": lambda: self.turns(True), "straight": lambda: self.turns(False)}
+        if name not in actions:
+            raise SimulationError(f"unknown vehicle command {name!r}; known: {', '.join(actions)}")
+        actions[name]()
+
+    def read(self, n: int) -> dict[str, np.ndarray]:
+        dt = 1.0 / self.rate_hz
+        t = self.t_s + np.arange(1, n + 1) * dt
+        k = np.arange(1, n + 1)
+        # first-order lags: cruise speed (accelerate ~5 s, brake ~3 s), turn amount ~3 s
+        target = 10.0 if self._driving else 0.0
+        tau = 5.0 if self._driving else 3.0
+        spd = target + (self.speed_mps - target) * np.exp(-k * dt / tau)
+        tt = 1.0 if self._turns else 0.0
+        turn = tt + (self.turn - tt) * np.exp(-k * dt / 3.0)
+        self.speed_mps, self.turn = float(spd[-1]), float(turn[-1])
+        ph = self.ph
+        moving = spd / 10.0  # the manoeuvres scale with the speed (a parked car has none)
+        fwd = spd * (1.0 + 0.5 * turn * np.sin(2 * np.pi * t / 47.0 + ph[0])) + \
+            0.2 * moving * np.sin(2 * np.pi * t / 23.0 + ph[1])
+        lat = moving * (0.01 + turn * 2.0) * np.sin(2 * np.pi * t / 31.0 + ph[2]) + \
+            moving * turn * 0.8 * np.sin(2 * np.pi * t / 13.0 + ph[4])
+        vert = moving * (0.01 + turn * 1.5) * np.sin(2 * np.pi * t / 41.0 + ph[3]) + \
+            moving * turn * 0.5 * np.sin(2 * np.pi * t / 17.0 + ph[5])
+        v_b = np.column_stack([fwd, lat, vert])
+        w_b = moving[:, None] * np.column_stack([0.05 * np.sin(2 * np.pi * t / 19.0), 0.04 * np.sin(2 * np.pi * t / 29.0),
+                                                 (0.02 + 0.13 * turn) * np.sin(2 * np.pi * t / 37.0 + ph[0])])
+        a = math.exp(-dt / 900.0)  # warming up toward 25 °C
+        temps = 25.0 + (self.temp_c - 25.0) * a ** k
+        self.temp_c = float(temps[-1])
+        cond = Conditions(t_s=t, temp_c=temps, temp_ref_c=25.0, omega_body_rad_s=w_b)
+        vl = ldv_model.forward(v_b, self.params, cond) + self.rng.normal(scale=self.beam_noise_mps, size=(n, 3))
+        ref = v_b + self.rng.normal(scale=self.ref_noise_mps, size=(n, 3))
+        self.t_s = float(t[-1])
+        return {"t_s": t, "vl1": vl[:, 0], "vl2": vl[:, 1], "vl3": vl[:, 2], "vx": ref[:, 0], "vy": ref[:, 1],
+                "vz": ref[:, 2], "wx": w_b[:, 0], "wy": w_b[:, 1], "wz": w_b[:, 2], "temp_c": temps}

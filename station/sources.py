@@ -21,13 +21,16 @@ from solvers.simulate import NOMINAL_ACCEL_SCALE_V_PER_MPS2, NOMINAL_ACCEL_ZERO_
 
 @dataclass
 class Samples:
-    """A batch: t_s (n,) device time [s], accel, gyro, mag (n, 3) raw, temp_c (n,)."""
+    """A batch: t_s (n,) device time [s], accel, gyro, mag (n, 3) raw, temp_c (n,);
+    ``extra``: any other columns by their capture names (the reference IMU's ``ref_gx``..,
+    the LDV's ``vl1``.., ``vx``.., ``wx``..), each (n,)."""
 
     t_s: np.ndarray
     accel: np.ndarray
     gyro: np.ndarray
     temp_c: np.ndarray
     mag: np.ndarray | None = None
+    extra: dict | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -50,7 +53,9 @@ class CentrifugeImu:
 
     ``set_orientation("k@ω")`` asks for orientation k (1-based) at ω rad/s; the bench then
     changes over like a real one: a speed change ramps for ``ramp_s``; a new orientation
-    first spins down, is handled (remounted) for ``handle_s``, then spins up. Specific force
+    first spins down, is handled (remounted) for ``handle_s``, then spins up. The speed it
+    holds is the set point within its controller's error (0.2 %, 1σ, a new one each time it
+    is set); the gyro on the table measures it. Specific force
     in the table frame (radial out, tangential, up) is ``(−ω²R/g, 0, 1)`` g (the simulator's
     convention); the forward model is ``solvers.models.accel.forward``. The gyro reads the
     table's rate, ``(0, 0, ω)`` in the table frame, in rad/s."""
@@ -64,6 +69,7 @@ class CentrifugeImu:
         self.orients = centrifuge_orientations(20)
         self.rate_hz, self.radius_m, self.g_mps2 = float(rate_hz), float(radius_m), float(g_mps2)
         self.noise_g, self.ramp_s, self.handle_s = noise_g, ramp_s, handle_s
+        self.speed_error = 0.002
         self.rng = np.random.default_rng(seed + 1)
         self.device_id = f"SIM-CFG-{seed:04d}"
         self.units = {"accel_unit": "g", "gyro_unit": "rad/s"}
@@ -84,6 +90,7 @@ class CentrifugeImu:
         t = self._i / self.rate_hz
         k0, w0 = (float(x[0]) for x in self._state(t)[:2])
         k0 = int(k0)
+        w = w * (1.0 + self.speed_error * self.rng.normal()) if w > 0 else 0.0
         if k == k0:
             self._plan = [(t, k0, w0, k, w, "ramp")]
         else:
@@ -150,9 +157,14 @@ class SimSource:
 
         if procedure == "accel-centrifuge":
             self.imu = CentrifugeImu(seed=seed, rate_hz=rate_hz)
-        else:  # the gyro noise (Allan) run holds the unit still like P4
-            self.imu = LiveImu(procedure="gyro-drift" if procedure == "gyro-noise" else procedure, seed=seed,
-                               rate_hz=rate_hz, hold_s=1e9)
+        elif procedure == "ldv":  # the vehicle with INS/DGPS and the LDV, 10 Hz
+            from solvers.simulate import LiveVehicle
+
+            rate_hz = 10.0
+            self.imu = LiveVehicle(seed=seed, rate_hz=rate_hz)
+        else:  # the gyro noise (Allan) run holds the unit still like P4; mode A adds the reference
+            self.imu = LiveImu(procedure="gyro-drift" if procedure in ("gyro-noise", "gyro-reference") else procedure,
+                               seed=seed, rate_hz=rate_hz, hold_s=1e9, reference=procedure == "gyro-reference")
         self.procedure = procedure
         self.positions = list(self.imu.positions)
         self.rate_hz = float(rate_hz)
@@ -173,6 +185,8 @@ class SimSource:
         """The id the simulated device reports (as solvers.simulate.LiveImu names it)."""
         if procedure == "accel-centrifuge":
             return f"SIM-CFG-{seed:04d}"  # CentrifugeImu, simulate_centrifuge's triad
+        if procedure in ("gyro-noise", "gyro-reference"):
+            procedure = "gyro-drift"
         return f"SIM-{procedure.upper()[:3]}-{seed:04d}"
 
     def start(self) -> "SimSource":
@@ -206,13 +220,27 @@ class SimSource:
             w.pop(0)
         if len(w) >= 2 and w[-1][0] > w[0][0]:
             self._stats.rate_hz = (w[-1][1] - w[0][1]) / (w[-1][0] - w[0][0]) / max(self.speed, 1e-9)
-        return Samples(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]),
-                       np.column_stack([d["gx"], d["gy"], d["gz"]]), d["temp_c"],
-                       np.column_stack([d["mx"], d["my"], d["mz"]]))
+        nan = np.full((n, 3), np.nan)
+
+        def trio(a, b, c):
+            return np.column_stack([d[a], d[b], d[c]]) if a in d else nan
+
+        std = {"t_s", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c"}
+        extra = {k: v for k, v in d.items() if k not in std}
+        return Samples(d["t_s"], trio("ax", "ay", "az"), trio("gx", "gy", "gz") if "gx" in d else trio("wx", "wy", "wz"),
+                       d["temp_c"], trio("mx", "my", "mz"), extra or None)
 
     def place(self, name: str) -> None:
+        """The operator's hand on the simulated bench: a position, a centrifuge setting
+        ``k@ω``, ``sweep`` / ``table`` / ``still``, or a vehicle command (the imu's
+        ``set_orientation``)."""
         with self._lock:
             self.imu.set_orientation(name)
+
+    def bench(self, what: str):
+        """A property of the simulated bench (``driving``, ``turning``, ...) or None."""
+        with self._lock:
+            return getattr(self.imu, what, None)
 
     def stats(self) -> SourceStats:
         return SourceStats(**vars(self._stats))

@@ -167,3 +167,89 @@ def test_skip_redo_select_abort_and_finish():
 def test_bad_config_is_refused(bad):
     with pytest.raises(ValueError):
         CentrifugeConfig(**bad)
+
+
+def test_a_stopped_centrifuge_is_never_a_row_even_when_the_operator_picks_the_step():
+    """The bug seen at the bench: Enter on a step while the centrifuge stood still stored a
+    row with the asked speed (6.28 rad/s) while the table turned at 0.001 rad/s. A row now
+    waits until the gyro measures the asked speed, and stores what it measured."""
+    now, src, guide = live(n_orientations=2)
+    run(now, src, guide, 4)  # the noise rest, centrifuge stopped
+    guide.select(0)  # the operator picks step 1: steady output, but the table does not turn
+    run(now, src, guide, 10)
+    st = guide.status()
+    assert guide.n_captured == 0 and st.phase == "place" and not st.at_speed
+    assert st.table_rate_rad_s < 0.01 and "not at speed" in st.message
+    src.place("1@" + repr(6.0))  # the wrong speed: steady, but 4.5 % slow
+    run(now, src, guide, 10)
+    assert guide.n_captured == 0 and not guide.status().at_speed
+    src.place("1@" + repr(2 * math.pi))
+    run(now, src, guide, 10)
+    s = guide.steps[0]
+    assert s.status == "captured" and s.how == "live"
+    # the measured mean rate, not the set point: the controller holds it within ~0.2 %
+    assert s.speed_measured_rad_s != s.speed_rad_s and abs(s.speed_measured_rad_s / s.speed_rad_s - 1) < 0.01
+
+
+def test_rows_that_disagree_are_named_as_soon_as_they_are_in():
+    """Typed rows of the simulator's own table; one typed at a speed off the asked one and
+    one with a lost minus sign: each is named by the event that follows its entry (the
+    model's robust screen runs from MIN_FIT_ROWS rows on; with 9 coefficients it needs
+    a few dozen rows to set one apart)."""
+    sim = simulate_centrifuge(seed=4)
+    cols = sim.columns
+    g = CentrifugeGuide(sample_rate_hz=100, units={"accel_unit": "g"},
+                        config=CentrifugeConfig(radius_m=float(sim.meta["radius_m"]), g_mps2=float(sim.meta["g_mps2"])))
+    named = []
+    for k, s in enumerate(list(g.steps)[:36]):
+        j = SPEEDS.index(min(SPEEDS, key=lambda w: abs(w - s.speed_rad_s))) * 20 + s.orientation - 1
+        vals = [repr(float(cols[c][j])) for c in ("ax", "ay", "az", "speed_rad_s")]
+        if k == 31:
+            vals[1] = repr(-float(cols["ay"][j]))  # a lost minus sign
+        if k == 3:
+            vals[3] = repr(float(cols["speed_rad_s"][j]) * 1.05)  # the tachometer read 5 % high
+        g.enter_manual(*vals)
+        named.append([d for kind, d in g.take_events() if kind == "disagree"])
+        if k == 31:
+            assert g.status().message.startswith("Entered 11 @ 12.57 rad/s: DISAGREES (|f| off the model")
+    assert named[3] == ["2 @  6.28 rad/s: speed 6.597 rad/s, asked 6.283"]
+    assert len(named[31]) == 1 and named[31][0].startswith("11 @ 12.57 rad/s: |f| off the model")
+    assert "lost minus sign" in named[31][0]
+    assert all(not n for k, n in enumerate(named) if k not in (3, 31))
+    assert set(g.disagreeing) == {3, 31}
+    assert g.capture().meta["rows_disagreeing"] == "2 @  6.28 rad/s, 11 @ 12.57 rad/s"
+    g.redo(31)  # redone: no longer named
+    assert set(g.disagreeing) == {3}
+
+
+def test_radius_and_local_g_are_checked_and_stored():
+    from station.procedures.centrifuge_guide import parse_positive
+
+    assert parse_positive(" 0.85 ", "radius") == 0.85
+    for bad in ("", "-1", "0", "abc", "1e999"):
+        with pytest.raises(ManualEntryError, match="not a positive number"):
+            parse_positive(bad, "radius")
+    g = CentrifugeGuide(sample_rate_hz=100, units={"accel_unit": "g"},
+                        config=CentrifugeConfig(radius_m=0.85, g_mps2=9.80156))
+    g.enter_manual("1", "0", "0", "6.3")
+    cap = g.capture()
+    assert cap.meta["radius_m"] == "0.85" and cap.meta["g_mps2"] == "9.80156"
+    assert cap.meta["speed_source"] == "typed by the operator"
+
+
+def test_the_drawing_of_a_mounting_matches_its_attitude():
+    """Each mounting's drawing lists the triad's axes in the table frame (out, turn, up):
+    the rows of the attitude the simulated centrifuge uses for that orientation."""
+    from solvers.simulate import centrifuge_orientations
+    from station.procedures.centrifuge_guide import mounting_drawing
+
+    for k in (1, 7, 20):
+        lines = mounting_drawing(k)
+        C_t_b = centrifuge_orientations(20)[k - 1]
+        for a, name in enumerate("xyz"):
+            row = lines[1 + a][24:]  # the table beside the two views
+            assert row.split()[0] == name
+            nums = [float(x) for x in row.split()[1:]]
+            np.testing.assert_allclose(nums, C_t_b[:, a], atol=0.006)
+        assert len(lines) == 5 and all(len(line) <= 56 for line in lines)  # the P2 screen at 80x24
+        assert "o" in lines[2] and "→" in lines[2]

@@ -81,7 +81,9 @@ def test_a_tilted_placement_is_not_in_position():
     feed(guide, sim, 1.5, follow=False)
     sim.set_orientation("xy_45")  # 45° off x_up: still, right face, wrong position
     st, events = feed(guide, sim, 6, follow=False)
-    assert 40 < st.angle_deg < 50 and not st.wrong_face and not st.in_position
+    # 45° apart, give or take the placements (within 3° on the 45° block, 1° flat) and the
+    # nominal (uncalibrated) zero and scale the angle is read with
+    assert 38 < st.angle_deg < 52 and not st.wrong_face and not st.in_position
     assert st.phase == "place" and not [e for e in events if e[0] == "captured"]
 
 

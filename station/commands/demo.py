@@ -60,7 +60,7 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
     src = SimSource(seed=args.seed, speed=1.0, clock=lambda: now[0]).start()
     guide = P1Guide(sample_rate_hz=src.rate_hz, accel_unit=src.units["accel_unit"], device_id=src.device_id,
                     config=GuideConfig(average_s=args.average_s, settle_s=1.0), nominal=src.nominal, site=src.site)
-    operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=3.0)
+    operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=6.0)
     last_phase = None
     last_capture_t = 0.0
     while guide.phase not in ("done", "aborted") and now[0] < max_device_s:

@@ -4,13 +4,17 @@ A step list: for each mounting orientation ``k`` (default the 20 attitudes of
 ``solvers.simulate.centrifuge_orientations``) and each speed (default 2π, 4π, 6π rad/s),
 "mount in orientation k, spin at ω rad/s". Each step is filled either
 
-- **live**: the station averages the accelerometer stream once its output is steady at
-  speed (``solvers.stillness.StillnessTracker`` on the accelerometer alone: on a
-  centrifuge "still" means a constant output, the turning gyro is left out). After each
-  capture the output must change (the operator remounts or changes speed: the detector
-  sees motion) before the next step can be captured, so one steady run is never taken
-  twice (the same holds for the first step after the initial rest: the stopped centrifuge
-  is not a row); or
+- **live**: the station averages the accelerometer stream once its output is steady
+  (``solvers.stillness.StillnessTracker`` on the accelerometer alone: on a centrifuge
+  "still" means a constant output, the turning gyro is left out) **and** the table rate
+  the gyro measures is within ``speed_tol`` of the asked speed (a stopped or wrongly set
+  centrifuge is never a row). The row's speed is the measured mean rate over its average,
+  not the set point. After each capture the output must change (the operator remounts or
+  changes speed: the detector sees motion) before the next step can be captured, so one
+  steady run is never taken twice (the same holds for the first step after the initial
+  rest: the stopped centrifuge is not a row). Without a gyro in a known unit the rate
+  cannot be checked: live rows then carry the asked speed, and the capture says so
+  (``speed_source: set point``); or
 - **manual**: the operator types the three averaged outputs and the measured speed
   (:func:`parse_manual`: decimal numbers only, a speed > 0; one clear message otherwise).
 
@@ -19,12 +23,16 @@ Phases: ``noise`` (initial rest, the centrifuge stopped: the detector learns the
 steady output), ``settle``, ``average`` (countdown), ``done``, ``aborted``. ``skip``,
 ``redo(index)``, ``select(index)``, ``abort``. Times are the samples' own ``t_s``.
 
+Rows that disagree are named at once: a row whose speed is off the asked one by more
+than ``speed_tol``, and, from ``MIN_FIT_ROWS`` rows on, every row the model's robust screen
+(``solvers.centrifuge.screen_rows``, the one the P2 fit uses) sets apart from the others
+(event ``disagree``; :attr:`CentrifugeGuide.disagreeing` maps step index to why).
+
 At the end (or earlier, ``MIN_FIT_ROWS`` rows) :meth:`CentrifugeGuide.capture` is the P2
 table of averages (``position, speed_rad_s, ax, ay, az`` and, when every row was averaged
 live, ``n, ax_std, ay_std, az_std``; metadata ``procedure: accel-centrifuge``,
-``radius_m``, ``g_mps2``, ``accel_unit``) for ``station.calibrate.calibrate_capture``.
-The live speed written is the one asked for (the centrifuge's set speed); type the
-tachometer's reading with a manual entry when it differs.
+``radius_m``, ``g_mps2`` (as the operator entered them), ``accel_unit``,
+``speed_source``) for ``station.calibrate.calibrate_capture``.
 """
 from __future__ import annotations
 
@@ -67,12 +75,22 @@ def parse_manual(ax: str, ay: str, az: str, speed_rad_s: str) -> tuple[float, fl
     return out[0], out[1], out[2], out[3]
 
 
+def parse_positive(text: str, name: str) -> float:
+    """A typed radius or local g: a decimal number > 0 (ManualEntryError otherwise)."""
+    t = (text or "").strip()
+    if not _NUMBER.fullmatch(t) or not math.isfinite(float(t)) or float(t) <= 0:
+        raise ManualEntryError(f"{name}: {t!r} is not a positive number")
+    return float(t)
+
+
 @dataclass
 class CentrifugeConfig:
     """speeds_rad_s: the speeds asked at each orientation [rad/s]. n_orientations: mounting
     attitudes (the paper's 20). radius_m: centrifuge radius to the triad [m]. g_mps2:
     local gravity [m/s²]. average_s / settle_s: averaging time and steady time before it
-    [s]. init_rest_s / window_s: the stillness detector's initial rest and window [s]."""
+    [s]. init_rest_s / window_s: the stillness detector's initial rest and window [s].
+    speed_tol: largest relative difference between the measured table rate and the asked
+    speed for a row (default 2 %)."""
 
     speeds_rad_s: tuple[float, ...] = DEFAULT_SPEEDS_RAD_S
     n_orientations: int = 20
@@ -82,6 +100,7 @@ class CentrifugeConfig:
     settle_s: float = 2.0
     init_rest_s: float = 2.0
     window_s: float = 0.5
+    speed_tol: float = 0.02
 
     def __post_init__(self) -> None:
         self.speeds_rad_s = tuple(float(w) for w in self.speeds_rad_s)
@@ -89,7 +108,7 @@ class CentrifugeConfig:
             raise ValueError(f"speeds_rad_s must be positive numbers, got {self.speeds_rad_s!r}")
         if not (isinstance(self.n_orientations, int) and self.n_orientations >= 1):
             raise ValueError(f"n_orientations must be a positive integer, got {self.n_orientations!r}")
-        for name in ("radius_m", "g_mps2", "average_s", "init_rest_s", "window_s"):
+        for name in ("radius_m", "g_mps2", "average_s", "init_rest_s", "window_s", "speed_tol"):
             v = float(getattr(self, name))
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number, got {getattr(self, name)!r}")
@@ -143,6 +162,7 @@ class CentrifugeStatus:
     progress: float
     raw: tuple[float, float, float]  # recent accelerometer mean (raw unit)
     table_rate_rad_s: float  # |gyro| in rad/s when the gyro unit is known, else NaN
+    at_speed: bool  # the measured rate is within speed_tol of the asked speed (True when unknown)
     n_captured: int
     n_skipped: int
     t_s: float
@@ -170,6 +190,8 @@ class CentrifugeGuide:
         self.phase = "noise"
         self.index: int | None = 0
         self._need_change = True  # the rest is the stopped centrifuge: spin up first
+        self.disagreeing: dict[int, str] = {}  # step index -> why the row disagrees
+        self._rate_known = _GYRO_RAD_S.get(self.units.get("gyro_unit") or "") is not None
         self._events: list[tuple[str, str]] = []
         self._message = "Centrifuge stopped: hold still while the noise is measured"
         self._last = None
@@ -181,6 +203,8 @@ class CentrifugeGuide:
         self._sum = np.zeros(3)
         self._sq = np.zeros(3)
         self._n = 0
+        self._rate_sum = 0.0
+        self._rate_n = 0
         self._t0 = math.nan
         self._t1 = math.nan
 
@@ -208,24 +232,35 @@ class CentrifugeGuide:
             return self.status()
         accel = np.asarray(accel, float).reshape(-1, 3)
         gyro = None if gyro is None else np.asarray(gyro, float).reshape(-1, 3)
+        f = _GYRO_RAD_S.get(self.units.get("gyro_unit") or "")
+        if gyro is None or f is None or not np.isfinite(gyro).any():
+            rates = np.full(len(t_s), np.nan)  # no rate measured (the set point is trusted)
+        else:
+            rates = np.linalg.norm(gyro, axis=1) * f
         step = max(1, int(self.sample_rate_hz * 0.1))
         st = None
         for a in range(0, len(t_s), step):
             sl = slice(a, a + step)
             st = self.tracker.update(t_s[sl], accel[sl], None)
-            self._advance(st, t_s[sl], accel[sl])
+            self._advance(st, t_s[sl], accel[sl], rates[sl])
             if self.phase in ("done", "aborted"):
                 break
         k = min(len(t_s), step)
         raw = np.nanmean(accel[-k:], axis=0)
         rate = math.nan
-        f = _GYRO_RAD_S.get(self.units.get("gyro_unit") or "")
-        if gyro is not None and f is not None:
+        if gyro is not None and f is not None and np.isfinite(gyro[-k:]).any():
             rate = float(np.linalg.norm(np.nanmean(gyro[-k:], axis=0))) * f
         self._last = (raw, rate, float(t_s[-1]), st)
         return self.status()
 
-    def _advance(self, st, t, a) -> None:
+    def _off_speed(self, rate: float) -> bool:
+        """True when the measured table rate is known and not the asked speed."""
+        s = self.step
+        if s is None or not math.isfinite(rate):
+            return False
+        return abs(rate - s.speed_rad_s) > self.config.speed_tol * s.speed_rad_s
+
+    def _advance(self, st, t, a, rates) -> None:
         c = self.config
         if self.index is None:
             return
@@ -238,22 +273,32 @@ class CentrifugeGuide:
                 self._message = f"{self.step.prompt}: waiting for the change"
                 return
             self._need_change = False
+        ok = np.isfinite(rates)
+        rate = float(np.mean(rates[ok])) if ok.any() else math.nan
+        off = self._off_speed(rate)
         if self.phase == "average":
-            if not st.is_still:
+            if not st.is_still or off:
                 self._avg_reset()
                 self.phase = "place"
-                self._message = "The output changed during the average: it starts again when steady"
+                self._message = ("The output changed during the average: it starts again when steady" if not off
+                                 else f"The table rate left the asked speed ({rate:.3f} rad/s): the average "
+                                 "starts again at speed")
                 self._events.append(("restarted", self.step.label))
                 return
-            self._avg_add(t, a)
+            self._avg_add(t, a, rates)
             if self._t1 - self._t0 >= c.average_s:
                 self._capture_live()
+            return
+        if off:
+            self.phase = "place"
+            self._message = (f"{self.step.prompt}; the table turns at {rate:.3f} rad/s: not at speed yet"
+                             if st.is_still else f"{self.step.prompt}; waiting for the speed")
             return
         if st.is_still and st.still_for_s >= c.settle_s:
             self.phase = "average"
             self._avg_reset()
             self._message = f"{self.step.prompt}: averaging, keep the speed steady"
-            self._avg_add(t, a)
+            self._avg_add(t, a, rates)
         elif st.is_still:
             self.phase = "settle"
             self._message = f"{self.step.prompt}: steady, averaging starts shortly"
@@ -261,8 +306,11 @@ class CentrifugeGuide:
             self.phase = "place"
             self._message = f"{self.step.prompt}; waiting for a steady output"
 
-    def _avg_add(self, t, a) -> None:
+    def _avg_add(self, t, a, rates) -> None:
         ok = np.all(np.isfinite(a), axis=1)
+        r = rates[ok & np.isfinite(rates)]
+        self._rate_sum += float(r.sum())
+        self._rate_n += len(r)
         a = a[ok]
         if not len(a):
             return
@@ -278,14 +326,51 @@ class CentrifugeGuide:
         mean = self._sum / self._n
         var = np.maximum(self._sq / self._n - mean ** 2, 0.0) * self._n / max(self._n - 1, 1)
         s.values, s.std, s.n = [float(x) for x in mean], [float(x) for x in np.sqrt(var)], int(self._n)
-        s.speed_measured_rad_s, s.status, s.how = s.speed_rad_s, "captured", "live"
+        measured = self._rate_sum / self._rate_n if self._rate_n else math.nan
+        s.speed_measured_rad_s = measured if math.isfinite(measured) else s.speed_rad_s
+        s.status, s.how = "captured", "live" if math.isfinite(measured) else "live-set-point"
         self._events.append(("captured", s.label))
         self._after_capture(f"Captured {s.label.strip()}")
 
     def _after_capture(self, said: str) -> None:
         self._avg_reset()
         self._need_change = True
+        self._check_rows()
+        bad = self.disagreeing.get(self.index) if self.index is not None else None
         self._next_pending(said)
+        if bad:
+            self._message = f"{said}: DISAGREES ({bad}); r redoes it. " + self._message.split(". ", 1)[-1]
+
+    def _check_rows(self) -> None:
+        """Name the rows that disagree (module docstring); events for newly named ones."""
+        from solvers.centrifuge import norm_target, screen_rows
+        from solvers.errors import SolverError
+
+        c = self.config
+        found: dict[int, str] = {}
+        idx = [i for i, s in enumerate(self.steps) if s.status == "captured"]
+        for i in idx:
+            s = self.steps[i]
+            if abs(s.speed_measured_rad_s - s.speed_rad_s) > c.speed_tol * s.speed_rad_s:
+                found[i] = f"speed {s.speed_measured_rad_s:.4g} rad/s, asked {s.speed_rad_s:.4g}"
+        if len(idx) >= MIN_FIT_ROWS:
+            N = np.array([self.steps[i].values for i in idx], float)
+            w = np.array([self.steps[i].speed_measured_rad_s for i in idx], float)
+            try:
+                with np.errstate(all="ignore"):  # few rows: the first fits can be wild
+                    scr = screen_rows(N, norm_target(w, c.radius_m, c.g_mps2))
+            except (SolverError, np.linalg.LinAlgError, ValueError):
+                scr = None
+            if scr is not None:
+                for j in np.flatnonzero(~scr.used):
+                    i = idx[int(j)]
+                    found.setdefault(i, f"|f| off the model by {scr.residuals[j]:+.3g} g, "
+                                        f"{abs(scr.residuals[j]) / max(scr.scale, 1e-300):.0f}x the others' spread"
+                                     + (f"; {scr.hints[int(j)]}" if int(j) in scr.hints else ""))
+        for i, why in found.items():
+            if i not in self.disagreeing:
+                self._events.append(("disagree", f"{self.steps[i].label.strip()}: {why}"))
+        self.disagreeing = found
 
     def _next_pending(self, said: str) -> None:
         n = len(self.steps)
@@ -337,6 +422,7 @@ class CentrifugeGuide:
             index = done[-1] if self.index is None else max((i for i in done if i < self.index), default=done[-1])
         s = self.steps[index]
         s.status, s.how, s.values, s.std, s.n, s.speed_measured_rad_s = "pending", "", None, None, 0, math.nan
+        self._check_rows()
         self.select(index)
         self._message = f"Redo: {s.prompt}"
 
@@ -381,7 +467,8 @@ class CentrifugeGuide:
             settle_left_s=max(c.settle_s - st.still_for_s, 0.0) if self.phase == "settle" else math.nan,
             countdown_s=max(c.average_s - rec, 0.0) if self.phase == "average" else math.nan,
             progress=min(rec / c.average_s, 1.0) if self.phase == "average" else 0.0,
-            raw=tuple(float(x) for x in raw), table_rate_rad_s=rate, n_captured=self.n_captured,
+            raw=tuple(float(x) for x in raw), table_rate_rad_s=rate, at_speed=not self._off_speed(rate),
+            n_captured=self.n_captured,
             n_skipped=sum(s.status == "skipped" for s in self.steps), t_s=t,
             message=self._message)
 
@@ -394,7 +481,7 @@ class CentrifugeGuide:
         cols = {"position": np.array([str(s.orientation) for s in rows], dtype=object),
                 "speed_rad_s": np.array([s.speed_measured_rad_s for s in rows], float),
                 "ax": v[:, 0], "ay": v[:, 1], "az": v[:, 2]}
-        if rows and all(s.how == "live" and s.n > 1 for s in rows):
+        if rows and all(s.how.startswith("live") and s.n > 1 for s in rows):
             sd = np.array([s.std for s in rows], float)
             cols.update({"n": np.array([s.n for s in rows], float), "ax_std": sd[:, 0], "ay_std": sd[:, 1],
                          "az_std": sd[:, 2]})
@@ -404,6 +491,13 @@ class CentrifugeGuide:
                 "g_mps2": repr(float(c.g_mps2)), "date": self.started[:10]}
         if any(s.how == "manual" for s in rows):
             meta["manual_rows"] = str(sum(s.how == "manual" for s in rows))
+        hows = {s.how for s in rows}
+        meta["speed_source"] = "; ".join(
+            text for how, text in (("live", "gyro on the table (mean over each row's average)"),
+                                   ("live-set-point", "set point (no rate measured)"),
+                                   ("manual", "typed by the operator")) if how in hows) or "none"
+        if self.disagreeing:
+            meta["rows_disagreeing"] = ", ".join(self.steps[i].label.strip() for i in sorted(self.disagreeing))
         meta.update({k: str(x) for k, x in (extra_meta or {}).items()})
         return Capture(meta=meta, columns=cols)
 
@@ -432,3 +526,45 @@ class CentrifugeOperator:
             self.place(name)
             return name
         return None
+
+
+def mounting_axes(k: int, n_orientations: int = 20) -> np.ndarray:
+    """Orientation ``k`` (1-based) of the station's mounting set
+    (``solvers.simulate.centrifuge_orientations``): rows are the triad's x, y, z input axes
+    in the table frame (radial outward, tangential along the turn, up)."""
+    from solvers.simulate import centrifuge_orientations
+
+    return centrifuge_orientations(n_orientations)[k - 1].T
+
+
+def mounting_drawing(k: int, n_orientations: int = 20) -> list[str]:
+    """What "orientation k" means: the triad's axes seen from above and from the side of
+    the arm, and each axis's direction cosines (out along the arm, along the turn, up).
+
+    In each view the centre ``o`` is the triad, the arm runs to the right (to the rim);
+    an axis letter sits where the axis points, capital when it points toward the viewer
+    (up in the top view, against the turn in the side view). Five lines."""
+    axes = mounting_axes(k, n_orientations)
+
+    def view(i: int, j: int, toward: int, sign: float) -> list[str]:
+        grid = [[" "] * 9 for _ in range(3)]
+        grid[1] = list("····o····")
+        for a in range(3):
+            col = 4 + int(round(4 * axes[a, i]))
+            row = 1 - int(round(1 * axes[a, j] * 1.4))
+            row = min(max(row, 0), 2)
+            name = "xyz"[a]
+            ch = name.upper() if sign * axes[a, toward] > 0 else name
+            while grid[row][col] not in (" ", "·") and col < 8:
+                col += 1
+            grid[row][col] = ch
+        return ["".join(r) for r in grid]
+
+    top = view(0, 1, 2, 1.0)   # from above: right = out, up-screen = along the turn
+    side = view(0, 2, 1, -1.0)  # from behind the turn: right = out, up-screen = up
+    cos = [f" {'xyz'[a]}  {axes[a, 0]:+.2f} {axes[a, 1]:+.2f} {axes[a, 2]:+.2f}" for a in range(3)]
+    return [f"{'above ↑turn':<12}{'side ↑up':<12}axis  out  turn   up",
+            f"{top[0]:<12}{side[0]:<12}{cos[0]}",
+            f"{top[1] + '→':<12}{side[1] + '→':<12}{cos[1]}",
+            f"{top[2]:<12}{side[2]:<12}{cos[2]}",
+            "o the triad, → the arm to the rim, CAPITAL toward you"]

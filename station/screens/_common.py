@@ -38,8 +38,36 @@ def source_rate_hz(src) -> float:
     return rate if math.isfinite(rate) and rate > 0 else 100.0
 
 
+def is_simulated(src) -> bool:
+    """True for the built-in simulated device and `station sim-device` on a port: the bench
+    whose unit the station can turn (``place``) for the operator."""
+    if src is None:
+        return False
+    return getattr(src, "kind", "") == "sim" or str(getattr(src, "device_id", "")).startswith("SIM-")
+
+
 class GuidedScreenMixin:
-    """For a Screen with ``_lock``, ``guide`` and ``_fitting`` (see ``__init__`` of the screens)."""
+    """For a Screen with ``_lock``, ``guide`` and ``_fitting`` (see ``__init__`` of the screens).
+
+    Actions named ``sim_*`` move the simulated bench (the operator's hand on the built-in
+    device); their keys show only when the source is simulated."""
+
+    def check_action(self, action: str, parameters) -> bool | None:
+        if action.startswith("sim_"):
+            return is_simulated(self.app.session.source)
+        return True
+
+    def _sim_place(self, name: str, said: str) -> None:
+        """Ask the simulated bench for ``name`` (a position, ``k@ω``, ``sweep`` ...)."""
+        src = self.app.session.source
+        if not is_simulated(src):
+            return
+        try:
+            src.place(name)
+        except Exception as exc:  # noqa: BLE001 - one line, the run goes on
+            self.notify(f"simulated bench: {exc}", severity="error", timeout=5)
+            return
+        self.notify(said, timeout=2)
 
     def _start_guide(self, src, make_guide: Callable) -> bool:
         """Start ``src`` and set ``self.guide`` (and the session's) to ``make_guide()``;

@@ -1,8 +1,12 @@
-"""Centrifuge (P2): the guided step list "mount in orientation k, spin at ω rad/s". The
-station averages the accelerometer once its output is steady at speed (the stability bar
-and countdown are the P1 widgets); or the operator types the averages and the measured
-speed (``m``, then Enter). At the end, or ``f`` with at least 10 rows, the table of
-averages is fitted and the Results screen shows it.
+"""Centrifuge (P2): the guided step list "mount in orientation k, spin at ω rad/s", with a
+drawing of mounting k (its axes from above and from the side of the arm, and their
+direction cosines), the radius and local g as the operator enters them (stored in the
+capture), and the table rate the gyro measures against the asked speed. The station
+averages the accelerometer once its output is steady and the rate is at the asked speed
+(the stability bar and countdown are the P1 widgets); or the operator types the averages
+and the measured speed (``m``, then Enter). Rows that disagree are named at once. At the
+end, or ``f`` with at least 10 rows, the table of averages is fitted and the Results
+screen shows it. On the simulated centrifuge ``p`` mounts and spins it as asked.
 
 Same pattern as the P1 screen: a thread worker drains the source and feeds the guide
 (``station.procedures.centrifuge_guide``), posting replaceable LiveUpdates and GuideEvents.
@@ -32,13 +36,16 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
     CSS = """
     CentrifugeScreen #steps { width: 22; height: 1fr; border: round $primary; }
     CentrifugeScreen #right { width: 1fr; height: 1fr; padding: 0 1; }
-    CentrifugeScreen #prompt { height: 3; }
+    CentrifugeScreen #prompt { height: 2; }
+    CentrifugeScreen #drawing { height: 5; color: $text-muted; }
+    CentrifugeScreen #bench { height: 1; }
+    CentrifugeScreen #bench Label { width: auto; }
+    CentrifugeScreen #bench Input { width: 10; margin-right: 1; }
     CentrifugeScreen #indicators { height: 2; }
     CentrifugeScreen #indicators Static { height: 1; }
-    CentrifugeScreen #readouts { height: 3; margin-top: 1; }
-    CentrifugeScreen #manual-title { height: 1; margin-top: 1; color: $text-muted; }
+    CentrifugeScreen #readouts { height: 2; }
     CentrifugeScreen #manual { height: 1; }
-    CentrifugeScreen #manual Label { width: 6; }
+    CentrifugeScreen #manual Label { width: auto; color: $text-muted; }
     CentrifugeScreen #manual Input { width: 1fr; margin-right: 1; }
     CentrifugeScreen #entry-error { height: 1; color: $error; }
     CentrifugeScreen #message { height: 2; text-style: bold; }
@@ -46,11 +53,12 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
     """
 
     BINDINGS = [
-        Binding("m", "manual", "Type values"),
+        Binding("m", "manual", "Type row"),
         Binding("s", "skip", "Skip"),
         Binding("r", "redo", "Redo"),
         Binding("a", "abort", "Abort"),
         Binding("f", "finish", "Fit now"),
+        Binding("p", "sim_place", "Spin (sim)"),
         Binding("escape", "leave_entry", "Back", show=False),
     ]
 
@@ -69,18 +77,34 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
             yield StepList(id="steps")
             with Vertical(id="right"):
                 yield Static("", id="prompt")
+                yield Static("", id="drawing")
+                with Horizontal(id="bench"):
+                    yield Label("Radius ")
+                    yield Input(value=f"{self._bench('radius_m', 1.0):g}", id="radius", compact=True)
+                    yield Label("m  local g ")
+                    yield Input(value=f"{self._bench('g_mps2', 9.8):g}", id="gravity", compact=True)
+                    yield Label("m/s²")
                 with Vertical(id="indicators"):
                     yield StabilityBar(id="stability")
                     yield CountdownBar(id="countdown")
                 yield Static("", id="readouts")
-                yield Static("m: type ax ay az, speed (rad/s), Enter; Esc back", id="manual-title")
                 with Horizontal(id="manual"):
+                    yield Label("m types ")
                     for name in FIELDS:
                         yield Input(placeholder=name, id=f"in-{name}", compact=True)
                 yield Static("", id="entry-error")
                 yield Static("", id="message")
                 yield Static("", id="progress")
         yield Footer()
+
+    def _bench(self, key: str, default: float) -> float:
+        """The session's (or the simulated centrifuge's) radius / local g, else ``default``."""
+        s = self.app.session
+        if key in s.extra:
+            return float(s.extra[key])
+        src = s.source
+        v = getattr(getattr(src, "imu", None), key, None) if getattr(src, "kind", "") == "sim" else None
+        return float(v) if isinstance(v, (int, float)) else default
 
     def on_mount(self) -> None:
         self.query_one("#steps").border_title = "Orientation @ ω"
@@ -93,8 +117,9 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         from station.procedures.centrifuge_guide import CentrifugeConfig, CentrifugeGuide
 
         s = self.app.session
-        kw = {k: s.extra[k] for k in ("speeds_rad_s", "n_orientations", "radius_m", "g_mps2") if k in s.extra}
-        cfg = CentrifugeConfig(average_s=s.average_s, settle_s=s.settle_s, **kw)
+        kw = {k: s.extra[k] for k in ("speeds_rad_s", "n_orientations") if k in s.extra}
+        cfg = CentrifugeConfig(average_s=s.average_s, settle_s=s.settle_s, radius_m=self._bench("radius_m", 1.0),
+                               g_mps2=self._bench("g_mps2", 9.8), **kw)
         return CentrifugeGuide(sample_rate_hz=source_rate_hz(src),
                                units=src.units, device_id=s.device_id or src.device_id, config=cfg)
 
@@ -135,18 +160,27 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         elif st.phase == "noise":
             prompt = f"[b]{step.prompt}[/b]\nFirst keep the centrifuge stopped: the noise is measured"
         else:
-            prompt = (f"[b]{step.prompt}[/b]\nRadius {g.config.radius_m:g} m. Remount or change the speed, then "
-                      "hold it steady")
+            prompt = f"[b]{step.prompt}[/b]\nRemount or change the speed, then hold it steady"
         self._put("#prompt", prompt)
+        from station.procedures.centrifuge_guide import mounting_drawing
+
+        k = step.orientation if step is not None else None
+        if k is not None and self._shown.get("_k") != k:
+            self._shown["_k"] = k
+            self._put("#drawing", "\n".join(mounting_drawing(k, g.config.n_orientations)))
         self.query_one(StabilityBar).show(st)
         self.query_one(CountdownBar).show(st, g.config.average_s)
         r, stats = st.raw, message.stats
         au = self.app.session.source.units.get("accel_unit") or "raw"
-        self._put("#readouts", 
-            f"accel {_n(r[0], '9.5f')} {_n(r[1], '9.5f')} {_n(r[2], '9.5f')} {au}\n"
-            f"table rate from the gyro {_n(st.table_rate_rad_s, '.3f')} rad/s\n"
-            f"{_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
-            + ("" if stats.connected else "   DISCONNECTED"))
+        if step is None or not (st.table_rate_rad_s == st.table_rate_rad_s):
+            speed = "" if step is None else f"  (no rate measured: asked {step.speed_rad_s:.2f})"
+        else:
+            speed = f" of {step.speed_rad_s:.2f} " + ("[green]AT SPEED[/]" if st.at_speed else "[b red]NOT AT SPEED[/]")
+        self._put("#readouts",
+            f"accel {_n(r[0], '8.4f')} {_n(r[1], '8.4f')} {_n(r[2], '8.4f')} {au}  "
+            f"{_n(stats.rate_hz, '.0f')} Hz err {stats.parse_errors} drop {stats.dropped}"
+            + ("" if stats.connected else " DISCONNECTED") + "\n"
+            f"table rate (gyro) {_n(st.table_rate_rad_s, '.3f')} rad/s{speed}")
         self._put("#message", st.message)
         self._put("#progress", 
             f"{st.n_captured}/{len(g.steps)} captured, {st.n_skipped} skipped · t={_n(st.t_s, '.0f')} s")
@@ -156,9 +190,12 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         if g is None:
             return
         with self._lock:
-            self.query_one(StepList).show(g.steps, g.index if g.index is not None else -1)
+            self.query_one(StepList).show(g.steps, g.index if g.index is not None else -1, set(g.disagreeing))
         if message.kind == "captured":
             self.notify(f"{message.detail.strip()} captured", timeout=2)
+        elif message.kind == "disagree":
+            self.notify(f"Row {message.detail} (r redoes it)", title="Row disagrees", severity="error",
+                        timeout=8)
         elif message.kind == "restarted":
             self.notify(f"{message.detail.strip()}: output changed, averaging restarted", severity="warning",
                         timeout=3)
@@ -183,7 +220,37 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
     def action_leave_entry(self) -> None:
         self.query_one("#steps").focus()
 
-    @on(Input.Submitted)
+    def action_sim_place(self) -> None:
+        """The simulated centrifuge: mount orientation k and spin to the asked speed."""
+        g = self.guide
+        if g is None or g.step is None:
+            return
+        with self._lock:
+            k, w = g.step.orientation, g.step.speed_rad_s
+        self._sim_place(f"{k}@{w!r}", f"Simulated centrifuge: orientation {k}, spinning up to {w:.2f} rad/s")
+
+    @on(Input.Submitted, "#radius, #gravity")
+    @on(Input.Blurred, "#radius, #gravity")
+    def _bench_entered(self, event) -> None:
+        """Radius and local g as entered: positive numbers, into the run's configuration
+        (and the capture's metadata); a bad one is one line and changes nothing."""
+        from station.procedures.centrifuge_guide import parse_positive
+
+        name, key = ("radius", "radius_m") if event.input.id == "radius" else ("local g", "g_mps2")
+        try:
+            v = parse_positive(event.input.value, name)
+        except ValueError as exc:
+            self.query_one("#entry-error", Static).update(str(exc))
+            return
+        self.query_one("#entry-error", Static).update("")
+        self.app.session.extra[key] = v
+        if self.guide is not None:
+            with self._lock:
+                setattr(self.guide.config, key, v)
+        if isinstance(event, Input.Submitted):
+            self.query_one("#steps").focus()
+
+    @on(Input.Submitted, "#manual Input")
     def _entered(self, event: Input.Submitted) -> None:
         from station.procedures.centrifuge_guide import ManualEntryError
 

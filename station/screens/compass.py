@@ -38,6 +38,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
         Binding("f", "finish", "Finish now"),
         Binding("r", "restart", "Restart"),
         Binding("a", "abort", "Abort"),
+        Binding("p", "sim_sweep", "Sweep (sim)"),
     ]
 
     def __init__(self) -> None:
@@ -135,6 +136,13 @@ class CompassScreen(GuidedScreenMixin, Screen):
 
     def action_abort(self) -> None:
         self._abort("P3 aborted: nothing saved")
+
+    def action_sim_sweep(self) -> None:
+        """The simulated unit: start turning it through every orientation, or stop."""
+        src = self.app.session.source
+        sweeping = getattr(src, "bench", lambda _: None)("driving") == "sweep"
+        self._sim_place("still" if sweeping else "sweep",
+                        "Simulated unit: sweep stopped" if sweeping else "Simulated unit: turning through every orientation")
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P3")
     def fit(self) -> None:

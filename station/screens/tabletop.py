@@ -43,6 +43,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
         Binding("r", "redo", "Redo"),
         Binding("a", "abort", "Abort"),
         Binding("f", "finish", "Fit now"),
+        Binding("p", "sim_place", "Place (sim)"),
     ]
 
     def __init__(self) -> None:
@@ -118,7 +119,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
         if s.scripted:
             from station.procedures.tabletop_guide import ScriptedOperator
 
-            operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=3.0)
+            operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=6.0)
         guide = self.guide
         self._pump(worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.temp_c), guide.status, operator,
                    with_hz=True)
@@ -197,6 +198,16 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
         self.app.session.guide = None
         self.app.notify(f"P1 aborted with {n} positions captured: Resume (F6) continues it", timeout=6)
         self.app.pop_screen()
+
+    def action_sim_place(self) -> None:
+        """The simulated device: turn the unit to the asked position (the hand's placement
+        error and the rocking as it is set down come with it)."""
+        g = self.guide
+        if g is None or g.step is None or g.phase in ("done", "aborted"):
+            return
+        with self._lock:
+            name = g.step.name
+        self._sim_place(name, f"Simulated unit turned to {name}")
 
     def action_finish(self) -> None:
         """Fit with the positions captured so far (at least 9 make sense for P1)."""

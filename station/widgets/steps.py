@@ -8,13 +8,15 @@ MARKS = {"captured": "✓", "skipped": "–", "pending": " "}
 
 
 class StepList(OptionList):
-    """One line per step: a mark (✓ captured, – skipped, ▶ current) and the name."""
+    """One line per step: a mark (✓ captured, – skipped, ▶ current, ! a captured row that
+    disagrees with the others) and the name."""
 
-    def show(self, steps, current: int) -> None:
+    def show(self, steps, current: int, flagged=()) -> None:
         highlighted = self.highlighted
         self.clear_options()
         self.add_options([
-            Option(f"{'▶' if i == current and s.status == 'pending' else MARKS[s.status]} {i + 1:2d} {s.name}", id=str(i))
+            Option(f"{'▶' if i == current and s.status == 'pending' else '!' if i in flagged else MARKS[s.status]}"
+                   f" {i + 1:2d} {s.name}", id=str(i))
             for i, s in enumerate(steps)
         ])
         self.highlighted = highlighted if highlighted is not None else current
