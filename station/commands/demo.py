@@ -1,6 +1,7 @@
-"""`station demo`: a whole P1 calibration on the simulated device, the scripted operator
-following the prompts, short averaging times, the result saved (in the TUI, or with
---headless as plain lines)."""
+"""`station demo`: a whole calibration on the simulated device (P1 by default; P2, P3,
+P4 static or with a reference IMU, P5 with --procedure), the scripted operator following
+the prompts, short averaging times, the result saved (in the TUI, or with --headless as
+plain lines for P1, P3 and P5)."""
 from __future__ import annotations
 
 import argparse
@@ -9,13 +10,18 @@ import sys
 from station.procedures import registry
 
 
+DEMOS = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "gyro-reference", "ldv")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="watch a whole P1 calibration on the simulated device (about 80 s)",
+    p = sub.add_parser("demo", help="watch a whole calibration (P1 by default, any of P1-P5) on the simulated device",
                        description="The TUI on the simulated device with a scripted operator who follows "
                        "the prompts; short averaging times; the result is saved to the database.")
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
-    p.add_argument("--procedure", choices=("accel-tabletop", "compass", "gyro-drift"), default=registry.DEFAULT,
-                   help="P1 (default), the P3 compass sweep, or P4 on a static base (180 s: try --speed 6)")
+    p.add_argument("--procedure", choices=DEMOS, default=registry.DEFAULT,
+                   help="P1 (default), P2 on the centrifuge (60 rows: try --speed 10), the P3 compass sweep, "
+                   "P4 on a static base or with a reference IMU (180 s: try --speed 6), P5 LDV on a vehicle "
+                   "(about 2 min: try --speed 6)")
     p.add_argument("--average-s", type=float, default=3.0, help="averaging time per position (default 3 s)")
     p.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second (default 1)")
     p.add_argument("--headless", action="store_true", help="no screen: run the same procedure, print lines")
@@ -36,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from station.sources import SimSource
 
     device = SimSource(seed=args.seed, speed=args.speed, procedure=args.procedure)
-    average_s = max(args.average_s, 180.0) if args.procedure == "gyro-drift" else args.average_s
+    average_s = max(args.average_s, 180.0) if args.procedure in ("gyro-drift", "gyro-reference") else args.average_s
     app = make_app(None if args.no_save else db_path(args), device=device, demo=True, average_s=average_s,
                    exit_when_saved=args.exit_when_saved)
     app.session.extra["compass_min_s"] = 30.0
@@ -49,10 +55,12 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
     out = out if out is not None else sys.stdout  # looked up now: stdout may have been replaced
     if getattr(args, "procedure", "accel-tabletop") == "compass":
         return headless_compass(args, db, out, max_device_s)
-    if getattr(args, "procedure", "accel-tabletop") == "gyro-drift":
+    if getattr(args, "procedure", "accel-tabletop") == "ldv":
+        return headless_ldv(args, db, out, max_device_s)
+    if getattr(args, "procedure", "accel-tabletop") != "accel-tabletop":
         from station.errors import UnsupportedError
 
-        raise UnsupportedError("demo --headless: P1 and compass only; run the P4 demo in the TUI")
+        raise UnsupportedError("demo --headless: P1, P3 (compass) and P5 (ldv) only; run the others in the TUI")
     from station.procedures.tabletop_guide import GuideConfig, P1Guide, ScriptedOperator
     from station.sources import SimSource
 
@@ -108,6 +116,37 @@ def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0
         if int(st.coverage * 10) != shown:
             shown = int(st.coverage * 10)
             print(f"{st.t_s:7.1f} s  coverage {100 * st.coverage:3.0f} %", file=out)
+    return _calibrate_and_save(guide, src.device_id, db, out)
+
+
+def headless_ldv(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
+    """P5 without a screen: the demo driver sets off straight, then turns and climbs; the
+    conditioning of the velocity set is printed as it builds."""
+    import numpy as np
+
+    out = out if out is not None else sys.stdout
+    from station.procedures.ldv_guide import Driver, LdvGuide
+    from station.sources import SimSource
+
+    now = [0.0]
+    src = SimSource(seed=args.seed, clock=lambda: now[0], procedure="ldv").start()
+    guide = LdvGuide(sample_rate_hz=src.rate_hz, device_id=src.device_id, site=src.site)
+    driver = Driver(src.place)
+    verdict = None
+    while guide.phase == "record" and now[0] < max_device_s:
+        now[0] += 0.5
+        b = src.drain()
+        if b is None:
+            continue
+        e = b.extra
+        st = guide.update(b.t_s, np.column_stack([e["vl1"], e["vl2"], e["vl3"]]),
+                          np.column_stack([e["vx"], e["vy"], e["vz"]]), b.gyro, b.temp_c)
+        said = driver.step(guide, st.t_s)
+        if said:
+            print(f"{st.t_s:7.1f} s  driver: {said}", file=out)
+        if st.verdict != verdict:
+            verdict = st.verdict
+            print(f"{st.t_s:7.1f} s  conditioning {verdict} (κ {st.kappa:.3g}, {st.n_epochs} moving epochs)", file=out)
     return _calibrate_and_save(guide, src.device_id, db, out)
 
 

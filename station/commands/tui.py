@@ -12,6 +12,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", choices=("station", "mavlink"), default="station", help="wire protocol of --port")
     p.add_argument("--sim", action="store_true", help="connect to the built-in simulated device and start P1 at once")
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed (with --sim)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="the built-in simulated device's seconds per wall second (default 1)")
     p.add_argument("--average-s", type=float, default=None,
                    help="averaging time per position in seconds (default 180; the source asks 3-5 minutes)")
     p.add_argument("--device-id", default=None, help="serial number of the device under test")
@@ -24,6 +26,10 @@ def run(args: argparse.Namespace) -> int:
     from station.app import make_app
     from station.cli import db_path
 
+    if not args.speed > 0:
+        from station.errors import InputError
+
+        raise InputError(None, None, f"--speed must be positive, got {args.speed:g}")
     if args.average_s is not None and not args.average_s > 0:
         from station.errors import InputError
 
@@ -37,10 +43,11 @@ def run(args: argparse.Namespace) -> int:
     elif args.sim:
         from station.sources import SimSource
 
-        device = SimSource(seed=args.seed)
+        device = SimSource(seed=args.seed, speed=args.speed)
         start = "procedure"
     app = make_app(db_path(args), device=device, average_s=args.average_s, device_id=args.device_id,
                    model=args.model, state_dir=args.state_dir, start=start)
+    app.session.extra["sim_speed"] = args.speed
     app.run()
     src = app.session.source
     if src is not None:

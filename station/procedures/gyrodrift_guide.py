@@ -196,3 +196,204 @@ class HoldGuide:
                 meta[key] = repr(float(self.site[key]))
         meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
         return Capture(meta=meta, columns=cols)
+
+
+# ---------------------------------------------------------------- P4 mode A
+
+@dataclass
+class ReferenceConfig:
+    """P4 mode A (a reference IMU rigidly mounted with the unit, both moving). duration_s:
+    recording length [s] (P4: >= 180). reference_drift_deg_h: the reference IMU's own drift
+    (1σ, from its data sheet; the source's fibre-optic example: 1 °/h). frame: the unit's
+    axes in words for the capture. min_motion_rad_s: the reference rate's spread that
+    makes the mounting check meaningful."""
+
+    duration_s: float = 180.0
+    reference_drift_deg_h: float = 1.0
+    frame: str = ""
+    min_motion_rad_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        for name in ("duration_s", "reference_drift_deg_h", "min_motion_rad_s"):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {getattr(self, name)!r}")
+
+
+@dataclass(frozen=True)
+class ReferenceStatus:
+    phase: str  # wait (no reference yet) | average (recording) | done | aborted
+    countdown_s: float
+    progress: float
+    drift: tuple[float, float, float]  # running mean of unit minus reference (raw gyro unit)
+    drift_se: tuple[float, float, float]  # its white-noise standard error (raw gyro unit)
+    motion: float  # RMS spread of the reference rate so far (raw gyro unit)
+    coupling_max: float  # largest |M| of d = ε + M Ω so far (rad/rad), NaN before motion
+    coupling_bias: float  # largest |M · mean Ω| (raw gyro unit): the drift's bias from it
+    mounting_ok: bool
+    n_samples: int
+    t_s: float
+    message: str
+    # HoldStatus look-alike fields, so the P1 widgets draw the countdown
+    is_still: bool = True
+    still_for_s: float = 0.0
+    calibrating: bool = False
+    level: float = math.nan
+    settle_left_s: float = math.nan
+
+
+class ReferenceGuide:
+    """P4 mode A live: record the unit's gyro and the reference IMU's side by side for
+    ``duration_s`` while the rate table turns both. Live, the procedure's own numbers:
+    the running drift ``ε = mean(ω − ω_ref)`` ± its white-noise standard error, how much
+    the reference moved, and the mounting check of ``solvers.gyrodrift.drift_reference``
+    (regress ``ω − ω_ref`` on the reference rate: a misaligned or scale-wrong mounting
+    grows with the rate and biases ε by ``M · mean Ω``), from running sums. The final
+    numbers come from the P4 calibration of the capture (``gyro_mode: reference``)."""
+
+    procedure = "gyro-drift"
+
+    def __init__(self, *, sample_rate_hz: float, units: dict, device_id: str = "", site: dict | None = None,
+                 config: ReferenceConfig | None = None):
+        self.config = config or ReferenceConfig()
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.units = dict(units)
+        self.device_id = device_id
+        self.site = dict(site or {})
+        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.phase = "wait"
+        self._events: list[tuple[str, str]] = []
+        self._message = "Waiting for the reference IMU"
+        self._reset()
+
+    def _reset(self) -> None:
+        self._chunks: list[tuple[np.ndarray, ...]] = []
+        self._n = 0
+        self._sd = np.zeros(3)  # Σ d
+        self._sdd = np.zeros(3)  # Σ d²
+        self._sr = np.zeros(3)  # Σ Ω
+        self._srr = np.zeros((3, 3))  # Σ Ω Ωᵀ
+        self._srd = np.zeros((3, 3))  # Σ Ω dᵀ
+        self._t0 = math.nan
+        self._t1 = math.nan
+
+    def take_events(self) -> list[tuple[str, str]]:
+        ev, self._events = self._events, []
+        return ev
+
+    def update(self, t_s, accel, gyro, ref, temp_c=None) -> ReferenceStatus:
+        """t_s (n,), accel (n, 3) raw, gyro (n, 3) in the gyro unit, ref (n, 3) in rad/s (the
+        capture format's unit of ``ref_g*``), temp_c (n,)."""
+        t_s = np.asarray(t_s, float)
+        if len(t_s) == 0 or self.phase in ("done", "aborted"):
+            return self.status()
+        accel, gyro = (np.asarray(x, float).reshape(-1, 3) for x in (accel, gyro))
+        ref = np.full((len(t_s), 3), np.nan) if ref is None else np.asarray(ref, float).reshape(-1, 3)
+        temp = np.full(len(t_s), np.nan) if temp_c is None else np.asarray(temp_c, float)
+        ok = np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(ref), axis=1)
+        if not ok.any():
+            self._message = ("No reference IMU signal: connect the reference (ref_gx ref_gy ref_gz) or use "
+                             "P4 on a static base")
+            return self.status()
+        if self.phase == "wait":
+            self.phase = "average"
+            self._t0 = float(t_s[ok][0])
+            self._message = "Recording the unit and the reference: run the rate table"
+        self._chunks.append((t_s, accel, gyro, ref, temp))
+        g, r = gyro[ok], ref[ok] * self._unit_per_rad_s()
+        d = g - r
+        self._n += len(d)
+        self._sd += d.sum(axis=0)
+        self._sdd += (d * d).sum(axis=0)
+        self._sr += r.sum(axis=0)
+        self._srr += r.T @ r
+        self._srd += r.T @ d
+        self._t1 = float(t_s[-1])
+        if self._t1 - self._t0 >= self.config.duration_s:
+            self.phase = "done"
+            self._message = f"Recorded {self._t1 - self._t0:.0f} s"
+            self._events.append(("done", ""))
+        return self.status()
+
+    def _checks(self):
+        """(ε, se, motion, M or None) from the running sums."""
+        n = self._n
+        if n < 2:
+            nan3 = np.full(3, np.nan)
+            return nan3, nan3, math.nan, None
+        eps = self._sd / n
+        var = np.maximum(self._sdd / n - eps * eps, 0.0) * n / (n - 1)
+        r_mean = self._sr / n
+        cov_r = self._srr / n - np.outer(r_mean, r_mean)
+        motion = float(math.sqrt(max(np.trace(cov_r), 0.0)))
+        M = None
+        if motion >= self.config.min_motion_rad_s * self._unit_per_rad_s() and np.linalg.cond(cov_r) < 1e8:
+            cov_rd = self._srd / n - np.outer(r_mean, eps)
+            M = np.linalg.solve(cov_r, cov_rd).T  # d − ε = M (Ω − mean Ω)
+        return eps, np.sqrt(var / n), motion, M
+
+    def _unit_per_rad_s(self) -> float:
+        from solvers.units import si_factor
+
+        f = si_factor("gyro", self.units.get("gyro_unit") or "rad/s")
+        return 1.0 / f if f else 1.0
+
+    def status(self) -> ReferenceStatus:
+        c = self.config
+        eps, se, motion, M = self._checks()
+        rec = (self._t1 - self._t0) if math.isfinite(self._t0) else 0.0
+        cmax = cbias = math.nan
+        ok = True
+        msg = self._message
+        if M is not None:
+            bias = M @ (self._sr / self._n)
+            cmax, cbias = float(np.max(np.abs(M))), float(np.max(np.abs(bias)))
+            sigma_ref = c.reference_drift_deg_h * math.radians(1.0) / 3600.0 * self._unit_per_rad_s()
+            ok = bool(np.all(np.abs(bias) <= 0.5 * np.sqrt(se ** 2 + sigma_ref ** 2)))
+            if not ok and self.phase == "average":
+                msg = (f"Unit minus reference grows with the rate (|M| up to {cmax:.3g}): check the mounting "
+                       "(misaligned or not rigid)")
+        elif self.phase == "average" and rec > 10 and not (motion >= c.min_motion_rad_s * self._unit_per_rad_s()):
+            msg = "The reference hardly moves: run the rate table so the mounting can be checked"
+        return ReferenceStatus(
+            phase=self.phase, countdown_s=max(c.duration_s - rec, 0.0) if self.phase == "average" else math.nan,
+            progress=min(rec / c.duration_s, 1.0) if self.phase in ("average", "done") else 0.0,
+            drift=tuple(float(x) for x in eps), drift_se=tuple(float(x) for x in se), motion=motion,
+            coupling_max=cmax, coupling_bias=cbias, mounting_ok=ok, n_samples=self._n,
+            t_s=self._t1, message=msg)
+
+    def abort(self) -> None:
+        self.phase = "aborted"
+        self._message = "Aborted"
+        self._events.append(("aborted", ""))
+
+    def restart(self) -> None:
+        if self.phase in ("average", "done"):
+            self._reset()
+            self.phase = "wait"
+            self._message = "Recording restarted"
+
+    def capture(self, extra_meta: dict | None = None):
+        from station.capture import Capture
+
+        ch = self._chunks
+        cat = [np.concatenate([c[i] for c in ch]) if ch else np.zeros((0, 3) if i in (1, 2, 3) else 0)
+               for i in range(5)]
+        t, a, g, r, temp = cat
+        cols = {"t": t, "ax": a[:, 0], "ay": a[:, 1], "az": a[:, 2], "gx": g[:, 0], "gy": g[:, 1], "gz": g[:, 2],
+                "ref_gx": r[:, 0], "ref_gy": r[:, 1], "ref_gz": r[:, 2]}
+        if np.isfinite(temp).any():
+            cols["temp_c"] = temp
+        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
+                "gyro_mode": "reference", "reference_drift_deg_h": repr(float(self.config.reference_drift_deg_h)),
+                "date": self.started[:10], "sample_rate_hz": repr(self.sample_rate_hz)}
+        if self.config.frame:
+            meta["frame"] = self.config.frame
+        for k in ("accel_unit", "gyro_unit"):
+            if self.units.get(k):
+                meta[k] = self.units[k]
+        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
+            if key in self.site:
+                meta[key] = repr(float(self.site[key]))
+        meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
+        return Capture(meta=meta, columns=cols)

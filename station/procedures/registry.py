@@ -42,7 +42,9 @@ class Procedure:
 
 @dataclass(frozen=True)
 class GuidedRun:
-    """A guided TUI run that is not a calibration procedure (the gyro noise run)."""
+    """A guided TUI run beside the procedures' own screens: another mode of one (P4 with a
+    reference IMU, whose capture is a ``gyro-drift`` one) or not a calibration at all (the
+    gyro noise run)."""
 
     name: str
     title: str
@@ -59,10 +61,11 @@ PROCEDURES: tuple[Procedure, ...] = (
     Procedure("gyro-drift", "P4", "gyrodrift", "gyro drift, static base", "gyro drift", "gyro",
               "station.procedures.gyrodrift", "station.screens.gyrodrift:HoldScreen", "rad/s", "gyrodrift"),
     Procedure("ldv", "P5", "ldv", "laser velocimeter", "LDV", "ldv",
-              "station.procedures.ldv", None, "m/s", "ldv"),
+              "station.procedures.ldv", "station.screens.ldv:LdvScreen", "m/s", "ldv"),
 )
 
 GUIDED_RUNS: tuple[GuidedRun, ...] = (
+    GuidedRun("gyro-reference", "P4 gyro drift, reference IMU", "station.screens.gyrodrift:ReferenceScreen"),
     GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen"),
 )
 

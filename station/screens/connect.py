@@ -259,7 +259,7 @@ class ConnectScreen(Screen):
                 from station.sources import SimSource
 
                 if src is None or src.kind != "sim" or src.procedure != s.procedure:
-                    src = SimSource(seed=0, procedure=s.procedure)
+                    src = SimSource(seed=0, procedure=s.procedure, speed=float(s.extra.get("sim_speed", 1.0)))
             else:
                 from station.sources import SerialSource
 

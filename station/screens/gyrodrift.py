@@ -1,6 +1,7 @@
-"""Gyro drift (P4, static base): place the unit level at a known heading and keep it
-still while the station records (P4 asks for at least 3 minutes). The stability bar and
-countdown are the P1 widgets; moving restarts the recording.
+"""Gyro drift (P4). Static base (mode B, ``HoldScreen``): place the unit level at a known
+heading and keep it still while the station records (P4 asks for at least 3 minutes). The
+stability bar and countdown are the P1 widgets; moving restarts the recording. Reference
+IMU (mode A, ``ReferenceScreen``): both units on a rate table, recorded side by side.
 
 Same pattern as the P1 screen: a thread worker drains the source and feeds the guide."""
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import math
 import threading
 
+import numpy as np
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -15,6 +17,8 @@ from textual.containers import Vertical
 from textual.screen import Screen
 from textual.widgets import Footer, Static
 from textual.worker import get_current_worker
+
+from solvers.units import si_factor
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
@@ -125,6 +129,127 @@ class HoldScreen(GuidedScreenMixin, Screen):
             # the analogue triad's zero-g output, so P4 can take pitch and roll from it
             extra["accel_offset"] = ", ".join([repr(float(nominal[0]))] * 3)
         return extra
+
+    def on_calibration_ready(self, message: CalibrationReady) -> None:
+        self._show_results(message, message.previous)
+
+
+class ReferenceScreen(GuidedScreenMixin, Screen):
+    """P4 mode A: the unit and a reference IMU rigidly mounted together on a rate table;
+    the station records both for the set time and shows, live, the running drift (unit
+    minus reference) ± its standard error, how much the reference moved, and the
+    mounting check (does the difference grow with the rate?). On the simulated device
+    ``p`` runs or stops the rate table."""
+
+    CSS = """
+    ReferenceScreen #body { padding: 0 1; }
+    ReferenceScreen #instruction { height: 2; }
+    ReferenceScreen #indicators { height: 1; margin-top: 1; }
+    ReferenceScreen #readouts { height: 6; margin-top: 1; }
+    ReferenceScreen #message { height: 2; text-style: bold; margin-top: 1; }
+    """
+    BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "abort", "Abort"),
+                Binding("p", "sim_table", "Rate table (sim)")]
+    SUBJECT = "P4 gyro drift, reference IMU"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._lock = threading.Lock()
+        self.guide = None
+        self.last_status = None
+        self.updates = 0
+        self._fitting = False
+
+    def compose(self) -> ComposeResult:
+        yield TitleBar(self.SUBJECT)
+        with Vertical(id="body"):
+            yield Static("Mount the unit rigidly on the reference IMU, axes aligned, and run the rate\n"
+                         "table (any motion: both see it). The drift is the unit minus the reference.",
+                         id="instruction")
+            with Vertical(id="indicators"):
+                yield CountdownBar(id="countdown")
+            yield Static("", id="readouts")
+            yield Static("", id="message")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.stream()
+
+    @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
+    def stream(self) -> None:
+        from station.procedures.gyrodrift_guide import ReferenceConfig, ReferenceGuide
+
+        s = self.app.session
+        worker = get_current_worker()
+        src = s.source
+
+        def make_guide():
+            frame = s.extra.get("frame") or (SIM_FRAME if src.kind == "sim" else "")
+            cfg = ReferenceConfig(duration_s=s.average_s, frame=frame,
+                                  reference_drift_deg_h=float(s.extra.get("reference_drift_deg_h", 1.0)))
+            return ReferenceGuide(sample_rate_hz=source_rate_hz(src), units=src.units,
+                                  device_id=s.device_id or src.device_id, site=getattr(src, "site", None), config=cfg)
+
+        if not self._start_guide(src, make_guide):
+            return
+        guide = self.guide
+        if s.scripted:
+            src.place("table")
+
+        def update(b):
+            e = b.extra or {}
+            ref = np.column_stack([e[k] for k in ("ref_gx", "ref_gy", "ref_gz")]) if "ref_gx" in e else None
+            return guide.update(b.t_s, b.accel, b.gyro, ref, b.temp_c)
+
+        self._pump(worker, src, update, guide.status)
+
+    def on_live_update(self, message: LiveUpdate) -> None:
+        st = message.status
+        self.last_status = st
+        self.updates += 1
+        g = self.guide
+        self.query_one(CountdownBar).show(st, g.config.duration_s if g else math.nan)
+        unit = self.app.session.source.units.get("gyro_unit") or "raw"
+        stats = message.stats
+        k = 3600.0 / math.radians(1.0) * (si_factor("gyro", unit) or math.nan)  # unit → °/h
+        e, se = st.drift, st.drift_se
+        mount = ("—" if not math.isfinite(st.coupling_max) else
+                 f"|M| {st.coupling_max:.2g} rad/rad, bias {st.coupling_bias * k:.2g} °/h "
+                 + ("[green]OK[/]" if st.mounting_ok else "[b red]CHECK THE MOUNTING[/]"))
+        self.query_one("#readouts", Static).update(
+            "drift (unit − reference), °/h ± 1σ (white noise)\n"
+            + "   ".join(f"{ax} {_n(e[i] * k, '+9.1f')} ± {_n(se[i] * k, '.1f')}" for i, ax in enumerate("xyz")) + "\n"
+            f"reference motion {_n(st.motion, '.3f')} {unit} RMS"
+            + ("   rate table ON" if getattr(self.app.session.source, "bench", lambda _: None)("driving") == "table"
+               else "") + "\n"
+            f"mounting check: {mount}\n"
+            f"{st.n_samples} samples   {_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   "
+            f"dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED"))
+        self.query_one("#message", Static).update(st.message)
+
+    def on_guide_event(self, message: GuideEvent) -> None:
+        if message.kind == "done":
+            self.fit()
+
+    def on_source_failed(self, message: SourceFailed) -> None:
+        self.query_one("#message", Static).update(f"[b red]device: {message.error}[/]")
+
+    def action_restart(self) -> None:
+        if self.guide is not None:
+            with self._lock:
+                self.guide.restart()
+
+    def action_abort(self) -> None:
+        self._abort("P4 aborted: nothing saved")
+
+    def action_sim_table(self) -> None:
+        src = self.app.session.source
+        on = getattr(src, "bench", lambda _: None)("driving") == "table"
+        self._sim_place("still" if on else "table", "Rate table stopped" if on else "Rate table running")
+
+    @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P4")
+    def fit(self) -> None:
+        self._fit("gyro-drift")
 
     def on_calibration_ready(self, message: CalibrationReady) -> None:
         self._show_results(message, message.previous)
