@@ -656,7 +656,8 @@ class LiveImu:
                          for name in P1_POSITIONS}
         for k, C in enumerate(sphere_attitudes(self.rng, 12)):
             self._targets[f"s{k + 1}"] = C
-        self._targets["level"] = C_n_b_for([0.0, 0.0, 1.0], 0.0)
+        # level: x forward pointing north, y left (west), z up (the P4 screen's instruction)
+        self._targets["level"] = C_n_b_for([0.0, 0.0, 1.0], math.pi)
         self.C = self._targets[self.positions[0]]
         # the reference IMU's own drift: ~1 °/h per axis (a fibre-optic unit)
         self.ref_bias = np.radians(1.0 / 3600.0) * self.rng.normal(size=3)
@@ -702,7 +703,7 @@ class LiveImu:
         self._settle_now()
         if name in self._bases:  # a fresh placement each time: any heading, a small error
             d, tilted = self._bases[name]
-            heading = self.rng.uniform(0.0, 2 * math.pi) if name != "level" else 0.0
+            heading = self.rng.uniform(0.0, 2 * math.pi) if name != "level" else math.pi  # x north
             err = PLACEMENT_TILTED_DEG if tilted else PLACEMENT_FLAT_DEG
             self._targets[name] = C_n_b_for(d, heading) @ placement_error(self.rng, err)
         self._move = (self.C, self._targets[name], self.t_s, self.MOVE_S, self._wobble())

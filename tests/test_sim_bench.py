@@ -109,3 +109,27 @@ def test_a_straight_road_leaves_the_ldv_angles_unidentifiable_turns_fix_it():
     assert velocity_condition(v) < KAPPA_WARN
     with pytest.raises(ValueError, match="unknown vehicle command"):
         car.set_orientation("fly")
+
+
+def test_the_level_unit_points_its_forward_axis_north_as_p4_asks():
+    """P4 on a static base: 'level, forward (x) axis north'. The simulated unit lies so:
+    the mode B calibration removes the Earth rate for that heading and recovers the
+    unit's own drift (in P4's frame, x fwd, y up, z right, from x fwd, y left, z up)."""
+    from station.procedures.gyrodrift_guide import HoldConfig, HoldGuide
+    from station.calibrate import calibrate_capture
+
+    imu = LiveImu(procedure="gyro-drift", seed=8, rate_hz=RATE_HZ, hold_s=1e9)
+    C = imu.C
+    np.testing.assert_allclose(C @ [1.0, 0.0, 0.0], [1.0, 0.0, 0.0], atol=1e-12)  # x north (NED)
+    np.testing.assert_allclose(C @ [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], atol=1e-12)  # z up
+    guide = HoldGuide(sample_rate_hz=RATE_HZ, units=imu.units, device_id=imu.device_id, site=imu.site,
+                      config=HoldConfig(duration_s=300.0, frame="x forward, y left, z up"))
+    while guide.phase != "done":
+        d = imu.read(100)
+        guide.update(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]),
+                     np.column_stack([d["gx"], d["gy"], d["gz"]]), d["temp_c"])
+    res = calibrate_capture(guide.capture(extra_meta={"accel_offset": "1.65, 1.65, 1.65"}))
+    eps = imu.gyro["eps"]
+    truth_p4 = np.array([eps[0], eps[2], -eps[1]])
+    err = np.abs(np.asarray(res["params"]["drift"]) - truth_p4)
+    assert np.all(err < 4 * np.asarray(res["uncertainty"]["drift"])), (err, res["uncertainty"]["drift"])

@@ -158,8 +158,8 @@ def test_p2_by_hand_the_p_key_mounts_and_spins_the_centrifuge(tmp_path):
     cal_id, g, capture = asyncio.run(story())
     rec = saved(db, "SIM-CFG-0022", cal_id)
     assert rec["procedure"] == "accel-centrifuge" and rec["n_positions"] == 12
-    assert capture.meta["radius_m"] == "1.0" and capture.meta["speed_source"].startswith("gyro")
-    assert all(abs(s.speed_measured_rad_s / s.speed_rad_s - 1) < 0.02 for s in g.steps)
+    assert capture.meta["radius_m"] == "1.0" and capture.meta["speed_source"].startswith("set point, confirmed")
+    assert all(abs(s.rate_gyro_rad_s / s.speed_rad_s - 1) < 0.02 for s in g.steps)
     truth = src.imu.truth()
     for k in ("S", "b"):
         err = np.abs(np.asarray(rec["params"][k]) - truth[k])

@@ -80,12 +80,10 @@ def test_centrifuge_live_run_to_a_saved_result(tmp_path):
 
     title, result, guide, capture = asyncio.run(story())
     assert "P2 centrifuge result" in title and result["n_positions"] == 12
-    # every row at the asked speed as the gyro measured it (the simulated controller holds
-    # the set point within 0.2 %, 1σ): the measured rate is stored, not the asked one
+    # every row at the asked speed as the gyro measured it
     for s in guide.steps:
-        assert s.how == "live" and abs(s.speed_measured_rad_s / s.speed_rad_s - 1) < 0.02
-        assert s.speed_measured_rad_s != s.speed_rad_s
-    assert capture.meta["speed_source"].startswith("gyro on the table")
+        assert s.how == "live" and abs(s.rate_gyro_rad_s / s.speed_rad_s - 1) < 0.02
+    assert capture.meta["speed_source"].startswith("set point, confirmed by the gyro")
     from db.store import Store
 
     hist = Store(db).history("SIM-CFG-0002")

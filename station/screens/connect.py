@@ -116,6 +116,7 @@ class ConnectScreen(Screen):
         self.query_one("#start", Button).focus()
 
     def on_screen_resume(self) -> None:
+        self.query_one("#start", Button).focus()  # back from a run: the same keys as at start-up
         self._check_resume()
         self.load_devices()
 
