@@ -872,7 +872,8 @@ class LiveVehicle:
         vert = moving * (0.01 + turn * 1.5) * np.sin(2 * np.pi * t / 41.0 + ph[3]) + \
             moving * turn * 0.5 * np.sin(2 * np.pi * t / 17.0 + ph[5])
         v_b = np.column_stack([fwd, lat, vert])
-        w_b = moving[:, None] * np.column_stack([0.05 * np.sin(2 * np.pi * t / 19.0), 0.04 * np.sin(2 * np.pi * t / 29.0),
+        w_b = moving[:, None] * np.column_stack([0.05 * np.sin(2 * np.pi * t / 19.0),
+                                                 0.04 * np.sin(2 * np.pi * t / 29.0),
                                                  (0.02 + 0.13 * turn) * np.sin(2 * np.pi * t / 37.0 + ph[0])])
         a = math.exp(-dt / 900.0)  # warming up toward 25 °C
         temps = 25.0 + (self.temp_c - 25.0) * a ** k

@@ -229,8 +229,8 @@ class SimSource:
 
         std = {"t_s", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c"}
         extra = {k: v for k, v in d.items() if k not in std}
-        return Samples(d["t_s"], trio("ax", "ay", "az"), trio("gx", "gy", "gz") if "gx" in d else trio("wx", "wy", "wz"),
-                       d["temp_c"], trio("mx", "my", "mz"), extra or None)
+        gyro = trio("gx", "gy", "gz") if "gx" in d else trio("wx", "wy", "wz")  # the vehicle's body rates
+        return Samples(d["t_s"], trio("ax", "ay", "az"), gyro, d["temp_c"], trio("mx", "my", "mz"), extra or None)
 
     def place(self, name: str) -> None:
         """The operator's hand on the simulated bench: a position, a centrifuge setting

@@ -6,7 +6,8 @@ here) in real time, paced by the monotonic clock, in the station protocol or as
 MAVLink 2. It reads host commands on the same port (docs/protocol.md):
 
     $STC,HDR               send the header now
-    $STC,ORIENT,<name>     move smoothly to a position (e.g. x_up; s1..s12; level)
+    $STC,ORIENT,<name>     move smoothly to a position (e.g. x_up; s1..s12; level), or
+                           sweep / table / still (solvers.simulate.LiveImu.set_orientation)
     $STC,TEMP,<c>          set the temperature set point, degC
     $STC,AUTO,ON|OFF|<procedure>   scripted operator: visit the positions in order
     $STC,RATE,<hz>         change the sample rate

@@ -11,9 +11,9 @@ A step list: for each mounting orientation ``k`` (default the 20 attitudes of
   centrifuge is never a row). The row's speed is the set point the gyro confirmed (a
   centrifuge's controller holds it far better than a MEMS gyro measures it: 1e-3 rad/s of
   noise per sample would add more scatter to ``|f|`` than the accelerometer's own); the
-  gyro's mean over the average is kept beside it (``rate_gyro_rad_s``). After each capture the output must change (the operator remounts or
-  changes speed: the detector sees motion) before the next step can be captured, so one
-  steady run is never taken twice (the same holds for the first step after the initial
+  gyro's mean over the average is kept beside it (``rate_gyro_rad_s``). After each capture
+  the output must change (the operator remounts or changes speed: the detector sees
+  motion) before the next step can be captured, so one steady run is never taken twice (the same holds for the first step after the initial
   rest: the stopped centrifuge is not a row). Without a gyro in a known unit the rate
   cannot be checked: live rows then carry the asked speed, and the capture says so
   (``speed_source: set point``); or

@@ -126,7 +126,8 @@ class LdvGuide:
         self._last = (v_ref[-1], beams[-1])
         st = self.status()
         if st.enough:
-            self._finish(f"κ {st.kappa:.3g} ≤ {KAPPA_WARN:.0e} with {st.n_epochs} moving epochs in {st.recorded_s:.0f} s")
+            self._finish(f"κ {st.kappa:.3g} ≤ {KAPPA_WARN:.0e} with {st.n_epochs} moving epochs "
+                         f"in {st.recorded_s:.0f} s")
         elif st.recorded_s >= self.config.max_s:
             self._finish(f"time limit {self.config.max_s:.0f} s reached at κ {st.kappa:.3g}")
         return self.status()

@@ -128,7 +128,8 @@ class LdvScreen(GuidedScreenMixin, Screen):
             car = "   vehicle " + ("driving" if bench("driving") else "parked") + \
                 (", turns and hills" if bench("turning") else ", straight" if bench("driving") else "")
         self.query_one("#readouts", Static).update(
-            f"reference {_n(v[0], '7.2f')} {_n(v[1], '7.2f')} {_n(v[2], '7.2f')} m/s (body)  |v| {_n(st.speed_mps, '.2f')}\n"
+            f"reference {_n(v[0], '7.2f')} {_n(v[1], '7.2f')} {_n(v[2], '7.2f')} m/s (body)  "
+            f"|v| {_n(st.speed_mps, '.2f')}\n"
             f"beams     {_n(b[0], '7.2f')} {_n(b[1], '7.2f')} {_n(b[2], '7.2f')} m/s{car}\n"
             f"{_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
             + ("" if stats.connected else "   DISCONNECTED"))
