@@ -64,3 +64,57 @@ def test_abort_and_bad_config():
     assert guide.phase == "aborted"
     with pytest.raises(ValueError):
         HoldConfig(duration_s=0)
+
+
+# ---------------------------------------------------------------- P4 mode A, live
+
+def _ref_run(seed, seconds, misalign_deg=0.0, table=True):
+    from solvers.frames import rotvec_to_matrix
+    from solvers.simulate import LiveImu
+    from station.procedures.gyrodrift_guide import ReferenceConfig, ReferenceGuide
+
+    imu = LiveImu(procedure="gyro-drift", seed=seed, rate_hz=100.0, hold_s=1e9, reference=True)
+    guide = ReferenceGuide(sample_rate_hz=100.0, units=imu.units, device_id=imu.device_id, site=imu.site,
+                           config=ReferenceConfig(duration_s=180.0, frame="x forward, y left, z up"))
+    if table:
+        imu.set_orientation("table")
+    R = rotvec_to_matrix(np.radians([0.0, misalign_deg, 0.0]))  # the unit tilted on the reference
+    st = guide.status()
+    for _ in range(int(seconds)):
+        d = imu.read(100)
+        ref = np.column_stack([d["ref_gx"], d["ref_gy"], d["ref_gz"]])
+        gyro = np.column_stack([d["gx"], d["gy"], d["gz"]])
+        gyro = (gyro - imu.gyro["eps"]) @ R.T + imu.gyro["eps"]
+        st = guide.update(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]), gyro, ref, d["temp_c"])
+    return imu, guide, st
+
+
+def test_mode_a_live_drift_and_the_capture_recover_the_units_drift():
+    from station.calibrate import calibrate_capture
+
+    imu, guide, st = _ref_run(3, 181)
+    assert guide.phase == "done" and st.mounting_ok and st.motion > 0.05
+    truth = np.asarray(imu.gyro["eps"]) - imu.ref_bias  # unit minus reference, the unit's axes
+    assert np.all(np.abs(np.asarray(st.drift) - truth) < 5 * np.asarray(st.drift_se))
+    res = calibrate_capture(guide.capture())
+    assert res["params"]["mode"] == "reference"
+    truth_p4 = np.array([truth[0], truth[2], -truth[1]])  # x fwd, y up, z right
+    err = np.abs(np.asarray(res["params"]["drift"]) - truth_p4)
+    assert np.all(err < 4 * np.asarray(res["uncertainty"]["drift"]))
+
+
+def test_mode_a_live_mounting_check_catches_a_tilted_unit():
+    _, _, st = _ref_run(4, 60, misalign_deg=2.0)
+    assert not st.mounting_ok and "check the mounting" in st.message
+    assert 0.02 < st.coupling_max < 0.05  # sin 2° ≈ 0.035 rad/rad
+
+
+def test_mode_a_waits_for_the_reference_and_asks_for_motion():
+    from station.procedures.gyrodrift_guide import ReferenceGuide
+
+    guide = ReferenceGuide(sample_rate_hz=100.0, units={"gyro_unit": "rad/s"})
+    t = np.arange(100) / 100.0
+    st = guide.update(t, np.zeros((100, 3)), np.zeros((100, 3)), None)
+    assert st.phase == "wait" and "No reference IMU signal" in st.message
+    _, _, st = _ref_run(5, 20, table=False)
+    assert st.phase == "average" and "hardly moves" in st.message and np.isnan(st.coupling_max)

@@ -6,8 +6,10 @@ P5 calibration refuses above ``KAPPA_REFUSE`` and warns about above ``KAPPA_WARN
 running sums of ``HᵀH``, with the per-beam least squares ``X_j = (HᵀH)⁻¹ Hᵀ V_Lj`` and its
 read-out (δK, α, β, γ; ``solvers.models.ldv.angles_from_X``) once κ allows it.
 
-The set is **enough** when κ ≤ ``KAPPA_WARN``, at least ``min_epochs`` moving epochs are in
-and ``min_s`` have been recorded; the recording then ends by itself (``f`` ends it earlier,
+The set is **enough** when κ ≤ ``KAPPA_WARN`` and has stayed so for ``good_for_s`` (a set
+that just crossed the line is marginal: more turns keep it well inside), at least
+``min_epochs`` moving epochs are in and ``min_s`` have been recorded; the recording then
+ends by itself (``f`` ends it earlier,
 the calibration still refuses an ill-conditioned set). Epochs with the vehicle parked
 (|v| < ``moving_mps``) are recorded but add nothing to HᵀH worth counting.
 
@@ -34,14 +36,18 @@ RATES = ("wx", "wy", "wz")
 @dataclass
 class LdvConfig:
     """min_s: shortest recording [s]; max_s: the recording ends here whatever κ [s];
-    min_epochs: moving epochs needed; moving_mps: speed under which an epoch is "parked"."""
+    min_epochs: moving epochs needed; moving_mps: speed under which an epoch is "parked";
+    good_for_s: how long κ must have stayed at or below KAPPA_WARN [s]."""
 
     min_s: float = 120.0
+    good_for_s: float = 30.0
     max_s: float = 1800.0
     min_epochs: int = 300
     moving_mps: float = 0.5
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.good_for_s) and self.good_for_s >= 0):
+            raise ValueError(f"good_for_s must be >= 0, got {self.good_for_s!r}")
         if not (0 <= self.min_s <= self.max_s and self.max_s > 0):
             raise ValueError("min_s and max_s must satisfy 0 <= min_s <= max_s, max_s > 0")
         if not (isinstance(self.min_epochs, int) and self.min_epochs >= 4):
@@ -89,6 +95,7 @@ class LdvGuide:
         self._HtY = np.zeros((3, 3))  # column j: Hᵀ V_Lj
         self._t0 = math.nan
         self._t1 = math.nan
+        self._good_since = math.nan  # device time κ last came down to KAPPA_WARN
         self._last = None
         self._message = "Drive: the station records the beams and the INS/DGPS velocity"
 
@@ -124,6 +131,11 @@ class LdvGuide:
         self._HtH += H.T @ H
         self._HtY += H.T @ Y
         self._last = (v_ref[-1], beams[-1])
+        if self.kappa <= KAPPA_WARN:
+            if not math.isfinite(self._good_since):
+                self._good_since = self._t1
+        else:
+            self._good_since = math.nan
         st = self.status()
         if st.enough:
             self._finish(f"κ {st.kappa:.3g} ≤ {KAPPA_WARN:.0e} with {st.n_epochs} moving epochs "
@@ -167,7 +179,9 @@ class LdvGuide:
         verdict = ("none" if not math.isfinite(kappa) else "refused" if kappa > KAPPA_REFUSE
                    else "poor" if kappa > KAPPA_WARN else "good")
         rec = (self._t1 - self._t0) if math.isfinite(self._t0) else 0.0
-        enough = verdict == "good" and self._epochs >= c.min_epochs and rec >= c.min_s
+        good_s = (self._t1 - self._good_since) if math.isfinite(self._good_since) else 0.0
+        enough = (verdict == "good" and good_s >= c.good_for_s and self._epochs >= c.min_epochs
+                  and rec >= c.min_s)
         v, b = self._last if self._last is not None else (np.full(3, np.nan), np.full(3, np.nan))
         speed = float(np.linalg.norm(v))
         msg = self._message
@@ -180,8 +194,9 @@ class LdvGuide:
             elif verdict == "poor":
                 msg = "Poorly conditioned still: keep turning and changing slope"
             elif not enough:
-                msg = (f"Well conditioned: keep driving ({max(c.min_epochs - self._epochs, 0)} epochs, "
-                       f"{max(c.min_s - rec, 0):.0f} s to go)")
+                left = max(c.min_s - rec, c.good_for_s - good_s, 0.0)
+                msg = (f"Well conditioned: keep driving and turning ({max(c.min_epochs - self._epochs, 0)} "
+                       f"epochs, {left:.0f} s to go)")
         return LdvStatus(
             phase=self.phase, kappa=kappa, verdict=verdict, enough=enough, n_epochs=self._epochs, n_samples=self._n,
             recorded_s=rec, speed_mps=speed, v_ref=tuple(float(x) for x in v), beams=tuple(float(x) for x in b),
