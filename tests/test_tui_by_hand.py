@@ -146,6 +146,14 @@ def test_p2_by_hand_the_p_key_mounts_and_spins_the_centrifuge(tmp_path):
             g = app.screen.guide
             text = screen_text(app)
             assert "above ↑turn" in text and "Radius" in text and "m/s²" in text
+            await pilot.press("tab")  # from the step list to the radius field
+            await wait_for(pilot, lambda: app.focused is not None and app.focused.id == "radius")
+            await pilot.press("end", *["backspace"] * 6, *"abc", "enter")
+            await wait_for(pilot, lambda: "radius: 'abc' is not a positive number" in screen_text(app))
+            assert g.config.radius_m == 1.0  # nothing changed
+            await pilot.press(*["backspace"] * 3, *"1.0", "enter")
+            await wait_for(pilot, lambda: app.focused is not None and app.focused.id == "steps")
+            assert "not a positive number" not in screen_text(app)
             await run_until(pilot, app, clock, lambda: g.phase == "change", step_s=1.0)  # noise rest, stopped
             assert g.n_captured == 0
             while g.phase != "done":
