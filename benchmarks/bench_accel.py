@@ -74,7 +74,7 @@ def p1_crlb(pos, B, M, g, opts) -> np.ndarray:
         big = p.label[:2] in ("xy", "yz", "xz")
         place = math.radians(opts["tilted_placement_deg"] if big else opts["placement_deg"]) / 3.0
         var = g * g * (place ** 2 + tilt2) + opts["noise_mps2"] ** 2 / n[k]
-        E = T._perp_basis(p.direction)
+        E = T.perp_basis(p.direction)
         rows.append(np.hstack([E, (E[:, :, None] * V[k][None, None, :]).reshape(2, 9)]))
         w.append(np.full(2, 1.0 / var))
     J = np.vstack(rows)

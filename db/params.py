@@ -14,32 +14,18 @@ import json
 import math
 from datetime import datetime, timezone
 
+from solvers.jsonable import jsonable
+
 DAYS_PER_YEAR = 365.25
 
 
 def clean_json(obj):
-    """Plain JSON types: numpy scalars/arrays -> Python, tuples -> lists, NaN/inf -> None.
+    """Plain JSON types (``solvers.jsonable``, strict): non-finite numbers become null.
 
     SQLite's JSON functions reject `NaN`, and SQLite itself stores a NaN REAL as NULL,
     so non-finite numbers are stored as null everywhere (documented in the README).
     """
-    if obj is None or isinstance(obj, (bool, str)):
-        return obj
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, int):
-        return int(obj)
-    if isinstance(obj, dict):
-        return {str(k): clean_json(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [clean_json(v) for v in obj]
-    tolist = getattr(obj, "tolist", None)  # numpy arrays and scalars
-    if tolist is not None:
-        value = tolist()
-        if type(value).__name__ == "bool":
-            return bool(value)
-        return clean_json(value)
-    raise ValueError(f"cannot store {type(obj).__name__} value {obj!r} as JSON")
+    return jsonable(obj, strict=True)
 
 
 def dumps(obj) -> str:

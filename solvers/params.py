@@ -83,16 +83,3 @@ class Packer:
                 i += k
             out[name] = block
         return out
-
-
-def to_jsonable(params: Mapping[str, object]) -> dict:
-    """Arrays → nested lists / floats (NaN stays NaN; callers that emit JSON map it to None)."""
-    out = {}
-    for k, v in params.items():
-        if isinstance(v, np.ndarray):
-            out[k] = v.tolist() if v.ndim else float(v)
-        elif isinstance(v, Mapping):
-            out[k] = to_jsonable(v)
-        else:
-            out[k] = v
-    return out

@@ -25,7 +25,7 @@ from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
-from solvers.params import to_jsonable
+from solvers.jsonable import jsonable
 from solvers.positions import P1_POSITIONS, C_n_b_for
 
 PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv")
@@ -241,14 +241,14 @@ def simulate_tabletop(seed: int = 0, effects: dict[str, float] | None = None, *,
     labels = np.array(segs_label, dtype=object)
     if averages:
         cols = _averages(labels, {"ax": y[:, 0], "ay": y[:, 1], "az": y[:, 2], "temp_c": temp})
-        return Simulation("accel-tabletop", meta, cols, _jsonable(truth))
+        return Simulation("accel-tabletop", meta, cols, jsonable(truth))
     cols = {"t": np.round(t, 6)}
     if label_positions:
         cols["position"] = labels
     cols.update({"ax": y[:, 0], "ay": y[:, 1], "az": y[:, 2],
                  "gx": np.round(gyro[:, 0], 7), "gy": np.round(gyro[:, 1], 7), "gz": np.round(gyro[:, 2], 7),
                  "temp_c": np.round(temp, 3)})
-    return Simulation("accel-tabletop", meta, cols, _jsonable(truth))
+    return Simulation("accel-tabletop", meta, cols, jsonable(truth))
 
 
 def _averages(labels: np.ndarray, cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -336,7 +336,7 @@ def simulate_centrifuge(seed: int = 0, effects: dict[str, float] | None = None, 
     cols = {"position": np.array(pos, dtype=object), "speed_rad_s": np.array(spd),
             "ax": np.round(y[:, 0], 9), "ay": np.round(y[:, 1], 9), "az": np.round(y[:, 2], 9),
             "temp_c": np.round(temp, 3), "elapsed_s": elapsed}
-    return Simulation("accel-centrifuge", meta, cols, _jsonable(truth))
+    return Simulation("accel-centrifuge", meta, cols, jsonable(truth))
 
 
 # ---------------------------------------------------------------- P3: compass
@@ -398,7 +398,7 @@ def simulate_compass(seed: int = 0, effects: dict[str, float] | None = None, *, 
             "gy": np.round(np.degrees(gyr[:, 1]), 5), "gz": np.round(np.degrees(gyr[:, 2]), 5),
             "mx": np.round(mag[:, 0], 4), "my": np.round(mag[:, 1], 4), "mz": np.round(mag[:, 2], 4),
             "temp_c": np.round(temp, 3)}
-    return Simulation("compass", meta, cols, _jsonable(truth))
+    return Simulation("compass", meta, cols, jsonable(truth))
 
 
 # ---------------------------------------------------------------- P4: gyro drift
@@ -473,7 +473,7 @@ def simulate_gyro_drift(seed: int = 0, effects: dict[str, float] | None = None, 
     if mode == "reference":
         ref = w_true + np.radians(1.0 / 3600.0) * rng.normal(size=3) + rng.normal(scale=gyro_noise_rad_s / 10, size=(n, 3))
         cols.update({"ref_gx": np.round(ref[:, 0], 9), "ref_gy": np.round(ref[:, 1], 9), "ref_gz": np.round(ref[:, 2], 9)})
-    return Simulation("gyro-drift", meta, cols, _jsonable(truth))
+    return Simulation("gyro-drift", meta, cols, jsonable(truth))
 
 
 # ---------------------------------------------------------------- P5: LDV
@@ -536,7 +536,7 @@ def simulate_ldv(seed: int = 0, effects: dict[str, float] | None = None, *, rate
         cols.update({"vx": np.round(v_ref[:, 0], 5), "vy": np.round(v_ref[:, 1], 5), "vz": np.round(v_ref[:, 2], 5)})
     cols.update({"wx": np.round(w_b[:, 0], 6), "wy": np.round(w_b[:, 1], 6), "wz": np.round(w_b[:, 2], 6),
                  "temp_c": np.round(temp, 3)})
-    return Simulation("ldv", meta, cols, _jsonable(truth))
+    return Simulation("ldv", meta, cols, jsonable(truth))
 
 
 # ---------------------------------------------------------------- entry point
@@ -555,18 +555,6 @@ def simulate(procedure: str, *, seed: int = 0, effects: dict[str, float] | None 
     if procedure not in _SIMULATORS:
         raise SimulationError(f"unknown procedure {procedure!r}; choose from {', '.join(PROCEDURES)}")
     return _SIMULATORS[procedure](seed=seed, effects=effects, **options)
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
 
 
 # ---------------------------------------------------------------- live device

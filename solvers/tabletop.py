@@ -120,7 +120,7 @@ def _cross(a, b) -> np.ndarray:
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def _perp_basis(u: np.ndarray) -> np.ndarray:
+def perp_basis(u: np.ndarray) -> np.ndarray:
     """Two unit vectors (2, 3) perpendicular to ``u`` and to each other."""
     a = np.eye(3)[int(np.argmin(np.abs(u)))]
     e1 = _cross(u, a)
@@ -256,14 +256,13 @@ def norm_sigma(positions: list[Position], B, M, noise_known: bool) -> np.ndarray
     the noise is unknown (the fit then takes its scale from the residuals)."""
     if not noise_known:
         return np.ones(len(positions))
-    V = np.array([p.mean for p in positions])
-    A = accel.p1_apply(V, B, M)
-    u = A / np.linalg.norm(A, axis=1, keepdims=True)
-    w = u @ np.asarray(M)                      # ∂|A|/∂V
-    var = np.array([(p.se ** 2 if p.se is not None else p.std ** 2 / max(p.n, 1)) for p in positions])
-    s = np.sqrt(np.sum(w * w * var, axis=1))
-    floor = 1e-6 * np.median(np.linalg.norm(A, axis=1))  # quantisation/rounding floor
-    return np.maximum(s, floor)
+    return accel.p1_norm_sigma(np.array([p.mean for p in positions]), B, M, mean_variance(positions))
+
+
+def mean_variance(positions: list[Position]) -> np.ndarray:
+    """The variance (m, 3) of each position's mean: its standard error ``se`` squared (bias
+    instability included, from the Allan deviation) when measured, else ``std² / n``."""
+    return np.array([(p.se ** 2 if p.se is not None else p.std ** 2 / max(p.n, 1)) for p in positions])
 
 
 # ----------------------------------------------------------------------------- the fit
@@ -272,7 +271,7 @@ def _joint_residual_builder(V: np.ndarray, g: float, sig_n: np.ndarray, known: l
     """Residual and Jacobian over blocks B, M: norm rows, then two rows per labelled position
     (the vector components perpendicular to its expected direction, target 0)."""
     m = len(known)
-    E = np.array([_perp_basis(u) for _, u, _ in known]).reshape(2 * m, 3)     # (2m, 3)
+    E = np.array([perp_basis(u) for _, u, _ in known]).reshape(2 * m, 3)     # (2m, 3)
     Vk = np.repeat(np.array([V[k] for k, _, _ in known]).reshape(m, 3), 2, axis=0)  # (2m, 3)
     sig_v = np.repeat(np.array([s for _, _, s in known], dtype=float), 2)
     Jv = np.hstack([E, (E[:, :, None] * Vk[:, None, :]).reshape(2 * m, 9)])
@@ -368,7 +367,7 @@ def rotation_covariance(positions, B, M, g_mps2, sig_n) -> np.ndarray:
             continue
         A = accel.p1_apply(p.mean[None], B, M)[0]
         var = (g_mps2 * p.placement_sigma_rad) ** 2 + float(sig_n[k]) ** 2
-        for e in _perp_basis(p.direction):
+        for e in perp_basis(p.direction):
             j = _cross(A, e)
             info += np.outer(j, j) / var
     return np.linalg.inv(info)

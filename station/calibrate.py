@@ -7,12 +7,13 @@ This module only dispatches.
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 
 from solvers.errors import SolverError
+from solvers.jsonable import jsonable
 from station.errors import InputError, UnsupportedError
+from station.formatting import MISSING, num, param_lines
 from station.procedures import registry
 from station.guard import check_extremes, check_result, printed_warnings, quiet_stdout
 
@@ -68,34 +69,8 @@ def guarded(capture, fn, *args, **kwargs):
                                "far beyond the sensor's range") from None
 
 
-def jsonable(obj):
-    """Arrays → lists, numpy scalars → floats, NaN/inf → None (JSON has no NaN)."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        f = float(obj)
-        return f if math.isfinite(f) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
 def to_json(result: dict) -> str:
     return json.dumps(jsonable(result), indent=2)
-
-
-def format_value(v, s) -> str:
-    if v is None:
-        return "—"
-    if s is None or (isinstance(s, float) and not math.isfinite(s)):
-        return f"{v:.6g} (not identifiable)" if isinstance(s, float) else f"{v:.6g}"
-    return f"{v:.6g} ± {s:.2g}"
 
 
 def format_text(result: dict) -> str:
@@ -112,32 +87,11 @@ def format_text(result: dict) -> str:
     params, unc = result.get("params", {}), result.get("uncertainty", {})
     for name, value in params.items():
         sig = unc.get(name) if isinstance(unc, dict) else None
-        lines += _format_param(name, value, sig)
-    lines.append(f"residual   {result.get('residual_rms'):.4g} RMS" if isinstance(result.get("residual_rms"), (int, float)) else "residual   —")
+        lines += param_lines(name, jsonable(value), jsonable(sig))
+    rms = num(result.get("residual_rms"), ".4g")
+    lines.append(f"residual   {rms} RMS" if rms != MISSING else f"residual   {MISSING}")
     if "n_positions" in result:
         lines.append(f"positions  {result['n_positions']}")
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)
-
-
-def _format_param(name, value, sig, indent="  ") -> list[str]:
-    value = jsonable(value)
-    sig = jsonable(sig)
-    if isinstance(value, dict):
-        out = [f"{indent}{name}:"]
-        for k, v in value.items():
-            out += _format_param(k, v, sig.get(k) if isinstance(sig, dict) else None, indent + "  ")
-        return out
-    if isinstance(value, list) and value and isinstance(value[0], list):
-        out = [f"{indent}{name}:"]
-        for i, row in enumerate(value):
-            srow = sig[i] if isinstance(sig, list) else [None] * len(row)
-            out.append(indent + "  [" + ", ".join(format_value(v, s) for v, s in zip(row, srow)) + "]")
-        return out
-    if isinstance(value, list):
-        srow = sig if isinstance(sig, list) else [None] * len(value)
-        return [f"{indent}{name}: [" + ", ".join(format_value(v, s) for v, s in zip(value, srow)) + "]"]
-    if isinstance(value, (int, float)):
-        return [f"{indent}{name}: {format_value(value, sig if isinstance(sig, (int, float)) else None)}"]
-    return [f"{indent}{name}: {value}"]

@@ -34,7 +34,7 @@ import numpy as np
 
 from solvers.units import ACCEL_UNITS, GYRO_UNITS, MAG_UNITS, RAW_UNITS
 from station.errors import InputError
-from station.procedures.registry import NAMES as PROCEDURES
+from station.procedures import registry
 
 FORMAT_VERSION = "1"
 TEXT_COLUMNS = frozenset({"position"})
@@ -191,8 +191,8 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
         raise InputError(path, lines.get(key), message)
 
     proc = meta.get("procedure")
-    if proc is not None and proc not in PROCEDURES:
-        bad("procedure", f"unknown procedure {_show(proc)} (expected one of {', '.join(PROCEDURES)})")
+    if proc is not None and registry.get(proc) is None:
+        bad("procedure", f"unknown procedure {_show(proc)} (expected one of {', '.join(registry.names())})")
     for key, allowed in UNIT_KEYS.items():
         unit = meta.get(key)
         if unit is None or unit in allowed:

@@ -21,7 +21,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from station.capture import (PROCEDURES, Capture, iter_capture_chunks, read_capture, write_capture)
+from station.capture import Capture, iter_capture_chunks, read_capture, write_capture
+from station.procedures.registry import names as procedure_names
 from station.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,7 +60,7 @@ BAD = [
     ("trailing-comma-header", HEAD + "t,ax,\n0,1,\n", 5, "empty column name (column 3 of the header)"),
     ("quoted-column-name", HEAD + 't,"ax"\n0,1\n', 5, "column name '\"ax\"' is not plain text (no quotes or control characters)"),
     ("unknown-procedure", "# station-capture: 1\n# procedure: accel-flat\nt,ax\n0,1\n", 2,
-     "unknown procedure 'accel-flat' (expected one of " + ", ".join(PROCEDURES) + ")"),
+     "unknown procedure 'accel-flat' (expected one of " + ", ".join(procedure_names()) + ")"),
     ("unknown-accel-unit", "# station-capture: 1\n# device: x\n# accel_unit: furlongs\nt,ax\n0,1\n", 3,
      "unknown accel_unit 'furlongs' (expected one of V, mV, counts, g, m/s^2, mps2, mg)"),
     ("accel-unit-of-wrong-kind", "# station-capture: 1\n# accel_unit: deg/s\nt,ax\n0,1\n", 2,
@@ -480,7 +481,7 @@ def test_every_shared_capture_reads_with_the_documented_rows(shared_data):
     assert len(files) == 13
     for path in files:
         c = read_capture(path)
-        assert c.meta["station-capture"] == "1" and c.procedure in PROCEDURES, path
+        assert c.meta["station-capture"] == "1" and c.procedure in procedure_names(), path
         if path.name == "table1.capture.csv":
             continue
         rows, duration_s = documented[path.name]

@@ -31,3 +31,88 @@ def test_headless_packages_do_not_import_ui_or_app(package):
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"{package} pulled in: {out.stdout.strip()}"
+
+
+# ---------------------------------------------------------------- the import graph, read from the source
+
+PACKAGES = sorted(p.parent.name for p in ROOT.glob("*/__init__.py"))
+# What each layer must never import (top-level module names, or dotted prefixes);
+# function-level imports count too. A new package must say where it stands.
+NEVER = {
+    "solvers": ("station", "db", "textual", "serial", "sqlite_utils"),
+    "db": ("station", "textual", "serial"),
+    "station": (),
+}
+# The UI-free procedure logic (the TUI is a thin view over it).
+NEVER_UI_FREE = ("textual", "rich", "station.app", "station.screens", "station.widgets")
+NUMPY_FREE = ("station.procedures.registry", "station.procedures.contract", "station.formatting",
+              "solvers.jsonable", "db.params")
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    import ast
+
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out += [(node.lineno, node.module)] + [(node.lineno, f"{node.module}.{a.name}") for a in node.names]
+    return out
+
+
+def _hits(name: str, banned) -> bool:
+    return any(name == b or name.startswith(b + ".") for b in banned)
+
+
+def test_every_package_has_a_layer():
+    assert set(PACKAGES) == set(NEVER), "a new top-level package: add its rule to NEVER"
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_imports_respect_the_layers(package):
+    bad = []
+    for path in sorted((ROOT / package).rglob("*.py")):
+        rel = path.relative_to(ROOT)
+        banned = NEVER[package]
+        if rel.parts[:2] == ("station", "procedures"):
+            banned = banned + NEVER_UI_FREE
+        bad += [f"{rel}:{line}: {name}" for line, name in _imports(path) if _hits(name, banned)]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_lists_load_without_numpy():
+    """The registry, the contract, the formatter and the JSON sanitizer start fast."""
+    code = ("import sys\n" + "".join(f"import {m}\n" for m in NUMPY_FREE)
+            + "print(','.join(m for m in ('numpy', 'textual') if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
+def test_no_module_imports_another_modules_private_name():
+    """``from x import _name`` or ``x._name`` across modules: a private name is its module's
+    business (dunders like __version__ are public)."""
+    import ast
+
+    ours = tuple(PACKAGES)
+    bad = []
+    for path in sorted(p for d in PACKAGES + ["benchmarks"] for p in (ROOT / d).rglob("*.py")):
+        rel = path.relative_to(ROOT)
+        here = ".".join(rel.with_suffix("").parts)
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        modules = {}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in ours:
+                for a in node.names:
+                    if a.name.startswith("_") and not a.name.startswith("__") and node.module != here:
+                        bad.append(f"{rel}:{node.lineno}: from {node.module} import {a.name}")
+                    modules[a.asname or a.name] = node.module
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name.split(".")[0] in ours:
+                        modules[a.asname or a.name.split(".")[0]] = a.name
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in modules
+                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+                bad.append(f"{rel}:{node.lineno}: {node.value.id}.{node.attr}")
+    assert not bad, "\n".join(bad)

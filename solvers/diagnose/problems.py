@@ -29,6 +29,7 @@ from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
+from solvers.tabletop import perp_basis
 
 # Deviance-test scales F from null simulations (bench_diagnose.py --null-only --trials 200).
 # The comment gives that run's 95th-percentile null score; F is set a little above it.
@@ -244,27 +245,19 @@ def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement
     m = len(V)
     known = [k for k in range(m) if directions[k] is not None]
     table = len(known) >= 3
-    E = []
-    for k in known:
-        u = np.asarray(directions[k], float)
-        a = np.eye(3)[int(np.argmin(np.abs(u)))]
-        e1 = np.cross(u, a)
-        e1 /= np.linalg.norm(e1)
-        E.append(np.vstack([e1, np.cross(u, e1)]))
+    E = [perp_basis(np.asarray(directions[k], float)) for k in known]
     T = np.asarray(temp_c, float) if temp_c is not None else None
     t = np.asarray(t_s, float) if t_s is not None else None
     cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0)
     Kinv = np.linalg.inv(K0)
+    B0, M0 = accel_model.forward_to_p1({"K": K0, "b": b0})
 
-    def norm_sigma(Vr, ser):
-        f = (Vr - b0) @ Kinv.T
-        u = f / np.linalg.norm(f, axis=1, keepdims=True)
-        wgt = u @ Kinv
-        return np.maximum(np.sqrt(np.sum(wgt * wgt * ser ** 2, axis=1)), 1e-6 * g_mps2), f
+    def norm_sigma(Vr, ser):  # the noise of |f| from each mean's standard error (the calibration's own)
+        return accel_model.p1_norm_sigma(Vr, B0, M0, np.asarray(ser, float) ** 2)
 
     if sub is not None:
         Vn = np.asarray(sub["V"], float)
-        s_n, _ = norm_sigma(Vn, np.asarray(sub["se"], float))
+        s_n = norm_sigma(Vn, np.asarray(sub["se"], float))
         Tn = np.asarray(sub["temp"], float) if sub.get("temp") is not None and T is not None else None
         tn = np.asarray(sub["t"], float)
         cond_n = Conditions(t_s=tn, temp_c=Tn, temp_ref_c=cond.temp_ref_c, t_ref_s=cond.t_ref_s)
@@ -274,9 +267,9 @@ def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement
     else:
         Vn, cond_n, pos_n = V, cond, np.arange(m)
         if se is not None:
-            s_n, _ = norm_sigma(V, np.asarray(se, float))
+            s_n = norm_sigma(V, np.asarray(se, float))
         elif noise_known and std is not None:
-            s_n, _ = norm_sigma(V, np.asarray(std, float) / np.sqrt(np.maximum(np.asarray(n, float), 1))[:, None])
+            s_n = norm_sigma(V, np.asarray(std, float) / np.sqrt(np.maximum(np.asarray(n, float), 1))[:, None])
         else:
             s_n = np.full(m, 1e-3)
     f0 = (V - b0) @ Kinv.T

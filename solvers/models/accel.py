@@ -152,6 +152,18 @@ def p1_apply(V, B, M) -> np.ndarray:
     return np.asarray(B, dtype=float) + np.atleast_2d(np.asarray(V, dtype=float)) @ np.asarray(M, dtype=float).T
 
 
+def p1_norm_sigma(V, B, M, var_V) -> np.ndarray:
+    """The noise of ``|A|`` (:func:`p1_apply`) per row from the variances ``var_V`` (N, 3) of
+    the raw components (independent axes; first order: ``∂|A|/∂V = ûᵀ M``), floored at
+    1e-6 of the median ``|A|`` (quantisation and rounding)."""
+    V = np.atleast_2d(np.asarray(V, dtype=float))
+    A = p1_apply(V, B, M)
+    norm = np.linalg.norm(A, axis=1)
+    w = (A / norm[:, None]) @ np.asarray(M, dtype=float)
+    s = np.sqrt(np.sum(w * w * np.asarray(var_V, dtype=float), axis=1))
+    return np.maximum(s, 1e-6 * float(np.median(norm)))
+
+
 def p1_norm_jacobian(V, B, M) -> tuple[np.ndarray, np.ndarray]:
     """``|A|`` of :func:`p1_apply` and its Jacobian (N, 12) w.r.t. ``(B[0..2], M[0][0], M[0][1], …, M[2][2])``
     (row-major, the order of ``solvers.params``): ``∂|A|/∂B = û``, ``∂|A|/∂M_ij = û_i V_j``."""

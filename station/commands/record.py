@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
     p.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: until interrupted)")
     p.add_argument("--out", help="capture file to write")
-    p.add_argument("--procedure", choices=registry.NAMES, help="the procedure this capture is for (metadata)")
+    p.add_argument("--procedure", choices=registry.names(), help="the procedure this capture is for (metadata)")
     p.add_argument("--meta", action="append", metavar="KEY=VALUE", help="extra metadata, e.g. latitude_deg=39.98")
     p.add_argument("--mavlink-message", metavar="MSG[:ID]",
                    help="MAVLink stream to record, e.g. HIGHRES_IMU, SCALED_IMU2, RAW_IMU:1 (default: first IMU message seen)")

@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "port (docs/protocol.md).",
     )
     p.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="sample rate (default 100)")
-    p.add_argument("--procedure", default=registry.DEFAULT, choices=registry.NAMES)
+    p.add_argument("--procedure", default=registry.DEFAULT, choices=registry.names())
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--effect", action="append", metavar="NAME=VALUE", help="an effect of diagnose.md and its size")

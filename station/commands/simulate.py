@@ -37,7 +37,7 @@ def seed_arg(text: str) -> int:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="write a realistic simulated capture and its truth",
                        description="Simulate a capture of any procedure with the station's forward models.")
-    p.add_argument("--procedure", required=True, choices=registry.NAMES)
+    p.add_argument("--procedure", required=True, choices=registry.names())
     p.add_argument("--out", required=True, help="capture file to write")
     p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--effect", action="append", metavar="NAME=VALUE",

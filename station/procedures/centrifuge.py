@@ -209,7 +209,8 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
 
 
 def format_text(result: dict) -> str:
-    from station.calibrate import _format_param, jsonable
+    from station.calibrate import jsonable
+    from station.formatting import param_lines
 
     r = jsonable(result)
     u = r["units"]
@@ -217,7 +218,7 @@ def format_text(result: dict) -> str:
              f"model      {r['model']}   (f in g, N in {u['N']})"]
     for k in ("S", "b", "D", "gamma"):
         if k in r["params"]:
-            lines += _format_param(f"{k} [{u[k]}]", r["params"][k], r["uncertainty"].get(k))
+            lines += param_lines(f"{k} [{u[k]}]", r["params"][k], r["uncertainty"].get(k))
     lines.append(f"residual   {r['residual_rms']:.3g} g RMS of |f| − sqrt(A²+1)")
     lines.append(f"rows       {r['rows_used']} used of {r['n_rows']} (R = {r['radius_m']} m, g = {r['g_mps2']} m/s²)")
     for w in r["warnings"]:

@@ -247,13 +247,14 @@ def _circ_rad(a) -> float:
 
 
 def format_text(result: dict) -> str:
-    from station.calibrate import _format_param
+    from station.calibrate import jsonable
+    from station.formatting import param_lines
 
     lines = [f"procedure  compass ({result.get('method')})", f"device     {result.get('device')}",
              f"model      {result.get('model')}"]
     p, u = result["params"], result["uncertainty"]
-    lines += _format_param("hard_iron", p["hard_iron"], u["hard_iron"])
-    lines += _format_param("soft_iron", p["soft_iron"], u["soft_iron"])
+    lines += param_lines("hard_iron", jsonable(p["hard_iron"]), jsonable(u["hard_iron"]))
+    lines += param_lines("soft_iron", jsonable(p["soft_iron"]), jsonable(u["soft_iron"]))
     ref = p["reference"]
     if result.get("igrf_anchored"):
         lines.append(f"  IGRF: F {ref['total_nT']:.1f} nT, N {ref['north_nT']:.1f}, E {ref['east_nT']:.1f}, "

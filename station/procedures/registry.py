@@ -69,16 +69,25 @@ GUIDED_RUNS: tuple[GuidedRun, ...] = (
     GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen"),
 )
 
-NAMES: tuple[str, ...] = tuple(p.name for p in PROCEDURES)
-SENSOR_KINDS: tuple[str, ...] = tuple(dict.fromkeys(p.sensor_kind for p in PROCEDURES))
 DEFAULT = PROCEDURES[0].name
 
-_BY_NAME = {p.name: p for p in PROCEDURES}
+# Everything below reads PROCEDURES when called, so that an entry added to it (a test's
+# toy procedure) is seen everywhere.
+
+
+def names() -> tuple[str, ...]:
+    """The procedures' names (capture ``procedure:`` values), in registry order."""
+    return tuple(p.name for p in PROCEDURES)
+
+
+def sensor_kinds() -> tuple[str, ...]:
+    """The sensor kinds the procedures calibrate (the database's devices.sensor_kinds)."""
+    return tuple(dict.fromkeys(p.sensor_kind for p in PROCEDURES))
 
 
 def get(name: str | None) -> Procedure | None:
     """The procedure called ``name``, None when there is none."""
-    return _BY_NAME.get(name or "")
+    return next((p for p in PROCEDURES if p.name == name), None)
 
 
 def result_title(name: str | None) -> str:
@@ -97,10 +106,10 @@ def guided() -> dict[str, str]:
 
 
 def screen_for(name: str):
-    """A new guided screen for procedure or run ``name`` (P1's when ``name`` has none)."""
+    """A new guided screen for procedure or run ``name`` (the default's when ``name`` has none)."""
     spec = next((r.screen for r in GUIDED_RUNS if r.name == name), None)
     if spec is None:
         p = get(name)
-        spec = p.screen if p is not None and p.screen else PROCEDURES[0].screen
+        spec = p.screen if p is not None and p.screen else get(DEFAULT).screen
     module, cls = spec.split(":")
     return getattr(importlib.import_module(module), cls)()

@@ -253,23 +253,20 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
     return result
 
 
-def _num(x) -> str:
-    return "∞ (singular)" if x is None else f"{x:.3g}"
-
-
 def format_text(result: dict) -> str:
-    from station.calibrate import _format_param, jsonable
+    from station.calibrate import jsonable
+    from station.formatting import num, param_lines
 
     r = jsonable(result)
     unit = r["units"]["V"]
     lines = [f"procedure  accel-tabletop (P1, {r['method']})", f"device     {r.get('device')}",
              f"model      {r['model']}   (V in {unit}, A in m/s²)",
              f"gauge      {r['gauge_description']}"]
-    lines += _format_param("B [m/s²]", r["params"]["B"], r["uncertainty"]["B"])
-    lines += _format_param(f"M [m/s² per {unit}]", r["params"]["M"], r["uncertainty"]["M"])
+    lines += param_lines("B [m/s²]", r["params"]["B"], r["uncertainty"]["B"])
+    lines += param_lines(f"M [m/s² per {unit}]", r["params"]["M"], r["uncertainty"]["M"])
     lines.append(f"residual   {r['residual_rms']:.3g} m/s² RMS of |A| − g (g = {r['g_mps2']:.5f} m/s²)")
     lines.append(f"positions  {r['n_positions']} ({r['positions_found_by']}), {r['n_distinct_orientations']} "
-                 f"distinct orientations, condition {_num(r['position_set_condition'])}")
+                 f"distinct orientations, condition {num(r['position_set_condition'], '.3g', '∞ (singular)')}")
     for p in r["positions"]:
         span = f"{p['t_start_s']:8.1f}–{p['t_stop_s']:8.1f} s" if p["t_start_s"] is not None else " " * 21
         flag = "  <- disagrees" if p["outlier"] else ""

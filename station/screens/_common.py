@@ -16,11 +16,6 @@ from typing import Callable
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 
 
-def _n(x, fmt):
-    """``x`` formatted, or an em dash when it is not a finite number."""
-    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
-
-
 def start_source(src) -> bool:
     """Start a simulated or serial source that is not running yet; True if it was started."""
     if src.kind == "sim" and getattr(src, "_t0", None) is None:

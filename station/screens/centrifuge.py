@@ -24,7 +24,8 @@ from textual.widgets import Footer, Input, Label, OptionList, Static
 from textual.worker import get_current_worker
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
-from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
+from station.formatting import num
+from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
 from station.widgets.steps import StepList
 from station.widgets.title import TitleBar
@@ -177,13 +178,13 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         else:
             speed = f" of {step.speed_rad_s:.2f} " + ("[green]AT SPEED[/]" if st.at_speed else "[b red]NOT AT SPEED[/]")
         self._put("#readouts",
-            f"accel {_n(r[0], '8.4f')} {_n(r[1], '8.4f')} {_n(r[2], '8.4f')} {au}  "
-            f"{_n(stats.rate_hz, '.0f')} Hz err {stats.parse_errors} drop {stats.dropped}"
+            f"accel {num(r[0], '8.4f')} {num(r[1], '8.4f')} {num(r[2], '8.4f')} {au}  "
+            f"{num(stats.rate_hz, '.0f')} Hz err {stats.parse_errors} drop {stats.dropped}"
             + ("" if stats.connected else " DISCONNECTED") + "\n"
-            f"table rate (gyro) {_n(st.table_rate_rad_s, '.3f')} rad/s{speed}")
+            f"table rate (gyro) {num(st.table_rate_rad_s, '.3f')} rad/s{speed}")
         self._put("#message", st.message)
         self._put("#progress", 
-            f"{st.n_captured}/{len(g.steps)} captured, {st.n_skipped} skipped · t={_n(st.t_s, '.0f')} s")
+            f"{st.n_captured}/{len(g.steps)} captured, {st.n_skipped} skipped · t={num(st.t_s, '.0f')} s")
 
     def on_guide_event(self, message: GuideEvent) -> None:
         g = self.guide

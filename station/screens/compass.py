@@ -20,7 +20,8 @@ from textual.widgets import Footer, Static
 from textual.worker import get_current_worker
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
-from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
+from station.formatting import num
+from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import bar
 from station.widgets.title import TitleBar
 
@@ -103,10 +104,10 @@ class CompassScreen(GuidedScreenMixin, Screen):
         m = st.field_raw
         stats = message.stats
         self.query_one("#readouts", Static).update(
-            f"mag  {_n(m[0], '8.2f')} {_n(m[1], '8.2f')} {_n(m[2], '8.2f')} {units.get('mag_unit') or 'raw'}"
-            f"  |m| {_n(st.field_norm_raw, '.2f')}\n"
-            f"turn {_n(st.turn_rate, '.3f')} {units.get('gyro_unit') or 'raw'}\n"
-            f"{_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
+            f"mag  {num(m[0], '8.2f')} {num(m[1], '8.2f')} {num(m[2], '8.2f')} {units.get('mag_unit') or 'raw'}"
+            f"  |m| {num(st.field_norm_raw, '.2f')}\n"
+            f"turn {num(st.turn_rate, '.3f')} {units.get('gyro_unit') or 'raw'}\n"
+            f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
             + ("" if stats.connected else "   DISCONNECTED"))
         self.query_one("#message", Static).update(st.message)
 

@@ -21,7 +21,8 @@ from textual.worker import get_current_worker
 from solvers.units import si_factor
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
-from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
+from station.formatting import num
+from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
 from station.widgets.title import TitleBar
 
@@ -95,9 +96,9 @@ class HoldScreen(GuidedScreenMixin, Screen):
         m, stats = st.gyro_mean, message.stats
         unit = self.app.session.source.units.get("gyro_unit") or "raw"
         self.query_one("#readouts", Static).update(
-            f"mean rate so far  {_n(m[0], '10.6f')} {_n(m[1], '10.6f')} {_n(m[2], '10.6f')} {unit}\n"
-            f"{st.n_samples} samples   temp {_n(st.temp_c, '.1f')} °C\n"
-            f"{_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
+            f"mean rate so far  {num(m[0], '10.6f')} {num(m[1], '10.6f')} {num(m[2], '10.6f')} {unit}\n"
+            f"{st.n_samples} samples   temp {num(st.temp_c, '.1f')} °C\n"
+            f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
             + ("" if stats.connected else "   DISCONNECTED"))
         self.query_one("#message", Static).update(st.message)
 

@@ -3,7 +3,6 @@ sigma), pass or fail against the device's tolerances, the residual per position;
 discard or export."""
 from __future__ import annotations
 
-import math
 import os
 
 from textual import work
@@ -13,16 +12,13 @@ from textual.containers import Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
+from station.formatting import num
 from station.screens.export import export_files
 from station.widgets.title import TitleBar
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
 from station.procedures.review import p1_residuals, param_rows, verdict
 from station.textsafe import tui_markup
-
-
-def _f(x, fmt=".6g") -> str:
-    return format(x, fmt) if isinstance(x, (int, float)) and math.isfinite(x) else "—"
 
 
 class ResultsScreen(Screen):
@@ -101,7 +97,7 @@ class ResultsScreen(Screen):
                 else "no previous calibration")
         entry = registry.get(r.get("procedure"))
         unit = entry.result_unit if entry is not None else ""
-        lines = [f"[{style}] {word.upper()} [/] residual {_f(r.get('residual_rms'), '.3g')} {unit} RMS · "
+        lines = [f"[{style}] {word.upper()} [/] residual {num(r.get('residual_rms'), '.3g')} {unit} RMS · "
                  f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
         lines += [f"[red]{x}[/]" for x in reasons[:2]]
         cond = (r.get("params") or {}).get("condition_number") if r.get("procedure") == "ldv" else None
@@ -113,16 +109,16 @@ class ResultsScreen(Screen):
         params.add_columns("param", "value", "± 1σ", "previous", "Δ/σ", "tol", "ok")
         for row in rows:
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
-            params.add_row(row.name, _f(row.value, ".7g"), _f(row.sigma, ".2g"), _f(row.previous, ".7g"),
-                           _f(row.change_sigma, "+.1f"), _f(row.tolerance, ".3g"), ok)
+            params.add_row(row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), num(row.previous, ".7g"),
+                           num(row.change_sigma, "+.1f"), num(row.tolerance, ".3g"), ok)
         gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
         if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
             prev_g = ((self.previous or {}).get("extra") or {}).get("gyro")
             for row in param_rows(gyro, prev_g if isinstance(prev_g, dict) else None):
-                params.add_row("gyro " + row.name, _f(row.value, ".7g"), _f(row.sigma, ".2g"), _f(row.previous, ".7g"),
-                               _f(row.change_sigma, "+.1f"), "", "")
+                params.add_row("gyro " + row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), num(row.previous, ".7g"),
+                               num(row.change_sigma, "+.1f"), "", "")
             lines.append(f"gyro: {gyro.get('n_rotations')} turns between {gyro.get('n_holds')} holds · gravity "
-                         f"carried to {_f(gyro.get('direction_rms_deg'), '.3g')}° RMS")
+                         f"carried to {num(gyro.get('direction_rms_deg'), '.3g')}° RMS")
             summary.update("\n".join(lines))
         elif isinstance(gyro, dict) and gyro.get("error"):
             lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
@@ -132,7 +128,7 @@ class ResultsScreen(Screen):
         residuals.display = bool(rows_res)
         residuals.add_columns("position", "|B+MV| m/s²", "residual mm/s²")
         for name, norm, res in rows_res:
-            residuals.add_row(name, _f(norm, ".5f"), _f(res * 1000.0, "+.2f"))
+            residuals.add_row(name, num(norm, ".5f"), num(res * 1000.0, "+.2f"))
 
     # ------------------------------------------------------------ actions
 

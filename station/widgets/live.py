@@ -7,6 +7,7 @@ import math
 from rich.text import Text
 from textual.widgets import Static
 
+from station.formatting import num
 from station.procedures.tabletop_guide import position_drawing
 
 
@@ -23,10 +24,6 @@ def mmss(seconds: float) -> str:
         return "--:--"
     s = int(math.ceil(seconds))
     return f"{s // 60:d}:{s % 60:02d}"
-
-
-def _num(x: float, fmt: str) -> str:
-    return format(x, fmt) if math.isfinite(x) else "—"
 
 
 class PlacementView(Static):
@@ -90,7 +87,7 @@ class CountdownBar(Static):
             t.append(f" {mmss(st.countdown_s)} left")
         elif st.phase == "settle":
             t.append(bar(0.0, self.WIDTH))
-            t.append(f" starts in {_num(st.settle_left_s, '.1f')} s")
+            t.append(f" starts in {num(st.settle_left_s, '.1f')} s")
         elif st.phase == "done":
             t.append(bar(1.0, self.WIDTH), style="green")
             t.append(" all done")
@@ -111,10 +108,10 @@ class Readouts(Static):
         gu = units.get("gyro_unit") or "raw"
         r, f, g = st.raw, st.f_mps2, st.gyro
         lines = [
-            f"raw  {_num(r[0], '9.4f')} {_num(r[1], '9.4f')} {_num(r[2], '9.4f')} {au}",
-            f"f    {_num(f[0], '9.3f')} {_num(f[1], '9.3f')} {_num(f[2], '9.3f')} m/s²  |a| {_num(st.norm_mps2, '.3f')}",
-            f"rate {_num(g[0], '9.4f')} {_num(g[1], '9.4f')} {_num(g[2], '9.4f')} {gu}",
-            f"temp {_num(st.temp_c, '.1f')} °C   {_num(stats.rate_hz, '.0f')} Hz   "
+            f"raw  {num(r[0], '9.4f')} {num(r[1], '9.4f')} {num(r[2], '9.4f')} {au}",
+            f"f    {num(f[0], '9.3f')} {num(f[1], '9.3f')} {num(f[2], '9.3f')} m/s²  |a| {num(st.norm_mps2, '.3f')}",
+            f"rate {num(g[0], '9.4f')} {num(g[1], '9.4f')} {num(g[2], '9.4f')} {gu}",
+            f"temp {num(st.temp_c, '.1f')} °C   {num(stats.rate_hz, '.0f')} Hz   "
             f"errors {stats.parse_errors}   dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED"),
         ]
         self.update("\n".join(lines))
