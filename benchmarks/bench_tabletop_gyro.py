@@ -60,7 +60,7 @@ def imu_tk_as_model(T_, s, b) -> dict:
 def imu_tk_fit(holds, motions, bias) -> dict:
     """imu_tk's gyro estimator: fixed bias, 9 parameters (6 misalignments, 3 scales),
     unweighted residual ``Rᵀ u_k − u_{k+1}`` per motion (3 components)."""
-    b = TG._Batch(motions)
+    b = TG.Batch(motions)
     u0 = np.array([holds[m.k0].u for m in motions])
     u1 = np.array([holds[m.k1].u for m in motions])
 

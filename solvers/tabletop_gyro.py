@@ -108,7 +108,7 @@ def _perp_basis(u: np.ndarray) -> np.ndarray:
     return np.vstack([e1, np.cross(u, e1)])
 
 
-class _Batch:
+class Batch:
     """The motions padded to one length for batched integration."""
 
     def __init__(self, motions: list[Motion]):
@@ -138,7 +138,7 @@ def direction_residuals(params: dict, holds: list[Hold], motions: list[Motion]) 
     or on held-out motions."""
     if not motions:
         return np.zeros(0)
-    b = _Batch(motions)
+    b = Batch(motions)
     R = gyro.integrate_rates(b.rates(params), b.t)
     out = []
     for i, mo in enumerate(motions):
@@ -154,7 +154,7 @@ def scale_search(holds: list[Hold], motions: list[Motion], lo: float = 1e-2, hi:
     eps = np.mean([h.y_mean for h in holds], axis=0)
     rate = np.median([len(m.t_s) / max(m.t_s[-1] - m.t_s[0], 1e-9) for m in motions])
     step = max(1, int(rate // 25))
-    b = _Batch([Motion(m.k0, m.k1, m.t_s[::step], m.y[::step], m.f_mps2[::step]) for m in motions])
+    b = Batch([Motion(m.k0, m.k1, m.t_s[::step], m.y[::step], m.f_mps2[::step]) for m in motions])
     U0 = np.array([holds[m.k0].u for m in motions])
     U1 = np.array([holds[m.k1].u for m in motions])
 
@@ -204,7 +204,7 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
         w_up0, horiz = 0.0, W
     # hold rows: σ² = se² + horizontal Earth rate (unknown direction) through the scale
     sig_h = np.sqrt(np.array([h.y_se ** 2 for h in holds]) + 0.5 * (scale0 * horiz) ** 2).ravel()
-    b = _Batch(motions)
+    b = Batch(motions)
     E = np.array([_perp_basis(holds[m.k1].u) for m in motions])            # (m, 2, 3)
     u0 = np.array([holds[m.k0].u for m in motions])
     sig_w = float(np.mean(np.asarray(noise_raw, dtype=float) / scale0))    # rad/s per sample

@@ -110,7 +110,7 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
                 continue
             d, s = T.known_direction(lab)
             out.append(T.Position(lab, seg.mean(axis=0), seg.std(axis=0, ddof=1), len(seg),
-                                  float(t[start]), float(t[stop - 1]), d, s, se=_mean_se(seg, t[start:stop])))
+                                  float(t[start]), float(t[stop - 1]), d, s, se=mean_se(seg, t[start:stop])))
         return out, "position column", True
     from solvers.stillness import detect_static_intervals
 
@@ -123,12 +123,12 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
         raise UnsupportedError(f"{_where(capture)}: accel-tabletop: cannot find static positions: {exc}") from None
     warnings += [f"stillness: {w}" for w in st.warnings]
     out = [T.Position(str(k + 1), np.asarray(iv.accel_mean, float), np.asarray(iv.accel_std, float), int(iv.n),
-                      float(iv.t_start_s), float(iv.t_stop_s), se=_mean_se(a[iv.start:iv.stop], t[iv.start:iv.stop]))
+                      float(iv.t_start_s), float(iv.t_stop_s), se=mean_se(a[iv.start:iv.stop], t[iv.start:iv.stop]))
            for k, iv in enumerate(st.intervals)]
     return out, "static intervals found automatically (no position column)", True
 
 
-def _mean_se(seg: np.ndarray, t: np.ndarray) -> np.ndarray | None:
+def mean_se(seg: np.ndarray, t: np.ndarray) -> np.ndarray | None:
     """The standard error of a position's mean with correlated noise (bias instability)
     included, from its Allan deviation (solvers/allan.py), as P4 does: std/sqrt(n) alone
     understates it when the bias wanders during the hold."""

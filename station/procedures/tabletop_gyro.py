@@ -52,7 +52,7 @@ def _start_scale(capture, holds, motions, notes: list[str]) -> float:
 def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np.ndarray, list[str]] | None:
     """Holds, motions between consecutive holds, the per-sample gyro noise and notes; None
     when the capture has no gyro time series."""
-    from station.procedures.tabletop import _mean_se
+    from station.procedures.tabletop import mean_se
 
     y = _gyro(capture)
     if y is None or not positions or any(p.t_start_s is None for p in positions):
@@ -68,7 +68,7 @@ def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np
         ok = np.all(np.isfinite(seg), axis=1)
         if ok.sum() < 16:
             continue
-        se = _mean_se(seg[ok], t[i0:i1 + 1][ok])
+        se = mean_se(seg[ok], t[i0:i1 + 1][ok])
         sd = seg[ok].std(axis=0, ddof=1)
         se = se if se is not None else sd / math.sqrt(ok.sum())
         f = accel.p1_apply(p.mean[None], B, M)[0]
@@ -172,7 +172,8 @@ def block(capture, positions, B, M, g_mps2: float) -> dict | None:
 
 def format_lines(block: dict) -> list[str]:
     """The gyro block in the plain report."""
-    from station.calibrate import _format_param, jsonable
+    from station.calibrate import jsonable
+    from station.formatting import param_lines
 
     if block is None:
         return []
@@ -182,10 +183,10 @@ def format_lines(block: dict) -> list[str]:
     u = b["units"]
     lines = [f"gyro       {b['model']} (y in {u['y']}, ω in rad/s, f in m/s²), from {b['n_rotations']} rotations "
              f"between {b['n_holds']} holds"]
-    lines += _format_param(f"K [{u['K']}]", b["params"]["K"], b["uncertainty"]["K"])
-    lines += _format_param(f"ε [{u['eps']}]", b["params"]["eps"], b["uncertainty"]["eps"])
+    lines += param_lines(f"K [{u['K']}]", jsonable(b["params"]["K"]), jsonable(b["uncertainty"]["K"]))
+    lines += param_lines(f"ε [{u['eps']}]", jsonable(b["params"]["eps"]), jsonable(b["uncertainty"]["eps"]))
     if "G" in b["params"]:
-        lines += _format_param(f"G [{u['G']}]", b["params"]["G"], b["uncertainty"]["G"])
+        lines += param_lines(f"G [{u['G']}]", jsonable(b["params"]["G"]), jsonable(b["uncertainty"]["G"]))
     lines.append(f"gyro residual {b['direction_rms_deg']:.3g}° RMS (gravity direction carried across each rotation)")
     for w in b["warnings"]:
         lines.append(f"warning    {w}")
