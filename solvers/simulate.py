@@ -662,7 +662,7 @@ class LiveImu:
     @property
     def truth(self) -> dict:
         B, M = accel_model.forward_to_p1(self.accel)
-        return _jsonable({"accel": {"B": B, "M": M, **self.accel}, "mag": self.mag, "gyro": self.gyro,
+        return jsonable({"accel": {"B": B, "M": M, **self.accel}, "mag": self.mag, "gyro": self.gyro,
                           "ref_bias_rad_s": self.ref_bias})
 
     @property
@@ -807,7 +807,7 @@ class LiveVehicle:
             1 - np.cos(np.radians(alpha)) ** 2 - np.cos(np.radians(beta)) ** 2, 0, 1))))
         alpha[1] = 180.0 - alpha[1]  # the second beam looks backward
         self.params = {"X": ldv_model.X_from_angles(dK, alpha, beta, gamma)}
-        self.truth = _jsonable({"X": self.params["X"], "dK": dK, "alpha_deg": alpha, "beta_deg": beta,
+        self.truth = jsonable({"X": self.params["X"], "dK": dK, "alpha_deg": alpha, "beta_deg": beta,
                                 "gamma_deg": gamma})
         self.beam_noise_mps, self.ref_noise_mps = beam_noise_mps, ref_noise_mps
         self.ph = self.rng.uniform(0, 2 * np.pi, size=6)
