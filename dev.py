@@ -4,6 +4,7 @@
     python3 dev.py station [ARGS...]   run the station (no ARGS: the TUI on the simulated device)
     python3 dev.py test [PYTEST ARGS]  run the whole test suite
     python3 dev.py bench [NAME]        run the benchmarks in benchmarks/
+    python3 dev.py lint [PATHS]        ruff check and ruff format --check (configured in pyproject.toml)
 
 The first call makes `.venv/` beside this file and installs the project into it
 (editable, with its test extra). Later calls reuse it; it is reinstalled only when
@@ -67,9 +68,14 @@ def main(argv: list[str]) -> int:
             print(f"== {path.name}", flush=True)
             rc |= subprocess.call([str(py), str(path)], cwd=ROOT, env=env)
         return rc
+    if cmd == "lint":
+        paths = rest or ["."]
+        rc = subprocess.call([str(py), "-m", "ruff", "check", *paths], cwd=ROOT, env=env)
+        rc |= subprocess.call([str(py), "-m", "ruff", "format", "--check", *paths], cwd=ROOT, env=env)
+        return rc
     if cmd == "setup":
         return 0
-    print(f"dev.py: unknown command {cmd!r} (station, test, bench, setup)", file=sys.stderr)
+    print(f"dev.py: unknown command {cmd!r} (station, test, bench, lint, setup)", file=sys.stderr)
     return 2
 
 

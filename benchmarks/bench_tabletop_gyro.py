@@ -84,7 +84,7 @@ def station_inputs():
     cap = read_capture(DATA)
     w: list[str] = []
     pos, _, nk = tabletop.static_positions(cap, w)
-    g = tabletop.gravity(cap, w)
+    g = cap.local_gravity_mps2(w)
     acc = T.calibrate(pos, g, noise_known=nk)
     holds, motions, noise, _ = TGP.inputs(cap, pos, acc.B, acc.M)
     t = np.asarray(cap.columns["t"], dtype=float)

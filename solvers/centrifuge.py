@@ -52,8 +52,8 @@ AXES = "xyz"
 
 
 def norm_target(speed_rad_s, radius_m: float, g_mps2: float) -> np.ndarray:
-    """``ρ = |f|`` in g on a centrifuge: ``sqrt((ω²R/g)² + 1)``."""
-    A = np.asarray(speed_rad_s, dtype=float) ** 2 * radius_m / g_mps2
+    """``ρ = |f|`` in g on a centrifuge: ``sqrt(A² + 1)``, ``A = ω²R/g`` (:func:`accel.centrifuge_input_g`)."""
+    A = accel.centrifuge_input_g(speed_rad_s, radius_m, g_mps2)
     return np.sqrt(A * A + 1.0)
 
 

@@ -4,6 +4,7 @@ what the database stores).
 Pure Python on purpose (no numpy import): ``station due`` and ``station history`` start
 without numpy; numpy's arrays and scalars are converted through their ``tolist()``.
 """
+
 from __future__ import annotations
 
 import math

@@ -312,7 +312,7 @@ def simulate_centrifuge(seed: int = 0, effects: dict[str, float] | None = None, 
     orients = centrifuge_orientations(n_orientations)
     rows_f, rows_c, rows_w, pos, spd = [], [], [], [], []
     for w in speeds_rad_s:
-        A = w * w * radius_m / g_mps2
+        A = float(accel_model.centrifuge_input_g(w, radius_m, g_mps2))
         for k, C_t_b in enumerate(orients):
             f_t = np.array([-A, 0.0, 1.0])
             rows_f.append(C_t_b.T @ f_t)

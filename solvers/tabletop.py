@@ -281,7 +281,7 @@ def _joint_residual_builder(V: np.ndarray, g: float, sig_n: np.ndarray, known: l
         nrm = np.sqrt(np.einsum("ij,ij->i", A, A)) - g
         if not m:
             return nrm
-        Ak = p["B"] + Vk @ p["M"].T
+        Ak = accel.p1_apply(Vk, p["B"], p["M"])
         return np.concatenate([nrm, np.einsum("ij,ij->i", E, Ak)])
 
     def jac(p, free_idx):

@@ -136,6 +136,25 @@ class Capture:
             raise InputError(self.path, self.meta_lines.get(key), f"metadata '{key}': {_show(value)} is not a number")
         return number
 
+    def local_gravity_mps2(self, warnings: list[str]) -> float:
+        """Local gravity for this capture, one policy for every procedure: metadata ``g_mps2``
+        (refused outside 9.7–9.9 m/s², citing its line), else normal gravity at
+        ``latitude_deg`` and ``altitude_m`` (``solvers.frames.normal_gravity_mps2``), else
+        standard gravity with a warning appended to ``warnings``."""
+        from solvers import frames
+
+        g = self.float_meta("g_mps2")
+        if g is not None:
+            if not 9.7 < g < 9.9:
+                raise InputError(self.path, self.meta_lines.get("g_mps2"), f"g_mps2 {g} m/s² is not a local gravity")
+            return g
+        lat = self.float_meta("latitude_deg")
+        if lat is not None:
+            return frames.normal_gravity_mps2(lat, self.float_meta("altitude_m", 0.0))
+        warnings.append("no g_mps2 and no latitude_deg: using standard gravity 9.80665 m/s² (local g differs by up "
+                        "to 0.3 %, which goes straight into the scale factors)")
+        return frames.G_STANDARD_MPS2
+
     def unit(self, name: str) -> str | None:
         """The unit of column ``name`` (raw columns: the capture's ``*_unit``), or None if unknown."""
         base = name[:-4] if name.endswith("_std") else name

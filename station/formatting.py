@@ -4,6 +4,7 @@ A value that is not a finite real number (None, NaN, ±inf, text) prints as ``mi
 (an em dash unless the caller's table uses another mark). Kept free of numpy: numpy's
 scalars are ``numbers.Real`` and are formatted like floats.
 """
+
 from __future__ import annotations
 
 import math

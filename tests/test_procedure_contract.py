@@ -8,6 +8,7 @@
 - the CLI's choices, the capture reader and ``solvers.simulate`` agree with the registry;
 - a sixth procedure is one registry entry plus one module (a toy, written here).
 """
+
 from __future__ import annotations
 
 import inspect
@@ -30,8 +31,7 @@ IDS = [p.name for p in ENTRIES]
 
 # time_drift sizes (units of solvers.models.*.effect_blocks) of about 20σ of what one
 # default simulated capture resolves (bench_diagnose.py's detection table, 1σ column)
-STRONG_TIME_DRIFT = {"accel-tabletop": 0.1, "accel-centrifuge": 2e-4, "compass": 20.0, "gyro-drift": 0.02,
-                     "ldv": 0.05}
+STRONG_TIME_DRIFT = {"accel-tabletop": 0.1, "accel-centrifuge": 2e-4, "compass": 20.0, "gyro-drift": 0.02, "ldv": 0.05}
 # the benchmark's design for P1: 12 extra positions leave the norm fit degrees of freedom
 # (with the 12 default positions a drift in time is not told apart from the quadratic term)
 OPTIONS = {"accel-tabletop": {"extra_positions": 12}}
@@ -91,8 +91,9 @@ def test_simulate_calibrate_diagnose_round_trip(entry, monkeypatch):
     from station.procedures.diagnose import analyse
 
     module = entry.load()
-    sim = S.simulate(entry.name, seed=11, effects={"time_drift": STRONG_TIME_DRIFT[entry.name]},
-                     **OPTIONS.get(entry.name, {}))
+    sim = S.simulate(
+        entry.name, seed=11, effects={"time_drift": STRONG_TIME_DRIFT[entry.name]}, **OPTIONS.get(entry.name, {})
+    )
     cap = Capture(meta=dict(sim.meta), columns=dict(sim.columns), path=f"sim-{entry.stem}.csv")
     result = calibrate_capture(cap)
     assert result["procedure"] == entry.name and np.isfinite(result["residual_rms"])
@@ -159,8 +160,18 @@ def test_a_sixth_procedure_is_one_entry_and_one_module(tmp_path, monkeypatch, ca
 
     (tmp_path / "toy_thermo.py").write_text(textwrap.dedent(TOY), encoding="utf-8")
     monkeypatch.syspath_prepend(str(tmp_path))
-    toy = registry.Procedure("thermo-offset", "P6", "toy_thermo", "thermometer offset", "thermometer", "temp",
-                             "toy_thermo", None, "°C", "toy")
+    toy = registry.Procedure(
+        name="thermo-offset",
+        code="P6",
+        stem="toy_thermo",
+        title="thermometer offset",
+        short="thermometer",
+        sensor_kind="temp",
+        module="toy_thermo",
+        screen=None,
+        result_unit="°C",
+        doc="toy",
+    )
     monkeypatch.setattr(registry, "PROCEDURES", registry.PROCEDURES + (toy,))
     rng = np.random.default_rng(6)
     t = np.arange(400) * 0.5

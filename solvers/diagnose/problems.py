@@ -29,6 +29,7 @@ from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
+from solvers.centrifuge import norm_target
 from solvers.tabletop import perp_basis
 
 # Deviance-test scales F from null simulations (bench_diagnose.py --null-only --trials 200).
@@ -331,7 +332,7 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
     """Table rows of mean outputs N (g) at speeds ω; the norm condition ``|f| = ρ``."""
     N = np.asarray(N, float)
     w = np.asarray(speed_rad_s, float)
-    rho = np.sqrt((w * w * radius_m / g_mps2) ** 2 + 1.0)
+    rho = norm_target(w, radius_m, g_mps2)
     labels = [str(x) for x in labels]
     # centripetal direction per mounting: the change of f with speed (f = −A c + up)
     f0 = accel_model.inverse(N, params0)
@@ -339,7 +340,7 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
     for lab in dict.fromkeys(labels):
         idx = [k for k, x in enumerate(labels) if x == lab]
         if len(idx) >= 2 and np.ptp(w[idx]) > 0:
-            A = w[idx] ** 2 * radius_m / g_mps2
+            A = accel_model.centrifuge_input_g(w[idx], radius_m, g_mps2)
             H = np.column_stack([-A, np.ones(len(idx))])
             coef, *_ = linalg.lstsq(H, f0[idx], rcond=None)
             c = coef[0] / max(np.linalg.norm(coef[0]), 1e-12)

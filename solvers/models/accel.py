@@ -39,6 +39,13 @@ SHAPES = {"K": (3, 3), "b": (3,), "S": (3,), "D": (3,), "C3": (3,), "A": (3,), "
           "bt": (3,), "gamma": (6,), "dr": (3,)}
 
 
+def centrifuge_input_g(speed_rad_s, radius_m: float, g_mps2: float):
+    """P2's centripetal input ``A = ω² R / g`` in g at table speed ω (rad/s), radius R (m),
+    local gravity g (m/s²): the specific force is ``f = −A c + up`` (c the centripetal
+    direction from the axis; source 001 eq. 6)."""
+    return np.asarray(speed_rad_s, dtype=float) ** 2 * radius_m / g_mps2
+
+
 def phi_matrix(gamma) -> np.ndarray:
     """Installation-error matrix Φ(γ), γ in the order γxy, γxz, γyx, γyz, γzx, γzy."""
     g = np.asarray(gamma, dtype=float)

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solvers.models import accel as accel_model
 from solvers.detectors import FieldCoverage, OrientationCheck, orientation_check  # noqa: F401 - re-exported
 from solvers.positions import P1_POSITIONS
 from solvers.stillness import StillnessTracker, TrackerState
@@ -55,7 +56,7 @@ class AccelToSpecificForce:
         self.M = np.eye(3) * k
 
     def __call__(self, raw: np.ndarray) -> np.ndarray:
-        return raw @ self.M.T + self.B
+        return accel_model.p1_apply(raw, self.B, self.M)
 
 
 # ------------------------------------------------------------------ glue

@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solvers import centrifuge as C
-from solvers import frames
 from solvers.errors import SolverError
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
@@ -99,14 +98,7 @@ def prepare(capture) -> Prepared:
     if R is None or R <= 0:
         raise InputError(capture.path, capture.meta_lines.get("radius_m"), "metadata needs 'radius_m' (the centrifuge "
                          "radius, m) for A = ω²R/g")
-    g = capture.float_meta("g_mps2")
-    if g is None:
-        lat = capture.float_meta("latitude_deg")
-        if lat is not None:
-            g = frames.normal_gravity_mps2(lat, capture.float_meta("altitude_m", 0.0))
-        else:
-            g = frames.G_STANDARD_MPS2
-            warnings.append("no g_mps2 or latitude_deg: using standard gravity 9.80665 m/s²")
+    g = capture.local_gravity_mps2(warnings)
     N, w, labels, sigma_N, lines = _rows(capture)
     return Prepared(N, w, labels, sigma_N, lines, R, g, warnings)
 

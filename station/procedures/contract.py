@@ -8,6 +8,7 @@ A module satisfies :class:`ProcedureModule` structurally (``isinstance`` works o
 protocol is runtime-checkable); ``tests/test_procedure_contract.py`` checks every module of
 the registry.
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple, Protocol, runtime_checkable
@@ -16,11 +17,11 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 class DiagnosisInput(NamedTuple):
     """What ``station diagnose`` needs from a procedure module."""
 
-    problem: Any                      # solvers.diagnose.engine.Problem
-    drivers: dict                     # what the plots draw the residuals against (per row)
-    explain: str                      # what an outlier row of this procedure usually means
-    group_kind: str = "time block"    # what one cross-validation group is ("position", "mounting")
-    quality: tuple = ()               # procedure-specific quality findings, rows as capture row indices
+    problem: Any  # solvers.diagnose.engine.Problem
+    drivers: dict  # what the plots draw the residuals against (per row)
+    explain: str  # what an outlier row of this procedure usually means
+    group_kind: str = "time block"  # what one cross-validation group is ("position", "mounting")
+    quality: tuple = ()  # procedure-specific quality findings, rows as capture row indices
 
 
 @runtime_checkable

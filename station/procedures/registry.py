@@ -14,6 +14,7 @@ Adding a procedure: one :class:`Procedure` entry in :data:`PROCEDURES` and its m
 ``solvers/simulate.py`` keeps its own list (solvers never import the station); a test holds
 the two equal.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -24,16 +25,16 @@ from dataclasses import dataclass
 class Procedure:
     """One procedure: what the station calls it and where its parts live."""
 
-    name: str           # the capture's ``procedure:`` value (capture-format.md)
-    code: str           # P1…P5: the code of the source documents and the TUI
-    stem: str           # the file stem of its module, guide, screen and tests
-    title: str          # what it calibrates, how (the Connect screen's list: "<code> <title>")
-    short: str          # a word or two in result titles ("P3 compass result"); empty: the code alone
-    sensor_kind: str    # the database's sensor kind (devices.sensor_kinds): accel, gyro, mag, ldv
-    module: str         # the dotted module that satisfies contract.ProcedureModule
+    name: str  # the capture's ``procedure:`` value (capture-format.md)
+    code: str  # P1…P5: the code of the source documents and the TUI
+    stem: str  # the file stem of its module, guide, screen and tests
+    title: str  # what it calibrates, how (the Connect screen's list: "<code> <title>")
+    short: str  # a word or two in result titles ("P3 compass result"); empty: the code alone
+    sensor_kind: str  # the database's sensor kind (devices.sensor_kinds): accel, gyro, mag, ldv
+    module: str  # the dotted module that satisfies contract.ProcedureModule
     screen: str | None  # "module:Class" of its guided TUI screen, None when not guided
-    result_unit: str    # the unit of its calibrate result's ``residual_rms``
-    doc: str            # its page under docs/
+    result_unit: str  # the unit of its calibrate result's ``residual_rms``
+    doc: str  # its page under docs/
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -52,16 +53,66 @@ class GuidedRun:
 
 
 PROCEDURES: tuple[Procedure, ...] = (
-    Procedure("accel-tabletop", "P1", "tabletop", "accelerometer, level table", "", "accel",
-              "station.procedures.tabletop", "station.screens.tabletop:ProcedureScreen", "m/s²", "accel"),
-    Procedure("accel-centrifuge", "P2", "centrifuge", "accelerometer, centrifuge", "centrifuge", "accel",
-              "station.procedures.centrifuge", "station.screens.centrifuge:CentrifugeScreen", "g", "accel"),
-    Procedure("compass", "P3", "compass", "compass sweep", "compass", "mag",
-              "station.procedures.compass", "station.screens.compass:CompassScreen", "nT", "compass"),
-    Procedure("gyro-drift", "P4", "gyrodrift", "gyro drift, static base", "gyro drift", "gyro",
-              "station.procedures.gyrodrift", "station.screens.gyrodrift:HoldScreen", "rad/s", "gyrodrift"),
-    Procedure("ldv", "P5", "ldv", "laser velocimeter", "LDV", "ldv",
-              "station.procedures.ldv", "station.screens.ldv:LdvScreen", "m/s", "ldv"),
+    Procedure(
+        name="accel-tabletop",
+        code="P1",
+        stem="tabletop",
+        title="accelerometer, level table",
+        short="",
+        sensor_kind="accel",
+        module="station.procedures.tabletop",
+        screen="station.screens.tabletop:ProcedureScreen",
+        result_unit="m/s²",
+        doc="accel",
+    ),
+    Procedure(
+        name="accel-centrifuge",
+        code="P2",
+        stem="centrifuge",
+        title="accelerometer, centrifuge",
+        short="centrifuge",
+        sensor_kind="accel",
+        module="station.procedures.centrifuge",
+        screen="station.screens.centrifuge:CentrifugeScreen",
+        result_unit="g",
+        doc="accel",
+    ),
+    Procedure(
+        name="compass",
+        code="P3",
+        stem="compass",
+        title="compass sweep",
+        short="compass",
+        sensor_kind="mag",
+        module="station.procedures.compass",
+        screen="station.screens.compass:CompassScreen",
+        result_unit="nT",
+        doc="compass",
+    ),
+    Procedure(
+        name="gyro-drift",
+        code="P4",
+        stem="gyrodrift",
+        title="gyro drift, static base",
+        short="gyro drift",
+        sensor_kind="gyro",
+        module="station.procedures.gyrodrift",
+        screen="station.screens.gyrodrift:HoldScreen",
+        result_unit="rad/s",
+        doc="gyrodrift",
+    ),
+    Procedure(
+        name="ldv",
+        code="P5",
+        stem="ldv",
+        title="laser velocimeter",
+        short="LDV",
+        sensor_kind="ldv",
+        module="station.procedures.ldv",
+        screen="station.screens.ldv:LdvScreen",
+        result_unit="m/s",
+        doc="ldv",
+    ),
 )
 
 GUIDED_RUNS: tuple[GuidedRun, ...] = (

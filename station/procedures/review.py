@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solvers.models import accel as accel_model
+
 
 def flatten(obj, prefix: str = "") -> dict[str, float | None]:
     """Scalars by name (``B[0]``, ``M[1][2]``), the database's naming."""
@@ -110,5 +112,5 @@ def p1_residuals(capture, result: dict) -> list[tuple[str, float, float]]:
     else:
         V = np.column_stack([capture.columns[c] for c in ("ax", "ay", "az")])
         names = capture.columns.get("position", np.array([str(i + 1) for i in range(len(V))], dtype=object))
-    norms = np.linalg.norm(V @ M.T + B, axis=1)
+    norms = np.linalg.norm(accel_model.p1_apply(V, B, M), axis=1)
     return [(str(n), float(a), float(a - g)) for n, a in zip(names, norms)]

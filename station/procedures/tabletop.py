@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from solvers import frames
 from solvers import tabletop as T
 from solvers.errors import SolverError
 from solvers.models import accel as accel_model
@@ -39,20 +38,6 @@ METHODS = {"norm": ("norm", "auto"), "upper-triangular": ("norm", "upper-triangu
 
 def _where(capture) -> str:
     return capture.path or "capture"
-
-
-def gravity(capture, warnings: list[str]) -> float:
-    g = capture.float_meta("g_mps2")
-    if g is not None:
-        if not 9.7 < g < 9.9:
-            raise InputError(capture.path, capture.meta_lines.get("g_mps2"), f"g_mps2 {g} m/s² is not a local gravity")
-        return g
-    lat = capture.float_meta("latitude_deg")
-    if lat is not None:
-        return frames.normal_gravity_mps2(lat, capture.float_meta("altitude_m", 0.0))
-    warnings.append("no g_mps2 and no latitude_deg: using standard gravity 9.80665 m/s² (local g differs by up "
-                    "to 0.3 %, which goes straight into the scale factors)")
-    return frames.G_STANDARD_MPS2
 
 
 def _accel(capture) -> np.ndarray:
@@ -182,7 +167,7 @@ class Prepared:
 def prepare(capture) -> Prepared:
     """Local gravity and the static positions of ``capture``, with the warnings they raise."""
     warnings: list[str] = []
-    g = gravity(capture, warnings)
+    g = capture.local_gravity_mps2(warnings)
     positions, found, noise_known = static_positions(capture, warnings)
     return Prepared(g, positions, found, noise_known, warnings)
 

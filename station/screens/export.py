@@ -1,11 +1,12 @@
 """The Results and noise screens' export action: the capture and its result as files."""
+
 from __future__ import annotations
 
 import datetime as _dt
 import json
 import os
 import tempfile
-from typing import Callable
+from collections.abc import Callable
 
 from station.messages import Exported
 
