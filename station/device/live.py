@@ -56,7 +56,7 @@ class AccelToSpecificForce:
         self.M = np.eye(3) * k
 
     def __call__(self, raw: np.ndarray) -> np.ndarray:
-        return accel_model.p1_apply(raw, self.B, self.M)
+        return accel_model.p1_apply(raw, self.B, self.M).reshape(np.shape(raw))  # one sample or rows
 
 
 # ------------------------------------------------------------------ glue
