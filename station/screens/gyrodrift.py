@@ -219,12 +219,12 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
                  + ("[green]OK[/]" if st.mounting_ok else "[b red]CHECK THE MOUNTING[/]"))
         self.query_one("#readouts", Static).update(
             "drift (unit − reference), °/h ± 1σ (white noise)\n"
-            + "   ".join(f"{ax} {_n(e[i] * k, '+9.1f')} ± {_n(se[i] * k, '.1f')}" for i, ax in enumerate("xyz")) + "\n"
-            f"reference motion {_n(st.motion, '.3f')} {unit} RMS"
+            + "   ".join(f"{ax} {num(e[i] * k, '+9.1f')} ± {num(se[i] * k, '.1f')}" for i, ax in enumerate("xyz")) + "\n"
+            f"reference motion {num(st.motion, '.3f')} {unit} RMS"
             + ("   rate table ON" if getattr(self.app.session.source, "bench", lambda _: None)("driving") == "table"
                else "") + "\n"
             f"mounting check: {mount}\n"
-            f"{st.n_samples} samples   {_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   "
+            f"{st.n_samples} samples   {num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   "
             f"dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED"))
         self.query_one("#message", Static).update(st.message)
 

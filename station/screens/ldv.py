@@ -26,7 +26,8 @@ from textual.worker import get_current_worker
 
 from solvers.ldv import KAPPA_REFUSE, KAPPA_WARN
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
-from station.screens._common import GuidedScreenMixin, _n, source_rate_hz
+from station.formatting import num
+from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import bar
 from station.widgets.title import TitleBar
 
@@ -116,7 +117,7 @@ class LdvScreen(GuidedScreenMixin, Screen):
         t.append(bar(kappa_bar(st.kappa), 16), style=style)
         word = {"none": "no data yet", "refused": "ILL-CONDITIONED (refused)", "poor": "poor (warned)",
                 "good": "good"}[st.verdict]
-        t.append(f" κ {_n(st.kappa, '.3g')}  {word}\n", style=style)
+        t.append(f" κ {num(st.kappa, '.3g')}  {word}\n", style=style)
         t.append(f"needs κ ≤ {KAPPA_WARN:.0e} (refused above {KAPPA_REFUSE:.0e}); {st.n_epochs} moving epochs, "
                  f"recorded {st.recorded_s:.0f} s" + ("  ENOUGH" if st.enough else ""))
         self.query_one("#condition", Static).update(t)
@@ -128,10 +129,10 @@ class LdvScreen(GuidedScreenMixin, Screen):
             car = "   vehicle " + ("driving" if bench("driving") else "parked") + \
                 (", turns and hills" if bench("turning") else ", straight" if bench("driving") else "")
         self.query_one("#readouts", Static).update(
-            f"reference {_n(v[0], '7.2f')} {_n(v[1], '7.2f')} {_n(v[2], '7.2f')} m/s (body)  "
-            f"|v| {_n(st.speed_mps, '.2f')}\n"
-            f"beams     {_n(b[0], '7.2f')} {_n(b[1], '7.2f')} {_n(b[2], '7.2f')} m/s{car}\n"
-            f"{_n(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
+            f"reference {num(v[0], '7.2f')} {num(v[1], '7.2f')} {num(v[2], '7.2f')} m/s (body)  "
+            f"|v| {num(st.speed_mps, '.2f')}\n"
+            f"beams     {num(b[0], '7.2f')} {num(b[1], '7.2f')} {num(b[2], '7.2f')} m/s{car}\n"
+            f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
             + ("" if stats.connected else "   DISCONNECTED"))
         if st.estimate is None:
             est = "estimate: when κ allows one"
