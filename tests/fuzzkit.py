@@ -519,15 +519,15 @@ def run_campaign(folder: str, bases: dict[str, str], *, n_mutated: int, n_extrem
                 what, data = mutate(texts[base], rng)
                 with open(path, "wb") as f:
                     f.write(data)
-                case = f"mutated#{k} {base}: {what}"
+                case = f"mutated#{seed}.{k} {base}: {what}"
             else:
                 what, cap = extreme(bases[base], rng)
                 try:
                     write_capture(path, cap)
                 except Exception as exc:  # noqa: BLE001 - the writer refused: not a valid file, skip
-                    runner.outcomes.append(Outcome("skipped", "write", f"extreme#{k} {base}: {what}", 0.0, str(exc)))
+                    runner.outcomes.append(Outcome("skipped", "write", f"extreme#{seed}.{k} {base}: {what}", 0.0, str(exc)))
                     continue
-                case = f"extreme#{k} {base}: {what}"
+                case = f"extreme#{seed}.{k} {base}: {what}"
             for command in commands:
                 runner.run(command, path, case)
             if progress is not None:
