@@ -719,50 +719,57 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         drop = {cc.cand.name} | {c["name"] for c in confused}
         remaining = [c for c in remaining if c.name not in drop]
 
+    def prune(picked, cur_fit, extra=None, min_items=2):
+        """Drop each picked effect that no longer passes against all the others (and ``extra``,
+        the generic effect, kept), refitted without it; returns (picked, fit, params, free)."""
+        if len(picked) + (extra is not None) >= min_items:
+            for item in list(picked):
+                cc = item[0]
+                others = [p for p in picked if p is not item] + ([(extra, None)] if extra is not None else [])
+                st = {k: cur_fit.params[k] for k in base_params}
+                fr = dict(problem.free)
+                for oc, _ in others:
+                    st.update({k: cur_fit.params[k] for k in oc.params})
+                    fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+                without = _refit(problem, st, fr, sigma)
+                r0 = without.weighted_residuals
+                J0, _, _ = jacobian(problem, without.params, fr)
+                Q0 = _orth(J0)
+                cand = _candidate_columns(problem, without.params, cc.cand, Q0, r0)
+                if cand.reason is not None:
+                    ok = False
+                else:
+                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
+                    ok = _passes(problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds),
+                                 _gram_rank(J0.T @ J0), n)
+                if not ok:
+                    picked.remove(item)
+                    entries[cc.cand.name]["selected"] = False
+                    cur_fit = without
+        keep = list(picked) + ([(extra, None)] if extra is not None else [])
+        free = dict(problem.free)
+        for oc, _ in keep:
+            free.update({k: v for k, v in oc.free.items() if k in oc.params})
+        state = {k: v for k, v in cur_fit.params.items() if k in base_params or any(k in oc.params for oc, _ in keep)}
+        if keep:
+            cur_fit = _refit(problem, state, free, sigma)
+            return picked, cur_fit, dict(cur_fit.params), free
+        return picked, baseline_fit, dict(base_params), free
+
     # name only what still earns its place against all the others, refitted
     if len(picked) > 1:
-        for item in list(picked):
-            cc = item[0]
-            others = [p for p in picked if p is not item]
-            st = dict(base_params)
-            fr = dict(problem.free)
-            for oc, _ in others:
-                st.update({k: cur_fit.params[k] for k in oc.params})
-                fr.update({k: v for k, v in oc.free.items() if k in oc.params})
-            for k in base_params:
-                st[k] = cur_fit.params[k]
-            without = _refit(problem, st, fr, sigma)
-            r0 = without.weighted_residuals
-            J0, _, _ = jacobian(problem, without.params, fr)
-            Q0 = _orth(J0)
-            cand = _candidate_columns(problem, without.params, cc.cand, Q0, r0)
-            if cand.reason is not None:
-                ok = False
-            else:
-                rr = _Rounds(J0, r0, sigma, fold_map, primary)
-                ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
-                rank0 = _gram_rank(J0.T @ J0)
-                ok = _passes(problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), rank0, n)
-            if not ok:
-                picked.remove(item)
-                entries[cc.cand.name]["selected"] = False
-                cur_fit = without
-        state = dict(cur_fit.params)
-        free = dict(problem.free)
-        for oc, _ in picked:
-            free.update({k: v for k, v in oc.free.items() if k in oc.params})
-        state = {k: v for k, v in state.items() if k in base_params or any(k in oc.params for oc, _ in picked)}
-        if picked:
-            cur_fit = _refit(problem, state, free, sigma)
-            state = dict(cur_fit.params)
-        else:
-            cur_fit, state = baseline_fit, dict(base_params)
+        picked, cur_fit, state, free = prune(picked, cur_fit)
 
     # effects outside the library: a smooth function of one driver (residual:<driver>)
-    generic_effect = None
     gens = generic_candidates(problem)
-    if gens and _residual_test(problem, cur_fit).get("white") is False:
-        # only where the model so far leaves residuals far from noise (diagnose.md)
+    m_gen = sum(len(item[1]) if item[0] == "scan" else 1 for item in gens)  # every basis tried is a test
+
+    def generic_round(state, free, named):
+        """The best generic candidate that passes against the model at ``state`` and that no
+        library candidate (other than ``named``) explains: (eval, correlations, held-out RMS) or None.
+        "Far from noise along a driver" is what this test asks, every basis counted: a
+        portmanteau test first would miss slow structure (a drift, a long period)."""
         r0 = _weighted(problem, state)
         J0, _, _ = jacobian(problem, state, free)
         Q0 = _orth(J0)
@@ -795,31 +802,73 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             if item[0] == "scan":
                 ev.k += 1     # the scanned location or period
             evals.append(ev)
-        # every basis tried counts as a test (a scanned family is as many tests as its members)
-        m = sum(len(item[1]) if item[0] == "scan" else 1 for item in gens)
-        passing = [ev for ev in evals if _passes(problem, ev, m, rounds.cv0(ev.cc.cand.folds), rank_cur, n,
+        passing = [ev for ev in evals if _passes(problem, ev, m_gen, rounds.cv0(ev.cc.cand.folds), rank_cur, n,
                                                  problem.generic_scale)]
-        if passing:
-            best = min(passing, key=lambda ev: ev.cv)
-            # correlation with each canonical candidate's signature at this state
-            corr = {}
-            for c in problem.candidates:
-                if c.reason is not None or any(c.name == oc.cand.name for oc, _ in picked):
-                    continue
-                cc = _candidate_columns(problem, state, c, Q0, r0)
-                if cc.reason is not None or cc.J.shape[1] == 0:
-                    continue
-                P = _orth(np.hstack([J0, cc.J]))
-                proj = P @ (P.T @ best.sig)
-                nb = float(np.linalg.norm(best.sig))
-                corr[c.name] = float(np.linalg.norm(proj) / nb) if nb > 0 else 0.0
-            if not any(v > CONFUSION_CORR for v in corr.values()):
-                best.cc.cand.setup()
-                generic_effect = (best, corr, cv_g)
-                state.update(best.cc.params)
-                free.update({k: v for k, v in best.cc.free.items() if k in best.cc.params})
-                cur_fit = _refit(problem, state, free, sigma)
-                state = dict(cur_fit.params)
+        if not passing:
+            return None
+        best = min(passing, key=lambda ev: ev.cv)
+        corr = {}   # how much of its signature each library candidate's columns hold, at this state
+        for c in problem.candidates:
+            if c.reason is not None or c.name in named:
+                continue
+            cc = _candidate_columns(problem, state, c, Q0, r0)
+            if cc.reason is not None or cc.J.shape[1] == 0:
+                continue
+            P = _orth(np.hstack([J0, cc.J]))
+            proj = P @ (P.T @ best.sig)
+            nb = float(np.linalg.norm(best.sig))
+            corr[c.name] = float(np.linalg.norm(proj) / nb) if nb > 0 else 0.0
+        if any(v > CONFUSION_CORR for v in corr.values()):
+            return None
+        return best, corr, cv_g
+
+    def with_generic(best, state, free):
+        best.cc.cand.setup()
+        state = {**state, **best.cc.params}
+        free = {**free, **{k: v for k, v in best.cc.free.items() if k in best.cc.params}}
+        fit_ = _refit(problem, state, free, sigma)
+        return fit_, dict(fit_.params), free
+
+    generic_effect = None
+    if gens:
+        res = generic_round(state, free, {oc.cand.name for oc, _ in picked})
+        if res is not None:
+            generic_effect = res
+            cur_fit, state, free = with_generic(res[0], state, free)
+            if picked:   # a library effect that only stood in for this structure is dropped now
+                picked, cur_fit, state, free = prune(picked, cur_fit, extra=res[0].cc, min_items=1)
+        elif picked:
+            # the library effects may have taken part of a structure none of them is (a bias step
+            # seen as a drift): try the generic one against the baseline, then keep only the library
+            # effects that still earn their place beside it, and it beside them
+            res0 = generic_round(dict(base_params), dict(problem.free), set())
+            if res0 is not None:
+                flags = {k: dict(v) for k, v in entries.items()}
+                fit2, st2, fr2 = with_generic(res0[0], state, free)
+                picked2, fit2, st2, fr2 = prune(list(picked), fit2, extra=res0[0].cc, min_items=1)
+                # the generic term must pass against the library effects that remain
+                st_wo = {k: v for k, v in st2.items() if k not in res0[0].cc.params}
+                fr_wo = {k: v for k, v in fr2.items() if k not in res0[0].cc.params}
+                wo = _refit(problem, st_wo, fr_wo, sigma) if picked2 else baseline_fit
+                r0 = wo.weighted_residuals
+                J0, _, _ = jacobian(problem, wo.params, fr_wo if picked2 else problem.free)
+                Q0 = _orth(J0)
+                res0[0].cc.cand.setup()
+                cand = _candidate_columns(problem, wo.params, res0[0].cc.cand, Q0, r0)
+                ok = False
+                if cand.reason is None:
+                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
+                    ev.k += 1 if "at" in res0[0].desc or "period" in res0[0].desc else 0
+                    ok = _passes(problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n,
+                                 problem.generic_scale)
+                if ok and len(picked2) < len(picked):
+                    res0[0].cc.cand.setup()
+                    picked, cur_fit, state, free = picked2, fit2, st2, fr2
+                    generic_effect = (res0[0], res0[1], cv_rms(J0, r0, sigma, folds, primary))
+                else:
+                    entries.clear()
+                    entries.update(flags)
 
     ext = cur_fit
     Je, _, _ = jacobian(problem, ext.params, free)
