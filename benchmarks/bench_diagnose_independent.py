@@ -130,7 +130,7 @@ def main(argv=None) -> int:
                 for e in list(errs)[:3]:
                     print(f"{'':<17} refused: {e}")
             for effect in G.CANONICAL[proc] + G.UNLISTED[proc]:
-                if only and effect not in only:
+                if not a.trials or (only and effect not in only):
                     continue
                 unlisted = effect in G.UNLISTED[proc]
                 res = list(ex.map(_trial, [(proc, effect, a.seed0 + 1000 * (1 + zlib.crc32(effect.encode()) % 97) + j, sizes)

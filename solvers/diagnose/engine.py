@@ -87,7 +87,7 @@ class Problem:
     scale_free: dict = field(default_factory=dict)   # blocks freed only to measure auxiliary rows' noise scale
     generic: list = field(default_factory=list)      # [(Conditions, {driver: per-sample values})] for residual:<driver>
     generic_width: int = 3                  # outputs per sample the generic extension adds to (axes, beams)
-    generic_scale: float = 1.0              # the generic extension's margin over the canonical test (nulls)
+    generic_scale: float = 2.0              # the generic extension's margin over the canonical test (nulls)
     fold_sets: dict = field(default_factory=dict)    # other CV groupings by name (e.g. "time": blocks within holds)
     screened: list = field(default_factory=list)     # quality findings of rows left out before the effect search
 
