@@ -22,9 +22,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 STAMP = VENV / ".station-stamp"
-# A path-based editable install: `station` resolves to this tree from any working folder,
-# even one that holds a folder named `station`.
-INSTALL_MODE = "editable_mode=compat"
+# The editable install is path-based (pyproject.toml: package-dir = {"" = "."}), so
+# `station` resolves to this tree from any working folder, even one that holds a folder
+# named `station`. Part of the stamp: a change of install method reinstalls.
+INSTALL_MODE = "path-based editable (package-dir)"
 
 
 def _venv_python() -> Path:
@@ -41,8 +42,7 @@ def ensure_venv() -> Path:
         venv.EnvBuilder(with_pip=True).create(VENV)
     print("dev.py: installing the station and its dependencies into .venv", file=sys.stderr)
     subprocess.run([str(py), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
-    subprocess.run([str(py), "-m", "pip", "install", "-q", "--config-settings", INSTALL_MODE,
-                    "-e", f"{ROOT}[test]"], check=True)
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "-e", f"{ROOT}[test]"], check=True)
     STAMP.write_text(want)
     return py
 

@@ -22,8 +22,15 @@ HASHED_COLUMNS = (
 )
 
 
+# Added by record_version 2 (hashed only in rows of that version or later, so rows
+# written before keep their hash).
+HASHED_COLUMNS_V2 = ("review",)
+
+
 def record_hash(row: dict) -> str:
     content = {k: row.get(k) for k in HASHED_COLUMNS}
+    if (row.get("record_version") or 1) >= 2:
+        content.update({k: row.get(k) for k in HASHED_COLUMNS_V2})
     text = json.dumps(content, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 

@@ -160,10 +160,33 @@ _ANCHORS = [
     "CREATE INDEX anchors_device ON anchors(device_id, id)",
 ]
 
+# Accept, reject or override, never silently (record_version 2 hashes `review` too):
+# - calibrations.review: JSON {verdict: pass|fail|no tolerance, reasons: [...],
+#   decision: accepted|rejected|override, note}; NULL on records saved before it.
+# - devices.limits: JSON {param or block: [low, high]}, absolute limits in the
+#   parameter's units (tolerances are changes from the value in use).
+# - captures.samples_sha256: sha256 of the capture's metadata and samples only (not
+#   who saved it or from where): the same capture saved twice has the same digest.
+# - settings: the station's remembered entries (operator, place, reference equipment).
+_REVIEW = [
+    "ALTER TABLE calibrations ADD COLUMN review TEXT",
+    "ALTER TABLE devices ADD COLUMN limits TEXT NOT NULL DEFAULT '{}'",
+    "ALTER TABLE captures ADD COLUMN samples_sha256 TEXT",
+    "CREATE INDEX captures_samples ON captures(samples_sha256)",
+    """
+    CREATE TABLE settings (
+        name TEXT PRIMARY KEY NOT NULL,
+        value TEXT NOT NULL,
+        updated TEXT NOT NULL
+    )
+    """,
+]
+
 # (name, statements), applied in this order. Append only.
 MIGRATIONS: list[tuple[str, list[str]]] = [
     ("0001_initial", _INITIAL),
     ("0002_anchors", _ANCHORS),
+    ("0003_review", _REVIEW),
 ]
 
 MIGRATION_NAMES = [name for name, _ in MIGRATIONS]
@@ -174,5 +197,5 @@ SCHEMA_VERSION = hashlib.sha256(
 ).hexdigest()[:12]
 
 # Calibration record layout version, stored in every row (calibrations.record_version)
-# and part of its hash.
-RECORD_VERSION = 1
+# and part of its hash. 2: the `review` column is hashed too.
+RECORD_VERSION = 2

@@ -45,6 +45,22 @@ class NotFound(LookupError):
         return str(self.args[0]) if self.args else "not found"
 
 
+class DuplicateCapture(ValueError):
+    """The capture's samples and metadata are already stored (`samples_sha256` matches)."""
+
+    def __init__(self, capture_id: int, calibration_id: int | None, device_id: str):
+        self.capture_id = capture_id
+        self.calibration_id = calibration_id
+        self.device_id = device_id
+        held = f"calibration #{calibration_id}" if calibration_id is not None else f"capture #{capture_id}"
+        super().__init__(f"this capture is already saved ({held} of {device_id}); a second save would count "
+                         "the same measurement twice")
+
+
+# Review decisions stored in calibrations.review (see db/schema.py, migration 0002_review).
+DECISIONS = ("accepted", "rejected", "override")
+
+
 def default_db_path() -> str:
     """`$STATION_DB`, else `${XDG_DATA_HOME:-~/.local/share}/station/station.db`."""
     explicit = os.environ.get("STATION_DB")
@@ -193,6 +209,7 @@ class Store:
             "notes": row["notes"],
             "interval_days": row["interval_days"],
             "tolerances": _loads(row["tolerances"], {}),
+            "limits": _loads(row["limits"], {}) if "limits" in row.keys() else {},
             "created": row["created"],
         }
 
@@ -217,10 +234,13 @@ class Store:
         notes: str | None = None,
         interval_days: float | None = None,
         tolerances: dict | None = None,
+        limits: dict | None = None,
     ) -> dict:
         """Add a device, or update the fields given (not None) of an existing one.
 
         `tolerances` merges into the stored ones; a value of None removes that name.
+        `limits` ({name or block: (low, high)}, absolute, in the parameter's units;
+        either end may be None) merges the same way.
         Changing the interval or tolerances updates the device's recalibration schedule.
         """
         self._check_id(device_id)
@@ -232,6 +252,8 @@ class Store:
             for name, value in tolerances.items():
                 if value is not None and not (isinstance(value, (int, float)) and value > 0):
                     raise ValueError(f"tolerance {name!r} must be a positive number, got {value!r}")
+        if limits is not None:
+            limits = {str(k): (None if v is None else _check_limit(k, v)) for k, v in limits.items()}
         with self._write() as conn:
             self._ensure_device(conn, device_id)
             row = conn.execute("SELECT * FROM devices WHERE id = ?", [device_id]).fetchone()
@@ -252,6 +274,15 @@ class Store:
                     else:
                         tol[str(name)] = float(value)
                 current["tolerances"] = tol
+            if limits is not None:
+                lim = dict(current["limits"])
+                for name, value in limits.items():
+                    if value is None:
+                        lim.pop(name, None)
+                    else:
+                        lim[name] = value
+                conn.execute("UPDATE devices SET limits = ? WHERE id = ?",
+                             [json.dumps(lim, ensure_ascii=False, sort_keys=True), device_id])
             conn.execute(
                 "UPDATE devices SET model = ?, sensor_kinds = ?, notes = ?, interval_days = ?, tolerances = ? WHERE id = ?",
                 [
@@ -321,14 +352,14 @@ class Store:
         digest = capture_digest(header, [(c["name"], c["dtype"], c["length"], c["sha256"]) for c in encoded])
         cur = conn.execute(
             """INSERT INTO captures (device_id, procedure, time, operator, host, latitude_deg, longitude_deg,
-                   altitude_m, n_rows, column_names, meta, raw_bytes, stored_bytes, sha256, saved_at)
-               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)""",
+                   altitude_m, n_rows, column_names, meta, raw_bytes, stored_bytes, sha256, saved_at, samples_sha256)
+               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)""",
             [
                 device_id, procedure, time, operator, host,
                 place("latitude_deg"), place("longitude_deg"), place("altitude_m"),
                 lengths.pop(), json.dumps([c["name"] for c in encoded], ensure_ascii=False), header["meta"],
                 sum(c["raw_bytes"] for c in encoded), sum(len(c["data"]) for c in encoded), digest,
-                P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+                P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"), _samples_digest(header["meta"], encoded),
             ],
         )
         capture_id = cur.lastrowid
@@ -353,6 +384,27 @@ class Store:
             )
             self._append_anchor(conn, device_id, "capture", capture_id)
         return capture_id
+
+    def find_duplicate(self, meta: dict, columns: dict) -> dict | None:
+        """The stored capture with these exact samples and metadata, or None.
+
+        {capture_id, device_id, calibration_id (its latest calibration, or None)}.
+        """
+        meta = {str(k): str(v) for k, v in dict(meta or {}).items()}
+        digest = _samples_digest(json.dumps(meta, ensure_ascii=False),
+                                 [encode_column(n, a) for n, a in columns.items()])
+        return self._duplicate(self.conn, digest)
+
+    def _duplicate(self, conn, digest: str) -> dict | None:
+        with self._lock:
+            row = conn.execute(
+                """SELECT c.id, c.device_id, (SELECT max(k.id) FROM calibrations k WHERE k.capture_id = c.id) AS cal
+                   FROM captures c WHERE c.samples_sha256 = ? ORDER BY c.id LIMIT 1""",
+                [digest],
+            ).fetchone()
+        if row is None:
+            return None
+        return {"capture_id": row["id"], "device_id": row["device_id"], "calibration_id": row["cal"]}
 
     def _read_capture(self, capture_id):
         with self._lock:
@@ -400,6 +452,8 @@ class Store:
         software_version: str | None = None,
         host: str | None = None,
         sensor_kind: str | None = None,
+        review: dict | None = None,
+        allow_duplicate: bool = False,
     ) -> int:
         """Store a capture and its calibration result (calibrate.md shape) in one transaction.
 
@@ -408,6 +462,12 @@ class Store:
         accepted calibration of the same procedure at or before its time. ``sensor_kind``
         (accel, gyro, mag, ldv) is merged into the device's ``sensor_kinds``. Returns the
         calibration id.
+
+        `review` records how the result was judged and decided: {verdict, reasons,
+        decision (accepted | rejected | override), note}; `decision` must agree with
+        `accepted` (override = accepted despite a failed verdict, and needs a note).
+        A capture whose samples and metadata are already stored raises
+        `DuplicateCapture` unless `allow_duplicate`.
         """
         meta = dict(meta or {})
         device = device_id or result.get("device") or meta.get("device")
@@ -428,7 +488,23 @@ class Store:
         extra = P.clean_json({k: v for k, v in result.items() if k not in _RESULT_COLUMNS})
         residual = P.clean_json(result.get("residual_rms"))
         n_pos = result.get("n_positions")
+        review_text = None
+        if review is not None:
+            review = P.clean_json(dict(review))
+            decision = review.get("decision")
+            if decision not in DECISIONS:
+                raise ValueError(f"review decision must be one of {', '.join(DECISIONS)}, got {decision!r}")
+            if (decision != "rejected") != bool(accepted):
+                raise ValueError(f"review decision {decision!r} disagrees with accepted={bool(accepted)}")
+            if decision == "override" and not str(review.get("note") or "").strip():
+                raise ValueError("accepting a failed calibration needs a note saying why")
+            review_text = P.dumps(review)
         with self._write() as conn:
+            if not allow_duplicate:
+                meta_text = json.dumps({str(k): str(v) for k, v in meta.items()}, ensure_ascii=False)
+                dup = self._duplicate(conn, _samples_digest(meta_text, [encode_column(n, a) for n, a in columns.items()]))
+                if dup is not None:
+                    raise DuplicateCapture(dup["capture_id"], dup["calibration_id"], dup["device_id"])
             self._ensure_device(conn, device, sensor_kind)
             capture_id, capture_sha = self._insert_capture(
                 conn, device_id=device, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
@@ -447,13 +523,14 @@ class Store:
             cur = conn.execute(
                 """INSERT INTO calibrations (device_id, procedure, time, model, params, uncertainty, residual_rms,
                        n_positions, warnings, result_extra, software_version, capture_id, capture_sha256, operator,
-                       host, accepted, supersedes, saved_at, record_version, prev_hash, hash)
-                   VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, '')""",
+                       host, accepted, supersedes, saved_at, record_version, prev_hash, review, hash)
+                   VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, '')""",
                 [
                     device, procedure, when, result.get("model"), P.dumps(params), P.dumps(uncertainty), residual,
                     None if n_pos is None else int(n_pos), P.dumps(warnings), P.dumps(extra), software_version,
                     capture_id, capture_sha, operator, host, 1 if accepted else 0, supersedes,
                     P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"), RECORD_VERSION, last["hash"] if last else None,
+                    review_text,
                 ],
             )
             cal_id = cur.lastrowid
@@ -485,6 +562,7 @@ class Store:
             "operator": row["operator"],
             "host": row["host"],
             "saved_at": row["saved_at"],
+            "review": _loads(row["review"]) if "review" in row.keys() else None,
         }
 
     def history(self, device_id: str, procedure: str | None = None) -> list[dict]:
@@ -540,6 +618,34 @@ class Store:
         later = self._query("SELECT id FROM calibrations WHERE supersedes = ? ORDER BY id LIMIT 1", [calibration_id])
         d["superseded_by"] = later[0]["id"] if later else None
         return d
+
+    def reference(self, device_id: str, procedure: str, before=None) -> dict | None:
+        """The calibration in use: the device's latest accepted calibration of `procedure`
+        (at or before `before` when given), the reference a new result is compared with.
+        Rejected calibrations never are."""
+        sql = "SELECT * FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1"
+        args: list = [device_id, procedure]
+        if before is not None:
+            sql += " AND time <= ?"
+            args.append(P.normalize_time(before))
+        rows = self._query(sql + " ORDER BY time DESC, id DESC LIMIT 1", args)
+        return self._cal_dict(rows[0]) if rows else None
+
+    # --- settings -----------------------------------------------------------------------
+
+    def settings(self) -> dict[str, str]:
+        """The station's remembered entries (operator, place, reference equipment...)."""
+        return {r["name"]: r["value"] for r in self._query("SELECT name, value FROM settings ORDER BY name")}
+
+    def set_settings(self, values: dict) -> None:
+        """Remember entries; a value of None or '' forgets that name."""
+        with self._write() as conn:
+            for name, value in values.items():
+                if value is None or str(value) == "":
+                    conn.execute("DELETE FROM settings WHERE name = ?", [str(name)])
+                else:
+                    conn.execute("INSERT OR REPLACE INTO settings (name, value, updated) VALUES (?, ?, ?)",
+                                 [str(name), str(value), P.iso(P.now_utc())])
 
     # --- drift and schedule -------------------------------------------------------------
 
@@ -972,3 +1078,24 @@ class Store:
     def integrity_check(self) -> str:
         """SQLite's own `PRAGMA integrity_check` ('ok' when the file is sound)."""
         return "\n".join(r[0] for r in self._query("PRAGMA integrity_check"))
+
+
+def _samples_digest(meta_text: str, encoded: list[dict]) -> str:
+    """sha256 of a capture's metadata JSON and its columns (name, dtype, length, raw sha256):
+    the same measurement has the same digest whoever saves it, wherever and whenever."""
+    return capture_digest({"meta": meta_text}, [(c["name"], c["dtype"], c["length"], c["sha256"]) for c in encoded])
+
+
+def _check_limit(name, value) -> list:
+    """[low, high] from a pair (either end None = open); low <= high."""
+    try:
+        low, high = value
+        low = None if low is None else float(low)
+        high = None if high is None else float(high)
+    except (TypeError, ValueError):
+        raise ValueError(f"limit {name!r} must be a pair (low, high), got {value!r}") from None
+    if (low is None and high is None) or any(x is not None and x != x for x in (low, high)):
+        raise ValueError(f"limit {name!r} needs at least one finite end, got {value!r}")
+    if low is not None and high is not None and low > high:
+        raise ValueError(f"limit {name!r}: low {low:g} is above high {high:g}")
+    return [low, high]

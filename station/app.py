@@ -119,6 +119,30 @@ class StationApp(App):
             if hasattr(screen, "show_due"):
                 screen.show_due(message.data)
 
+    def unsaved_work(self) -> str | None:
+        """What quitting now would lose, or None."""
+        for screen in self.screen_stack:
+            guide = getattr(screen, "guide", None)
+            if guide is not None and getattr(guide, "phase", "") not in ("done", "fitted", "aborted"):
+                return "the run in progress"
+            if (type(screen).__name__ == "ResultsScreen" and getattr(screen, "result", None) is not None
+                    and getattr(screen, "calibration_id", None) is None and not getattr(screen, "discarded", False)):
+                return "the unsaved result"
+        return None
+
+    async def action_quit(self) -> None:
+        """ctrl+q: quit, after a confirmation when a run or an unsaved result would be lost."""
+        from station.screens.decide import ConfirmScreen
+
+        lost = self.unsaved_work()
+        if lost is None or self.session.scripted:
+            self.exit()
+            return
+        if isinstance(self.screen, ConfirmScreen):
+            return
+        self.push_screen(ConfirmScreen(f"Quit? {lost[0].upper() + lost[1:]} is lost."),
+                         lambda yes: self.exit() if yes else None)
+
     def action_history(self) -> None:
         from station.screens.history import HistoryScreen
 

@@ -15,14 +15,42 @@ def open_store(path: str):
 
 
 def save_result(path: str, capture, result: dict, *, device_id: str | None = None,
-                operator: str | None = None, accepted: bool = True) -> int:
-    """Store ``capture`` and ``result`` in one transaction; returns the calibration id."""
+                operator: str | None = None, accepted: bool = True, review: dict | None = None,
+                time=None) -> int:
+    """Store ``capture`` and ``result`` in one transaction; returns the calibration id.
+
+    ``review`` is ``station.procedures.review.review_record(...)`` (how the result was
+    judged and decided). A capture already stored raises ``db.store.DuplicateCapture``.
+    """
     store = open_store(path)
     try:
         operator = operator or getpass.getuser()
     except Exception:
         operator = operator or None
     entry = registry.get(result.get("procedure") or capture.meta.get("procedure"))
-    return store.save_calibration(result, meta=capture.meta, columns=capture.columns, device_id=device_id,
-                                  operator=operator, accepted=accepted, software_version=__version__,
-                                  host=socket.gethostname(), sensor_kind=entry.sensor_kind if entry else None)
+    try:
+        return store.save_calibration(result, meta=capture.meta, columns=capture.columns, device_id=device_id,
+                                      operator=operator, accepted=accepted, software_version=__version__,
+                                      host=socket.gethostname(), review=review, time=time,
+                                      sensor_kind=entry.sensor_kind if entry else None)
+    finally:
+        store.close()
+
+
+def judge(path: str | None, result: dict, device_id: str | None = None):
+    """(Assessment, device dict or None, previous accepted calibration or None) of ``result``
+    against the device in the database at ``path`` (nothing to compare without one)."""
+    import os
+
+    from station.procedures.review import assess
+
+    device = device_id or result.get("device")
+    dev = previous = None
+    if path and device and os.path.exists(path):
+        store = open_store(path)
+        try:
+            dev = store.get_device(device)
+            previous = store.reference(device, result.get("procedure") or "")
+        finally:
+            store.close()
+    return assess(result, previous, dev), dev, previous

@@ -27,7 +27,7 @@ def _save(db, result, **meta):
     m["sensor_device_id"] = "1310988"  # PX4 applies a CAL_*n slot only to the sensor with this id
     m.update(meta)
     with Store(db) as s:
-        return s.save_calibration(result, meta=m, columns=cols)
+        return s.save_calibration(result, meta=m, columns=cols, allow_duplicate=True)
 
 
 def _params(text: str, fmt: str) -> dict[str, float]:
@@ -219,10 +219,10 @@ def test_recompute_reports_differences_in_sigma(capsys, db, shared_data):
     values, sigmas = flatten(result["params"]), flatten(result["uncertainty"])
     name = next(n for n, s in sigmas.items() if s and values.get(n) is not None)
     with Store(db) as s:
-        same = s.save_calibration(result, meta=capture.meta, columns=capture.columns, device_id="R")
+        same = s.save_calibration(result, meta=capture.meta, columns=capture.columns, allow_duplicate=True, device_id="R")
         older = json.loads(json.dumps(result))  # as if an older version had found +2 sigma on one parameter
         _shift(older["params"], name, 2.0 * sigmas[name])
-        moved = s.save_calibration(older, meta=capture.meta, columns=capture.columns, device_id="R")
+        moved = s.save_calibration(older, meta=capture.meta, columns=capture.columns, allow_duplicate=True, device_id="R")
     code, out, _ = run(capsys, "recompute", str(same), "--json", "--db", db)
     assert code == 0
     diffs = {d["param"]: d for d in json.loads(out)["differences"]}

@@ -25,7 +25,7 @@ def _save_series(store, device, days, B0, rates, sigma, rng=None, accepted=None,
             B = [b + rng.normal(0.0, sigma) for b in B]
         when = (T0 + timedelta(days=d)).strftime("%Y-%m-%dT%H:%M:%SZ")
         ok = True if accepted is None else accepted[k]
-        ids.append(store.save_calibration(procedure_result(device=device, B=B, sigma_B=sigma), meta=meta, columns=cols,
+        ids.append(store.save_calibration(procedure_result(device=device, B=B, sigma_B=sigma), meta=meta, columns=cols, allow_duplicate=True,
                                           time=when, accepted=ok))
     return ids
 
@@ -97,7 +97,7 @@ def test_noisy_drift_of_several_devices_within_sigma(store):
 def test_drift_ignores_rejected_calibrations(store):
     _save_series(store, "R", [0, 365.25, 730.5], B0=(0, 0, 0), rates=(0.1, 0, 0), sigma=0.01)
     meta, cols = small_capture(device="R")
-    store.save_calibration(accel_result(device="R", B=(5, 5, 5)), meta=meta, columns=cols,
+    store.save_calibration(accel_result(device="R", B=(5, 5, 5)), meta=meta, columns=cols, allow_duplicate=True,
                            time="2023-06-01", accepted=False)
     t = store.drift("R", param="B[0]")[0]
     assert t["n"] == 3 and t["rate_per_year"] == pytest.approx(0.1, abs=1e-12)
@@ -139,9 +139,9 @@ def test_due_by_interval(store):
     assert late[0]["status"] == "overdue" and late[0]["days_left"] == pytest.approx(-10.0)
     # a new accepted calibration restarts the clock; a rejected one does not
     meta, cols = small_capture(device="I")
-    store.save_calibration(accel_result(device="I"), meta=meta, columns=cols, time=due_at, accepted=False)
+    store.save_calibration(accel_result(device="I"), meta=meta, columns=cols, allow_duplicate=True, time=due_at, accepted=False)
     assert [e["device_id"] for e in store.due(now=due_at + timedelta(days=10))] == ["I"]
-    store.save_calibration(accel_result(device="I"), meta=meta, columns=cols, time=due_at)
+    store.save_calibration(accel_result(device="I"), meta=meta, columns=cols, allow_duplicate=True, time=due_at)
     assert store.due(now=due_at + timedelta(days=10)) == []
 
 

@@ -29,7 +29,7 @@ def _writer(path: str, worker: int, n: int, shared: str) -> None:
     for i in range(n):
         device = shared if i % 2 else f"W{worker}"
         meta, cols = cap(seed=worker * 1000 + i, device=device)
-        s.save_calibration(res(device=device, tag=f"w{worker}-{i}"), meta=meta, columns=cols)
+        s.save_calibration(res(device=device, tag=f"w{worker}-{i}"), meta=meta, columns=cols, allow_duplicate=True)
     s.close()
 
 
@@ -62,7 +62,7 @@ KILL_SCRIPT = textwrap.dedent(
     while True:
         meta, cols = small_capture(seed=i, n=20000, device="K")
         print("start", i, time.monotonic(), flush=True)
-        cid = s.save_calibration(accel_result(device="K", B=(i, 0, 0)), meta=meta, columns=cols)
+        cid = s.save_calibration(accel_result(device="K", B=(i, 0, 0)), meta=meta, columns=cols, allow_duplicate=True)
         print("done", cid, i, time.monotonic(), flush=True)
         i += 1
     """
@@ -74,7 +74,7 @@ def test_kill_during_save_leaves_database_consistent(tmp_path, seed):
     path = str(tmp_path / "station.db")
     with Store(path) as s:  # some history from before
         meta, cols = small_capture(device="K")
-        first = s.save_calibration(accel_result(device="K", B=(-1, 0, 0)), meta=meta, columns=cols)
+        first = s.save_calibration(accel_result(device="K", B=(-1, 0, 0)), meta=meta, columns=cols, allow_duplicate=True)
     rng = np.random.default_rng(seed)
     proc = subprocess.Popen(
         [sys.executable, "-c", KILL_SCRIPT.format(tests=str(TESTS), path=path)],
@@ -114,7 +114,7 @@ def test_kill_during_save_leaves_database_consistent(tmp_path, seed):
         assert s.counts()["captures"] == len(h)  # never a capture without its calibration
         assert s.verify() == []
         meta, cols = small_capture(device="K")  # and it still takes writes
-        after = s.save_calibration(accel_result(device="K"), meta=meta, columns=cols)
+        after = s.save_calibration(accel_result(device="K"), meta=meta, columns=cols, allow_duplicate=True)
         assert s.history("K")[-1]["id"] == after and s.verify() == []
 
 
@@ -127,9 +127,9 @@ def filled(tmp_path):
         ids = []
         for k, date in enumerate(["2024-01-01", "2024-06-01", "2025-01-01", "2025-06-01"]):
             meta, cols = small_capture(seed=k, device="T", date=date)
-            ids.append(s.save_calibration(accel_result(device="T", B=(k, 0, 0)), meta=meta, columns=cols))
+            ids.append(s.save_calibration(accel_result(device="T", B=(k, 0, 0)), meta=meta, columns=cols, allow_duplicate=True))
         meta, cols = small_capture(device="U")
-        ids.append(s.save_calibration(accel_result(device="U"), meta=meta, columns=cols))
+        ids.append(s.save_calibration(accel_result(device="U"), meta=meta, columns=cols, allow_duplicate=True))
         assert s.verify() == []
     return path, ids
 

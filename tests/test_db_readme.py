@@ -46,7 +46,7 @@ def test_readme_queries_run_and_answer(tmp_path):
         meta, cols = small_capture()
         for device, ago in (("SOON", 20), ("LATER", 10)):
             for k in range(2):
-                s.save_calibration(accel_result(device=device, B=(0.1 * (k + 1), 0, 0)), meta=meta, columns=cols,
+                s.save_calibration(accel_result(device=device, B=(0.1 * (k + 1), 0, 0)), meta=meta, columns=cols, allow_duplicate=True,
                                    time=now - timedelta(days=ago + 100 * (1 - k)))
     raw = sqlite3.connect(path)
     in_use = raw.execute(queries[0]).fetchall()

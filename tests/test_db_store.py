@@ -239,21 +239,21 @@ def test_save_calibration_stores_capture_result_and_device(store):
 def test_device_resolution_order(store):
     meta, cols = small_capture(device="FROM-META")
     r = accel_result(device="FROM-RESULT")
-    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols, device_id="FROM-ARG"))["device_id"] == "FROM-ARG"
-    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols))["device_id"] == "FROM-RESULT"
+    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True, device_id="FROM-ARG"))["device_id"] == "FROM-ARG"
+    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True))["device_id"] == "FROM-RESULT"
     r.pop("device")
-    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols))["device_id"] == "FROM-META"
+    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True))["device_id"] == "FROM-META"
     meta.pop("device")
     with pytest.raises(ValueError, match="no device"):
-        store.save_calibration(r, meta=meta, columns=cols)
+        store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True)
 
 
 def test_time_is_argument_then_capture_date_then_now(store):
     meta, cols = small_capture(date="2025-05-06T07:08:09Z")
-    a = store.save_calibration(accel_result(), meta=meta, columns=cols, time="2020-01-02")
-    b = store.save_calibration(accel_result(), meta=meta, columns=cols)
+    a = store.save_calibration(accel_result(), meta=meta, columns=cols, allow_duplicate=True, time="2020-01-02")
+    b = store.save_calibration(accel_result(), meta=meta, columns=cols, allow_duplicate=True)
     meta.pop("date")
-    c = store.save_calibration(accel_result(), meta=meta, columns=cols)
+    c = store.save_calibration(accel_result(), meta=meta, columns=cols, allow_duplicate=True)
     assert store.calibration(a)["time"] == "2020-01-02T00:00:00Z"
     assert store.calibration(b)["time"] == "2025-05-06T07:08:09Z"
     now = store.calibration(c)["time"]
@@ -333,7 +333,7 @@ def test_store_survives_threads(tmp_path):
     def work(k):
         try:
             for _ in range(10):
-                s.save_calibration(accel_result(device=f"T{k}"), meta=meta, columns=cols)
+                s.save_calibration(accel_result(device=f"T{k}"), meta=meta, columns=cols, allow_duplicate=True)
                 s.history(f"T{k}")
         except Exception as exc:  # pragma: no cover - reported below
             errors.append(exc)

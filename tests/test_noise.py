@@ -65,3 +65,5 @@ def test_refusals():
 
 def test_format_duration():
     assert [format_duration(x) for x in (45, 600, 7300, math.inf)] == ["45 s", "10 min", "2.0 h", "never"]
+    # issue 15: "needs 13,803 h" where the README promises "never": beyond a day is never
+    assert format_duration(13803 * 3600.0) == "never" and format_duration(23.5 * 3600) == "23.5 h"

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from textual.css.query import NoMatches
 
 from station.app import make_app
 from station.sources import SimSource
@@ -18,13 +19,56 @@ from tests.tui_data import p1_result, seed_history
 SIZE = (80, 24)
 
 
-async def wait_for(pilot, cond, timeout_s=20.0, step_s=0.05):
+async def wait_for(pilot, cond, timeout_s=120.0, step_s=0.05):
+    """Wait until ``cond()`` holds. The timeout is a safety net for a hung app, not a pace:
+    it is generous so a loaded machine (8 jobs on 2 cores) only makes the test slower. A
+    widget not mounted yet (the screen is still composing) counts as not yet."""
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
-        if cond():
-            return True
+        try:
+            if cond():
+                return True
+        except NoMatches:
+            pass
         await pilot.pause(step_s)
     raise AssertionError(f"timed out after {timeout_s} s waiting for {cond}")
+
+
+class BenchClock:
+    """The simulated bench's clock, advanced by the test (``SimSource(clock=...)``): the
+    device only moves on when the test says so, so no phase can pass unseen and a loaded
+    machine cannot make the consumer fall behind and lose samples."""
+
+    def __init__(self) -> None:
+        self.t_s = 0.0
+
+    def __call__(self) -> float:
+        return self.t_s
+
+
+def _consumed(src) -> bool:
+    """Has the app drained everything the clock made due? (the source's own counters)"""
+    if src._t0 is None:
+        return True
+    return int((src.clock() - src._t0) * src.speed * src.rate_hz) <= src._produced
+
+
+async def run_bench(pilot, src, clock: BenchClock, until, step_s=0.2, max_device_s=3600.0, timeout_s=600.0):
+    """Advance ``clock`` by ``step_s`` each time the app has drained the source, until
+    ``until()`` holds (NoMatches counts as not yet)."""
+    t_end = time.monotonic() + timeout_s
+    t_max = clock.t_s + max_device_s
+    while True:
+        try:
+            if until():
+                return
+        except NoMatches:
+            pass
+        if clock.t_s > t_max or time.monotonic() > t_end:
+            raise AssertionError(f"{until} never held ({clock.t_s:.1f} s device time)")
+        if _consumed(src):
+            clock.t_s += step_s
+        await pilot.pause(0.01)
 
 
 def screen_name(app) -> str:
@@ -111,10 +155,12 @@ def test_demo_runs_a_whole_p1_and_saves_it(tmp_path):
     db = str(tmp_path / "station.db")
 
     async def story():
-        app = make_app(db, device=SimSource(seed=4, speed=50), demo=True, average_s=1.0, settle_s=0.5)
+        clock = BenchClock()
+        src = SimSource(seed=4, clock=clock)
+        app = make_app(db, device=src, demo=True, average_s=1.0, settle_s=0.5)
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=90)
-            await wait_for(pilot, lambda: app.screen.calibration_id is not None, timeout_s=10)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.25)
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             summary = text_of(app, "#summary")
             params = app.screen.query_one("#params")
             residuals = app.screen.query_one("#residuals")
@@ -151,11 +197,12 @@ def test_compass_sweep_from_connect_to_a_saved_result(tmp_path):
         app.session.extra["compass_min_s"] = 120.0
         async with app.run_test(size=SIZE) as pilot:
             app.screen.query_one("#procedure").value = "compass"
-            app.session.source = SimSource(seed=3, speed=40, procedure="compass")
+            clock = BenchClock()
+            src = app.session.source = SimSource(seed=3, procedure="compass", clock=clock)
             await pilot.press("f5")
-            await wait_for(pilot, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2)
-            assert "+z" in text_of(app, "#map") and "Coverage" in text_of(app, "#progress")
-            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=40)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2)
+            await wait_for(pilot, lambda: "+z" in text_of(app, "#map") and "Coverage" in text_of(app, "#progress"))
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.5)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             title = screen_lines(app)[0]
             assert not app.screen.query_one("#residuals").display  # P1-only table
@@ -174,13 +221,15 @@ def test_gyro_drift_hold_to_a_saved_result(tmp_path):
     db = str(tmp_path / "station.db")
 
     async def story():
-        src = SimSource(seed=5, speed=60, procedure="gyro-drift")
+        clock = BenchClock()
+        src = SimSource(seed=5, procedure="gyro-drift", clock=clock)
         app = make_app(db, device=src, demo=True, average_s=180.0)
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: screen_name(app) == "HoldScreen" and app.screen.updates > 2)
-            await wait_for(pilot, lambda: app.screen.last_status is not None and app.screen.last_status.phase == "average")
-            assert "left" in text_of(app, "#countdown") and "still" in text_of(app, "#stability")
-            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=40)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "HoldScreen" and app.screen.updates > 2)
+            await run_bench(pilot, src, clock, lambda: app.screen.last_status is not None
+                            and app.screen.last_status.phase == "average")
+            await wait_for(pilot, lambda: "left" in text_of(app, "#countdown") and "still" in text_of(app, "#stability"))
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=1.0)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             title = screen_lines(app)[0]
         return title
@@ -195,15 +244,15 @@ def test_gyro_drift_hold_to_a_saved_result(tmp_path):
 
 def test_wrong_face_up_is_shown_and_blocks_capture():
     async def story():
-        src = SimSource(seed=1, speed=10)
+        clock = BenchClock()
+        src = SimSource(seed=1, clock=clock)
         app = make_app(None, device=src, start="procedure", average_s=60.0)
         async with app.run_test(size=SIZE) as pilot:
             await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
             src.place("x_down")  # asked for x_up
-            await wait_for(pilot, lambda: app.screen.last_status and app.screen.last_status.wrong_face
-                           and app.screen.last_status.is_still)
-            await pilot.pause(0.3)
-            assert "WRONG FACE UP" in text_of(app, "#orientation")
+            await run_bench(pilot, src, clock, lambda: app.screen.last_status and app.screen.last_status.wrong_face
+                            and app.screen.last_status.is_still)
+            await wait_for(pilot, lambda: "WRONG FACE UP" in text_of(app, "#orientation"))
             assert "Wrong face up" in text_of(app, "#message")
             assert app.screen.guide.n_captured == 0
 
@@ -214,20 +263,28 @@ def test_skip_redo_abort_and_resume(tmp_path):
     db = str(tmp_path / "station.db")
 
     async def story():
-        src = SimSource(seed=5, speed=20)
+        clock = BenchClock()
+        src = SimSource(seed=5, clock=clock)
         app = make_app(db, device=src, start="procedure", average_s=1.0, settle_s=0.5)
         async with app.run_test(size=SIZE) as pilot:
             await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
             g = app.screen.guide
-            await wait_for(pilot, lambda: g.n_captured == 1)  # x_up: the unit starts there
+            await run_bench(pilot, src, clock, lambda: g.n_captured == 1)  # x_up: the unit starts there
             await pilot.press("s")  # skip x_down
-            await pilot.pause(0.1)
-            assert g.steps[1].status == "skipped" and g.step.name == "y_up"
+            await wait_for(pilot, lambda: g.steps[1].status == "skipped")
+            assert g.step.name == "y_up"
             src.place("y_up")
-            await wait_for(pilot, lambda: g.steps[2].status == "captured")
+            await run_bench(pilot, src, clock, lambda: g.steps[2].status == "captured")
             steps = app.screen.query_one("#steps")
             await wait_for(pilot, lambda: "✓" in str(steps.get_option_at_index(2).prompt))
+            await pilot.press("a")  # abort asks first; n keeps the run
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+            assert g.phase != "aborted"
             await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")
             await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
             resume = app.screen.query_one("#resume")
             await wait_for(pilot, lambda: not resume.disabled)
@@ -273,11 +330,11 @@ def test_results_compare_with_the_previous_calibration_and_export(tmp_path):
 
     summary, row, paths, saved = asyncio.run(story())
     assert "FAIL" in summary and f"previous #{previous['id']}" in summary
-    assert row[0] == "B[0]" and row[6] == "✗"
+    assert row[0] == "B[0]" and row[3] == "m/s^2" and row[7] == "✗"
     b_new, b_old = result["params"]["B"][0], previous["params"]["B"][0]
     s2 = result["uncertainty"]["B"][0] ** 2 + previous["uncertainty"]["B"][0] ** 2
-    assert float(row[4]) == pytest.approx((b_new - b_old) / np.sqrt(s2), abs=0.051)
-    assert row[4] == "+88.4"  # 0.5 / sqrt(2 * 0.004²)
+    assert float(row[5]) == pytest.approx((b_new - b_old) / np.sqrt(s2), abs=0.051)
+    assert row[5] == "+88.4"  # 0.5 / sqrt(2 * 0.004²)
     assert "Discarded" in saved
     back = read_capture(paths[0])
     np.testing.assert_array_equal(back.columns["ax"], cap.columns["ax"])

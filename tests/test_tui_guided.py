@@ -10,7 +10,7 @@ import pytest
 
 from station.app import make_app
 from station.sources import SimSource
-from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for
+from tests.test_tui import SIZE, BenchClock, run_bench, screen_lines, screen_name, text_of, wait_for
 
 
 def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
@@ -55,6 +55,8 @@ def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
             await pilot.pause(0.1)
             assert screen_name(app) == "CentrifugeScreen"
             await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")
             await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
 
     asyncio.run(story())
@@ -66,15 +68,18 @@ def test_centrifuge_live_run_to_a_saved_result(tmp_path):
     db = str(tmp_path / "station.db")
 
     async def story():
-        src = SimSource(seed=2, speed=40, procedure="accel-centrifuge")
+        clock = BenchClock()
+        src = SimSource(seed=2, procedure="accel-centrifuge", clock=clock)
         app = make_app(db, device=src, demo=True, average_s=1.0, settle_s=0.5)
         app.session.extra["n_orientations"] = 4  # 12 rows: the exact fit needs more than 9
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.updates > 2)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "CentrifugeScreen"
+                            and app.screen.updates > 2)
             scr = app.screen
-            await wait_for(pilot, lambda: scr.last_status is not None and scr.last_status.phase == "average"
-                           or screen_name(app) == "ResultsScreen")
-            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=60)
+            await run_bench(pilot, src, clock, lambda: scr.last_status is not None
+                            and scr.last_status.phase == "average" or screen_name(app) == "ResultsScreen",
+                            step_s=0.1)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.25)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             return screen_lines(app)[0], app.screen.result, scr.guide, app.screen.capture
 
@@ -100,11 +105,13 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
         app.session.extra["export_dir"] = str(tmp_path)
         async with app.run_test(size=SIZE) as pilot:
             app.screen.query_one("#procedure").value = "gyro-noise"
-            app.session.source = SimSource(seed=4, speed=60, procedure="gyro-noise")
+            clock = BenchClock()
+            src = app.session.source = SimSource(seed=4, procedure="gyro-noise", clock=clock)
             await pilot.press("f5")
-            await wait_for(pilot, lambda: screen_name(app) == "NoiseHoldScreen" and app.screen.updates > 2)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "NoiseHoldScreen"
+                            and app.screen.updates > 2)
             assert "gyro noise (Allan) run" in screen_lines(app)[0]
-            await wait_for(pilot, lambda: screen_name(app) == "AllanScreen", timeout_s=40)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "AllanScreen", step_s=1.0)
             scr = app.screen
             await wait_for(pilot, lambda: "ARW" in text_of(app, "#table"))
             table = text_of(app, "#table")
@@ -117,11 +124,11 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
             await pilot.press("t")
             scr.query_one("#accuracy").value = ""
             await pilot.press(*"abc", "enter")
-            assert "positive number" in text_of(app, "#status")
+            await wait_for(pilot, lambda: "positive number" in text_of(app, "#status"))
             await pilot.press("t")
             scr.query_one("#accuracy").value = ""
             await pilot.press(*"5", "enter")
-            assert scr.accuracy_deg_h == 5.0 and "1σ ≤ 5 °/h" in text_of(app, "#status")
+            await wait_for(pilot, lambda: scr.accuracy_deg_h == 5.0 and "1σ ≤ 5 °/h" in text_of(app, "#status"))
             await pilot.press("e")
             await wait_for(pilot, lambda: len(scr.exported) == 2)
             return scr.exported, r

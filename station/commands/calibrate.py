@@ -1,4 +1,14 @@
-"""`station calibrate FILE [--json] [--method M] [--device ID] [--save]` (calibrate.md)."""
+"""`station calibrate FILE [--json] [--method M] [--device ID] [--save]` (calibrate.md).
+
+With `--save` the result is judged first (`station.procedures.review.assess`: the
+device's tolerances against the calibration in use, its absolute limits, the fit's own
+checks) and the exit status says what happened:
+
+    0  saved as accepted (it passed, or had nothing to fail; or --override NOTE)
+    1  FAIL, not saved: give --reject REASON or --override NOTE to decide
+    2  bad input, or the capture is already saved (nothing saved)
+    3  saved as rejected (--reject REASON): kept in the history, never the reference
+"""
 from __future__ import annotations
 
 import argparse
@@ -19,6 +29,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--device", default=None, help="device id (default: the capture's 'device')")
     p.add_argument("--save", action="store_true", help="store capture and result in the station database")
     p.add_argument("--operator", default=None, help="operator's name, stored with --save")
+    decide = p.add_mutually_exclusive_group()
+    decide.add_argument("--reject", default=None, metavar="REASON",
+                        help="with --save: store the result as rejected, with this reason (exit 3)")
+    decide.add_argument("--override", default=None, metavar="NOTE",
+                        help="with --save: accept a result that fails its tolerances, limits or fit checks, "
+                             "with this note saying why (exit 0)")
     p.add_argument("--accuracy", type=float, default=None, metavar="DEG_H",
                    help="gyro-drift: the 1-sigma drift accuracy asked, °/h (sets metadata accuracy_deg_h)")
     p.add_argument("--reference", default=None, metavar="FILE",
@@ -30,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import warnings
 
-    from station.calibrate import calibrate_capture, format_text, to_json
+    from station.calibrate import calibrate_capture, to_json
     from station.importers.load import load_for_command
 
     if getattr(args, "accuracy", None) is not None and not 0 < args.accuracy < float("inf"):
@@ -49,30 +65,89 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate_capture(capture, method=args.method)
     if args.device:
         result["device"] = args.device
+    for flag in ("reject", "override"):
+        note = getattr(args, flag, None)
+        if note is not None and not args.save:
+            from station.errors import InputError
+
+            raise InputError(None, None, f"--{flag} decides what --save stores: give --save too")
+        if note is not None and not note.strip():
+            from station.errors import InputError
+
+            raise InputError(None, None, f"--{flag} needs a non-empty text saying why")
+    status = 0
     if args.save:
-        result["calibration_id"] = _save(args, capture, result)
+        status = _save(args, capture, result)
     if args.json:
         print(to_json(result))
     else:
         from station.textsafe import safe
 
         shown = dict(result, device=safe(result["device"]) if result.get("device") is not None else None)
-        print(format_text(shown))
-    return 0
+        print(_text(shown))
+    return status
+
+
+def _text(result: dict) -> str:
+    from station.calibrate import format_text
+    from station.textsafe import safe
+
+    text = format_text(result)
+    review = result.get("review")
+    if review:
+        lines = [f"verdict    {review['verdict'].upper()}"]
+        lines += [f"  - {safe(r)}" for r in review.get("reasons", [])]
+        if result.get("calibration_id") is not None:
+            note = f": {safe(review['note'])}" if review.get("note") else ""
+            lines.append(f"saved      calibration #{result['calibration_id']} as {review['decision']}{note}")
+        else:
+            lines.append("saved      nothing (FAIL: --reject REASON or --override NOTE decides)")
+        text += "\n" + "\n".join(lines)
+    return text
 
 
 def _save(args: argparse.Namespace, capture, result: dict) -> int:
-    """save_result with the database's errors as one line and exit 2 (as the db commands do)."""
-    import sqlite3
+    """Judge, then save as the rules say (module docstring); the exit status.
 
+    The database's errors are one line and exit 2 (as the db commands do)."""
+    import sqlite3
+    import sys
+
+    from db.store import DuplicateCapture
     from station.cli import db_path
     from station.errors import InputError
-    from station.store import save_result
+    from station.procedures.review import review_record
+    from station.store import judge, save_result
 
     path = db_path(args)
     try:
-        return save_result(path, capture, result, device_id=args.device, operator=args.operator)
+        assessment, _, previous = judge(path, result, args.device)
+    except (sqlite3.Error, OSError, ValueError) as exc:
+        raise InputError(path, None, f"cannot read the station database: {exc}") from None
+    if args.override is not None:
+        decision, note = ("override" if assessment.failed else "accepted"), args.override
+    elif args.reject is not None:
+        decision, note = "rejected", args.reject
+    elif assessment.failed:
+        decision, note = None, ""
+    else:
+        decision, note = "accepted", ""
+    review = {"verdict": assessment.verdict, "reasons": list(assessment.reasons), "decision": decision,
+              "note": note.strip(), "previous_calibration_id": previous["id"] if previous else None}
+    result["review"] = review
+    if decision is None:
+        print(f"station: FAIL, not saved ({'; '.join(assessment.reasons)}); --reject REASON stores it as "
+              "rejected, --override NOTE accepts it", file=sys.stderr)
+        return 1
+    stored = dict(review_record(assessment, decision, note), previous_calibration_id=review["previous_calibration_id"])
+    try:
+        result["calibration_id"] = save_result(path, capture, {k: v for k, v in result.items() if k != "review"},
+                                               device_id=args.device, operator=args.operator,
+                                               accepted=decision != "rejected", review=stored)
+    except DuplicateCapture as exc:
+        raise InputError(args.file, None, str(exc)) from None
     except (sqlite3.Error, OSError) as exc:
         raise InputError(path, None, f"cannot save to the station database: {exc}") from None
     except ValueError as exc:  # the store's refusals (e.g. an empty device id)
         raise InputError(None, None, str(exc)) from None
+    return 3 if decision == "rejected" else 0

@@ -38,6 +38,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, "--average-s and --speed must be positive")
     if args.headless:
         return headless(args, None if args.no_save else db_path(args))
+    import sys
+
+    if not (sys.stdin.isatty() and sys.stdout.isatty()):  # (without one Textual spins a core)
+        raise InputError(None, None, "the demo on screen needs a terminal (stdin and stdout are not one); "
+                         "without one: station demo --headless")
     from station.app import make_app
     from station.sources import SimSource
 
@@ -158,8 +163,14 @@ def _calibrate_and_save(guide, device_id: str, db: str | None, out) -> int:
     result = calibrate_capture(capture)
     print(format_text(result), file=out)
     if db:
-        from station.store import save_result
+        from station.procedures.review import review_record
+        from station.store import judge, save_result
 
-        cal_id = save_result(db, capture, result, device_id=device_id)
+        assessment, _, _ = judge(db, result, device_id)
+        if assessment.failed:  # the scripted operator never decides for a person
+            print("FAIL, not saved: " + "; ".join(assessment.reasons), file=out)
+            return 1
+        cal_id = save_result(db, capture, result, device_id=device_id,
+                             review=review_record(assessment, "accepted"), time=getattr(guide, "started", None))
         print(f"saved as calibration #{cal_id} in {db}", file=out)
     return 0

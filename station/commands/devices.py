@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from station.commands._dbutil import add_db_option, fmt_num, open_store, print_json, require_device
@@ -23,6 +24,11 @@ def register(subparsers) -> None:
     add.add_argument(
         "--tolerance", action="append", default=[], metavar="NAME=VALUE",
         help="largest acceptable change of a parameter (B[0]) or block (B) from its calibrated value; repeatable",
+    )
+    add.add_argument(
+        "--limit", action="append", default=[], metavar="NAME=LOW:HIGH",
+        help="absolute limits of a parameter (M[0][0]=0.98:1.02) or block (B=-0.5:0.5), in its units; "
+             "leave one end empty for none (S=0.9:); repeatable",
     )
     add.set_defaults(func=_add)
 
@@ -54,6 +60,26 @@ def _tolerances(items: list[str]) -> dict | None:
     return out
 
 
+def _limits(items: list[str]) -> dict | None:
+    if not items:
+        return None
+    out = {}
+    for item in items:
+        name, sep, span = item.partition("=")
+        low, colon, high = span.partition(":")
+        try:
+            pair = [float(low) if low.strip() else None, float(high) if high.strip() else None]
+        except ValueError:
+            pair = None
+        if (not sep or not colon or not name or pair is None or pair == [None, None]
+                or any(x is not None and not math.isfinite(x) for x in pair)
+                or (None not in pair and pair[0] > pair[1])):
+            raise InputError(None, None, f"--limit {item!r}: expected NAME=LOW:HIGH with LOW <= HIGH "
+                                         "(one end may be empty)")
+        out[name] = pair
+    return out
+
+
 def _add(args: argparse.Namespace) -> int:
     if args.interval_days is not None and not args.interval_days > 0:
         raise InputError(None, None, f"--interval-days must be positive, got {args.interval_days:g}")
@@ -66,6 +92,7 @@ def _add(args: argparse.Namespace) -> int:
             interval_days=args.interval_days,
             sensor_kinds=args.kinds,
             tolerances=_tolerances(args.tolerance),
+            limits=_limits(args.limit),
         )
     sys.stdout.write(f"{'updated' if existed else 'added'} device {safe(device['id'])}\n")
     return 0
@@ -113,6 +140,8 @@ def _show(args: argparse.Namespace) -> int:
         f"sensor kinds: {safe(', '.join(device['sensor_kinds']) or '-')}",
         f"interval: {fmt_num(device['interval_days'])} days" if device["interval_days"] else "interval: -",
         "tolerances: " + (", ".join(f"{safe(k)}={fmt_num(v)}" for k, v in device["tolerances"].items()) or "-"),
+        "limits: " + (", ".join(f"{safe(k)}={'' if lo is None else format(lo, 'g')}:{'' if hi is None else format(hi, 'g')}"
+                                for k, (lo, hi) in device.get("limits", {}).items()) or "-"),
         f"created: {safe(device['created'])}",
         f"calibrations: {len(history)}",
     ]

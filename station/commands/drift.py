@@ -34,13 +34,7 @@ def _significance(t: dict) -> float:
 def _plot(trends: list[dict]) -> str:
     import plotext as plt
 
-    from db.params import parse_time
-
-    def year(text: str) -> float:
-        dt = parse_time(text)
-        start = dt.replace(month=1, day=1, hour=0, minute=0, second=0)
-        end = start.replace(year=start.year + 1)
-        return dt.year + (dt - start).total_seconds() / (end - start).total_seconds()
+    from station.timeaxis import time_axis
 
     from station.term import color_enabled
 
@@ -56,7 +50,8 @@ def _plot(trends: list[dict]) -> str:
         if not color:
             plt.theme("clear")
         plt.plotsize(width, 15)
-        xs = [year(x) for x in t["times"]]
+        axis = time_axis(t["times"])
+        xs = axis["x"]
         ys = t["values"]
         if all(s is not None for s in t["sigmas"]):
             plt.error(xs, ys, yerr=t["sigmas"])
@@ -64,12 +59,15 @@ def _plot(trends: list[dict]) -> str:
         if t["rate_per_year"] is not None and t["trend_value_at_last"] is not None:
             y_last = t["trend_value_at_last"]
             ends = [xs[0], xs[-1]]
-            plt.plot(ends, [y_last + t["rate_per_year"] * (x - xs[-1]) for x in ends], label="trend")
+            per_day = t["rate_per_year"] / 365.25  # x is in days
+            plt.plot(ends, [y_last + per_day * (x - xs[-1]) for x in ends], label="trend")
         rate = "" if t["rate_per_year"] is None else (
             f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} /year"
         )
         plt.title(safe(f"{t['procedure']} {t['param']}{rate}"))
-        plt.xlabel("year")
+        plt.xlim(*axis["xlim"])
+        plt.xticks(axis["ticks"], axis["labels"])
+        plt.xlabel(axis["label"])
         text = plt.build()
         figures.append(text if color else plt.uncolorize(text))
     return "\n".join(figures)

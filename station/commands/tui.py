@@ -23,17 +23,22 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import sys
+
     from station.app import make_app
     from station.cli import db_path
+    from station.errors import InputError
 
     if not args.speed > 0:
         from station.errors import InputError
 
         raise InputError(None, None, f"--speed must be positive, got {args.speed:g}")
     if args.average_s is not None and not args.average_s > 0:
-        from station.errors import InputError
-
         raise InputError(None, None, f"--average-s must be positive, got {args.average_s:g}")
+    if not (sys.stdin.isatty() and sys.stdout.isatty()):  # (without one Textual spins a core)
+        raise InputError(None, None, "the operator console needs a terminal (stdin and stdout are not one); "
+                         "for scripts: station demo --headless, station calibrate FILE")
+
     device = None
     start = None
     if args.port:

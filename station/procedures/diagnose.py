@@ -99,7 +99,7 @@ def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
     return out, diag, inp
 
 
-def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True) -> str:
+def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plot_width: int = 78) -> str:
     from station.calibrate import jsonable
 
     r = jsonable(result)
@@ -148,7 +148,7 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True) -> 
     L.append("verdict     " + (", ".join(r["verdict"]) if r["verdict"] else "none"))
     L += _per_group(diag, inp.group_kind)
     if plots:
-        L.append(_plots(diag))
+        L.append(_plots(diag, plot_width))
     return "\n".join(L)
 
 
@@ -177,8 +177,9 @@ def _per_group(diag, kind: str) -> list[str]:
     return out
 
 
-def _plots(diag) -> str:
-    """Measured − simulated (the fitted baseline, primary rows) against each driver."""
+def _plots(diag, width: int = 78) -> str:
+    """Measured − simulated (the fitted baseline, primary rows) against each driver, each
+    ``width`` columns wide (the screen passes its own width: a wider plot wraps)."""
     try:
         import plotext as plt
     except ImportError:  # pragma: no cover - plotext is a dependency
@@ -197,7 +198,7 @@ def _plots(diag) -> str:
         xs, ys = x[ok][::step], res[ok][::step]
         plt.clear_figure()
         plt.theme("clear")
-        plt.plot_size(78, 13)
+        plt.plot_size(width, 13)
         plt.scatter(xs.tolist(), ys.tolist(), marker="dot")
         plt.title(f"measured − simulated baseline [{prob.unit}] against {name}")
         out.append(plt.build())

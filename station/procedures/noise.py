@@ -98,9 +98,15 @@ def noise_report(gyro, sample_rate_hz: float, gyro_unit: str | None) -> NoiseRep
                        sigma_mean_deg_h=np.asarray(me.se) / DEG_H_RAD_S, noise_model=model, mean_error=me)
 
 
+# The longest still record a P4 run is worth: beyond a day the fitted noise model is
+# extrapolated far past any record it was fitted on, and the floor is within a hair of
+# the accuracy asked. Longer needs are "never" (README: "never" when the floor is above).
+PRACTICAL_RECORD_S = 24 * 3600.0
+
+
 def format_duration(seconds: float) -> str:
-    """'45 s', '12 min', '3.2 h', 'never' (inf)."""
-    if not math.isfinite(seconds):
+    """'45 s', '12 min', '3.2 h', 'never' (inf, or beyond ``PRACTICAL_RECORD_S``)."""
+    if not math.isfinite(seconds) or seconds > PRACTICAL_RECORD_S:
         return "never"
     if seconds < 120:
         return f"{seconds:.0f} s"

@@ -1,9 +1,18 @@
-"""What the Results screen shows, computed without a screen: parameters with their
-change from the previous calibration (in sigma), tolerance checks, P1 residuals.
+"""What the Results screen, ``calibrate --save`` and the report show, computed without a
+screen: parameters with their units and change from the previous calibration (in sigma),
+the tolerance and limit checks, the fit's own checks, the verdict, P1 residuals.
 
 Tolerances are the device's (``db.store.Store.get_device(...)['tolerances']``): the
 largest change of a parameter (or block, e.g. ``B``) from the value in use that is still
 acceptable, in the parameter's units; ``residual_rms`` limits the fit's residual.
+Limits (``...['limits']``) are absolute: ``{name or block: [low, high]}`` (either end
+None). The previous calibration is the calibration in use: the last *accepted* one
+(``Store.reference``); a rejected calibration is never compared against.
+
+A result FAILS when a parameter leaves its tolerance or limits, the residual exceeds its
+tolerance, or the fit fails its own checks (``fit_checks``). A failed result is saved only
+by an explicit decision: rejected with a reason, or accepted as an override with a note
+(``review_record``).
 """
 from __future__ import annotations
 
@@ -50,9 +59,16 @@ class ParamRow:
     change_sigma: float | None = None  # (value - previous) / sqrt(sigma² + sigma_prev²)
     tolerance: float | None = None
     ok: bool | None = None  # None: nothing to check against
+    unit: str = ""
+    limit: tuple | None = None  # (low, high), either may be None
+    in_limits: bool | None = None
 
 
-def param_rows(result: dict, previous: dict | None = None, tolerances: dict | None = None) -> list[ParamRow]:
+def param_rows(result: dict, previous: dict | None = None, tolerances: dict | None = None,
+               limits: dict | None = None) -> list[ParamRow]:
+    """One row per scalar parameter; ``ok`` is False when it changed more than its
+    tolerance from ``previous`` or left its absolute ``limits``."""
+    limits = limits or {}
     values = flatten(result.get("params", {}))
     sigmas = flatten(result.get("uncertainty", {}))
     prev_v = flatten(previous.get("params", {})) if previous else {}
@@ -71,14 +87,151 @@ def param_rows(result: dict, previous: dict | None = None, tolerances: dict | No
             row.tolerance = float(tol)
             if row.previous is not None:
                 row.ok = abs(v - row.previous) <= row.tolerance
+        row.unit = param_unit(result, name)
+        lim = limits.get(name, limits.get(_block(name)))
+        if lim is not None:
+            low, high = (None if x is None else float(x) for x in lim)
+            row.limit = (low, high)
+            if _finite(v):
+                row.in_limits = (low is None or v >= low) and (high is None or v <= high)
+            else:
+                row.in_limits = False
+            row.ok = row.in_limits if row.ok is None else (row.ok and row.in_limits)
         rows.append(row)
     return rows
+
+
+def param_unit(result: dict, name: str) -> str:
+    """The unit of one scalar parameter (``B[0]``, ``beam1.alpha_deg``), '' when dimensionless."""
+    block = _block(name)
+    leaf = name.rsplit(".", 1)[-1]
+    units = result.get("units") if isinstance(result.get("units"), dict) else {}
+    if block in units:
+        return str(units[block])
+    if leaf.endswith("_deg") or leaf in ("pitch_deg", "roll_deg"):
+        return "°"
+    if leaf.endswith("_nT"):
+        return "nT"
+    if leaf.endswith("_mps"):
+        return "m/s"
+    proc = result.get("procedure")
+    if proc == "compass":
+        mag = result.get("mag_unit") or "raw"
+        return {"hard_iron": mag, "soft_iron": f"nT per {mag}"}.get(block, "")
+    if proc == "accel-tabletop":
+        return {"B": "m/s^2", "M": "m/s^2 per raw unit"}.get(block, "")
+    if proc == "accel-centrifuge":
+        return {"S": "g per g", "b": "g", "D": "g/g^2", "gamma": "rad"}.get(block, "")
+    if proc == "gyro-drift" and block in ("drift", "earth_rate_body"):
+        return "rad/s"
+    if proc == "ldv" and leaf == "dK":
+        return "1"
+    return ""
+
+
+def result_unit(result: dict) -> str:
+    """The unit of the result's residual_rms."""
+    units = result.get("units") if isinstance(result.get("units"), dict) else {}
+    if units.get("residual_rms"):
+        return str(units["residual_rms"]).split(" (")[0]
+    from station.procedures import registry
+
+    entry = registry.get(result.get("procedure"))
+    return entry.result_unit if entry is not None else ""
+
+
+def fit_checks(result: dict, chi2_limit: float = 100.0) -> list[str]:
+    """The fit's own checks, failed ones as one line each ([] when it passes them).
+
+    - non-finite parameters or residual: the fit did not converge;
+    - every parameter's σ at least its |value| (two or more): the data determined none;
+    - a reduced χ² above ``chi2_limit`` (residual RMS more than √100 = 10 times the
+      measured noise), only when the noise was measured rather than taken from the
+      residuals themselves.
+    """
+    out = []
+    values = flatten(result.get("params", {}))
+    sigmas = flatten(result.get("uncertainty", {}))
+    if any(v is None for v in values.values()) or not (result.get("residual_rms") is None
+                                                        or _finite(result.get("residual_rms"))):
+        out.append("the fit returned non-finite values")
+    pairs = [(v, sigmas[k]) for k, v in values.items() if _finite(v) and _finite(sigmas.get(k))]
+    # A gyro drift indistinguishable from zero is a good gyro, not a failed fit.
+    if result.get("procedure") != "gyro-drift" and len(pairs) >= 2 and all(s >= abs(v) for v, s in pairs):
+        out.append(f"every parameter's σ is larger than its value ({len(pairs)} of {len(pairs)}): "
+                   "the data determine none of them")
+    # Where the noise is taken from the residuals, χ² cannot see a misfit: a residual of
+    # 5 % of g on an accelerometer means the model does not describe the data at all (a
+    # working triad on a bench leaves milli-g; e.g. a centrifuge that never turned).
+    res = result.get("residual_rms")
+    bound = {"accel-tabletop": 0.05 * 9.80665, "accel-centrifuge": 0.05}.get(result.get("procedure"))
+    if bound is not None and _finite(res) and res > bound:
+        unit = "m/s²" if result.get("procedure") == "accel-tabletop" else "g"
+        out.append(f"residual {res:.3g} {unit} RMS is above 5 % of g ({bound:.3g} {unit}): "
+                   "the model does not describe these data")
+    chi2 = result.get("reduced_chi2")
+    noise = str(result.get("noise") or "")
+    if _finite(chi2) and chi2 > chi2_limit and not noise.startswith("estimated"):
+        out.append(f"residual {math.sqrt(chi2):.3g} times the measured noise (reduced χ² {chi2:.3g}): "
+                   "the model does not describe these data")
+    return out
+
+
+@dataclass
+class Assessment:
+    """How a result fares: ``verdict`` pass | fail | no tolerance, and why."""
+
+    verdict: str
+    reasons: list[str]
+    rows: list[ParamRow]
+    checks: list[str]  # the fit's own failed checks (also in reasons)
+
+    @property
+    def failed(self) -> bool:
+        return self.verdict == "fail"
+
+
+def assess(result: dict, previous: dict | None = None, device: dict | None = None) -> Assessment:
+    """Judge ``result`` against the device's tolerances and limits, the calibration in use
+    (``previous``, an accepted calibration or None) and the fit's own checks."""
+    device = device or {}
+    tolerances = device.get("tolerances") or {}
+    limits = device.get("limits") or {}
+    rows = param_rows(result, previous, tolerances, limits)
+    word, reasons = verdict(rows, result, tolerances)
+    checks = fit_checks(result)
+    if checks:
+        word = "fail"
+        reasons = reasons + checks
+    return Assessment(word, reasons, rows, checks)
+
+
+def review_record(assessment: Assessment, decision: str, note: str = "") -> dict:
+    """What the database stores with the calibration (``calibrations.review``).
+
+    decision: ``accepted`` (a result that did not fail), ``rejected`` (needs a reason
+    when it failed: the note), or ``override`` (a failed result accepted; needs a note).
+    """
+    note = (note or "").strip()
+    if decision == "accepted" and assessment.failed:
+        raise ValueError("a failed result is accepted only as an override with a note")
+    if decision in ("rejected", "override") and assessment.failed and not note:
+        raise ValueError(f"{'rejecting' if decision == 'rejected' else 'overriding'} a failed result needs a note")
+    return {"verdict": assessment.verdict, "reasons": list(assessment.reasons), "decision": decision, "note": note}
 
 
 def verdict(rows: list[ParamRow], result: dict, tolerances: dict | None = None) -> tuple[str, list[str]]:
     """("pass" | "fail" | "no tolerance", reasons)."""
     tolerances = tolerances or {}
-    reasons = [f"{r.name} changed {r.value - r.previous:+.3g} (tolerance {r.tolerance:g})" for r in rows if r.ok is False]
+    reasons = []
+    for r in rows:
+        u = f" {r.unit}" if r.unit and r.unit != "1" else ""
+        if r.tolerance is not None and r.previous is not None and abs(r.value - r.previous) > r.tolerance:
+            reasons.append(f"{r.name} changed {r.value - r.previous:+.3g}{u} (tolerance {r.tolerance:g}{u})")
+        if r.in_limits is False:
+            lo, hi = r.limit
+            span = f"{'-∞' if lo is None else format(lo, 'g')} … {'∞' if hi is None else format(hi, 'g')}"
+            reasons.append(f"{r.name} = {_fmt(r.value)}{u} outside its limits {span}{u}")
     checked = any(r.ok is not None for r in rows)
     tol_res = tolerances.get("residual_rms")
     res = result.get("residual_rms")
@@ -89,6 +242,10 @@ def verdict(rows: list[ParamRow], result: dict, tolerances: dict | None = None) 
     if not checked:
         return "no tolerance", []
     return ("fail" if reasons else "pass"), reasons
+
+
+def _fmt(x) -> str:
+    return format(x, ".6g") if _finite(x) else "—"
 
 
 def p1_residuals(capture, result: dict) -> list[tuple[str, float, float]]:

@@ -9,6 +9,7 @@ class in the MRO.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Callable
@@ -64,6 +65,14 @@ class GuidedScreenMixin:
             return
         self.notify(said, timeout=2)
 
+    def action_ask_abort(self) -> None:
+        """`a`: abort only once the operator confirms (y / Enter; n / Esc keeps the run)."""
+        from station.screens.decide import ConfirmScreen
+
+        keep = " (captured positions are kept: Resume continues)" if self.app.session.procedure == \
+            "accel-tabletop" else " (nothing of this run is saved)"
+        self.app.push_screen(ConfirmScreen("Abort this run?" + keep), lambda yes: self.action_abort() if yes else None)
+
     def _start_guide(self, src, make_guide: Callable) -> bool:
         """Start ``src`` and set ``self.guide`` (and the session's) to ``make_guide()``;
         False, with a SourceFailed posted, when either fails."""
@@ -84,6 +93,13 @@ class GuidedScreenMixin:
         ``update(batch)`` feeds the guide and returns its status (under the lock);
         ``status()`` is the LiveUpdate payload (under the lock); ``accept(batch)`` skips
         batches the guide cannot use; ``with_hz`` adds the measured post rate."""
+        base = src.stats()  # the counters count this procedure only, not what came before it
+
+        def counted():
+            st = src.stats()
+            return dataclasses.replace(st, samples=st.samples - base.samples, dropped=st.dropped - base.dropped,
+                                       parse_errors=st.parse_errors - base.parse_errors)
+
         period = 1.0 / self.app.session.refresh_hz
         next_post = 0.0
         posts = 0
@@ -105,9 +121,9 @@ class GuidedScreenMixin:
                 if with_hz:
                     posts += 1
                     hz = posts / (now - t_posts) if now > t_posts else math.nan
-                    self.post_message(LiveUpdate(payload, src.stats(), hz))
+                    self.post_message(LiveUpdate(payload, counted(), hz))
                 else:
-                    self.post_message(LiveUpdate(payload, src.stats()))
+                    self.post_message(LiveUpdate(payload, counted()))
                 next_post = max(next_post + period, now - period)  # 15 Hz on average
             time.sleep(0.02)  # 50 batches a second: ~20 samples each at 1 kHz
 

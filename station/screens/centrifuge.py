@@ -57,7 +57,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         Binding("m", "manual", "Type row"),
         Binding("s", "skip", "Skip"),
         Binding("r", "redo", "Redo"),
-        Binding("a", "abort", "Abort"),
+        Binding("a", "ask_abort", "Abort"),
         Binding("f", "finish", "Fit now"),
         Binding("p", "sim_place", "Spin (sim)"),
         Binding("escape", "leave_entry", "Back", show=False),

@@ -38,7 +38,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
     BINDINGS = [
         Binding("f", "finish", "Finish now"),
         Binding("r", "restart", "Restart"),
-        Binding("a", "abort", "Abort"),
+        Binding("a", "ask_abort", "Abort"),
         Binding("p", "sim_sweep", "Sweep (sim)"),
     ]
 

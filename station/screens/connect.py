@@ -19,6 +19,8 @@ from station.textsafe import tui_markup, tui_text
 
 SIM = "sim"
 OTHER = "other"
+# what a lab's report states, remembered between sessions: settings name -> input
+LAB_FIELDS = {"operator": "#operator", "place": "#place", "reference_equipment": "#reference"}
 
 
 class ConnectScreen(Screen):
@@ -30,12 +32,16 @@ class ConnectScreen(Screen):
     ConnectScreen #protocol { width: 20; }
     ConnectScreen #port { width: 1fr; }
     ConnectScreen #serial, ConnectScreen #model, ConnectScreen #known { width: 1fr; }
+    ConnectScreen #operator, ConnectScreen #place, ConnectScreen #reference { width: 1fr; }
+    ConnectScreen .row Label.inner { width: auto; padding: 0 1; }
+    ConnectScreen Input:focus, ConnectScreen Select:focus > SelectCurrent { background: $accent 30%; }
+    ConnectScreen Button:focus { text-style: bold reverse; }
     ConnectScreen #average { width: 12; }
     ConnectScreen #buttons { height: 1; margin-top: 1; }
     ConnectScreen #buttons Button { margin-right: 2; }
     ConnectScreen #due { color: $warning; padding: 0 1; height: auto; }
     ConnectScreen #status { padding: 0 1; height: auto; }
-    ConnectScreen #title { text-style: bold; padding: 0 1; margin-bottom: 1; }
+    ConnectScreen #title { text-style: bold; padding: 0 1; }
     """
 
     BINDINGS = [
@@ -63,14 +69,23 @@ class ConnectScreen(Screen):
                             compact=True)
             with Horizontal(classes="row"):
                 yield Label("Serial number")
-                yield Input(value=s.device_id, placeholder="device under test (default: what it reports)",
-                            id="serial", compact=True)
-            with Horizontal(classes="row"):
-                yield Label("Model")
+                yield Input(value=s.device_id, placeholder="default: what it reports", id="serial", compact=True)
+                yield Label("model", classes="inner")
                 yield Input(value=s.model, placeholder="e.g. ADXL335 triad", id="model", compact=True)
             with Horizontal(classes="row"):
                 yield Label("Registered")
                 yield Select([], prompt="pick a registered device", id="known", compact=True)
+            # entered once, remembered in the database (settings), written into each capture
+            with Horizontal(classes="row"):
+                yield Label("Operator")
+                yield Input(value=s.extra.get("operator", ""), placeholder="your name", id="operator", compact=True)
+                yield Label("place", classes="inner")
+                yield Input(value=s.extra.get("place", ""), placeholder="lab, bench", id="place", compact=True)
+            with Horizontal(classes="row"):
+                yield Label("Reference")
+                yield Input(value=s.extra.get("reference_equipment", ""),
+                            placeholder="reference equipment (table, turntable, IMU: model and serial)",
+                            id="reference", compact=True)
             with Horizontal(classes="row"):
                 yield Label("Procedure")
                 guided = registry.guided()
@@ -128,10 +143,18 @@ class ConnectScreen(Screen):
             store = self.app.session.open_store()
             devices = store.list_devices() if store is not None else []
             self.post_message(StoreLoaded("devices", devices))
+            if store is not None:
+                self.post_message(StoreLoaded("settings", store.settings()))
         except Exception as exc:  # noqa: BLE001
             self.post_message(StoreLoaded("devices", [], error=str(exc)))
 
     def on_store_loaded(self, message: StoreLoaded) -> None:
+        if message.what == "settings":  # fill what the operator has not typed yet
+            for key, widget in LAB_FIELDS.items():
+                box = self.query_one(widget, Input)
+                if not box.value and message.data.get(key):
+                    box.value = message.data[key]
+                    self.app.session.extra.setdefault(key, message.data[key])
         if message.what == "devices":
             known = self.query_one("#known", Select)
             self._devices = {d["id"]: d for d in message.data}
@@ -238,6 +261,8 @@ class ConnectScreen(Screen):
         s.procedure = self.query_one("#procedure", Select).value
         s.model = self.query_one("#model", Input).value.strip()
         s.device_id = self.query_one("#serial", Input).value.strip()
+        for key, widget in LAB_FIELDS.items():
+            s.extra[key] = self.query_one(widget, Input).value.strip()
         choice = self.query_one("#source", Select).value
         port = self.query_one("#port", Input).value.strip()
         if choice == OTHER and not port and not (s.source is not None and s.source.kind == "serial"):
@@ -276,6 +301,7 @@ class ConnectScreen(Screen):
 
                 store = s.open_store() or Store(s.db_path)
                 s.extra["_store"] = store
+                store.set_settings({k: s.extra.get(k, "") for k in LAB_FIELDS})
                 known = store.get_device(device_id)
                 if known is None or (s.model and known.get("model") != s.model):
                     store.add_device(device_id, model=s.model or None)

@@ -50,7 +50,8 @@ class DiagnoseScreen(Screen):
             from station.procedures.diagnose import analyse, format_text
 
             result, diag, inp = analyse(capture)
-            self.post_message(StoreLoaded("diagnose", format_text(result, diag, inp, plots=True)))
+            width = max(40, self.size.width - 6)  # padding and the scroll bar: a wider plot wraps
+            self.post_message(StoreLoaded("diagnose", format_text(result, diag, inp, plots=True, plot_width=width)))
         except Exception as exc:  # noqa: BLE001 - one line on screen
             self.post_message(StoreLoaded("diagnose", None, error=str(exc)))
 

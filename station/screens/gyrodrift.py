@@ -37,7 +37,7 @@ class HoldScreen(GuidedScreenMixin, Screen):
     HoldScreen #readouts { height: 3; margin-top: 1; }
     HoldScreen #message { height: 1; text-style: bold; margin-top: 1; }
     """
-    BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "abort", "Abort")]
+    BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "ask_abort", "Abort")]
 
     def __init__(self) -> None:
         super().__init__()
@@ -149,7 +149,7 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
     ReferenceScreen #readouts { height: 6; margin-top: 1; }
     ReferenceScreen #message { height: 2; text-style: bold; margin-top: 1; }
     """
-    BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "abort", "Abort"),
+    BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "ask_abort", "Abort"),
                 Binding("p", "sim_table", "Rate table (sim)")]
     SUBJECT = "P4 gyro drift, reference IMU"
 

@@ -12,7 +12,15 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 from textual_plotext import PlotextPlot
 
+from station.procedures import registry
+from station.timeaxis import time_axis
 from station.widgets.title import TitleBar
+
+
+def _short(procedure: str) -> str:
+    """P1..P5 for the table (the procedure's name is on its Results and in the report)."""
+    return {"accel-tabletop": "P1", "accel-centrifuge": "P2", "compass": "P3", "gyro-drift": "P4",
+            "ldv": "P5"}.get(procedure, procedure)
 from station.messages import StoreLoaded
 from station.textsafe import safe, tui_markup
 
@@ -21,7 +29,8 @@ class HistoryScreen(Screen):
     SUB_TITLE = "devices and calibrations"
     CSS = """
     HistoryScreen #due { height: auto; padding: 0 1; color: $warning; }
-    HistoryScreen #devices { width: 34; height: 1fr; }
+    HistoryScreen #devices { width: 26; height: 1fr; }
+    HistoryScreen DataTable:focus { border-left: thick $accent; }
     HistoryScreen #right { width: 1fr; height: 1fr; }
     HistoryScreen #calibrations { height: 1fr; }
     HistoryScreen #plot { height: 1fr; min-height: 8; }
@@ -53,9 +62,9 @@ class HistoryScreen(Screen):
 
     def on_mount(self) -> None:
         t = self.query_one("#devices", DataTable)
-        t.add_columns("device", "cals", "status")
+        t.add_columns("device", "n", "status")
         c = self.query_one("#calibrations", DataTable)
-        c.add_columns("#", "date", "procedure", "residual", "in use")
+        c.add_columns("#", "time (UTC)", "proc", "residual", "state")
         self.load()
 
     @work(thread=True, exclusive=True, group="history", exit_on_error=False, description="read devices")
@@ -109,8 +118,13 @@ class HistoryScreen(Screen):
             for h in reversed(self.history):
                 res = h["residual_rms"]
                 in_use = h["accepted"] and h.get("superseded_by") is None
-                c.add_row(str(h["id"]), tui_markup(h["time"][:10]), tui_markup(h["procedure"]),
-                          f"{res:.3g}" if isinstance(res, (int, float)) else "—", "✓" if in_use else "",
+                entry = registry.get(h["procedure"])
+                unit = entry.result_unit if entry is not None else ""
+                decision = (h.get("review") or {}).get("decision")
+                state = "in use" if in_use else ("rejected" if not h["accepted"] else
+                                                 ("override" if decision == "override" else "old"))
+                c.add_row(str(h["id"]), h["time"][:16].replace("T", " "), tui_markup(_short(h["procedure"])),
+                          f"{res:.3g} {unit}" if isinstance(res, (int, float)) else "—", state,
                           key=str(h["id"]))
             # keep the parameter the operator chose when the same device is read again
             # (the first row highlight can ask for it a second time)
@@ -147,13 +161,25 @@ class HistoryScreen(Screen):
             w.refresh()
             return
         d = self.drift[self.param_index]
-        x = list(range(1, len(d["values"]) + 1))
+        axis = time_axis(d["times"], n_ticks=3)
+        x = axis["x"]
         plt.plot(x, d["values"], marker="dot")
         if all(isinstance(s, (int, float)) and math.isfinite(s) for s in d["sigmas"] or []) and d["sigmas"]:
             plt.plot(x, [v + s for v, s in zip(d["values"], d["sigmas"])], color="gray")
             plt.plot(x, [v - s for v, s in zip(d["values"], d["sigmas"])], color="gray")
+        plt.xlim(*axis["xlim"])
+        plt.xticks(axis["ticks"], axis["labels"])
+        unit = self._unit(d)
         rate = d.get("rate_per_year")
-        rate_txt = f", {rate:+.3g}/year" if isinstance(rate, (int, float)) else ""
-        plt.title(f"{safe(self.device_id)} {safe(d['param'])} ({self.param_index + 1}/{len(self.drift)}){rate_txt}  p: next")
-        plt.xlabel("calibration")
+        rate_txt = f" {rate:+.3g} {unit}/yr" if isinstance(rate, (int, float)) else ""
+        plt.title(f"{safe(d['param'])} [{unit or '1'}] {self.param_index + 1}/{len(self.drift)}{rate_txt}")
+        plt.xlabel(axis["label"])
         w.refresh()
+
+    def _unit(self, d: dict) -> str:
+        from station.procedures.review import param_unit
+
+        for h in reversed(self.history):
+            if h["procedure"] == d["procedure"]:
+                return param_unit(dict(h["extra"], procedure=h["procedure"], params=h["params"]), d["param"])
+        return ""

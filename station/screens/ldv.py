@@ -51,7 +51,7 @@ class LdvScreen(GuidedScreenMixin, Screen):
     BINDINGS = [
         Binding("f", "finish", "Finish now"),
         Binding("r", "restart", "Restart"),
-        Binding("a", "abort", "Abort"),
+        Binding("a", "ask_abort", "Abort"),
         Binding("d", "sim_drive", "Drive/stop (sim)"),
         Binding("t", "sim_turns", "Turns (sim)"),
     ]

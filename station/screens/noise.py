@@ -17,7 +17,7 @@ from textual.widgets import Footer, Input, Label, Static
 from textual_plotext import PlotextPlot
 
 from station.messages import Exported
-from station.procedures.noise import AXES, format_duration
+from station.procedures.noise import AXES, PRACTICAL_RECORD_S, format_duration
 from station.screens.export import export_files
 from station.screens.gyrodrift import HoldScreen
 from station.widgets.title import TitleBar
@@ -148,9 +148,10 @@ class AllanScreen(Screen):
         self.query_one("#table", Static).update(self._table(need))
         worst = max(need)
         self.query_one("#status", Static).update(
-            f"For 1σ ≤ {acc:g} °/h a still P4 record needs {format_duration(worst)}." if math.isfinite(worst)
+            f"For 1σ ≤ {acc:g} °/h a still P4 record needs {format_duration(worst)}."
+            if math.isfinite(worst) and worst <= PRACTICAL_RECORD_S
             else f"No still P4 record reaches 1σ ≤ {acc:g} °/h: the fitted noise floor (bias instability, "
-                 "rate random walk) is above it.")
+                 f"rate random walk) is above it{'' if not math.isfinite(worst) else ' or within a hair of it (> 24 h)'}.")
 
     @on(Input.Submitted, "#accuracy")
     def _accuracy(self, event: Input.Submitted) -> None:

@@ -1,6 +1,7 @@
-"""Results: coefficients ± 1σ, the change from the device's previous calibration (in
-sigma), pass or fail against the device's tolerances, the residual per position; save,
-discard or export."""
+"""Results: coefficients ± 1σ with units, the change from the calibration in use (in
+sigma), pass or fail against the device's tolerances, limits and the fit's own checks,
+the residual per position; save (a FAIL only as rejected with a reason or as an override
+with a note), reject, discard, export, report."""
 from __future__ import annotations
 
 import os
@@ -8,7 +9,7 @@ import os
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Vertical
+from textual.containers import Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
@@ -17,15 +18,17 @@ from station.screens.export import export_files
 from station.widgets.title import TitleBar
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
-from station.procedures.review import p1_residuals, param_rows, verdict
+from station.procedures.review import assess, p1_residuals, param_rows, result_unit, review_record
 from station.textsafe import tui_markup
 
 
 class ResultsScreen(Screen):
     SUB_TITLE = "P1 result"
     CSS = """
+    ResultsScreen #notes { height: auto; max-height: 7; }
     ResultsScreen #summary { height: auto; padding: 0 1; }
     ResultsScreen #tables { height: 1fr; }
+    ResultsScreen DataTable:focus { border-left: thick $accent; }
     ResultsScreen #params { height: 2fr; }
     ResultsScreen #residuals { height: 1fr; }
     ResultsScreen #saved { height: auto; padding: 0 1; text-style: bold; }
@@ -33,8 +36,10 @@ class ResultsScreen(Screen):
 
     BINDINGS = [
         Binding("s", "save", "Save"),
+        Binding("x", "reject", "Reject"),
         Binding("d", "discard", "Discard"),
         Binding("e", "export", "Export"),
+        Binding("r", "report", "Report"),
         Binding("g", "diagnose", "Diagnose"),
         Binding("n", "new", "New run"),
         Binding("f2", "history", "History"),
@@ -47,13 +52,17 @@ class ResultsScreen(Screen):
         self.error = error
         self.previous = previous
         self.tolerances: dict = {}
+        self.device: dict = {}
+        self.assessment = None
+        self.decision: str | None = None
         self.calibration_id: int | None = None
         self.discarded = False
 
     def compose(self) -> ComposeResult:
         proc = (self.result or {}).get("procedure") or self.capture.meta.get("procedure", "")
         yield TitleBar(registry.result_title(proc))
-        yield Static("", id="summary")
+        with VerticalScroll(id="notes"):
+            yield Static("", id="summary")
         with Vertical(id="tables"):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
             yield DataTable(id="residuals", zebra_stripes=True, cursor_type="row")
@@ -75,10 +84,14 @@ class ResultsScreen(Screen):
     def on_store_loaded(self, message: StoreLoaded) -> None:
         if message.what != "device":
             return
-        self.tolerances = (message.data or {}).get("tolerances") or {}
+        self.device = message.data or {}
+        self.tolerances = self.device.get("tolerances") or {}
         self.draw()
         if self.app.session.autosave and self.result is not None:
-            self.action_save()
+            if self.assessment is not None and self.assessment.failed:
+                self.notify("FAIL: not saved without a decision (s)", severity="error", timeout=8)
+            else:
+                self.action_save()
 
     def draw(self) -> None:
         summary = self.query_one("#summary", Static)
@@ -90,33 +103,35 @@ class ResultsScreen(Screen):
             params.display = residuals.display = False
             return
         r = self.result
-        rows = param_rows(r, self.previous, self.tolerances)
-        word, reasons = verdict(rows, r, self.tolerances)
+        a = self.assessment = assess(r, self.previous, self.device)
+        rows, word, reasons = a.rows, a.verdict, a.reasons
         style = {"pass": "b green", "fail": "b white on red"}.get(word, "b")
-        prev = (f"previous #{self.previous['id']} of {self.previous['time'][:10]}" if self.previous
-                else "no previous calibration")
-        entry = registry.get(r.get("procedure"))
-        unit = entry.result_unit if entry is not None else ""
+        prev = (f"previous #{self.previous['id']} of {self.previous['time'][:16].replace('T', ' ')}"
+                if self.previous else "no previous calibration")
+        unit = result_unit(r)
         lines = [f"[{style}] {word.upper()} [/] residual {num(r.get('residual_rms'), '.3g')} {unit} RMS · "
                  f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
-        lines += [f"[red]{x}[/]" for x in reasons[:2]]
+        lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
         cond = (r.get("params") or {}).get("condition_number") if r.get("procedure") == "ldv" else None
         if isinstance(cond, (int, float)):
             lines.append(f"velocity set: cond(HᵀH) = {cond:.3g} (well enough conditioned to separate the angles)")
-        lines += [f"[yellow]warning: {tui_markup(w if len(w) < 68 else w[:66] + '…')}[/]" for w in (r.get("warnings") or [])[:2]]
+        lines += [f"[yellow]warning: {tui_markup(w)}[/]" for w in (r.get("warnings") or [])]
+        if a.failed:
+            lines.append("[b]s[/] decides: save as rejected (reason) or accept as override (note) · "
+                         "[b]n[/] re-do")
         summary.update("\n".join(lines))
         params.clear(columns=True)
-        params.add_columns("param", "value", "± 1σ", "previous", "Δ/σ", "tol", "ok")
+        params.add_columns("param", "value", "± 1σ", "unit", "in use", "Δ/σ", "tol", "ok")
         for row in rows:
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
-            params.add_row(row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), num(row.previous, ".7g"),
+            params.add_row(row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), row.unit, num(row.previous, ".7g"),
                            num(row.change_sigma, "+.1f"), num(row.tolerance, ".3g"), ok)
         gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
         if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
             prev_g = ((self.previous or {}).get("extra") or {}).get("gyro")
             for row in param_rows(gyro, prev_g if isinstance(prev_g, dict) else None):
-                params.add_row("gyro " + row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), num(row.previous, ".7g"),
-                               num(row.change_sigma, "+.1f"), "", "")
+                params.add_row("gyro " + row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), row.unit,
+                               num(row.previous, ".7g"), num(row.change_sigma, "+.1f"), "", "")
             lines.append(f"gyro: {gyro.get('n_rotations')} turns between {gyro.get('n_holds')} holds · gravity "
                          f"carried to {num(gyro.get('direction_rms_deg'), '.3g')}° RMS")
             summary.update("\n".join(lines))
@@ -132,26 +147,63 @@ class ResultsScreen(Screen):
 
     # ------------------------------------------------------------ actions
 
-    def action_save(self) -> None:
+    def _can_save(self) -> bool:
         if self.result is None:
             self.notify("Nothing to save: the fit failed", severity="error")
-            return
+            return False
         if self.calibration_id is not None:
             self.notify(f"Already saved as calibration #{self.calibration_id}")
-            return
+            return False
         if not self.app.session.db_path:
             self.notify("No database: start with --db PATH to save", severity="error")
+            return False
+        return True
+
+    def action_save(self) -> None:
+        if not self._can_save():
             return
+        if self.assessment is not None and self.assessment.failed:
+            from station.screens.decide import DecideScreen
+
+            self.app.push_screen(DecideScreen(self.assessment.reasons, failed=True), self._decided)
+            return
+        self._start_save("accepted", "")
+
+    def action_reject(self) -> None:
+        if not self._can_save():
+            return
+        from station.screens.decide import DecideScreen
+
+        reasons = self.assessment.reasons if self.assessment is not None else []
+        failed = self.assessment is not None and self.assessment.failed
+        self.app.push_screen(DecideScreen(reasons, failed=failed), self._decided)
+
+    def _decided(self, answer) -> None:
+        if answer:
+            self._start_save(*answer)
+
+    def _start_save(self, decision: str, note: str) -> None:
+        self.decision = decision
         self.query_one("#saved", Static).update("Saving…")
-        self.save()
+        self.save(decision, note)
 
     @work(thread=True, exclusive=True, group="save", exit_on_error=False, description="save the calibration")
-    def save(self) -> None:
+    def save(self, decision: str = "accepted", note: str = "") -> None:
         s = self.app.session
         try:
             from station.store import save_result
 
-            cal_id = save_result(s.db_path, self.capture, self.result, device_id=s.device_id)
+            for key in ("operator", "place", "reference_equipment"):  # entered on Connect
+                if s.extra.get(key) and not self.capture.meta.get(key):
+                    self.capture.meta[key] = s.extra[key]
+            review = review_record(self.assessment or assess(self.result), decision, note)
+            review["previous_calibration_id"] = self.previous["id"] if self.previous else None
+            started = getattr(s.guide, "started", None)  # the run's start, with its time of day
+            if not (isinstance(started, str) and started[:10] == str(self.capture.meta.get("date", ""))[:10]):
+                started = None  # not this capture's run (an imported file)
+            cal_id = save_result(s.db_path, self.capture, self.result, device_id=s.device_id,
+                                 operator=s.extra.get("operator") or None, accepted=decision != "rejected",
+                                 review=review, time=started if isinstance(started, str) else None)
             guide = s.guide
             state_path = getattr(guide, "state_path", None)
             if state_path and os.path.exists(state_path):
@@ -166,7 +218,9 @@ class ResultsScreen(Screen):
             label.update(f"[b red]Not saved: {tui_markup(message.error)}[/]")
             return
         self.calibration_id = message.calibration_id
-        label.update(f"[b green]Saved as calibration #{message.calibration_id} for {tui_markup(self.app.session.device_id)}[/]")
+        how = {"rejected": "[b red]Saved as REJECTED calibration", "override": "[b yellow]Saved (override) as calibration"
+               }.get(self.decision, "[b green]Saved as calibration")
+        label.update(f"{how} #{message.calibration_id} for {tui_markup(self.app.session.device_id)}[/]")
         if self.app.session.exit_when_saved:
             self.set_timer(1.0, self.app.exit)
 
@@ -193,6 +247,25 @@ class ResultsScreen(Screen):
         else:
             self.notify("Exported " + ", ".join(os.path.basename(p) for p in message.paths), timeout=6)
             self.exported = message.paths
+
+    def action_report(self) -> None:
+        if self.calibration_id is None:
+            self.notify("Save first (s): the report is of a stored calibration", severity="warning")
+            return
+        self.report()
+
+    @work(thread=True, exclusive=True, group="report", exit_on_error=False, description="write the report")
+    def report(self) -> None:
+        from station.commands.report import write_report
+
+        try:
+            folder = self.app.session.extra.get("export_dir") or os.getcwd()
+            path = os.path.join(folder, f"calibration-{self.calibration_id}.html")
+            store = self.app.session.open_store()
+            write_report(store, self.calibration_id, path)
+            self.post_message(Exported([path]))
+        except Exception as exc:  # noqa: BLE001 - one line on screen
+            self.post_message(Exported([], error=str(exc)))
 
     def action_diagnose(self) -> None:
         from station.screens.diagnose import DiagnoseScreen

@@ -41,7 +41,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
     BINDINGS = [
         Binding("s", "skip", "Skip"),
         Binding("r", "redo", "Redo"),
-        Binding("a", "abort", "Abort"),
+        Binding("a", "ask_abort", "Abort"),
         Binding("f", "finish", "Fit now"),
         Binding("p", "sim_place", "Place (sim)"),
     ]

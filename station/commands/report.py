@@ -1,0 +1,70 @@
+"""`station report CALIBRATION_ID [-o FILE]`: the calibration's report as one self-contained HTML page."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+from station.commands._dbutil import open_store
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "report",
+        help="a calibration's report: one self-contained HTML page to file and sign",
+        description="Write the calibration's report (device, procedure and source, operator, place, date and "
+        "conditions, reference equipment, each parameter with u and U (k = 2) and units, pass/fail, "
+        "the previous calibration and drift, figures, hashes and verify status) as HTML.",
+    )
+    p.add_argument("calibration_id", type=int, metavar="CALIBRATION_ID")
+    p.add_argument(
+        "-o",
+        "--out",
+        default=None,
+        metavar="FILE",
+        help="where to write it (default: calibration-<ID>.html in the current folder; - for stdout)",
+    )
+    p.set_defaults(func=run)
+
+
+def write_report(store, calibration_id: int, out: str | None) -> str:
+    """Render and write atomically; returns the path (or '-' after writing to stdout)."""
+    import sys
+    import tempfile
+
+    from station.report import build_report, render_html
+
+    page = render_html(build_report(store, calibration_id))
+    if out == "-":
+        sys.stdout.write(page)
+        return "-"
+    path = out or f"calibration-{calibration_id}.html"
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".report-", suffix=".html", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(page)
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)  # an ordinary file, not mkstemp's 0600
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def run(args: argparse.Namespace) -> int:
+    from station.errors import InputError
+
+    if args.out not in (None, "-") and not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
+        raise InputError(args.out, None, "its folder does not exist")
+    with open_store(args) as store:
+        try:
+            path = write_report(store, args.calibration_id, args.out)
+        except OSError as exc:
+            raise InputError(args.out, None, f"cannot write the report: {exc.strerror or exc}") from None
+    if path != "-":
+        print(path)
+    return 0

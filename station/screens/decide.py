@@ -1,0 +1,96 @@
+"""Decide what to do with a result: save as rejected with a reason, accept as an override
+with a note, or go back (and re-do). Also a yes/no confirmation for abort and quit.
+
+Both are modal screens that return their answer through ``dismiss`` (the caller passes a
+callback to ``push_screen``): ``DecideScreen`` returns ``("rejected" | "override", note)``
+or None; ``ConfirmScreen`` returns True or False.
+"""
+
+from __future__ import annotations
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.screen import ModalScreen
+from textual.widgets import Input, Static
+
+
+class DecideScreen(ModalScreen):
+    """A failed result: the operator saves it as rejected, or accepts it with a note."""
+
+    CSS = """
+    DecideScreen { align: center middle; }
+    DecideScreen #box { width: 76; height: auto; max-height: 22; border: round $error; background: $surface;
+                        padding: 0 1; }
+    DecideScreen #why { height: auto; max-height: 10; }
+    DecideScreen #error { height: auto; color: $error; }
+    DecideScreen Input:focus { border: tall $accent; }
+    """
+    BINDINGS = [
+        Binding("ctrl+r", "decide('rejected')", "Save as rejected", priority=True),
+        Binding("ctrl+o", "decide('override')", "Accept (override)", priority=True),
+        Binding("escape", "cancel", "Back", priority=True),
+    ]
+
+    def __init__(self, reasons: list[str], failed: bool = True) -> None:
+        super().__init__()
+        self.reasons = reasons
+        self.failed = failed
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="box"):
+            head = (
+                "[b]FAIL[/]: this result is not saved as accepted without a decision."
+                if self.failed
+                else "Save this result as rejected?"
+            )
+            lines = [head] + [f"• {r}" for r in self.reasons[:6]]
+            if len(self.reasons) > 6:
+                lines.append(f"… and {len(self.reasons) - 6} more")
+            yield Static("\n".join(lines), id="why")
+            yield Static("A reason (rejected) or a note saying why it is accepted anyway:")
+            yield Input(placeholder="reason / note (required)", id="note")
+            keys = "ctrl+r save as rejected · " + ("ctrl+o accept as override · " if self.failed else "")
+            yield Static(keys + "esc back (re-do: n new run)")
+            yield Static("", id="error")
+
+    def on_mount(self) -> None:
+        self.query_one("#note", Input).focus()
+
+    def action_decide(self, decision: str) -> None:
+        if decision == "override" and not self.failed:
+            return
+        note = self.query_one("#note", Input).value.strip()
+        if not note:
+            self.query_one("#error", Static).update("Type a reason or note first: it is stored with the result.")
+            return
+        self.dismiss((decision, note))
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class ConfirmScreen(ModalScreen):
+    """y / Enter confirms, n / Escape declines."""
+
+    CSS = """
+    ConfirmScreen { align: center middle; }
+    ConfirmScreen #box { width: 60; height: auto; border: round $warning; background: $surface; padding: 0 1; }
+    """
+    BINDINGS = [
+        Binding("y", "answer(True)", "Yes", priority=True),
+        Binding("enter", "answer(True)", "Yes", show=False, priority=True),
+        Binding("n", "answer(False)", "No", priority=True),
+        Binding("escape", "answer(False)", "No", show=False, priority=True),
+    ]
+
+    def __init__(self, question: str) -> None:
+        super().__init__()
+        self.question = question
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="box"):
+            yield Static(self.question + "\n\n[b]y[/] yes · [b]n[/] no")
+
+    def action_answer(self, yes: bool) -> None:
+        self.dismiss(yes)

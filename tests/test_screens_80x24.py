@@ -1,0 +1,192 @@
+"""The screens at 80x24 as an operator reads them (real app under its pilot, real SQLite):
+units, whole warnings, every P1 position, dates with times on the History axis, counters
+of the procedure only, confirmation before quitting a run, lab metadata entered once on
+Connect and remembered; and `station tui` without a terminal."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import subprocess
+import sys
+
+from db import Store
+from station.app import make_app
+from station.sources import SimSource
+from tests.test_tui import SIZE, BenchClock, run_bench, screen_lines, screen_name, text_of, wait_for
+from tests.tui_data import p1_result
+
+
+def test_tui_without_a_terminal_exits_with_one_line(tmp_path):
+    """It spun at 70 % of a core until killed (issue 15)."""
+    for argv in (["tui"], [], ["demo"]):
+        r = subprocess.run(
+            [sys.executable, "-m", "station", *argv, "--db", str(tmp_path / "s.db")],
+            stdin=subprocess.DEVNULL,
+            check=False,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert r.returncode == 2, (argv, r.stderr)
+        assert r.stderr.count("\n") == 1 and "terminal" in r.stderr and r.stdout == ""
+
+
+def test_results_show_units_whole_warnings_and_every_position(tmp_path):
+    from station.screens.results import ResultsScreen
+
+    cap, result = p1_result("IMU-8")
+    long = (
+        "the placement of x_down disagrees with its label by 12.5° (more than the 10° the gauge assumes): "
+        "the table's vector condition is weakened; the norm condition still holds"
+    )
+    result["warnings"] = [long, "second warning that must be readable too, not cut with an ellipsis"]
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id="IMU-8")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#residuals").row_count == 12)
+            summary = app.screen.query_one("#summary")
+            text = str(summary.render())
+            params = app.screen.query_one("#params")
+            units = {params.get_row_at(i)[0]: params.get_row_at(i)[3] for i in range(params.row_count)}
+            # every position reachable: focus the residual table and walk to its end
+            app.screen.query_one("#residuals").focus()
+            for _ in range(12):
+                await pilot.press("down")
+            await wait_for(pilot, lambda: any("xz_135" in line for line in screen_lines(app)))
+            return text, units, screen_lines(app)
+
+    text, units, lines = asyncio.run(story())
+    flat = " ".join(text.split())
+    assert " ".join(long.split()) in flat and "not cut with an ellipsis" in flat
+    assert "…" not in flat
+    assert units["B[0]"] == "m/s^2" and units["M[0][0]"].startswith("m/s^2 per")
+    assert "m/s² RMS" in lines[1] or "m/s² RMS" in " ".join(lines[:4])
+    assert all(len(line) <= 80 for line in lines)
+
+
+def _history_times(db, device, times):
+    for k, t in enumerate(times):
+        cap, result = p1_result(device, drift=0.02 * k, date=t)
+        from station.store import save_result
+
+        save_result(db, cap, result, device_id=device, operator="test", time=t)
+
+
+def test_history_shows_times_of_day_and_a_date_axis(tmp_path):
+    db = str(tmp_path / "s.db")
+    _history_times(db, "IMU-5", ["2026-11-23T08:15:00Z", "2026-11-23T13:40:00Z", "2026-11-23T17:05:00Z"])
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(
+                pilot,
+                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 3,
+            )
+            await wait_for(pilot, lambda: any("date and time (UTC)" in line for line in screen_lines(app)))
+            return screen_lines(app)
+
+    lines = asyncio.run(story())
+    text = "\n".join(lines)
+    assert "2026-11-23 17:05" in text and "2026-11-23 08:15" in text  # not midnight
+    ticks = re.findall(r"\b(\d\d-\d\d) (\d\d:\d\d)\b", text)
+    assert ticks and all(day == "11-23" for day, _ in ticks), ticks  # one day: times of day, no year 1013
+    assert "B[0] [m/s^2]" in text
+    assert all(len(line) <= 80 for line in lines)
+
+
+def test_quit_during_a_run_asks_first_and_counters_start_with_the_run(tmp_path):
+    clock = BenchClock()
+    src = SimSource(seed=3, clock=clock)
+    src.max_batch_s = 0.5
+    src.start()
+    clock.t_s = 30.0  # the device ran on while nobody read it: 29.5 s of samples lost
+    src.drain()
+    assert src.stats().dropped > 1000
+
+    async def story():
+        app = make_app(None, device=src, start="procedure", average_s=60.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await run_bench(pilot, src, clock, lambda: getattr(app.screen, "updates", 0) > 3, step_s=0.1)
+            await wait_for(pilot, lambda: "dropped" in text_of(app, "#readouts"))
+            readouts = text_of(app, "#readouts")
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+            running = app.is_running
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")
+            await wait_for(pilot, lambda: not app.is_running)
+            return readouts, running
+
+    readouts, running = asyncio.run(story())
+    assert running
+    assert re.search(r"dropped 0\b", readouts), readouts
+
+
+def test_connect_remembers_the_lab_and_writes_it_into_the_capture(tmp_path):
+    db = str(tmp_path / "s.db")
+
+    async def first():
+        app = make_app(db)
+        async with app.run_test(size=SIZE) as pilot:
+            scr = app.screen
+            scr.query_one("#operator").value = "Ann Lee"
+            scr.query_one("#place").value = "Lab 2, bench 3"
+            scr.query_one("#reference").value = "granite table GT-4"
+            scr.query_one("#serial").value = "IMU-3"
+            app.session.source = SimSource(seed=1, speed=1.0)
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+            return app.session.extra
+
+    extra = asyncio.run(first())
+    assert extra["operator"] == "Ann Lee"
+    with Store(db) as s:
+        assert s.settings() == {
+            "operator": "Ann Lee",
+            "place": "Lab 2, bench 3",
+            "reference_equipment": "granite table GT-4",
+        }
+
+    async def second():
+        app = make_app(db)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: app.screen.query_one("#place").value == "Lab 2, bench 3")
+            return {k: app.screen.query_one(f"#{k}").value for k in ("operator", "place", "reference")}
+
+    assert asyncio.run(second()) == {
+        "operator": "Ann Lee",
+        "place": "Lab 2, bench 3",
+        "reference": "granite table GT-4",
+    }
+
+    # a result saved in that session carries them into its capture (and so the report)
+    from station.screens.results import ResultsScreen
+
+    cap, result = p1_result("IMU-3")
+
+    async def save():
+        app = make_app(db, device_id="IMU-3")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: app.screen.query_one("#place").value == "Lab 2, bench 3")
+            app.session.extra.update(
+                operator="Ann Lee", place="Lab 2, bench 3", reference_equipment="granite table GT-4"
+            )
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.assessment is not None)
+            await pilot.press("s")
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            return app.screen.calibration_id
+
+    cal_id = asyncio.run(save())
+    with Store(db) as s:
+        cal = s.calibration(cal_id)
+        meta = s.capture_info(cal["capture_id"])["meta"]
+    assert cal["operator"] == "Ann Lee"
+    assert meta["place"] == "Lab 2, bench 3" and meta["reference_equipment"] == "granite table GT-4"
