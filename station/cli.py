@@ -49,12 +49,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def db_path(args: argparse.Namespace) -> str:
-    """The database path: --db, then $STATION_DB, then the XDG default."""
-    explicit = getattr(args, "db", None) or os.environ.get("STATION_DB")
+    """The database path: --db, else ``db.store.default_db_path()`` ($STATION_DB, then XDG)."""
+    explicit = getattr(args, "db", None)
     if explicit:
         return explicit
-    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local", "share")
-    return os.path.join(base, "station", "station.db")
+    from db.store import default_db_path  # loaded only when the default is needed
+
+    return default_db_path()
 
 
 # Commands that own the terminal (Textual draws it); everything else writes through SafeStream.
