@@ -10,6 +10,7 @@ The first call makes `.venv/` beside this file and installs the project into it
 (editable, with its test extra). Later calls reuse it; it is reinstalled only when
 `pyproject.toml` changes (a hash is kept in `.venv/.station-stamp`).
 """
+
 from __future__ import annotations
 
 import hashlib

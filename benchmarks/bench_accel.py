@@ -25,6 +25,7 @@ Solve time: median per calibration, against a baseline measured in the same run 
 alone, the source's method; P2: the paper's linear least squares). Targets: P1 with 12
 positions < 20 ms; P2 with 60 rows < 100 ms.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,8 +45,15 @@ from solvers import tabletop as T  # noqa: E402
 from solvers.models import accel  # noqa: E402
 from solvers.simulate import simulate  # noqa: E402
 
-P1_OPTS = dict(averages=True, bias_instability_mps2=0.0, table_tilt_deg=0.5, placement_deg=0.5,
-               tilted_placement_deg=3.0, noise_mps2=0.01, hold_s=20.0)
+P1_OPTS = dict(
+    averages=True,
+    bias_instability_mps2=0.0,
+    table_tilt_deg=0.5,
+    placement_deg=0.5,
+    tilted_placement_deg=3.0,
+    noise_mps2=0.01,
+    hold_s=20.0,
+)
 P1_NAMES = [f"B[{i}]" for i in range(3)] + [f"M[{i}][{j}]" for i in range(3) for j in range(3)]
 P2_NAMES = [f"{k}[{i}]" for k in "SbD" for i in range(3)]
 
@@ -55,9 +63,16 @@ def p1_positions(sim) -> list[T.Position]:
     out = []
     for k, lab in enumerate(c["position"]):
         d, s = T.known_direction(lab)
-        out.append(T.Position(lab, np.array([c["ax"][k], c["ay"][k], c["az"][k]]),
-                              np.array([c["ax_std"][k], c["ay_std"][k], c["az_std"][k]]), int(c["n"][k]),
-                              direction=d, placement_sigma_rad=s))
+        out.append(
+            T.Position(
+                lab,
+                np.array([c["ax"][k], c["ay"][k], c["az"][k]]),
+                np.array([c["ax_std"][k], c["ay_std"][k], c["az_std"][k]]),
+                int(c["n"][k]),
+                direction=d,
+                placement_sigma_rad=s,
+            )
+        )
     return out
 
 
@@ -73,7 +88,7 @@ def p1_crlb(pos, B, M, g, opts) -> np.ndarray:
             continue
         big = p.label[:2] in ("xy", "yz", "xz")
         place = math.radians(opts["tilted_placement_deg"] if big else opts["placement_deg"]) / 3.0
-        var = g * g * (place ** 2 + tilt2) + opts["noise_mps2"] ** 2 / n[k]
+        var = g * g * (place**2 + tilt2) + opts["noise_mps2"] ** 2 / n[k]
         E = T.perp_basis(p.direction)
         rows.append(np.hstack([E, (E[:, :, None] * V[k][None, None, :]).reshape(2, 9)]))
         w.append(np.full(2, 1.0 / var))
@@ -140,8 +155,15 @@ def p2_trial(seed: int):
         return np.concatenate([r.params[k] for k in "SbD"])
 
     zs = np.concatenate([e.sigma[k] for k in "SbD"])
-    return ((vec(e) - truth) / crlb, (vec(p) - truth) / crlb, (vec(p3) - truth) / crlb, (vec(e) - truth) / zs,
-            t1 - t0, t2 - t1, t4 - t3)
+    return (
+        (vec(e) - truth) / crlb,
+        (vec(p) - truth) / crlb,
+        (vec(p3) - truth) / crlb,
+        (vec(e) - truth) / zs,
+        t1 - t0,
+        t2 - t1,
+        t4 - t3,
+    )
 
 
 def run(fn, seeds, jobs):
@@ -183,17 +205,23 @@ def main(argv=None) -> int:
         t = time.perf_counter()
         out = run(p1_trial, seeds, args.jobs)
         z, z8, zs, zu, _, _ = (np.array(x) for x in zip(*out))
-        print(f"P1 level table: {args.trials} trials ({time.perf_counter() - t:.0f} s), 12 positions, noise 0.01 "
-              "m/s², placement 0.5°/3°, table tilt 0.5°")
+        print(
+            f"P1 level table: {args.trials} trials ({time.perf_counter() - t:.0f} s), 12 positions, noise 0.01 "
+            "m/s², placement 0.5°/3°, table tilt 0.5°"
+        )
         print("efficiency = RMS(error / sqrt(CRLB)) (target <= 1.05 for the station's estimator)")
         print(table(P1_NAMES, {"station": eff(z), "mean err/CRLB": np.mean(z, axis=0), "step 8 only": eff(z8)}))
         print("upper-triangular gauge (the 9 parameters the norm condition determines), against its own CRLB:")
         print(table(P1U_NAMES, {"upper-tri": eff(zu)}))
-        print(f"coverage of the reported σ: {100 * np.mean(np.abs(zs) < 1):.1f} % within 1σ, "
-              f"{100 * np.mean(np.abs(zs) < 2):.1f} % within 2σ (expect 68.3, 95.4)")
+        print(
+            f"coverage of the reported σ: {100 * np.mean(np.abs(zs) < 1):.1f} % within 1σ, "
+            f"{100 * np.mean(np.abs(zs) < 2):.1f} % within 2σ (expect 68.3, 95.4)"
+        )
         ts, t8 = timing(p1_trial, 40)
-        print(f"solve time, 12 positions (one process, 40 calibrations): median {1e3 * ts:.1f} ms (target < 20 ms); "
-              f"baseline step 8 alone {1e3 * t8:.2f} ms; ratio {ts / t8:.1f}")
+        print(
+            f"solve time, 12 positions (one process, 40 calibrations): median {1e3 * ts:.1f} ms (target < 20 ms); "
+            f"baseline step 8 alone {1e3 * t8:.2f} ms; ratio {ts / t8:.1f}"
+        )
         print()
     if args.only in (None, "p2"):
         t = time.perf_counter()
@@ -202,12 +230,16 @@ def main(argv=None) -> int:
         print(f"P2 centrifuge: {args.trials} trials ({time.perf_counter() - t:.0f} s), 60 rows, noise 1e-5 g")
         print("efficiency = RMS(error / sqrt(CRLB)) (target <= 1.05 for exact)")
         print(table(P2_NAMES, {"exact": eff(ze), "paper": eff(zp), "paper 3rd ord": eff(zp3)}))
-        print(f"coverage of the exact fit's σ (noise estimated from residuals): {100 * np.mean(np.abs(zs) < 1):.1f} % "
-              f"within 1σ, {100 * np.mean(np.abs(zs) < 2):.1f} % within 2σ")
+        print(
+            f"coverage of the exact fit's σ (noise estimated from residuals): {100 * np.mean(np.abs(zs) < 1):.1f} % "
+            f"within 1σ, {100 * np.mean(np.abs(zs) < 2):.1f} % within 2σ"
+        )
         te, tp, tsc = timing(p2_trial, 40)
-        print(f"solve time, 60 rows (one process, 40 calibrations): exact {1e3 * te:.1f} ms (target < 100 ms), row "
-              f"screening {1e3 * tsc:.1f} ms; baseline paper's method {1e3 * tp:.1f} ms; ratio exact/paper "
-              f"{te / tp:.1f}")
+        print(
+            f"solve time, 60 rows (one process, 40 calibrations): exact {1e3 * te:.1f} ms (target < 100 ms), row "
+            f"screening {1e3 * tsc:.1f} ms; baseline paper's method {1e3 * tp:.1f} ms; ratio exact/paper "
+            f"{te / tp:.1f}"
+        )
     return 0
 
 

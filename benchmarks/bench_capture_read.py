@@ -14,6 +14,7 @@ the few decimals real loggers write) with ``write_capture``, then, each in a fre
 Targets: read in under 3 s; peak traced memory within 3x the numeric arrays' size.
 ``--update-docs`` writes the figures into docs/benchmarks.md under "## Capture reader".
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,7 +53,9 @@ def hwm_bytes():  # peak RSS of this process image (Linux); None elsewhere
     except (OSError, StopIteration):
         return None
 """
-_READ = _PRELUDE + """
+_READ = (
+    _PRELUDE
+    + """
 from station.capture import read_capture
 rss0, hwm0 = maxrss_bytes(), hwm_bytes()
 t0, c0 = time.perf_counter(), time.process_time()
@@ -63,7 +66,10 @@ hwm = None if hwm0 is None else hwm_bytes() - hwm0
 print(json.dumps({{"s": dt, "cpu": cpu, "rss_delta": maxrss_bytes() - rss0, "hwm_delta": hwm, "rows": c.n_rows, "numeric_bytes": numeric,
                   "position_bytes": c.columns["position"].nbytes}}))
 """
-_TRACE = _PRELUDE + """
+)
+_TRACE = (
+    _PRELUDE
+    + """
 import tracemalloc
 from station.capture import read_capture
 tracemalloc.start()
@@ -71,14 +77,20 @@ c = read_capture(path)
 current, peak = tracemalloc.get_traced_memory()
 print(json.dumps({{"peak": peak, "current": current}}))
 """
-_LOADTXT = _PRELUDE + """
+)
+_LOADTXT = (
+    _PRELUDE
+    + """
 rss0 = maxrss_bytes()
 t0, c0 = time.perf_counter(), time.process_time()
 a = np.loadtxt(path, delimiter=",", comments=None, skiprows={skip}, usecols={usecols}, dtype=float)
 dt, cpu = time.perf_counter() - t0, time.process_time() - c0
 print(json.dumps({{"s": dt, "cpu": cpu, "rss_delta": maxrss_bytes() - rss0, "rows": len(a)}}))
 """
-_CSV = _PRELUDE + """
+)
+_CSV = (
+    _PRELUDE
+    + """
 import csv
 rss0 = maxrss_bytes()
 t0, c0 = time.perf_counter(), time.process_time()
@@ -94,7 +106,10 @@ out = {{n: (np.array(c, dtype=object) if n == "position" else np.array([float(v)
 dt, cpu = time.perf_counter() - t0, time.process_time() - c0
 print(json.dumps({{"s": dt, "cpu": cpu, "rss_delta": maxrss_bytes() - rss0, "rows": len(out["t"])}}))
 """
-_PANDAS = _PRELUDE + """
+)
+_PANDAS = (
+    _PRELUDE
+    + """
 import pandas as pd
 rss0 = maxrss_bytes()
 t0, c0 = time.perf_counter(), time.process_time()
@@ -102,6 +117,7 @@ df = pd.read_csv(path, comment="#", dtype={{"position": str}})
 dt, cpu = time.perf_counter() - t0, time.process_time() - c0
 print(json.dumps({{"s": dt, "cpu": cpu, "rss_delta": maxrss_bytes() - rss0, "rows": len(df)}}))
 """
+)
 
 
 def _run(code: str, path: str, **fmt) -> dict:
@@ -110,7 +126,9 @@ def _run(code: str, path: str, **fmt) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-_MAKE = _PRELUDE + """
+_MAKE = (
+    _PRELUDE
+    + """
 from benchmarks.bench_capture_read import make_capture
 from station.capture import write_capture
 cap = make_capture({rows}, sparse={sparse})
@@ -118,6 +136,7 @@ t0 = time.perf_counter()
 write_capture(path, cap)
 print(json.dumps({{"write_s": time.perf_counter() - t0}}))
 """
+)
 
 
 def make_capture(rows: int, seed: int = 0, sparse: bool = False):
@@ -134,10 +153,25 @@ def make_capture(rows: int, seed: int = 0, sparse: bool = False):
     temp = np.round(24.0 + np.cumsum(rng.standard_normal(rows)) * 1e-3, 3)
     if sparse:
         temp[np.arange(rows) % 10 != 0] = np.nan
-    cols = {"t": t, "position": position, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2],
-            "gx": gyr[:, 0], "gy": gyr[:, 1], "gz": gyr[:, 2], "temp_c": temp}
-    meta = {"station-capture": "1", "procedure": "accel-tabletop", "device": "BENCH-0001",
-            "accel_unit": "V", "gyro_unit": "rad/s", "sample_rate_hz": "100"}
+    cols = {
+        "t": t,
+        "position": position,
+        "ax": acc[:, 0],
+        "ay": acc[:, 1],
+        "az": acc[:, 2],
+        "gx": gyr[:, 0],
+        "gy": gyr[:, 1],
+        "gz": gyr[:, 2],
+        "temp_c": temp,
+    }
+    meta = {
+        "station-capture": "1",
+        "procedure": "accel-tabletop",
+        "device": "BENCH-0001",
+        "accel_unit": "V",
+        "gyro_unit": "rad/s",
+        "sample_rate_hz": "100",
+    }
     return Capture(meta=meta, columns=cols)
 
 
@@ -181,6 +215,7 @@ def main(argv: list[str] | None = None) -> int:
         sparse = _run(_READ, sparse_path)
         try:
             import pandas  # noqa: F401
+
             pandas_r = _run(_PANDAS, path)
         except (ImportError, subprocess.CalledProcessError):
             pandas_r = None
@@ -195,8 +230,10 @@ def main(argv: list[str] | None = None) -> int:
     hwm = None if reads[0]["hwm_delta"] is None else statistics.median(r["hwm_delta"] for r in reads)
 
     def vs(other: dict) -> str:
-        return (f"wall {other['s']:.2f} s, CPU {other['cpu']:.2f} s, maxrss +{_mib(other['rss_delta'])}; "
-                f"read_capture / this: wall {best / other['s']:.2f}, CPU {cpu / other['cpu']:.2f}")
+        return (
+            f"wall {other['s']:.2f} s, CPU {other['cpu']:.2f} s, maxrss +{_mib(other['rss_delta'])}; "
+            f"read_capture / this: wall {best / other['s']:.2f}, CPU {cpu / other['cpu']:.2f}"
+        )
 
     lines = [
         f"read_capture:       wall best {best:.2f} s, median {median:.2f} s of {args.repeat}; CPU best {cpu:.2f} s "
@@ -244,7 +281,7 @@ def _update_docs(lines: list[str], machine: str, args, write_s: float, size: int
         text = text.rstrip("\n") + "\n\n" + section
     else:
         end = text.find("\n## ", start + 1)
-        text = text[:start] + section + ("" if end < 0 else "\n" + text[end + 1:])
+        text = text[:start] + section + ("" if end < 0 else "\n" + text[end + 1 :])
     tmp = doc.with_suffix(".md.tmp")
     tmp.write_text(text)
     os.replace(tmp, doc)

@@ -17,6 +17,7 @@ bound, RLS against the batch solution, and RLS throughput.
 3. Throughput of the RLS (samples/s, target >= 10,000), both forms, against a baseline
    measured in the same run: the batch fit (solvers.fit) on the same samples.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -79,18 +80,23 @@ def main(argv=None) -> int:
         if k % 10 == 0:
             run_diffs.append(running_vs_batch(y, cal))
     norm, inside = np.array(norm), np.array(inside)
-    eff = np.sqrt(np.mean(norm ** 2, axis=0))
+    eff = np.sqrt(np.mean(norm**2, axis=0))
     bias = np.mean(norm, axis=0)
-    print(f"compass efficiency, {n} trials (seeds {args.seed0}..{args.seed0 + n - 1}), "
-          f"{time.perf_counter() - t0:.1f} s")
+    print(
+        f"compass efficiency, {n} trials (seeds {args.seed0}..{args.seed0 + n - 1}), {time.perf_counter() - t0:.1f} s"
+    )
     print(f"{'param':>8} {'RMS/sqrt(CRLB)':>15} {'mean/sqrt(CRLB)':>16} {'|err|<1σ':>9}")
     for name, e, b, c in zip(NAMES, eff, bias, inside.mean(axis=0)):
         print(f"{name:>8} {e:15.3f} {b:16.3f} {100 * c:8.1f}%")
     se = 1.0 / np.sqrt(2 * n)  # standard error of an RMS ratio near 1
-    print(f"max efficiency {eff.max():.3f} (target <= 1.1; Monte Carlo s.e. ≈ {se:.3f}); "
-          f"mean {eff.mean():.3f}; 1σ coverage {100 * inside.mean():.1f}% (expect 68.3%)")
-    print(f"RLS (fixed linearisation, {C.RLS_PASSES} pass) vs batch: max {max(diffs):.2e} σ, "
-          f"median {np.median(diffs):.2e} σ (target < 0.1)")
+    print(
+        f"max efficiency {eff.max():.3f} (target <= 1.1; Monte Carlo s.e. ≈ {se:.3f}); "
+        f"mean {eff.mean():.3f}; 1σ coverage {100 * inside.mean():.1f}% (expect 68.3%)"
+    )
+    print(
+        f"RLS (fixed linearisation, {C.RLS_PASSES} pass) vs batch: max {max(diffs):.2e} σ, "
+        f"median {np.median(diffs):.2e} σ (target < 0.1)"
+    )
 
     # running extended RLS (live form) on the last trial, and throughput
     y, cal = last
@@ -104,19 +110,24 @@ def main(argv=None) -> int:
     rate_run = reps * len(y) / (time.perf_counter() - t)
     t = time.perf_counter()
     for _ in range(reps):
-        fx = C.MagRLS(cal.W_ellipsoid, cal.h_ellipsoid, cal.field_nT, P0_fix, noise_raw=cal.noise_raw,
-                      linearise="fixed")
+        fx = C.MagRLS(
+            cal.W_ellipsoid, cal.h_ellipsoid, cal.field_nT, P0_fix, noise_raw=cal.noise_raw, linearise="fixed"
+        )
         fx.process(y)
     rate_fix = reps * len(y) / (time.perf_counter() - t)
     t = time.perf_counter()
     for _ in range(reps):
         C.batch_fit(y, cal.W_ellipsoid, cal.h_ellipsoid, cal.field_nT, cal.noise_raw)
     rate_batch = reps * len(y) / (time.perf_counter() - t)
-    print(f"running extended RLS (P0 = {C.RLS_RUNNING_P0_INFLATION:g} x Fisher cov.) vs batch, every 10th "
-          f"trial ({len(run_diffs)}): max {max(run_diffs):.2e} σ, median {np.median(run_diffs):.2e} σ")
-    print(f"throughput ({len(y)} samples): RLS fixed {rate_fix:,.0f}/s, RLS running {rate_run:,.0f}/s "
-          f"(target >= 10,000/s); baseline batch fit {rate_batch:,.0f}/s "
-          f"(ratios {rate_fix / rate_batch:.2f}, {rate_run / rate_batch:.2f})")
+    print(
+        f"running extended RLS (P0 = {C.RLS_RUNNING_P0_INFLATION:g} x Fisher cov.) vs batch, every 10th "
+        f"trial ({len(run_diffs)}): max {max(run_diffs):.2e} σ, median {np.median(run_diffs):.2e} σ"
+    )
+    print(
+        f"throughput ({len(y)} samples): RLS fixed {rate_fix:,.0f}/s, RLS running {rate_run:,.0f}/s "
+        f"(target >= 10,000/s); baseline batch fit {rate_batch:,.0f}/s "
+        f"(ratios {rate_fix / rate_batch:.2f}, {rate_run / rate_batch:.2f})"
+    )
     return 0
 
 

@@ -11,6 +11,7 @@ baselines measured in the same run: a bare `python -c pass`, and `station --vers
 
     python3 dev.py bench bench_db          # or: .venv/bin/python benchmarks/bench_db.py [--rebuild]
 """
+
 from __future__ import annotations
 
 import json
@@ -22,7 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ from db.schema import RECORD_VERSION, SCHEMA_VERSION  # noqa: E402
 
 N_DEVICES = 10_000
 N_CALS = 50
-NOW = datetime(2026, 11, 1, tzinfo=timezone.utc)
+NOW = datetime(2026, 11, 1, tzinfo=UTC)
 CACHE = Path(tempfile.gettempdir()) / f"station-bench-{SCHEMA_VERSION}-{N_DEVICES}x{N_CALS}.db"
 PY = sys.executable
 
@@ -83,13 +84,27 @@ def build(path: Path) -> None:
             B = (0.1 + rates * years + rng.normal(0, 0.002, 3)).tolist()
             M = (np.eye(3) + rng.normal(0, 1e-4, (3, 3))).tolist()
             row = {
-                "id": cal_id, "device_id": dev, "procedure": "accel-tabletop", "time": P.iso(when),
-                "model": "A = B + M V", "params": P.dumps({"B": B, "M": M}),
+                "id": cal_id,
+                "device_id": dev,
+                "procedure": "accel-tabletop",
+                "time": P.iso(when),
+                "model": "A = B + M V",
+                "params": P.dumps({"B": B, "M": M}),
                 "uncertainty": P.dumps({"B": [0.002] * 3, "M": [[1e-4] * 3] * 3}),
-                "residual_rms": 0.004, "n_positions": 12, "warnings": "[]", "result_extra": "{}",
-                "software_version": "0.1.0", "capture_id": None, "capture_sha256": None, "operator": "bench",
-                "host": "bench", "accepted": 1, "supersedes": prev_id, "saved_at": P.iso(when)[:-1] + ".000000Z",
-                "record_version": RECORD_VERSION, "prev_hash": prev_hash,
+                "residual_rms": 0.004,
+                "n_positions": 12,
+                "warnings": "[]",
+                "result_extra": "{}",
+                "software_version": "0.1.0",
+                "capture_id": None,
+                "capture_sha256": None,
+                "operator": "bench",
+                "host": "bench",
+                "accepted": 1,
+                "supersedes": prev_id,
+                "saved_at": P.iso(when)[:-1] + ".000000Z",
+                "record_version": RECORD_VERSION,
+                "prev_hash": prev_hash,
             }
             row["hash"] = record_hash(row)
             prev_hash, prev_id = row["hash"], cal_id
@@ -111,9 +126,11 @@ def build(path: Path) -> None:
 
 
 def _insert(conn, batch) -> None:
-    cols = ("id, device_id, procedure, time, model, params, uncertainty, residual_rms, n_positions, warnings, "
-            "result_extra, software_version, capture_id, capture_sha256, operator, host, accepted, supersedes, "
-            "saved_at, record_version, prev_hash, hash")
+    cols = (
+        "id, device_id, procedure, time, model, params, uncertainty, residual_rms, n_positions, warnings, "
+        "result_extra, software_version, capture_id, capture_sha256, operator, host, accepted, supersedes, "
+        "saved_at, record_version, prev_hash, hash"
+    )
     conn.executemany(f"INSERT INTO calibrations ({cols}) VALUES ({','.join('?' * 22)})", batch)
 
 
@@ -148,21 +165,41 @@ def capture_5min() -> tuple[dict, dict]:
     n = 30_000
     t = np.arange(n) / 100.0
     cols = {"t": t}
-    for name, scale, lsb in (("ax", 9.81, 1 / 16384), ("ay", 0, 1 / 16384), ("az", 0, 1 / 16384),
-                             ("gx", 0, 1 / 131), ("gy", 0, 1 / 131), ("gz", 0, 1 / 131),
-                             ("mx", 200, 0.15), ("my", -50, 0.15), ("mz", 400, 0.15)):
+    for name, scale, lsb in (
+        ("ax", 9.81, 1 / 16384),
+        ("ay", 0, 1 / 16384),
+        ("az", 0, 1 / 16384),
+        ("gx", 0, 1 / 131),
+        ("gy", 0, 1 / 131),
+        ("gz", 0, 1 / 131),
+        ("mx", 200, 0.15),
+        ("my", -50, 0.15),
+        ("mz", 400, 0.15),
+    ):
         cols[name] = np.round((scale + rng.normal(0, 40 * lsb, n)) / lsb) * lsb
     cols["temp_c"] = np.round(25 + np.cumsum(rng.normal(0, 0.001, n)), 2)
-    meta = {"station-capture": "1", "procedure": "accel-tabletop", "device": "BENCH-SAVE", "accel_unit": "m/s^2",
-            "sample_rate_hz": "100", "date": "2026-11-01T10:00:00Z"}
+    meta = {
+        "station-capture": "1",
+        "procedure": "accel-tabletop",
+        "device": "BENCH-SAVE",
+        "accel_unit": "m/s^2",
+        "sample_rate_hz": "100",
+        "date": "2026-11-01T10:00:00Z",
+    }
     return meta, cols
 
 
 def result_for(device: str) -> dict:
-    return {"procedure": "accel-tabletop", "device": device, "model": "A = B + M V",
-            "params": {"B": [0.1, 0.2, 0.3], "M": np.eye(3).tolist()},
-            "uncertainty": {"B": [1e-3] * 3, "M": [[1e-4] * 3] * 3}, "residual_rms": 0.004, "n_positions": 12,
-            "warnings": []}
+    return {
+        "procedure": "accel-tabletop",
+        "device": device,
+        "model": "A = B + M V",
+        "params": {"B": [0.1, 0.2, 0.3], "M": np.eye(3).tolist()},
+        "uncertainty": {"B": [1e-3] * 3, "M": [[1e-4] * 3] * 3},
+        "residual_rms": 0.004,
+        "n_positions": 12,
+        "warnings": [],
+    }
 
 
 def main() -> int:
@@ -173,8 +210,10 @@ def main() -> int:
     rng = np.random.default_rng(1)
     ids = [device_id(int(k)) for k in rng.integers(0, N_DEVICES, 20)]
 
-    print(f"\n{N_DEVICES} devices x {N_CALS} calibrations (schema {SCHEMA_VERSION}); "
-          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; ms = median wall (CPU)")
+    print(
+        f"\n{N_DEVICES} devices x {N_CALS} calibrations (schema {SCHEMA_VERSION}); "
+        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; ms = median wall (CPU)"
+    )
     it = iter(ids * 10)
     open_ms, _, open_cpu, _ = timed(lambda: Store(str(CACHE)).close(), 10)
     with Store(str(CACHE)) as s:
@@ -183,19 +222,25 @@ def main() -> int:
         due_ms, due_max, due_cpu, d = timed(lambda: s.due(now=NOW), 10)
         drift_ms, _, drift_cpu, _ = timed(lambda: s.drift(next(it)), 10)
     assert counts["calibrations"] == N_DEVICES * N_CALS and len(h) == N_CALS
-    print(f"library: open {open_ms:.1f} ({open_cpu:.1f}); history(ID) {hist_ms:.1f} ({hist_cpu:.1f}), {len(h)} records; "
-          f"due() {due_ms:.1f} ({due_cpu:.1f}), {len(d)} devices due; drift(ID) {drift_ms:.1f} ({drift_cpu:.1f})")
+    print(
+        f"library: open {open_ms:.1f} ({open_cpu:.1f}); history(ID) {hist_ms:.1f} ({hist_cpu:.1f}), {len(h)} records; "
+        f"due() {due_ms:.1f} ({due_cpu:.1f}), {len(d)} devices due; drift(ID) {drift_ms:.1f} ({drift_cpu:.1f})"
+    )
 
     base_py = proc([PY, "-c", "pass"])
     base_cli = proc([PY, "-m", "station", "--version"])
     hist_cli = proc([PY, "-m", "station", "history", ids[0], "--db", str(CACHE)])
     histj_cli = proc([PY, "-m", "station", "history", ids[1], "--json", "--db", str(CACHE)])
     due_cli = proc([PY, "-m", "station", "due", "--now", P.iso(NOW), "--db", str(CACHE)])
-    direct = ("import sys, argparse; from station.commands import {m}; "
-              "sys.exit({m}.run(argparse.Namespace(db={db!r}, {a})))")
-    hist_direct = proc([PY, "-c", direct.format(m="history", db=str(CACHE),
-                                                 a=f"id={ids[2]!r}, procedure=None, json=False")])
-    due_direct = proc([PY, "-c", direct.format(m="due", db=str(CACHE), a=f"within=0.0, now={P.iso(NOW)!r}, json=False")])
+    direct = (
+        "import sys, argparse; from station.commands import {m}; sys.exit({m}.run(argparse.Namespace(db={db!r}, {a})))"
+    )
+    hist_direct = proc(
+        [PY, "-c", direct.format(m="history", db=str(CACHE), a=f"id={ids[2]!r}, procedure=None, json=False")]
+    )
+    due_direct = proc(
+        [PY, "-c", direct.format(m="due", db=str(CACHE), a=f"within=0.0, now={P.iso(NOW)!r}, json=False")]
+    )
     assert hist_cli[2] == 0 and due_cli[2] == 1 and hist_direct[2] == 0 and due_direct[2] == 1
 
     def fmt(r):
@@ -204,10 +249,14 @@ def main() -> int:
     print("processes, median of 7:")
     print(f"  baseline python -c pass            {fmt(base_py)}")
     print(f"  baseline station --version         {fmt(base_cli)}   CLI start-up: imports every command module")
-    print(f"  station history ID                 {fmt(hist_cli)}   --json {fmt(histj_cli)}; "
-          f"start-up + {hist_cli[0] - base_cli[0]:.0f} ({hist_cli[1] - base_cli[1]:.0f})")
-    print(f"  station due                        {fmt(due_cli)}   start-up + {due_cli[0] - base_cli[0]:.0f} "
-          f"({due_cli[1] - base_cli[1]:.0f})")
+    print(
+        f"  station history ID                 {fmt(hist_cli)}   --json {fmt(histj_cli)}; "
+        f"start-up + {hist_cli[0] - base_cli[0]:.0f} ({hist_cli[1] - base_cli[1]:.0f})"
+    )
+    print(
+        f"  station due                        {fmt(due_cli)}   start-up + {due_cli[0] - base_cli[0]:.0f} "
+        f"({due_cli[1] - base_cli[1]:.0f})"
+    )
     print(f"  history handler, no other commands {fmt(hist_direct)}")
     print(f"  due handler, no other commands     {fmt(due_direct)}")
 
@@ -230,8 +279,10 @@ def main() -> int:
         shutil.copyfile(CACHE, big)
         with Store(big) as s:
             into_big = timed(lambda: s.save_calibration(result_for(device_id(5)), meta=meta, columns=cols), 3)
-    print(f"\nsave a 5-min 100 Hz capture (30,000 x 10, {raw / 1e6:.1f} MB raw -> {info['stored_bytes'] / 1e6:.2f} MB, "
-          f"{raw / info['stored_bytes']:.1f}x, zlib level {ZLIB_LEVEL}):")
+    print(
+        f"\nsave a 5-min 100 Hz capture (30,000 x 10, {raw / 1e6:.1f} MB raw -> {info['stored_bytes'] / 1e6:.2f} MB, "
+        f"{raw / info['stored_bytes']:.1f}x, zlib level {ZLIB_LEVEL}):"
+    )
     print(f"  save_calibration, fresh DB         {save[0]:.0f} ({save[2]:.0f}), max {save[1]:.0f}")
     print(f"  save_calibration, the big DB       {into_big[0]:.0f} ({into_big[2]:.0f})")
     print(f"  baseline zlib of the columns alone {zl[0]:.0f} ({zl[2]:.0f}); save/zlib CPU = {save[2] / zl[2]:.1f}")

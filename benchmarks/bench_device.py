@@ -21,6 +21,7 @@ Baseline, measured in the same run: the station parser alone on an in-memory buf
 (the cost of the pty, the thread, batching and writing the capture). Also the MAVLink
 parser's in-memory throughput for comparison.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,7 +31,6 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -69,8 +69,14 @@ def parser_baseline(n: int = 200_000) -> dict:
         q.take()
     mcpu = time.process_time() - c0
     assert q.stats.samples == m
-    return {"pty_bytes": pty_capacity_bytes(), "samples_per_s": n / cpu, "us_per_sample": cpu / n * 1e6, "bytes_per_sample": len(data) / n,
-            "mavlink_samples_per_s": m / mcpu, "mavlink_us_per_sample": mcpu / m * 1e6}
+    return {
+        "pty_bytes": pty_capacity_bytes(),
+        "samples_per_s": n / cpu,
+        "us_per_sample": cpu / n * 1e6,
+        "bytes_per_sample": len(data) / n,
+        "mavlink_samples_per_s": m / mcpu,
+        "mavlink_us_per_sample": mcpu / m * 1e6,
+    }
 
 
 def pty_capacity_bytes() -> int:
@@ -102,8 +108,14 @@ def start_sim(rate: float, pin: bool) -> tuple[subprocess.Popen, str]:
     if pin and len(CORES) >= 2:
         core = CORES[0]
         pre = lambda: os.sched_setaffinity(0, {core})  # noqa: E731
-    p = subprocess.Popen([sys.executable, "-m", "station", "sim-device", "--rate", f"{rate:g}"], cwd=ROOT,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=pre)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "station", "sim-device", "--rate", f"{rate:g}"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=pre,
+    )
     path = p.stdout.readline().strip()
     if not path.startswith("/dev/"):
         raise SystemExit(f"sim-device did not start: {p.stderr.read()}")
@@ -139,12 +151,20 @@ def run_once(rate: float, seconds: float, pin: bool, out: Path) -> dict:
     m = res.meta
     wall = w1 - w0
     return {
-        "rate": rate, "seconds": seconds, "rows": cap.n_rows, "span_s": span,
+        "rate": rate,
+        "seconds": seconds,
+        "rows": cap.n_rows,
+        "span_s": span,
         "received_share": cap.n_rows / (rate * span + 1) if span > 0 else 0.0,
-        "gaps": int(m["gaps"]), "dropped": int(m["dropped"]), "parse_errors": int(m["parse_errors"]),
-        "every_step_exact": ok_steps, "reader_cpu_per_s": cpu_thread / wall, "process_cpu_per_s": (p1 - p0) / wall,
+        "gaps": int(m["gaps"]),
+        "dropped": int(m["dropped"]),
+        "parse_errors": int(m["parse_errors"]),
+        "every_step_exact": ok_steps,
+        "reader_cpu_per_s": cpu_thread / wall,
+        "process_cpu_per_s": (p1 - p0) / wall,
         "reader_us_per_sample": cpu_thread / max(1, cap.n_rows) * 1e6,
-        "sim_lag_ms": simstats.get("lag_ms", float("nan")), "sim": simstats,
+        "sim_lag_ms": simstats.get("lag_ms", float("nan")),
+        "sim": simstats,
     }
 
 
@@ -161,8 +181,9 @@ def sustained(r: dict) -> bool:
     return verdict(r) == "sustained"
 
 
-def docs_section(base: dict, endurance: dict, steps: list[dict], best: float | None, args, pinned: bool,
-                 load: tuple[float, float]) -> str:
+def docs_section(
+    base: dict, endurance: dict, steps: list[dict], best: float | None, args, pinned: bool, load: tuple[float, float]
+) -> str:
     e = endurance
     lines = [
         "## Device I/O",
@@ -202,25 +223,34 @@ def docs_section(base: dict, endurance: dict, steps: list[dict], best: float | N
         r = failed[0]
         us = r["reader_cpu_per_s"] * 1e6 / max(1.0, r["rows"] / r["seconds"])
         fill_ms = base["pty_bytes"] / (base["bytes_per_sample"] * r["rate"]) * 1e3
-        head = (f"At {r['rate']:g} Hz ({verdict(r)}) the reader thread used {r['reader_cpu_per_s'] * 1e3:.0f} ms of "
-                f"CPU per s ({us:.1f} µs per sample received).")
+        head = (
+            f"At {r['rate']:g} Hz ({verdict(r)}) the reader thread used {r['reader_cpu_per_s'] * 1e3:.0f} ms of "
+            f"CPU per s ({us:.1f} µs per sample received)."
+        )
         if r["reader_cpu_per_s"] < 0.5:
             lines.append(
                 head + f" It was not CPU-bound. The pseudo-terminal holds {base['pty_bytes'] / 1024:.0f} KiB, "
                 f"{fill_ms:.0f} ms of output at that rate, so the limit is how promptly the device and reader processes "
                 f"are scheduled on the shared machine (see the load average above); at its "
-                f"measured CPU per sample the reader alone would manage about {1e3 / us:.0f} k samples/s.")
+                f"measured CPU per sample the reader alone would manage about {1e3 / us:.0f} k samples/s."
+            )
         else:
             lines.append(head + " The reader was CPU-bound.")
     lines += [
-              "A pseudo-terminal has no baud limit; a real UART at 921600 baud carries about "
-              f"{92160 / base['bytes_per_sample']:.0f} sentences/s of this size.", ""]
+        "A pseudo-terminal has no baud limit; a real UART at 921600 baud carries about "
+        f"{92160 / base['bytes_per_sample']:.0f} sentences/s of this size.",
+        "",
+    ]
     return "\n".join(lines)
 
 
 def update_docs(section: str) -> None:
     path = ROOT / "docs" / "benchmarks.md"
-    text = path.read_text() if path.exists() else "# Benchmarks\n\nEach section belongs to the engineer who owns its benchmark script; edit only your own.\n"
+    text = (
+        path.read_text()
+        if path.exists()
+        else "# Benchmarks\n\nEach section belongs to the engineer who owns its benchmark script; edit only your own.\n"
+    )
     start = text.find("## Device I/O")
     if start >= 0:
         nxt = text.find("\n## ", start + 5)
@@ -247,24 +277,31 @@ def main() -> int:
 
     load0 = os.getloadavg()[0]
     base = parser_baseline()
-    print(f"parser baseline: {base['samples_per_s']:,.0f} samples/s, {base['us_per_sample']:.2f} us/sample; "
-          f"MAVLink {base['mavlink_samples_per_s']:,.0f} samples/s")
+    print(
+        f"parser baseline: {base['samples_per_s']:,.0f} samples/s, {base['us_per_sample']:.2f} us/sample; "
+        f"MAVLink {base['mavlink_samples_per_s']:,.0f} samples/s"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         e = run_once(1000.0, args.seconds, pin, Path(tmp) / "endurance.csv")
-        print(f"endurance 1 kHz {args.seconds:g} s: rows {e['rows']}, gaps {e['gaps']}, dropped {e['dropped']}, "
-              f"parse errors {e['parse_errors']}, steps exact {e['every_step_exact']}, "
-              f"reader CPU {e['reader_cpu_per_s'] * 1e3:.1f} ms/s ({e['reader_us_per_sample']:.1f} us/sample, "
-              f"{e['reader_us_per_sample'] / base['us_per_sample']:.2f}x parser-only), "
-              f"process CPU {e['process_cpu_per_s'] * 1e3:.1f} ms/s")
+        print(
+            f"endurance 1 kHz {args.seconds:g} s: rows {e['rows']}, gaps {e['gaps']}, dropped {e['dropped']}, "
+            f"parse errors {e['parse_errors']}, steps exact {e['every_step_exact']}, "
+            f"reader CPU {e['reader_cpu_per_s'] * 1e3:.1f} ms/s ({e['reader_us_per_sample']:.1f} us/sample, "
+            f"{e['reader_us_per_sample'] / base['us_per_sample']:.2f}x parser-only), "
+            f"process CPU {e['process_cpu_per_s'] * 1e3:.1f} ms/s"
+        )
         steps, best = [], None
         for rate in [float(x) for x in args.rates.split(",")]:
             r = run_once(rate, args.step_seconds, pin, Path(tmp) / f"step{rate:g}.csv")
             steps.append(r)
             ok = sustained(r)
-            print(f"rate {rate:>7g} Hz: rows {r['rows']}, received {r['received_share'] * 100:.1f} %, gaps {r['gaps']}, "
-                  f"dropped {r['dropped']}, parse errors {r['parse_errors']}, steps exact {r['every_step_exact']}, "
-                  f"reader CPU {r['reader_cpu_per_s'] * 1e3:.0f} ms/s, process CPU {r['process_cpu_per_s'] * 1e3:.0f} ms/s, "
-                  f"device lag {r['sim_lag_ms']:.1f} ms -> {verdict(r)}", flush=True)
+            print(
+                f"rate {rate:>7g} Hz: rows {r['rows']}, received {r['received_share'] * 100:.1f} %, gaps {r['gaps']}, "
+                f"dropped {r['dropped']}, parse errors {r['parse_errors']}, steps exact {r['every_step_exact']}, "
+                f"reader CPU {r['reader_cpu_per_s'] * 1e3:.0f} ms/s, process CPU {r['process_cpu_per_s'] * 1e3:.0f} ms/s, "
+                f"device lag {r['sim_lag_ms']:.1f} ms -> {verdict(r)}",
+                flush=True,
+            )
             if not ok:
                 break
             best = rate

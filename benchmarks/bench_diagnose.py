@@ -18,6 +18,7 @@ seed is then simulated at ``size_ref · k / sqrt(deviance)`` (``_trial``). Detec
 hidden name in the verdict (named itself or as confused with the chosen one). The 1σ
 printed is the median over the captures (``sigma_sizes`` gives a quick 3-seed estimate).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,7 +36,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from solvers.simulate import EFFECTS_BY_PROCEDURE, simulate  # noqa: E402
+from solvers.simulate import simulate  # noqa: E402
 from station.capture import Capture  # noqa: E402
 
 # Options that keep the capture's structure independent of the hidden effect (and give
@@ -52,10 +53,20 @@ OPTIONS = {
 REF_SIZES = {
     "accel-tabletop": {"temperature_bias": 5e-3, "time_drift": 0.05, "quadratic": 5e-4, "scale_asymmetry": 5e-3},
     "gyro-drift": {"temperature_bias": 3e-4, "time_drift": 3e-2, "g_sensitivity": 1e-4},
-    "accel-centrifuge": {"temperature_bias": 1e-4, "time_drift": 1e-4, "misalignment": 1e-4, "cubic": 1e-8,
-                         "lever_arm": 1e-3},
-    "compass": {"temperature_bias": 2.0, "time_drift": 20.0, "mag_accel_misalignment": 0.02,
-                "field_anomaly": 0.02, "time_varying_hard_iron": 1.0},
+    "accel-centrifuge": {
+        "temperature_bias": 1e-4,
+        "time_drift": 1e-4,
+        "misalignment": 1e-4,
+        "cubic": 1e-8,
+        "lever_arm": 1e-3,
+    },
+    "compass": {
+        "temperature_bias": 2.0,
+        "time_drift": 20.0,
+        "mag_accel_misalignment": 0.02,
+        "field_anomaly": 0.02,
+        "time_varying_hard_iron": 1.0,
+    },
     "ldv": {"temperature_bias": 2e-3, "time_drift": 0.02, "time_delay": 0.01, "lever_arm": 0.1, "offset": 0.01},
 }
 # effects a simulation cannot hide: earth_rate is always in the simulated gyro input
@@ -70,7 +81,7 @@ def run_one(procedure: str, seed: int, effects: dict | None = None) -> dict:
     t0 = time.perf_counter()
     out, diag, _ = analyse(cap)
     dt = time.perf_counter() - t0
-    cv0 = out["baseline"]["cv_rms"]
+    cv0 = out["baseline"]["cv_rms"]  # noqa: F841
     score = max([d["D"] / d["q"] for d in diag.deviance.values() if d["cv_lower"] and d["k"] > 0] + [0.0])
     n = len(diag.problem.sigma)
     dchi = {}
@@ -78,8 +89,15 @@ def run_one(procedure: str, seed: int, effects: dict | None = None) -> dict:
         if c.get("delta_bic") is not None:
             dchi[c["name"]] = c["delta_bic"]
     dev = {k: v["D"] for k, v in diag.deviance.items()}
-    return {"verdict": out["verdict"], "score": score, "seconds": dt, "delta_bic": dchi, "n": n, "deviance": dev,
-            "confused": {e["name"]: [x["name"] for x in e["confused_with"]] for e in out["effects"]}}
+    return {
+        "verdict": out["verdict"],
+        "score": score,
+        "seconds": dt,
+        "delta_bic": dchi,
+        "n": n,
+        "deviance": dev,
+        "confused": {e["name"]: [x["name"] for x in e["confused_with"]] for e in out["effects"]},
+    }
 
 
 def _job(args):
@@ -93,7 +111,9 @@ def null_rates(procedures, trials, jobs, seed0=1000):
     from solvers.diagnose.problems import THRESHOLDS
 
     print(f"# null captures: {trials} per procedure")
-    print(f"{'procedure':<18} {'false alarms':>13} {'rate':>7} {'95% score':>10} {'99% score':>10} {'threshold':>10} {'s/capture':>10} errors")
+    print(
+        f"{'procedure':<18} {'false alarms':>13} {'rate':>7} {'95% score':>10} {'99% score':>10} {'threshold':>10} {'s/capture':>10} errors"
+    )
     for p in procedures:
         with ProcessPoolExecutor(jobs) as ex:
             res = list(ex.map(_job, [(p, seed0 + k) for k in range(trials)]))
@@ -103,8 +123,11 @@ def null_rates(procedures, trials, jobs, seed0=1000):
         q95 = float(np.percentile(scores, 95)) if len(scores) else math.nan
         q99 = float(np.percentile(scores, 99)) if len(scores) else math.nan
         secs = np.mean([r["seconds"] for r in ok]) if ok else math.nan
-        print(f"{p:<18} {fa:>6}/{len(ok):<6} {100 * fa / max(len(ok), 1):6.1f}% {q95:10.1f} {q99:10.1f} {THRESHOLDS[p]:10.2f} "
-              f"{secs:10.2f} {len(res) - len(ok)}", flush=True)
+        print(
+            f"{p:<18} {fa:>6}/{len(ok):<6} {100 * fa / max(len(ok), 1):6.1f}% {q95:10.1f} {q99:10.1f} {THRESHOLDS[p]:10.2f} "
+            f"{secs:10.2f} {len(res) - len(ok)}",
+            flush=True,
+        )
 
 
 def sigma_sizes(procedure: str) -> dict:
@@ -165,20 +188,26 @@ def runtime():
     from station.procedures.diagnose import analyse
 
     print("\n# runtime, one-hour 100 Hz captures (analyse(), capture in memory)")
-    for p, opts in (("gyro-drift", {"duration_s": 3600.0, "rate_hz": 100.0}),
-                    ("ldv", {"duration_s": 3600.0, "rate_hz": 100.0})):
+    for p, opts in (
+        ("gyro-drift", {"duration_s": 3600.0, "rate_hz": 100.0}),
+        ("ldv", {"duration_s": 3600.0, "rate_hz": 100.0}),
+    ):
         sim = simulate(p, seed=7, **opts)
         cap = Capture(meta=sim.meta, columns=sim.columns, path="hour.csv")
         n = len(next(iter(sim.columns.values())))
         t0 = time.perf_counter()
         from station.calibrate import calibrate_capture
+
         calibrate_capture(cap)
         t_cal = time.perf_counter() - t0
         t0 = time.perf_counter()
         analyse(cap)
         t_diag = time.perf_counter() - t0
-        print(f"{p:<12} rows {n:>8}  diagnose {t_diag:6.2f} s   (calibrate alone {t_cal:5.2f} s, "
-              f"ratio {t_diag / max(t_cal, 1e-9):.1f})  target < 5 s", flush=True)
+        print(
+            f"{p:<12} rows {n:>8}  diagnose {t_diag:6.2f} s   (calibrate alone {t_cal:5.2f} s, "
+            f"ratio {t_diag / max(t_cal, 1e-9):.1f})  target < 5 s",
+            flush=True,
+        )
 
 
 def main(argv=None) -> int:
@@ -190,9 +219,13 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-runtime", action="store_true")
     ap.add_argument("--procedures", default=",".join(OPTIONS))
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--null-seed0", type=int, default=1000,
-                    help="first seed of the null captures (1000: the set the thresholds were calibrated on; "
-                         "use another for an independent check)")
+    ap.add_argument(
+        "--null-seed0",
+        type=int,
+        default=1000,
+        help="first seed of the null captures (1000: the set the thresholds were calibrated on; "
+        "use another for an independent check)",
+    )
     ap.add_argument("--sizes", default="3,5,8")
     a = ap.parse_args(argv)
     procs = [p for p in a.procedures.split(",") if p]

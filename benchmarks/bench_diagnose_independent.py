@@ -19,6 +19,7 @@ Scenarios where the effect has no driver (constant temperature, a table without 
 < 3 orientations for g-sensitivity, no body rate for the LDV lever arm) are skipped and
 the next scenario drawn. Nothing tells the code which effect was hidden.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -88,7 +89,7 @@ def _trial(args):
         r = G.RENDER[proc](sc, effect, size)
         try:
             out = _analyse(r.meta, r.columns)
-            tied = set()   # names the data could not tell from the hidden one (confused_with)
+            tied = set()  # names the data could not tell from the hidden one (confused_with)
             for e in out["effects"]:
                 group = {e["name"]} | {c["name"] for c in e["confused_with"]}
                 if effect in group:
@@ -123,9 +124,12 @@ def main(argv=None) -> int:
                     for v in r["verdict"]:
                         names[v] = names.get(v, 0) + 1
                 secs = np.mean([r["seconds"] for r in ok]) if ok else math.nan
-                print(f"{proc:<17} nulls {len(ok):4d}  false alarms {fa:3d} ({100 * fa / max(len(ok), 1):4.1f} %)"
-                      f"  of which residual: {fr}  refused {len(res) - len(ok)}  {secs:.2f} s/capture  "
-                      f"{dict(sorted(names.items(), key=lambda x: -x[1]))}", flush=True)
+                print(
+                    f"{proc:<17} nulls {len(ok):4d}  false alarms {fa:3d} ({100 * fa / max(len(ok), 1):4.1f} %)"
+                    f"  of which residual: {fr}  refused {len(res) - len(ok)}  {secs:.2f} s/capture  "
+                    f"{dict(sorted(names.items(), key=lambda x: -x[1]))}",
+                    flush=True,
+                )
                 errs = {r["error"] for r in res if "error" in r}
                 for e in list(errs)[:3]:
                     print(f"{'':<17} refused: {e}")
@@ -133,8 +137,15 @@ def main(argv=None) -> int:
                 if not a.trials or (only and effect not in only):
                     continue
                 unlisted = effect in G.UNLISTED[proc]
-                res = list(ex.map(_trial, [(proc, effect, a.seed0 + 1000 * (1 + zlib.crc32(effect.encode()) % 97) + j, sizes)
-                                           for j in range(a.trials)]))
+                res = list(
+                    ex.map(
+                        _trial,
+                        [
+                            (proc, effect, a.seed0 + 1000 * (1 + zlib.crc32(effect.encode()) % 97) + j, sizes)
+                            for j in range(a.trials)
+                        ],
+                    )
+                )
                 res = [r for r in res if r is not None]
                 cells = []
                 for i, k in enumerate(sizes):
@@ -148,8 +159,9 @@ def main(argv=None) -> int:
                             for v in r["verdict"]:
                                 if v.startswith("residual:"):
                                     drivers[v] = drivers.get(v, 0) + 1
-                        cells.append(f"{k:g}σ: residual {100 * hit / n:5.1f}%  canonical {100 * canon / n:5.1f}% "
-                                     f"{drivers}")
+                        cells.append(
+                            f"{k:g}σ: residual {100 * hit / n:5.1f}%  canonical {100 * canon / n:5.1f}% {drivers}"
+                        )
                     else:
                         hit = sum(effect in r["verdict"] for r in rows)
                         wrong = sum(any(v != effect and v not in r["tied"] for v in r["verdict"]) for r in rows)
@@ -159,8 +171,10 @@ def main(argv=None) -> int:
                             for v in r["verdict"]:
                                 if v != effect:
                                     extra[v] = extra.get(v, 0) + 1
-                        cells.append(f"{k:g}σ: named {100 * hit / n:5.1f}%  wrong {100 * wrong / n:5.1f}%  "
-                                     f"clean {100 * clean / n:5.1f}% {extra}")
+                        cells.append(
+                            f"{k:g}σ: named {100 * hit / n:5.1f}%  wrong {100 * wrong / n:5.1f}%  "
+                            f"clean {100 * clean / n:5.1f}% {extra}"
+                        )
                     errs = sum(1 for r in res if "error" in r[i])
                     if errs:
                         cells[-1] += f" refused {errs}"

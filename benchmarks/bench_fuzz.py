@@ -9,6 +9,7 @@ The harness is `tests/fuzzkit.py` (its docstring says what each outcome means); 
 is `tests/test_fuzz.py`. Prints one line of progress per 100 captures, then the figures, and
 each failure with the case that made it (reproducible: seed and case number).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,8 +43,9 @@ def _shard(args: tuple) -> list:
                 with open(f"{progress_path}.{job}", "w") as f:
                     json.dump([o.__dict__ for o in outcomes], f)
 
-    return F.run_campaign(folder, bases, n_mutated=n_mutated, n_extreme=n_extreme, seed=seed, timeout_s=timeout_s,
-                          progress=progress)
+    return F.run_campaign(
+        folder, bases, n_mutated=n_mutated, n_extreme=n_extreme, seed=seed, timeout_s=timeout_s, progress=progress
+    )
 
 
 def _shard_to_file(job: tuple, path: str) -> None:
@@ -67,15 +69,16 @@ def main() -> int:
     ap.add_argument("--update-docs", action="store_true", help="write the figures into docs/benchmarks.md")
     a = ap.parse_args()
     t0 = time.monotonic()
-    jobs = [(j, m, e, a.seed + 1000 * j, a.timeout, a.out) for j, (m, e) in
-            enumerate(zip(_split(a.mutated, a.jobs), _split(a.extreme, a.jobs)))]
+    jobs = [
+        (j, m, e, a.seed + 1000 * j, a.timeout, a.out)
+        for j, (m, e) in enumerate(zip(_split(a.mutated, a.jobs), _split(a.extreme, a.jobs)))
+    ]
     if a.jobs == 1:
         outcomes = _shard(jobs[0])
     else:  # one process per job (each forks its own case worker), results through a file
         folder = tempfile.mkdtemp(prefix="fuzz-results-")
         ctx = mp.get_context("fork")
-        procs = [ctx.Process(target=_shard_to_file, args=(job, os.path.join(folder, f"{job[0]}.json")))
-                 for job in jobs]
+        procs = [ctx.Process(target=_shard_to_file, args=(job, os.path.join(folder, f"{job[0]}.json"))) for job in jobs]
         for p in procs:
             p.start()
         for p in procs:
@@ -95,8 +98,8 @@ def main() -> int:
     lines = [
         f"captures: {s['captures']} ({s['mutated']} mutated, {s['extreme']} valid-but-extreme; "
         f"{s['counts'].get('skipped', 0)} extreme edits the writer itself refused, not counted)",
-        f"runs (calibrate + diagnose): {s['runs']}: " + ", ".join(f"{k} {v}" for k, v in sorted(s["counts"].items())
-                                                                  if k != "skipped"),
+        f"runs (calibrate + diagnose): {s['runs']}: "
+        + ", ".join(f"{k} {v}" for k, v in sorted(s["counts"].items()) if k != "skipped"),
         "failures: " + ", ".join(f"{k} {s['counts'].get(k, 0)}" for k in F.FAILURES),
         f"time per run: median {s['median_s']:.3f} s, max {s['max_s']:.1f} s (limit {a.timeout:g} s); "
         f"wall {wall / 60:.1f} min with {a.jobs} jobs",
@@ -117,9 +120,12 @@ def _update_docs(lines: list[str], a) -> None:
     path = ROOT / "docs" / "benchmarks.md"
     text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
     head = "## Fuzz and extreme values"
-    body = (f"{head}\n\n`nice -n 10 .venv/bin/python benchmarks/bench_fuzz.py --mutated {a.mutated} "
-            f"--extreme {a.extreme} --jobs {a.jobs} --seed {a.seed} --timeout {a.timeout:g}`\n\n"
-            + "\n".join(f"- {line}" for line in lines) + "\n")
+    body = (
+        f"{head}\n\n`nice -n 10 .venv/bin/python benchmarks/bench_fuzz.py --mutated {a.mutated} "
+        f"--extreme {a.extreme} --jobs {a.jobs} --seed {a.seed} --timeout {a.timeout:g}`\n\n"
+        + "\n".join(f"- {line}" for line in lines)
+        + "\n"
+    )
     if head in text:
         start = text.index(head)
         nxt = text.find("\n## ", start + len(head))

@@ -15,6 +15,7 @@ the reported uncertainty is right), coverage at 1σ and 2σ (0.683, 0.954), and 
 white-noise-only figure σ/√n for comparison (what a naive error would claim). Also the
 time of one mode-B estimate against a bare numpy mean over the same samples.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,8 +50,9 @@ def run_mode(mode: str, seeds):
         elif mode == "B":
             sim = simulate("gyro-drift", seed=s, mode="static")
             c = sim.columns
-            r = gd.drift_static(_cols(c, ["gx", "gy", "gz"]), _cols(c, ["ax", "ay", "az"]), 0.01,
-                                float(sim.meta["latitude_deg"]), 0.0)
+            r = gd.drift_static(
+                _cols(c, ["gx", "gy", "gz"]), _cols(c, ["ax", "ay", "az"]), 0.01, float(sim.meta["latitude_deg"]), 0.0
+            )
             d, sg, sw = r.drift_rad_s, r.sigma_rad_s, r.mean_error.se_white
         else:
             sim = simulate("gyro-drift", seed=s, mode="static", headings_deg=[0, 90, 180, 270], duration_s=480)
@@ -71,15 +73,27 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     n = 40 if args.quick else args.trials
     print(f"P4 gyro drift vs simulated truth ({n} seeds for A and B, {max(n // 4, 20)} for several positions)")
-    print("mode                 RMS err °/h   mean σ °/h   RMS(err/σ)   |err|<σ   |err|<2σ   naive σ/√n °/h  RMS(err/naive)")
-    for mode, label, k in (("A", "A reference IMU", n), ("B", "B static base", n), ("M", "several positions", max(n // 4, 20))):
+    print(
+        "mode                 RMS err °/h   mean σ °/h   RMS(err/σ)   |err|<σ   |err|<2σ   naive σ/√n °/h  RMS(err/naive)"
+    )
+    for mode, label, k in (
+        ("A", "A reference IMU", n),
+        ("B", "B static base", n),
+        ("M", "several positions", max(n // 4, 20)),
+    ):
         t0 = time.perf_counter()
         e, s, w = run_mode(mode, range(args.seed0, args.seed0 + k))
         z = e / s
-        naive = f"{np.nanmean(w) / DEG_H:14.2f}  {np.sqrt(np.nanmean((e / w) ** 2)):8.2f}" if np.isfinite(w).any() else f"{'—':>14}  {'—':>8}"
-        print(f"{label:20s} {np.sqrt(np.mean(e ** 2)) / DEG_H:11.2f}   {np.mean(s) / DEG_H:10.2f}   "
-              f"{np.sqrt(np.mean(z ** 2)):10.2f}   {np.mean(np.abs(z) < 1):7.3f}   {np.mean(np.abs(z) < 2):8.3f}   {naive}"
-              f"   [{time.perf_counter() - t0:.1f} s]")
+        naive = (
+            f"{np.nanmean(w) / DEG_H:14.2f}  {np.sqrt(np.nanmean((e / w) ** 2)):8.2f}"
+            if np.isfinite(w).any()
+            else f"{'—':>14}  {'—':>8}"
+        )
+        print(
+            f"{label:20s} {np.sqrt(np.mean(e**2)) / DEG_H:11.2f}   {np.mean(s) / DEG_H:10.2f}   "
+            f"{np.sqrt(np.mean(z**2)):10.2f}   {np.mean(np.abs(z) < 1):7.3f}   {np.mean(np.abs(z) < 2):8.3f}   {naive}"
+            f"   [{time.perf_counter() - t0:.1f} s]"
+        )
     sim = simulate("gyro-drift", seed=args.seed0, mode="static")
     c = sim.columns
     w, f = _cols(c, ["gx", "gy", "gz"]), _cols(c, ["ax", "ay", "az"])
@@ -93,8 +107,10 @@ def main(argv=None) -> int:
         w.mean(axis=0)
         f.mean(axis=0)
     t_base = (time.perf_counter() - t0) / reps
-    print(f"\nspeed ({len(w)} samples): mode-B estimate with Allan error {t_est * 1e3:.1f} ms, bare means "
-          f"{t_base * 1e3:.2f} ms (ratio {t_est / t_base:.0f}x)")
+    print(
+        f"\nspeed ({len(w)} samples): mode-B estimate with Allan error {t_est * 1e3:.1f} ms, bare means "
+        f"{t_base * 1e3:.2f} ms (ratio {t_est / t_base:.0f}x)"
+    )
     return 0
 
 

@@ -14,6 +14,7 @@ by O(σ_ref²/spread²) ≈ 1e-5. Efficiency = RMS over trials of the normalised
 parameter (1.0 = efficient; target <= 1.1). Also: the share of |error| < reported 1σ
 (expect ~68 %), and the fit's time against a bare numpy lstsq in the same run.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -68,19 +69,30 @@ def main(argv=None) -> int:
             Z.append(z)
             IN.append(inside)
             K.append(kappa)
-        Z, IN = np.array(Z), np.array(IN)      # (trials, 3 beams, 7) and (trials, 3, 4)
-        eff = np.sqrt(np.mean(Z ** 2, axis=0))
+        Z, IN = np.array(Z), np.array(IN)  # (trials, 3 beams, 7) and (trials, 3, 4)
+        eff = np.sqrt(np.mean(Z**2, axis=0))
         bias = np.mean(Z, axis=0)
-        print(f"\n{'EIV-corrected' if eiv else 'ordinary least squares (default)'}"
-              f"   [{time.perf_counter() - t0:.1f} s; cond(HᵀH) median {np.median(K):.0f}]")
+        print(
+            f"\n{'EIV-corrected' if eiv else 'ordinary least squares (default)'}"
+            f"   [{time.perf_counter() - t0:.1f} s; cond(HᵀH) median {np.median(K):.0f}]"
+        )
         print("efficiency RMS(err)/sqrt(CRLB)  X1     X2     X3    | dK     alpha  beta   gamma")
         for j in range(3):
-            print(f"  beam{j + 1}                       " + " ".join(f"{v:6.3f}" for v in eff[j, :3]) + " | "
-                  + " ".join(f"{v:6.3f}" for v in eff[j, 3:]))
-        print(f"  worst {eff.max():.3f}  (target <= 1.1)   mean bias/sqrt(CRLB) worst {np.abs(bias).max():.3f}"
-              f" (±{1 / np.sqrt(n):.3f} by chance)")
-        print("share |err| < reported 1σ (expect 0.683):",
-              " ".join(f"{v:.3f}" for v in IN.mean(axis=(0, 1))), "(dK alpha beta gamma)")
+            print(
+                f"  beam{j + 1}                       "
+                + " ".join(f"{v:6.3f}" for v in eff[j, :3])
+                + " | "
+                + " ".join(f"{v:6.3f}" for v in eff[j, 3:])
+            )
+        print(
+            f"  worst {eff.max():.3f}  (target <= 1.1)   mean bias/sqrt(CRLB) worst {np.abs(bias).max():.3f}"
+            f" (±{1 / np.sqrt(n):.3f} by chance)"
+        )
+        print(
+            "share |err| < reported 1σ (expect 0.683):",
+            " ".join(f"{v:.3f}" for v in IN.mean(axis=(0, 1))),
+            "(dK alpha beta gamma)",
+        )
     # speed: the station's fit against a bare lstsq on the same data
     sim = simulate("ldv", seed=args.seed0)
     c = sim.columns
@@ -95,8 +107,10 @@ def main(argv=None) -> int:
     for _ in range(reps):
         np.linalg.lstsq(H, Y, rcond=None)
     t_base = (time.perf_counter() - t0) / reps
-    print(f"\nspeed ({len(H)} epochs): calibrate_ldv {t_fit * 1e3:.2f} ms, bare lstsq {t_base * 1e3:.3f} ms "
-          f"(ratio {t_fit / t_base:.0f}x: covariance, Jacobians, identifiability)")
+    print(
+        f"\nspeed ({len(H)} epochs): calibrate_ldv {t_fit * 1e3:.2f} ms, bare lstsq {t_base * 1e3:.3f} ms "
+        f"(ratio {t_fit / t_base:.0f}x: covariance, Jacobians, identifiability)"
+    )
     return 0
 
 

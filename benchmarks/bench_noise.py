@@ -31,9 +31,7 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=200.0)
     a = ap.parse_args()
     dt = 1.0 / a.rate
-    print(
-        f"N = {N_TRUE:g} rad/s/√Hz, K = {K_TRUE:g} rad/s²/√Hz, {a.rate:g} Hz, {a.records} records x 3 axes each"
-    )
+    print(f"N = {N_TRUE:g} rad/s/√Hz, K = {K_TRUE:g} rad/s²/√Hz, {a.rate:g} Hz, {a.records} records x 3 axes each")
     print("record_s  rms_z_N  rms_z_K  warned  t_fit_s  t_oadev_s  ratio")
     for seconds in a.seconds:
         n = int(seconds * a.rate)
@@ -53,9 +51,7 @@ def main() -> None:
             warned += int(f.duration_s < np.max(f.random_walk_min_duration_s))
         rn, rk = np.sqrt(np.mean(np.square(zn))), np.sqrt(np.mean(np.square(zk)))
         tf, ta = float(np.median(t_fit)), float(np.median(t_ad))
-        print(
-            f"{seconds:8.0f}  {rn:7.2f}  {rk:7.2f}  {warned:3d}/{a.records}  {tf:7.2f}  {ta:9.3f}  {tf / ta:5.1f}"
-        )
+        print(f"{seconds:8.0f}  {rn:7.2f}  {rk:7.2f}  {warned:3d}/{a.records}  {tf:7.2f}  {ta:9.3f}  {tf / ta:5.1f}")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ gauge: its truth is rotated into that gauge (M = Q R, truth → (Qᵀ B, R)) bef
 Baseline in the same run: P1 without bias instability (`bias_instability_mps2=0`), where the
 per-position std/sqrt(n) is the whole noise.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,8 +41,12 @@ CASES = [
     ("ldv", {}),
     ("ldv", {"reference": "nav"}),
 ]
-KEYS = {"accel-tabletop": ["B", "M"], "accel-centrifuge": ["S", "b", "D"], "compass": ["hard_iron", "soft_iron"],
-        "gyro-drift": ["drift"]}
+KEYS = {
+    "accel-tabletop": ["B", "M"],
+    "accel-centrifuge": ["S", "b", "D"],
+    "compass": ["hard_iron", "soft_iron"],
+    "gyro-drift": ["drift"],
+}
 
 
 def z_scores(procedure: str, d: dict, truth: dict) -> dict[str, float]:
@@ -80,9 +85,12 @@ def run_case(procedure: str, options: dict, seeds: int, folder: str) -> None:
     z = np.concatenate([np.array(v) for v in per.values()])
     worst = sorted(((float(np.sqrt(np.mean(np.square(v)))), k) for k, v in per.items()), reverse=True)[:3]
     label = procedure + (" " + " ".join(f"{k}={v}" for k, v in options.items()) if options else "")
-    print(f"{label:<62} n={z.size:4d}  rms z {np.sqrt(np.mean(z ** 2)):5.2f}  "
-          f"|z|<1 {np.mean(np.abs(z) < 1):4.2f}  |z|<2 {np.mean(np.abs(z) < 2):4.2f}  "
-          f"worst {', '.join(f'{k} {r:.2f}' for r, k in worst)}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+    print(
+        f"{label:<62} n={z.size:4d}  rms z {np.sqrt(np.mean(z**2)):5.2f}  "
+        f"|z|<1 {np.mean(np.abs(z) < 1):4.2f}  |z|<2 {np.mean(np.abs(z) < 2):4.2f}  "
+        f"worst {', '.join(f'{k} {r:.2f}' for r, k in worst)}  ({time.perf_counter() - t0:.0f} s)",
+        flush=True,
+    )
 
 
 def main() -> int:

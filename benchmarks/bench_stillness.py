@@ -15,6 +15,7 @@
 
 Times are the best of R runs (the machine may be shared; the load average is printed).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -130,8 +131,7 @@ def main() -> int:
     t_a, c_a = best_cpu(lambda: detect_static_intervals(t, a, sample_rate_hz=FS), repeat)
     win = res.config.window_n
     t_np, c_np = best_cpu(lambda: baseline(a, win, res.noise.accel_var, res.config.threshold_factor), repeat)
-    t_cs, c_cs = best_cpu(lambda: baseline_cumsum(a, win, res.noise.accel_var, res.config.threshold_factor),
-                          repeat)
+    t_cs, c_cs = best_cpu(lambda: baseline_cumsum(a, win, res.noise.accel_var, res.config.threshold_factor), repeat)
     tracemalloc.start()
     detect_static_intervals(t, a, w, sample_rate_hz=FS)
     peak = tracemalloc.get_traced_memory()[1]
@@ -139,17 +139,27 @@ def main() -> int:
     truth = [(s, e) for s, e in truth if e - s >= FS]  # a rest cut short by the end of the series
     found = sum(any(iv.start >= s - 50 and iv.stop <= e + 50 for iv in res.intervals) for s, e in truth)
     print("\nbatch detector (robust noise floor, window 1 s = 1001 samples); wall and CPU seconds")
-    print(f"  accel + gyro : {t_b:6.3f} s wall {c_b:6.3f} s CPU  {n / c_b / 1e6:5.2f} M samples/s CPU"
-          f"  CPU ratio to baseline {c_b / c_np:5.2f}")
-    print(f"  accel only   : {t_a:6.3f} s wall {c_a:6.3f} s CPU  {n / c_a / 1e6:5.2f} M samples/s CPU"
-          f"  CPU ratio to baseline {c_a / c_np:5.2f}")
-    print(f"  baseline     : {t_np:6.3f} s wall {c_np:6.3f} s CPU  (np.convolve moving variance, accel only,"
-          " no noise estimate, no interval statistics)")
-    print(f"  cumsum base  : {t_cs:6.3f} s wall {c_cs:6.3f} s CPU  (one global cumsum, accel only, same omissions);"
-          f" accel-only detector / this = {c_a / c_cs:4.2f}")
+    print(
+        f"  accel + gyro : {t_b:6.3f} s wall {c_b:6.3f} s CPU  {n / c_b / 1e6:5.2f} M samples/s CPU"
+        f"  CPU ratio to baseline {c_b / c_np:5.2f}"
+    )
+    print(
+        f"  accel only   : {t_a:6.3f} s wall {c_a:6.3f} s CPU  {n / c_a / 1e6:5.2f} M samples/s CPU"
+        f"  CPU ratio to baseline {c_a / c_np:5.2f}"
+    )
+    print(
+        f"  baseline     : {t_np:6.3f} s wall {c_np:6.3f} s CPU  (np.convolve moving variance, accel only,"
+        " no noise estimate, no interval statistics)"
+    )
+    print(
+        f"  cumsum base  : {t_cs:6.3f} s wall {c_cs:6.3f} s CPU  (one global cumsum, accel only, same omissions);"
+        f" accel-only detector / this = {c_a / c_cs:4.2f}"
+    )
     print(f"  peak memory  : {peak / 1e6:7.1f} MB for {n * 6 * 8 / 1e6:.0f} MB of input")
-    print(f"  intervals    : {len(res.intervals)} found, {found}/{len(truth)} planted rests recovered "
-          f"(accel only: {len(res_a.intervals)})")
+    print(
+        f"  intervals    : {len(res.intervals)} found, {found}/{len(truth)} planted rests recovered "
+        f"(accel only: {len(res_a.intervals)})"
+    )
 
     # 2. tracker
     print("\ntracker (accel + gyro, noise from the batch result; rows fed in batches of B)")
@@ -160,12 +170,14 @@ def main() -> int:
         def feed(b=b, rows=rows):
             tr = StillnessTracker.from_result(res)
             for i in range(0, rows, b):
-                tr.update(t[i:i + b], a[i:i + b], w[i:i + b])
+                tr.update(t[i : i + b], a[i : i + b], w[i : i + b])
             return tr
 
         wall, cpu = best_cpu(feed, repeat)
-        print(f"  {b:>6} {rows / wall:12,.0f} {rows / cpu:12,.0f} {cpu / math.ceil(rows / b) * 1e6:14.1f} "
-              f"{FS * cpu / rows:12.1%}")
+        print(
+            f"  {b:>6} {rows / wall:12,.0f} {rows / cpu:12,.0f} {cpu / math.ceil(rows / b) * 1e6:14.1f} "
+            f"{FS * cpu / rows:12.1%}"
+        )
     return 0
 
 

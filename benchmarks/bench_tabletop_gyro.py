@@ -22,6 +22,7 @@ accelerometer calibration's frame).
 
     nice -n 10 python benchmarks/bench_tabletop_gyro.py [--seeds 500] [--skip-coverage | --coverage-only]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,7 +49,7 @@ IMU_TK_PRINTED = {
     "T": np.array([[1, 0.00593634, 0.00111101], [0.00808812, 1, -0.0535569], [0.0253067, -0.0025513, 1]]),
     "s": np.array([0.000209295, 0.000209899, 0.000209483]),
     "b": np.array([32777.1, 32459.8, 32511.8]),
-    "final_cost": 1.506956e-03,          # Ceres ½ Σ |r|², 37 residual blocks of 3
+    "final_cost": 1.506956e-03,  # Ceres ½ Σ |r|², 37 residual blocks of 3
 }
 
 
@@ -89,7 +90,7 @@ def station_inputs():
     holds, motions, noise, _ = TGP.inputs(cap, pos, acc.B, acc.M)
     t = np.asarray(cap.columns["t"], dtype=float)
     y = np.column_stack([np.asarray(cap.columns[c], dtype=float) for c in ("gx", "gy", "gz")])
-    rest_bias = y[t < t[0] + 50.0].mean(axis=0)           # imu_tk: setInitStaticIntervalDuration(50)
+    rest_bias = y[t < t[0] + 50.0].mean(axis=0)  # imu_tk: setInitStaticIntervalDuration(50)
     return holds, motions, noise, rest_bias
 
 
@@ -124,9 +125,11 @@ def part1() -> None:
         A = np.linalg.inv(p["K"])
         s = np.diag(A)
         Tm = A / s[None, :]
-        out = (f"{name:28s} 1/s = {1 / s[0]:8.2f} {1 / s[1]:8.2f} {1 / s[2]:8.2f}  "
-               f"T01 {Tm[0, 1]:+.5f} T02 {Tm[0, 2]:+.5f} T10 {Tm[1, 0]:+.5f} T12 {Tm[1, 2]:+.5f} "
-               f"T20 {Tm[2, 0]:+.5f} T21 {Tm[2, 1]:+.5f}  b = {p['eps'][0]:.1f} {p['eps'][1]:.1f} {p['eps'][2]:.1f}")
+        out = (
+            f"{name:28s} 1/s = {1 / s[0]:8.2f} {1 / s[1]:8.2f} {1 / s[2]:8.2f}  "
+            f"T01 {Tm[0, 1]:+.5f} T02 {Tm[0, 2]:+.5f} T10 {Tm[1, 0]:+.5f} T12 {Tm[1, 2]:+.5f} "
+            f"T20 {Tm[2, 0]:+.5f} T21 {Tm[2, 1]:+.5f}  b = {p['eps'][0]:.1f} {p['eps'][1]:.1f} {p['eps'][2]:.1f}"
+        )
         print(out)
         if sig is not None:
             print(f"{'':28s} σ(K diag) = {sig[0]:.2f} {sig[1]:.2f} {sig[2]:.2f} counts per rad/s")
@@ -134,12 +137,16 @@ def part1() -> None:
     row("imu_tk (printed, C++)", printed)
     row("imu_tk (re-implemented)", tk)
     row("station", st.params(), np.diag(st.sigma_K))
-    print(f"station g-sensitivity fitted: {st.G is not None}; reduced χ² {st.fit.reduced_chi2:.2f}; "
-          f"fit {t_station:.2f} s, imu_tk re-implementation {t_tk:.2f} s")
+    print(
+        f"station g-sensitivity fitted: {st.G is not None}; reduced χ² {st.fit.reduced_chi2:.2f}; "
+        f"fit {t_station:.2f} s, imu_tk re-implementation {t_tk:.2f} s"
+    )
     print("\n== gravity direction residual after each rotation, in sample (RMS over 37, degrees) ==")
-    print(f"imu_tk printed parameters : {rms_deg(TG.direction_residuals(printed, holds, motions)):.4f}"
-          f"   (imu_tk's own cost {IMU_TK_PRINTED['final_cost']:.3e} = "
-          f"{math.degrees(math.sqrt(2 * IMU_TK_PRINTED['final_cost'] / 37)):.4f}° RMS on its own holds)")
+    print(
+        f"imu_tk printed parameters : {rms_deg(TG.direction_residuals(printed, holds, motions)):.4f}"
+        f"   (imu_tk's own cost {IMU_TK_PRINTED['final_cost']:.3e} = "
+        f"{math.degrees(math.sqrt(2 * IMU_TK_PRINTED['final_cost'] / 37)):.4f}° RMS on its own holds)"
+    )
     print(f"imu_tk re-implemented     : {rms_deg(TG.direction_residuals(tk, holds, motions)):.4f}")
     print(f"station                   : {rms_deg(st.direction_residual_rad):.4f}")
     print(f"station without G         : {rms_deg(st_nog.direction_residual_rad):.4f}")
@@ -157,10 +164,14 @@ def part1() -> None:
         r_tk = TG.direction_residuals(tk_f, holds, test_m)
         all_st.append(r_st)
         all_tk.append(r_tk)
-        print(f"fold {fold}: {len(out)} poses out, {len(train_m)} rotations fitted, {len(test_m)} held out: "
-              f"imu_tk {rms_deg(r_tk):.4f}  station {rms_deg(r_st):.4f}  station without G {rms_deg(all_ng[-1]):.4f}")
-    print(f"all folds: imu_tk {rms_deg(np.concatenate(all_tk)):.4f}  station {rms_deg(np.concatenate(all_st)):.4f}"
-          f"  station without G {rms_deg(np.concatenate(all_ng)):.4f}")
+        print(
+            f"fold {fold}: {len(out)} poses out, {len(train_m)} rotations fitted, {len(test_m)} held out: "
+            f"imu_tk {rms_deg(r_tk):.4f}  station {rms_deg(r_st):.4f}  station without G {rms_deg(all_ng[-1]):.4f}"
+        )
+    print(
+        f"all folds: imu_tk {rms_deg(np.concatenate(all_tk)):.4f}  station {rms_deg(np.concatenate(all_st)):.4f}"
+        f"  station without G {rms_deg(np.concatenate(all_ng)):.4f}"
+    )
 
 
 def part2(seeds: int, rate_hz: float = 50.0, extra: int = 4) -> None:
@@ -173,9 +184,18 @@ def part2(seeds: int, rate_hz: float = 50.0, extra: int = 4) -> None:
         if seed and seed % 50 == 0:
             a = np.abs(np.concatenate([np.concatenate(v) for v in z.values()]))
             print(f"  {seed} sessions: 1σ {np.mean(a < 1):.3f}  2σ {np.mean(a < 2):.3f}", flush=True)
-        sim = simulate("accel-tabletop", seed=10_000 + seed, extra_positions=extra, hold_s=4, move_s=2,
-                       init_rest_s=10, rate_hz=rate_hz, gyro_scale_sigma=0.01, gyro_misalignment_sigma_rad=0.005,
-                       gyro_g_sensitivity=2e-4)
+        sim = simulate(
+            "accel-tabletop",
+            seed=10_000 + seed,
+            extra_positions=extra,
+            hold_s=4,
+            move_s=2,
+            init_rest_s=10,
+            rate_hz=rate_hz,
+            gyro_scale_sigma=0.01,
+            gyro_misalignment_sigma_rad=0.005,
+            gyro_g_sensitivity=2e-4,
+        )
         out = tabletop.calibrate(Capture(dict(sim.meta), dict(sim.columns)))
         gb = out["gyro"]
         R = np.array(out["params"]["M"]) @ np.linalg.inv(np.array(sim.truth["M"]))
@@ -189,8 +209,10 @@ def part2(seeds: int, rate_hz: float = 50.0, extra: int = 4) -> None:
     allz = np.abs(np.concatenate([np.concatenate(v) for v in z.values()]))
     n = allz.size
     se1, se2 = math.sqrt(0.6827 * 0.3173 / n), math.sqrt(0.9545 * 0.0455 / n)
-    print(f"all {n} values: within 1σ {np.mean(allz < 1):.3f} (expect 0.683 ± {se1:.3f}), "
-          f"within 2σ {np.mean(allz < 2):.3f} (expect 0.954 ± {se2:.3f})")
+    print(
+        f"all {n} values: within 1σ {np.mean(allz < 1):.3f} (expect 0.683 ± {se1:.3f}), "
+        f"within 2σ {np.mean(allz < 2):.3f} (expect 0.954 ± {se2:.3f})"
+    )
     for k, v in z.items():
         a = np.abs(np.concatenate(v))
         print(f"  {k:4s} {a.size:6d} values: 1σ {np.mean(a < 1):.3f}  2σ {np.mean(a < 2):.3f}")

@@ -14,6 +14,7 @@
    the same reader alone (no app) for the same time. Targets: >= 10 Hz refresh, reader +
    UI < 30 % of a core.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -55,8 +56,9 @@ def startup_s(make: str, runs: int) -> list[float]:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     for _ in range(runs):
         t = time.time()
-        p = subprocess.run([sys.executable, "-c", code, repr(t)], capture_output=True, text=True, cwd=ROOT,
-                           env=env, timeout=120)
+        p = subprocess.run(
+            [sys.executable, "-c", code, repr(t)], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120
+        )
         if p.returncode != 0:
             raise SystemExit(f"start-up run failed: {p.stderr[-2000:]}")
         out.append(float(p.stdout.strip().splitlines()[-1]))
@@ -64,8 +66,13 @@ def startup_s(make: str, runs: int) -> list[float]:
 
 
 def start_sim(rate: float) -> tuple[subprocess.Popen, str]:
-    p = subprocess.Popen([sys.executable, "-m", "station", "sim-device", "--rate", f"{rate:g}"], cwd=ROOT,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "station", "sim-device", "--rate", f"{rate:g}"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     path = p.stdout.readline().strip()
     if not path.startswith("/dev/"):
         raise SystemExit(f"sim-device did not start: {p.stderr.read()}")
@@ -93,8 +100,12 @@ def reader_alone(path: str, seconds: float) -> dict:
         time.sleep(0.01)
     c1, w1, st = time.process_time(), time.monotonic(), src.stats()
     src.stop()
-    return {"cpu": (c1 - c0) / (w1 - w0), "rate": (st.samples - n0) / (w1 - w0), "dropped": st.dropped,
-            "errors": st.parse_errors}
+    return {
+        "cpu": (c1 - c0) / (w1 - w0),
+        "rate": (st.samples - n0) / (w1 - w0),
+        "dropped": st.dropped,
+        "errors": st.parse_errors,
+    }
 
 
 def app_streaming(path: str, seconds: float) -> dict:
@@ -117,8 +128,14 @@ def app_streaming(path: str, seconds: float) -> dict:
             c0, w0, u0, n0 = time.process_time(), time.monotonic(), scr.updates, src.stats().samples
             await asyncio.sleep(seconds)
             c1, w1, u1, st = time.process_time(), time.monotonic(), scr.updates, src.stats()
-            out.update(cpu=(c1 - c0) / (w1 - w0), refresh=(u1 - u0) / (w1 - w0), rate=(st.samples - n0) / (w1 - w0),
-                       dropped=st.dropped, errors=st.parse_errors, guide_t=scr.last_status.t_s)
+            out.update(
+                cpu=(c1 - c0) / (w1 - w0),
+                refresh=(u1 - u0) / (w1 - w0),
+                rate=(st.samples - n0) / (w1 - w0),
+                dropped=st.dropped,
+                errors=st.parse_errors,
+                guide_t=scr.last_status.t_s,
+            )
         src.stop()
 
     asyncio.run(run())
@@ -137,8 +154,10 @@ def main() -> int:
     station = startup_s(MAKE_STATION, args.runs)
     print("\n1. start-up to the first screen (fresh process, headless, 80x24)")
     print(f"   bare Textual app : median {statistics.median(bare):.3f} s, best {min(bare):.3f} s")
-    print(f"   station (Connect): median {statistics.median(station):.3f} s, best {min(station):.3f} s "
-          f"(target < 1.5 s; ratio to bare {statistics.median(station) / statistics.median(bare):.2f})")
+    print(
+        f"   station (Connect): median {statistics.median(station):.3f} s, best {min(station):.3f} s "
+        f"(target < 1.5 s; ratio to bare {statistics.median(station) / statistics.median(bare):.2f})"
+    )
 
     print(f"\n2. streaming {args.rate:g} Hz over a pty for {args.seconds:g} s")
     sim, path = start_sim(args.rate)
@@ -147,11 +166,15 @@ def main() -> int:
         ui = app_streaming(path, args.seconds)
     finally:
         stop_sim(sim)
-    print(f"   reader alone      : {100 * base['cpu']:.1f} % of a core, {base['rate']:.0f} samples/s, "
-          f"dropped {base['dropped']}, parse errors {base['errors']}")
-    print(f"   reader + guide + UI: {100 * ui['cpu']:.1f} % of a core (target < 30 %; ratio to reader alone "
-          f"{ui['cpu'] / base['cpu']:.1f}), refresh {ui['refresh']:.1f} Hz (target >= 10), "
-          f"{ui['rate']:.0f} samples/s, dropped {ui['dropped']}, parse errors {ui['errors']}")
+    print(
+        f"   reader alone      : {100 * base['cpu']:.1f} % of a core, {base['rate']:.0f} samples/s, "
+        f"dropped {base['dropped']}, parse errors {base['errors']}"
+    )
+    print(
+        f"   reader + guide + UI: {100 * ui['cpu']:.1f} % of a core (target < 30 %; ratio to reader alone "
+        f"{ui['cpu'] / base['cpu']:.1f}), refresh {ui['refresh']:.1f} Hz (target >= 10), "
+        f"{ui['rate']:.0f} samples/s, dropped {ui['dropped']}, parse errors {ui['errors']}"
+    )
     return 0
 
 

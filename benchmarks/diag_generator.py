@@ -33,6 +33,7 @@ averages), least-squares projected off the baseline's parameters, with the gener
 own noise covariance (white plus exponential-kernel bias instability):
 ``z = |s⊥|² / sqrt(s⊥ᵀ Σ s⊥)``. An effect "at k σ" has the size that makes ``z = k``.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,8 +53,7 @@ CANONICAL = {
     "accel-tabletop": ("temperature_bias", "time_drift", "quadratic", "scale_asymmetry"),
     "gyro-drift": ("temperature_bias", "time_drift", "g_sensitivity"),
     "accel-centrifuge": ("temperature_bias", "time_drift", "misalignment", "cubic", "lever_arm"),
-    "compass": ("temperature_bias", "time_drift", "mag_accel_misalignment", "field_anomaly",
-                "time_varying_hard_iron"),
+    "compass": ("temperature_bias", "time_drift", "mag_accel_misalignment", "field_anomaly", "time_varying_hard_iron"),
     "ldv": ("temperature_bias", "time_drift", "time_delay", "lever_arm", "offset"),
 }
 UNLISTED = {
@@ -73,28 +73,30 @@ SITES = [(52.2, 0.12, 20.0), (-33.9, 151.2, 40.0), (47.4, 8.5, 420.0), (35.7, 13
 class Rendered:
     meta: dict
     columns: dict
-    raw: np.ndarray            # (N, 3) raw output the signature is taken on
-    obs: "Observation"
+    raw: np.ndarray  # (N, 3) raw output the signature is taken on
+    obs: Observation
 
 
 @dataclass
 class Observation:
     """What the procedure's calibration observes of a raw signature (see module docstring)."""
-    kind: str                        # "radial" (norm-based) or "vector"
-    use: np.ndarray                  # sample mask of the samples the calibration uses
-    A: np.ndarray | None             # (3, 3) raw → calibrated input (radial)
-    u: np.ndarray | None             # (N, 3) unit input direction per sample (radial)
-    sigma: np.ndarray                # (3,) white noise per raw axis (vector) or (1,) radial σ in input units
-    gm_ratio: float                  # bias-instability σ over white σ
+
+    kind: str  # "radial" (norm-based) or "vector"
+    use: np.ndarray  # sample mask of the samples the calibration uses
+    A: np.ndarray | None  # (3, 3) raw → calibrated input (radial)
+    u: np.ndarray | None  # (N, 3) unit input direction per sample (radial)
+    sigma: np.ndarray  # (3,) white noise per raw axis (vector) or (1,) radial σ in input units
+    gm_ratio: float  # bias-instability σ over white σ
     tau_s: float
     t: np.ndarray
-    hold: np.ndarray                 # hold index per sample (−1 moving)
-    averages: bool                   # only hold means reach the calibration
-    span: list = field(default_factory=list)   # raw-space (N, 3) patterns the baseline absorbs
-    dip: dict | None = None          # compass: {"f_hat": (H, 3), "W": (3, 3), "sigma": (H,)}
+    hold: np.ndarray  # hold index per sample (−1 moving)
+    averages: bool  # only hold means reach the calibration
+    span: list = field(default_factory=list)  # raw-space (N, 3) patterns the baseline absorbs
+    dip: dict | None = None  # compass: {"f_hat": (H, 3), "W": (3, 3), "sigma": (H,)}
 
 
 # ------------------------------------------------------------------ helpers
+
 
 def _temperature(rng, t, kind):
     T0 = rng.uniform(15, 30)
@@ -102,15 +104,21 @@ def _temperature(rng, t, kind):
     if kind == "constant":
         return T0 + rng.normal(scale=0.02, size=len(t))
     if kind == "warmup":
-        return T0 + rng.uniform(2, 8) * (1 - np.exp(-(t - t[0]) / rng.uniform(0.2, 0.6) / span)) \
+        return (
+            T0
+            + rng.uniform(2, 8) * (1 - np.exp(-(t - t[0]) / rng.uniform(0.2, 0.6) / span))
             + rng.normal(scale=0.03, size=len(t))
+        )
     if kind == "staircase":  # thermal chamber: levels in a random order, not tracking time
         levels = rng.permutation(np.linspace(-10, 10, int(rng.integers(3, 6))))
         k = np.minimum(((t - t[0]) / span * len(levels)).astype(int), len(levels) - 1)
         return T0 + levels[k] + rng.normal(scale=0.05, size=len(t))
     if kind == "cycle":
-        return T0 + rng.uniform(3, 8) * np.sin(2 * np.pi * (t - t[0]) / span * rng.uniform(1.2, 2.5)
-                                               + rng.uniform(0, 6.28)) + rng.normal(scale=0.03, size=len(t))
+        return (
+            T0
+            + rng.uniform(3, 8) * np.sin(2 * np.pi * (t - t[0]) / span * rng.uniform(1.2, 2.5) + rng.uniform(0, 6.28))
+            + rng.normal(scale=0.03, size=len(t))
+        )
     # random walk
     steps = rng.normal(scale=1.0, size=len(t))
     walk = np.cumsum(steps)
@@ -159,13 +167,19 @@ def _unlisted(name, size, pattern, t, temp):
 def _patterns(rng, duration_s):
     """One pattern per effect (unit size), drawn with the scenario."""
     return {
-        "v": _rand_dir(rng), "v2": _rand_dir(rng), "signs": rng.choice([-1.0, 1.0], 3) * rng.uniform(0.4, 1.0, 3),
-        "M": rng.normal(size=(3, 3)), "at": rng.uniform(0.3, 0.7), "phase": rng.uniform(0, 2 * np.pi),
-        "period_s": duration_s / rng.uniform(3.0, 8.0), "gamma": _unit(rng.normal(size=6)),
+        "v": _rand_dir(rng),
+        "v2": _rand_dir(rng),
+        "signs": rng.choice([-1.0, 1.0], 3) * rng.uniform(0.4, 1.0, 3),
+        "M": rng.normal(size=(3, 3)),
+        "at": rng.uniform(0.3, 0.7),
+        "phase": rng.uniform(0, 2 * np.pi),
+        "period_s": duration_s / rng.uniform(3.0, 8.0),
+        "gamma": _unit(rng.normal(size=6)),
     }
 
 
 # ------------------------------------------------------------------ P1 level table
+
 
 def tabletop_scenario(rng):
     n_pos = int(rng.integers(9, 31))
@@ -191,15 +205,25 @@ def tabletop_scenario(rng):
     if n_pos * hold * rate > 110_000:
         rate = 50.0
     white = float(rng.uniform(0.003, 0.03))
-    return {"procedure": "accel-tabletop", "seed_rng": int(rng.integers(1 << 31)),
-            "dirs": [dirs[k] for k in order], "labels": [labels[k] for k in order], "mode": str(mode),
-            "unit": unit, "rate": rate, "hold": hold, "move": float(rng.uniform(2, 8)),
-            "white": white, "gm": white * float(rng.uniform(0.0, 0.04)), "tau": float(rng.uniform(20, 400)),
-            "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk"])),
-            "placement_deg": float(rng.uniform(0.1, 1.0)), "site": SITES[int(rng.integers(len(SITES)))],
-            "K": (np.eye(3) + rng.normal(scale=0.01, size=(3, 3))) * ACCEL_UNITS[unit]
-            * rng.uniform(0.9, 1.1, 3)[:, None],
-            "b": rng.normal(scale=0.3, size=3) * ACCEL_UNITS[unit]}
+    return {
+        "procedure": "accel-tabletop",
+        "seed_rng": int(rng.integers(1 << 31)),
+        "dirs": [dirs[k] for k in order],
+        "labels": [labels[k] for k in order],
+        "mode": str(mode),
+        "unit": unit,
+        "rate": rate,
+        "hold": hold,
+        "move": float(rng.uniform(2, 8)),
+        "white": white,
+        "gm": white * float(rng.uniform(0.0, 0.04)),
+        "tau": float(rng.uniform(20, 400)),
+        "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk"])),
+        "placement_deg": float(rng.uniform(0.1, 1.0)),
+        "site": SITES[int(rng.integers(len(SITES)))],
+        "K": (np.eye(3) + rng.normal(scale=0.01, size=(3, 3))) * ACCEL_UNITS[unit] * rng.uniform(0.9, 1.1, 3)[:, None],
+        "b": rng.normal(scale=0.3, size=3) * ACCEL_UNITS[unit],
+    }
 
 
 def tabletop_render(sc, effect=None, size=0.0, noise=True):
@@ -210,6 +234,7 @@ def tabletop_render(sc, effect=None, size=0.0, noise=True):
     for d in sc["dirs"]:
         P = frames.rotvec_to_matrix(rng.normal(scale=math.radians(sc["placement_deg"]), size=3))
         from solvers.positions import C_n_b_for
+
         atts.append(C_n_b_for(d, rng.uniform(0, 2 * np.pi)) @ P)
     Cs, hold_id = [], []
     for k, C in enumerate(atts):
@@ -231,18 +256,18 @@ def tabletop_render(sc, effect=None, size=0.0, noise=True):
     extra = np.zeros((n, 3))
     Kd = np.diag(sc["K"])
     if effect == "temperature_bias":
-        params["bT"] = Kd * pat["signs"] * size           # size: m/s² per °C
+        params["bT"] = Kd * pat["signs"] * size  # size: m/s² per °C
     elif effect == "time_drift":
         params["bt"] = Kd * pat["signs"] * size / 3600.0  # size: m/s² per hour
     elif effect == "quadratic":
-        params["D"] = pat["signs"] * size                 # 1/(m/s²)
+        params["D"] = pat["signs"] * size  # 1/(m/s²)
     elif effect == "scale_asymmetry":
         params["A"] = pat["signs"] * size
     elif effect in ("bias_step", "periodic_bias"):
         extra = _unlisted(effect, size, {**pat}, t, temp) * Kd  # size in m/s²
     cond = Conditions(t_s=t, temp_c=temp, temp_ref_c=float(np.mean(temp)), t_ref_s=float(np.mean(t)))
     y = accel_model.forward(f, params, cond) + extra
-    if effect == "temp_scale":                           # size: relative scale per °C
+    if effect == "temp_scale":  # size: relative scale per °C
         y = y + ((temp - temp.mean())[:, None] * pat["signs"] * size * f) @ sc["K"].T
     nz = np.zeros((n, 3))
     if noise:
@@ -251,14 +276,31 @@ def tabletop_render(sc, effect=None, size=0.0, noise=True):
     gyro = np.zeros((n, 3))
     gyro[moving] = rng.normal(scale=0.3, size=(int(moving.sum()), 3))
     gyro += rng.normal(scale=0.002, size=(n, 3)) + 0.01
-    meta = {"station-capture": "1", "procedure": "accel-tabletop", "device": f"IND-P1-{sc['seed_rng'] % 10000}",
-            "accel_unit": sc["unit"], "gyro_unit": "rad/s", "latitude_deg": f"{sc['site'][0]}",
-            "longitude_deg": f"{sc['site'][1]}", "altitude_m": f"{sc['site'][2]}", "date": "2025-06-01",
-            "sample_rate_hz": f"{rate:g}"}
+    meta = {
+        "station-capture": "1",
+        "procedure": "accel-tabletop",
+        "device": f"IND-P1-{sc['seed_rng'] % 10000}",
+        "accel_unit": sc["unit"],
+        "gyro_unit": "rad/s",
+        "latitude_deg": f"{sc['site'][0]}",
+        "longitude_deg": f"{sc['site'][1]}",
+        "altitude_m": f"{sc['site'][2]}",
+        "date": "2025-06-01",
+        "sample_rate_hz": f"{rate:g}",
+    }
     lab = np.array([sc["labels"][k] if k >= 0 else "" for k in hold_id], dtype=object)
     if sc["mode"] == "averages":
-        cols = {"position": [], "n": [], "ax": [], "ay": [], "az": [], "ax_std": [], "ay_std": [], "az_std": [],
-                "temp_c": []}
+        cols = {
+            "position": [],
+            "n": [],
+            "ax": [],
+            "ay": [],
+            "az": [],
+            "ax_std": [],
+            "ay_std": [],
+            "az_std": [],
+            "temp_c": [],
+        }
         for k in range(len(atts)):
             m = hold_id == k
             cols["position"].append(sc["labels"][k])
@@ -272,32 +314,61 @@ def tabletop_render(sc, effect=None, size=0.0, noise=True):
         cols = {"t": t}
         if sc["mode"] == "labelled":
             cols["position"] = lab
-        cols.update({"ax": y[:, 0], "ay": y[:, 1], "az": y[:, 2], "gx": gyro[:, 0], "gy": gyro[:, 1],
-                     "gz": gyro[:, 2], "temp_c": temp})
+        cols.update(
+            {
+                "ax": y[:, 0],
+                "ay": y[:, 1],
+                "az": y[:, 2],
+                "gx": gyro[:, 0],
+                "gy": gyro[:, 1],
+                "gz": gyro[:, 2],
+                "temp_c": temp,
+            }
+        )
     u = f / np.linalg.norm(f, axis=1, keepdims=True)
     Kinv = np.linalg.inv(sc["K"])
     span = [np.outer(np.ones(n), sc["K"][:, j]) for j in range(3)]
     span += [np.outer(f[:, i], sc["K"][:, j]) for i in range(3) for j in range(3)]
-    obs = Observation("radial", ~moving, Kinv, u, np.array([sc["white"]]), sc["gm"] / sc["white"], sc["tau"], t,
-                      hold_id, sc["mode"] == "averages", span)
+    obs = Observation(
+        "radial",
+        ~moving,
+        Kinv,
+        u,
+        np.array([sc["white"]]),
+        sc["gm"] / sc["white"],
+        sc["tau"],
+        t,
+        hold_id,
+        sc["mode"] == "averages",
+        span,
+    )
     return Rendered(meta, cols, y, obs)
 
 
 # ------------------------------------------------------------------ P4 gyro drift
+
 
 def gyro_scenario(rng):
     n_or = int(rng.choice([1, 2, 3, 4], p=[0.25, 0.2, 0.2, 0.35]))
     total = float(rng.uniform(240, 900))
     unit = str(rng.choice(["rad/s", "deg/s"]))
     white = float(rng.uniform(5e-4, 5e-3))
-    return {"procedure": "gyro-drift", "seed_rng": int(rng.integers(1 << 31)), "n_or": n_or, "total": total,
-            "rate": float(rng.choice([20.0, 50.0, 100.0])), "unit": unit, "white": white,
-            "gm": white * float(rng.uniform(0.0, 0.01)), "tau": float(rng.uniform(30, 300)),
-            "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk"])),
-            "site": SITES[int(rng.integers(len(SITES)))],
-            "headings": [float(h) for h in rng.uniform(0, 360, n_or)],
-            "tilts": [(float(rng.normal(scale=25)), float(rng.normal(scale=25))) for _ in range(n_or)],
-            "eps": rng.normal(scale=0.005, size=3)}
+    return {
+        "procedure": "gyro-drift",
+        "seed_rng": int(rng.integers(1 << 31)),
+        "n_or": n_or,
+        "total": total,
+        "rate": float(rng.choice([20.0, 50.0, 100.0])),
+        "unit": unit,
+        "white": white,
+        "gm": white * float(rng.uniform(0.0, 0.01)),
+        "tau": float(rng.uniform(30, 300)),
+        "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk"])),
+        "site": SITES[int(rng.integers(len(SITES)))],
+        "headings": [float(h) for h in rng.uniform(0, 360, n_or)],
+        "tilts": [(float(rng.normal(scale=25)), float(rng.normal(scale=25))) for _ in range(n_or)],
+        "eps": rng.normal(scale=0.005, size=3),
+    }
 
 
 def gyro_render(sc, effect=None, size=0.0, noise=True):
@@ -324,9 +395,9 @@ def gyro_render(sc, effect=None, size=0.0, noise=True):
     params = {"eps": sc["eps"].copy()}
     extra = np.zeros((n, 3))
     if effect == "temperature_bias":
-        params["bT"] = pat["signs"] * size                 # rad/s per °C
+        params["bT"] = pat["signs"] * size  # rad/s per °C
     elif effect == "time_drift":
-        params["bt"] = pat["signs"] * size / 3600.0        # rad/s per hour
+        params["bt"] = pat["signs"] * size / 3600.0  # rad/s per hour
     elif effect == "g_sensitivity":
         params["G"] = pat["M"] / np.linalg.norm(pat["M"]) * size  # rad/s per m/s²
     elif effect in ("bias_step", "periodic_bias"):
@@ -337,12 +408,30 @@ def gyro_render(sc, effect=None, size=0.0, noise=True):
         y = y + rng.normal(scale=sc["white"], size=(n, 3)) + (_gm(rng, t, sc["gm"], sc["tau"]) if sc["gm"] > 0 else 0)
     acc = f_b + (rng.normal(scale=0.02, size=(n, 3)) if noise else 0)
     k = 1.0 if sc["unit"] == "rad/s" else 180 / math.pi
-    meta = {"station-capture": "1", "procedure": "gyro-drift", "device": f"IND-P4-{sc['seed_rng'] % 10000}",
-            "accel_unit": "m/s^2", "gyro_unit": sc["unit"], "latitude_deg": f"{lat}",
-            "longitude_deg": f"{sc['site'][1]}", "altitude_m": f"{sc['site'][2]}", "date": "2025-06-01",
-            "sample_rate_hz": f"{sc['rate']:g}", "gyro_mode": "static", "frame": "body x forward, y up, z right"}
-    cols = {"t": t, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2], "gx": y[:, 0] * k, "gy": y[:, 1] * k,
-            "gz": y[:, 2] * k, "temp_c": temp}
+    meta = {
+        "station-capture": "1",
+        "procedure": "gyro-drift",
+        "device": f"IND-P4-{sc['seed_rng'] % 10000}",
+        "accel_unit": "m/s^2",
+        "gyro_unit": sc["unit"],
+        "latitude_deg": f"{lat}",
+        "longitude_deg": f"{sc['site'][1]}",
+        "altitude_m": f"{sc['site'][2]}",
+        "date": "2025-06-01",
+        "sample_rate_hz": f"{sc['rate']:g}",
+        "gyro_mode": "static",
+        "frame": "body x forward, y up, z right",
+    }
+    cols = {
+        "t": t,
+        "ax": acc[:, 0],
+        "ay": acc[:, 1],
+        "az": acc[:, 2],
+        "gx": y[:, 0] * k,
+        "gy": y[:, 1] * k,
+        "gz": y[:, 2] * k,
+        "temp_c": temp,
+    }
     if sc["n_or"] > 1:
         cols["position"] = np.array([f"o{x + 1}" for x in hid], dtype=object)
         cols["heading_deg"] = np.array(head)
@@ -353,24 +442,44 @@ def gyro_render(sc, effect=None, size=0.0, noise=True):
         e = np.zeros((n, 3))
         e[:, j] = 1.0
         span.append(e)
-    obs = Observation("vector", np.ones(n, bool), None, None, np.full(3, sc["white"]), sc["gm"] / sc["white"],
-                      sc["tau"], t, hid, False, span)
+    obs = Observation(
+        "vector",
+        np.ones(n, bool),
+        None,
+        None,
+        np.full(3, sc["white"]),
+        sc["gm"] / sc["white"],
+        sc["tau"],
+        t,
+        hid,
+        False,
+        span,
+    )
     return Rendered(meta, cols, y, obs)
 
 
 # ------------------------------------------------------------------ P2 centrifuge
 
+
 def centrifuge_scenario(rng):
     n_m = int(rng.integers(6, 21))
     n_s = int(rng.integers(2, 6))
     speeds = np.sort(rng.uniform(math.pi, 8 * math.pi, n_s))
-    return {"procedure": "accel-centrifuge", "seed_rng": int(rng.integers(1 << 31)), "n_m": n_m,
-            "speeds": [float(s) for s in speeds], "radius": float(rng.uniform(0.4, 1.6)),
-            "order": str(rng.choice(["mounting", "speed"])), "noise": float(rng.uniform(3e-6, 3e-5)),
-            "row_s": float(rng.uniform(60, 300)),
-            "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk", "speed"])),
-            "S": rng.uniform(0.95, 1.3, 3), "b": rng.normal(scale=0.05, size=3),
-            "D": rng.normal(scale=5e-5, size=3), "g": float(rng.uniform(9.78, 9.83))}
+    return {
+        "procedure": "accel-centrifuge",
+        "seed_rng": int(rng.integers(1 << 31)),
+        "n_m": n_m,
+        "speeds": [float(s) for s in speeds],
+        "radius": float(rng.uniform(0.4, 1.6)),
+        "order": str(rng.choice(["mounting", "speed"])),
+        "noise": float(rng.uniform(3e-6, 3e-5)),
+        "row_s": float(rng.uniform(60, 300)),
+        "temp": str(rng.choice(["constant", "warmup", "staircase", "cycle", "walk", "speed"])),
+        "S": rng.uniform(0.95, 1.3, 3),
+        "b": rng.normal(scale=0.05, size=3),
+        "D": rng.normal(scale=5e-5, size=3),
+        "g": float(rng.uniform(9.78, 9.83)),
+    }
 
 
 def centrifuge_render(sc, effect=None, size=0.0, noise=True):
@@ -396,26 +505,46 @@ def centrifuge_render(sc, effect=None, size=0.0, noise=True):
     pat = _patterns(rng, el[-1])
     params = {"S": sc["S"], "b": sc["b"], "D": sc["D"]}
     if effect == "temperature_bias":
-        params["bT"] = pat["signs"] * size                 # g per °C
+        params["bT"] = pat["signs"] * size  # g per °C
     elif effect == "time_drift":
-        params["bt"] = pat["signs"] * size / 3600.0        # g per hour
+        params["bt"] = pat["signs"] * size / 3600.0  # g per hour
     elif effect == "misalignment":
-        params["gamma"] = pat["gamma"] * size              # rad
+        params["gamma"] = pat["gamma"] * size  # rad
     elif effect == "cubic":
-        params["C3"] = pat["signs"] * size                 # 1/g²
+        params["C3"] = pat["signs"] * size  # 1/g²
     elif effect == "lever_arm":
-        params["dr"] = pat["signs"] * size                 # m
-    cond = Conditions(t_s=el, temp_c=temp, temp_ref_c=float(temp.mean()), t_ref_s=float(el.mean()),
-                      input_unit_mps2=sc["g"], omega_rad_s=ws, centripetal_dir=c)
+        params["dr"] = pat["signs"] * size  # m
+    cond = Conditions(
+        t_s=el,
+        temp_c=temp,
+        temp_ref_c=float(temp.mean()),
+        t_ref_s=float(el.mean()),
+        input_unit_mps2=sc["g"],
+        omega_rad_s=ws,
+        centripetal_dir=c,
+    )
     y = accel_model.forward(f, params, cond)
     if effect == "temp_scale":
         y = y + ((temp - temp.mean())[:, None] * pat["signs"] * size * f) * sc["S"]
     if noise:
         y = y + rng.normal(scale=sc["noise"], size=(n, 3))
-    meta = {"station-capture": "1", "procedure": "accel-centrifuge", "device": f"IND-P2-{sc['seed_rng'] % 10000}",
-            "accel_unit": "g", "radius_m": repr(sc["radius"]), "g_mps2": repr(sc["g"])}
-    cols = {"position": np.array(lab, dtype=object), "speed_rad_s": ws, "ax": y[:, 0], "ay": y[:, 1],
-            "az": y[:, 2], "temp_c": temp, "elapsed_s": el}
+    meta = {
+        "station-capture": "1",
+        "procedure": "accel-centrifuge",
+        "device": f"IND-P2-{sc['seed_rng'] % 10000}",
+        "accel_unit": "g",
+        "radius_m": repr(sc["radius"]),
+        "g_mps2": repr(sc["g"]),
+    }
+    cols = {
+        "position": np.array(lab, dtype=object),
+        "speed_rad_s": ws,
+        "ax": y[:, 0],
+        "ay": y[:, 1],
+        "az": y[:, 2],
+        "temp_c": temp,
+        "elapsed_s": el,
+    }
     u = f / np.linalg.norm(f, axis=1, keepdims=True)
     S = np.diag(sc["S"])
     span = []
@@ -424,23 +553,44 @@ def centrifuge_render(sc, effect=None, size=0.0, noise=True):
             e = np.zeros((n, 3))
             e[:, j] = col * (sc["S"][j] if col is not None else 1.0)
             span.append(e)
-    obs = Observation("radial", np.ones(n, bool), np.linalg.inv(S), u, np.array([sc["noise"]]), 0.0, 1.0, el,
-                      np.arange(n), False, span)
+    obs = Observation(
+        "radial",
+        np.ones(n, bool),
+        np.linalg.inv(S),
+        u,
+        np.array([sc["noise"]]),
+        0.0,
+        1.0,
+        el,
+        np.arange(n),
+        False,
+        span,
+    )
     return Rendered(meta, cols, y, obs)
 
 
 # ------------------------------------------------------------------ P3 compass
 
+
 def compass_scenario(rng):
     unit = str(rng.choice(list(MAG_UNITS)))
-    return {"procedure": "compass", "seed_rng": int(rng.integers(1 << 31)), "n_h": int(rng.integers(8, 21)),
-            "hold": float(rng.uniform(2, 6)), "move": float(rng.uniform(1, 3)),
-            "rate": float(rng.choice([25.0, 50.0, 100.0])), "unit": unit, "white_nT": float(rng.uniform(30, 200)),
-            "gm_nT": float(rng.uniform(0, 15)), "tau": float(rng.uniform(20, 200)),
-            "temp": str(rng.choice(["constant", "warmup", "cycle", "walk"])),
-            "site": SITES[int(rng.integers(len(SITES)))], "accel_unit": str(rng.choice(["g", "m/s^2"])),
-            "W": np.eye(3) + np.triu(rng.normal(scale=0.05, size=(3, 3))),
-            "h": rng.normal(scale=5000, size=3)}
+    return {
+        "procedure": "compass",
+        "seed_rng": int(rng.integers(1 << 31)),
+        "n_h": int(rng.integers(8, 21)),
+        "hold": float(rng.uniform(2, 6)),
+        "move": float(rng.uniform(1, 3)),
+        "rate": float(rng.choice([25.0, 50.0, 100.0])),
+        "unit": unit,
+        "white_nT": float(rng.uniform(30, 200)),
+        "gm_nT": float(rng.uniform(0, 15)),
+        "tau": float(rng.uniform(20, 200)),
+        "temp": str(rng.choice(["constant", "warmup", "cycle", "walk"])),
+        "site": SITES[int(rng.integers(len(SITES)))],
+        "accel_unit": str(rng.choice(["g", "m/s^2"])),
+        "W": np.eye(3) + np.triu(rng.normal(scale=0.05, size=(3, 3))),
+        "h": rng.normal(scale=5000, size=3),
+    }
 
 
 def compass_render(sc, effect=None, size=0.0, noise=True):
@@ -469,21 +619,26 @@ def compass_render(sc, effect=None, size=0.0, noise=True):
     temp = _temperature(rng, t, sc["temp"])
     pat = _patterns(rng, t[-1])
     m_n = m_ned.copy()
-    if effect == "field_anomaly":   # size: relative magnitude change; inclination moves with it (steel nearby)
-        R = frames.rotvec_to_matrix(np.cross([0, 0, 1.0], _unit(m_ned)) / np.linalg.norm(np.cross([0, 0, 1.0], _unit(m_ned)))
-                                    * size * 0.4 * pat["signs"][0])
+    if effect == "field_anomaly":  # size: relative magnitude change; inclination moves with it (steel nearby)
+        R = frames.rotvec_to_matrix(
+            np.cross([0, 0, 1.0], _unit(m_ned))
+            / np.linalg.norm(np.cross([0, 0, 1.0], _unit(m_ned)))
+            * size
+            * 0.4
+            * pat["signs"][0]
+        )
         m_n = (1 + size * pat["signs"][1] / abs(pat["signs"][1])) * (R @ m_ned)
     m_b = C_b_n @ m_n
     params = {"W": sc["W"], "h": sc["h"]}
     extra = np.zeros((n, 3))
     if effect == "temperature_bias":
-        params["bT"] = pat["signs"] * size                 # nT per °C
+        params["bT"] = pat["signs"] * size  # nT per °C
     elif effect == "time_drift":
-        params["bt"] = pat["signs"] * size / 3600.0        # nT per hour
+        params["bt"] = pat["signs"] * size / 3600.0  # nT per hour
     elif effect == "mag_accel_misalignment":
-        params["rho"] = pat["v"] * size                    # rad
+        params["rho"] = pat["v"] * size  # rad
     elif effect == "time_varying_hard_iron":
-        params["dh"] = pat["v"] * size                     # nT
+        params["dh"] = pat["v"] * size  # nT
         params["t_on_s"] = np.array(t[0] + pat["at"] * (t[-1] - t[0]))
     elif effect == "periodic_bias":
         extra = _unlisted(effect, size, pat, t, temp)
@@ -492,20 +647,43 @@ def compass_render(sc, effect=None, size=0.0, noise=True):
     if effect == "temp_scale":
         y = y + np.linalg.solve(sc["W"], ((temp - temp.mean())[:, None] * pat["signs"] * size * m_b).T).T
     if noise:
-        y = y + rng.normal(scale=sc["white_nT"], size=(n, 3)) + (_gm(rng, t, sc["gm_nT"], sc["tau"])
-                                                                 if sc["gm_nT"] > 0 else 0)
+        y = (
+            y
+            + rng.normal(scale=sc["white_nT"], size=(n, 3))
+            + (_gm(rng, t, sc["gm_nT"], sc["tau"]) if sc["gm_nT"] > 0 else 0)
+        )
     a_k = 1 / 9.80665 if sc["accel_unit"] == "g" else 1.0
     acc = (f_b + (rng.normal(scale=0.02, size=(n, 3)) if noise else 0)) * a_k
     w = np.zeros((n, 3))
     w[moving] = rng.normal(scale=0.8, size=(int(moving.sum()), 3))
     gyr = np.degrees(w + (rng.normal(scale=0.003, size=(n, 3)) if noise else 0))
     ku = MAG_UNITS[sc["unit"]]
-    meta = {"station-capture": "1", "procedure": "compass", "device": f"IND-P3-{sc['seed_rng'] % 10000}",
-            "accel_unit": sc["accel_unit"], "gyro_unit": "deg/s", "mag_unit": sc["unit"], "latitude_deg": f"{lat}",
-            "longitude_deg": f"{lon}", "altitude_m": f"{alt}", "date": "2025-06-01",
-            "sample_rate_hz": f"{sc['rate']:g}"}
-    cols = {"t": t, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2], "gx": gyr[:, 0], "gy": gyr[:, 1],
-            "gz": gyr[:, 2], "mx": y[:, 0] * ku, "my": y[:, 1] * ku, "mz": y[:, 2] * ku, "temp_c": temp}
+    meta = {
+        "station-capture": "1",
+        "procedure": "compass",
+        "device": f"IND-P3-{sc['seed_rng'] % 10000}",
+        "accel_unit": sc["accel_unit"],
+        "gyro_unit": "deg/s",
+        "mag_unit": sc["unit"],
+        "latitude_deg": f"{lat}",
+        "longitude_deg": f"{lon}",
+        "altitude_m": f"{alt}",
+        "date": "2025-06-01",
+        "sample_rate_hz": f"{sc['rate']:g}",
+    }
+    cols = {
+        "t": t,
+        "ax": acc[:, 0],
+        "ay": acc[:, 1],
+        "az": acc[:, 2],
+        "gx": gyr[:, 0],
+        "gy": gyr[:, 1],
+        "gz": gyr[:, 2],
+        "mx": y[:, 0] * ku,
+        "my": y[:, 1] * ku,
+        "mz": y[:, 2] * ku,
+        "temp_c": temp,
+    }
     Winv = np.linalg.inv(sc["W"])
     m_true = C_b_n @ m_ned
     span = []
@@ -513,7 +691,7 @@ def compass_render(sc, effect=None, size=0.0, noise=True):
         e = np.zeros((n, 3))
         e[:, j] = 1.0
         span.append(e)
-        for i in range(j, 3):   # W upper ⇔ W⁻¹ upper: output j from input i ≥ j
+        for i in range(j, 3):  # W upper ⇔ W⁻¹ upper: output j from input i ≥ j
             e = np.zeros((n, 3))
             e[:, j] = m_true[:, i]
             span.append(e)
@@ -523,20 +701,38 @@ def compass_render(sc, effect=None, size=0.0, noise=True):
     f_hat = np.array([_unit(C_b_n[hid == k][0] @ np.array([0.0, 0.0, -1.0])) for k in range(H)])
     Fm = np.linalg.norm(m_ned)
     dip_sigma = np.full(H, math.hypot(sc["white_nT"] / Fm / math.sqrt(hn), 0.02 / g / math.sqrt(hn)))
-    obs = Observation("radial", np.ones(n, bool), sc["W"], m_true / Fm, np.array([sc["white_nT"]]),
-                      sc["gm_nT"] / sc["white_nT"], sc["tau"], t, hid, False, span,
-                      dip={"f_hat": f_hat, "W": sc["W"], "sigma": dip_sigma, "m_hat": m_true / Fm, "F": Fm})
+    obs = Observation(
+        "radial",
+        np.ones(n, bool),
+        sc["W"],
+        m_true / Fm,
+        np.array([sc["white_nT"]]),
+        sc["gm_nT"] / sc["white_nT"],
+        sc["tau"],
+        t,
+        hid,
+        False,
+        span,
+        dip={"f_hat": f_hat, "W": sc["W"], "sigma": dip_sigma, "m_hat": m_true / Fm, "F": Fm},
+    )
     return Rendered(meta, cols, y, obs)
 
 
 # ------------------------------------------------------------------ P5 LDV
 
+
 def ldv_scenario(rng):
-    return {"procedure": "ldv", "seed_rng": int(rng.integers(1 << 31)), "duration": float(rng.uniform(300, 900)),
-            "rate": float(rng.choice([10.0, 20.0, 50.0])), "ref": str(rng.choice(["body", "nav"])),
-            "rates": bool(rng.uniform() < 0.7), "noise": float(rng.uniform(0.003, 0.03)),
-            "temp": str(rng.choice(["constant", "warmup", "cycle", "walk"])),
-            "site": SITES[int(rng.integers(len(SITES)))]}
+    return {
+        "procedure": "ldv",
+        "seed_rng": int(rng.integers(1 << 31)),
+        "duration": float(rng.uniform(300, 900)),
+        "rate": float(rng.choice([10.0, 20.0, 50.0])),
+        "ref": str(rng.choice(["body", "nav"])),
+        "rates": bool(rng.uniform() < 0.7),
+        "noise": float(rng.uniform(0.003, 0.03)),
+        "temp": str(rng.choice(["constant", "warmup", "cycle", "walk"])),
+        "site": SITES[int(rng.integers(len(SITES)))],
+    }
 
 
 def ldv_render(sc, effect=None, size=0.0, noise=True):
@@ -563,9 +759,9 @@ def ldv_render(sc, effect=None, size=0.0, noise=True):
     params = {"X": X}
     extra = np.zeros((n, 3))
     if effect == "temperature_bias":
-        params["bT"] = pat["signs"] * size                 # m/s per °C
+        params["bT"] = pat["signs"] * size  # m/s per °C
     elif effect == "time_drift":
-        params["bt"] = pat["signs"] * size / 3600.0        # m/s per hour
+        params["bt"] = pat["signs"] * size / 3600.0  # m/s per hour
     elif effect == "time_delay":
         params["tau_s"] = np.array(size * pat["signs"][0] / abs(pat["signs"][0]))
     elif effect == "lever_arm":
@@ -581,16 +777,32 @@ def ldv_render(sc, effect=None, size=0.0, noise=True):
     if noise:
         y = y + rng.normal(scale=sc["noise"], size=(n, 3))
     v_ref = v_b + (rng.normal(scale=sc["noise"] / 4, size=(n, 3)) if noise else 0)
-    meta = {"station-capture": "1", "procedure": "ldv", "device": f"IND-P5-{sc['seed_rng'] % 10000}",
-            "latitude_deg": f"{sc['site'][0]}", "longitude_deg": f"{sc['site'][1]}", "altitude_m": f"{sc['site'][2]}",
-            "date": "2025-06-01", "sample_rate_hz": f"{sc['rate']:g}", "frame": "body x forward, y right, z down"}
+    meta = {
+        "station-capture": "1",
+        "procedure": "ldv",
+        "device": f"IND-P5-{sc['seed_rng'] % 10000}",
+        "latitude_deg": f"{sc['site'][0]}",
+        "longitude_deg": f"{sc['site'][1]}",
+        "altitude_m": f"{sc['site'][2]}",
+        "date": "2025-06-01",
+        "sample_rate_hz": f"{sc['rate']:g}",
+        "frame": "body x forward, y right, z down",
+    }
     cols = {"t": t, "vl1": y[:, 0], "vl2": y[:, 1], "vl3": y[:, 2]}
     if sc["ref"] == "nav":
         yaw = np.cumsum(yaw_rate) / sc["rate"]
         C = np.stack([frames.euler_to_C_n_b(r, p, q) for r, p, q in zip(roll, pitch, yaw)])
         v_n = np.einsum("nij,nj->ni", C, v_ref)
-        cols.update({"vn": v_n[:, 0], "ve": v_n[:, 1], "vd": v_n[:, 2], "roll_deg": np.degrees(roll),
-                     "pitch_deg": np.degrees(pitch), "yaw_deg": np.degrees(yaw)})
+        cols.update(
+            {
+                "vn": v_n[:, 0],
+                "ve": v_n[:, 1],
+                "vd": v_n[:, 2],
+                "roll_deg": np.degrees(roll),
+                "pitch_deg": np.degrees(pitch),
+                "yaw_deg": np.degrees(yaw),
+            }
+        )
     else:
         cols.update({"vx": v_ref[:, 0], "vy": v_ref[:, 1], "vz": v_ref[:, 2]})
     if sc["rates"]:
@@ -602,15 +814,26 @@ def ldv_render(sc, effect=None, size=0.0, noise=True):
             e = np.zeros((n, 3))
             e[:, j] = v_b[:, i]
             span.append(e)
-    obs = Observation("vector", np.ones(n, bool), None, None, np.full(3, sc["noise"]), 0.0, 1.0, t,
-                      np.zeros(n, int), False, span)
+    obs = Observation(
+        "vector", np.ones(n, bool), None, None, np.full(3, sc["noise"]), 0.0, 1.0, t, np.zeros(n, int), False, span
+    )
     return Rendered(meta, cols, y, obs)
 
 
-SCENARIOS = {"accel-tabletop": tabletop_scenario, "gyro-drift": gyro_scenario,
-             "accel-centrifuge": centrifuge_scenario, "compass": compass_scenario, "ldv": ldv_scenario}
-RENDER = {"accel-tabletop": tabletop_render, "gyro-drift": gyro_render, "accel-centrifuge": centrifuge_render,
-          "compass": compass_render, "ldv": ldv_render}
+SCENARIOS = {
+    "accel-tabletop": tabletop_scenario,
+    "gyro-drift": gyro_scenario,
+    "accel-centrifuge": centrifuge_scenario,
+    "compass": compass_scenario,
+    "ldv": ldv_scenario,
+}
+RENDER = {
+    "accel-tabletop": tabletop_render,
+    "gyro-drift": gyro_render,
+    "accel-centrifuge": centrifuge_render,
+    "compass": compass_render,
+    "ldv": ldv_render,
+}
 
 
 def applicable(sc: dict, effect: str) -> bool:
@@ -619,7 +842,7 @@ def applicable(sc: dict, effect: str) -> bool:
     if effect in ("temperature_bias", "temp_scale") and sc.get("temp") == "constant":
         return False
     if p == "accel-tabletop" and sc["mode"] == "averages" and effect in ("time_drift", "bias_step", "periodic_bias"):
-        return False   # a table without time
+        return False  # a table without time
     if p == "gyro-drift" and effect == "g_sensitivity" and sc["n_or"] < 3:
         return False
     if p == "ldv" and effect == "lever_arm" and not sc["rates"]:
@@ -628,6 +851,7 @@ def applicable(sc: dict, effect: str) -> bool:
 
 
 # ------------------------------------------------------------------ detection σ of the true extension
+
 
 def _kernel_apply(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
     """``Σ_j exp(−|i − j| dt/τ) x_j`` on a uniform grid (two recursive passes)."""
@@ -651,7 +875,7 @@ def _observe(o: Observation, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         H = len(o.dip["f_hat"])
         rows = []
         for k in range(H):
-            m = (o.hold == k)
+            m = o.hold == k
             dm = (d[m] @ o.dip["W"].T).mean(axis=0) / o.dip["F"]
             mh = o.dip["m_hat"][m][0]
             dperp = dm - mh * (mh @ dm)
@@ -676,12 +900,12 @@ def detection_z(o: Observation, signature: np.ndarray) -> float:
     m = s.size
     rs = r[:m].reshape(s.shape)
     num = float(r @ r)
-    var = float(r @ r)   # white part (unit variance)
+    var = float(r @ r)  # white part (unit variance)
     if o.gm_ratio > 0:
         full = np.zeros((len(o.t), rs.shape[1]))
         full[o.use] = rs
         dt = float(o.t[1] - o.t[0]) if len(o.t) > 1 else 1.0
-        var += o.gm_ratio ** 2 * float(np.sum(full * _kernel_apply(full, dt, o.tau_s)))
+        var += o.gm_ratio**2 * float(np.sum(full * _kernel_apply(full, dt, o.tau_s)))
     return num / math.sqrt(max(var, 1e-300))
 
 
@@ -702,16 +926,49 @@ def size_for(sc: dict, effect: str, k_sigma: float, ref: float | None = None) ->
 
 
 REF_SIZE = {
-    "accel-tabletop": {"temperature_bias": 1e-3, "time_drift": 1e-2, "quadratic": 1e-4, "scale_asymmetry": 1e-3,
-                       "bias_step": 1e-2, "periodic_bias": 1e-2, "temp_scale": 1e-4},
-    "gyro-drift": {"temperature_bias": 1e-5, "time_drift": 1e-4, "g_sensitivity": 1e-5, "bias_step": 1e-4,
-                   "periodic_bias": 1e-4},
-    "accel-centrifuge": {"temperature_bias": 1e-5, "time_drift": 1e-5, "misalignment": 1e-4, "cubic": 1e-7,
-                         "lever_arm": 1e-3, "temp_scale": 1e-5},
-    "compass": {"temperature_bias": 10.0, "time_drift": 100.0, "mag_accel_misalignment": 0.01,
-                "field_anomaly": 0.01, "time_varying_hard_iron": 100.0, "periodic_bias": 100.0, "temp_scale": 1e-3},
-    "ldv": {"temperature_bias": 1e-3, "time_drift": 1e-2, "time_delay": 1e-2, "lever_arm": 0.05, "offset": 1e-2,
-            "bias_step": 1e-2, "periodic_bias": 1e-2, "temp_scale": 1e-4},
+    "accel-tabletop": {
+        "temperature_bias": 1e-3,
+        "time_drift": 1e-2,
+        "quadratic": 1e-4,
+        "scale_asymmetry": 1e-3,
+        "bias_step": 1e-2,
+        "periodic_bias": 1e-2,
+        "temp_scale": 1e-4,
+    },
+    "gyro-drift": {
+        "temperature_bias": 1e-5,
+        "time_drift": 1e-4,
+        "g_sensitivity": 1e-5,
+        "bias_step": 1e-4,
+        "periodic_bias": 1e-4,
+    },
+    "accel-centrifuge": {
+        "temperature_bias": 1e-5,
+        "time_drift": 1e-5,
+        "misalignment": 1e-4,
+        "cubic": 1e-7,
+        "lever_arm": 1e-3,
+        "temp_scale": 1e-5,
+    },
+    "compass": {
+        "temperature_bias": 10.0,
+        "time_drift": 100.0,
+        "mag_accel_misalignment": 0.01,
+        "field_anomaly": 0.01,
+        "time_varying_hard_iron": 100.0,
+        "periodic_bias": 100.0,
+        "temp_scale": 1e-3,
+    },
+    "ldv": {
+        "temperature_bias": 1e-3,
+        "time_drift": 1e-2,
+        "time_delay": 1e-2,
+        "lever_arm": 0.05,
+        "offset": 1e-2,
+        "bias_step": 1e-2,
+        "periodic_bias": 1e-2,
+        "temp_scale": 1e-4,
+    },
 }
 
 

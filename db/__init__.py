@@ -2,6 +2,7 @@
 
 Entry point: `db.store.Store` (re-exported here). Never imports `station` or `textual`.
 """
+
 from __future__ import annotations
 
 from db.store import NotFound, Store, default_db_path

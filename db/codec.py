@@ -10,6 +10,7 @@ Encodings (column `capture_columns.encoding`), readable from any language:
   `position`); `dtype` is `object` (returned as an object array of `str`) or the
   numpy unicode dtype it came in (`<U5`, ...).
 """
+
 from __future__ import annotations
 
 import hashlib

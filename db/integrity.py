@@ -8,6 +8,7 @@ of a device's history is then visible to `Store.verify()`. It detects edits made
 with ordinary tools; it is not a signature (someone who rewrites every later hash
 with this code cannot be caught from inside the file).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -15,10 +16,27 @@ import json
 
 # Columns of `calibrations` that form the hashed content (everything but `hash`).
 HASHED_COLUMNS = (
-    "id", "device_id", "procedure", "time", "model", "params", "uncertainty",
-    "residual_rms", "n_positions", "warnings", "result_extra", "software_version",
-    "capture_id", "capture_sha256", "operator", "host", "accepted", "supersedes",
-    "saved_at", "record_version", "prev_hash",
+    "id",
+    "device_id",
+    "procedure",
+    "time",
+    "model",
+    "params",
+    "uncertainty",
+    "residual_rms",
+    "n_positions",
+    "warnings",
+    "result_extra",
+    "software_version",
+    "capture_id",
+    "capture_sha256",
+    "operator",
+    "host",
+    "accepted",
+    "supersedes",
+    "saved_at",
+    "record_version",
+    "prev_hash",
 )
 
 
@@ -37,8 +55,16 @@ def record_hash(row: dict) -> str:
 
 # Columns of `anchors` that form an anchor's hash (everything but `hash`).
 ANCHOR_COLUMNS = (
-    "id", "time", "device_id", "event", "head_id", "head_hash", "n_calibrations", "settings_hash",
-    "capture_id", "prev_hash",
+    "id",
+    "time",
+    "device_id",
+    "event",
+    "head_id",
+    "head_hash",
+    "n_calibrations",
+    "settings_hash",
+    "capture_id",
+    "prev_hash",
 )
 # Device columns under the anchors (everything a person could change to move a due date or
 # loosen a tolerance).

@@ -3,6 +3,7 @@
 Imported only when a migration is pending: sqlite-utils pulls in pandas when it is
 installed, which costs a third of a second at start-up.
 """
+
 from __future__ import annotations
 
 import sqlite3

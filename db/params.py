@@ -8,11 +8,12 @@ parameters; `null` (a non-finite number when stored) has no value.
 Pure Python on purpose (no numpy): `station due` and `station history` must start
 fast.
 """
+
 from __future__ import annotations
 
 import json
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 from solvers.jsonable import jsonable
 
@@ -74,6 +75,7 @@ def tolerance_for(name: str, tolerances: dict) -> float | None:
 
 # --- time -----------------------------------------------------------------------------
 
+
 def parse_time(value) -> datetime:
     """ISO 8601 date or date-time (str or datetime) -> aware UTC datetime; naive = UTC."""
     if isinstance(value, datetime):
@@ -87,13 +89,13 @@ def parse_time(value) -> datetime:
         except ValueError:
             raise ValueError(f"date {text!r} is not an ISO 8601 date or date-time") from None
     if dt.tzinfo is None:
-        dt = dt.replace(tzinfo=timezone.utc)
-    return dt.astimezone(timezone.utc)
+        dt = dt.replace(tzinfo=UTC)
+    return dt.astimezone(UTC)
 
 
 def iso(dt: datetime) -> str:
     """The stored form: `YYYY-MM-DDTHH:MM:SSZ` (UTC, whole seconds, sorts as text)."""
-    return dt.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    return dt.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def normalize_time(value) -> str:
@@ -101,7 +103,7 @@ def normalize_time(value) -> str:
 
 
 def now_utc() -> datetime:
-    return datetime.now(timezone.utc)
+    return datetime.now(UTC)
 
 
 def years_between(a: datetime, b: datetime) -> float:
@@ -109,6 +111,7 @@ def years_between(a: datetime, b: datetime) -> float:
 
 
 # --- trend ----------------------------------------------------------------------------
+
 
 def linear_trend(t_years: list[float], values: list[float], sigmas: list[float | None]) -> dict:
     """Weighted least-squares line `value = a + rate * t` (t in years).

@@ -21,6 +21,7 @@ Tables (readable names so `sqlite3`, `sqlite-utils` and Datasette can query them
 
 Times are UTC ISO 8601 text `YYYY-MM-DDTHH:MM:SSZ` (sortable as text).
 """
+
 from __future__ import annotations
 
 import hashlib

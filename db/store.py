@@ -17,6 +17,7 @@ Conventions:
 Neither numpy nor sqlite-utils is imported at module level: opening an up-to-date
 database and reading history must stay fast for the CLI.
 """
+
 from __future__ import annotations
 
 import json
@@ -53,8 +54,10 @@ class DuplicateCapture(ValueError):
         self.calibration_id = calibration_id
         self.device_id = device_id
         held = f"calibration #{calibration_id}" if calibration_id is not None else f"capture #{capture_id}"
-        super().__init__(f"this capture is already saved ({held} of {device_id}); a second save would count "
-                         "the same measurement twice")
+        super().__init__(
+            f"this capture is already saved ({held} of {device_id}); a second save would count "
+            "the same measurement twice"
+        )
 
 
 # Review decisions stored in calibrations.review (see db/schema.py, migration 0002_review).
@@ -76,8 +79,10 @@ def _loads(text, default=None):
     try:
         return json.loads(text)
     except ValueError as exc:  # edited outside the station
-        raise ValueError(f"the database holds a record that is not valid JSON ({exc}); "
-                         "`station verify` names the records changed after they were written") from None
+        raise ValueError(
+            f"the database holds a record that is not valid JSON ({exc}); "
+            "`station verify` names the records changed after they were written"
+        ) from None
 
 
 class Store:
@@ -186,7 +191,7 @@ class Store:
         with self._lock:
             self.conn.close()
 
-    def __enter__(self) -> "Store":
+    def __enter__(self) -> Store:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -281,8 +286,10 @@ class Store:
                         lim.pop(name, None)
                     else:
                         lim[name] = value
-                conn.execute("UPDATE devices SET limits = ? WHERE id = ?",
-                             [json.dumps(lim, ensure_ascii=False, sort_keys=True), device_id])
+                conn.execute(
+                    "UPDATE devices SET limits = ? WHERE id = ?",
+                    [json.dumps(lim, ensure_ascii=False, sort_keys=True), device_id],
+                )
             conn.execute(
                 "UPDATE devices SET model = ?, sensor_kinds = ?, notes = ?, interval_days = ?, tolerances = ? WHERE id = ?",
                 [
@@ -355,22 +362,45 @@ class Store:
                    altitude_m, n_rows, column_names, meta, raw_bytes, stored_bytes, sha256, saved_at, samples_sha256)
                VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)""",
             [
-                device_id, procedure, time, operator, host,
-                place("latitude_deg"), place("longitude_deg"), place("altitude_m"),
-                lengths.pop(), json.dumps([c["name"] for c in encoded], ensure_ascii=False), header["meta"],
-                sum(c["raw_bytes"] for c in encoded), sum(len(c["data"]) for c in encoded), digest,
-                P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"), _samples_digest(header["meta"], encoded),
+                device_id,
+                procedure,
+                time,
+                operator,
+                host,
+                place("latitude_deg"),
+                place("longitude_deg"),
+                place("altitude_m"),
+                lengths.pop(),
+                json.dumps([c["name"] for c in encoded], ensure_ascii=False),
+                header["meta"],
+                sum(c["raw_bytes"] for c in encoded),
+                sum(len(c["data"]) for c in encoded),
+                digest,
+                P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+                _samples_digest(header["meta"], encoded),
             ],
         )
         capture_id = cur.lastrowid
         conn.executemany(
             "INSERT INTO capture_columns (capture_id, ordinal, name, dtype, length, encoding, data) VALUES (?, ?, ?, ?, ?, ?, ?)",
-            [(capture_id, i, c["name"], c["dtype"], c["length"], c["encoding"], c["data"]) for i, c in enumerate(encoded)],
+            [
+                (capture_id, i, c["name"], c["dtype"], c["length"], c["encoding"], c["data"])
+                for i, c in enumerate(encoded)
+            ],
         )
         return capture_id, digest
 
-    def save_capture(self, *, device_id, procedure, meta: dict, columns: dict, operator=None, host=None,
-                     sensor_kind: str | None = None) -> int:
+    def save_capture(
+        self,
+        *,
+        device_id,
+        procedure,
+        meta: dict,
+        columns: dict,
+        operator=None,
+        host=None,
+        sensor_kind: str | None = None,
+    ) -> int:
         """Store one capture losslessly (see `db.codec`); the device is created if unknown.
         ``sensor_kind`` (accel, gyro, mag, ldv: the caller's procedure registry says which) is
         merged into the device's ``sensor_kinds``."""
@@ -391,8 +421,9 @@ class Store:
         {capture_id, device_id, calibration_id (its latest calibration, or None)}.
         """
         meta = {str(k): str(v) for k, v in dict(meta or {}).items()}
-        digest = _samples_digest(json.dumps(meta, ensure_ascii=False),
-                                 [encode_column(n, a) for n, a in columns.items()])
+        digest = _samples_digest(
+            json.dumps(meta, ensure_ascii=False), [encode_column(n, a) for n, a in columns.items()]
+        )
         return self._duplicate(self.conn, digest)
 
     def _duplicate(self, conn, digest: str) -> dict | None:
@@ -502,7 +533,9 @@ class Store:
         with self._write() as conn:
             if not allow_duplicate:
                 meta_text = json.dumps({str(k): str(v) for k, v in meta.items()}, ensure_ascii=False)
-                dup = self._duplicate(conn, _samples_digest(meta_text, [encode_column(n, a) for n, a in columns.items()]))
+                dup = self._duplicate(
+                    conn, _samples_digest(meta_text, [encode_column(n, a) for n, a in columns.items()])
+                )
                 if dup is not None:
                     raise DuplicateCapture(dup["capture_id"], dup["calibration_id"], dup["device_id"])
             self._ensure_device(conn, device, sensor_kind)
@@ -526,10 +559,26 @@ class Store:
                        host, accepted, supersedes, saved_at, record_version, prev_hash, review, hash)
                    VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, '')""",
                 [
-                    device, procedure, when, result.get("model"), P.dumps(params), P.dumps(uncertainty), residual,
-                    None if n_pos is None else int(n_pos), P.dumps(warnings), P.dumps(extra), software_version,
-                    capture_id, capture_sha, operator, host, 1 if accepted else 0, supersedes,
-                    P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"), RECORD_VERSION, last["hash"] if last else None,
+                    device,
+                    procedure,
+                    when,
+                    result.get("model"),
+                    P.dumps(params),
+                    P.dumps(uncertainty),
+                    residual,
+                    None if n_pos is None else int(n_pos),
+                    P.dumps(warnings),
+                    P.dumps(extra),
+                    software_version,
+                    capture_id,
+                    capture_sha,
+                    operator,
+                    host,
+                    1 if accepted else 0,
+                    supersedes,
+                    P.now_utc().strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+                    RECORD_VERSION,
+                    last["hash"] if last else None,
                     review_text,
                 ],
             )
@@ -644,8 +693,10 @@ class Store:
                 if value is None or str(value) == "":
                     conn.execute("DELETE FROM settings WHERE name = ?", [str(name)])
                 else:
-                    conn.execute("INSERT OR REPLACE INTO settings (name, value, updated) VALUES (?, ?, ?)",
-                                 [str(name), str(value), P.iso(P.now_utc())])
+                    conn.execute(
+                        "INSERT OR REPLACE INTO settings (name, value, updated) VALUES (?, ?, ?)",
+                        [str(name), str(value), P.iso(P.now_utc())],
+                    )
 
     # --- drift and schedule -------------------------------------------------------------
 
@@ -793,8 +844,10 @@ class Store:
         for r in rows:
             due_dt = P.parse_time(r["due"])
             days_left = (due_dt - now_dt).total_seconds() / 86400.0
-            by_drift = r["drift_due"] is not None and r["drift_due"] == r["due"] and (
-                r["interval_due"] is None or r["drift_due"] < r["interval_due"]
+            by_drift = (
+                r["drift_due"] is not None
+                and r["drift_due"] == r["due"]
+                and (r["interval_due"] is None or r["drift_due"] < r["interval_due"])
             )
             if by_drift:
                 text = (
@@ -818,7 +871,13 @@ class Store:
             }
             entry = devices.setdefault(
                 r["device_id"],
-                {"device_id": r["device_id"], "model": r["model"], "due": r["due"], "days_left": days_left, "reasons": []},
+                {
+                    "device_id": r["device_id"],
+                    "model": r["model"],
+                    "due": r["due"],
+                    "days_left": days_left,
+                    "reasons": [],
+                },
             )
             entry["reasons"].append(reason)
         out = list(devices.values())
@@ -844,14 +903,45 @@ class Store:
     # Tables and columns verify reads; a missing one is a damaged schema (reported, not a crash).
     _VERIFY_SCHEMA = {
         "devices": ("id", "model", "sensor_kinds", "notes", "interval_days", "tolerances", "created"),
-        "calibrations": ("id", "device_id", "procedure", "time", "accepted", "capture_id", "capture_sha256",
-                         "prev_hash", "hash", "params", "uncertainty"),
+        "calibrations": (
+            "id",
+            "device_id",
+            "procedure",
+            "time",
+            "accepted",
+            "capture_id",
+            "capture_sha256",
+            "prev_hash",
+            "hash",
+            "params",
+            "uncertainty",
+        ),
         "captures": ("id", "device_id", "procedure", "time", "operator", "host", "meta", "sha256"),
         "capture_columns": ("capture_id", "ordinal", "name", "dtype", "length", "encoding", "data"),
-        "schedule": ("device_id", "procedure", "last_calibration_id", "last_calibrated", "interval_due",
-                     "drift_due", "drift_param", "drift_rate_per_year", "due"),
-        "anchors": ("id", "time", "device_id", "event", "head_id", "head_hash", "n_calibrations",
-                    "settings_hash", "capture_id", "prev_hash", "hash"),
+        "schedule": (
+            "device_id",
+            "procedure",
+            "last_calibration_id",
+            "last_calibrated",
+            "interval_due",
+            "drift_due",
+            "drift_param",
+            "drift_rate_per_year",
+            "due",
+        ),
+        "anchors": (
+            "id",
+            "time",
+            "device_id",
+            "event",
+            "head_id",
+            "head_hash",
+            "n_calibrations",
+            "settings_hash",
+            "capture_id",
+            "prev_hash",
+            "hash",
+        ),
     }
 
     def _schema_problems(self) -> tuple[list[dict], set[str]]:
@@ -864,9 +954,12 @@ class Store:
                 continue
             missing = [c for c in columns if c not in have]
             if missing:
-                problems.append({"kind": "schema damaged",
-                                 "detail": f"table {table!r} lacks column{'s' if len(missing) > 1 else ''} "
-                                           f"{', '.join(missing)}"})
+                problems.append(
+                    {
+                        "kind": "schema damaged",
+                        "detail": f"table {table!r} lacks column{'s' if len(missing) > 1 else ''} {', '.join(missing)}",
+                    }
+                )
                 broken.add(table)
         return problems, broken
 
@@ -905,13 +998,24 @@ class Store:
                         prev_device, prev_hash = d["device_id"], None
                     if record_hash(d) != d["hash"]:
                         flagged.add(d["device_id"])
-                        problems.append({"kind": "tampered", "calibration_id": d["id"], "device_id": d["device_id"],
-                                         "detail": "its content no longer matches the hash written with it"})
+                        problems.append(
+                            {
+                                "kind": "tampered",
+                                "calibration_id": d["id"],
+                                "device_id": d["device_id"],
+                                "detail": "its content no longer matches the hash written with it",
+                            }
+                        )
                     if d["prev_hash"] != prev_hash:
                         flagged.add(d["device_id"])
-                        problems.append({"kind": "chain broken", "calibration_id": d["id"], "device_id": d["device_id"],
-                                         "detail": "the record before it in this device's history was removed, added "
-                                                   "or changed"})
+                        problems.append(
+                            {
+                                "kind": "chain broken",
+                                "calibration_id": d["id"],
+                                "device_id": d["device_id"],
+                                "detail": "the record before it in this device's history was removed, added or changed",
+                            }
+                        )
                     prev_hash = d["hash"]
                     n = heads.get(d["device_id"], (0, "", 0))[2] + 1
                     heads[d["device_id"]] = (d["id"], d["hash"], n)
@@ -922,9 +1026,12 @@ class Store:
             issued = self._issued("calibrations")
             top = max((h[0] for h in heads.values()), default=0)
             if issued is not None and issued > top:
-                counter = {"kind": "calibration removed", "calibration_id": issued,
-                           "detail": f"calibration ids were issued up to {issued} but the newest present is "
-                                     f"{top or 'none'}: the newest records were removed"}
+                counter = {
+                    "kind": "calibration removed",
+                    "calibration_id": issued,
+                    "detail": f"calibration ids were issued up to {issued} but the newest present is "
+                    f"{top or 'none'}: the newest records were removed",
+                }
         if not broken & {"anchors", "devices", "calibrations"}:
             found = self._verify_anchors(heads, flagged)
             problems.extend(found)
@@ -946,18 +1053,32 @@ class Store:
         prev = None
         for a in rows:
             if anchor_hash(a) != a["hash"]:
-                problems.append({"kind": "anchor tampered", "device_id": a["device_id"],
-                                 "detail": f"anchor {a['id']} no longer matches the hash written with it"})
+                problems.append(
+                    {
+                        "kind": "anchor tampered",
+                        "device_id": a["device_id"],
+                        "detail": f"anchor {a['id']} no longer matches the hash written with it",
+                    }
+                )
                 flagged.add(a["device_id"])
             if a["prev_hash"] != prev:
-                problems.append({"kind": "anchors removed", "device_id": a["device_id"],
-                                 "detail": f"the anchor before anchor {a['id']} was removed, added or changed"})
+                problems.append(
+                    {
+                        "kind": "anchors removed",
+                        "device_id": a["device_id"],
+                        "detail": f"the anchor before anchor {a['id']} was removed, added or changed",
+                    }
+                )
             prev = a["hash"]
         issued = self._issued("anchors")
         if issued is not None and issued > (rows[-1]["id"] if rows else 0):
-            problems.append({"kind": "anchors removed",
-                             "detail": f"anchor ids were issued up to {issued} but the newest present is "
-                                       f"{rows[-1]['id'] if rows else 'none'}: the newest anchors were removed"})
+            problems.append(
+                {
+                    "kind": "anchors removed",
+                    "detail": f"anchor ids were issued up to {issued} but the newest present is "
+                    f"{rows[-1]['id'] if rows else 'none'}: the newest anchors were removed",
+                }
+            )
         latest: dict[str, dict] = {}
         for a in rows:
             latest[a["device_id"]] = a
@@ -965,8 +1086,13 @@ class Store:
         for device_id, a in latest.items():
             dev = devices.get(device_id)
             if dev is None:
-                problems.append({"kind": "device removed", "device_id": device_id,
-                                 "detail": "the device and its record were deleted from the devices table"})
+                problems.append(
+                    {
+                        "kind": "device removed",
+                        "device_id": device_id,
+                        "detail": "the device and its record were deleted from the devices table",
+                    }
+                )
                 continue
             if device_id in flagged:
                 continue
@@ -974,22 +1100,36 @@ class Store:
             have_id, have_hash, have_n = head if head else (None, None, 0)
             if (a["head_id"], a["head_hash"]) != (have_id, have_hash) or a["n_calibrations"] != have_n:
                 gone = a["head_id"] is not None and (have_id is None or have_id < a["head_id"])
-                problems.append({
-                    "kind": "calibration removed" if gone or have_n < a["n_calibrations"] else "chain broken",
-                    "calibration_id": a["head_id"], "device_id": device_id,
-                    "detail": f"the anchors record {a['n_calibrations']} calibration(s) ending with "
-                              f"#{a['head_id']}; the table holds {have_n}"
-                              + (f" ending with #{have_id}" if have_id is not None else "")})
+                problems.append(
+                    {
+                        "kind": "calibration removed" if gone or have_n < a["n_calibrations"] else "chain broken",
+                        "calibration_id": a["head_id"],
+                        "device_id": device_id,
+                        "detail": f"the anchors record {a['n_calibrations']} calibration(s) ending with "
+                        f"#{a['head_id']}; the table holds {have_n}"
+                        + (f" ending with #{have_id}" if have_id is not None else ""),
+                    }
+                )
                 flagged.add(device_id)
             if settings_hash(dev) != a["settings_hash"]:
-                problems.append({"kind": "settings changed", "device_id": device_id,
-                                 "detail": "model, notes, interval or tolerances differ from what the station last "
-                                           "wrote (changed outside `station devices add`)"})
+                problems.append(
+                    {
+                        "kind": "settings changed",
+                        "device_id": device_id,
+                        "detail": "model, notes, interval or tolerances differ from what the station last "
+                        "wrote (changed outside `station devices add`)",
+                    }
+                )
                 flagged.add(device_id)
         for device_id in devices:
             if device_id not in latest:
-                problems.append({"kind": "device added", "device_id": device_id,
-                                 "detail": "the device has no anchor: it was added outside the station"})
+                problems.append(
+                    {
+                        "kind": "device added",
+                        "device_id": device_id,
+                        "detail": "the device has no anchor: it was added outside the station",
+                    }
+                )
                 flagged.add(device_id)
         return problems
 
@@ -997,11 +1137,16 @@ class Store:
         """The stored schedule against the one recomputed from devices and calibrations."""
         problems = []
         with self._lock:
-            stored = {(r["device_id"], r["procedure"]): list(r) for r in self.conn.execute(
-                """SELECT device_id, procedure, last_calibration_id, last_calibrated, interval_due, drift_due,
-                          drift_param, drift_rate_per_year, due FROM schedule""")}
+            stored = {
+                (r["device_id"], r["procedure"]): list(r)
+                for r in self.conn.execute(
+                    """SELECT device_id, procedure, last_calibration_id, last_calibrated, interval_due, drift_due,
+                          drift_param, drift_rate_per_year, due FROM schedule"""
+                )
+            }
             pairs = self.conn.execute(
-                "SELECT DISTINCT device_id, procedure FROM calibrations WHERE accepted = 1").fetchall()
+                "SELECT DISTINCT device_id, procedure FROM calibrations WHERE accepted = 1"
+            ).fetchall()
             try:
                 expected = {(d, p): self._schedule_row(self.conn, d, p) for d, p in pairs}
             except (ValueError, TypeError, KeyError):  # an edited record the trend cannot read: reported above
@@ -1009,8 +1154,10 @@ class Store:
         expected = {k: v for k, v in expected.items() if v is not None}
 
         def same(a, b):
-            return all((x == y) or (isinstance(x, float) and isinstance(y, float) and abs(x - y) <= 1e-9 * max(
-                abs(x), abs(y))) for x, y in zip(a, b))
+            return all(
+                (x == y) or (isinstance(x, float) and isinstance(y, float) and abs(x - y) <= 1e-9 * max(abs(x), abs(y)))
+                for x, y in zip(a, b)
+            )
 
         for key in sorted(set(stored) | set(expected), key=lambda k: (str(k[0]), str(k[1]))):
             if key[0] in flagged:
@@ -1018,8 +1165,10 @@ class Store:
             have, want = stored.get(key), expected.get(key)
             if have is not None and want is not None and same(have, want):
                 continue
-            detail = (f"{key[1]}: stored due {have[8] if have else 'none'}, the calibrations give "
-                      f"{want[8] if want else 'none'}")
+            detail = (
+                f"{key[1]}: stored due {have[8] if have else 'none'}, the calibrations give "
+                f"{want[8] if want else 'none'}"
+            )
             problems.append({"kind": "schedule changed", "device_id": key[0], "detail": detail})
         return problems
 
@@ -1031,13 +1180,26 @@ class Store:
         for r in self._query("SELECT id, device_id FROM captures ORDER BY id"):
             if r["id"] in capture_refs or r["id"] in standalone:
                 continue
-            problems.append({"kind": "orphaned capture", "capture_id": r["id"], "device_id": r["device_id"],
-                             "detail": "no calibration refers to it: the calibration saved with it was removed"})
+            problems.append(
+                {
+                    "kind": "orphaned capture",
+                    "capture_id": r["id"],
+                    "device_id": r["device_id"],
+                    "detail": "no calibration refers to it: the calibration saved with it was removed",
+                }
+            )
         present = {r[0] for r in self._query("SELECT id FROM captures")}
         for capture_id, (cal_id, device_id, _) in sorted(capture_refs.items()):
             if capture_id not in present:
-                problems.append({"kind": "capture missing", "capture_id": capture_id, "calibration_id": cal_id,
-                                 "device_id": device_id, "detail": "the capture this calibration was made from is gone"})
+                problems.append(
+                    {
+                        "kind": "capture missing",
+                        "capture_id": capture_id,
+                        "calibration_id": cal_id,
+                        "device_id": device_id,
+                        "detail": "the capture this calibration was made from is gone",
+                    }
+                )
         return problems
 
     def _verify_captures(self, capture_refs: dict) -> list[dict]:

@@ -21,6 +21,7 @@ Limit: noise correlated on the scale of the record itself (a Gauss-Markov bias w
 correlation time ~T/3) is partly invisible in any record of length T; there the reported
 error is short by up to ~1.4x (tests/test_allan.py measures the coverage).
 """
+
 from __future__ import annotations
 
 import math
@@ -59,7 +60,7 @@ def oadev(y, dt_s: float, taus_s=None) -> tuple[np.ndarray, np.ndarray, np.ndarr
     out = np.empty((len(m), Y.shape[1]))
     terms = np.empty(len(m), dtype=int)
     for i, mi in enumerate(m):
-        d = x[2 * mi:] - 2.0 * x[mi:-mi] + x[: -2 * mi]
+        d = x[2 * mi :] - 2.0 * x[mi:-mi] + x[: -2 * mi]
         tau = mi * dt_s
         out[i] = np.sqrt(np.sum(d * d, axis=0) / (2.0 * tau * tau * d.shape[0]))
         terms[i] = d.shape[0]
@@ -71,15 +72,15 @@ def oadev(y, dt_s: float, taus_s=None) -> tuple[np.ndarray, np.ndarray, np.ndarr
 class MeanError:
     """The mean of a rate record and its 1-sigma standard error (per axis)."""
 
-    mean: np.ndarray          # (k,)
-    se: np.ndarray            # (k,) the reported 1-sigma: max(white, Allan-based)
-    se_white: np.ndarray      # σ / sqrt(n), what uncorrelated noise alone would give
+    mean: np.ndarray  # (k,)
+    se: np.ndarray  # (k,) the reported 1-sigma: max(white, Allan-based)
+    se_white: np.ndarray  # σ / sqrt(n), what uncorrelated noise alone would give
     tau_at_max_s: np.ndarray  # τ where ADEV(τ) sqrt(τ/T) peaked
     duration_s: float
     taus_s: np.ndarray
-    adev: np.ndarray          # (len(taus), k)
+    adev: np.ndarray  # (len(taus), k)
     noise_model: np.ndarray | None = None  # (k, 3): AVAR(τ) = c0/τ + c1 + c2 τ, per axis
-    se_model: np.ndarray | None = None     # sqrt(c0/T + c1 + c2 T), the model at τ = T
+    se_model: np.ndarray | None = None  # sqrt(c0/T + c1 + c2 T), the model at τ = T
 
 
 def fit_noise_model(taus_s, adev, terms, dt_s: float) -> np.ndarray:
@@ -127,8 +128,17 @@ def mean_standard_error(y, dt_s: float, max_fraction: float = 1.0 / 3.0) -> Mean
     se = np.maximum(se_white, se_allan)
     if se_model is not None:
         se = np.maximum(se, se_model)
-    return MeanError(mean=mean, se=se, se_white=se_white, tau_at_max_s=tau_at, duration_s=T,
-                     taus_s=taus, adev=adev, noise_model=model, se_model=se_model)
+    return MeanError(
+        mean=mean,
+        se=se,
+        se_white=se_white,
+        tau_at_max_s=tau_at,
+        duration_s=T,
+        taus_s=taus,
+        adev=adev,
+        noise_model=model,
+        se_model=se_model,
+    )
 
 
 def time_needed_s(me: MeanError, accuracy: float) -> np.ndarray:
@@ -141,7 +151,7 @@ def time_needed_s(me: MeanError, accuracy: float) -> np.ndarray:
     need = me.duration_s * (np.asarray(me.se, dtype=float) / accuracy) ** 2
     if me.noise_model is None:
         return need
-    a2 = accuracy ** 2
+    a2 = accuracy**2
     out = need.copy()
     for k, (c0, c1, c2) in enumerate(me.noise_model):
         room = a2 - c1
@@ -186,17 +196,17 @@ class NoiseFit:
     """
 
     taus_s: np.ndarray
-    adev: np.ndarray        # (m, k)
-    adev_lo: np.ndarray     # (m, k)
-    adev_hi: np.ndarray     # (m, k)
-    edf: np.ndarray         # (m, k)
-    white: np.ndarray       # (k,)
+    adev: np.ndarray  # (m, k)
+    adev_lo: np.ndarray  # (m, k)
+    adev_hi: np.ndarray  # (m, k)
+    edf: np.ndarray  # (m, k)
+    white: np.ndarray  # (k,)
     white_sigma: np.ndarray
     random_walk: np.ndarray
     random_walk_sigma: np.ndarray
     bias_instability: np.ndarray
     bias_instability_tau_s: np.ndarray
-    model: np.ndarray       # (k, 3): c0 = N², c1, c2 = K²/3
+    model: np.ndarray  # (k, 3): c0 = N², c1, c2 = K²/3
     duration_s: float
     n: int
     # record length for which K's sigma holds: the longest τ (T/3) at least 4x the τ where
@@ -217,8 +227,9 @@ def _wls(A0, av, sd):
     return c
 
 
-def noise_fit(y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3.0, n_boot: int = 20,
-              seed: int = 0) -> NoiseFit:
+def noise_fit(
+    y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3.0, n_boot: int = 20, seed: int = 0
+) -> NoiseFit:
     """White-noise density, bias instability and rate random walk of rates ``y`` (N,) or (N, k)."""
     import allantools
 
@@ -238,8 +249,10 @@ def noise_fit(y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3
             continue
         for _ in range(3):  # weights from the model's AVAR (not the noisy points), refit
             c = model[j]
-            edf[:, j] = [allantools.edf_greenhall(alpha=_alpha(c, t), d=2, m=int(m), N=n + 1, overlapping=True)
-                         for t, m in zip(taus, ms)]
+            edf[:, j] = [
+                allantools.edf_greenhall(alpha=_alpha(c, t), d=2, m=int(m), N=n + 1, overlapping=True)
+                for t, m in zip(taus, ms)
+            ]
             pred = A0 @ c if np.any(c > 0) else av
             sds[:, j] = np.maximum(pred, 1e-300) * np.sqrt(2.0 / edf[:, j])
             model[j] = _wls(A0, av, sds[:, j])
@@ -262,8 +275,20 @@ def noise_fit(y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3
     imin = np.argmin(adev, axis=0)
     with np.errstate(divide="ignore"):
         need = np.where(rw > 0, 12.0 * math.sqrt(3.0) * white / np.where(rw > 0, rw, 1.0), np.inf)
-    return NoiseFit(taus_s=taus, adev=adev, adev_lo=lo, adev_hi=hi, edf=edf, white=white, white_sigma=spread[:, 0],
-                    random_walk=rw, random_walk_sigma=spread[:, 1],
-                    bias_instability=adev[imin, np.arange(k)] / BIAS_INSTABILITY_FACTOR,
-                    bias_instability_tau_s=taus[imin], model=model, duration_s=n * dt_s, n=n,
-                    random_walk_min_duration_s=need)
+    return NoiseFit(
+        taus_s=taus,
+        adev=adev,
+        adev_lo=lo,
+        adev_hi=hi,
+        edf=edf,
+        white=white,
+        white_sigma=spread[:, 0],
+        random_walk=rw,
+        random_walk_sigma=spread[:, 1],
+        bias_instability=adev[imin, np.arange(k)] / BIAS_INSTABILITY_FACTOR,
+        bias_instability_tau_s=taus[imin],
+        model=model,
+        duration_s=n * dt_s,
+        n=n,
+        random_walk_min_duration_s=need,
+    )

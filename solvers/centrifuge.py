@@ -35,6 +35,7 @@ Two estimators on the same rows:
   ``−C3`` (eq. 21 loses the sign) → ``b = −C1 (…)/(2 C2 (…))`` (the printed eq. 22 has the
   ratio ``C1/C2`` upside down). The printed eq. 14 also writes ``C4i`` with a stray ``N⁴``.
 """
+
 from __future__ import annotations
 
 import math
@@ -59,11 +60,11 @@ def norm_target(speed_rad_s, radius_m: float, g_mps2: float) -> np.ndarray:
 
 @dataclass
 class P2Result:
-    params: dict                     # S, b, D (and gamma)
+    params: dict  # S, b, D (and gamma)
     sigma: dict
     method: str
-    residuals: np.ndarray            # |f| − ρ per used row (g)
-    used: np.ndarray                 # bool mask of rows used
+    residuals: np.ndarray  # |f| − ρ per used row (g)
+    used: np.ndarray  # bool mask of rows used
     residual_rms: float
     fit: FitResult | None
     noise_known: bool
@@ -94,8 +95,8 @@ def row_sigma(N, params, sigma_N) -> np.ndarray:
 
 def initial_guess(N: np.ndarray, rho: np.ndarray) -> dict:
     """Linear start: ``Σ_i (C2i N_i² + C1i N_i) + C0 = ρ²`` (an axis-aligned ellipsoid)."""
-    H = np.column_stack([N ** 2, N, np.ones(len(N))])
-    c, *_ = linalg.lstsq(H, rho ** 2, rcond=None)
+    H = np.column_stack([N**2, N, np.ones(len(N))])
+    c, *_ = linalg.lstsq(H, rho**2, rcond=None)
     c2 = np.where(c[:3] > 0, c[:3], np.nan)
     S = 1.0 / np.sqrt(c2)
     b = -c[3:6] / (2.0 * c2)
@@ -127,7 +128,7 @@ def exact_fit(N, rho, *, sigma_N=None, gamma: bool = False, initial: dict | None
     return res
 
 
-GAMMA_SIGMA_MAX = 1e-2   # rad: a γ known worse than this is not worth reporting as determined
+GAMMA_SIGMA_MAX = 1e-2  # rad: a γ known worse than this is not worth reporting as determined
 
 
 def _exact(N, rho, sigma_N, gamma_free, initial) -> P2Result:
@@ -173,16 +174,26 @@ def _exact_from(N, rho, sigma_N, gamma_free, p0) -> P2Result:
             res.sigma = {k: v * s for k, v in res.sigma.items()}
             res.misfit_scaled = True
     if res.unidentifiable:
-        raise NotIdentifiable(f"the rows cannot determine {', '.join(res.unidentifiable)} (condition number "
-                              f"{res.condition_number:.3g}): more orientations or speeds are needed")
+        raise NotIdentifiable(
+            f"the rows cannot determine {', '.join(res.unidentifiable)} (condition number "
+            f"{res.condition_number:.3g}): more orientations or speeds are needed"
+        )
     out = {k: res.params[k] for k in p0}
     sig_out = {k: res.sigma[k] for k in p0}
     if gamma_free is not None:
         sig_out["gamma"] = np.where(gamma_free, sig_out["gamma"], 0.0)
     r = res.residuals
-    return P2Result(out, sig_out, "exact" if gamma_free is None else "exact-gamma", r, np.ones(len(N), bool),
-                    float(np.sqrt(np.mean(r ** 2))), res, noise_known,
-                    extra={"reduced_chi2": res.reduced_chi2, "condition_number": res.condition_number})
+    return P2Result(
+        out,
+        sig_out,
+        "exact" if gamma_free is None else "exact-gamma",
+        r,
+        np.ones(len(N), bool),
+        float(np.sqrt(np.mean(r**2))),
+        res,
+        noise_known,
+        extra={"reduced_chi2": res.reduced_chi2, "condition_number": res.condition_number},
+    )
 
 
 def _residual_and_jacobian(N, rho, gamma_free):
@@ -209,6 +220,7 @@ def paper_or_linear_start(N, rho) -> dict:
 
 
 # ------------------------------------------------------------------- the paper's method
+
 
 def paper_design(N: np.ndarray) -> np.ndarray:
     """Eq. 15's design matrix: ``[1, N_x, N_y, N_z, N_x², …, N_z⁴]`` (n, 13)."""
@@ -243,9 +255,9 @@ def paper_closed_form(q: np.ndarray, variant: str = "paper") -> dict:
     S, b, D = np.zeros(3), np.zeros(3), np.zeros(3)
     for i in range(3):
         C1, C2, C3, C4 = q[1 + i], q[4 + i], q[7 + i], q[10 + i]
-        ratio = (C4 / C3) * (C1 / C2)          # = 5 K c1(K) / (c3(K) c2(K))
+        ratio = (C4 / C3) * (C1 / C2)  # = 5 K c1(K) / (c3(K) c2(K))
         K = ratio / 5.0
-        for _ in range(50):                    # fixed point; K is ~1e-5 in practice
+        for _ in range(50):  # fixed point; K is ~1e-5 in practice
             K_new = ratio * c3f(K) * c2f(K) / (5.0 * c1f(K))
             if abs(K_new - K) <= 1e-16 + 1e-14 * abs(K):
                 K = K_new
@@ -265,12 +277,15 @@ def paper_fit(N, rho, variant: str = "paper") -> P2Result:
     N = np.asarray(N, dtype=float)
     rho = np.asarray(rho, dtype=float)
     if len(N) < 14:
-        raise TooFewPositions(f"{len(N)} rows; the paper's 13-coefficient least squares needs more than 13 "
-                              "(it asks for at least 54)")
+        raise TooFewPositions(
+            f"{len(N)} rows; the paper's 13-coefficient least squares needs more than 13 (it asks for at least 54)"
+        )
     q, res = paper_coefficients(N, rho)
     if res.unidentifiable:
-        raise NotIdentifiable("the rows cannot determine the paper's 13 coefficients: the outputs need more "
-                              "spread (orientations and speeds)")
+        raise NotIdentifiable(
+            "the rows cannot determine the paper's 13 coefficients: the outputs need more "
+            "spread (orientations and speeds)"
+        )
     p = paper_closed_form(q, variant)
     x0 = np.concatenate([p["S"], p["b"], p["D"]])
     J = np.zeros((9, 13))
@@ -284,20 +299,28 @@ def paper_fit(N, rho, variant: str = "paper") -> P2Result:
     cov = J @ res.cov @ J.T
     sg = np.sqrt(np.clip(np.diag(cov), 0, None))
     r = norm_residual(N, rho, p)
-    return P2Result(p, {"S": sg[0:3], "b": sg[3:6], "D": sg[6:9]}, "paper" if variant == "paper" else "paper-3rd",
-                    r, np.ones(len(N), bool), float(np.sqrt(np.mean(r ** 2))), None, False,
-                    extra={"coefficients": q, "polynomial_rms": float(np.sqrt(np.mean(res.residuals ** 2))),
-                           "x0": x0})
+    return P2Result(
+        p,
+        {"S": sg[0:3], "b": sg[3:6], "D": sg[6:9]},
+        "paper" if variant == "paper" else "paper-3rd",
+        r,
+        np.ones(len(N), bool),
+        float(np.sqrt(np.mean(r**2))),
+        None,
+        False,
+        extra={"coefficients": q, "polynomial_rms": float(np.sqrt(np.mean(res.residuals**2))), "x0": x0},
+    )
 
 
 # ------------------------------------------------------------------- screening rows
 
+
 @dataclass
 class Screen:
-    used: np.ndarray                 # bool: rows that agree with the model
-    residuals: np.ndarray            # |f| − ρ of every row at the inlier fit (g)
-    scale: float                     # robust scale of the inliers' residuals (g)
-    hints: dict                      # row → text (e.g. a sign that would make it agree)
+    used: np.ndarray  # bool: rows that agree with the model
+    residuals: np.ndarray  # |f| − ρ of every row at the inlier fit (g)
+    scale: float  # robust scale of the inliers' residuals (g)
+    hints: dict  # row → text (e.g. a sign that would make it agree)
 
 
 def screen_rows(N, rho, *, gamma: bool = False, threshold: float = 8.0) -> Screen:
@@ -323,7 +346,7 @@ def screen_rows(N, rho, *, gamma: bool = False, threshold: float = 8.0) -> Scree
     rel = row_sigma(N, p, 1.0)
     z = norm_residual(N, rho, p) / rel
     s = max(1.4826 * float(np.median(np.abs(z))), 1e-300)
-    if np.all(np.abs(z) <= threshold * s):     # the least-squares fit already explains every row
+    if np.all(np.abs(z) <= threshold * s):  # the least-squares fit already explains every row
         return Screen(np.ones(len(N), bool), z * rel, s * float(np.median(rel)), {})
     for _ in range(15):
         rel = row_sigma(N, p, 1.0)
@@ -342,7 +365,7 @@ def screen_rows(N, rho, *, gamma: bool = False, threshold: float = 8.0) -> Scree
         for i in range(3):
             M2 = N[k].copy()
             M2[i] = -M2[i]
-            rk = float(norm_residual(M2[None], rho[k:k + 1], p)[0] / rel[k])
+            rk = float(norm_residual(M2[None], rho[k : k + 1], p)[0] / rel[k])
             if abs(rk) <= threshold * s:
                 hints[int(k)] = f"would agree with a{AXES[i]} = {M2[i]:.6g} (a lost minus sign?)"
                 break

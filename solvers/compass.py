@@ -64,6 +64,7 @@ refused below 0.1 (all directions in one plane). Distinct orientations
 (:func:`distinct_directions`): the greedy count of field directions at least
 ``DISTINCT_SEPARATION_DEG`` = 20° apart.
 """
+
 from __future__ import annotations
 
 import math
@@ -94,7 +95,7 @@ RLS_PASSES = 1
 NOISE_BIAS_CORRECTION = True  # see noise_bias_nT
 HEADING_MAX_TILT_DEG = 70.0
 
-UPPER = np.triu_indices(3)            # W's free elements, row-major: 00 01 02 11 12 22
+UPPER = np.triu_indices(3)  # W's free elements, row-major: 00 01 02 11 12 22
 W_FREE = np.triu(np.ones((3, 3), dtype=bool))
 
 
@@ -103,6 +104,7 @@ class CoverageTooLow(SolverError):
 
 
 # ---------------------------------------------------------------- 1. filters
+
 
 def _signal():
     from scipy import signal  # imported lazily: scipy.signal takes seconds to load
@@ -118,8 +120,7 @@ def _sos(cutoff_hz: float, rate_hz: float, order: int):
     return signal.butter(order, wn, btype="low", output="sos")
 
 
-def lowpass(x, cutoff_hz: float, rate_hz: float, *, zero_phase: bool = True,
-            order: int = FILTER_ORDER) -> np.ndarray:
+def lowpass(x, cutoff_hz: float, rate_hz: float, *, zero_phase: bool = True, order: int = FILTER_ORDER) -> np.ndarray:
     """Butterworth low-pass along axis 0. ``zero_phase``: forward-backward (``sosfiltfilt``,
     no delay, squared magnitude response) for recorded captures; else causal ``sosfilt``
     started at the first sample's value (live use, see :class:`CausalLowpass`)."""
@@ -139,8 +140,7 @@ class CausalLowpass:
     state between blocks, so feeding a signal in pieces equals filtering it whole. The
     state starts at steady state for the first sample (no start-up transient)."""
 
-    def __init__(self, cutoff_hz: float, rate_hz: float, shape: tuple = (3,), *,
-                 order: int = FILTER_ORDER):
+    def __init__(self, cutoff_hz: float, rate_hz: float, shape: tuple = (3,), *, order: int = FILTER_ORDER):
         self.sos = _sos(cutoff_hz, rate_hz, order)
         self.shape = tuple(shape)
         self.zi = None
@@ -159,6 +159,7 @@ class CausalLowpass:
 
 # ---------------------------------------------------------------- 2. tilt from gravity
 
+
 def pitch_roll_from_accel(f) -> tuple[np.ndarray, np.ndarray]:
     """Pitch θ and roll φ [rad] from specific force rows (any unit), body x fwd, y right,
     z down: at rest ``f = g (sin θ, −sin φ cos θ, −cos φ cos θ)``."""
@@ -169,6 +170,7 @@ def pitch_roll_from_accel(f) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------- 3. Kalman filters
+
 
 @dataclass
 class KalmanConfig:
@@ -206,7 +208,7 @@ class AngleKalman:
         self.wrap = wrap
         self.a = float(angle0)
         self.b = 0.0
-        self.P = [0.05 ** 2, 0.0, 0.0, config.bias0_sigma_rad_s ** 2]  # p00 p01 p10 p11
+        self.P = [0.05**2, 0.0, 0.0, config.bias0_sigma_rad_s**2]  # p00 p01 p10 p11
 
     def step(self, rate: float, z: float, dt: float, r_scale: float = 1.0) -> float:
         c = self.c
@@ -286,8 +288,9 @@ class TiltKalman:
         return pitch, roll
 
 
-def kalman_pitch_roll(t_s, f, omega_rad_s, config: KalmanConfig | None = None,
-                      g_unit: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def kalman_pitch_roll(
+    t_s, f, omega_rad_s, config: KalmanConfig | None = None, g_unit: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Pitch and roll [rad] per sample from specific force ``f`` (rows, in units where 1 g =
     ``g_unit``) and body rates ``omega_rad_s`` (rows p, q, r; r may be NaN/absent → 0)."""
     return TiltKalman(config, g_unit).process(t_s, f, omega_rad_s)
@@ -301,8 +304,7 @@ class LiveCompass:
     per row. The accelerometer must read specific force in g (flip a gravity-direction
     sensor before)."""
 
-    def __init__(self, rate_hz: float, W, h, declination_deg: float = 0.0,
-                 config: KalmanConfig | None = None):
+    def __init__(self, rate_hz: float, W, h, declination_deg: float = 0.0, config: KalmanConfig | None = None):
         self.W, self.h = np.asarray(W, float), np.asarray(h, float)
         self.declination_deg = float(declination_deg)
         self.f_acc = CausalLowpass(ACCEL_CUTOFF_HZ, rate_hz)
@@ -320,6 +322,7 @@ class LiveCompass:
 
 
 # ---------------------------------------------------------------- coverage
+
 
 def fibonacci_sphere(n: int) -> np.ndarray:
     """``n`` near-uniform unit vectors (their Voronoi cells are near equal-area)."""
@@ -387,8 +390,10 @@ def midrange_directions(y) -> np.ndarray:
 
 # ---------------------------------------------------------------- 4. magnetometer
 
-def ellipsoid_fit(y, field_nT: float | None = None, *,
-                  axis_aligned: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+
+def ellipsoid_fit(
+    y, field_nT: float | None = None, *, axis_aligned: bool = False
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Algebraic ellipsoid fit of raw vectors ``y`` (N, 3); ``axis_aligned``: the ellipsoid's
     axes along the sensor axes (W diagonal: 3 scales + 3 centre = the source's 6 unknowns,
     identifiable from 6 orientations), else general (9 unknowns).
@@ -408,12 +413,13 @@ def ellipsoid_fit(y, field_nT: float | None = None, *,
     if axis_aligned:
         D = np.column_stack([X * X, Y * Y, Z * Z, 2 * X, 2 * Y, 2 * Z, one])
     else:
-        D = np.column_stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z,
-                             2 * X, 2 * Y, 2 * Z, one])
+        D = np.column_stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z, 2 * X, 2 * Y, 2 * Z, one])
     _, sv, Vt = linalg.svd(D, full_matrices=False)
     if sv[-2] <= 1e-9 * sv[0]:
-        raise NotIdentifiable("the magnetometer vectors do not determine an ellipsoid "
-                              "(they lie on a plane or a cone: turn the unit through more orientations)")
+        raise NotIdentifiable(
+            "the magnetometer vectors do not determine an ellipsoid "
+            "(they lie on a plane or a cone: turn the unit through more orientations)"
+        )
     v = Vt[-1]
     if axis_aligned:
         v = np.concatenate([v[:3], [0.0, 0.0, 0.0], v[3:]])
@@ -431,8 +437,10 @@ def ellipsoid_fit(y, field_nT: float | None = None, *,
     An = A / k if k != 0 else A * np.nan
     ev = np.linalg.eigvalsh(An) if np.all(np.isfinite(An)) else np.array([-1.0])
     if np.any(ev <= 0):
-        raise NotIdentifiable("the magnetometer data do not fit an ellipsoid (the quadric is not "
-                              "closed): turn the unit through more orientations")
+        raise NotIdentifiable(
+            "the magnetometer data do not fit an ellipsoid (the quadric is not "
+            "closed): turn the unit through more orientations"
+        )
     An_raw = An / (s * s)  # in raw units
     h = mu + s * hx
     U = np.linalg.cholesky(An_raw).T  # upper, An = Uᵀ U
@@ -482,7 +490,7 @@ def noise_from_second_differences(y) -> float:
     if len(d2) < 10:
         return math.nan
     s = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / math.sqrt(6.0)
-    return float(np.sqrt(np.mean(s ** 2)))
+    return float(np.sqrt(np.mean(s**2)))
 
 
 def noise_bias_nT(y, W, h, noise_raw: float) -> np.ndarray:
@@ -491,11 +499,10 @@ def noise_bias_nT(y, W, h, noise_raw: float) -> np.ndarray:
     order; ~0.4 nT for 150 nT noise on a 55,000 nT field, enough to bias W's scale by a
     quarter sigma). Added to F in every fit so that the *true* field has magnitude F."""
     n, _, gain = magnitude_jacobian(y, np.asarray(W, float), np.asarray(h, float))
-    return float(noise_raw) ** 2 * (np.sum(np.asarray(W, float) ** 2) - gain ** 2) / (2.0 * n)
+    return float(noise_raw) ** 2 * (np.sum(np.asarray(W, float) ** 2) - gain**2) / (2.0 * n)
 
 
-def batch_fit(y, W0, h0, field_nT: float, noise_raw: float, *, weights_at=None,
-              W_free=W_FREE) -> FitResult:
+def batch_fit(y, W0, h0, field_nT: float, noise_raw: float, *, weights_at=None, W_free=W_FREE) -> FitResult:
     """Nonlinear least squares of ``|W(y − h)| − (F + b)`` over W (upper) and h through
     ``solvers.fit``, b the noise bias (:func:`noise_bias_nT`, when NOISE_BIAS_CORRECTION).
     Per-row sigma ``noise_raw · |Wᵀû|``; sigma and b at ``weights_at`` = (W, h) (default
@@ -516,8 +523,14 @@ def batch_fit(y, W0, h0, field_nT: float, noise_raw: float, *, weights_at=None,
     def jac(p):
         return magnitude_jacobian(y, p["W"], p["h"])[1][:, cols]
 
-    return fit(resid, {"W": np.asarray(W0, float), "h": np.asarray(h0, float)},
-               free={"W": W_free, "h": True}, sigma=sigma, jac=jac, scale_on_misfit=True)
+    return fit(
+        resid,
+        {"W": np.asarray(W0, float), "h": np.asarray(h0, float)},
+        free={"W": W_free, "h": True},
+        sigma=sigma,
+        jac=jac,
+        scale_on_misfit=True,
+    )
 
 
 class MagRLS:
@@ -536,8 +549,17 @@ class MagRLS:
     ``update(y_row)`` processes one raw sample, ``process(Y)`` many. ``P`` is in units of
     θ², for the measurement variance ``noise_raw² |Wᵀû|²``."""
 
-    def __init__(self, W0, h0, field_nT: float, P0, *, noise_raw: float = 1.0,
-                 forgetting: float = 1.0, linearise: str = "running"):
+    def __init__(
+        self,
+        W0,
+        h0,
+        field_nT: float,
+        P0,
+        *,
+        noise_raw: float = 1.0,
+        forgetting: float = 1.0,
+        linearise: str = "running",
+    ):
         if linearise not in ("running", "fixed"):
             raise ValueError("linearise must be 'running' or 'fixed'")
         self.theta = theta_of(W0, h0)
@@ -572,7 +594,7 @@ class MagRLS:
         # pseudo-measurement of the linearised model: z = F − n_ref + J θ_ref = J θ
         z = (self.F - n_ref) + J @ self.theta_ref
         if NOISE_BIAS_CORRECTION:
-            z += self.r0 * (np.sum(W_ref ** 2) - gain * gain) / (2.0 * n_ref)
+            z += self.r0 * (np.sum(W_ref**2) - gain * gain) / (2.0 * n_ref)
         R = lam * self.r0 * gain * gain
         for H, zk, rk in zip(J, z.tolist(), R.tolist()):
             PH = P @ H
@@ -589,21 +611,24 @@ class MagRLS:
         for y0, y1, y2 in Y.tolist():
             w00, w01, w02, w11, w12, w22, h0, h1, h2 = th.tolist()
             d0, d1, d2 = y0 - h0, y1 - h1, y2 - h2
-            u0 = w00 * d0 + w01 * d1 + w02 * d2     # u = W d: mag.inverse for one row,
-            u1 = w11 * d1 + w12 * d2                # written out for speed
+            u0 = w00 * d0 + w01 * d1 + w02 * d2  # u = W d: mag.inverse for one row,
+            u1 = w11 * d1 + w12 * d2  # written out for speed
             u2 = w22 * d2
             n = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
             a0, a1, a2 = u0 / n, u1 / n, u2 / n
             g0 = a0 * w00
             g1 = a0 * w01 + a1 * w11
-            g2 = a0 * w02 + a1 * w12 + a2 * w22    # g = Wᵀ û
+            g2 = a0 * w02 + a1 * w12 + a2 * w22  # g = Wᵀ û
             H[:] = (a0 * d0, a0 * d1, a0 * d2, a1 * d1, a1 * d2, a2 * d2, -g0, -g1, -g2)
             PH = P @ H
             g2 = g0 * g0 + g1 * g1 + g2 * g2
             s = lam * r0 * g2 + H @ PH
             K = PH / s
-            b = r0 * (w00 * w00 + w01 * w01 + w02 * w02 + w11 * w11 + w12 * w12 + w22 * w22 - g2) / (2.0 * n) \
-                if bias else 0.0
+            b = (
+                r0 * (w00 * w00 + w01 * w01 + w02 * w02 + w11 * w11 + w12 * w12 + w22 * w22 - g2) / (2.0 * n)
+                if bias
+                else 0.0
+            )
             th += K * (F + b - n)
             P -= np.outer(K, PH)
             if lam != 1.0:
@@ -613,8 +638,9 @@ class MagRLS:
         self.process(np.atleast_2d(y_row))
 
 
-def rls_passes(y, W0, h0, field_nT: float, noise_raw: float, *, passes: int = 2,
-               inflation: float | None = None) -> MagRLS:
+def rls_passes(
+    y, W0, h0, field_nT: float, noise_raw: float, *, passes: int = 2, inflation: float | None = None
+) -> MagRLS:
     """RLS over a recorded capture: ``passes`` passes with fixed linearisation, each started
     at the previous pass's estimate with ``P0 = inflation × (Jᵀ Σ⁻¹ J)⁻¹`` there."""
     inflation = RLS_P0_INFLATION if inflation is None else inflation
@@ -649,8 +675,8 @@ class MagCalibration:
     W_ellipsoid: np.ndarray
     h_ellipsoid: np.ndarray
     batch: FitResult
-    rls_minus_batch_sigma: float          # max |θ_rls − θ_batch| / σ_batch (NaN: no RLS)
-    noise_raw: float                      # raw noise estimate (per axis)
+    rls_minus_batch_sigma: float  # max |θ_rls − θ_batch| / σ_batch (NaN: no RLS)
+    noise_raw: float  # raw noise estimate (per axis)
     residual_rms_nT: float
     n_samples: int
     n_distinct: int
@@ -660,13 +686,18 @@ class MagCalibration:
 
 
 def _spread(x: np.ndarray) -> dict:
-    return {"mean": float(np.mean(x)), "std": float(np.std(x)), "min": float(np.min(x)),
-            "max": float(np.max(x)),
-            "std_percent": float(100.0 * np.std(x) / np.mean(x))}
+    return {
+        "mean": float(np.mean(x)),
+        "std": float(np.std(x)),
+        "min": float(np.min(x)),
+        "max": float(np.max(x)),
+        "std_percent": float(100.0 * np.std(x) / np.mean(x)),
+    }
 
 
-def check_orientations(y, *, need: int = MIN_RLS_ORIENTATIONS, min_coverage: float = MIN_COVERAGE,
-                       directions=None) -> tuple[int, float]:
+def check_orientations(
+    y, *, need: int = MIN_RLS_ORIENTATIONS, min_coverage: float = MIN_COVERAGE, directions=None
+) -> tuple[int, float]:
     """Distinct orientations and coverage of the field directions; raises TooFewPositions /
     CoverageTooLow with the reason."""
     if directions is None:
@@ -680,7 +711,8 @@ def check_orientations(y, *, need: int = MIN_RLS_ORIENTATIONS, min_coverage: flo
             raise CoverageTooLow(
                 f"the field hardly changed direction (largest range {span:.3g} against a field of about "
                 f"{size:.3g} in raw units): the unit was not turned; turn it through all orientations, "
-                "including upside down")
+                "including upside down"
+            )
     u = midrange_directions(y) if directions is None else unit_rows(directions)
     n_dist = distinct_directions(u)
     cov = coverage(u)
@@ -688,24 +720,33 @@ def check_orientations(y, *, need: int = MIN_RLS_ORIENTATIONS, min_coverage: flo
         raise TooFewPositions(
             f"only {n_dist} distinct field directions (>= {DISTINCT_SEPARATION_DEG:.0f}° apart); "
             f"the {'RLS' if need >= MIN_RLS_ORIENTATIONS else 'ellipsoid fit'} needs at least {need}: "
-            "turn the unit through more orientations")
+            "turn the unit through more orientations"
+        )
     sp = spread(u)
     if sp < MIN_SPREAD:
         raise CoverageTooLow(
             f"the field directions lie in one plane (spread {sp:.2f}, need {MIN_SPREAD:.2f}; "
             f"{100 * cov:.0f}% of the sphere): the unit was turned about one axis only; "
-            "turn it through all orientations, including upside down")
+            "turn it through all orientations, including upside down"
+        )
     if cov < min_coverage:
         raise CoverageTooLow(
             f"the field direction came within {COVERAGE_RADIUS_DEG:.0f}° of only {100 * cov:.0f}% of the "
             f"sphere (need {100 * min_coverage:.0f}%): turn the unit through all orientations, "
-            "including upside down")
+            "including upside down"
+        )
     return n_dist, cov
 
 
-def calibrate_mag(y, field_nT: float | None, *, unit_factor_nT: float | None = None,
-                  method: str = "rls", noise_raw: float | None = None,
-                  min_coverage: float = MIN_COVERAGE) -> MagCalibration:
+def calibrate_mag(
+    y,
+    field_nT: float | None,
+    *,
+    unit_factor_nT: float | None = None,
+    method: str = "rls",
+    noise_raw: float | None = None,
+    min_coverage: float = MIN_COVERAGE,
+) -> MagCalibration:
     """Ellipsoid fit → RLS (and the batch reference) on raw magnetometer rows ``y``.
 
     ``field_nT``: the IGRF total field; None → F = ellipsoid radius × ``unit_factor_nT``
@@ -723,7 +764,8 @@ def calibrate_mag(y, field_nT: float | None, *, unit_factor_nT: float | None = N
             f"only {n0} distinct field directions (>= {DISTINCT_SEPARATION_DEG:.0f}° apart): the RLS "
             f"(full upper-triangular W and h, 9 parameters) needs at least {MIN_RLS_ORIENTATIONS}; "
             f"with {MIN_ELLIPSOID_ORIENTATIONS} to {MIN_RLS_ORIENTATIONS - 1} only the axis-aligned "
-            "ellipsoid (method 'ellipsoid', 6 parameters) can be fitted: turn the unit through more orientations")
+            "ellipsoid (method 'ellipsoid', 6 parameters) can be fitted: turn the unit through more orientations"
+        )
     W1, h1, radius = ellipsoid_fit(y, 1.0, axis_aligned=not full)
     if field_nT is None:
         F = radius * (unit_factor_nT if unit_factor_nT else 1.0)
@@ -731,17 +773,20 @@ def calibrate_mag(y, field_nT: float | None, *, unit_factor_nT: float | None = N
         F = float(field_nT)
     W_e = W1 * F
     m_e = calibrated(y, W_e, h1)
-    n_dist, cov = check_orientations(y, need=MIN_RLS_ORIENTATIONS if full else MIN_ELLIPSOID_ORIENTATIONS,
-                                     min_coverage=min_coverage, directions=m_e)
+    n_dist, cov = check_orientations(
+        y, need=MIN_RLS_ORIENTATIONS if full else MIN_ELLIPSOID_ORIENTATIONS, min_coverage=min_coverage, directions=m_e
+    )
     W_free = W_FREE if full else np.eye(3, dtype=bool)
     if noise_raw is None:
         _, _, gain_e = magnitude_jacobian(y, W_e, h1)
         r_e = (np.linalg.norm(m_e, axis=1) - F) / gain_e
-        noise_raw = float(np.sqrt(np.sum(r_e ** 2) / max(len(y) - int(W_free.sum()) - 3, 1)))
+        noise_raw = float(np.sqrt(np.sum(r_e**2) / max(len(y) - int(W_free.sum()) - 3, 1)))
     batch = batch_fit(y, W_e, h1, F, noise_raw, W_free=W_free)
     if not batch.success or batch.unidentifiable:
-        raise NotIdentifiable("the soft/hard-iron fit is not identifiable from these data "
-                              f"({', '.join(batch.unidentifiable) or batch.message})")
+        raise NotIdentifiable(
+            "the soft/hard-iron fit is not identifiable from these data "
+            f"({', '.join(batch.unidentifiable) or batch.message})"
+        )
     Wb, hb = batch.params["W"], batch.params["h"]
     sig_raw = float(noise_raw) * (math.sqrt(batch.reduced_chi2) if batch.misfit_scaled else 1.0)
     if full:
@@ -762,14 +807,28 @@ def calibrate_mag(y, field_nT: float | None, *, unit_factor_nT: float | None = N
     after = np.linalg.norm(calibrated(y, W, h), axis=1)
     resid = after - F
     return MagCalibration(
-        W=W, h=h, W_sigma=batch.sigma["W"] * W_free, h_sigma=batch.sigma["h"], field_nT=F,
-        method=method, W_ellipsoid=W_e, h_ellipsoid=h1, batch=batch, rls_minus_batch_sigma=diff,
-        noise_raw=sig_raw, residual_rms_nT=float(np.sqrt(np.mean(resid ** 2))), n_samples=len(y),
-        n_distinct=n_dist, coverage=cov, magnitude_before=_spread(raw_mag),
-        magnitude_after=_spread(after))
+        W=W,
+        h=h,
+        W_sigma=batch.sigma["W"] * W_free,
+        h_sigma=batch.sigma["h"],
+        field_nT=F,
+        method=method,
+        W_ellipsoid=W_e,
+        h_ellipsoid=h1,
+        batch=batch,
+        rls_minus_batch_sigma=diff,
+        noise_raw=sig_raw,
+        residual_rms_nT=float(np.sqrt(np.mean(resid**2))),
+        n_samples=len(y),
+        n_distinct=n_dist,
+        coverage=cov,
+        magnitude_before=_spread(raw_mag),
+        magnitude_after=_spread(after),
+    )
 
 
 # ---------------------------------------------------------------- 5. heading and sign
+
 
 def level_field(m_body, pitch_rad, roll_rad) -> np.ndarray:
     """``R_y(θ) R_x(φ) m_b`` per row: the field in the levelled (heading) frame."""
@@ -784,8 +843,9 @@ def level_field(m_body, pitch_rad, roll_rad) -> np.ndarray:
     return np.column_stack([x2, y1, z2])
 
 
-def heading_deg(m_body_nT, pitch_rad, roll_rad, declination_deg: float = 0.0,
-                max_tilt_deg: float = HEADING_MAX_TILT_DEG) -> tuple[np.ndarray, np.ndarray]:
+def heading_deg(
+    m_body_nT, pitch_rad, roll_rad, declination_deg: float = 0.0, max_tilt_deg: float = HEADING_MAX_TILT_DEG
+) -> tuple[np.ndarray, np.ndarray]:
     """Tilt-compensated (magnetic, true) heading of body x in [0, 360) per row; NaN where
     |pitch| exceeds ``max_tilt_deg`` (roll and heading are undefined near ±90°)."""
     ml = level_field(m_body_nT, pitch_rad, roll_rad)
@@ -811,8 +871,8 @@ def accel_mag_angle_deg(f, m) -> np.ndarray:
 
 @dataclass
 class SignVerdict:
-    sign: str                # 'specific_force' or 'gravity'
-    angle_deg: float         # median accel–field angle as given
+    sign: str  # 'specific_force' or 'gravity'
+    angle_deg: float  # median accel–field angle as given
     expected_deg: float | None  # 90 + inclination for specific force
     reason: str
 
@@ -827,19 +887,39 @@ def detect_accel_sign(f, m_cal, inclination_deg: float | None) -> SignVerdict:
     if inclination_deg is not None:
         e_sf, e_gr = 90.0 + inclination_deg, 90.0 - inclination_deg
         if abs(inclination_deg) < 10.0:
-            return SignVerdict("specific_force", ang, e_sf,
-                               f"inclination {inclination_deg:.1f}° is too shallow to tell the sign; assumed specific force")
+            return SignVerdict(
+                "specific_force",
+                ang,
+                e_sf,
+                f"inclination {inclination_deg:.1f}° is too shallow to tell the sign; assumed specific force",
+            )
         if abs(ang - e_gr) < abs(ang - e_sf):
-            return SignVerdict("gravity", ang, e_sf,
-                               f"accelerometer–field angle {ang:.1f}° matches the gravity direction "
-                               f"(90° − I = {e_gr:.1f}°), not specific force (90° + I = {e_sf:.1f}°)")
-        return SignVerdict("specific_force", ang, e_sf, f"accelerometer–field angle {ang:.1f}° "
-                           f"matches specific force (90° + I = {e_sf:.1f}°)")
+            return SignVerdict(
+                "gravity",
+                ang,
+                e_sf,
+                f"accelerometer–field angle {ang:.1f}° matches the gravity direction "
+                f"(90° − I = {e_gr:.1f}°), not specific force (90° + I = {e_sf:.1f}°)",
+            )
+        return SignVerdict(
+            "specific_force",
+            ang,
+            e_sf,
+            f"accelerometer–field angle {ang:.1f}° matches specific force (90° + I = {e_sf:.1f}°)",
+        )
     if ang < 90.0:
-        return SignVerdict("gravity", ang, None,
-                           f"accelerometer–field angle {ang:.1f}° < 90°: the accelerometer points "
-                           "along the field's downward component, i.e. reports the gravity "
-                           "direction (assuming the northern magnetic hemisphere; no site given)")
-    return SignVerdict("specific_force", ang, None,
-                       f"accelerometer–field angle {ang:.1f}° > 90°: specific force "
-                       "(assuming the northern magnetic hemisphere; no site given)")
+        return SignVerdict(
+            "gravity",
+            ang,
+            None,
+            f"accelerometer–field angle {ang:.1f}° < 90°: the accelerometer points "
+            "along the field's downward component, i.e. reports the gravity "
+            "direction (assuming the northern magnetic hemisphere; no site given)",
+        )
+    return SignVerdict(
+        "specific_force",
+        ang,
+        None,
+        f"accelerometer–field angle {ang:.1f}° > 90°: specific force "
+        "(assuming the northern magnetic hemisphere; no site given)",
+    )

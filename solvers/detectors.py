@@ -13,6 +13,7 @@ Pure numerics (no I/O, no UI), so both can import them without pulling in textua
   ``solvers.compass.check_orientations``, refused below ``MIN_COVERAGE``. The drawable map
   samples the same measure on a latitude/longitude grid.
 """
+
 from __future__ import annotations
 
 import math
@@ -72,8 +73,7 @@ class FieldCoverage:
     from every kept row, in between the measure is kept incrementally. 0: follow exactly.
     """
 
-    def __init__(self, rate_hz: float = 100.0, keep_hz: float = 10.0, center=None,
-                 recentre_frac: float = 0.01) -> None:
+    def __init__(self, rate_hz: float = 100.0, keep_hz: float = 10.0, center=None, recentre_frac: float = 0.01) -> None:
         self.recentre_frac = float(recentre_frac)
         self._c_used: np.ndarray | None = None
         self.every = max(1, int(round(float(rate_hz) / keep_hz))) if rate_hz and math.isfinite(rate_hz) else 1
@@ -179,7 +179,7 @@ class FieldCoverage:
         nb, ns = n_bands * sub, n_sectors * sub
         z = -1.0 + (np.arange(nb) + 0.5) * 2.0 / nb
         az = -math.pi + (np.arange(ns) + 0.5) * 2.0 * math.pi / ns
-        r = np.sqrt(1.0 - z ** 2)
+        r = np.sqrt(1.0 - z**2)
         pts = np.column_stack([np.outer(r, np.cos(az)).ravel(), np.outer(r, np.sin(az)).ravel(), np.repeat(z, ns)])
         best = self._max_dot(("grid", n_bands, n_sectors, sub), pts)
         hit = (best >= math.cos(math.radians(C.COVERAGE_RADIUS_DEG))).reshape(n_bands, sub, n_sectors, sub)

@@ -17,11 +17,12 @@ above 1: beyond 1 + 3·sqrt(2/dof)), the covariance is scaled by the reduced χ�
 uncertainties account for the misfit (calibrate.md). Without ``sigma`` the noise is
 estimated from the residuals (covariance always scaled by the reduced χ²).
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -35,18 +36,18 @@ from solvers.params import Packer, Params
 class FitResult:
     """What a fit found, and how far to trust it. Every array is a plain numpy array."""
 
-    params: Params                     # all blocks (fixed ones as given)
-    sigma: Params                      # 1-sigma, same shapes; 0 fixed, NaN unidentifiable
-    names: list[str]                   # names of the free scalar elements, in x order
-    x: np.ndarray                      # free elements
-    cov: np.ndarray                    # covariance of x (scaled as documented)
-    residuals: np.ndarray              # r = model − data at the solution (unweighted)
-    weighted_residuals: np.ndarray     # r / σ
-    chi2: float                        # Σ (r/σ)²
-    dof: int                           # len(r) − identifiable free parameters
+    params: Params  # all blocks (fixed ones as given)
+    sigma: Params  # 1-sigma, same shapes; 0 fixed, NaN unidentifiable
+    names: list[str]  # names of the free scalar elements, in x order
+    x: np.ndarray  # free elements
+    cov: np.ndarray  # covariance of x (scaled as documented)
+    residuals: np.ndarray  # r = model − data at the solution (unweighted)
+    weighted_residuals: np.ndarray  # r / σ
+    chi2: float  # Σ (r/σ)²
+    dof: int  # len(r) − identifiable free parameters
     reduced_chi2: float
-    misfit_scaled: bool                # covariance scaled by reduced χ²
-    condition_number: float            # of the column-scaled weighted Jacobian
+    misfit_scaled: bool  # covariance scaled by reduced χ²
+    condition_number: float  # of the column-scaled weighted Jacobian
     unidentifiable: list[str]
     null_space: list[dict[str, float]]  # unit null directions over free names (large parts only)
     success: bool
@@ -99,14 +100,17 @@ def fit(
 
     jac_arg: object = "2-point"
     if jac is not None:
+
         def jac_arg(x: np.ndarray) -> np.ndarray:  # noqa: F811 - a closure, by design
             J = np.asarray(jac(packer.unpack(x)), dtype=float)
             return J * np.reshape(weights, (-1, 1)) if weights is not None else J
 
     r0 = fun(x0)
     if not np.all(np.isfinite(r0)):
-        raise NotFinite("the residual is not finite at the starting point: values beyond what the model can "
-                        "carry (overflowing or absurd readings)")
+        raise NotFinite(
+            "the residual is not finite at the starting point: values beyond what the model can "
+            "carry (overflowing or absurd readings)"
+        )
     n, p = r0.size, x0.size
     if method is None:
         method = "lm" if (n >= p and loss == "linear") else "trf"
@@ -115,12 +119,33 @@ def fit(
     else:
         if max_nfev is None:  # bounded: well-posed fits here converge in under (p + 1) evaluations;
             max_nfev = MAX_NFEV_PER_PARAM * (p + 1)  # absurd data no longer iterate for minutes
-        sol = least_squares(fun, x0, jac=jac_arg, method=method, loss=loss, x_scale="jac",
-                            max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        sol = least_squares(
+            fun,
+            x0,
+            jac=jac_arg,
+            method=method,
+            loss=loss,
+            x_scale="jac",
+            max_nfev=max_nfev,
+            xtol=1e-12,
+            ftol=1e-12,
+            gtol=1e-12,
+        )
         sol_x, status, message, nfev, success = sol.x, sol.status, sol.message, sol.nfev, bool(sol.success)
-    return summarise(packer, sol_x, fun, jac_arg, status=status, message=message, nfev=nfev,
-                     success=success, weights=weights, ident_rtol=ident_rtol,
-                     scale_on_misfit=scale_on_misfit, sigma_given=sigma is not None)
+    return summarise(
+        packer,
+        sol_x,
+        fun,
+        jac_arg,
+        status=status,
+        message=message,
+        nfev=nfev,
+        success=success,
+        weights=weights,
+        ident_rtol=ident_rtol,
+        scale_on_misfit=scale_on_misfit,
+        sigma_given=sigma is not None,
+    )
 
 
 # Residual evaluations allowed per free parameter (+1) when the caller gives no max_nfev: the
@@ -142,9 +167,21 @@ def _numeric_jacobian(fun, x: np.ndarray) -> np.ndarray:
     return J
 
 
-def summarise(packer: Packer, x: np.ndarray, fun, jac_arg, *, status: int, message: str,
-              nfev: int, success: bool, weights, ident_rtol: float, scale_on_misfit: bool,
-              sigma_given: bool) -> FitResult:
+def summarise(
+    packer: Packer,
+    x: np.ndarray,
+    fun,
+    jac_arg,
+    *,
+    status: int,
+    message: str,
+    nfev: int,
+    success: bool,
+    weights,
+    ident_rtol: float,
+    scale_on_misfit: bool,
+    sigma_given: bool,
+) -> FitResult:
     """Covariance, identifiability and misfit at the solution ``x``."""
     rw = fun(x)
     p = x.size
@@ -193,24 +230,37 @@ def summarise(packer: Packer, x: np.ndarray, fun, jac_arg, *, status: int, messa
     sig = np.where(unident_mask, np.nan, sig)
     r = rw / weights if weights is not None else rw
     return FitResult(
-        params=packer.unpack(x), sigma=packer.unpack_sigma(sig), names=names, x=x, cov=cov,
-        residuals=r, weighted_residuals=rw, chi2=chi2, dof=dof, reduced_chi2=red,
-        misfit_scaled=scaled, condition_number=cond,
-        unidentifiable=[names[i] for i in np.flatnonzero(unident_mask)], null_space=null_space,
-        success=success, status=int(status), message=str(message), nfev=int(nfev),
+        params=packer.unpack(x),
+        sigma=packer.unpack_sigma(sig),
+        names=names,
+        x=x,
+        cov=cov,
+        residuals=r,
+        weighted_residuals=rw,
+        chi2=chi2,
+        dof=dof,
+        reduced_chi2=red,
+        misfit_scaled=scaled,
+        condition_number=cond,
+        unidentifiable=[names[i] for i in np.flatnonzero(unident_mask)],
+        null_space=null_space,
+        success=success,
+        status=int(status),
+        message=str(message),
+        nfev=int(nfev),
         singular_values=s,
     )
 
 
-def linear_fit(H: np.ndarray, y: np.ndarray, sigma: float | np.ndarray | None = None,
-               names: list[str] | None = None, **kw) -> FitResult:
+def linear_fit(
+    H: np.ndarray, y: np.ndarray, sigma: float | np.ndarray | None = None, names: list[str] | None = None, **kw
+) -> FitResult:
     """Ordinary/weighted linear least squares ``y ≈ H x`` through the same engine (one
     result type, one identifiability test): ``x`` comes back as block ``'x'``."""
     H = np.asarray(H, dtype=float)
     y = np.asarray(y, dtype=float)
     x_ls, *_ = linalg.lstsq(H, y, rcond=None)
-    res = fit(lambda p: H @ p["x"] - y, {"x": x_ls}, sigma=sigma,
-              jac=lambda p: H, **kw)
+    res = fit(lambda p: H @ p["x"] - y, {"x": x_ls}, sigma=sigma, jac=lambda p: H, **kw)
     if names is not None:
         res.names = list(names)
         res.unidentifiable = [names[int(n[2:-1])] for n in res.unidentifiable]

@@ -13,6 +13,7 @@ Conventions
 - Euler angles (roll φ, pitch θ, yaw ψ) are aerospace z-y-x for NED:
   ``C_n_b = Rz(ψ) Ry(θ) Rx(φ)``.
 """
+
 from __future__ import annotations
 
 import math

@@ -4,6 +4,7 @@ ppigrf returns geodetic east, north, **up** components [nT]; the station reports
 east, **down** (NOAA's convention): ``down = −up``. Inclination is positive when the field
 points down (northern hemisphere); declination positive east of true north.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -25,7 +26,7 @@ def parse_date(text: str | _dt.date | _dt.datetime) -> _dt.datetime:
     except ValueError:
         d = _dt.datetime.combine(_dt.date.fromisoformat(s[:10]), _dt.time())
     if d.tzinfo is not None:
-        d = d.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+        d = d.astimezone(_dt.UTC).replace(tzinfo=None)
     return d
 
 
@@ -58,10 +59,14 @@ def igrf_date(date) -> tuple[_dt.datetime, str | None]:
     years = abs((d - edge).total_seconds()) / (365.25 * 86400.0)
     span = f"IGRF coverage {first.date()} to {last.date()}"
     if years > MAX_EXTRAPOLATION_YEARS:
-        raise ValueError(f"{d.date()} is {years:.1f} years outside the {span}; dates up to "
-                         f"{MAX_EXTRAPOLATION_YEARS:g} years outside use the nearest epoch, farther are refused")
-    return edge, (f"date {d.date()} is outside the {span}: the field of {edge.date()} is used "
-                  f"({years:.1f} years away; the field changes by up to ~100 nT per year)")
+        raise ValueError(
+            f"{d.date()} is {years:.1f} years outside the {span}; dates up to "
+            f"{MAX_EXTRAPOLATION_YEARS:g} years outside use the nearest epoch, farther are refused"
+        )
+    return edge, (
+        f"date {d.date()} is outside the {span}: the field of {edge.date()} is used "
+        f"({years:.1f} years away; the field changes by up to ~100 nT per year)"
+    )
 
 
 @lru_cache(maxsize=256)

@@ -17,6 +17,7 @@ noise included), plus, in mode A, the reference IMU's own drift; in mode B the E
 term's error from the heading (default σ 3°, the source allows ≤ 5°), the latitude
 (σ 0.5°) and the tilt, propagated through the projection.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,16 +25,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from solvers import linalg
-from solvers import allan
+from solvers import allan, linalg
 from solvers.errors import NotIdentifiable, SolverError, TooFewPositions
 from solvers.fit import linear_fit
-from solvers.frames import OMEGA_EARTH_RAD_S, earth_rate_nue, p4_C_n_b, p4_pitch_roll_from_accel
+from solvers.frames import OMEGA_EARTH_RAD_S, p4_C_n_b, p4_pitch_roll_from_accel
 from solvers.models.gyro import earth_rate_body
 
 DEG_H_RAD_S = math.radians(1.0) / 3600.0  # 1 °/h in rad/s
-MIN_DURATION_S = 30.0        # below this the error estimate itself is meaningless: refused
-SOURCE_DURATION_S = 180.0    # the source's ">= 3 min"
+MIN_DURATION_S = 30.0  # below this the error estimate itself is meaningless: refused
+SOURCE_DURATION_S = 180.0  # the source's ">= 3 min"
 
 
 class RecordTooShort(SolverError):
@@ -61,15 +61,16 @@ class DriftResult:
 def _check_length(n: int, dt_s: float, what: str) -> list[str]:
     T = n * dt_s
     if n < 64 or T < MIN_DURATION_S:
-        raise RecordTooShort(f"{what}: {T:.1f} s ({n} samples) is too short for a drift and its "
-                             f"error; record at least {SOURCE_DURATION_S:.0f} s (P4 asks for >= 3 min)")
+        raise RecordTooShort(
+            f"{what}: {T:.1f} s ({n} samples) is too short for a drift and its "
+            f"error; record at least {SOURCE_DURATION_S:.0f} s (P4 asks for >= 3 min)"
+        )
     if T < SOURCE_DURATION_S - 1e-9:
         return [f"{what}: record is {T:.0f} s, shorter than the 3 min P4 asks for"]
     return []
 
 
-def drift_reference(omega_rad_s, ref_rad_s, dt_s: float,
-                    ref_drift_rad_s: float = DEG_H_RAD_S) -> DriftResult:
+def drift_reference(omega_rad_s, ref_rad_s, dt_s: float, ref_drift_rad_s: float = DEG_H_RAD_S) -> DriftResult:
     """Mode A: mean of MEMS minus reference over the record.
 
     ``ref_drift_rad_s``: the reference IMU's own drift (1 sigma per axis, default 1 °/h,
@@ -79,7 +80,7 @@ def drift_reference(omega_rad_s, ref_rad_s, dt_s: float,
     r = np.asarray(ref_rad_s, dtype=float)
     warnings = _check_length(len(w), dt_s, "mode A")
     me = allan.mean_standard_error(w - r, dt_s)
-    sigma = np.sqrt(me.se ** 2 + ref_drift_rad_s ** 2)
+    sigma = np.sqrt(me.se**2 + ref_drift_rad_s**2)
     extra = {"ref_drift_rad_s": ref_drift_rad_s}
     # Mounting check: regress the difference on the reference rate, d = ε + M Ω. A
     # misalignment or scale error M biases the mean difference by M · mean(Ω).
@@ -90,10 +91,12 @@ def drift_reference(omega_rad_s, ref_rad_s, dt_s: float,
         bias = M @ r.mean(axis=0)
         extra["rate_coupling_bias_rad_s"] = bias
         if np.any(np.abs(bias) > 0.5 * sigma):
-            warnings.append("MEMS minus reference grows with the rate (misalignment or scale error, largest "
-                            f"{np.max(np.abs(M)):.3g} rad/rad): with a mean rate of "
-                            f"{np.linalg.norm(r.mean(axis=0)):.3g} rad/s it biases the drift by up to "
-                            f"{np.max(np.abs(bias)):.3g} rad/s")
+            warnings.append(
+                "MEMS minus reference grows with the rate (misalignment or scale error, largest "
+                f"{np.max(np.abs(M)):.3g} rad/rad): with a mean rate of "
+                f"{np.linalg.norm(r.mean(axis=0)):.3g} rad/s it biases the drift by up to "
+                f"{np.max(np.abs(bias)):.3g} rad/s"
+            )
     return DriftResult("reference", me.mean, sigma, me, extra=extra, warnings=warnings)
 
 
@@ -118,10 +121,16 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-def earth_rate_body_sigma(latitude_deg: float, pitch_deg: float, roll_deg: float, heading_deg: float,
-                          sigmas_deg: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+def earth_rate_body_sigma(
+    latitude_deg: float,
+    pitch_deg: float,
+    roll_deg: float,
+    heading_deg: float,
+    sigmas_deg: tuple[float, float, float, float],
+) -> tuple[np.ndarray, np.ndarray]:
     """Earth rate in the body frame and its 1-sigma from the errors of (latitude, pitch,
     roll, heading) [deg], propagated by central differences."""
+
     def e(x):
         L, p, r, h = x
         return earth_rate_body(L, p4_C_n_b(math.radians(p), math.radians(r), math.radians(h)))
@@ -136,9 +145,16 @@ def earth_rate_body_sigma(latitude_deg: float, pitch_deg: float, roll_deg: float
     return e(x0), np.sqrt(np.diag(cov))
 
 
-def drift_static(omega_rad_s, f_body, dt_s: float, latitude_deg: float | None,
-                 heading_deg: float = 0.0, *, heading_sigma_deg: float = 3.0,
-                 latitude_sigma_deg: float = 0.5) -> DriftResult:
+def drift_static(
+    omega_rad_s,
+    f_body,
+    dt_s: float,
+    latitude_deg: float | None,
+    heading_deg: float = 0.0,
+    *,
+    heading_sigma_deg: float = 3.0,
+    latitude_sigma_deg: float = 0.5,
+) -> DriftResult:
     """Mode B on one static position.
 
     ``omega_rad_s`` (N, 3) gyro in rad/s and ``f_body`` (N, 3) specific force in any unit
@@ -157,17 +173,20 @@ def drift_static(omega_rad_s, f_body, dt_s: float, latitude_deg: float | None,
         res.warnings.append("no accelerometer: pitch and roll taken as 0 (±2°), Earth rate projected for a level unit")
     res.pitch_deg, res.roll_deg, res.sigma_pitch_deg, res.sigma_roll_deg = p, r, sp, sr
     if latitude_deg is None:
-        res.warnings.append("no latitude_deg: the Earth rate cannot be removed; drift is the plain mean "
-                            f"(it contains up to {OMEGA_EARTH_RAD_S:.3g} rad/s of Earth rate)")
+        res.warnings.append(
+            "no latitude_deg: the Earth rate cannot be removed; drift is the plain mean "
+            f"(it contains up to {OMEGA_EARTH_RAD_S:.3g} rad/s of Earth rate)"
+        )
         res.earth_rate_body_rad_s = None
         return res
-    e, se = earth_rate_body_sigma(latitude_deg, p, r, heading_deg,
-                                  (latitude_sigma_deg, sp, sr, heading_sigma_deg))
+    e, se = earth_rate_body_sigma(latitude_deg, p, r, heading_deg, (latitude_sigma_deg, sp, sr, heading_sigma_deg))
     res.earth_rate_body_rad_s, res.sigma_earth_rate_body_rad_s = e, se
     res.drift_rad_s = me.mean - e
-    res.sigma_rad_s = np.sqrt(me.se ** 2 + se ** 2)
+    res.sigma_rad_s = np.sqrt(me.se**2 + se**2)
     if abs(p) > 30 or abs(r) > 30:
-        res.warnings.append(f"pitch {p:.1f}°, roll {r:.1f}°: far from level; check the body frame (x fwd, y up, z right)")
+        res.warnings.append(
+            f"pitch {p:.1f}°, roll {r:.1f}°: far from level; check the body frame (x fwd, y up, z right)"
+        )
     return res
 
 
@@ -181,8 +200,13 @@ class Position:
     label: str = ""
 
 
-def drift_multi(positions: list[Position], latitude_deg: float | None, *,
-                heading_sigma_deg: float = 3.0, headings_known: bool = True) -> DriftResult:
+def drift_multi(
+    positions: list[Position],
+    latitude_deg: float | None,
+    *,
+    heading_sigma_deg: float = 3.0,
+    headings_known: bool = True,
+) -> DriftResult:
     """Several static positions: ε and the Earth rate together (module docstring).
 
     The Earth rate a position sees is ``C_b_n,k ω_ie^n``: its vertical part ``Ω sin L`` lies
@@ -213,14 +237,14 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
             p, r, sp, sr = 0.0, 0.0, 2.0, 2.0
         tilts.append((p, r, sp, sr))
         C = p4_C_n_b(math.radians(p), math.radians(r), math.radians(pos.heading_deg))
-        up = C.T[:, 1]                               # the body's view of "up" (NUE's U)
+        up = C.T[:, 1]  # the body's view of "up" (NUE's U)
         horiz = np.eye(3) - np.outer(up, up)
-        cov = np.diag(pos.omega.se ** 2)
+        cov = np.diag(pos.omega.se**2)
         if latitude_deg is not None and headings_known:
             e, se = earth_rate_body_sigma(latitude_deg, p, r, pos.heading_deg, (0.0, sp, sr, heading_sigma_deg))
             e_list.append(e)
             rows.append(np.column_stack([np.eye(3), e]))
-            cov = cov + np.diag(se ** 2)
+            cov = cov + np.diag(se**2)
             y.append(pos.omega.mean)
         elif latitude_deg is not None:
             lat = math.radians(latitude_deg)
@@ -234,7 +258,7 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
             y.append(pos.omega.mean)
         else:
             rows.append(np.column_stack([np.eye(3), up]))
-            cov = cov + 0.5 * W ** 2 * horiz
+            cov = cov + 0.5 * W**2 * horiz
             y.append(pos.omega.mean)
         covs.append(cov)
     # whiten each position's 3x3 covariance (the unknown horizontal Earth rate correlates axes)
@@ -258,21 +282,29 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
             Y = np.append(Y, m / s)
     fr = linear_fit(H, Y, sigma=np.ones(len(Y)), names=names)
     if fr.unidentifiable:
-        raise NotIdentifiable("the static positions cannot separate " + ", ".join(fr.unidentifiable)
-                              + ": add positions tilted about different axes")
+        raise NotIdentifiable(
+            "the static positions cannot separate "
+            + ", ".join(fr.unidentifiable)
+            + ": add positions tilted about different axes"
+        )
     x = fr.params["x"]
     sx = np.sqrt(np.diag(fr.cov))
-    w_mean = np.average(np.array([p.omega.mean for p in positions]), axis=0,
-                        weights=[p.omega.duration_s for p in positions])
+    w_mean = np.average(
+        np.array([p.omega.mean for p in positions]), axis=0, weights=[p.omega.duration_s for p in positions]
+    )
     res = DriftResult("static-multi", x[:3], sx[:3])
     res.pitch_deg = [t[0] for t in tilts]
     res.roll_deg = [t[1] for t in tilts]
     res.sigma_pitch_deg = [t[2] for t in tilts]
     res.sigma_roll_deg = [t[3] for t in tilts]
     n_data = 3 * len(positions)
-    res.extra = {"reduced_chi2": fr.reduced_chi2, "misfit_scaled": fr.misfit_scaled,
-                 "condition_number": fr.condition_number, "headings_known": headings_known,
-                 "residuals_rad_s": np.concatenate([np.asarray(yk) - Hk @ x for Hk, yk in zip(rows, y)])[:n_data]}
+    res.extra = {
+        "reduced_chi2": fr.reduced_chi2,
+        "misfit_scaled": fr.misfit_scaled,
+        "condition_number": fr.condition_number,
+        "headings_known": headings_known,
+        "residuals_rad_s": np.concatenate([np.asarray(yk) - Hk @ x for Hk, yk in zip(rows, y)])[:n_data],
+    }
     res.earth_rate_body_rad_s = w_mean - x[:3]
     res.sigma_earth_rate_body_rad_s = sx[:3]
     weights = [p.omega.duration_s for p in positions]
@@ -284,18 +316,23 @@ def drift_multi(positions: list[Position], latitude_deg: float | None, *,
         res.earth_rate_body_rad_s = float(x[3]) * e_mean
         res.sigma_earth_rate_body_rad_s = float(sx[3]) * np.abs(e_mean)
         if abs(x[3] - 1.0) > 3 * sx[3]:
-            res.warnings.append(f"Earth-rate scale {x[3]:.3f} ± {sx[3]:.3f} differs from 1 by more than 3σ: "
-                                "check latitude, headings and the body frame")
+            res.warnings.append(
+                f"Earth-rate scale {x[3]:.3f} ± {sx[3]:.3f} differs from 1 by more than 3σ: "
+                "check latitude, headings and the body frame"
+            )
     elif latitude_deg is not None:
         res.earth_rate_body_rad_s = np.average(np.array(e_list), axis=0, weights=weights)
         res.sigma_earth_rate_body_rad_s = np.full(3, W * abs(math.cos(math.radians(latitude_deg))) / math.sqrt(2.0))
-        res.warnings.append("headings unknown: the vertical Earth rate (Ω sin L along each position's up) is "
-                            "removed; the horizontal part (Ω cos L, direction unknown) is in the uncertainty")
+        res.warnings.append(
+            "headings unknown: the vertical Earth rate (Ω sin L along each position's up) is "
+            "removed; the horizontal part (Ω cos L, direction unknown) is in the uncertainty"
+        )
     else:
         _no_latitude(res, x, fr.cov, headings_known)
     if fr.misfit_scaled:
-        res.warnings.append(f"positions disagree beyond their noise (reduced χ² {fr.reduced_chi2:.2f}); "
-                            "uncertainties scaled up")
+        res.warnings.append(
+            f"positions disagree beyond their noise (reduced χ² {fr.reduced_chi2:.2f}); uncertainties scaled up"
+        )
     return res
 
 
@@ -306,33 +343,48 @@ def _no_latitude(res: DriftResult, x: np.ndarray, cov: np.ndarray, headings_know
         wN, wU = float(x[3]), float(x[4])
         sN, sU = math.sqrt(cov[3, 3]), math.sqrt(cov[4, 4])
         identifiable = max(sN, sU) < W / 4
-        lat = math.degrees(math.atan2(wU, max(wN, 0.0)))                   # cos L ≥ 0: within ±90°
+        lat = math.degrees(math.atan2(wU, max(wN, 0.0)))  # cos L ≥ 0: within ±90°
         s_lat = _latitude_sigma_deg(max(wN, 1e-12), wU, cov[3:5, 3:5]) if identifiable else None
-        res.extra.update({"earth_rate_north_rad_s": wN, "sigma_earth_rate_north_rad_s": sN,
-                          "earth_rate_magnitude_ratio": math.hypot(wN, wU) / W})
+        res.extra.update(
+            {
+                "earth_rate_north_rad_s": wN,
+                "sigma_earth_rate_north_rad_s": sN,
+                "earth_rate_magnitude_ratio": math.hypot(wN, wU) / W,
+            }
+        )
     else:
         wU = float(x[3])
         sU = math.sqrt(cov[3, 3])
         identifiable = sU < W / 4
         ratio = max(-1.0, min(1.0, wU / W))
         lat = math.degrees(math.asin(ratio))
-        s_lat = (min(90.0, math.degrees(sU / W / max(math.sqrt(1.0 - ratio * ratio), 1e-3)))
-                 if identifiable else None)
-    res.extra.update({"earth_rate_up_rad_s": wU, "sigma_earth_rate_up_rad_s": sU,
-                      "latitude_identifiable": identifiable,
-                      "latitude_from_gyros_deg": lat if identifiable else None,
-                      "sigma_latitude_from_gyros_deg": s_lat})
+        s_lat = min(90.0, math.degrees(sU / W / max(math.sqrt(1.0 - ratio * ratio), 1e-3))) if identifiable else None
+    res.extra.update(
+        {
+            "earth_rate_up_rad_s": wU,
+            "sigma_earth_rate_up_rad_s": sU,
+            "latitude_identifiable": identifiable,
+            "latitude_from_gyros_deg": lat if identifiable else None,
+            "sigma_latitude_from_gyros_deg": s_lat,
+        }
+    )
     what = "north and up components" if headings_known else "its vertical component (headings unknown)"
     if identifiable:
-        res.warnings.append(f"no latitude_deg: Earth rate fitted from the positions ({what}); implied latitude "
-                            f"{lat:.1f}° ± {s_lat:.1f}°")
+        res.warnings.append(
+            f"no latitude_deg: Earth rate fitted from the positions ({what}); implied latitude "
+            f"{lat:.1f}° ± {s_lat:.1f}°"
+        )
     else:
         res.warnings.append(
             f"no latitude_deg: the Earth rate ({what}: up {wU:.2e} ± {sU:.1e} rad/s against |Ω| = {W:.3g}) is not "
             "identifiable from these positions, so no latitude can be inferred; the drift carries the Earth "
-            "rate's possible size in its uncertainty" + ("" if headings_known else
-                                                          " (headings unknown: only the vertical part is observable; "
-                                                          "give latitude_deg to remove it)"))
+            "rate's possible size in its uncertainty"
+            + (
+                ""
+                if headings_known
+                else " (headings unknown: only the vertical part is observable; give latitude_deg to remove it)"
+            )
+        )
 
 
 def _latitude_sigma_deg(wN: float, wU: float, cov2: np.ndarray) -> float:
@@ -344,23 +396,31 @@ def _latitude_sigma_deg(wN: float, wU: float, cov2: np.ndarray) -> float:
 def accuracy_statement(me: allan.MeanError, achieved_rad_s, accuracy_rad_s: float | None) -> tuple[dict, list[str]]:
     """Achieved 1-sigma vs the accuracy asked; time needed per axis when short of it."""
     achieved = np.asarray(achieved_rad_s, dtype=float)
-    out = {"duration_s": me.duration_s, "achieved_sigma_rad_s": achieved,
-           "achieved_sigma_deg_h": achieved / DEG_H_RAD_S}
+    out = {
+        "duration_s": me.duration_s,
+        "achieved_sigma_rad_s": achieved,
+        "achieved_sigma_deg_h": achieved / DEG_H_RAD_S,
+    }
     warnings: list[str] = []
     if accuracy_rad_s is None:
         return out, warnings
     # the part that does not average down (reference drift, Earth-rate projection)
-    sys2 = np.clip(achieved ** 2 - me.se ** 2, 0.0, None)
-    room = np.sqrt(np.clip(accuracy_rad_s ** 2 - sys2, 0.0, None))
-    need = np.array([allan.time_needed_s(me, rm)[k] if rm > 0 else np.inf
-                     for k, rm in enumerate(room)])
+    sys2 = np.clip(achieved**2 - me.se**2, 0.0, None)
+    room = np.sqrt(np.clip(accuracy_rad_s**2 - sys2, 0.0, None))
+    need = np.array([allan.time_needed_s(me, rm)[k] if rm > 0 else np.inf for k, rm in enumerate(room)])
     out["accuracy_rad_s"] = accuracy_rad_s
     out["enough"] = bool(np.all(achieved <= accuracy_rad_s))
     out["time_needed_s"] = need
     if not out["enough"]:
         worst = float(np.max(need))
-        what = ("the noise model fitted to the Allan deviation (bias instability, rate random walk) says no "
-                "record length reaches it" if not math.isfinite(worst) else f"about {worst:.0f} s needed")
-        warnings.append(f"achieved 1σ {np.max(achieved) / DEG_H_RAD_S:.3g} °/h is above the accuracy asked "
-                        f"({accuracy_rad_s / DEG_H_RAD_S:.3g} °/h) after {me.duration_s:.0f} s: {what}")
+        what = (
+            "the noise model fitted to the Allan deviation (bias instability, rate random walk) says no "
+            "record length reaches it"
+            if not math.isfinite(worst)
+            else f"about {worst:.0f} s needed"
+        )
+        warnings.append(
+            f"achieved 1σ {np.max(achieved) / DEG_H_RAD_S:.3g} °/h is above the accuracy asked "
+            f"({accuracy_rad_s / DEG_H_RAD_S:.3g} °/h) after {me.duration_s:.0f} s: {what}"
+        )
     return out, warnings

@@ -21,6 +21,7 @@ so κ is physical). A vehicle that only drives straight has ``κ`` in the millio
 angles cannot be separated; :func:`calibrate_ldv` raises :class:`NotIdentifiable` above
 ``KAPPA_REFUSE`` unless ``force`` (then it warns loudly), and warns above ``KAPPA_WARN``.
 """
+
 from __future__ import annotations
 
 import math
@@ -40,15 +41,15 @@ ANGLE_NAMES = ("alpha_deg", "beta_deg", "gamma_deg")
 
 @dataclass
 class BeamResult:
-    X: np.ndarray            # (3,)
-    cov_X: np.ndarray        # (3, 3)
+    X: np.ndarray  # (3,)
+    cov_X: np.ndarray  # (3, 3)
     dK: float
-    angles_deg: np.ndarray   # α, β, γ
+    angles_deg: np.ndarray  # α, β, γ
     sigma_dK: float
     sigma_angles_deg: np.ndarray
-    sigma_mps: float         # evaluation σ of V̂_L − V_L
+    sigma_mps: float  # evaluation σ of V̂_L − V_L
     residuals: np.ndarray
-    eiv_bias_X: np.ndarray   # expected OLS bias from the reference noise (given σ_ref)
+    eiv_bias_X: np.ndarray  # expected OLS bias from the reference noise (given σ_ref)
 
 
 @dataclass
@@ -66,7 +67,7 @@ def angle_jacobian(X) -> np.ndarray:
     u = X / nrm
     J = np.empty((4, 3))
     J[0] = u
-    du = (np.eye(3) - np.outer(u, u)) / nrm           # d u / d X
+    du = (np.eye(3) - np.outer(u, u)) / nrm  # d u / d X
     for i in range(3):
         s = math.sqrt(max(1.0 - u[i] ** 2, 1e-300))
         J[1 + i] = -np.degrees(du[i] / s)
@@ -117,8 +118,7 @@ def velocity_condition(v_body_mps) -> float:
     return float((s[0] / s[-1]) ** 2) if s[-1] > 0 else math.inf
 
 
-def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None,
-                  force: bool = False) -> LdvResult:
+def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None, force: bool = False) -> LdvResult:
     """Per-beam least squares (module docstring). ``v_body_mps`` (N, 3), ``vl_mps`` (N, k).
 
     ``ref_sigma_mps``: the reference velocity's noise (m/s, per axis); when given, the
@@ -136,9 +136,11 @@ def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None,
     kappa = velocity_condition(H)
     warnings: list[str] = []
     if kappa > KAPPA_REFUSE:
-        msg = (f"velocity set ill-conditioned: cond(HᵀH) = {kappa:.3g} > {KAPPA_REFUSE:.0e}; the body "
-               "velocity hardly changes direction (driving straight?), so the beam angles cannot be "
-               "separated: drive turns, slopes, braking")
+        msg = (
+            f"velocity set ill-conditioned: cond(HᵀH) = {kappa:.3g} > {KAPPA_REFUSE:.0e}; the body "
+            "velocity hardly changes direction (driving straight?), so the beam angles cannot be "
+            "separated: drive turns, slopes, braking"
+        )
         if not force:
             raise NotIdentifiable(msg)
         warnings.append("FORCED: " + msg + "; the numbers below are NOT trustworthy")
@@ -149,10 +151,10 @@ def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None,
     for j in range(Y.shape[1]):
         fr = linear_fit(H, Y[:, j], sigma=None, names=["X1", "X2", "X3"])
         X = np.asarray(fr.params["x"], dtype=float)
-        bias = -(ref_sigma_mps ** 2) * n * HtH_inv @ X if ref_sigma_mps else np.zeros(3)
+        bias = -(ref_sigma_mps**2) * n * HtH_inv @ X if ref_sigma_mps else np.zeros(3)
         if ref_sigma_mps:
-            X = np.linalg.solve(H.T @ H - n * ref_sigma_mps ** 2 * np.eye(3), H.T @ Y[:, j])
-        r = Y[:, j] - H @ X                                  # V_L − V̂_L
+            X = np.linalg.solve(H.T @ H - n * ref_sigma_mps**2 * np.eye(3), H.T @ Y[:, j])
+        r = Y[:, j] - H @ X  # V_L − V̂_L
         s2 = float(r @ r) / max(n - 3, 1)
         cov = s2 * HtH_inv
         excess = residual_excess(r)
@@ -160,18 +162,28 @@ def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None,
             cov_hac = hac_covariance(H, r, HtH_inv)
             if np.trace(cov_hac) > np.trace(cov):
                 cov = cov_hac
-            warnings.append(f"beam{j + 1}: residuals are {excess:.2f}x their sample-to-sample noise (correlated in "
-                            "time): the model does not explain everything (time delay, lever arm, offset or "
-                            "drift?); uncertainties from a correlation-robust (Newey-West) covariance")
+            warnings.append(
+                f"beam{j + 1}: residuals are {excess:.2f}x their sample-to-sample noise (correlated in "
+                "time): the model does not explain everything (time delay, lever arm, offset or "
+                "drift?); uncertainties from a correlation-robust (Newey-West) covariance"
+            )
         a = ldv_model.angles_from_X(X[None, :])
         J = angle_jacobian(X)
         cov_a = J @ cov @ J.T
         sa = np.sqrt(np.clip(np.diag(cov_a), 0.0, None))
-        beams.append(BeamResult(
-            X=X, cov_X=cov, dK=float(a["dK"][0]),
-            angles_deg=np.array([a[k][0] for k in ANGLE_NAMES]),
-            sigma_dK=float(sa[0]), sigma_angles_deg=sa[1:],
-            sigma_mps=float(np.std(r, ddof=3)), residuals=r, eiv_bias_X=bias))
+        beams.append(
+            BeamResult(
+                X=X,
+                cov_X=cov,
+                dK=float(a["dK"][0]),
+                angles_deg=np.array([a[k][0] for k in ANGLE_NAMES]),
+                sigma_dK=float(sa[0]),
+                sigma_angles_deg=sa[1:],
+                sigma_mps=float(np.std(r, ddof=3)),
+                residuals=r,
+                eiv_bias_X=bias,
+            )
+        )
     return LdvResult(beams, kappa, n, warnings)
 
 
@@ -185,5 +197,5 @@ def crlb_X(v_true_mps, X, beam_sigma_mps: float, ref_sigma_mps: float) -> np.nda
     ``kron(σ_b² I + σ_ref² X Xᵀ, (HᵀH)⁻¹)`` by Woodbury, whose beam-j block is the formula.
     The per-beam OLS uses the *noisy* H: its extra variance and bias are O(σ_ref²/spread²)."""
     H = np.asarray(v_true_mps, dtype=float)
-    s2 = beam_sigma_mps ** 2 + float(np.dot(X, X)) * ref_sigma_mps ** 2
+    s2 = beam_sigma_mps**2 + float(np.dot(X, X)) * ref_sigma_mps**2
     return s2 * np.linalg.inv(H.T @ H)

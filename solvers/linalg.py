@@ -6,6 +6,7 @@ return; ``svd`` raises or returns NaN. Every solver goes through these instead, 
 non-finite intermediate (an overflowing square of an absurd reading) becomes
 :class:`solvers.errors.NotFinite` with a message, at once.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,8 +17,10 @@ from solvers.errors import NotFinite
 def _check(what: str, *arrays) -> None:
     for a in arrays:
         if not np.all(np.isfinite(a)):
-            raise NotFinite(f"{what}: the numbers overflowed or are not finite "
-                            "(values far beyond the sensor's range, or a degenerate input)")
+            raise NotFinite(
+                f"{what}: the numbers overflowed or are not finite "
+                "(values far beyond the sensor's range, or a degenerate input)"
+            )
 
 
 def lstsq(a, b, rcond=None):

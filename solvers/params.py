@@ -5,10 +5,11 @@ Effects switch on by the presence of their blocks. This module packs and unpacks
 dicts to the flat vectors an optimiser wants, with a mask of which elements are free,
 and names each scalar element (``'M[1][2]'``, ``'b[0]'``, ``'tau_s'``).
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 
@@ -35,7 +36,7 @@ class Packer:
     free: dict[str, np.ndarray]  # bool arrays, same shapes
 
     @classmethod
-    def build(cls, template: Mapping[str, object], free: Mapping[str, object] | None = None) -> "Packer":
+    def build(cls, template: Mapping[str, object], free: Mapping[str, object] | None = None) -> Packer:
         tpl = as_params(template)
         mask: dict[str, np.ndarray] = {}
         for name, value in tpl.items():

@@ -5,6 +5,7 @@ table plane; positions 7–12 hold the XY, YZ and XZ planes vertical-ish with gr
 45° and 135° between the plane's two axes. Each entry is the unit specific force in the
 body frame (a perfect triad at rest reads ``g`` times it: the axis pointing up reads +g).
 """
+
 from __future__ import annotations
 
 import math

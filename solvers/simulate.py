@@ -10,6 +10,7 @@ is not quite level, white noise and bias instability, a temperature profile.
 
 Effect sizes are in the units each model's ``effect_blocks`` documents.
 """
+
 from __future__ import annotations
 
 import math
@@ -18,14 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solvers import frames
-from solvers.frames import rotvec_to_matrix, matrix_to_rotvec
+from solvers.frames import matrix_to_rotvec, rotvec_to_matrix
 from solvers.geomag import field_ned, igrf_reference
+from solvers.jsonable import jsonable
 from solvers.models import Conditions
 from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
-from solvers.jsonable import jsonable
 from solvers.positions import P1_POSITIONS, C_n_b_for
 
 PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv")
@@ -33,8 +34,7 @@ PROCEDURES = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ld
 EFFECTS_BY_PROCEDURE = {
     "accel-tabletop": ("temperature_bias", "time_drift", "quadratic", "scale_asymmetry"),
     "accel-centrifuge": ("temperature_bias", "time_drift", "misalignment", "cubic", "lever_arm"),
-    "compass": ("temperature_bias", "time_drift", "mag_accel_misalignment", "field_anomaly",
-                "time_varying_hard_iron"),
+    "compass": ("temperature_bias", "time_drift", "mag_accel_misalignment", "field_anomaly", "time_varying_hard_iron"),
     "gyro-drift": ("temperature_bias", "time_drift", "g_sensitivity", "earth_rate"),
     "ldv": ("temperature_bias", "time_drift", "time_delay", "lever_arm", "offset"),
 }
@@ -62,8 +62,7 @@ def _check_effects(procedure: str, effects: dict[str, float] | None) -> dict[str
     allowed = EFFECTS_BY_PROCEDURE[procedure]
     for name in effects:
         if name not in allowed:
-            raise SimulationError(f"effect {name!r} does not apply to {procedure}; "
-                                  f"choose from {', '.join(allowed)}")
+            raise SimulationError(f"effect {name!r} does not apply to {procedure}; choose from {', '.join(allowed)}")
     return effects
 
 
@@ -72,6 +71,7 @@ def _fmt(x: float) -> str:
 
 
 # ---------------------------------------------------------------- bench building blocks
+
 
 def smoothstep(s: np.ndarray) -> np.ndarray:
     """0 → 1 with zero rate at both ends (a hand's move)."""
@@ -94,6 +94,7 @@ def gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma: float, tau_
     if sigma <= 0 or n == 0:
         return np.zeros((n, dim))
     from scipy.signal import lfilter  # only when needed: slow to import
+
     a = math.exp(-dt / tau_s)
     q = sigma * math.sqrt(1.0 - a * a)
     w = rng.normal(size=(n, dim)) * q
@@ -101,8 +102,9 @@ def gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma: float, tau_
     return lfilter([1.0], [1.0, -a], w, axis=0)
 
 
-def warmup_temperature(t_s: np.ndarray, start_c: float, rise_c: float, tau_s: float,
-                       rng: np.random.Generator) -> np.ndarray:
+def warmup_temperature(
+    t_s: np.ndarray, start_c: float, rise_c: float, tau_s: float, rng: np.random.Generator
+) -> np.ndarray:
     """A power-up warm-up: exponential rise plus a little sensor noise."""
     return start_c + rise_c * (1.0 - np.exp(-t_s / tau_s)) + rng.normal(scale=0.02, size=t_s.shape)
 
@@ -115,8 +117,12 @@ def placement_error(rng: np.random.Generator, max_deg: float) -> np.ndarray:
 
 
 def _site_meta(site: dict) -> dict[str, str]:
-    return {"latitude_deg": _fmt(site["latitude_deg"]), "longitude_deg": _fmt(site["longitude_deg"]),
-            "altitude_m": _fmt(site["altitude_m"]), "date": str(site["date"])}
+    return {
+        "latitude_deg": _fmt(site["latitude_deg"]),
+        "longitude_deg": _fmt(site["longitude_deg"]),
+        "altitude_m": _fmt(site["altitude_m"]),
+        "date": str(site["date"]),
+    }
 
 
 def _positions_column(labels: list[str]) -> np.ndarray:
@@ -141,15 +147,29 @@ def nominal_tabletop_device(rng: np.random.Generator) -> dict:
     return {"K": K, "b": b}
 
 
-def simulate_tabletop(seed: int = 0, effects: dict[str, float] | None = None, *, rate_hz: float = 100.0,
-                      hold_s: float = 20.0, move_s: float = 4.0, init_rest_s: float | None = None,
-                      positions: list[str] | None = None, extra_positions: int = 0,
-                      placement_deg: float = 0.5, tilted_placement_deg: float = 3.0,
-                      table_tilt_deg: float = 0.3, noise_mps2: float = 0.01,
-                      bias_instability_mps2: float = 2e-4, averages: bool = False,
-                      label_positions: bool = True, site: dict | None = None,
-                      gyro_scale_sigma: float = 0.0, gyro_misalignment_sigma_rad: float = 0.0,
-                      gyro_g_sensitivity: float = 0.0, gyro_noise_rad_s: float = 0.003) -> Simulation:
+def simulate_tabletop(
+    seed: int = 0,
+    effects: dict[str, float] | None = None,
+    *,
+    rate_hz: float = 100.0,
+    hold_s: float = 20.0,
+    move_s: float = 4.0,
+    init_rest_s: float | None = None,
+    positions: list[str] | None = None,
+    extra_positions: int = 0,
+    placement_deg: float = 0.5,
+    tilted_placement_deg: float = 3.0,
+    table_tilt_deg: float = 0.3,
+    noise_mps2: float = 0.01,
+    bias_instability_mps2: float = 2e-4,
+    averages: bool = False,
+    label_positions: bool = True,
+    site: dict | None = None,
+    gyro_scale_sigma: float = 0.0,
+    gyro_misalignment_sigma_rad: float = 0.0,
+    gyro_g_sensitivity: float = 0.0,
+    gyro_noise_rad_s: float = 0.003,
+) -> Simulation:
     """P1 on a level table: 12 source positions (or ``positions``), plus random extra ones.
 
     The gyro (rad/s) sees the moves and the Earth rate through ``y = K ω + ε + G f``: ``K`` =
@@ -227,16 +247,32 @@ def simulate_tabletop(seed: int = 0, effects: dict[str, float] | None = None, *,
     gyro = gyro_model.forward(w_all + w_earth, gparams, gcond) + rng.normal(scale=gyro_noise_rad_s, size=(n, 3))
     B, M = accel_model.forward_to_p1({"K": K, "b": params["b"]})
     truth = {
-        "procedure": "accel-tabletop", "seed": seed, "g_mps2": g, "B": B, "M": M,
-        "K": K, "b": params["b"], "effects": {k: float(v) for k, v in effects.items()},
+        "procedure": "accel-tabletop",
+        "seed": seed,
+        "g_mps2": g,
+        "B": B,
+        "M": M,
+        "K": K,
+        "b": params["b"],
+        "effects": {k: float(v) for k, v in effects.items()},
         "effect_blocks": {k: v for k, v in params.items() if k not in ("K", "b")},
-        "positions": names, "placement_error_deg": placement, "table_tilt_deg": table_tilt_deg,
-        "noise_mps2": noise_mps2, "gyro_bias_rad_s": gyro_bias,
+        "positions": names,
+        "placement_error_deg": placement,
+        "table_tilt_deg": table_tilt_deg,
+        "noise_mps2": noise_mps2,
+        "gyro_bias_rad_s": gyro_bias,
         "gyro": {"K": gparams.get("K", np.eye(3)), "eps": gyro_bias, "G": gparams.get("G", np.zeros((3, 3)))},
     }
-    meta = {"station-capture": "1", "procedure": "accel-tabletop", "device": f"SIM-ACC-{seed:04d}",
-            "accel_unit": "V", "gyro_unit": "rad/s", **_site_meta(site), "sample_rate_hz": _fmt(rate_hz),
-            "simulated": "yes"}
+    meta = {
+        "station-capture": "1",
+        "procedure": "accel-tabletop",
+        "device": f"SIM-ACC-{seed:04d}",
+        "accel_unit": "V",
+        "gyro_unit": "rad/s",
+        **_site_meta(site),
+        "sample_rate_hz": _fmt(rate_hz),
+        "simulated": "yes",
+    }
     y = np.round(y, 6)
     labels = np.array(segs_label, dtype=object)
     if averages:
@@ -245,9 +281,17 @@ def simulate_tabletop(seed: int = 0, effects: dict[str, float] | None = None, *,
     cols = {"t": np.round(t, 6)}
     if label_positions:
         cols["position"] = labels
-    cols.update({"ax": y[:, 0], "ay": y[:, 1], "az": y[:, 2],
-                 "gx": np.round(gyro[:, 0], 7), "gy": np.round(gyro[:, 1], 7), "gz": np.round(gyro[:, 2], 7),
-                 "temp_c": np.round(temp, 3)})
+    cols.update(
+        {
+            "ax": y[:, 0],
+            "ay": y[:, 1],
+            "az": y[:, 2],
+            "gx": np.round(gyro[:, 0], 7),
+            "gy": np.round(gyro[:, 1], 7),
+            "gz": np.round(gyro[:, 2], 7),
+            "temp_c": np.round(temp, 3),
+        }
+    )
     return Simulation("accel-tabletop", meta, cols, jsonable(truth))
 
 
@@ -285,14 +329,24 @@ def fibonacci_directions(n: int) -> np.ndarray:
 def centrifuge_orientations(n: int = 20) -> list[np.ndarray]:
     """``n`` mounting attitudes (body → table frame: radial-out, tangential, up), spread
     over the sphere (Fibonacci directions for the body x axis, rolls stepped by 137.5°)."""
-    return [frames.rotation_between([1.0, 0.0, 0.0], d) @ frames.rot_x(GOLDEN_ANGLE * k * 1.7)
-            for k, d in enumerate(fibonacci_directions(n))]
+    return [
+        frames.rotation_between([1.0, 0.0, 0.0], d) @ frames.rot_x(GOLDEN_ANGLE * k * 1.7)
+        for k, d in enumerate(fibonacci_directions(n))
+    ]
 
 
-def simulate_centrifuge(seed: int = 0, effects: dict[str, float] | None = None, *,
-                        speeds_rad_s=(2 * math.pi, 4 * math.pi, 6 * math.pi), radius_m: float = 1.0,
-                        g_mps2: float = 9.8, n_orientations: int = 20, noise_g: float = 1e-5,
-                        truth_params: dict | None = None, latitude_deg: float = 39.0) -> Simulation:
+def simulate_centrifuge(
+    seed: int = 0,
+    effects: dict[str, float] | None = None,
+    *,
+    speeds_rad_s=(2 * math.pi, 4 * math.pi, 6 * math.pi),
+    radius_m: float = 1.0,
+    g_mps2: float = 9.8,
+    n_orientations: int = 20,
+    noise_g: float = 1e-5,
+    truth_params: dict | None = None,
+    latitude_deg: float = 39.0,
+) -> Simulation:
     """P2 as a table of averages (like Wang & Li 2021 Table 1), outputs in g.
 
     The table frame is (radial outward, tangential, up); the specific force at the centre
@@ -302,9 +356,11 @@ def simulate_centrifuge(seed: int = 0, effects: dict[str, float] | None = None, 
     effects = _check_effects("accel-centrifuge", effects)
     rng = np.random.default_rng(seed)
     if truth_params is None:
-        params = {"S": np.array([1.29, 1.21, 1.26]) * (1 + rng.normal(scale=0.01, size=3)),
-                  "b": np.array([0.213, 0.256, 0.516]) * (1 + rng.normal(scale=0.05, size=3)),
-                  "D": np.array([0.57, 0.31, 0.45]) * 1e-4 * (1 + rng.normal(scale=0.05, size=3))}
+        params = {
+            "S": np.array([1.29, 1.21, 1.26]) * (1 + rng.normal(scale=0.01, size=3)),
+            "b": np.array([0.213, 0.256, 0.516]) * (1 + rng.normal(scale=0.05, size=3)),
+            "D": np.array([0.57, 0.31, 0.45]) * 1e-4 * (1 + rng.normal(scale=0.05, size=3)),
+        }
     else:
         params = {k: np.asarray(v, dtype=float) for k, v in truth_params.items()}
     for name, size in effects.items():
@@ -324,33 +380,68 @@ def simulate_centrifuge(seed: int = 0, effects: dict[str, float] | None = None, 
     m = len(f)
     elapsed = np.arange(m) * 120.0  # two minutes a row
     temp = 25.0 + 0.5 * np.array(spd) / (2 * math.pi) + rng.normal(scale=0.05, size=m)
-    cond = Conditions(t_s=elapsed, temp_c=temp, temp_ref_c=25.0, input_unit_mps2=g_mps2,
-                      omega_rad_s=np.array(rows_w), centripetal_dir=np.array(rows_c))
+    cond = Conditions(
+        t_s=elapsed,
+        temp_c=temp,
+        temp_ref_c=25.0,
+        input_unit_mps2=g_mps2,
+        omega_rad_s=np.array(rows_w),
+        centripetal_dir=np.array(rows_c),
+    )
     y = accel_model.forward(f, params, cond) + rng.normal(scale=noise_g, size=(m, 3))
-    truth = {"procedure": "accel-centrifuge", "seed": seed, **{k: v for k, v in params.items()},
-             "effects": {k: float(v) for k, v in effects.items()}, "f_g": f, "radius_m": radius_m,
-             "g_mps2": g_mps2, "noise_g": noise_g}
-    meta = {"station-capture": "1", "procedure": "accel-centrifuge", "device": f"SIM-CFG-{seed:04d}",
-            "accel_unit": "g", "radius_m": _fmt(radius_m), "g_mps2": _fmt(g_mps2),
-            "latitude_deg": _fmt(latitude_deg), "simulated": "yes"}
-    cols = {"position": np.array(pos, dtype=object), "speed_rad_s": np.array(spd),
-            "ax": np.round(y[:, 0], 9), "ay": np.round(y[:, 1], 9), "az": np.round(y[:, 2], 9),
-            "temp_c": np.round(temp, 3), "elapsed_s": elapsed}
+    truth = {
+        "procedure": "accel-centrifuge",
+        "seed": seed,
+        **{k: v for k, v in params.items()},
+        "effects": {k: float(v) for k, v in effects.items()},
+        "f_g": f,
+        "radius_m": radius_m,
+        "g_mps2": g_mps2,
+        "noise_g": noise_g,
+    }
+    meta = {
+        "station-capture": "1",
+        "procedure": "accel-centrifuge",
+        "device": f"SIM-CFG-{seed:04d}",
+        "accel_unit": "g",
+        "radius_m": _fmt(radius_m),
+        "g_mps2": _fmt(g_mps2),
+        "latitude_deg": _fmt(latitude_deg),
+        "simulated": "yes",
+    }
+    cols = {
+        "position": np.array(pos, dtype=object),
+        "speed_rad_s": np.array(spd),
+        "ax": np.round(y[:, 0], 9),
+        "ay": np.round(y[:, 1], 9),
+        "az": np.round(y[:, 2], 9),
+        "temp_c": np.round(temp, 3),
+        "elapsed_s": elapsed,
+    }
     return Simulation("accel-centrifuge", meta, cols, jsonable(truth))
 
 
 # ---------------------------------------------------------------- P3: compass
 
+
 def sphere_attitudes(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     """``n`` hand-held attitudes spread over the sphere (body → NED)."""
-    return [C_n_b_for(d, rng.uniform(0, 2 * math.pi)) @ placement_error(rng, 10.0)
-            for d in fibonacci_directions(n)]
+    return [C_n_b_for(d, rng.uniform(0, 2 * math.pi)) @ placement_error(rng, 10.0) for d in fibonacci_directions(n)]
 
 
-def simulate_compass(seed: int = 0, effects: dict[str, float] | None = None, *, rate_hz: float = 50.0,
-                     n_orientations: int = 24, hold_s: float = 2.0, move_s: float = 2.5,
-                     mag_noise_uT: float = 0.15, accel_noise_mps2: float = 0.02,
-                     hand_accel_mps2: float = 0.3, site: dict | None = None) -> Simulation:
+def simulate_compass(
+    seed: int = 0,
+    effects: dict[str, float] | None = None,
+    *,
+    rate_hz: float = 50.0,
+    n_orientations: int = 24,
+    hold_s: float = 2.0,
+    move_s: float = 2.5,
+    mag_noise_uT: float = 0.15,
+    accel_noise_mps2: float = 0.02,
+    hand_accel_mps2: float = 0.3,
+    site: dict | None = None,
+) -> Simulation:
     """P3: a compass module turned by hand through the sphere; accel g, gyro deg/s, mag uT."""
     effects = _check_effects("compass", effects)
     rng = np.random.default_rng(seed)
@@ -381,33 +472,67 @@ def simulate_compass(seed: int = 0, effects: dict[str, float] | None = None, *, 
         params.update(mag_model.effect_blocks(name, size, rng, params, duration_s=float(t[-1])))
     cond = Conditions(t_s=t, temp_c=temp, temp_ref_c=25.0)
     mag = mag_model.forward(m_b, params, cond) + rng.normal(scale=mag_noise_uT, size=(n, 3))
-    acc = accel_model.forward(f_b / frames.G_STANDARD_MPS2,
-                              {"K": np.eye(3), "b": np.zeros(3)}) + rng.normal(scale=accel_noise_mps2 / frames.G_STANDARD_MPS2, size=(n, 3))
+    acc = accel_model.forward(f_b / frames.G_STANDARD_MPS2, {"K": np.eye(3), "b": np.zeros(3)}) + rng.normal(
+        scale=accel_noise_mps2 / frames.G_STANDARD_MPS2, size=(n, 3)
+    )
     gyro_bias = rng.normal(scale=0.005, size=3)
     gyr = gyro_model.forward(w_all, {"eps": gyro_bias}) + rng.normal(scale=0.002, size=(n, 3))
-    truth = {"procedure": "compass", "seed": seed, "soft_iron": params["W"], "hard_iron": params["h"],
-             "reference": ref, "effects": {k: float(v) for k, v in effects.items()},
-             "effect_blocks": {k: v for k, v in params.items() if k not in ("W", "h")},
-             "heading_deg": [math.degrees(frames.C_n_b_to_euler(C)[2]) for C in atts],
-             "mag_noise_uT": mag_noise_uT}
-    meta = {"station-capture": "1", "procedure": "compass", "device": f"SIM-MAG-{seed:04d}",
-            "accel_unit": "g", "gyro_unit": "deg/s", "mag_unit": "uT", **_site_meta(site),
-            "sample_rate_hz": _fmt(rate_hz), "simulated": "yes"}
-    cols = {"t": np.round(t, 6), "ax": np.round(acc[:, 0], 6), "ay": np.round(acc[:, 1], 6),
-            "az": np.round(acc[:, 2], 6), "gx": np.round(np.degrees(gyr[:, 0]), 5),
-            "gy": np.round(np.degrees(gyr[:, 1]), 5), "gz": np.round(np.degrees(gyr[:, 2]), 5),
-            "mx": np.round(mag[:, 0], 4), "my": np.round(mag[:, 1], 4), "mz": np.round(mag[:, 2], 4),
-            "temp_c": np.round(temp, 3)}
+    truth = {
+        "procedure": "compass",
+        "seed": seed,
+        "soft_iron": params["W"],
+        "hard_iron": params["h"],
+        "reference": ref,
+        "effects": {k: float(v) for k, v in effects.items()},
+        "effect_blocks": {k: v for k, v in params.items() if k not in ("W", "h")},
+        "heading_deg": [math.degrees(frames.C_n_b_to_euler(C)[2]) for C in atts],
+        "mag_noise_uT": mag_noise_uT,
+    }
+    meta = {
+        "station-capture": "1",
+        "procedure": "compass",
+        "device": f"SIM-MAG-{seed:04d}",
+        "accel_unit": "g",
+        "gyro_unit": "deg/s",
+        "mag_unit": "uT",
+        **_site_meta(site),
+        "sample_rate_hz": _fmt(rate_hz),
+        "simulated": "yes",
+    }
+    cols = {
+        "t": np.round(t, 6),
+        "ax": np.round(acc[:, 0], 6),
+        "ay": np.round(acc[:, 1], 6),
+        "az": np.round(acc[:, 2], 6),
+        "gx": np.round(np.degrees(gyr[:, 0]), 5),
+        "gy": np.round(np.degrees(gyr[:, 1]), 5),
+        "gz": np.round(np.degrees(gyr[:, 2]), 5),
+        "mx": np.round(mag[:, 0], 4),
+        "my": np.round(mag[:, 1], 4),
+        "mz": np.round(mag[:, 2], 4),
+        "temp_c": np.round(temp, 3),
+    }
     return Simulation("compass", meta, cols, jsonable(truth))
 
 
 # ---------------------------------------------------------------- P4: gyro drift
 
-def simulate_gyro_drift(seed: int = 0, effects: dict[str, float] | None = None, *, mode: str = "static",
-                        rate_hz: float = 100.0, duration_s: float = 180.0, headings_deg=None,
-                        pitch_deg: float | None = None, roll_deg: float | None = None,
-                        gyro_noise_rad_s: float = 0.002, bias_instability_rad_s: float = 2e-5,
-                        heading_error_deg: float = 3.0, site: dict | None = None) -> Simulation:
+
+def simulate_gyro_drift(
+    seed: int = 0,
+    effects: dict[str, float] | None = None,
+    *,
+    mode: str = "static",
+    rate_hz: float = 100.0,
+    duration_s: float = 180.0,
+    headings_deg=None,
+    pitch_deg: float | None = None,
+    roll_deg: float | None = None,
+    gyro_noise_rad_s: float = 0.002,
+    bias_instability_rad_s: float = 2e-5,
+    heading_error_deg: float = 3.0,
+    site: dict | None = None,
+) -> Simulation:
     """P4: mode ``static`` (B, static base, Earth rate seen) or ``reference`` (A, a
     reference IMU ten times better rigidly mounted, both moving). Body axes x forward,
     y up, z right; navigation north-up-east (source 003). ``headings_deg`` with several
@@ -430,8 +555,16 @@ def simulate_gyro_drift(seed: int = 0, effects: dict[str, float] | None = None, 
         params.update(gyro_model.effect_blocks(name, size, rng, params))
     C_list, hdg_col, tilt = [], [], []
     for k, h in enumerate(headings):
-        p = math.radians(pitch_deg if pitch_deg is not None else rng.normal(scale=1.0) + (20.0 * (k % 2) if len(headings) > 1 else 0.0))
-        r = math.radians(roll_deg if roll_deg is not None else rng.normal(scale=1.0) + (15.0 * ((k // 2) % 2) if len(headings) > 1 else 0.0))
+        p = math.radians(
+            pitch_deg
+            if pitch_deg is not None
+            else rng.normal(scale=1.0) + (20.0 * (k % 2) if len(headings) > 1 else 0.0)
+        )
+        r = math.radians(
+            roll_deg
+            if roll_deg is not None
+            else rng.normal(scale=1.0) + (15.0 * ((k // 2) % 2) if len(headings) > 1 else 0.0)
+        )
         true_h = math.radians(h + rng.normal(scale=heading_error_deg))
         C = frames.p4_C_n_b(p, r, true_h)
         C_list.append(np.repeat(C[None], n_per, axis=0))
@@ -446,41 +579,84 @@ def simulate_gyro_drift(seed: int = 0, effects: dict[str, float] | None = None, 
     w_motion = np.zeros((n, 3))
     if mode == "reference":
         # a slow turntable-like oscillation both units see
-        w_motion = np.column_stack([0.05 * np.sin(2 * np.pi * t / 7.0), 0.2 * np.sin(2 * np.pi * t / 11.0),
-                                    0.03 * np.sin(2 * np.pi * t / 5.0)])
+        w_motion = np.column_stack(
+            [0.05 * np.sin(2 * np.pi * t / 7.0), 0.2 * np.sin(2 * np.pi * t / 11.0), 0.03 * np.sin(2 * np.pi * t / 5.0)]
+        )
     temp = warmup_temperature(t, 25.0, 6.0, 240.0, rng)
     cond = Conditions(t_s=t, temp_c=temp, temp_ref_c=25.0, f_mps2=f_b)
     w_true = w_earth + w_motion
-    gyr = gyro_model.forward(w_true, params, cond) + rng.normal(scale=gyro_noise_rad_s, size=(n, 3)) \
+    gyr = (
+        gyro_model.forward(w_true, params, cond)
+        + rng.normal(scale=gyro_noise_rad_s, size=(n, 3))
         + gauss_markov(rng, n, dt, bias_instability_rad_s, 60.0)
+    )
     acc = f_b + rng.normal(scale=0.01, size=(n, 3))
-    truth = {"procedure": "gyro-drift", "seed": seed, "mode": mode, "drift": eps,
-             "earth_rate_body_mean": w_earth.mean(axis=0), "attitudes": tilt,
-             "effects": {k: float(v) for k, v in effects.items()},
-             "effect_blocks": {k: v for k, v in params.items() if k != "eps"},
-             "gyro_noise_rad_s": gyro_noise_rad_s, "latitude_deg": lat}
-    meta = {"station-capture": "1", "procedure": "gyro-drift", "device": f"SIM-GYR-{seed:04d}",
-            "accel_unit": "m/s^2", "gyro_unit": "rad/s", **_site_meta(site), "sample_rate_hz": _fmt(rate_hz),
-            "gyro_mode": mode, "frame": "body x forward, y up, z right", "simulated": "yes"}
+    truth = {
+        "procedure": "gyro-drift",
+        "seed": seed,
+        "mode": mode,
+        "drift": eps,
+        "earth_rate_body_mean": w_earth.mean(axis=0),
+        "attitudes": tilt,
+        "effects": {k: float(v) for k, v in effects.items()},
+        "effect_blocks": {k: v for k, v in params.items() if k != "eps"},
+        "gyro_noise_rad_s": gyro_noise_rad_s,
+        "latitude_deg": lat,
+    }
+    meta = {
+        "station-capture": "1",
+        "procedure": "gyro-drift",
+        "device": f"SIM-GYR-{seed:04d}",
+        "accel_unit": "m/s^2",
+        "gyro_unit": "rad/s",
+        **_site_meta(site),
+        "sample_rate_hz": _fmt(rate_hz),
+        "gyro_mode": mode,
+        "frame": "body x forward, y up, z right",
+        "simulated": "yes",
+    }
     if len(headings) == 1:
         meta["heading_deg"] = _fmt(headings[0])
-    cols = {"t": np.round(t, 6), "ax": np.round(acc[:, 0], 5), "ay": np.round(acc[:, 1], 5),
-            "az": np.round(acc[:, 2], 5), "gx": np.round(gyr[:, 0], 8), "gy": np.round(gyr[:, 1], 8),
-            "gz": np.round(gyr[:, 2], 8), "temp_c": np.round(temp, 3)}
+    cols = {
+        "t": np.round(t, 6),
+        "ax": np.round(acc[:, 0], 5),
+        "ay": np.round(acc[:, 1], 5),
+        "az": np.round(acc[:, 2], 5),
+        "gx": np.round(gyr[:, 0], 8),
+        "gy": np.round(gyr[:, 1], 8),
+        "gz": np.round(gyr[:, 2], 8),
+        "temp_c": np.round(temp, 3),
+    }
     if len(headings) > 1:
         cols["heading_deg"] = np.array(hdg_col, dtype=float)
         cols["position"] = np.array([str(headings.index(h) + 1) for h in hdg_col], dtype=object)
     if mode == "reference":
-        ref = w_true + np.radians(1.0 / 3600.0) * rng.normal(size=3) + rng.normal(scale=gyro_noise_rad_s / 10, size=(n, 3))
-        cols.update({"ref_gx": np.round(ref[:, 0], 9), "ref_gy": np.round(ref[:, 1], 9), "ref_gz": np.round(ref[:, 2], 9)})
+        ref = (
+            w_true
+            + np.radians(1.0 / 3600.0) * rng.normal(size=3)
+            + rng.normal(scale=gyro_noise_rad_s / 10, size=(n, 3))
+        )
+        cols.update(
+            {"ref_gx": np.round(ref[:, 0], 9), "ref_gy": np.round(ref[:, 1], 9), "ref_gz": np.round(ref[:, 2], 9)}
+        )
     return Simulation("gyro-drift", meta, cols, jsonable(truth))
 
 
 # ---------------------------------------------------------------- P5: LDV
 
-def simulate_ldv(seed: int = 0, effects: dict[str, float] | None = None, *, rate_hz: float = 10.0,
-                 duration_s: float = 600.0, maneuver: str = "varied", reference: str = "body",
-                 beam_noise_mps: float = 0.01, ref_noise_mps: float = 0.005, site: dict | None = None) -> Simulation:
+
+def simulate_ldv(
+    seed: int = 0,
+    effects: dict[str, float] | None = None,
+    *,
+    rate_hz: float = 10.0,
+    duration_s: float = 600.0,
+    maneuver: str = "varied",
+    reference: str = "body",
+    beam_noise_mps: float = 0.01,
+    ref_noise_mps: float = 0.005,
+    site: dict | None = None,
+) -> Simulation:
     """P5: a vehicle with INS/DGPS and a three-beam LDV; ``maneuver`` 'varied' (turns,
     hills, braking: body velocity directions spread) or 'straight' (the ill-conditioned
     case the source warns of); ``reference`` 'body' (vx vy vz) or 'nav' (vn ve vd + attitude)."""
@@ -498,8 +674,13 @@ def simulate_ldv(seed: int = 0, effects: dict[str, float] | None = None, *, rate
         lat_v = 2.0 * np.sin(2 * np.pi * t / 31.0 + ph[2]) + 0.8 * np.sin(2 * np.pi * t / 13.0 + ph[4])
         vert_v = 1.5 * np.sin(2 * np.pi * t / 41.0 + ph[3]) + 0.5 * np.sin(2 * np.pi * t / 17.0 + ph[5])
     v_b = np.column_stack([fwd, lat_v, vert_v])  # FRD body velocity
-    w_b = np.column_stack([0.05 * np.sin(2 * np.pi * t / 19.0), 0.04 * np.sin(2 * np.pi * t / 29.0),
-                           0.15 * np.sin(2 * np.pi * t / 37.0 + ph[0])])
+    w_b = np.column_stack(
+        [
+            0.05 * np.sin(2 * np.pi * t / 19.0),
+            0.04 * np.sin(2 * np.pi * t / 29.0),
+            0.15 * np.sin(2 * np.pi * t / 37.0 + ph[0]),
+        ]
+    )
     dK = rng.normal(scale=0.005, size=3)
     alpha = np.array([60.0, 60.0, 90.0]) + rng.normal(scale=0.5, size=3)
     beta = np.array([90.0, 90.0, 60.0]) + rng.normal(scale=0.5, size=3)
@@ -515,27 +696,60 @@ def simulate_ldv(seed: int = 0, effects: dict[str, float] | None = None, *, rate
     cond = Conditions(t_s=t, temp_c=temp, temp_ref_c=25.0, omega_body_rad_s=w_b)
     vl = ldv_model.forward(v_b, params, cond) + rng.normal(scale=beam_noise_mps, size=(n, 3))
     v_ref = v_b + rng.normal(scale=ref_noise_mps, size=(n, 3))
-    truth = {"procedure": "ldv", "seed": seed, "X": params["X"], "dK": dK, "alpha_deg": alpha,
-             "beta_deg": beta, "gamma_deg": gamma, "effects": {k: float(v) for k, v in effects.items()},
-             "effect_blocks": {k: v for k, v in params.items() if k != "X"},
-             "beam_noise_mps": beam_noise_mps, "ref_noise_mps": ref_noise_mps}
-    meta = {"station-capture": "1", "procedure": "ldv", "device": f"SIM-LDV-{seed:04d}", **_site_meta(site),
-            "sample_rate_hz": _fmt(rate_hz), "frame": "body x forward, y right, z down", "simulated": "yes"}
-    cols = {"t": np.round(t, 6), "vl1": np.round(vl[:, 0], 5), "vl2": np.round(vl[:, 1], 5),
-            "vl3": np.round(vl[:, 2], 5)}
+    truth = {
+        "procedure": "ldv",
+        "seed": seed,
+        "X": params["X"],
+        "dK": dK,
+        "alpha_deg": alpha,
+        "beta_deg": beta,
+        "gamma_deg": gamma,
+        "effects": {k: float(v) for k, v in effects.items()},
+        "effect_blocks": {k: v for k, v in params.items() if k != "X"},
+        "beam_noise_mps": beam_noise_mps,
+        "ref_noise_mps": ref_noise_mps,
+    }
+    meta = {
+        "station-capture": "1",
+        "procedure": "ldv",
+        "device": f"SIM-LDV-{seed:04d}",
+        **_site_meta(site),
+        "sample_rate_hz": _fmt(rate_hz),
+        "frame": "body x forward, y right, z down",
+        "simulated": "yes",
+    }
+    cols = {
+        "t": np.round(t, 6),
+        "vl1": np.round(vl[:, 0], 5),
+        "vl2": np.round(vl[:, 1], 5),
+        "vl3": np.round(vl[:, 2], 5),
+    }
     if reference == "nav":
         yaw = np.cumsum(w_b[:, 2]) / rate_hz
         pitch = 0.02 * np.sin(2 * np.pi * t / 53.0)
         roll = 0.01 * np.sin(2 * np.pi * t / 61.0)
         C = np.stack([frames.euler_to_C_n_b(r, p, y) for r, p, y in zip(roll, pitch, yaw)])
         v_n = np.einsum("nij,nj->ni", C, v_ref)
-        cols.update({"vn": np.round(v_n[:, 0], 5), "ve": np.round(v_n[:, 1], 5), "vd": np.round(v_n[:, 2], 5),
-                     "roll_deg": np.round(np.degrees(roll), 6), "pitch_deg": np.round(np.degrees(pitch), 6),
-                     "yaw_deg": np.round(np.degrees(yaw), 6)})
+        cols.update(
+            {
+                "vn": np.round(v_n[:, 0], 5),
+                "ve": np.round(v_n[:, 1], 5),
+                "vd": np.round(v_n[:, 2], 5),
+                "roll_deg": np.round(np.degrees(roll), 6),
+                "pitch_deg": np.round(np.degrees(pitch), 6),
+                "yaw_deg": np.round(np.degrees(yaw), 6),
+            }
+        )
     else:
         cols.update({"vx": np.round(v_ref[:, 0], 5), "vy": np.round(v_ref[:, 1], 5), "vz": np.round(v_ref[:, 2], 5)})
-    cols.update({"wx": np.round(w_b[:, 0], 6), "wy": np.round(w_b[:, 1], 6), "wz": np.round(w_b[:, 2], 6),
-                 "temp_c": np.round(temp, 3)})
+    cols.update(
+        {
+            "wx": np.round(w_b[:, 0], 6),
+            "wy": np.round(w_b[:, 1], 6),
+            "wz": np.round(w_b[:, 2], 6),
+            "temp_c": np.round(temp, 3),
+        }
+    )
     return Simulation("ldv", meta, cols, jsonable(truth))
 
 
@@ -585,8 +799,9 @@ def rate_table_rad_s(u_s: np.ndarray) -> np.ndarray:
     """A slow rate table carrying the unit and the reference IMU (P4 mode A): body rates
     [rad/s], mostly about the vertical (z), a little about the level axes."""
     u = np.asarray(u_s, float)[:, None]
-    return np.hstack([0.05 * np.sin(2 * np.pi * u / 7.0), 0.03 * np.sin(2 * np.pi * u / 5.0),
-                      0.2 * np.sin(2 * np.pi * u / 11.0)])
+    return np.hstack(
+        [0.05 * np.sin(2 * np.pi * u / 7.0), 0.03 * np.sin(2 * np.pi * u / 5.0), 0.2 * np.sin(2 * np.pi * u / 11.0)]
+    )
 
 
 DRIVES = {"sweep": sweep_rate_rad_s, "table": rate_table_rad_s}
@@ -607,9 +822,17 @@ class LiveImu:
 
     MOVE_S = 2.5
 
-    def __init__(self, *, procedure: str = "accel-tabletop", seed: int = 0, rate_hz: float = 100.0,
-                 effects: dict[str, float] | None = None, hold_s: float = 8.0, site: dict | None = None,
-                 reference: bool = False):
+    def __init__(
+        self,
+        *,
+        procedure: str = "accel-tabletop",
+        seed: int = 0,
+        rate_hz: float = 100.0,
+        effects: dict[str, float] | None = None,
+        hold_s: float = 8.0,
+        site: dict | None = None,
+        reference: bool = False,
+    ):
         if procedure not in PROCEDURES:
             raise SimulationError(f"unknown procedure {procedure!r}")
         effects = _check_effects(procedure, effects)
@@ -619,11 +842,15 @@ class LiveImu:
         self.hold_s = float(hold_s)
         self.site = dict(DEFAULT_SITE, **(site or {}))
         self.g = frames.normal_gravity_mps2(self.site["latitude_deg"], self.site["altitude_m"])
-        ref = igrf_reference(self.site["latitude_deg"], self.site["longitude_deg"], self.site["altitude_m"], self.site["date"])
+        ref = igrf_reference(
+            self.site["latitude_deg"], self.site["longitude_deg"], self.site["altitude_m"], self.site["date"]
+        )
         self.m_ned = field_ned(ref)
         self.accel = nominal_tabletop_device(self.rng)
-        self.mag = {"W": 1000.0 * (np.eye(3) + np.triu(self.rng.normal(scale=0.04, size=(3, 3)))),
-                    "h": self.rng.normal(scale=8.0, size=3)}
+        self.mag = {
+            "W": 1000.0 * (np.eye(3) + np.triu(self.rng.normal(scale=0.04, size=(3, 3)))),
+            "h": self.rng.normal(scale=8.0, size=3),
+        }
         self.gyro = {"eps": self.rng.normal(scale=0.01, size=3)}
         for name, size in effects.items():
             if name in accel_model.EFFECTS and procedure.startswith("accel"):
@@ -635,13 +862,19 @@ class LiveImu:
         self.reference = bool(reference)
         self.units = {"accel_unit": "V", "gyro_unit": "rad/s", "mag_unit": "uT"}
         self.device_id = f"SIM-{procedure.upper()[:3]}-{seed:04d}"
-        self.positions = list(P1_POSITIONS) if procedure.startswith("accel") else \
-            [f"s{k + 1}" for k in range(12)] if procedure == "compass" else ["level"]
+        self.positions = (
+            list(P1_POSITIONS)
+            if procedure.startswith("accel")
+            else [f"s{k + 1}" for k in range(12)]
+            if procedure == "compass"
+            else ["level"]
+        )
         self._bases = {name: (P1_POSITIONS[name], name[:2] in ("xy", "yz", "xz")) for name in P1_POSITIONS}
         self._bases["level"] = (np.array([0.0, 0.0, 1.0]), False)
         # _targets: where the unit is (or was last put) for each name
-        self._targets = {name: C_n_b_for(P1_POSITIONS[name], 0.3) @ placement_error(self.rng, 1.0)
-                         for name in P1_POSITIONS}
+        self._targets = {
+            name: C_n_b_for(P1_POSITIONS[name], 0.3) @ placement_error(self.rng, 1.0) for name in P1_POSITIONS
+        }
         for k, C in enumerate(sphere_attitudes(self.rng, 12)):
             self._targets[f"s{k + 1}"] = C
         # level: x forward pointing north, y left (west), z up (the P4 screen's instruction)
@@ -662,8 +895,14 @@ class LiveImu:
     @property
     def truth(self) -> dict:
         B, M = accel_model.forward_to_p1(self.accel)
-        return jsonable({"accel": {"B": B, "M": M, **self.accel}, "mag": self.mag, "gyro": self.gyro,
-                          "ref_bias_rad_s": self.ref_bias})
+        return jsonable(
+            {
+                "accel": {"B": B, "M": M, **self.accel},
+                "mag": self.mag,
+                "gyro": self.gyro,
+                "ref_bias_rad_s": self.ref_bias,
+            }
+        )
 
     @property
     def driving(self) -> str | None:
@@ -686,8 +925,9 @@ class LiveImu:
                 self._move = (self.C, self.C, self.t_s, 0.0, self._wobble())
             return
         if name not in self._targets:
-            raise SimulationError(f"unknown position {name!r}; known: {', '.join(self._targets)}, "
-                                  f"{', '.join(DRIVES)}, still")
+            raise SimulationError(
+                f"unknown position {name!r}; known: {', '.join(self._targets)}, {', '.join(DRIVES)}, still"
+            )
         self._settle_now()
         if name in self._bases:  # a fresh placement each time: any heading, a small error
             d, tilted = self._bases[name]
@@ -773,8 +1013,19 @@ class LiveImu:
         gyr = gyro_model.forward(w_b, self.gyro, cond) + self.rng.normal(scale=0.003, size=(n, 3))
         mag = mag_model.forward(m_b, self.mag, cond) + self.rng.normal(scale=0.15, size=(n, 3))
         self.t_s = float(t[-1])
-        out = {"t_s": t, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2], "gx": gyr[:, 0], "gy": gyr[:, 1],
-               "gz": gyr[:, 2], "mx": mag[:, 0], "my": mag[:, 1], "mz": mag[:, 2], "temp_c": temps}
+        out = {
+            "t_s": t,
+            "ax": acc[:, 0],
+            "ay": acc[:, 1],
+            "az": acc[:, 2],
+            "gx": gyr[:, 0],
+            "gy": gyr[:, 1],
+            "gz": gyr[:, 2],
+            "mx": mag[:, 0],
+            "my": mag[:, 1],
+            "mz": mag[:, 2],
+            "temp_c": temps,
+        }
         if self.reference:
             ref = w_b + self.ref_bias + self.rng.normal(scale=0.0003, size=(n, 3))
             out.update({"ref_gx": ref[:, 0], "ref_gy": ref[:, 1], "ref_gz": ref[:, 2]})
@@ -792,8 +1043,15 @@ class LiveVehicle:
     (the source's warning). Outputs: ``vl1..vl3`` (beams, m/s), ``vx vy vz`` (reference
     body velocity, FRD, m/s), ``wx wy wz`` (body rates, rad/s), ``temp_c``."""
 
-    def __init__(self, *, seed: int = 0, rate_hz: float = 10.0, beam_noise_mps: float = 0.01,
-                 ref_noise_mps: float = 0.005, site: dict | None = None):
+    def __init__(
+        self,
+        *,
+        seed: int = 0,
+        rate_hz: float = 10.0,
+        beam_noise_mps: float = 0.01,
+        ref_noise_mps: float = 0.005,
+        site: dict | None = None,
+    ):
         self.rng = np.random.default_rng(seed)
         self.rate_hz = float(rate_hz)
         self.site = dict(DEFAULT_SITE, **(site or {}))
@@ -803,12 +1061,14 @@ class LiveVehicle:
         dK = self.rng.normal(scale=0.005, size=3)
         alpha = np.array([60.0, 60.0, 90.0]) + self.rng.normal(scale=0.5, size=3)
         beta = np.array([90.0, 90.0, 60.0]) + self.rng.normal(scale=0.5, size=3)
-        gamma = np.degrees(np.arccos(np.sqrt(np.clip(
-            1 - np.cos(np.radians(alpha)) ** 2 - np.cos(np.radians(beta)) ** 2, 0, 1))))
+        gamma = np.degrees(
+            np.arccos(np.sqrt(np.clip(1 - np.cos(np.radians(alpha)) ** 2 - np.cos(np.radians(beta)) ** 2, 0, 1)))
+        )
         alpha[1] = 180.0 - alpha[1]  # the second beam looks backward
         self.params = {"X": ldv_model.X_from_angles(dK, alpha, beta, gamma)}
-        self.truth = jsonable({"X": self.params["X"], "dK": dK, "alpha_deg": alpha, "beta_deg": beta,
-                                "gamma_deg": gamma})
+        self.truth = jsonable(
+            {"X": self.params["X"], "dK": dK, "alpha_deg": alpha, "beta_deg": beta, "gamma_deg": gamma}
+        )
         self.beam_noise_mps, self.ref_noise_mps = beam_noise_mps, ref_noise_mps
         self.ph = self.rng.uniform(0, 2 * np.pi, size=6)
         self.t_s = 0.0
@@ -834,8 +1094,12 @@ class LiveVehicle:
 
     def set_orientation(self, name: str) -> None:
         """Commands by name (the bench interface): ``drive``, ``stop``, ``turns``, ``straight``."""
-        actions = {"drive": lambda: self.drive(True), "stop": lambda: self.drive(False),
-                   "turns": lambda: self.turns(True), "straight": lambda: self.turns(False)}
+        actions = {
+            "drive": lambda: self.drive(True),
+            "stop": lambda: self.drive(False),
+            "turns": lambda: self.turns(True),
+            "straight": lambda: self.turns(False),
+        }
         if name not in actions:
             raise SimulationError(f"unknown vehicle command {name!r}; known: {', '.join(actions)}")
         actions[name]()
@@ -853,22 +1117,40 @@ class LiveVehicle:
         self.speed_mps, self.turn = float(spd[-1]), float(turn[-1])
         ph = self.ph
         moving = spd / 10.0  # the manoeuvres scale with the speed (a parked car has none)
-        fwd = spd * (1.0 + 0.5 * turn * np.sin(2 * np.pi * t / 47.0 + ph[0])) + \
-            0.2 * moving * np.sin(2 * np.pi * t / 23.0 + ph[1])
-        lat = moving * (0.01 + turn * 2.0) * np.sin(2 * np.pi * t / 31.0 + ph[2]) + \
-            moving * turn * 0.8 * np.sin(2 * np.pi * t / 13.0 + ph[4])
-        vert = moving * (0.01 + turn * 1.5) * np.sin(2 * np.pi * t / 41.0 + ph[3]) + \
-            moving * turn * 0.5 * np.sin(2 * np.pi * t / 17.0 + ph[5])
+        fwd = spd * (1.0 + 0.5 * turn * np.sin(2 * np.pi * t / 47.0 + ph[0])) + 0.2 * moving * np.sin(
+            2 * np.pi * t / 23.0 + ph[1]
+        )
+        lat = moving * (0.01 + turn * 2.0) * np.sin(2 * np.pi * t / 31.0 + ph[2]) + moving * turn * 0.8 * np.sin(
+            2 * np.pi * t / 13.0 + ph[4]
+        )
+        vert = moving * (0.01 + turn * 1.5) * np.sin(2 * np.pi * t / 41.0 + ph[3]) + moving * turn * 0.5 * np.sin(
+            2 * np.pi * t / 17.0 + ph[5]
+        )
         v_b = np.column_stack([fwd, lat, vert])
-        w_b = moving[:, None] * np.column_stack([0.05 * np.sin(2 * np.pi * t / 19.0),
-                                                 0.04 * np.sin(2 * np.pi * t / 29.0),
-                                                 (0.02 + 0.13 * turn) * np.sin(2 * np.pi * t / 37.0 + ph[0])])
+        w_b = moving[:, None] * np.column_stack(
+            [
+                0.05 * np.sin(2 * np.pi * t / 19.0),
+                0.04 * np.sin(2 * np.pi * t / 29.0),
+                (0.02 + 0.13 * turn) * np.sin(2 * np.pi * t / 37.0 + ph[0]),
+            ]
+        )
         a = math.exp(-dt / 900.0)  # warming up toward 25 °C
-        temps = 25.0 + (self.temp_c - 25.0) * a ** k
+        temps = 25.0 + (self.temp_c - 25.0) * a**k
         self.temp_c = float(temps[-1])
         cond = Conditions(t_s=t, temp_c=temps, temp_ref_c=25.0, omega_body_rad_s=w_b)
         vl = ldv_model.forward(v_b, self.params, cond) + self.rng.normal(scale=self.beam_noise_mps, size=(n, 3))
         ref = v_b + self.rng.normal(scale=self.ref_noise_mps, size=(n, 3))
         self.t_s = float(t[-1])
-        return {"t_s": t, "vl1": vl[:, 0], "vl2": vl[:, 1], "vl3": vl[:, 2], "vx": ref[:, 0], "vy": ref[:, 1],
-                "vz": ref[:, 2], "wx": w_b[:, 0], "wy": w_b[:, 1], "wz": w_b[:, 2], "temp_c": temps}
+        return {
+            "t_s": t,
+            "vl1": vl[:, 0],
+            "vl2": vl[:, 1],
+            "vl3": vl[:, 2],
+            "vx": ref[:, 0],
+            "vy": ref[:, 1],
+            "vz": ref[:, 2],
+            "wx": w_b[:, 0],
+            "wy": w_b[:, 1],
+            "wz": w_b[:, 2],
+            "temp_c": temps,
+        }

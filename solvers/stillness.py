@@ -42,6 +42,7 @@ Numerics: windowed sums come from cumulative sums that restart every `block` sam
 batch detector and `StillnessTracker` compute bit-identical statistics whatever the
 batch sizes. No Python loop runs over samples.
 """
+
 from __future__ import annotations
 
 import math
@@ -259,7 +260,7 @@ class StillnessResult:
         """(N,) bool, True on samples inside a reported interval."""
         mask = np.zeros(self.n_samples, dtype=bool)
         for iv in self.intervals:
-            mask[iv.start:iv.stop] = True
+            mask[iv.start : iv.stop] = True
         return mask
 
 
@@ -290,7 +291,7 @@ class _RowStore:
         """Make room for m more rows and return them (uninitialised) to be filled."""
         if self.len + m > len(self.buf):
             k = self.len if self.keep is None else min(self.len, self.keep)
-            old = self.buf[self.len - k:self.len]
+            old = self.buf[self.len - k : self.len]
             if k + m > len(self.buf) // 2:
                 grown = np.empty((max(k + m, 2 * len(self.buf)), self.buf.shape[1]))
                 grown[:k] = old
@@ -300,13 +301,13 @@ class _RowStore:
             self.start += self.len - k
             self.len = k
         self.len += m
-        return self.buf[self.len - m:self.len]
+        return self.buf[self.len - m : self.len]
 
     def rows(self, i0: int, i1: int) -> np.ndarray:
         """Rows with absolute indices i0 .. i1-1 (a view)."""
         if i0 < self.start:
             raise RuntimeError(f"row {i0} was dropped (oldest kept: {self.start})")
-        return self.buf[i0 - self.start:i1 - self.start]
+        return self.buf[i0 - self.start : i1 - self.start]
 
 
 class _WindowSums:
@@ -365,11 +366,11 @@ class _WindowSums:
             return np.zeros((0, self.c))
         qc, base = self._q.buf, self._q.start
         f0 = lo - w + 1  # first row of the first window
-        q_l = qc[lo - base:hi - base]
+        q_l = qc[lo - base : hi - base]
         if f0 == 0:
-            e = np.vstack([np.zeros((1, self.c)), qc[f0 - base:hi - w - base]])
+            e = np.vstack([np.zeros((1, self.c)), qc[f0 - base : hi - w - base]])
         else:
-            e = qc[f0 - 1 - base:hi - w - base].copy()
+            e = qc[f0 - 1 - base : hi - w - base].copy()
         for kb in range(-(-f0 // b) * b, hi - w + 1, b):  # windows starting a block
             e[kb - f0] = 0.0
         out = q_l - e
@@ -398,16 +399,16 @@ class _Stats:
     has_nan: np.ndarray  # (k,) bool
 
     @staticmethod
-    def from_sums(s: np.ndarray, w: int, has_gyro: bool, gyro_ref: np.ndarray | None) -> "_Stats":
+    def from_sums(s: np.ndarray, w: int, has_gyro: bool, gyro_ref: np.ndarray | None) -> _Stats:
         d = 6 if has_gyro else 3
         s1 = s[:, :d]
-        var = (s[:, d:2 * d] - s1 * s1 / w) / (w - 1)
+        var = (s[:, d : 2 * d] - s1 * s1 / w) / (w - 1)
         np.maximum(var, 0.0, out=var)
         gyro_mean = s[:, 3:6] / w + gyro_ref if has_gyro else None
         return _Stats(var[:, 0:3], var[:, 3:6] if has_gyro else None, gyro_mean, s[:, -1] > 0.5)
 
     @staticmethod
-    def concat(parts: list["_Stats"]) -> "_Stats":
+    def concat(parts: list[_Stats]) -> _Stats:
         def cat(name):
             vals = [getattr(p, name) for p in parts]
             return None if vals[0] is None else np.concatenate(vals)
@@ -415,11 +416,15 @@ class _Stats:
         return _Stats(cat("accel_var"), cat("gyro_var"), cat("gyro_mean"), cat("has_nan"))
 
     @staticmethod
-    def empty(k: int, has_gyro: bool) -> "_Stats":
-        return _Stats(np.empty((k, 3)), np.empty((k, 3)) if has_gyro else None,
-                      np.empty((k, 3)) if has_gyro else None, np.empty(k, dtype=bool))
+    def empty(k: int, has_gyro: bool) -> _Stats:
+        return _Stats(
+            np.empty((k, 3)),
+            np.empty((k, 3)) if has_gyro else None,
+            np.empty((k, 3)) if has_gyro else None,
+            np.empty(k, dtype=bool),
+        )
 
-    def put(self, i: int, part: "_Stats") -> None:
+    def put(self, i: int, part: _Stats) -> None:
         """Copy `part` into rows i .. i+len(part)-1."""
         j = i + len(part)
         self.accel_var[i:j] = part.accel_var
@@ -428,37 +433,40 @@ class _Stats:
             self.gyro_mean[i:j] = part.gyro_mean
         self.has_nan[i:j] = part.has_nan
 
-    def where(self, mask: np.ndarray) -> "_Stats":
+    def where(self, mask: np.ndarray) -> _Stats:
         """The rows where mask is True (no copy when it is True everywhere)."""
         if mask.all():
             return self
         return self.take(np.flatnonzero(mask))
 
-    def take(self, idx) -> "_Stats":
+    def take(self, idx) -> _Stats:
         if isinstance(idx, np.ndarray) and idx.dtype != bool:
+
             def pick(x):
                 return None if x is None else np.take(x, idx, axis=0)
 
-            return _Stats(pick(self.accel_var), pick(self.gyro_var), pick(self.gyro_mean),
-                          self.has_nan[idx])
-        return _Stats(self.accel_var[idx],
-                      None if self.gyro_var is None else self.gyro_var[idx],
-                      None if self.gyro_mean is None else self.gyro_mean[idx],
-                      self.has_nan[idx])
+            return _Stats(pick(self.accel_var), pick(self.gyro_var), pick(self.gyro_mean), self.has_nan[idx])
+        return _Stats(
+            self.accel_var[idx],
+            None if self.gyro_var is None else self.gyro_var[idx],
+            None if self.gyro_mean is None else self.gyro_mean[idx],
+            self.has_nan[idx],
+        )
 
     def __len__(self) -> int:
         return len(self.accel_var)
 
 
-def _channels(accel: np.ndarray, gyro: np.ndarray | None, bad: np.ndarray,
-              ref_a: np.ndarray, ref_g: np.ndarray | None) -> np.ndarray:
+def _channels(
+    accel: np.ndarray, gyro: np.ndarray | None, bad: np.ndarray, ref_a: np.ndarray, ref_g: np.ndarray | None
+) -> np.ndarray:
     """Rows [a-ref, g-ref, (a-ref)^2, (g-ref)^2, nan flag]; NaN rows are zero but flagged."""
     d = 3 if gyro is None else 6
     x = np.empty((len(accel), 2 * d + 1))
     np.subtract(accel, ref_a, out=x[:, 0:3])
     if gyro is not None:
         np.subtract(gyro, ref_g, out=x[:, 3:6])
-    np.multiply(x[:, :d], x[:, :d], out=x[:, d:2 * d])
+    np.multiply(x[:, :d], x[:, :d], out=x[:, d : 2 * d])
     x[:, -1] = bad
     if bad.any():
         x[bad, :-1] = 0.0
@@ -500,8 +508,7 @@ def _lsb(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(out), out, 0.0)
 
 
-def _noise_from_windows(ref: _Stats, lsb_a: np.ndarray, lsb_g: np.ndarray | None,
-                        source: str) -> NoiseFloor:
+def _noise_from_windows(ref: _Stats, lsb_a: np.ndarray, lsb_g: np.ndarray | None, source: str) -> NoiseFloor:
     accel_var = np.maximum(np.median(ref.accel_var, axis=0), lsb_a * lsb_a / 12.0)
     gyro_var = gyro_bias = None
     if ref.gyro_var is not None:
@@ -515,8 +522,7 @@ def _thresholds(noise: NoiseFloor, cfg: StillnessConfig, has_gyro: bool) -> Thre
     thr_g = None
     if has_gyro and cfg.gyro_rate_factor is not None:
         thr_g = cfg.gyro_rate_factor * math.sqrt(float(np.sum(noise.gyro_var)))
-    return Thresholds(thr_a, thr_g, cfg.threshold_factor,
-                      cfg.gyro_rate_factor if thr_g is not None else None)
+    return Thresholds(thr_a, thr_g, cfg.threshold_factor, cfg.gyro_rate_factor if thr_g is not None else None)
 
 
 def _scale(x: np.ndarray) -> float:
@@ -526,8 +532,9 @@ def _scale(x: np.ndarray) -> float:
     return 1.0
 
 
-def _robust_noise(stats: _Stats, accel: np.ndarray, gyro: np.ndarray | None,
-                  bad: np.ndarray, quantile: float) -> tuple[NoiseFloor, list[str]]:
+def _robust_noise(
+    stats: _Stats, accel: np.ndarray, gyro: np.ndarray | None, bad: np.ndarray, quantile: float
+) -> tuple[NoiseFloor, list[str]]:
     """Noise floor without an initial rest.
 
     Score each valid window by its accelerometer (and rate) variance magnitude, each
@@ -563,14 +570,13 @@ def _robust_noise(stats: _Stats, accel: np.ndarray, gyro: np.ndarray | None,
         gyro_var = gyro_bias = None
         if gyro is not None:
             dg = _valid_diffs(gyro, bad)
-            gyro_var = np.maximum(np.median(dg * dg, axis=0) / (2.0 * _CHI2_1_MEDIAN),
-                                  lsb_g * lsb_g / 12.0)
+            gyro_var = np.maximum(np.median(dg * dg, axis=0) / (2.0 * _CHI2_1_MEDIAN), lsb_g * lsb_g / 12.0)
             gyro_bias = np.median(gyro[~bad], axis=0)
-        noise = NoiseFloor(np.maximum(diff_var_a, lsb_a * lsb_a / 12.0), gyro_var, gyro_bias,
-                           "first_differences", 0)
+        noise = NoiseFloor(np.maximum(diff_var_a, lsb_a * lsb_a / 12.0), gyro_var, gyro_bias, "first_differences", 0)
         warnings.append(
             f"no rest found: the quietest {quantile:.0%} of windows vary {floor / diff:.0f}x more "
-            "than sample-to-sample noise; thresholds use the first-difference noise")
+            "than sample-to-sample noise; thresholds use the first-difference noise"
+        )
     return noise, warnings
 
 
@@ -615,8 +621,8 @@ def _check_inputs(t_s, accel, gyro, nan_policy: str, row0: int = 0, t_prev: floa
     if nan_policy == "raise" and bad.any():
         r = row0 + int(np.flatnonzero(bad)[0])
         raise StillnessInputError(
-            f"row {r}: NaN or infinite value in accel/gyro (pass nan_policy='omit' to treat "
-            "such rows as motion)", r)
+            f"row {r}: NaN or infinite value in accel/gyro (pass nan_policy='omit' to treat such rows as motion)", r
+        )
     return t, a, g, bad
 
 
@@ -632,8 +638,9 @@ def _interval(t, a, g, start, stop) -> StaticInterval:
         gseg = g[start:stop]
         gm = gseg.mean(axis=0)
         gs = gseg.std(axis=0, ddof=1) if n > 1 else np.full(3, np.nan)
-    return StaticInterval(int(start), int(stop), float(t[start]), float(t[stop - 1]), int(n),
-                          seg.mean(axis=0), std, gm, gs)
+    return StaticInterval(
+        int(start), int(stop), float(t[start]), float(t[stop - 1]), int(n), seg.mean(axis=0), std, gm, gs
+    )
 
 
 def detect_static_intervals(
@@ -676,15 +683,14 @@ def detect_static_intervals(
         raise StillnessInputError(f"{n} samples: too few to detect anything")
     if sample_rate_hz is None:
         sample_rate_hz = 1.0 / float(np.median(np.diff(t)))
-    cfg = StillnessConfig(sample_rate_hz, window_s, threshold_factor, gyro_rate_factor,
-                          min_duration_s, margin_s)
+    cfg = StillnessConfig(sample_rate_hz, window_s, threshold_factor, gyro_rate_factor, min_duration_s, margin_s)
     if not 0 < robust_quantile < 1:
         raise StillnessInputError(f"robust_quantile must be in (0, 1), got {robust_quantile!r}")
     w, h = cfg.window_n, cfg.half_n
     if n < w:
         raise StillnessInputError(
-            f"{n} samples is shorter than one {w}-sample window ({cfg.window_s:g} s at "
-            f"{cfg.sample_rate_hz:g} Hz)")
+            f"{n} samples is shorter than one {w}-sample window ({cfg.window_s:g} s at {cfg.sample_rate_hz:g} Hz)"
+        )
     has_gyro = g is not None
     if bad.all():
         raise StillnessInputError("every row contains NaN: nothing to detect")
@@ -706,19 +712,19 @@ def detect_static_intervals(
     if init_rest_s:
         n_init = int(round(float(init_rest_s) * cfg.sample_rate_hz))
         if n_init > n:
-            raise StillnessInputError(
-                f"init_rest_s={init_rest_s:g} s needs {n_init} samples, the data has {n}")
+            raise StillnessInputError(f"init_rest_s={init_rest_s:g} s needs {n_init} samples, the data has {n}")
         if n_init < w:
             raise StillnessInputError(
-                f"init_rest_s={init_rest_s:g} s ({n_init} samples) is shorter than one "
-                f"{w}-sample window")
+                f"init_rest_s={init_rest_s:g} s ({n_init} samples) is shorter than one {w}-sample window"
+            )
         noise = _initial_rest_noise(stats, a, g, bad, n_init, w)
         robust, _ = _robust_noise(stats, a, g, bad, robust_quantile)
         ratio = float(_norm3(noise.accel_var[None, :])[0] / _norm3(robust.accel_var[None, :])[0])
         if ratio > 4.0:
             warnings.append(
                 f"the initial rest is {ratio:.1f}x noisier than the quietest windows of the "
-                "recording: was the unit moving during it?")
+                "recording: was the unit moving during it?"
+            )
     else:
         noise, warnings = _robust_noise(stats, a, g, bad, robust_quantile)
 
@@ -726,13 +732,13 @@ def detect_static_intervals(
     lev_w, a_norm_w, g_dev_w = _levels(stats, noise, thr)
 
     level = np.full(n, np.nan)
-    level[h:n - h] = lev_w
+    level[h : n - h] = lev_w
     a_norm = np.full(n, np.nan)
-    a_norm[h:n - h] = a_norm_w
+    a_norm[h : n - h] = a_norm_w
     g_dev = None
     if g_dev_w is not None:
         g_dev = np.full(n, np.nan)
-        g_dev[h:n - h] = g_dev_w
+        g_dev[h : n - h] = g_dev_w
 
     # runs of static window centres -> trimmed intervals
     still = lev_w < 1.0
@@ -843,13 +849,22 @@ class StillnessTracker:
     window_s/2. Memory is bounded (a few windows of rows) once the noise is known.
     """
 
-    def __init__(self, sample_rate_hz: float, *, init_rest_s: float | None = None,
-                 noise: NoiseFloor | None = None, window_s: float = 1.0,
-                 threshold_factor: float = 5.0, gyro_rate_factor: float | None = 10.0,
-                 min_duration_s: float = 1.0, margin_s: float | None = None,
-                 nan_policy: str = "raise"):
-        self.config = StillnessConfig(float(sample_rate_hz), window_s, threshold_factor,
-                                      gyro_rate_factor, min_duration_s, margin_s)
+    def __init__(
+        self,
+        sample_rate_hz: float,
+        *,
+        init_rest_s: float | None = None,
+        noise: NoiseFloor | None = None,
+        window_s: float = 1.0,
+        threshold_factor: float = 5.0,
+        gyro_rate_factor: float | None = 10.0,
+        min_duration_s: float = 1.0,
+        margin_s: float | None = None,
+        nan_policy: str = "raise",
+    ):
+        self.config = StillnessConfig(
+            float(sample_rate_hz), window_s, threshold_factor, gyro_rate_factor, min_duration_s, margin_s
+        )
         if (noise is None) == (not init_rest_s):
             raise StillnessInputError("give exactly one of init_rest_s (> 0) or noise")
         if nan_policy not in ("raise", "omit"):
@@ -863,7 +878,8 @@ class StillnessTracker:
             if self._n_init < self._w:
                 raise StillnessInputError(
                     f"init_rest_s={init_rest_s:g} s ({self._n_init} samples) is shorter than "
-                    f"one {self._w}-sample window")
+                    f"one {self._w}-sample window"
+                )
         self.noise: NoiseFloor | None = noise
         self.thresholds: Thresholds | None = None
         self.intervals: list[StaticInterval] = []
@@ -888,12 +904,19 @@ class StillnessTracker:
         self._new: list[StaticInterval] = []
 
     @classmethod
-    def from_result(cls, result: StillnessResult, *, nan_policy: str = "raise") -> "StillnessTracker":
+    def from_result(cls, result: StillnessResult, *, nan_policy: str = "raise") -> StillnessTracker:
         """A tracker with the settings and the noise floor of a batch result."""
         c = result.config
-        return cls(c.sample_rate_hz, noise=result.noise, window_s=c.window_s,
-                   threshold_factor=c.threshold_factor, gyro_rate_factor=c.gyro_rate_factor,
-                   min_duration_s=c.min_duration_s, margin_s=c.margin_s, nan_policy=nan_policy)
+        return cls(
+            c.sample_rate_hz,
+            noise=result.noise,
+            window_s=c.window_s,
+            threshold_factor=c.threshold_factor,
+            gyro_rate_factor=c.gyro_rate_factor,
+            min_duration_s=c.min_duration_s,
+            margin_s=c.margin_s,
+            nan_policy=nan_policy,
+        )
 
     # -- public
 
@@ -925,8 +948,7 @@ class StillnessTracker:
         if self._finished:
             raise StillnessInputError("the tracker is finished; make a new one")
         n0 = self._rows.end
-        t, a, g, bad = _check_inputs(t_s, accel, gyro, self.nan_policy, n0,
-                                     None if n0 == 0 else self._t_last)
+        t, a, g, bad = _check_inputs(t_s, accel, gyro, self.nan_policy, n0, None if n0 == 0 else self._t_last)
         if self._has_gyro is None:
             if self.noise is not None and g is not None and self.noise.gyro_var is None:
                 raise StillnessInputError("the noise floor given has no gyro part, but gyro rows are")
@@ -966,8 +988,7 @@ class StillnessTracker:
                 self._pending = []
                 init = self._rows.rows(0, self._n_init)
                 ig = init[:, _G] if self._has_gyro else None
-                self.noise = _initial_rest_noise(stats, init[:, _A], ig, init[:, _BAD] > 0.5,
-                                                 self._n_init, self._w)
+                self.noise = _initial_rest_noise(stats, init[:, _A], ig, init[:, _BAD] > 0.5, self._n_init, self._w)
                 self._rows.keep = self._keep
             self.thresholds = _thresholds(self.noise, self.config, self._has_gyro)
 
@@ -1042,10 +1063,16 @@ class StillnessTracker:
         if self._mom_a.n != stop - start:  # every row start..stop-1 must have been added
             raise RuntimeError(f"stillness tracker lost rows of interval [{start}, {stop})")
         iv = StaticInterval(
-            start, stop, self._run_t_start, float(self._rows.rows(stop - 1, stop)[0, _T]),
-            stop - start, self._mom_a.mean.copy(), self._mom_a.std,
+            start,
+            stop,
+            self._run_t_start,
+            float(self._rows.rows(stop - 1, stop)[0, _T]),
+            stop - start,
+            self._mom_a.mean.copy(),
+            self._mom_a.std,
             self._mom_g.mean.copy() if self._has_gyro else None,
-            self._mom_g.std if self._has_gyro else None)
+            self._mom_g.std if self._has_gyro else None,
+        )
         self.intervals.append(iv)
         self._new.append(iv)
 
@@ -1077,20 +1104,22 @@ def _fit_sphere_centre(means: np.ndarray) -> np.ndarray:
     if len(means) < 4:
         raise TooFewPositions(
             f"{len(means)} static intervals: fitting the zero-g offset needs at least 4 "
-            "orientations that are not all in one plane")
+            "orientations that are not all in one plane"
+        )
     a = np.hstack([2.0 * means, np.ones((len(means), 1))])
     b = np.sum(means * means, axis=1)
     sv = linalg.svd(a, compute_uv=False)
     if sv[-1] <= 1e-9 * sv[0]:
         raise NotIdentifiable(
-            "the interval means lie in one plane: the zero-g offset cannot be fitted; "
-            "pass offset= explicitly")
+            "the interval means lie in one plane: the zero-g offset cannot be fitted; pass offset= explicitly"
+        )
     sol, *_ = linalg.lstsq(a, b, rcond=None)
     return sol[:3]
 
 
-def cluster_orientations(intervals: Sequence[StaticInterval] | np.ndarray,
-                         max_angle_deg: float = 5.0, *, offset=None) -> OrientationClusters:
+def cluster_orientations(
+    intervals: Sequence[StaticInterval] | np.ndarray, max_angle_deg: float = 5.0, *, offset=None
+) -> OrientationClusters:
     """Group static intervals whose mean gravity directions agree within max_angle_deg.
 
     intervals: StaticInterval objects (weighted by their sample count) or a (k, 3) array of

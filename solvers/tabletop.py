@@ -30,6 +30,7 @@ Gauge. ``|R(B + M V)| = |B + M V|`` for every rotation ``R``: the norm cannot se
 
 Everything here is pure numerics; :mod:`station.procedures.tabletop` reads captures.
 """
+
 from __future__ import annotations
 
 import math
@@ -47,16 +48,32 @@ from solvers.positions import P1_POSITIONS
 # ~0.5°, and a hand-held 45°/135° block (±3°).
 PLACEMENT_SIGMA_AXIS_RAD = math.radians(0.4)
 PLACEMENT_SIGMA_TILTED_RAD = math.radians(1.1)
-DISTINCT_ANGLE_DEG = 7.0       # two positions closer than this are one orientation
-MIN_DISTINCT = 9               # the norm fit's 9 identifiable parameters
-CONDITION_WARN = 30.0          # position-set condition above this: warn "too alike"
+DISTINCT_ANGLE_DEG = 7.0  # two positions closer than this are one orientation
+MIN_DISTINCT = 9  # the norm fit's 9 identifiable parameters
+CONDITION_WARN = 30.0  # position-set condition above this: warn "too alike"
 
 # Source numbering (positions 1-6) and the station's order for 7-12; imucal's names.
 _ORDER = list(P1_POSITIONS)
-_ALIASES = {"x_p": "x_up", "x_a": "x_down", "y_p": "y_up", "y_a": "y_down", "z_p": "z_up",
-            "z_a": "z_down", "+x": "x_up", "-x": "x_down", "+y": "y_up", "-y": "y_down",
-            "+z": "z_up", "-z": "z_down", "x+": "x_up", "x-": "x_down", "y+": "y_up",
-            "y-": "y_down", "z+": "z_up", "z-": "z_down"}
+_ALIASES = {
+    "x_p": "x_up",
+    "x_a": "x_down",
+    "y_p": "y_up",
+    "y_a": "y_down",
+    "z_p": "z_up",
+    "z_a": "z_down",
+    "+x": "x_up",
+    "-x": "x_down",
+    "+y": "y_up",
+    "-y": "y_down",
+    "+z": "z_up",
+    "-z": "z_down",
+    "x+": "x_up",
+    "x-": "x_down",
+    "y+": "y_up",
+    "y-": "y_down",
+    "z+": "z_up",
+    "z-": "z_down",
+}
 
 
 def known_direction(label: str | None) -> tuple[np.ndarray | None, float]:
@@ -87,9 +104,9 @@ class Position:
     n: int = 1
     t_start_s: float | None = None
     t_stop_s: float | None = None
-    direction: np.ndarray | None = None      # known unit specific-force direction
+    direction: np.ndarray | None = None  # known unit specific-force direction
     placement_sigma_rad: float = math.nan
-    se: np.ndarray | None = None             # standard error of the mean (3,), correlated noise included; None: std/sqrt(n)
+    se: np.ndarray | None = None  # standard error of the mean (3,), correlated noise included; None: std/sqrt(n)
 
 
 @dataclass
@@ -98,23 +115,24 @@ class P1Result:
     M: np.ndarray
     sigma_B: np.ndarray
     sigma_M: np.ndarray
-    method: str                       # 'norm' or 'six-position'
-    gauge: str                        # 'table', 'upper-triangular' or 'none' (step 8 only)
+    method: str  # 'norm' or 'six-position'
+    gauge: str  # 'table', 'upper-triangular' or 'none' (step 8 only)
     gauge_text: str
-    norm_residuals: np.ndarray        # |A_k| − g per position (m/s²)
-    norm_sigma: np.ndarray            # the σ_k used (m/s²)
-    residual_rms: float               # RMS of norm_residuals
+    norm_residuals: np.ndarray  # |A_k| − g per position (m/s²)
+    norm_sigma: np.ndarray  # the σ_k used (m/s²)
+    residual_rms: float  # RMS of norm_residuals
     n_distinct: int
-    clusters: np.ndarray              # orientation cluster index per position
-    position_condition: float         # condition of the norm Jacobian of the position set (P1's 12: 1.6)
+    clusters: np.ndarray  # orientation cluster index per position
+    position_condition: float  # condition of the norm Jacobian of the position set (P1's 12: 1.6)
     fit: FitResult | None
-    step8: dict | None                # {'B','M','sigma_B','sigma_M','residual_rms'} when computed
+    step8: dict | None  # {'B','M','sigma_B','sigma_M','residual_rms'} when computed
     noise_known: bool
     warnings: list[str] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)
 
 
 # ----------------------------------------------------------------------------- helpers
+
 
 def _cross(a, b) -> np.ndarray:
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
@@ -140,8 +158,9 @@ def step8(positions: list[Position], g_mps2: float) -> dict:
     independent readings)."""
     known = [p for p in positions if p.direction is not None]
     if len(known) < 4:
-        raise TooFewPositions(f"{len(known)} positions with a known gravity direction; step 8 needs at least 4 "
-                              "(the six ±axis positions)")
+        raise TooFewPositions(
+            f"{len(known)} positions with a known gravity direction; step 8 needs at least 4 (the six ±axis positions)"
+        )
     V = np.array([p.mean for p in known])
     H1 = np.hstack([np.ones((len(known), 1)), V])
     if np.linalg.matrix_rank(H1, tol=1e-9 * np.abs(H1).max()) < 4:
@@ -152,7 +171,7 @@ def step8(positions: list[Position], g_mps2: float) -> dict:
     sig = np.zeros(3 * len(known))
     for k, p in enumerate(known):
         for i in range(3):
-            H[3 * k + i, 4 * i:4 * i + 4] = H1[k]
+            H[3 * k + i, 4 * i : 4 * i + 4] = H1[k]
             y[3 * k + i] = g_mps2 * p.direction[i]
             sig[3 * k + i] = g_mps2 * p.placement_sigma_rad
     res = linear_fit(H, y, sigma=sig)
@@ -162,8 +181,14 @@ def step8(positions: list[Position], g_mps2: float) -> dict:
     M = np.vstack([x[1:4], x[5:8], x[9:12]])
     sB = sx[[0, 4, 8]]
     sM = np.vstack([sx[1:4], sx[5:8], sx[9:12]])
-    return {"B": B, "M": M, "sigma_B": sB, "sigma_M": sM, "fit": res,
-            "residual_rms": float(np.sqrt(np.mean(res.residuals ** 2)))}
+    return {
+        "B": B,
+        "M": M,
+        "sigma_B": sB,
+        "sigma_M": sM,
+        "fit": res,
+        "residual_rms": float(np.sqrt(np.mean(res.residuals**2))),
+    }
 
 
 def ellipsoid_initial(V: np.ndarray, g_mps2: float) -> tuple[np.ndarray, np.ndarray] | None:
@@ -175,16 +200,16 @@ def ellipsoid_initial(V: np.ndarray, g_mps2: float) -> tuple[np.ndarray, np.ndar
     H = np.column_stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z, np.ones(len(V))])
     scale = np.abs(H).max(axis=0)
     scale[scale == 0] = 1.0
-    th, *_ = linalg.lstsq(H / scale, np.full(len(V), g_mps2 ** 2), rcond=None)
+    th, *_ = linalg.lstsq(H / scale, np.full(len(V), g_mps2**2), rcond=None)
     th = th / scale
     Q = np.array([[th[0], th[3], th[4]], [th[3], th[1], th[5]], [th[4], th[5], th[2]]])
     q = th[6:9]
     try:
         v0 = -np.linalg.solve(Q, q)
-        r = g_mps2 ** 2 - th[9] + q @ np.linalg.solve(Q, q)
+        r = g_mps2**2 - th[9] + q @ np.linalg.solve(Q, q)
         if r <= 0:
             return None
-        L = np.linalg.cholesky(Q * g_mps2 ** 2 / r)
+        L = np.linalg.cholesky(Q * g_mps2**2 / r)
     except np.linalg.LinAlgError:
         return None
     M = L.T
@@ -262,16 +287,17 @@ def norm_sigma(positions: list[Position], B, M, noise_known: bool) -> np.ndarray
 def mean_variance(positions: list[Position]) -> np.ndarray:
     """The variance (m, 3) of each position's mean: its standard error ``se`` squared (bias
     instability included, from the Allan deviation) when measured, else ``std² / n``."""
-    return np.array([(p.se ** 2 if p.se is not None else p.std ** 2 / max(p.n, 1)) for p in positions])
+    return np.array([(p.se**2 if p.se is not None else p.std**2 / max(p.n, 1)) for p in positions])
 
 
 # ----------------------------------------------------------------------------- the fit
+
 
 def _joint_residual_builder(V: np.ndarray, g: float, sig_n: np.ndarray, known: list[tuple[int, np.ndarray, float]]):
     """Residual and Jacobian over blocks B, M: norm rows, then two rows per labelled position
     (the vector components perpendicular to its expected direction, target 0)."""
     m = len(known)
-    E = np.array([perp_basis(u) for _, u, _ in known]).reshape(2 * m, 3)     # (2m, 3)
+    E = np.array([perp_basis(u) for _, u, _ in known]).reshape(2 * m, 3)  # (2m, 3)
     Vk = np.repeat(np.array([V[k] for k, _, _ in known]).reshape(m, 3), 2, axis=0)  # (2m, 3)
     sig_v = np.repeat(np.array([s for _, _, s in known], dtype=float), 2)
     Jv = np.hstack([E, (E[:, :, None] * Vk[:, None, :]).reshape(2 * m, 9)])
@@ -307,8 +333,11 @@ def refine(positions: list[Position], g_mps2: float, B0, M0, *, gauge: str, sig_
     from ``(B0, M0)`` through ``solvers.fit``."""
     V = np.array([p.mean for p in positions])
     if gauge == "table":
-        known = [(k, p.direction, math.hypot(g_mps2 * p.placement_sigma_rad, float(sig_n[k])))
-                 for k, p in enumerate(positions) if p.direction is not None]
+        known = [
+            (k, p.direction, math.hypot(g_mps2 * p.placement_sigma_rad, float(sig_n[k])))
+            for k, p in enumerate(positions)
+            if p.direction is not None
+        ]
         free = {"B": True, "M": True}
         idx = list(range(12))
     else:
@@ -328,7 +357,7 @@ def _studentized(positions, B, M, res: FitResult, gauge: str, s_n) -> np.ndarray
     Jw = accel.p1_norm_jacobian(V, B, M)[1][:, idx] / s_n[:, None]
     cov_u = res.cov / (res.reduced_chi2 if res.misfit_scaled else 1.0)
     h = np.clip(np.sum((Jw @ cov_u) * Jw, axis=1), 0.0, 1.0)
-    z = res.residuals[:len(positions)] / s_n
+    z = res.residuals[: len(positions)] / s_n
     return z / np.sqrt(np.maximum(1.0 - h, 1e-3))
 
 
@@ -353,7 +382,9 @@ def find_outliers(positions, g_mps2, res: FitResult, gauge: str, s_n, threshold:
             cur = refine(pa, g_mps2, cur.params["B"], cur.params["M"], gauge=gauge, sig_n=s_n[active])
         except Exception:
             break
-        rk = float(np.linalg.norm(accel.p1_apply(positions[k].mean[None], cur.params["B"], cur.params["M"]))[()] - g_mps2)
+        rk = float(
+            np.linalg.norm(accel.p1_apply(positions[k].mean[None], cur.params["B"], cur.params["M"]))[()] - g_mps2
+        )
         out.append((k, rk / s_n[k], rk))
     return out
 
@@ -381,8 +412,9 @@ def debias_rotation(B, M, cov_w) -> tuple[np.ndarray, np.ndarray]:
     return corr @ B, corr @ M
 
 
-def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm", gauge: str = "auto",
-              noise_known: bool = True) -> P1Result:
+def calibrate(
+    positions: list[Position], g_mps2: float, *, method: str = "norm", gauge: str = "auto", noise_known: bool = True
+) -> P1Result:
     """The P1 calibration of ``positions`` (see the module docstring).
 
     method: ``'norm'`` (step 8 when possible, then step 10) or ``'six-position'`` (step 8
@@ -403,8 +435,10 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
             warnings.append(f"step 8 not possible: {exc}")
     if method == "six-position":
         if s8 is None:
-            raise TooFewPositions(f"the six-position (step 8) solution needs the ±axis positions labelled; "
-                                  f"this capture has {len(known)} positions with a known direction")
+            raise TooFewPositions(
+                f"the six-position (step 8) solution needs the ±axis positions labelled; "
+                f"this capture has {len(known)} positions with a known direction"
+            )
         return _step8_result(positions, g_mps2, s8, warnings, noise_known)
 
     # provisional calibration, for clustering and the start
@@ -419,8 +453,10 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
         hint = ""
         if s8 is not None and len({tuple(np.round(p.direction, 3)) for p in known}) >= 6:
             hint = "; the labelled ±axis positions allow the six-position linear solution (--method six-position)"
-        raise TooFewPositions(f"{n_distinct} distinct orientations in {len(positions)} static positions; the "
-                              f"norm-condition fit needs at least {MIN_DISTINCT}{hint}")
+        raise TooFewPositions(
+            f"{n_distinct} distinct orientations in {len(positions)} static positions; the "
+            f"norm-condition fit needs at least {MIN_DISTINCT}{hint}"
+        )
     dirs = np.array([p.direction for p in known]) if known else np.zeros((0, 3))
     rank_known = int(np.linalg.matrix_rank(dirs, tol=0.1)) if len(known) else 0
     if gauge == "auto":
@@ -429,17 +465,21 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
         raise NotIdentifiable("the table gauge needs at least two labelled positions with different known directions")
     cond = position_condition(V, B0, M0)
     if not math.isfinite(cond):
-        raise NotIdentifiable(f"the {len(positions)} positions cannot determine the calibration (the norm "
-                              "condition's Jacobian is singular): the orientations are too alike; add positions "
-                              "spread over all directions")
+        raise NotIdentifiable(
+            f"the {len(positions)} positions cannot determine the calibration (the norm "
+            "condition's Jacobian is singular): the orientations are too alike; add positions "
+            "spread over all directions"
+        )
     if noise_known:
         sig_n = norm_sigma(positions, B0, M0, True)
     else:
         s_est = estimate_norm_noise(positions, g_mps2, B0, M0)
         if s_est is None:
             s_est = 1e-3 * g_mps2
-            warnings.append("no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
-                            f"a norm noise of {s_est:.3g} m/s²")
+            warnings.append(
+                "no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
+                f"a norm noise of {s_est:.3g} m/s²"
+            )
         sig_n = np.full(len(positions), s_est)
     res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
     if noise_known:  # weights at the solution; refit only if they moved (a far start)
@@ -448,8 +488,10 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
             res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_new)
         sig_n = sig_new
     if res.unidentifiable:
-        raise NotIdentifiable(f"the positions cannot determine {', '.join(res.unidentifiable)} "
-                              f"(condition number {res.condition_number:.3g})")
+        raise NotIdentifiable(
+            f"the positions cannot determine {', '.join(res.unidentifiable)} "
+            f"(condition number {res.condition_number:.3g})"
+        )
     B, M = res.params["B"], res.params["M"]
     rotation_cov = None
     if gauge == "table":
@@ -457,40 +499,67 @@ def calibrate(positions: list[Position], g_mps2: float, *, method: str = "norm",
         B, M = debias_rotation(B, M, rotation_cov)
     cond = position_condition(V, B, M)
     if cond > CONDITION_WARN:
-        warnings.append(f"the positions are too alike (condition number {cond:.0f} > {CONDITION_WARN:.0f}): "
-                        "some coefficients are poorly determined; add positions with gravity along other directions")
+        warnings.append(
+            f"the positions are too alike (condition number {cond:.0f} > {CONDITION_WARN:.0f}): "
+            "some coefficients are poorly determined; add positions with gravity along other directions"
+        )
     n = len(positions)
     r_n = res.residuals[:n]
     s_n = sig_n
-    z = r_n / s_n
+    z = r_n / s_n  # noqa: F841
     outliers = find_outliers(positions, g_mps2, res, gauge, s_n)
     for k, zk, rk in outliers:
         p = positions[k]
         when = f" (t {p.t_start_s:.1f}–{p.t_stop_s:.1f} s)" if p.t_start_s is not None else ""
-        warnings.append(f"position {p.label or k + 1}{when} disagrees with the rest: |A| − g = {rk:+.3g} m/s² "
-                        f"against the fit of the others, {abs(zk):.0f}σ; was it still, or touching something? "
-                        "(it is kept in the fit)")
+        warnings.append(
+            f"position {p.label or k + 1}{when} disagrees with the rest: |A| − g = {rk:+.3g} m/s² "
+            f"against the fit of the others, {abs(zk):.0f}σ; was it still, or touching something? "
+            "(it is kept in the fit)"
+        )
     outliers = [k for k, _, _ in outliers]
     if noise_known and res.misfit_scaled:
-        warnings.append(f"the residuals are {math.sqrt(res.reduced_chi2):.1f}× the measured noise (reduced χ² "
-                        f"{res.reduced_chi2:.3g}): A = B + M V does not explain everything (temperature, "
-                        "non-linearity, moving positions?); uncertainties are scaled up by that factor")
+        warnings.append(
+            f"the residuals are {math.sqrt(res.reduced_chi2):.1f}× the measured noise (reduced χ² "
+            f"{res.reduced_chi2:.3g}): A = B + M V does not explain everything (temperature, "
+            "non-linearity, moving positions?); uncertainties are scaled up by that factor"
+        )
     if not noise_known:
-        warnings.append(f"no per-position noise given: the norm noise is estimated from the residuals "
-                        f"({s_n[0]:.3g} m/s²), so uncertainties include any model misfit")
+        warnings.append(
+            f"no per-position noise given: the norm noise is estimated from the residuals "
+            f"({s_n[0]:.3g} m/s²), so uncertainties include any model misfit"
+        )
     if gauge == "table":
         sig_deg = sorted({round(math.degrees(p.placement_sigma_rad), 2) for p in known})
-        gauge_text = ("table: the rotation the norm cannot see is fixed by the labelled positions' known gravity "
-                      f"directions (vector condition, placement σ {'/'.join(str(s) for s in sig_deg)}° per "
-                      "component), everything else by the norm condition")
+        gauge_text = (
+            "table: the rotation the norm cannot see is fixed by the labelled positions' known gravity "
+            f"directions (vector condition, placement σ {'/'.join(str(s) for s in sig_deg)}° per "
+            "component), everything else by the norm condition"
+        )
     else:
-        gauge_text = ("upper-triangular: M[1][0] = M[2][0] = M[2][1] = 0 (imu_tk's convention: frame z = the "
-                      "sensor's z axis, frame y in its y-z plane); no labelled positions fix the orientation")
-    return P1Result(B=B, M=M, sigma_B=res.sigma["B"], sigma_M=res.sigma["M"], method="norm", gauge=gauge,
-                    gauge_text=gauge_text, norm_residuals=r_n, norm_sigma=s_n,
-                    residual_rms=float(np.sqrt(np.mean(r_n ** 2))), n_distinct=n_distinct, clusters=clusters,
-                    position_condition=cond, fit=res, step8=_s8_summary(s8), noise_known=noise_known,
-                    warnings=warnings, outliers=outliers)
+        gauge_text = (
+            "upper-triangular: M[1][0] = M[2][0] = M[2][1] = 0 (imu_tk's convention: frame z = the "
+            "sensor's z axis, frame y in its y-z plane); no labelled positions fix the orientation"
+        )
+    return P1Result(
+        B=B,
+        M=M,
+        sigma_B=res.sigma["B"],
+        sigma_M=res.sigma["M"],
+        method="norm",
+        gauge=gauge,
+        gauge_text=gauge_text,
+        norm_residuals=r_n,
+        norm_sigma=s_n,
+        residual_rms=float(np.sqrt(np.mean(r_n**2))),
+        n_distinct=n_distinct,
+        clusters=clusters,
+        position_condition=cond,
+        fit=res,
+        step8=_s8_summary(s8),
+        noise_known=noise_known,
+        warnings=warnings,
+        outliers=outliers,
+    )
 
 
 def _s8_summary(s8):
@@ -504,12 +573,27 @@ def _step8_result(positions, g_mps2, s8, warnings, noise_known) -> P1Result:
     B, M = s8["B"], s8["M"]
     r = np.linalg.norm(accel.p1_apply(V, B, M), axis=1) - g_mps2
     clusters = orientation_clusters(accel.p1_apply(V, B, M))
-    warnings = warnings + ["six-position (step 8) linear solution only: its accuracy is limited by how well the "
-                           "device was placed (σ ≈ 0.4° → ~0.07 m/s²), not by the sensor noise; the norm-condition "
-                           f"refinement needs at least {MIN_DISTINCT} distinct orientations"]
-    return P1Result(B=B, M=M, sigma_B=s8["sigma_B"], sigma_M=s8["sigma_M"], method="six-position", gauge="none",
-                    gauge_text="step 8: the labelled positions' known gravity directions define the frame",
-                    norm_residuals=r, norm_sigma=norm_sigma(positions, B, M, noise_known),
-                    residual_rms=float(np.sqrt(np.mean(r ** 2))), n_distinct=int(clusters.max() + 1),
-                    clusters=clusters, position_condition=position_condition(V, B, M), fit=s8["fit"],
-                    step8=_s8_summary(s8), noise_known=noise_known, warnings=warnings)
+    warnings = warnings + [
+        "six-position (step 8) linear solution only: its accuracy is limited by how well the "
+        "device was placed (σ ≈ 0.4° → ~0.07 m/s²), not by the sensor noise; the norm-condition "
+        f"refinement needs at least {MIN_DISTINCT} distinct orientations"
+    ]
+    return P1Result(
+        B=B,
+        M=M,
+        sigma_B=s8["sigma_B"],
+        sigma_M=s8["sigma_M"],
+        method="six-position",
+        gauge="none",
+        gauge_text="step 8: the labelled positions' known gravity directions define the frame",
+        norm_residuals=r,
+        norm_sigma=norm_sigma(positions, B, M, noise_known),
+        residual_rms=float(np.sqrt(np.mean(r**2))),
+        n_distinct=int(clusters.max() + 1),
+        clusters=clusters,
+        position_condition=position_condition(V, B, M),
+        fit=s8["fit"],
+        step8=_s8_summary(s8),
+        noise_known=noise_known,
+        warnings=warnings,
+    )

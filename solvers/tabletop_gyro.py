@@ -26,6 +26,7 @@ Analytic Jacobian: a change ``δω_j`` of the rate at step j turns the result by
 ``R exp([δθ]×)``, ``δθ = Σ Q_j δφ_j`` (``integrate_rates``), and the residual by
 ``E [v]× δθ``, ``v = Rᵀ u_k``; ``δω = −K⁻¹ (δK ω + δε + δG f)``.
 """
+
 from __future__ import annotations
 
 import math
@@ -36,11 +37,10 @@ import numpy as np
 from solvers.errors import NotIdentifiable, TooFewPositions
 from solvers.fit import FitResult, fit
 from solvers.frames import OMEGA_EARTH_RAD_S
-from solvers.models import Conditions
-from solvers.models import gyro
+from solvers.models import Conditions, gyro
 
-MIN_MOTIONS = 5            # rotations needed for 9 scale/misalignment parameters (2 rows each)
-G_MIN_ORIENTATIONS = 6     # distinct hold directions before g-sensitivity is fitted
+MIN_MOTIONS = 5  # rotations needed for 9 scale/misalignment parameters (2 rows each)
+G_MIN_ORIENTATIONS = 6  # distinct hold directions before g-sensitivity is fitted
 
 
 @dataclass
@@ -83,16 +83,16 @@ class GyroResult:
     sigma_G: np.ndarray | None
     earth_rate_up_rad_s: float
     sigma_earth_rate_up_rad_s: float
-    direction_residual_rad: np.ndarray      # angle between predicted and measured u_{k1}, per motion
-    direction_sigma_rad: np.ndarray         # the σ used per motion (per component)
-    hold_residual: np.ndarray               # (n_holds, 3) raw units
+    direction_residual_rad: np.ndarray  # angle between predicted and measured u_{k1}, per motion
+    direction_sigma_rad: np.ndarray  # the σ used per motion (per component)
+    hold_residual: np.ndarray  # (n_holds, 3) raw units
     fit: FitResult
     latitude_deg: float | None
     warnings: list[str] = field(default_factory=list)
 
     @property
     def direction_rms_rad(self) -> float:
-        return float(np.sqrt(np.mean(self.direction_residual_rad ** 2)))
+        return float(np.sqrt(np.mean(self.direction_residual_rad**2)))
 
     def params(self) -> dict:
         out = {"K": self.K, "eps": self.eps}
@@ -165,7 +165,7 @@ def scale_search(holds: list[Hold], motions: list[Motion], lo: float = 1e-2, hi:
     grid = np.exp(np.linspace(math.log(lo), math.log(hi), 81))
     j = int(np.argmin([cost(s) for s in grid]))
     a, c = grid[max(j - 1, 0)], grid[min(j + 1, len(grid) - 1)]
-    for _ in range(30):                     # golden section on log s
+    for _ in range(30):  # golden section on log s
         m1, m2 = a * (c / a) ** 0.382, a * (c / a) ** 0.618
         if cost(m1) < cost(m2):
             c = m2
@@ -174,8 +174,15 @@ def scale_search(holds: list[Hold], motions: list[Motion], lo: float = 1e-2, hi:
     return math.sqrt(a * c)
 
 
-def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitude_deg: float | None = None,
-              fit_g: bool | None = None) -> GyroResult:
+def calibrate(
+    holds: list[Hold],
+    motions: list[Motion],
+    K0,
+    *,
+    noise_raw,
+    latitude_deg: float | None = None,
+    fit_g: bool | None = None,
+) -> GyroResult:
     """Fit ``K``, ``ε`` (and ``G``) to the holds and the rotations (module docstring).
 
     ``K0`` the starting gain (raw units per rad/s, e.g. ``I / unit factor``); ``noise_raw`` the
@@ -193,8 +200,10 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
     if fit_g is None:
         fit_g = n_dirs >= G_MIN_ORIENTATIONS and spans
         if not fit_g:
-            warnings.append(f"g-sensitivity not fitted: the holds span {n_dirs} distinct directions "
-                            f"(needs {G_MIN_ORIENTATIONS} in 3-D); the bias then contains G·f averaged over them")
+            warnings.append(
+                f"g-sensitivity not fitted: the holds span {n_dirs} distinct directions "
+                f"(needs {G_MIN_ORIENTATIONS} in 3-D); the bias then contains G·f averaged over them"
+            )
     K0 = np.asarray(K0, dtype=float)
     scale0 = np.abs(np.diag(K0))
     if latitude_deg is not None:
@@ -203,12 +212,12 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
     else:
         w_up0, horiz = 0.0, W
     # hold rows: σ² = se² + horizontal Earth rate (unknown direction) through the scale
-    sig_h = np.sqrt(np.array([h.y_se ** 2 for h in holds]) + 0.5 * (scale0 * horiz) ** 2).ravel()
+    sig_h = np.sqrt(np.array([h.y_se**2 for h in holds]) + 0.5 * (scale0 * horiz) ** 2).ravel()
     b = Batch(motions)
-    E = np.array([_perp_basis(holds[m.k1].u) for m in motions])            # (m, 2, 3)
+    E = np.array([_perp_basis(holds[m.k1].u) for m in motions])  # (m, 2, 3)
     u0 = np.array([holds[m.k0].u for m in motions])
-    sig_w = float(np.mean(np.asarray(noise_raw, dtype=float) / scale0))    # rad/s per sample
-    arw2 = sig_w ** 2 * np.sum(b.dt ** 2, axis=1)
+    sig_w = float(np.mean(np.asarray(noise_raw, dtype=float) / scale0))  # rad/s per sample
+    arw2 = sig_w**2 * np.sum(b.dt**2, axis=1)
     dir2 = np.array([holds[m.k0].dir_sigma_rad ** 2 + holds[m.k1].dir_sigma_rad ** 2 for m in motions])
     sig_r = np.sqrt(arw2 + dir2 + 0.5 * (horiz * b.duration) ** 2)
     sigma = np.concatenate([sig_h, np.repeat(sig_r, 2)] + ([[1.0]] if latitude_deg is None else []))
@@ -227,7 +236,7 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
     def resid(p):
         hold = (U * p["wU"]) @ p["K"].T + p["eps"] + F @ p["G"].T - Ybar
         R = gyro.integrate_rates(b.rates(model(p)), b.t)
-        v = np.einsum("mji,mj->mi", R, u0)                                  # Rᵀ u_k0
+        v = np.einsum("mji,mj->mi", R, u0)  # Rᵀ u_k0
         rot = np.einsum("mci,mi->mc", E, v).ravel()
         out = [hold.ravel(), rot]
         if latitude_deg is None:
@@ -235,7 +244,7 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
         return np.concatenate(out)
 
     def jac(p):
-        K, G = p["K"], p["G"]
+        K, G = p["K"], p["G"]  # noqa: F841
         A = np.linalg.inv(K)
         cols = []
         # holds: d/dK_ab = e_a (wU u)[b]; d/deps = I; d/dG_ab = e_a f[b]; d/dwU = K u
@@ -247,8 +256,8 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
         w = b.rates(model(p))
         R, Q = gyro.integrate_rates(w, b.t, with_jacobian=True)
         v = np.einsum("mji,mj->mi", R, u0)
-        Ev = np.einsum("mci,mij->mcj", E, gyro.skew(v))                    # E [v]×  (m, 2, 3)
-        Bj = b.dt[..., None, None] * (Q @ A)                                # (m, n-1, 3, 3)
+        Ev = np.einsum("mci,mij->mcj", E, gyro.skew(v))  # E [v]×  (m, 2, 3)
+        Bj = b.dt[..., None, None] * (Q @ A)  # (m, n-1, 3, 3)
         wm = 0.5 * (w[:, 1:] + w[:, :-1])
         fm = 0.5 * (b.f[:, 1:] + b.f[:, :-1])
         dK = -np.einsum("mjca,mjb->mcab", Bj, wm).reshape(len(motions), 3, 9)
@@ -276,27 +285,44 @@ def calibrate(holds: list[Hold], motions: list[Motion], K0, *, noise_raw, latitu
         out.warnings[:0] = ["g-sensitivity not identifiable from these holds: not fitted"]
         return out
     if res.unidentifiable:
-        raise NotIdentifiable(f"the rotations between the holds cannot determine {', '.join(res.unidentifiable)} "
-                              "(turn the unit about all three axes between holds)")
+        raise NotIdentifiable(
+            f"the rotations between the holds cannot determine {', '.join(res.unidentifiable)} "
+            "(turn the unit about all three axes between holds)"
+        )
     p = res.params
     dres = direction_residuals(model(p), holds, motions)
-    hold_r = res.residuals[:3 * nh].reshape(nh, 3)
+    hold_r = res.residuals[: 3 * nh].reshape(nh, 3)
     if res.misfit_scaled:
-        warnings.append(f"gyro: the residuals are {math.sqrt(res.reduced_chi2):.1f}× their expected size (reduced "
-                        f"χ² {res.reduced_chi2:.3g}): the holds' bias or the rotations are not explained to the "
-                        "noise (bias drifting between holds, a motion partly inside a hold?); uncertainties scaled up")
+        warnings.append(
+            f"gyro: the residuals are {math.sqrt(res.reduced_chi2):.1f}× their expected size (reduced "
+            f"χ² {res.reduced_chi2:.3g}): the holds' bias or the rotations are not explained to the "
+            "noise (bias drifting between holds, a motion partly inside a hold?); uncertainties scaled up"
+        )
     zr = dres / sig_r
     med = float(np.median(np.abs(zr)))
     for i in np.flatnonzero(np.abs(zr) > 5 * max(med, 1.0) * 1.4826):
         mo = motions[i]
-        warnings.append(f"gyro: the rotation from hold {holds[mo.k0].label} to {holds[mo.k1].label} misses by "
-                        f"{math.degrees(dres[i]):.2f}° ({zr[i]:.0f}σ): clipped rate, or moved during a hold? (kept)")
+        warnings.append(
+            f"gyro: the rotation from hold {holds[mo.k0].label} to {holds[mo.k1].label} misses by "
+            f"{math.degrees(dres[i]):.2f}° ({zr[i]:.0f}σ): clipped rate, or moved during a hold? (kept)"
+        )
     sig = res.sigma
-    return GyroResult(K=p["K"], eps=p["eps"], G=p["G"] if fit_g else None, sigma_K=sig["K"], sigma_eps=sig["eps"],
-                      sigma_G=sig["G"] if fit_g else None, earth_rate_up_rad_s=float(p["wU"]),
-                      sigma_earth_rate_up_rad_s=float(sig["wU"]), direction_residual_rad=dres,
-                      direction_sigma_rad=sig_r, hold_residual=hold_r, fit=res, latitude_deg=latitude_deg,
-                      warnings=warnings)
+    return GyroResult(
+        K=p["K"],
+        eps=p["eps"],
+        G=p["G"] if fit_g else None,
+        sigma_K=sig["K"],
+        sigma_eps=sig["eps"],
+        sigma_G=sig["G"] if fit_g else None,
+        earth_rate_up_rad_s=float(p["wU"]),
+        sigma_earth_rate_up_rad_s=float(sig["wU"]),
+        direction_residual_rad=dres,
+        direction_sigma_rad=sig_r,
+        hold_residual=hold_r,
+        fit=res,
+        latitude_deg=latitude_deg,
+        warnings=warnings,
+    )
 
 
 def _distinct(U: np.ndarray, max_angle_deg: float = 7.0) -> int:

@@ -1,4 +1,5 @@
 """Physical units of raw sensor columns: factors to SI (m/s², rad/s, nT, m/s)."""
+
 from __future__ import annotations
 
 import math

@@ -5,6 +5,7 @@ Screens (one file each in ``station/screens/``): Connect → Procedure → Resul
 Help. Device I/O and database reads run in thread workers that post the typed messages
 of ``station/messages.py``; the procedure logic is ``station.procedures.tabletop_guide``.
 """
+
 from __future__ import annotations
 
 import os
@@ -112,8 +113,7 @@ class StationApp(App):
                 parts.append("overdue: " + ", ".join(tui_markup(d["device_id"]) for d in overdue[:4]))
             if soon:
                 parts.append("due within 7 days: " + ", ".join(tui_markup(d["device_id"]) for d in soon[:4]))
-            self.notify("; ".join(parts) + "  (F2 history)", title="Recalibration",
-                        severity="warning", timeout=10)
+            self.notify("; ".join(parts) + "  (F2 history)", title="Recalibration", severity="warning", timeout=10)
         self.due = message.data
         for screen in self.screen_stack:
             if hasattr(screen, "show_due"):
@@ -125,8 +125,12 @@ class StationApp(App):
             guide = getattr(screen, "guide", None)
             if guide is not None and getattr(guide, "phase", "") not in ("done", "fitted", "aborted"):
                 return "the run in progress"
-            if (type(screen).__name__ == "ResultsScreen" and getattr(screen, "result", None) is not None
-                    and getattr(screen, "calibration_id", None) is None and not getattr(screen, "discarded", False)):
+            if (
+                type(screen).__name__ == "ResultsScreen"
+                and getattr(screen, "result", None) is not None
+                and getattr(screen, "calibration_id", None) is None
+                and not getattr(screen, "discarded", False)
+            ):
                 return "the unsaved result"
         return None
 
@@ -140,8 +144,9 @@ class StationApp(App):
             return
         if isinstance(self.screen, ConfirmScreen):
             return
-        self.push_screen(ConfirmScreen(f"Quit? {lost[0].upper() + lost[1:]} is lost."),
-                         lambda yes: self.exit() if yes else None)
+        self.push_screen(
+            ConfirmScreen(f"Quit? {lost[0].upper() + lost[1:]} is lost."), lambda yes: self.exit() if yes else None
+        )
 
     def action_history(self) -> None:
         from station.screens.history import HistoryScreen
@@ -156,10 +161,20 @@ class StationApp(App):
             self.push_screen(HelpScreen())
 
 
-def make_app(db_path: str | None = None, device=None, *, demo: bool = False, average_s: float | None = None,
-             settle_s: float | None = None, device_id: str | None = None, model: str = "",
-             state_dir: str | None = None, start: str | None = None, resume: bool = False,
-             exit_when_saved: bool = False) -> StationApp:
+def make_app(
+    db_path: str | None = None,
+    device=None,
+    *,
+    demo: bool = False,
+    average_s: float | None = None,
+    settle_s: float | None = None,
+    device_id: str | None = None,
+    model: str = "",
+    state_dir: str | None = None,
+    start: str | None = None,
+    resume: bool = False,
+    exit_when_saved: bool = False,
+) -> StationApp:
     """The station app.
 
     db_path: the station database (None: nothing is saved or looked up).
@@ -169,8 +184,16 @@ def make_app(db_path: str | None = None, device=None, *, demo: bool = False, ave
     average_s: averaging time per position (default 180 s, the source's 3–5 minutes;
         the demo uses 3 s).
     """
-    session = Session(db_path=db_path, source=device, scripted=demo, autosave=demo, state_dir=state_dir,
-                      resume=resume, exit_when_saved=exit_when_saved, model=model)
+    session = Session(
+        db_path=db_path,
+        source=device,
+        scripted=demo,
+        autosave=demo,
+        state_dir=state_dir,
+        resume=resume,
+        exit_when_saved=exit_when_saved,
+        model=model,
+    )
     session.average_s = float(average_s if average_s is not None else (3.0 if demo else 180.0))
     session.settle_s = float(settle_s if settle_s is not None else (1.0 if demo else 2.0))
     if device is not None:

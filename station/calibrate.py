@@ -4,6 +4,7 @@ Each procedure's logic lives in its module (``station/procedures/<stem>.py``, li
 ``station.procedures.registry``; its shape is ``station.procedures.contract.ProcedureModule``).
 This module only dispatches.
 """
+
 from __future__ import annotations
 
 import json
@@ -14,8 +15,8 @@ from solvers.errors import SolverError
 from solvers.jsonable import jsonable
 from station.errors import InputError, UnsupportedError
 from station.formatting import MISSING, num, param_lines
-from station.procedures import registry
 from station.guard import check_extremes, check_result, printed_warnings, quiet_stdout
+from station.procedures import registry
 
 
 def procedure_module(procedure: str | None, path=None):
@@ -60,13 +61,15 @@ def guarded(capture, fn, *args, **kwargs):
         with np.errstate(all="ignore"):
             return fn(*args, **kwargs)
     except np.linalg.LinAlgError as exc:  # NaN/inf reached a decomposition: degenerate or absurd data
-        raise UnsupportedError(f"{where}: the fit failed numerically ({exc}); "
-                               "check the data: constant, all zero or absurdly large values?") from None
+        raise UnsupportedError(
+            f"{where}: the fit failed numerically ({exc}); check the data: constant, all zero or absurdly large values?"
+        ) from None
     except SolverError as exc:
         raise UnsupportedError(f"{where}: {exc}") from None
     except (OverflowError, FloatingPointError) as exc:
-        raise UnsupportedError(f"{where}: a number overflowed in the fit ({exc}): the data hold values "
-                               "far beyond the sensor's range") from None
+        raise UnsupportedError(
+            f"{where}: a number overflowed in the fit ({exc}): the data hold values far beyond the sensor's range"
+        ) from None
 
 
 def to_json(result: dict) -> str:
@@ -82,8 +85,11 @@ def format_text(result: dict) -> str:
         module = None
     if module is not None and hasattr(module, "format_text"):
         return module.format_text(result)
-    lines = [f"procedure  {result.get('procedure')}", f"device     {result.get('device')}",
-             f"model      {result.get('model')}"]
+    lines = [
+        f"procedure  {result.get('procedure')}",
+        f"device     {result.get('device')}",
+        f"model      {result.get('model')}",
+    ]
     params, unc = result.get("params", {}), result.get("uncertainty", {})
     for name, value in params.items():
         sig = unc.get(name) if isinstance(unc, dict) else None

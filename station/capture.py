@@ -18,6 +18,7 @@ capture that the reader would refuse or could not give back exactly: ``read_capt
 ``write_capture(p, c)`` equals ``c`` (floats are written with ``repr``, which round-trips bit
 for bit; integer-valued floats are written without the ``.0``).
 """
+
 from __future__ import annotations
 
 import codecs
@@ -65,14 +66,36 @@ _NUMERIC_META: dict[str, tuple] = {
 
 # Units shown by `station inspect` for the columns the spec names.
 _COLUMN_UNITS = {
-    "t": "s", "temp_c": "°C", "speed_rad_s": "rad/s", "ref_gx": "rad/s", "ref_gy": "rad/s",
-    "ref_gz": "rad/s", "vl1": "m/s", "vl2": "m/s", "vl3": "m/s", "vx": "m/s", "vy": "m/s",
-    "vz": "m/s", "vn": "m/s", "ve": "m/s", "vd": "m/s", "roll_deg": "deg", "pitch_deg": "deg",
-    "yaw_deg": "deg", "wx": "rad/s", "wy": "rad/s", "wz": "rad/s", "heading_deg": "deg",
-    "n": "samples", "position": "label",
+    "t": "s",
+    "temp_c": "°C",
+    "speed_rad_s": "rad/s",
+    "ref_gx": "rad/s",
+    "ref_gy": "rad/s",
+    "ref_gz": "rad/s",
+    "vl1": "m/s",
+    "vl2": "m/s",
+    "vl3": "m/s",
+    "vx": "m/s",
+    "vy": "m/s",
+    "vz": "m/s",
+    "vn": "m/s",
+    "ve": "m/s",
+    "vd": "m/s",
+    "roll_deg": "deg",
+    "pitch_deg": "deg",
+    "yaw_deg": "deg",
+    "wx": "rad/s",
+    "wy": "rad/s",
+    "wz": "rad/s",
+    "heading_deg": "deg",
+    "n": "samples",
+    "position": "label",
 }
-_RAW_COLUMN_UNIT_KEY = {c: k for k, cols in (("accel_unit", "ax ay az"), ("gyro_unit", "gx gy gz"),
-                                             ("mag_unit", "mx my mz")) for c in cols.split()}
+_RAW_COLUMN_UNIT_KEY = {
+    c: k
+    for k, cols in (("accel_unit", "ax ay az"), ("gyro_unit", "gx gy gz"), ("mag_unit", "mx my mz"))
+    for c in cols.split()
+}
 
 # A number as the format writes it: no nan/inf words, no underscores, no hex.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
@@ -87,6 +110,7 @@ DEFAULT_CHUNK_ROWS = 65536
 
 
 # ------------------------------------------------------------------------------------ Capture
+
 
 @dataclass(eq=False)
 class Capture:
@@ -151,8 +175,10 @@ class Capture:
         lat = self.float_meta("latitude_deg")
         if lat is not None:
             return frames.normal_gravity_mps2(lat, self.float_meta("altitude_m", 0.0))
-        warnings.append("no g_mps2 and no latitude_deg: using standard gravity 9.80665 m/s² (local g differs by up "
-                        "to 0.3 %, which goes straight into the scale factors)")
+        warnings.append(
+            "no g_mps2 and no latitude_deg: using standard gravity 9.80665 m/s² (local g differs by up "
+            "to 0.3 %, which goes straight into the scale factors)"
+        )
         return frames.G_STANDARD_MPS2
 
     def unit(self, name: str) -> str | None:
@@ -179,11 +205,15 @@ def _same_array(a: np.ndarray, b: np.ndarray) -> bool:
     if text_a:
         return a.tolist() == b.tolist()
     nan = np.isnan(a)  # a NaN's sign is not kept: the file has only empty fields
-    return bool(np.array_equal(nan, np.isnan(b)) and np.array_equal(a[~nan], b[~nan])
-                and np.array_equal(np.signbit(a[~nan]), np.signbit(b[~nan])))
+    return bool(
+        np.array_equal(nan, np.isnan(b))
+        and np.array_equal(a[~nan], b[~nan])
+        and np.array_equal(np.signbit(a[~nan]), np.signbit(b[~nan]))
+    )
 
 
 # ----------------------------------------------------------------------------- small helpers
+
 
 def _show(value: str, limit: int = 40) -> str:
     """A field value quoted for a message: 'abc', or repr() when it holds odd characters."""
@@ -206,6 +236,7 @@ def _looks_numeric(text: str) -> bool:
 
 def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
     """Known metadata keys hold valid values (procedure, units, numbers, date, gyro_mode)."""
+
     def bad(key: str, message: str):
         raise InputError(path, lines.get(key), message)
 
@@ -263,6 +294,7 @@ def _label_problem(label: str) -> str | None:
 
 # ------------------------------------------------------------------------------------ reading
 
+
 class _Head:
     """What precedes the data: metadata, header, and where the data start."""
 
@@ -296,7 +328,9 @@ def _decode(path: str, raw: bytes, lineno: int) -> str:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(path, lineno, f"not UTF-8 text: byte 0x{raw[exc.start]:02x} at column {exc.start + 1}") from None
+        raise InputError(
+            path, lineno, f"not UTF-8 text: byte 0x{raw[exc.start]:02x} at column {exc.start + 1}"
+        ) from None
     if text.endswith("\n"):
         text = text[:-1]
     if text.endswith("\r"):
@@ -322,7 +356,7 @@ def _read_head(path: str) -> _Head:
                 raise InputError(path, lineno, f"line longer than {_MAX_HEAD_LINE} bytes: not a capture file")
             if lineno == 1:
                 if raw.startswith(codecs.BOM_UTF8):
-                    raw = raw[len(codecs.BOM_UTF8):]
+                    raw = raw[len(codecs.BOM_UTF8) :]
                 elif raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
                     raise InputError(path, 1, "UTF-16 text; capture files are UTF-8")
             text = _decode(path, raw, lineno)
@@ -340,7 +374,9 @@ def _read_head(path: str) -> _Head:
                 if not sep or not key:
                     raise InputError(path, lineno, f"metadata line without 'key: value': {_show(stripped)}")
                 if key in head.meta:
-                    raise InputError(path, lineno, f"duplicate metadata key '{key}' (first on line {head.meta_lines[key]})")
+                    raise InputError(
+                        path, lineno, f"duplicate metadata key '{key}' (first on line {head.meta_lines[key]})"
+                    )
                 head.meta[key] = value
                 head.meta_lines[key] = lineno
                 continue
@@ -370,7 +406,9 @@ def _first_line(path: str, f, stripped: str) -> None:
     if key.strip() != "station-capture" or not sep:
         raise InputError(path, 1, f"missing first line '{want}': not a station capture file{way_in}")
     if value.strip() != FORMAT_VERSION:
-        raise InputError(path, 1, f"unsupported capture version {_show(value.strip())} (this station reads version {FORMAT_VERSION})")
+        raise InputError(
+            path, 1, f"unsupported capture version {_show(value.strip())} (this station reads version {FORMAT_VERSION})"
+        )
 
 
 def _has_empty_field(data: bytes) -> bool:
@@ -403,7 +441,9 @@ class _Parser:
         self.prev_t_text = ""
         self.labels: dict[str, str] = {}  # one str object per distinct label
         if self.text:
-            self.dtype = np.dtype([(f"f{j}", f"S{_LABEL_WIDTH}" if j in self.text else "f8") for j in range(self.ncols)])
+            self.dtype = np.dtype(
+                [(f"f{j}", f"S{_LABEL_WIDTH}" if j in self.text else "f8") for j in range(self.ncols)]
+            )
         else:
             self.dtype = np.dtype("f8")
 
@@ -419,7 +459,7 @@ class _Parser:
             out = self._slow(lines, first_line)
         elif self.t_index is not None:
             stop = len(block) - 1 if block.endswith(b"\n") else len(block)
-            last = block[block.rfind(b"\n", 0, stop) + 1:stop]
+            last = block[block.rfind(b"\n", 0, stop) + 1 : stop]
             self.prev_t_text = last.split(b",")[self.t_index].strip().decode("ascii")
             self.prev_t = float(self.prev_t_text)
         return out
@@ -438,8 +478,14 @@ class _Parser:
                 return None
             data = _fill_empty_fields(data)
         try:
-            arr = np.loadtxt(io.BytesIO(data), dtype=self.dtype, delimiter=",", comments=None,
-                             ndmin=1 if self.text else 2, encoding="ascii")
+            arr = np.loadtxt(
+                io.BytesIO(data),
+                dtype=self.dtype,
+                delimiter=",",
+                comments=None,
+                ndmin=1 if self.text else 2,
+                encoding="ascii",
+            )
         except Exception:  # noqa: BLE001 - any parse failure: the per-cell path finds and names it
             return None
         if len(arr) != n_lines or (not self.text and arr.shape[1] != self.ncols):
@@ -525,7 +571,11 @@ class _Parser:
             return math.nan
         if not _NUMBER.fullmatch(v):
             if v.lower().lstrip("+-") in _NONFINITE_WORDS:
-                raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is not allowed: leave the field empty for a missing value")
+                raise InputError(
+                    self.path,
+                    lineno,
+                    f"column '{name}': {_show(v)} is not allowed: leave the field empty for a missing value",
+                )
             raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is not a number")
         x = float(v)
         if not math.isfinite(x):
@@ -555,8 +605,11 @@ def _blocks(f, block_bytes: int, path: str, first_line: int) -> Iterator[bytes]:
             block += tail
             start = block.rfind(b"\n", 0, len(block) - 1) + 1
             if len(block.rstrip(b"\r\n")) - start > _MAX_DATA_LINE:
-                raise InputError(path, lineno + block.count(b"\n", 0, start),
-                                 f"line longer than {_MAX_DATA_LINE} bytes: not a capture row")
+                raise InputError(
+                    path,
+                    lineno + block.count(b"\n", 0, start),
+                    f"line longer than {_MAX_DATA_LINE} bytes: not a capture row",
+                )
         lineno += block.count(b"\n")
         yield block
 
@@ -585,10 +638,12 @@ def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[d
                 pending_blank = first if pending_blank is None else pending_blank
                 continue
             if pending_blank is not None:
-                raise InputError(path, pending_blank, "blank line inside the data (only trailing blank lines are allowed)")
+                raise InputError(
+                    path, pending_blank, "blank line inside the data (only trailing blank lines are allowed)"
+                )
             nl = block.find(b"\n", end)
             if 0 <= nl < len(block) - 1:  # trailing blank lines: an error only if data follow
-                block = block[:nl + 1]
+                block = block[: nl + 1]
                 pending_blank = first + _count_lines(block)
             n_lines = _count_lines(block)
             chunk = parser.parse(block, n_lines, first, force_slow=force_slow)
@@ -623,11 +678,11 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
         pieces = parts[name]
         columns[name] = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
         pieces.clear()
-    return Capture(meta=head.meta, columns=columns, path=path, meta_lines=head.meta_lines,
-                   header_line=head.header_line)
+    return Capture(meta=head.meta, columns=columns, path=path, meta_lines=head.meta_lines, header_line=head.header_line)
 
 
 # ------------------------------------------------------------------------------------ writing
+
 
 def _fmt_float(x: float) -> str:
     s = repr(x)
@@ -641,12 +696,24 @@ def _meta_for_writing(path, meta: dict[str, str]) -> dict[str, str]:
             raise InputError(path, None, f"metadata {key!r}: keys and values must be str")
         if key == "station-capture":
             if value != FORMAT_VERSION:
-                raise InputError(path, None, f"unsupported capture version {_show(value)} (this station writes version {FORMAT_VERSION})")
+                raise InputError(
+                    path,
+                    None,
+                    f"unsupported capture version {_show(value)} (this station writes version {FORMAT_VERSION})",
+                )
             continue
         if not key or key != key.strip() or ":" in key or not key.isprintable():
-            raise InputError(path, None, f"metadata key {_show(key)} cannot be written (empty, spaces at the ends, ':' or a control character)")
+            raise InputError(
+                path,
+                None,
+                f"metadata key {_show(key)} cannot be written (empty, spaces at the ends, ':' or a control character)",
+            )
         if value != value.strip() or not value.isprintable():
-            raise InputError(path, None, f"metadata '{key}': {_show(value)} cannot be written (spaces at the ends or a control character)")
+            raise InputError(
+                path,
+                None,
+                f"metadata '{key}': {_show(value)} cannot be written (spaces at the ends or a control character)",
+            )
         out[key] = value
     _check_meta(path, out, {})
     return out
@@ -673,8 +740,9 @@ def _text_cells(path, name: str, col: np.ndarray, start: int, first_column: bool
         distinct = None
     if distinct is None:
         bad = next(i for i, v in enumerate(values) if _label_text(v) is None)
-        raise InputError(path, None, f"column '{name}', row {start + bad + 1}: {type(values[bad]).__name__} "
-                         "value is not a label")
+        raise InputError(
+            path, None, f"column '{name}', row {start + bad + 1}: {type(values[bad]).__name__} value is not a label"
+        )
     for v in distinct:
         s = _label_text(v)
         problem = None
@@ -704,18 +772,28 @@ def _number_cells(path, name: str, col: np.ndarray, start: int, prev_t: float, i
         bad |= np.isnan(col)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise InputError(path, None, f"column '{name}', row {start + i + 1}: {float(col[i])!r} cannot be written (only finite numbers{'' if is_t else ' or NaN'})")
+        raise InputError(
+            path,
+            None,
+            f"column '{name}', row {start + i + 1}: {float(col[i])!r} cannot be written (only finite numbers{'' if is_t else ' or NaN'})",
+        )
     if is_t:
         back = np.flatnonzero(np.diff(np.concatenate(([prev_t], col))) < 0)
         if back.size:
             i = int(back[0])
             before = prev_t if i == 0 else col[i - 1]
-            raise InputError(path, None, f"column 't', row {start + i + 1}: t goes backwards: {float(col[i])!r} after {float(before)!r}")
+            raise InputError(
+                path,
+                None,
+                f"column 't', row {start + i + 1}: t goes backwards: {float(col[i])!r} after {float(before)!r}",
+            )
     elif name == "n":
         wrong = finite & ~((col >= 1) & (col == np.floor(col)))
         if wrong.any():
             i = int(np.flatnonzero(wrong)[0])
-            raise InputError(path, None, f"column 'n', row {start + i + 1}: {float(col[i])!r} is not a whole number of samples")
+            raise InputError(
+                path, None, f"column 'n', row {start + i + 1}: {float(col[i])!r} is not a whole number of samples"
+            )
     elif name.endswith("_std"):
         wrong = finite & (col < 0)
         if wrong.any():
@@ -775,7 +853,7 @@ def _emit(f, path, meta: dict[str, str], names: list[str], arrays: list[np.ndarr
     for start in range(0, n, rows):
         cells = []
         for j, (name, col) in enumerate(zip(names, arrays)):
-            part = col[start:start + rows]
+            part = col[start : start + rows]
             if name in TEXT_COLUMNS:
                 cells.append(_text_cells(path, name, part, start, first_column=(j == 0)))
             else:
@@ -785,8 +863,12 @@ def _emit(f, path, meta: dict[str, str], names: list[str], arrays: list[np.ndarr
         lines = [",".join(r) for r in zip(*cells)]
         if len(names) == 1 and not all(lines):
             i = start + lines.index("")
-            raise InputError(path, None, f"column '{names[0]}', row {i + 1}: a one-column capture cannot hold "
-                             "a missing value (the line would be blank)")
+            raise InputError(
+                path,
+                None,
+                f"column '{names[0]}', row {i + 1}: a one-column capture cannot hold "
+                "a missing value (the line would be blank)",
+            )
         f.write("\n".join(lines))
         f.write("\n")
 

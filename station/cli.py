@@ -3,6 +3,7 @@
 Subcommands live one per module in `station/commands/`; each module defines
 `register(subparsers)` and sets `func=handler(args) -> int` on its parser.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -109,6 +110,9 @@ def main(argv: list[str] | None = None) -> int:
             if debug:
                 raise
             where = getattr(args, "file", None) or getattr(args, "command", None) or "station"
-            print(f"station: {where}: cannot process this input ({type(exc).__name__}: {exc}); "
-                  "STATION_DEBUG=1 shows the traceback", file=sys.stderr)
+            print(
+                f"station: {where}: cannot process this input ({type(exc).__name__}: {exc}); "
+                "STATION_DEBUG=1 shows the traceback",
+                file=sys.stderr,
+            )
             return 2

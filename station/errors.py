@@ -1,4 +1,5 @@
 """Errors that reach the operator as one line and exit status 2."""
+
 from __future__ import annotations
 
 import os

@@ -42,6 +42,7 @@ COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI
 
 Raw volts or counts and the LDV have no parameters in either firmware and are refused.
 """
+
 from __future__ import annotations
 
 import json
@@ -139,6 +140,7 @@ def _symmetric_part(w):
 
 # --- the parameters in use (capture metadata) --------------------------------------------
 
+
 class InUse:
     """The firmware parameters a capture's data were corrected with (`param.<NAME>` metadata)."""
 
@@ -158,7 +160,8 @@ class InUse:
             other = "qgc or px4" if self.source_firmware == "px4" else self.source_firmware
             raise UnsupportedError(
                 f"{fmt}: the capture's data were corrected by {self.source_firmware} parameters (corrected: true); "
-                f"only --format {other} can compose absolute parameters from them")
+                f"only --format {other} can compose absolute parameters from them"
+            )
 
     def get(self, name: str) -> float | None:
         return self.params.get(name)
@@ -170,7 +173,8 @@ class InUse:
             raise UnsupportedError(
                 f"{self.fmt}: the capture's data were already corrected by the board (corrected: true), but its "
                 f"metadata hold no param.{missing[0]}: the {what} in use are unknown, so no absolute parameters "
-                "can be composed (record over MAVLink, which reads them, or import the log that holds them)")
+                "can be composed (record over MAVLink, which reads them, or import the log that holds them)"
+            )
         return [self.params[n] for n in names]
 
     def identity_rotation(self, names: list[str], ex: Export) -> None:
@@ -181,19 +185,24 @@ class InUse:
             n, v = next(iter(bad.items()))
             raise UnsupportedError(
                 f"{self.fmt}: the board rotation in use is not the identity ({n} = {v:g}): the corrected data are in the "
-                "body frame and the parameters in the sensor frame; composing across a rotation is not supported")
+                "body frame and the parameters in the sensor frame; composing across a rotation is not supported"
+            )
         if len(known) < len(names):
             ex.note(f"assumed no board rotation ({', '.join(n for n in names if n not in known)} not in the capture)")
 
 
 def _check_range(fmt: str, name: str, value: float, lo: float | None, hi: float | None, why: str) -> None:
     if not math.isfinite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
-        rng = f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (f"> {lo:g}" if lo is not None else f"< {hi:g}")
-        raise UnsupportedError(f"{fmt}: {name} = {value:.6g} is outside what the firmware accepts ({rng}, {why}); "
-                               "nothing written")
+        rng = (
+            f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (f"> {lo:g}" if lo is not None else f"< {hi:g}")
+        )
+        raise UnsupportedError(
+            f"{fmt}: {name} = {value:.6g} is outside what the firmware accepts ({rng}, {why}); nothing written"
+        )
 
 
 # --- accelerometer ----------------------------------------------------------------------
+
 
 def _accel_offsets_scales(cal: dict, meta: dict, fmt: str, ex: Export) -> tuple[list[float], list[float]]:
     """Per axis (offset m/s², scale) such that a = (a_fw - offset) * scale, a_fw in m/s²."""
@@ -203,17 +212,23 @@ def _accel_offsets_scales(cal: dict, meta: dict, fmt: str, ex: Export) -> tuple[
         B, M = _vec(p, "B"), _mat(p, "M")
         scales = [M[i][i] / k for i in range(3)]
         offsets = [-B[i] / scales[i] for i in range(3)]
-        ex.note(f"from A = B + M V (P1) with V in {unit}: scale = M_ii / ({k:.6g} m/s^2 per {unit}), "
-                "offset = -B_i / scale_i (sign flipped: the firmware subtracts it before scaling)")
+        ex.note(
+            f"from A = B + M V (P1) with V in {unit}: scale = M_ii / ({k:.6g} m/s^2 per {unit}), "
+            "offset = -B_i / scale_i (sign flipped: the firmware subtracts it before scaling)"
+        )
         off_diag = max(abs(M[i][j] / M[i][i]) for i in range(3) for j in range(3) if i != j)
-        ex.note(f"dropped: off-diagonal M_ij (cross-axis, largest |M_ij/M_ii| = {off_diag:.3g}); "
-                "the firmware has no cross-axis accelerometer terms")
+        ex.note(
+            f"dropped: off-diagonal M_ij (cross-axis, largest |M_ij/M_ii| = {off_diag:.3g}); "
+            "the firmware has no cross-axis accelerometer terms"
+        )
     elif procedure == "accel-centrifuge":
         S, b = _vec(p, "S"), _vec(p, "b")
         scales = [G_STANDARD_MPS2 / (k * S[i]) for i in range(3)]
         offsets = [k * b[i] for i in range(3)]
-        ex.note(f"from N = S Phi [f + D f^2] + b (P2), f in g, N in {unit}: scale = g0 / (S_i * {k:.6g} m/s^2 per {unit}), "
-                f"offset = b_i in m/s^2 (g0 = {G_STANDARD_MPS2} m/s^2, the firmware's)")
+        ex.note(
+            f"from N = S Phi [f + D f^2] + b (P2), f in g, N in {unit}: scale = g0 / (S_i * {k:.6g} m/s^2 per {unit}), "
+            f"offset = b_i in m/s^2 (g0 = {G_STANDARD_MPS2} m/s^2, the firmware's)"
+        )
         dropped = ["D (second-order, g/g^2)"]
         if "gamma" in p:
             dropped.append("gamma (misalignment)")
@@ -249,19 +264,33 @@ def _device_id(meta: dict, kind: str) -> int | None:
 def _ap_names(kind: str, n: int) -> dict:
     s = "" if n == 1 else str(n)
     if kind == "accel":
-        return {"off": [f"INS_ACC{s}OFFS_{a}" for a in AXES], "scale": [f"INS_ACC{s}SCAL_{a}" for a in AXES],
-                "id": f"INS_ACC{s}_ID"}
+        return {
+            "off": [f"INS_ACC{s}OFFS_{a}" for a in AXES],
+            "scale": [f"INS_ACC{s}SCAL_{a}" for a in AXES],
+            "id": f"INS_ACC{s}_ID",
+        }
     if kind == "gyro":
-        return {"off": [f"INS_GYR{s}OFFS_{a}" for a in AXES],  # INS_GYROFFS_X, INS_GYR2OFFS_X, ...
-                "id": f"INS_GYR{s}_ID"}
-    return {"off": [f"COMPASS_OFS{s}_{a}" for a in AXES], "dia": [f"COMPASS_DIA{s}_{a}" for a in AXES],
-            "odi": [f"COMPASS_ODI{s}_{a}" for a in AXES], "scale": f"COMPASS_SCALE{s}", "id": f"COMPASS_DEV_ID{s}"}
+        return {
+            "off": [f"INS_GYR{s}OFFS_{a}" for a in AXES],  # INS_GYROFFS_X, INS_GYR2OFFS_X, ...
+            "id": f"INS_GYR{s}_ID",
+        }
+    return {
+        "off": [f"COMPASS_OFS{s}_{a}" for a in AXES],
+        "dia": [f"COMPASS_DIA{s}_{a}" for a in AXES],
+        "odi": [f"COMPASS_ODI{s}_{a}" for a in AXES],
+        "scale": f"COMPASS_SCALE{s}",
+        "id": f"COMPASS_DEV_ID{s}",
+    }
 
 
 def _px4_names(kind: str, i: int) -> dict:
     k = {"accel": "ACC", "gyro": "GYRO", "mag": "MAG"}[kind]
-    out = {"off": [f"CAL_{k}{i}_{a}OFF" for a in AXES], "id": f"CAL_{k}{i}_ID", "prio": f"CAL_{k}{i}_PRIO",
-           "rot": f"CAL_{k}{i}_ROT"}
+    out = {
+        "off": [f"CAL_{k}{i}_{a}OFF" for a in AXES],
+        "id": f"CAL_{k}{i}_ID",
+        "prio": f"CAL_{k}{i}_PRIO",
+        "rot": f"CAL_{k}{i}_ROT",
+    }
     if kind in ("accel", "mag"):
         out["scale"] = [f"CAL_{k}{i}_{a}SCALE" for a in AXES]
     if kind == "mag":
@@ -316,8 +345,10 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             s_old = [s if s != 0 else 1.0 for s in s_old]  # 0 = never calibrated: AP_InertialSensor::init sets 1
             off = [o_old[i] + off[i] / s_old[i] for i in range(3)]
             scale = [s_old[i] * scale[i] for i in range(3)]
-            ex.note("composed with the parameters in use: OFFS = OFFS_in_use + OFFS_fit / SCAL_in_use, "
-                    "SCAL = SCAL_in_use * SCAL_fit")
+            ex.note(
+                "composed with the parameters in use: OFFS = OFFS_in_use + OFFS_fit / SCAL_in_use, "
+                "SCAL = SCAL_in_use * SCAL_fit"
+            )
         for name, v in zip(names["off"], off):
             _check_range(fmt, name, v, -AP_ACC_OFFS_MAX_MPS2, AP_ACC_OFFS_MAX_MPS2, "INS_ACCOFFS @Range")
         for name, v in zip(names["scale"], scale):
@@ -353,8 +384,10 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             # m = A (P_eff (r + o_old) − c h) = A P_eff (r + o_old − P_eff⁻¹ c h)
             ofs = o_old - np.linalg.solve(P_eff, ch)
             A = A @ P_eff / sf  # the firmware keeps multiplying by COMPASS_SCALE in use
-            ex.note("composed with the parameters in use: DIA/ODI = symmetric part of (fit matrix x matrix in use), "
-                    "OFS = OFS_in_use - (matrix in use)^-1 * hard_iron")
+            ex.note(
+                "composed with the parameters in use: DIA/ODI = symmetric part of (fit matrix x matrix in use), "
+                "OFS = OFS_in_use - (matrix in use)^-1 * hard_iron"
+            )
         P = _symmetric_part(A)
         offs_max = use.get("COMPASS_OFFS_MAX") or AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS
         for name, v in zip(names["off"], ofs):
@@ -362,7 +395,9 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         for name, i in zip(names["dia"], range(3)):
             _check_range(fmt, name, P[i, i], *AP_COMPASS_DIA_RANGE, "CompassCalibrator::fit_acceptable")
         for name, (i, j) in zip(names["odi"], ODIAG_PAIRS):
-            _check_range(fmt, name, P[i, j], -AP_COMPASS_ODI_MAX, AP_COMPASS_ODI_MAX, "CompassCalibrator::fit_acceptable")
+            _check_range(
+                fmt, name, P[i, j], -AP_COMPASS_ODI_MAX, AP_COMPASS_ODI_MAX, "CompassCalibrator::fit_acceptable"
+            )
         for name, v in zip(names["off"], ofs):
             ex.set(name, v)
         for name, i in zip(names["dia"], range(3)):
@@ -370,8 +405,10 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         for name, (i, j) in zip(names["odi"], ODIAG_PAIRS):
             ex.set(name, P[i, j])
         ex.note(f"COMPASS_OFS = -hard_iron in milligauss (ArduPilot ADDS offsets); hard_iron was in {unit}")
-        ex.note("COMPASS_DIA/ODI = symmetric part sqrtm(W^T W) of soft_iron, rescaled to map milligauss to milligauss; "
-                "it gives the same |m| as the station's upper-triangular W (they differ by a rotation the field norm cannot see)")
+        ex.note(
+            "COMPASS_DIA/ODI = symmetric part sqrtm(W^T W) of soft_iron, rescaled to map milligauss to milligauss; "
+            "it gives the same |m| as the station's upper-triangular W (they differ by a rotation the field norm cannot see)"
+        )
 
 
 def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex: Export) -> None:
@@ -394,7 +431,8 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         raise UnsupportedError(
             f"px4: the sensor's device id is unknown (no {kind}_device_id or sensor_device_id in the capture, no "
             f"{names['id']} in use): PX4 applies {names['id'][:-3]}_* only to the sensor whose device id is "
-            f"{names['id']}; give --device-id (the device_id of the board's sensor_{kind})")
+            f"{names['id']}; give --device-id (the device_id of the board's sensor_{kind})"
+        )
     if use.corrected:
         use.identity_rotation(["SENS_BOARD_ROT", "SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"], ex)
     ex.set_int(names["id"], dev)
@@ -404,8 +442,10 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
     if rot is not None:
         ex.set_int(names["rot"], int(rot))
     else:
-        ex.note(f"{names['rot']} not written (not in use in the capture): -1 for an internal sensor, "
-                "the mounting rotation for an external one")
+        ex.note(
+            f"{names['rot']} not written (not in use in the capture): -1 for an internal sensor, "
+            "the mounting rotation for an external one"
+        )
     if kind == "accel":
         off, scale = _accel_offsets_scales(cal, meta, fmt, ex)
         if use.corrected:
@@ -413,8 +453,10 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             s_old = use.need(names["scale"], "accelerometer scales")
             off = [o_old[k] + off[k] / s_old[k] for k in range(3)]
             scale = [s_old[k] * scale[k] for k in range(3)]
-            ex.note("composed with the parameters in use: OFF = OFF_in_use + OFF_fit / SCALE_in_use, "
-                    "SCALE = SCALE_in_use * SCALE_fit")
+            ex.note(
+                "composed with the parameters in use: OFF = OFF_in_use + OFF_fit / SCALE_in_use, "
+                "SCALE = SCALE_in_use * SCALE_fit"
+            )
         for name, v in zip(names["scale"], scale):
             _check_range(fmt, name, v, 0.0, None, "Accelerometer::set_scale")
         for name, v in zip(names["off"], off):
@@ -444,8 +486,10 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             # m = A (S_old (r − o_old) − c h) = A S_old (r − o_old − S_old⁻¹ c h)
             off = o_old + np.linalg.solve(S_old, ch)
             A = A @ S_old
-            ex.note("composed with the parameters in use: SCALE/ODIAG = symmetric part of (fit matrix x matrix in use), "
-                    "OFF = OFF_in_use + (matrix in use)^-1 * hard_iron")
+            ex.note(
+                "composed with the parameters in use: SCALE/ODIAG = symmetric part of (fit matrix x matrix in use), "
+                "OFF = OFF_in_use + (matrix in use)^-1 * hard_iron"
+            )
         P = _symmetric_part(A)
         for name, k in zip(names["scale"], range(3)):
             _check_range(fmt, name, P[k, k], 0.0, None, "Magnetometer scale")
@@ -456,11 +500,15 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         for name, (r, c) in zip(names["odiag"], ODIAG_PAIRS):
             ex.set(name, P[r, c])
         ex.note(f"CAL_MAG_OFF = hard_iron in gauss, same sign (PX4 subtracts it); hard_iron was in {unit}")
-        ex.note("CAL_MAG_SCALE/ODIAG = symmetric part sqrtm(W^T W) of soft_iron, rescaled to map gauss to gauss; "
-                "same |m| as the station's upper-triangular W (they differ by a rotation the field norm cannot see)")
+        ex.note(
+            "CAL_MAG_SCALE/ODIAG = symmetric part sqrtm(W^T W) of soft_iron, rescaled to map gauss to gauss; "
+            "same |m| as the station's upper-triangular W (they differ by a rotation the field norm cannot see)"
+        )
     if kind == "accel":
-        ex.note("PX4 takes a new CAL_ACC offset or scale only when it differs from the one in use by more than "
-                "0.01 (vector length; Accelerometer::set_offset/set_scale)")
+        ex.note(
+            "PX4 takes a new CAL_ACC offset or scale only when it differs from the one in use by more than "
+            "0.01 (vector length; Accelerometer::set_offset/set_scale)"
+        )
 
 
 def _header(cal: dict) -> list[str]:
@@ -489,7 +537,7 @@ def _c_string(text: str) -> str:
         elif 32 <= ord(ch) < 127:
             out.append(ch)
         else:
-            out.extend(f"\\x{b:02x}\"\"" for b in ch.encode("utf-8"))
+            out.extend(f'\\x{b:02x}""' for b in ch.encode("utf-8"))
     return '"' + "".join(out) + '"'
 
 
@@ -541,7 +589,8 @@ def _c_header(cal: dict, meta: dict | None = None) -> str:
     prefix = (_c_ident(str(cal["device_id"])).strip("_") or "device").lower() + "_" + _c_ident(cal["procedure"]).lower()
     prefix = _c_ident(prefix)
     units = C_UNITS.get(cal["procedure"], "SI unless the name says otherwise").format(
-        accel_unit=meta.get("accel_unit", "?"), mag_unit=meta.get("mag_unit", "?"))
+        accel_unit=meta.get("accel_unit", "?"), mag_unit=meta.get("mag_unit", "?")
+    )
     lines = [f"/* {_c_comment(line)} */" for line in _header(cal)]
     lines += [
         f"/* model: {_c_comment(str(cal.get('model') or cal['procedure']))} */",
@@ -576,8 +625,14 @@ def _c_header(cal: dict, meta: dict | None = None) -> str:
     return "\n".join(lines)
 
 
-def export(cal: dict, meta: dict, fmt: str, instance: int | None = None, device_id: int | None = None,
-           vehicle: tuple[int, int] = (1, 1)) -> str:
+def export(
+    cal: dict,
+    meta: dict,
+    fmt: str,
+    instance: int | None = None,
+    device_id: int | None = None,
+    vehicle: tuple[int, int] = (1, 1),
+) -> str:
     """The text of calibration `cal` (a `Store.calibration` dict) in format `fmt`.
 
     `meta` is the stored capture's metadata (units; for data the board had already corrected,
@@ -611,13 +666,19 @@ def export(cal: dict, meta: dict, fmt: str, instance: int | None = None, device_
             raise UnsupportedError(f"{fmt}: --instance is 0..3")
         _px4(cal, meta, instance, device_id, ex)
         if fmt == "px4":
-            body = [f"param set {name} {value:.9g}" if isinstance(value, float) else f"param set {name} {value}"
-                    for name, value in ex.values]
+            body = [
+                f"param set {name} {value:.9g}" if isinstance(value, float) else f"param set {name} {value}"
+                for name, value in ex.values
+            ]
         else:
             sysid, compid = vehicle
             body = ["# Vehicle-Id Component-Id Name Value Type"]
-            body += [f"{sysid}\t{compid}\t{name}\t{value:.9g}\t{QGC_REAL32}" if isinstance(value, float)
-                     else f"{sysid}\t{compid}\t{name}\t{value}\t{QGC_INT32}" for name, value in ex.values]
+            body += [
+                f"{sysid}\t{compid}\t{name}\t{value:.9g}\t{QGC_REAL32}"
+                if isinstance(value, float)
+                else f"{sysid}\t{compid}\t{name}\t{value}\t{QGC_INT32}"
+                for name, value in ex.values
+            ]
     else:
         raise UnsupportedError(f"unknown export format '{fmt}' (one of {', '.join(FORMATS)})")
     head = [f"# {_c_comment(line)}" for line in _header(cal)]

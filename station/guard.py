@@ -11,6 +11,7 @@
 - :func:`check_result`: a result whose parameters came out non-finite is refused with the
   parameter's name instead of being returned with nulls.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -61,15 +62,21 @@ def check_extremes(capture) -> None:
                 first = (k, name, float(arr[k]))
     if first is not None:
         k, name, value = first
-        raise InputError(capture.path, _data_line(capture, k),
-                         f"column '{name}': {value:g} is beyond what any instrument reports "
-                         f"(magnitudes up to {MAX_ABS:g} are accepted)")
+        raise InputError(
+            capture.path,
+            _data_line(capture, k),
+            f"column '{name}': {value:g} is beyond what any instrument reports "
+            f"(magnitudes up to {MAX_ABS:g} are accepted)",
+        )
     t = capture.columns.get("t")
     if t is not None and len(t) > 1:
         t = np.asarray(t, dtype=float)
         if not t[-1] > t[0]:
-            raise InputError(capture.path, _data_line(capture, 0),
-                             f"column 't': the time axis does not advance ({len(t)} rows, all at t = {t[0]:g} s)")
+            raise InputError(
+                capture.path,
+                _data_line(capture, 0),
+                f"column 't': the time axis does not advance ({len(t)} rows, all at t = {t[0]:g} s)",
+            )
         steps = np.diff(t)
         positive = steps[steps > 0]
         if positive.size and not np.isfinite(positive.min() / max(abs(t[0]), abs(t[-1]))):
@@ -83,8 +90,23 @@ _MEASURED = {
     "accel-centrifuge": ("ax", "ay", "az", "speed_rad_s"),
     "compass": ("mx", "my", "mz", "ax", "ay", "az", "gx", "gy", "gz"),
     "gyro-drift": ("gx", "gy", "gz", "ax", "ay", "az", "ref_gx", "ref_gy", "ref_gz"),
-    "ldv": ("vl1", "vl2", "vl3", "vx", "vy", "vz", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",
-            "wx", "wy", "wz"),
+    "ldv": (
+        "vl1",
+        "vl2",
+        "vl3",
+        "vx",
+        "vy",
+        "vz",
+        "vn",
+        "ve",
+        "vd",
+        "roll_deg",
+        "pitch_deg",
+        "yaw_deg",
+        "wx",
+        "wy",
+        "wz",
+    ),
 }
 _BEAMS = ("vl1", "vl2", "vl3")
 
@@ -103,11 +125,16 @@ def check_columns(capture) -> None:
         arr = np.asarray(col, dtype=float)
         finite = arr[np.isfinite(arr)]
         if finite.size == 0:
-            raise InputError(capture.path, capture.header_line,
-                             f"column '{name}' is empty in every row: the sensor gave no data for it")
+            raise InputError(
+                capture.path,
+                capture.header_line,
+                f"column '{name}' is empty in every row: the sensor gave no data for it",
+            )
         if capture.procedure == "ldv" and name in _BEAMS and len(arr) > 1 and finite.min() == finite.max():
-            raise UnsupportedError(f"{capture.path or 'capture'}: ldv: beam '{name}' reads {finite[0] + 0.0:g} m/s in every "
-                                   "row: a dead or saturated beam, its angles and scale factor cannot be determined")
+            raise UnsupportedError(
+                f"{capture.path or 'capture'}: ldv: beam '{name}' reads {finite[0] + 0.0:g} m/s in every "
+                "row: a dead or saturated beam, its angles and scale factor cannot be determined"
+            )
 
 
 # The parameters each procedure exists to deliver; any of them non-finite is a refusal. Others
@@ -143,14 +170,18 @@ def check_result(capture, result: dict) -> None:
 
     sigmas = [v for _, v in walk(result.get("uncertainty") or {}, "") if not isinstance(v, (str, bool))]
     if sigmas and all(missing(v) for v in sigmas):
-        raise UnsupportedError(f"{capture.path or 'capture'}: {capture.procedure}: no parameter's uncertainty can be "
-                               "computed from these data: refused rather than reported without one")
+        raise UnsupportedError(
+            f"{capture.path or 'capture'}: {capture.procedure}: no parameter's uncertainty can be "
+            "computed from these data: refused rather than reported without one"
+        )
     for name, value in walk(result.get("params") or {}, ""):
         if core is not None and name.split("[")[0].split(".")[0] not in core:
             continue
         if missing(value):
-            raise UnsupportedError(f"{capture.path or 'capture'}: {capture.procedure}: the data cannot determine "
-                                   f"'{name}' (the fit gives no finite value): refused rather than reported as null")
+            raise UnsupportedError(
+                f"{capture.path or 'capture'}: {capture.procedure}: the data cannot determine "
+                f"'{name}' (the fit gives no finite value): refused rather than reported as null"
+            )
 
 
 def _libc_fflush() -> None:

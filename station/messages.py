@@ -4,6 +4,7 @@ Workers run in threads; ``post_message`` is thread-safe. ``LiveUpdate`` is repla
 when the screen falls behind, only the newest is drawn (the guide itself sees every
 sample on the worker thread, so nothing is lost for the averages).
 """
+
 from __future__ import annotations
 
 from textual.message import Message

@@ -7,6 +7,7 @@ and never blocks for long. ``place(name)`` asks the bench to move to a named pos
 the simulated device moves; a serial device gets ``$STC,ORIENT,<name>`` (which the
 simulated device on a pty understands; a real device ignores it).
 """
+
 from __future__ import annotations
 
 import math
@@ -62,8 +63,17 @@ class CentrifugeImu:
     convention); the forward model is ``solvers.models.accel.forward``. The gyro reads the
     table's rate, ``(0, 0, ω)`` in the table frame, in rad/s."""
 
-    def __init__(self, *, seed: int = 0, rate_hz: float = 100.0, radius_m: float = 1.0, g_mps2: float = 9.8,
-                 noise_g: float = 1e-4, ramp_s: float = 2.0, handle_s: float = 3.0):
+    def __init__(
+        self,
+        *,
+        seed: int = 0,
+        rate_hz: float = 100.0,
+        radius_m: float = 1.0,
+        g_mps2: float = 9.8,
+        noise_g: float = 1e-4,
+        ramp_s: float = 2.0,
+        handle_s: float = 3.0,
+    ):
         from solvers.simulate import centrifuge_orientations, simulate_centrifuge
 
         sim = simulate_centrifuge(seed, radius_m=radius_m, g_mps2=g_mps2)
@@ -97,8 +107,12 @@ class CentrifugeImu:
             self._plan = [(t, k0, w0, k, w, "ramp")]
         else:
             t1, t2 = t + self.ramp_s, t + 2 * self.ramp_s + self.handle_s
-            self._plan = [(t, k0, w0, k0, 0.0, "ramp"), (t1, k, 0.0, k, 0.0, "handle"),
-                          (t1 + self.handle_s, k, 0.0, k, w, "ramp"), (t2, k, w, k, w, "steady")]
+            self._plan = [
+                (t, k0, w0, k0, 0.0, "ramp"),
+                (t1, k, 0.0, k, 0.0, "handle"),
+                (t1 + self.handle_s, k, 0.0, k, w, "ramp"),
+                (t2, k, w, k, w, "steady"),
+            ]
         self.k, self.w = k, w
 
     def _state(self, t):
@@ -107,7 +121,7 @@ class CentrifugeImu:
         k = np.full(len(t), self._plan[0][3], dtype=int)
         w = np.full(len(t), self._plan[0][4], dtype=float)
         handled = np.zeros(len(t), dtype=bool)
-        for t0, k0, w0, k1, w1, kind in self._plan:
+        for t0, k0, w0, k1, w1, kind in self._plan:  # noqa: B007
             on = t >= t0
             k[on] = k1
             if kind == "ramp":
@@ -137,8 +151,19 @@ class CentrifugeImu:
         y = accel_model.forward(f + shake, self.params) + self.rng.normal(scale=self.noise_g, size=(n, 3))
         g = g + self.rng.normal(scale=1e-3, size=(n, 3))
         nan = np.full(n, np.nan)
-        return {"t_s": t, "ax": y[:, 0], "ay": y[:, 1], "az": y[:, 2], "gx": g[:, 0], "gy": g[:, 1],
-                "gz": g[:, 2], "mx": nan, "my": nan, "mz": nan, "temp_c": np.full(n, 25.0)}
+        return {
+            "t_s": t,
+            "ax": y[:, 0],
+            "ay": y[:, 1],
+            "az": y[:, 2],
+            "gx": g[:, 0],
+            "gy": g[:, 1],
+            "gz": g[:, 2],
+            "mx": nan,
+            "my": nan,
+            "mz": nan,
+            "temp_c": np.full(n, 25.0),
+        }
 
 
 class SimSource:
@@ -153,8 +178,16 @@ class SimSource:
     # the simulated triad's data-sheet zero [V] and sensitivity [V per m/s²]
     nominal = (NOMINAL_ACCEL_ZERO_V, NOMINAL_ACCEL_SCALE_V_PER_MPS2)
 
-    def __init__(self, *, seed: int = 0, rate_hz: float = 100.0, speed: float = 1.0, clock=time.monotonic,
-                 max_batch_s: float = 1.0, procedure: str = "accel-tabletop"):
+    def __init__(
+        self,
+        *,
+        seed: int = 0,
+        rate_hz: float = 100.0,
+        speed: float = 1.0,
+        clock=time.monotonic,
+        max_batch_s: float = 1.0,
+        procedure: str = "accel-tabletop",
+    ):
         from solvers.simulate import LiveImu
 
         if procedure == "accel-centrifuge":
@@ -165,8 +198,13 @@ class SimSource:
             rate_hz = 10.0
             self.imu = LiveVehicle(seed=seed, rate_hz=rate_hz)
         else:  # the gyro noise (Allan) run holds the unit still like P4; mode A adds the reference
-            self.imu = LiveImu(procedure="gyro-drift" if procedure in ("gyro-noise", "gyro-reference") else procedure,
-                               seed=seed, rate_hz=rate_hz, hold_s=1e9, reference=procedure == "gyro-reference")
+            self.imu = LiveImu(
+                procedure="gyro-drift" if procedure in ("gyro-noise", "gyro-reference") else procedure,
+                seed=seed,
+                rate_hz=rate_hz,
+                hold_s=1e9,
+                reference=procedure == "gyro-reference",
+            )
         self.procedure = procedure
         self.positions = list(self.imu.positions)
         self.rate_hz = float(rate_hz)
@@ -191,7 +229,7 @@ class SimSource:
             procedure = "gyro-drift"
         return f"SIM-{procedure.upper()[:3]}-{seed:04d}"
 
-    def start(self) -> "SimSource":
+    def start(self) -> SimSource:
         self._t0 = self.clock()
         self._stats.connected = True
         return self
@@ -268,7 +306,7 @@ class SerialSource:
         self.rate_hz = math.nan
         self.site: dict = {}
 
-    def start(self) -> "SerialSource":
+    def start(self) -> SerialSource:
         """Open the port (raises station.device.reader.PortError) and wait for the header."""
         self.reader.start()
         h = self.reader.wait_header(self.header_timeout_s)
@@ -291,14 +329,24 @@ class SerialSource:
         if b is None or len(b) == 0:
             return None
         c = b.columns
-        return Samples(b.t_s, np.column_stack([c["ax"], c["ay"], c["az"]]),
-                       np.column_stack([c["gx"], c["gy"], c["gz"]]), c["temp_c"],
-                       np.column_stack([c["mx"], c["my"], c["mz"]]))
+        return Samples(
+            b.t_s,
+            np.column_stack([c["ax"], c["ay"], c["az"]]),
+            np.column_stack([c["gx"], c["gy"], c["gz"]]),
+            c["temp_c"],
+            np.column_stack([c["mx"], c["my"], c["mz"]]),
+        )
 
     def place(self, name: str) -> None:
         self.reader.command("ORIENT", name)
 
     def stats(self) -> SourceStats:
         s = self.reader.stats()
-        return SourceStats(samples=s.samples, rate_hz=s.rate_hz, parse_errors=s.parse_errors, dropped=s.dropped,
-                           connected=s.connected, last_error=s.last_error)
+        return SourceStats(
+            samples=s.samples,
+            rate_hz=s.rate_hz,
+            parse_errors=s.parse_errors,
+            dropped=s.dropped,
+            connected=s.connected,
+            last_error=s.last_error,
+        )

@@ -1,4 +1,5 @@
 """The application's door to the database: save a calibrate result with its capture."""
+
 from __future__ import annotations
 
 import getpass
@@ -14,9 +15,17 @@ def open_store(path: str):
     return Store(path)
 
 
-def save_result(path: str, capture, result: dict, *, device_id: str | None = None,
-                operator: str | None = None, accepted: bool = True, review: dict | None = None,
-                time=None) -> int:
+def save_result(
+    path: str,
+    capture,
+    result: dict,
+    *,
+    device_id: str | None = None,
+    operator: str | None = None,
+    accepted: bool = True,
+    review: dict | None = None,
+    time=None,
+) -> int:
     """Store ``capture`` and ``result`` in one transaction; returns the calibration id.
 
     ``review`` is ``station.procedures.review.review_record(...)`` (how the result was
@@ -29,10 +38,19 @@ def save_result(path: str, capture, result: dict, *, device_id: str | None = Non
         operator = operator or None
     entry = registry.get(result.get("procedure") or capture.meta.get("procedure"))
     try:
-        return store.save_calibration(result, meta=capture.meta, columns=capture.columns, device_id=device_id,
-                                      operator=operator, accepted=accepted, software_version=__version__,
-                                      host=socket.gethostname(), review=review, time=time,
-                                      sensor_kind=entry.sensor_kind if entry else None)
+        return store.save_calibration(
+            result,
+            meta=capture.meta,
+            columns=capture.columns,
+            device_id=device_id,
+            operator=operator,
+            accepted=accepted,
+            software_version=__version__,
+            host=socket.gethostname(),
+            review=review,
+            time=time,
+            sensor_kind=entry.sensor_kind if entry else None,
+        )
     finally:
         store.close()
 

@@ -57,7 +57,7 @@ def _time_ticks(lo: float, hi: float) -> tuple[list[float], str]:
     day = 86400.0
     if span <= 0:
         return [lo], "%Y-%m-%d %H:%M"
-    for step, fmt in (
+    for step, fmt in (  # noqa: B007
         (60, "%H:%M"),
         (600, "%H:%M"),
         (3600, "%m-%d %H:%M"),

@@ -13,6 +13,7 @@ Every command's text output and every TUI table goes through it; as a last line 
 defence, :class:`SafeStream` applies the same escaping to anything else written to
 stdout/stderr by a command (keeping the line breaks the command itself writes).
 """
+
 from __future__ import annotations
 
 import io

@@ -1,4 +1,5 @@
 """Hand-built calibration results (calibrate.md shape) and small captures for the db tests."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -30,14 +31,26 @@ def compass_result(device="MAG-1", hard_iron=(10.0, -5.0, 2.0), soft_iron=None, 
         "params": {
             "hard_iron": list(hard_iron),
             "soft_iron": [list(r) for r in W],
-            "reference": {"north_nT": 27000.0, "east_nT": -2000.0, "down_nT": 45000.0, "total_nT": 52518.0,
-                          "inclination_deg": 59.0, "declination_deg": -4.2},
+            "reference": {
+                "north_nT": 27000.0,
+                "east_nT": -2000.0,
+                "down_nT": 45000.0,
+                "total_nT": 52518.0,
+                "inclination_deg": 59.0,
+                "declination_deg": -4.2,
+            },
         },
         "uncertainty": {
             "hard_iron": [sigma] * 3,
             "soft_iron": [[sigma] * 3 for _ in range(3)],
-            "reference": {"north_nT": 0.0, "east_nT": 0.0, "down_nT": 0.0, "total_nT": 0.0,
-                          "inclination_deg": 0.0, "declination_deg": 0.0},
+            "reference": {
+                "north_nT": 0.0,
+                "east_nT": 0.0,
+                "down_nT": 0.0,
+                "total_nT": 0.0,
+                "inclination_deg": 0.0,
+                "declination_deg": 0.0,
+            },
         },
         "residual_rms": 50.0,
         "n_positions": 300,
@@ -50,8 +63,13 @@ def gyro_result(device="GYRO-1", drift=(1e-4, -2e-4, 5e-5)) -> dict:
         "procedure": "gyro-drift",
         "device": device,
         "model": "w' = w - eps",
-        "params": {"drift": list(drift), "mode": "B", "pitch_deg": 0.5, "roll_deg": -0.2,
-                   "earth_rate_body": [5.6e-5, 4.4e-5, 0.0]},
+        "params": {
+            "drift": list(drift),
+            "mode": "B",
+            "pitch_deg": 0.5,
+            "roll_deg": -0.2,
+            "earth_rate_body": [5.6e-5, 4.4e-5, 0.0],
+        },
         "uncertainty": {"drift": [1e-6] * 3, "pitch_deg": 0.01, "roll_deg": 0.01, "earth_rate_body": [1e-7] * 3},
         "residual_rms": 1e-3,
         "n_positions": 1,
@@ -66,8 +84,12 @@ def ldv_result(device="LDV-1") -> dict:
         "device": device,
         "model": "V_L = (1 + dK)(Vx cos a + Vy cos b + Vz cos g)",
         "params": {"beam1": dict(beam), "beam2": dict(beam), "beam3": dict(beam), "condition_number": 3.2},
-        "uncertainty": {"beam1": {k: 0.001 for k in beam}, "beam2": {k: 0.001 for k in beam},
-                        "beam3": {k: 0.001 for k in beam}, "condition_number": None},
+        "uncertainty": {
+            "beam1": {k: 0.001 for k in beam},
+            "beam2": {k: 0.001 for k in beam},
+            "beam3": {k: 0.001 for k in beam},
+            "condition_number": None,
+        },
         "residual_rms": 0.01,
         "n_positions": 100,
         "warnings": [],

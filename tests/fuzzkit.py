@@ -19,6 +19,7 @@ stdout empty, one line on stderr with a reason), and the failures: ``hang``, ``l
 (the CLI's ``cannot process this input``), ``stray-stdout`` (anything on fd 1 but the JSON),
 ``bad-exit`` (another status or a multi-line error), ``crash`` (an exception out of main).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -68,9 +69,38 @@ def make_bases(folder: str, seed: int = 0, names: tuple[str, ...] | None = None)
 
 # ------------------------------------------------------------------------------ mutations
 
-_EXTREME_TEXT = ["1e308", "-1e308", "1e-320", "4.9e-324", "1e400", "-0", "0", "nan", "inf", "-inf", "NaN",
-                 "1" * 400, "0x10", "1_000", "１２", "1e", "--1", ".", "+", "1,5", "\"3\"", " ", "\t7", "9" * 20,
-                 "1e200", "-1e200", "1e20", "2e20", "3.4e38", "1.7976931348623157e308"]
+_EXTREME_TEXT = [
+    "1e308",
+    "-1e308",
+    "1e-320",
+    "4.9e-324",
+    "1e400",
+    "-0",
+    "0",
+    "nan",
+    "inf",
+    "-inf",
+    "NaN",
+    "1" * 400,
+    "0x10",
+    "1_000",
+    "１２",
+    "1e",
+    "--1",
+    ".",
+    "+",
+    "1,5",
+    '"3"',
+    " ",
+    "\t7",
+    "9" * 20,
+    "1e200",
+    "-1e200",
+    "1e20",
+    "2e20",
+    "3.4e38",
+    "1.7976931348623157e308",
+]
 _CONTROL = ["\x00", "\x1b[31m", "\x07", "\r", "\x9b", "\u202e", "\ufeff", "\x7f", "\x0b", "\x0c", "\u2028"]
 _META_EDITS = [
     ("procedure", ["", "accel-tabletop", "compass", "ldv", "gyro-drift", "accel-centrifuge", "nope", "P1"]),
@@ -80,8 +110,20 @@ _META_EDITS = [
     ("latitude_deg", ["90", "-90", "91", "1e308", "nan", "", "abc", "0"]),
     ("longitude_deg", ["360", "-180", "361", "1e308", ""]),
     ("altitude_m", ["1e308", "-12000", "1000000", "1000001", "-1e6", "nan"]),
-    ("date", ["1850-01-01", "1897-06-01", "2031-06-01", "2099-01-01", "2026-02-30", "0001-01-01", "9999-12-31",
-              "yesterday", ""]),
+    (
+        "date",
+        [
+            "1850-01-01",
+            "1897-06-01",
+            "2031-06-01",
+            "2099-01-01",
+            "2026-02-30",
+            "0001-01-01",
+            "9999-12-31",
+            "yesterday",
+            "",
+        ],
+    ),
     ("radius_m", ["0", "-1", "1e-300", "10000", "1e308", "abc"]),
     ("g_mps2", ["0", "1e-300", "1000", "1e308", "-9.8"]),
     ("gyro_mode", ["reference", "static", "other", ""]),
@@ -119,11 +161,11 @@ def m_insert_bytes(text, rng):
 
 def m_delete_span(text, rng):
     i = rng.randrange(len(text))
-    return text[:i] + text[i + rng.randint(1, 200):]
+    return text[:i] + text[i + rng.randint(1, 200) :]
 
 
 def m_truncate(text, rng):
-    return text[:rng.randrange(len(text))]
+    return text[: rng.randrange(len(text))]
 
 
 def m_field(text, rng):
@@ -165,7 +207,7 @@ def m_lines(text, rng):
     if op == "dup":
         lines[i:i] = [lines[i]] * rng.randint(1, 50)
     elif op == "del":
-        del lines[i:i + rng.randint(1, 100)]
+        del lines[i : i + rng.randint(1, 100)]
     elif op == "swap":
         lines[i], lines[k] = lines[k], lines[i]
     elif op == "blank":
@@ -235,12 +277,32 @@ def m_long_line(text, rng):
 
 
 def m_line_endings(text, rng):
-    return rng.choice([text.replace("\n", "\r\n"), text.replace("\n", "\r"), "\ufeff" + text,
-                       text.replace("\n", "\r\n", rng.randint(1, 50))])
+    return rng.choice(
+        [
+            text.replace("\n", "\r\n"),
+            text.replace("\n", "\r"),
+            "\ufeff" + text,
+            text.replace("\n", "\r\n", rng.randint(1, 50)),
+        ]
+    )
 
 
-MUTATORS = [m_flip_bytes, m_insert_bytes, m_delete_span, m_truncate, m_field, m_field, m_column, m_lines,
-            m_control, m_header, m_meta, m_meta, m_long_line, m_line_endings]
+MUTATORS = [
+    m_flip_bytes,
+    m_insert_bytes,
+    m_delete_span,
+    m_truncate,
+    m_field,
+    m_field,
+    m_column,
+    m_lines,
+    m_control,
+    m_header,
+    m_meta,
+    m_meta,
+    m_long_line,
+    m_line_endings,
+]
 
 
 def mutate(text: str, rng: random.Random) -> tuple[str, bytes]:
@@ -261,9 +323,37 @@ def mutate(text: str, rng: random.Random) -> tuple[str, bytes]:
 
 # ------------------------------------------------------------------------------ extreme but valid
 
-_MEASURED = {"ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "vl1", "vl2", "vl3", "vx", "vy", "vz", "vn", "ve",
-             "vd", "ref_gx", "ref_gy", "ref_gz", "speed_rad_s", "temp_c", "roll_deg", "pitch_deg", "yaw_deg",
-             "wx", "wy", "wz"}
+_MEASURED = {
+    "ax",
+    "ay",
+    "az",
+    "gx",
+    "gy",
+    "gz",
+    "mx",
+    "my",
+    "mz",
+    "vl1",
+    "vl2",
+    "vl3",
+    "vx",
+    "vy",
+    "vz",
+    "vn",
+    "ve",
+    "vd",
+    "ref_gx",
+    "ref_gy",
+    "ref_gz",
+    "speed_rad_s",
+    "temp_c",
+    "roll_deg",
+    "pitch_deg",
+    "yaw_deg",
+    "wx",
+    "wy",
+    "wz",
+}
 
 
 def _numeric(cap):
@@ -325,7 +415,7 @@ def x_time(cap, rng):
     elif op == "steps":
         t = np.floor(t)
     else:
-        t = np.repeat(t[::2], 2)[:len(t)]
+        t = np.repeat(t[::2], 2)[: len(t)]
     cap.columns["t"] = t
     return f"time {op}"
 
@@ -334,15 +424,27 @@ def x_rows(cap, rng):
     n = rng.choice([1, 2, 3, 5])
     start = rng.randrange(max(1, cap.n_rows - n))
     for k in list(cap.columns):
-        cap.columns[k] = np.asarray(cap.columns[k])[start:start + n]
+        cap.columns[k] = np.asarray(cap.columns[k])[start : start + n]
     return f"{n} rows"
 
 
 def x_meta(cap, rng):
-    key, value = rng.choice([("latitude_deg", "90"), ("latitude_deg", "-90"), ("longitude_deg", "360"),
-                             ("altitude_m", "-12000"), ("altitude_m", "1000000"), ("date", "1896-01-01"),
-                             ("date", "2034-12-31"), ("g_mps2", "1000"), ("radius_m", "0.000001"),
-                             ("radius_m", "10000"), ("heading_deg", "720"), ("sample_rate_hz", "1e9")])
+    key, value = rng.choice(
+        [
+            ("latitude_deg", "90"),
+            ("latitude_deg", "-90"),
+            ("longitude_deg", "360"),
+            ("altitude_m", "-12000"),
+            ("altitude_m", "1000000"),
+            ("date", "1896-01-01"),
+            ("date", "2034-12-31"),
+            ("g_mps2", "1000"),
+            ("radius_m", "0.000001"),
+            ("radius_m", "10000"),
+            ("heading_deg", "720"),
+            ("sample_rate_hz", "1e9"),
+        ]
+    )
     cap.meta[key] = value
     return f"{key}={value}"
 
@@ -362,9 +464,10 @@ def extreme(path: str, rng: random.Random) -> tuple[str, object]:
 
 # ------------------------------------------------------------------------------ running
 
+
 @dataclass
 class Outcome:
-    kind: str                # ok, refused, or one of FAILURES
+    kind: str  # ok, refused, or one of FAILURES
     command: str
     case: str
     seconds: float
@@ -404,8 +507,9 @@ def _run_main(command: str, path: str) -> tuple[int | None, str, str, bytes, str
     return rc, out.getvalue(), err.getvalue(), stray, crash
 
 
-def classify(command: str, case: str, rc, stdout: str, stderr: str, stray: bytes, crash: str,
-             seconds: float) -> Outcome:
+def classify(
+    command: str, case: str, rc, stdout: str, stderr: str, stray: bytes, crash: str, seconds: float
+) -> Outcome:
     if crash:
         return Outcome("crash", command, case, seconds, crash[:300])
     if stray:
@@ -488,8 +592,13 @@ class Runner:
                 self._proc.kill()
                 self._proc.join(10)
                 self._proc = None
-                outcome = Outcome("hang", command, case, wall,
-                                  f"no answer after {cpu:.0f} s of CPU ({wall:.0f} s wall); limit {self.timeout_s:g} s CPU")
+                outcome = Outcome(
+                    "hang",
+                    command,
+                    case,
+                    wall,
+                    f"no answer after {cpu:.0f} s of CPU ({wall:.0f} s wall); limit {self.timeout_s:g} s CPU",
+                )
                 break
         self.outcomes.append(outcome)
         return outcome
@@ -502,8 +611,17 @@ class Runner:
                 self._proc.kill()
 
 
-def run_campaign(folder: str, bases: dict[str, str], *, n_mutated: int, n_extreme: int, seed: int,
-                 timeout_s: float, commands=COMMANDS, progress=None) -> list[Outcome]:
+def run_campaign(
+    folder: str,
+    bases: dict[str, str],
+    *,
+    n_mutated: int,
+    n_extreme: int,
+    seed: int,
+    timeout_s: float,
+    commands=COMMANDS,
+    progress=None,
+) -> list[Outcome]:
     """``n_mutated`` mutated and ``n_extreme`` extreme captures, each through every command."""
     from station.capture import write_capture
 
@@ -525,7 +643,9 @@ def run_campaign(folder: str, bases: dict[str, str], *, n_mutated: int, n_extrem
                 try:
                     write_capture(path, cap)
                 except Exception as exc:  # noqa: BLE001 - the writer refused: not a valid file, skip
-                    runner.outcomes.append(Outcome("skipped", "write", f"extreme#{seed}.{k} {base}: {what}", 0.0, str(exc)))
+                    runner.outcomes.append(
+                        Outcome("skipped", "write", f"extreme#{seed}.{k} {base}: {what}", 0.0, str(exc))
+                    )
                     continue
                 case = f"extreme#{seed}.{k} {base}: {what}"
             for command in commands:

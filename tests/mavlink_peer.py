@@ -13,9 +13,7 @@ url, seconds = sys.argv[1], float(sys.argv[2])
 t_start = time.monotonic()
 while True:  # a TCP station may not listen yet
     try:
-        conn = mavutil.mavlink_connection(
-            url, source_system=1, source_component=1, retries=0
-        )
+        conn = mavutil.mavlink_connection(url, source_system=1, source_component=1, retries=0)
         break
     except OSError:
         if time.monotonic() - t_start > 20:
@@ -49,15 +47,10 @@ while time.monotonic() - t0 < seconds:
     if m is not None:
         t = m.get_type()
         if t == "REQUEST_DATA_STREAM" or (
-            t == "COMMAND_LONG"
-            and m.command == mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
+            t == "COMMAND_LONG" and m.command == mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
         ):
             streaming = True
-        elif (
-            t == "COMMAND_LONG"
-            and m.command == mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE
-            and int(m.param1) == 148
-        ):
+        elif t == "COMMAND_LONG" and m.command == mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE and int(m.param1) == 148:
             mav.autopilot_version_send(
                 0,
                 0x040500FF,

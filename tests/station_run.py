@@ -1,4 +1,5 @@
 """Helpers shared by test modules: a Simulation as a Capture, and the real CLI."""
+
 from __future__ import annotations
 
 import contextlib
@@ -23,8 +24,9 @@ def run_station(*args, subprocess_run: bool = False) -> subprocess.CompletedProc
     """The real CLI: in a subprocess, or (faster, same code path: argparse, StationError →
     one line on stderr, exit 2) through ``station.cli.main`` in this process."""
     if subprocess_run:
-        return subprocess.run([sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True,
-                              text=True, timeout=120)
+        return subprocess.run(
+            [sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True, text=True, timeout=120
+        )
     from station.cli import main
 
     out, err = io.StringIO(), io.StringIO()

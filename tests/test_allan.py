@@ -1,11 +1,11 @@
 """Allan deviation (against allantools) and the correlated-noise standard error of a mean."""
+
 from __future__ import annotations
 
 import math
 
 import allantools
 import numpy as np
-import pytest
 
 from solvers import allan
 from solvers.simulate import gauss_markov
@@ -54,7 +54,7 @@ def _coverage(white, instability, seeds=120):
 def test_standard_error_covers_the_simulators_gyro_noise():
     """180 s at 100 Hz, white 0.002 rad/s + 60 s Gauss-Markov 2e-5 rad/s (simulate's P4)."""
     z, _ = _coverage(0.002, 2e-5)
-    assert np.mean(z < 2) >= 0.90               # nominal 0.954 (120 seeds: ±0.02)
+    assert np.mean(z < 2) >= 0.90  # nominal 0.954 (120 seeds: ±0.02)
     assert np.mean(z < 3) >= 0.97
 
 

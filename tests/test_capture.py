@@ -5,6 +5,7 @@ through the real CLI in a subprocess (exit 2, one line on stderr, no traceback).
 also checked with tiny read blocks, so a rule broken across a block boundary names the same
 line as in one block.
 """
+
 from __future__ import annotations
 
 import csv
@@ -22,8 +23,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from station.capture import Capture, iter_capture_chunks, read_capture, write_capture
-from station.procedures.registry import names as procedure_names
 from station.errors import InputError
+from station.procedures.registry import names as procedure_names
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = ROOT / ".venv" / "bin" / "python"
@@ -43,12 +44,30 @@ WAY_IN = "; for a log or another CSV use `station import FILE --procedure P --ou
 BAD = [
     ("empty", b"", 1, "empty file"),
     ("only-blank", b"\n\n  \n", 1, "empty file"),
-    ("no-version-line", "t,ax\n0,1\n", 1, "missing first line '# station-capture: 1': not a station capture file" + WAY_IN),
-    ("version-not-first", "# procedure: ldv\n# station-capture: 1\nt,ax\n0,1\n", 1,
-     "missing first line '# station-capture: 1': not a station capture file" + WAY_IN),
-    ("version-2", "# station-capture: 2\nt,ax\n0,1\n", 1, "unsupported capture version '2' (this station reads version 1)"),
-    ("meta-without-colon", HEAD + "# recorded on the bench\n" + HDR + ROWS, 5,
-     "metadata line without 'key: value': '# recorded on the bench'"),
+    (
+        "no-version-line",
+        "t,ax\n0,1\n",
+        1,
+        "missing first line '# station-capture: 1': not a station capture file" + WAY_IN,
+    ),
+    (
+        "version-not-first",
+        "# procedure: ldv\n# station-capture: 1\nt,ax\n0,1\n",
+        1,
+        "missing first line '# station-capture: 1': not a station capture file" + WAY_IN,
+    ),
+    (
+        "version-2",
+        "# station-capture: 2\nt,ax\n0,1\n",
+        1,
+        "unsupported capture version '2' (this station reads version 1)",
+    ),
+    (
+        "meta-without-colon",
+        HEAD + "# recorded on the bench\n" + HDR + ROWS,
+        5,
+        "metadata line without 'key: value': '# recorded on the bench'",
+    ),
     ("meta-empty-key", HEAD + "# : 3\n" + HDR + ROWS, 5, "metadata line without 'key: value': '# : 3'"),
     ("meta-duplicate", HEAD + "# device: D2\n" + HDR + ROWS, 5, "duplicate metadata key 'device' (first on line 3)"),
     ("no-header", HEAD, 5, "no header row (a line of column names must follow the metadata)"),
@@ -58,58 +77,152 @@ BAD = [
     ("duplicate-column", HEAD + "t,ax,ay,ax\n0,1,2,3\n", 5, "duplicate column 'ax' (columns 2 and 4)"),
     ("empty-column-name", HEAD + "t,,ay\n0,1,2\n", 5, "empty column name (column 2 of the header)"),
     ("trailing-comma-header", HEAD + "t,ax,\n0,1,\n", 5, "empty column name (column 3 of the header)"),
-    ("quoted-column-name", HEAD + 't,"ax"\n0,1\n', 5, "column name '\"ax\"' is not plain text (no quotes or control characters)"),
-    ("unknown-procedure", "# station-capture: 1\n# procedure: accel-flat\nt,ax\n0,1\n", 2,
-     "unknown procedure 'accel-flat' (expected one of " + ", ".join(procedure_names()) + ")"),
-    ("unknown-accel-unit", "# station-capture: 1\n# device: x\n# accel_unit: furlongs\nt,ax\n0,1\n", 3,
-     "unknown accel_unit 'furlongs' (expected one of V, mV, counts, g, m/s^2, mps2, mg)"),
-    ("accel-unit-of-wrong-kind", "# station-capture: 1\n# accel_unit: deg/s\nt,ax\n0,1\n", 2,
-     "accel_unit 'deg/s' is not an acceleration unit (expected one of V, mV, counts, g, m/s^2, mps2, mg)"),
-    ("unknown-mag-unit", "# station-capture: 1\n# mag_unit: tesla\nt,mx\n0,1\n", 2,
-     "unknown mag_unit 'tesla' (expected one of V, mV, counts, nT, uT, gauss, G, mG, mgauss)"),
+    (
+        "quoted-column-name",
+        HEAD + 't,"ax"\n0,1\n',
+        5,
+        "column name '\"ax\"' is not plain text (no quotes or control characters)",
+    ),
+    (
+        "unknown-procedure",
+        "# station-capture: 1\n# procedure: accel-flat\nt,ax\n0,1\n",
+        2,
+        "unknown procedure 'accel-flat' (expected one of " + ", ".join(procedure_names()) + ")",
+    ),
+    (
+        "unknown-accel-unit",
+        "# station-capture: 1\n# device: x\n# accel_unit: furlongs\nt,ax\n0,1\n",
+        3,
+        "unknown accel_unit 'furlongs' (expected one of V, mV, counts, g, m/s^2, mps2, mg)",
+    ),
+    (
+        "accel-unit-of-wrong-kind",
+        "# station-capture: 1\n# accel_unit: deg/s\nt,ax\n0,1\n",
+        2,
+        "accel_unit 'deg/s' is not an acceleration unit (expected one of V, mV, counts, g, m/s^2, mps2, mg)",
+    ),
+    (
+        "unknown-mag-unit",
+        "# station-capture: 1\n# mag_unit: tesla\nt,mx\n0,1\n",
+        2,
+        "unknown mag_unit 'tesla' (expected one of V, mV, counts, nT, uT, gauss, G, mG, mgauss)",
+    ),
     ("meta-not-a-number", HEAD + "# g_mps2: 9,81\n" + HDR + ROWS, 5, "metadata 'g_mps2': '9,81' is not a number"),
     ("meta-nan", HEAD + "# radius_m: nan\n" + HDR + ROWS, 5, "metadata 'radius_m': 'nan' is not a number"),
-    ("latitude-out-of-range", HEAD + "# latitude_deg: 95\n" + HDR + ROWS, 5,
-     "metadata 'latitude_deg': '95' must be between -90 and 90"),
-    ("bad-date", HEAD + "# date: 21/11/2026\n" + HDR + ROWS, 5,
-     "metadata 'date': '21/11/2026' is not an ISO date (YYYY-MM-DD[THH:MM:SS])"),
-    ("bad-gyro-mode", HEAD + "# gyro_mode: spinning\n" + HDR + ROWS, 5,
-     "unknown gyro_mode 'spinning' (expected one of reference, static)"),
+    (
+        "latitude-out-of-range",
+        HEAD + "# latitude_deg: 95\n" + HDR + ROWS,
+        5,
+        "metadata 'latitude_deg': '95' must be between -90 and 90",
+    ),
+    (
+        "bad-date",
+        HEAD + "# date: 21/11/2026\n" + HDR + ROWS,
+        5,
+        "metadata 'date': '21/11/2026' is not an ISO date (YYYY-MM-DD[THH:MM:SS])",
+    ),
+    (
+        "bad-gyro-mode",
+        HEAD + "# gyro_mode: spinning\n" + HDR + ROWS,
+        5,
+        "unknown gyro_mode 'spinning' (expected one of reference, static)",
+    ),
     ("not-a-number", _good("1.5,2,2.4,abc,1.6\n"), 9, "column 'ay': 'abc' is not a number"),
     ("decimal-comma", HEAD + "t;ax\n0;1,5\n", 6, "too many fields: 2 where the header has 1 columns"),
-    ("literal-nan", _good("1.5,2,nan,1.5,1.6\n"), 9, "column 'ax': 'nan' is not allowed: leave the field empty for a missing value"),
-    ("literal-NaN-t", _good("NaN,2,2.4,1.5,1.6\n"), 9, "column 't': 'NaN' is not allowed: leave the field empty for a missing value"),
-    ("literal-inf", _good("1.5,2,2.4,-inf,1.6\n"), 9, "column 'ay': '-inf' is not allowed: leave the field empty for a missing value"),
+    (
+        "literal-nan",
+        _good("1.5,2,nan,1.5,1.6\n"),
+        9,
+        "column 'ax': 'nan' is not allowed: leave the field empty for a missing value",
+    ),
+    (
+        "literal-NaN-t",
+        _good("NaN,2,2.4,1.5,1.6\n"),
+        9,
+        "column 't': 'NaN' is not allowed: leave the field empty for a missing value",
+    ),
+    (
+        "literal-inf",
+        _good("1.5,2,2.4,-inf,1.6\n"),
+        9,
+        "column 'ay': '-inf' is not allowed: leave the field empty for a missing value",
+    ),
     ("overflow", _good("1.5,2,2.4,1e999,1.6\n"), 9, "column 'ay': '1e999' is out of range"),
     ("underscore-digits", _good("1.5,2,2_400,1.5,1.6\n"), 9, "column 'ax': '2_400' is not a number"),
     ("unicode-digits", _good("1.5,2,\u0662,1.5,1.6\n"), 9, "column 'ax': '\u0662' is not a number"),
     ("too-many-fields", _good("1.5,2,2.4,1.5,1.6,9\n"), 9, "too many fields: 6 where the header has 5 columns"),
     ("too-few-fields", _good("1.5,2,2.4,1.5\n"), 9, "too few fields: 4 where the header has 5 columns"),
-    ("t-backwards", HEAD + HDR + "1.0,1,2.5,1.6,1.7\n2.0,1,2.5,1.6,1.7\n1.5,1,2.5,1.6,1.7\n", 8,
-     "t goes backwards: 1.5 after 2.0"),
+    (
+        "t-backwards",
+        HEAD + HDR + "1.0,1,2.5,1.6,1.7\n2.0,1,2.5,1.6,1.7\n1.5,1,2.5,1.6,1.7\n",
+        8,
+        "t goes backwards: 1.5 after 2.0",
+    ),
     ("t-empty", _good(",2,2.4,1.5,1.6\n"), 9, "column 't': empty (every row of a time series needs its time)"),
-    ("comment-in-data", _good("# a note\n1.5,2,2.4,1.5,1.6\n"), 9,
-     "comment line inside the data (# lines must come before the header)"),
-    ("comment-in-data-text-first", HEAD + "position,ax\n1,2.5\n#2,2.5\n", 7,
-     "comment line inside the data (# lines must come before the header)"),
-    ("blank-line-in-data", _good("\n1.5,2,2.4,1.5,1.6\n"), 9,
-     "blank line inside the data (only trailing blank lines are allowed)"),
-    ("nul-byte-data", _good().encode() + b"1.5,2,2.4\x00,1.5,1.6\n", 9,
-     "NUL byte at column 10: binary data, not a text capture"),
-    ("nul-byte-first-line", b"\x00\x01\x02binary\n\xff\xfe", 1, "NUL byte at column 1: binary data, not a text capture"),
+    (
+        "comment-in-data",
+        _good("# a note\n1.5,2,2.4,1.5,1.6\n"),
+        9,
+        "comment line inside the data (# lines must come before the header)",
+    ),
+    (
+        "comment-in-data-text-first",
+        HEAD + "position,ax\n1,2.5\n#2,2.5\n",
+        7,
+        "comment line inside the data (# lines must come before the header)",
+    ),
+    (
+        "blank-line-in-data",
+        _good("\n1.5,2,2.4,1.5,1.6\n"),
+        9,
+        "blank line inside the data (only trailing blank lines are allowed)",
+    ),
+    (
+        "nul-byte-data",
+        _good().encode() + b"1.5,2,2.4\x00,1.5,1.6\n",
+        9,
+        "NUL byte at column 10: binary data, not a text capture",
+    ),
+    (
+        "nul-byte-first-line",
+        b"\x00\x01\x02binary\n\xff\xfe",
+        1,
+        "NUL byte at column 1: binary data, not a text capture",
+    ),
     ("bad-utf8-data", _good().encode() + b"1.5,\xff2,2.4,1.5,1.6\n", 9, "not UTF-8 text: byte 0xff at column 5"),
-    ("bad-utf8-meta", b"# station-capture: 1\n# device: caf\xe9\n" + (HDR + ROWS).encode(), 2,
-     "not UTF-8 text: byte 0xe9 at column 14"),
+    (
+        "bad-utf8-meta",
+        b"# station-capture: 1\n# device: caf\xe9\n" + (HDR + ROWS).encode(),
+        2,
+        "not UTF-8 text: byte 0xe9 at column 14",
+    ),
     ("png", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", 1, "not UTF-8 text: byte 0x89 at column 1"),
     ("utf16", "# station-capture: 1\nt,ax\n0,1\n".encode("utf-16"), 1, "UTF-16 text; capture files are UTF-8"),
-    ("bare-cr-endings", b"# station-capture: 1\rt,ax\r0,1\r", 1,
-     "stray carriage return (\\r) inside the line; use LF or CRLF line endings"),
-    ("quote-in-label", _good('1.5,"x_p",2.4,1.5,1.6\n'), 9, "column 'position': '\"x_p\"' holds a quote, which plain CSV cannot hold"),
+    (
+        "bare-cr-endings",
+        b"# station-capture: 1\rt,ax\r0,1\r",
+        1,
+        "stray carriage return (\\r) inside the line; use LF or CRLF line endings",
+    ),
+    (
+        "quote-in-label",
+        _good('1.5,"x_p",2.4,1.5,1.6\n'),
+        9,
+        "column 'position': '\"x_p\"' holds a quote, which plain CSV cannot hold",
+    ),
     ("tab-in-label", _good("1.5,x\tp,2.4,1.5,1.6\n"), 9, "column 'position': 'x\\tp' holds a control character"),
-    ("n-not-whole", HEAD + "position,n,ax,ax_std\n1,10,2.5,0.01\n2,2.5,2.5,0.01\n", 7,
-     "column 'n': '2.5' is not a whole number of samples (1 or more)"),
-    ("std-negative", HEAD + "position,n,ax,ax_std\n1,10,2.5,0.01\n2,10,2.5,-0.01\n", 7,
-     "column 'ax_std': '-0.01' is negative (it is a standard deviation)"),
+    (
+        "n-not-whole",
+        HEAD + "position,n,ax,ax_std\n1,10,2.5,0.01\n2,2.5,2.5,0.01\n",
+        7,
+        "column 'n': '2.5' is not a whole number of samples (1 or more)",
+    ),
+    (
+        "std-negative",
+        HEAD + "position,n,ax,ax_std\n1,10,2.5,0.01\n2,10,2.5,-0.01\n",
+        7,
+        "column 'ax_std': '-0.01' is negative (it is a standard deviation)",
+    ),
 ]
 
 
@@ -132,8 +245,9 @@ def test_bad_input_names_file_line_and_problem(tmp_path, content, line, message,
 @pytest.mark.parametrize("content,line,message", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
 def test_bad_input_through_the_cli(tmp_path, content, line, message):
     path = _write(tmp_path, content)
-    out = subprocess.run([PYTHON, "-m", "station", "inspect", str(path)], cwd=ROOT, capture_output=True,
-                         text=True, timeout=60)
+    out = subprocess.run(
+        [PYTHON, "-m", "station", "inspect", str(path)], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2
     assert out.stdout == ""
     assert "Traceback" not in out.stderr
@@ -169,11 +283,17 @@ def test_t_backwards_across_a_block_boundary_quotes_the_file_text(tmp_path):
 
 # ----------------------------------------------------------------------- what is accepted
 
+
 def test_good_capture_reads_exactly(tmp_path):
     path = _write(tmp_path, HEAD + "# lab note: bench 3: left\n" + HDR + ROWS)
     c = read_capture(path)
-    assert list(c.meta.items()) == [("station-capture", "1"), ("procedure", "accel-tabletop"), ("device", "D1"),
-                                    ("accel_unit", "V"), ("lab note", "bench 3: left")]
+    assert list(c.meta.items()) == [
+        ("station-capture", "1"),
+        ("procedure", "accel-tabletop"),
+        ("device", "D1"),
+        ("accel_unit", "V"),
+        ("lab note", "bench 3: left"),
+    ]
     assert list(c.columns) == ["t", "position", "ax", "ay", "az"]
     assert c.columns["t"].dtype == np.float64 and c.columns["t"].tolist() == [0.0, 0.5, 1.0]
     assert c.columns["position"].dtype == object and c.columns["position"].tolist() == ["1", "1", "2"]
@@ -183,8 +303,10 @@ def test_good_capture_reads_exactly(tmp_path):
 
 
 def test_crlf_bom_trailing_blanks_whitespace_and_missing_values(tmp_path):
-    text = ("\ufeff# station-capture: 1\r\n#device :  D 7 \r\n\r\n t , position , ax \r\n"
-            "0, x_p ,1.5\r\n1,, \r\n2,x_p,-3e2\r\n\r\n  \r\n")
+    text = (
+        "\ufeff# station-capture: 1\r\n#device :  D 7 \r\n\r\n t , position , ax \r\n"
+        "0, x_p ,1.5\r\n1,, \r\n2,x_p,-3e2\r\n\r\n  \r\n"
+    )
     c = read_capture(_write(tmp_path, text))
     assert c.meta == {"station-capture": "1", "device": "D 7"}
     assert list(c.columns) == ["t", "position", "ax"]
@@ -282,9 +404,10 @@ def test_iter_capture_chunks_checks_the_head_at_once(tmp_path):
 _FLOATS = st.floats(allow_nan=True, allow_infinity=False)  # subnormals, ±1.8e308, -0.0, NaN
 _FINITE = st.floats(allow_nan=False, allow_infinity=False)  # no empty fields: the numpy fast path reads these
 _ASCII_LABEL = st.text(alphabet="abcxyz_+-019 ", max_size=8).map(str.strip)
-_LABEL = st.text(alphabet=st.characters(blacklist_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"),
-                                        blacklist_characters=',"'), max_size=12).filter(
-    lambda s: s == s.strip() and s.isprintable())
+_LABEL = st.text(
+    alphabet=st.characters(blacklist_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"), blacklist_characters=',"'),
+    max_size=12,
+).filter(lambda s: s == s.strip() and s.isprintable())
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -293,12 +416,18 @@ def test_write_then_read_gives_back_the_same_capture(tmp_path, data, n):
     t = np.sort(np.array(data.draw(st.lists(st.floats(-1e12, 1e12), min_size=n, max_size=n))))
     cols = {
         "t": t,
-        "position": np.array(data.draw(st.lists(st.one_of(_LABEL, _ASCII_LABEL), min_size=n, max_size=n)), dtype=object),
+        "position": np.array(
+            data.draw(st.lists(st.one_of(_LABEL, _ASCII_LABEL), min_size=n, max_size=n)), dtype=object
+        ),
         "ax": np.array(data.draw(st.lists(data.draw(st.sampled_from([_FLOATS, _FINITE])), min_size=n, max_size=n))),
         "temp_c": np.array(data.draw(st.lists(st.floats(-1e-300, 1e-300), min_size=n, max_size=n))),
     }
-    meta = {"station-capture": "1", "procedure": "gyro-drift", "device": data.draw(_LABEL),
-            "free-form": data.draw(st.text(alphabet="abc :#,=é", max_size=10).map(str.strip))}
+    meta = {
+        "station-capture": "1",
+        "procedure": "gyro-drift",
+        "device": data.draw(_LABEL),
+        "free-form": data.draw(st.text(alphabet="abc :#,=é", max_size=10).map(str.strip)),
+    }
     c = Capture(meta=meta, columns=cols)
     path = tmp_path / "rt.capture.csv"
     write_capture(path, c)
@@ -313,8 +442,21 @@ def test_write_then_read_gives_back_the_same_capture(tmp_path, data, n):
 
 
 def test_round_trip_of_extreme_and_integer_values(tmp_path):
-    x = np.array([0.0, -0.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308, 33108.0, 1e16,
-                  0.1, 1 / 3, np.nan, -123456789012345.0])
+    x = np.array(
+        [
+            0.0,
+            -0.0,
+            5e-324,
+            -2.2250738585072014e-308,
+            1.7976931348623157e308,
+            33108.0,
+            1e16,
+            0.1,
+            1 / 3,
+            np.nan,
+            -123456789012345.0,
+        ]
+    )
     c = Capture({"station-capture": "1"}, {"ax": x, "n": np.arange(1.0, len(x) + 1)})
     path = tmp_path / "x.capture.csv"
     write_capture(path, c)
@@ -329,10 +471,25 @@ def test_round_trip_of_extreme_and_integer_values(tmp_path):
 def test_fast_path_reads_extreme_values_bit_for_bit(tmp_path):
     from station.capture import _Parser
 
-    x = np.array([0.0, -0.0, 5e-324, 2.2250738585072014e-308, -1.7976931348623157e308, 0.1, 1 / 3, 33108.0,
-                  -9007199254740993.0, 1e22, 123.456e-7])
-    c = Capture({"station-capture": "1"}, {"t": np.arange(len(x), dtype=float), "position": np.array(
-        ["a"] * 5 + ["b"] * 6, dtype=object), "ax": x})
+    x = np.array(
+        [
+            0.0,
+            -0.0,
+            5e-324,
+            2.2250738585072014e-308,
+            -1.7976931348623157e308,
+            0.1,
+            1 / 3,
+            33108.0,
+            -9007199254740993.0,
+            1e22,
+            123.456e-7,
+        ]
+    )
+    c = Capture(
+        {"station-capture": "1"},
+        {"t": np.arange(len(x), dtype=float), "position": np.array(["a"] * 5 + ["b"] * 6, dtype=object), "ax": x},
+    )
     path = tmp_path / "x.capture.csv"
     write_capture(path, c)
     block = path.read_bytes().split(b"\n", 2)[2]
@@ -348,12 +505,15 @@ def test_real_capture_round_trips(shared_data, tmp_path):
     assert read_capture(tmp_path / "copy.capture.csv") == c
 
 
-@pytest.mark.parametrize("label,shown,why", [
-    ("a,b", "'a,b'", "holds a comma, which plain CSV cannot hold"),
-    ('say "x"', "'say \"x\"'", "holds a quote or a control character, which plain CSV cannot hold"),
-    ("two\nlines", "'two\\nlines'", "holds a quote or a control character, which plain CSV cannot hold"),
-    (" x_p", "' x_p'", "has spaces at the ends, which the reader would strip"),
-])
+@pytest.mark.parametrize(
+    "label,shown,why",
+    [
+        ("a,b", "'a,b'", "holds a comma, which plain CSV cannot hold"),
+        ('say "x"', "'say \"x\"'", "holds a quote or a control character, which plain CSV cannot hold"),
+        ("two\nlines", "'two\\nlines'", "holds a quote or a control character, which plain CSV cannot hold"),
+        (" x_p", "' x_p'", "has spaces at the ends, which the reader would strip"),
+    ],
+)
 def test_writer_refuses_labels_plain_csv_cannot_hold(tmp_path, label, shown, why):
     path = tmp_path / "w.capture.csv"
     c = Capture({"station-capture": "1"}, {"t": np.array([0.0, 1.0]), "position": np.array(["1", label], dtype=object)})
@@ -363,23 +523,26 @@ def test_writer_refuses_labels_plain_csv_cannot_hold(tmp_path, label, shown, why
     assert os.listdir(tmp_path) == []
 
 
-@pytest.mark.parametrize("cols,meta,fragment", [
-    ({"t": [0.0, np.inf]}, {}, "column 't', row 2: inf cannot be written"),
-    ({"t": [0.0, np.nan]}, {}, "column 't', row 2: nan cannot be written"),
-    ({"t": [1.0, 0.5]}, {}, "column 't', row 2: t goes backwards: 0.5 after 1.0"),
-    ({"ax": [1.0, -np.inf]}, {}, "column 'ax', row 2: -inf cannot be written"),
-    ({"n": [3.0, 0.0]}, {}, "column 'n', row 2: 0.0 is not a whole number of samples"),
-    ({"ax": [1.0, np.nan]}, {}, "a one-column capture cannot hold a missing value"),
-    ({"t": [0.0], "t ": [1.0]}, {}, "column name 't ' cannot be written"),
-    ({"#t": [0.0]}, {}, "would read as a comment"),
-    ({"position": ["#1"], "ax": [1.0]}, {}, "starts with '#' in the first column"),
-    ({"ax": [1.0]}, {"procedure": "accel-flat"}, "unknown procedure 'accel-flat'"),
-    ({"ax": [1.0]}, {"device": "a\nb"}, "cannot be written"),
-    ({"ax": [1.0]}, {"a:b": "c"}, "cannot be written"),
-    ({"ax": [1.0]}, {"station-capture": "2"}, "unsupported capture version '2'"),
-    ({"ax": [], "ay": []}, {}, "capture has no data rows"),
-    ({"ax": [1.0], "ay": [1.0, 2.0]}, {}, "columns differ in length (ax=1, ay=2)"),
-])
+@pytest.mark.parametrize(
+    "cols,meta,fragment",
+    [
+        ({"t": [0.0, np.inf]}, {}, "column 't', row 2: inf cannot be written"),
+        ({"t": [0.0, np.nan]}, {}, "column 't', row 2: nan cannot be written"),
+        ({"t": [1.0, 0.5]}, {}, "column 't', row 2: t goes backwards: 0.5 after 1.0"),
+        ({"ax": [1.0, -np.inf]}, {}, "column 'ax', row 2: -inf cannot be written"),
+        ({"n": [3.0, 0.0]}, {}, "column 'n', row 2: 0.0 is not a whole number of samples"),
+        ({"ax": [1.0, np.nan]}, {}, "a one-column capture cannot hold a missing value"),
+        ({"t": [0.0], "t ": [1.0]}, {}, "column name 't ' cannot be written"),
+        ({"#t": [0.0]}, {}, "would read as a comment"),
+        ({"position": ["#1"], "ax": [1.0]}, {}, "starts with '#' in the first column"),
+        ({"ax": [1.0]}, {"procedure": "accel-flat"}, "unknown procedure 'accel-flat'"),
+        ({"ax": [1.0]}, {"device": "a\nb"}, "cannot be written"),
+        ({"ax": [1.0]}, {"a:b": "c"}, "cannot be written"),
+        ({"ax": [1.0]}, {"station-capture": "2"}, "unsupported capture version '2'"),
+        ({"ax": [], "ay": []}, {}, "capture has no data rows"),
+        ({"ax": [1.0], "ay": [1.0, 2.0]}, {}, "columns differ in length (ax=1, ay=2)"),
+    ],
+)
 def test_writer_refuses_what_the_reader_would_refuse(tmp_path, cols, meta, fragment):
     path = tmp_path / "w.capture.csv"
     columns = {k: np.array(v, dtype=object if k == "position" else float) for k, v in cols.items()}
@@ -390,6 +553,7 @@ def test_writer_refuses_what_the_reader_would_refuse(tmp_path, cols, meta, fragm
 
 
 # ------------------------------------------------------------------------------ atomicity
+
 
 def _big_capture(n: int) -> Capture:
     t = np.arange(n) * 0.01
@@ -462,6 +626,7 @@ def test_written_file_keeps_the_old_mode(tmp_path):
 
 # ------------------------------------------------------------------------------ real data
 
+
 def _readme_rows(shared_data: Path) -> dict[str, tuple[int, float]]:
     """capture name -> (rows, duration_s) from the table in ../shared/data/README.md."""
     text = (shared_data / "README.md").read_text()
@@ -500,15 +665,20 @@ def test_table_of_averages_reads_with_sixty_rows(shared_data):
     assert c.float_meta("radius_m") == 1.0 and c.float_meta("g_mps2") == 9.8
 
 
-@pytest.mark.parametrize("name", ["imucal_ferraris/imucal_ferraris_labelled.capture.csv",
-                                  "sunsided_marg/sunsided_full_sphere.capture.csv",
-                                  "wang2021_centrifuge/table1.capture.csv"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "imucal_ferraris/imucal_ferraris_labelled.capture.csv",
+        "sunsided_marg/sunsided_full_sphere.capture.csv",
+        "wang2021_centrifuge/table1.capture.csv",
+    ],
+)
 def test_shared_capture_values_match_an_independent_csv_parse(shared_data, name):
     path = shared_data / name
     with open(path, newline="") as f:
         lines = [ln for ln in f.read().splitlines()]
     n_meta = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
-    rows = list(csv.reader(lines[n_meta + 1:]))
+    rows = list(csv.reader(lines[n_meta + 1 :]))
     header = lines[n_meta].split(",")
     c = read_capture(path)
     fast_vs_slow = read_capture(path, _force_slow=True)
@@ -523,6 +693,7 @@ def test_shared_capture_values_match_an_independent_csv_parse(shared_data, name)
 
 
 # ------------------------------------------------------------------------------ the command
+
 
 def _station(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([PYTHON, "-m", "station", *args], cwd=ROOT, capture_output=True, text=True, timeout=60)
@@ -571,8 +742,12 @@ def test_export_capture_gives_back_the_stored_capture(shared_data, tmp_path):
     db = tmp_path / "station.db"
     store = Store(str(db))
     try:
-        capture_id = store.save_capture(device_id="imucal-example-sensor", procedure=original.procedure,
-                                        meta=original.meta, columns=original.columns)
+        capture_id = store.save_capture(
+            device_id="imucal-example-sensor",
+            procedure=original.procedure,
+            meta=original.meta,
+            columns=original.columns,
+        )
     finally:
         store.close()
     out = tmp_path / "exported.capture.csv"

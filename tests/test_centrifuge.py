@@ -1,11 +1,11 @@
 """P2 centrifuge calibration: exact fit and the paper's method on simulated data and on the
 paper's own Table 1 (as printed, with its lost minus signs found and named)."""
+
 from __future__ import annotations
 
 import json
 
 import numpy as np
-import pytest
 
 from solvers import centrifuge as C
 from solvers.simulate import simulate
@@ -54,7 +54,7 @@ def test_known_noise_gives_right_weights():
     sim = simulate("accel-centrifuge", seed=5, noise_g=1e-5)
     N, rho = rows(sim)
     r = C.exact_fit(N, rho, sigma_N=1e-5)
-    assert 0.5 < r.fit.reduced_chi2 < 1.6          # 51 dof: 1 ± 0.2 (1σ)
+    assert 0.5 < r.fit.reduced_chi2 < 1.6  # 51 dof: 1 ± 0.2 (1σ)
     assert not r.fit.misfit_scaled
 
 
@@ -63,9 +63,11 @@ def test_paper_closed_forms_invert_the_coefficients():
     both for the paper's printed coefficients and the consistent third-order ones."""
     S, b, D = np.array(TRUTH["S"]), np.array(TRUTH["b"]), np.array(TRUTH["D"])
     s, K = 1 / S, D * b / S
-    for variant, (f1, f2, f3) in (("paper", ((1 + K) * (1 + 2 * K), 1 + 6 * K + 6 * K * K, 1 + 2 * K)),
-                                  ("third-order", (1 + 3 * K + 10 * K * K, 1 + 6 * K + 30 * K * K, 1 + 10 * K))):
-        q = np.concatenate([[0.0], -2 * b * s * s * f1, s * s * f2, -2 * D * s ** 3 * f3, 5 * D * D * s ** 4])
+    for variant, (f1, f2, f3) in (
+        ("paper", ((1 + K) * (1 + 2 * K), 1 + 6 * K + 6 * K * K, 1 + 2 * K)),
+        ("third-order", (1 + 3 * K + 10 * K * K, 1 + 6 * K + 30 * K * K, 1 + 10 * K)),
+    ):
+        q = np.concatenate([[0.0], -2 * b * s * s * f1, s * s * f2, -2 * D * s**3 * f3, 5 * D * D * s**4])
         p = C.paper_closed_form(q, variant)
         assert np.allclose(p["S"], S, rtol=1e-12) and np.allclose(p["b"], b, rtol=1e-10)
         assert np.allclose(p["D"], D, rtol=1e-10)

@@ -1,6 +1,7 @@
 """The UI-free P2 centrifuge guide (station.procedures.centrifuge_guide): the live path on
 the simulated centrifuge, the manual path (typed averages) and its refusals, the step
 list's skip / redo / select / abort, and the table of averages calibrate_capture takes."""
+
 from __future__ import annotations
 
 import math
@@ -11,8 +12,14 @@ import pytest
 from solvers.simulate import simulate_centrifuge
 from station.calibrate import calibrate_capture
 from station.procedures.centrifuge_guide import (
-    MIN_FIT_ROWS, CentrifugeConfig, CentrifugeGuide, CentrifugeOperator, ManualEntryError, centrifuge_steps,
-    parse_manual)
+    MIN_FIT_ROWS,
+    CentrifugeConfig,
+    CentrifugeGuide,
+    CentrifugeOperator,
+    ManualEntryError,
+    centrifuge_steps,
+    parse_manual,
+)
 from station.sources import SimSource
 
 SPEEDS = (2 * math.pi, 4 * math.pi, 6 * math.pi)
@@ -22,24 +29,31 @@ def test_default_steps_are_the_papers_20_orientations_at_3_speeds():
     steps = centrifuge_steps(CentrifugeConfig())
     assert len(steps) == 60
     assert [(s.orientation, round(s.speed_rad_s, 6)) for s in steps[:4]] == [
-        (1, round(2 * math.pi, 6)), (1, round(4 * math.pi, 6)), (1, round(6 * math.pi, 6)), (2, round(2 * math.pi, 6))]
+        (1, round(2 * math.pi, 6)),
+        (1, round(4 * math.pi, 6)),
+        (1, round(6 * math.pi, 6)),
+        (2, round(2 * math.pi, 6)),
+    ]
     assert steps[0].prompt.startswith("Mount in orientation 1, spin at 6.28 rad/s (1 rev/s)")
     steps = centrifuge_steps(CentrifugeConfig(speeds_rad_s=[5.0], n_orientations=3))
     assert [s.label for s in steps] == [" 1 @  5.00 rad/s", " 2 @  5.00 rad/s", " 3 @  5.00 rad/s"]
 
 
-@pytest.mark.parametrize("fields, message", [
-    (("1.2", "abc", "0.3", "6.28"), "ay: 'abc' is not a number"),
-    (("", "0", "0", "6.28"), "ax: empty"),
-    (("1,5", "0", "0", "6.28"), "ax: '1,5' is not a number"),
-    (("nan", "0", "0", "6.28"), "ax: 'nan' is not a number"),
-    (("1_0", "0", "0", "6.28"), "ax: '1_0' is not a number"),
-    (("0x10", "0", "0", "6.28"), "ax: '0x10' is not a number"),
-    (("1e999", "0", "0", "6.28"), "ax: '1e999' is out of range"),
-    (("1", "0", "0", "0"), "speed: 0 rad/s; the centrifuge speed must be > 0"),
-    (("1", "0", "0", "-6.28"), "speed must be > 0"),
-    (("1", "0", "0", "fast"), "speed: 'fast' is not a number"),
-])
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        (("1.2", "abc", "0.3", "6.28"), "ay: 'abc' is not a number"),
+        (("", "0", "0", "6.28"), "ax: empty"),
+        (("1,5", "0", "0", "6.28"), "ax: '1,5' is not a number"),
+        (("nan", "0", "0", "6.28"), "ax: 'nan' is not a number"),
+        (("1_0", "0", "0", "6.28"), "ax: '1_0' is not a number"),
+        (("0x10", "0", "0", "6.28"), "ax: '0x10' is not a number"),
+        (("1e999", "0", "0", "6.28"), "ax: '1e999' is out of range"),
+        (("1", "0", "0", "0"), "speed: 0 rad/s; the centrifuge speed must be > 0"),
+        (("1", "0", "0", "-6.28"), "speed must be > 0"),
+        (("1", "0", "0", "fast"), "speed: 'fast' is not a number"),
+    ],
+)
 def test_bad_manual_entries_are_refused_with_one_message(fields, message):
     with pytest.raises(ManualEntryError) as info:
         parse_manual(*fields)
@@ -63,8 +77,12 @@ def test_typed_averages_give_the_same_calibration_as_the_file():
     repr strings) become a capture whose calibration equals that of the simulator's own."""
     sim = simulate_centrifuge(seed=4)
     cols = sim.columns
-    g = CentrifugeGuide(sample_rate_hz=100, units={"accel_unit": "g"}, device_id=sim.meta["device"],
-                        config=CentrifugeConfig(radius_m=float(sim.meta["radius_m"]), g_mps2=float(sim.meta["g_mps2"])))
+    g = CentrifugeGuide(
+        sample_rate_hz=100,
+        units={"accel_unit": "g"},
+        device_id=sim.meta["device"],
+        config=CentrifugeConfig(radius_m=float(sim.meta["radius_m"]), g_mps2=float(sim.meta["g_mps2"])),
+    )
     for s in list(g.steps):
         assert g.step is s  # the guide walks the list in order
         j = SPEEDS.index(min(SPEEDS, key=lambda w: abs(w - s.speed_rad_s))) * 20 + s.orientation - 1
@@ -101,8 +119,12 @@ def run(now, src, guide, seconds, operator=None, dt=0.1):
 def live(n_orientations=12, average_s=2.0, seed=1):
     now = [0.0]
     src = SimSource(seed=seed, procedure="accel-centrifuge", clock=lambda: now[0]).start()
-    guide = CentrifugeGuide(sample_rate_hz=src.rate_hz, units=src.units, device_id=src.device_id,
-                            config=CentrifugeConfig(n_orientations=n_orientations, average_s=average_s, settle_s=1.0))
+    guide = CentrifugeGuide(
+        sample_rate_hz=src.rate_hz,
+        units=src.units,
+        device_id=src.device_id,
+        config=CentrifugeConfig(n_orientations=n_orientations, average_s=average_s, settle_s=1.0),
+    )
     return now, src, guide
 
 
@@ -143,8 +165,9 @@ def test_a_steady_run_is_not_taken_twice_and_a_changing_output_restarts_nothing_
 
 
 def test_skip_redo_select_abort_and_finish():
-    g = CentrifugeGuide(sample_rate_hz=100, units={"accel_unit": "g"},
-                        config=CentrifugeConfig(n_orientations=4))  # 12 steps
+    g = CentrifugeGuide(
+        sample_rate_hz=100, units={"accel_unit": "g"}, config=CentrifugeConfig(n_orientations=4)
+    )  # 12 steps
     g.enter_manual("1", "0", "0", "6.3")
     g.skip()
     assert [s.status for s in g.steps[:3]] == ["captured", "skipped", "pending"] and g.index == 2
@@ -162,8 +185,16 @@ def test_skip_redo_select_abort_and_finish():
         g.enter_manual("1", "0", "0", "6.3")
 
 
-@pytest.mark.parametrize("bad", [{"speeds_rad_s": []}, {"speeds_rad_s": [0.0]}, {"n_orientations": 0},
-                                 {"radius_m": -1}, {"average_s": float("nan")}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"speeds_rad_s": []},
+        {"speeds_rad_s": [0.0]},
+        {"n_orientations": 0},
+        {"radius_m": -1},
+        {"average_s": float("nan")},
+    ],
+)
 def test_bad_config_is_refused(bad):
     with pytest.raises(ValueError):
         CentrifugeConfig(**bad)
@@ -202,8 +233,11 @@ def test_rows_that_disagree_are_named_as_soon_as_they_are_in():
     a few dozen rows to set one apart)."""
     sim = simulate_centrifuge(seed=4)
     cols = sim.columns
-    g = CentrifugeGuide(sample_rate_hz=100, units={"accel_unit": "g"},
-                        config=CentrifugeConfig(radius_m=float(sim.meta["radius_m"]), g_mps2=float(sim.meta["g_mps2"])))
+    g = CentrifugeGuide(
+        sample_rate_hz=100,
+        units={"accel_unit": "g"},
+        config=CentrifugeConfig(radius_m=float(sim.meta["radius_m"]), g_mps2=float(sim.meta["g_mps2"])),
+    )
     named = []
     for k, s in enumerate(list(g.steps)[:36]):
         j = SPEEDS.index(min(SPEEDS, key=lambda w: abs(w - s.speed_rad_s))) * 20 + s.orientation - 1
@@ -233,8 +267,9 @@ def test_radius_and_local_g_are_checked_and_stored():
     for bad in ("", "-1", "0", "abc", "1e999"):
         with pytest.raises(ManualEntryError, match="not a positive number"):
             parse_positive(bad, "radius")
-    g = CentrifugeGuide(sample_rate_hz=100, units={"accel_unit": "g"},
-                        config=CentrifugeConfig(radius_m=0.85, g_mps2=9.80156))
+    g = CentrifugeGuide(
+        sample_rate_hz=100, units={"accel_unit": "g"}, config=CentrifugeConfig(radius_m=0.85, g_mps2=9.80156)
+    )
     g.enter_manual("1", "0", "0", "6.3")
     cap = g.capture()
     assert cap.meta["radius_m"] == "0.85" and cap.meta["g_mps2"] == "9.80156"

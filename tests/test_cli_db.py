@@ -1,23 +1,24 @@
 """The database commands end to end: devices, history, drift, due, verify (real files, real CLI)."""
+
 from __future__ import annotations
 
 import json
 import os
 import subprocess
 import sys
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
+from db_testdata import accel_result, compass_result, small_capture
 
 from db import Store
-from station.textsafe import safe
-from db_testdata import accel_result, compass_result, small_capture
 from station.cli import main
+from station.textsafe import safe
 
 ROOT = Path(__file__).resolve().parents[1]
-NASTY_ID = "IMU \"7\"; DROP TABLE devices; -- Ω温\nsecond line"
-NASTY_NOTES = "it's \"fine\"\n\tSELECT * FROM calibrations;\nüñí 🙂"
+NASTY_ID = 'IMU "7"; DROP TABLE devices; -- Ω温\nsecond line'
+NASTY_NOTES = 'it\'s "fine"\n\tSELECT * FROM calibrations;\nüñí 🙂'
 
 
 def run(capsys, *argv) -> tuple[int, str, str]:
@@ -37,18 +38,40 @@ def filled(db):
         s.add_device("IMU-1", model="ADXL355", interval_days=365, tolerances={"B[0]": 0.01})
         meta, cols = small_capture(device="IMU-1")
         for k, date in enumerate(["2024-01-01", "2024-07-01", "2025-01-01"]):
-            s.save_calibration(accel_result(B=(0.1 + 0.01 * k, 0.2, 0.3)), meta=dict(meta, date=date), columns=cols,
-                               software_version="0.1.0")
-        s.save_calibration(compass_result(device="IMU-1"), meta=dict(meta, date="2024-03-01", procedure="compass"),
-                           columns=cols)
+            s.save_calibration(
+                accel_result(B=(0.1 + 0.01 * k, 0.2, 0.3)),
+                meta=dict(meta, date=date),
+                columns=cols,
+                software_version="0.1.0",
+            )
+        s.save_calibration(
+            compass_result(device="IMU-1"), meta=dict(meta, date="2024-03-01", procedure="compass"), columns=cols
+        )
     return db
 
 
 # --- devices ---------------------------------------------------------------------------
 
+
 def test_devices_add_list_show(capsys, db):
-    code, out, _ = run(capsys, "devices", "add", "IMU-2", "--model", "BMI088", "--interval-days", "90",
-                       "--notes", "rack B", "--tolerance", "B=0.05", "--tolerance", "M[0][0]=0.001", "--db", db)
+    code, out, _ = run(
+        capsys,
+        "devices",
+        "add",
+        "IMU-2",
+        "--model",
+        "BMI088",
+        "--interval-days",
+        "90",
+        "--notes",
+        "rack B",
+        "--tolerance",
+        "B=0.05",
+        "--tolerance",
+        "M[0][0]=0.001",
+        "--db",
+        db,
+    )
     assert code == 0 and out == "added device IMU-2\n"
     code, out, _ = run(capsys, "devices", "add", "IMU-2", "--notes", "rack C", "--db", db)
     assert code == 0 and out == "updated device IMU-2\n"
@@ -69,16 +92,19 @@ def test_db_option_before_the_action_and_env(capsys, db, monkeypatch):
     assert [x["id"] for x in json.loads(out)] == ["A", "B"]
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["devices", "add", "X", "--tolerance", "B"], "--tolerance 'B'"),
-    (["devices", "add", "X", "--tolerance", "B=-1"], "positive"),
-    (["devices", "add", "X", "--interval-days", "0"], "--interval-days must be positive"),
-    (["devices", "add", " "], "non-empty"),
-    (["devices", "show", "nope"], 'no device "nope"'),
-    (["history", "nope"], 'no device "nope"'),
-    (["drift", "nope"], 'no device "nope"'),
-    (["due", "--within", "-3"], "--within must not be negative"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["devices", "add", "X", "--tolerance", "B"], "--tolerance 'B'"),
+        (["devices", "add", "X", "--tolerance", "B=-1"], "positive"),
+        (["devices", "add", "X", "--interval-days", "0"], "--interval-days must be positive"),
+        (["devices", "add", " "], "non-empty"),
+        (["devices", "show", "nope"], 'no device "nope"'),
+        (["history", "nope"], 'no device "nope"'),
+        (["drift", "nope"], 'no device "nope"'),
+        (["due", "--within", "-3"], "--within must not be negative"),
+    ],
+)
 def test_bad_input_one_line_exit_2(capsys, db, argv, needle):
     Store(db).close()  # an empty database: the refusal is about the argument, not a missing file
     code, out, err = run(capsys, *argv, "--db", db)
@@ -114,17 +140,23 @@ def test_nasty_id_and_notes_stored_verbatim_shown_with_control_characters_escape
 
 def test_nasty_id_verbatim_through_a_real_process(db):
     env = dict(os.environ, STATION_DB=db, PYTHONIOENCODING="utf-8")
-    add = subprocess.run([sys.executable, "-m", "station", "devices", "add", NASTY_ID, "--notes", NASTY_NOTES],
-                         cwd=ROOT, env=env, capture_output=True)
+    add = subprocess.run(
+        [sys.executable, "-m", "station", "devices", "add", NASTY_ID, "--notes", NASTY_NOTES],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+    )
     assert add.returncode == 0, add.stderr
-    show = subprocess.run([sys.executable, "-m", "station", "devices", "show", NASTY_ID], cwd=ROOT, env=env,
-                          capture_output=True)
+    show = subprocess.run(
+        [sys.executable, "-m", "station", "devices", "show", NASTY_ID], cwd=ROOT, env=env, capture_output=True
+    )
     assert show.returncode == 0
     text = show.stdout.decode("utf-8")
     assert f"device: {safe(NASTY_ID)}\n" in text and f"notes: {safe(NASTY_NOTES)}\n" in text
 
 
 # --- history ---------------------------------------------------------------------------
+
 
 def test_history_json_oldest_first_with_required_fields(capsys, filled):
     code, out, _ = run(capsys, "history", "IMU-1", "--json", "--db", filled)
@@ -147,6 +179,7 @@ def test_history_text(capsys, filled):
 
 # --- drift -----------------------------------------------------------------------------
 
+
 def test_drift_json_and_text_with_plot(capsys, filled):
     code, out, _ = run(capsys, "drift", "IMU-1", "--param", "B[0]", "--json", "--db", filled)
     [t] = json.loads(out)
@@ -167,6 +200,7 @@ def test_drift_json_and_text_with_plot(capsys, filled):
 
 
 # --- due -------------------------------------------------------------------------------
+
 
 def test_due_exit_status_for_cron(capsys, filled):
     # IMU-1 last accel calibration 2025-01-01 with a 365-day interval; its compass one 2024-03-01
@@ -189,13 +223,15 @@ def test_due_exit_status_for_cron(capsys, filled):
 def test_due_real_process_exit_codes(tmp_path):
     db = str(tmp_path / "station.db")
     env = dict(os.environ, STATION_DB=db)
-    missing = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
+    missing = subprocess.run(
+        [sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True
+    )
     assert missing.returncode == 2 and missing.stdout == "" and "no station database" in missing.stderr
     assert not os.path.exists(db)  # a mistyped path is not created
     Store(db).close()
     quiet = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
     assert quiet.returncode == 0 and quiet.stdout == "nothing due\n"
-    now = datetime.now(timezone.utc)
+    now = datetime.now(UTC)
     with Store(db) as s:
         s.add_device("OLD", interval_days=30)
         meta, cols = small_capture(device="OLD")

@@ -1,4 +1,5 @@
 """`station export` (known answers by applying each firmware's own correction) and `station recompute`."""
+
 from __future__ import annotations
 
 import json
@@ -7,9 +8,9 @@ import subprocess
 
 import numpy as np
 import pytest
+from db_testdata import accel_result, compass_result, gyro_result, ldv_result, small_capture
 
 from db import Store
-from db_testdata import accel_result, compass_result, gyro_result, ldv_result, small_capture
 from station.cli import main
 
 G0 = 9.80665  # the firmwares' standard gravity (GRAVITY_MSS, CONSTANTS_ONE_G)
@@ -60,7 +61,7 @@ def test_accel_tabletop_offsets_and_scales_reproduce_the_diagonal_model(capsys, 
     code, out, _ = run(capsys, "export", str(cid), "--format", fmt, "--db", db)
     assert code == 0
     p = _params(out, fmt)
-    names = (["INS_ACCOFFS_", "INS_ACCSCAL_"] if fmt == "ardupilot" else ["CAL_ACC0_{}OFF", "CAL_ACC0_{}SCALE"])
+    names = ["INS_ACCOFFS_", "INS_ACCSCAL_"] if fmt == "ardupilot" else ["CAL_ACC0_{}OFF", "CAL_ACC0_{}SCALE"]
     rng = np.random.default_rng(1)
     for _ in range(5):
         v_raw = rng.normal(0, 1.0, 3)  # in the capture's unit
@@ -77,10 +78,16 @@ def test_accel_tabletop_offsets_and_scales_reproduce_the_diagonal_model(capsys, 
 
 
 def test_accel_centrifuge_px4(capsys, db):
-    r = {"procedure": "accel-centrifuge", "device": "C", "model": "N = S Phi [f + D f^2] + b",
-         "params": {"S": [1.01, 0.99, 1.02], "b": [0.02, -0.01, 0.03], "D": [1e-4, 0, 0]},
-         "uncertainty": {"S": [1e-4] * 3, "b": [1e-4] * 3, "D": [1e-5] * 3}, "residual_rms": 0.001,
-         "n_positions": 20, "warnings": []}
+    r = {
+        "procedure": "accel-centrifuge",
+        "device": "C",
+        "model": "N = S Phi [f + D f^2] + b",
+        "params": {"S": [1.01, 0.99, 1.02], "b": [0.02, -0.01, 0.03], "D": [1e-4, 0, 0]},
+        "uncertainty": {"S": [1e-4] * 3, "b": [1e-4] * 3, "D": [1e-5] * 3},
+        "residual_rms": 0.001,
+        "n_positions": 20,
+        "warnings": [],
+    }
     cid = _save(db, r, accel_unit="g")
     code, out, _ = run(capsys, "export", str(cid), "--format", "px4", "--db", db)
     p = _params(out, "px4")
@@ -109,13 +116,21 @@ def test_compass_ardupilot_and_px4_reproduce_the_field_norm(capsys, db, unit, nT
     code2, px, _ = run(capsys, "export", str(cid), "--format", "px4", "--db", db)
     assert code == code2 == 0
     a, p = _params(ap, "ardupilot"), _params(px, "px4")
-    mat_ap = np.array([[a["COMPASS_DIA_X"], a["COMPASS_ODI_X"], a["COMPASS_ODI_Y"]],
-                       [a["COMPASS_ODI_X"], a["COMPASS_DIA_Y"], a["COMPASS_ODI_Z"]],
-                       [a["COMPASS_ODI_Y"], a["COMPASS_ODI_Z"], a["COMPASS_DIA_Z"]]])
+    mat_ap = np.array(
+        [
+            [a["COMPASS_DIA_X"], a["COMPASS_ODI_X"], a["COMPASS_ODI_Y"]],
+            [a["COMPASS_ODI_X"], a["COMPASS_DIA_Y"], a["COMPASS_ODI_Z"]],
+            [a["COMPASS_ODI_Y"], a["COMPASS_ODI_Z"], a["COMPASS_DIA_Z"]],
+        ]
+    )
     ofs_ap = np.array([a[f"COMPASS_OFS_{x}"] for x in "XYZ"])
-    mat_px = np.array([[p["CAL_MAG0_XSCALE"], p["CAL_MAG0_XODIAG"], p["CAL_MAG0_YODIAG"]],
-                       [p["CAL_MAG0_XODIAG"], p["CAL_MAG0_YSCALE"], p["CAL_MAG0_ZODIAG"]],
-                       [p["CAL_MAG0_YODIAG"], p["CAL_MAG0_ZODIAG"], p["CAL_MAG0_ZSCALE"]]])
+    mat_px = np.array(
+        [
+            [p["CAL_MAG0_XSCALE"], p["CAL_MAG0_XODIAG"], p["CAL_MAG0_YODIAG"]],
+            [p["CAL_MAG0_XODIAG"], p["CAL_MAG0_YSCALE"], p["CAL_MAG0_ZODIAG"]],
+            [p["CAL_MAG0_YODIAG"], p["CAL_MAG0_ZODIAG"], p["CAL_MAG0_ZSCALE"]],
+        ]
+    )
     off_px = np.array([p[f"CAL_MAG0_{x}OFF"] for x in "XYZ"])
     for _ in range(5):
         raw = rng.normal(0, 50.0, 3)  # capture units
@@ -131,8 +146,15 @@ def test_compass_ardupilot_and_px4_reproduce_the_field_norm(capsys, db, unit, nT
 def test_gyro_offsets_and_instances(capsys, db):
     cid = _save(db, gyro_result(device="G", drift=(1e-4, -2e-4, 5e-5)), gyro_unit="deg/s")
     _, out, _ = run(capsys, "export", str(cid), "--format", "px4", "--instance", "1", "--db", db)
-    assert _params(out, "px4") == pytest.approx({"CAL_GYRO1_XOFF": 1e-4, "CAL_GYRO1_YOFF": -2e-4, "CAL_GYRO1_ZOFF": 5e-5,
-                                                 "CAL_GYRO1_ID": 1310988, "CAL_GYRO1_PRIO": 50})
+    assert _params(out, "px4") == pytest.approx(
+        {
+            "CAL_GYRO1_XOFF": 1e-4,
+            "CAL_GYRO1_YOFF": -2e-4,
+            "CAL_GYRO1_ZOFF": 5e-5,
+            "CAL_GYRO1_ID": 1310988,
+            "CAL_GYRO1_PRIO": 50,
+        }
+    )
     _, out, _ = run(capsys, "export", str(cid), "--format", "ardupilot", "--instance", "2", "--db", db)
     assert set(_params(out, "ardupilot")) == {"INS_GYR2OFFS_X", "INS_GYR2OFFS_Y", "INS_GYR2OFFS_Z"}
     assert "# calibration warning: no temperature column" in out
@@ -175,17 +197,22 @@ def test_c_header_compiles_and_holds_the_values(capsys, db, tmp_path):
     (tmp_path / "main.c").write_text(
         '#include <stdio.h>\n#include "cal.h"\nint main(void){\n'
         '  printf("%s|%.9g|%.9g|%.9g|%ld\\n", imu__q_ldv_device, imu__q_ldv_beam2_alpha_deg,\n'
-        '         imu__q_ldv_sigma_beam3_dK, imu__q_ldv_condition_number, imu__q_ldv_calibration_id);\n'
-        '  return 0;}\n')
+        "         imu__q_ldv_sigma_beam3_dK, imu__q_ldv_condition_number, imu__q_ldv_calibration_id);\n"
+        "  return 0;}\n"
+    )
     exe = tmp_path / "main"
-    subprocess.run(["cc", "-Wall", "-Werror", "-Wno-unused-const-variable", "-o", str(exe), str(tmp_path / "main.c")],
-                   check=True, capture_output=True)
+    subprocess.run(
+        ["cc", "-Wall", "-Werror", "-Wno-unused-const-variable", "-o", str(exe), str(tmp_path / "main.c")],
+        check=True,
+        capture_output=True,
+    )
     got = subprocess.run([str(exe)], check=True, capture_output=True).stdout.decode("utf-8").rstrip("\n")
     f32 = [f"{float(np.float32(x)):.9g}" for x in (60.1, 0.001, 3.2)]  # the values as float, printed back
     assert got == f"{device}|{'|'.join(f32)}|{cid}"
 
 
 # --- recompute -------------------------------------------------------------------------
+
 
 def test_recompute_without_a_capture_or_calibration_is_one_line(capsys, db):
     code, _, err = run(capsys, "recompute", "5", "--db", db)
@@ -201,8 +228,12 @@ def _calibrated_shared_capture(shared_data):
     from station.errors import UnsupportedError
 
     reasons = []
-    for rel in ["wang2021_centrifuge/table1.capture.csv", "mpu6050_unc/mpu6050_unc_static_test.capture.csv",
-                "imucal_ferraris/imucal_ferraris_labelled.capture.csv", "sunsided_marg/sunsided_full_sphere.capture.csv"]:
+    for rel in [
+        "wang2021_centrifuge/table1.capture.csv",
+        "mpu6050_unc/mpu6050_unc_static_test.capture.csv",
+        "imucal_ferraris/imucal_ferraris_labelled.capture.csv",
+        "sunsided_marg/sunsided_full_sphere.capture.csv",
+    ]:
         capture = read_capture(shared_data / rel)
         try:
             return capture, calibrate.calibrate_capture(capture)
@@ -219,10 +250,14 @@ def test_recompute_reports_differences_in_sigma(capsys, db, shared_data):
     values, sigmas = flatten(result["params"]), flatten(result["uncertainty"])
     name = next(n for n, s in sigmas.items() if s and values.get(n) is not None)
     with Store(db) as s:
-        same = s.save_calibration(result, meta=capture.meta, columns=capture.columns, allow_duplicate=True, device_id="R")
+        same = s.save_calibration(
+            result, meta=capture.meta, columns=capture.columns, allow_duplicate=True, device_id="R"
+        )
         older = json.loads(json.dumps(result))  # as if an older version had found +2 sigma on one parameter
         _shift(older["params"], name, 2.0 * sigmas[name])
-        moved = s.save_calibration(older, meta=capture.meta, columns=capture.columns, allow_duplicate=True, device_id="R")
+        moved = s.save_calibration(
+            older, meta=capture.meta, columns=capture.columns, allow_duplicate=True, device_id="R"
+        )
     code, out, _ = run(capsys, "recompute", str(same), "--json", "--db", db)
     assert code == 0
     diffs = {d["param"]: d for d in json.loads(out)["differences"]}

@@ -3,6 +3,7 @@
 Each case here was a traceback (or a silent acceptance) found by running the station as a
 bench engineer would; real files in tmp_path, real SQLite files, the real CLI.
 """
+
 from __future__ import annotations
 
 import os
@@ -34,8 +35,9 @@ def one_line(err: str) -> str:
 
 
 def station_subprocess(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "station", *map(str, argv)], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "station", *map(str, argv)], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
 
 
 @pytest.fixture(scope="module")
@@ -50,6 +52,7 @@ def ldv_capture(tmp_path_factory) -> Path:
 
 
 # --- calibrate --save: the database is the bad input -----------------------------------
+
 
 def test_calibrate_save_into_a_file_that_is_not_a_database(tmp_path, capsys, ldv_capture):
     db = tmp_path / "notes.db"
@@ -76,6 +79,7 @@ def test_calibrate_save_with_a_blank_device_id(tmp_path, capsys, ldv_capture):
 
 # --- export / simulate: the output path is the bad input ------------------------------
 
+
 @pytest.fixture
 def db_with_calibration(tmp_path, capsys, ldv_capture) -> Path:
     db = tmp_path / "station.db"
@@ -100,26 +104,30 @@ def test_simulate_truth_to_an_unwritable_place(tmp_path, capsys, where):
     target = tmp_path / "no" / "t.json" if where == "missing-folder" else tmp_path / "adir"
     if where == "directory":
         target.mkdir()
-    code, _, err = run(capsys, "simulate", "--procedure", "accel-centrifuge", "--out", tmp_path / "c.csv",
-                       "--truth", target)
+    code, _, err = run(
+        capsys, "simulate", "--procedure", "accel-centrifuge", "--out", tmp_path / "c.csv", "--truth", target
+    )
     assert code == 2
     assert one_line(err).startswith(f"station: {target}: cannot write")
     assert not [p for p in tmp_path.rglob(".truth-*")]
 
 
-@pytest.mark.parametrize("procedure, option, says", [
-    ("accel-tabletop", "hold_s=-1", "must be positive"),           # was: ValueError traceback
-    ("accel-tabletop", "noise_mps2=nan", "finite"),                 # was: accepted, NaN capture
-    ("accel-tabletop", "extra_positions=-3", "whole number >= 0"),  # was: silently 0
-    ("accel-tabletop", "averages=maybe", "expected 0 or 1"),        # was: silently True
-    ("accel-centrifuge", "noise_g=-1", "must not be negative"),     # was: ValueError traceback
-    ("compass", "n_orientations=0", "whole number >= 1"),           # was: IndexError traceback
-    ("gyro-drift", "duration_s=0", "must be positive"),             # was: RuntimeWarnings, then exit 2
-    ("ldv", "maneuver=bogus", "choose varied or straight"),         # was: silently 'varied'
-    ("ldv", "reference=bogus", "choose body or nav"),               # was: silently 'body'
-    ("ldv", "duration_s=1e12", "more samples than fit in memory"),  # was: MemoryError traceback
-    ("compass", "site=x", "not settable"),
-])
+@pytest.mark.parametrize(
+    "procedure, option, says",
+    [
+        ("accel-tabletop", "hold_s=-1", "must be positive"),  # was: ValueError traceback
+        ("accel-tabletop", "noise_mps2=nan", "finite"),  # was: accepted, NaN capture
+        ("accel-tabletop", "extra_positions=-3", "whole number >= 0"),  # was: silently 0
+        ("accel-tabletop", "averages=maybe", "expected 0 or 1"),  # was: silently True
+        ("accel-centrifuge", "noise_g=-1", "must not be negative"),  # was: ValueError traceback
+        ("compass", "n_orientations=0", "whole number >= 1"),  # was: IndexError traceback
+        ("gyro-drift", "duration_s=0", "must be positive"),  # was: RuntimeWarnings, then exit 2
+        ("ldv", "maneuver=bogus", "choose varied or straight"),  # was: silently 'varied'
+        ("ldv", "reference=bogus", "choose body or nav"),  # was: silently 'body'
+        ("ldv", "duration_s=1e12", "more samples than fit in memory"),  # was: MemoryError traceback
+        ("compass", "site=x", "not settable"),
+    ],
+)
 def test_simulate_bad_option(tmp_path, capsys, procedure, option, says):
     out_file = tmp_path / "x.csv"
     code, _, err = run(capsys, "simulate", "--procedure", procedure, "--out", out_file, "--option", option)
@@ -128,39 +136,80 @@ def test_simulate_bad_option(tmp_path, capsys, procedure, option, says):
 
 
 def test_simulate_non_finite_effect(tmp_path, capsys):
-    code, _, err = run(capsys, "simulate", "--procedure", "ldv", "--out", tmp_path / "x.csv",
-                       "--effect", "time_delay=inf")
+    code, _, err = run(
+        capsys, "simulate", "--procedure", "ldv", "--out", tmp_path / "x.csv", "--effect", "time_delay=inf"
+    )
     assert code == 2 and "not a finite number" in one_line(err)
 
 
 def test_simulate_good_options_still_work(tmp_path, capsys):
     out_file = tmp_path / "t.csv"
-    code, out, err = run(capsys, "simulate", "--procedure", "accel-tabletop", "--out", out_file,
-                         "--option", "averages=1", "--option", "extra_positions=2",
-                         "--option", "table_tilt_deg=-0.5")
+    code, out, err = run(
+        capsys,
+        "simulate",
+        "--procedure",
+        "accel-tabletop",
+        "--out",
+        out_file,
+        "--option",
+        "averages=1",
+        "--option",
+        "extra_positions=2",
+        "--option",
+        "table_tilt_deg=-0.5",
+    )
     assert code == 0, err
     cap = read_capture(out_file)
     assert not cap.is_time_series and cap.n_rows == 14
-    code, out, err = run(capsys, "simulate", "--procedure", "accel-tabletop", "--out", out_file,
-                         "--option", "label_positions=0", "--option", "hold_s=5")
+    code, out, err = run(
+        capsys,
+        "simulate",
+        "--procedure",
+        "accel-tabletop",
+        "--out",
+        out_file,
+        "--option",
+        "label_positions=0",
+        "--option",
+        "hold_s=5",
+    )
     assert code == 0, err
     cap = read_capture(out_file)
     assert cap.is_time_series and "position" not in cap.columns
 
 
 def test_simulate_unlabelled_table_is_refused(tmp_path, capsys):
-    code, _, err = run(capsys, "simulate", "--procedure", "accel-tabletop", "--out", tmp_path / "t.csv",
-                       "--option", "averages=1", "--option", "label_positions=0")  # was: labels kept silently
+    code, _, err = run(
+        capsys,
+        "simulate",
+        "--procedure",
+        "accel-tabletop",
+        "--out",
+        tmp_path / "t.csv",
+        "--option",
+        "averages=1",
+        "--option",
+        "label_positions=0",
+    )  # was: labels kept silently
     assert code == 2 and "label_positions=0 applies to time series" in one_line(err)
 
 
 # --- degenerate data: refused with a reason, no numpy noise on stderr ------------------
 
+
 def _tabletop_table(path: Path, rows: np.ndarray) -> Path:
-    cols = {"position": np.array([str(k + 1) for k in range(len(rows))], dtype=object),
-            "ax": rows[:, 0], "ay": rows[:, 1], "az": rows[:, 2]}
-    write_capture(path, Capture(meta={"station-capture": "1", "procedure": "accel-tabletop", "accel_unit": "V"},
-                                columns=cols, path=path))
+    cols = {
+        "position": np.array([str(k + 1) for k in range(len(rows))], dtype=object),
+        "ax": rows[:, 0],
+        "ay": rows[:, 1],
+        "az": rows[:, 2],
+    }
+    write_capture(
+        path,
+        Capture(
+            meta={"station-capture": "1", "procedure": "accel-tabletop", "accel_unit": "V"}, columns=cols, path=path
+        ),
+    )
     return path
 
 
@@ -203,11 +252,18 @@ def test_orientation_clusters_zero_vectors_are_one_orientation():
 
 # --- files that are not captures (these already worked; kept so they stay that way) ---
 
+
 @pytest.mark.parametrize("command", ["calibrate", "inspect"])
-@pytest.mark.parametrize("kind, says", [
-    ("missing", "no such file"), ("directory", "is a directory"), ("empty", "empty file"),
-    ("binary", "binary data"), ("text", "not a station capture file"),
-])
+@pytest.mark.parametrize(
+    "kind, says",
+    [
+        ("missing", "no such file"),
+        ("directory", "is a directory"),
+        ("empty", "empty file"),
+        ("binary", "binary data"),
+        ("text", "not a station capture file"),
+    ],
+)
 def test_not_a_capture(tmp_path, capsys, command, kind, says):
     path = tmp_path / f"{kind}.csv"
     if kind == "directory":
@@ -230,15 +286,20 @@ def test_capture_of_another_procedure_for_a_method(tmp_path, capsys, ldv_capture
 
 
 def test_unknown_ids_in_the_database(tmp_path, capsys, db_with_calibration):
-    for argv, says in [(("history", "NOPE"), 'no device "NOPE"'), (("drift", "NOPE"), 'no device "NOPE"'),
-                       (("export", "99", "--format", "json"), "no calibration 99"),
-                       (("recompute", "99"), "no calibration 99"), (("export-capture", "99"), "no capture 99")]:
+    for argv, says in [
+        (("history", "NOPE"), 'no device "NOPE"'),
+        (("drift", "NOPE"), 'no device "NOPE"'),
+        (("export", "99", "--format", "json"), "no calibration 99"),
+        (("recompute", "99"), "no calibration 99"),
+        (("export-capture", "99"), "no capture 99"),
+    ]:
         code, _, err = run(capsys, "--db", db_with_calibration, *argv)
         assert code == 2 and says in one_line(err), argv
     assert os.path.getsize(db_with_calibration) > 0
 
 
 # --- missing values: used data may shrink, but never silently --------------------------
+
 
 def _with_holes(src: Path, dst: Path, column: str) -> Path:
     cap = read_capture(src)
@@ -282,8 +343,12 @@ def test_gyro_drift_with_a_dead_accelerometer_is_refused(tmp_path, capsys):
     from solvers.simulate import simulate
 
     sim = simulate("gyro-drift", seed=5, duration_s=60.0)
-    cols = dict(sim.columns, ax=np.zeros_like(sim.columns["ax"]), ay=np.zeros_like(sim.columns["ay"]),
-                az=np.zeros_like(sim.columns["az"]))
+    cols = dict(
+        sim.columns,
+        ax=np.zeros_like(sim.columns["ax"]),
+        ay=np.zeros_like(sim.columns["ay"]),
+        az=np.zeros_like(sim.columns["az"]),
+    )
     path = tmp_path / "dead.csv"
     write_capture(path, Capture(meta=sim.meta, columns=cols, path=path))
     code, out, err = run(capsys, "calibrate", path)  # was: exit 0, roll -180°, drift with null σ
@@ -366,11 +431,14 @@ def test_calibrate_accuracy_must_be_positive(tmp_path, capsys, value):
     assert code == 2 and "--accuracy must be a positive number" in one_line(err)
 
 
-@pytest.mark.parametrize("argv", [
-    ("simulate", "--procedure", "ldv", "--out", "{tmp}/x.csv", "--seed", "-1"),  # was: ValueError traceback
-    ("walkthrough", "--procedure", "ldv", "--seed", "-1"),                      # was: ValueError traceback
-    ("devices", "add", "Y", "--kind", "bogus"),                                  # was: stored silently
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("simulate", "--procedure", "ldv", "--out", "{tmp}/x.csv", "--seed", "-1"),  # was: ValueError traceback
+        ("walkthrough", "--procedure", "ldv", "--seed", "-1"),  # was: ValueError traceback
+        ("devices", "add", "Y", "--kind", "bogus"),  # was: stored silently
+    ],
+)
 def test_argument_errors_exit_2(tmp_path, capsys, argv):
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     with pytest.raises(SystemExit) as exc:
@@ -393,8 +461,12 @@ def test_record_out_a_folder_or_missing_folder_is_one_line_before_recording(tmp_
     import sys
 
     for out, needle in ((tmp_path, "is a folder"), (tmp_path / "no" / "x.csv", "no folder")):
-        r = subprocess.run([sys.executable, "-m", "station", "record", "--port", "loop://", "--seconds", "1",
-                            "--out", str(out)], capture_output=True, text=True, timeout=60)
+        r = subprocess.run(
+            [sys.executable, "-m", "station", "record", "--port", "loop://", "--seconds", "1", "--out", str(out)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert r.returncode == 2 and needle in r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 

@@ -1,5 +1,6 @@
 """The CLI starts without the numerics: building the parser loads no numpy, scipy or textual
 (start-up time is what `station due` from cron and every command pays)."""
+
 from __future__ import annotations
 
 import subprocess
@@ -7,9 +8,11 @@ import sys
 
 
 def test_parser_builds_without_heavy_imports():
-    code = ("import sys\nfrom station.cli import build_parser\nbuild_parser()\n"
-            "heavy = sorted(m for m in ('numpy', 'scipy', 'textual', 'sqlite_utils', 'pandas') if m in sys.modules)\n"
-            "print(','.join(heavy))\n")
+    code = (
+        "import sys\nfrom station.cli import build_parser\nbuild_parser()\n"
+        "heavy = sorted(m for m in ('numpy', 'scipy', 'textual', 'sqlite_utils', 'pandas') if m in sys.modules)\n"
+        "print(','.join(heavy))\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
 

@@ -1,6 +1,7 @@
 """P3 compass: simulated truth within the reported uncertainty, RLS = batch, IGRF against a
 published NOAA value, heading known answers, filters and Kalman tilt, refusals through the
 CLI, and the accelerometer sign on the sunsided data."""
+
 from __future__ import annotations
 
 import json
@@ -37,6 +38,7 @@ def _write(tmp_path, sim_or_meta, columns=None, name="c.capture.csv"):
 
 # ---------------------------------------------------------------- truth recovery
 
+
 def test_truth_recovered_within_reported_sigma_over_seeds():
     """12 simulated devices: ~68 % of the 9 normalised errors within 1σ, none beyond 4.5σ.
     Binomial s.d. of the share over 108 (partly correlated) values ≈ 5 %: accept 50–85 %."""
@@ -44,8 +46,7 @@ def test_truth_recovered_within_reported_sigma_over_seeds():
     for seed in range(12):
         sim = simulate("compass", seed=100 + seed, n_orientations=16, hold_s=1.5, move_s=1.5)
         y = _mag(sim)
-        cal = C.calibrate_mag(y, sim.truth["reference"]["total_nT"],
-                              noise_raw=C.noise_from_second_differences(y))
+        cal = C.calibrate_mag(y, sim.truth["reference"]["total_nT"], noise_raw=C.noise_from_second_differences(y))
         Wt, ht = np.array(sim.truth["soft_iron"]), np.array(sim.truth["hard_iron"])
         err = C.theta_of(cal.W, cal.h) - C.theta_of(Wt, ht)
         sig = np.concatenate([cal.W_sigma[C.UPPER], cal.h_sigma])
@@ -98,6 +99,7 @@ def test_ellipsoid_fit_exact_on_noiseless_data():
 
 # ---------------------------------------------------------------- IGRF known answer
 
+
 def test_igrf_against_noaa_calculator():
     """NOAA NCEI Magnetic Field Calculator, model IGRF2020 (IGRF-13), calculator version
     0.5.1.11, 2020-01-01 (2020.0), 45°N 116°E, 5 km above the WGS-84 ellipsoid:
@@ -109,27 +111,31 @@ def test_igrf_against_noaa_calculator():
     assert r["north_nT"] == pytest.approx(24198.1, abs=10.0)
     assert r["east_nT"] == pytest.approx(-3501.6, abs=10.0)
     assert r["down_nT"] == pytest.approx(51515.9, abs=10.0)
-    F = math.sqrt(24198.1 ** 2 + 3501.6 ** 2 + 51515.9 ** 2)
+    F = math.sqrt(24198.1**2 + 3501.6**2 + 51515.9**2)
     assert r["total_nT"] == pytest.approx(F, abs=10.0)
     assert r["declination_deg"] == pytest.approx(math.degrees(math.atan2(-3501.6, 24198.1)), abs=0.05)
     assert r["inclination_deg"] == pytest.approx(
-        math.degrees(math.atan2(51515.9, math.hypot(24198.1, 3501.6))), abs=0.05)
+        math.degrees(math.atan2(51515.9, math.hypot(24198.1, 3501.6))), abs=0.05
+    )
 
 
 # ---------------------------------------------------------------- heading known answers
 
+
 @pytest.mark.parametrize("yaw_deg", [0.0, 30.0, 90.0, 180.0, 271.0, 359.0])
 def test_heading_level_known_yaw(yaw_deg):
-    ref = igrf_reference(**{k: SITE[k] for k in ("latitude_deg", "longitude_deg")},
-                         altitude_m=SITE["altitude_m"], date=SITE["date"])
+    ref = igrf_reference(
+        **{k: SITE[k] for k in ("latitude_deg", "longitude_deg")}, altitude_m=SITE["altitude_m"], date=SITE["date"]
+    )
     C_n_b = frames.euler_to_C_n_b(0.0, 0.0, math.radians(yaw_deg))
     m_b = C_n_b.T @ field_ned(ref)
     f_b = C_n_b.T @ np.array([0.0, 0.0, -1.0])  # specific force, g units
     pitch, roll = C.pitch_roll_from_accel(f_b)
     mag, true = C.heading_deg(m_b, pitch, roll, ref["declination_deg"])
     assert true[0] == pytest.approx(yaw_deg % 360.0, abs=1e-9) or abs(true[0] - yaw_deg) % 360 < 1e-9
-    assert (mag[0] - (yaw_deg - ref["declination_deg"])) % 360.0 == pytest.approx(0.0, abs=1e-9) or \
-        (mag[0] - (yaw_deg - ref["declination_deg"])) % 360.0 == pytest.approx(360.0, abs=1e-9)
+    assert (mag[0] - (yaw_deg - ref["declination_deg"])) % 360.0 == pytest.approx(0.0, abs=1e-9) or (
+        mag[0] - (yaw_deg - ref["declination_deg"])
+    ) % 360.0 == pytest.approx(360.0, abs=1e-9)
 
 
 @pytest.mark.parametrize("roll_deg,pitch_deg,yaw_deg", [(20, -15, 123), (-40, 30, 250), (170, 10, 45)])
@@ -157,8 +163,11 @@ def test_held_headings_match_simulated_truth(tmp_path):
     truth = np.array(sim.truth["heading_deg"]) % 360.0
     rows = res["headings"]
     assert len(rows) == len(truth)  # one per held attitude
-    errs = [((r["heading_true_deg"] - t + 180.0) % 360.0) - 180.0
-            for r, t in zip(rows, truth) if r["heading_true_deg"] is not None]
+    errs = [
+        ((r["heading_true_deg"] - t + 180.0) % 360.0) - 180.0
+        for r, t in zip(rows, truth)
+        if r["heading_true_deg"] is not None
+    ]
     assert len(errs) >= 15
     # 0.15 µT noise on ~55 µT, ~0.1° tilt noise: a few tenths of a degree; a tilt error is
     # amplified ~1/cos(pitch) in heading, and holds reach ±65° pitch: max 1.5°
@@ -166,6 +175,7 @@ def test_held_headings_match_simulated_truth(tmp_path):
 
 
 # ---------------------------------------------------------------- filters and Kalman
+
 
 def test_filters_zero_phase_and_causal_streaming():
     rate = 100.0
@@ -214,23 +224,44 @@ def test_kalman_rides_through_hand_acceleration_and_learns_bias():
 
 # ---------------------------------------------------------------- coverage and refusals
 
+
 def _capture_from_attitudes(atts, *, noise_uT=0.15, hold=60, seed=0, params=None):
     """Held attitudes (body → NED), jumps between them; accel g, gyro 0, mag µT."""
     rng = np.random.default_rng(seed)
     ref = igrf_reference(SITE["latitude_deg"], SITE["longitude_deg"], SITE["altitude_m"], SITE["date"])
-    params = params or {"W": 1000.0 * (np.eye(3) + np.triu(rng.normal(scale=0.04, size=(3, 3)))),
-                        "h": rng.normal(scale=8.0, size=3)}
+    params = params or {
+        "W": 1000.0 * (np.eye(3) + np.triu(rng.normal(scale=0.04, size=(3, 3)))),
+        "h": rng.normal(scale=8.0, size=3),
+    }
     C_b_n = np.repeat(np.array([a.T for a in atts]), hold, axis=0)
     m = mag_model.forward(C_b_n @ field_ned(ref), params) + rng.normal(scale=noise_uT, size=(len(C_b_n), 3))
     f = C_b_n @ np.array([0.0, 0.0, -1.0]) + rng.normal(scale=0.002, size=(len(C_b_n), 3))
     n = len(C_b_n)
-    cols = {"t": np.arange(n) / 50.0, "ax": f[:, 0], "ay": f[:, 1], "az": f[:, 2],
-            "gx": np.zeros(n), "gy": np.zeros(n), "gz": np.zeros(n),
-            "mx": m[:, 0], "my": m[:, 1], "mz": m[:, 2]}
-    meta = {"station-capture": "1", "procedure": "compass", "device": "T-1", "accel_unit": "g",
-            "gyro_unit": "deg/s", "mag_unit": "uT", "latitude_deg": str(SITE["latitude_deg"]),
-            "longitude_deg": str(SITE["longitude_deg"]), "altitude_m": str(SITE["altitude_m"]),
-            "date": SITE["date"], "sample_rate_hz": "50"}
+    cols = {
+        "t": np.arange(n) / 50.0,
+        "ax": f[:, 0],
+        "ay": f[:, 1],
+        "az": f[:, 2],
+        "gx": np.zeros(n),
+        "gy": np.zeros(n),
+        "gz": np.zeros(n),
+        "mx": m[:, 0],
+        "my": m[:, 1],
+        "mz": m[:, 2],
+    }
+    meta = {
+        "station-capture": "1",
+        "procedure": "compass",
+        "device": "T-1",
+        "accel_unit": "g",
+        "gyro_unit": "deg/s",
+        "mag_unit": "uT",
+        "latitude_deg": str(SITE["latitude_deg"]),
+        "longitude_deg": str(SITE["longitude_deg"]),
+        "altitude_m": str(SITE["altitude_m"]),
+        "date": SITE["date"],
+        "sample_rate_hz": "50",
+    }
     return meta, cols
 
 
@@ -273,8 +304,9 @@ def test_refuses_too_few_orientations(tmp_path, capsys):
 
 def test_coverage_measure():
     assert C.coverage(C.fibonacci_sphere(2000)) == 1.0
-    ring = np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 500)), np.sin(np.linspace(0, 2 * np.pi, 500)),
-                            np.zeros(500)])
+    ring = np.column_stack(
+        [np.cos(np.linspace(0, 2 * np.pi, 500)), np.sin(np.linspace(0, 2 * np.pi, 500)), np.zeros(500)]
+    )
     # a great circle: the ±30° band around it is half the sphere, but it is planar
     assert C.coverage(ring) == pytest.approx(0.5, abs=0.05)
     assert C.spread(ring) < 1e-9 and C.spread(C.fibonacci_sphere(500)) > 0.95
@@ -290,6 +322,7 @@ def test_coverage_measure():
 
 # ---------------------------------------------------------------- CLI contract, site, sign
 
+
 def test_json_contract_and_text(tmp_path, capsys):
     sim = simulate("compass", seed=9)
     path = _write(tmp_path, sim)
@@ -299,8 +332,14 @@ def test_json_contract_and_text(tmp_path, capsys):
     assert W.shape == (3, 3) and np.all(np.tril(W, -1) == 0.0) and np.all(np.diag(W) > 0)
     assert np.array(res["uncertainty"]["soft_iron"]).shape == (3, 3)
     assert len(res["params"]["hard_iron"]) == 3 and len(res["uncertainty"]["hard_iron"]) == 3
-    assert set(res["params"]["reference"]) == {"north_nT", "east_nT", "down_nT", "total_nT",
-                                               "inclination_deg", "declination_deg"}
+    assert set(res["params"]["reference"]) == {
+        "north_nT",
+        "east_nT",
+        "down_nT",
+        "total_nT",
+        "inclination_deg",
+        "declination_deg",
+    }
     assert res["params"]["reference"]["total_nT"] == pytest.approx(sim.truth["reference"]["total_nT"])
     assert res["residual_rms"] == pytest.approx(150.0, rel=0.15)  # 0.15 µT × |W| ≈ 150 nT
     assert res["n_positions"] >= 9 and res["warnings"] == []
@@ -331,8 +370,11 @@ def test_gravity_sign_detected_and_flipped_on_simulated_data(tmp_path):
     assert res["accel_sign"]["detected"] == "gravity" and res["accel_sign"]["used"] == "gravity"
     assert any("gravity direction" in w and "flipped" in w for w in res["warnings"])
     truth = np.array(sim.truth["heading_deg"]) % 360.0
-    errs = [((r["heading_true_deg"] - t + 180.0) % 360.0) - 180.0
-            for r, t in zip(res["headings"], truth) if r["heading_true_deg"] is not None]
+    errs = [
+        ((r["heading_true_deg"] - t + 180.0) % 360.0) - 180.0
+        for r, t in zip(res["headings"], truth)
+        if r["heading_true_deg"] is not None
+    ]
     assert np.median(np.abs(errs)) < 0.3 and np.max(np.abs(errs)) < 1.5  # right again after the flip
 
 
@@ -368,8 +410,7 @@ def test_table_of_averages_capture(tmp_path):
     c = sim.columns
     n_hold = int(2.0 * 50.0)
     starts = [k * (n_hold + int(2.5 * 50.0)) for k in range(20)]
-    cols = {k: np.array([np.mean(c[k][s:s + n_hold]) for s in starts])
-            for k in ("ax", "ay", "az", "mx", "my", "mz")}
+    cols = {k: np.array([np.mean(c[k][s : s + n_hold]) for s in starts]) for k in ("ax", "ay", "az", "mx", "my", "mz")}
     cols = {"position": np.array([str(k + 1) for k in range(20)], dtype=object), **cols}
     res = _run_json(_write(tmp_path, dict(sim.meta), cols))
     Wt, ht = np.array(sim.truth["soft_iron"]), np.array(sim.truth["hard_iron"])
@@ -379,8 +420,11 @@ def test_table_of_averages_capture(tmp_path):
     assert np.all(np.abs((W - Wt)[up] / s_W[up]) < 4.0) and np.all(np.abs((h - ht) / s_h) < 4.0)
     assert len(res["headings"]) == 20
     truth = np.array(sim.truth["heading_deg"]) % 360.0
-    errs = [((r["heading_true_deg"] - t + 180.0) % 360.0) - 180.0
-            for r, t in zip(res["headings"], truth) if r["heading_true_deg"] is not None]
+    errs = [
+        ((r["heading_true_deg"] - t + 180.0) % 360.0) - 180.0
+        for r, t in zip(res["headings"], truth)
+        if r["heading_true_deg"] is not None
+    ]
     assert np.median(np.abs(errs)) < 0.5
 
 
@@ -403,8 +447,9 @@ def test_live_compass_streams_and_settles_on_truth():
         np.testing.assert_allclose(np.concatenate([p[k] for p in parts]), whole[k], atol=1e-9)
     n_hold, n_move = 100, 125
     ends = [n_hold - 1 + k * (n_hold + n_move) for k in range(len(tr["heading_deg"]))]
-    errs = [((whole[3][i] - h + 180.0) % 360.0) - 180.0 for i, h in zip(ends, tr["heading_deg"])
-            if np.isfinite(whole[3][i])]
+    errs = [
+        ((whole[3][i] - h + 180.0) % 360.0) - 180.0 for i, h in zip(ends, tr["heading_deg"]) if np.isfinite(whole[3][i])
+    ]
     assert len(errs) >= 18 and np.median(np.abs(errs)) < 0.5 and np.max(np.abs(errs)) < 2.0
 
 
@@ -413,9 +458,20 @@ def test_six_to_eight_orientations_axis_aligned_ellipsoid_only(tmp_path, capsys)
     ellipsoid (6 unknowns) but not the RLS's full W (9): refused by default, fitted with
     --method ellipsoid, and a diagonal truth is recovered within the reported σ."""
     params = {"W": np.diag([1040.0, 965.0, 1010.0]), "h": np.array([5.0, -9.0, 3.0])}
-    atts = [C.unit_rows(d)[0] for d in ([1, 0.1, 0.2], [-1, 0.2, 0.1], [0.1, 1, -0.2], [0.2, -1, 0.1],
-                                        [0.1, 0.2, 1], [-0.2, 0.1, -1], [0.6, 0.6, 0.5])]
+    atts = [
+        C.unit_rows(d)[0]
+        for d in (
+            [1, 0.1, 0.2],
+            [-1, 0.2, 0.1],
+            [0.1, 1, -0.2],
+            [0.2, -1, 0.1],
+            [0.1, 0.2, 1],
+            [-0.2, 0.1, -1],
+            [0.6, 0.6, 0.5],
+        )
+    ]
     from solvers.positions import C_n_b_for
+
     Cs = [C_n_b_for(d, 0.3 * k) for k, d in enumerate(atts)]
     path = _write(tmp_path, *_capture_from_attitudes(Cs, params=params, hold=100))
     rc, out = _run_cli(path, capsys)

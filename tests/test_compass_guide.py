@@ -1,4 +1,5 @@
 """The UI-free P3 sweep guide (station.procedures.compass_guide) on the simulated device."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,8 +13,13 @@ from station.sources import SimSource
 def make(min_s=30.0, target=0.8, seed=2):
     now = [0.0]
     src = SimSource(seed=seed, procedure="compass", clock=lambda: now[0]).start()
-    guide = CompassGuide(sample_rate_hz=src.rate_hz, units=src.units, device_id=src.device_id, site=src.site,
-                         config=CompassConfig(min_s=min_s, target_coverage=target))
+    guide = CompassGuide(
+        sample_rate_hz=src.rate_hz,
+        units=src.units,
+        device_id=src.device_id,
+        site=src.site,
+        config=CompassConfig(min_s=min_s, target_coverage=target),
+    )
     return now, src, guide
 
 

@@ -1,4 +1,5 @@
 """Rows with a missing magnetometer value are left out and counted, never silently."""
+
 from __future__ import annotations
 
 import numpy as np

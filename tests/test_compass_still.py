@@ -1,5 +1,6 @@
 """A compass capture of a unit that was never turned is refused for that reason, not let
 through by sensor noise that points everywhere about its own midrange centre."""
+
 from __future__ import annotations
 
 import numpy as np

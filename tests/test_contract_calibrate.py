@@ -5,6 +5,7 @@ the procedure: the required keys, each procedure's parameter names and shapes, `
 with the same shape as `params` (1σ, never negative), valid JSON without NaN/Infinity
 literals. The real CLI (`station.cli.main`) writes the JSON; we parse what it printed.
 """
+
 from __future__ import annotations
 
 import json
@@ -122,8 +123,9 @@ def check_gyro(d: dict) -> None:
         assert set(p) == GYRO_MODE_B
         assert is_num(p["pitch_deg"]) and is_num(p["roll_deg"])
         # earth_rate_body [3] rad/s; without latitude_deg it cannot be known: null, and a warning says so
-        assert vec(p["earth_rate_body"]) or (p["earth_rate_body"] is None
-                                            and any("latitude" in w for w in d["warnings"]))
+        assert vec(p["earth_rate_body"]) or (
+            p["earth_rate_body"] is None and any("latitude" in w for w in d["warnings"])
+        )
         if p["earth_rate_body"] is not None:
             assert math.hypot(*p["earth_rate_body"]) <= 7.2922e-5 * (1 + 1e-6)  # no more than Earth's rate
     else:
@@ -142,8 +144,13 @@ def check_ldv(d: dict) -> None:
         assert math.isclose(cosines, 1.0, abs_tol=1e-6)  # direction angles of one unit vector
 
 
-CHECKS = {"accel-tabletop": check_tabletop, "accel-centrifuge": check_centrifuge, "compass": check_compass,
-          "gyro-drift": check_gyro, "ldv": check_ldv}
+CHECKS = {
+    "accel-tabletop": check_tabletop,
+    "accel-centrifuge": check_centrifuge,
+    "compass": check_compass,
+    "gyro-drift": check_gyro,
+    "ldv": check_ldv,
+}
 
 # small but realistic simulations (kept short for the suite's time budget)
 SIMULATED = [
@@ -160,9 +167,13 @@ SIMULATED = [
 ]
 
 
-@pytest.mark.parametrize("procedure, options, method", SIMULATED,
-                         ids=[f"{p}-{'-'.join(f'{k}={v}' for k, v in o.items()) or 'default'}{'-' + m if m else ''}"
-                              for p, o, m in SIMULATED])
+@pytest.mark.parametrize(
+    "procedure, options, method",
+    SIMULATED,
+    ids=[
+        f"{p}-{'-'.join(f'{k}={v}' for k, v in o.items()) or 'default'}{'-' + m if m else ''}" for p, o, m in SIMULATED
+    ],
+)
 def test_simulated_capture_matches_the_contract(tmp_path, capsys, procedure, options, method):
     from solvers.simulate import simulate
 

@@ -1,17 +1,18 @@
 """Drift trends and recalibration reminders on devices with known synthetic drift."""
+
 from __future__ import annotations
 
 import math
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 import pytest
+from db_testdata import accel_result, small_capture
 
 from db import Store
 from db.params import DAYS_PER_YEAR, linear_trend
-from db_testdata import accel_result, small_capture
 
-T0 = datetime(2022, 1, 1, tzinfo=timezone.utc)
+T0 = datetime(2022, 1, 1, tzinfo=UTC)
 
 
 def _save_series(store, device, days, B0, rates, sigma, rng=None, accepted=None, procedure_result=accel_result):
@@ -25,8 +26,16 @@ def _save_series(store, device, days, B0, rates, sigma, rng=None, accepted=None,
             B = [b + rng.normal(0.0, sigma) for b in B]
         when = (T0 + timedelta(days=d)).strftime("%Y-%m-%dT%H:%M:%SZ")
         ok = True if accepted is None else accepted[k]
-        ids.append(store.save_calibration(procedure_result(device=device, B=B, sigma_B=sigma), meta=meta, columns=cols, allow_duplicate=True,
-                                          time=when, accepted=ok))
+        ids.append(
+            store.save_calibration(
+                procedure_result(device=device, B=B, sigma_B=sigma),
+                meta=meta,
+                columns=cols,
+                allow_duplicate=True,
+                time=when,
+                accepted=ok,
+            )
+        )
     return ids
 
 
@@ -78,8 +87,13 @@ def test_noise_free_drift_is_recovered_exactly(store):
 
 def test_noisy_drift_of_several_devices_within_sigma(store):
     rng = np.random.default_rng(2024)
-    truth = {"A": (0.02, -0.01, 0.0), "B": (-0.05, 0.0, 0.03), "C": (0.0, 0.1, -0.02), "D": (0.004, 0.0, 0.0),
-             "E": (-0.3, 0.2, 0.01)}
+    truth = {
+        "A": (0.02, -0.01, 0.0),
+        "B": (-0.05, 0.0, 0.03),
+        "C": (0.0, 0.1, -0.02),
+        "D": (0.004, 0.0, 0.0),
+        "E": (-0.3, 0.2, 0.01),
+    }
     sigma = 0.005
     pulls = []
     for device, rates in truth.items():
@@ -97,8 +111,14 @@ def test_noisy_drift_of_several_devices_within_sigma(store):
 def test_drift_ignores_rejected_calibrations(store):
     _save_series(store, "R", [0, 365.25, 730.5], B0=(0, 0, 0), rates=(0.1, 0, 0), sigma=0.01)
     meta, cols = small_capture(device="R")
-    store.save_calibration(accel_result(device="R", B=(5, 5, 5)), meta=meta, columns=cols, allow_duplicate=True,
-                           time="2023-06-01", accepted=False)
+    store.save_calibration(
+        accel_result(device="R", B=(5, 5, 5)),
+        meta=meta,
+        columns=cols,
+        allow_duplicate=True,
+        time="2023-06-01",
+        accepted=False,
+    )
     t = store.drift("R", param="B[0]")[0]
     assert t["n"] == 3 and t["rate_per_year"] == pytest.approx(0.1, abs=1e-12)
 
@@ -126,6 +146,7 @@ def test_negligible_drift_predicts_no_exit(store):
 
 # --- due -------------------------------------------------------------------------------
 
+
 def test_due_by_interval(store):
     store.add_device("I", interval_days=180)
     _save_series(store, "I", [0], B0=(0, 0, 0), rates=(0, 0, 0), sigma=0.01)  # calibrated 2022-01-01
@@ -139,7 +160,9 @@ def test_due_by_interval(store):
     assert late[0]["status"] == "overdue" and late[0]["days_left"] == pytest.approx(-10.0)
     # a new accepted calibration restarts the clock; a rejected one does not
     meta, cols = small_capture(device="I")
-    store.save_calibration(accel_result(device="I"), meta=meta, columns=cols, allow_duplicate=True, time=due_at, accepted=False)
+    store.save_calibration(
+        accel_result(device="I"), meta=meta, columns=cols, allow_duplicate=True, time=due_at, accepted=False
+    )
     assert [e["device_id"] for e in store.due(now=due_at + timedelta(days=10))] == ["I"]
     store.save_calibration(accel_result(device="I"), meta=meta, columns=cols, allow_duplicate=True, time=due_at)
     assert store.due(now=due_at + timedelta(days=10)) == []

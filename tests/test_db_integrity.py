@@ -1,8 +1,8 @@
 """Integrity on real files: concurrent writers, SIGKILL mid-save, tamper evidence."""
+
 from __future__ import annotations
 
 import multiprocessing
-import os
 import signal
 import sqlite3
 import subprocess
@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from db_testdata import accel_result, small_capture
 
 from db import Store
-from db_testdata import accel_result, small_capture
 
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = Path(__file__).resolve().parent
@@ -23,7 +23,8 @@ TESTS = Path(__file__).resolve().parent
 
 def _writer(path: str, worker: int, n: int, shared: str) -> None:
     sys.path.insert(0, str(TESTS))
-    from db_testdata import accel_result as res, small_capture as cap
+    from db_testdata import accel_result as res
+    from db_testdata import small_capture as cap
 
     s = Store(path)
     for i in range(n):
@@ -74,11 +75,15 @@ def test_kill_during_save_leaves_database_consistent(tmp_path, seed):
     path = str(tmp_path / "station.db")
     with Store(path) as s:  # some history from before
         meta, cols = small_capture(device="K")
-        first = s.save_calibration(accel_result(device="K", B=(-1, 0, 0)), meta=meta, columns=cols, allow_duplicate=True)
+        first = s.save_calibration(
+            accel_result(device="K", B=(-1, 0, 0)), meta=meta, columns=cols, allow_duplicate=True
+        )
     rng = np.random.default_rng(seed)
     proc = subprocess.Popen(
         [sys.executable, "-c", KILL_SCRIPT.format(tests=str(TESTS), path=path)],
-        cwd=ROOT, stdout=subprocess.PIPE, text=True,
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
     )
     committed, durations, started = [], [], None
     target = int(rng.integers(2, 5))
@@ -120,6 +125,7 @@ def test_kill_during_save_leaves_database_consistent(tmp_path, seed):
 
 # --- tamper evidence -------------------------------------------------------------------
 
+
 @pytest.fixture
 def filled(tmp_path):
     path = str(tmp_path / "station.db")
@@ -127,7 +133,9 @@ def filled(tmp_path):
         ids = []
         for k, date in enumerate(["2024-01-01", "2024-06-01", "2025-01-01", "2025-06-01"]):
             meta, cols = small_capture(seed=k, device="T", date=date)
-            ids.append(s.save_calibration(accel_result(device="T", B=(k, 0, 0)), meta=meta, columns=cols, allow_duplicate=True))
+            ids.append(
+                s.save_calibration(accel_result(device="T", B=(k, 0, 0)), meta=meta, columns=cols, allow_duplicate=True)
+            )
         meta, cols = small_capture(device="U")
         ids.append(s.save_calibration(accel_result(device="U"), meta=meta, columns=cols, allow_duplicate=True))
         assert s.verify() == []
@@ -143,8 +151,7 @@ def _edit(path: str, sql: str, args=()) -> None:
 
 def test_verify_names_a_row_edited_with_sqlite3(filled):
     path, ids = filled
-    _edit(path, "UPDATE calibrations SET params = replace(params, '\"B\":[1.0,', '\"B\":[1.5,') WHERE id = ?",
-          [ids[1]])
+    _edit(path, "UPDATE calibrations SET params = replace(params, '\"B\":[1.0,', '\"B\":[1.5,') WHERE id = ?", [ids[1]])
     with Store(path) as s:
         assert s.calibration(ids[1])["params"]["B"][0] == 1.5
         problems = s.verify()
@@ -152,8 +159,16 @@ def test_verify_names_a_row_edited_with_sqlite3(filled):
     assert problems[0]["device_id"] == "T"
 
 
-@pytest.mark.parametrize("column,value", [("accepted", 0), ("time", "2023-01-01T00:00:00Z"), ("residual_rms", 0.001),
-                                          ("operator", "mallory"), ("software_version", "9.9")])
+@pytest.mark.parametrize(
+    "column,value",
+    [
+        ("accepted", 0),
+        ("time", "2023-01-01T00:00:00Z"),
+        ("residual_rms", 0.001),
+        ("operator", "mallory"),
+        ("software_version", "9.9"),
+    ],
+)
 def test_verify_catches_any_field(filled, column, value):
     path, ids = filled
     _edit(path, f"UPDATE calibrations SET {column} = ? WHERE id = ?", [value, ids[2]])
@@ -183,7 +198,10 @@ def test_verify_catches_deleted_record(filled):
     with Store(path) as s:
         problems = s.verify()
     # the chain names the record after the gap; the deleted record's capture is left behind
-    assert [(p["kind"], p["calibration_id"]) for p in problems] == [("chain broken", ids[2]), ("orphaned capture", None)]
+    assert [(p["kind"], p["calibration_id"]) for p in problems] == [
+        ("chain broken", ids[2]),
+        ("orphaned capture", None),
+    ]
 
 
 def test_verify_catches_changed_samples(filled):
@@ -194,11 +212,16 @@ def test_verify_catches_changed_samples(filled):
     import zlib
 
     cols["ax"][0] += 1e-9
-    _edit(path, "UPDATE capture_columns SET data = ? WHERE capture_id = ? AND name = 'ax'",
-          [zlib.compress(cols["ax"].tobytes()), capture_id])
+    _edit(
+        path,
+        "UPDATE capture_columns SET data = ? WHERE capture_id = ? AND name = 'ax'",
+        [zlib.compress(cols["ax"].tobytes()), capture_id],
+    )
     with Store(path) as s:
         problems = s.verify()
-    assert [(p["kind"], p["capture_id"], p["calibration_id"]) for p in problems] == [("capture changed", capture_id, ids[0])]
+    assert [(p["kind"], p["capture_id"], p["calibration_id"]) for p in problems] == [
+        ("capture changed", capture_id, ids[0])
+    ]
 
 
 def test_verify_cli_exit_1_names_the_record(filled, capsys):

@@ -1,15 +1,16 @@
 """The README's Database section stays true: its SQL runs and every database command is in it."""
+
 from __future__ import annotations
 
 import re
 import sqlite3
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
+from db_testdata import accel_result, small_capture
 
 from db import Store
-from db_testdata import accel_result, small_capture
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -39,22 +40,31 @@ def test_readme_queries_run_and_answer(tmp_path):
     queries = re.findall(r"```sql\n(.*?)```", _section(), flags=re.S)
     assert len(queries) == 3
     path = str(tmp_path / "station.db")
-    now = datetime.now(timezone.utc)
+    now = datetime.now(UTC)
     with Store(path) as s:
         s.add_device("SOON", interval_days=30)
         s.add_device("LATER", interval_days=365)
         meta, cols = small_capture()
         for device, ago in (("SOON", 20), ("LATER", 10)):
             for k in range(2):
-                s.save_calibration(accel_result(device=device, B=(0.1 * (k + 1), 0, 0)), meta=meta, columns=cols, allow_duplicate=True,
-                                   time=now - timedelta(days=ago + 100 * (1 - k)))
+                s.save_calibration(
+                    accel_result(device=device, B=(0.1 * (k + 1), 0, 0)),
+                    meta=meta,
+                    columns=cols,
+                    allow_duplicate=True,
+                    time=now - timedelta(days=ago + 100 * (1 - k)),
+                )
     raw = sqlite3.connect(path)
     in_use = raw.execute(queries[0]).fetchall()
     assert [(r[0], r[1]) for r in in_use] == [("LATER", "accel-tabletop"), ("SOON", "accel-tabletop")]
     assert all('"B":[0.2,' in r[4] for r in in_use)  # the newer one of each pair
     series = raw.execute(queries[1]).fetchall()
-    assert [(r[0], r[2], r[3]) for r in series] == [("LATER", 0.1, 0.01), ("LATER", 0.2, 0.01),
-                                                    ("SOON", 0.1, 0.01), ("SOON", 0.2, 0.01)]
+    assert [(r[0], r[2], r[3]) for r in series] == [
+        ("LATER", 0.1, 0.01),
+        ("LATER", 0.2, 0.01),
+        ("SOON", 0.1, 0.01),
+        ("SOON", 0.2, 0.01),
+    ]
     due = raw.execute(queries[2]).fetchall()
     assert [r[0] for r in due] == ["SOON"]  # due in 10 days; LATER in 355
     raw.close()

@@ -1,4 +1,5 @@
 """db.store on real SQLite files: schema, devices, lossless captures, calibrations, history."""
+
 from __future__ import annotations
 
 import json
@@ -7,13 +8,13 @@ import sqlite3
 
 import numpy as np
 import pytest
+from db_testdata import accel_result, compass_result, ldv_result, small_capture
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from db import NotFound, Store, default_db_path
 from db.schema import MIGRATION_NAMES
-from db_testdata import accel_result, compass_result, ldv_result, small_capture
 
 
 @pytest.fixture
@@ -25,6 +26,7 @@ def store(tmp_path):
 
 # --- opening, schema, migrations -------------------------------------------------------
 
+
 def test_open_creates_parent_folder_wal_foreign_keys_and_migrations(tmp_path):
     path = tmp_path / "a" / "b" / "station.db"
     with Store(str(path)) as s:
@@ -33,7 +35,9 @@ def test_open_creates_parent_folder_wal_foreign_keys_and_migrations(tmp_path):
         assert s.conn.execute("PRAGMA foreign_keys").fetchone()[0] == 1
         assert s.conn.execute("PRAGMA busy_timeout").fetchone()[0] >= 10000
     raw = sqlite3.connect(path)
-    applied = [r[0] for r in raw.execute("SELECT name FROM _sqlite_migrations WHERE migration_set='station' ORDER BY id")]
+    applied = [
+        r[0] for r in raw.execute("SELECT name FROM _sqlite_migrations WHERE migration_set='station' ORDER BY id")
+    ]
     assert applied == MIGRATION_NAMES
     names = {r[0] for r in raw.execute("SELECT name FROM sqlite_master WHERE type IN ('table','view')")}
     assert {"devices", "captures", "capture_columns", "calibrations", "schedule", "calibration_params"} <= names
@@ -101,9 +105,16 @@ def test_foreign_keys_refuse_orphans(store):
 
 # --- devices ---------------------------------------------------------------------------
 
+
 def test_add_get_update_device(store):
-    d = store.add_device("IMU-7", model="ADXL355", sensor_kinds=["accel"], notes="bench 2", interval_days=180,
-                         tolerances={"B": 0.05, "M[0][0]": 1e-3})
+    d = store.add_device(
+        "IMU-7",
+        model="ADXL355",
+        sensor_kinds=["accel"],
+        notes="bench 2",
+        interval_days=180,
+        tolerances={"B": 0.05, "M[0][0]": 1e-3},
+    )
     assert d["id"] == "IMU-7" and d["model"] == "ADXL355" and d["interval_days"] == 180.0
     assert d["tolerances"] == {"B": 0.05, "M[0][0]": 1e-3}
     d = store.add_device("IMU-7", notes="moved to bench 3", tolerances={"M[0][0]": None, "B[2]": 0.01})
@@ -128,7 +139,7 @@ def test_bad_interval_and_tolerance_refused(store):
 
 
 NASTY = [
-    'IMU "quoted" \'single\'',
+    "IMU \"quoted\" 'single'",
     "x'); DROP TABLE devices; --",
     "Gerät-Ω-温度-🙂",
     "line one\nline two\r\nline three",
@@ -153,6 +164,7 @@ def test_nasty_ids_and_notes_round_trip_verbatim(store, device_id):
 
 
 # --- captures --------------------------------------------------------------------------
+
 
 def _bits(a: np.ndarray) -> np.ndarray:
     return a.view(np.uint64) if a.dtype == np.float64 else a
@@ -219,12 +231,14 @@ def test_capture_bad_columns_refused(store):
 
 # --- calibrations ----------------------------------------------------------------------
 
+
 def test_save_calibration_stores_capture_result_and_device(store):
     meta, cols = small_capture(device="IMU-9", date="2026-11-21")
     r = accel_result(device="IMU-9")
     r["uncertainty"]["B"][1] = float("nan")
-    cid = store.save_calibration(r, meta=meta, columns=cols, operator="bo", software_version="0.1.0",
-                                 sensor_kind="accel")
+    cid = store.save_calibration(
+        r, meta=meta, columns=cols, operator="bo", software_version="0.1.0", sensor_kind="accel"
+    )
     cal = store.calibration(cid)
     assert cal["device_id"] == "IMU-9" and cal["time"] == "2026-11-21T00:00:00Z"
     assert cal["software_version"] == "0.1.0" and cal["operator"] == "bo" and cal["accepted"] is True
@@ -239,10 +253,21 @@ def test_save_calibration_stores_capture_result_and_device(store):
 def test_device_resolution_order(store):
     meta, cols = small_capture(device="FROM-META")
     r = accel_result(device="FROM-RESULT")
-    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True, device_id="FROM-ARG"))["device_id"] == "FROM-ARG"
-    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True))["device_id"] == "FROM-RESULT"
+    assert (
+        store.calibration(
+            store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True, device_id="FROM-ARG")
+        )["device_id"]
+        == "FROM-ARG"
+    )
+    assert (
+        store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True))["device_id"]
+        == "FROM-RESULT"
+    )
     r.pop("device")
-    assert store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True))["device_id"] == "FROM-META"
+    assert (
+        store.calibration(store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True))["device_id"]
+        == "FROM-META"
+    )
     meta.pop("device")
     with pytest.raises(ValueError, match="no device"):
         store.save_calibration(r, meta=meta, columns=cols, allow_duplicate=True)
@@ -285,8 +310,19 @@ def test_history_oldest_first_supersedes_and_rejections(store):
     assert by["2025-06-01"]["supersedes"] is None  # saved first: nothing before it yet
     assert by["2026-01-01"]["supersedes"] == ids["2025-06-01"]
     assert by["2025-06-01"]["superseded_by"] == ids["2026-01-01"]
-    for key in ("id", "time", "procedure", "params", "uncertainty", "residual_rms", "accepted", "capture_id",
-                "supersedes", "software_version", "warnings"):
+    for key in (
+        "id",
+        "time",
+        "procedure",
+        "params",
+        "uncertainty",
+        "residual_rms",
+        "accepted",
+        "capture_id",
+        "supersedes",
+        "software_version",
+        "warnings",
+    ):
         assert key in h[0]
     assert len(store.history("IMU-1")) == 5
     assert store.history("unknown") == []
@@ -298,8 +334,10 @@ def test_calibration_params_view_matches_flattened_params(store):
     meta, cols = small_capture()
     c1 = store.save_calibration(accel_result(B=(1.5, 2.5, 3.5)), meta=meta, columns=cols)
     c2 = store.save_calibration(ldv_result(device="LDV-1"), meta=dict(meta, procedure="ldv"), columns=cols)
-    rows = {(r[0], r[1]): (r[2], r[3]) for r in store.conn.execute(
-        "SELECT calibration_id, param, value, sigma FROM calibration_params")}
+    rows = {
+        (r[0], r[1]): (r[2], r[3])
+        for r in store.conn.execute("SELECT calibration_id, param, value, sigma FROM calibration_params")
+    }
     assert rows[(c1, "B[1]")] == (2.5, 0.01)
     assert rows[(c1, "M[2][2]")] == (1.0, 0.001)
     assert rows[(c2, "beam2.alpha_deg")] == (60.1, 0.001)

@@ -1,6 +1,7 @@
 """Live detectors: orientation check, the compass coverage (the calibration's own measure,
 solvers.detectors, shared with the guides), and the glue that feeds reader batches from
 the project's simulator to the stillness tracker."""
+
 from __future__ import annotations
 
 import math
@@ -8,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from solvers.positions import P1_POSITIONS
-from solvers.simulate import LiveImu
 from solvers import compass as C
 from solvers.detectors import FieldCoverage
+from solvers.positions import P1_POSITIONS
+from solvers.simulate import LiveImu
 from station.device.live import LiveDetectors, orientation_check
 from station.device.protocol import SENSOR_FIELDS
 from station.device.reader import Batch
@@ -69,7 +70,9 @@ def test_field_coverage_is_the_calibrations_measure():
         lazy.update(chunk)
         assert lazy.fraction == C.coverage(lazy.directions())
     assert abs(lazy.fraction - exact) <= 1 / C.COVERAGE_CELLS
-    assert np.linalg.norm(lazy.centre() - lazy.midrange_centre()) <= 0.01 * 50.0 * 1.01 and 0.5 < exact < 1.0  # about its midrange a hemisphere spreads out
+    assert (
+        np.linalg.norm(lazy.centre() - lazy.midrange_centre()) <= 0.01 * 50.0 * 1.01 and 0.5 < exact < 1.0
+    )  # about its midrange a hemisphere spreads out
     sub = FieldCoverage(rate_hz=100.0, keep_hz=10.0)
     sub.update(rows)
     assert sub.n_kept == 300 and abs(sub.fraction - exact) <= 2 / C.COVERAGE_CELLS

@@ -1,5 +1,6 @@
 """The background reader on real pseudo-terminals with real pyserial: batching, bounded
 queue, reconnection after the port vanishes (gap marked, nothing lost)."""
+
 from __future__ import annotations
 
 import math

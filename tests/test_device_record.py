@@ -1,5 +1,6 @@
 """`station sim-device` and `station record` end to end on real pseudo-terminals: the capture
 reads back, gaps are marked, a stopped or killed recording leaves nothing silently broken."""
+
 from __future__ import annotations
 
 import os
@@ -23,8 +24,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def station(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "station", *args], cwd=ROOT, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+    return subprocess.Popen(
+        [sys.executable, "-m", "station", *args],
+        cwd=ROOT,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        **kw,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -44,8 +51,19 @@ def sim_path():
 def test_record_from_sim_device_reads_back(sim_path, tmp_path):
     path = sim_path
     out = tmp_path / "cap.csv"
-    rec = station("record", "--port", path, "--seconds", "1.5", "--out", str(out),
-                  "--procedure", "accel-tabletop", "--meta", "latitude_deg=39.98")
+    rec = station(
+        "record",
+        "--port",
+        path,
+        "--seconds",
+        "1.5",
+        "--out",
+        str(out),
+        "--procedure",
+        "accel-tabletop",
+        "--meta",
+        "latitude_deg=39.98",
+    )
     stdout, stderr = rec.communicate(timeout=60)
     assert rec.returncode == 0, stderr
     assert "recorded" in stdout and stderr == ""
@@ -134,8 +152,13 @@ def test_sim_device_obeys_commands(tmp_path):
         finally:
             stop.set()
             th.join(5)
-    assert [(a.verb, a.ok) for a in acks] == [("ORIENT", True), ("ORIENT", False), ("AUTO", False),
-                                             ("TEMP", False), ("RATE", True)]
+    assert [(a.verb, a.ok) for a in acks] == [
+        ("ORIENT", True),
+        ("ORIENT", False),
+        ("AUTO", False),
+        ("TEMP", False),
+        ("RATE", True),
+    ]
     assert "sideways" in acks[1].text and "accel-tabletop" in acks[2].text
     # 0.0855 V per m/s^2 times 2 g: x_up -> x_down lowers ax by ~1.7 V (noise 0.001 V)
     assert b.column("ax")[-20:].mean() < before - 1.5
@@ -195,7 +218,10 @@ def test_recording_across_an_unplug_marks_the_gap_in_the_capture(tmp_path):
     assert cap.n_rows == 170 and cap.meta["gaps"] == "30" and cap.meta["reconnects"] == "1"
     np.testing.assert_array_equal(cap.columns["ax"], np.r_[0:100, 130:200])
     np.testing.assert_array_equal(cap.columns["segment"], np.r_[[0] * 100, [1] * 70])
-    assert cap.meta["gap_1"].startswith("segment 1 reconnect: t 0.099000 -> 0.130000 s") and "missed 30" in cap.meta["gap_1"]
+    assert (
+        cap.meta["gap_1"].startswith("segment 1 reconnect: t 0.099000 -> 0.130000 s")
+        and "missed 30" in cap.meta["gap_1"]
+    )
 
 
 def test_no_samples_is_an_error_and_leaves_no_file(tmp_path):
@@ -210,14 +236,20 @@ def test_no_samples_is_an_error_and_leaves_no_file(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("args,message", [
-    (["record", "--port", "/dev/nonexistent-tty", "--out", "x.csv", "--seconds", "1"], "/dev/nonexistent-tty: cannot open"),
-    (["record", "--out", "x.csv"], "--port is required"),
-    (["record", "--port", "loop://", "--out", "x.csv", "--mavlink-message", "GPS_RAW"], "GPS_RAW"),
-    (["sim-device", "--effect", "warp_drive=3"], "warp_drive"),
-    (["sim-device", "--effect", "temperature_bias=big"], "'big' is not a number"),
-    (["sim-device", "--rate", "0"], "--rate 0"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (
+            ["record", "--port", "/dev/nonexistent-tty", "--out", "x.csv", "--seconds", "1"],
+            "/dev/nonexistent-tty: cannot open",
+        ),
+        (["record", "--out", "x.csv"], "--port is required"),
+        (["record", "--port", "loop://", "--out", "x.csv", "--mavlink-message", "GPS_RAW"], "GPS_RAW"),
+        (["sim-device", "--effect", "warp_drive=3"], "warp_drive"),
+        (["sim-device", "--effect", "temperature_bias=big"], "'big' is not a number"),
+        (["sim-device", "--rate", "0"], "--rate 0"),
+    ],
+)
 def test_bad_arguments_get_one_line_and_exit_2(args, message, tmp_path, monkeypatch, capsys):
     from station.cli import main
 
@@ -234,8 +266,19 @@ def test_bad_metadata_is_refused_before_recording(tmp_path, capsys):
     m, s = os.openpty()
     tty.setraw(s)
     try:
-        rc = main(["record", "--port", os.ttyname(s), "--seconds", "1", "--out", str(tmp_path / "b.csv"),
-                   "--meta", "latitude_deg=north"])
+        rc = main(
+            [
+                "record",
+                "--port",
+                os.ttyname(s),
+                "--seconds",
+                "1",
+                "--out",
+                str(tmp_path / "b.csv"),
+                "--meta",
+                "latitude_deg=north",
+            ]
+        )
     finally:
         os.close(m)
         os.close(s)
@@ -272,4 +315,8 @@ def test_a_different_device_on_the_port_ends_the_recording_keeping_what_came_bef
         os.close(s)
     cap = read_capture(tmp_path / "d.csv")
     assert res.stopped_because == "device changed" and "UNIT-A" in warnings[0] and "UNIT-B" in warnings[0]
-    assert cap.meta["device"] == "UNIT-A" and cap.n_rows == 50 and list(cap.columns) == ["t", "segment", "ax", "ay", "az", "temp_c"]
+    assert (
+        cap.meta["device"] == "UNIT-A"
+        and cap.n_rows == 50
+        and list(cap.columns) == ["t", "segment", "ax", "ay", "az", "temp_c"]
+    )

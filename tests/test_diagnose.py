@@ -6,6 +6,7 @@ is drawn at random inside the test and never passed to the code under test. Size
 of what each capture design resolves (1σ = the size whose fitted signature has Δχ² = 1,
 measured by benchmarks/bench_diagnose.py sigma_sizes, docs/benchmarks.md "Diagnose").
 """
+
 from __future__ import annotations
 
 import json
@@ -19,15 +20,33 @@ from station.cli import main
 
 # 8 sigma of what the benchmark design resolves (bench_diagnose.py sigma_sizes × 8).
 SIGMA_1 = {
-    "accel-tabletop": {"temperature_bias": 5.0e-4, "time_drift": 5.2e-3, "quadratic": 4.3e-5,
-                       "scale_asymmetry": 4.6e-4},
+    "accel-tabletop": {
+        "temperature_bias": 5.0e-4,
+        "time_drift": 5.2e-3,
+        "quadratic": 4.3e-5,
+        "scale_asymmetry": 4.6e-4,
+    },
     "gyro-drift": {"temperature_bias": 1.34e-5, "time_drift": 9.4e-4, "g_sensitivity": 6.3e-6},
-    "accel-centrifuge": {"temperature_bias": 9.8e-6, "time_drift": 8.3e-6, "misalignment": 4.2e-6,
-                         "cubic": 6.7e-10, "lever_arm": 4.6e-5},
-    "compass": {"temperature_bias": 0.049, "time_drift": 0.87, "mag_accel_misalignment": 1.6e-3,
-                "time_varying_hard_iron": 0.019},
-    "ldv": {"temperature_bias": 7.8e-5, "time_drift": 2.2e-3, "time_delay": 3.0e-4, "lever_arm": 2.1e-3,
-            "offset": 2.7e-4},
+    "accel-centrifuge": {
+        "temperature_bias": 9.8e-6,
+        "time_drift": 8.3e-6,
+        "misalignment": 4.2e-6,
+        "cubic": 6.7e-10,
+        "lever_arm": 4.6e-5,
+    },
+    "compass": {
+        "temperature_bias": 0.049,
+        "time_drift": 0.87,
+        "mag_accel_misalignment": 1.6e-3,
+        "time_varying_hard_iron": 0.019,
+    },
+    "ldv": {
+        "temperature_bias": 7.8e-5,
+        "time_drift": 2.2e-3,
+        "time_delay": 3.0e-4,
+        "lever_arm": 2.1e-3,
+        "offset": 2.7e-4,
+    },
 }
 SIZE_8SIGMA = {p: {k: 8.0 * v for k, v in d.items()} for p, d in SIGMA_1.items()}
 OPTIONS = {
@@ -59,9 +78,19 @@ def _named(result: dict) -> set[str]:
     return set(result["verdict"])
 
 
-@pytest.mark.parametrize("procedure,seed", [("gyro-drift", 11), ("gyro-drift", 12), ("accel-tabletop", 21),
-                                            ("accel-tabletop", 22), ("accel-centrifuge", 31),
-                                            ("accel-centrifuge", 32), ("ldv", 41), ("compass", 51)])
+@pytest.mark.parametrize(
+    "procedure,seed",
+    [
+        ("gyro-drift", 11),
+        ("gyro-drift", 12),
+        ("accel-tabletop", 21),
+        ("accel-tabletop", 22),
+        ("accel-centrifuge", 31),
+        ("accel-centrifuge", 32),
+        ("ldv", 41),
+        ("compass", 51),
+    ],
+)
 def test_hidden_effect_is_named(tmp_path, capsys, procedure, seed):
     rng = np.random.default_rng(seed)
     library = [e for e in EFFECTS_BY_PROCEDURE[procedure] if e in SIZE_8SIGMA[procedure]]
@@ -70,16 +99,21 @@ def test_hidden_effect_is_named(tmp_path, capsys, procedure, seed):
     res = _diagnose(_write(tmp_path, sim), capsys)
     assert hidden in _named(res), (hidden, res["verdict"], res["candidates"])
     eff = {e["name"]: e for e in res["effects"]}
-    named = hidden if hidden in eff else next(e for e in eff.values()
-                                               if hidden in [c["name"] for c in e["confused_with"]])["name"]
+    named = (
+        hidden
+        if hidden in eff
+        else next(e for e in eff.values() if hidden in [c["name"] for c in e["confused_with"]])["name"]
+    )
     e = eff[named]
     assert e["cv_rms_after"] < e["cv_rms_before"]
     assert e["gain"] == pytest.approx(1 - e["cv_rms_after"] / e["cv_rms_before"])
     assert res["extended"]["cv_rms"] < res["baseline"]["cv_rms"]
 
 
-@pytest.mark.parametrize("procedure,seed", [("gyro-drift", 101), ("accel-tabletop", 102), ("accel-centrifuge", 103),
-                                            ("ldv", 104), ("compass", 105)])
+@pytest.mark.parametrize(
+    "procedure,seed",
+    [("gyro-drift", 101), ("accel-tabletop", 102), ("accel-centrifuge", 103), ("ldv", 104), ("compass", 105)],
+)
 def test_null_capture_verdict_is_empty(tmp_path, capsys, procedure, seed):
     sim = simulate(procedure, seed=seed, **OPTIONS[procedure])
     res = _diagnose(_write(tmp_path, sim), capsys)
@@ -117,14 +151,14 @@ def test_moved_position_and_gap_are_named(tmp_path, capsys):
     c = {k: np.array(v, copy=True) for k, v in sim.columns.items()}
     pos = c["position"]
     idx = np.flatnonzero(pos == "y_up")
-    mid = idx[len(idx) // 2 - 150: len(idx) // 2 + 150]           # 3 s of handling in the middle
+    mid = idx[len(idx) // 2 - 150 : len(idx) // 2 + 150]  # 3 s of handling in the middle
     wob = np.sin(np.linspace(0, 6 * np.pi, len(mid)))
     c["ax"][mid] += 0.08 * wob
     c["az"][mid] += 0.05 * wob
     c["gx"][mid] += 0.4 * wob
     cut = np.flatnonzero(pos == "z_down")
     keep = np.ones(len(pos), bool)
-    keep[cut[500:900]] = False                                     # 4 s of samples lost
+    keep[cut[500:900]] = False  # 4 s of samples lost
     cols = {k: v[keep] for k, v in c.items()}
     path = _write(tmp_path, type(sim)(sim.procedure, sim.meta, cols))
     res = _diagnose(path, capsys)
@@ -153,7 +187,7 @@ def test_json_shape_is_exactly_the_contract(tmp_path, capsys):
     assert set(e) == EFFECT_KEYS
     o, so = np.array(e["params"]["o"]), np.array(e["uncertainty"]["o"])
     truth = np.array(sim.truth["effect_blocks"]["o"])
-    assert np.all(np.abs(o - truth) < 4 * so + 1e-9), (o, truth, so)   # truth within 4σ per beam
+    assert np.all(np.abs(o - truth) < 4 * so + 1e-9), (o, truth, so)  # truth within 4σ per beam
 
 
 def test_text_report_with_plots(tmp_path, capsys):
@@ -181,8 +215,9 @@ def test_bad_input_one_line_exit_2(tmp_path, capsys):
 def test_earth_rate_named_when_a_constant_bias_was_fitted(tmp_path, capsys):
     # four headings, no latitude: the baseline is a plain constant bias, and the Earth rate
     # (north and up components, projected with each position's attitude) is what is missing
-    sim = simulate("gyro-drift", seed=2, headings_deg=[0.0, 90.0, 180.0, 270.0], duration_s=600.0,
-                   gyro_noise_rad_s=0.0005)
+    sim = simulate(
+        "gyro-drift", seed=2, headings_deg=[0.0, 90.0, 180.0, 270.0], duration_s=600.0, gyro_noise_rad_s=0.0005
+    )
     sim.meta.pop("latitude_deg")
     res = _diagnose(_write(tmp_path, sim), capsys)
     assert "earth_rate" in res["verdict"]
@@ -197,10 +232,10 @@ def test_earth_rate_named_when_a_constant_bias_was_fitted(tmp_path, capsys):
 def test_row_far_beyond_the_noise_is_named_by_line(tmp_path, capsys):
     sim = simulate("accel-centrifuge", seed=5)
     sim.columns["ay"] = np.array(sim.columns["ay"], copy=True)
-    sim.columns["ay"][17] += 2e-3                     # 200σ of the table's 1e-5 g noise
+    sim.columns["ay"][17] += 2e-3  # 200σ of the table's 1e-5 g noise
     path = _write(tmp_path, sim)
     res = _diagnose(path, capsys)
     out = [q for q in res["quality"] if q["kind"] == "outlier"]
     assert out, res["quality"]
     header = next(i for i, line in enumerate(open(path).read().splitlines(), start=1) if not line.startswith("#"))
-    assert out[0]["where"].startswith(f"line {header + 18} ")   # data row 18 (index 17)
+    assert out[0]["where"].startswith(f"line {header + 18} ")  # data row 18 (index 17)

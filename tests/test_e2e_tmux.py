@@ -1,6 +1,7 @@
 """End to end in a real terminal (tmux on a private socket, a real pseudo-terminal) at
 80x24: `station demo`, and `station` driven by keys alone, to calibrations saved in a
 temporary database, checked with `station history --json`."""
+
 from __future__ import annotations
 
 import json
@@ -29,8 +30,10 @@ def pane(sock) -> str:
 def test_station_demo_in_tmux_saves_a_calibration(tmp_path):
     sock = f"test-{os.getpid()}"
     db = tmp_path / "station.db"
-    cmd = (f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station demo --db {db} "
-           f"--speed 12 --average-s 1; echo EXIT=$?; sleep 30")
+    cmd = (
+        f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station demo --db {db} "
+        f"--speed 12 --average-s 1; echo EXIT=$?; sleep 30"
+    )
     tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
     try:
         seen_procedure = False
@@ -53,8 +56,13 @@ def test_station_demo_in_tmux_saves_a_calibration(tmp_path):
         assert "EXIT=0" in screen, screen
     finally:
         tmux(sock, "kill-server", check=False)
-    out = subprocess.run([sys.executable, "-m", "station", "history", "SIM-ACC-0000", "--json", "--db", str(db)],
-                         capture_output=True, text=True, cwd=ROOT, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "station", "history", "SIM-ACC-0000", "--json", "--db", str(db)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+    )
     assert out.returncode == 0, out.stderr
     records = json.loads(out.stdout)
     assert len(records) == 1 and records[0]["procedure"] == "accel-tabletop"
@@ -84,8 +92,10 @@ def test_p1_and_p5_by_keys_alone_in_tmux(tmp_path):
     the conditioning says when it is enough, saved. The simulated device runs 20x."""
     sock = f"test-keys-{os.getpid()}"
     db = tmp_path / "station.db"
-    cmd = (f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station tui --db {db} --speed 20 "
-           f"--average-s 2; echo EXIT=$?; sleep 30")
+    cmd = (
+        f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station tui --db {db} --speed 20 "
+        f"--average-s 2; echo EXIT=$?; sleep 30"
+    )
     tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
     try:
         _wait_pane(sock, lambda s: "f5 Start" in s, 60, "the Connect screen")
@@ -129,8 +139,13 @@ def test_p1_and_p5_by_keys_alone_in_tmux(tmp_path):
     finally:
         tmux(sock, "kill-server", check=False)
     for device, procedure in (("SIM-ACC-0000", "accel-tabletop"), ("SIM-LDV-0000", "ldv")):
-        out = subprocess.run([sys.executable, "-m", "station", "history", device, "--json", "--db", str(db)],
-                             capture_output=True, text=True, cwd=ROOT, timeout=60)
+        out = subprocess.run(
+            [sys.executable, "-m", "station", "history", device, "--json", "--db", str(db)],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=60,
+        )
         assert out.returncode == 0, out.stderr
         records = json.loads(out.stdout)
         assert len(records) == 1 and records[0]["procedure"] == procedure

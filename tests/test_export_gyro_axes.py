@@ -5,6 +5,7 @@ z right) and once as a sensor mounted 'x forward, y left, z up' with its x gyro 
 (the sunsided_marg convention). Both give the same body-frame drift d; the firmware offsets
 of the second must be d on the sensor's axes: (−d_x, −d_z, +d_y).
 """
+
 from __future__ import annotations
 
 import json
@@ -48,15 +49,19 @@ def captures(tmp_path_factory):
     # sensor axes: x = body x (reading reversed for the gyro), y = left = −body z, z = up = body y
     cols = dict(c, gx=-c["gx"], gy=-c["gz"], gz=c["gy"], ax=c["ax"], ay=-c["az"], az=c["ay"])
     sensor = folder / "sensor.csv"
-    write_capture(sensor, Capture(meta=dict(sim.meta, frame="x forward, y left, z up", gyro_flip="x"),
-                                  columns=cols, path=sensor))
+    write_capture(
+        sensor, Capture(meta=dict(sim.meta, frame="x forward, y left, z up", gyro_flip="x"), columns=cols, path=sensor)
+    )
     return body, sensor
 
 
-@pytest.mark.parametrize("fmt, names", [
-    ("ardupilot", ("INS_GYROFFS_X", "INS_GYROFFS_Y", "INS_GYROFFS_Z")),  # AP_InertialSensor.cpp @Param GYROFFS_X
-    ("px4", ("CAL_GYRO0_XOFF", "CAL_GYRO0_YOFF", "CAL_GYRO0_ZOFF")),
-])
+@pytest.mark.parametrize(
+    "fmt, names",
+    [
+        ("ardupilot", ("INS_GYROFFS_X", "INS_GYROFFS_Y", "INS_GYROFFS_Z")),  # AP_InertialSensor.cpp @Param GYROFFS_X
+        ("px4", ("CAL_GYRO0_XOFF", "CAL_GYRO0_YOFF", "CAL_GYRO0_ZOFF")),
+    ],
+)
 def test_gyro_offsets_are_on_the_sensor_axes(tmp_path, capsys, captures, fmt, names):
     body, sensor = captures
     db = tmp_path / "s.db"

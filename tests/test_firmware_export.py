@@ -57,11 +57,7 @@ ARDUPILOT_NAMES = (
         "INS_ACC2_ID",
         "INS_ACC3_ID",
     }
-    | {
-        f"COMPASS_{g}_{a}"
-        for g in ("OFS", "OFS2", "OFS3", "DIA", "DIA2", "DIA3", "ODI", "ODI2", "ODI3")
-        for a in XYZ
-    }
+    | {f"COMPASS_{g}_{a}" for g in ("OFS", "OFS2", "OFS3", "DIA", "DIA2", "DIA3", "ODI", "ODI2", "ODI3") for a in XYZ}
     | {
         "COMPASS_SCALE",
         "COMPASS_SCALE2",
@@ -89,11 +85,7 @@ PX4_SOURCE_NAMES = (
             "ZSCALE",
         )
     }
-    | {
-        f"CAL_GYRO{i}_{s}"
-        for i in range(4)
-        for s in ("ID", "PRIO", "ROT", "XOFF", "YOFF", "ZOFF")
-    }
+    | {f"CAL_GYRO{i}_{s}" for i in range(4) for s in ("ID", "PRIO", "ROT", "XOFF", "YOFF", "ZOFF")}
     | {
         f"CAL_MAG{i}_{s}"
         for i in range(4)
@@ -134,9 +126,7 @@ def names_in(text: str, fmt: str) -> dict[str, float]:
         else:
             sysid, compid, name, value, typ = line.split("\t")
             assert (sysid, compid) == ("1", "1") and typ in ("6", "9")
-            assert (typ == "6") == name.endswith(
-                ("_ID", "_PRIO", "_ROT")
-            )  # INT32 vs REAL32
+            assert (typ == "6") == name.endswith(("_ID", "_PRIO", "_ROT"))  # INT32 vs REAL32
         out[name] = float(value)
     return out
 
@@ -158,24 +148,17 @@ def every_export(db):
     """(format, instance, text) for each sensor kind, format and instance."""
     accel = _save(
         db,
-        accel_result(
-            device="A", B=(0.1, -0.2, 0.3), M=[[1.01, 0, 0], [0, 0.99, 0], [0, 0, 1.0]]
-        ),
+        accel_result(device="A", B=(0.1, -0.2, 0.3), M=[[1.01, 0, 0], [0, 0.99, 0], [0, 0, 1.0]]),
         accel_unit="m/s^2",
         sensor_device_id="1310988",
     )
-    gyro = _save(
-        db, gyro_result(device="G"), gyro_unit="rad/s", sensor_device_id="1310988"
-    )
+    gyro = _save(db, gyro_result(device="G"), gyro_unit="rad/s", sensor_device_id="1310988")
     mag = _save(
         db,
         compass_result(
             device="M",
             hard_iron=(10.0, -5.0, 2.0),
-            soft_iron=[
-                [1e3 * w for w in r]
-                for r in ((1.02, 0.01, 0), (0, 0.98, 0.02), (0, 0, 1.0))
-            ],
+            soft_iron=[[1e3 * w for w in r] for r in ((1.02, 0.01, 0), (0, 0.98, 0.02), (0, 0, 1.0))],
         ),
         mag_unit="uT",
         sensor_device_id="197388",
@@ -210,16 +193,12 @@ def every_export(db):
 
 def test_every_name_written_is_in_the_firmware_parameter_list(capsys, every_export):
     written = {"ardupilot": set(), "px4": set(), "qgc": set()}
-    for fmt, inst, cid, argv in every_export:
+    for fmt, inst, cid, argv in every_export:  # noqa: B007
         code, out, err = run(capsys, *argv)
         assert code == 0, err
         written[fmt] |= set(names_in(out, fmt))
-    assert written["ardupilot"] <= ARDUPILOT_NAMES, (
-        written["ardupilot"] - ARDUPILOT_NAMES
-    )
-    assert written["px4"] == written["qgc"] and written["px4"] <= PX4_SOURCE_NAMES, (
-        written["px4"] - PX4_SOURCE_NAMES
-    )
+    assert written["ardupilot"] <= ARDUPILOT_NAMES, written["ardupilot"] - ARDUPILOT_NAMES
+    assert written["px4"] == written["qgc"] and written["px4"] <= PX4_SOURCE_NAMES, written["px4"] - PX4_SOURCE_NAMES
     # the gyro offsets: INS_GYROFFS_X (not INS_GYROOFFS_X, which Mission Planner would skip)
     assert {"INS_GYROFFS_X", "INS_GYR2OFFS_Y", "INS_GYR3OFFS_Z"} <= written["ardupilot"]
     assert not any("GYROOFFS" in n for n in written["ardupilot"])
@@ -232,19 +211,12 @@ def test_every_name_written_is_in_the_firmware_parameter_list(capsys, every_expo
     } <= written["px4"]
 
 
-def test_px4_names_are_in_the_list_px4_stored_in_a_real_log(
-    capsys, every_export, shared_data
-):
+def test_px4_names_are_in_the_list_px4_stored_in_a_real_log(capsys, every_export, shared_data):
     pyulog = pytest.importorskip("pyulog")
-    log = (
-        shared_data
-        / "px4_ulog"
-        / "original"
-        / "sample_logging_tagged_and_default_params.ulg"
-    )
+    log = shared_data / "px4_ulog" / "original" / "sample_logging_tagged_and_default_params.ulg"
     in_log = set(pyulog.ULog(str(log)).initial_parameters)
     written = set()
-    for fmt, inst, cid, argv in every_export:
+    for fmt, inst, cid, argv in every_export:  # noqa: B007
         if fmt == "px4" and inst in (
             0,
             1,
@@ -269,22 +241,14 @@ def test_qgc_file_has_qgroundcontrols_columns(capsys, db):
             "param.CAL_MAG1_PRIO": "75",
         },
     )
-    code, out, err = run(
-        capsys, "export", cid, "--format", "qgc", "--vehicle", "1,1", "--db", db
-    )
+    code, out, err = run(capsys, "export", cid, "--format", "qgc", "--vehicle", "1,1", "--db", db)
     assert code == 0, err
     rows = [line.split("\t") for line in out.splitlines() if not line.startswith("#")]
     assert "# Vehicle-Id Component-Id Name Value Type" in out
     p = {r[2]: (float(r[3]), r[4]) for r in rows}
     # the slot is found the firmware's way: the one whose CAL_MAGn_ID holds the sensor's id
-    assert (
-        p["CAL_MAG1_ID"] == (197388, "6")
-        and p["CAL_MAG1_ROT"] == (0, "6")
-        and p["CAL_MAG1_PRIO"] == (75, "6")
-    )
-    assert (
-        p["CAL_MAG1_XOFF"][0] == pytest.approx(0.1) and p["CAL_MAG1_XOFF"][1] == "9"
-    )  # 10 uT = 0.1 gauss
+    assert p["CAL_MAG1_ID"] == (197388, "6") and p["CAL_MAG1_ROT"] == (0, "6") and p["CAL_MAG1_PRIO"] == (75, "6")
+    assert p["CAL_MAG1_XOFF"][0] == pytest.approx(0.1) and p["CAL_MAG1_XOFF"][1] == "9"  # 10 uT = 0.1 gauss
 
 
 # --- composition with the parameters in use -------------------------------------------------
@@ -309,27 +273,17 @@ def _board_corrected_capture(tmp_path, fmt: str, seed: int):
     M_r = M * NOMINAL_V_PER_MPS2  # A = B_r + M_r r
     B_r = B + M @ np.full(3, NOMINAL_ZERO_V)
     s_true = np.diag(M_r)
-    o_true = (
-        -B_r / s_true
-    )  # a = (r - o) * s, diagonal part (the firmware has no cross-axis terms)
+    o_true = -B_r / s_true  # a = (r - o) * s, diagonal part (the firmware has no cross-axis terms)
     o_old, s_old = np.array([0.21, -0.13, 0.34]), np.array([1.012, 0.985, 1.021])
     d = (r - o_old) * s_old
     cols = dict(sim.columns, ax=d[:, 0], ay=d[:, 1], az=d[:, 2])
-    meta = dict(
-        sim.meta, accel_unit="m/s^2", corrected="true", sensor_device_id="1310988"
-    )
+    meta = dict(sim.meta, accel_unit="m/s^2", corrected="true", sensor_device_id="1310988")
     if fmt == "ardupilot":
         meta.update(
             firmware="ardupilot",
             **{"param.AHRS_ORIENTATION": "0"},
-            **{
-                f"param.INS_ACCOFFS_{a}": repr(float(o_old[i]))
-                for i, a in enumerate(XYZ)
-            },
-            **{
-                f"param.INS_ACCSCAL_{a}": repr(float(s_old[i]))
-                for i, a in enumerate(XYZ)
-            },
+            **{f"param.INS_ACCOFFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+            **{f"param.INS_ACCSCAL_{a}": repr(float(s_old[i])) for i, a in enumerate(XYZ)},
         )
     else:
         meta.update(
@@ -340,14 +294,8 @@ def _board_corrected_capture(tmp_path, fmt: str, seed: int):
                 "param.CAL_ACC0_ROT": "-1",
                 "param.SENS_BOARD_ROT": "0",
             },
-            **{
-                f"param.CAL_ACC0_{a}OFF": repr(float(o_old[i]))
-                for i, a in enumerate(XYZ)
-            },
-            **{
-                f"param.CAL_ACC0_{a}SCALE": repr(float(s_old[i]))
-                for i, a in enumerate(XYZ)
-            },
+            **{f"param.CAL_ACC0_{a}OFF": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+            **{f"param.CAL_ACC0_{a}SCALE": repr(float(s_old[i])) for i, a in enumerate(XYZ)},
         )
     path = tmp_path / f"board-{fmt}.csv"
     write_capture(path, Capture(meta=meta, columns=cols, path=path))
@@ -361,17 +309,11 @@ def test_composed_accel_parameters_reproduce_the_truth(capsys, tmp_path, fmt, se
     code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
     assert code == 0, err
     res = json.loads(out)
-    code, text, err = run(
-        capsys, "export", res["calibration_id"], "--format", fmt, "--db", db
-    )
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", fmt, "--db", db)
     assert code == 0, err
     p = names_in(text, fmt)
-    off_names = [
-        f"INS_ACCOFFS_{a}" if fmt == "ardupilot" else f"CAL_ACC0_{a}OFF" for a in XYZ
-    ]
-    scale_names = [
-        f"INS_ACCSCAL_{a}" if fmt == "ardupilot" else f"CAL_ACC0_{a}SCALE" for a in XYZ
-    ]
+    off_names = [f"INS_ACCOFFS_{a}" if fmt == "ardupilot" else f"CAL_ACC0_{a}OFF" for a in XYZ]
+    scale_names = [f"INS_ACCSCAL_{a}" if fmt == "ardupilot" else f"CAL_ACC0_{a}SCALE" for a in XYZ]
     o, s = np.array([p[n] for n in off_names]), np.array([p[n] for n in scale_names])
     # 1-sigma of the composed values from the fit's own (B, M) uncertainty:
     # o = o_old + off_fit / s_old, off_fit = -B_i / M_ii; s = s_old * M_ii
@@ -411,9 +353,7 @@ def test_composition_refusals_are_one_line(capsys, tmp_path):
             db,
         )
 
-    unknown = {
-        k: v for k, v in cap.meta.items() if not k.startswith("param.INS_ACCSCAL")
-    }
+    unknown = {k: v for k, v in cap.meta.items() if not k.startswith("param.INS_ACCSCAL")}
     code, out, err = export_with(unknown)
     assert code == 2 and out == "" and err.count("\n") == 1
     assert "no param.INS_ACCSCAL_X" in err and "in use are unknown" in err
@@ -421,25 +361,15 @@ def test_composition_refusals_are_one_line(capsys, tmp_path):
     assert code == 2 and out == "" and "corrected by ardupilot parameters" in err
     code, out, err = export_with(dict(cap.meta, **{"param.AHRS_ORIENTATION": "4"}))
     assert code == 2 and out == "" and "AHRS_ORIENTATION = 4" in err
-    code, out, err = export_with(
-        dict(cap.meta, **{"param.INS_ACCSCAL_X": "1.3"})
-    )  # composed scale ~1.27
+    code, out, err = export_with(dict(cap.meta, **{"param.INS_ACCSCAL_X": "1.3"}))  # composed scale ~1.27
     assert code == 2 and out == "" and "INS_ACCSCAL_X" in err and "0.8..1.2" in err
 
 
 def test_px4_without_a_device_id_is_refused_and_device_id_option_works(capsys, db):
     cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
     code, out, err = run(capsys, "export", cid, "--format", "px4", "--db", db)
-    assert (
-        code == 2
-        and out == ""
-        and err.count("\n") == 1
-        and "CAL_GYRO0_ID" in err
-        and "--device-id" in err
-    )
-    code, out, err = run(
-        capsys, "export", cid, "--format", "px4", "--device-id", "2424842", "--db", db
-    )
+    assert code == 2 and out == "" and err.count("\n") == 1 and "CAL_GYRO0_ID" in err and "--device-id" in err
+    code, out, err = run(capsys, "export", cid, "--format", "px4", "--device-id", "2424842", "--db", db)
     assert code == 0 and "param set CAL_GYRO0_ID 2424842" in out
 
 
@@ -451,9 +381,7 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     from solvers.simulate import simulate
 
     sim = simulate("compass", seed=2)
-    r_mG = (
-        np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0
-    )  # 1 uT = 10 mGauss
+    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
     o_old = np.array([-35.0, 52.0, 18.0])
     P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
     d_gauss = (r_mG + o_old) @ P_old.T / 1000.0
@@ -465,14 +393,8 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
         mag_device_id="97539",
         **{"param.AHRS_ORIENTATION": "0", "param.COMPASS_DEV_ID": "97539"},
         **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
-        **{
-            f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i]))
-            for i, a in enumerate(XYZ)
-        },
-        **{
-            f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j]))
-            for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))
-        },
+        **{f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
     )
     cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
     path = tmp_path / "mag.csv"
@@ -481,9 +403,7 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
     assert code == 0, err
     res = json.loads(out)
-    code, text, err = run(
-        capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db
-    )
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 0, err
     p = names_in(text, "ardupilot")
     ofs = np.array([p[f"COMPASS_OFS_{a}"] for a in XYZ])
@@ -495,15 +415,11 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
         ]
     )
     h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
-    W_true = (
-        np.asarray(sim.truth["soft_iron"]) / 100.0 / 10.0
-    )  # uT -> nT, as mGauss -> mGauss
+    W_true = np.asarray(sim.truth["soft_iron"]) / 100.0 / 10.0  # uT -> nT, as mGauss -> mGauss
     vals, vecs = np.linalg.eigh(W_true.T @ W_true)
     P_true = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
     # 1-sigma of the offsets: the fit's hard-iron sigma (gauss -> mGauss) through the matrix in use
-    sigma_ofs = np.abs(np.linalg.inv(P_old)) @ (
-        np.asarray(res["uncertainty"]["hard_iron"]) * 1000.0
-    )
+    sigma_ofs = np.abs(np.linalg.inv(P_old)) @ (np.asarray(res["uncertainty"]["hard_iron"]) * 1000.0)
     assert np.all(np.abs(ofs + h_true_mG) < 4 * sigma_ofs + 0.05), (
         ofs + h_true_mG,
         sigma_ofs,
@@ -511,16 +427,11 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     # the soft-iron matrix: the fit's relative sigma of W, ~1e-3 here; 5e-3 is several times that
     assert np.abs(P - P_true).max() < 5e-3, P - P_true
     # the fit alone, as absolute parameters, would be wrong by the parameters in use
-    A_alone = (
-        np.asarray(res["params"]["soft_iron"]) / 100.0 / 1000.0
-    )  # gauss -> nT, as mGauss -> mGauss
+    A_alone = np.asarray(res["params"]["soft_iron"]) / 100.0 / 1000.0  # gauss -> nT, as mGauss -> mGauss
     vals, vecs = np.linalg.eigh(A_alone.T @ A_alone)
     P_alone = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
     assert np.abs(P_alone - P_true).max() > 4 * 5e-3
-    assert np.all(
-        np.abs(-np.asarray(res["params"]["hard_iron"]) * 1000.0 + h_true_mG)
-        > 4 * sigma_ofs + 0.05
-    )
+    assert np.all(np.abs(-np.asarray(res["params"]["hard_iron"]) * 1000.0 + h_true_mG) > 4 * sigma_ofs + 0.05)
     assert "composed with the parameters in use" in text
 
 
@@ -530,9 +441,7 @@ def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_pa
     from solvers.simulate import simulate
 
     sim = simulate("compass", seed=5)
-    r_G = (
-        np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) / 100.0
-    )  # uT -> gauss
+    r_G = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) / 100.0  # uT -> gauss
     o_old = np.array([0.031, -0.045, 0.012])
     S_old = np.array([[0.98, 0.01, 0.02], [0.01, 1.02, -0.015], [0.02, -0.015, 1.0]])
     d_G = (r_G - o_old) @ S_old.T
@@ -550,14 +459,8 @@ def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_pa
         },
         **{"param.CAL_MAG0_ID": "197388", "param.SENS_BOARD_ROT": "0"},
         **{f"param.CAL_MAG1_{a}OFF": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
-        **{
-            f"param.CAL_MAG1_{a}SCALE": repr(float(S_old[i, i]))
-            for i, a in enumerate(XYZ)
-        },
-        **{
-            f"param.CAL_MAG1_{a}ODIAG": repr(float(S_old[ij]))
-            for a, ij in odiag.items()
-        },
+        **{f"param.CAL_MAG1_{a}SCALE": repr(float(S_old[i, i])) for i, a in enumerate(XYZ)},
+        **{f"param.CAL_MAG1_{a}ODIAG": repr(float(S_old[ij])) for a, ij in odiag.items()},
     )
     cols = dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])
     path = tmp_path / "mag.csv"
@@ -566,35 +469,23 @@ def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_pa
     code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
     assert code == 0, err
     res = json.loads(out)
-    code, text, err = run(
-        capsys, "export", res["calibration_id"], "--format", "px4", "--db", db
-    )
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "px4", "--db", db)
     assert code == 0, err
     p = names_in(text, "px4")
-    assert (
-        p["CAL_MAG1_ID"] == 396809
-        and p["CAL_MAG1_PRIO"] == 75
-        and p["CAL_MAG1_ROT"] == 0
-    )
+    assert p["CAL_MAG1_ID"] == 396809 and p["CAL_MAG1_PRIO"] == 75 and p["CAL_MAG1_ROT"] == 0
     off = np.array([p[f"CAL_MAG1_{a}OFF"] for a in XYZ])
     S = np.diag([p[f"CAL_MAG1_{a}SCALE"] for a in XYZ])
     for a, (i, j) in odiag.items():
         S[i, j] = S[j, i] = p[f"CAL_MAG1_{a}ODIAG"]
     h_true_G = np.asarray(sim.truth["hard_iron"]) / 100.0
-    W_true = (
-        np.asarray(sim.truth["soft_iron"]) * 100.0 / 1e5
-    )  # uT -> nT, as gauss -> gauss
+    W_true = np.asarray(sim.truth["soft_iron"]) * 100.0 / 1e5  # uT -> nT, as gauss -> gauss
     vals, vecs = np.linalg.eigh(W_true.T @ W_true)
     S_true = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
-    sigma_off = np.abs(np.linalg.inv(S_old)) @ np.asarray(
-        res["uncertainty"]["hard_iron"]
-    )  # gauss
+    sigma_off = np.abs(np.linalg.inv(S_old)) @ np.asarray(res["uncertainty"]["hard_iron"])  # gauss
     assert np.all(np.abs(off - h_true_G) < 4 * sigma_off + 5e-5), (
         off - h_true_G,
         sigma_off,
     )
     assert np.abs(S - S_true).max() < 5e-3, S - S_true
     # the fit alone would miss the offsets in use by far more than its sigma
-    assert np.all(
-        np.abs(np.asarray(res["params"]["hard_iron"]) - h_true_G) > 4 * sigma_off + 5e-5
-    )
+    assert np.all(np.abs(np.asarray(res["params"]["hard_iron"]) - h_true_G) > 4 * sigma_off + 5e-5)

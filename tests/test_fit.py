@@ -1,4 +1,5 @@
 """The fitting engine: estimates, covariance, identifiability, gauge and misfit."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,7 +28,7 @@ def test_nonlinear_recovery_coverage_over_seeds():
     for seed in range(trials):
         rng = np.random.default_rng(seed)
         y = 3.0 * np.exp(-0.7 * t) + rng.normal(scale=0.05, size=t.size)
-        res = fit(lambda p: p["A"] * np.exp(-p["k"] * t) - y, {"A": 2.0, "k": 1.0}, sigma=0.05)
+        res = fit(lambda p: p["A"] * np.exp(-p["k"] * t) - y, {"A": 2.0, "k": 1.0}, sigma=0.05)  # noqa: B023
         z = abs(float(res.params["k"]) - 0.7) / float(res.sigma["k"])
         inside1 += z < 1
         inside2 += z < 2

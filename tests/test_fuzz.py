@@ -2,6 +2,7 @@
 `benchmarks/bench_fuzz.py`, figures in docs/benchmarks.md): mutated and valid-but-extreme
 captures of all five procedures through `calibrate` and `diagnose`, each in a worker with a
 time limit. Nothing may hang, reach the last-resort error, write stray stdout or crash."""
+
 from __future__ import annotations
 
 import random
@@ -46,12 +47,18 @@ def test_the_harness_sees_each_kind_of_failure(tmp_path, monkeypatch):
     """The classifier is not blind: each failure it exists to find is reported as such."""
     assert F.classify("calibrate", "c", 0, "not json", "", b"", "", 0.1).kind == "stray-stdout"
     assert F.classify("calibrate", "c", 0, "{}", "", b"** On entry to DLASCL", "", 0.1).kind == "stray-stdout"
-    assert F.classify("calibrate", "c", 2, "", "station: f: cannot process this input (ValueError: x)\n", b"", "",
-                      0.1).kind == "last-resort"
+    assert (
+        F.classify(
+            "calibrate", "c", 2, "", "station: f: cannot process this input (ValueError: x)\n", b"", "", 0.1
+        ).kind
+        == "last-resort"
+    )
     assert F.classify("calibrate", "c", 2, "", "station: a\nb\n", b"", "", 0.1).kind == "bad-exit"
     assert F.classify("calibrate", "c", None, "", "", b"", "KeyError: 'x'", 0.1).kind == "crash"
-    assert F.classify("calibrate", "c", 2, "", "station: f:3: column 'ax': 'x' is not a number\n", b"", "",
-                      0.1).kind == "refused"
+    assert (
+        F.classify("calibrate", "c", 2, "", "station: f:3: column 'ax': 'x' is not a number\n", b"", "", 0.1).kind
+        == "refused"
+    )
     # a real hang: a worker that never answers is killed at the limit and reported
     runner = F.Runner(timeout_s=1.0)  # a sleeping worker: caught by the wall-time bound (10 x)
     monkeypatch.setattr(F, "_run_main", lambda command, path: __import__("time").sleep(3600))
@@ -63,7 +70,8 @@ def test_the_harness_sees_each_kind_of_failure(tmp_path, monkeypatch):
 
 def test_mutators_change_the_file_and_keep_their_names():
     text = "# station-capture: 1\n# procedure: compass\nt,mx,my,mz\n" + "".join(
-        f"{k * 0.1:.1f},{k},{-k},{2 * k}\n" for k in range(50))
+        f"{k * 0.1:.1f},{k},{-k},{2 * k}\n" for k in range(50)
+    )
     rng = random.Random(4)
     changed = 0
     for _ in range(200):

@@ -1,11 +1,14 @@
 """P4 gyro drift: Earth-rate projection by hand, simulated truth within the reported
 uncertainty (modes A, B, several positions), conventions, refusals through the CLI, real data."""
+
 from __future__ import annotations
 
 import math
 
 import numpy as np
 import pytest
+from station_run import capture_of as _cap
+from station_run import run_station as _station
 
 from solvers import frames
 from solvers import gyrodrift as gd
@@ -14,37 +17,41 @@ from solvers.simulate import simulate
 from station.capture import Capture, read_capture, write_capture
 from station.procedures import gyrodrift as proc
 
-from station_run import capture_of as _cap
-from station_run import run_station as _station
-
 W = 7.2921151e-5
 DEG = math.pi / 180
 
 
 # ------------------------------------------------------------------ known answers by hand
 
-@pytest.mark.parametrize("pitch, roll, heading, expected", [
-    # level, forward north, at 40° N: [Ω cos 40°, Ω sin 40°, 0] = [5.58608e-5, 4.68727e-5, 0]
-    (0, 0, 0, [5.58608e-5, 4.68727e-5, 0.0]),
-    # forward east: the right axis points south, so it sees −Ω cos L; up still Ω sin L
-    (0, 0, 90, [0.0, 4.68727e-5, -5.58608e-5]),
-    # nose up 30°: forward = cos30 N + sin30 U → Ω cos(40° − 30°) = Ω · 0.984808 = 7.18133e-5;
-    # up axis = −sin30 N + cos30 U → Ω(−0.5·0.766044 + 0.866025·0.642788) = 1.26625e-5
-    (30, 0, 0, [7.18133e-5, 1.26625e-5, 0.0]),
-    # right wing down 20°: right = cos20 E − sin20 U → −Ω sin40 sin20 = −1.60313e-5;
-    # up = cos20 U + sin20 E → Ω sin40 cos20 = 4.40460e-5
-    (0, 20, 0, [5.58608e-5, 4.40460e-5, -1.60313e-5]),
-])
+
+@pytest.mark.parametrize(
+    "pitch, roll, heading, expected",
+    [
+        # level, forward north, at 40° N: [Ω cos 40°, Ω sin 40°, 0] = [5.58608e-5, 4.68727e-5, 0]
+        (0, 0, 0, [5.58608e-5, 4.68727e-5, 0.0]),
+        # forward east: the right axis points south, so it sees −Ω cos L; up still Ω sin L
+        (0, 0, 90, [0.0, 4.68727e-5, -5.58608e-5]),
+        # nose up 30°: forward = cos30 N + sin30 U → Ω cos(40° − 30°) = Ω · 0.984808 = 7.18133e-5;
+        # up axis = −sin30 N + cos30 U → Ω(−0.5·0.766044 + 0.866025·0.642788) = 1.26625e-5
+        (30, 0, 0, [7.18133e-5, 1.26625e-5, 0.0]),
+        # right wing down 20°: right = cos20 E − sin20 U → −Ω sin40 sin20 = −1.60313e-5;
+        # up = cos20 U + sin20 E → Ω sin40 cos20 = 4.40460e-5
+        (0, 20, 0, [5.58608e-5, 4.40460e-5, -1.60313e-5]),
+    ],
+)
 def test_earth_rate_projection_worked_by_hand(pitch, roll, heading, expected):
     C = frames.p4_C_n_b(pitch * DEG, roll * DEG, heading * DEG)
     np.testing.assert_allclose(earth_rate_body(40.0, C), expected, atol=2e-10)  # 6-digit hand values
 
 
-@pytest.mark.parametrize("f, pitch, roll", [
-    ([0.0, 9.8, 0.0], 0.0, 0.0),
-    ([9.8 * 0.5, 9.8 * math.sqrt(3) / 2, 0.0], 30.0, 0.0),        # nose up 30°: forward reads +g sin30
-    ([0.0, 9.8 * math.cos(20 * DEG), -9.8 * math.sin(20 * DEG)], 0.0, 20.0),  # right wing down
-])
+@pytest.mark.parametrize(
+    "f, pitch, roll",
+    [
+        ([0.0, 9.8, 0.0], 0.0, 0.0),
+        ([9.8 * 0.5, 9.8 * math.sqrt(3) / 2, 0.0], 30.0, 0.0),  # nose up 30°: forward reads +g sin30
+        ([0.0, 9.8 * math.cos(20 * DEG), -9.8 * math.sin(20 * DEG)], 0.0, 20.0),  # right wing down
+    ],
+)
 def test_pitch_roll_from_accel_by_hand(f, pitch, roll):
     p, r = frames.p4_pitch_roll_from_accel(f)
     assert math.degrees(p) == pytest.approx(pitch, abs=1e-9)
@@ -66,6 +73,7 @@ def test_mode_b_known_answer_without_noise():
 
 # ------------------------------------------------------------------ truth within uncertainty
 
+
 def _cols(c, names):
     return np.column_stack([c[k] for k in names])
 
@@ -78,7 +86,7 @@ def test_mode_a_truth_within_uncertainty_over_seeds():
         res = gd.drift_reference(_cols(c, ["gx", "gy", "gz"]), _cols(c, ["ref_gx", "ref_gy", "ref_gz"]), 0.01)
         z.append((res.drift_rad_s - sim.truth["drift"]) / res.sigma_rad_s)
     z = np.abs(np.concatenate(z))
-    assert np.mean(z < 2) >= 0.88      # nominal 0.954; 90 values
+    assert np.mean(z < 2) >= 0.88  # nominal 0.954; 90 values
     assert np.mean(z < 3) >= 0.97
 
 
@@ -87,11 +95,12 @@ def test_mode_b_truth_within_uncertainty_over_seeds():
     for seed in range(30):
         sim = simulate("gyro-drift", seed=100 + seed, mode="static")
         c = sim.columns
-        res = gd.drift_static(_cols(c, ["gx", "gy", "gz"]), _cols(c, ["ax", "ay", "az"]), 0.01,
-                              float(sim.meta["latitude_deg"]), 0.0)
+        res = gd.drift_static(
+            _cols(c, ["gx", "gy", "gz"]), _cols(c, ["ax", "ay", "az"]), 0.01, float(sim.meta["latitude_deg"]), 0.0
+        )
         z.append((res.drift_rad_s - sim.truth["drift"]) / res.sigma_rad_s)
         att = sim.truth["attitudes"][0]
-        assert res.pitch_deg == pytest.approx(att["pitch_deg"], abs=0.05)   # accel noise 0.01 m/s²
+        assert res.pitch_deg == pytest.approx(att["pitch_deg"], abs=0.05)  # accel noise 0.01 m/s²
         assert res.roll_deg == pytest.approx(att["roll_deg"], abs=0.05)
     z = np.abs(np.concatenate(z))
     assert np.mean(z < 2) >= 0.88
@@ -101,14 +110,13 @@ def test_mode_b_truth_within_uncertainty_over_seeds():
 def test_multi_position_truth_and_earth_rate_scale_over_seeds():
     z, zs = [], []
     for seed in range(12):
-        sim = simulate("gyro-drift", seed=200 + seed, mode="static", headings_deg=[0, 90, 180, 270],
-                       duration_s=480)
+        sim = simulate("gyro-drift", seed=200 + seed, mode="static", headings_deg=[0, 90, 180, 270], duration_s=480)
         out = proc.calibrate(_cap(sim))
         assert out["params"]["mode"] == "static-multi" and out["n_positions"] == 4
         z.append((np.array(out["params"]["drift"]) - sim.truth["drift"]) / np.array(out["uncertainty"]["drift"]))
         zs.append((out["fit"]["earth_rate_scale"] - 1.0) / out["fit"]["sigma_earth_rate_scale"])
     z = np.abs(np.concatenate(z))
-    assert np.mean(z < 2) >= 0.85      # 36 values
+    assert np.mean(z < 2) >= 0.85  # 36 values
     assert np.mean(z < 3) >= 0.95
     assert np.mean(np.abs(zs) < 3) >= 0.9
 
@@ -117,8 +125,9 @@ def test_procedure_result_follows_calibrate_md():
     sim = simulate("gyro-drift", seed=1, mode="static")
     out = proc.calibrate(_cap(sim))
     p, u = out["params"], out["uncertainty"]
-    assert {"procedure", "device", "model", "params", "uncertainty", "residual_rms", "n_positions",
-            "warnings"} <= set(out)
+    assert {"procedure", "device", "model", "params", "uncertainty", "residual_rms", "n_positions", "warnings"} <= set(
+        out
+    )
     assert p["mode"] == "static" and len(p["drift"]) == 3 and len(p["earth_rate_body"]) == 3
     assert isinstance(p["pitch_deg"], float) and isinstance(p["roll_deg"], float)
     assert len(u["drift"]) == 3 and u["pitch_deg"] > 0
@@ -154,6 +163,7 @@ def test_accuracy_statement():
 
 # ------------------------------------------------------------------ conventions
 
+
 def test_other_frame_gravity_sign_and_flipped_gyro_give_the_same_drift():
     """The same static unit written as sunsided does (x fwd, y left, z up; accel = gravity
     direction; gyro x reversed) in deg/s and g: declared in metadata, the P4 result must match."""
@@ -164,8 +174,14 @@ def test_other_frame_gravity_sign_and_flipped_gyro_give_the_same_drift():
     g = _cols(c, ["gx", "gy", "gz"]) @ C_flu_fur.T / DEG
     a = -(_cols(c, ["ax", "ay", "az"]) @ C_flu_fur.T) / 9.80665
     g[:, 0] *= -1
-    meta = dict(sim.meta, gyro_unit="deg/s", accel_unit="g", frame="x forward, y left, z up",
-                accel_sign="gravity", gyro_flip="x")
+    meta = dict(
+        sim.meta,
+        gyro_unit="deg/s",
+        accel_unit="g",
+        frame="x forward, y left, z up",
+        accel_sign="gravity",
+        gyro_flip="x",
+    )
     cols = dict(c, gx=g[:, 0], gy=g[:, 1], gz=g[:, 2], ax=a[:, 0], ay=a[:, 1], az=a[:, 2])
     out = proc.calibrate(Capture(meta, cols))
     np.testing.assert_allclose(out["params"]["drift"], ref["params"]["drift"], atol=1e-12)
@@ -183,6 +199,7 @@ def test_frame_text_must_be_a_right_handed_triad():
 
 
 # ------------------------------------------------------------------ refusals (CLI, exit 2)
+
 
 def _write(tmp_path, sim, name="c.csv"):
     path = tmp_path / name
@@ -214,10 +231,25 @@ def test_cli_refuses_missing_columns(tmp_path):
 
 def test_table_of_averages_refused(tmp_path):
     path = tmp_path / "avg.csv"
-    write_capture(path, Capture({"station-capture": "1", "procedure": "gyro-drift", "device": "X",
-                                 "gyro_unit": "rad/s", "sample_rate_hz": "100"},
-                                {"position": np.array(["1", "2"], dtype=object), "n": np.array([100.0, 100.0]),
-                                 "gx": np.array([0.01, 0.02]), "gy": np.zeros(2), "gz": np.zeros(2)}))
+    write_capture(
+        path,
+        Capture(
+            {
+                "station-capture": "1",
+                "procedure": "gyro-drift",
+                "device": "X",
+                "gyro_unit": "rad/s",
+                "sample_rate_hz": "100",
+            },
+            {
+                "position": np.array(["1", "2"], dtype=object),
+                "n": np.array([100.0, 100.0]),
+                "gx": np.array([0.01, 0.02]),
+                "gy": np.zeros(2),
+                "gz": np.zeros(2),
+            },
+        ),
+    )
     _one_line_refusal(_station("calibrate", path), "table of averages")
 
 
@@ -231,6 +263,7 @@ def test_cli_refuses_counts_without_a_scale_and_uses_one_given(tmp_path):
     r = _station("calibrate", _write(tmp_path, sim, "e.csv"), "--json")
     assert r.returncode == 0, r.stderr
     import json
+
     out = json.loads(r.stdout)
     # 1-count quantisation (7.6e-3 °/s) averages out well below the 3e-5 rad/s noise error
     np.testing.assert_allclose(out["params"]["drift"], sim.truth["drift"], atol=1e-4)
@@ -238,6 +271,7 @@ def test_cli_refuses_counts_without_a_scale_and_uses_one_given(tmp_path):
 
 
 # ------------------------------------------------------------------ real data
+
 
 def test_sunsided_static_run(shared_data):
     cap = read_capture(shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward_10min.capture.csv")
@@ -277,8 +311,15 @@ def test_several_positions_without_latitude_estimate_it():
     """No latitude: ε and the Earth rate's north/up components together; a quieter gyro
     (0.5 mrad/s white) so the latitude check is meaningful. Truth 39.98° within 3σ."""
     for seed in range(3):
-        sim = simulate("gyro-drift", seed=300 + seed, mode="static", headings_deg=[0, 90, 180, 270],
-                       duration_s=480, gyro_noise_rad_s=5e-4, bias_instability_rad_s=2e-6)
+        sim = simulate(
+            "gyro-drift",
+            seed=300 + seed,
+            mode="static",
+            headings_deg=[0, 90, 180, 270],
+            duration_s=480,
+            gyro_noise_rad_s=5e-4,
+            bias_instability_rad_s=2e-6,
+        )
         meta = dict(sim.meta)
         del meta["latitude_deg"]
         out = proc.calibrate(Capture(meta, dict(sim.columns)))
@@ -304,8 +345,11 @@ def test_mode_a_warns_when_misalignment_meets_a_mean_rate():
     assert any("misalignment" in m for m in res.warnings)
     assert np.max(np.abs(res.extra["rate_coupling_bias_rad_s"])) == pytest.approx(0.2 * math.sin(2 * DEG), rel=0.1)
     zero_mean = omega - omega.mean(axis=0)
-    res0 = gd.drift_reference(zero_mean @ C.T + eps + rng.normal(scale=0.002, size=(n, 3)),
-                              zero_mean + rng.normal(scale=0.0002, size=(n, 3)), 0.01)
+    res0 = gd.drift_reference(
+        zero_mean @ C.T + eps + rng.normal(scale=0.002, size=(n, 3)),
+        zero_mean + rng.normal(scale=0.0002, size=(n, 3)),
+        0.01,
+    )
     assert not any("misalignment" in m for m in res0.warnings)
 
 
@@ -322,8 +366,7 @@ def test_several_orientations_unknown_headings_no_latitude_give_a_sane_drift():
     the Earth rate's possible size (a few 1e-5 rad/s), not nonsense."""
     z = []
     for seed in range(8):
-        sim = simulate("gyro-drift", seed=400 + seed, mode="static", headings_deg=[0, 90, 180, 270],
-                       duration_s=480)
+        sim = simulate("gyro-drift", seed=400 + seed, mode="static", headings_deg=[0, 90, 180, 270], duration_s=480)
         out = proc.calibrate(_unknown_headings(sim, keep_latitude=False))
         fit = out["fit"]
         assert out["params"]["mode"] == "static-multi" and fit["headings_known"] is False
@@ -340,8 +383,15 @@ def test_several_orientations_unknown_headings_no_latitude_give_a_sane_drift():
 def test_several_orientations_unknown_headings_with_latitude_remove_the_vertical_rate():
     z = []
     for seed in range(6):
-        sim = simulate("gyro-drift", seed=500 + seed, mode="static", headings_deg=[0, 90, 180, 270],
-                       duration_s=480, gyro_noise_rad_s=5e-4, bias_instability_rad_s=2e-6)
+        sim = simulate(
+            "gyro-drift",
+            seed=500 + seed,
+            mode="static",
+            headings_deg=[0, 90, 180, 270],
+            duration_s=480,
+            gyro_noise_rad_s=5e-4,
+            bias_instability_rad_s=2e-6,
+        )
         out = proc.calibrate(_unknown_headings(sim, keep_latitude=True))
         assert "earth_rate_scale" not in out["fit"]
         z.append((np.array(out["params"]["drift"]) - sim.truth["drift"]) / np.array(out["uncertainty"]["drift"]))
@@ -354,8 +404,7 @@ def test_latitude_from_known_headings_stays_within_90_degrees():
     """Known headings, no latitude, the noisy default gyro: the north/up fit may come out with a
     negative north component; the latitude is then not reported or within ±90°, never 179.9°."""
     for seed in range(4):
-        sim = simulate("gyro-drift", seed=600 + seed, mode="static", headings_deg=[0, 90, 180, 270],
-                       duration_s=480)
+        sim = simulate("gyro-drift", seed=600 + seed, mode="static", headings_deg=[0, 90, 180, 270], duration_s=480)
         meta = {k: v for k, v in sim.meta.items() if k != "latitude_deg"}
         fit = proc.calibrate(Capture(meta, dict(sim.columns)))["fit"]
         lat = fit["latitude_from_gyros_deg"]

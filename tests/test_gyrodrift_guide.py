@@ -1,4 +1,5 @@
 """The UI-free P4 static-base hold (station.procedures.gyrodrift_guide) on the simulated device."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,8 +14,13 @@ SIM_FRAME = "x forward, y left, z up"  # the simulated unit lies level with z up
 def make(duration_s=180.0, seed=1):
     now = [0.0]
     src = SimSource(seed=seed, procedure="gyro-drift", clock=lambda: now[0], max_batch_s=1.0).start()
-    guide = HoldGuide(sample_rate_hz=src.rate_hz, units=src.units, device_id=src.device_id, site=src.site,
-                      config=HoldConfig(duration_s=duration_s, settle_s=1.0, frame=SIM_FRAME))
+    guide = HoldGuide(
+        sample_rate_hz=src.rate_hz,
+        units=src.units,
+        device_id=src.device_id,
+        site=src.site,
+        config=HoldConfig(duration_s=duration_s, settle_s=1.0, frame=SIM_FRAME),
+    )
     return now, src, guide
 
 
@@ -68,14 +74,20 @@ def test_abort_and_bad_config():
 
 # ---------------------------------------------------------------- P4 mode A, live
 
+
 def _ref_run(seed, seconds, misalign_deg=0.0, table=True):
     from solvers.frames import rotvec_to_matrix
     from solvers.simulate import LiveImu
     from station.procedures.gyrodrift_guide import ReferenceConfig, ReferenceGuide
 
     imu = LiveImu(procedure="gyro-drift", seed=seed, rate_hz=100.0, hold_s=1e9, reference=True)
-    guide = ReferenceGuide(sample_rate_hz=100.0, units=imu.units, device_id=imu.device_id, site=imu.site,
-                           config=ReferenceConfig(duration_s=180.0, frame="x forward, y left, z up"))
+    guide = ReferenceGuide(
+        sample_rate_hz=100.0,
+        units=imu.units,
+        device_id=imu.device_id,
+        site=imu.site,
+        config=ReferenceConfig(duration_s=180.0, frame="x forward, y left, z up"),
+    )
     if table:
         imu.set_orientation("table")
     R = rotvec_to_matrix(np.radians([0.0, misalign_deg, 0.0]))  # the unit tilted on the reference

@@ -1,8 +1,8 @@
 """P4 mode B with an analogue accelerometer (V): its zero-g offset must be known before its
 direction means a tilt; without it the station says so and does not invent pitch and roll."""
+
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from solvers.simulate import NOMINAL_ACCEL_ZERO_V, simulate

@@ -7,6 +7,7 @@ placement and timing), changes what a careless or hostile user would, and runs t
 The hang and the stdout cases run in a subprocess with a timeout: a hang fails the test
 instead of stalling the suite, and stdout is the real file descriptor 1.
 """
+
 from __future__ import annotations
 
 import json
@@ -63,17 +64,20 @@ def _set(col: str, row: int, value: float):
     def fn(c):
         c.columns[col] = np.array(c.columns[col], dtype=float)
         c.columns[col][row] = value
+
     return fn
 
 
 def _cli(*args, timeout=180):
     """The real CLI in a subprocess: (rc, stdout, stderr); a hang raises TimeoutExpired."""
-    r = subprocess.run([sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True,
-                       text=True, timeout=timeout)
+    r = subprocess.run(
+        [sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, capture_output=True, text=True, timeout=timeout
+    )
     return r.returncode, r.stdout, r.stderr
 
 
 # --------------------------------------------------------------------------- the hang
+
 
 @pytest.mark.parametrize("command", ["calibrate", "diagnose"])
 def test_one_cell_of_1e200_in_a_p2_table_is_refused_at_once_naming_line_and_column(sims, tmp_path, command):
@@ -117,6 +121,7 @@ def test_dependency_prints_at_fd_level_are_caught_not_written():
 
 # --------------------------------------------------------------------------- IGRF coverage
 
+
 @pytest.mark.parametrize("date,years", [("2031-06-01", "1.4"), ("1897-03-01", "2.8")])
 def test_compass_outside_igrf_coverage_warns_in_the_result_and_stdout_is_only_json(sims, tmp_path, date, years):
     src = sims("compass")
@@ -124,6 +129,7 @@ def test_compass_outside_igrf_coverage_warns_in_the_result_and_stdout_is_only_js
 
     def redate(c):
         c.meta["date"] = date
+
     _mutated(src, dst, redate)
     rc, out, err = _cli("calibrate", dst, "--json")
     assert rc == 0, err
@@ -139,6 +145,7 @@ def test_compass_far_outside_igrf_coverage_is_refused_on_the_date_line(sims, tmp
 
     def redate(c):
         c.meta["date"] = "1850-06-01"
+
     _mutated(src, dst, redate)
     line = read_capture(dst).meta_lines["date"]
     rc, out, err = _cli("calibrate", dst, "--json")
@@ -160,20 +167,24 @@ def test_igrf_date_policy():
 
 # --------------------------------------------------------------------------- last-resort errors -> reasons
 
+
 def _col_nan(col):
     def fn(c):
         c.columns[col] = np.full(c.n_rows, np.nan)
+
     return fn
 
 
 def _scale(col, k):
     def fn(c):
         c.columns[col] = np.asarray(c.columns[col], dtype=float) * k
+
     return fn
 
 
 def _meta(key, value):
     """Metadata the writer refuses: written as a placeholder, then edited in the text."""
+
     def fn(c):
         c.meta[key] = "0"
 
@@ -184,7 +195,13 @@ def _meta(key, value):
 CASES = [
     # (id, procedure, simulator options, mutation, what the one line must say)
     ("p1-one-sample-1e308", "accel-tabletop", (), _set("ax", 400, 1e308), "column 'ax': 1e+308 is beyond"),
-    ("p4a-one-sample-1e308", "gyro-drift", ("mode=reference",), _set("gx", 400, 1e308), "column 'gx': 1e+308 is beyond"),
+    (
+        "p4a-one-sample-1e308",
+        "gyro-drift",
+        ("mode=reference",),
+        _set("gx", 400, 1e308),
+        "column 'gx': 1e+308 is beyond",
+    ),
     ("altitude-1e308", "accel-tabletop", (), _meta("altitude_m", "1e308"), "metadata 'altitude_m'"),
     ("empty-magnetometer-column", "compass", (), _col_nan("mx"), "column 'mx' is empty in every row"),
     ("ldv-nav-empty-attitude", "ldv", ("reference=nav",), _col_nan("roll_deg"), "column 'roll_deg' is empty"),
@@ -222,11 +239,13 @@ def test_a_result_with_a_null_parameter_is_refused_not_returned():
         check_result(cap, {"params": {"beam1": {"dK": -1.0, "alpha_deg": None}}, "uncertainty": {}})
     with pytest.raises(UnsupportedError, match="uncertainty"):
         check_result(cap, {"params": {"drift": [0.1, 0.2, 0.3]}, "uncertainty": {"drift": [None, None, None]}})
-    check_result(cap, {"params": {"drift": [0.1, 0.2, 0.3], "mode": "reference"},
-                       "uncertainty": {"drift": [0.01, 0.01, 0.01]}})
+    check_result(
+        cap, {"params": {"drift": [0.1, 0.2, 0.3], "mode": "reference"}, "uncertainty": {"drift": [0.01, 0.01, 0.01]}}
+    )
 
 
 # --------------------------------------------------------------------------- reader memory
+
 
 def test_reader_memory_is_bounded_whatever_the_first_line_length(tmp_path):
     """A 400 KB first data line made the reader ask for 65,536 x 400 KB = 26 GB at once

@@ -46,11 +46,7 @@ class DataFlashWriter:
 
     def __init__(self, path, units: bool = True):
         self.enc = DFReader.DFReader_binary.__new__(DFReader.DFReader_binary)
-        self.enc.formats = {
-            0x80: DFReader.DFFormat(
-                0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns"
-            )
-        }
+        self.enc.formats = {0x80: DFReader.DFFormat(0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns")}
         self.f = open(path, "wb")  # noqa: SIM115 - closed by close(), like a writer object
         self.fmt = {}
         for name, fmt, cols in (
@@ -184,12 +180,8 @@ def test_bin_round_trip_units_parameters_date_place(tmp_path):
     t_us, acc = truth[0][:, 0], truth[0][:, 4:7]
     first = int(np.flatnonzero(t_us >= 500_100)[0])
     last = int(np.flatnonzero(t_us <= t_us[-1])[-1])
-    np.testing.assert_array_equal(
-        c.columns["ax"], _f32(acc[first : last + 1, 0])[: c.n_rows]
-    )
-    np.testing.assert_allclose(
-        c.columns["t"], (t_us[first : first + c.n_rows] - t_us[first]) * 1e-6, atol=1e-9
-    )
+    np.testing.assert_array_equal(c.columns["ax"], _f32(acc[first : last + 1, 0])[: c.n_rows])
+    np.testing.assert_allclose(c.columns["t"], (t_us[first : first + c.n_rows] - t_us[first]) * 1e-6, atol=1e-9)
     assert abs(float(m["sample_rate_hz"]) - 400) < 1e-6
     # the 100 Hz compass is interpolated onto the 400 Hz rows; its mGauss values are whole numbers
     assert "mag linear" in m["import_align"]
@@ -200,27 +192,18 @@ def test_bin_round_trip_units_parameters_date_place(tmp_path):
     t_first_row = t_us[first] * 1e-6
     t_gps = (500_000 + 10 * 2500) * 1e-6
     want = gps_unix - t_gps + t_first_row
-    assert m["date"] == dt.datetime.fromtimestamp(int(want), dt.UTC).strftime(
-        "%Y-%m-%dT%H:%M:%S"
-    )
-    assert (
-        abs(float(m["latitude_deg"]) - 47.397742) < 1e-6
-        and abs(float(m["longitude_deg"]) - 8.545594) < 1e-6
-    )
+    assert m["date"] == dt.datetime.fromtimestamp(int(want), dt.UTC).strftime("%Y-%m-%dT%H:%M:%S")
+    assert abs(float(m["latitude_deg"]) - 47.397742) < 1e-6 and abs(float(m["longitude_deg"]) - 8.545594) < 1e-6
 
 
 def test_bin_second_instance_and_old_logs_without_units(tmp_path):
     log = tmp_path / "two.bin"
     truth = write_bin(log, units=False)
     out = tmp_path / "imu1.csv"
-    res = run_station(
-        "import", log, "--procedure", "gyro-drift", "--instance", "1", "--out", out
-    )
+    res = run_station("import", log, "--procedure", "gyro-drift", "--instance", "1", "--out", out)
     assert res.returncode == 0, res.stderr
     c = read_capture(out)
-    assert (
-        c.meta["sensor_device_id"] == "2818308" and c.meta["sensor_instance"] == "1"
-    )  # INS_GYR2_ID
+    assert c.meta["sensor_device_id"] == "2818308" and c.meta["sensor_instance"] == "1"  # INS_GYR2_ID
     assert set(c.columns["gx"]) <= set(_f32(truth[1][:, 1]))
     # no FMTU: ArduPilot's LogStructure units (IMU rad/s, m/s/s; MAG mGauss)
     assert (c.meta["gyro_unit"], c.meta["accel_unit"]) == ("rad/s", "m/s^2")
@@ -234,11 +217,7 @@ def test_bin_second_instance_and_old_logs_without_units(tmp_path):
         "--out",
         tmp_path / "x.csv",
     )
-    assert (
-        res.returncode == 2
-        and "instances 0, 1" in res.stderr
-        and not (tmp_path / "x.csv").exists()
-    )
+    assert res.returncode == 2 and "instances 0, 1" in res.stderr and not (tmp_path / "x.csv").exists()
 
 
 def test_bin_parameter_changed_during_the_data_is_flagged(tmp_path):
@@ -248,9 +227,7 @@ def test_bin_parameter_changed_during_the_data_is_flagged(tmp_path):
     res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
     assert res.returncode == 0
     c = read_capture(out)
-    assert np.float32(float(c.meta["param.INS_ACCOFFS_X"])) == np.float32(
-        0.0512
-    )  # the value at the start
+    assert np.float32(float(c.meta["param.INS_ACCOFFS_X"])) == np.float32(0.0512)  # the value at the start
     assert c.meta["params_changed"] == "INS_ACCOFFS_X" and "INS_ACCOFFS_X" in res.stderr
 
 
@@ -315,12 +292,7 @@ def test_bin_calibrates_directly_and_recovers_the_truth(tmp_path):
     assert np.all(np.abs(b - B) <= 5 * sb + 1e-4), (b, sb)
     np.testing.assert_allclose(np.array(r["params"]["M"]), M, atol=0.01)
     out = tmp_path / "tabletop.csv"
-    assert (
-        run_station(
-            "import", log, "--procedure", "accel-tabletop", "--out", out
-        ).returncode
-        == 0
-    )
+    assert run_station("import", log, "--procedure", "accel-tabletop", "--out", out).returncode == 0
     via = json.loads(run_station("calibrate", out, "--json").stdout)
     assert via["params"] == r["params"]
 
@@ -341,9 +313,7 @@ def write_tlog(path, autopilot=3, n=100, t0=1_700_000_000.0, second_imu=False):
     ints = {"INS_ACC_ID": 6, "COMPASS_DEV_ID": 6, "AHRS_ORIENTATION": 2}
     for i, (name, value) in enumerate(PARAMS.items()):
         at(t0)
-        mav.param_value_send(
-            name.encode(), float(value), ints.get(name, 9), len(PARAMS), i
-        )
+        mav.param_value_send(name.encode(), float(value), ints.get(name, 9), len(PARAMS), i)
     rng = np.random.default_rng(5)
     sent = []
     for k in range(n):
@@ -379,15 +349,11 @@ def test_tlog_round_trip_units_from_pymavlink_definitions(tmp_path):
     np.testing.assert_array_equal(c.columns["ax"], sent[:, 1])
     np.testing.assert_array_equal(c.columns["mz"], sent[:, 9])
     np.testing.assert_allclose(c.columns["t"], sent[:, 0], atol=1e-9)
-    assert (
-        m["date"] == "2023-11-14T22:13:20"
-    )  # the ground station's clock, t0 = 1.7e9 s
+    assert m["date"] == "2023-11-14T22:13:20"  # the ground station's clock, t0 = 1.7e9 s
     assert m["param.INS_ACC_ID"] == "2753028" and m["sensor_device_id"] == "2753028"
     assert np.float32(float(m["param.COMPASS_OFS_X"])) == np.float32(120.5)
     # |f| ≈ 1 g in mg: the unit is right
-    f = np.linalg.norm(
-        np.column_stack([c.columns["ax"], c.columns["ay"], c.columns["az"]]), axis=1
-    )
+    f = np.linalg.norm(np.column_stack([c.columns["ax"], c.columns["ay"], c.columns["az"]]), axis=1)
     assert abs(np.median(f) - 1000) < 5
     res = run_station(
         "import",
@@ -401,9 +367,7 @@ def test_tlog_round_trip_units_from_pymavlink_definitions(tmp_path):
     )
     assert res.returncode == 0, res.stderr
     c1 = read_capture(tmp_path / "i1.csv")
-    assert (
-        c1.meta["import_source"].startswith("SCALED_IMU2") and "mx" not in c1.columns
-    )  # no compass there
+    assert c1.meta["import_source"].startswith("SCALED_IMU2") and "mx" not in c1.columns  # no compass there
     assert np.all(c1.columns["az"] == -990)
 
 
@@ -412,16 +376,9 @@ def test_tlog_raw_imu_from_another_autopilot_is_counts(tmp_path):
     log = tmp_path / "generic.tlog"
     write_tlog(log, autopilot=0)
     out = tmp_path / "g.csv"
-    assert (
-        run_station("import", log, "--procedure", "gyro-drift", "--out", out).returncode
-        == 0
-    )
+    assert run_station("import", log, "--procedure", "gyro-drift", "--out", out).returncode == 0
     c = read_capture(out)
-    assert (
-        c.meta["accel_unit"] == "counts"
-        and c.meta["corrected"] == "false"
-        and "firmware" not in c.meta
-    )
+    assert c.meta["accel_unit"] == "counts" and c.meta["corrected"] == "false" and "firmware" not in c.meta
 
 
 @pytest.mark.parametrize(
@@ -440,14 +397,8 @@ def test_bad_logs_one_line_nothing_written(tmp_path, suffix, content, says):
         ("calibrate", bad, "--procedure", "accel-tabletop"),
     ):
         res = run_station(*cmd)
-        assert (
-            res.returncode == 2 and res.stdout == "" and "Traceback" not in res.stderr
-        )
-        assert (
-            res.stderr.count("\n") == 1
-            and str(bad) in res.stderr
-            and says in res.stderr
-        ), res.stderr
+        assert res.returncode == 2 and res.stdout == "" and "Traceback" not in res.stderr
+        assert res.stderr.count("\n") == 1 and str(bad) in res.stderr and says in res.stderr, res.stderr
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -469,9 +420,7 @@ def test_tlog_from_px4_highres_imu_and_bytewise_parameters(tmp_path):
     """PX4 streams HIGHRES_IMU (m/s², rad/s, gauss, already calibrated) and sends integer
     parameters byte-wise inside PARAM_VALUE's float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
     log_path = tmp_path / "px4.tlog"
-    log = mavutil.mavlogfile(
-        str(log_path), write=True, source_system=1, source_component=1
-    )
+    log = mavutil.mavlogfile(str(log_path), write=True, source_system=1, source_component=1)
     t0 = 1_710_773_350.0
 
     def at(t):
@@ -517,9 +466,7 @@ def test_tlog_from_px4_highres_imu_and_bytewise_parameters(tmp_path):
     )
     assert m["param.CAL_ACC0_ID"] == "2424842"  # decoded byte-wise, not 3.4e-39
     assert np.float32(float(m["param.CAL_ACC0_XOFF"])) == np.float32(0.15803528)
-    assert np.all(c.columns["az"] == np.float32(-9.79)) and np.all(
-        c.columns["temp_c"] == 40.5
-    )
+    assert np.all(c.columns["az"] == np.float32(-9.79)) and np.all(c.columns["temp_c"] == 40.5)
     assert abs(float(m["sample_rate_hz"]) - 250) < 1e-6
 
 
@@ -536,13 +483,8 @@ def test_tlog_with_every_message_twice_keeps_each_sample_once(tmp_path):
         i += n
     twice.write_bytes(bytes(out))
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    assert (
-        run_station("import", once, "--procedure", "gyro-drift", "--out", a).returncode
-        == 0
-    )
+    assert run_station("import", once, "--procedure", "gyro-drift", "--out", a).returncode == 0
     res = run_station("import", twice, "--procedure", "gyro-drift", "--out", b)
     assert res.returncode == 0 and "100 repeated IMU messages" in res.stderr
     assert read_capture(a) == read_capture(b)  # metadata and every column
-    np.testing.assert_array_equal(
-        read_capture(a).columns["gx"], read_capture(b).columns["gx"]
-    )
+    np.testing.assert_array_equal(read_capture(a).columns["gx"], read_capture(b).columns["gx"])

@@ -22,9 +22,7 @@ def _mutations(data: bytes, seed: int):
     hole = bytearray(data)
     j = int(rng.integers(0, len(data) - 300))
     hole[j : j + 300] = rng.integers(0, 256, 300, dtype=np.uint8).tobytes()
-    mid = (
-        len(data) // 2
-    )  # a block of zeros inside (a DataFlash page that was never written)
+    mid = len(data) // 2  # a block of zeros inside (a DataFlash page that was never written)
     gap = data[:mid] + bytes(600) + data[mid:]
     return {"flipped": bytes(flipped), "cut": cut, "hole": bytes(hole), "gap": gap}
 
@@ -34,12 +32,7 @@ def sources(tmp_path_factory, shared_data):
     d = tmp_path_factory.mktemp("src")
     write_bin(d / "a.bin")
     write_tlog(d / "a.tlog")
-    ulg = (
-        shared_data
-        / "px4_ulog"
-        / "original"
-        / "sample_logging_tagged_and_default_params.ulg"
-    )
+    ulg = shared_data / "px4_ulog" / "original" / "sample_logging_tagged_and_default_params.ulg"
     return {
         ".bin": (d / "a.bin").read_bytes(),
         ".tlog": (d / "a.tlog").read_bytes(),
@@ -67,9 +60,7 @@ def test_corrupt_log_one_line_or_a_valid_capture(tmp_path, sources, suffix, kind
     if res.returncode == 0:
         assert res.stdout.count("\n") == 1 and res.stdout.startswith(f"{out}: ")
         noise = [line for line in res.stderr.splitlines() if ": warning: " not in line]
-        assert (
-            noise == []
-        )  # no reader chatter ("bad header ..." from pymavlink's compiled indexer)
+        assert noise == []  # no reader chatter ("bad header ..." from pymavlink's compiled indexer)
         read_capture(out)  # what was written is a valid capture
     else:
         assert res.returncode == 2 and res.stdout == "" and not out.exists()

@@ -23,11 +23,7 @@ T0 = 1403636579758555392  # EuRoC MH_01's first IMU stamp (ns)
 
 
 def _imu_rows(rng, n=600, hz=200):
-    t = (
-        T0
-        + np.round(np.arange(n) * 1e9 / hz).astype(np.int64)
-        + rng.integers(-300, 300, n)
-    )
+    t = T0 + np.round(np.arange(n) * 1e9 / hz).astype(np.int64) + rng.integers(-300, 300, n)
     w = rng.normal(0, 0.002, (n, 3))
     a = np.array([8.15, -0.38, -2.40]) + rng.normal(0, 0.02, (n, 3))
     return t, w, a
@@ -56,30 +52,16 @@ def test_euroc_and_kalibr_round_trip(tmp_path, header):
     np.testing.assert_allclose(c.columns["t"], (t - t[0]) * 1e-9, rtol=0, atol=1e-12)
     # calibrate reads it directly; a file with accel and gyro needs the procedure named
     res = run_station("calibrate", src)
-    assert (
-        res.returncode == 2
-        and "--procedure" in res.stderr
-        and res.stderr.count("\n") == 1
-    )
+    assert res.returncode == 2 and "--procedure" in res.stderr and res.stderr.count("\n") == 1
     res = run_station("calibrate", src, "--procedure", "gyro-drift")
-    assert "Traceback" not in res.stderr and (
-        res.returncode == 0 or res.stderr.count("\n") == 1
-    )
+    assert "Traceback" not in res.stderr and (res.returncode == 0 or res.stderr.count("\n") == 1)
 
 
 def test_euroc_bad_cell_names_file_and_line(tmp_path):
     src = tmp_path / "data.csv"
-    src.write_text(
-        EUROC + "\n" + f"{T0},0,0,0,0,0,9.8\n{T0 + 5_000_000},0,0,abc,0,0,9.8\n"
-    )
-    res = run_station(
-        "import", src, "--procedure", "gyro-drift", "--out", tmp_path / "o.csv"
-    )
-    assert (
-        res.returncode == 2
-        and res.stderr.strip()
-        == f"station: {src}:3: column 'gz': 'abc' is not a number"
-    )
+    src.write_text(EUROC + "\n" + f"{T0},0,0,0,0,0,9.8\n{T0 + 5_000_000},0,0,abc,0,0,9.8\n")
+    res = run_station("import", src, "--procedure", "gyro-drift", "--out", tmp_path / "o.csv")
+    assert res.returncode == 2 and res.stderr.strip() == f"station: {src}:3: column 'gz': 'abc' is not a number"
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -90,9 +72,7 @@ def test_plain_csv_is_refused_by_calibrate_with_the_way_in(tmp_path):
     assert res.returncode == 2 and res.stderr.count("\n") == 1
     assert f"{src}:1:" in res.stderr and "station import" in res.stderr
     # station import takes it once the unit is known (the names already are the capture's)
-    res = run_station(
-        "import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv"
-    )
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
     assert res.returncode == 2 and "--unit accel=UNIT" in res.stderr
     res = run_station(
         "import",
@@ -122,10 +102,7 @@ def test_plain_csv_with_map_units_and_time_in_ms(tmp_path):
         "time_ms;temp;acc_x;acc_y;acc_z;gyr_x;gyr_y;gyr_z;mag_x;mag_y;mag_z",
     ]
     lines += [""] * n
-    lines[2:] = [
-        ";".join(repr(float(x)) for x in [t_ms[i], 25.5, *acc[i], *gyr[i], *mag[i]])
-        for i in range(n)
-    ]
+    lines[2:] = [";".join(repr(float(x)) for x in [t_ms[i], 25.5, *acc[i], *gyr[i], *mag[i]]) for i in range(n)]
     src.write_text("\n".join(lines) + "\n")
     out = tmp_path / "o.csv"
     res = run_station(
@@ -159,9 +136,7 @@ def test_plain_csv_with_map_units_and_time_in_ms(tmp_path):
 
 def test_plain_csv_without_time_uses_rate(tmp_path):
     src = tmp_path / "adc.csv"
-    src.write_text(
-        "x,y,z\n" + "".join(f"{2.5 + 0.001 * i},{1.6},{1.7}\n" for i in range(10))
-    )
+    src.write_text("x,y,z\n" + "".join(f"{2.5 + 0.001 * i},{1.6},{1.7}\n" for i in range(10)))
     out = tmp_path / "o.csv"
     res = run_station(
         "import",
@@ -230,9 +205,7 @@ def test_plain_csv_bad_input_one_line(tmp_path, content, args, says):
     src = tmp_path / "in.csv"
     src.write_text(content)
     out = tmp_path / "o.csv"
-    res = run_station(
-        "import", src, "--procedure", "accel-tabletop", "--out", out, *args
-    )
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *args)
     assert res.returncode == 2 and res.stdout == "" and "Traceback" not in res.stderr
     assert res.stderr.count("\n") == 1 and says in res.stderr, res.stderr
     assert not out.exists()
@@ -255,10 +228,6 @@ def test_options_that_do_not_apply_are_refused(tmp_path, shared_data):
 
 def test_a_station_capture_needs_no_import(tmp_path):
     src = tmp_path / "c.csv"
-    src.write_text(
-        "# station-capture: 1\n# procedure: accel-tabletop\n# accel_unit: g\nt,ax,ay,az\n0,0,0,1\n"
-    )
-    res = run_station(
-        "import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv"
-    )
+    src.write_text("# station-capture: 1\n# procedure: accel-tabletop\n# accel_unit: g\nt,ax,ay,az\n0,0,0,1\n")
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
     assert res.returncode == 2 and f"{src}:1: already a station capture" in res.stderr

@@ -27,9 +27,7 @@ def px4_dir(shared_data):
 
 
 def _topic(ulog, name, multi_id=0):
-    return next(
-        d for d in ulog.data_list if d.name == name and d.multi_id == multi_id
-    ).data
+    return next(d for d in ulog.data_list if d.name == name and d.multi_id == multi_id).data
 
 
 def _import(tmp_path, log, *args):
@@ -63,9 +61,7 @@ def test_every_log_imports_with_its_cal_parameters(tmp_path, px4_dir, name):
     assert t[0] == 0 and np.all(np.diff(t) >= 0)
 
 
-def test_raw_topics_are_uncorrected_and_carry_their_device_and_cal_slot(
-    tmp_path, px4_dir
-):
+def test_raw_topics_are_uncorrected_and_carry_their_device_and_cal_slot(tmp_path, px4_dir):
     """CubeOrange, PX4 v1.11: sensor_accel is the driver's output (PX4 applies CAL_ACCn later)."""
     log = px4_dir / "sample_log_small.ulg"
     capture, res = _import(tmp_path, log, "--procedure", "accel-tabletop")
@@ -84,13 +80,9 @@ def test_raw_topics_are_uncorrected_and_carry_their_device_and_cal_slot(
     ts = np.asarray(acc["timestamp_sample"], dtype=np.int64)[start : start + n]
     np.testing.assert_allclose(capture.columns["t"], (ts - ts[0]) * 1e-6, atol=1e-9)
     # physics: the board stood on the ground: |f| ≈ g in m/s², |B| of the Earth in gauss
-    f = np.linalg.norm(
-        np.column_stack([capture.columns[c] for c in ("ax", "ay", "az")]), axis=1
-    )
+    f = np.linalg.norm(np.column_stack([capture.columns[c] for c in ("ax", "ay", "az")]), axis=1)
     assert abs(np.median(f) - 9.81) < 0.3
-    b = np.linalg.norm(
-        np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1
-    )
+    b = np.linalg.norm(np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1)
     assert 0.2 < np.median(b) < 0.7
     # the raw topics were logged at 1 Hz: the importer says where the dense data are
     assert "--source combined" in res.stderr
@@ -101,9 +93,7 @@ def test_instance_option_picks_the_second_imu(tmp_path, px4_dir):
     capture, _ = _import(tmp_path, log, "--procedure", "gyro-drift", "--instance", "1")
     ulog = ULog(str(log))
     gyro1 = _topic(ulog, "sensor_gyro", 1)
-    assert (
-        int(capture.meta["sensor_device_id"]) == int(gyro1["device_id"][0]) == 3670050
-    )
+    assert int(capture.meta["sensor_device_id"]) == int(gyro1["device_id"][0]) == 3670050
     assert capture.meta["sensor_instance"] == "1"  # CAL_GYRO1_ID = 3670050
     assert set(capture.columns["gx"]) <= set(np.asarray(gyro1["x"], dtype=np.float64))
 
@@ -115,9 +105,7 @@ def test_sensor_combined_is_marked_corrected(tmp_path, px4_dir):
     assert meta["corrected"] == "true" and meta["mag_unit"] == "gauss"
     assert "sensor_combined" in meta["import_source"]
     assert capture.n_rows > 17000 and abs(float(meta["sample_rate_hz"]) - 250) < 5
-    b = np.linalg.norm(
-        np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1
-    )
+    b = np.linalg.norm(np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1)
     assert 0.2 < np.nanmedian(b) < 0.7  # the Earth's field, in gauss
     combined, _ = _import(
         tmp_path,
@@ -134,11 +122,7 @@ def test_calibrate_and_diagnose_read_the_log_directly(tmp_path, px4_dir):
     log = px4_dir / "sample.ulg"
     res = run_station("calibrate", log)
     assert res.returncode == 2 and res.stdout == ""
-    assert (
-        res.stderr.count("\n") == 1
-        and "--procedure" in res.stderr
-        and str(log) in res.stderr
-    )
+    assert res.stderr.count("\n") == 1 and "--procedure" in res.stderr and str(log) in res.stderr
     # a flight has no static positions: refused with the reason, one line
     res = run_station("calibrate", log, "--procedure", "accel-tabletop")
     assert res.returncode == 2 and res.stdout == "" and res.stderr.count("\n") == 1
@@ -171,9 +155,7 @@ def test_bad_ulog_one_line_and_nothing_written(tmp_path, content, says):
     out.write_text("keep me\n")
     res = run_station("import", bad, "--procedure", "accel-tabletop", "--out", out)
     assert res.returncode == 2 and res.stdout == ""
-    assert (
-        res.stderr.count("\n") == 1 and f"{bad}: " in res.stderr and says in res.stderr
-    )
+    assert res.stderr.count("\n") == 1 and f"{bad}: " in res.stderr and says in res.stderr
     assert out.read_text() == "keep me\n"  # nothing half-written
     assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.ulg", "out.csv"]
 
@@ -183,18 +165,12 @@ def test_truncated_real_log_is_refused_or_imported_whole(tmp_path, px4_dir):
     data = (px4_dir / "sample_logging_tagged_and_default_params.ulg").read_bytes()
     cut = tmp_path / "cut.ulg"
     cut.write_bytes(data[: len(data) // 3])
-    res = run_station(
-        "import", cut, "--procedure", "accel-tabletop", "--out", tmp_path / "cut.csv"
-    )
+    res = run_station("import", cut, "--procedure", "accel-tabletop", "--out", tmp_path / "cut.csv")
     assert "Traceback" not in res.stderr
     if res.returncode == 0:
         read_capture(tmp_path / "cut.csv")
     else:
-        assert (
-            res.returncode == 2
-            and res.stderr.count("\n") == 1
-            and not (tmp_path / "cut.csv").exists()
-        )
+        assert res.returncode == 2 and res.stderr.count("\n") == 1 and not (tmp_path / "cut.csv").exists()
 
 
 def test_bad_instance_names_the_ones_there(tmp_path, px4_dir):
@@ -208,11 +184,7 @@ def test_bad_instance_names_the_ones_there(tmp_path, px4_dir):
         "--out",
         tmp_path / "x.csv",
     )
-    assert (
-        res.returncode == 2
-        and "instances 0, 1, 2" in res.stderr
-        and not (tmp_path / "x.csv").exists()
-    )
+    assert res.returncode == 2 and "instances 0, 1, 2" in res.stderr and not (tmp_path / "x.csv").exists()
 
 
 def test_out_must_not_be_the_log(tmp_path, px4_dir):
@@ -223,9 +195,7 @@ def test_out_must_not_be_the_log(tmp_path, px4_dir):
     assert log.read_bytes() == (px4_dir / "sample_px4_events.ulg").read_bytes()
 
 
-def test_combined_compass_from_vehicle_magnetometer_with_place_and_date(
-    tmp_path, px4_dir
-):
+def test_combined_compass_from_vehicle_magnetometer_with_place_and_date(tmp_path, px4_dir):
     """PX4 ≥ 1.11 logs the calibrated compass as vehicle_magnetometer; the SITL log's GPS gives
     PX4's default SITL home (47.397742 N, 8.545594 E, Zürich) and the UTC date of the flight."""
     capture, _ = _import(
@@ -237,18 +207,10 @@ def test_combined_compass_from_vehicle_magnetometer_with_place_and_date(
         "combined",
     )
     meta = capture.meta
-    assert (
-        meta["corrected"] == "true"
-        and "vehicle_magnetometer[0]" in meta["import_source"]
-    )
-    assert (
-        abs(float(meta["latitude_deg"]) - 47.397742) < 1e-4
-        and abs(float(meta["longitude_deg"]) - 8.545594) < 1e-4
-    )
+    assert meta["corrected"] == "true" and "vehicle_magnetometer[0]" in meta["import_source"]
+    assert abs(float(meta["latitude_deg"]) - 47.397742) < 1e-4 and abs(float(meta["longitude_deg"]) - 8.545594) < 1e-4
     assert meta["date"].startswith("2024-03-18")
-    b = np.linalg.norm(
-        np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1
-    )
+    b = np.linalg.norm(np.column_stack([capture.columns[c] for c in ("mx", "my", "mz")]), axis=1)
     assert 0.4 < np.median(b) < 0.55  # Zürich's field, about 0.48 gauss
 
 
@@ -267,8 +229,6 @@ def test_inspect_shows_what_import_would_write_and_instance_spares_other_sensors
     )
     assert res.returncode == 0, res.stderr
     s = json.loads(res.stdout)
-    assert (
-        s["metadata"]["sensor_device_id"] == "2621474"
-    )  # sensor_gyro[2], CAL_GYRO2_ID
+    assert s["metadata"]["sensor_device_id"] == "2621474"  # sensor_gyro[2], CAL_GYRO2_ID
     assert [c["name"] for c in s["columns"] if c["name"].startswith("m")] == []
     assert "no sensor_mag[2]" in res.stderr

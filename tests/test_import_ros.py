@@ -69,9 +69,7 @@ def _messages(
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     for k in range(n_mag):
         ns = T0_NS + 1_000_000 + round(k * 1e9 / mag_hz)
-        b_T = (48_000.0 * dirs[k] + np.asarray(hard_iron_nT)) * 1e-9 + rng.normal(
-            0, 20e-9, 3
-        )
+        b_T = (48_000.0 * dirs[k] + np.asarray(hard_iron_nT)) * 1e-9 + rng.normal(0, 20e-9, 3)
         msg = T["sensor_msgs/msg/MagneticField"](
             header=header(ns),
             magnetic_field=Vec3(x=b_T[0], y=b_T[1], z=b_T[2]),
@@ -138,30 +136,21 @@ def test_bag_round_trip(tmp_path, kind):
     n = c.n_rows
     np.testing.assert_array_equal(c.columns["gx"], truth["gyr"][first : first + n, 0])
     np.testing.assert_array_equal(c.columns["az"], truth["acc"][first : first + n, 2])
-    np.testing.assert_allclose(
-        c.columns["t"], (t_imu[first : first + n] - t_imu[first]) * 1e-9, atol=1e-9
-    )
+    np.testing.assert_allclose(c.columns["t"], (t_imu[first : first + n] - t_imu[first]) * 1e-9, atol=1e-9)
     assert abs(float(m["sample_rate_hz"]) - 200) < 1e-6
     # the 50 Hz compass, tesla → nT, interpolated onto the rows: |B| near 48 µT
-    b = np.linalg.norm(
-        np.column_stack([c.columns["mx"], c.columns["my"], c.columns["mz"]]), axis=1
-    )
+    b = np.linalg.norm(np.column_stack([c.columns["mx"], c.columns["my"], c.columns["mz"]]), axis=1)
     assert 30_000 < np.nanmedian(b) < 49_000
 
 
 def test_several_imu_topics_need_a_choice(tmp_path):
     ts = get_typestore(Stores.ROS2_HUMBLE)
     msgs, _ = _messages(ts, np.random.default_rng(2))
-    msgs2 = [
-        ("/imu/raw" if t == "/imu/data" else t, typ, ns, msg)
-        for t, typ, ns, msg in msgs
-    ]
+    msgs2 = [("/imu/raw" if t == "/imu/data" else t, typ, ns, msg) for t, typ, ns, msg in msgs]
     both = sorted(msgs + [m for m in msgs2 if m[0] == "/imu/raw"], key=lambda m: m[2])
     bag = tmp_path / "two_imus"
     write_ros2(bag, both, StoragePlugin.SQLITE3)
-    res = run_station(
-        "import", bag, "--procedure", "gyro-drift", "--out", tmp_path / "x.csv"
-    )
+    res = run_station("import", bag, "--procedure", "gyro-drift", "--out", tmp_path / "x.csv")
     assert res.returncode == 2 and res.stderr.count("\n") == 1
     assert "/imu/data, /imu/raw" in res.stderr and "--topic imu=" in res.stderr
     assert not (tmp_path / "x.csv").exists()
@@ -184,9 +173,7 @@ def test_magnetometer_only_bag_calibrates_as_compass_directly(tmp_path):
     offset put in (nT) comes back."""
     ts = get_typestore(Stores.ROS2_HUMBLE)
     hard = (1500.0, -800.0, 300.0)
-    msgs, _ = _messages(
-        ts, np.random.default_rng(4), n_imu=2400, mag_only=True, hard_iron_nT=hard
-    )
+    msgs, _ = _messages(ts, np.random.default_rng(4), n_imu=2400, mag_only=True, hard_iron_nT=hard)
     bag = tmp_path / "mag_only"
     write_ros2(bag, msgs, StoragePlugin.MCAP)
     res = run_station("calibrate", bag, "--json")
@@ -194,9 +181,7 @@ def test_magnetometer_only_bag_calibrates_as_compass_directly(tmp_path):
     r = json.loads(res.stdout)
     assert r["procedure"] == "compass"
     offset = np.asarray(r["params"]["hard_iron"], dtype=float)
-    np.testing.assert_allclose(
-        offset, hard, atol=60.0
-    )  # 20 nT noise per axis, 600 samples
+    np.testing.assert_allclose(offset, hard, atol=60.0)  # 20 nT noise per axis, 600 samples
 
 
 @pytest.mark.parametrize(
@@ -209,13 +194,9 @@ def test_magnetometer_only_bag_calibrates_as_compass_directly(tmp_path):
 def test_bad_bags_one_line(tmp_path, name, content, says):
     bad = tmp_path / name
     bad.write_bytes(content)
-    res = run_station(
-        "import", bad, "--procedure", "gyro-drift", "--out", tmp_path / "o.csv"
-    )
+    res = run_station("import", bad, "--procedure", "gyro-drift", "--out", tmp_path / "o.csv")
     assert res.returncode == 2 and res.stdout == "" and "Traceback" not in res.stderr
-    assert (
-        res.stderr.count("\n") == 1 and str(bad) in res.stderr and says in res.stderr
-    ), res.stderr
+    assert res.stderr.count("\n") == 1 and str(bad) in res.stderr and says in res.stderr, res.stderr
     assert not (tmp_path / "o.csv").exists()
 
 
@@ -224,14 +205,6 @@ def test_bag_without_sensor_topics_says_what_it_holds(tmp_path):
     T = ts.types
     bag = tmp_path / "strings"
     msg = T["std_msgs/msg/String"](data="hello")
-    write_ros2(
-        bag, [("/chatter", "std_msgs/msg/String", T0_NS, msg)], StoragePlugin.SQLITE3
-    )
-    res = run_station(
-        "import", bag, "--procedure", "compass", "--out", tmp_path / "o.csv"
-    )
-    assert (
-        res.returncode == 2
-        and "std_msgs/msg/String" in res.stderr
-        and "sensor_msgs/Imu" in res.stderr
-    )
+    write_ros2(bag, [("/chatter", "std_msgs/msg/String", T0_NS, msg)], StoragePlugin.SQLITE3)
+    res = run_station("import", bag, "--procedure", "compass", "--out", tmp_path / "o.csv")
+    assert res.returncode == 2 and "std_msgs/msg/String" in res.stderr and "sensor_msgs/Imu" in res.stderr

@@ -1,4 +1,5 @@
 """solvers/ and db/ never load textual or station (checked in a fresh interpreter)."""
+
 from __future__ import annotations
 
 import pkgutil
@@ -45,8 +46,13 @@ NEVER = {
 }
 # The UI-free procedure logic (the TUI is a thin view over it).
 NEVER_UI_FREE = ("textual", "rich", "station.app", "station.screens", "station.widgets")
-NUMPY_FREE = ("station.procedures.registry", "station.procedures.contract", "station.formatting",
-              "solvers.jsonable", "db.params")
+NUMPY_FREE = (
+    "station.procedures.registry",
+    "station.procedures.contract",
+    "station.formatting",
+    "solvers.jsonable",
+    "db.params",
+)
 
 
 def _imports(path: Path) -> list[tuple[int, str]]:
@@ -83,8 +89,11 @@ def test_imports_respect_the_layers(package):
 
 def test_the_lists_load_without_numpy():
     """The registry, the contract, the formatter and the JSON sanitizer start fast."""
-    code = ("import sys\n" + "".join(f"import {m}\n" for m in NUMPY_FREE)
-            + "print(','.join(m for m in ('numpy', 'textual') if m in sys.modules))\n")
+    code = (
+        "import sys\n"
+        + "".join(f"import {m}\n" for m in NUMPY_FREE)
+        + "print(','.join(m for m in ('numpy', 'textual') if m in sys.modules))\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
 
@@ -112,7 +121,12 @@ def test_no_module_imports_another_modules_private_name():
                     if a.name.split(".")[0] in ours:
                         modules[a.asname or a.name.split(".")[0]] = a.name
         for node in ast.walk(tree):
-            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in modules
-                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and node.value.id in modules
+                and node.attr.startswith("_")
+                and not node.attr.startswith("__")
+            ):
                 bad.append(f"{rel}:{node.lineno}: {node.value.id}.{node.attr}")
     assert not bad, "\n".join(bad)

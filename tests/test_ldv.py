@@ -1,20 +1,20 @@
 """P5 laser velocimeter: truth within the reported uncertainty (body and navigation-frame
 reference), the covariance propagation, conditioning refusal, two-clock alignment, bad input."""
+
 from __future__ import annotations
 
 import json
 
 import numpy as np
 import pytest
+from station_run import capture_of as _cap
+from station_run import run_station as _station
 
 from solvers import ldv as ldv_solver
 from solvers.models import ldv as ldv_model
 from solvers.simulate import simulate
 from station.capture import Capture, write_capture
 from station.procedures import ldv as proc
-
-from station_run import capture_of as _cap
-from station_run import run_station as _station
 
 KEYS = ("dK", "alpha_deg", "beta_deg", "gamma_deg")
 
@@ -31,8 +31,12 @@ def test_known_answer_noise_free():
     # exact data: X comes back exactly, and the source's read-out gives the angles
     rng = np.random.default_rng(0)
     v = rng.normal(size=(50, 3)) * [5.0, 2.0, 1.0] + [10.0, 0.0, 0.0]
-    X = ldv_model.X_from_angles(np.array([0.01, -0.02, 0.0]), np.array([60.0, 120.0, 90.0]),
-                                np.array([90.0, 90.0, 60.0]), np.array([30.0, 30.0, 30.0]))
+    X = ldv_model.X_from_angles(
+        np.array([0.01, -0.02, 0.0]),
+        np.array([60.0, 120.0, 90.0]),
+        np.array([90.0, 90.0, 60.0]),
+        np.array([30.0, 30.0, 30.0]),
+    )
     res = ldv_solver.calibrate_ldv(v, v @ X.T)
     for j, b in enumerate(res.beams):
         np.testing.assert_allclose(b.X, X[j], atol=1e-12)
@@ -64,7 +68,7 @@ def test_truth_within_uncertainty_over_seeds(reference):
             expect = np.hypot(sim.truth["beam_noise_mps"], sim.truth["ref_noise_mps"])
             assert out["params"][f"beam{j + 1}"]["sigma_mps"] == pytest.approx(expect, rel=0.1)
     z = np.abs(z)
-    assert np.mean(z < 2) >= 0.9       # 240 values, nominal 0.954
+    assert np.mean(z < 2) >= 0.9  # 240 values, nominal 0.954
     assert np.mean(z < 3) >= 0.98
 
 
@@ -102,6 +106,7 @@ def test_missing_columns_and_too_few_epochs_refused(tmp_path):
         proc.calibrate(_cap(sim))
     short = simulate("ldv", seed=5, duration_s=0.3)
     from station.errors import UnsupportedError
+
     with pytest.raises(UnsupportedError, match="epochs"):
         proc.calibrate(_cap(short))
 
@@ -135,7 +140,8 @@ def test_two_clocks_ref_t_column_interleaved_rows_and_separate_file(tmp_path):
     assert np.max(np.abs(_z(out, truth))) < 4
     for j in range(3):
         assert out["params"][f"beam{j + 1}"]["alpha_deg"] == pytest.approx(
-            base["params"][f"beam{j + 1}"]["alpha_deg"], abs=0.05)
+            base["params"][f"beam{j + 1}"]["alpha_deg"], abs=0.05
+        )
 
     # (3) interleaved rows on one t column: reference rows carry their own (same-clock) times
     t_ref = t[k]
@@ -152,11 +158,21 @@ def test_two_clocks_ref_t_column_interleaved_rows_and_separate_file(tmp_path):
 
     # (1) a separate reference capture, referenced from the metadata, relative path
     ref_file = tmp_path / "ins.csv"
-    write_capture(ref_file, Capture({"station-capture": "1", "procedure": "ldv", "device": "INS"},
-                                    {"t": t[k] + offset, "vx": c["vx"][k], "vy": c["vy"][k], "vz": c["vz"][k]}))
+    write_capture(
+        ref_file,
+        Capture(
+            {"station-capture": "1", "procedure": "ldv", "device": "INS"},
+            {"t": t[k] + offset, "vx": c["vx"][k], "vy": c["vy"][k], "vz": c["vz"][k]},
+        ),
+    )
     main = tmp_path / "ldv.csv"
-    write_capture(main, Capture(dict(sim.meta, reference_file="ins.csv", reference_time_offset_s=str(offset)),
-                                {"t": t, "vl1": c["vl1"], "vl2": c["vl2"], "vl3": c["vl3"]}))
+    write_capture(
+        main,
+        Capture(
+            dict(sim.meta, reference_file="ins.csv", reference_time_offset_s=str(offset)),
+            {"t": t, "vl1": c["vl1"], "vl2": c["vl2"], "vl3": c["vl3"]},
+        ),
+    )
     r = _station("calibrate", main, "--json")
     assert r.returncode == 0, r.stderr
     out1 = json.loads(r.stdout)
@@ -164,8 +180,13 @@ def test_two_clocks_ref_t_column_interleaved_rows_and_separate_file(tmp_path):
     assert np.max(np.abs(_z(out1, truth))) < 4
     # the same through --reference (no reference_file in the metadata)
     bare = tmp_path / "ldv_bare.csv"
-    write_capture(bare, Capture(dict(sim.meta, reference_time_offset_s=str(offset)),
-                                {"t": t, "vl1": c["vl1"], "vl2": c["vl2"], "vl3": c["vl3"]}))
+    write_capture(
+        bare,
+        Capture(
+            dict(sim.meta, reference_time_offset_s=str(offset)),
+            {"t": t, "vl1": c["vl1"], "vl2": c["vl2"], "vl3": c["vl3"]},
+        ),
+    )
     r2 = _station("calibrate", bare, "--reference", ref_file, "--json")
     assert r2.returncode == 0, r2.stderr
     assert json.loads(r2.stdout)["params"] == out1["params"]

@@ -2,6 +2,7 @@
 (solvers.simulate.LiveVehicle): the conditioning of the velocity set as it builds is the
 P5 fit's own number, a straight road is never enough, turns make it enough, and the
 recording calibrates to the vehicle's true beams."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,9 +19,13 @@ def drive(car, guide, seconds, chunk=20):
     st = guide.status()
     for _ in range(int(seconds * car.rate_hz / chunk)):
         d = car.read(chunk)
-        st = guide.update(d["t_s"], np.column_stack([d["vl1"], d["vl2"], d["vl3"]]),
-                          np.column_stack([d["vx"], d["vy"], d["vz"]]), np.column_stack([d["wx"], d["wy"], d["wz"]]),
-                          d["temp_c"])
+        st = guide.update(
+            d["t_s"],
+            np.column_stack([d["vl1"], d["vl2"], d["vl3"]]),
+            np.column_stack([d["vx"], d["vy"], d["vz"]]),
+            np.column_stack([d["wx"], d["wy"], d["wz"]]),
+            d["temp_c"],
+        )
         if guide.phase != "record":
             break
     return st

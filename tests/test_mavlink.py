@@ -1,5 +1,6 @@
 """MAVLink written by pymavlink into a real pty, read back by the station's reader with the
 documented units (station/device/mavlink.py, docs/protocol.md)."""
+
 from __future__ import annotations
 
 import math
@@ -64,8 +65,22 @@ def test_highres_imu_is_read_in_si_units(pty_pair):
         mav.heartbeat_send(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_PX4, 0, 0, 0)
         for k in range(20):
             mav.highres_imu_send(
-                1_000_000 + 5000 * k, 0.25, -0.5, 9.75, 0.125, -0.0625, 0.03125, 0.21, -0.04, 0.45,
-                1013.0, 0.0, 0.0, 31.5, 0x1FFF, 0,
+                1_000_000 + 5000 * k,
+                0.25,
+                -0.5,
+                9.75,
+                0.125,
+                -0.0625,
+                0.03125,
+                0.21,
+                -0.04,
+                0.45,
+                1013.0,
+                0.0,
+                0.0,
+                31.5,
+                0x1FFF,
+                0,
             )
         b = read_all(r, 20)
         h, s = r.header, r.stats()
@@ -142,8 +157,10 @@ def test_sender_whose_frames_all_carry_sequence_zero_loses_nothing():
     800 samples (it gave 1: each frame was taken as a repeat of the last); a frame sent twice
     byte for byte is still one sample."""
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
-    frames = [bytes(mav.highres_imu_encode(5000 * k, 0.1, 0.2, 9.8, 0, 0, 0, 0.2, 0, 0.4, 0, 0, 0, 25.0,
-                                           0x1FFF, 0).pack(mav)) for k in range(800)]
+    frames = [
+        bytes(mav.highres_imu_encode(5000 * k, 0.1, 0.2, 9.8, 0, 0, 0, 0.2, 0, 0.4, 0, 0, 0, 25.0, 0x1FFF, 0).pack(mav))
+        for k in range(800)
+    ]
     assert {f[4] for f in frames} == {0}  # MAVLink 2 seq byte: all zero
     p = MavlinkParser()
     p.feed(b"".join(frames[:100] + [frames[99]] + frames[100:]))
@@ -170,8 +187,14 @@ def test_record_from_the_simulated_flight_controller(tmp_path):
         th = threading.Thread(target=dev.run, args=(stop,), daemon=True)
         th.start()
         try:
-            res = record(dev.path, str(tmp_path / "fc.csv"), protocol="mavlink", seconds=1.0,
-                         mavlink_source="HIGHRES_IMU", header_timeout_s=3.0)
+            res = record(
+                dev.path,
+                str(tmp_path / "fc.csv"),
+                protocol="mavlink",
+                seconds=1.0,
+                mavlink_source="HIGHRES_IMU",
+                header_timeout_s=3.0,
+            )
         finally:
             stop.set()
             th.join(5)
@@ -186,8 +209,9 @@ def test_record_from_the_simulated_flight_controller(tmp_path):
     assert res.samples == cap.n_rows
 
 
-@pytest.mark.parametrize("station_url,peer_url", [("udp:127.0.0.1:{}", "udpout:127.0.0.1:{}"),
-                                                  ("tcpin:127.0.0.1:{}", "tcp:127.0.0.1:{}")])
+@pytest.mark.parametrize(
+    "station_url,peer_url", [("udp:127.0.0.1:{}", "udpout:127.0.0.1:{}"), ("tcpin:127.0.0.1:{}", "tcp:127.0.0.1:{}")]
+)
 def test_record_over_udp_a_stream_it_had_to_request(tmp_path, station_url, peer_url):
     """`station record --port udp:127.0.0.1:PORT` against a pymavlink peer process on this machine
     that streams RAW_IMU only once asked: the capture holds the requested stream in ArduPilot's
@@ -205,12 +229,32 @@ def test_record_over_udp_a_stream_it_had_to_request(tmp_path, station_url, peer_
     s.close()
     root = Path(__file__).resolve().parents[1]
     out = tmp_path / "udp.csv"
-    peer = subprocess.Popen([sys.executable, str(root / "tests" / "mavlink_peer.py"), peer_url.format(port), "30"],
-                            stdout=subprocess.DEVNULL)
+    peer = subprocess.Popen(
+        [sys.executable, str(root / "tests" / "mavlink_peer.py"), peer_url.format(port), "30"],
+        stdout=subprocess.DEVNULL,
+    )
     try:
-        rec = subprocess.run([sys.executable, "-m", "station", "record", "--port", station_url.format(port),
-                              "--protocol", "mavlink", "--seconds", "3", "--out", str(out)],
-                             check=False, cwd=root, capture_output=True, text=True, timeout=120)
+        rec = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "station",
+                "record",
+                "--port",
+                station_url.format(port),
+                "--protocol",
+                "mavlink",
+                "--seconds",
+                "3",
+                "--out",
+                str(out),
+            ],
+            check=False,
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
     finally:
         peer.kill()
         peer.wait()
@@ -244,7 +288,9 @@ def test_px4_board_asked_for_highres_imu_and_its_integer_parameters_decoded_byte
     asked = MavlinkParser()  # decode what the station sent, with pymavlink
     sent = [m for f in p.take_outgoing() for m in asked._mav.parse_buffer(f) or []]
     assert [(m.get_type(), getattr(m, "command", None)) for m in sent] == [
-        ("COMMAND_LONG", mavlink2.MAV_CMD_REQUEST_MESSAGE), ("PARAM_REQUEST_LIST", None)]
+        ("COMMAND_LONG", mavlink2.MAV_CMD_REQUEST_MESSAGE),
+        ("PARAM_REQUEST_LIST", None),
+    ]
     p.feed(frame(board.autopilot_version_encode(0, 0, 0, 0, 0, b"\0" * 8, b"\0" * 8, b"\0" * 8, 0, 0, 0, b"\0" * 18)))
     sent = [m for f in p.take_outgoing() for m in asked._mav.parse_buffer(f) or []]
     interval = [m for m in sent if getattr(m, "command", None) == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL]

@@ -1,4 +1,5 @@
 """Forward models: conventions tested once, forward/inverse exact, effects switch on by name."""
+
 from __future__ import annotations
 
 import math
@@ -7,8 +8,7 @@ import numpy as np
 import pytest
 
 from solvers import frames
-from solvers.models import Conditions
-from solvers.models import accel, gyro, ldv, mag
+from solvers.models import Conditions, accel, gyro, ldv, mag
 from solvers.positions import P1_POSITIONS, C_n_b_for
 
 
@@ -51,7 +51,9 @@ def test_normal_gravity_known_values():
     assert frames.normal_gravity_mps2(0.0) == pytest.approx(9.7803253359, abs=1e-9)
     assert frames.normal_gravity_mps2(90.0) == pytest.approx(9.8321849378, abs=1e-9)
     # free-air gradient about −3.086e-6 s⁻²: 1000 m up is ~3.09 mm/s² less
-    assert frames.normal_gravity_mps2(45.0) - frames.normal_gravity_mps2(45.0, 1000.0) == pytest.approx(3.086e-3, rel=2e-3)
+    assert frames.normal_gravity_mps2(45.0) - frames.normal_gravity_mps2(45.0, 1000.0) == pytest.approx(
+        3.086e-3, rel=2e-3
+    )
 
 
 def test_p4_frames_level_north_projection_by_hand():
@@ -76,13 +78,24 @@ def _accel_params(rng):
     return {"K": K, "b": np.array([1.6, 1.7, 1.65])}
 
 
-@pytest.mark.parametrize("effects", [(), ("quadratic",), ("cubic",), ("scale_asymmetry",),
-                                     ("temperature_bias", "time_drift"), ("quadratic", "cubic", "scale_asymmetry")])
+@pytest.mark.parametrize(
+    "effects",
+    [
+        (),
+        ("quadratic",),
+        ("cubic",),
+        ("scale_asymmetry",),
+        ("temperature_bias", "time_drift"),
+        ("quadratic", "cubic", "scale_asymmetry"),
+    ],
+)
 def test_accel_inverse_is_exact(effects):
     rng = np.random.default_rng(1)
     p = _accel_params(rng)
     for e in effects:
-        p.update(accel.effect_blocks(e, {"quadratic": 1e-3, "cubic": 1e-5, "scale_asymmetry": 1e-3}.get(e, 0.01), rng, p))
+        p.update(
+            accel.effect_blocks(e, {"quadratic": 1e-3, "cubic": 1e-5, "scale_asymmetry": 1e-3}.get(e, 0.01), rng, p)
+        )
     f = rng.normal(scale=9.8, size=(200, 3))
     cond = Conditions(t_s=np.linspace(0, 600, 200), temp_c=np.linspace(20, 30, 200))
     y = accel.forward(f, p, cond)
@@ -103,7 +116,11 @@ def test_p1_parametrisation_round_trip():
 
 def test_p2_gain_and_quadratic_match_source_form():
     # N = K [f + D f∘f] + b with K = S Φ (source 001), one axis worked by hand.
-    p = {"S": np.array([1.29, 1.21, 1.26]), "b": np.array([0.213, 0.256, 0.516]), "D": np.array([5.7e-5, 3.1e-5, 4.5e-5])}
+    p = {
+        "S": np.array([1.29, 1.21, 1.26]),
+        "b": np.array([0.213, 0.256, 0.516]),
+        "D": np.array([5.7e-5, 3.1e-5, 4.5e-5]),
+    }
     y = accel.forward(np.array([[0.0, 0.0, -1.0]]), p)
     assert y[0, 2] == pytest.approx(1.26 * (-1.0 + 4.5e-5) + 0.516, abs=1e-15)
     p["gamma"] = np.array([1e-3, 0, 0, 0, 0, 0])
@@ -135,8 +152,13 @@ def test_gyro_forward_inverse_and_g_sensitivity():
 def test_mag_forward_inverse_and_hard_iron_step():
     rng = np.random.default_rng(5)
     W = 1000 * (np.eye(3) + np.triu(0.05 * rng.normal(size=(3, 3))))
-    p = {"W": W, "h": np.array([3.0, -4.0, 1.0]), "dh": np.array([1.0, 0.0, 0.0]), "t_on_s": np.array(5.0),
-         "rho": np.array([0.01, -0.02, 0.005])}
+    p = {
+        "W": W,
+        "h": np.array([3.0, -4.0, 1.0]),
+        "dh": np.array([1.0, 0.0, 0.0]),
+        "t_on_s": np.array(5.0),
+        "rho": np.array([0.01, -0.02, 0.005]),
+    }
     m = rng.normal(scale=30000, size=(10, 3))
     cond = Conditions(t_s=np.arange(10.0))
     y = mag.forward(m, p, cond)
@@ -157,7 +179,9 @@ def test_ldv_angles_round_trip_and_source_equation():
     v = np.array([[10.0, 1.0, -0.5]])
     y = ldv.forward(v, {"X": X})
     # V_L = (1 + δK)(Vx cos α + Vy cos β + Vz cos γ), beam 1 by hand
-    by_hand = 1.01 * (10 * math.cos(math.radians(60)) + 1 * math.cos(math.radians(90)) - 0.5 * math.cos(math.radians(c[0])))
+    by_hand = 1.01 * (
+        10 * math.cos(math.radians(60)) + 1 * math.cos(math.radians(90)) - 0.5 * math.cos(math.radians(c[0]))
+    )
     assert y[0, 0] == pytest.approx(by_hand, abs=1e-12)
 
 

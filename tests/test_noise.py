@@ -1,5 +1,6 @@
 """The gyro noise (Allan) report (station.procedures.noise): known answers on simulated
 white rate noise, the time a P4 run needs, and refusals."""
+
 from __future__ import annotations
 
 import math

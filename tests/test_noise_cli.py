@@ -23,9 +23,7 @@ ACCEL_N, ACCEL_K = (2e-3, 1.5e-3, 2.5e-3), (1e-4, 2e-4, 3e-4)  # m/s²/√Hz, m/
 
 def kalibr_noise(rng, n, density, random_walk, dt=1.0 / RATE_HZ):
     d, k = np.asarray(density), np.asarray(random_walk)
-    return d / np.sqrt(dt) * rng.normal(size=(n, 3)) + np.cumsum(
-        k * np.sqrt(dt) * rng.normal(size=(n, 3)), axis=0
-    )
+    return d / np.sqrt(dt) * rng.normal(size=(n, 3)) + np.cumsum(k * np.sqrt(dt) * rng.normal(size=(n, 3)), axis=0)
 
 
 def still_capture(path, seed, seconds=600.0):
@@ -59,14 +57,10 @@ def run(capsys, *argv):
     return code, out.out, out.err
 
 
-def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_yaml(
-    capsys, tmp_path
-):
+def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_yaml(capsys, tmp_path):
     cap = still_capture(tmp_path / "still.csv", seed=11)
     yaml_path = tmp_path / "imu.yaml"
-    code, out, err = run(
-        capsys, "noise", cap, "--format", "kalibr", "--out", yaml_path, "--json"
-    )
+    code, out, err = run(capsys, "noise", cap, "--format", "kalibr", "--out", yaml_path, "--json")
     assert code == 0, err
     doc = json.loads(out)
     for kind, N, K in (("gyro", GYRO_N, GYRO_K), ("accel", ACCEL_N, ACCEL_K)):
@@ -105,16 +99,9 @@ def test_text_with_plot_and_bad_input(capsys, tmp_path, monkeypatch):
     monkeypatch.delenv("NO_COLOR", raising=False)
     cap = still_capture(tmp_path / "still.csv", seed=3, seconds=120.0)
     code, out, err = run(capsys, "noise", cap)
-    assert (
-        code == 0
-        and "rad/s/√Hz" in out
-        and "m/s³/√Hz" in out
-        and "Allan deviation" in out
-    )
+    assert code == 0 and "rad/s/√Hz" in out and "m/s³/√Hz" in out and "Allan deviation" in out
     assert "\x1b[" not in out  # not a terminal: no colour
-    assert (
-        "random walk poorly resolved" in out
-    )  # 120 s is too short for K's sigma (crossover ~26-40 s)
+    assert "random walk poorly resolved" in out  # 120 s is too short for K's sigma (crossover ~26-40 s)
     table = tmp_path / "table.csv"
     write_capture(
         table,
@@ -130,8 +117,6 @@ def test_text_with_plot_and_bad_input(capsys, tmp_path, monkeypatch):
         ),
     )
     code, out, err = run(capsys, "noise", table)
-    assert (
-        code == 2 and out == "" and err.count("\n") == 1 and "table of averages" in err
-    )
+    assert code == 2 and out == "" and err.count("\n") == 1 and "table of averages" in err
     code, out, err = run(capsys, "noise", cap, "--out", tmp_path / "x.yaml")
     assert code == 2 and "--format kalibr" in err and not (tmp_path / "x.yaml").exists()

@@ -1,5 +1,6 @@
 """The station line protocol parser: good, garbage, partial, checksum-bad and wrapping input,
 with exact error and gap counts (docs/protocol.md)."""
+
 from __future__ import annotations
 
 import math
@@ -94,8 +95,10 @@ def test_the_documented_arduino_sentences_parse():
     text = DOC.read_text()
     assert '"STD,%u,%lu,%s,%s,%s,,,,,,,"' in text and '"STH,1,ARDU-01,V,,,100"' in text
     data = sentence("STH", 1, "ARDU-01", "V", "", "", 100)
-    data += b"".join(b"$%s*%02X\r\n" % (pl, checksum(pl)) for pl in (
-        b"STD,%d,%d,%s,%s,%s,,,,,,," % (k, 10_000 * k, b"2.5012", b"1.6633", b"1.6621") for k in range(3)))
+    data += b"".join(
+        b"$%s*%02X\r\n" % (pl, checksum(pl))
+        for pl in (b"STD,%d,%d,%s,%s,%s,,,,,,," % (k, 10_000 * k, b"2.5012", b"1.6633", b"1.6621") for k in range(3))
+    )
     p, ev, block = parse(data)
     assert p.stats.parse_errors == 0 and len(block) == 3 and ev[0].gyro_unit == "" and ev[0].accel_unit == "V"
     assert np.isnan(block.values[:, 3:10]).all()
@@ -127,21 +130,25 @@ def test_garbage_partial_and_bad_sentences_are_counted_by_kind():
     few = sentence("STD", 6, 6000, 1, 2, 3)
     not_number = sentence("STD", 7, 7000, "abc", *([1] * 9))
     seq_range = sentence("STD", 70000, 8000, *([1] * 10))
-    data = b"".join([
-        header_sentence(HEADER),
-        good[0], good[1],
-        b"hello there\r\n",                      # noise (a line without $)
-        b"\x00\xff\x13" + good[2],               # noise in front: noise +1, sample kept
-        bytes(bad_cs),                           # checksum
-        no_star,                                 # malformed
-        bad_hex,                                 # malformed
-        few,                                     # malformed
-        not_number,                              # malformed
-        seq_range,                               # malformed
-        b"x" * 300,                              # too long, no line end ...
-        good[9],                                 # ... then a sentence: kept
-        good[10], good[11],
-    ])
+    data = b"".join(
+        [
+            header_sentence(HEADER),
+            good[0],
+            good[1],
+            b"hello there\r\n",  # noise (a line without $)
+            b"\x00\xff\x13" + good[2],  # noise in front: noise +1, sample kept
+            bytes(bad_cs),  # checksum
+            no_star,  # malformed
+            bad_hex,  # malformed
+            few,  # malformed
+            not_number,  # malformed
+            seq_range,  # malformed
+            b"x" * 300,  # too long, no line end ...
+            good[9],  # ... then a sentence: kept
+            good[10],
+            good[11],
+        ]
+    )
     p, ev, block = parse(data, [7] * 400)
     assert p.stats.errors == {"checksum": 1, "malformed": 5, "too_long": 1, "noise": 2}
     assert p.stats.parse_errors == 9
@@ -199,13 +206,23 @@ def test_empty_nan_and_inf_fields_are_missing_values():
 
 
 def test_commands_acks_and_unknown_sentences():
-    data = (command_sentence("orient", "x_up") + command_sentence("TEMP", 30.5) + ack_sentence("ORIENT", True, "x_up")
-            + ack_sentence("RATE", False, "rate must be 0.1..100000 Hz") + sentence("XYZ", 1, 2) + command_sentence("HDR"))
+    data = (
+        command_sentence("orient", "x_up")
+        + command_sentence("TEMP", 30.5)
+        + ack_sentence("ORIENT", True, "x_up")
+        + ack_sentence("RATE", False, "rate must be 0.1..100000 Hz")
+        + sentence("XYZ", 1, 2)
+        + command_sentence("HDR")
+    )
     p, ev, block = parse(data)
     assert block is None and p.stats.parse_errors == 0 and p.stats.unknown == 1
     assert ev == [
-        Command("ORIENT", ("x_up",)), Command("TEMP", ("30.5",)), Ack("ORIENT", True, "x_up"),
-        Ack("RATE", False, "rate must be 0.1..100000 Hz"), Unknown(("XYZ", "1", "2")), Command("HDR", ()),
+        Command("ORIENT", ("x_up",)),
+        Command("TEMP", ("30.5",)),
+        Ack("ORIENT", True, "x_up"),
+        Ack("RATE", False, "rate must be 0.1..100000 Hz"),
+        Unknown(("XYZ", "1", "2")),
+        Command("HDR", ()),
     ]
 
 
@@ -240,13 +257,16 @@ def test_random_bytes_never_raise(data):
     assert p.stats.bytes == len(data)
 
 
-@pytest.mark.parametrize("line,kind", [
-    (b"$STD,1,2*\r\n", "malformed"),
-    (b"$*00\r\n", "malformed"),
-    (b"$STH,1*%02X\r\n" % checksum(b"STH,1"), "malformed"),
-    (b"$STD,\xff\xfe*%02X\r\n" % checksum(b"STD,\xff\xfe"), "malformed"),
-    (b"$STA,ORIENT,MAYBE*%02X\r\n" % checksum(b"STA,ORIENT,MAYBE"), "malformed"),
-])
+@pytest.mark.parametrize(
+    "line,kind",
+    [
+        (b"$STD,1,2*\r\n", "malformed"),
+        (b"$*00\r\n", "malformed"),
+        (b"$STH,1*%02X\r\n" % checksum(b"STH,1"), "malformed"),
+        (b"$STD,\xff\xfe*%02X\r\n" % checksum(b"STD,\xff\xfe"), "malformed"),
+        (b"$STA,ORIENT,MAYBE*%02X\r\n" % checksum(b"STA,ORIENT,MAYBE"), "malformed"),
+    ],
+)
 def test_single_bad_lines(line, kind):
     p = StationParser()
     p.feed(data_sentence(0, 0, row(0)) + line)

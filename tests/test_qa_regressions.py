@@ -1,4 +1,5 @@
 """Regressions found by QA on the station's own simulator (known truth, seeded)."""
+
 from __future__ import annotations
 
 import numpy as np

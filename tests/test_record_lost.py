@@ -1,6 +1,7 @@
 """A device lost for good, or back but silent, during `station record --seconds S` (issue 16):
 the capture keeps every sample, says `complete: false` and why, and the command exits 1.
 Real pseudo-terminals behind a symlink that is removed (unplug) and made again (replug)."""
+
 from __future__ import annotations
 
 import os
@@ -146,14 +147,20 @@ def test_a_recording_that_runs_to_its_end_is_complete(bench, tmp_path):
 
 def test_record_command_exits_1_when_the_device_is_lost(bench, tmp_path):
     out = tmp_path / "cli.csv"
-    proc = subprocess.Popen([sys.executable, "-m", "station", "record", "--port", bench.link, "--seconds", "6",
-                             "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station", "record", "--port", bench.link, "--seconds", "6", "--out", str(out)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     tty_name = os.ttyname(bench.fds[1])
 
     def has_port_open():  # the recorder opened the port (opening flushes what was sent before)
         try:
-            return any(os.readlink(f"/proc/{proc.pid}/fd/{fd}") == tty_name
-                       for fd in os.listdir(f"/proc/{proc.pid}/fd"))
+            return any(
+                os.readlink(f"/proc/{proc.pid}/fd/{fd}") == tty_name for fd in os.listdir(f"/proc/{proc.pid}/fd")
+            )
         except OSError:
             return False
 

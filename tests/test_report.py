@@ -73,7 +73,9 @@ def _table_rows(page: str, table_id: str) -> list[list[str]]:
     body = page.split(f"id='{table_id}'", 1)[1].split("</table>", 1)[0]
     rows = []
     for tr in re.findall(r"<tr>(.*?)</tr>", body, re.DOTALL):
-        rows.append([re.sub(r"<[^>]+>", "", c).strip() for c in re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", tr, re.DOTALL)])
+        rows.append(
+            [re.sub(r"<[^>]+>", "", c).strip() for c in re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", tr, re.DOTALL)]
+        )
     return rows
 
 

@@ -31,9 +31,7 @@ def test_ports_json_is_what_pyserial_lists():
     assert p.returncode == 0 and p.stderr == ""
     got = json.loads(p.stdout)  # a list even when empty, never the "no ports" sentence
     assert isinstance(got, list)
-    assert sorted(x["device"] for x in got) == sorted(
-        q.device for q in list_ports.comports()
-    )
+    assert sorted(x["device"] for x in got) == sorted(q.device for q in list_ports.comports())
     assert all(set(x) == {"device", "description", "hwid"} for x in got)
 
 
@@ -89,6 +87,4 @@ def test_the_tui_honours_no_color(monkeypatch):
     from station.app import make_app
 
     app = make_app(db_path=":memory:")
-    assert (
-        app.no_color
-    )  # Textual then draws the whole app through its monochrome filter
+    assert app.no_color  # Textual then draws the whole app through its monochrome filter

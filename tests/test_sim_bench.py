@@ -4,6 +4,7 @@ until the same stillness detector the guides use sees it settle; a sweep covers 
 sphere as the compass calibration measures it; the reference IMU reads the unit's motion
 with its own small drift; the vehicle's velocity set is ill-conditioned on a straight road
 and well-conditioned with turns and hills."""
+
 from __future__ import annotations
 
 import math
@@ -26,8 +27,9 @@ def still_track(imu, seconds, tracker, chunk=10):
     out = []
     for _ in range(int(seconds * RATE_HZ / chunk)):
         d = imu.read(chunk)
-        st = tracker.update(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]),
-                            np.column_stack([d["gx"], d["gy"], d["gz"]]))
+        st = tracker.update(
+            d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]), np.column_stack([d["gx"], d["gy"], d["gz"]])
+        )
         out.append((float(d["t_s"][-1]), st.is_still))
     return out
 
@@ -115,19 +117,28 @@ def test_the_level_unit_points_its_forward_axis_north_as_p4_asks():
     """P4 on a static base: 'level, forward (x) axis north'. The simulated unit lies so:
     the mode B calibration removes the Earth rate for that heading and recovers the
     unit's own drift (in P4's frame, x fwd, y up, z right, from x fwd, y left, z up)."""
-    from station.procedures.gyrodrift_guide import HoldConfig, HoldGuide
     from station.calibrate import calibrate_capture
+    from station.procedures.gyrodrift_guide import HoldConfig, HoldGuide
 
     imu = LiveImu(procedure="gyro-drift", seed=8, rate_hz=RATE_HZ, hold_s=1e9)
     C = imu.C
     np.testing.assert_allclose(C @ [1.0, 0.0, 0.0], [1.0, 0.0, 0.0], atol=1e-12)  # x north (NED)
     np.testing.assert_allclose(C @ [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], atol=1e-12)  # z up
-    guide = HoldGuide(sample_rate_hz=RATE_HZ, units=imu.units, device_id=imu.device_id, site=imu.site,
-                      config=HoldConfig(duration_s=300.0, frame="x forward, y left, z up"))
+    guide = HoldGuide(
+        sample_rate_hz=RATE_HZ,
+        units=imu.units,
+        device_id=imu.device_id,
+        site=imu.site,
+        config=HoldConfig(duration_s=300.0, frame="x forward, y left, z up"),
+    )
     while guide.phase != "done":
         d = imu.read(100)
-        guide.update(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]),
-                     np.column_stack([d["gx"], d["gy"], d["gz"]]), d["temp_c"])
+        guide.update(
+            d["t_s"],
+            np.column_stack([d["ax"], d["ay"], d["az"]]),
+            np.column_stack([d["gx"], d["gy"], d["gz"]]),
+            d["temp_c"],
+        )
     res = calibrate_capture(guide.capture(extra_meta={"accel_offset": "1.65, 1.65, 1.65"}))
     eps = imu.gyro["eps"]
     truth_p4 = np.array([eps[0], eps[2], -eps[1]])

@@ -1,5 +1,6 @@
 """The simulator: valid captures for every procedure and effect, read back identically,
 consistent with the forward models it is built on."""
+
 from __future__ import annotations
 
 import json
@@ -20,10 +21,22 @@ SMALL = {
     "gyro-drift": {"duration_s": 20.0},
     "ldv": {"duration_s": 60.0},
 }
-SIZES = {"temperature_bias": 0.01, "time_drift": 0.05, "quadratic": 1e-3, "scale_asymmetry": 1e-3,
-         "misalignment": 5e-4, "cubic": 1e-6, "lever_arm": 0.02, "g_sensitivity": 1e-4, "earth_rate": 1.0,
-         "mag_accel_misalignment": 0.02, "field_anomaly": 0.05, "time_varying_hard_iron": 2.0,
-         "time_delay": 0.05, "offset": 0.02}
+SIZES = {
+    "temperature_bias": 0.01,
+    "time_drift": 0.05,
+    "quadratic": 1e-3,
+    "scale_asymmetry": 1e-3,
+    "misalignment": 5e-4,
+    "cubic": 1e-6,
+    "lever_arm": 0.02,
+    "g_sensitivity": 1e-4,
+    "earth_rate": 1.0,
+    "mag_accel_misalignment": 0.02,
+    "field_anomaly": 0.05,
+    "time_varying_hard_iron": 2.0,
+    "time_delay": 0.05,
+    "offset": 0.02,
+}
 
 
 def _cases():
@@ -92,24 +105,49 @@ def test_unknown_effect_for_procedure_is_refused():
 
 def test_cli_simulate_writes_capture_and_truth(tmp_path):
     out, truth = tmp_path / "g.csv", tmp_path / "g.json"
-    r = subprocess.run([sys.executable, "-m", "station", "simulate", "--procedure", "gyro-drift", "--out", str(out),
-                        "--truth", str(truth), "--seed", "5", "--effect", "temperature_bias=1e-4",
-                        "--option", "duration_s=10"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "station",
+            "simulate",
+            "--procedure",
+            "gyro-drift",
+            "--out",
+            str(out),
+            "--truth",
+            str(truth),
+            "--seed",
+            "5",
+            "--effect",
+            "temperature_bias=1e-4",
+            "--option",
+            "duration_s=10",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert read_capture(out).procedure == "gyro-drift"
     assert json.loads(truth.read_text())["effects"] == {"temperature_bias": 1e-4}
 
 
-@pytest.mark.parametrize("args,needle", [
-    (["--effect", "warp=1"], "does not apply"),
-    (["--effect", "temperature_bias=abc"], "not a number"),
-    (["--effect", "temperature_bias"], "NAME=VALUE"),
-    (["--option", "no_such_option=3"], "simulate:"),
-])
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--effect", "warp=1"], "does not apply"),
+        (["--effect", "temperature_bias=abc"], "not a number"),
+        (["--effect", "temperature_bias"], "NAME=VALUE"),
+        (["--option", "no_such_option=3"], "simulate:"),
+    ],
+)
 def test_cli_simulate_bad_arguments_one_line_exit_2(tmp_path, args, needle):
     out = tmp_path / "x.csv"
-    r = subprocess.run([sys.executable, "-m", "station", "simulate", "--procedure", "ldv", "--out", str(out), *args],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "station", "simulate", "--procedure", "ldv", "--out", str(out), *args],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     assert needle in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert not out.exists()

@@ -1,5 +1,6 @@
 """Static-interval detection (solvers/stillness.py): planted truth, batch == incremental,
 bad input, and the three real multi-position recordings of ../shared/data."""
+
 from __future__ import annotations
 
 import math
@@ -169,12 +170,12 @@ def test_level_statistic_for_a_bar():
     res = detect_static_intervals(t, a, w, init_rest_s=10)
     n = len(t)
     assert res.level.shape == res.accel_var_norm.shape == res.gyro_rate.shape == (n,)
-    assert np.isnan(res.level[:H]).all() and np.isnan(res.level[n - H:]).all()
+    assert np.isnan(res.level[:H]).all() and np.isnan(res.level[n - H :]).all()
     inside = res.still_mask
     assert np.all(res.level[inside & np.isfinite(res.level)] < 1)
     s, e = truth[1]
-    assert np.nanmax(res.level[truth[0][1]:s]) > 10  # a move is far above threshold
-    assert np.nanmedian(res.level[s + H:e - H]) < 0.5  # a rest is well below
+    assert np.nanmax(res.level[truth[0][1] : s]) > 10  # a move is far above threshold
+    assert np.nanmedian(res.level[s + H : e - H]) < 0.5  # a rest is well below
 
 
 def test_gyro_sees_a_turn_about_gravity():
@@ -185,12 +186,12 @@ def test_gyro_sees_a_turn_about_gravity():
     n = 2 * n_rest + n_turn
     a = BIAS_A + np.array([0, 0, G]) + rng.normal(0, SIGMA_A, (n, 3))
     w = BIAS_W + rng.normal(0, SIGMA_W, (n, 3))
-    w[n_rest:n_rest + n_turn, 2] += math.radians(20.0)
+    w[n_rest : n_rest + n_turn, 2] += math.radians(20.0)
     t = np.arange(n) / FS
     with_gyro = detect_static_intervals(t, a, w)
     assert len(with_gyro.intervals) == 2
     assert with_gyro.intervals[0].stop <= n_rest and with_gyro.intervals[1].start >= n_rest + n_turn
-    assert not with_gyro.still_mask[n_rest:n_rest + n_turn].any()
+    assert not with_gyro.still_mask[n_rest : n_rest + n_turn].any()
     # accelerometer only: the turn is invisible (the reason the gyro test exists)
     accel_only = detect_static_intervals(t, a)
     assert [(i.start, i.stop) for i in accel_only.intervals] == [(0, n)]
@@ -231,7 +232,7 @@ def _random_split(rng, n, max_batch):
 def _feed(tracker, t, a, w, sizes, states=None):
     i = 0
     for k in sizes:
-        st = tracker.update(t[i:i + k], a[i:i + k], None if w is None else w[i:i + k])
+        st = tracker.update(t[i : i + k], a[i : i + k], None if w is None else w[i : i + k])
         if states is not None:
             states.append((i + k, st))
         i += k
@@ -239,8 +240,9 @@ def _feed(tracker, t, a, w, sizes, states=None):
 
 
 def _same_intervals(got, ref):
-    assert [(i.start, i.stop, i.t_start_s, i.t_stop_s, i.n) for i in got] == \
-           [(i.start, i.stop, i.t_start_s, i.t_stop_s, i.n) for i in ref]
+    assert [(i.start, i.stop, i.t_start_s, i.t_stop_s, i.n) for i in got] == [
+        (i.start, i.stop, i.t_start_s, i.t_stop_s, i.n) for i in ref
+    ]
     for x, y in zip(got, ref):
         scale = np.abs(y.accel_mean).max()
         np.testing.assert_allclose(x.accel_mean, y.accel_mean, rtol=0, atol=1e-12 * scale)
@@ -398,7 +400,7 @@ def test_nan_rows():
     res = detect_static_intervals(t, a, w, init_rest_s=10, nan_policy="omit")
     # the NaN row splits its rest: no interval contains it, the others are untouched
     assert not any(iv.start <= bad_row < iv.stop for iv in res.intervals)
-    assert np.isinf(res.level[bad_row - H:bad_row + H + 1]).all()
+    assert np.isinf(res.level[bad_row - H : bad_row + H + 1]).all()
     clean = detect_static_intervals(t, np.nan_to_num(a, nan=a[bad_row - 1, 1]), w, init_rest_s=10)
     far = [(i.start, i.stop) for i in clean.intervals if abs(i.start - bad_row) > 1000 and abs(i.stop - bad_row) > 1000]
     assert set(far) <= {(i.start, i.stop) for i in res.intervals}
@@ -549,8 +551,18 @@ def test_mpu6050_10_intervals(shared_data):
     """SOURCE.md: 10 static intervals (36.6 s rest, then 9 poses); the authors' detector kept
     10 intervals (static_intervals.csv), each of which lies inside one of ours."""
     c, t, a, g = _read(shared_data / "mpu6050_unc" / "mpu6050_unc_calibration.capture.csv")
-    authors = [(150, 3613), (4297, 4299), (4934, 4946), (5585, 5690), (6205, 6368), (7018, 7046),
-               (7570, 7765), (8297, 8457), (9094, 9158), (9662, 10095)]
+    authors = [
+        (150, 3613),
+        (4297, 4299),
+        (4934, 4946),
+        (5585, 5690),
+        (6205, 6368),
+        (7018, 7046),
+        (7570, 7765),
+        (8297, 8457),
+        (9094, 9158),
+        (9662, 10095),
+    ]
     for init in (36.5, None):
         res = detect_static_intervals(t, a, g, init_rest_s=init)
         assert len(res.intervals) == 10, init

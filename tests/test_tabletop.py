@@ -1,5 +1,6 @@
 """P1 level-table calibration: recovery of simulated truth within the reported σ over many
 seeds, the two stages, the gauge, unsupportable captures refused with the reason."""
+
 from __future__ import annotations
 
 import math
@@ -18,8 +19,7 @@ from station.cli import main
 G = 9.80152
 
 
-def fast_table(seed: int, *, noise_mps2=0.01, n=2000, placement_deg=0.5, tilted_deg=3.0, tilt_deg=0.5,
-               names=None):
+def fast_table(seed: int, *, noise_mps2=0.01, n=2000, placement_deg=0.5, tilted_deg=3.0, tilt_deg=0.5, names=None):
     """A P1 table of averages straight from the forward model (the simulator's bench, without
     its time series): placement error per position, a tilted table, white noise."""
     rng = np.random.default_rng(seed)
@@ -30,8 +30,11 @@ def fast_table(seed: int, *, noise_mps2=0.01, n=2000, placement_deg=0.5, tilted_
     out = []
     for name in names or list(P1_POSITIONS):
         big = name[:2] in ("xy", "yz", "xz")
-        C = tilt @ C_n_b_for(P1_POSITIONS[name], rng.uniform(0, 2 * math.pi)) @ placement_error(
-            rng, tilted_deg if big else placement_deg)
+        C = (
+            tilt
+            @ C_n_b_for(P1_POSITIONS[name], rng.uniform(0, 2 * math.pi))
+            @ placement_error(rng, tilted_deg if big else placement_deg)
+        )
         f = C.T @ np.array([0.0, 0.0, -G])
         V = accel.forward(f[None], dev)[0] + K @ rng.normal(scale=noise_mps2 / math.sqrt(n), size=3)
         std = noise_mps2 * np.linalg.norm(K, axis=1)
@@ -55,7 +58,7 @@ def test_coverage_over_200_seeds():
         z.append(z_scores(r, B, M))
         flagged += len(r.outliers)
     z = np.array(z)
-    assert flagged <= 4          # no position is off: a false alarm is rare
+    assert flagged <= 4  # no position is off: a false alarm is rare
     in1, in2 = np.mean(np.abs(z) < 1), np.mean(np.abs(z) < 2)
     assert abs(in1 - 0.683) < 0.13, in1
     assert abs(in2 - 0.954) < 0.06, in2
@@ -67,10 +70,10 @@ def test_stage8_and_stage10_agree_without_placement_error():
     """With perfect placement both stages see the same truth: step 10 = step 8 within
     step 8's noise-limited error (the tiny sensor noise only)."""
     pos, B, M = fast_table(1, placement_deg=0.0, tilted_deg=0.0, tilt_deg=0.0, noise_mps2=1e-4)
-    for p in pos:                      # the operator is known to be perfect here
+    for p in pos:  # the operator is known to be perfect here
         p.placement_sigma_rad = 1e-5
     r = T.calibrate(pos, G)
-    assert np.allclose(r.step8["B"], r.B, atol=1e-4)   # m/s²: 1e-4 noise / sqrt(2000) × leverage
+    assert np.allclose(r.step8["B"], r.B, atol=1e-4)  # m/s²: 1e-4 noise / sqrt(2000) × leverage
     assert np.allclose(r.step8["M"], r.M, atol=1e-5)
     assert np.allclose(r.B, B, atol=1e-4) and np.allclose(r.M, M, atol=1e-5)
 
@@ -82,8 +85,8 @@ def test_stage10_beats_stage8_with_placement_error():
     r = T.calibrate(pos, G)
     V = np.array([p.mean for p in pos])
     r8 = np.linalg.norm(accel.p1_apply(V, r.step8["B"], r.step8["M"]), axis=1) - G
-    assert np.sqrt(np.mean(r8 ** 2)) > 20 * r.residual_rms
-    assert r.residual_rms < 1e-3                           # noise 0.01/sqrt(2000) = 2.2e-4 m/s²
+    assert np.sqrt(np.mean(r8**2)) > 20 * r.residual_rms
+    assert r.residual_rms < 1e-3  # noise 0.01/sqrt(2000) = 2.2e-4 m/s²
     assert np.all(np.abs(r.step8["M"] - r.M) < 4 * r.step8["sigma_M"])
 
 
@@ -131,6 +134,7 @@ def test_too_few_and_too_alike_positions_refused():
 
 # ----------------------------------------------------------------------------- the CLI
 
+
 def _write(tmp_path, sim, name="c.csv", columns=None):
     path = tmp_path / name
     write_capture(path, Capture(dict(sim.meta), dict(columns or sim.columns)))
@@ -166,7 +170,7 @@ def test_cli_time_series_labelled_and_unlabelled(tmp_path, capsys, series):
     res_u = json.loads(out)
     assert res_u["gauge"] == "upper-triangular" and res_u["n_positions"] == 12
     assert res_u["positions_found_by"].startswith("static intervals")
-    assert 0.5 < res_u["residual_rms"] / res["residual_rms"] < 2.0   # other spans, same noise
+    assert 0.5 < res_u["residual_rms"] / res["residual_rms"] < 2.0  # other spans, same noise
 
 
 def test_cli_refuses_saturated_axis(tmp_path, capsys, series):
@@ -213,8 +217,10 @@ def test_table_without_noise_columns_and_numbered_positions(tmp_path, capsys):
     import json
 
     sim = simulate("accel-tabletop", seed=14, hold_s=5.0, move_s=2.0, averages=True)
-    cols = {"position": np.array([str(k + 1) for k in range(12)], dtype=object),
-            **{c: sim.columns[c] for c in ("ax", "ay", "az")}}
+    cols = {
+        "position": np.array([str(k + 1) for k in range(12)], dtype=object),
+        **{c: sim.columns[c] for c in ("ax", "ay", "az")},
+    }
     code, out, err = _cli(capsys, _write(tmp_path, sim, "nonoise.csv", cols), "--json")
     assert code == 0, err
     res = json.loads(out)

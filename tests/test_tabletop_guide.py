@@ -1,4 +1,5 @@
 """The UI-free P1 guide (station.procedures.tabletop_guide) driven by the simulated bench device."""
+
 from __future__ import annotations
 
 import json
@@ -7,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from solvers.simulate import LiveImu
 from solvers.models import accel as accel_model
+from solvers.simulate import LiveImu
 from station.procedures.tabletop_guide import GuideConfig, P1Guide, position_drawing
 
 RATE_HZ = 100.0
@@ -23,8 +24,12 @@ def feed(guide, sim, seconds, follow=True, chunk=10):
     st = guide.status()
     for _ in range(int(seconds * RATE_HZ / chunk)):
         d = sim.read(chunk)
-        st = guide.update(d["t_s"], np.column_stack([d["ax"], d["ay"], d["az"]]),
-                          np.column_stack([d["gx"], d["gy"], d["gz"]]), d["temp_c"])
+        st = guide.update(
+            d["t_s"],
+            np.column_stack([d["ax"], d["ay"], d["az"]]),
+            np.column_stack([d["gx"], d["gy"], d["gz"]]),
+            d["temp_c"],
+        )
         events += guide.take_events()
         if follow and guide.phase == "place" and st.step_name != asked:
             asked = st.step_name
@@ -36,8 +41,15 @@ def feed(guide, sim, seconds, follow=True, chunk=10):
 
 def make(seed=3, average_s=1.0, nominal=SIM_NOMINAL, **kw):
     sim = LiveImu(seed=seed, rate_hz=RATE_HZ, hold_s=1e9)
-    guide = P1Guide(sample_rate_hz=RATE_HZ, accel_unit="V", device_id=sim.device_id, nominal=nominal,
-                    config=GuideConfig(average_s=average_s, settle_s=0.5, init_rest_s=1.0), site=SITE, **kw)
+    guide = P1Guide(
+        sample_rate_hz=RATE_HZ,
+        accel_unit="V",
+        device_id=sim.device_id,
+        nominal=nominal,
+        config=GuideConfig(average_s=average_s, settle_s=0.5, init_rest_s=1.0),
+        site=SITE,
+        **kw,
+    )
     return sim, guide
 
 
@@ -159,8 +171,13 @@ def test_resume_from_the_state_file(tmp_path):
 
 def test_orientation_is_learned_without_a_nominal_scale():
     sim = LiveImu(seed=5, rate_hz=RATE_HZ, hold_s=1e9)
-    guide = P1Guide(sample_rate_hz=RATE_HZ, accel_unit="counts", device_id="X",
-                    config=GuideConfig(average_s=1.0, settle_s=0.5, init_rest_s=1.0), site=SITE)
+    guide = P1Guide(
+        sample_rate_hz=RATE_HZ,
+        accel_unit="counts",
+        device_id="X",
+        config=GuideConfig(average_s=1.0, settle_s=0.5, init_rest_s=1.0),
+        site=SITE,
+    )
     st, _ = feed(guide, sim, 1.5)
     assert math.isnan(st.angle_deg)  # nothing known yet: the operator is trusted
     st, events = feed(guide, sim, 35)
@@ -173,8 +190,13 @@ def test_orientation_is_learned_without_a_nominal_scale():
 def test_previous_calibration_is_the_model_so_far():
     sim, _ = make()
     B, M = accel_model.forward_to_p1(sim.accel)
-    guide = P1Guide(sample_rate_hz=RATE_HZ, accel_unit="V", config=GuideConfig(average_s=1.0, init_rest_s=1.0),
-                    previous={"params": {"B": B.tolist(), "M": M.tolist()}}, site=SITE)
+    guide = P1Guide(
+        sample_rate_hz=RATE_HZ,
+        accel_unit="V",
+        config=GuideConfig(average_s=1.0, init_rest_s=1.0),
+        previous={"params": {"B": B.tolist(), "M": M.tolist()}},
+        site=SITE,
+    )
     st, _ = feed(guide, sim, 2.0, follow=False)
     assert st.norm_mps2 == pytest.approx(guide.g_mps2, abs=0.02)  # noise ~0.01 m/s² per 0.1 s mean
     assert st.angle_deg < 2.0  # placement error up to 1°
@@ -232,10 +254,12 @@ def test_procedure_logic_does_not_load_textual():
     import subprocess
     import sys
 
-    code = ("import sys, station.procedures.tabletop_guide, station.procedures.compass_guide, "
-            "station.procedures.gyrodrift_guide, station.procedures.centrifuge_guide, station.procedures.noise, "
-            "station.procedures.review, station.sources, solvers.detectors, station.device.live; "
-            "print('textual' in sys.modules)")
+    code = (
+        "import sys, station.procedures.tabletop_guide, station.procedures.compass_guide, "
+        "station.procedures.gyrodrift_guide, station.procedures.centrifuge_guide, station.procedures.noise, "
+        "station.procedures.review, station.sources, solvers.detectors, station.device.live; "
+        "print('textual' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"

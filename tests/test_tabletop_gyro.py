@@ -1,6 +1,7 @@
 """Gyro calibration from the rotations between P1 holds: integration by hand, simulated truth
 within the reported uncertainty, imu_tk's own Xsens recording against imu_tk's own output,
 imucal's Ferraris session with its 360° turns held out."""
+
 from __future__ import annotations
 
 import math
@@ -28,8 +29,10 @@ def test_rotation_from_output_inverts_the_forward_model():
     """Output made by ``forward`` with a scale/misalignment/bias integrates back to the true turn."""
     t = np.linspace(0.0, 3.0, 601)
     w_true = np.column_stack([0.4 * np.sin(t), 0.3 * np.ones_like(t), -0.2 * t])
-    p = {"K": np.array([[1.02, 0.01, -0.003], [0.004, 0.98, 0.006], [-0.01, 0.002, 1.01]]),
-         "eps": np.array([0.01, -0.02, 0.005])}
+    p = {
+        "K": np.array([[1.02, 0.01, -0.003], [0.004, 0.98, 0.006], [-0.01, 0.002, 1.01]]),
+        "eps": np.array([0.01, -0.02, 0.005]),
+    }
     y = gyro.forward(w_true, p)
     np.testing.assert_allclose(gyro.rotation_from_output(y, t, p), gyro.integrate_rates(w_true, t), atol=1e-12)
 
@@ -48,8 +51,17 @@ def _truth_in_the_accel_frame(out, sim):
 def test_simulated_scale_misalignment_bias_and_g_sensitivity_within_uncertainty(latitude):
     z = []
     for seed in range(5):
-        sim = simulate("accel-tabletop", seed=30 + seed, extra_positions=8, hold_s=5, move_s=3, init_rest_s=20,
-                       gyro_scale_sigma=0.01, gyro_misalignment_sigma_rad=0.005, gyro_g_sensitivity=2e-4)
+        sim = simulate(
+            "accel-tabletop",
+            seed=30 + seed,
+            extra_positions=8,
+            hold_s=5,
+            move_s=3,
+            init_rest_s=20,
+            gyro_scale_sigma=0.01,
+            gyro_misalignment_sigma_rad=0.005,
+            gyro_g_sensitivity=2e-4,
+        )
         meta = dict(sim.meta)
         if not latitude:
             meta = {k: v for k, v in meta.items() if k != "latitude_deg"}
@@ -61,7 +73,7 @@ def test_simulated_scale_misalignment_bias_and_g_sensitivity_within_uncertainty(
         for k in ("K", "eps", "G"):
             z.append(((np.array(gb["params"][k]) - truth[k]) / np.array(gb["uncertainty"][k])).ravel())
         assert gb["direction_rms_deg"] < 0.1
-    z = np.abs(np.concatenate(z))          # 105 values
+    z = np.abs(np.concatenate(z))  # 105 values
     assert np.all(z < 4.5)
     assert 0.5 <= np.mean(z < 1) <= 0.85
     assert np.mean(z < 2) >= 0.88
@@ -88,7 +100,7 @@ def test_imu_tk_xsens_gyro_matches_imu_tks_own_output(shared_data):
     imu_tk_T = np.array([[1, 0.00593634, 0.00111101], [0.00808812, 1, -0.0535569], [0.0253067, -0.0025513, 1]])
     A_tk = imu_tk_T * imu_tk_s[None, :]
     np.testing.assert_allclose(1 / np.diag(A), 1 / np.diag(A_tk), rtol=3e-3)
-    assert np.max(np.abs(A / np.diag(A)[None, :] - imu_tk_T)) < 2e-3      # misalignment to ~0.1°
+    assert np.max(np.abs(A / np.diag(A)[None, :] - imu_tk_T)) < 2e-3  # misalignment to ~0.1°
     sK = np.array(gb["uncertainty"]["K"])
     assert np.all(np.isfinite(sK)) and np.all(sK > 0) and np.all(sK < 5)  # counts per rad/s, of ~4770
     assert np.all(np.array(gb["uncertainty"]["eps"]) > 0)
@@ -120,8 +132,9 @@ def test_diagnosis_input_names_a_hidden_g_sensitivity(g_sens, named):
     from solvers.diagnose import diagnose
     from station.procedures import tabletop_gyro
 
-    sim = simulate("accel-tabletop", seed=5, extra_positions=8, hold_s=10, move_s=3, init_rest_s=20,
-                   gyro_g_sensitivity=g_sens)
+    sim = simulate(
+        "accel-tabletop", seed=5, extra_positions=8, hold_s=10, move_s=3, init_rest_s=20, gyro_g_sensitivity=g_sens
+    )
     cap = Capture(dict(sim.meta), dict(sim.columns))
     inp = tabletop_gyro.diagnosis_input(cap, tabletop.calibrate(cap))
     names = [e["name"] for e in diagnose(inp.problem).effects]

@@ -2,6 +2,7 @@
 bidi overrides in device ids, models, notes and a capture's ``# device:`` line are shown
 escaped by every command and in the TUI tables, and a newline inside a field cannot forge
 a table row. The command tests read the bytes a real pseudo-terminal receives."""
+
 from __future__ import annotations
 
 import asyncio
@@ -23,8 +24,11 @@ HOSTILE_MODEL = "M\x9b31mred\x85"
 HOSTILE_NOTES = "line1\nFAKE-ROW  forged  0  -\x1b[31m"
 
 # Bytes a terminal acts on (after the pty's own LF -> CRLF translation is undone).
-RAW = [b"\x1b", b"\x07", b"\r", b"\x08"] + [("\x80" if k == 0 else chr(0x80 + k)).encode() for k in range(32)] \
+RAW = (
+    [b"\x1b", b"\x07", b"\r", b"\x08"]
+    + [("\x80" if k == 0 else chr(0x80 + k)).encode() for k in range(32)]
     + ["\u202e".encode()]
+)
 
 
 def test_safe_escapes_what_a_terminal_acts_on_and_keeps_the_rest():
@@ -49,8 +53,15 @@ def test_json_escapes_keep_the_document_valid_and_the_value_exact():
 def _pty_run(*args, env=None) -> tuple[int, bytes]:
     """Run the real CLI with stdout and stderr on a real pty; every byte the terminal got."""
     master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "station", *map(str, args)], cwd=ROOT, stdin=subprocess.DEVNULL,
-                            stdout=slave, stderr=slave, env=env, close_fds=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station", *map(str, args)],
+        cwd=ROOT,
+        stdin=subprocess.DEVNULL,
+        stdout=slave,
+        stderr=slave,
+        env=env,
+        close_fds=True,
+    )
     os.close(slave)
     chunks = []
     deadline = time.monotonic() + 120
@@ -81,8 +92,21 @@ def hostile_db(tmp_path_factory):
     text = cap.read_text().replace("# device: SIM-CFG-0005", "# device: CAP\x1b[5mBLINK\x9d8;;http://x\x9c", 1)
     assert "CAP\x1b" in text
     cap.write_text(text)
-    r = run_station("devices", "add", HOSTILE_ID, "--model", HOSTILE_MODEL, "--notes", HOSTILE_NOTES,
-                    "--interval-days", "1", "--tolerance", "S=1e-9", "--db", db)
+    r = run_station(
+        "devices",
+        "add",
+        HOSTILE_ID,
+        "--model",
+        HOSTILE_MODEL,
+        "--notes",
+        HOSTILE_NOTES,
+        "--interval-days",
+        "1",
+        "--tolerance",
+        "S=1e-9",
+        "--db",
+        db,
+    )
     assert r.returncode == 0, r.stderr
     for date in ("2024-01-01", "2024-06-01"):
         dated = d / f"p2-{date}.csv"
@@ -92,11 +116,23 @@ def hostile_db(tmp_path_factory):
     return db, cap
 
 
-@pytest.mark.parametrize("args", [
-    ("devices", "list"), ("devices", "show", HOSTILE_ID), ("history", HOSTILE_ID), ("due",),
-    ("drift", HOSTILE_ID, "--no-plot"), ("drift", HOSTILE_ID), ("verify",), ("recompute", HOSTILE_ID),
-    ("devices", "show", "NO\x1b[31mSUCH"), ("devices", "list", "--json"), ("history", HOSTILE_ID, "--json"),
-], ids=lambda a: "-".join(x for x in a if x.isascii() and x.isprintable()) or "x")
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("devices", "list"),
+        ("devices", "show", HOSTILE_ID),
+        ("history", HOSTILE_ID),
+        ("due",),
+        ("drift", HOSTILE_ID, "--no-plot"),
+        ("drift", HOSTILE_ID),
+        ("verify",),
+        ("recompute", HOSTILE_ID),
+        ("devices", "show", "NO\x1b[31mSUCH"),
+        ("devices", "list", "--json"),
+        ("history", HOSTILE_ID, "--json"),
+    ],
+    ids=lambda a: "-".join(x for x in a if x.isascii() and x.isprintable()) or "x",
+)
 def test_database_text_reaches_a_real_terminal_escaped(hostile_db, args):
     db, _ = hostile_db
     rc, out = _pty_run(*args, "--db", db)
@@ -131,8 +167,8 @@ def test_history_screen_shows_hostile_ids_escaped_one_row_each(hostile_db):
         async with app.run_test(size=(120, 40)) as pilot:
             t_end = time.monotonic() + 30
             while time.monotonic() < t_end and not (
-                    type(app.screen).__name__ == "HistoryScreen"
-                    and app.screen.query_one("#calibrations").row_count == 2):
+                type(app.screen).__name__ == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2
+            ):
                 await pilot.pause(0.05)
             devices = app.screen.query_one("#devices")
             lines = [strip.text for strip in app.screen._compositor.render_strips()]

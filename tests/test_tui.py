@@ -1,5 +1,6 @@
 """Pilot tests: each screen's story, on the real Textual app at 80x24, a real SQLite file,
 the simulated device (in-process, or on a real pty through the serial reader)."""
+
 from __future__ import annotations
 
 import asyncio
@@ -83,7 +84,7 @@ def screen_lines(app) -> list[str]:
 def text_of(app, selector) -> str:
     """The text shown in the widget's region of the screen."""
     r = app.screen.query_one(selector).region
-    return "\n".join(line[r.x:r.right] for line in screen_lines(app)[r.y:r.bottom])
+    return "\n".join(line[r.x : r.right] for line in screen_lines(app)[r.y : r.bottom])
 
 
 # ---------------------------------------------------------------- Connect
@@ -107,7 +108,7 @@ def test_connect_screen_starts_p1_on_the_simulator_and_registers_the_device(tmp_
             assert "Stillness" in text_of(app, "#stability")
         return app
 
-    app = asyncio.run(story())
+    app = asyncio.run(story())  # noqa: F841
     from db.store import Store
 
     dev = Store(db).get_device("SIM-ACC-0002")
@@ -226,9 +227,15 @@ def test_gyro_drift_hold_to_a_saved_result(tmp_path):
         app = make_app(db, device=src, demo=True, average_s=180.0)
         async with app.run_test(size=SIZE) as pilot:
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "HoldScreen" and app.screen.updates > 2)
-            await run_bench(pilot, src, clock, lambda: app.screen.last_status is not None
-                            and app.screen.last_status.phase == "average")
-            await wait_for(pilot, lambda: "left" in text_of(app, "#countdown") and "still" in text_of(app, "#stability"))
+            await run_bench(
+                pilot,
+                src,
+                clock,
+                lambda: app.screen.last_status is not None and app.screen.last_status.phase == "average",
+            )
+            await wait_for(
+                pilot, lambda: "left" in text_of(app, "#countdown") and "still" in text_of(app, "#stability")
+            )
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=1.0)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             title = screen_lines(app)[0]
@@ -250,8 +257,14 @@ def test_wrong_face_up_is_shown_and_blocks_capture():
         async with app.run_test(size=SIZE) as pilot:
             await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
             src.place("x_down")  # asked for x_up
-            await run_bench(pilot, src, clock, lambda: app.screen.last_status and app.screen.last_status.wrong_face
-                            and app.screen.last_status.is_still)
+            await run_bench(
+                pilot,
+                src,
+                clock,
+                lambda: (
+                    app.screen.last_status and app.screen.last_status.wrong_face and app.screen.last_status.is_still
+                ),
+            )
             await wait_for(pilot, lambda: "WRONG FACE UP" in text_of(app, "#orientation"))
             assert "Wrong face up" in text_of(app, "#message")
             assert app.screen.guide.n_captured == 0
@@ -366,8 +379,10 @@ def test_history_lists_devices_calibrations_and_drift(tmp_path):
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=(120, 40)) as pilot:
-            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen"
-                           and app.screen.query_one("#calibrations").row_count == 3)
+            await wait_for(
+                pilot,
+                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 3,
+            )
             await wait_for(pilot, lambda: len(app.screen.drift) > 1)  # 'p' needs the drift loaded
             devices = app.screen.query_one("#devices")
             first = devices.get_row_at(0)
@@ -393,11 +408,14 @@ def test_diagnose_a_stored_calibration_from_history(tmp_path):
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen"
-                           and app.screen.query_one("#calibrations").row_count == 2)
+            await wait_for(
+                pilot,
+                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2,
+            )
             await pilot.press("g")  # the newest calibration is under the cursor
-            await wait_for(pilot, lambda: screen_name(app) == "DiagnoseScreen" and app.screen.report is not None,
-                           timeout_s=40)
+            await wait_for(
+                pilot, lambda: screen_name(app) == "DiagnoseScreen" and app.screen.report is not None, timeout_s=40
+            )
             title, report = screen_lines(app)[0], app.screen.report
             await pilot.press("escape")
             await pilot.pause(0.05)
@@ -430,8 +448,15 @@ def test_import_an_ldv_file_with_its_conditioning_check(tmp_path):
             for path, key in ((str(tmp_path / "missing.csv"), "missing"), (bad, "bad")):
                 app.screen.query_one("#path").value = path
                 await pilot.press("enter")
-                await wait_for(pilot, lambda: "[" not in text_of(app, "#status") and "…" not in text_of(app, "#status")
-                               and text_of(app, "#status").strip() != "", timeout_s=30)
+                await wait_for(
+                    pilot,
+                    lambda: (
+                        "[" not in text_of(app, "#status")
+                        and "…" not in text_of(app, "#status")
+                        and text_of(app, "#status").strip() != ""
+                    ),
+                    timeout_s=30,
+                )
                 out[key] = " ".join(text_of(app, "#status").split())
             app.screen.query_one("#path").value = good
             await pilot.press("enter")
@@ -462,14 +487,21 @@ def test_procedure_reads_the_simulated_device_over_a_real_pty():
     t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
     t.start()
     try:
+
         async def story():
             app = make_app(None, device=SerialSource(path))
             async with app.run_test(size=SIZE) as pilot:
                 assert app.screen.query_one("#source").value == "other"
                 await pilot.press("f5")
-                await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen"
-                               and app.screen.last_status is not None
-                               and app.screen.last_status.n_captured >= 0 and app.screen.updates > 10)
+                await wait_for(
+                    pilot,
+                    lambda: (
+                        screen_name(app) == "ProcedureScreen"
+                        and app.screen.last_status is not None
+                        and app.screen.last_status.n_captured >= 0
+                        and app.screen.updates > 10
+                    ),
+                )
                 await wait_for(pilot, lambda: not app.screen.last_status.calibrating, timeout_s=10)
                 readouts = text_of(app, "#readouts")
                 st = app.screen.last_status
@@ -506,8 +538,9 @@ def test_headless_demo_saves_a_p1(tmp_path, capsys):
     assert lines[-1] == f"saved as calibration #1 in {db}"
 
 
-@pytest.mark.parametrize("argv", [["demo", "--average-s", "0"], ["demo", "--speed", "-1"],
-                                  ["tui", "--average-s", "-3"]])
+@pytest.mark.parametrize(
+    "argv", [["demo", "--average-s", "0"], ["demo", "--speed", "-1"], ["tui", "--average-s", "-3"]]
+)
 def test_bad_options_are_one_line_and_exit_2(argv, capsys):
     from station.cli import main
 

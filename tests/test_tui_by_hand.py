@@ -7,6 +7,7 @@ No scripted operator: nothing moves unless a key says so.
 The source runs on a clock the test advances (device seconds), waiting after each step
 until the screen's worker has consumed it, so the runs are the same at any machine load.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -119,8 +120,7 @@ def test_p1_by_hand_the_p_key_places_each_position(tmp_path):
                         assert any(not still for still, _ in seen), seen  # the detector saw it rock
                         assert all(still for still, phase in seen if phase == "average"), seen
                 first = False
-                await run_until(pilot, app, clock, lambda: g.phase == "done" or g.step.name != name,
-                                max_device_s=400)
+                await run_until(pilot, app, clock, lambda: g.phase == "done" or g.step.name != name, max_device_s=400)  # noqa: B023
             cal_id = await save(pilot, app)
             return cal_id, g
 
@@ -159,7 +159,7 @@ def test_p2_by_hand_the_p_key_mounts_and_spins_the_centrifuge(tmp_path):
             while g.phase != "done":
                 k = g.index
                 await pilot.press("p")
-                await run_until(pilot, app, clock, lambda: g.index != k, step_s=2.0, max_device_s=600)
+                await run_until(pilot, app, clock, lambda: g.index != k, step_s=2.0, max_device_s=600)  # noqa: B023
             cal_id = await save(pilot, app)
             return cal_id, g, app.screen.capture
 

@@ -1,5 +1,6 @@
 """Pilot tests for the P2 centrifuge and the gyro noise (Allan) screens at 80x24: each
 screen's story on the real Textual app, the simulated device, a real SQLite file."""
+
 from __future__ import annotations
 
 import asyncio
@@ -73,12 +74,21 @@ def test_centrifuge_live_run_to_a_saved_result(tmp_path):
         app = make_app(db, device=src, demo=True, average_s=1.0, settle_s=0.5)
         app.session.extra["n_orientations"] = 4  # 12 rows: the exact fit needs more than 9
         async with app.run_test(size=SIZE) as pilot:
-            await run_bench(pilot, src, clock, lambda: screen_name(app) == "CentrifugeScreen"
-                            and app.screen.updates > 2)
+            await run_bench(
+                pilot, src, clock, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.updates > 2
+            )
             scr = app.screen
-            await run_bench(pilot, src, clock, lambda: scr.last_status is not None
-                            and scr.last_status.phase == "average" or screen_name(app) == "ResultsScreen",
-                            step_s=0.1)
+            await run_bench(
+                pilot,
+                src,
+                clock,
+                lambda: (
+                    scr.last_status is not None
+                    and scr.last_status.phase == "average"
+                    or screen_name(app) == "ResultsScreen"
+                ),
+                step_s=0.1,
+            )
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.25)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             return screen_lines(app)[0], app.screen.result, scr.guide, app.screen.capture
@@ -108,8 +118,7 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
             clock = BenchClock()
             src = app.session.source = SimSource(seed=4, procedure="gyro-noise", clock=clock)
             await pilot.press("f5")
-            await run_bench(pilot, src, clock, lambda: screen_name(app) == "NoiseHoldScreen"
-                            and app.screen.updates > 2)
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "NoiseHoldScreen" and app.screen.updates > 2)
             assert "gyro noise (Allan) run" in screen_lines(app)[0]
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "AllanScreen", step_s=1.0)
             scr = app.screen

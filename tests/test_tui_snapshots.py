@@ -5,6 +5,7 @@ Deterministic: seeded simulator on a fake clock that the test advances in 1 s st
 notifications cleared before the picture. Update after a deliberate UI change with
 ``pytest tests/test_tui_snapshots.py --snapshot-update`` and look at the report.
 """
+
 from __future__ import annotations
 
 import time
@@ -52,8 +53,9 @@ def test_tabletop_snapshot(snap_compare, size):
         for k in range(1, 18):  # 17 s of device time in 1 s steps, each consumed before the next
             clock.t = float(k)
             await _settle(pilot, lambda: guide.status().t_s >= clock.t - 1e-6)
-        await _settle(pilot, lambda: app.screen.last_status is not None
-                      and app.screen.last_status.t_s >= clock.t - 1e-6)
+        await _settle(
+            pilot, lambda: app.screen.last_status is not None and app.screen.last_status.t_s >= clock.t - 1e-6
+        )
         await pilot.pause(0.2)
         app.clear_notifications()
         await pilot.pause(0.05)
@@ -64,7 +66,6 @@ def test_tabletop_snapshot(snap_compare, size):
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
 def test_results_snapshot(snap_compare, size):
     from station.screens.results import ResultsScreen
-
     from tests.tui_data import p1_result
 
     cap, result = p1_result()
@@ -87,8 +88,12 @@ def test_history_snapshot(snap_compare, size, tmp_path):
     app = make_app(db, start="history")
 
     async def run_before(pilot):
-        await _settle(pilot, lambda: type(app.screen).__name__ == "HistoryScreen"
-                      and app.screen.query_one("#calibrations").row_count == 3)
+        await _settle(
+            pilot,
+            lambda: (
+                type(app.screen).__name__ == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 3
+            ),
+        )
         await pilot.pause(0.2)
         app.clear_notifications()
         await pilot.pause(0.05)
@@ -118,8 +123,12 @@ def test_centrifuge_snapshot(snap_compare, size):
             app.screen.query_one(f"#in-{name}").value = value
         app.screen.query_one("#in-speed").focus()
         await pilot.press("enter", "escape")
-        await _settle(pilot, lambda: guide.n_captured == 1 and app.screen.last_status is not None
-                      and app.screen.last_status.n_captured == 1)
+        await _settle(
+            pilot,
+            lambda: (
+                guide.n_captured == 1 and app.screen.last_status is not None and app.screen.last_status.n_captured == 1
+            ),
+        )
         await pilot.pause(0.2)
         app.clear_notifications()
         await pilot.pause(0.05)
@@ -140,8 +149,10 @@ def test_noise_snapshot(snap_compare, size):
     n, fs = 60_000, 100.0
     y = rng.normal(scale=2e-4, size=(n, 3)) + np.cumsum(rng.normal(scale=2e-8, size=(n, 3)), axis=0)
     report = noise_report(y, fs, "rad/s")
-    cap = Capture(meta={"station-capture": "1", "procedure": "gyro-drift", "gyro_unit": "rad/s"},
-                  columns={"t": np.arange(n) / fs, "gx": y[:, 0], "gy": y[:, 1], "gz": y[:, 2]})
+    cap = Capture(
+        meta={"station-capture": "1", "procedure": "gyro-drift", "gyro_unit": "rad/s"},
+        columns={"t": np.arange(n) / fs, "gx": y[:, 0], "gy": y[:, 1], "gz": y[:, 2]},
+    )
     app = make_app(None, device_id="IMU-0042")
 
     async def run_before(pilot):

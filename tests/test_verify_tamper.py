@@ -3,17 +3,18 @@ the newest calibration deleted (or all of a device's), a device's tolerances, in
 notes changed, a due date moved in `schedule`, a capture left without its calibration, a
 damaged schema. Each tamper is made with the `sqlite3` module on the real file, then the
 real CLI is run: exit 1 and the problem named, never a traceback or a KeyError."""
+
 from __future__ import annotations
 
 import json
 import os
 import sqlite3
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 import pytest
+from db_testdata import accel_result, compass_result, small_capture
 
 from db import Store
-from db_testdata import accel_result, compass_result, small_capture
 from station.cli import main
 
 
@@ -34,13 +35,17 @@ def _edit(path, sql, args=()):
 def record(tmp_path):
     """A database as the station writes it: two devices, settings, four calibrations, a schedule."""
     path = str(tmp_path / "station.db")
-    now = datetime.now(timezone.utc)
+    now = datetime.now(UTC)
     with Store(path) as s:
         s.add_device("IMU-7", model="ADXL", interval_days=30, notes="bench 2", tolerances={"B": 0.05})
         for k, days in enumerate((400, 200, 40)):
             meta, cols = small_capture(seed=k, device="IMU-7")
-            s.save_calibration(accel_result(device="IMU-7", B=(0.1 + 0.01 * k, -0.2, 0.3)), meta=meta, columns=cols,
-                               time=now - timedelta(days=days))
+            s.save_calibration(
+                accel_result(device="IMU-7", B=(0.1 + 0.01 * k, -0.2, 0.3)),
+                meta=meta,
+                columns=cols,
+                time=now - timedelta(days=days),
+            )
         s.add_device("MAG-1", interval_days=365)
         meta, cols = small_capture(seed=9, procedure="compass", device="MAG-1")
         s.save_calibration(compass_result(device="MAG-1"), meta=meta, columns=cols, time=now - timedelta(days=10))
@@ -87,12 +92,16 @@ def test_deleting_the_newest_calibration_and_its_anchor_is_seen(capsys, record):
     assert code == 1 and kinds  # the anchor chain (and the id counters) remember
 
 
-@pytest.mark.parametrize("sql", [
-    "UPDATE devices SET tolerances = '{\"B\": 5.0}' WHERE id = 'IMU-7'",
-    "UPDATE devices SET interval_days = 3650 WHERE id = 'IMU-7'",
-    "UPDATE devices SET notes = 'all fine' WHERE id = 'IMU-7'",
-    "UPDATE devices SET model = 'other' WHERE id = 'IMU-7'",
-], ids=["tolerances", "interval", "notes", "model"])
+@pytest.mark.parametrize(
+    "sql",
+    [
+        "UPDATE devices SET tolerances = '{\"B\": 5.0}' WHERE id = 'IMU-7'",
+        "UPDATE devices SET interval_days = 3650 WHERE id = 'IMU-7'",
+        "UPDATE devices SET notes = 'all fine' WHERE id = 'IMU-7'",
+        "UPDATE devices SET model = 'other' WHERE id = 'IMU-7'",
+    ],
+    ids=["tolerances", "interval", "notes", "model"],
+)
 def test_changing_device_settings_is_seen(capsys, record, sql):
     path, _ = record
     _edit(path, sql)
@@ -110,8 +119,11 @@ def test_moving_a_due_date_in_the_schedule_is_seen(capsys, record):
     path, _ = record
     code, out, _ = _cli(capsys, "due", "--db", path)
     assert code == 1 and out.startswith("IMU-7: overdue by")
-    _edit(path, "UPDATE schedule SET due = '2999-01-01T00:00:00Z', interval_due = '2999-01-01T00:00:00Z' "
-                "WHERE device_id = 'IMU-7'")
+    _edit(
+        path,
+        "UPDATE schedule SET due = '2999-01-01T00:00:00Z', interval_due = '2999-01-01T00:00:00Z' "
+        "WHERE device_id = 'IMU-7'",
+    )
     assert _cli(capsys, "due", "--db", path)[:2] == (0, "nothing due\n")  # the tamper works on `due` ...
     code, kinds = _kinds(capsys, path)
     assert code == 1 and kinds == [("schedule changed", "IMU-7")]  # ... and verify names it
@@ -145,11 +157,14 @@ def test_a_stored_capture_on_its_own_is_not_an_orphan(capsys, record):
     assert _kinds(capsys, path) == (0, [])
 
 
-@pytest.mark.parametrize("sql,detail", [
-    ("ALTER TABLE calibrations DROP COLUMN hash", "lacks column hash"),
-    ("DROP TABLE anchors", "'anchors' is missing"),
-    ("ALTER TABLE devices DROP COLUMN notes", "lacks column notes"),
-])
+@pytest.mark.parametrize(
+    "sql,detail",
+    [
+        ("ALTER TABLE calibrations DROP COLUMN hash", "lacks column hash"),
+        ("DROP TABLE anchors", "'anchors' is missing"),
+        ("ALTER TABLE devices DROP COLUMN notes", "lacks column notes"),
+    ],
+)
 def test_a_damaged_schema_is_reported_not_a_crash(capsys, record, sql, detail):
     path, _ = record
     raw = sqlite3.connect(path)
@@ -169,8 +184,19 @@ def test_verify_on_a_missing_database_is_one_line_exit_2(capsys, tmp_path):
     assert not (tmp_path / "typo").exists()
 
 
-@pytest.mark.parametrize("args", [("due",), ("devices", "list"), ("history", "X"), ("drift", "X"), ("recompute", "1"),
-                                  ("export", "1", "--format", "json"), ("export-capture", "1"), ("devices", "show", "X")])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("due",),
+        ("devices", "list"),
+        ("history", "X"),
+        ("drift", "X"),
+        ("recompute", "1"),
+        ("export", "1", "--format", "json"),
+        ("export-capture", "1"),
+        ("devices", "show", "X"),
+    ],
+)
 def test_reading_commands_refuse_a_missing_database_and_create_nothing(capsys, tmp_path, args):
     db = tmp_path / "no" / "such" / "station.db"
     code, out, err = _cli(capsys, *args, "--db", db)

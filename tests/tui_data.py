@@ -1,5 +1,6 @@
 """Fixed P1 captures and results for the TUI tests (no solver, no simulator: the screens
 are tested, not the numbers), and a database seeded with them."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,15 +19,32 @@ def p1_result(device="IMU-0042", drift=0.0, date="2026-03-01"):
     names = list(P1_POSITIONS)
     V = np.array([np.linalg.solve(M, G_MPS2 * P1_POSITIONS[n] - B) for n in names])
     V[0] += 2e-5  # a little misfit on x_up
-    cols = {"position": np.array(names, dtype=object), "ax": V[:, 0], "ay": V[:, 1], "az": V[:, 2],
-            "n": np.full(12, 300.0)}
-    meta = {"station-capture": "1", "procedure": "accel-tabletop", "device": device, "accel_unit": "V",
-            "g_mps2": repr(G_MPS2), "date": date}
-    result = {"procedure": "accel-tabletop", "device": device, "model": "A = B + M V",
-              "params": {"B": B.tolist(), "M": M.tolist()},
-              "uncertainty": {"B": [0.004, 0.004, 0.005], "M": [[3e-4, 2e-3, 2e-3], [0, 3e-4, 2e-3], [0, 0, 3e-4]]},
-              "residual_rms": 0.00031 + 0.0001 * drift, "n_positions": 12, "g_mps2": G_MPS2,
-              "warnings": ["gauge: M upper triangular (rotation about gravity not observable)"]}
+    cols = {
+        "position": np.array(names, dtype=object),
+        "ax": V[:, 0],
+        "ay": V[:, 1],
+        "az": V[:, 2],
+        "n": np.full(12, 300.0),
+    }
+    meta = {
+        "station-capture": "1",
+        "procedure": "accel-tabletop",
+        "device": device,
+        "accel_unit": "V",
+        "g_mps2": repr(G_MPS2),
+        "date": date,
+    }
+    result = {
+        "procedure": "accel-tabletop",
+        "device": device,
+        "model": "A = B + M V",
+        "params": {"B": B.tolist(), "M": M.tolist()},
+        "uncertainty": {"B": [0.004, 0.004, 0.005], "M": [[3e-4, 2e-3, 2e-3], [0, 3e-4, 2e-3], [0, 0, 3e-4]]},
+        "residual_rms": 0.00031 + 0.0001 * drift,
+        "n_positions": 12,
+        "g_mps2": G_MPS2,
+        "warnings": ["gauge: M upper triangular (rotation about gravity not observable)"],
+    }
     return Capture(meta=meta, columns=cols), result
 
 

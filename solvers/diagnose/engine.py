@@ -31,11 +31,12 @@ Method (docs/diagnose.md):
 6. The extended model is refitted nonlinearly (``solvers.fit``) with the selected blocks;
    its residuals are tested for whiteness (Ljung–Box on time-ordered rows) or against χ².
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 from scipy.special import gammaincc, gammainccinv
@@ -44,11 +45,11 @@ from solvers import linalg
 from solvers.fit import FitResult, fit
 from solvers.params import Packer, as_params
 
-DEAD_RTOL = 1e-2          # a column whose part outside the baseline's span is below this fraction: not identifiable
-CONFUSION_CORR = 0.9      # |corr| of fitted signatures above this: the data cannot tell the two apart
+DEAD_RTOL = 1e-2  # a column whose part outside the baseline's span is below this fraction: not identifiable
+CONFUSION_CORR = 0.9  # |corr| of fitted signatures above this: the data cannot tell the two apart
 MAX_FOLDS = 10
-ALPHA = 0.05              # family-wise level the per-candidate deviance quantiles start from
-MIN_DOF = 3               # an extension must leave this many degrees of freedom
+ALPHA = 0.05  # family-wise level the per-candidate deviance quantiles start from
+MIN_DOF = 3  # an extension must leave this many degrees of freedom
 
 
 @dataclass
@@ -61,8 +62,8 @@ class Candidate:
     free: dict | None = None
     scan: tuple[str, np.ndarray] | None = None
     reason: str | None = None
-    setup: Callable[[], None] | None = None   # generic candidates: write the driver basis into the conditions
-    folds: str | None = None   # the problem's fold set that validates it (None: the default groups)
+    setup: Callable[[], None] | None = None  # generic candidates: write the driver basis into the conditions
+    folds: str | None = None  # the problem's fold set that validates it (None: the default groups)
 
 
 @dataclass
@@ -77,19 +78,19 @@ class Problem:
     candidates: list[Candidate]
     threshold: float
     unit: str = ""
-    time_ordered: bool = False           # rows are a time series (Ljung–Box) or averages (χ²)
+    time_ordered: bool = False  # rows are a time series (Ljung–Box) or averages (χ²)
     row_labels: list[str] | None = None  # a name per row for quality findings
     extended_model: Callable[[list[str]], str] | None = None
     row_types: np.ndarray | None = None
     drivers: dict = field(default_factory=dict)  # name → per-row value (time, temperature, input …) for plots
-    channels: int = 1                       # time-ordered rows interleave this many channels (axes, beams)
-    series: np.ndarray | None = None        # per row: id of its time-ordered series (−1: none), for serial correlation
-    scale_free: dict = field(default_factory=dict)   # blocks freed only to measure auxiliary rows' noise scale
-    generic: list = field(default_factory=list)      # [(Conditions, {driver: per-sample values})] for residual:<driver>
-    generic_width: int = 3                  # outputs per sample the generic extension adds to (axes, beams)
-    generic_scale: float = 2.0              # the generic extension's margin over the canonical test (nulls)
-    fold_sets: dict = field(default_factory=dict)    # other CV groupings by name (e.g. "time": blocks within holds)
-    screened: list = field(default_factory=list)     # quality findings of rows left out before the effect search
+    channels: int = 1  # time-ordered rows interleave this many channels (axes, beams)
+    series: np.ndarray | None = None  # per row: id of its time-ordered series (−1: none), for serial correlation
+    scale_free: dict = field(default_factory=dict)  # blocks freed only to measure auxiliary rows' noise scale
+    generic: list = field(default_factory=list)  # [(Conditions, {driver: per-sample values})] for residual:<driver>
+    generic_width: int = 3  # outputs per sample the generic extension adds to (axes, beams)
+    generic_scale: float = 2.0  # the generic extension's margin over the canonical test (nulls)
+    fold_sets: dict = field(default_factory=dict)  # other CV groupings by name (e.g. "time": blocks within holds)
+    screened: list = field(default_factory=list)  # quality findings of rows left out before the effect search
 
 
 @dataclass
@@ -104,21 +105,22 @@ class Diagnosis:
     extended_cv_rms: float
     extended_names: list[str]
     residual_test: dict
-    studentized: np.ndarray               # extended residual / (sigma · noise scale)
+    studentized: np.ndarray  # extended residual / (sigma · noise scale)
     model: str
     extended_model: str
     problem: Problem
-    deviance: dict = field(default_factory=dict)   # first round: {name: {D, k, q, cv_lower}} (benchmark)
+    deviance: dict = field(default_factory=dict)  # first round: {name: {D, k, q, cv_lower}} (benchmark)
 
     def rms(self, fitres: FitResult) -> float:
         """Residual RMS in data units over the primary rows (all rows of one kind)."""
         r = fitres.residuals
         if self.problem.row_types is not None:
             r = r[np.asarray(self.problem.row_types) == 0]
-        return float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
+        return float(np.sqrt(np.mean(r**2))) if r.size else 0.0
 
 
 # ---------------------------------------------------------------- linear algebra helpers
+
 
 def _weighted(problem: Problem, params: dict) -> np.ndarray:
     return np.asarray(problem.residual(params), dtype=float).ravel() / problem.sigma
@@ -179,7 +181,7 @@ def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, p
         e = out * float(np.median(sigma[primary]))
     else:
         e = out * sigma
-    return float(np.sqrt(np.mean(e ** 2)))
+    return float(np.sqrt(np.mean(e**2)))
 
 
 def chi2_isf(p: float, k: int) -> float:
@@ -187,7 +189,7 @@ def chi2_isf(p: float, k: int) -> float:
     return 2.0 * float(gammainccinv(k / 2.0, p))
 
 
-def selection_threshold(problem: "Problem", k: int, n: int, m: int) -> float:
+def selection_threshold(problem: Problem, k: int, n: int, m: int) -> float:
     """ΔBIC below which a k-parameter candidate (one of m) is selected:
     ``k ln n − F·χ²_k(1 − α/m)`` — a deviance test at level α/m whose scale ``F`` (the
     procedure's ``threshold``) is measured on null simulations, written as a ΔBIC bound."""
@@ -239,18 +241,18 @@ def chi2_test(rw: np.ndarray, dof: int) -> dict:
     c = float(rw @ rw)
     dof = max(int(dof), 1)
     p = float(gammaincc(dof / 2.0, c / 2.0))
-    return {"test": "chi-square", "chi2": c, "dof": dof, "reduced_chi2": c / dof, "p_value": p,
-            "white": bool(p > 0.01)}
+    return {"test": "chi-square", "chi2": c, "dof": dof, "reduced_chi2": c / dof, "p_value": p, "white": bool(p > 0.01)}
 
 
 # ---------------------------------------------------------------- candidates
 
+
 @dataclass
 class _Cand:
     cand: Candidate
-    params: dict          # null blocks (with the best scanned value)
+    params: dict  # null blocks (with the best scanned value)
     free: dict
-    J: np.ndarray         # weighted Jacobian columns (identifiable ones)
+    J: np.ndarray  # weighted Jacobian columns (identifiable ones)
     names: list[str]
     reason: str | None = None
 
@@ -261,8 +263,7 @@ def _free_of(c: Candidate) -> dict:
     return {k: True for k in c.blocks if not (c.scan and k == c.scan[0])}
 
 
-def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.ndarray,
-                       r0: np.ndarray) -> _Cand:
+def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.ndarray, r0: np.ndarray) -> _Cand:
     """Jacobian columns of ``c`` at ``base_params`` (best grid value when scanned), with the
     columns the baseline already spans removed (fixed at their null values)."""
     grid = [None] if c.scan is None else list(c.scan[1])
@@ -303,8 +304,15 @@ def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.
     pnorm = np.linalg.norm(perp, axis=0)
     keep = (norm > 0) & (pnorm > DEAD_RTOL * np.where(norm > 0, norm, 1.0))
     if not keep.any():
-        return _Cand(c, blocks, free, J[:, :0], [], "its signature is indistinguishable from the baseline "
-                     "parameters in this capture (the data do not vary its driver independently)")
+        return _Cand(
+            c,
+            blocks,
+            free,
+            J[:, :0],
+            [],
+            "its signature is indistinguishable from the baseline "
+            "parameters in this capture (the data do not vary its driver independently)",
+        )
     # fix the dead elements at their null values
     packer = Packer.build({**{k: v for k, v in blocks.items()}}, {k: free.get(k, False) for k in blocks})
     dead = [n for n, k in zip(names, keep) if not k]
@@ -331,6 +339,7 @@ def _split_name(name: str):
 
 
 # ---------------------------------------------------------------- serial correlation
+
 
 def _acf(x: np.ndarray, lags: int) -> np.ndarray:
     """Autocorrelation ρ(0..lags) of a (mean-removed) series by FFT."""
@@ -372,9 +381,9 @@ def serial_inflation(e: np.ndarray, s: np.ndarray, series: np.ndarray | None) ->
 
 # ---------------------------------------------------------------- generic extension
 
-GENERIC_STEP_GRID = np.linspace(0.1, 0.9, 13)   # step positions, fractions of the driver's range
-GENERIC_PERIODS = 10                            # periods scanned, span/30 … span/1.5 (log)
-GENERIC_SMOOTH_KNOTS = (3, 5)                    # piecewise-linear bases (complexity chosen by CV)
+GENERIC_STEP_GRID = np.linspace(0.1, 0.9, 13)  # step positions, fractions of the driver's range
+GENERIC_PERIODS = 10  # periods scanned, span/30 … span/1.5 (log)
+GENERIC_SMOOTH_KNOTS = (3, 5)  # piecewise-linear bases (complexity chosen by CV)
 
 
 def _hat_basis(x: np.ndarray, knots: int) -> np.ndarray:
@@ -391,7 +400,7 @@ def _fold_for(driver: str) -> str | None:
     return "time" if driver in ("time", "temperature") else None
 
 
-def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
+def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
     """The ``residual:<driver>`` candidates: (candidate, description) per driver and shape.
     Each candidate's block ``bR`` (p × width) multiplies a basis of the driver that its
     ``setup`` writes into every condition set of ``problem.generic`` (solvers.models.additive_terms)."""
@@ -419,10 +428,11 @@ def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
                 for cond, d in conds:
                     x = np.asarray(d[drv], float)
                     cond.extra["basis"] = fn(x)
+
             blocks = {"bR": np.zeros((p, width))}
             return (Candidate(f"residual:{drv}", blocks, setup=setup, folds=_fold_for(drv)), dict(desc, driver=drv))
 
-        if per_axis:   # a scale linear in temperature / time acting on each axis' input
+        if per_axis:  # a scale linear in temperature / time acting on each axis' input
             continue
         base = drv.split(":")[0]
         if base not in ("time", "temperature"):
@@ -430,27 +440,44 @@ def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
         if base in ("time", "temperature") and "input_axis" in names:
             ia = [np.asarray(d["input_axis"], float) for _, d in conds]
             if all(a is not None and a.ndim == 2 for a in ia):
+
                 def scale_fn_factory(drv=drv, lo=lo, span=span):
                     def setup():
                         for cond, d in conds:
                             x = (np.asarray(d[drv], float) - lo) / span - 0.5
                             cond.extra["basis"] = (x[:, None] * np.asarray(d["input_axis"], float))[:, None, :]
+
                     return setup
-                out.append((Candidate(f"residual:{drv}", {"bR": np.zeros((1, width))}, setup=scale_fn_factory(),
-                                      folds=_fold_for(drv)),
-                            {"shape": "linear", "acts_on": "scale", "driver": drv}))
-        if base == "time":   # a bias that jumps (a current switched on, a knock)
+
+                out.append(
+                    (
+                        Candidate(
+                            f"residual:{drv}",
+                            {"bR": np.zeros((1, width))},
+                            setup=scale_fn_factory(),
+                            folds=_fold_for(drv),
+                        ),
+                        {"shape": "linear", "acts_on": "scale", "driver": drv},
+                    )
+                )
+        if base == "time":  # a bias that jumps (a current switched on, a knock)
             family = []
             for f in GENERIC_STEP_GRID:
                 x0 = lo + f * span
-                family.append(make(lambda x, x0=x0: (x >= x0).astype(float)[:, None] - 0.5, 1,
-                                   {"shape": "step", "at": x0}))
+                family.append(
+                    make(lambda x, x0=x0: (x >= x0).astype(float)[:, None] - 0.5, 1, {"shape": "step", "at": x0})
+                )
             out.append(("scan", family))
         if base == "time":
             fam = []
             for P in np.geomspace(span / 30.0, span / 1.5, GENERIC_PERIODS):
-                fam.append(make(lambda x, P=P: np.column_stack([np.sin(2 * np.pi * x / P), np.cos(2 * np.pi * x / P)]),
-                                2, {"shape": "periodic", "period": float(P)}))
+                fam.append(
+                    make(
+                        lambda x, P=P: np.column_stack([np.sin(2 * np.pi * x / P), np.cos(2 * np.pi * x / P)]),
+                        2,
+                        {"shape": "periodic", "period": float(P)},
+                    )
+                )
             out.append(("scan", fam))
         for K in GENERIC_SMOOTH_KNOTS:
             out.append(make(lambda x, K=K: _hat_basis(x, K), K - 1, {"shape": "smooth", "knots": K}))
@@ -459,7 +486,8 @@ def generic_candidates(problem: "Problem") -> list[tuple[Candidate, dict]]:
 
 # ---------------------------------------------------------------- the engine
 
-def _refit(problem: "Problem", params: dict, free: dict, sigma: np.ndarray) -> FitResult:
+
+def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> FitResult:
     """Nonlinear refit from the linearised step at ``params``."""
     Jx, _, packer = jacobian(problem, params, free)
     d, _ = _lstsq_rss(Jx, _weighted(problem, params))
@@ -480,8 +508,8 @@ class _Eval:
     cv: float
     sig: np.ndarray
     k: int
-    D: float          # deviance (unknown noise scale per row kind)
-    infl: float       # serial-correlation inflation of that deviance
+    D: float  # deviance (unknown noise scale per row kind)
+    infl: float  # serial-correlation inflation of that deviance
     desc: dict | None = None
 
     @property
@@ -557,7 +585,7 @@ class _Round:
             cv = out * float(np.median(self.sigma[self.primary]))
         else:
             cv = out * self.sigma
-        return d, e, float(np.sqrt(np.mean(cv ** 2)))
+        return d, e, float(np.sqrt(np.mean(cv**2)))
 
 
 class _Rounds:
@@ -603,7 +631,7 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
         k += 1  # the scanned scalar (hard-iron step time) is a parameter too
     D = term_cur - typed_fit_term(e, types)
     db = max(k, 0) * math.log(n) - D
-    sig = cc.J @ d[A.shape[1]:]
+    sig = cc.J @ d[A.shape[1] :]
     sig = sig - QA @ (QA.T @ sig)
     infl = serial_inflation(e, sig, problem.series)
     return _Eval(cc, db, cvc, sig, int(k), D, infl)
@@ -663,12 +691,18 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     entries: dict[str, dict] = {}
     for c in problem.candidates:
         if c.reason is not None:
-            entries[c.name] = {"name": c.name, "delta_bic": None, "cv_rms": None, "selected": False,
-                               "resolvable": False, "reason": c.reason}
+            entries[c.name] = {
+                "name": c.name,
+                "delta_bic": None,
+                "cv_rms": None,
+                "selected": False,
+                "resolvable": False,
+                "reason": c.reason,
+            }
     state, free = dict(base_params), dict(problem.free)
     cur_fit = baseline_fit
     cv_cur = cv0
-    picked: list[tuple[_Cand, dict]] = []   # (candidate columns, effect entry)
+    picked: list[tuple[_Cand, dict]] = []  # (candidate columns, effect entry)
     verdict: list[str] = []
     remaining = [c for c in problem.candidates if c.reason is None]
     deviance: dict = {}
@@ -688,21 +722,35 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         for cc in cands:
             if cc.reason is not None:
                 if first:
-                    entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": None, "cv_rms": None,
-                                             "selected": False, "resolvable": False, "reason": cc.reason}
+                    entries[cc.cand.name] = {
+                        "name": cc.cand.name,
+                        "delta_bic": None,
+                        "cv_rms": None,
+                        "selected": False,
+                        "resolvable": False,
+                        "reason": cc.reason,
+                    }
                 continue
             ev = _evaluate(problem, cc, rounds.get(cc.cand.folds), term_cur, types, n)
             evals.append(ev)
             if first:
-                entries[cc.cand.name] = {"name": cc.cand.name, "delta_bic": ev.delta_bic, "cv_rms": ev.cv,
-                                         "selected": False}
+                entries[cc.cand.name] = {
+                    "name": cc.cand.name,
+                    "delta_bic": ev.delta_bic,
+                    "cv_rms": ev.cv,
+                    "selected": False,
+                }
         m = len(evals)
         rank_cur = _gram_rank(J0.T @ J0)
         if first:
             for ev in evals:
-                deviance[ev.cc.cand.name] = {"D": ev.D_rob, "k": ev.k, "q": chi2_isf(ALPHA / max(m, 1), max(ev.k, 1)),
-                                             "cv_lower": bool(ev.cv < rounds.cv0(ev.cc.cand.folds)),
-                                             "inflation": ev.infl}
+                deviance[ev.cc.cand.name] = {
+                    "D": ev.D_rob,
+                    "k": ev.k,
+                    "q": chi2_isf(ALPHA / max(m, 1), max(ev.k, 1)),
+                    "cv_lower": bool(ev.cv < rounds.cv0(ev.cc.cand.folds)),
+                    "inflation": ev.infl,
+                }
         first = False
         passing = [ev for ev in evals if _passes(problem, ev, m, rounds.cv0(ev.cc.cand.folds), rank_cur, n)]
         if not passing:
@@ -741,8 +789,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 else:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
-                    ok = _passes(problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds),
-                                 _gram_rank(J0.T @ J0), n)
+                    ok = _passes(
+                        problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n
+                    )
                 if not ok:
                     picked.remove(item)
                     entries[cc.cand.name]["selected"] = False
@@ -782,7 +831,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         for item in gens:
             family = item[1] if item[0] == "scan" else [item]
             best_fam = None
-            for cand, desc in family:   # a scanned family: its best member by the residual it leaves
+            for cand, desc in family:  # a scanned family: its best member by the residual it leaves
                 cand.setup()
                 cc = _candidate_columns(problem, state, cand, Q0, r0)
                 if cc.reason is not None:
@@ -800,14 +849,17 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             ev = _evaluate(problem, cc, rounds.get(cand.folds), term_cur, types, n)
             ev.desc = desc
             if item[0] == "scan":
-                ev.k += 1     # the scanned location or period
+                ev.k += 1  # the scanned location or period
             evals.append(ev)
-        passing = [ev for ev in evals if _passes(problem, ev, m_gen, rounds.cv0(ev.cc.cand.folds), rank_cur, n,
-                                                 problem.generic_scale)]
+        passing = [
+            ev
+            for ev in evals
+            if _passes(problem, ev, m_gen, rounds.cv0(ev.cc.cand.folds), rank_cur, n, problem.generic_scale)
+        ]
         if not passing:
             return None
         best = min(passing, key=lambda ev: ev.cv)
-        corr = {}   # how much of its signature each library candidate's columns hold, at this state
+        corr = {}  # how much of its signature each library candidate's columns hold, at this state
         for c in problem.candidates:
             if c.reason is not None or c.name in named:
                 continue
@@ -835,7 +887,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         if res is not None:
             generic_effect = res
             cur_fit, state, free = with_generic(res[0], state, free)
-            if picked:   # a library effect that only stood in for this structure is dropped now
+            if picked:  # a library effect that only stood in for this structure is dropped now
                 picked, cur_fit, state, free = prune(picked, cur_fit, extra=res[0].cc, min_items=1)
         elif picked:
             # the library effects may have taken part of a structure none of them is (a bias step
@@ -860,8 +912,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     rr = _Rounds(J0, r0, sigma, fold_map, primary)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
                     ev.k += 1 if "at" in res0[0].desc or "period" in res0[0].desc else 0
-                    ok = _passes(problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n,
-                                 problem.generic_scale)
+                    ok = _passes(
+                        problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n, problem.generic_scale
+                    )
                 if ok and len(picked2) < len(picked):
                     res0[0].cc.cand.setup()
                     picked, cur_fit, state, free = picked2, fit2, st2, fr2
@@ -905,11 +958,20 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         desc = dict(best.desc)
         drv = desc.pop("driver")
         name = f"residual:{drv}"
-        effects.append({"name": name, "params": {"bR": ext.params["bR"], **{k: v for k, v in desc.items()
-                                                                             if k != "shape"}},
-                        "uncertainty": {"bR": ext.sigma["bR"]}, "cv_rms_before": cv_g, "cv_rms_after": cv_ext,
-                        "gain": 1.0 - cv_ext / cv_g if cv_g > 0 else 0.0, "confused_with": [],
-                        "shape": desc.get("shape"), "driver": drv, "correlation": corr})
+        effects.append(
+            {
+                "name": name,
+                "params": {"bR": ext.params["bR"], **{k: v for k, v in desc.items() if k != "shape"}},
+                "uncertainty": {"bR": ext.sigma["bR"]},
+                "cv_rms_before": cv_g,
+                "cv_rms_after": cv_ext,
+                "gain": 1.0 - cv_ext / cv_g if cv_g > 0 else 0.0,
+                "confused_with": [],
+                "shape": desc.get("shape"),
+                "driver": drv,
+                "correlation": corr,
+            }
+        )
         verdict.append(name)
     rw = ext.weighted_residuals
     scale = math.sqrt(ext.chi2 / ext.dof) if ext.dof > 0 else 1.0
@@ -922,11 +984,26 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     ext_model = problem.extended_model(canon) if (problem.extended_model and canon) else problem.model
     if generic_effect:
         ext_model += f" + f_{effects[-1]['shape']}({effects[-1]['driver']})"
-    return Diagnosis(problem.procedure, baseline_fit, cv0, cand_list, effects, verdict, ext, cv_ext,
-                     names, test, stud, problem.model, ext_model, problem, deviance)
+    return Diagnosis(
+        problem.procedure,
+        baseline_fit,
+        cv0,
+        cand_list,
+        effects,
+        verdict,
+        ext,
+        cv_ext,
+        names,
+        test,
+        stud,
+        problem.model,
+        ext_model,
+        problem,
+        deviance,
+    )
 
 
-def _residual_test(problem: "Problem", fitres: FitResult) -> dict:
+def _residual_test(problem: Problem, fitres: FitResult) -> dict:
     """Ljung–Box per channel (Bonferroni) on time-ordered rows, else χ² of the weighted residuals."""
     rw = fitres.weighted_residuals
     if problem.time_ordered:
@@ -945,7 +1022,7 @@ def _residual_test(problem: "Problem", fitres: FitResult) -> dict:
     return chi2_test(rw, fitres.dof)
 
 
-def _driver_correlations(problem: "Problem", resid: np.ndarray) -> list[dict]:
+def _driver_correlations(problem: Problem, resid: np.ndarray) -> list[dict]:
     """|correlation| of the residual (primary rows) with each driver and with its smoothed
     trend (the residual averaged in 10 bins of the driver: structure, not only a slope), largest first."""
     keep = np.ones(len(resid), bool) if problem.row_types is None else np.asarray(problem.row_types) == 0
@@ -961,7 +1038,7 @@ def _driver_correlations(problem: "Problem", resid: np.ndarray) -> list[dict]:
         b = np.clip(np.searchsorted(edges, xr, side="right") - 1, 0, 9)
         means = np.array([rr[b == i].mean() if np.any(b == i) else 0.0 for i in range(10)])
         trend = means[b]
-        explained = float(np.sum(trend ** 2) / max(np.sum(rr ** 2), 1e-300))
+        explained = float(np.sum(trend**2) / max(np.sum(rr**2), 1e-300))
         out.append({"driver": name, "correlation": lin, "explained_by_trend": explained})
     out.sort(key=lambda d: -d["explained_by_trend"])
     return out

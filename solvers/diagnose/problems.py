@@ -14,6 +14,7 @@ also lower the held-out RMS (docs/benchmarks.md, Diagnose). F > 1: the noise is 
 white Gaussian noise χ² assumes (bias instability, placement errors), and the measured
 null distribution says by how much.
 """
+
 from __future__ import annotations
 
 import math
@@ -21,7 +22,7 @@ import math
 import numpy as np
 
 from solvers import linalg
-from solvers import frames
+from solvers.centrifuge import norm_target
 from solvers.diagnose.engine import Candidate, Problem
 from solvers.errors import TooFewPositions
 from solvers.models import Conditions
@@ -29,19 +30,18 @@ from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
-from solvers.centrifuge import norm_target
 from solvers.tabletop import perp_basis
 
 # Deviance-test scales F from null simulations (bench_diagnose.py --null-only --trials 200).
 # The comment gives that run's 95th-percentile null score; F is set a little above it.
 THRESHOLDS = {
-    "accel-tabletop": 2.2,      # 1.8 (1.7 on the independent generator's nulls): placement errors, bias instability
-    "accel-centrifuge": 1.25,   # 1.0 (0.8 independent)
-    "compass": 1.65,            # 1.4 (1.75 independent): hand tremor, filtered magnetometer noise
-    "gyro-drift": 1.5,          # 0.8 (1.4 on the independent generator's nulls): bias instability in the block means
-    "ldv": 1.05,                # 0.95 (0.84 independent): white noise
+    "accel-tabletop": 2.2,  # 1.8 (1.7 on the independent generator's nulls): placement errors, bias instability
+    "accel-centrifuge": 1.25,  # 1.0 (0.8 independent)
+    "compass": 1.65,  # 1.4 (1.75 independent): hand tremor, filtered magnetometer noise
+    "gyro-drift": 1.5,  # 0.8 (1.4 on the independent generator's nulls): bias instability in the block means
+    "ldv": 1.05,  # 0.95 (0.84 independent): white noise
 }
-MIN_TEMP_SPAN_C = 0.2   # a temperature that varies less than this cannot resolve a temperature term
+MIN_TEMP_SPAN_C = 0.2  # a temperature that varies less than this cannot resolve a temperature term
 
 
 def _span(x) -> float:
@@ -54,8 +54,11 @@ def _temp_candidate(temp_c, width=3, block="bT") -> Candidate:
     if temp_c is None or not np.all(np.isfinite(temp_c)):
         return Candidate("temperature_bias", reason="no temperature in the capture (temp_c column)")
     if _span(temp_c) < MIN_TEMP_SPAN_C:
-        return Candidate("temperature_bias", reason=f"temperature constant within {_span(temp_c):.2g} °C: "
-                         "a temperature term cannot be told from the bias")
+        return Candidate(
+            "temperature_bias",
+            reason=f"temperature constant within {_span(temp_c):.2g} °C: "
+            "a temperature term cannot be told from the bias",
+        )
     return Candidate("temperature_bias", {block: np.zeros(width)}, folds="time")
 
 
@@ -82,8 +85,10 @@ def _ref(temp_c) -> float:
 
 # ---------------------------------------------------------------- P4 gyro drift
 
-def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C_b_n=None,
-                 max_rows: int = 400) -> Problem:
+
+def gyro_problem(
+    t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C_b_n=None, max_rows: int = 400
+) -> Problem:
     """Static gyro record(s) (P4 body frame, rad/s) as block means.
 
     earth_body_rad_s: (N, 3) Earth rate in the body frame per sample (the mode-B baseline),
@@ -105,9 +110,11 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
             if e - s >= max(2, per // 2):
                 blocks.append((s, e))
     if len(blocks) < 4:  # e.g. a position label that changes on every row
-        raise TooFewPositions(f"the static record breaks into {len(bounds) - 1} runs of one position too short to "
-                              f"average ({n} rows, {len(blocks)} blocks of 2 rows or more): diagnosis needs longer "
-                              "stretches at rest")
+        raise TooFewPositions(
+            f"the static record breaks into {len(bounds) - 1} runs of one position too short to "
+            f"average ({n} rows, {len(blocks)} blocks of 2 rows or more): diagnosis needs longer "
+            "stretches at rest"
+        )
     idx = [np.arange(s, e) for s, e in blocks]
     mean = lambda x: np.array([np.mean(x[i], axis=0) for i in idx])  # noqa: E731
     tb, wb = mean(t), mean(w)
@@ -136,24 +143,48 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
     if fb is None:
         cands.append(Candidate("g_sensitivity", reason="no accelerometer: the specific force is unknown"))
     elif not multi:
-        cands.append(Candidate("g_sensitivity", reason="one static orientation: the specific force does not "
-                               "change, so G f cannot be told from the bias"))
+        cands.append(
+            Candidate(
+                "g_sensitivity",
+                reason="one static orientation: the specific force does not "
+                "change, so G f cannot be told from the bias",
+            )
+        )
     else:
         cands.append(Candidate("g_sensitivity", {"G": np.zeros((3, 3))}))
     if earth_body_rad_s is not None:
-        cands.append(Candidate("earth_rate", reason="part of the baseline here: the latitude is known and "
-                               "the Earth rate is removed (mode B)"))
+        cands.append(
+            Candidate(
+                "earth_rate",
+                reason="part of the baseline here: the latitude is known and the Earth rate is removed (mode B)",
+            )
+        )
     elif Cb is None or not multi:
-        cands.append(Candidate("earth_rate", reason="one static orientation and no latitude: the Earth rate "
-                               "cannot be told from the bias"))
+        cands.append(
+            Candidate(
+                "earth_rate",
+                reason="one static orientation and no latitude: the Earth rate cannot be told from the bias",
+            )
+        )
     else:
         cands.append(Candidate("earth_rate", {"wE": np.zeros(2)}))
     base_model = "y = ω_E + ε (P4 mode B)" if earth_body_rad_s is not None else "y = ε"
-    prob = Problem("gyro-drift", base_model,
-                   residual, sigma, np.repeat(groups, 3), {"eps": wb.mean(axis=0) - Eb.mean(axis=0)},
-                   {"eps": True}, cands, THRESHOLDS["gyro-drift"], unit="rad/s", time_ordered=True, channels=3,
-                   row_labels=[f"position {p} t={x:.1f} s {a}" for p, x in zip(pb, tb) for a in "xyz"],
-                   extended_model=lambda names: base_model.split(" (")[0] + _suffix(names, GYRO_TERMS))
+    prob = Problem(
+        "gyro-drift",
+        base_model,
+        residual,
+        sigma,
+        np.repeat(groups, 3),
+        {"eps": wb.mean(axis=0) - Eb.mean(axis=0)},
+        {"eps": True},
+        cands,
+        THRESHOLDS["gyro-drift"],
+        unit="rad/s",
+        time_ordered=True,
+        channels=3,
+        row_labels=[f"position {p} t={x:.1f} s {a}" for p, x in zip(pb, tb) for a in "xyz"],
+        extended_model=lambda names: base_model.split(" (")[0] + _suffix(names, GYRO_TERMS),
+    )
     prob.drivers = {"time [s]": np.repeat(tb, 3)}
     if Tb is not None:
         prob.drivers["temperature [°C]"] = np.repeat(Tb, 3)
@@ -162,11 +193,21 @@ def gyro_problem(t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C
     return prob
 
 
-GYRO_TERMS = {"temperature_bias": " + b_T (T − T_ref)", "time_drift": " + b_t (t − t_ref)",
-              "g_sensitivity": " + G f", "earth_rate": " + C_b_n ω_ie (fitted)"}
-ACCEL_TERMS = {"quadratic": "D f²", "cubic": "C3 f³", "scale_asymmetry": "A min(f, 0)",
-               "temperature_bias": "b_T (T − T_ref)", "time_drift": "b_t (t − t_ref)",
-               "misalignment": "Φ(γ)", "lever_arm": "ω² dr c"}
+GYRO_TERMS = {
+    "temperature_bias": " + b_T (T − T_ref)",
+    "time_drift": " + b_t (t − t_ref)",
+    "g_sensitivity": " + G f",
+    "earth_rate": " + C_b_n ω_ie (fitted)",
+}
+ACCEL_TERMS = {
+    "quadratic": "D f²",
+    "cubic": "C3 f³",
+    "scale_asymmetry": "A min(f, 0)",
+    "temperature_bias": "b_T (T − T_ref)",
+    "time_drift": "b_t (t − t_ref)",
+    "misalignment": "Φ(γ)",
+    "lever_arm": "ω² dr c",
+}
 
 
 def _suffix(names, terms) -> str:
@@ -175,8 +216,8 @@ def _suffix(names, terms) -> str:
 
 # ---------------------------------------------------------------- P5 LDV
 
-def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=None,
-                max_rows: int = 20000) -> Problem:
+
+def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=None, max_rows: int = 20000) -> Problem:
     """Paired reference velocity and beam outputs; baseline X (per beam), all beams stacked."""
     t = np.asarray(t_s, float) if t_s is not None else None
     v = np.asarray(v_body_mps, float)
@@ -188,8 +229,9 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     t = t[sel] if t is not None else None
     T = np.asarray(temp_c, float)[sel] if temp_c is not None else None
     W = np.asarray(omega_body_rad_s, float)[sel] if omega_body_rad_s is not None else None
-    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0,
-                      omega_body_rad_s=W)
+    cond = Conditions(
+        t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0, omega_body_rad_s=W
+    )
     r0 = v @ np.asarray(X0).T - y
     sig_beam = np.maximum(np.std(r0, axis=0), 1e-12)
 
@@ -207,28 +249,63 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
         cands.append(Candidate("lever_arm", {"r": np.zeros(3)}))
     cands.append(Candidate("offset", {"o": np.zeros(3)}))
     groups = time_blocks(t) if t is not None else (np.arange(len(v)) * 10) // len(v)
-    prob = Problem("ldv", "V_L = X v (P5)", residual, np.tile(sig_beam, len(v)), np.repeat(groups, 3),
-                   {"X": np.asarray(X0, float)}, {"X": True}, cands, THRESHOLDS["ldv"], unit="m/s",
-                   time_ordered=True, channels=3,
-                   row_labels=[f"t={x:.2f} s beam {j + 1}" for x in (t if t is not None else np.arange(len(v)))
-                               for j in range(3)],
-                   extended_model=lambda names: "V_L = X (v(t − τ) + ω × r) + o + …" if names else "V_L = X v")
+    prob = Problem(
+        "ldv",
+        "V_L = X v (P5)",
+        residual,
+        np.tile(sig_beam, len(v)),
+        np.repeat(groups, 3),
+        {"X": np.asarray(X0, float)},
+        {"X": True},
+        cands,
+        THRESHOLDS["ldv"],
+        unit="m/s",
+        time_ordered=True,
+        channels=3,
+        row_labels=[f"t={x:.2f} s beam {j + 1}" for x in (t if t is not None else np.arange(len(v))) for j in range(3)],
+        extended_model=lambda names: "V_L = X (v(t − τ) + ω × r) + o + …" if names else "V_L = X v",
+    )
     prob.drivers = {"speed |v| [m/s]": np.repeat(np.linalg.norm(v, axis=1), 3)}
     if t is not None:
         prob.drivers["time [s]"] = np.repeat(t, 3)
     if T is not None:
         prob.drivers["temperature [°C]"] = np.repeat(T, 3)
     prob.series = np.tile(np.arange(3), len(v))
-    prob.generic = [(cond, {"time": t, "temperature": T, "input": np.linalg.norm(v, axis=1),
-                            "rate": None if W is None else np.linalg.norm(W, axis=1),
-                            "input_axis": v @ np.asarray(X0, float).T})]
+    prob.generic = [
+        (
+            cond,
+            {
+                "time": t,
+                "temperature": T,
+                "input": np.linalg.norm(v, axis=1),
+                "rate": None if W is None else np.linalg.norm(W, axis=1),
+                "input_axis": v @ np.asarray(X0, float).T,
+            },
+        )
+    ]
     return prob
 
 
 # ---------------------------------------------------------------- P1 level table
 
-def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement_sigma_rad,
-                     t_s=None, temp_c=None, noise_known=True, se=None, sub=None) -> Problem:
+
+def tabletop_problem(
+    V,
+    std,
+    n,
+    g_mps2,
+    K0,
+    b0,
+    *,
+    labels,
+    directions,
+    placement_sigma_rad,
+    t_s=None,
+    temp_c=None,
+    noise_known=True,
+    se=None,
+    sub=None,
+) -> Problem:
     """Static positions: mean raw outputs V (m, 3); norm rows ``|f| − g`` and, for labelled
     positions, the two components perpendicular to the known direction (σ = g·placement).
 
@@ -288,26 +365,46 @@ def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement
     groups = np.concatenate([pos_n, np.repeat(known, 2) if table else np.zeros(0, int)])
     freeK = np.ones((3, 3), bool) if table else np.triu(np.ones((3, 3), bool))
     K0 = np.asarray(K0, float) if table else np.triu(np.asarray(K0, float))
-    cands = [_temp_candidate(T), _time_candidate(t),
-             Candidate("quadratic", {"D": np.zeros(3)}), Candidate("scale_asymmetry", {"A": np.zeros(3)})]
+    cands = [
+        _temp_candidate(T),
+        _time_candidate(t),
+        Candidate("quadratic", {"D": np.zeros(3)}),
+        Candidate("scale_asymmetry", {"A": np.zeros(3)}),
+    ]
     if sub is not None:
         rows = [f"position {labels[k]} part {j + 1} |f|" for k, j in zip(pos_n, part)]
     else:
         rows = [f"position {labels[k]} |f|" for k in range(m)]
     rows += [f"position {labels[k]} direction {j + 1}" for k in known for j in range(2)] if table else []
-    prob = Problem("accel-tabletop", "y = K f + b  (P1: A = B + M V, M = K⁻¹, B = −M b)", residual, sigma,
-                   groups, {"K": K0, "b": np.asarray(b0, float)}, {"K": freeK, "b": True}, cands,
-                   THRESHOLDS["accel-tabletop"], unit="m/s^2", row_labels=rows,
-                   extended_model=lambda names: "y = K (f" + "".join(" + " + ACCEL_TERMS[x] for x in names
-                                                                  if x not in ("temperature_bias", "time_drift"))
-                   + ") + b" + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift")))
+    prob = Problem(
+        "accel-tabletop",
+        "y = K f + b  (P1: A = B + M V, M = K⁻¹, B = −M b)",
+        residual,
+        sigma,
+        groups,
+        {"K": K0, "b": np.asarray(b0, float)},
+        {"K": freeK, "b": True},
+        cands,
+        THRESHOLDS["accel-tabletop"],
+        unit="m/s^2",
+        row_labels=rows,
+        extended_model=lambda names: (
+            "y = K (f"
+            + "".join(" + " + ACCEL_TERMS[x] for x in names if x not in ("temperature_bias", "time_drift"))
+            + ") + b"
+            + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift"))
+        ),
+    )
     nn = len(s_n)
     prob.row_types = np.concatenate([np.zeros(nn, int), np.ones(len(s_v), int)])
     pad = np.full(len(s_v), np.nan)
     prob.drivers = {"position #": np.concatenate([pos_n + 1.0, pad])}
     if sub is not None:
-        prob.fold_sets = {"time": np.concatenate([(part + pos_n) % parts,
-                                                  (np.repeat(known, 2) % parts) if table else np.zeros(0, int)])}
+        prob.fold_sets = {
+            "time": np.concatenate(
+                [(part + pos_n) % parts, (np.repeat(known, 2) % parts) if table else np.zeros(0, int)]
+            )
+        }
         prob.series = np.concatenate([np.zeros(nn, int), np.full(len(s_v), -1)])
         prob.drivers["time [s]"] = np.concatenate([cond_n.t_s, pad])
         if cond_n.temp_c is not None:
@@ -327,8 +424,10 @@ def tabletop_problem(V, std, n, g_mps2, K0, b0, *, labels, directions, placement
 
 # ---------------------------------------------------------------- P2 centrifuge
 
-def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sigma_N=None, temp_c=None,
-                       elapsed_s=None) -> Problem:
+
+def centrifuge_problem(
+    N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sigma_N=None, temp_c=None, elapsed_s=None
+) -> Problem:
     """Table rows of mean outputs N (g) at speeds ω; the norm condition ``|f| = ρ``."""
     N = np.asarray(N, float)
     w = np.asarray(speed_rad_s, float)
@@ -348,31 +447,60 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
     T = np.asarray(temp_c, float) if temp_c is not None else None
     t = np.asarray(elapsed_s, float) if elapsed_s is not None else None
     have_c = np.all(np.isfinite(c_dir))
-    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0,
-                      input_unit_mps2=g_mps2, omega_rad_s=w, centripetal_dir=np.nan_to_num(c_dir))
+    cond = Conditions(
+        t_s=t,
+        temp_c=T,
+        temp_ref_c=_ref(T),
+        t_ref_s=float(np.mean(t)) if t is not None else 0.0,
+        input_unit_mps2=g_mps2,
+        omega_rad_s=w,
+        centripetal_dir=np.nan_to_num(c_dir),
+    )
 
     def residual(p):
         return np.linalg.norm(accel_model.inverse(N, p, cond), axis=1) - rho
 
     if sigma_N is not None:
         from solvers.centrifuge import row_sigma
+
         sigma = row_sigma(N, params0, sigma_N)
     else:
         sigma = np.full(len(N), 1e-5)
     base = {k: np.asarray(params0[k], float) for k in ("S", "b", "D")}
     from solvers.centrifuge import GAMMA_FREE
-    cands = [_temp_candidate(T), _time_candidate(t),
-             Candidate("misalignment", {"gamma": np.zeros(6)}, free={"gamma": GAMMA_FREE}),
-             Candidate("cubic", {"C3": np.zeros(3)})]
-    cands.append(Candidate("lever_arm", {"dr": np.zeros(3)}) if have_c else
-                 Candidate("lever_arm", reason="a mounting seen at one speed only: its centripetal direction is unknown"))
-    prob = Problem("accel-centrifuge", "N = S (f + D f∘f) + b, |f| = ρ (P2)", residual, sigma,
-                   np.array([list(dict.fromkeys(labels)).index(x) for x in labels]), base,
-                   {"S": True, "b": True, "D": True}, cands, THRESHOLDS["accel-centrifuge"], unit="g",
-                   row_labels=[f"position {x} ω={y:.3g} rad/s" for x, y in zip(labels, w)],
-                   extended_model=lambda names: "N = S " + ("Φ(γ) " if "misalignment" in names else "") + "(f + D f∘f" + "".join(
-                       " + " + ACCEL_TERMS[x] for x in names if x in ("cubic", "lever_arm")) + ") + b" + "".join(
-                       " + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift")))
+
+    cands = [
+        _temp_candidate(T),
+        _time_candidate(t),
+        Candidate("misalignment", {"gamma": np.zeros(6)}, free={"gamma": GAMMA_FREE}),
+        Candidate("cubic", {"C3": np.zeros(3)}),
+    ]
+    cands.append(
+        Candidate("lever_arm", {"dr": np.zeros(3)})
+        if have_c
+        else Candidate("lever_arm", reason="a mounting seen at one speed only: its centripetal direction is unknown")
+    )
+    prob = Problem(
+        "accel-centrifuge",
+        "N = S (f + D f∘f) + b, |f| = ρ (P2)",
+        residual,
+        sigma,
+        np.array([list(dict.fromkeys(labels)).index(x) for x in labels]),
+        base,
+        {"S": True, "b": True, "D": True},
+        cands,
+        THRESHOLDS["accel-centrifuge"],
+        unit="g",
+        row_labels=[f"position {x} ω={y:.3g} rad/s" for x, y in zip(labels, w)],
+        extended_model=lambda names: (
+            "N = S "
+            + ("Φ(γ) " if "misalignment" in names else "")
+            + "(f + D f∘f"
+            + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("cubic", "lever_arm"))
+            + ") + b"
+            + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift"))
+        ),
+    )
     prob.drivers = {"input |f| [g]": rho, "mounting #": prob.groups.astype(float) + 1}
     if T is not None:
         prob.drivers["temperature [°C]"] = T
@@ -384,9 +512,24 @@ def centrifuge_problem(N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sig
 
 # ---------------------------------------------------------------- P3 compass
 
-def compass_problem(t_s, y_raw, W0, h0, field_nT, inclination_deg, *, noise_raw, temp_c=None,
-                    static_f=None, static_y=None, static_t=None, static_temp=None, static_sigma=None,
-                    max_rows: int = 4000) -> Problem:
+
+def compass_problem(
+    t_s,
+    y_raw,
+    W0,
+    h0,
+    field_nT,
+    inclination_deg,
+    *,
+    noise_raw,
+    temp_c=None,
+    static_f=None,
+    static_y=None,
+    static_t=None,
+    static_temp=None,
+    static_sigma=None,
+    max_rows: int = 4000,
+) -> Problem:
     """Magnitude rows ``|W(y − h …)| − F`` on (decimated) samples, plus dip rows on static
     holds: ``f̂ · m̂ − c`` (``c`` free, −sin I nominally), which ``mag_accel_misalignment``
     changes with orientation."""
@@ -425,33 +568,57 @@ def compass_problem(t_s, y_raw, W0, h0, field_nT, inclination_deg, *, noise_raw,
     dip_known = have_dip and inclination_deg is not None
     if have_dip:
         # the dip against IGRF's inclination: c fixed at −sin I where the site is known
-        base["c_dip"] = np.array(-math.sin(math.radians(inclination_deg)) if dip_known else
-                                 float(np.mean([0.0])))
+        base["c_dip"] = np.array(-math.sin(math.radians(inclination_deg)) if dip_known else float(np.mean([0.0])))
         free["c_dip"] = not dip_known
     # c_dip's start: the measured mean
     s_mag = np.full(len(y), max(noise_raw, 1e-12) * float(np.linalg.norm(W0, 2)))
-    s_dip = np.asarray(static_sigma, float) if (have_dip and static_sigma is not None) else np.full(
-        len(static_f) if have_dip else 0, 1e-3)
+    s_dip = (
+        np.asarray(static_sigma, float)
+        if (have_dip and static_sigma is not None)
+        else np.full(len(static_f) if have_dip else 0, 1e-3)
+    )
     sigma = np.concatenate([s_mag, s_dip])
     g_mag = time_blocks(t)
-    g_dip = time_blocks(np.concatenate([t, np.asarray(static_t, float)]))[len(t):] if have_dip else np.zeros(0, int)
+    g_dip = time_blocks(np.concatenate([t, np.asarray(static_t, float)]))[len(t) :] if have_dip else np.zeros(0, int)
     dur = float(t.max() - t.min())
-    cands = [_temp_candidate(T), _time_candidate(t),
-             Candidate("mag_accel_misalignment", {"rho": np.zeros(3)}) if have_dip else
-             Candidate("mag_accel_misalignment", reason="no static accelerometer holds: the dip angle cannot be checked"),
-             Candidate("field_anomaly", {"field_scale": np.array(1.0), "dc_dip": np.array(0.0)}) if dip_known else
-             Candidate("field_anomaly", reason="no static accelerometer holds or no site (latitude, longitude, date): "
-                       "the dip angle cannot be compared with IGRF's inclination, and a field magnitude that "
-                       "differs from IGRF is a common scale of W"),
-             Candidate("time_varying_hard_iron", {"dh": np.zeros(3), "t_on_s": np.array(0.0)},
-                       free={"dh": True, "t_on_s": False},
-                       scan=("t_on_s", float(t.min()) + dur * np.linspace(0.1, 0.9, 33)))]
-    prob = Problem("compass", "m = W (y − h), |m| = F (P3)", residual, sigma, np.concatenate([g_mag, g_dip]),
-                   base, free, cands, THRESHOLDS["compass"], unit="nT", time_ordered=False,
-                   row_labels=[f"t={x:.2f} s |m|" for x in t] + [f"hold t={x:.1f} s dip" for x in
-                                                                 (static_t if have_dip else [])],
-                   extended_model=lambda names: "m = W R(ρ)ᵀ (y − h − Δh[t ≥ t_on] − …)" if names else
-                   "m = W (y − h)")
+    cands = [
+        _temp_candidate(T),
+        _time_candidate(t),
+        Candidate("mag_accel_misalignment", {"rho": np.zeros(3)})
+        if have_dip
+        else Candidate(
+            "mag_accel_misalignment", reason="no static accelerometer holds: the dip angle cannot be checked"
+        ),
+        Candidate("field_anomaly", {"field_scale": np.array(1.0), "dc_dip": np.array(0.0)})
+        if dip_known
+        else Candidate(
+            "field_anomaly",
+            reason="no static accelerometer holds or no site (latitude, longitude, date): "
+            "the dip angle cannot be compared with IGRF's inclination, and a field magnitude that "
+            "differs from IGRF is a common scale of W",
+        ),
+        Candidate(
+            "time_varying_hard_iron",
+            {"dh": np.zeros(3), "t_on_s": np.array(0.0)},
+            free={"dh": True, "t_on_s": False},
+            scan=("t_on_s", float(t.min()) + dur * np.linspace(0.1, 0.9, 33)),
+        ),
+    ]
+    prob = Problem(
+        "compass",
+        "m = W (y − h), |m| = F (P3)",
+        residual,
+        sigma,
+        np.concatenate([g_mag, g_dip]),
+        base,
+        free,
+        cands,
+        THRESHOLDS["compass"],
+        unit="nT",
+        time_ordered=False,
+        row_labels=[f"t={x:.2f} s |m|" for x in t] + [f"hold t={x:.1f} s dip" for x in (static_t if have_dip else [])],
+        extended_model=lambda names: "m = W R(ρ)ᵀ (y − h − Δh[t ≥ t_on] − …)" if names else "m = W (y − h)",
+    )
     prob.row_types = np.concatenate([np.zeros(len(y), int), np.ones(len(s_dip), int)])
     pad = np.full(len(s_dip), np.nan)
     prob.drivers = {"time [s]": np.concatenate([t, pad])}

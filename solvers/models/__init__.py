@@ -10,6 +10,7 @@ Each model module defines:
 An effect is on when its blocks are in the params dict. ``Conditions`` carries everything
 about a sample that is not the input itself (time, temperature, centrifuge geometry, ...).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -19,6 +19,7 @@ Blocks:
   ``temperature_bias`` → ``bT`` [3] (output/°C); ``time_drift`` → ``bt`` [3] (output/s);
   ``misalignment`` → ``gamma`` [6] (rad); ``lever_arm`` → ``dr`` [3] (m).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,8 +36,18 @@ EFFECTS = {
     "misalignment": ("gamma",),
     "lever_arm": ("dr",),
 }
-SHAPES = {"K": (3, 3), "b": (3,), "S": (3,), "D": (3,), "C3": (3,), "A": (3,), "bT": (3,),
-          "bt": (3,), "gamma": (6,), "dr": (3,)}
+SHAPES = {
+    "K": (3, 3),
+    "b": (3,),
+    "S": (3,),
+    "D": (3,),
+    "C3": (3,),
+    "A": (3,),
+    "bT": (3,),
+    "bt": (3,),
+    "gamma": (6,),
+    "dr": (3,),
+}
 
 
 def centrifuge_input_g(speed_rad_s, radius_m: float, g_mps2: float):
@@ -193,7 +204,7 @@ def p2_norm_jacobian(y, params: dict) -> tuple[np.ndarray, np.ndarray, list[str]
     D = np.asarray(params.get("D", np.zeros(3)), dtype=float)
     K = K_matrix(params)
     G = np.linalg.solve((K * (1.0 + 2.0 * D * f)[:, None, :]).transpose(0, 2, 1), u_hat[:, :, None])[:, :, 0]
-    u = f + D * f * f                                   # input terms
+    u = f + D * f * f  # input terms
     S = np.asarray(params["S"], dtype=float)
     phi = phi_matrix(params["gamma"]) if "gamma" in params else np.eye(3)
     cols = [-G * (u @ phi.T), -G, -(G @ K) * f * f]

@@ -14,6 +14,7 @@ factor; the model works in rad/s]::
   ``ω = C_b_n ω_ie^n`` (:func:`earth_rate_body`); the mode-B baseline includes it, and
   diagnosis names it when a plain constant-bias model was fitted to multi-position data.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -82,6 +83,7 @@ def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict
 
 # ----------------------------------------------------------------- integration (rotations)
 
+
 def rotvec_matrices(phi) -> np.ndarray:
     """``exp([φ]×)`` for rotation vectors (..., 3) → (..., 3, 3) (Rodrigues, exact)."""
     phi = np.asarray(phi, dtype=float)
@@ -109,9 +111,14 @@ def right_jacobian(phi) -> np.ndarray:
 def skew(v: np.ndarray) -> np.ndarray:
     """``[v]×`` for vectors (..., 3) → (..., 3, 3)."""
     z = np.zeros(v.shape[:-1])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
-                     np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+    return np.stack(
+        [
+            np.stack([z, -v[..., 2], v[..., 1]], -1),
+            np.stack([v[..., 2], z, -v[..., 0]], -1),
+            np.stack([-v[..., 1], v[..., 0], z], -1),
+        ],
+        -2,
+    )
 
 
 def integrate_rates(omega_rad_s, t_s, *, with_jacobian: bool = False):
@@ -132,9 +139,9 @@ def integrate_rates(omega_rad_s, t_s, *, with_jacobian: bool = False):
         w, t = w[None], t[None]
     dt = np.diff(t, axis=1)[..., None]
     phi = 0.5 * (w[:, 1:] + w[:, :-1]) * dt
-    S = rotvec_matrices(phi)                      # (m, n-1, 3, 3)
+    S = rotvec_matrices(phi)  # (m, n-1, 3, 3)
     m, n1 = phi.shape[:2]
-    P = np.empty_like(S)                          # suffix products after step j
+    P = np.empty_like(S)  # suffix products after step j
     acc = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()
     for j in range(n1 - 1, -1, -1):
         P[:, j] = acc

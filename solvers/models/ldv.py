@@ -13,6 +13,7 @@ form is ``X_j = (1 + δK_j) u_j``; block ``X`` [3x3] holds the three beams as ro
   ``cond.omega_body_rad_s``); ``offset`` → ``o`` [3] m/s; ``temperature_bias`` → ``bT``
   [3]; ``time_drift`` → ``bt`` [3] m/s per s.
 """
+
 from __future__ import annotations
 
 import numpy as np

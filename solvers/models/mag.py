@@ -17,6 +17,7 @@ and the calibration of source 002 is its inverse ``m = W (y − h)`` (baseline).
   in the hard iron when a current switches on; ``temperature_bias`` → ``bT`` [3];
   ``time_drift`` → ``bt`` [3] raw/s.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,7 @@ EFFECTS = {
     "temperature_bias": ("bT",),
     "time_drift": ("bt",),
 }
-SHAPES = {"W": (3, 3), "h": (3,), "rho": (3,), "field_scale": (), "dh": (3,), "t_on_s": (),
-          "bT": (3,), "bt": (3,)}
+SHAPES = {"W": (3, 3), "h": (3,), "rho": (3,), "field_scale": (), "dh": (3,), "t_on_s": (), "bT": (3,), "bt": (3,)}
 
 
 def hard_iron(params: dict, cond: Conditions | None, n: int) -> np.ndarray:
@@ -68,8 +68,7 @@ def inverse(y, params: dict, cond: Conditions | None = None) -> np.ndarray:
     return m
 
 
-def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict,
-                  duration_s: float = 60.0) -> dict:
+def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict, duration_s: float = 60.0) -> dict:
     """Effect blocks of magnitude ``size``: mag_accel_misalignment rad; field_anomaly
     relative change of the field magnitude; time_varying_hard_iron raw units (step at a
     random time in the middle half of the capture); temperature_bias raw/°C;
@@ -81,8 +80,7 @@ def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict
         return {"field_scale": np.array(1.0 + size * rng.choice([-1.0, 1.0]))}
     if name == "time_varying_hard_iron":
         v = rng.normal(size=3)
-        return {"dh": size * v / np.linalg.norm(v),
-                "t_on_s": np.array(rng.uniform(0.25, 0.75) * duration_s)}
+        return {"dh": size * v / np.linalg.norm(v), "t_on_s": np.array(rng.uniform(0.25, 0.75) * duration_s)}
     if name == "temperature_bias":
         return {"bT": size * random_signs(rng, 3)}
     if name == "time_drift":

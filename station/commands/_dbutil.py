@@ -1,4 +1,5 @@
 """Shared plumbing of the database commands: open the store, map its errors to exit 2."""
+
 from __future__ import annotations
 
 import argparse
@@ -23,8 +24,12 @@ def require_existing(path: str) -> None:
     if path == ":memory:" or path.startswith("file:"):
         return
     if not os.path.exists(path):
-        raise InputError(path, None, "no station database here (mistyped --db or $STATION_DB?); "
-                         "`station devices add ID` or `station calibrate FILE --save` creates one")
+        raise InputError(
+            path,
+            None,
+            "no station database here (mistyped --db or $STATION_DB?); "
+            "`station devices add ID` or `station calibrate FILE --save` creates one",
+        )
     if os.path.isdir(path):
         raise InputError(path, None, "is a directory, not a station database")
 

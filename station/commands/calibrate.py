@@ -9,36 +9,62 @@ checks) and the exit status says what happened:
     2  bad input, or the capture is already saved (nothing saved)
     3  saved as rejected (--reject REASON): kept in the history, never the reference
 """
+
 from __future__ import annotations
 
 import argparse
 
 
-
 def register(sub: argparse._SubParsersAction) -> None:
     from station.importers.options import add_arguments
 
-    p = sub.add_parser("calibrate", help="calibrate a capture file (the procedure named in its metadata)",
-                       description="Compute the calibration the capture's procedure asks for and print it.")
-    p.add_argument("file", help="capture file (station-capture CSV), or a log: .ulg, .bin, .tlog, ROS bag/MCAP, EuRoC/Kalibr CSV")
+    p = sub.add_parser(
+        "calibrate",
+        help="calibrate a capture file (the procedure named in its metadata)",
+        description="Compute the calibration the capture's procedure asks for and print it.",
+    )
+    p.add_argument(
+        "file", help="capture file (station-capture CSV), or a log: .ulg, .bin, .tlog, ROS bag/MCAP, EuRoC/Kalibr CSV"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object (calibrate.md)")
-    p.add_argument("--method", default=None, help="estimator, where a procedure offers several "
-                   "(accel-tabletop: norm | upper-triangular | six-position | step8; accel-centrifuge: exact | "
-                   "exact-gamma | paper | paper-3rd, each also -all; compass: rls | batch | ellipsoid; "
-                   "gyro-drift: reference | static (mode A | B); ldv: force)")
+    p.add_argument(
+        "--method",
+        default=None,
+        help="estimator, where a procedure offers several "
+        "(accel-tabletop: norm | upper-triangular | six-position | step8; accel-centrifuge: exact | "
+        "exact-gamma | paper | paper-3rd, each also -all; compass: rls | batch | ellipsoid; "
+        "gyro-drift: reference | static (mode A | B); ldv: force)",
+    )
     p.add_argument("--device", default=None, help="device id (default: the capture's 'device')")
     p.add_argument("--save", action="store_true", help="store capture and result in the station database")
     p.add_argument("--operator", default=None, help="operator's name, stored with --save")
     decide = p.add_mutually_exclusive_group()
-    decide.add_argument("--reject", default=None, metavar="REASON",
-                        help="with --save: store the result as rejected, with this reason (exit 3)")
-    decide.add_argument("--override", default=None, metavar="NOTE",
-                        help="with --save: accept a result that fails its tolerances, limits or fit checks, "
-                             "with this note saying why (exit 0)")
-    p.add_argument("--accuracy", type=float, default=None, metavar="DEG_H",
-                   help="gyro-drift: the 1-sigma drift accuracy asked, °/h (sets metadata accuracy_deg_h)")
-    p.add_argument("--reference", default=None, metavar="FILE",
-                   help="ldv: the reference velocity stream as a separate capture (sets reference_file)")
+    decide.add_argument(
+        "--reject",
+        default=None,
+        metavar="REASON",
+        help="with --save: store the result as rejected, with this reason (exit 3)",
+    )
+    decide.add_argument(
+        "--override",
+        default=None,
+        metavar="NOTE",
+        help="with --save: accept a result that fails its tolerances, limits or fit checks, "
+        "with this note saying why (exit 0)",
+    )
+    p.add_argument(
+        "--accuracy",
+        type=float,
+        default=None,
+        metavar="DEG_H",
+        help="gyro-drift: the 1-sigma drift accuracy asked, °/h (sets metadata accuracy_deg_h)",
+    )
+    p.add_argument(
+        "--reference",
+        default=None,
+        metavar="FILE",
+        help="ldv: the reference velocity stream as a separate capture (sets reference_file)",
+    )
     add_arguments(p)
     p.set_defaults(func=run)
 
@@ -132,18 +158,32 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
         decision, note = None, ""
     else:
         decision, note = "accepted", ""
-    review = {"verdict": assessment.verdict, "reasons": list(assessment.reasons), "decision": decision,
-              "note": note.strip(), "previous_calibration_id": previous["id"] if previous else None}
+    review = {
+        "verdict": assessment.verdict,
+        "reasons": list(assessment.reasons),
+        "decision": decision,
+        "note": note.strip(),
+        "previous_calibration_id": previous["id"] if previous else None,
+    }
     result["review"] = review
     if decision is None:
-        print(f"station: FAIL, not saved ({'; '.join(assessment.reasons)}); --reject REASON stores it as "
-              "rejected, --override NOTE accepts it", file=sys.stderr)
+        print(
+            f"station: FAIL, not saved ({'; '.join(assessment.reasons)}); --reject REASON stores it as "
+            "rejected, --override NOTE accepts it",
+            file=sys.stderr,
+        )
         return 1
     stored = dict(review_record(assessment, decision, note), previous_calibration_id=review["previous_calibration_id"])
     try:
-        result["calibration_id"] = save_result(path, capture, {k: v for k, v in result.items() if k != "review"},
-                                               device_id=args.device, operator=args.operator,
-                                               accepted=decision != "rejected", review=stored)
+        result["calibration_id"] = save_result(
+            path,
+            capture,
+            {k: v for k, v in result.items() if k != "review"},
+            device_id=args.device,
+            operator=args.operator,
+            accepted=decision != "rejected",
+            review=stored,
+        )
     except DuplicateCapture as exc:
         raise InputError(args.file, None, str(exc)) from None
     except (sqlite3.Error, OSError) as exc:

@@ -2,6 +2,7 @@
 P4 static or with a reference IMU, P5 with --procedure), the scripted operator following
 the prompts, short averaging times, the result saved (in the TUI, or with --headless as
 plain lines for P1, P3 and P5)."""
+
 from __future__ import annotations
 
 import argparse
@@ -9,19 +10,25 @@ import sys
 
 from station.procedures import registry
 
-
 DEMOS = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "gyro-reference", "ldv")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="watch a whole calibration (P1 by default, any of P1-P5) on the simulated device",
-                       description="The TUI on the simulated device with a scripted operator who follows "
-                       "the prompts; short averaging times; the result is saved to the database.")
+    p = sub.add_parser(
+        "demo",
+        help="watch a whole calibration (P1 by default, any of P1-P5) on the simulated device",
+        description="The TUI on the simulated device with a scripted operator who follows "
+        "the prompts; short averaging times; the result is saved to the database.",
+    )
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
-    p.add_argument("--procedure", choices=DEMOS, default=registry.DEFAULT,
-                   help="P1 (default), P2 on the centrifuge (60 rows: try --speed 10), the P3 compass sweep, "
-                   "P4 on a static base or with a reference IMU (180 s: try --speed 6), P5 LDV on a vehicle "
-                   "(about 2 min: try --speed 6)")
+    p.add_argument(
+        "--procedure",
+        choices=DEMOS,
+        default=registry.DEFAULT,
+        help="P1 (default), P2 on the centrifuge (60 rows: try --speed 10), the P3 compass sweep, "
+        "P4 on a static base or with a reference IMU (180 s: try --speed 6), P5 LDV on a vehicle "
+        "(about 2 min: try --speed 6)",
+    )
     p.add_argument("--average-s", type=float, default=3.0, help="averaging time per position (default 3 s)")
     p.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second (default 1)")
     p.add_argument("--headless", action="store_true", help="no screen: run the same procedure, print lines")
@@ -41,15 +48,23 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     if not (sys.stdin.isatty() and sys.stdout.isatty()):  # (without one Textual spins a core)
-        raise InputError(None, None, "the demo on screen needs a terminal (stdin and stdout are not one); "
-                         "without one: station demo --headless")
+        raise InputError(
+            None,
+            None,
+            "the demo on screen needs a terminal (stdin and stdout are not one); without one: station demo --headless",
+        )
     from station.app import make_app
     from station.sources import SimSource
 
     device = SimSource(seed=args.seed, speed=args.speed, procedure=args.procedure)
     average_s = max(args.average_s, 180.0) if args.procedure in ("gyro-drift", "gyro-reference") else args.average_s
-    app = make_app(None if args.no_save else db_path(args), device=device, demo=True, average_s=average_s,
-                   exit_when_saved=args.exit_when_saved)
+    app = make_app(
+        None if args.no_save else db_path(args),
+        device=device,
+        demo=True,
+        average_s=average_s,
+        exit_when_saved=args.exit_when_saved,
+    )
     app.session.extra["compass_min_s"] = 30.0
     app.run()
     return 0
@@ -71,8 +86,14 @@ def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int
 
     now = [0.0]
     src = SimSource(seed=args.seed, speed=1.0, clock=lambda: now[0]).start()
-    guide = P1Guide(sample_rate_hz=src.rate_hz, accel_unit=src.units["accel_unit"], device_id=src.device_id,
-                    config=GuideConfig(average_s=args.average_s, settle_s=1.0), nominal=src.nominal, site=src.site)
+    guide = P1Guide(
+        sample_rate_hz=src.rate_hz,
+        accel_unit=src.units["accel_unit"],
+        device_id=src.device_id,
+        config=GuideConfig(average_s=args.average_s, settle_s=1.0),
+        nominal=src.nominal,
+        site=src.site,
+    )
     operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=6.0)
     last_phase = None
     last_capture_t = 0.0
@@ -107,8 +128,13 @@ def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0
 
     now = [0.0]
     src = SimSource(seed=args.seed, clock=lambda: now[0], procedure="compass").start()
-    guide = CompassGuide(sample_rate_hz=src.rate_hz, units=src.units, device_id=src.device_id, site=src.site,
-                         config=CompassConfig(min_s=30.0))
+    guide = CompassGuide(
+        sample_rate_hz=src.rate_hz,
+        units=src.units,
+        device_id=src.device_id,
+        site=src.site,
+        config=CompassConfig(min_s=30.0),
+    )
     operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
     shown = -1
     while guide.phase == "sweep" and now[0] < max_device_s:
@@ -144,8 +170,13 @@ def headless_ldv(args, db: str | None, out=None, max_device_s: float = 900.0) ->
         if b is None:
             continue
         e = b.extra
-        st = guide.update(b.t_s, np.column_stack([e["vl1"], e["vl2"], e["vl3"]]),
-                          np.column_stack([e["vx"], e["vy"], e["vz"]]), b.gyro, b.temp_c)
+        st = guide.update(
+            b.t_s,
+            np.column_stack([e["vl1"], e["vl2"], e["vl3"]]),
+            np.column_stack([e["vx"], e["vy"], e["vz"]]),
+            b.gyro,
+            b.temp_c,
+        )
         said = driver.step(guide, st.t_s)
         if said:
             print(f"{st.t_s:7.1f} s  driver: {said}", file=out)
@@ -170,7 +201,13 @@ def _calibrate_and_save(guide, device_id: str, db: str | None, out) -> int:
         if assessment.failed:  # the scripted operator never decides for a person
             print("FAIL, not saved: " + "; ".join(assessment.reasons), file=out)
             return 1
-        cal_id = save_result(db, capture, result, device_id=device_id,
-                             review=review_record(assessment, "accepted"), time=getattr(guide, "started", None))
+        cal_id = save_result(
+            db,
+            capture,
+            result,
+            device_id=device_id,
+            review=review_record(assessment, "accepted"),
+            time=getattr(guide, "started", None),
+        )
         print(f"saved as calibration #{cal_id} in {db}", file=out)
     return 0

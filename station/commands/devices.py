@@ -1,4 +1,5 @@
 """`station devices add|list|show`: the devices the station knows."""
+
 from __future__ import annotations
 
 import argparse
@@ -19,16 +20,28 @@ def register(subparsers) -> None:
     add.add_argument("--model", help="device model")
     add.add_argument("--interval-days", type=float, help="recalibration interval in days")
     add.add_argument("--notes", help="free text")
-    add.add_argument("--kind", action="append", dest="kinds", metavar="KIND", choices=("accel", "gyro", "mag", "ldv"),
-                     help="sensor kind (accel, gyro, mag, ldv); repeatable")
     add.add_argument(
-        "--tolerance", action="append", default=[], metavar="NAME=VALUE",
+        "--kind",
+        action="append",
+        dest="kinds",
+        metavar="KIND",
+        choices=("accel", "gyro", "mag", "ldv"),
+        help="sensor kind (accel, gyro, mag, ldv); repeatable",
+    )
+    add.add_argument(
+        "--tolerance",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
         help="largest acceptable change of a parameter (B[0]) or block (B) from its calibrated value; repeatable",
     )
     add.add_argument(
-        "--limit", action="append", default=[], metavar="NAME=LOW:HIGH",
+        "--limit",
+        action="append",
+        default=[],
+        metavar="NAME=LOW:HIGH",
         help="absolute limits of a parameter (M[0][0]=0.98:1.02) or block (B=-0.5:0.5), in its units; "
-             "leave one end empty for none (S=0.9:); repeatable",
+        "leave one end empty for none (S=0.9:); repeatable",
     )
     add.set_defaults(func=_add)
 
@@ -71,11 +84,18 @@ def _limits(items: list[str]) -> dict | None:
             pair = [float(low) if low.strip() else None, float(high) if high.strip() else None]
         except ValueError:
             pair = None
-        if (not sep or not colon or not name or pair is None or pair == [None, None]
-                or any(x is not None and not math.isfinite(x) for x in pair)
-                or (None not in pair and pair[0] > pair[1])):
-            raise InputError(None, None, f"--limit {item!r}: expected NAME=LOW:HIGH with LOW <= HIGH "
-                                         "(one end may be empty)")
+        if (
+            not sep
+            or not colon
+            or not name
+            or pair is None
+            or pair == [None, None]
+            or any(x is not None and not math.isfinite(x) for x in pair)
+            or (None not in pair and pair[0] > pair[1])
+        ):
+            raise InputError(
+                None, None, f"--limit {item!r}: expected NAME=LOW:HIGH with LOW <= HIGH (one end may be empty)"
+            )
         out[name] = pair
     return out
 
@@ -109,11 +129,17 @@ def _list(args: argparse.Namespace) -> int:
         return 0
     rows = [("ID", "MODEL", "KINDS", "INTERVAL_D", "CALIBRATIONS", "LAST_CALIBRATED", "NOTES")]
     for d in devices:
-        rows.append((
-            safe(d["id"]), safe(d["model"] or "-"), safe(",".join(d["sensor_kinds"]) or "-"),
-            fmt_num(d["interval_days"]), str(d["n_calibrations"]), safe(d["last_calibrated"] or "-"),
-            safe(d["notes"] or ""),
-        ))
+        rows.append(
+            (
+                safe(d["id"]),
+                safe(d["model"] or "-"),
+                safe(",".join(d["sensor_kinds"]) or "-"),
+                fmt_num(d["interval_days"]),
+                str(d["n_calibrations"]),
+                safe(d["last_calibrated"] or "-"),
+                safe(d["notes"] or ""),
+            )
+        )
     widths = [max(len(r[i]) for r in rows) if i < 6 else 0 for i in range(7)]
     for r in rows:
         sys.stdout.write("  ".join(c.ljust(w) if w else c for c, w in zip(r, widths)).rstrip(" ") + "\n")
@@ -140,8 +166,14 @@ def _show(args: argparse.Namespace) -> int:
         f"sensor kinds: {safe(', '.join(device['sensor_kinds']) or '-')}",
         f"interval: {fmt_num(device['interval_days'])} days" if device["interval_days"] else "interval: -",
         "tolerances: " + (", ".join(f"{safe(k)}={fmt_num(v)}" for k, v in device["tolerances"].items()) or "-"),
-        "limits: " + (", ".join(f"{safe(k)}={'' if lo is None else format(lo, 'g')}:{'' if hi is None else format(hi, 'g')}"
-                                for k, (lo, hi) in device.get("limits", {}).items()) or "-"),
+        "limits: "
+        + (
+            ", ".join(
+                f"{safe(k)}={'' if lo is None else format(lo, 'g')}:{'' if hi is None else format(hi, 'g')}"
+                for k, (lo, hi) in device.get("limits", {}).items()
+            )
+            or "-"
+        ),
         f"created: {safe(device['created'])}",
         f"calibrations: {len(history)}",
     ]

@@ -1,4 +1,5 @@
 """`station drift ID [--param NAME] [--json]`: each coefficient's trend over time."""
+
 from __future__ import annotations
 
 import argparse
@@ -6,8 +7,8 @@ import os
 import sys
 
 from station.commands._dbutil import fmt_num, open_store, print_json, require_device
-from station.procedures import registry
 from station.errors import InputError
+from station.procedures import registry
 from station.textsafe import safe
 
 MAX_PLOTS = 4
@@ -34,9 +35,8 @@ def _significance(t: dict) -> float:
 def _plot(trends: list[dict]) -> str:
     import plotext as plt
 
-    from station.timeaxis import time_axis
-
     from station.term import color_enabled
+    from station.timeaxis import time_axis
 
     tty = sys.stdout.isatty()
     color = color_enabled(sys.stdout)
@@ -61,8 +61,10 @@ def _plot(trends: list[dict]) -> str:
             ends = [xs[0], xs[-1]]
             per_day = t["rate_per_year"] / 365.25  # x is in days
             plt.plot(ends, [y_last + per_day * (x - xs[-1]) for x in ends], label="trend")
-        rate = "" if t["rate_per_year"] is None else (
-            f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} /year"
+        rate = (
+            ""
+            if t["rate_per_year"] is None
+            else (f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} /year")
         )
         plt.title(safe(f"{t['procedure']} {t['param']}{rate}"))
         plt.xlim(*axis["xlim"])
@@ -89,11 +91,18 @@ def run(args: argparse.Namespace) -> int:
     header = ("PROCEDURE", "PARAM", "N", "IN_USE", "RATE/YEAR", "±SIGMA", "TOLERANCE", "LEAVES_TOLERANCE")
     rows = [header]
     for t in trends:
-        rows.append((
-            safe(t["procedure"]), safe(t["param"]), str(t["n"]), fmt_num(t["value_in_use"]),
-            fmt_num(t["rate_per_year"], 3), fmt_num(t["rate_sigma_per_year"], 2),
-            fmt_num(t["tolerance"]), safe((t["leaves_tolerance"] or "-")[:10]),
-        ))
+        rows.append(
+            (
+                safe(t["procedure"]),
+                safe(t["param"]),
+                str(t["n"]),
+                fmt_num(t["value_in_use"]),
+                fmt_num(t["rate_per_year"], 3),
+                fmt_num(t["rate_sigma_per_year"], 2),
+                fmt_num(t["tolerance"]),
+                safe((t["leaves_tolerance"] or "-")[:10]),
+            )
+        )
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
     out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     sys.stdout.write("\n".join(out) + "\n")
@@ -104,7 +113,9 @@ def run(args: argparse.Namespace) -> int:
         else:
             chosen = sorted(plottable, key=_significance, reverse=True)[:MAX_PLOTS]
         if chosen:
-            note = "" if args.param else f" (the {len(chosen)} steepest relative to their sigma; --param NAME for others)"
+            note = (
+                "" if args.param else f" (the {len(chosen)} steepest relative to their sigma; --param NAME for others)"
+            )
             # the plot's own colour codes (a terminal only) pass; its titles were made safe above
             write = getattr(sys.stdout, "write_trusted", sys.stdout.write)
             write(f"\nplot{note}:\n" + _plot(chosen) + "\n")

@@ -3,6 +3,7 @@
 For cron and systemd timers: exit status 0 = nothing due, 1 = something due or
 overdue (listed on stdout), 2 = bad input.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,7 +16,8 @@ from station.textsafe import safe
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "due", help="devices due for recalibration (exit 1 when any is)",
+        "due",
+        help="devices due for recalibration (exit 1 when any is)",
         description="Devices due or overdue for recalibration: by their interval since the last accepted "
         "calibration, and earlier when a coefficient's drift trend leaves its tolerance first. "
         "Exit status 1 when anything is due, 0 when nothing is.",

@@ -1,4 +1,5 @@
 """`station export CALIBRATION_ID --format json|ardupilot|px4|c-header`."""
+
 from __future__ import annotations
 
 import argparse
@@ -9,12 +10,19 @@ import tempfile
 from station.commands._dbutil import open_store
 from station.errors import InputError
 
-FORMATS = ("json", "ardupilot", "px4", "qgc", "c-header")  # = station.firmware_export.FORMATS (not imported: start-up time)
+FORMATS = (
+    "json",
+    "ardupilot",
+    "px4",
+    "qgc",
+    "c-header",
+)  # = station.firmware_export.FORMATS (not imported: start-up time)
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "export", help="a stored calibration as JSON, ArduPilot or PX4 parameters, or a C header",
+        "export",
+        help="a stored calibration as JSON, ArduPilot or PX4 parameters, or a C header",
         description="ardupilot: a .param file (Mission Planner, MAVProxy); px4: 'param set' lines; qgc: a "
         "QGroundControl .params file (PX4); c-header: float constants. When the capture's data were already "
         "corrected by the board, the new absolute parameters are composed with the parameters in use (read from "
@@ -23,10 +31,18 @@ def register(subparsers) -> None:
     p.add_argument("calibration_id", metavar="CALIBRATION_ID", type=int)
     p.add_argument("--format", required=True, choices=FORMATS)
     p.add_argument("--instance", type=int, help="firmware sensor slot (ArduPilot 1-3, default 1; PX4 0-3, default 0)")
-    p.add_argument("--device-id", type=int, metavar="ID",
-                   help="PX4: the sensor's device id for CAL_*n_ID when the capture does not hold it")
-    p.add_argument("--vehicle", default="1,1", metavar="SYSID,COMPID",
-                   help="qgc: the vehicle and component id columns (default 1,1)")
+    p.add_argument(
+        "--device-id",
+        type=int,
+        metavar="ID",
+        help="PX4: the sensor's device id for CAL_*n_ID when the capture does not hold it",
+    )
+    p.add_argument(
+        "--vehicle",
+        default="1,1",
+        metavar="SYSID,COMPID",
+        help="qgc: the vehicle and component id columns (default 1,1)",
+    )
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE (atomically) instead of stdout")
     p.set_defaults(func=run)
 

@@ -1,4 +1,5 @@
 """`station export-capture CAPTURE_ID [-o FILE]` (or `--calibration ID`): a stored capture as a capture file."""
+
 from __future__ import annotations
 
 import argparse
@@ -10,10 +11,12 @@ from station.errors import InputError
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "export-capture", help="a stored capture back as a capture file (the station's CSV format)",
+        "export-capture",
+        help="a stored capture back as a capture file (the station's CSV format)",
         description="Write a capture stored in the database as a capture file, exactly as it was saved "
         "(same metadata, columns and values). Give the capture's id, or --calibration ID for the capture a "
-        "calibration was computed from.")
+        "calibration was computed from.",
+    )
     p.add_argument("capture_id", metavar="CAPTURE_ID", type=int, nargs="?", help="capture id")
     p.add_argument("--calibration", metavar="ID", type=int, help="export the capture of this calibration")
     p.add_argument("-o", "--output", metavar="FILE", help="write FILE (atomically) instead of stdout")

@@ -1,4 +1,5 @@
 """`station history ID [--procedure P] [--json]`: a device's calibrations, oldest first."""
+
 from __future__ import annotations
 
 import argparse
@@ -30,7 +31,7 @@ def _param_lines(params: dict, uncertainty: dict) -> list[str]:
         sig = flatten({key: (uncertainty or {}).get(key)})
         parts = []
         for name, v in vals.items():
-            label = name[len(key):]
+            label = name[len(key) :]
             s = sig.get(name)
             text = fmt_num(v) + (f"±{fmt_num(s, 2)}" if s is not None else "")
             parts.append(f"{safe(label)}={text}" if label.startswith(".") else text)

@@ -28,8 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--device",
         default=None,
-        help="the capture's device id (default: from the log where it names "
-        "the board and sensor)",
+        help="the capture's device id (default: from the log where it names the board and sensor)",
     )
     add_arguments(p, for_import=True)
     p.set_defaults(func=run)
@@ -44,11 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from station.importers.load import import_file
     from station.importers.options import options_from_args
 
-    if (
-        os.path.exists(args.out)
-        and os.path.exists(args.file)
-        and os.path.samefile(args.out, args.file)
-    ):
+    if os.path.exists(args.out) and os.path.exists(args.file) and os.path.samefile(args.out, args.file):
         raise InputError(args.out, None, "--out is the input file: choose another name")
     capture, warnings = import_file(args.file, options_from_args(args))
     write_capture(args.out, capture)
@@ -57,9 +52,7 @@ def run(args: argparse.Namespace) -> int:
     t = capture.columns["t"]
     cols = [c for c in capture.columns if c != "t"]
     params = sum(1 for k in capture.meta if k.startswith("param."))
-    units = ", ".join(
-        f"{k[:-5]} {v}" for k, v in capture.meta.items() if k.endswith("_unit")
-    )
+    units = ", ".join(f"{k[:-5]} {v}" for k, v in capture.meta.items() if k.endswith("_unit"))
     corrected = capture.meta.get("corrected")
     print(
         f"{args.out}: {capture.procedure}, {capture.n_rows} rows, {float(t[-1]):.6g} s, "

@@ -1,4 +1,5 @@
 """`station inspect FILE [--json]`: validate a capture file and summarise it."""
+
 from __future__ import annotations
 
 import argparse
@@ -6,14 +7,16 @@ import json
 import math
 
 
-
 def register(sub: argparse._SubParsersAction) -> None:
     from station.importers.options import add_arguments
 
-    p = sub.add_parser("inspect", help="validate a capture file and print a summary",
-                       description="Read a capture file with every check the station applies and print "
-                       "its procedure, device, rows, duration, rate, columns (with units) and metadata. "
-                       "Bad input: one line 'file:line: what is wrong' and exit status 2.")
+    p = sub.add_parser(
+        "inspect",
+        help="validate a capture file and print a summary",
+        description="Read a capture file with every check the station applies and print "
+        "its procedure, device, rows, duration, rate, columns (with units) and metadata. "
+        "Bad input: one line 'file:line: what is wrong' and exit status 2.",
+    )
     p.add_argument("file", help="capture file (station-capture CSV)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_arguments(p)  # a log or EuRoC file: the capture `station import` would write
@@ -34,7 +37,11 @@ def summary(capture) -> dict:
         "device": capture.meta.get("device") or None,
         "kind": "time series" if capture.is_time_series else "table of averages",
         "rows": capture.n_rows,
-        "t_start_s": None, "t_end_s": None, "duration_s": None, "rate_hz": None, "median_step_s": None,
+        "t_start_s": None,
+        "t_end_s": None,
+        "duration_s": None,
+        "rate_hz": None,
+        "median_step_s": None,
         "sample_rate_hz": capture.float_meta("sample_rate_hz"),
         "positions": None,
     }
@@ -54,10 +61,12 @@ def summary(capture) -> dict:
             entry["missing"] = int(sum(1 for v in arr.tolist() if not v))
         else:
             good = arr[~np.isnan(arr)]
-            entry.update(missing=int(len(arr) - len(good)),
-                         min=_num(good.min()) if len(good) else None,
-                         max=_num(good.max()) if len(good) else None,
-                         mean=_num(good.mean()) if len(good) else None)
+            entry.update(
+                missing=int(len(arr) - len(good)),
+                min=_num(good.min()) if len(good) else None,
+                max=_num(good.max()) if len(good) else None,
+                mean=_num(good.mean()) if len(good) else None,
+            )
         columns.append(entry)
     out["columns"] = columns
     out["metadata"] = dict(capture.meta)
@@ -78,8 +87,11 @@ def format_text(s: dict) -> str:
     ]
     if s["duration_s"] is not None:
         lines.append(f"duration:   {_g(s['duration_s'])} s (t from {_g(s['t_start_s'])} to {_g(s['t_end_s'])} s)")
-        rate = (f"{_g(s['rate_hz'])} Hz (rows per second over the duration; median step {_g(s['median_step_s'])} s)"
-                if s["rate_hz"] else "–")
+        rate = (
+            f"{_g(s['rate_hz'])} Hz (rows per second over the duration; median step {_g(s['median_step_s'])} s)"
+            if s["rate_hz"]
+            else "–"
+        )
         if s["sample_rate_hz"] is not None:
             rate += f"; metadata says {_g(s['sample_rate_hz'])} Hz"
         lines.append(f"rate:       {rate}")

@@ -21,26 +21,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         "with its 1-sigma; a terminal plot. --format kalibr writes Kalibr's imu.yaml (rad/s/sqrt(Hz), "
         "rad/s^2/sqrt(Hz), m/s^2/sqrt(Hz), m/s^3/sqrt(Hz), update_rate).",
     )
-    p.add_argument(
-        "file", help="capture file: a still recording with gx gy gz and/or ax ay az"
-    )
+    p.add_argument("file", help="capture file: a still recording with gx gy gz and/or ax ay az")
     p.add_argument(
         "--format",
         choices=("text", "kalibr"),
         default="text",
         help="kalibr: write imu.yaml (to --out, default imu.yaml) and print the figures",
     )
-    p.add_argument(
-        "--out", metavar="FILE", help="where --format kalibr writes (default imu.yaml)"
-    )
+    p.add_argument("--out", metavar="FILE", help="where --format kalibr writes (default imu.yaml)")
     p.add_argument(
         "--rostopic",
         default="/imu0",
         help="the rostopic line of imu.yaml (default /imu0)",
     )
-    p.add_argument(
-        "--json", action="store_true", help="print one JSON object instead of the text"
-    )
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text")
     p.add_argument("--no-plot", action="store_true", help="no terminal plot")
     p.set_defaults(func=run)
 
@@ -59,9 +53,7 @@ def _write_atomic(path: str, text: str) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         if isinstance(exc, OSError):
-            raise InputError(
-                path, None, f"cannot write: {exc.strerror or exc}"
-            ) from None
+            raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
         raise
 
 
@@ -79,9 +71,7 @@ def _text(result: dict) -> str:
     deg = 180.0 / math.pi
     for kind, f in result["sensors"].items():
         if kind == "gyro":
-            out.append(
-                "gyro          noise density           bias instability         random walk"
-            )
+            out.append("gyro          noise density           bias instability         random walk")
             for i, a in enumerate("xyz"):
                 out.append(
                     f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} rad/s/√Hz ({_g(f.white[i] * deg * 60)} °/√h)"
@@ -89,9 +79,7 @@ def _text(result: dict) -> str:
                     f"  {_g(f.random_walk[i])} ± {_g(f.random_walk_sigma[i])} rad/s²/√Hz"
                 )
         else:
-            out.append(
-                "accelerometer noise density           bias instability         random walk"
-            )
+            out.append("accelerometer noise density           bias instability         random walk")
             for i, a in enumerate("xyz"):
                 out.append(
                     f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} m/s²/√Hz"
@@ -125,9 +113,7 @@ def _plot(result: dict) -> str:
         plt.yscale("log")
         for i, a in enumerate("xyz"):
             plt.plot(f.taus_s.tolist(), f.adev[:, i].tolist(), label=a, marker="dot")
-        plt.title(
-            f"{kind} Allan deviation [{'rad/s' if kind == 'gyro' else 'm/s²'}] against τ [s]"
-        )
+        plt.title(f"{kind} Allan deviation [{'rad/s' if kind == 'gyro' else 'm/s²'}] against τ [s]")
         text = plt.build()
         figs.append(text if color else plt.uncolorize(text))
     return "\n".join(figs) + "\n"

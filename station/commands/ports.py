@@ -1,4 +1,5 @@
 """`station ports`: the serial ports this machine has (serial.tools.list_ports)."""
+
 from __future__ import annotations
 
 import argparse
@@ -13,8 +14,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Pseudo-terminals (station sim-device) are not listed: use the path sim-device prints.",
     )
     p.add_argument("--links", action="store_true", help="also list symlinks such as /dev/serial/by-id/*")
-    p.add_argument("--json", action="store_true",
-                   help="a JSON list of {device, description, hwid} (an empty list when there is none)")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="a JSON list of {device, description, hwid} (an empty list when there is none)",
+    )
     p.set_defaults(func=run)
 
 
@@ -23,8 +27,13 @@ def run(args: argparse.Namespace) -> int:
 
     ports = list_ports(include_links=args.links)
     if args.json:
-        print(json.dumps([{"device": p.device, "description": p.description, "hwid": p.hwid} for p in ports],
-                         indent=2, ensure_ascii=False))
+        print(
+            json.dumps(
+                [{"device": p.device, "description": p.description, "hwid": p.hwid} for p in ports],
+                indent=2,
+                ensure_ascii=False,
+            )
+        )
         return 0
     if not ports:
         print("no ports")

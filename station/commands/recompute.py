@@ -1,4 +1,5 @@
 """`station recompute CALIBRATION_ID`: re-run a stored capture with today's code, show what moved."""
+
 from __future__ import annotations
 
 import argparse
@@ -6,8 +7,8 @@ import json
 import sys
 
 from station.commands._dbutil import fmt_num, open_store, print_json
-from station.textsafe import safe
 from station.errors import UnsupportedError
+from station.textsafe import safe
 
 
 def register(subparsers) -> None:
@@ -58,10 +59,17 @@ def differences(stored: dict, new: dict) -> list[dict]:
         z = None
         if delta is not None and sigma is not None and sigma > 0:
             z = delta / sigma
-        rows.append({
-            "param": name, "stored": a, "stored_sigma": sigma, "recomputed": b,
-            "recomputed_sigma": new_s.get(name), "delta": delta, "delta_in_sigma": z,
-        })
+        rows.append(
+            {
+                "param": name,
+                "stored": a,
+                "stored_sigma": sigma,
+                "recomputed": b,
+                "recomputed_sigma": new_s.get(name),
+                "delta": delta,
+                "delta_in_sigma": z,
+            }
+        )
     return rows
 
 
@@ -86,8 +94,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         from db.params import clean_json
 
-        print_json({"calibration_id": cal["id"], "stored": cal["result"], "recomputed": clean_json(new),
-                    "differences": rows})
+        print_json(
+            {"calibration_id": cal["id"], "stored": cal["result"], "recomputed": clean_json(new), "differences": rows}
+        )
         return 0
     worst = max((abs(r["delta_in_sigma"]) for r in rows if r["delta_in_sigma"] is not None), default=None)
     out = [
@@ -96,8 +105,14 @@ def run(args: argparse.Namespace) -> int:
     ]
     header = ("PARAM", "STORED", "±SIGMA", "RECOMPUTED", "DELTA", "DELTA/SIGMA")
     table = [header] + [
-        (r["param"], fmt_num(r["stored"]), fmt_num(r["stored_sigma"], 2), fmt_num(r["recomputed"]),
-         fmt_num(r["delta"], 3), "-" if r["delta_in_sigma"] is None else f"{r['delta_in_sigma']:+.2f}")
+        (
+            r["param"],
+            fmt_num(r["stored"]),
+            fmt_num(r["stored_sigma"], 2),
+            fmt_num(r["recomputed"]),
+            fmt_num(r["delta"], 3),
+            "-" if r["delta_in_sigma"] is None else f"{r['delta_in_sigma']:+.2f}",
+        )
         for r in rows
     ]
     widths = [max(len(t[i]) for t in table) for i in range(len(header))]

@@ -1,4 +1,5 @@
 """`station record --port PORT --out FILE`: record a device into a capture, headless."""
+
 from __future__ import annotations
 
 import argparse
@@ -24,17 +25,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", help="device path or pyserial URL")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200; ignored by ptys and sockets)")
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
-    p.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: until interrupted)")
+    p.add_argument(
+        "--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: until interrupted)"
+    )
     p.add_argument("--out", help="capture file to write")
     p.add_argument("--procedure", choices=registry.names(), help="the procedure this capture is for (metadata)")
     p.add_argument("--meta", action="append", metavar="KEY=VALUE", help="extra metadata, e.g. latitude_deg=39.98")
-    p.add_argument("--mavlink-message", metavar="MSG[:ID]",
-                   help="MAVLink stream to record, e.g. HIGHRES_IMU, SCALED_IMU2, RAW_IMU:1 (default: first IMU message seen)")
-    p.add_argument("--mavlink-rate", type=float, default=200.0, metavar="HZ",
-                   help="ask the flight controller to stream at HZ (REQUEST_DATA_STREAM and MAV_CMD_SET_MESSAGE_INTERVAL; "
-                   "also reads AUTOPILOT_VERSION and the calibration parameters); 0: ask nothing (default 200)")
-    p.add_argument("--recover", metavar="FILE.partial",
-                   help="finish the .partial file a killed recording left (drops a cut last line) and exit")
+    p.add_argument(
+        "--mavlink-message",
+        metavar="MSG[:ID]",
+        help="MAVLink stream to record, e.g. HIGHRES_IMU, SCALED_IMU2, RAW_IMU:1 (default: first IMU message seen)",
+    )
+    p.add_argument(
+        "--mavlink-rate",
+        type=float,
+        default=200.0,
+        metavar="HZ",
+        help="ask the flight controller to stream at HZ (REQUEST_DATA_STREAM and MAV_CMD_SET_MESSAGE_INTERVAL; "
+        "also reads AUTOPILOT_VERSION and the calibration parameters); 0: ask nothing (default 200)",
+    )
+    p.add_argument(
+        "--recover",
+        metavar="FILE.partial",
+        help="finish the .partial file a killed recording left (drops a cut last line) and exit",
+    )
     p.set_defaults(func=run)
 
 
@@ -50,7 +64,7 @@ def _meta(items: list[str] | None) -> dict[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     from station.device.mavlink import parse_source
-    from station.device.record import recover_partial, record
+    from station.device.record import record, recover_partial
 
     if args.recover:
         path = recover_partial(args.recover, args.out)
@@ -81,10 +95,17 @@ def run(args: argparse.Namespace) -> int:
     old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         res = record(
-            args.port, args.out, baud=args.baud, protocol=args.protocol, seconds=args.seconds,
-            procedure=args.procedure, extra_meta=_meta(args.meta), mavlink_source=args.mavlink_message,
+            args.port,
+            args.out,
+            baud=args.baud,
+            protocol=args.protocol,
+            seconds=args.seconds,
+            procedure=args.procedure,
+            extra_meta=_meta(args.meta),
+            mavlink_source=args.mavlink_message,
             mavlink_rate_hz=args.mavlink_rate or None,
-            stop=stop, warn=lambda msg: print(f"station record: {msg}", file=sys.stderr),
+            stop=stop,
+            warn=lambda msg: print(f"station record: {msg}", file=sys.stderr),
         )
     finally:
         for s, h in old.items():

@@ -3,6 +3,7 @@
 Prints the pty's path (/dev/pts/N) as the first line of stdout, then streams the
 simulator's samples in real time until SIGINT/SIGTERM (exit 0) or `--seconds`.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -57,8 +58,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, "--hold must be positive")
     try:
         imu = LiveImu(
-            procedure=args.procedure, seed=args.seed, rate_hz=args.rate,
-            effects=_effects(args.effect), hold_s=args.hold,
+            procedure=args.procedure,
+            seed=args.seed,
+            rate_hz=args.rate,
+            effects=_effects(args.effect),
+            hold_s=args.hold,
         )
     except ValueError as exc:  # SimulationError: unknown effect for the procedure, ...
         raise InputError(None, None, str(exc).splitlines()[0]) from None

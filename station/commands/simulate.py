@@ -1,4 +1,5 @@
 """`station simulate --procedure NAME --out FILE [--seed N] [--effect NAME=VALUE ...] [--truth FILE.json]`."""
+
 from __future__ import annotations
 
 import argparse
@@ -35,22 +36,33 @@ def seed_arg(text: str) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("simulate", help="write a realistic simulated capture and its truth",
-                       description="Simulate a capture of any procedure with the station's forward models.")
+    p = sub.add_parser(
+        "simulate",
+        help="write a realistic simulated capture and its truth",
+        description="Simulate a capture of any procedure with the station's forward models.",
+    )
     p.add_argument("--procedure", required=True, choices=registry.names())
     p.add_argument("--out", required=True, help="capture file to write")
     p.add_argument("--seed", type=seed_arg, default=0)
-    p.add_argument("--effect", action="append", metavar="NAME=VALUE",
-                   help="switch on an effect of diagnose.md with a size (units: see docs/models.md)")
+    p.add_argument(
+        "--effect",
+        action="append",
+        metavar="NAME=VALUE",
+        help="switch on an effect of diagnose.md with a size (units: see docs/models.md)",
+    )
     p.add_argument("--truth", help="also write the truth (parameters, effects) as JSON here")
-    p.add_argument("--option", action="append", metavar="NAME=VALUE",
-                   help="simulator option, e.g. hold_s=5, averages=1, mode=reference, maneuver=straight")
+    p.add_argument(
+        "--option",
+        action="append",
+        metavar="NAME=VALUE",
+        help="simulator option, e.g. hold_s=5, averages=1, mode=reference, maneuver=straight",
+    )
     p.set_defaults(func=run)
 
 
 # What the command line can set, checked here so a bad value gets one line, not a traceback.
 _FLAGS = {"averages", "label_positions"}
-_COUNTS = {"extra_positions": 0, "n_orientations": 1}               # integer, at least this
+_COUNTS = {"extra_positions": 0, "n_orientations": 1}  # integer, at least this
 _CHOICES = {"mode": ("static", "reference"), "maneuver": ("varied", "straight"), "reference": ("body", "nav")}
 _POSITIVE = {"rate_hz", "hold_s", "duration_s", "radius_m", "g_mps2"}  # > 0; other numbers >= 0 unless angles
 _SIGNED = {"latitude_deg", "pitch_deg", "roll_deg", "table_tilt_deg"}  # any finite value
@@ -64,8 +76,16 @@ def _option_value(name: str, value):
         raise InputError(None, None, f"--option {name}: not settable from the command line")
     if name in _FLAGS:
         text = str(value).strip().lower()
-        flags = {"1": True, "1.0": True, "true": True, "yes": True, "0": False, "0.0": False, "false": False,
-                 "no": False}
+        flags = {
+            "1": True,
+            "1.0": True,
+            "true": True,
+            "yes": True,
+            "0": False,
+            "0.0": False,
+            "false": False,
+            "no": False,
+        }
         if text not in flags:
             raise InputError(None, None, f"--option {name}={value}: expected 0 or 1")
         return flags[text]
@@ -110,10 +130,10 @@ def _write_json(path: str, obj) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import math
+
     from solvers.simulate import SimulationError, simulate
     from station.capture import Capture, write_capture
-
-    import math
 
     effects = parse_assignments(args.effect, "--effect")
     for name, size in effects.items():
@@ -123,8 +143,12 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(None, None, f"--effect {name}: {size} is not a finite number")
     options = {k: _option_value(k, v) for k, v in parse_assignments(args.option, "--option").items()}
     if options.get("averages") and options.get("label_positions") is False:
-        raise InputError(None, None, "--option label_positions=0 applies to time series: a table of averages "
-                         "(averages=1) always names its positions")
+        raise InputError(
+            None,
+            None,
+            "--option label_positions=0 applies to time series: a table of averages "
+            "(averages=1) always names its positions",
+        )
     try:
         sim = simulate(args.procedure, seed=args.seed, effects=effects, **options)
     except (SimulationError, TypeError) as exc:
@@ -137,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
     if args.truth:
         _write_json(args.truth, sim.truth)
     n = len(next(iter(sim.columns.values())))
-    print(f"wrote {args.out}: {args.procedure}, {n} rows, device {sim.meta.get('device')}"
-          + (f", effects {effects}" if effects else ""))
+    print(
+        f"wrote {args.out}: {args.procedure}, {n} rows, device {sim.meta.get('device')}"
+        + (f", effects {effects}" if effects else "")
+    )
     return 0

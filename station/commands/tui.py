@@ -1,21 +1,30 @@
 """`station tui` (also `station` with no command): the operator console."""
+
 from __future__ import annotations
 
 import argparse
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("tui", help="operator console: guided calibration, results, history (the default)",
-                       description="The operator TUI. Starts on the Connect screen with the built-in "
-                       "simulated device selected; --port pre-selects a serial device.")
+    p = sub.add_parser(
+        "tui",
+        help="operator console: guided calibration, results, history (the default)",
+        description="The operator TUI. Starts on the Connect screen with the built-in "
+        "simulated device selected; --port pre-selects a serial device.",
+    )
     p.add_argument("--port", default=None, help="serial port or pyserial URL of the device")
     p.add_argument("--protocol", choices=("station", "mavlink"), default="station", help="wire protocol of --port")
     p.add_argument("--sim", action="store_true", help="connect to the built-in simulated device and start P1 at once")
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed (with --sim)")
-    p.add_argument("--speed", type=float, default=1.0,
-                   help="the built-in simulated device's seconds per wall second (default 1)")
-    p.add_argument("--average-s", type=float, default=None,
-                   help="averaging time per position in seconds (default 180; the source asks 3-5 minutes)")
+    p.add_argument(
+        "--speed", type=float, default=1.0, help="the built-in simulated device's seconds per wall second (default 1)"
+    )
+    p.add_argument(
+        "--average-s",
+        type=float,
+        default=None,
+        help="averaging time per position in seconds (default 180; the source asks 3-5 minutes)",
+    )
     p.add_argument("--device-id", default=None, help="serial number of the device under test")
     p.add_argument("--model", default="", help="model of the device under test")
     p.add_argument("--state-dir", default=None, help="folder of resume files (default: next to the database)")
@@ -36,8 +45,12 @@ def run(args: argparse.Namespace) -> int:
     if args.average_s is not None and not args.average_s > 0:
         raise InputError(None, None, f"--average-s must be positive, got {args.average_s:g}")
     if not (sys.stdin.isatty() and sys.stdout.isatty()):  # (without one Textual spins a core)
-        raise InputError(None, None, "the operator console needs a terminal (stdin and stdout are not one); "
-                         "for scripts: station demo --headless, station calibrate FILE")
+        raise InputError(
+            None,
+            None,
+            "the operator console needs a terminal (stdin and stdout are not one); "
+            "for scripts: station demo --headless, station calibrate FILE",
+        )
 
     device = None
     start = None
@@ -50,8 +63,15 @@ def run(args: argparse.Namespace) -> int:
 
         device = SimSource(seed=args.seed, speed=args.speed)
         start = "procedure"
-    app = make_app(db_path(args), device=device, average_s=args.average_s, device_id=args.device_id,
-                   model=args.model, state_dir=args.state_dir, start=start)
+    app = make_app(
+        db_path(args),
+        device=device,
+        average_s=args.average_s,
+        device_id=args.device_id,
+        model=args.model,
+        state_dir=args.state_dir,
+        start=start,
+    )
     app.session.extra["sim_speed"] = args.speed
     app.run()
     src = app.session.source

@@ -1,5 +1,6 @@
 """`station verify`: exit 1, naming the record, when a stored calibration, capture, device setting
 or schedule was changed or removed after it was written (`db.store.Store.verify`)."""
+
 from __future__ import annotations
 
 import argparse
@@ -16,8 +17,13 @@ def register(subparsers) -> None:
         "verify", help="check that no stored calibration was changed after it was written (exit 1 if one was)"
     )
     p.add_argument("--json", action="store_true", help="a JSON list of problems")
-    p.add_argument("--anchor", action="append", default=[], metavar="HASH",
-                   help="an anchor hash from an export or report: a problem unless the record still holds it")
+    p.add_argument(
+        "--anchor",
+        action="append",
+        default=[],
+        metavar="HASH",
+        help="an anchor hash from an export or report: a problem unless the record still holds it",
+    )
     p.set_defaults(func=run)
 
 
@@ -31,9 +37,16 @@ def run(args: argparse.Namespace) -> int:
             except sqlite3.Error:  # no anchors table: reported by verify as a damaged schema
                 held = False
             if not held:
-                problems.append({"kind": "anchor missing", "calibration_id": None, "capture_id": None,
-                                 "device_id": None, "detail": f"anchor {anchor} (from an export or report) is not in "
-                                 "the record: anchors written after it was shown were removed or rewritten"})
+                problems.append(
+                    {
+                        "kind": "anchor missing",
+                        "calibration_id": None,
+                        "capture_id": None,
+                        "device_id": None,
+                        "detail": f"anchor {anchor} (from an export or report) is not in "
+                        "the record: anchors written after it was shown were removed or rewritten",
+                    }
+                )
         counts = store.counts()
     if sound != "ok":
         problems.insert(0, {"kind": "corrupt file", "detail": f"PRAGMA integrity_check: {sound}"})
@@ -51,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     if problems:
         sys.stderr.write(f"station: verify found {len(problems)} problem{'s' if len(problems) != 1 else ''}\n")
         return 1
+
     def n(count: int, word: str) -> str:
         return f"{count} {word}{'' if count == 1 else 's'}"
 

@@ -3,6 +3,7 @@
 A headless end-to-end run of one procedure on the simulator: what a newcomer (or CI)
 can run with no device and no screen.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -63,7 +64,11 @@ def run(args: argparse.Namespace) -> int:
             continue
         sig_v = np.where(np.asarray(sig_v, dtype=object) == None, np.nan, sig_v).astype(float)  # noqa: E711
         est, sig, tru = _flat(name, value), _flat(name, sig_v), _flat(name, truth[name])
-        zs = [(k, (est[k] - tru[k]) / sig[k]) for k in est if k in tru and sig.get(k) and np.isfinite(sig[k]) and sig[k] > 0]
+        zs = [
+            (k, (est[k] - tru[k]) / sig[k])
+            for k in est
+            if k in tru and sig.get(k) and np.isfinite(sig[k]) and sig[k] > 0
+        ]
         if zs:
             print("   " + name + ": " + ", ".join(f"{z:+.1f}" for _, z in zs))
     return 0

@@ -18,6 +18,7 @@ units (V, mV, counts) need a rough calibration `A = B + M V` (e.g. the device's 
 one, or a nominal front end), given as `accel_B`, `accel_M`; without one the check is
 refused with a clear message rather than guessed.
 """
+
 from __future__ import annotations
 
 import math
@@ -25,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solvers.models import accel as accel_model
 from solvers.detectors import FieldCoverage, OrientationCheck, orientation_check  # noqa: F401 - re-exported
+from solvers.models import accel as accel_model
 from solvers.positions import P1_POSITIONS
 from solvers.stillness import StillnessTracker, TrackerState
 from solvers.units import si_factor
@@ -134,8 +135,13 @@ class LiveDetectors:
     def update(self, batch: Batch | None) -> LiveStatus:
         if batch is not None and len(batch):
             self._feed(batch)
-        return LiveStatus(self._last_t if self._samples else math.nan, self._samples, self._state,
-                          self._orientation(), self.coverage.fraction if self._has_mag else None)
+        return LiveStatus(
+            self._last_t if self._samples else math.nan,
+            self._samples,
+            self._state,
+            self._orientation(),
+            self.coverage.fraction if self._has_mag else None,
+        )
 
     @property
     def _has_mag(self) -> bool:
@@ -169,8 +175,10 @@ class LiveDetectors:
         if self.expected is None or self._to_f is None:
             return None
         s = self._state
-        raw = s.accel_mean if (s is not None and s.accel_mean is not None) else (
-            self._recent_a.mean(axis=0) if len(self._recent_a) else None
+        raw = (
+            s.accel_mean
+            if (s is not None and s.accel_mean is not None)
+            else (self._recent_a.mean(axis=0) if len(self._recent_a) else None)
         )
         if raw is None:
             return None

@@ -25,6 +25,7 @@ duplicate only when its sequence number, type and payload all repeat the previou
 frame's: a sender whose frames all carry the same sequence number (pymavlink's `pack()`
 without `send()`) loses nothing, since its IMU timestamps advance.
 """
+
 from __future__ import annotations
 
 import math
@@ -71,11 +72,11 @@ def parse_source(source: str | None) -> tuple[str | None, int | None]:
 class MavlinkParser:
     """Incremental MAVLink (1 and 2) parser with the same interface as StationParser.
 
-    `feed(chunk)` returns events (a synthetic Header when the stream is chosen,
-    Restart, Unknown for nothing); samples accumulate until `take()`. Errors by kind:
-    `noise` (bytes before a frame start), `checksum` (bad CRC), `malformed` (other
-    undecodable frames). Valid messages of other types count as `unknown`. Bytes before
-the first valid frame of a stream (or after `reset_stream()`) are not counted.
+        `feed(chunk)` returns events (a synthetic Header when the stream is chosen,
+        Restart, Unknown for nothing); samples accumulate until `take()`. Errors by kind:
+        `noise` (bytes before a frame start), `checksum` (bad CRC), `malformed` (other
+        undecodable frames). Valid messages of other types count as `unknown`. Bytes before
+    the first valid frame of a stream (or after `reset_stream()`) are not counted.
     """
 
     def __init__(self, source: str | None = None, request_hz: float | None = None) -> None:
@@ -175,7 +176,8 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
             self.system = key
             self._units = IMU_MESSAGES[t]
             if t == "RAW_IMU" and self.autopilots.get(key, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA) not in (
-                mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, mavlink2.MAV_AUTOPILOT_GENERIC
+                mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                mavlink2.MAV_AUTOPILOT_GENERIC,
             ):
                 self._units = RAW_IMU_COUNTS
             acc, gyr, mag, *_ = self._units
@@ -202,13 +204,22 @@ the first valid frame of a stream (or after `reset_stream()`) are not counted.
                 events.append(Restart(st.samples))
                 self._t_offset_us = 0.0
         self._last_t_us = t_us
-        self._rows.append([
-            m.get_seq(), t_us + self._t_offset_us,
-            m.xacc * k, m.yacc * k, m.zacc * k,
-            m.xgyro * k, m.ygyro * k, m.zgyro * k,
-            m.xmag * k, m.ymag * k, m.zmag * k,
-            temp_c,
-        ])
+        self._rows.append(
+            [
+                m.get_seq(),
+                t_us + self._t_offset_us,
+                m.xacc * k,
+                m.yacc * k,
+                m.zacc * k,
+                m.xgyro * k,
+                m.ygyro * k,
+                m.zgyro * k,
+                m.xmag * k,
+                m.ymag * k,
+                m.zmag * k,
+                temp_c,
+            ]
+        )
         st.samples += 1
 
 
@@ -232,9 +243,11 @@ class MavlinkEncoder:
         self._mav.seq = (self._mav.seq + n) % 256
 
     def heartbeat(self) -> bytes:
-        return self._pack(self._mav.heartbeat_encode(
-            mavlink2.MAV_TYPE_GENERIC, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, mavlink2.MAV_STATE_ACTIVE
-        ))
+        return self._pack(
+            self._mav.heartbeat_encode(
+                mavlink2.MAV_TYPE_GENERIC, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, mavlink2.MAV_STATE_ACTIVE
+            )
+        )
 
     def imu(self, t_us: int, acc_mps2, gyro_rad_s, mag_gauss, temp_c: float) -> bytes:
         """One HIGHRES_IMU frame (plus SCALED_IMU when scaled_too); NaN fields sent as 0."""
@@ -242,9 +255,7 @@ class MavlinkEncoder:
         w = [0.0 if v != v else float(v) for v in gyro_rad_s]
         b = [0.0 if v != v else float(v) for v in mag_gauss]
         tc = 0.0 if temp_c != temp_c else float(temp_c)
-        out = self._pack(self._mav.highres_imu_encode(
-            int(t_us), *a, *w, *b, 0.0, 0.0, 0.0, tc, HIGHRES_FIELDS_ALL, 0
-        ))
+        out = self._pack(self._mav.highres_imu_encode(int(t_us), *a, *w, *b, 0.0, 0.0, 0.0, tc, HIGHRES_FIELDS_ALL, 0))
         if self.scaled_too:
             g0 = 9.80665
 
@@ -252,11 +263,15 @@ class MavlinkEncoder:
                 return max(-32768, min(32767, int(round(x))))
 
             tcs = i16(tc * 100) or 1  # 0 would mean "no sensor"
-            out += self._pack(self._mav.scaled_imu_encode(
-                (int(t_us) // 1000) % (1 << 32),
-                *(i16(v / g0 * 1000) for v in a), *(i16(v * 1000) for v in w),
-                *(i16(v * 1000) for v in b), tcs,
-            ))
+            out += self._pack(
+                self._mav.scaled_imu_encode(
+                    (int(t_us) // 1000) % (1 << 32),
+                    *(i16(v / g0 * 1000) for v in a),
+                    *(i16(v * 1000) for v in w),
+                    *(i16(v * 1000) for v in b),
+                    tcs,
+                )
+            )
         return out
 
 
@@ -265,10 +280,21 @@ def set_message_interval(msg_name: str, rate_hz: float, target_system: int = 1, 
     mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
     msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{msg_name.upper()}")
     interval_us = 1e6 / rate_hz if rate_hz > 0 else -1
-    return bytes(mav.command_long_encode(
-        target_system, target_component, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-        msg_id, interval_us, 0, 0, 0, 0, 0,
-    ).pack(mav))
+    return bytes(
+        mav.command_long_encode(
+            target_system,
+            target_component,
+            mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL,
+            0,
+            msg_id,
+            interval_us,
+            0,
+            0,
+            0,
+            0,
+            0,
+        ).pack(mav)
+    )
 
 
 __all__ = ["IMU_MESSAGES", "MavlinkParser", "MavlinkEncoder", "set_message_interval", "ERROR_KINDS", "Unknown"]
@@ -277,8 +303,7 @@ __all__ = ["IMU_MESSAGES", "MavlinkParser", "MavlinkEncoder", "set_message_inter
 # --- network endpoints and the board's identity (pymavlink's connection layer) ---------------
 
 NETWORK_PREFIXES = ("udp:", "udpin:", "udpout:", "udpbcast:", "tcp:", "tcpin:")
-PARAM_PREFIXES = ("INS_ACC", "INS_GYR", "COMPASS_", "AHRS_ORIENTATION", "CAL_ACC", "CAL_GYRO", "CAL_MAG",
-                  "SENS_BOARD_")
+PARAM_PREFIXES = ("INS_ACC", "INS_GYR", "COMPASS_", "AHRS_ORIENTATION", "CAL_ACC", "CAL_GYRO", "CAL_MAG", "SENS_BOARD_")
 FIRMWARE = {mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA: "ardupilot", mavlink2.MAV_AUTOPILOT_PX4: "px4"}
 
 
@@ -325,8 +350,14 @@ def _param_value(value: float, ptype: int, firmware: str | None) -> float | int:
     byte-wise inside the float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE), ArduPilot casts."""
     import struct
 
-    ints = (mavlink2.MAV_PARAM_TYPE_INT32, mavlink2.MAV_PARAM_TYPE_UINT32, mavlink2.MAV_PARAM_TYPE_INT16,
-            mavlink2.MAV_PARAM_TYPE_UINT16, mavlink2.MAV_PARAM_TYPE_INT8, mavlink2.MAV_PARAM_TYPE_UINT8)
+    ints = (
+        mavlink2.MAV_PARAM_TYPE_INT32,
+        mavlink2.MAV_PARAM_TYPE_UINT32,
+        mavlink2.MAV_PARAM_TYPE_INT16,
+        mavlink2.MAV_PARAM_TYPE_UINT16,
+        mavlink2.MAV_PARAM_TYPE_INT8,
+        mavlink2.MAV_PARAM_TYPE_UINT8,
+    )
     if ptype in ints:
         if firmware == "px4":
             fmt = "<I" if ptype == mavlink2.MAV_PARAM_TYPE_UINT32 else "<i"
@@ -366,11 +397,15 @@ class BoardLink:
 
     def _request_stream(self, key: tuple[int, int]) -> None:
         s, c = key
-        self._send(self.mav.request_data_stream_encode(s, c, mavlink2.MAV_DATA_STREAM_RAW_SENSORS,
-                                                       int(round(self.rate_hz)), 1))
+        self._send(
+            self.mav.request_data_stream_encode(s, c, mavlink2.MAV_DATA_STREAM_RAW_SENSORS, int(round(self.rate_hz)), 1)
+        )
         msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{self.want}")
-        self._send(self.mav.command_long_encode(s, c, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
-                                                1e6 / self.rate_hz, 0, 0, 0, 0, 0))
+        self._send(
+            self.mav.command_long_encode(
+                s, c, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / self.rate_hz, 0, 0, 0, 0, 0
+            )
+        )
 
     def on_message(self, m, t: str, key: tuple[int, int], streaming: bool) -> None:
         if t == "HEARTBEAT" and m.autopilot != mavlink2.MAV_AUTOPILOT_INVALID and m.type != mavlink2.MAV_TYPE_GCS:
@@ -385,8 +420,21 @@ class BoardLink:
             if not streaming and (self.uid is not None or self._heartbeats > 2):
                 self._request_stream(key)
             if self.uid is None:
-                self._send(self.mav.command_long_encode(s, c, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
-                                                        mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0))
+                self._send(
+                    self.mav.command_long_encode(
+                        s,
+                        c,
+                        mavlink2.MAV_CMD_REQUEST_MESSAGE,
+                        0,
+                        mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                    )
+                )
             if not self._asked_params:
                 self._asked_params = True
                 self._send(self.mav.param_request_list_encode(s, c))
@@ -425,10 +473,17 @@ class BoardLink:
             out["params_received"] = f"{len(self._param_indices)}/{self.param_count}"
         for name in sorted(self.params):
             v = self.params[name]  # floats as the shortest text of the float32 the board keeps
-            out[f"param.{name}"] = str(v) if isinstance(v, int) else np.format_float_positional(
-                np.float32(v), unique=True, trim="-")
-        ids = {"INS_ACC_ID": "accel_device_id", "INS_GYR_ID": "gyro_device_id", "COMPASS_DEV_ID": "mag_device_id",
-               "CAL_ACC0_ID": "accel_device_id", "CAL_GYRO0_ID": "gyro_device_id", "CAL_MAG0_ID": "mag_device_id"}
+            out[f"param.{name}"] = (
+                str(v) if isinstance(v, int) else np.format_float_positional(np.float32(v), unique=True, trim="-")
+            )
+        ids = {
+            "INS_ACC_ID": "accel_device_id",
+            "INS_GYR_ID": "gyro_device_id",
+            "COMPASS_DEV_ID": "mag_device_id",
+            "CAL_ACC0_ID": "accel_device_id",
+            "CAL_GYRO0_ID": "gyro_device_id",
+            "CAL_MAG0_ID": "mag_device_id",
+        }
         for p, key in ids.items():
             if self.params.get(p):
                 out[key] = str(int(self.params[p]))

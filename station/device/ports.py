@@ -1,4 +1,5 @@
 """Serial ports on this machine, through serial.tools.list_ports."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -12,6 +12,7 @@
 partial lines, checksum errors, binary noise and wrapping counters, counts every
 problem by kind in `stats` and never raises on bad input.
 """
+
 from __future__ import annotations
 
 import math
@@ -50,7 +51,7 @@ class Header:
     def units(self) -> dict[str, str]:
         return {"accel_unit": self.accel_unit, "gyro_unit": self.gyro_unit, "mag_unit": self.mag_unit}
 
-    def same_device(self, other: "Header | None") -> bool:
+    def same_device(self, other: Header | None) -> bool:
         return other is not None and (self.device_id, self.accel_unit, self.gyro_unit, self.mag_unit) == (
             other.device_id,
             other.accel_unit,
@@ -109,7 +110,7 @@ class SampleBlock:
         return len(self.seq)
 
     @classmethod
-    def from_rows(cls, rows: list) -> "SampleBlock | None":
+    def from_rows(cls, rows: list) -> SampleBlock | None:
         """Rows ``[seq, t_dev_us, *values]`` as a block (None when there are none); an
         'inf' from a device is no usable value: NaN."""
         if not rows:
@@ -138,10 +139,17 @@ class ParseStats:
     def parse_errors(self) -> int:
         return sum(self.errors.values())
 
-    def copy(self) -> "ParseStats":
+    def copy(self) -> ParseStats:
         return ParseStats(
-            self.bytes, self.sentences, self.samples, self.gaps, self.gap_events,
-            self.duplicates, self.restarts, self.unknown, dict(self.errors),
+            self.bytes,
+            self.sentences,
+            self.samples,
+            self.gaps,
+            self.gap_events,
+            self.duplicates,
+            self.restarts,
+            self.unknown,
+            dict(self.errors),
         )
 
 
@@ -172,7 +180,9 @@ def header_sentence(h: Header) -> bytes:
 def data_sentence(seq: int, t_dev_us: int, values, digits: int = 7) -> bytes:
     """One `$STD` sentence; seq and time are reduced modulo their ranges."""
     return sentence(
-        "STD", int(seq) % SEQ_MODULO, int(t_dev_us) % TIME_MODULO,
+        "STD",
+        int(seq) % SEQ_MODULO,
+        int(t_dev_us) % TIME_MODULO,
         *(format_value(float(v), digits) for v in values),
     )
 
@@ -182,7 +192,7 @@ def data_sentences(seq0: int, t_dev_us, values, digits: int = 7) -> bytes:
     fmt = f".{digits}g"
     out = []
     for i, (t, row) in enumerate(zip(np.asarray(t_dev_us).tolist(), np.asarray(values, dtype=float).tolist())):
-        payload = "STD,%d,%d,%s" % (
+        payload = "STD,%d,%d,%s" % (  # noqa: UP031
             (seq0 + i) % SEQ_MODULO,
             int(t) % TIME_MODULO,
             ",".join("" if v != v else format(v, fmt) for v in row),
@@ -198,8 +208,10 @@ def command_sentence(verb: str, *args: object) -> bytes:
 
 def ack_sentence(verb: str, ok: bool, text: str = "") -> bytes:
     text = text.replace(",", ";").replace("*", "").replace("$", "")
-    return sentence("STA", verb.upper(), "OK" if ok else "ERR", text) if text else sentence(
-        "STA", verb.upper(), "OK" if ok else "ERR"
+    return (
+        sentence("STA", verb.upper(), "OK" if ok else "ERR", text)
+        if text
+        else sentence("STA", verb.upper(), "OK" if ok else "ERR")
     )
 
 

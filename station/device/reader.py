@@ -21,14 +21,15 @@ sequence numbers count exactly the samples it missed (`gaps`).
 The queue holds at most `max_queued` samples; when a consumer falls behind, the oldest
 batches are dropped and counted in `stats().dropped`.
 """
+
 from __future__ import annotations
 
 import collections
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 import serial
@@ -74,11 +75,11 @@ class Batch:
         cols.update({name: self.values[:, i] for i, name in enumerate(SENSOR_FIELDS)})
         return cols
 
-    def select(self, mask) -> "Batch":
+    def select(self, mask) -> Batch:
         return Batch(self.t_s[mask], self.seq[mask], self.segment[mask], self.values[mask])
 
     @staticmethod
-    def concat(batches: list["Batch"]) -> "Batch | None":
+    def concat(batches: list[Batch]) -> Batch | None:
         if not batches:
             return None
         if len(batches) == 1:
@@ -141,7 +142,9 @@ def make_parser(protocol: str, mavlink_source: str | None = None, request_hz: fl
 def open_port(port: str, baud: int = 115200, timeout_s: float = 0.02):
     """A device path or any pyserial URL, opened, raw 8N1; a MAVLink network endpoint
     (`udp:HOST:PORT`, `udpout:`, `tcp:`, `tcpin:`) through pymavlink's connection layer."""
-    if port.lower().startswith(("udp:", "udpin:", "udpout:", "udpbcast:", "tcp:", "tcpin:")):  # = mavlink.NETWORK_PREFIXES
+    if port.lower().startswith(
+        ("udp:", "udpin:", "udpout:", "udpbcast:", "tcp:", "tcpin:")
+    ):  # = mavlink.NETWORK_PREFIXES
         from station.device.mavlink import NetworkPort  # pymavlink's import is slow: only for these
 
         return NetworkPort(port, timeout_s)
@@ -208,7 +211,7 @@ class Reader:
 
     # ------------------------------------------------------------ lifecycle
 
-    def start(self, *, wait_for_port: bool = False) -> "Reader":
+    def start(self, *, wait_for_port: bool = False) -> Reader:
         """Open the port and start the thread. Raises PortError if the port cannot be
         opened, unless `wait_for_port` (then the thread keeps trying)."""
         if self._thread is not None:
@@ -235,7 +238,7 @@ class Reader:
             self._thread.join(timeout_s)
         self._close()
 
-    def __enter__(self) -> "Reader":
+    def __enter__(self) -> Reader:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -416,9 +419,7 @@ class Reader:
         for a, b in zip(cuts[:-1], cuts[1:]):
             cut = mine.get(a)
             if cut is not None or self._anchor_t_s is None:
-                host_t = self._t0_host if self._anchor_t_s is None else (
-                    host_now - (dev[b - 1] - dev[a]) * 1e-6
-                )
+                host_t = self._t0_host if self._anchor_t_s is None else (host_now - (dev[b - 1] - dev[a]) * 1e-6)
                 t_anchor = host_t - self._t0_host
                 if not math.isnan(self._last_t_s):
                     t_anchor = max(t_anchor, self._last_t_s + 1e-6)
@@ -432,7 +433,9 @@ class Reader:
                             self._pending_gap = GapEvent(
                                 self._pending_gap.segment,
                                 "reconnect" if reason == "restart" else f"reconnect, {reason}",
-                                self._pending_gap.t_s, down_s=self._pending_gap.down_s, error=self._pending_gap.error,
+                                self._pending_gap.t_s,
+                                down_s=self._pending_gap.down_s,
+                                error=self._pending_gap.error,
                             )
                             self._gaps_before_break = -1
                     if old is not None:
@@ -443,8 +446,10 @@ class Reader:
             seg[a:b] = self._segment
             if self._pending_gap is not None and math.isnan(self._pending_gap.t_resume_s):
                 g = self._pending_gap
-                missed = -1 if (g.reason != "reconnect" or self._gaps_before_break < 0) else (
-                    self.parser.stats.gaps - self._gaps_before_break
+                missed = (
+                    -1
+                    if (g.reason != "reconnect" or self._gaps_before_break < 0)
+                    else (self.parser.stats.gaps - self._gaps_before_break)
                 )
                 with self._lock:
                     self._events.append(GapEvent(g.segment, g.reason, g.t_s, float(t_s[a]), g.down_s, missed, g.error))

@@ -23,6 +23,7 @@ nothing for the last `SILENCE_S` seconds (after a reconnection: it came back sil
 a capture with every sample it did send, `complete: false`, `incomplete: <why>` and
 `last_data_s` (when the data stop, s from the start); `station record` exits 1.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -89,7 +90,7 @@ def format_rows(batch: Batch, columns: list[str]) -> str:
     seg = batch.segment.tolist()
     out = []
     for i, row in enumerate(vals):
-        out.append("%.6f,%d,%s\n" % (t[i], seg[i], ",".join(["" if v != v else _fmt(v) for v in row])))
+        out.append("%.6f,%d,%s\n" % (t[i], seg[i], ",".join(["" if v != v else _fmt(v) for v in row])))  # noqa: UP031
     return "".join(out)
 
 
@@ -253,11 +254,16 @@ def record(
     _check_extra_meta(directory, procedure, extra_meta)
     own_reader = reader is None
     if reader is None:
-        reader = Reader(port, baud=baud, protocol=protocol, mavlink_source=mavlink_source,
-                        request_hz=mavlink_rate_hz if protocol == "mavlink" else None)
+        reader = Reader(
+            port,
+            baud=baud,
+            protocol=protocol,
+            mavlink_source=mavlink_source,
+            request_hz=mavlink_rate_hz if protocol == "mavlink" else None,
+        )
         reader.start()
     started = time.monotonic()
-    recorded_at = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0)
+    recorded_at = _dt.datetime.now(_dt.UTC).replace(microsecond=0)
     stream: CaptureStream | None = None
     try:
         # a flight controller asked for its stream answers after a heartbeat or two (1 Hz)
@@ -386,8 +392,9 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
 SILENCE_S = 2.0  # no rows for this long (and 20 sample periods) at the end: the device went silent
 
 
-def _ending(stats: ReaderStats, last_rows_at: float | None, started: float, ended_at: float, dts: list[float],
-            stopped: str) -> str:
+def _ending(
+    stats: ReaderStats, last_rows_at: float | None, started: float, ended_at: float, dts: list[float], stopped: str
+) -> str:
     """Why a recording that ran to its end is incomplete: the device was lost and never came
     back, or it is connected but sends nothing (after a reconnection: came back silent). ""
     when the data ran to the end."""
@@ -406,7 +413,9 @@ def _ending(stats: ReaderStats, last_rows_at: float | None, started: float, ende
     return ""
 
 
-def _end_meta(stats: ReaderStats, events: list[GapEvent], rows: int, dts: list[float], duration_s: float) -> dict[str, str]:
+def _end_meta(
+    stats: ReaderStats, events: list[GapEvent], rows: int, dts: list[float], duration_s: float
+) -> dict[str, str]:
     m: dict[str, str] = {}
     if dts:
         m["sample_rate_hz"] = f"{1.0 / float(np.median(dts)):.6g}"

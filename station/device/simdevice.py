@@ -20,6 +20,7 @@ unread in the pty) is discarded and streaming goes on with fresh data. Sequence 
 keep counting, so a reader that was connected counts the loss as a gap, and one that
 opens the port later starts on a contiguous stream.
 """
+
 from __future__ import annotations
 
 import collections
@@ -37,6 +38,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from solvers.models import accel as accel_model
+
+# The MAVLink flight-controller stand-in converts the simulated analogue accelerometer
+# (V) to m/s^2 with the device family's nominal front end (solvers/simulate.py
+# `nominal_tabletop_device`: ~0.0855 V per m/s^2, ~1.65 V at zero), through the accel
+# model's own inverse: a factory scaling that leaves the unit's errors to calibrate.
+from solvers.simulate import NOMINAL_ACCEL_PARAMS as NOMINAL_ACCEL_V  # noqa: E402
 from solvers.units import si_factor
 from station.device.protocol import (
     SENSOR_FIELDS,
@@ -47,12 +54,6 @@ from station.device.protocol import (
     data_sentences,
     header_sentence,
 )
-
-# The MAVLink flight-controller stand-in converts the simulated analogue accelerometer
-# (V) to m/s^2 with the device family's nominal front end (solvers/simulate.py
-# `nominal_tabletop_device`: ~0.0855 V per m/s^2, ~1.65 V at zero), through the accel
-# model's own inverse: a factory scaling that leaves the unit's errors to calibrate.
-from solvers.simulate import NOMINAL_ACCEL_PARAMS as NOMINAL_ACCEL_V  # noqa: E402
 
 
 @dataclass
@@ -129,7 +130,7 @@ class SimDevice:
                     pass
         self.master = self.slave = None
 
-    def __enter__(self) -> "SimDevice":
+    def __enter__(self) -> SimDevice:
         if self.master is None:
             self.open()
         return self
@@ -152,15 +153,15 @@ class SimDevice:
             self._seq += n
             return out
         acc_v = np.column_stack([d["ax"], d["ay"], d["az"]])
-        acc = accel_model.inverse(acc_v, NOMINAL_ACCEL_V) if self.imu.units["accel_unit"] == "V" else (
-            acc_v * si_factor("accel", self.imu.units["accel_unit"])
+        acc = (
+            accel_model.inverse(acc_v, NOMINAL_ACCEL_V)
+            if self.imu.units["accel_unit"] == "V"
+            else (acc_v * si_factor("accel", self.imu.units["accel_unit"]))
         )
         kg, km = self._to_si
         gyr = np.column_stack([d["gx"], d["gy"], d["gz"]]) * kg
         mag = np.column_stack([d["mx"], d["my"], d["mz"]]) * (km / 1e5)  # nT -> gauss
-        return b"".join(
-            self._mav.imu(int(t_us[i]), acc[i], gyr[i], mag[i], float(d["temp_c"][i])) for i in range(n)
-        )
+        return b"".join(self._mav.imu(int(t_us[i]), acc[i], gyr[i], mag[i], float(d["temp_c"][i])) for i in range(n))
 
     # ------------------------------------------------------------ output queue
 

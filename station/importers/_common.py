@@ -84,11 +84,7 @@ def fmt_param(value) -> str:
 
 def iso_utc(unix_s: float) -> str:
     """A Unix time as the capture's ``date``: ISO date-time, UTC, whole seconds."""
-    return (
-        _dt.datetime.fromtimestamp(unix_s, _dt.UTC)
-        .replace(tzinfo=None)
-        .isoformat(timespec="seconds")
-    )
+    return _dt.datetime.fromtimestamp(unix_s, _dt.UTC).replace(tzinfo=None).isoformat(timespec="seconds")
 
 
 def clean_stream(path, stream: Stream) -> Stream | None:
@@ -98,11 +94,7 @@ def clean_stream(path, stream: Stream) -> Stream | None:
     keep = np.isfinite(t)
     order = np.argsort(t[keep], kind="stable")
     t, xyz = t[keep][order], xyz[keep][order]
-    temp = (
-        None
-        if stream.temp_c is None
-        else np.asarray(stream.temp_c, dtype=np.float64)[keep][order]
-    )
+    temp = None if stream.temp_c is None else np.asarray(stream.temp_c, dtype=np.float64)[keep][order]
     if len(t) == 0:
         return None
     return Stream(
@@ -123,9 +115,7 @@ def _median_period(t: np.ndarray) -> float:
     return float(np.median(d)) if len(d) else math.inf
 
 
-def align(
-    grid_t: np.ndarray, t: np.ndarray, values: np.ndarray, grid_period: float
-) -> tuple[np.ndarray, str]:
+def align(grid_t: np.ndarray, t: np.ndarray, values: np.ndarray, grid_period: float) -> tuple[np.ndarray, str]:
     """``values`` (n, k) sampled at ``t``, put on ``grid_t``: nearest sample when the rates
     match (noise untouched), linear interpolation otherwise; empty (NaN) across gaps."""
     period = _median_period(t)
@@ -145,9 +135,7 @@ def align(
         return out, "nearest"
     span = t[hi] - t[lo]
     inside = (grid_t >= t[0]) & (grid_t <= t[-1]) & (span <= 3 * period)
-    w = np.where(span > 0, (grid_t - t[lo]) / np.where(span > 0, span, 1.0), 0.0)[
-        :, None
-    ]
+    w = np.where(span > 0, (grid_t - t[lo]) / np.where(span > 0, span, 1.0), 0.0)[:, None]
     interp = values[lo] * (1 - w) + values[hi] * w
     out[inside] = interp[inside]
     return out, "linear"
@@ -179,19 +167,13 @@ def to_capture(
                 if bad.any():
                     s.xyz[bad] = np.nan
                     imported.warnings.append(
-                        f"{int(bad.any(axis=1).sum())} {NAME[kind]} samples hold "
-                        "infinite values: left empty"
+                        f"{int(bad.any(axis=1).sum())} {NAME[kind]} samples hold infinite values: left empty"
                     )
                 streams[kind] = s
     primary = PRIMARY[procedure]
     if primary not in streams:
-        found = (
-            ", ".join(NAME[k] for k in streams)
-            or "no accelerometer, gyro or magnetometer"
-        )
-        raise InputError(
-            path, None, f"{procedure} needs {NAME[primary]} data; this file has {found}"
-        )
+        found = ", ".join(NAME[k] for k in streams) or "no accelerometer, gyro or magnetometer"
+        raise InputError(path, None, f"{procedure} needs {NAME[primary]} data; this file has {found}")
     grid = streams[primary]
     if len(grid.t_s) < 2:
         raise InputError(
@@ -203,12 +185,8 @@ def to_capture(
     start = max(s.t_s[0] for s in streams.values())
     end = min(s.t_s[-1] for s in streams.values())
     if end < start:
-        others = ", ".join(
-            f"{NAME[k]} {s.t_s[0]:.3f}–{s.t_s[-1]:.3f} s" for k, s in streams.items()
-        )
-        raise InputError(
-            path, None, f"the sensors' time spans do not overlap ({others})"
-        )
+        others = ", ".join(f"{NAME[k]} {s.t_s[0]:.3f}–{s.t_s[-1]:.3f} s" for k, s in streams.items())
+        raise InputError(path, None, f"the sensors' time spans do not overlap ({others})")
     rows = (grid.t_s >= start) & (grid.t_s <= end)
     grid_t = grid.t_s[rows]
     grid_period = _median_period(grid_t)
@@ -230,12 +208,8 @@ def to_capture(
         s = streams.get(kind)
         if s is None:
             continue
-        if kind == primary or (
-            len(s.t_s) == len(grid.t_s) and np.array_equal(s.t_s, grid.t_s)
-        ):
-            values = s.xyz[
-                rows
-            ]  # the same samples (one message or one CSV row holds both)
+        if kind == primary or (len(s.t_s) == len(grid.t_s) and np.array_equal(s.t_s, grid.t_s)):
+            values = s.xyz[rows]  # the same samples (one message or one CSV row holds both)
         else:
             values, mode = align(grid_t, s.t_s, s.xyz, grid_period)
             how.append(f"{kind} {mode}")
@@ -256,14 +230,10 @@ def to_capture(
     for kind, s in streams.items():
         if s.device_id is not None:
             meta[f"{kind}_device_id"] = str(int(s.device_id))
-    meta["import_source"] = "; ".join(
-        dict.fromkeys(streams[k].source for k in KINDS if k in streams)
-    )
+    meta["import_source"] = "; ".join(dict.fromkeys(streams[k].source for k in KINDS if k in streams))
     if how:
         meta["import_align"] = f"rows at the {primary} samples; " + ", ".join(how)
     # parameters last, in name order, after the keys a reader looks for first
     params = sorted(k for k in meta if k.startswith("param."))
-    meta = {k: v for k, v in meta.items() if not k.startswith("param.")} | {
-        k: meta[k] for k in params
-    }
+    meta = {k: v for k, v in meta.items() if not k.startswith("param.")} | {k: meta[k] for k in params}
     return Capture(meta=meta, columns=columns, path=None if path is None else str(path))

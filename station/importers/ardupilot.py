@@ -92,9 +92,7 @@ def _open_error(path, exc: Exception, what: str) -> InputError:
         return InputError(path, None, f"is a directory, not {what}")
     if isinstance(exc, PermissionError):
         return InputError(path, None, "permission denied")
-    return InputError(
-        path, None, f"not a readable {what} ({type(exc).__name__}: {exc})"
-    )
+    return InputError(path, None, f"not a readable {what} ({type(exc).__name__}: {exc})")
 
 
 def _params_meta(params: dict[str, float], meta: dict[str, str]) -> None:
@@ -138,16 +136,8 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         else:
             os.environ["PYMAVLINK_FAST_INDEX"] = fast
     names = set(getattr(log, "name_to_id", {}))
-    imu_name = (
-        "IMU"
-        if inst == 0 or "IMU" in names and f"IMU{inst + 1}" not in names
-        else f"IMU{inst + 1}"
-    )
-    mag_name = (
-        "MAG"
-        if inst == 0 or "MAG" in names and f"MAG{inst + 1}" not in names
-        else f"MAG{inst + 1}"
-    )
+    imu_name = "IMU" if inst == 0 or "IMU" in names and f"IMU{inst + 1}" not in names else f"IMU{inst + 1}"
+    mag_name = "MAG" if inst == 0 or "MAG" in names and f"MAG{inst + 1}" not in names else f"MAG{inst + 1}"
     types = [imu_name, mag_name, "PARM", "GPS"]
     rows: dict[str, list] = {"accel": [], "gyro": [], "mag": []}
     temps: list[float] = []
@@ -184,12 +174,8 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                         rows["accel"].append((t_us, m.AccX, m.AccY, m.AccZ))
                         temps.append(m.T if "T" in cols else math.nan)
                         if "accel" not in units:
-                            units["accel"] = (
-                                m.fmt.get_unit("AccX") if m.fmt.units else ""
-                            )
-                            units["gyro"] = (
-                                m.fmt.get_unit("GyrX") if m.fmt.units else ""
-                            )
+                            units["accel"] = m.fmt.get_unit("AccX") if m.fmt.units else ""
+                            units["gyro"] = m.fmt.get_unit("GyrX") if m.fmt.units else ""
                     else:
                         rows["mag"].append((t_us, m.MagX, m.MagY, m.MagZ))
                         if "mag" not in units:
@@ -199,31 +185,18 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 if name == "PARM":
                     if first_us is None:
                         params[d["Name"]] = d["Value"]
-                    elif (
-                        str(d["Name"]).startswith(PARAM_PREFIXES)
-                        and params.get(d["Name"]) != d["Value"]
-                    ):
+                    elif str(d["Name"]).startswith(PARAM_PREFIXES) and params.get(d["Name"]) != d["Value"]:
                         late.add(d["Name"])
                     continue
                 if name == "GPS":
                     _df_gps(d, fixes)
-                    if (
-                        gps_utc_offset is None
-                        and d.get("GWk")
-                        and d.get("Status", 0) >= 3
-                    ):
+                    if gps_utc_offset is None and d.get("GWk") and d.get("Status", 0) >= 3:
                         gps_utc_offset = (
-                            GPS_EPOCH_UNIX_S
-                            + d["GWk"] * 604800.0
-                            + d["GMS"] * 1e-3
-                            - GPS_LEAP_S
-                            - d["TimeUS"] * 1e-6
+                            GPS_EPOCH_UNIX_S + d["GWk"] * 604800.0 + d["GMS"] * 1e-3 - GPS_LEAP_S - d["TimeUS"] * 1e-6
                         )
                     continue
     except Exception as exc:  # noqa: BLE001
-        raise InputError(
-            path, None, f"cannot read the DataFlash log ({type(exc).__name__}: {exc})"
-        ) from None
+        raise InputError(path, None, f"cannot read the DataFlash log ({type(exc).__name__}: {exc})") from None
     finally:
         with contextlib.suppress(Exception):
             log.close()
@@ -234,9 +207,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 path,
                 None,
                 f"--instance {inst}: the log has "
-                + "; ".join(
-                    f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items()
-                ),
+                + "; ".join(f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items()),
             )
         raise InputError(path, None, "no IMU or MAG messages in the DataFlash log")
     streams = {}
@@ -336,19 +307,12 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     try:
         with _quiet():
             while True:
-                m = log.recv_match(
-                    type=wanted
-                    + ["PARAM_VALUE", "HEARTBEAT", "GPS_RAW_INT", "AUTOPILOT_VERSION"]
-                )
+                m = log.recv_match(type=wanted + ["PARAM_VALUE", "HEARTBEAT", "GPS_RAW_INT", "AUTOPILOT_VERSION"])
                 if m is None:
                     break
                 name = m.get_type()
                 if name == "HEARTBEAT":
-                    if (
-                        firmware is None
-                        and m.autopilot in MAV_AUTOPILOT
-                        and m.get_srcComponent() == 1
-                    ):
+                    if firmware is None and m.autopilot in MAV_AUTOPILOT and m.get_srcComponent() == 1:
                         firmware = MAV_AUTOPILOT[m.autopilot]
                 elif name == "PARAM_VALUE":
                     param_msgs.append((first_t is not None, m))
@@ -358,15 +322,9 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
                 elif name == "AUTOPILOT_VERSION":
                     board_uid = board_uid or (m.uid or None)
                 else:
-                    t = (
-                        m.time_usec * 1e-6
-                        if hasattr(m, "time_usec")
-                        else m.time_boot_ms * 1e-3
-                    )
+                    t = m.time_usec * 1e-6 if hasattr(m, "time_usec") else m.time_boot_ms * 1e-3
                     key = (name, tuple(m.to_dict().values()))
-                    if (
-                        key in seen
-                    ):  # the same message again (a log fed by two links): once
+                    if key in seen:  # the same message again (a log fed by two links): once
                         duplicates += 1
                         continue
                     seen.add(key)
@@ -375,9 +333,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
                     msg_class[name] = type(m)
                     first_t = t if first_t is None else first_t
     except Exception as exc:  # noqa: BLE001
-        raise InputError(
-            path, None, f"cannot read the MAVLink log ({type(exc).__name__}: {exc})"
-        ) from None
+        raise InputError(path, None, f"cannot read the MAVLink log ({type(exc).__name__}: {exc})") from None
     finally:
         with contextlib.suppress(Exception):
             log.close()
@@ -390,11 +346,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         )
     late = set()
     for after_start, m in param_msgs:
-        pid = (
-            m.param_id
-            if isinstance(m.param_id, str)
-            else m.param_id.decode(errors="replace")
-        )
+        pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
         pid = pid.rstrip("\x00")
         value = _param_value(m, firmware)
         if not after_start or pid not in params:
@@ -408,9 +360,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     for kind, fields in MAV_FIELDS.items():
         if kinds is not None and kind not in kinds:
             continue
-        values = np.array(
-            [[getattr(m, f) for f in fields] for _, m in samples], dtype=np.float64
-        )
+        values = np.array([[getattr(m, f) for f in fields] for _, m in samples], dtype=np.float64)
         if kind == "mag" and not np.any(values):
             continue  # no compass behind this IMU message
         unit = MAV_UNITS.get((kind, units.get(fields[0], "")))
@@ -438,26 +388,18 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     meta: dict[str, str] = {}
     if firmware:
         meta["firmware"] = firmware
-    meta["corrected"] = (
-        "false" if (name == "RAW_IMU" and firmware != "ardupilot") else "true"
-    )
+    meta["corrected"] = "false" if (name == "RAW_IMU" and firmware != "ardupilot") else "true"
     if board_uid:
         meta["board_uid"] = str(board_uid)
-    if (
-        arrivals[name] > 946684800
-    ):  # the ground station's clock (UTC) when the first sample came
+    if arrivals[name] > 946684800:  # the ground station's clock (UTC) when the first sample came
         meta["date"] = iso_utc(arrivals[name])
     _place(fixes, meta)
     warnings = []
     if late:
         meta["params_changed"] = ",".join(sorted(late))
-        warnings.append(
-            f"parameters changed while the data were logged: {', '.join(sorted(late))}"
-        )
+        warnings.append(f"parameters changed while the data were logged: {', '.join(sorted(late))}")
     if duplicates:
-        warnings.append(
-            f"{duplicates} repeated IMU messages (same time and values) read once"
-        )
+        warnings.append(f"{duplicates} repeated IMU messages (same time and values) read once")
     if firmware == "px4":
         for pname in sorted(params):
             if pname.startswith(("CAL_", "SENS_BOARD_")):

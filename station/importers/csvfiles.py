@@ -72,9 +72,7 @@ def _open_text(path) -> tuple[list[str], int]:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data[: exc.start].count(b"\n") + 1
-        raise InputError(
-            path, line, f"not UTF-8 text: byte 0x{data[exc.start]:02x}"
-        ) from None
+        raise InputError(path, line, f"not UTF-8 text: byte 0x{data[exc.start]:02x}") from None
     return text.splitlines(), len(data)
 
 
@@ -102,14 +100,10 @@ def _number(path, lineno: int, name: str, cell: str) -> float:
     if not _NUMBER.fullmatch(cell):
         if cell.strip() == "":
             return math.nan
-        raise InputError(
-            path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number"
-        )
+        raise InputError(path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number")
     x = float(cell)
     if not math.isfinite(x):
-        raise InputError(
-            path, lineno, f"column '{name}': {cell.strip()!r} is out of range"
-        )
+        raise InputError(path, lineno, f"column '{name}': {cell.strip()!r} is out of range")
     return x
 
 
@@ -129,17 +123,11 @@ def _rows(
         text = lines[i]
         if not text.strip() or text.lstrip().startswith("#"):
             continue
-        cells = next(
-            csv.reader([text], delimiter=delimiter, skipinitialspace=delimiter == " ")
-        )
+        cells = next(csv.reader([text], delimiter=delimiter, skipinitialspace=delimiter == " "))
         if len(cells) != ncols:
-            raise InputError(
-                path, i + 1, f"{len(cells)} fields where the header has {ncols}"
-            )
+            raise InputError(path, i + 1, f"{len(cells)} fields where the header has {ncols}")
         for target, j in cols.items():
-            if (
-                target == int_time
-            ):  # nanosecond integers: keep every digit (float64 would round them)
+            if target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
                 cell = cells[j].strip()
                 if not re.fullmatch(r"[+-]?[0-9]+", cell):
                     raise InputError(
@@ -153,15 +141,10 @@ def _rows(
         linenos.append(i + 1)
     if not linenos:
         raise InputError(path, start + 1, "no data rows after the header")
-    return {
-        t: (np.asarray(v, dtype=object if t == int_time else np.float64))
-        for t, v in out.items()
-    }, linenos
+    return {t: (np.asarray(v, dtype=object if t == int_time else np.float64)) for t, v in out.items()}, linenos
 
 
-def _time_seconds(
-    path, t, linenos: list[int], factor: float, integer: bool
-) -> np.ndarray:
+def _time_seconds(path, t, linenos: list[int], factor: float, integer: bool) -> np.ndarray:
     """Seconds from the first row; t must not go backwards (the line that does is named)."""
     if integer:
         t0 = t[0]
@@ -169,9 +152,7 @@ def _time_seconds(
     else:
         if np.isnan(t).any():
             i = int(np.flatnonzero(np.isnan(t))[0])
-            raise InputError(
-                path, linenos[i], "the time column is empty (every row needs its time)"
-            )
+            raise InputError(path, linenos[i], "the time column is empty (every row needs its time)")
         ts = (t - t[0]) * factor
     back = np.flatnonzero(np.diff(ts) < 0)
     if back.size:
@@ -294,34 +275,20 @@ def read_plain(
             raise InputError(
                 None,
                 None,
-                f"--map {target}=…: {target!r} is not a capture column "
-                f"(choose from {', '.join(TARGETS)})",
+                f"--map {target}=…: {target!r} is not a capture column (choose from {', '.join(TARGETS)})",
             )
     for key in units:
         if key not in ("t", "accel", "gyro", "mag"):
-            raise InputError(
-                None, None, f"--unit {key}=…: expected t, accel, gyro or mag"
-            )
+            raise InputError(None, None, f"--unit {key}=…: expected t, accel, gyro or mag")
     lines, _ = _open_text(path)
     hi = next(
-        (
-            i
-            for i, s in enumerate(lines)
-            if s.strip() and not s.lstrip().startswith("#")
-        ),
+        (i for i, s in enumerate(lines) if s.strip() and not s.lstrip().startswith("#")),
         None,
     )
     if hi is None:
         raise InputError(path, 1, "empty file: no header row")
     delimiter = _sniff_delimiter(lines[hi])
-    header = [
-        c.strip()
-        for c in next(
-            csv.reader(
-                [lines[hi]], delimiter=delimiter, skipinitialspace=delimiter == " "
-            )
-        )
-    ]
+    header = [c.strip() for c in next(csv.reader([lines[hi]], delimiter=delimiter, skipinitialspace=delimiter == " "))]
     if all(_NUMBER.fullmatch(c) for c in header if c):
         raise InputError(
             path,
@@ -347,8 +314,7 @@ def read_plain(
             raise InputError(
                 path,
                 hi + 1,
-                f"--map {target}={source}: no column {source!r} in the header "
-                f"({', '.join(header)})",
+                f"--map {target}={source}: no column {source!r} in the header ({', '.join(header)})",
             )
     kinds_present = {KIND_OF[c] for c in cols if c in KIND_OF}
     for kind in sorted(kinds_present):
@@ -369,9 +335,7 @@ def read_plain(
             )
     t_unit = units.get("t", "s")
     if t_unit not in TIME_UNITS:
-        raise InputError(
-            None, None, f"--unit t={t_unit}: expected one of {', '.join(TIME_UNITS)}"
-        )
+        raise InputError(None, None, f"--unit t={t_unit}: expected one of {', '.join(TIME_UNITS)}")
     if "t" not in cols and rate_hz is None:
         raise InputError(
             None,
@@ -379,14 +343,10 @@ def read_plain(
             "no time column: map one (--map t=COLUMN) or give the sample rate (--rate HZ)",
         )
     if rate_hz is not None and not (0 < rate_hz < math.inf):
-        raise InputError(
-            None, None, f"--rate must be a positive number of Hz, got {rate_hz:g}"
-        )
+        raise InputError(None, None, f"--rate must be a positive number of Hz, got {rate_hz:g}")
     values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
     if "t" in values:
-        t_s = _time_seconds(
-            path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False
-        )
+        t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False)
     else:
         t_s = np.arange(len(linenos), dtype=np.float64) / rate_hz
     streams = _streams(

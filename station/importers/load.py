@@ -41,23 +41,18 @@ def detect(path) -> str | None:
 def read(path, opts: ImportOptions, fmt: str) -> Imported:
     """The streams and metadata of ``path`` read as ``fmt``."""
     if fmt not in FORMATS:
-        raise InputError(
-            None, None, f"--format {fmt!r}: expected one of {', '.join(FORMATS)}"
-        )
+        raise InputError(None, None, f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
     if fmt != "px4" and opts.source != "auto":
         raise InputError(None, None, "--source applies to PX4 logs only")
     if fmt not in ("px4", "ardupilot", "tlog") and opts.instance is not None:
-        raise InputError(
-            None, None, "--instance applies to PX4, ArduPilot and MAVLink logs only"
-        )
+        raise InputError(None, None, "--instance applies to PX4, ArduPilot and MAVLink logs only")
     if fmt != "ros" and opts.topics:
         raise InputError(None, None, "--topic applies to ROS bags and MCAP files only")
     if fmt != "csv" and (opts.mapping or opts.units or opts.rate_hz is not None):
         raise InputError(
             None,
             None,
-            f"--map, --unit and --rate apply to plain CSV files (this is read as {fmt}: "
-            "its units come from the file)",
+            f"--map, --unit and --rate apply to plain CSV files (this is read as {fmt}: its units come from the file)",
         )
     p = Path(path)
     if not p.exists():
@@ -86,9 +81,7 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
 
     if fmt == "euroc":
         return csvfiles.read_euroc(path)
-    return csvfiles.read_plain(
-        path, mapping=opts.mapping, units=opts.units, rate_hz=opts.rate_hz
-    )
+    return csvfiles.read_plain(path, mapping=opts.mapping, units=opts.units, rate_hz=opts.rate_hz)
 
 
 def infer_procedure(path, imported: Imported, fmt: str) -> str:
@@ -101,8 +94,7 @@ def infer_procedure(path, imported: Imported, fmt: str) -> str:
     raise InputError(
         path,
         None,
-        f"a {fmt} file with {have} data: say which procedure with --procedure "
-        f"({', '.join(fits)})",
+        f"a {fmt} file with {have} data: say which procedure with --procedure ({', '.join(fits)})",
     )
 
 
@@ -139,11 +131,7 @@ def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
             fmt = "csv"  # --map/--unit say it is a foreign CSV
         else:
             capture = read_capture(path)
-            if (
-                opts.procedure
-                and capture.procedure
-                and opts.procedure != capture.procedure
-            ):
+            if opts.procedure and capture.procedure and opts.procedure != capture.procedure:
                 raise InputError(
                     path,
                     capture.meta_lines.get("procedure"),
@@ -153,9 +141,7 @@ def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
             if opts.procedure and not capture.procedure:
                 capture.meta["procedure"] = opts.procedure
             return capture, []
-    capture, warnings = import_file(
-        path, ImportOptions(**{**opts.__dict__, "fmt": fmt})
-    )
+    capture, warnings = import_file(path, ImportOptions(**{**opts.__dict__, "fmt": fmt}))
     with tempfile.TemporaryDirectory(prefix="station-import-") as tmp:
         tmp_path = os.path.join(tmp, "capture.csv")
         write_capture(tmp_path, capture)

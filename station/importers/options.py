@@ -44,9 +44,7 @@ def parse_pairs(items: list[str] | None, what: str) -> dict[str, str]:
             key, sep, value = part.partition("=")
             key, value = key.strip(), value.strip()
             if not sep or not key or not value:
-                raise InputError(
-                    None, None, f"{what} {part.strip()!r}: expected NAME=VALUE"
-                )
+                raise InputError(None, None, f"{what} {part.strip()!r}: expected NAME=VALUE")
             if key in out:
                 raise InputError(None, None, f"{what}: {key} given twice")
             out[key] = value
@@ -71,11 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser, *, for_import: bool = False) 
         required=for_import,
         help="the procedure the data are for (sets the capture's rows: accel samples for "
         "accel-tabletop, gyro for gyro-drift, mag for compass)"
-        + (
-            ""
-            if for_import
-            else "; needed for a log unless it holds only magnetometer data"
-        ),
+        + ("" if for_import else "; needed for a log unless it holds only magnetometer data"),
     )
     g.add_argument(
         "--instance",

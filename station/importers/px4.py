@@ -48,9 +48,7 @@ def _load(path):
         *GPS_TOPICS,
     ]
     try:
-        with contextlib.redirect_stdout(
-            io.StringIO()
-        ):  # pyulog reports oddities on stdout
+        with contextlib.redirect_stdout(io.StringIO()):  # pyulog reports oddities on stdout
             return ULog(str(path), wanted)
     except FileNotFoundError:
         raise InputError(path, None, "no such file") from None
@@ -59,17 +57,11 @@ def _load(path):
     except PermissionError:
         raise InputError(path, None, "permission denied") from None
     except Exception as exc:  # noqa: BLE001 - pyulog raises bare Exceptions on a bad header
-        raise InputError(
-            path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})"
-        ) from None
+        raise InputError(path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})") from None
 
 
 def _topics(ulog, name: str) -> dict[int, object]:
-    return {
-        d.multi_id: d
-        for d in ulog.data_list
-        if d.name == name and len(d.data.get("timestamp", ())) > 0
-    }
+    return {d.multi_id: d for d in ulog.data_list if d.name == name and len(d.data.get("timestamp", ())) > 0}
 
 
 def _time_us(data: dict) -> np.ndarray:
@@ -102,9 +94,7 @@ def read(
     ``primary``, the one the procedure calibrates); ``source``: ``raw``, ``combined`` or ``auto``
     (raw topics where logged, else ``sensor_combined``)."""
     if source not in SOURCES:
-        raise InputError(
-            None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}"
-        )
+        raise InputError(None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}")
     ulog = _load(path)
     params = dict(ulog.initial_parameters)
     info = ulog.msg_info_dict
@@ -117,15 +107,13 @@ def read(
         raise InputError(
             path,
             None,
-            "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic "
-            "(try --source combined)",
+            "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic (try --source combined)",
         )
     if not use_raw and not combined:
         raise InputError(
             path,
             None,
-            "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag "
-            "nor sensor_combined",
+            "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag nor sensor_combined",
         )
     streams: dict[str, Stream] = {}
     meta: dict[str, str] = {"firmware": "px4"}
@@ -141,9 +129,7 @@ def read(
                 if instance is None:
                     inst = min(topics)
                 elif primary is not None and kind != primary:
-                    warnings.append(
-                        f"--instance {instance}: no {RAW_TOPICS[kind]}[{instance}], so no {kind} columns"
-                    )
+                    warnings.append(f"--instance {instance}: no {RAW_TOPICS[kind]}[{instance}], so no {kind} columns")
                     continue
                 else:
                     raise InputError(
@@ -199,11 +185,7 @@ def read(
             if not all(c in d for c in cols):
                 continue
             ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
-            device_id = (
-                int(ids[0])
-                if len(ids) and len(np.unique(ids)) == 1 and ids[0]
-                else None
-            )
+            device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
             streams[kind] = Stream(
                 kind,
                 t_us.astype(np.float64),
@@ -214,16 +196,13 @@ def read(
                 _slot(params, kind, device_id),
             )
         vmag = _topics(ulog, "vehicle_magnetometer")
-        if (
-            "mag" not in streams and vmag
-        ):  # PX4 ≥ 1.11: the calibrated compass has its own topic
+        if "mag" not in streams and vmag:  # PX4 ≥ 1.11: the calibrated compass has its own topic
             inst = 0 if instance is None else instance
             if inst not in vmag:
                 raise InputError(
                     path,
                     None,
-                    f"--instance {inst}: vehicle_magnetometer has instances "
-                    f"{', '.join(map(str, sorted(vmag)))}",
+                    f"--instance {inst}: vehicle_magnetometer has instances {', '.join(map(str, sorted(vmag)))}",
                 )
             d = vmag[inst].data
             cols = [f"magnetometer_ga[{j}]" for j in range(3)]
@@ -240,14 +219,10 @@ def read(
             )
         meta["corrected"] = "true"
     if not streams:
-        raise InputError(
-            path, None, "no accelerometer, gyro or magnetometer samples in the log"
-        )
+        raise InputError(path, None, "no accelerometer, gyro or magnetometer samples in the log")
     t0_us = min(s.t_s[0] for s in streams.values())
     t1_us = max(s.t_s[-1] for s in streams.values())
-    for s in (
-        streams.values()
-    ):  # µs → s from the first sample (subtract first: SITL stamps are Unix µs)
+    for s in streams.values():  # µs → s from the first sample (subtract first: SITL stamps are Unix µs)
         s.t_s = (s.t_s - t0_us) * 1e-6
     # parameters in use at the start of the data; any change while the data run is listed
     late: set[str] = set()
@@ -308,9 +283,7 @@ def _place_and_date(ulog, t0_us: float, meta: dict[str, str]) -> None:
                     np.asarray(d["latitude_deg"])[fixed],
                     np.asarray(d["longitude_deg"])[fixed],
                 )
-                alt = np.asarray(d.get("altitude_msl_m", np.full(len(ts), np.nan)))[
-                    fixed
-                ]
+                alt = np.asarray(d.get("altitude_msl_m", np.full(len(ts), np.nan)))[fixed]
             elif "lat" in d:
                 lat, lon = (
                     np.asarray(d["lat"])[fixed] * 1e-7,

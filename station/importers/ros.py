@@ -27,9 +27,7 @@ SUFFIXES = (".bag", ".db3", ".mcap")
 
 def is_bag(path) -> bool:
     p = Path(path)
-    return p.suffix.lower() in SUFFIXES or (
-        p.is_dir() and (p / "metadata.yaml").is_file()
-    )
+    return p.suffix.lower() in SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
 
 
 def _stamp(msg, fallback_ns: int) -> int:
@@ -72,9 +70,7 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
     p = Path(path)
     if not p.exists():
         raise InputError(path, None, "no such file")
-    store = get_typestore(
-        Stores.ROS1_NOETIC if p.suffix.lower() == ".bag" else Stores.LATEST
-    )
+    store = get_typestore(Stores.ROS1_NOETIC if p.suffix.lower() == ".bag" else Stores.LATEST)
     try:
         reader = AnyReader([p], default_typestore=store)
         reader.open()
@@ -88,20 +84,12 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
         by_type: dict[str, dict[str, int]] = {IMU: {}, MAG: {}, TEMP: {}}
         for c in reader.connections:
             if c.msgtype in by_type:
-                by_type[c.msgtype][c.topic] = (
-                    by_type[c.msgtype].get(c.topic, 0) + c.msgcount
-                )
+                by_type[c.msgtype][c.topic] = by_type[c.msgtype].get(c.topic, 0) + c.msgcount
         imu_topic = _pick(path, by_type[IMU], topics.get("imu"), "Imu")
         mag_topic = _pick(path, by_type[MAG], topics.get("mag"), "MagneticField")
-        temp_topic = (
-            _pick(path, by_type[TEMP], topics.get("temp"), "Temperature")
-            if by_type[TEMP]
-            else None
-        )
+        temp_topic = _pick(path, by_type[TEMP], topics.get("temp"), "Temperature") if by_type[TEMP] else None
         if imu_topic is None and mag_topic is None:
-            kinds_found = sorted({c.msgtype for c in reader.connections}) or [
-                "no messages"
-            ]
+            kinds_found = sorted({c.msgtype for c in reader.connections}) or ["no messages"]
             raise InputError(
                 path,
                 None,
@@ -133,17 +121,12 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001
-        raise InputError(
-            path, None, f"cannot read the bag ({type(exc).__name__}: {exc})"
-        ) from None
+        raise InputError(path, None, f"cannot read the bag ({type(exc).__name__}: {exc})") from None
     finally:
         reader.close()
     # seconds from the earliest stamp, subtracted in integer ns (Unix ns in a float lose 0.2 µs)
     origin = min((r[0] for rows in (acc, gyr, mag, temp) for r in rows[:1]), default=0)
-    acc, gyr, mag, temp = (
-        [((r[0] - origin) * 1e-9, *r[1:]) for r in rows]
-        for rows in (acc, gyr, mag, temp)
-    )
+    acc, gyr, mag, temp = ([((r[0] - origin) * 1e-9, *r[1:]) for r in rows] for rows in (acc, gyr, mag, temp))
     streams: dict[str, Stream] = {}
     for kind, rows, unit, topic in (
         ("accel", acc, "m/s^2", imu_topic),
@@ -152,17 +135,13 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
     ):
         if rows and (kinds is None or kind in kinds):
             arr = np.asarray(rows, dtype=np.float64)
-            streams[kind] = Stream(
-                kind, arr[:, 0], arr[:, 1:4], unit, f"{topic} ({kind})"
-            )
+            streams[kind] = Stream(kind, arr[:, 0], arr[:, 1:4], unit, f"{topic} ({kind})")
     if temp and "accel" in streams:
         tt = np.asarray(temp, dtype=np.float64)
         a = streams["accel"]
         a.temp_c = np.interp(a.t_s, tt[:, 0], tt[:, 1], left=np.nan, right=np.nan)
     meta: dict[str, str] = {}
-    if (
-        first_ns and first_ns > 946684800 * 10**9
-    ):  # a bag's receive clock is UTC wall time
+    if first_ns and first_ns > 946684800 * 10**9:  # a bag's receive clock is UTC wall time
         meta["date"] = iso_utc(first_ns * 1e-9)
     frames.discard("")
     if len(frames) == 1:

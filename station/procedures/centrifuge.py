@@ -14,6 +14,7 @@ fit, ``solvers.centrifuge.screen_rows``) are left out, and each is named in ``wa
 ``rejected_rows`` with the sign flip that would make it agree, if one does. Nothing in the
 data is changed.
 """
+
 from __future__ import annotations
 
 import math
@@ -56,9 +57,11 @@ def _rows(capture):
                 raise InputError(capture.path, lines[k], "row has an empty ax/ay/az/speed_rad_s")
         return a, w, labels, sig, lines
     if pos is None:
-        raise UnsupportedError(f"{_where(capture)}: accel-centrifuge: a time series needs a 'position' column to "
-                               "tell the orientations apart (or give a table of averages, one row per "
-                               "orientation and speed)")
+        raise UnsupportedError(
+            f"{_where(capture)}: accel-centrifuge: a time series needs a 'position' column to "
+            "tell the orientations apart (or give a table of averages, one row per "
+            "orientation and speed)"
+        )
     key = [(str(pos[k]), w[k]) for k in range(len(a))]
     N, W, L, S, lines = [], [], [], [], []
     k = 0
@@ -81,11 +84,11 @@ def _rows(capture):
 class Prepared:
     """A P2 capture read once: the rows of mean outputs, the radius and local gravity."""
 
-    N: np.ndarray                 # mean outputs (n, 3), the capture's accel_unit
-    speed_rad_s: np.ndarray       # (n,)
-    labels: list[str]             # mounting (position) per row
-    sigma_N: np.ndarray | None    # standard error of each mean (n, 3), None when not measured
-    lines: list[int]              # the capture's line of each row
+    N: np.ndarray  # mean outputs (n, 3), the capture's accel_unit
+    speed_rad_s: np.ndarray  # (n,)
+    labels: list[str]  # mounting (position) per row
+    sigma_N: np.ndarray | None  # standard error of each mean (n, 3), None when not measured
+    lines: list[int]  # the capture's line of each row
     radius_m: float
     g_mps2: float
     warnings: list[str] = field(default_factory=list)
@@ -96,8 +99,11 @@ def prepare(capture) -> Prepared:
     warnings: list[str] = []
     R = capture.float_meta("radius_m")
     if R is None or R <= 0:
-        raise InputError(capture.path, capture.meta_lines.get("radius_m"), "metadata needs 'radius_m' (the centrifuge "
-                         "radius, m) for A = ω²R/g")
+        raise InputError(
+            capture.path,
+            capture.meta_lines.get("radius_m"),
+            "metadata needs 'radius_m' (the centrifuge radius, m) for A = ω²R/g",
+        )
     g = capture.local_gravity_mps2(warnings)
     N, w, labels, sigma_N, lines = _rows(capture)
     return Prepared(N, w, labels, sigma_N, lines, R, g, warnings)
@@ -109,8 +115,9 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
     all_rows = key.endswith("-all")
     base = key[:-4] if all_rows else key
     if base not in BASES:
-        raise UnsupportedError(f"accel-centrifuge: unknown method {key!r} (methods: {', '.join(BASES)}, "
-                               "each optionally with -all)")
+        raise UnsupportedError(
+            f"accel-centrifuge: unknown method {key!r} (methods: {', '.join(BASES)}, each optionally with -all)"
+        )
     unit = capture.meta.get("accel_unit") or "raw"
     prep = prepared if prepared is not None else prepare(capture)
     warnings = list(prep.warnings)
@@ -119,8 +126,10 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
     rho = C.norm_target(w, R, g)
     n_all = len(N)
     if len(np.unique(np.round(w, 9))) < 2:
-        warnings.append("one centrifuge speed only: the quadratic term D is poorly separated from the scale "
-                        "factor; use several speeds")
+        warnings.append(
+            "one centrifuge speed only: the quadratic term D is poorly separated from the scale "
+            "factor; use several speeds"
+        )
     used = np.ones(n_all, bool)
     rejected = []
     try:
@@ -129,17 +138,28 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
             if (~scr.used).sum() and scr.used.sum() >= max(15, n_all // 2):
                 used = scr.used
                 for k in np.flatnonzero(~used):
-                    rejected.append({"row": int(k + 1), "line": lines[k], "position": labels[k],
-                                     "speed_rad_s": float(w[k]), "residual_g": float(scr.residuals[k]),
-                                     "hint": scr.hints.get(int(k))})
+                    rejected.append(
+                        {
+                            "row": int(k + 1),
+                            "line": lines[k],
+                            "position": labels[k],
+                            "speed_rad_s": float(w[k]),
+                            "residual_g": float(scr.residuals[k]),
+                            "hint": scr.hints.get(int(k)),
+                        }
+                    )
                 spread = scr.scale
-                warnings.append(f"{len(rejected)} of {n_all} rows disagree with the model far beyond the others "
-                                f"(|f| off by {np.min(np.abs([r['residual_g'] for r in rejected])):.2g}–"
-                                f"{np.max(np.abs([r['residual_g'] for r in rejected])):.2g} g against a spread of "
-                                f"{spread:.2g} g) and are left out of the fit (use --method {base}-all to keep them)")
+                warnings.append(
+                    f"{len(rejected)} of {n_all} rows disagree with the model far beyond the others "
+                    f"(|f| off by {np.min(np.abs([r['residual_g'] for r in rejected])):.2g}–"
+                    f"{np.max(np.abs([r['residual_g'] for r in rejected])):.2g} g against a spread of "
+                    f"{spread:.2g} g) and are left out of the fit (use --method {base}-all to keep them)"
+                )
                 for r in rejected:
-                    warnings.append(f"line {r['line']} (position {r['position']}, ω {r['speed_rad_s']:.4g} rad/s): "
-                                    f"|f| − ρ = {r['residual_g']:+.3g} g" + (f"; {r['hint']}" if r["hint"] else ""))
+                    warnings.append(
+                        f"line {r['line']} (position {r['position']}, ω {r['speed_rad_s']:.4g} rad/s): "
+                        f"|f| − ρ = {r['residual_g']:+.3g} g" + (f"; {r['hint']}" if r["hint"] else "")
+                    )
         Nu, ru = N[used], rho[used]
         sN = sigma_N[used] if sigma_N is not None else None
         if base in ("exact", "exact-gamma"):
@@ -152,14 +172,18 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         raise UnsupportedError(f"{_where(capture)}: accel-centrifuge: the fit failed: {exc}") from None
     if res.fit is not None:
         if res.noise_known and res.fit.misfit_scaled:
-            warnings.append(f"residuals are {math.sqrt(res.fit.reduced_chi2):.1f}× the measured noise: the model "
-                            "does not explain everything (installation angles, lever arm, cubic term?); "
-                            "uncertainties scaled up")
+            warnings.append(
+                f"residuals are {math.sqrt(res.fit.reduced_chi2):.1f}× the measured noise: the model "
+                "does not explain everything (installation angles, lever arm, cubic term?); "
+                "uncertainties scaled up"
+            )
         if not res.noise_known:
             warnings.append("no per-row noise (n, *_std columns): uncertainties come from the residual scatter")
     if base.startswith("paper"):
-        warnings.append("the paper's method truncates the inverse's series (error O(D³x⁵)) and fits 13 lumped "
-                        "coefficients without weights; its uncertainties are propagated from that fit")
+        warnings.append(
+            "the paper's method truncates the inverse's series (error O(D³x⁵)) and fits 13 lumped "
+            "coefficients without weights; its uncertainties are propagated from that fit"
+        )
     params = {k: v for k, v in res.params.items()}
     result = {
         "procedure": "accel-centrifuge",
@@ -171,8 +195,15 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         "n_positions": int(used.sum()),
         "warnings": warnings,
         "method": key,
-        "units": {"f": "g", "N": unit, "S": f"{unit} per g", "b": unit, "D": "g/g^2", "gamma": "rad",
-                  "residual_rms": "g (|f| − sqrt(A² + 1))"},
+        "units": {
+            "f": "g",
+            "N": unit,
+            "S": f"{unit} per g",
+            "b": unit,
+            "D": "g/g^2",
+            "gamma": "rad",
+            "residual_rms": "g (|f| − sqrt(A² + 1))",
+        },
         "g_mps2": g,
         "radius_m": R,
         "n_rows": n_all,
@@ -182,21 +213,31 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
     }
     if base == "exact-gamma":
         if res.extra.get("gamma_gauge") == "all":
-            result["gamma_gauge"] = ("all 6 angles fitted: the quadratic term acts on the sensor's own axes, which "
-                                     "makes a rotation of the whole triad visible at these accelerations")
+            result["gamma_gauge"] = (
+                "all 6 angles fitted: the quadratic term acts on the sensor's own axes, which "
+                "makes a rotation of the whole triad visible at these accelerations"
+            )
         else:
-            result["gamma_gauge"] = ("γxy = γxz = γyz = 0: these data cannot see a rotation of the whole triad, so "
-                                     "the frame's x axis is the x accelerometer's and its y axis lies in the x-y "
-                                     "input plane")
-            warnings.append("installation angles: only their non-orthogonal part is identifiable here; the triad's "
-                            "rotation is fixed by convention (γxy = γxz = γyz = 0)")
+            result["gamma_gauge"] = (
+                "γxy = γxz = γyz = 0: these data cannot see a rotation of the whole triad, so "
+                "the frame's x axis is the x accelerometer's and its y axis lies in the x-y "
+                "input plane"
+            )
+            warnings.append(
+                "installation angles: only their non-orthogonal part is identifiable here; the triad's "
+                "rotation is fixed by convention (γxy = γxz = γyz = 0)"
+            )
     if res.fit is not None:
         result["reduced_chi2"] = res.fit.reduced_chi2
         result["condition_number"] = res.fit.condition_number
     if base.startswith("paper"):
-        result["paper_coefficients"] = {"C0": res.extra["coefficients"][0],
-                                        "C1": res.extra["coefficients"][1:4], "C2": res.extra["coefficients"][4:7],
-                                        "C3": res.extra["coefficients"][7:10], "C4": res.extra["coefficients"][10:13]}
+        result["paper_coefficients"] = {
+            "C0": res.extra["coefficients"][0],
+            "C1": res.extra["coefficients"][1:4],
+            "C2": res.extra["coefficients"][4:7],
+            "C3": res.extra["coefficients"][7:10],
+            "C4": res.extra["coefficients"][10:13],
+        }
     return result
 
 
@@ -206,8 +247,11 @@ def format_text(result: dict) -> str:
 
     r = jsonable(result)
     u = r["units"]
-    lines = [f"procedure  accel-centrifuge (P2, {r['method']})", f"device     {r.get('device')}",
-             f"model      {r['model']}   (f in g, N in {u['N']})"]
+    lines = [
+        f"procedure  accel-centrifuge (P2, {r['method']})",
+        f"device     {r.get('device')}",
+        f"model      {r['model']}   (f in g, N in {u['N']})",
+    ]
     for k in ("S", "b", "D", "gamma"):
         if k in r["params"]:
             lines += param_lines(f"{k} [{u[k]}]", r["params"][k], r["uncertainty"].get(k))
@@ -225,10 +269,16 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     prep = prepared if prepared is not None else prepare(capture)
     N, w, labels, sigma_N, lines = prep.N, prep.speed_rad_s, prep.labels, prep.sigma_N, prep.lines
     p0 = {k: np.asarray(v, float) for k, v in base["params"].items() if k in ("S", "b", "D")}
-    temp = np.asarray(capture.columns["temp_c"], float) if "temp_c" in capture.columns and \
-        not capture.is_time_series else None
-    el = np.asarray(capture.columns["elapsed_s"], float) if "elapsed_s" in capture.columns and \
-        not capture.is_time_series else None
+    temp = (
+        np.asarray(capture.columns["temp_c"], float)
+        if "temp_c" in capture.columns and not capture.is_time_series
+        else None
+    )
+    el = (
+        np.asarray(capture.columns["elapsed_s"], float)
+        if "elapsed_s" in capture.columns and not capture.is_time_series
+        else None
+    )
     # the calibration's own screen (solvers.centrifuge.screen_rows): rows that disagree with the
     # model far beyond the others are left out of the effect search too, and named by line
     rejected = {r["line"]: r for r in base.get("rejected_rows") or []}
@@ -242,16 +292,28 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         temp = temp[keep] if temp is not None else None
         el = el[keep] if el is not None else None
         for ln, r in rejected.items():
-            screened.append({"kind": "outlier", "line": ln, "position": str(r["position"]),
-                             "where": f"line {ln} (position {r['position']}, ω={r['speed_rad_s']:.3g} rad/s)",
-                             "speed_rad_s": r["speed_rad_s"], "residual_g": r["residual_g"], "screened": True,
-                             "explanation": f"|f| − ρ = {r['residual_g']:+.3g} g, far beyond the other rows' spread "
-                                            "(the calibration leaves it out; so does the effect search)"
-                                            + (f"; {r['hint']}" if r.get("hint") else "")})
-    prob = DP.centrifuge_problem(N, w, prep.radius_m, prep.g_mps2, p0, labels=labels, sigma_N=sigma_N,
-                                 temp_c=temp, elapsed_s=el)
+            screened.append(
+                {
+                    "kind": "outlier",
+                    "line": ln,
+                    "position": str(r["position"]),
+                    "where": f"line {ln} (position {r['position']}, ω={r['speed_rad_s']:.3g} rad/s)",
+                    "speed_rad_s": r["speed_rad_s"],
+                    "residual_g": r["residual_g"],
+                    "screened": True,
+                    "explanation": f"|f| − ρ = {r['residual_g']:+.3g} g, far beyond the other rows' spread "
+                    "(the calibration leaves it out; so does the effect search)"
+                    + (f"; {r['hint']}" if r.get("hint") else ""),
+                }
+            )
+    prob = DP.centrifuge_problem(
+        N, w, prep.radius_m, prep.g_mps2, p0, labels=labels, sigma_N=sigma_N, temp_c=temp, elapsed_s=el
+    )
     prob.row_labels = [f"line {ln} (position {lab}, ω={x:.3g} rad/s)" for ln, lab, x in zip(lines, labels, w)]
     prob.screened = screened
-    return DiagnosisInput(prob, {"position": labels, "speed_rad_s": w},
-                          "a row that disagrees with the norm condition: a transcription error or a mounting "
-                          "that shifted", group_kind="mounting")
+    return DiagnosisInput(
+        prob,
+        {"position": labels, "speed_rad_s": w},
+        "a row that disagrees with the norm condition: a transcription error or a mounting that shifted",
+        group_kind="mounting",
+    )

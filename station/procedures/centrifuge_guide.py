@@ -36,6 +36,7 @@ live, ``n, ax_std, ay_std, az_std``; metadata ``procedure: accel-centrifuge``,
 ``radius_m``, ``g_mps2`` (as the operator entered them), ``accel_unit``,
 ``speed_source``) for ``station.calibrate.calibrate_capture``.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -143,8 +144,10 @@ class CentrifugeStep:
 
     @property
     def prompt(self) -> str:
-        return (f"Mount in orientation {self.orientation}, spin at {self.speed_rad_s:.3g} rad/s "
-                f"({self.speed_rad_s / (2 * math.pi):.3g} rev/s)")
+        return (
+            f"Mount in orientation {self.orientation}, spin at {self.speed_rad_s:.3g} rad/s "
+            f"({self.speed_rad_s / (2 * math.pi):.3g} rev/s)"
+        )
 
 
 def centrifuge_steps(config: CentrifugeConfig) -> list[CentrifugeStep]:
@@ -178,18 +181,31 @@ _GYRO_RAD_S = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
 class CentrifugeGuide:
     procedure = "accel-centrifuge"
 
-    def __init__(self, *, sample_rate_hz: float, units: dict, device_id: str = "",
-                 config: CentrifugeConfig | None = None, steps: list[CentrifugeStep] | None = None):
+    def __init__(
+        self,
+        *,
+        sample_rate_hz: float,
+        units: dict,
+        device_id: str = "",
+        config: CentrifugeConfig | None = None,
+        steps: list[CentrifugeStep] | None = None,
+    ):
         self.config = config or CentrifugeConfig()
         self.sample_rate_hz = float(sample_rate_hz)
         self.units = dict(units)
         self.device_id = device_id
         self.steps = steps if steps is not None else centrifuge_steps(self.config)
-        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         c = self.config
         init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
-        self.tracker = StillnessTracker(self.sample_rate_hz, init_rest_s=init, window_s=c.window_s,
-                                        min_duration_s=0.0, margin_s=0.0, nan_policy="omit")
+        self.tracker = StillnessTracker(
+            self.sample_rate_hz,
+            init_rest_s=init,
+            window_s=c.window_s,
+            min_duration_s=0.0,
+            margin_s=0.0,
+            nan_policy="omit",
+        )
         self.phase = "noise"
         self.index: int | None = 0
         self._need_change = True  # the rest is the stopped centrifuge: spin up first
@@ -283,9 +299,11 @@ class CentrifugeGuide:
             if not st.is_still or off:
                 self._avg_reset()
                 self.phase = "place"
-                self._message = ("The output changed during the average: it starts again when steady" if not off
-                                 else f"The table rate left the asked speed ({rate:.3f} rad/s): the average "
-                                 "starts again at speed")
+                self._message = (
+                    "The output changed during the average: it starts again when steady"
+                    if not off
+                    else f"The table rate left the asked speed ({rate:.3f} rad/s): the average starts again at speed"
+                )
                 self._events.append(("restarted", self.step.label))
                 return
             self._avg_add(t, a, rates)
@@ -294,8 +312,11 @@ class CentrifugeGuide:
             return
         if off:
             self.phase = "place"
-            self._message = (f"{self.step.prompt}; the table turns at {rate:.3f} rad/s: not at speed yet"
-                             if st.is_still else f"{self.step.prompt}; waiting for the speed")
+            self._message = (
+                f"{self.step.prompt}; the table turns at {rate:.3f} rad/s: not at speed yet"
+                if st.is_still
+                else f"{self.step.prompt}; waiting for the speed"
+            )
             return
         if st.is_still and st.still_for_s >= c.settle_s:
             self.phase = "average"
@@ -327,7 +348,7 @@ class CentrifugeGuide:
     def _capture_live(self) -> None:
         s = self.step
         mean = self._sum / self._n
-        var = np.maximum(self._sq / self._n - mean ** 2, 0.0) * self._n / max(self._n - 1, 1)
+        var = np.maximum(self._sq / self._n - mean**2, 0.0) * self._n / max(self._n - 1, 1)
         s.values, s.std, s.n = [float(x) for x in mean], [float(x) for x in np.sqrt(var)], int(self._n)
         measured = self._rate_sum / self._rate_n if self._rate_n else math.nan
         s.speed_measured_rad_s, s.rate_gyro_rad_s = s.speed_rad_s, measured
@@ -368,9 +389,12 @@ class CentrifugeGuide:
             if scr is not None:
                 for j in np.flatnonzero(~scr.used):
                     i = idx[int(j)]
-                    found.setdefault(i, f"|f| off the model by {scr.residuals[j]:+.3g} g, "
-                                        f"{abs(scr.residuals[j]) / max(scr.scale, 1e-300):.0f}x the others' spread"
-                                     + (f"; {scr.hints[int(j)]}" if int(j) in scr.hints else ""))
+                    found.setdefault(
+                        i,
+                        f"|f| off the model by {scr.residuals[j]:+.3g} g, "
+                        f"{abs(scr.residuals[j]) / max(scr.scale, 1e-300):.0f}x the others' spread"
+                        + (f"; {scr.hints[int(j)]}" if int(j) in scr.hints else ""),
+                    )
         for i, why in found.items():
             if i not in self.disagreeing:
                 self._events.append(("disagree", f"{self.steps[i].label.strip()}: {why}"))
@@ -467,15 +491,23 @@ class CentrifugeGuide:
         st = st if st is not None else self.tracker.state
         rec = (self._t1 - self._t0) if self.phase == "average" and math.isfinite(self._t0) else 0.0
         return CentrifugeStatus(
-            phase=self.phase, index=self.index, calibrating=st.calibrating, is_still=st.is_still,
-            still_for_s=float(st.still_for_s), level=float(st.level),
+            phase=self.phase,
+            index=self.index,
+            calibrating=st.calibrating,
+            is_still=st.is_still,
+            still_for_s=float(st.still_for_s),
+            level=float(st.level),
             settle_left_s=max(c.settle_s - st.still_for_s, 0.0) if self.phase == "settle" else math.nan,
             countdown_s=max(c.average_s - rec, 0.0) if self.phase == "average" else math.nan,
             progress=min(rec / c.average_s, 1.0) if self.phase == "average" else 0.0,
-            raw=tuple(float(x) for x in raw), table_rate_rad_s=rate, at_speed=not self._off_speed(rate),
+            raw=tuple(float(x) for x in raw),
+            table_rate_rad_s=rate,
+            at_speed=not self._off_speed(rate),
             n_captured=self.n_captured,
-            n_skipped=sum(s.status == "skipped" for s in self.steps), t_s=t,
-            message=self._message)
+            n_skipped=sum(s.status == "skipped" for s in self.steps),
+            t_s=t,
+            message=self._message,
+        )
 
     def capture(self, extra_meta: dict | None = None):
         """The captured rows as a P2 table of averages (``station.capture.Capture``)."""
@@ -483,27 +515,49 @@ class CentrifugeGuide:
 
         rows = [s for s in self.steps if s.status == "captured"]
         v = np.array([s.values for s in rows], float).reshape(-1, 3)
-        cols = {"position": np.array([str(s.orientation) for s in rows], dtype=object),
-                "speed_rad_s": np.array([s.speed_measured_rad_s for s in rows], float),
-                "ax": v[:, 0], "ay": v[:, 1], "az": v[:, 2]}
+        cols = {
+            "position": np.array([str(s.orientation) for s in rows], dtype=object),
+            "speed_rad_s": np.array([s.speed_measured_rad_s for s in rows], float),
+            "ax": v[:, 0],
+            "ay": v[:, 1],
+            "az": v[:, 2],
+        }
         if any(math.isfinite(s.rate_gyro_rad_s) for s in rows):
             cols["rate_gyro_rad_s"] = np.array([s.rate_gyro_rad_s for s in rows], float)
         if rows and all(s.how.startswith("live") and s.n > 1 for s in rows):
             sd = np.array([s.std for s in rows], float)
-            cols.update({"n": np.array([s.n for s in rows], float), "ax_std": sd[:, 0], "ay_std": sd[:, 1],
-                         "az_std": sd[:, 2]})
+            cols.update(
+                {"n": np.array([s.n for s in rows], float), "ax_std": sd[:, 0], "ay_std": sd[:, 1], "az_std": sd[:, 2]}
+            )
         c = self.config
-        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
-                "accel_unit": self.units.get("accel_unit") or "raw", "radius_m": repr(float(c.radius_m)),
-                "g_mps2": repr(float(c.g_mps2)), "date": self.started[:10]}
+        meta = {
+            "station-capture": "1",
+            "procedure": self.procedure,
+            "device": self.device_id or "unknown",
+            "accel_unit": self.units.get("accel_unit") or "raw",
+            "radius_m": repr(float(c.radius_m)),
+            "g_mps2": repr(float(c.g_mps2)),
+            "date": self.started[:10],
+        }
         if any(s.how == "manual" for s in rows):
             meta["manual_rows"] = str(sum(s.how == "manual" for s in rows))
         hows = {s.how for s in rows}
-        meta["speed_source"] = "; ".join(
-            text for how, text in (("live", f"set point, confirmed by the gyro on the table within "
-                                            f"{100 * self.config.speed_tol:g} % (its mean in rate_gyro_rad_s)"),
-                                   ("live-set-point", "set point (no rate measured)"),
-                                   ("manual", "typed by the operator")) if how in hows) or "none"
+        meta["speed_source"] = (
+            "; ".join(
+                text
+                for how, text in (
+                    (
+                        "live",
+                        f"set point, confirmed by the gyro on the table within "
+                        f"{100 * self.config.speed_tol:g} % (its mean in rate_gyro_rad_s)",
+                    ),
+                    ("live-set-point", "set point (no rate measured)"),
+                    ("manual", "typed by the operator"),
+                )
+                if how in hows
+            )
+            or "none"
+        )
         if self.disagreeing:
             meta["rows_disagreeing"] = ", ".join(self.steps[i].label.strip() for i in sorted(self.disagreeing))
         meta.update({k: str(x) for k, x in (extra_meta or {}).items()})
@@ -568,11 +622,13 @@ def mounting_drawing(k: int, n_orientations: int = 20) -> list[str]:
             grid[row][col] = ch
         return ["".join(r) for r in grid]
 
-    top = view(0, 1, 2, 1.0)   # from above: right = out, up-screen = along the turn
+    top = view(0, 1, 2, 1.0)  # from above: right = out, up-screen = along the turn
     side = view(0, 2, 1, -1.0)  # from behind the turn: right = out, up-screen = up
     cos = [f" {'xyz'[a]}  {axes[a, 0]:+.2f} {axes[a, 1]:+.2f} {axes[a, 2]:+.2f}" for a in range(3)]
-    return [f"{'above ↑turn':<12}{'side ↑up':<12}axis  out  turn   up",
-            f"{top[0]:<12}{side[0]:<12}{cos[0]}",
-            f"{top[1] + '→':<12}{side[1] + '→':<12}{cos[1]}",
-            f"{top[2]:<12}{side[2]:<12}{cos[2]}",
-            "o the triad, → the arm to the rim, CAPITAL toward you"]
+    return [
+        f"{'above ↑turn':<12}{'side ↑up':<12}axis  out  turn   up",
+        f"{top[0]:<12}{side[0]:<12}{cos[0]}",
+        f"{top[1] + '→':<12}{side[1] + '→':<12}{cos[1]}",
+        f"{top[2]:<12}{side[2]:<12}{cos[2]}",
+        "o the triad, → the arm to the rim, CAPITAL toward you",
+    ]

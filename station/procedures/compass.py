@@ -12,6 +12,7 @@ the warnings an operator must see:
   accelerometer is flipped, with a warning, never silently;
 - misfit: residuals above the noise estimated from the data (second differences).
 """
+
 from __future__ import annotations
 
 import math
@@ -43,14 +44,19 @@ def _xyz(capture, prefix: str) -> np.ndarray | None:
 def _reference(capture, warnings: list[str]) -> dict | None:
     lat, lon = capture.float_meta("latitude_deg"), capture.float_meta("longitude_deg")
     if lat is None or lon is None:
-        warnings.append("no place in the metadata (latitude_deg, longitude_deg): no IGRF reference; "
-                        "the field magnitude is normalised to the data's own mean radius, so the "
-                        "calibration is NOT IGRF-anchored (W's overall scale is relative)")
+        warnings.append(
+            "no place in the metadata (latitude_deg, longitude_deg): no IGRF reference; "
+            "the field magnitude is normalised to the data's own mean radius, so the "
+            "calibration is NOT IGRF-anchored (W's overall scale is relative)"
+        )
         return None
     date = capture.meta.get("date")
     if not date:
-        raise InputError(capture.path, None, "metadata has latitude_deg/longitude_deg but no 'date': "
-                         "the IGRF field needs the date of the recording")
+        raise InputError(
+            capture.path,
+            None,
+            "metadata has latitude_deg/longitude_deg but no 'date': the IGRF field needs the date of the recording",
+        )
     alt = capture.float_meta("altitude_m", 0.0)
     try:
         _, note = igrf_date(date)
@@ -65,9 +71,9 @@ def _reference(capture, warnings: list[str]) -> dict | None:
 class Prepared:
     """A P3 capture read once: the raw magnetometer rows, which are complete, the times."""
 
-    y: np.ndarray             # raw magnetometer (n, 3), the capture's mag_unit
-    good: np.ndarray          # rows with all three components (n,)
-    t: np.ndarray | None      # times (n,) of a time series, else None
+    y: np.ndarray  # raw magnetometer (n, 3), the capture's mag_unit
+    good: np.ndarray  # rows with all three components (n,)
+    t: np.ndarray | None  # times (n,) of a time series, else None
     warnings: list[str] = field(default_factory=list)
 
 
@@ -103,18 +109,23 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         if not math.isfinite(noise_raw) or noise_raw <= 0:
             noise_raw = None
     try:
-        cal = C.calibrate_mag(y, None if ref is None else ref["total_nT"], unit_factor_nT=mag_factor,
-                              method=method, noise_raw=noise_raw)
+        cal = C.calibrate_mag(
+            y, None if ref is None else ref["total_nT"], unit_factor_nT=mag_factor, method=method, noise_raw=noise_raw
+        )
     except SolverError as exc:
         raise UnsupportedError(f"{capture.path or 'capture'}: compass: {exc}") from None
     if cal.batch.misfit_scaled:
-        warnings.append(f"residuals are {math.sqrt(cal.batch.reduced_chi2):.1f}x the sensor noise "
-                        "(estimated from second differences): the ellipsoid model does not explain "
-                        "everything (time misalignment, field disturbances, nonlinearity); "
-                        "uncertainties are scaled up accordingly")
+        warnings.append(
+            f"residuals are {math.sqrt(cal.batch.reduced_chi2):.1f}x the sensor noise "
+            "(estimated from second differences): the ellipsoid model does not explain "
+            "everything (time misalignment, field disturbances, nonlinearity); "
+            "uncertainties are scaled up accordingly"
+        )
     if not math.isfinite(cal.rls_minus_batch_sigma):
-        warnings.append(f"only {cal.n_distinct} distinct orientations: axis-aligned ellipsoid (diagonal W) "
-                        "without RLS; the off-diagonal soft iron is not estimated")
+        warnings.append(
+            f"only {cal.n_distinct} distinct orientations: axis-aligned ellipsoid (diagonal W) "
+            "without RLS; the off-diagonal soft iron is not estimated"
+        )
     if cal.rls_minus_batch_sigma > 0.1:
         warnings.append(f"the RLS differs from the batch solution by {cal.rls_minus_batch_sigma:.2f} sigma")
     if ref is None:
@@ -127,8 +138,11 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         "model": MODEL,
         "method": method,
         "params": {"hard_iron": cal.h.tolist(), "soft_iron": cal.W.tolist(), "reference": reference},
-        "uncertainty": {"hard_iron": cal.h_sigma.tolist(), "soft_iron": cal.W_sigma.tolist(),
-                        "reference": {k: None for k in REF_KEYS}},
+        "uncertainty": {
+            "hard_iron": cal.h_sigma.tolist(),
+            "soft_iron": cal.W_sigma.tolist(),
+            "reference": {k: None for k in REF_KEYS},
+        },
         "residual_rms": cal.residual_rms_nT,
         "n_positions": cal.n_distinct,
         "warnings": warnings,
@@ -156,8 +170,10 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
         return
     a_factor = si_factor("accel", capture.meta.get("accel_unit"))
     if a_factor is None:
-        warnings.append(f"accel_unit {capture.meta.get('accel_unit')!r} has no physical factor: "
-                        "no tilt, no heading (calibrate the accelerometer first)")
+        warnings.append(
+            f"accel_unit {capture.meta.get('accel_unit')!r} has no physical factor: "
+            "no tilt, no heading (calibrate the accelerometer first)"
+        )
         return
     f_g = a * (a_factor / G_STANDARD_MPS2)
     w = _xyz(capture, "g")
@@ -182,20 +198,31 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     verdict = C.detect_accel_sign(f_f[good], m_cal[good], inc)
     stated = (capture.meta.get("accel_sign") or "").strip().lower().replace("-", "_").replace(" ", "_") or None
     if stated not in (None, "gravity", "specific_force"):
-        raise InputError(capture.path, capture.meta_lines.get("accel_sign"),
-                         f"metadata 'accel_sign': {stated!r} is not 'gravity' or 'specific_force'")
+        raise InputError(
+            capture.path,
+            capture.meta_lines.get("accel_sign"),
+            f"metadata 'accel_sign': {stated!r} is not 'gravity' or 'specific_force'",
+        )
     sign = stated or verdict.sign
     if stated and stated != verdict.sign:
-        warnings.append(f"metadata says accel_sign: {stated}, but the data suggest {verdict.sign} "
-                        f"({verdict.reason}); following the metadata")
+        warnings.append(
+            f"metadata says accel_sign: {stated}, but the data suggest {verdict.sign} "
+            f"({verdict.reason}); following the metadata"
+        )
     if sign == "gravity":
         src = "metadata accel_sign: gravity" if stated else "detected"
-        warnings.append(f"accelerometer reports the gravity direction, not specific force ({src}: "
-                        f"{verdict.reason}); flipped its sign for tilt and heading")
+        warnings.append(
+            f"accelerometer reports the gravity direction, not specific force ({src}: "
+            f"{verdict.reason}); flipped its sign for tilt and heading"
+        )
         f_f = -f_f
-    result["accel_sign"] = {"used": sign, "stated": stated, "detected": verdict.sign,
-                            "accel_field_angle_deg": verdict.angle_deg,
-                            "expected_specific_force_deg": verdict.expected_deg}
+    result["accel_sign"] = {
+        "used": sign,
+        "stated": stated,
+        "detected": verdict.sign,
+        "accel_field_angle_deg": verdict.angle_deg,
+        "expected_specific_force_deg": verdict.expected_deg,
+    }
     decl = 0.0 if ref is None else ref["declination_deg"]
     if ref is None:
         warnings.append("no declination without a place: true heading = magnetic heading")
@@ -216,8 +243,13 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
 
 
 def _heading_row(i, pitch, roll, mh, th, t0=None, t1=None) -> dict:
-    row = {"index": int(i), "pitch_deg": math.degrees(pitch), "roll_deg": math.degrees(roll),
-           "heading_magnetic_deg": float(mh), "heading_true_deg": float(th)}
+    row = {
+        "index": int(i),
+        "pitch_deg": math.degrees(pitch),
+        "roll_deg": math.degrees(roll),
+        "heading_magnetic_deg": float(mh),
+        "heading_true_deg": float(th),
+    }
     if t0 is not None:
         row.update({"t_start_s": float(t0), "t_stop_s": float(t1)})
     return row
@@ -228,17 +260,26 @@ def _held_headings(t, f_g, w, pitch, roll, mh, th, warnings) -> list[dict]:
     try:
         from solvers.stillness import detect_static_intervals
 
-        still = detect_static_intervals(t, np.nan_to_num(f_g), None if w is None else np.nan_to_num(w),
-                                        nan_policy="omit")
+        still = detect_static_intervals(
+            t, np.nan_to_num(f_g), None if w is None else np.nan_to_num(w), nan_policy="omit"
+        )
     except (SolverError, ValueError) as exc:
         warnings.append(f"no held orientations found for per-position headings ({exc})")
         return []
     rows = []
     for k, iv in enumerate(still.intervals):
         s = slice(iv.start, iv.stop)
-        rows.append(_heading_row(k, float(np.median(pitch[s])), _circ_rad(roll[s]),
-                                 C.circular_mean_deg(mh[s]), C.circular_mean_deg(th[s]),
-                                 iv.t_start_s, iv.t_stop_s))
+        rows.append(
+            _heading_row(
+                k,
+                float(np.median(pitch[s])),
+                _circ_rad(roll[s]),
+                C.circular_mean_deg(mh[s]),
+                C.circular_mean_deg(th[s]),
+                iv.t_start_s,
+                iv.t_stop_s,
+            )
+        )
     return rows
 
 
@@ -250,27 +291,38 @@ def format_text(result: dict) -> str:
     from station.calibrate import jsonable
     from station.formatting import param_lines
 
-    lines = [f"procedure  compass ({result.get('method')})", f"device     {result.get('device')}",
-             f"model      {result.get('model')}"]
+    lines = [
+        f"procedure  compass ({result.get('method')})",
+        f"device     {result.get('device')}",
+        f"model      {result.get('model')}",
+    ]
     p, u = result["params"], result["uncertainty"]
     lines += param_lines("hard_iron", jsonable(p["hard_iron"]), jsonable(u["hard_iron"]))
     lines += param_lines("soft_iron", jsonable(p["soft_iron"]), jsonable(u["soft_iron"]))
     ref = p["reference"]
     if result.get("igrf_anchored"):
-        lines.append(f"  IGRF: F {ref['total_nT']:.1f} nT, N {ref['north_nT']:.1f}, E {ref['east_nT']:.1f}, "
-                     f"D {ref['down_nT']:.1f} nT, inclination {ref['inclination_deg']:.2f}°, "
-                     f"declination {ref['declination_deg']:.2f}°")
+        lines.append(
+            f"  IGRF: F {ref['total_nT']:.1f} nT, N {ref['north_nT']:.1f}, E {ref['east_nT']:.1f}, "
+            f"D {ref['down_nT']:.1f} nT, inclination {ref['inclination_deg']:.2f}°, "
+            f"declination {ref['declination_deg']:.2f}°"
+        )
     else:
         lines.append(f"  no IGRF reference: field normalised to {result['field_nT']:.6g} nT (data radius)")
     b, a = result["field_magnitude_before_nT"], result["field_magnitude_after_nT"]
-    lines.append(f"|m| before {b['mean']:.6g} ± {b['std']:.3g} nT ({b['std_percent']:.2f} %), "
-                 f"after {a['mean']:.6g} ± {a['std']:.3g} nT ({a['std_percent']:.3f} %)")
-    lines.append(f"residual   {result['residual_rms']:.4g} nT RMS; coverage {100 * result['coverage']:.0f}% "
-                 f"of the sphere; {result['n_positions']} distinct orientations; "
-                 f"RLS − batch ≤ {result['rls_minus_batch_max_sigma']:.3f} σ")
+    lines.append(
+        f"|m| before {b['mean']:.6g} ± {b['std']:.3g} nT ({b['std_percent']:.2f} %), "
+        f"after {a['mean']:.6g} ± {a['std']:.3g} nT ({a['std_percent']:.3f} %)"
+    )
+    lines.append(
+        f"residual   {result['residual_rms']:.4g} nT RMS; coverage {100 * result['coverage']:.0f}% "
+        f"of the sphere; {result['n_positions']} distinct orientations; "
+        f"RLS − batch ≤ {result['rls_minus_batch_max_sigma']:.3f} σ"
+    )
     for h in result.get("headings", [])[:40]:
-        lines.append(f"  held {h['index']:>2}: pitch {h['pitch_deg']:7.2f}°  roll {h['roll_deg']:7.2f}°  "
-                     f"heading {h['heading_magnetic_deg']:7.2f}° magnetic, {h['heading_true_deg']:7.2f}° true")
+        lines.append(
+            f"  held {h['index']:>2}: pitch {h['pitch_deg']:7.2f}°  roll {h['roll_deg']:7.2f}°  "
+            f"heading {h['heading_magnetic_deg']:7.2f}° magnetic, {h['heading_true_deg']:7.2f}° true"
+        )
     if result.get("calibration_id") is not None:
         lines.append(f"saved      calibration {result['calibration_id']}")
     for w in result.get("warnings", []):
@@ -307,13 +359,15 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
             if len(ivs) >= 4:
                 static = {
                     "static_f": np.array([iv.accel_mean for iv in ivs]),
-                    "static_y": np.array([y[idx[iv.start:iv.stop]].mean(axis=0) for iv in ivs]),
-                    "static_t": np.array([t[idx[iv.start:iv.stop]].mean() for iv in ivs]),
-                    "static_temp": None if temp is None else
-                    np.array([np.nanmean(temp[idx[iv.start:iv.stop]]) for iv in ivs]),
+                    "static_y": np.array([y[idx[iv.start : iv.stop]].mean(axis=0) for iv in ivs]),
+                    "static_t": np.array([t[idx[iv.start : iv.stop]].mean() for iv in ivs]),
+                    "static_temp": None
+                    if temp is None
+                    else np.array([np.nanmean(temp[idx[iv.start : iv.stop]]) for iv in ivs]),
                 }
         except (SolverError, ValueError):
             static = {}
-    prob = DP.compass_problem(t[good], y[good], W0, h0, F, incl, noise_raw=noise,
-                              temp_c=None if temp is None else temp[good], **static)
+    prob = DP.compass_problem(
+        t[good], y[good], W0, h0, F, incl, noise_raw=noise, temp_c=None if temp is None else temp[good], **static
+    )
     return DiagnosisInput(prob, {}, "a sample far off the field sphere: a magnetic disturbance nearby or a glitch")

@@ -14,6 +14,7 @@ Phases: ``sweep`` (recording) → ``done`` when coverage ≥ ``target_coverage``
 becomes a time-series :class:`station.capture.Capture` for ``calibrate_capture``
 (``station/procedures/compass.py``). Times are the samples' own ``t_s``.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -42,8 +43,10 @@ class CompassConfig:
 
     def __post_init__(self) -> None:
         if not MIN_COVERAGE <= self.target_coverage <= 1:
-            raise ValueError(f"target_coverage must be in [{MIN_COVERAGE}, 1] (the calibration refuses "
-                             f"below {100 * MIN_COVERAGE:.0f} %), got {self.target_coverage!r}")
+            raise ValueError(
+                f"target_coverage must be in [{MIN_COVERAGE}, 1] (the calibration refuses "
+                f"below {100 * MIN_COVERAGE:.0f} %), got {self.target_coverage!r}"
+            )
         if not (self.min_s >= 0 and self.max_s > 0 and self.max_s >= self.min_s):
             raise ValueError("min_s and max_s must satisfy 0 <= min_s <= max_s, max_s > 0")
         if self.n_bands < 2 or self.n_sectors < 3:
@@ -68,20 +71,27 @@ class CompassStatus:
 class CompassGuide:
     procedure = "compass"
 
-    def __init__(self, *, sample_rate_hz: float, units: dict, device_id: str = "", site: dict | None = None,
-                 config: CompassConfig | None = None):
+    def __init__(
+        self,
+        *,
+        sample_rate_hz: float,
+        units: dict,
+        device_id: str = "",
+        site: dict | None = None,
+        config: CompassConfig | None = None,
+    ):
         self.config = config or CompassConfig()
         self.sample_rate_hz = float(sample_rate_hz)
         self.units = dict(units)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         self.phase = "sweep"
         self._events: list[tuple[str, str]] = []
         self._reset()
 
     def _reset(self) -> None:
-        c = self.config
+        c = self.config  # noqa: F841
         self.field = FieldCoverage(self.sample_rate_hz)
         self._chunks: list[dict[str, np.ndarray]] = []
         self._n = 0
@@ -101,8 +111,10 @@ class CompassGuide:
         """Rows from +z (top) to -z: '█' the cell lies within 30° of a visited direction,
         '▒' partly, '·' not yet (the measure the percentage counts, drawn)."""
         c = self.config
-        return ["".join("█" if x >= 0.75 else "▒" if x > 0 else "·" for x in row)
-                for row in self.field.grid(c.n_bands, c.n_sectors)[::-1]]
+        return [
+            "".join("█" if x >= 0.75 else "▒" if x > 0 else "·" for x in row)
+            for row in self.field.grid(c.n_bands, c.n_sectors)[::-1]
+        ]
 
     # ------------------------------------------------------------ feeding
 
@@ -160,8 +172,19 @@ class CompassGuide:
         m, rate, t = self._last if self._last is not None else (np.full(3, np.nan), math.nan, math.nan)
         rec = (self._t1 - self._t0) if math.isfinite(self._t0) else 0.0
         cov = self.coverage
-        return CompassStatus(self.phase, cov, self.config.target_coverage, cov >= MIN_COVERAGE, rec, self._n,
-                             tuple(float(x) for x in m), float(np.linalg.norm(m)), rate, t, self._message)
+        return CompassStatus(
+            self.phase,
+            cov,
+            self.config.target_coverage,
+            cov >= MIN_COVERAGE,
+            rec,
+            self._n,
+            tuple(float(x) for x in m),
+            float(np.linalg.norm(m)),
+            rate,
+            t,
+            self._message,
+        )
 
     # ------------------------------------------------------------ the capture
 
@@ -179,8 +202,13 @@ class CompassGuide:
         temp = np.concatenate([c["temp"] for c in ch]) if ch else np.zeros(0)
         if np.isfinite(temp).any():
             cols["temp_c"] = temp
-        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
-                "date": self.started[:10], "sample_rate_hz": repr(self.sample_rate_hz)}
+        meta = {
+            "station-capture": "1",
+            "procedure": self.procedure,
+            "device": self.device_id or "unknown",
+            "date": self.started[:10],
+            "sample_rate_hz": repr(self.sample_rate_hz),
+        }
         for k in ("accel_unit", "gyro_unit", "mag_unit"):
             if self.units.get(k):
                 meta[k] = self.units[k]

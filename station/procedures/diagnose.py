@@ -4,6 +4,7 @@ Each procedure module (``station/procedures/<stem>.py``, listed in the registry)
 its capture once (``prepare``), calibrates the baseline from it and builds its problem
 (``diagnosis_input``); the numerics are ``solvers.diagnose``.
 """
+
 from __future__ import annotations
 
 import re
@@ -27,14 +28,18 @@ def _line(capture, row: int) -> int | None:
 
 # ---------------------------------------------------------------- quality
 
+
 def _quality(capture, diag, inp) -> list[dict]:
-    out: list[dict] = list(diag.problem.screened)   # rows the data-quality screen left out, by line
+    out: list[dict] = list(diag.problem.screened)  # rows the data-quality screen left out, by line
     if capture.is_time_series and "t" in capture.columns:
         for q in Q.gaps(capture.columns["t"]):
             q["line"] = _line(capture, q.pop("row"))
             out.append(q)
-    num = {c: v for c, v in capture.columns.items()
-           if c in ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "vl1", "vl2", "vl3")}
+    num = {
+        c: v
+        for c, v in capture.columns.items()
+        if c in ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "vl1", "vl2", "vl3")
+    }
     if capture.is_time_series:
         for q in Q.saturation(num):
             q["line"] = _line(capture, q.pop("row"))
@@ -49,18 +54,32 @@ def _quality(capture, diag, inp) -> list[dict]:
         out.append(q)
     if diag.residual_test.get("white") is False:
         rt = diag.residual_test
-        drivers = [{"driver": d["driver"], "correlation": d["correlation"], "explained_by_trend": d["explained_by_trend"]}
-                   for d in rt.get("drivers", [])[:3]]
-        top = ", ".join(f"{d['driver']} ({100 * d['explained_by_trend']:.0f} % of the residual variance follows it)"
-                        for d in drivers) or "no driver of this capture"
-        out.append({"kind": "residuals_not_white", "test": rt["test"], "p_value": rt.get("p_value"),
-                    "drivers": drivers,
-                    "explanation": "the extended model's residuals are not noise-like: something remains that no "
-                                   f"candidate explains (or the noise is correlated); they follow most: {top}"})
+        drivers = [
+            {"driver": d["driver"], "correlation": d["correlation"], "explained_by_trend": d["explained_by_trend"]}
+            for d in rt.get("drivers", [])[:3]
+        ]
+        top = (
+            ", ".join(
+                f"{d['driver']} ({100 * d['explained_by_trend']:.0f} % of the residual variance follows it)"
+                for d in drivers
+            )
+            or "no driver of this capture"
+        )
+        out.append(
+            {
+                "kind": "residuals_not_white",
+                "test": rt["test"],
+                "p_value": rt.get("p_value"),
+                "drivers": drivers,
+                "explanation": "the extended model's residuals are not noise-like: something remains that no "
+                f"candidate explains (or the noise is correlated); they follow most: {top}",
+            }
+        )
     return out
 
 
 # ---------------------------------------------------------------- entry point
+
 
 def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
     """(diagnose.md dict, the engine's Diagnosis, the procedure's diagnosis input)."""
@@ -87,12 +106,20 @@ def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
     bp = diag.baseline
     out = {
         "procedure": capture.procedure,
-        "baseline": {"model": diag.model, "params": bp.params, "residual_rms": diag.rms(bp),
-                     "cv_rms": diag.baseline_cv_rms},
+        "baseline": {
+            "model": diag.model,
+            "params": bp.params,
+            "residual_rms": diag.rms(bp),
+            "cv_rms": diag.baseline_cv_rms,
+        },
         "candidates": diag.candidates,
         "effects": diag.effects,
-        "extended": {"model": diag.extended_model, "params": diag.extended.params, "residual_rms": diag.rms(diag.extended),
-                     "cv_rms": diag.extended_cv_rms},
+        "extended": {
+            "model": diag.extended_model,
+            "params": diag.extended.params,
+            "residual_rms": diag.rms(diag.extended),
+            "cv_rms": diag.extended_cv_rms,
+        },
         "quality": _quality(capture, diag, inp),
         "verdict": diag.verdict,
     }
@@ -105,14 +132,18 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plo
     r = jsonable(result)
     unit = diag.problem.unit
     L = [f"procedure   {r['procedure']}"]
-    for q in r["quality"]:   # structured residuals are said first, before any verdict
+    for q in r["quality"]:  # structured residuals are said first, before any verdict
         if q["kind"] == "residuals_not_white":
-            L.append(f"WARNING     residuals not noise-like ({q['test']}, p = {q['p_value']:.3g}): "
-                     + q["explanation"].split("; ", 1)[-1])
-    L += [f"baseline    {r['baseline']['model']}",
-          f"            residual {r['baseline']['residual_rms']:.4g} {unit} RMS, held-out {r['baseline']['cv_rms']:.4g}",
-          "candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {:g}, "
-          "and a lower held-out RMS; refitted and re-tested after each pick)".format(diag.problem.threshold)]
+            L.append(
+                f"WARNING     residuals not noise-like ({q['test']}, p = {q['p_value']:.3g}): "
+                + q["explanation"].split("; ", 1)[-1]
+            )
+    L += [
+        f"baseline    {r['baseline']['model']}",
+        f"            residual {r['baseline']['residual_rms']:.4g} {unit} RMS, held-out {r['baseline']['cv_rms']:.4g}",
+        f"candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {diag.problem.threshold:g}, "
+        "and a lower held-out RMS; refitted and re-tested after each pick)",
+    ]
     for c in r["candidates"]:
         if c.get("resolvable") is False:
             L.append(f"  {c['name']:<24} unresolvable: {c['reason']}")
@@ -120,27 +151,37 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plo
             mark = "  <- selected" if c["selected"] else ""
             L.append(f"  {c['name']:<24} ΔBIC {c['delta_bic']:+10.1f}   held-out RMS {c['cv_rms']:.4g}{mark}")
     for e in r["effects"]:
-        L.append(f"effect      {e['name']}: held-out RMS {e['cv_rms_before']:.4g} → {e['cv_rms_after']:.4g} "
-                 f"(gain {100 * e['gain']:.1f} %)")
+        L.append(
+            f"effect      {e['name']}: held-out RMS {e['cv_rms_before']:.4g} → {e['cv_rms_after']:.4g} "
+            f"(gain {100 * e['gain']:.1f} %)"
+        )
         for c in e["confused_with"]:
             L.append(f"            cannot be told apart from {c['name']} (correlation {c['correlation']:+.3f})")
         if e["name"].startswith("residual:"):
             corr = ", ".join(f"{k} {v:.2f}" for k, v in e.get("correlation", {}).items())
-            L.append(f"            outside the library: a {e.get('shape')} function of {e.get('driver')}"
-                     f"{' acting on the scale' if e['params'].get('acts_on') == 'scale' else ''}; "
-                     f"correlation with the library's signatures: {corr or 'none resolvable'}")
+            L.append(
+                f"            outside the library: a {e.get('shape')} function of {e.get('driver')}"
+                f"{' acting on the scale' if e['params'].get('acts_on') == 'scale' else ''}; "
+                f"correlation with the library's signatures: {corr or 'none resolvable'}"
+            )
         for k, v in e["params"].items():
-            if k not in e["uncertainty"]:   # a residual effect's description (step place, period, knots)
+            if k not in e["uncertainty"]:  # a residual effect's description (step place, period, knots)
                 L.append(f"            {k} = {v}")
                 continue
-            L.append(f"            {k} = {np.round(np.asarray(v, dtype=float), 8).tolist()} ± "
-                     f"{np.round(np.asarray(e['uncertainty'][k], dtype=float), 8).tolist()}")
+            L.append(
+                f"            {k} = {np.round(np.asarray(v, dtype=float), 8).tolist()} ± "
+                f"{np.round(np.asarray(e['uncertainty'][k], dtype=float), 8).tolist()}"
+            )
     L.append(f"extended    {r['extended']['model']}")
-    L.append(f"            residual {r['extended']['residual_rms']:.4g} {unit} RMS, held-out {r['extended']['cv_rms']:.4g}")
+    L.append(
+        f"            residual {r['extended']['residual_rms']:.4g} {unit} RMS, held-out {r['extended']['cv_rms']:.4g}"
+    )
     rt = diag.residual_test
     if rt.get("p_value") is not None:
-        L.append(f"            residual test {rt['test']}: p = {rt['p_value']:.3g} "
-                 f"({'noise-like' if rt['white'] else 'NOT noise-like'})")
+        L.append(
+            f"            residual test {rt['test']}: p = {rt['p_value']:.3g} "
+            f"({'noise-like' if rt['white'] else 'NOT noise-like'})"
+        )
     for q in r["quality"]:
         where = q.get("where") if q.get("screened") else (q.get("position") or q.get("where") or q.get("column") or "")
         line = f" line {q['line']}" if q.get("line") else ""
@@ -172,8 +213,10 @@ def _per_group(diag, kind: str) -> list[str]:
         if kind == "time block" and "time [s]" in prob.drivers:
             tt = np.asarray(prob.drivers["time [s]"])[m]
             name = f"t {np.nanmin(tt):8.1f}–{np.nanmax(tt):8.1f} s"
-        out.append(f"  {name:<28} {np.mean(base[m]):+.3e} ({np.sqrt(np.mean(base[m] ** 2)):.2e})  →  "
-                   f"{np.mean(ext[m]):+.3e} ({np.sqrt(np.mean(ext[m] ** 2)):.2e})")
+        out.append(
+            f"  {name:<28} {np.mean(base[m]):+.3e} ({np.sqrt(np.mean(base[m] ** 2)):.2e})  →  "
+            f"{np.mean(ext[m]):+.3e} ({np.sqrt(np.mean(ext[m] ** 2)):.2e})"
+        )
     return out
 
 

@@ -22,6 +22,7 @@ without them, static intervals are found (solvers.stillness) and moving samples 
 intervals of different orientation become positions. Two or more positions: ε and the
 Earth-rate scale together (solvers.gyrodrift.drift_multi).
 """
+
 from __future__ import annotations
 
 import math
@@ -43,20 +44,28 @@ DIAGNOSIS_BASELINE = False  # diagnosis_input fits its own baseline (the drift i
 
 # Devices whose captures are known to break the conventions (their SOURCE.md).
 KNOWN_CONVENTIONS = {
-    "sunsided-mpu6050-hmc5883l": {"frame": "x forward, y left, z up", "accel_sign": "gravity",
-                                  "gyro_flip": "x"},
+    "sunsided-mpu6050-hmc5883l": {"frame": "x forward, y left, z up", "accel_sign": "gravity", "gyro_flip": "x"},
 }
 
-_DIRS = {"forward": (1, 0, 0), "fwd": (1, 0, 0), "front": (1, 0, 0), "back": (-1, 0, 0),
-         "backward": (-1, 0, 0), "up": (0, 1, 0), "down": (0, -1, 0), "right": (0, 0, 1),
-         "left": (0, 0, -1)}
+_DIRS = {
+    "forward": (1, 0, 0),
+    "fwd": (1, 0, 0),
+    "front": (1, 0, 0),
+    "back": (-1, 0, 0),
+    "backward": (-1, 0, 0),
+    "up": (0, 1, 0),
+    "down": (0, -1, 0),
+    "right": (0, 0, 1),
+    "left": (0, 0, -1),
+}
 
 
 def frame_matrix(text: str) -> np.ndarray:
     """``C_fur_cap``: the capture's axes (described as 'x forward, y left, z up') → P4's
     body frame (x fwd, y up, z right). ValueError when not a right-handed triad."""
-    found = dict(re.findall(r"\b([xyz])\s*[:=]?\s*(forward|fwd|front|backward|back|up|down|right|left)\b",
-                            text.lower()))
+    found = dict(
+        re.findall(r"\b([xyz])\s*[:=]?\s*(forward|fwd|front|backward|back|up|down|right|left)\b", text.lower())
+    )
     if set(found) != {"x", "y", "z"}:
         raise ValueError(f"frame {text!r}: say where x, y and z point (forward/back/up/down/left/right)")
     M = np.column_stack([_DIRS[found[a]] for a in "xyz"]).astype(float)
@@ -79,8 +88,10 @@ def _conventions(capture, warnings: list[str]):
             conv[key] = meta[key]
         elif key in known:
             conv[key] = known[key]
-            warnings.append(f"device {meta.get('device')!r}: {key} '{known[key]}' assumed from its known "
-                            "conventions (SOURCE.md); say so in the metadata to silence this")
+            warnings.append(
+                f"device {meta.get('device')!r}: {key} '{known[key]}' assumed from its known "
+                "conventions (SOURCE.md); say so in the metadata to silence this"
+            )
     C = np.eye(3)
     if "frame" in conv:
         try:
@@ -88,12 +99,14 @@ def _conventions(capture, warnings: list[str]):
         except ValueError as exc:
             raise InputError(capture.path, _line(capture, "frame"), str(exc)) from None
         if not np.allclose(C, np.eye(3)):
-            warnings.append(f"capture axes '{conv['frame']}' rotated into P4's body frame "
-                            "(x forward, y up, z right)")
+            warnings.append(f"capture axes '{conv['frame']}' rotated into P4's body frame (x forward, y up, z right)")
     sign = conv.get("accel_sign", "specific_force").strip().lower().replace("-", "_").replace(" ", "_")
     if sign not in ("specific_force", "gravity"):
-        raise InputError(capture.path, _line(capture, "accel_sign"),
-                         f"accel_sign {conv['accel_sign']!r}: use 'specific_force' or 'gravity'")
+        raise InputError(
+            capture.path,
+            _line(capture, "accel_sign"),
+            f"accel_sign {conv['accel_sign']!r}: use 'specific_force' or 'gravity'",
+        )
     if sign == "gravity":
         warnings.append("accelerometer reports the gravity direction (not specific force): sign flipped for tilt")
     flips = np.ones(3)
@@ -112,8 +125,10 @@ def _gyro_factor(capture, warnings: list[str]) -> float:
     if unit == "counts":
         lsb = capture.float_meta("gyro_counts_per_deg_s")
         if lsb is None or lsb <= 0:
-            raise UnsupportedError(f"{capture.path}: gyro_unit is 'counts' and no 'gyro_counts_per_deg_s' gives "
-                                   "the scale (MPU-6050 at ±250 °/s: 131); add it to the metadata")
+            raise UnsupportedError(
+                f"{capture.path}: gyro_unit is 'counts' and no 'gyro_counts_per_deg_s' gives "
+                "the scale (MPU-6050 at ±250 °/s: 131); add it to the metadata"
+            )
         warnings.append(f"gyro in counts: nominal scale {lsb:g} counts per °/s used (its error scales the drift)")
         return math.radians(1.0) / lsb
     f = si_factor("gyro", unit)
@@ -124,8 +139,10 @@ def _gyro_factor(capture, warnings: list[str]) -> float:
 
 def _dt(capture) -> float:
     if not capture.is_time_series and "n" in capture.columns:
-        raise UnsupportedError(f"{capture.path}: a table of averages cannot give a drift's error (Allan "
-                               "deviation): gyro-drift needs the time series")
+        raise UnsupportedError(
+            f"{capture.path}: a table of averages cannot give a drift's error (Allan "
+            "deviation): gyro-drift needs the time series"
+        )
     if capture.is_time_series:
         t = capture.columns["t"]
         d = np.diff(t[np.isfinite(t)])
@@ -133,16 +150,21 @@ def _dt(capture) -> float:
             return float(np.median(d))
     rate = capture.float_meta("sample_rate_hz")
     if rate is None or rate <= 0:
-        raise UnsupportedError(f"{capture.path}: gyro drift needs a time series: a 't' column with at least two "
-                               "increasing times, or sample_rate_hz")
+        raise UnsupportedError(
+            f"{capture.path}: gyro drift needs a time series: a 't' column with at least two "
+            "increasing times, or sample_rate_hz"
+        )
     return 1.0 / rate
 
 
 def _need(capture, names):
     missing = [c for c in names if c not in capture.columns]
     if missing:
-        raise InputError(capture.path, capture.header_line,
-                         f"gyro-drift needs column(s) {', '.join(missing)} (have {', '.join(capture.columns)})")
+        raise InputError(
+            capture.path,
+            capture.header_line,
+            f"gyro-drift needs column(s) {', '.join(missing)} (have {', '.join(capture.columns)})",
+        )
     return np.column_stack([capture.columns[c] for c in names]).astype(float)
 
 
@@ -160,12 +182,12 @@ def _finite_rows(arrays, warnings, what):
 class Prepared:
     """A P4 capture read once: its axis conventions and the gyro rates in P4's body frame."""
 
-    C_fur_cap: np.ndarray        # the capture's axes → P4 body (x fwd, y up, z right)
-    accel_sign: float            # +1 specific force, −1 gravity direction
-    gyro_flips: np.ndarray       # per-axis sign making the gyro right-handed
-    gyro_factor: float           # capture's gyro unit → rad/s (1.0 when unknown, see gyro_unit_error)
+    C_fur_cap: np.ndarray  # the capture's axes → P4 body (x fwd, y up, z right)
+    accel_sign: float  # +1 specific force, −1 gravity direction
+    gyro_flips: np.ndarray  # per-axis sign making the gyro right-handed
+    gyro_factor: float  # capture's gyro unit → rad/s (1.0 when unknown, see gyro_unit_error)
     gyro_unit_error: str | None  # why the gyro cannot be put in rad/s (counts without a scale), else None
-    w_b: np.ndarray              # gyro (n, 3) in P4's body frame: rad/s, or the raw unit with gyro_unit_error
+    w_b: np.ndarray  # gyro (n, 3) in P4's body frame: rad/s, or the raw unit with gyro_unit_error
     warnings: list[str] = field(default_factory=list)
 
 
@@ -182,10 +204,14 @@ def prepare(capture) -> Prepared:
     return Prepared(C, asign, flips, k, err, w_b, warnings)
 
 
-def calibrate(capture, method: str | None = None, *, accuracy_deg_h: float | None = None,
-              prepared: Prepared | None = None) -> dict:
-    mode = (method or capture.meta.get("gyro_mode") or
-            ("reference" if "ref_gx" in capture.columns else "static")).strip().lower()
+def calibrate(
+    capture, method: str | None = None, *, accuracy_deg_h: float | None = None, prepared: Prepared | None = None
+) -> dict:
+    mode = (
+        (method or capture.meta.get("gyro_mode") or ("reference" if "ref_gx" in capture.columns else "static"))
+        .strip()
+        .lower()
+    )
     if mode in ("a", "ref"):
         mode = "reference"
     if mode in ("b", "static-base"):
@@ -197,7 +223,7 @@ def calibrate(capture, method: str | None = None, *, accuracy_deg_h: float | Non
         raise UnsupportedError(prep.gyro_unit_error)
     warnings = list(prep.warnings)
     C, asign, flips, k = prep.C_fur_cap, prep.accel_sign, prep.gyro_flips, prep.gyro_factor
-    w_b = prep.w_b                                      # rad/s, P4 body frame
+    w_b = prep.w_b  # rad/s, P4 body frame
     dt = _dt(capture)
     if accuracy_deg_h is None:
         accuracy_deg_h = capture.float_meta("accuracy_deg_h")
@@ -233,8 +259,10 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
     if head0 is None:
         head0 = 0.0
         if capture.float_meta("latitude_deg") is not None and "heading_deg" not in capture.columns:
-            warnings.append("no heading_deg: forward axis taken as pointing north (heading 0) for a single "
-                            "position; with several positions the headings count as unknown")
+            warnings.append(
+                "no heading_deg: forward axis taken as pointing north (heading 0) for a single "
+                "position; with several positions the headings count as unknown"
+            )
     hcol = capture.columns.get("heading_deg")
     pcol = capture.columns.get("position")
     if pcol is not None and np.any(pcol != ""):
@@ -252,6 +280,7 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
     if f_b is None or not capture.is_time_series:
         return [(ok, head0, "1")]
     from solvers.stillness import detect_static_intervals
+
     idx = np.flatnonzero(ok)
     try:
         st = detect_static_intervals(capture.columns["t"][idx], f_b[idx], w_b[idx])
@@ -274,14 +303,16 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
     for j, (_, ivs) in enumerate(groups):
         m = np.zeros(len(ok), dtype=bool)
         for iv in ivs:
-            m[idx[iv.start:iv.stop]] = True
+            m[idx[iv.start : iv.stop]] = True
         segs.append((m, head0, str(j + 1)))
     used = sum(int(s[0].sum()) for s in segs)
     if used < ok.sum():
         warnings.append(f"{int(ok.sum()) - used} moving samples left out (stillness detection)")
     if len(segs) > 1 and capture.float_meta("heading_deg") is not None:
-        warnings.append(f"{len(segs)} static orientations found with no heading column: all taken as "
-                        f"heading {head0:g}° (the metadata's); the Earth-rate scale checks this")
+        warnings.append(
+            f"{len(segs)} static orientations found with no heading column: all taken as "
+            f"heading {head0:g}° (the metadata's); the Earth-rate scale checks this"
+        )
     return segs
 
 
@@ -292,9 +323,11 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
     offset = capture.meta.get("accel_offset")
     if have_acc and unit in ("V", "mV") and offset is None:
         have_acc = False
-        warnings.append(f"accelerometer in {unit} with no 'accel_offset' metadata: its zero-g output is "
-                        "unknown, so pitch and roll cannot be measured and are not used (give accel_offset: "
-                        "x, y, z in the accelerometer's unit, e.g. from its P1 calibration)")
+        warnings.append(
+            f"accelerometer in {unit} with no 'accel_offset' metadata: its zero-g output is "
+            "unknown, so pitch and roll cannot be measured and are not used (give accel_offset: "
+            "x, y, z in the accelerometer's unit, e.g. from its P1 calibration)"
+        )
     if have_acc:
         raw = _need(capture, ["ax", "ay", "az"])
         if offset is not None:
@@ -303,24 +336,30 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
             except ValueError:
                 off = np.zeros(0)
             if off.shape != (3,):
-                raise InputError(capture.path, _line(capture, "accel_offset"),
-                                 f"accel_offset {offset!r}: give three numbers x, y, z in {unit or 'the accelerometer unit'}")
+                raise InputError(
+                    capture.path,
+                    _line(capture, "accel_offset"),
+                    f"accel_offset {offset!r}: give three numbers x, y, z in {unit or 'the accelerometer unit'}",
+                )
             raw = raw - off
         f_b = (raw * asign) @ C.T
         if unit == "counts" and offset is None:
-            warnings.append("accelerometer in counts: only its direction is used for pitch and roll "
-                            "(its bias, uncalibrated, tilts them)")
+            warnings.append(
+                "accelerometer in counts: only its direction is used for pitch and roll "
+                "(its bias, uncalibrated, tilts them)"
+            )
     ok = _finite_rows([w_b, f_b], warnings, "gyro or accelerometer")
     if f_b is not None and ok.any() and not np.linalg.norm(f_b[ok].mean(axis=0)) > 0:
-        raise UnsupportedError(f"{capture.path}: the accelerometer reads zero on average, so mode B has no "
-                               "pitch and roll (a dead or unconnected sensor?): check the ax ay az columns")
+        raise UnsupportedError(
+            f"{capture.path}: the accelerometer reads zero on average, so mode B has no "
+            "pitch and roll (a dead or unconnected sensor?): check the ax ay az columns"
+        )
     lat = capture.float_meta("latitude_deg")
     hsig = capture.float_meta("heading_sigma_deg", 3.0)
     segs = _segments(capture, w_b, f_b, dt, ok, warnings)
     if len(segs) == 1:
         m, head, _ = segs[0]
-        res = gd.drift_static(w_b[m], None if f_b is None else f_b[m], dt, lat, head,
-                              heading_sigma_deg=hsig)
+        res = gd.drift_static(w_b[m], None if f_b is None else f_b[m], dt, lat, head, heading_sigma_deg=hsig)
         e = res.earth_rate_body_rad_s if res.earth_rate_body_rad_s is not None else 0.0
         return res, res.mean_error, 1, w_b[m] - res.drift_rad_s - e
     positions = []
@@ -328,12 +367,19 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
         if m.sum() < 64:
             warnings.append(f"position {lab}: {int(m.sum())} samples, too few; left out")
             continue
-        positions.append(gd.Position(allan.mean_standard_error(w_b[m], dt),
-                                     None if f_b is None else allan.mean_standard_error(f_b[m], dt), head, lab))
+        positions.append(
+            gd.Position(
+                allan.mean_standard_error(w_b[m], dt),
+                None if f_b is None else allan.mean_standard_error(f_b[m], dt),
+                head,
+                lab,
+            )
+        )
     if len(positions) == 1:
         m = segs[0][0]
-        res = gd.drift_static(w_b[m], None if f_b is None else f_b[m], dt, lat, positions[0].heading_deg,
-                              heading_sigma_deg=hsig)
+        res = gd.drift_static(
+            w_b[m], None if f_b is None else f_b[m], dt, lat, positions[0].heading_deg, heading_sigma_deg=hsig
+        )
         return res, res.mean_error, 1, w_b[m] - res.drift_rad_s
     known = "heading_deg" in capture.columns or capture.float_meta("heading_deg") is not None
     res = gd.drift_multi(positions, lat, heading_sigma_deg=hsig, headings_known=known)
@@ -359,10 +405,16 @@ def _result(capture, res: gd.DriftResult, mode, n_pos, resid, acc, me, C, flips,
     params = {"drift": drift, "mode": res.mode}
     unc = {"drift": sig}
     if mode == "static":
-        params.update({"pitch_deg": res.pitch_deg, "roll_deg": res.roll_deg,
-                       "earth_rate_body": res.earth_rate_body_rad_s})
-        unc.update({"pitch_deg": res.sigma_pitch_deg, "roll_deg": res.sigma_roll_deg,
-                    "earth_rate_body": res.sigma_earth_rate_body_rad_s})
+        params.update(
+            {"pitch_deg": res.pitch_deg, "roll_deg": res.roll_deg, "earth_rate_body": res.earth_rate_body_rad_s}
+        )
+        unc.update(
+            {
+                "pitch_deg": res.sigma_pitch_deg,
+                "roll_deg": res.sigma_roll_deg,
+                "earth_rate_body": res.sigma_earth_rate_body_rad_s,
+            }
+        )
     out = {
         "procedure": "gyro-drift",
         "device": capture.meta.get("device"),
@@ -374,8 +426,12 @@ def _result(capture, res: gd.DriftResult, mode, n_pos, resid, acc, me, C, flips,
         "warnings": warnings,
         "frame": "body x forward, y up, z right (rad/s)",
         "drift_deg_h": drift / gd.DEG_H_RAD_S,
-        "drift_raw": {"value": raw_drift, "sigma": raw_sig, "unit": capture.meta.get("gyro_unit", "rad/s"),
-                      "axes": "the capture's gx gy gz"},
+        "drift_raw": {
+            "value": raw_drift,
+            "sigma": raw_sig,
+            "unit": capture.meta.get("gyro_unit", "rad/s"),
+            "axes": "the capture's gx gy gz",
+        },
         "accuracy": acc,
         "allan": {"tau_s": me.taus_s, "adev_rad_s": me.adev.T if me.adev.size else []},
     }
@@ -387,10 +443,13 @@ def _result(capture, res: gd.DriftResult, mode, n_pos, resid, acc, me, C, flips,
 def format_text(result: dict) -> str:
     p, u = result["params"], result["uncertainty"]
     d, s = np.asarray(p["drift"]), np.asarray(u["drift"])
-    lines = [f"procedure  gyro-drift ({p['mode']})", f"device     {result.get('device')}",
-             f"model      {result['model']}",
-             "drift      " + "  ".join(f"{a} {v:+.4e} ± {e:.1e} rad/s ({v / gd.DEG_H_RAD_S:+.1f} °/h)"
-                                      for a, v, e in zip("xyz", d, s))]
+    lines = [
+        f"procedure  gyro-drift ({p['mode']})",
+        f"device     {result.get('device')}",
+        f"model      {result['model']}",
+        "drift      "
+        + "  ".join(f"{a} {v:+.4e} ± {e:.1e} rad/s ({v / gd.DEG_H_RAD_S:+.1f} °/h)" for a, v, e in zip("xyz", d, s)),
+    ]
     if p.get("earth_rate_body") is not None:
         e = np.asarray(p["earth_rate_body"])
         lines.append("earth rate " + "  ".join(f"{a} {v:+.3e}" for a, v in zip("xyz", e)) + " rad/s removed")
@@ -402,13 +461,22 @@ def format_text(result: dict) -> str:
             lines.append(f"tilt       pitch {pr:.2f}° roll {p['roll_deg']:.2f}°")
     fit = result.get("fit", {})
     if "earth_rate_scale" in fit:
-        lines.append(f"earth-rate scale {fit['earth_rate_scale']:.3f} ± {fit['sigma_earth_rate_scale']:.3f} (1 expected)")
+        lines.append(
+            f"earth-rate scale {fit['earth_rate_scale']:.3f} ± {fit['sigma_earth_rate_scale']:.3f} (1 expected)"
+        )
     acc = result.get("accuracy", {})
     if acc:
-        lines.append(f"record     {acc['duration_s']:.0f} s; achieved 1σ "
-                     + ", ".join(f"{v:.3g}" for v in np.asarray(acc["achieved_sigma_deg_h"])) + " °/h"
-                     + (f"; asked {acc['accuracy_rad_s'] / gd.DEG_H_RAD_S:g} °/h: "
-                        + ("enough" if acc["enough"] else "NOT enough") if "accuracy_rad_s" in acc else ""))
+        lines.append(
+            f"record     {acc['duration_s']:.0f} s; achieved 1σ "
+            + ", ".join(f"{v:.3g}" for v in np.asarray(acc["achieved_sigma_deg_h"]))
+            + " °/h"
+            + (
+                f"; asked {acc['accuracy_rad_s'] / gd.DEG_H_RAD_S:g} °/h: "
+                + ("enough" if acc["enough"] else "NOT enough")
+                if "accuracy_rad_s" in acc
+                else ""
+            )
+        )
     lines.append(f"residual   {result['residual_rms']:.4g} rad/s RMS (noise about the model)")
     lines.append(f"positions  {result['n_positions']}")
     for w in result.get("warnings", []):
@@ -459,18 +527,28 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
     use = label != ""
     order = np.flatnonzero(use)
     if len(order) < 16:
-        raise UnsupportedError(f"{capture.path}: gyro-drift: {len(order)} static samples; diagnosis needs a "
-                               "static record (P4 asks for >= 3 min)")
+        raise UnsupportedError(
+            f"{capture.path}: gyro-drift: {len(order)} static samples; diagnosis needs a "
+            "static record (P4 asks for >= 3 min)"
+        )
     f_mps2 = None
     if f_b is not None:
         gnorm = float(np.median(np.linalg.norm(f_b[use], axis=1)))
         if not gnorm > 0:
-            raise UnsupportedError(f"{capture.path}: the accelerometer reads zero on average (a dead or "
-                                   "unconnected sensor?): check the ax ay az columns")
+            raise UnsupportedError(
+                f"{capture.path}: the accelerometer reads zero on average (a dead or "
+                "unconnected sensor?): check the ax ay az columns"
+            )
         f_mps2 = f_b[use] * (frames.G_STANDARD_MPS2 / gnorm)
     temp = np.asarray(capture.columns["temp_c"], float)[order] if "temp_c" in capture.columns else None
-    prob = DP.gyro_problem(t[order], w_b[order], f_mps2, temp,
-                           E[order] if (lat is not None or mode_ref) else None, label[order], C_b_n=Cbn[order])
+    prob = DP.gyro_problem(
+        t[order],
+        w_b[order],
+        f_mps2,
+        temp,
+        E[order] if (lat is not None or mode_ref) else None,
+        label[order],
+        C_b_n=Cbn[order],
+    )
     prob.unit = unit
-    return DiagnosisInput(prob, {"rows": order},
-                          "a block far off the others: a knock, the unit moved, or a bias jump")
+    return DiagnosisInput(prob, {"rows": order}, "a block far off the others: a knock, the unit moved, or a bias jump")

@@ -8,6 +8,7 @@ with a countdown; the name matches the P1 guide so the same widgets draw it), ``
 ``aborted``. Times are the samples' own ``t_s``. The recording becomes a time-series
 capture with ``gyro_mode: static``, ``latitude_deg``, ``heading_deg`` and ``frame``.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -61,18 +62,31 @@ class HoldStatus:
 class HoldGuide:
     procedure = "gyro-drift"
 
-    def __init__(self, *, sample_rate_hz: float, units: dict, device_id: str = "", site: dict | None = None,
-                 config: HoldConfig | None = None):
+    def __init__(
+        self,
+        *,
+        sample_rate_hz: float,
+        units: dict,
+        device_id: str = "",
+        site: dict | None = None,
+        config: HoldConfig | None = None,
+    ):
         self.config = config or HoldConfig()
         self.sample_rate_hz = float(sample_rate_hz)
         self.units = dict(units)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         c = self.config
         init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
-        self.tracker = StillnessTracker(self.sample_rate_hz, init_rest_s=init, window_s=c.window_s,
-                                        min_duration_s=0.0, margin_s=0.0, nan_policy="omit")
+        self.tracker = StillnessTracker(
+            self.sample_rate_hz,
+            init_rest_s=init,
+            window_s=c.window_s,
+            min_duration_s=0.0,
+            margin_s=0.0,
+            nan_policy="omit",
+        )
         self.phase = "noise"
         self._events: list[tuple[str, str]] = []
         self._message = "Place the unit level, forward axis at the set heading; keep it still"
@@ -105,8 +119,11 @@ class HoldGuide:
             self._advance(st, t_s[sl], accel[sl], gyro[sl], temp[sl])
             if self.phase == "done":
                 break
-        self._last = (st, float(np.nanmean(temp[-step:])) if np.isfinite(temp[-step:]).any() else math.nan,
-                      float(t_s[-1]))
+        self._last = (
+            st,
+            float(np.nanmean(temp[-step:])) if np.isfinite(temp[-step:]).any() else math.nan,
+            float(t_s[-1]),
+        )
         return self.status()
 
     def _advance(self, st, t, a, g, temp) -> None:
@@ -165,12 +182,20 @@ class HoldGuide:
         rec = (self._t1 - self._t0) if self.phase in ("average", "done") and math.isfinite(self._t0) else 0.0
         mean = self._sum / self._n if self._n else np.full(3, np.nan)
         return HoldStatus(
-            phase=self.phase, calibrating=st.calibrating, is_still=st.is_still, still_for_s=float(st.still_for_s),
+            phase=self.phase,
+            calibrating=st.calibrating,
+            is_still=st.is_still,
+            still_for_s=float(st.still_for_s),
             level=float(st.level),
             settle_left_s=max(c.settle_s - st.still_for_s, 0.0) if self.phase == "settle" else math.nan,
             countdown_s=max(c.duration_s - rec, 0.0) if self.phase == "average" else math.nan,
             progress=min(rec / c.duration_s, 1.0) if self.phase in ("average", "done") else 0.0,
-            gyro_mean=tuple(float(x) for x in mean), n_samples=self._n, temp_c=temp, t_s=t, message=self._message)
+            gyro_mean=tuple(float(x) for x in mean),
+            n_samples=self._n,
+            temp_c=temp,
+            t_s=t,
+            message=self._message,
+        )
 
     def capture(self, extra_meta: dict | None = None):
         from station.capture import Capture
@@ -183,9 +208,15 @@ class HoldGuide:
         cols = {"t": t, "ax": a[:, 0], "ay": a[:, 1], "az": a[:, 2], "gx": g[:, 0], "gy": g[:, 1], "gz": g[:, 2]}
         if np.isfinite(temp).any():
             cols["temp_c"] = temp
-        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
-                "gyro_mode": "static", "heading_deg": repr(float(self.config.heading_deg)),
-                "date": self.started[:10], "sample_rate_hz": repr(self.sample_rate_hz)}
+        meta = {
+            "station-capture": "1",
+            "procedure": self.procedure,
+            "device": self.device_id or "unknown",
+            "gyro_mode": "static",
+            "heading_deg": repr(float(self.config.heading_deg)),
+            "date": self.started[:10],
+            "sample_rate_hz": repr(self.sample_rate_hz),
+        }
         if self.config.frame:
             meta["frame"] = self.config.frame
         for k in ("accel_unit", "gyro_unit"):
@@ -199,6 +230,7 @@ class HoldGuide:
 
 
 # ---------------------------------------------------------------- P4 mode A
+
 
 @dataclass
 class ReferenceConfig:
@@ -253,14 +285,21 @@ class ReferenceGuide:
 
     procedure = "gyro-drift"
 
-    def __init__(self, *, sample_rate_hz: float, units: dict, device_id: str = "", site: dict | None = None,
-                 config: ReferenceConfig | None = None):
+    def __init__(
+        self,
+        *,
+        sample_rate_hz: float,
+        units: dict,
+        device_id: str = "",
+        site: dict | None = None,
+        config: ReferenceConfig | None = None,
+    ):
         self.config = config or ReferenceConfig()
         self.sample_rate_hz = float(sample_rate_hz)
         self.units = dict(units)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         self.phase = "wait"
         self._events: list[tuple[str, str]] = []
         self._message = "Waiting for the reference IMU"
@@ -292,8 +331,9 @@ class ReferenceGuide:
         temp = np.full(len(t_s), np.nan) if temp_c is None else np.asarray(temp_c, float)
         ok = np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(ref), axis=1)
         if not ok.any():
-            self._message = ("No reference IMU signal: connect the reference (ref_gx ref_gy ref_gz) or use "
-                             "P4 on a static base")
+            self._message = (
+                "No reference IMU signal: connect the reference (ref_gx ref_gy ref_gz) or use P4 on a static base"
+            )
             return self.status()
         if self.phase == "wait":
             self.phase = "average"
@@ -349,18 +389,28 @@ class ReferenceGuide:
             bias = M @ (self._sr / self._n)
             cmax, cbias = float(np.max(np.abs(M))), float(np.max(np.abs(bias)))
             sigma_ref = c.reference_drift_deg_h * math.radians(1.0) / 3600.0 * self._unit_per_rad_s()
-            ok = bool(np.all(np.abs(bias) <= 0.5 * np.sqrt(se ** 2 + sigma_ref ** 2)))
+            ok = bool(np.all(np.abs(bias) <= 0.5 * np.sqrt(se**2 + sigma_ref**2)))
             if not ok and self.phase == "average":
-                msg = (f"Unit minus reference grows with the rate (|M| up to {cmax:.3g}): check the mounting "
-                       "(misaligned or not rigid)")
+                msg = (
+                    f"Unit minus reference grows with the rate (|M| up to {cmax:.3g}): check the mounting "
+                    "(misaligned or not rigid)"
+                )
         elif self.phase == "average" and rec > 10 and not (motion >= c.min_motion_rad_s * self._unit_per_rad_s()):
             msg = "The reference hardly moves: run the rate table so the mounting can be checked"
         return ReferenceStatus(
-            phase=self.phase, countdown_s=max(c.duration_s - rec, 0.0) if self.phase == "average" else math.nan,
+            phase=self.phase,
+            countdown_s=max(c.duration_s - rec, 0.0) if self.phase == "average" else math.nan,
             progress=min(rec / c.duration_s, 1.0) if self.phase in ("average", "done") else 0.0,
-            drift=tuple(float(x) for x in eps), drift_se=tuple(float(x) for x in se), motion=motion,
-            coupling_max=cmax, coupling_bias=cbias, mounting_ok=ok, n_samples=self._n,
-            t_s=self._t1, message=msg)
+            drift=tuple(float(x) for x in eps),
+            drift_se=tuple(float(x) for x in se),
+            motion=motion,
+            coupling_max=cmax,
+            coupling_bias=cbias,
+            mounting_ok=ok,
+            n_samples=self._n,
+            t_s=self._t1,
+            message=msg,
+        )
 
     def abort(self) -> None:
         self.phase = "aborted"
@@ -377,16 +427,33 @@ class ReferenceGuide:
         from station.capture import Capture
 
         ch = self._chunks
-        cat = [np.concatenate([c[i] for c in ch]) if ch else np.zeros((0, 3) if i in (1, 2, 3) else 0)
-               for i in range(5)]
+        cat = [
+            np.concatenate([c[i] for c in ch]) if ch else np.zeros((0, 3) if i in (1, 2, 3) else 0) for i in range(5)
+        ]
         t, a, g, r, temp = cat
-        cols = {"t": t, "ax": a[:, 0], "ay": a[:, 1], "az": a[:, 2], "gx": g[:, 0], "gy": g[:, 1], "gz": g[:, 2],
-                "ref_gx": r[:, 0], "ref_gy": r[:, 1], "ref_gz": r[:, 2]}
+        cols = {
+            "t": t,
+            "ax": a[:, 0],
+            "ay": a[:, 1],
+            "az": a[:, 2],
+            "gx": g[:, 0],
+            "gy": g[:, 1],
+            "gz": g[:, 2],
+            "ref_gx": r[:, 0],
+            "ref_gy": r[:, 1],
+            "ref_gz": r[:, 2],
+        }
         if np.isfinite(temp).any():
             cols["temp_c"] = temp
-        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
-                "gyro_mode": "reference", "reference_drift_deg_h": repr(float(self.config.reference_drift_deg_h)),
-                "date": self.started[:10], "sample_rate_hz": repr(self.sample_rate_hz)}
+        meta = {
+            "station-capture": "1",
+            "procedure": self.procedure,
+            "device": self.device_id or "unknown",
+            "gyro_mode": "reference",
+            "reference_drift_deg_h": repr(float(self.config.reference_drift_deg_h)),
+            "date": self.started[:10],
+            "sample_rate_hz": repr(self.sample_rate_hz),
+        }
         if self.config.frame:
             meta["frame"] = self.config.frame
         for k in ("accel_unit", "gyro_unit"):

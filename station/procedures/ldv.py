@@ -31,6 +31,7 @@ are.
 warning); otherwise such a capture is refused. Metadata ``reference_sigma_mps``: the
 reference velocity noise, which switches on the errors-in-variables correction.
 """
+
 from __future__ import annotations
 
 import os
@@ -65,12 +66,16 @@ def _reference_body(cap, tcol: str):
         v = np.full((len(nav), 3), np.nan)
         r, p, y = np.radians(nav[ok, 3]), np.radians(nav[ok, 4]), np.radians(nav[ok, 5])
         C = np.stack([frames.euler_to_C_n_b(a, b, c) for a, b, c in zip(r, p, y)])
-        v[ok] = np.einsum("nji,nj->ni", C, nav[ok, :3])    # C_n_bᵀ v_n
+        v[ok] = np.einsum("nji,nj->ni", C, nav[ok, :3])  # C_n_bᵀ v_n
         kind = "nav"
     else:
         have = ", ".join(cap.columns)
-        raise InputError(cap.path, cap.header_line, "ldv needs a reference velocity: columns vx vy vz (body) "
-                         f"or vn ve vd with roll_deg pitch_deg yaw_deg (have {have})")
+        raise InputError(
+            cap.path,
+            cap.header_line,
+            "ldv needs a reference velocity: columns vx vy vz (body) "
+            f"or vn ve vd with roll_deg pitch_deg yaw_deg (have {have})",
+        )
     t = np.asarray(cap.columns[tcol], dtype=float) if tcol in cap.columns else None
     return t, v, kind
 
@@ -107,8 +112,11 @@ def aligned_velocities(capture, reference=None, warnings=None):
     warnings = [] if warnings is None else warnings
     missing = [c for c in ("vl1", "vl2", "vl3") if c not in capture.columns]
     if missing:
-        raise InputError(capture.path, capture.header_line,
-                         f"ldv needs beam column(s) {', '.join(missing)} (have {', '.join(capture.columns)})")
+        raise InputError(
+            capture.path,
+            capture.header_line,
+            f"ldv needs beam column(s) {', '.join(missing)} (have {', '.join(capture.columns)})",
+        )
     vl = _cols(capture, ("vl1", "vl2", "vl3"))
     offset = capture.float_meta("reference_time_offset_s", 0.0)
     ref_path = reference or capture.meta.get("reference_file")
@@ -134,10 +142,12 @@ def aligned_velocities(capture, reference=None, warnings=None):
                 warnings.append(f"{int((~ok).sum())} rows with missing values left out")
             return v_ref[ok], vl[ok], dict(info, reference=kind, rows=np.flatnonzero(ok))
         if t_ref is None:
-            raise UnsupportedError(f"{capture.path}: rows hold either LDV or reference samples but there is no "
-                                   "time column to align them")
-        info["alignment"] = ("'ref_t' column" if tcol == "ref_t" else "interleaved rows on 't'") + \
-            ", reference interpolated to LDV times"
+            raise UnsupportedError(
+                f"{capture.path}: rows hold either LDV or reference samples but there is no time column to align them"
+            )
+        info["alignment"] = (
+            "'ref_t' column" if tcol == "ref_t" else "interleaved rows on 't'"
+        ) + ", reference interpolated to LDV times"
     if "t" not in capture.columns:
         raise InputError(capture.path, capture.header_line, "aligning two streams needs a 't' column")
     t = np.asarray(capture.columns["t"], dtype=float)
@@ -156,9 +166,9 @@ def aligned_velocities(capture, reference=None, warnings=None):
 class Prepared:
     """A P5 capture read once: reference and beam velocities paired on the LDV clock."""
 
-    v_body: np.ndarray    # reference velocity in the body frame (n, 3), m/s
-    vl: np.ndarray        # beam outputs (n, 3), m/s
-    info: dict            # alignment, reference kind, rows (capture row of each pair)
+    v_body: np.ndarray  # reference velocity in the body frame (n, 3), m/s
+    vl: np.ndarray  # beam outputs (n, 3), m/s
+    info: dict  # alignment, reference kind, rows (capture row of each pair)
     warnings: list[str] = field(default_factory=list)
 
 
@@ -185,11 +195,20 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
     params, unc, fit = {}, {}, {}
     for j, b in enumerate(res.beams):
         key = f"beam{j + 1}"
-        params[key] = {"dK": b.dK, "alpha_deg": b.angles_deg[0], "beta_deg": b.angles_deg[1],
-                       "gamma_deg": b.angles_deg[2], "sigma_mps": b.sigma_mps}
-        unc[key] = {"dK": b.sigma_dK, "alpha_deg": b.sigma_angles_deg[0], "beta_deg": b.sigma_angles_deg[1],
-                    "gamma_deg": b.sigma_angles_deg[2],
-                    "sigma_mps": b.sigma_mps / np.sqrt(2.0 * max(res.n - 3, 1))}
+        params[key] = {
+            "dK": b.dK,
+            "alpha_deg": b.angles_deg[0],
+            "beta_deg": b.angles_deg[1],
+            "gamma_deg": b.angles_deg[2],
+            "sigma_mps": b.sigma_mps,
+        }
+        unc[key] = {
+            "dK": b.sigma_dK,
+            "alpha_deg": b.sigma_angles_deg[0],
+            "beta_deg": b.sigma_angles_deg[1],
+            "gamma_deg": b.sigma_angles_deg[2],
+            "sigma_mps": b.sigma_mps / np.sqrt(2.0 * max(res.n - 3, 1)),
+        }
         fit[key] = {"X": b.X, "cov_X": b.cov_X, "eiv_bias_X": b.eiv_bias_X}
         cosines = np.cos(np.radians(b.angles_deg))
         if abs(float(cosines @ cosines) - 1.0) > 1e-9:
@@ -203,7 +222,7 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
         "model": MODEL,
         "params": params,
         "uncertainty": unc,
-        "residual_rms": float(np.sqrt(np.mean(resid ** 2))),
+        "residual_rms": float(np.sqrt(np.mean(resid**2))),
         "n_positions": res.n,
         "warnings": warnings,
         "reference": info.get("reference"),
@@ -216,14 +235,20 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
 
 def format_text(result: dict) -> str:
     p, u = result["params"], result["uncertainty"]
-    lines = [f"procedure  ldv", f"device     {result.get('device')}", f"model      {result['model']}",
-             f"reference  {result.get('reference')} ({result.get('alignment')}); {result.get('estimator')}",
-             f"cond(HᵀH)  {p['condition_number']:.3g}  ({result['n_positions']} epochs)"]
+    lines = [
+        "procedure  ldv",
+        f"device     {result.get('device')}",
+        f"model      {result['model']}",
+        f"reference  {result.get('reference')} ({result.get('alignment')}); {result.get('estimator')}",
+        f"cond(HᵀH)  {p['condition_number']:.3g}  ({result['n_positions']} epochs)",
+    ]
     for j in (1, 2, 3):
         b, s = p[f"beam{j}"], u[f"beam{j}"]
-        lines.append(f"beam{j}      δK {b['dK']:+.5f} ± {s['dK']:.1e}  α {b['alpha_deg']:.3f} ± {s['alpha_deg']:.3f}°"
-                     f"  β {b['beta_deg']:.3f} ± {s['beta_deg']:.3f}°  γ {b['gamma_deg']:.3f} ± {s['gamma_deg']:.3f}°"
-                     f"  σ {b['sigma_mps']:.4f} m/s")
+        lines.append(
+            f"beam{j}      δK {b['dK']:+.5f} ± {s['dK']:.1e}  α {b['alpha_deg']:.3f} ± {s['alpha_deg']:.3f}°"
+            f"  β {b['beta_deg']:.3f} ± {s['beta_deg']:.3f}°  γ {b['gamma_deg']:.3f} ± {s['gamma_deg']:.3f}°"
+            f"  σ {b['sigma_mps']:.4f} m/s"
+        )
     lines.append(f"residual   {result['residual_rms']:.4g} m/s RMS")
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
@@ -238,8 +263,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     v_b, vl, rows = prep.v_body, prep.vl, prep.info.get("rows")
 
     def pick(name):
-        return None if name not in capture.columns or rows is None else \
-            np.asarray(capture.columns[name], float)[rows]
+        return None if name not in capture.columns or rows is None else np.asarray(capture.columns[name], float)[rows]
 
     W = None
     if rows is not None and all(c in capture.columns for c in ("wx", "wy", "wz")):

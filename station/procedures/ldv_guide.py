@@ -17,6 +17,7 @@ Phases: ``record`` → ``done`` | ``aborted``. Times are the samples' own ``t_s`
 is a P5 time series (``t vl1 vl2 vl3 vx vy vz wx wy wz temp_c``, the reference in the body
 frame, x forward, y right, z down) for ``station.procedures.ldv``.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -76,13 +77,14 @@ class LdvStatus:
 class LdvGuide:
     procedure = "ldv"
 
-    def __init__(self, *, sample_rate_hz: float, device_id: str = "", site: dict | None = None,
-                 config: LdvConfig | None = None):
+    def __init__(
+        self, *, sample_rate_hz: float, device_id: str = "", site: dict | None = None, config: LdvConfig | None = None
+    ):
         self.config = config or LdvConfig()
         self.sample_rate_hz = float(sample_rate_hz)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         self.phase = "record"
         self._events: list[tuple[str, str]] = []
         self._reset()
@@ -138,8 +140,9 @@ class LdvGuide:
             self._good_since = math.nan
         st = self.status()
         if st.enough:
-            self._finish(f"κ {st.kappa:.3g} ≤ {KAPPA_WARN:.0e} with {st.n_epochs} moving epochs "
-                         f"in {st.recorded_s:.0f} s")
+            self._finish(
+                f"κ {st.kappa:.3g} ≤ {KAPPA_WARN:.0e} with {st.n_epochs} moving epochs in {st.recorded_s:.0f} s"
+            )
         elif st.recorded_s >= self.config.max_s:
             self._finish(f"time limit {self.config.max_s:.0f} s reached at κ {st.kappa:.3g}")
         return self.status()
@@ -170,18 +173,26 @@ class LdvGuide:
         except np.linalg.LinAlgError:
             return None
         a = ldv_model.angles_from_X(X)
-        return tuple((float(a["dK"][j]), float(a["alpha_deg"][j]), float(a["beta_deg"][j]), float(a["gamma_deg"][j]))
-                     for j in range(len(X)))
+        return tuple(
+            (float(a["dK"][j]), float(a["alpha_deg"][j]), float(a["beta_deg"][j]), float(a["gamma_deg"][j]))
+            for j in range(len(X))
+        )
 
     def status(self) -> LdvStatus:
         c = self.config
         kappa = self.kappa
-        verdict = ("none" if not math.isfinite(kappa) else "refused" if kappa > KAPPA_REFUSE
-                   else "poor" if kappa > KAPPA_WARN else "good")
+        verdict = (
+            "none"
+            if not math.isfinite(kappa)
+            else "refused"
+            if kappa > KAPPA_REFUSE
+            else "poor"
+            if kappa > KAPPA_WARN
+            else "good"
+        )
         rec = (self._t1 - self._t0) if math.isfinite(self._t0) else 0.0
         good_s = (self._t1 - self._good_since) if math.isfinite(self._good_since) else 0.0
-        enough = (verdict == "good" and good_s >= c.good_for_s and self._epochs >= c.min_epochs
-                  and rec >= c.min_s)
+        enough = verdict == "good" and good_s >= c.good_for_s and self._epochs >= c.min_epochs and rec >= c.min_s
         v, b = self._last if self._last is not None else (np.full(3, np.nan), np.full(3, np.nan))
         speed = float(np.linalg.norm(v))
         msg = self._message
@@ -189,18 +200,33 @@ class LdvGuide:
             if not (speed >= c.moving_mps):
                 msg = "Parked: drive (the beams see nothing worth fitting at rest)"
             elif verdict in ("none", "refused"):
-                msg = ("Straight driving: the velocity hardly changes direction, the beam angles cannot be "
-                       "separated; drive turns, slopes, braking")
+                msg = (
+                    "Straight driving: the velocity hardly changes direction, the beam angles cannot be "
+                    "separated; drive turns, slopes, braking"
+                )
             elif verdict == "poor":
                 msg = "Poorly conditioned still: keep turning and changing slope"
             elif not enough:
                 left = max(c.min_s - rec, c.good_for_s - good_s, 0.0)
-                msg = (f"Well conditioned: keep driving and turning ({max(c.min_epochs - self._epochs, 0)} "
-                       f"epochs, {left:.0f} s to go)")
+                msg = (
+                    f"Well conditioned: keep driving and turning ({max(c.min_epochs - self._epochs, 0)} "
+                    f"epochs, {left:.0f} s to go)"
+                )
         return LdvStatus(
-            phase=self.phase, kappa=kappa, verdict=verdict, enough=enough, n_epochs=self._epochs, n_samples=self._n,
-            recorded_s=rec, speed_mps=speed, v_ref=tuple(float(x) for x in v), beams=tuple(float(x) for x in b),
-            estimate=self._estimate() if verdict in ("poor", "good") else None, t_s=self._t1, message=msg)
+            phase=self.phase,
+            kappa=kappa,
+            verdict=verdict,
+            enough=enough,
+            n_epochs=self._epochs,
+            n_samples=self._n,
+            recorded_s=rec,
+            speed_mps=speed,
+            v_ref=tuple(float(x) for x in v),
+            beams=tuple(float(x) for x in b),
+            estimate=self._estimate() if verdict in ("poor", "good") else None,
+            t_s=self._t1,
+            message=msg,
+        )
 
     def capture(self, extra_meta: dict | None = None):
         """The recording as a P5 time-series capture (body-frame reference)."""
@@ -217,9 +243,14 @@ class LdvGuide:
         temp = np.concatenate([c["temp"] for c in ch]) if ch else np.zeros(0)
         if np.isfinite(temp).any():
             cols["temp_c"] = temp
-        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
-                "date": self.started[:10], "sample_rate_hz": repr(self.sample_rate_hz),
-                "frame": "body x forward, y right, z down"}
+        meta = {
+            "station-capture": "1",
+            "procedure": self.procedure,
+            "device": self.device_id or "unknown",
+            "date": self.started[:10],
+            "sample_rate_hz": repr(self.sample_rate_hz),
+            "frame": "body x forward, y right, z down",
+        }
         for key in ("latitude_deg", "longitude_deg", "altitude_m"):
             if key in self.site:
                 meta[key] = repr(float(self.site[key]))

@@ -18,6 +18,7 @@ Reported per axis (IEEE Std 952 readings, rates converted to °/h):
 
 The Earth's rotation is a constant on a still unit: the Allan deviation does not see it.
 """
+
 from __future__ import annotations
 
 import math
@@ -39,14 +40,14 @@ class NoiseReport:
 
     duration_s: float
     sample_rate_hz: float
-    taus_s: np.ndarray        # (m,)
-    adev_deg_h: np.ndarray    # (m, 3)
+    taus_s: np.ndarray  # (m,)
+    adev_deg_h: np.ndarray  # (m, 3)
     arw_deg_rt_h: np.ndarray  # (3,) angle random walk [°/√h]
     bias_instability_deg_h: np.ndarray  # (3,)
     bias_instability_tau_s: np.ndarray  # (3,) τ of the ADEV minimum
-    mean_deg_h: np.ndarray    # (3,) mean rate (includes the Earth's rate)
+    mean_deg_h: np.ndarray  # (3,) mean rate (includes the Earth's rate)
     sigma_mean_deg_h: np.ndarray  # (3,) 1-sigma of the mean (solvers.allan.mean_standard_error)
-    noise_model: np.ndarray   # (3, 3) c0 [rad²/s], c1 [rad²/s²], c2 [rad²/s³] per axis
+    noise_model: np.ndarray  # (3, 3) c0 [rad²/s], c1 [rad²/s²], c2 [rad²/s³] per axis
     mean_error: allan.MeanError
 
     def time_needed_s(self, accuracy_deg_h: float) -> np.ndarray:
@@ -56,13 +57,19 @@ class NoiseReport:
         return allan.time_needed_s(self.mean_error, accuracy_deg_h * DEG_H_RAD_S)
 
     def to_json(self, accuracy_deg_h: float | None = None) -> dict:
-        out = {"kind": "gyro-noise", "duration_s": self.duration_s, "sample_rate_hz": self.sample_rate_hz,
-               "tau_s": self.taus_s.tolist(), "adev_deg_h": self.adev_deg_h.T.tolist(),
-               "arw_deg_rt_h": self.arw_deg_rt_h.tolist(),
-               "bias_instability_deg_h": self.bias_instability_deg_h.tolist(),
-               "bias_instability_tau_s": self.bias_instability_tau_s.tolist(),
-               "mean_deg_h": self.mean_deg_h.tolist(), "sigma_mean_deg_h": self.sigma_mean_deg_h.tolist(),
-               "noise_model_c0_c1_c2": self.noise_model.tolist()}
+        out = {
+            "kind": "gyro-noise",
+            "duration_s": self.duration_s,
+            "sample_rate_hz": self.sample_rate_hz,
+            "tau_s": self.taus_s.tolist(),
+            "adev_deg_h": self.adev_deg_h.T.tolist(),
+            "arw_deg_rt_h": self.arw_deg_rt_h.tolist(),
+            "bias_instability_deg_h": self.bias_instability_deg_h.tolist(),
+            "bias_instability_tau_s": self.bias_instability_tau_s.tolist(),
+            "mean_deg_h": self.mean_deg_h.tolist(),
+            "sigma_mean_deg_h": self.sigma_mean_deg_h.tolist(),
+            "noise_model_c0_c1_c2": self.noise_model.tolist(),
+        }
         if accuracy_deg_h is not None:
             need = self.time_needed_s(accuracy_deg_h)
             out["accuracy_deg_h"] = accuracy_deg_h
@@ -77,8 +84,9 @@ def noise_report(gyro, sample_rate_hz: float, gyro_unit: str | None) -> NoiseRep
     be given in °/h) or fewer than 30 rows (too short for three τ)."""
     k = si_factor("gyro", gyro_unit)
     if k is None:
-        raise ValueError(f"gyro_unit {gyro_unit or 'unknown'!r} has no physical factor: the Allan run needs "
-                         "rad/s or deg/s")
+        raise ValueError(
+            f"gyro_unit {gyro_unit or 'unknown'!r} has no physical factor: the Allan run needs rad/s or deg/s"
+        )
     y = np.asarray(gyro, dtype=float).reshape(-1, 3)
     y = y[np.all(np.isfinite(y), axis=1)] * k
     if len(y) < 30:
@@ -91,11 +99,19 @@ def noise_report(gyro, sample_rate_hz: float, gyro_unit: str | None) -> NoiseRep
     model = me.noise_model if me.noise_model is not None else np.zeros((3, 3))
     imin = np.argmin(adev, axis=0)
     arw = np.sqrt(model[:, 0]) * math.degrees(1.0) * 60.0
-    return NoiseReport(duration_s=me.duration_s, sample_rate_hz=float(sample_rate_hz), taus_s=taus,
-                       adev_deg_h=adev / DEG_H_RAD_S, arw_deg_rt_h=arw,
-                       bias_instability_deg_h=adev[imin, np.arange(3)] / BIAS_INSTABILITY_FACTOR / DEG_H_RAD_S,
-                       bias_instability_tau_s=taus[imin], mean_deg_h=me.mean / DEG_H_RAD_S,
-                       sigma_mean_deg_h=np.asarray(me.se) / DEG_H_RAD_S, noise_model=model, mean_error=me)
+    return NoiseReport(
+        duration_s=me.duration_s,
+        sample_rate_hz=float(sample_rate_hz),
+        taus_s=taus,
+        adev_deg_h=adev / DEG_H_RAD_S,
+        arw_deg_rt_h=arw,
+        bias_instability_deg_h=adev[imin, np.arange(3)] / BIAS_INSTABILITY_FACTOR / DEG_H_RAD_S,
+        bias_instability_tau_s=taus[imin],
+        mean_deg_h=me.mean / DEG_H_RAD_S,
+        sigma_mean_deg_h=np.asarray(me.se) / DEG_H_RAD_S,
+        noise_model=model,
+        mean_error=me,
+    )
 
 
 # The longest still record a P4 run is worth: beyond a day the fitted noise model is
@@ -168,14 +184,21 @@ def noise_json(result: dict) -> dict:
         u = SI_UNIT[kind]
         doc["sensors"][kind] = {
             "unit": u,
-            "noise_density": f.white.tolist(), "noise_density_sigma": f.white_sigma.tolist(),
+            "noise_density": f.white.tolist(),
+            "noise_density_sigma": f.white_sigma.tolist(),
             "noise_density_unit": f"{u}/sqrt(Hz)",
-            "random_walk": f.random_walk.tolist(), "random_walk_sigma": f.random_walk_sigma.tolist(),
+            "random_walk": f.random_walk.tolist(),
+            "random_walk_sigma": f.random_walk_sigma.tolist(),
             "random_walk_unit": f"{u}/s/sqrt(Hz)",
-            "bias_instability": f.bias_instability.tolist(), "bias_instability_tau_s": f.bias_instability_tau_s.tolist(),
+            "bias_instability": f.bias_instability.tolist(),
+            "bias_instability_tau_s": f.bias_instability_tau_s.tolist(),
             "bias_instability_unit": u,
-            "random_walk_min_duration_s": [x if math.isfinite(x) else None for x in f.random_walk_min_duration_s.tolist()],
-            "tau_s": f.taus_s.tolist(), "adev": f.adev.T.tolist(), "adev_lo_68": f.adev_lo.T.tolist(),
+            "random_walk_min_duration_s": [
+                x if math.isfinite(x) else None for x in f.random_walk_min_duration_s.tolist()
+            ],
+            "tau_s": f.taus_s.tolist(),
+            "adev": f.adev.T.tolist(),
+            "adev_lo_68": f.adev_lo.T.tolist(),
             "adev_hi_68": f.adev_hi.T.tolist(),
         }
     return doc
@@ -188,16 +211,20 @@ def random_walk_warning(f, kind: str) -> str | None:
         return None
     if not math.isfinite(need):
         return f"{kind} random walk not resolved on some axis (fitted 0): record longer"
-    return (f"{kind} random walk poorly resolved: its sigma holds for records of {need:.0f} s or more, "
-            f"this one is {f.duration_s:.0f} s")
+    return (
+        f"{kind} random walk poorly resolved: its sigma holds for records of {need:.0f} s or more, "
+        f"this one is {f.duration_s:.0f} s"
+    )
 
 
 def kalibr_yaml(result: dict, rostopic: str = "/imu0") -> str:
     """Kalibr's imu.yaml: one value per sensor, the largest of the three axes (conservative:
     Kalibr models every axis with the same density), per-axis figures and 1-sigma in comments."""
-    lines = ["# IMU noise model for Kalibr (station noise): Allan deviation of a still record",
-             f"# {result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz; each value is the largest "
-             "of the three axes"]
+    lines = [
+        "# IMU noise model for Kalibr (station noise): Allan deviation of a still record",
+        f"# {result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz; each value is the largest "
+        "of the three axes",
+    ]
     body = []
     for kind, key in (("accel", "accelerometer"), ("gyro", "gyroscope")):
         f = result["sensors"].get(kind)
@@ -205,8 +232,10 @@ def kalibr_yaml(result: dict, rostopic: str = "/imu0") -> str:
             lines.append(f"# no {key} in the capture: {key} values are missing and Kalibr will refuse the file")
             continue
         u = "m/s^2" if kind == "accel" else "rad/s"
-        for name, v, s, unit in (("noise_density", f.white, f.white_sigma, f"{u}/sqrt(Hz)"),
-                                 ("random_walk", f.random_walk, f.random_walk_sigma, f"{u}/s/sqrt(Hz)")):
+        for name, v, s, unit in (
+            ("noise_density", f.white, f.white_sigma, f"{u}/sqrt(Hz)"),
+            ("random_walk", f.random_walk, f.random_walk_sigma, f"{u}/s/sqrt(Hz)"),
+        ):
             i = int(np.argmax(v))
             per_axis = ", ".join(f"{a} {x:.4g} ± {e:.2g}" for a, x, e in zip("xyz", v, s))
             body.append(f"{key}_{name}: {float(v[i]):.6g}  # {unit}; per axis {per_axis}")

@@ -14,6 +14,7 @@ tolerance, or the fit fails its own checks (``fit_checks``). A failed result is 
 by an explicit decision: rejected with a reason, or accepted as an override with a note
 (``review_record``).
 """
+
 from __future__ import annotations
 
 import math
@@ -64,8 +65,9 @@ class ParamRow:
     in_limits: bool | None = None
 
 
-def param_rows(result: dict, previous: dict | None = None, tolerances: dict | None = None,
-               limits: dict | None = None) -> list[ParamRow]:
+def param_rows(
+    result: dict, previous: dict | None = None, tolerances: dict | None = None, limits: dict | None = None
+) -> list[ParamRow]:
     """One row per scalar parameter; ``ok`` is False when it changed more than its
     tolerance from ``previous`` or left its absolute ``limits``."""
     limits = limits or {}
@@ -152,14 +154,17 @@ def fit_checks(result: dict, chi2_limit: float = 100.0) -> list[str]:
     out = []
     values = flatten(result.get("params", {}))
     sigmas = flatten(result.get("uncertainty", {}))
-    if any(v is None for v in values.values()) or not (result.get("residual_rms") is None
-                                                        or _finite(result.get("residual_rms"))):
+    if any(v is None for v in values.values()) or not (
+        result.get("residual_rms") is None or _finite(result.get("residual_rms"))
+    ):
         out.append("the fit returned non-finite values")
     pairs = [(v, sigmas[k]) for k, v in values.items() if _finite(v) and _finite(sigmas.get(k))]
     # A gyro drift indistinguishable from zero is a good gyro, not a failed fit.
     if result.get("procedure") != "gyro-drift" and len(pairs) >= 2 and all(s >= abs(v) for v, s in pairs):
-        out.append(f"every parameter's σ is larger than its value ({len(pairs)} of {len(pairs)}): "
-                   "the data determine none of them")
+        out.append(
+            f"every parameter's σ is larger than its value ({len(pairs)} of {len(pairs)}): "
+            "the data determine none of them"
+        )
     # Where the noise is taken from the residuals, χ² cannot see a misfit: a residual of
     # 5 % of g on an accelerometer means the model does not describe the data at all (a
     # working triad on a bench leaves milli-g; e.g. a centrifuge that never turned).
@@ -167,13 +172,17 @@ def fit_checks(result: dict, chi2_limit: float = 100.0) -> list[str]:
     bound = {"accel-tabletop": 0.05 * 9.80665, "accel-centrifuge": 0.05}.get(result.get("procedure"))
     if bound is not None and _finite(res) and res > bound:
         unit = "m/s²" if result.get("procedure") == "accel-tabletop" else "g"
-        out.append(f"residual {res:.3g} {unit} RMS is above 5 % of g ({bound:.3g} {unit}): "
-                   "the model does not describe these data")
+        out.append(
+            f"residual {res:.3g} {unit} RMS is above 5 % of g ({bound:.3g} {unit}): "
+            "the model does not describe these data"
+        )
     chi2 = result.get("reduced_chi2")
     noise = str(result.get("noise") or "")
     if _finite(chi2) and chi2 > chi2_limit and not noise.startswith("estimated"):
-        out.append(f"residual {math.sqrt(chi2):.3g} times the measured noise (reduced χ² {chi2:.3g}): "
-                   "the model does not describe these data")
+        out.append(
+            f"residual {math.sqrt(chi2):.3g} times the measured noise (reduced χ² {chi2:.3g}): "
+            "the model does not describe these data"
+        )
     return out
 
 

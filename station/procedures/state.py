@@ -1,4 +1,5 @@
 """Where a guided run's resume file lives (kept free of numpy so the TUI starts fast)."""
+
 from __future__ import annotations
 
 import os

@@ -16,9 +16,9 @@ Methods: ``norm`` (default: step 8 where labels allow, then the norm fit in the 
 gauge, or ``upper-triangular`` without labels), ``upper-triangular`` (that gauge even with
 labels), ``six-position`` (step 8 only).
 """
+
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,8 +32,12 @@ from station.procedures.contract import DiagnosisInput
 
 MODEL = "A = B + M V"
 DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
-METHODS = {"norm": ("norm", "auto"), "upper-triangular": ("norm", "upper-triangular"),
-           "six-position": ("six-position", "auto"), "step8": ("six-position", "auto")}
+METHODS = {
+    "norm": ("norm", "auto"),
+    "upper-triangular": ("norm", "upper-triangular"),
+    "six-position": ("six-position", "auto"),
+    "step8": ("six-position", "auto"),
+}
 
 
 def _where(capture) -> str:
@@ -94,8 +98,19 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
             if len(seg) < 2:
                 continue
             d, s = T.known_direction(lab)
-            out.append(T.Position(lab, seg.mean(axis=0), seg.std(axis=0, ddof=1), len(seg),
-                                  float(t[start]), float(t[stop - 1]), d, s, se=mean_se(seg, t[start:stop])))
+            out.append(
+                T.Position(
+                    lab,
+                    seg.mean(axis=0),
+                    seg.std(axis=0, ddof=1),
+                    len(seg),
+                    float(t[start]),
+                    float(t[stop - 1]),
+                    d,
+                    s,
+                    se=mean_se(seg, t[start:stop]),
+                )
+            )
         return out, "position column", True
     from solvers.stillness import detect_static_intervals
 
@@ -107,9 +122,18 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
     except (SolverError, ValueError) as exc:
         raise UnsupportedError(f"{_where(capture)}: accel-tabletop: cannot find static positions: {exc}") from None
     warnings += [f"stillness: {w}" for w in st.warnings]
-    out = [T.Position(str(k + 1), np.asarray(iv.accel_mean, float), np.asarray(iv.accel_std, float), int(iv.n),
-                      float(iv.t_start_s), float(iv.t_stop_s), se=mean_se(a[iv.start:iv.stop], t[iv.start:iv.stop]))
-           for k, iv in enumerate(st.intervals)]
+    out = [
+        T.Position(
+            str(k + 1),
+            np.asarray(iv.accel_mean, float),
+            np.asarray(iv.accel_std, float),
+            int(iv.n),
+            float(iv.t_start_s),
+            float(iv.t_stop_s),
+            se=mean_se(a[iv.start : iv.stop], t[iv.start : iv.stop]),
+        )
+        for k, iv in enumerate(st.intervals)
+    ]
     return out, "static intervals found automatically (no position column)", True
 
 
@@ -150,7 +174,8 @@ def check_saturation(capture, positions: list[T.Position]) -> None:
                 raise UnsupportedError(
                     f"{_where(capture)}: accel-tabletop: axis {'xyz'[i]} is saturated in position {p.label}{where}: "
                     f"stuck at {p.mean[i]:g} {capture.meta.get('accel_unit', '')}, its extreme reading, while the "
-                    "other axes are noisy; the range is too small for 1 g (or the sensor clips): cannot calibrate")
+                    "other axes are noisy; the range is too small for 1 g (or the sensor clips): cannot calibrate"
+                )
 
 
 @dataclass
@@ -194,16 +219,27 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         s = ACCEL_UNITS[unit]
         dev = np.abs(np.diag(res.M) / s - 1.0)
         if np.any(dev > 0.2):
-            warnings.append(f"scale factors differ from the nominal {s:g} m/s² per {unit} by up to "
-                            f"{100 * dev.max():.0f} %: check accel_unit")
+            warnings.append(
+                f"scale factors differ from the nominal {s:g} m/s² per {unit} by up to "
+                f"{100 * dev.max():.0f} %: check accel_unit"
+            )
     t_known = [p for p in positions if p.direction is not None]
     rows = []
     for k, p in enumerate(positions):
-        rows.append({"label": p.label, "t_start_s": p.t_start_s, "t_stop_s": p.t_stop_s, "n": p.n,
-                     "mean_raw": p.mean, "residual_mps2": float(res.norm_residuals[k]),
-                     "sigma_mps2": float(res.norm_sigma[k]),
-                     "known_direction": p.direction if p.direction is not None else None,
-                     "orientation": int(res.clusters[k]), "outlier": k in res.outliers})
+        rows.append(
+            {
+                "label": p.label,
+                "t_start_s": p.t_start_s,
+                "t_stop_s": p.t_stop_s,
+                "n": p.n,
+                "mean_raw": p.mean,
+                "residual_mps2": float(res.norm_residuals[k]),
+                "sigma_mps2": float(res.norm_sigma[k]),
+                "known_direction": p.direction if p.direction is not None else None,
+                "orientation": int(res.clusters[k]),
+                "outlier": k in res.outliers,
+            }
+        )
     result = {
         "procedure": "accel-tabletop",
         "device": capture.meta.get("device"),
@@ -222,10 +258,14 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         "n_labelled_positions": len(t_known),
         "n_distinct_orientations": res.n_distinct,
         "position_set_condition": res.position_condition,
-        "noise": ("estimated from the residuals" if not noise_known else
-                  "measured per position: standard error of each hold's mean, bias instability included "
-                  "(fitted Allan noise model)" if any(p.se is not None for p in positions) else
-                  "measured per position (std/sqrt(n))"),
+        "noise": (
+            "estimated from the residuals"
+            if not noise_known
+            else "measured per position: standard error of each hold's mean, bias instability included "
+            "(fitted Allan noise model)"
+            if any(p.se is not None for p in positions)
+            else "measured per position (std/sqrt(n))"
+        ),
         "reduced_chi2": res.fit.reduced_chi2 if res.fit is not None else None,
         "positions": rows,
         "step8": res.step8,
@@ -244,14 +284,19 @@ def format_text(result: dict) -> str:
 
     r = jsonable(result)
     unit = r["units"]["V"]
-    lines = [f"procedure  accel-tabletop (P1, {r['method']})", f"device     {r.get('device')}",
-             f"model      {r['model']}   (V in {unit}, A in m/s²)",
-             f"gauge      {r['gauge_description']}"]
+    lines = [
+        f"procedure  accel-tabletop (P1, {r['method']})",
+        f"device     {r.get('device')}",
+        f"model      {r['model']}   (V in {unit}, A in m/s²)",
+        f"gauge      {r['gauge_description']}",
+    ]
     lines += param_lines("B [m/s²]", r["params"]["B"], r["uncertainty"]["B"])
     lines += param_lines(f"M [m/s² per {unit}]", r["params"]["M"], r["uncertainty"]["M"])
     lines.append(f"residual   {r['residual_rms']:.3g} m/s² RMS of |A| − g (g = {r['g_mps2']:.5f} m/s²)")
-    lines.append(f"positions  {r['n_positions']} ({r['positions_found_by']}), {r['n_distinct_orientations']} "
-                 f"distinct orientations, condition {num(r['position_set_condition'], '.3g', '∞ (singular)')}")
+    lines.append(
+        f"positions  {r['n_positions']} ({r['positions_found_by']}), {r['n_distinct_orientations']} "
+        f"distinct orientations, condition {num(r['position_set_condition'], '.3g', '∞ (singular)')}"
+    )
     for p in r["positions"]:
         span = f"{p['t_start_s']:8.1f}–{p['t_stop_s']:8.1f} s" if p["t_start_s"] is not None else " " * 21
         flag = "  <- disagrees" if p["outlier"] else ""
@@ -293,20 +338,34 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         t_mean = _col(capture, "t")
     std = np.array([p.std if p.std is not None else np.full(3, np.nan) for p in positions])
     se = np.array([p.se for p in positions]) if all(p.se is not None for p in positions) else None
-    prob = DP.tabletop_problem(np.array([p.mean for p in positions]), std if noise_known else None,
-                               np.array([p.n for p in positions]), g, fw["K"], fw["b"],
-                               labels=[p.label for p in positions], directions=dirs,
-                               placement_sigma_rad=[p.placement_sigma_rad for p in positions],
-                               t_s=t_mean, temp_c=temp_mean, noise_known=noise_known, se=se,
-                               sub=_sub_holds(capture, positions) if capture.is_time_series else None)
+    prob = DP.tabletop_problem(
+        np.array([p.mean for p in positions]),
+        std if noise_known else None,
+        np.array([p.n for p in positions]),
+        g,
+        fw["K"],
+        fw["b"],
+        labels=[p.label for p in positions],
+        directions=dirs,
+        placement_sigma_rad=[p.placement_sigma_rad for p in positions],
+        t_s=t_mean,
+        temp_c=temp_mean,
+        noise_known=noise_known,
+        se=se,
+        sub=_sub_holds(capture, positions) if capture.is_time_series else None,
+    )
     drivers = {"position": [p.label for p in positions], "time_s": t_mean, "temp_c": temp_mean}
-    return DiagnosisInput(prob, drivers,
-                          "a position that disagrees with the others: the unit moved, a wrong label, or a knock",
-                          group_kind="position", quality=tuple(_moved_positions(capture)))
+    return DiagnosisInput(
+        prob,
+        drivers,
+        "a position that disagrees with the others: the unit moved, a wrong label, or a knock",
+        group_kind="position",
+        quality=tuple(_moved_positions(capture)),
+    )
 
 
-SUB_HOLDS = 4          # parts a hold is cut into for diagnosis (time-resolved evidence)
-MIN_SUB_SAMPLES = 25   # a hold shorter than SUB_HOLDS × this stays one row
+SUB_HOLDS = 4  # parts a hold is cut into for diagnosis (time-resolved evidence)
+MIN_SUB_SAMPLES = 25  # a hold shorter than SUB_HOLDS × this stays one row
 
 
 def _sub_holds(capture, positions) -> dict | None:
@@ -346,8 +405,11 @@ def _moved_positions(capture) -> list[dict]:
     from solvers.stillness import detect_static_intervals
 
     a = _accel(capture)
-    g = np.column_stack([_col(capture, c) for c in ("gx", "gy", "gz")]) \
-        if all(c in capture.columns for c in ("gx", "gy", "gz")) else None
+    g = (
+        np.column_stack([_col(capture, c) for c in ("gx", "gy", "gz")])
+        if all(c in capture.columns for c in ("gx", "gy", "gz"))
+        else None
+    )
     try:
         st = detect_static_intervals(capture.columns["t"], a, g, nan_policy="omit")
         return Q.moved_positions(st.still_mask, capture.columns["position"])

@@ -22,6 +22,7 @@ The averages become a P1 table-of-averages :class:`station.capture.Capture`
 (:meth:`P1Guide.capture`). The state (captured averages, current step, settings) is
 saved as a small JSON file after every change so an interrupted run can be resumed.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -29,7 +30,7 @@ import json
 import math
 import os
 import tempfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -120,7 +121,7 @@ class GuideStatus:
     message: str
 
 
-MAX_RECORD_ROWS = 2_000_000   # ~5.5 h at 100 Hz: beyond, the guide keeps the averages only
+MAX_RECORD_ROWS = 2_000_000  # ~5.5 h at 100 Hz: beyond, the guide keeps the averages only
 
 
 def p1_steps(names: list[str] | None = None) -> list[Step]:
@@ -147,10 +148,21 @@ class P1Guide:
 
     procedure = "accel-tabletop"
 
-    def __init__(self, *, sample_rate_hz: float, accel_unit: str = "V", device_id: str = "",
-                 config: GuideConfig | None = None, positions: list[str] | None = None,
-                 nominal=None, previous: dict | None = None, site: dict | None = None,
-                 g_mps2: float | None = None, state_path: str | None = None, gyro_unit: str | None = None):
+    def __init__(
+        self,
+        *,
+        sample_rate_hz: float,
+        accel_unit: str = "V",
+        device_id: str = "",
+        config: GuideConfig | None = None,
+        positions: list[str] | None = None,
+        nominal=None,
+        previous: dict | None = None,
+        site: dict | None = None,
+        g_mps2: float | None = None,
+        state_path: str | None = None,
+        gyro_unit: str | None = None,
+    ):
         self.config = config or GuideConfig()
         self.gyro_unit = gyro_unit
         # the whole stream with the gyro, so that the turns between positions calibrate the gyro
@@ -169,7 +181,7 @@ class P1Guide:
         self.index = 0
         self.phase = "noise"
         self.state_path = state_path
-        self.started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         self._events: list[tuple[str, str]] = []
         self._message = "Hold the unit still: measuring the sensor noise"
         self._nominal = self._nominal_from(nominal, accel_unit)
@@ -200,8 +212,14 @@ class P1Guide:
     def _new_tracker(self) -> None:
         c = self.config
         init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
-        self.tracker = StillnessTracker(self.sample_rate_hz, init_rest_s=init, window_s=c.window_s,
-                                        min_duration_s=0.0, margin_s=0.0, nan_policy="omit")
+        self.tracker = StillnessTracker(
+            self.sample_rate_hz,
+            init_rest_s=init,
+            window_s=c.window_s,
+            min_duration_s=0.0,
+            margin_s=0.0,
+            nan_policy="omit",
+        )
         self.phase = "noise" if self.phase not in ("done", "aborted") else self.phase
 
     def _avg_reset(self) -> None:
@@ -340,7 +358,7 @@ class P1Guide:
         if self.phase == "noise":
             self.phase = "place"
             self._message = "Place the unit as shown and let go"
-        raw = accel[-max(1, len(accel) // 2):].mean(axis=0)
+        raw = accel[-max(1, len(accel) // 2) :].mean(axis=0)
         angle, ok, wrong = self._orientation(raw)
         known = math.isfinite(angle)
         in_pos = st.is_still and (ok or not known)
@@ -496,15 +514,30 @@ class P1Guide:
             countdown, progress = math.nan, 0.0
         settle_left = max(c.settle_s - st.still_for_s, 0.0) if self.phase == "settle" else math.nan
         return GuideStatus(
-            phase=self.phase, step_index=self.index, step_name=step.name if step else "",
-            instruction=step.instruction if step else "", n_steps=len(self.steps), n_captured=self.n_captured,
-            calibrating=st.calibrating, is_still=st.is_still, still_for_s=float(st.still_for_s),
-            level=float(st.level), angle_deg=angle, in_position=ok, wrong_face=wrong,
-            settle_left_s=settle_left, countdown_s=countdown, progress=progress,
-            raw=tuple(float(x) for x in raw), f_mps2=tuple(float(x) for x in f),
+            phase=self.phase,
+            step_index=self.index,
+            step_name=step.name if step else "",
+            instruction=step.instruction if step else "",
+            n_steps=len(self.steps),
+            n_captured=self.n_captured,
+            calibrating=st.calibrating,
+            is_still=st.is_still,
+            still_for_s=float(st.still_for_s),
+            level=float(st.level),
+            angle_deg=angle,
+            in_position=ok,
+            wrong_face=wrong,
+            settle_left_s=settle_left,
+            countdown_s=countdown,
+            progress=progress,
+            raw=tuple(float(x) for x in raw),
+            f_mps2=tuple(float(x) for x in f),
             norm_mps2=float(np.linalg.norm(f)) if np.all(np.isfinite(f)) else math.nan,
-            gyro=tuple(float(x) for x in gyr) if gyr is not None else nan3, temp_c=temp, t_s=t,
-            message=self._message)
+            gyro=tuple(float(x) for x in gyr) if gyr is not None else nan3,
+            temp_c=temp,
+            t_s=t,
+            message=self._message,
+        )
 
     # ------------------------------------------------------------ the capture
 
@@ -517,9 +550,14 @@ class P1Guide:
 
         caps = [s for s in self.steps if s.status == "captured"]
         series = self._series(caps) if rotations else None
-        meta = {"station-capture": "1", "procedure": self.procedure, "device": self.device_id or "unknown",
-                "accel_unit": self.accel_unit, "date": self.started[:10],
-                "g_mps2": repr(float(self.g_mps2))}
+        meta = {
+            "station-capture": "1",
+            "procedure": self.procedure,
+            "device": self.device_id or "unknown",
+            "accel_unit": self.accel_unit,
+            "date": self.started[:10],
+            "g_mps2": repr(float(self.g_mps2)),
+        }
         for key in ("latitude_deg", "longitude_deg", "altitude_m"):
             if key in self.site:
                 meta[key] = repr(float(self.site[key]))
@@ -554,8 +592,16 @@ class P1Guide:
         pos = np.full(len(t), "", dtype=object)
         for s in caps:
             pos[(t >= s.t0_s) & (t <= s.t_s)] = s.name
-        cols = {"t": t, "position": pos, "ax": a[:, 0], "ay": a[:, 1], "az": a[:, 2],
-                "gx": g[:, 0], "gy": g[:, 1], "gz": g[:, 2]}
+        cols = {
+            "t": t,
+            "position": pos,
+            "ax": a[:, 0],
+            "ay": a[:, 1],
+            "az": a[:, 2],
+            "gx": g[:, 0],
+            "gy": g[:, 1],
+            "gz": g[:, 2],
+        }
         if np.isfinite(temp).any():
             cols["temp_c"] = temp
         return cols
@@ -563,12 +609,20 @@ class P1Guide:
     # ------------------------------------------------------------ resume
 
     def to_state(self) -> dict:
-        return {"version": STATE_VERSION, "procedure": self.procedure, "device_id": self.device_id,
-                "accel_unit": self.accel_unit, "sample_rate_hz": self.sample_rate_hz,
-                "started": self.started, "site": self.site, "g_mps2": self.g_mps2,
-                "config": asdict(self.config), "index": self.index,
-                "phase": self.phase if self.phase in ("done", "aborted") else "running",
-                "steps": [asdict(s) for s in self.steps]}
+        return {
+            "version": STATE_VERSION,
+            "procedure": self.procedure,
+            "device_id": self.device_id,
+            "accel_unit": self.accel_unit,
+            "sample_rate_hz": self.sample_rate_hz,
+            "started": self.started,
+            "site": self.site,
+            "g_mps2": self.g_mps2,
+            "config": asdict(self.config),
+            "index": self.index,
+            "phase": self.phase if self.phase in ("done", "aborted") else "running",
+            "steps": [asdict(s) for s in self.steps],
+        }
 
     def save(self, path: str | None = None) -> None:
         """Write the resume state atomically (no-op without a path)."""
@@ -588,16 +642,31 @@ class P1Guide:
             raise
 
     @classmethod
-    def from_state(cls, state: dict, *, state_path: str | None = None, nominal=None,
-                   previous: dict | None = None, sample_rate_hz: float | None = None) -> "P1Guide":
+    def from_state(
+        cls,
+        state: dict,
+        *,
+        state_path: str | None = None,
+        nominal=None,
+        previous: dict | None = None,
+        sample_rate_hz: float | None = None,
+    ) -> P1Guide:
         """Resume: captured steps are kept; the current step restarts from "noise"."""
         if state.get("version") != STATE_VERSION or state.get("procedure") != cls.procedure:
             raise ValueError("not a P1 guide state (version or procedure differ)")
         steps = [Step(**{**s, "direction": tuple(s["direction"])}) for s in state["steps"]]
-        g = cls(sample_rate_hz=sample_rate_hz or state["sample_rate_hz"], accel_unit=state["accel_unit"],
-                device_id=state["device_id"], config=GuideConfig(**state["config"]),
-                positions=[s.name for s in steps], nominal=nominal, previous=previous,
-                site=state.get("site"), g_mps2=state.get("g_mps2"), state_path=state_path)
+        g = cls(
+            sample_rate_hz=sample_rate_hz or state["sample_rate_hz"],
+            accel_unit=state["accel_unit"],
+            device_id=state["device_id"],
+            config=GuideConfig(**state["config"]),
+            positions=[s.name for s in steps],
+            nominal=nominal,
+            previous=previous,
+            site=state.get("site"),
+            g_mps2=state.get("g_mps2"),
+            state_path=state_path,
+        )
         g.steps = steps
         g.started = state.get("started", g.started)
         g.index = int(state.get("index", 0))
@@ -612,7 +681,7 @@ class P1Guide:
         return g
 
     @classmethod
-    def load(cls, path: str, **kw) -> "P1Guide":
+    def load(cls, path: str, **kw) -> P1Guide:
         with open(path, encoding="utf-8") as fh:
             state = json.load(fh)
         return cls.from_state(state, state_path=path, **kw)
@@ -667,8 +736,9 @@ class ScriptedOperator:
     a newcomer sees the orientation indicator catch it.
     """
 
-    def __init__(self, place, *, reaction_s: float = 1.0, mistakes: dict[str, str] | None = None,
-                 mistake_s: float = 4.0):
+    def __init__(
+        self, place, *, reaction_s: float = 1.0, mistakes: dict[str, str] | None = None, mistake_s: float = 4.0
+    ):
         self.place = place
         self.reaction_s = reaction_s
         self.mistakes = dict(mistakes or {})

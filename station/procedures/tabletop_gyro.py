@@ -10,6 +10,7 @@ Metadata read: ``gyro_unit`` (rad/s, deg/s, ... or ``counts``; for counts a
 ``gyro_counts_per_rad_s`` or ``gyro_counts_per_deg_s`` starting scale, else one is searched
 for), ``latitude_deg`` (the Earth rate's vertical part removed where given).
 """
+
 from __future__ import annotations
 
 import math
@@ -40,8 +41,10 @@ def _start_scale(capture, holds, motions, notes: list[str]) -> float:
         if per_deg:
             return per_deg * 180.0 / math.pi
         s = TG.scale_search(holds, motions)
-        notes.append(f"gyro in counts with no nominal scale: starting scale {s:.4g} counts per rad/s found by "
-                     "matching the rotations")
+        notes.append(
+            f"gyro in counts with no nominal scale: starting scale {s:.4g} counts per rad/s found by "
+            "matching the rotations"
+        )
         return s
     f = si_factor("gyro", unit) if unit else 1.0
     if f is None:
@@ -64,11 +67,11 @@ def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np
     holds, spans, stds = [], [], []
     for p in sorted(positions, key=lambda q: q.t_start_s):
         i0, i1 = int(np.searchsorted(t, p.t_start_s)), int(np.searchsorted(t, p.t_stop_s, side="right")) - 1
-        seg = y[i0:i1 + 1]
+        seg = y[i0 : i1 + 1]
         ok = np.all(np.isfinite(seg), axis=1)
         if ok.sum() < 16:
             continue
-        se = mean_se(seg[ok], t[i0:i1 + 1][ok])
+        se = mean_se(seg[ok], t[i0 : i1 + 1][ok])
         sd = seg[ok].std(axis=0, ddof=1)
         se = se if se is not None else sd / math.sqrt(ok.sum())
         f = accel.p1_apply(p.mean[None], B, M)[0]
@@ -81,18 +84,21 @@ def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np
     motions = []
     for k in range(len(holds) - 1):
         a, b = spans[k][1], spans[k + 1][0]
-        seg = y[a:b + 1]
-        if b <= a or not np.all(np.isfinite(seg)) or not np.all(np.isfinite(f_all[a:b + 1])):
-            notes.append(f"gyro: the motion from hold {holds[k].label} to {holds[k + 1].label} has missing samples: "
-                         "left out")
+        seg = y[a : b + 1]
+        if b <= a or not np.all(np.isfinite(seg)) or not np.all(np.isfinite(f_all[a : b + 1])):
+            notes.append(
+                f"gyro: the motion from hold {holds[k].label} to {holds[k + 1].label} has missing samples: left out"
+            )
             continue
         clipped = np.any((seg <= lo) | (seg >= hi), axis=0) & (hi - lo > 0) & _at_limit(capture, lo, hi)
         if clipped.any():
-            notes.append(f"gyro: the motion from hold {holds[k].label} to {holds[k + 1].label} reaches the "
-                         f"range limit on {', '.join('xyz'[i] for i in np.flatnonzero(clipped))}: left out")
+            notes.append(
+                f"gyro: the motion from hold {holds[k].label} to {holds[k + 1].label} reaches the "
+                f"range limit on {', '.join('xyz'[i] for i in np.flatnonzero(clipped))}: left out"
+            )
             continue
         a, b = _moving_span(t, y, a, b, holds[k].y_mean, holds[k + 1].y_mean, stds[k])
-        motions.append(TG.Motion(k, k + 1, t[a:b + 1], y[a:b + 1], f_all[a:b + 1]))
+        motions.append(TG.Motion(k, k + 1, t[a : b + 1], y[a : b + 1], f_all[a : b + 1]))
     noise = np.median(np.array(stds), axis=0) if stds else np.ones(3)
     return holds, motions, noise, notes
 
@@ -101,7 +107,7 @@ def _moving_span(t, y, a: int, b: int, y0, y1, sd, margin_s: float = 0.5) -> tup
     """The part of samples a..b where the unit turns (any axis beyond 6σ of both holds' means),
     with ``margin_s`` either side: the still stretches around a turn (placing, settling) add
     only noise and bias to the integral."""
-    seg = y[a:b + 1]
+    seg = y[a : b + 1]
     sd = np.maximum(np.asarray(sd, dtype=float), 1e-12)
     moving = np.any(np.abs(seg - y0) > 6 * sd, axis=1) & np.any(np.abs(seg - y1) > 6 * sd, axis=1)
     idx = np.flatnonzero(moving)
@@ -136,8 +142,10 @@ def block(capture, positions, B, M, g_mps2: float) -> dict | None:
         return {"procedure": "gyro-tabletop", "error": str(exc), "warnings": notes, "n_rotations": len(motions)}
     warnings = notes + r.warnings
     if lat is None:
-        warnings.append("gyro: no latitude_deg: the Earth rate (≤ 7.3e-5 rad/s) stays in the bias and in G's "
-                        "uncertainty (its vertical part is indistinguishable from a g-sensitivity)")
+        warnings.append(
+            "gyro: no latitude_deg: the Earth rate (≤ 7.3e-5 rad/s) stays in the bias and in G's "
+            "uncertainty (its vertical part is indistinguishable from a g-sensitivity)"
+        )
     A = np.linalg.inv(r.K)
     params = {"K": r.K, "eps": r.eps}
     unc = {"K": r.sigma_K, "eps": r.sigma_eps}
@@ -149,10 +157,16 @@ def block(capture, positions, B, M, g_mps2: float) -> dict | None:
         "model": MODEL,
         "params": params,
         "uncertainty": unc,
-        "units": {"y": unit, "K": f"{unit} per rad/s", "eps": unit, "G": f"{unit} per m/s^2",
-                  "omega": "rad/s", "f": "m/s^2 (calibrated accelerometer)"},
+        "units": {
+            "y": unit,
+            "K": f"{unit} per rad/s",
+            "eps": unit,
+            "G": f"{unit} per m/s^2",
+            "omega": "rad/s",
+            "f": "m/s^2 (calibrated accelerometer)",
+        },
         "frame": "the accelerometer calibration's frame (its gauge): K's off-diagonal is the gyro's misalignment "
-                 "to the accelerometer triad",
+        "to the accelerometer triad",
         "scale": scale,
         "sigma_scale": np.diag(r.sigma_K),
         "misalignment": r.K / scale[:, None] - np.eye(3),
@@ -162,8 +176,11 @@ def block(capture, positions, B, M, g_mps2: float) -> dict | None:
         "direction_rms_deg": math.degrees(r.direction_rms_rad),
         "n_holds": len(holds),
         "n_rotations": len(motions),
-        "earth_rate": ({"removed_up_rad_s": r.earth_rate_up_rad_s, "latitude_deg": lat} if lat is not None else
-                       {"fitted_up_rad_s": r.earth_rate_up_rad_s, "sigma_up_rad_s": r.sigma_earth_rate_up_rad_s}),
+        "earth_rate": (
+            {"removed_up_rad_s": r.earth_rate_up_rad_s, "latitude_deg": lat}
+            if lat is not None
+            else {"fitted_up_rad_s": r.earth_rate_up_rad_s, "sigma_up_rad_s": r.sigma_earth_rate_up_rad_s}
+        ),
         "reduced_chi2": r.fit.reduced_chi2,
         "g_sensitivity_fitted": r.G is not None,
         "warnings": warnings,
@@ -181,8 +198,10 @@ def format_lines(block: dict) -> list[str]:
     if "error" in b:
         return [f"gyro       not calibrated: {b['error']}"] + [f"warning    {w}" for w in b.get("warnings", [])]
     u = b["units"]
-    lines = [f"gyro       {b['model']} (y in {u['y']}, ω in rad/s, f in m/s²), from {b['n_rotations']} rotations "
-             f"between {b['n_holds']} holds"]
+    lines = [
+        f"gyro       {b['model']} (y in {u['y']}, ω in rad/s, f in m/s²), from {b['n_rotations']} rotations "
+        f"between {b['n_holds']} holds"
+    ]
     lines += param_lines(f"K [{u['K']}]", jsonable(b["params"]["K"]), jsonable(b["uncertainty"]["K"]))
     lines += param_lines(f"ε [{u['eps']}]", jsonable(b["params"]["eps"]), jsonable(b["uncertainty"]["eps"]))
     if "G" in b["params"]:
@@ -219,8 +238,15 @@ def diagnosis_input(capture, base: dict, prepared=None):
         rows.append(i)
         labels += [p.label] * len(i)
     idx = np.concatenate(rows)
-    prob = DP.gyro_problem(t[idx], y[idx] @ A.T, accel.p1_apply(raw_a[idx], B, M),
-                           None if temp is None else np.asarray(temp, float)[idx], None, np.array(labels, dtype=object))
+    prob = DP.gyro_problem(
+        t[idx],
+        y[idx] @ A.T,
+        accel.p1_apply(raw_a[idx], B, M),
+        None if temp is None else np.asarray(temp, float)[idx],
+        None,
+        np.array(labels, dtype=object),
+    )
     drivers = {"position": labels, "time_s": t[idx]}
-    return DiagnosisInput(prob, drivers, "a hold whose gyro mean disagrees: the unit moved, or the bias jumped",
-                          group_kind="time block")
+    return DiagnosisInput(
+        prob, drivers, "a hold whose gyro mean disagrees: the unit moved, or the bias jumped", group_kind="time block"
+    )

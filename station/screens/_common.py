@@ -7,12 +7,13 @@ CalibrationReady). Each screen keeps its own ``@work`` methods and message handl
 passes what differs. No message handlers live here: Textual calls the handlers of every
 class in the MRO.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 
@@ -69,8 +70,11 @@ class GuidedScreenMixin:
         """`a`: abort only once the operator confirms (y / Enter; n / Esc keeps the run)."""
         from station.screens.decide import ConfirmScreen
 
-        keep = " (captured positions are kept: Resume continues)" if self.app.session.procedure == \
-            "accel-tabletop" else " (nothing of this run is saved)"
+        keep = (
+            " (captured positions are kept: Resume continues)"
+            if self.app.session.procedure == "accel-tabletop"
+            else " (nothing of this run is saved)"
+        )
         self.app.push_screen(ConfirmScreen("Abort this run?" + keep), lambda yes: self.action_abort() if yes else None)
 
     def _start_guide(self, src, make_guide: Callable) -> bool:
@@ -86,8 +90,16 @@ class GuidedScreenMixin:
             return False
         return True
 
-    def _pump(self, worker, src, update: Callable, status: Callable, operator=None,
-              accept: Callable | None = None, with_hz: bool = False) -> None:
+    def _pump(
+        self,
+        worker,
+        src,
+        update: Callable,
+        status: Callable,
+        operator=None,
+        accept: Callable | None = None,
+        with_hz: bool = False,
+    ) -> None:
         """Drain ``src`` into the guide until ``worker`` is cancelled.
 
         ``update(batch)`` feeds the guide and returns its status (under the lock);
@@ -97,8 +109,12 @@ class GuidedScreenMixin:
 
         def counted():
             st = src.stats()
-            return dataclasses.replace(st, samples=st.samples - base.samples, dropped=st.dropped - base.dropped,
-                                       parse_errors=st.parse_errors - base.parse_errors)
+            return dataclasses.replace(
+                st,
+                samples=st.samples - base.samples,
+                dropped=st.dropped - base.dropped,
+                parse_errors=st.parse_errors - base.parse_errors,
+            )
 
         period = 1.0 / self.app.session.refresh_hz
         next_post = 0.0

@@ -11,6 +11,7 @@ screen shows it. On the simulated centrifuge ``p`` mounts and spins it as asked.
 Same pattern as the P1 screen: a thread worker drains the source and feeds the guide
 (``station.procedures.centrifuge_guide``), posting replaceable LiveUpdates and GuideEvents.
 """
+
 from __future__ import annotations
 
 import threading
@@ -23,8 +24,8 @@ from textual.screen import Screen
 from textual.widgets import Footer, Input, Label, OptionList, Static
 from textual.worker import get_current_worker
 
-from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.formatting import num
+from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
 from station.widgets.steps import StepList
@@ -119,10 +120,16 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
 
         s = self.app.session
         kw = {k: s.extra[k] for k in ("speeds_rad_s", "n_orientations") if k in s.extra}
-        cfg = CentrifugeConfig(average_s=s.average_s, settle_s=s.settle_s, radius_m=self._bench("radius_m", 1.0),
-                               g_mps2=self._bench("g_mps2", 9.8), **kw)
-        return CentrifugeGuide(sample_rate_hz=source_rate_hz(src),
-                               units=src.units, device_id=s.device_id or src.device_id, config=cfg)
+        cfg = CentrifugeConfig(
+            average_s=s.average_s,
+            settle_s=s.settle_s,
+            radius_m=self._bench("radius_m", 1.0),
+            g_mps2=self._bench("g_mps2", 9.8),
+            **kw,
+        )
+        return CentrifugeGuide(
+            sample_rate_hz=source_rate_hz(src), units=src.units, device_id=s.device_id or src.device_id, config=cfg
+        )
 
     @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")
     def stream(self) -> None:
@@ -177,14 +184,18 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
             speed = "" if step is None else f"  (no rate measured: asked {step.speed_rad_s:.2f})"
         else:
             speed = f" of {step.speed_rad_s:.2f} " + ("[green]AT SPEED[/]" if st.at_speed else "[b red]NOT AT SPEED[/]")
-        self._put("#readouts",
+        self._put(
+            "#readouts",
             f"accel {num(r[0], '8.4f')} {num(r[1], '8.4f')} {num(r[2], '8.4f')} {au}  "
             f"{num(stats.rate_hz, '.0f')} Hz err {stats.parse_errors} drop {stats.dropped}"
-            + ("" if stats.connected else " DISCONNECTED") + "\n"
-            f"table rate (gyro) {num(st.table_rate_rad_s, '.3f')} rad/s{speed}")
+            + ("" if stats.connected else " DISCONNECTED")
+            + "\n"
+            f"table rate (gyro) {num(st.table_rate_rad_s, '.3f')} rad/s{speed}",
+        )
         self._put("#message", st.message)
-        self._put("#progress", 
-            f"{st.n_captured}/{len(g.steps)} captured, {st.n_skipped} skipped · t={num(st.t_s, '.0f')} s")
+        self._put(
+            "#progress", f"{st.n_captured}/{len(g.steps)} captured, {st.n_skipped} skipped · t={num(st.t_s, '.0f')} s"
+        )
 
     def on_guide_event(self, message: GuideEvent) -> None:
         g = self.guide
@@ -195,11 +206,9 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         if message.kind == "captured":
             self.notify(f"{message.detail.strip()} captured", timeout=2)
         elif message.kind == "disagree":
-            self.notify(f"Row {message.detail} (r redoes it)", title="Row disagrees", severity="error",
-                        timeout=8)
+            self.notify(f"Row {message.detail} (r redoes it)", title="Row disagrees", severity="error", timeout=8)
         elif message.kind == "restarted":
-            self.notify(f"{message.detail.strip()}: output changed, averaging restarted", severity="warning",
-                        timeout=3)
+            self.notify(f"{message.detail.strip()}: output changed, averaging restarted", severity="warning", timeout=3)
         elif message.kind == "done":
             self.fit()
 
@@ -260,7 +269,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         ids = [f"#in-{n}" for n in FIELDS]
         k = ids.index(f"#{event.input.id}")
         values = [self.query_one(i, Input).value for i in ids]
-        if k < 3 and not all(v.strip() for v in values[k + 1:]):
+        if k < 3 and not all(v.strip() for v in values[k + 1 :]):
             self.query_one(ids[k + 1], Input).focus()  # Enter moves on until the row is full
             return
         try:

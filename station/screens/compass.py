@@ -6,6 +6,7 @@ recorded time, the field readouts and the turn rate. The recording ends by itsel
 Same pattern as the P1 screen: a thread worker drains the source and feeds the guide,
 posting replaceable LiveUpdates (~15 Hz) and GuideEvents.
 """
+
 from __future__ import annotations
 
 import threading
@@ -19,8 +20,8 @@ from textual.screen import Screen
 from textual.widgets import Footer, Static
 from textual.worker import get_current_worker
 
-from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.formatting import num
+from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import bar
 from station.widgets.title import TitleBar
@@ -55,9 +56,11 @@ class CompassScreen(GuidedScreenMixin, Screen):
         with Horizontal():
             yield Static("", id="map")
             with Vertical(id="right"):
-                yield Static("Turn the unit slowly through every orientation:\n"
-                             "each face up in turn, a full turn about the\nvertical at each. Keep metal away.",
-                             id="instruction")
+                yield Static(
+                    "Turn the unit slowly through every orientation:\n"
+                    "each face up in turn, a full turn about the\nvertical at each. Keep metal away.",
+                    id="instruction",
+                )
                 yield Static("", id="progress")
                 yield Static("", id="readouts")
                 yield Static("", id="message")
@@ -77,8 +80,13 @@ class CompassScreen(GuidedScreenMixin, Screen):
 
         def make_guide():
             cfg = CompassConfig(min_s=s.extra.get("compass_min_s", 60.0))
-            return CompassGuide(sample_rate_hz=source_rate_hz(src), units=src.units,
-                                device_id=s.device_id or src.device_id, site=getattr(src, "site", None), config=cfg)
+            return CompassGuide(
+                sample_rate_hz=source_rate_hz(src),
+                units=src.units,
+                device_id=s.device_id or src.device_id,
+                site=getattr(src, "site", None),
+                config=cfg,
+            )
 
         if not self._start_guide(src, make_guide):
             return
@@ -86,8 +94,14 @@ class CompassScreen(GuidedScreenMixin, Screen):
         if s.scripted and getattr(src, "positions", None):
             operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
         guide = self.guide
-        self._pump(worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.mag, b.temp_c),
-                   lambda: (guide.status(), guide.coverage_map()), operator, accept=lambda b: b.mag is not None)
+        self._pump(
+            worker,
+            src,
+            lambda b: guide.update(b.t_s, b.accel, b.gyro, b.mag, b.temp_c),
+            lambda: (guide.status(), guide.coverage_map()),
+            operator,
+            accept=lambda b: b.mag is not None,
+        )
 
     def on_live_update(self, message: LiveUpdate) -> None:
         st, cov_map = message.status
@@ -96,10 +110,15 @@ class CompassScreen(GuidedScreenMixin, Screen):
         units = self.app.session.source.units
         self.query_one("#map", Static).update("+z\n" + "\n".join(cov_map) + "\n-z")
         t = Text("Coverage ")
-        t.append(bar(st.coverage / st.target if st.target else 0, 16), style="green" if st.coverage >= st.target else "cyan")
-        t.append(f" {100 * st.coverage:3.0f} % of {100 * st.target:.0f} %"
-                 + ("" if st.enough else " (fit needs 40 %)") + f"\nRecorded {st.recorded_s:5.0f} s, "
-                 f"{st.n_samples} samples")
+        t.append(
+            bar(st.coverage / st.target if st.target else 0, 16), style="green" if st.coverage >= st.target else "cyan"
+        )
+        t.append(
+            f" {100 * st.coverage:3.0f} % of {100 * st.target:.0f} %"
+            + ("" if st.enough else " (fit needs 40 %)")
+            + f"\nRecorded {st.recorded_s:5.0f} s, "
+            f"{st.n_samples} samples"
+        )
         self.query_one("#progress", Static).update(t)
         m = st.field_raw
         stats = message.stats
@@ -108,7 +127,8 @@ class CompassScreen(GuidedScreenMixin, Screen):
             f"  |m| {num(st.field_norm_raw, '.2f')}\n"
             f"turn {num(st.turn_rate, '.3f')} {units.get('gyro_unit') or 'raw'}\n"
             f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
-            + ("" if stats.connected else "   DISCONNECTED"))
+            + ("" if stats.connected else "   DISCONNECTED")
+        )
         self.query_one("#message", Static).update(st.message)
 
     def on_guide_event(self, message: GuideEvent) -> None:
@@ -142,8 +162,10 @@ class CompassScreen(GuidedScreenMixin, Screen):
         """The simulated unit: start turning it through every orientation, or stop."""
         src = self.app.session.source
         sweeping = getattr(src, "bench", lambda _: None)("driving") == "sweep"
-        self._sim_place("still" if sweeping else "sweep",
-                        "Simulated unit: sweep stopped" if sweeping else "Simulated unit: turning through every orientation")
+        self._sim_place(
+            "still" if sweeping else "sweep",
+            "Simulated unit: sweep stopped" if sweeping else "Simulated unit: turning through every orientation",
+        )
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P3")
     def fit(self) -> None:

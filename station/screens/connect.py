@@ -1,6 +1,7 @@
 """Connect: choose the source (the built-in simulated device or a serial port and its
 protocol), the device under test (serial number, model; or one already registered) and
 the averaging time, then start P1 (or resume an interrupted run)."""
+
 from __future__ import annotations
 
 import os
@@ -12,10 +13,10 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Button, Footer, Input, Label, Select, Static
 
-from station.widgets.title import TitleBar
-from station.procedures import registry
 from station.messages import Connected, SourceFailed, StoreLoaded
+from station.procedures import registry
 from station.textsafe import tui_markup, tui_text
+from station.widgets.title import TitleBar
 
 SIM = "sim"
 OTHER = "other"
@@ -59,14 +60,21 @@ class ConnectScreen(Screen):
         with Vertical(id="form"):
             with Horizontal(classes="row"):
                 yield Label("Source")
-                yield Select(self._source_options(), value=self._default_source(), allow_blank=False,
-                             id="source", compact=True)
-                yield Select([("station protocol", "station"), ("MAVLink", "mavlink")], value="station",
-                             allow_blank=False, id="protocol", compact=True)
+                yield Select(
+                    self._source_options(), value=self._default_source(), allow_blank=False, id="source", compact=True
+                )
+                yield Select(
+                    [("station protocol", "station"), ("MAVLink", "mavlink")],
+                    value="station",
+                    allow_blank=False,
+                    id="protocol",
+                    compact=True,
+                )
             with Horizontal(classes="row"):
                 yield Label("Port or URL")
-                yield Input(placeholder="/dev/ttyUSB0, socket://host:port (when Source is Other)", id="port",
-                            compact=True)
+                yield Input(
+                    placeholder="/dev/ttyUSB0, socket://host:port (when Source is Other)", id="port", compact=True
+                )
             with Horizontal(classes="row"):
                 yield Label("Serial number")
                 yield Input(value=s.device_id, placeholder="default: what it reports", id="serial", compact=True)
@@ -83,14 +91,22 @@ class ConnectScreen(Screen):
                 yield Input(value=s.extra.get("place", ""), placeholder="lab, bench", id="place", compact=True)
             with Horizontal(classes="row"):
                 yield Label("Reference")
-                yield Input(value=s.extra.get("reference_equipment", ""),
-                            placeholder="reference equipment (table, turntable, IMU: model and serial)",
-                            id="reference", compact=True)
+                yield Input(
+                    value=s.extra.get("reference_equipment", ""),
+                    placeholder="reference equipment (table, turntable, IMU: model and serial)",
+                    id="reference",
+                    compact=True,
+                )
             with Horizontal(classes="row"):
                 yield Label("Procedure")
                 guided = registry.guided()
-                yield Select([(v, k) for k, v in guided.items()], value=s.procedure if s.procedure in guided
-                             else registry.DEFAULT, allow_blank=False, id="procedure", compact=True)
+                yield Select(
+                    [(v, k) for k, v in guided.items()],
+                    value=s.procedure if s.procedure in guided else registry.DEFAULT,
+                    allow_blank=False,
+                    id="procedure",
+                    compact=True,
+                )
             with Horizontal(classes="row"):
                 yield Label("Average (s)")
                 yield Input(value=f"{s.average_s:g}", id="average", type="number", compact=True)
@@ -164,9 +180,15 @@ class ConnectScreen(Screen):
         bad = [d for d in due or [] if d["status"] in ("overdue", "due")]
         text = ""
         if bad:
-            text = "Recalibration " + "; ".join(
-                f"{tui_markup(d['device_id'])} {d['status']}" + (f" ({-d['days_left']:.0f} d)" if d['status'] == 'overdue' else "")
-                for d in bad[:3]) + ("; …" if len(bad) > 3 else "")
+            text = (
+                "Recalibration "
+                + "; ".join(
+                    f"{tui_markup(d['device_id'])} {d['status']}"
+                    + (f" ({-d['days_left']:.0f} d)" if d["status"] == "overdue" else "")
+                    for d in bad[:3]
+                )
+                + ("; …" if len(bad) > 3 else "")
+            )
         for label in self.query("#due"):  # none yet when the due list arrives before this screen is composed
             label.update(text)
 
@@ -191,7 +213,8 @@ class ConnectScreen(Screen):
         if not s.resume_dir():
             return None
         serial = self.query_one("#serial", Input).value.strip() or (
-            getattr(s.source, "device_id", "") if s.source is not None else "")
+            getattr(s.source, "device_id", "") if s.source is not None else ""
+        )
         if not serial and self.query_one("#source", Select).value == SIM:
             from station.sources import SimSource
 

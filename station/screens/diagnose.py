@@ -1,5 +1,6 @@
 """Diagnose: the `station diagnose` findings (diagnose.md) for a capture — the one just
 calibrated, or a stored calibration's — with its plots of measured minus simulated."""
+
 from __future__ import annotations
 
 from rich.text import Text

@@ -4,6 +4,7 @@ stability bar and countdown are the P1 widgets; moving restarts the recording. R
 IMU (mode A, ``ReferenceScreen``): both units on a rate table, recorded side by side.
 
 Same pattern as the P1 screen: a thread worker drains the source and feeds the guide."""
+
 from __future__ import annotations
 
 import math
@@ -19,9 +20,8 @@ from textual.widgets import Footer, Static
 from textual.worker import get_current_worker
 
 from solvers.units import si_factor
-
-from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.formatting import num
+from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
 from station.widgets.title import TitleBar
@@ -48,9 +48,11 @@ class HoldScreen(GuidedScreenMixin, Screen):
         self._fitting = False
 
     SUBJECT = "P4 gyro drift, static base"
-    INSTRUCTION = ("Put the unit on a level, steady surface, forward (x) axis pointing north\n"
-                   "(heading 0°), and do not touch it: the station records the gyro at rest\n"
-                   "and removes the Earth's rotation. Walking on a wooden floor shows here.")
+    INSTRUCTION = (
+        "Put the unit on a level, steady surface, forward (x) axis pointing north\n"
+        "(heading 0°), and do not touch it: the station records the gyro at rest\n"
+        "and removes the Earth's rotation. Walking on a wooden floor shows here."
+    )
     NAME = "P4"
 
     def compose(self) -> ComposeResult:
@@ -78,8 +80,13 @@ class HoldScreen(GuidedScreenMixin, Screen):
         def make_guide():
             frame = s.extra.get("frame") or (SIM_FRAME if src.kind == "sim" else "")
             cfg = HoldConfig(duration_s=s.average_s, settle_s=s.settle_s, frame=frame)
-            return HoldGuide(sample_rate_hz=source_rate_hz(src), units=src.units,
-                             device_id=s.device_id or src.device_id, site=getattr(src, "site", None), config=cfg)
+            return HoldGuide(
+                sample_rate_hz=source_rate_hz(src),
+                units=src.units,
+                device_id=s.device_id or src.device_id,
+                site=getattr(src, "site", None),
+                config=cfg,
+            )
 
         if not self._start_guide(src, make_guide):
             return
@@ -99,7 +106,8 @@ class HoldScreen(GuidedScreenMixin, Screen):
             f"mean rate so far  {num(m[0], '10.6f')} {num(m[1], '10.6f')} {num(m[2], '10.6f')} {unit}\n"
             f"{st.n_samples} samples   temp {num(st.temp_c, '.1f')} °C\n"
             f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
-            + ("" if stats.connected else "   DISCONNECTED"))
+            + ("" if stats.connected else "   DISCONNECTED")
+        )
         self.query_one("#message", Static).update(st.message)
 
     def on_guide_event(self, message: GuideEvent) -> None:
@@ -149,8 +157,11 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
     ReferenceScreen #readouts { height: 6; margin-top: 1; }
     ReferenceScreen #message { height: 2; text-style: bold; margin-top: 1; }
     """
-    BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "ask_abort", "Abort"),
-                Binding("p", "sim_table", "Rate table (sim)")]
+    BINDINGS = [
+        Binding("r", "restart", "Restart"),
+        Binding("a", "ask_abort", "Abort"),
+        Binding("p", "sim_table", "Rate table (sim)"),
+    ]
     SUBJECT = "P4 gyro drift, reference IMU"
 
     def __init__(self) -> None:
@@ -164,9 +175,11 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
     def compose(self) -> ComposeResult:
         yield TitleBar(self.SUBJECT)
         with Vertical(id="body"):
-            yield Static("Mount the unit rigidly on the reference IMU, axes aligned, and run the rate\n"
-                         "table (any motion: both see it). The drift is the unit minus the reference.",
-                         id="instruction")
+            yield Static(
+                "Mount the unit rigidly on the reference IMU, axes aligned, and run the rate\n"
+                "table (any motion: both see it). The drift is the unit minus the reference.",
+                id="instruction",
+            )
             with Vertical(id="indicators"):
                 yield CountdownBar(id="countdown")
             yield Static("", id="readouts")
@@ -186,10 +199,18 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
 
         def make_guide():
             frame = s.extra.get("frame") or (SIM_FRAME if src.kind == "sim" else "")
-            cfg = ReferenceConfig(duration_s=s.average_s, frame=frame,
-                                  reference_drift_deg_h=float(s.extra.get("reference_drift_deg_h", 1.0)))
-            return ReferenceGuide(sample_rate_hz=source_rate_hz(src), units=src.units,
-                                  device_id=s.device_id or src.device_id, site=getattr(src, "site", None), config=cfg)
+            cfg = ReferenceConfig(
+                duration_s=s.average_s,
+                frame=frame,
+                reference_drift_deg_h=float(s.extra.get("reference_drift_deg_h", 1.0)),
+            )
+            return ReferenceGuide(
+                sample_rate_hz=source_rate_hz(src),
+                units=src.units,
+                device_id=s.device_id or src.device_id,
+                site=getattr(src, "site", None),
+                config=cfg,
+            )
 
         if not self._start_guide(src, make_guide):
             return
@@ -214,18 +235,27 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
         stats = message.stats
         k = 3600.0 / math.radians(1.0) * (si_factor("gyro", unit) or math.nan)  # unit → °/h
         e, se = st.drift, st.drift_se
-        mount = ("—" if not math.isfinite(st.coupling_max) else
-                 f"|M| {st.coupling_max:.2g} rad/rad, bias {st.coupling_bias * k:.2g} °/h "
-                 + ("[green]OK[/]" if st.mounting_ok else "[b red]CHECK THE MOUNTING[/]"))
+        mount = (
+            "—"
+            if not math.isfinite(st.coupling_max)
+            else f"|M| {st.coupling_max:.2g} rad/rad, bias {st.coupling_bias * k:.2g} °/h "
+            + ("[green]OK[/]" if st.mounting_ok else "[b red]CHECK THE MOUNTING[/]")
+        )
         self.query_one("#readouts", Static).update(
             "drift (unit − reference), °/h ± 1σ (white noise)\n"
-            + "   ".join(f"{ax} {num(e[i] * k, '+9.1f')} ± {num(se[i] * k, '.1f')}" for i, ax in enumerate("xyz")) + "\n"
+            + "   ".join(f"{ax} {num(e[i] * k, '+9.1f')} ± {num(se[i] * k, '.1f')}" for i, ax in enumerate("xyz"))
+            + "\n"
             f"reference motion {num(st.motion, '.3f')} {unit} RMS"
-            + ("   rate table ON" if getattr(self.app.session.source, "bench", lambda _: None)("driving") == "table"
-               else "") + "\n"
+            + (
+                "   rate table ON"
+                if getattr(self.app.session.source, "bench", lambda _: None)("driving") == "table"
+                else ""
+            )
+            + "\n"
             f"mounting check: {mount}\n"
             f"{st.n_samples} samples   {num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   "
-            f"dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED"))
+            f"dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED")
+        )
         self.query_one("#message", Static).update(st.message)
 
     def on_guide_event(self, message: GuideEvent) -> None:

@@ -1,4 +1,5 @@
 """Help: keys and what each screen does (Escape or F1 closes it)."""
+
 from __future__ import annotations
 
 from textual.app import ComposeResult

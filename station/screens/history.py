@@ -1,5 +1,6 @@
 """History: devices, their calibrations over time, a drift plot of one parameter, and
 the due and overdue reminders."""
+
 from __future__ import annotations
 
 import math
@@ -19,10 +20,13 @@ from station.widgets.title import TitleBar
 
 def _short(procedure: str) -> str:
     """P1..P5 for the table (the procedure's name is on its Results and in the report)."""
-    return {"accel-tabletop": "P1", "accel-centrifuge": "P2", "compass": "P3", "gyro-drift": "P4",
-            "ldv": "P5"}.get(procedure, procedure)
-from station.messages import StoreLoaded
-from station.textsafe import safe, tui_markup
+    return {"accel-tabletop": "P1", "accel-centrifuge": "P2", "compass": "P3", "gyro-drift": "P4", "ldv": "P5"}.get(
+        procedure, procedure
+    )
+
+
+from station.messages import StoreLoaded  # noqa: E402
+from station.textsafe import safe, tui_markup  # noqa: E402
 
 
 class HistoryScreen(Screen):
@@ -74,7 +78,9 @@ class HistoryScreen(Screen):
             if store is None:
                 self.post_message(StoreLoaded("devices", {"devices": [], "due": []}))
                 return
-            self.post_message(StoreLoaded("devices", {"devices": store.list_devices(), "due": store.due(within_days=30)}))
+            self.post_message(
+                StoreLoaded("devices", {"devices": store.list_devices(), "due": store.due(within_days=30)})
+            )
         except Exception as exc:  # noqa: BLE001
             self.post_message(StoreLoaded("devices", {"devices": [], "due": []}, error=str(exc)))
 
@@ -121,11 +127,19 @@ class HistoryScreen(Screen):
                 entry = registry.get(h["procedure"])
                 unit = entry.result_unit if entry is not None else ""
                 decision = (h.get("review") or {}).get("decision")
-                state = "in use" if in_use else ("rejected" if not h["accepted"] else
-                                                 ("override" if decision == "override" else "old"))
-                c.add_row(str(h["id"]), h["time"][:16].replace("T", " "), tui_markup(_short(h["procedure"])),
-                          f"{res:.3g} {unit}" if isinstance(res, (int, float)) else "—", state,
-                          key=str(h["id"]))
+                state = (
+                    "in use"
+                    if in_use
+                    else ("rejected" if not h["accepted"] else ("override" if decision == "override" else "old"))
+                )
+                c.add_row(
+                    str(h["id"]),
+                    h["time"][:16].replace("T", " "),
+                    tui_markup(_short(h["procedure"])),
+                    f"{res:.3g} {unit}" if isinstance(res, (int, float)) else "—",
+                    state,
+                    key=str(h["id"]),
+                )
             # keep the parameter the operator chose when the same device is read again
             # (the first row highlight can ask for it a second time)
             self.param_index = self.param_index % len(self.drift) if (same and self.drift) else 0

@@ -1,6 +1,7 @@
 """Import: calibrate a capture file recorded elsewhere (any procedure; P5 LDV runs come
 this way, from the vehicle's logger). The conditioning check is the procedure's own: an
 ill-conditioned LDV velocity set is refused with one line saying what to drive."""
+
 from __future__ import annotations
 
 import os
@@ -27,9 +28,11 @@ class ImportScreen(Screen):
     def compose(self) -> ComposeResult:
         yield TitleBar("import a capture file")
         with Vertical(id="body"):
-            yield Static("Capture file (station-capture CSV, ../shared/spec/capture-format.md). Its\n"
-                         "'procedure' metadata says how to calibrate it; P5 (LDV) checks that the\n"
-                         "velocities turn enough to separate the beam angles.")
+            yield Static(
+                "Capture file (station-capture CSV, ../shared/spec/capture-format.md). Its\n"
+                "'procedure' metadata says how to calibrate it; P5 (LDV) checks that the\n"
+                "velocities turn enough to separate the beam angles."
+            )
             yield Input(placeholder="path/to/capture.csv, then Enter", id="path")
             yield Static("", id="status")
         yield Footer()

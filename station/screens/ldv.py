@@ -9,6 +9,7 @@ or drives straight.
 Same pattern as the other guided screens: a thread worker drains the source and feeds the
 guide (``station.procedures.ldv_guide``), posting replaceable LiveUpdates and GuideEvents.
 """
+
 from __future__ import annotations
 
 import math
@@ -25,8 +26,8 @@ from textual.widgets import Footer, Static
 from textual.worker import get_current_worker
 
 from solvers.ldv import KAPPA_REFUSE, KAPPA_WARN
-from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.formatting import num
+from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import bar
 from station.widgets.title import TitleBar
@@ -67,9 +68,11 @@ class LdvScreen(GuidedScreenMixin, Screen):
     def compose(self) -> ComposeResult:
         yield TitleBar("P5 laser velocimeter on a vehicle")
         with Vertical(id="body"):
-            yield Static("Drive with the INS/DGPS running: turns, slopes and braking. Straight driving\n"
-                         "leaves the beam angles unidentifiable (the conditioning below says when).",
-                         id="instruction")
+            yield Static(
+                "Drive with the INS/DGPS running: turns, slopes and braking. Straight driving\n"
+                "leaves the beam angles unidentifiable (the conditioning below says when).",
+                id="instruction",
+            )
             yield Static("", id="condition")
             yield Static("", id="readouts")
             yield Static("", id="estimate")
@@ -89,8 +92,12 @@ class LdvScreen(GuidedScreenMixin, Screen):
 
         def make_guide():
             cfg = LdvConfig(min_s=float(s.extra.get("ldv_min_s", 120.0)))
-            return LdvGuide(sample_rate_hz=source_rate_hz(src), device_id=s.device_id or src.device_id,
-                            site=getattr(src, "site", None), config=cfg)
+            return LdvGuide(
+                sample_rate_hz=source_rate_hz(src),
+                device_id=s.device_id or src.device_id,
+                site=getattr(src, "site", None),
+                config=cfg,
+            )
 
         if not self._start_guide(src, make_guide):
             return
@@ -115,31 +122,39 @@ class LdvScreen(GuidedScreenMixin, Screen):
         t = Text("Conditioning ")
         style = {"good": "green", "poor": "yellow"}.get(st.verdict, "red")
         t.append(bar(kappa_bar(st.kappa), 16), style=style)
-        word = {"none": "no data yet", "refused": "ILL-CONDITIONED (refused)", "poor": "poor (warned)",
-                "good": "good"}[st.verdict]
+        word = {"none": "no data yet", "refused": "ILL-CONDITIONED (refused)", "poor": "poor (warned)", "good": "good"}[
+            st.verdict
+        ]
         t.append(f" κ {num(st.kappa, '.3g')}  {word}\n", style=style)
-        t.append(f"needs κ ≤ {KAPPA_WARN:.0e} (refused above {KAPPA_REFUSE:.0e}); {st.n_epochs} moving epochs, "
-                 f"recorded {st.recorded_s:.0f} s" + ("  ENOUGH" if st.enough else ""))
+        t.append(
+            f"needs κ ≤ {KAPPA_WARN:.0e} (refused above {KAPPA_REFUSE:.0e}); {st.n_epochs} moving epochs, "
+            f"recorded {st.recorded_s:.0f} s" + ("  ENOUGH" if st.enough else "")
+        )
         self.query_one("#condition", Static).update(t)
         v, b, stats = st.v_ref, st.beams, message.stats
         src = self.app.session.source
         bench = getattr(src, "bench", lambda _: None)
         car = ""
         if bench("driving") is not None:
-            car = "   vehicle " + ("driving" if bench("driving") else "parked") + \
-                (", turns and hills" if bench("turning") else ", straight" if bench("driving") else "")
+            car = (
+                "   vehicle "
+                + ("driving" if bench("driving") else "parked")
+                + (", turns and hills" if bench("turning") else ", straight" if bench("driving") else "")
+            )
         self.query_one("#readouts", Static).update(
             f"reference {num(v[0], '7.2f')} {num(v[1], '7.2f')} {num(v[2], '7.2f')} m/s (body)  "
             f"|v| {num(st.speed_mps, '.2f')}\n"
             f"beams     {num(b[0], '7.2f')} {num(b[1], '7.2f')} {num(b[2], '7.2f')} m/s{car}\n"
             f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
-            + ("" if stats.connected else "   DISCONNECTED"))
+            + ("" if stats.connected else "   DISCONNECTED")
+        )
         if st.estimate is None:
             est = "estimate: when κ allows one"
         else:
             est = "estimate  " + "\n          ".join(
                 f"beam{j + 1} δK {e[0]:+.4f}  α {e[1]:6.2f}°  β {e[2]:6.2f}°  γ {e[3]:6.2f}°"
-                for j, e in enumerate(st.estimate))
+                for j, e in enumerate(st.estimate)
+            )
         self.query_one("#estimate", Static).update(est)
         self.query_one("#message", Static).update(st.message)
 
@@ -176,8 +191,10 @@ class LdvScreen(GuidedScreenMixin, Screen):
 
     def action_sim_turns(self) -> None:
         on = getattr(self.app.session.source, "bench", lambda _: None)("turning")
-        self._sim_place("straight" if on else "turns",
-                        "Simulated vehicle: straight road" if on else "Simulated vehicle: turns and hills")
+        self._sim_place(
+            "straight" if on else "turns",
+            "Simulated vehicle: straight road" if on else "Simulated vehicle: turns and hills",
+        )
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="fit P5")
     def fit(self) -> None:

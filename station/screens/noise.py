@@ -2,6 +2,7 @@
 result screen draws the Allan deviation per axis (log-log, textual-plotext) and gives the
 angle random walk, the bias instability and how long a P4 run must be for the accuracy
 typed in (``station.procedures.noise``, numerics in ``solvers.allan``)."""
+
 from __future__ import annotations
 
 import math
@@ -37,9 +38,11 @@ class NoiseHoldScreen(HoldScreen):
     """The still recording of the noise run (HoldScreen with its own words and ending)."""
 
     SUBJECT = "gyro noise (Allan) run"
-    INSTRUCTION = ("Put the unit on a steady surface away from fans and footsteps and do not\n"
-                   "touch it: the station records the gyro at rest for the set time and\n"
-                   "computes its Allan deviation (longer records reach longer τ).")
+    INSTRUCTION = (
+        "Put the unit on a steady surface away from fans and footsteps and do not\n"
+        "touch it: the station records the gyro at rest for the set time and\n"
+        "computes its Allan deviation (longer records reach longer τ)."
+    )
     NAME = "Noise run"
 
     @work(thread=True, exclusive=True, group="fit", exit_on_error=False, description="Allan analysis")
@@ -75,8 +78,12 @@ class AllanScreen(Screen):
     AllanScreen #accuracy { width: 12; }
     AllanScreen #status { height: 2; padding: 0 1; }
     """
-    BINDINGS = [Binding("t", "accuracy", "Accuracy"), Binding("e", "export", "Export"),
-                Binding("n", "new", "New run"), Binding("escape", "leave_entry", "Back", show=False)]
+    BINDINGS = [
+        Binding("t", "accuracy", "Accuracy"),
+        Binding("e", "export", "Export"),
+        Binding("n", "new", "New run"),
+        Binding("escape", "leave_entry", "Back", show=False),
+    ]
 
     def __init__(self, capture, report, error: str | None = None) -> None:
         super().__init__()
@@ -93,8 +100,7 @@ class AllanScreen(Screen):
             yield Static("", id="table")
             with Horizontal(id="ask"):
                 yield Label("P4 accuracy asked (°/h):")
-                yield Input(value=f"{self.app.session.extra.get('accuracy_deg_h', 1.0):g}", id="accuracy",
-                            compact=True)
+                yield Input(value=f"{self.app.session.extra.get('accuracy_deg_h', 1.0):g}", id="accuracy", compact=True)
                 yield Label("  (t, type, Enter)")
             yield Static("", id="status")
         yield Footer()
@@ -126,10 +132,14 @@ class AllanScreen(Screen):
 
     def _table(self, need=None) -> str:
         r = self.report
-        lines = [f"axis  ARW °/√h   bias inst. °/h (τ s)   mean °/h ± 1σ" + ("     P4 needs" if need is not None else "")]
+        lines = [
+            "axis  ARW °/√h   bias inst. °/h (τ s)   mean °/h ± 1σ" + ("     P4 needs" if need is not None else "")
+        ]
         for k, ax in enumerate(AXES):
-            line = (f"{ax:>4}  {r.arw_deg_rt_h[k]:8.4f}   {r.bias_instability_deg_h[k]:9.3f} ({r.bias_instability_tau_s[k]:5.0f})"
-                    f"   {r.mean_deg_h[k]:8.2f} ± {r.sigma_mean_deg_h[k]:.2f}")
+            line = (
+                f"{ax:>4}  {r.arw_deg_rt_h[k]:8.4f}   {r.bias_instability_deg_h[k]:9.3f} ({r.bias_instability_tau_s[k]:5.0f})"
+                f"   {r.mean_deg_h[k]:8.2f} ± {r.sigma_mean_deg_h[k]:.2f}"
+            )
             if need is not None:
                 line += f"   {format_duration(need[k]):>9}"
             lines.append(line)
@@ -151,7 +161,8 @@ class AllanScreen(Screen):
             f"For 1σ ≤ {acc:g} °/h a still P4 record needs {format_duration(worst)}."
             if math.isfinite(worst) and worst <= PRACTICAL_RECORD_S
             else f"No still P4 record reaches 1σ ≤ {acc:g} °/h: the fitted noise floor (bias instability, "
-                 f"rate random walk) is above it{'' if not math.isfinite(worst) else ' or within a hair of it (> 24 h)'}.")
+            f"rate random walk) is above it{'' if not math.isfinite(worst) else ' or within a hair of it (> 24 h)'}."
+        )
 
     @on(Input.Submitted, "#accuracy")
     def _accuracy(self, event: Input.Submitted) -> None:
@@ -174,8 +185,12 @@ class AllanScreen(Screen):
 
     @work(thread=True, exclusive=True, group="export", exit_on_error=False, description="export")
     def export(self) -> None:
-        export_files(self, self.capture, "gyro-noise",
-                     lambda: None if self.report is None else self.report.to_json(self.accuracy_deg_h))
+        export_files(
+            self,
+            self.capture,
+            "gyro-noise",
+            lambda: None if self.report is None else self.report.to_json(self.accuracy_deg_h),
+        )
 
     def on_exported(self, message: Exported) -> None:
         if message.error:

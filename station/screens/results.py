@@ -2,6 +2,7 @@
 sigma), pass or fail against the device's tolerances, limits and the fit's own checks,
 the residual per position; save (a FAIL only as rejected with a reason or as an override
 with a note), reject, discard, export, report."""
+
 from __future__ import annotations
 
 import os
@@ -14,12 +15,12 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
 from station.formatting import num
-from station.screens.export import export_files
-from station.widgets.title import TitleBar
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
 from station.procedures.review import assess, p1_residuals, param_rows, result_unit, review_record
+from station.screens.export import export_files
 from station.textsafe import tui_markup
+from station.widgets.title import TitleBar
 
 
 class ResultsScreen(Screen):
@@ -98,42 +99,66 @@ class ResultsScreen(Screen):
         params = self.query_one("#params", DataTable)
         residuals = self.query_one("#residuals", DataTable)
         if self.result is None:
-            summary.update(f"[b red]No calibration: {tui_markup(self.error)}[/]\n"
-                           f"{self.capture.n_rows} positions captured; e exports them as a capture file.")
+            summary.update(
+                f"[b red]No calibration: {tui_markup(self.error)}[/]\n"
+                f"{self.capture.n_rows} positions captured; e exports them as a capture file."
+            )
             params.display = residuals.display = False
             return
         r = self.result
         a = self.assessment = assess(r, self.previous, self.device)
         rows, word, reasons = a.rows, a.verdict, a.reasons
         style = {"pass": "b green", "fail": "b white on red"}.get(word, "b")
-        prev = (f"previous #{self.previous['id']} of {self.previous['time'][:16].replace('T', ' ')}"
-                if self.previous else "no previous calibration")
+        prev = (
+            f"previous #{self.previous['id']} of {self.previous['time'][:16].replace('T', ' ')}"
+            if self.previous
+            else "no previous calibration"
+        )
         unit = result_unit(r)
-        lines = [f"[{style}] {word.upper()} [/] residual {num(r.get('residual_rms'), '.3g')} {unit} RMS · "
-                 f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"]
+        lines = [
+            f"[{style}] {word.upper()} [/] residual {num(r.get('residual_rms'), '.3g')} {unit} RMS · "
+            f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"
+        ]
         lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
         cond = (r.get("params") or {}).get("condition_number") if r.get("procedure") == "ldv" else None
         if isinstance(cond, (int, float)):
             lines.append(f"velocity set: cond(HᵀH) = {cond:.3g} (well enough conditioned to separate the angles)")
         lines += [f"[yellow]warning: {tui_markup(w)}[/]" for w in (r.get("warnings") or [])]
         if a.failed:
-            lines.append("[b]s[/] decides: save as rejected (reason) or accept as override (note) · "
-                         "[b]n[/] re-do")
+            lines.append("[b]s[/] decides: save as rejected (reason) or accept as override (note) · [b]n[/] re-do")
         summary.update("\n".join(lines))
         params.clear(columns=True)
         params.add_columns("param", "value", "± 1σ", "unit", "in use", "Δ/σ", "tol", "ok")
         for row in rows:
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
-            params.add_row(row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), row.unit, num(row.previous, ".7g"),
-                           num(row.change_sigma, "+.1f"), num(row.tolerance, ".3g"), ok)
+            params.add_row(
+                row.name,
+                num(row.value, ".7g"),
+                num(row.sigma, ".2g"),
+                row.unit,
+                num(row.previous, ".7g"),
+                num(row.change_sigma, "+.1f"),
+                num(row.tolerance, ".3g"),
+                ok,
+            )
         gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
         if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
             prev_g = ((self.previous or {}).get("extra") or {}).get("gyro")
             for row in param_rows(gyro, prev_g if isinstance(prev_g, dict) else None):
-                params.add_row("gyro " + row.name, num(row.value, ".7g"), num(row.sigma, ".2g"), row.unit,
-                               num(row.previous, ".7g"), num(row.change_sigma, "+.1f"), "", "")
-            lines.append(f"gyro: {gyro.get('n_rotations')} turns between {gyro.get('n_holds')} holds · gravity "
-                         f"carried to {num(gyro.get('direction_rms_deg'), '.3g')}° RMS")
+                params.add_row(
+                    "gyro " + row.name,
+                    num(row.value, ".7g"),
+                    num(row.sigma, ".2g"),
+                    row.unit,
+                    num(row.previous, ".7g"),
+                    num(row.change_sigma, "+.1f"),
+                    "",
+                    "",
+                )
+            lines.append(
+                f"gyro: {gyro.get('n_rotations')} turns between {gyro.get('n_holds')} holds · gravity "
+                f"carried to {num(gyro.get('direction_rms_deg'), '.3g')}° RMS"
+            )
             summary.update("\n".join(lines))
         elif isinstance(gyro, dict) and gyro.get("error"):
             lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
@@ -201,9 +226,16 @@ class ResultsScreen(Screen):
             started = getattr(s.guide, "started", None)  # the run's start, with its time of day
             if not (isinstance(started, str) and started[:10] == str(self.capture.meta.get("date", ""))[:10]):
                 started = None  # not this capture's run (an imported file)
-            cal_id = save_result(s.db_path, self.capture, self.result, device_id=s.device_id,
-                                 operator=s.extra.get("operator") or None, accepted=decision != "rejected",
-                                 review=review, time=started if isinstance(started, str) else None)
+            cal_id = save_result(
+                s.db_path,
+                self.capture,
+                self.result,
+                device_id=s.device_id,
+                operator=s.extra.get("operator") or None,
+                accepted=decision != "rejected",
+                review=review,
+                time=started if isinstance(started, str) else None,
+            )
             guide = s.guide
             state_path = getattr(guide, "state_path", None)
             if state_path and os.path.exists(state_path):
@@ -218,8 +250,10 @@ class ResultsScreen(Screen):
             label.update(f"[b red]Not saved: {tui_markup(message.error)}[/]")
             return
         self.calibration_id = message.calibration_id
-        how = {"rejected": "[b red]Saved as REJECTED calibration", "override": "[b yellow]Saved (override) as calibration"
-               }.get(self.decision, "[b green]Saved as calibration")
+        how = {
+            "rejected": "[b red]Saved as REJECTED calibration",
+            "override": "[b yellow]Saved (override) as calibration",
+        }.get(self.decision, "[b green]Saved as calibration")
         label.update(f"{how} #{message.calibration_id} for {tui_markup(self.app.session.device_id)}[/]")
         if self.app.session.exit_when_saved:
             self.set_timer(1.0, self.app.exit)
@@ -238,8 +272,12 @@ class ResultsScreen(Screen):
     def export(self) -> None:
         from station.calibrate import jsonable
 
-        export_files(self, self.capture, self.capture.meta.get("procedure", "capture"),
-                     lambda: None if self.result is None else jsonable(self.result))
+        export_files(
+            self,
+            self.capture,
+            self.capture.meta.get("procedure", "capture"),
+            lambda: None if self.result is None else jsonable(self.result),
+        )
 
     def on_exported(self, message: Exported) -> None:
         if message.error:

@@ -6,6 +6,7 @@ the operator can skip, redo or abort.
 The source is drained and the guide fed on a thread worker; the screen gets a
 replaceable LiveUpdate ~15 times a second and a GuideEvent for each capture.
 """
+
 from __future__ import annotations
 
 import os
@@ -19,11 +20,11 @@ from textual.screen import Screen
 from textual.widgets import Footer, OptionList, Static
 from textual.worker import get_current_worker
 
-from station.widgets.title import TitleBar
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz, start_source
 from station.widgets.live import CountdownBar, OrientationIndicator, PlacementView, Readouts, StabilityBar
 from station.widgets.steps import StepList
+from station.widgets.title import TitleBar
 
 
 class ProcedureScreen(GuidedScreenMixin, Screen):
@@ -76,8 +77,8 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
     # ------------------------------------------------------------ the worker
 
     def _make_guide(self):
-        from station.procedures.tabletop_guide import GuideConfig, P1Guide
         from station.procedures.state import default_state_path
+        from station.procedures.tabletop_guide import GuideConfig, P1Guide
 
         s = self.app.session
         src = s.source
@@ -93,10 +94,16 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
         if s.resume and state_path and os.path.exists(state_path):
             guide = P1Guide.load(state_path, sample_rate_hz=rate, **kw)
         else:
-            guide = P1Guide(sample_rate_hz=rate, accel_unit=src.units.get("accel_unit") or "counts",
-                            device_id=s.device_id, config=GuideConfig(average_s=s.average_s, settle_s=s.settle_s),
-                            site=getattr(src, "site", None), state_path=state_path,
-                            gyro_unit=src.units.get("gyro_unit") or None, **kw)
+            guide = P1Guide(
+                sample_rate_hz=rate,
+                accel_unit=src.units.get("accel_unit") or "counts",
+                device_id=s.device_id,
+                config=GuideConfig(average_s=s.average_s, settle_s=s.settle_s),
+                site=getattr(src, "site", None),
+                state_path=state_path,
+                gyro_unit=src.units.get("gyro_unit") or None,
+                **kw,
+            )
         guide.previous_calibration = previous
         return guide
 
@@ -121,8 +128,9 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
 
             operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=6.0)
         guide = self.guide
-        self._pump(worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.temp_c), guide.status, operator,
-                   with_hz=True)
+        self._pump(
+            worker, src, lambda b: guide.update(b.t_s, b.accel, b.gyro, b.temp_c), guide.status, operator, with_hz=True
+        )
 
     # ------------------------------------------------------------ drawing
 
@@ -143,8 +151,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
         self.query_one(CountdownBar).show(st, g.config.average_s)
         self.query_one(Readouts).show(st, message.stats, s.source.units)
         self.query_one("#message", Static).update(st.message)
-        self.query_one("#progress", Static).update(
-            f"{st.n_captured}/{st.n_steps} captured · t={st.t_s:.0f} s")
+        self.query_one("#progress", Static).update(f"{st.n_captured}/{st.n_steps} captured · t={st.t_s:.0f} s")
 
     def on_guide_event(self, message: GuideEvent) -> None:
         g = self.guide

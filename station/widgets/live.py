@@ -1,5 +1,6 @@
 """Live indicators of a guided step: placement drawing, stability, orientation,
 averaging countdown, readouts. Each is a Static that redraws from a GuideStatus."""
+
 from __future__ import annotations
 
 import math

@@ -1,5 +1,6 @@
 """A one-line title bar (the app's title and the screen's subject); no clock, so
 screenshots stay deterministic."""
+
 from __future__ import annotations
 
 from textual.widgets import Static
