@@ -66,7 +66,9 @@ class HistoryScreen(Screen):
 
     def on_mount(self) -> None:
         t = self.query_one("#devices", DataTable)
-        t.add_columns("device", "n", "status")
+        t.add_columns("device", "n")
+        # fixed width: "overdue" fits whatever render sees the rows first (the snapshot raced on it)
+        t.add_column("status", width=7)
         c = self.query_one("#calibrations", DataTable)
         c.add_columns("#", "time (UTC)", "proc", "residual", "state")
         self.load()
