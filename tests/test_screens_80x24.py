@@ -86,7 +86,9 @@ def test_history_shows_times_of_day_and_a_date_axis(tmp_path):
                 pilot,
                 lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 3,
             )
-            await wait_for(pilot, lambda: any("date and time (UTC)" in line for line in screen_lines(app)))
+            # the rows and the plot are painted on later refreshes than row_count says: wait for what is asserted
+            want = ("date and time (UTC)", "2026-11-23 17:05", "2026-11-23 08:15")
+            await wait_for(pilot, lambda: all(w in "\n".join(screen_lines(app)) for w in want))
             return screen_lines(app)
 
     lines = asyncio.run(story())
