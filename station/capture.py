@@ -27,7 +27,6 @@ import io
 import math
 import os
 import re
-import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -35,6 +34,7 @@ import numpy as np
 
 from solvers.units import ACCEL_UNITS, GYRO_UNITS, MAG_UNITS, RAW_UNITS
 from station.errors import InputError
+from station.fileio import atomic_open, cannot_write
 from station.procedures import registry
 
 FORMAT_VERSION = "1"
@@ -892,24 +892,5 @@ def write_capture(path, capture: Capture, *, rows: int = DEFAULT_CHUNK_ROWS) -> 
     """
     path = os.fspath(path)
     meta, names, arrays, n = _prepare(path, capture)
-    directory = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
-    except OSError as exc:
-        raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            _emit(f, path, meta, names, arrays, n, rows)
-            f.flush()
-            os.fsync(f.fileno())
-        mode = os.stat(path).st_mode & 0o7777 if os.path.isfile(path) else 0o644
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        if isinstance(exc, OSError):
-            raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
-        raise
+    with cannot_write(path), atomic_open(path, "w", newline="\n") as f:
+        _emit(f, path, meta, names, arrays, n, rows)

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 
 from station.commands._dbutil import open_store
 from station.errors import InputError
+from station.fileio import atomic_write_text, cannot_write
 
 FORMATS = (
     "json",
@@ -59,21 +58,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, f"--vehicle {args.vehicle!r}: expected SYSID,COMPID, e.g. 1,1") from None
     text = export(cal, meta, args.format, args.instance, device_id=args.device_id, vehicle=(sysid, compid))
     if args.output:
-        folder = os.path.dirname(os.path.abspath(args.output))
-        try:
-            fd, tmp = tempfile.mkstemp(dir=folder, prefix=".export-", suffix=".tmp")
-        except OSError as exc:
-            raise InputError(args.output, None, f"cannot write: {exc.strerror or exc}") from None
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
-            os.replace(tmp, args.output)
-        except BaseException as exc:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            if isinstance(exc, OSError):
-                raise InputError(args.output, None, f"cannot write: {exc.strerror or exc}") from None
-            raise
+        with cannot_write(args.output):
+            atomic_write_text(args.output, text)
     else:
         sys.stdout.write(text)
     return 0

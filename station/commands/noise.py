@@ -7,9 +7,9 @@ import json
 import math
 import os
 import sys
-import tempfile
 
 from station.errors import InputError
+from station.fileio import atomic_write_text, cannot_write
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,21 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _write_atomic(path: str, text: str) -> None:
-    folder = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".noise-", suffix=".tmp")
-    except OSError as exc:
-        raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
-        raise
+    with cannot_write(path):
+        atomic_write_text(path, text)
 
 
 def _g(x: float) -> str:

@@ -6,6 +6,7 @@ import argparse
 import os
 
 from station.commands._dbutil import open_store
+from station.fileio import atomic_write_text, cannot_write
 
 
 def register(subparsers) -> None:
@@ -30,7 +31,6 @@ def register(subparsers) -> None:
 def write_report(store, calibration_id: int, out: str | None) -> str:
     """Render and write atomically; returns the path (or '-' after writing to stdout)."""
     import sys
-    import tempfile
 
     from station.report import build_report, render_html
 
@@ -39,19 +39,7 @@ def write_report(store, calibration_id: int, out: str | None) -> str:
         sys.stdout.write(page)
         return "-"
     path = out or f"calibration-{calibration_id}.html"
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".report-", suffix=".html", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(page)
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)  # an ordinary file, not mkstemp's 0600
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write_text(path, page)
     return path
 
 
@@ -61,10 +49,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out not in (None, "-") and not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
         raise InputError(args.out, None, "its folder does not exist")
     with open_store(args) as store:
-        try:
+        with cannot_write(args.out, "the report"):
             path = write_report(store, args.calibration_id, args.out)
-        except OSError as exc:
-            raise InputError(args.out, None, f"cannot write the report: {exc.strerror or exc}") from None
     if path != "-":
         print(path)
     return 0

@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import tempfile
 
 from station.errors import InputError
+from station.fileio import atomic_write_json, cannot_write
 from station.procedures import registry
 
 
@@ -111,22 +109,9 @@ def _option_value(name: str, value):
 
 
 def _write_json(path: str, obj) -> None:
-    """Atomically (temp file in the same folder, then os.replace); OSError -> one line."""
-    folder = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".truth-", suffix=".json")
-    except OSError as exc:
-        raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=2)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise InputError(path, None, f"cannot write: {exc.strerror or exc}") from None
-        raise
+    """Atomically (station.fileio); OSError -> one line."""
+    with cannot_write(path):
+        atomic_write_json(path, obj, indent=2)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -39,6 +39,7 @@ import numpy as np
 from station.device.protocol import SENSOR_FIELDS, Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
 from station.errors import InputError, StationError
+from station.fileio import atomic_open
 
 SENSOR_GROUPS = {"accel_unit": ("ax", "ay", "az"), "gyro_unit": ("gx", "gy", "gz"), "mag_unit": ("mx", "my", "mz")}
 PARTIAL_SUFFIX = ".partial"
@@ -154,41 +155,28 @@ def _head_text(meta: dict[str, str], columns: list[str]) -> str:
 
 def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str], *, cut_tail: bool = False) -> int:
     """Copy src's data rows under a new head into dst atomically; returns rows copied."""
-    directory = os.path.dirname(os.path.abspath(dst))
-    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(dst)}.", suffix=".tmp", dir=directory)
     rows = 0
-    try:
-        with open(src, "rb") as fin, os.fdopen(fd, "wb") as fout:
-            # skip the old head: metadata lines, then the header row
-            while True:
-                line = fin.readline()
-                if not line:
-                    raise InputError(src, None, "no header row: not a partial recording")
-                if not line.startswith(b"#"):
-                    break
-            fout.write(_head_text(meta, columns).encode("utf-8"))
-            tail = b""
-            while True:
-                block = fin.read(1 << 20)
-                if not block:
-                    break
-                block = tail + block
-                cut = block.rfind(b"\n") + 1
-                fout.write(block[:cut])
-                rows += block.count(b"\n", 0, cut)
-                tail = block[cut:]
-            if tail and not cut_tail:
-                raise InputError(src, None, "last line is cut short (use --recover)")
-            fout.flush()
-            os.fsync(fout.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, dst)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    with open(src, "rb") as fin, atomic_open(dst, "wb") as fout:
+        # skip the old head: metadata lines, then the header row
+        while True:
+            line = fin.readline()
+            if not line:
+                raise InputError(src, None, "no header row: not a partial recording")
+            if not line.startswith(b"#"):
+                break
+        fout.write(_head_text(meta, columns).encode("utf-8"))
+        tail = b""
+        while True:
+            block = fin.read(1 << 20)
+            if not block:
+                break
+            block = tail + block
+            cut = block.rfind(b"\n") + 1
+            fout.write(block[:cut])
+            rows += block.count(b"\n", 0, cut)
+            tail = block[cut:]
+        if tail and not cut_tail:
+            raise InputError(src, None, "last line is cut short (use --recover)")
     return rows
 
 

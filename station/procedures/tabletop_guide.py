@@ -29,7 +29,6 @@ import datetime as _dt
 import json
 import math
 import os
-import tempfile
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -38,6 +37,7 @@ from solvers import frames
 from solvers.detectors import orientation_check
 from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS
 from solvers.stillness import StillnessTracker
+from station.fileio import atomic_write_json
 from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
 STATE_VERSION = 1
@@ -631,15 +631,7 @@ class P1Guide:
             return
         folder = os.path.dirname(os.path.abspath(path))
         os.makedirs(folder, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".guide-", suffix=".json", dir=folder)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump(self.to_state(), fh, indent=1)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        atomic_write_json(path, self.to_state(), indent=1)
 
     @classmethod
     def from_state(

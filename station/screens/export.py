@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import datetime as _dt
-import json
 import os
-import tempfile
 from collections.abc import Callable
 
+from station.fileio import atomic_write_json
 from station.messages import Exported
 
 
@@ -26,10 +25,7 @@ def export_files(screen, capture, what: str, payload: Callable) -> None:
         data = payload()
         if data is not None:
             paths.append(base + ".json")
-            fd, tmp = tempfile.mkstemp(prefix=".export-", dir=folder)
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump(data, fh, indent=2)
-            os.replace(tmp, paths[1])
+            atomic_write_json(paths[1], data, indent=2)
         screen.post_message(Exported(paths))
     except Exception as exc:  # noqa: BLE001
         screen.post_message(Exported([], error=str(exc)))

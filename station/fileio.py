@@ -1,0 +1,116 @@
+"""One atomic file write for the whole station: a temporary file beside the target, then a rename.
+
+Readers see the old file or the new one, never half of either: the new content goes to a
+hidden temporary file in the target's folder (``.<name>.<random>.tmp``), is flushed and
+fsynced, and only then renamed over the target (``os.replace``, atomic on POSIX and on one
+Windows volume). Any exception on the way, ``KeyboardInterrupt`` included, removes the
+temporary file and leaves the target as it was.
+
+Permissions: a file that already exists keeps its mode; a new one gets what ``open()`` would
+give it (0o666 less the umask), not ``tempfile.mkstemp``'s 0o600. Newlines: as ``open()``
+with the same ``newline`` argument (binary modes write the bytes as given).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from station.errors import InputError
+
+
+@contextmanager
+def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str | None = None) -> Iterator:
+    """Open a file object to write ``path``'s new content; it replaces ``path`` when the
+    ``with`` block ends without an exception. ``mode`` is ``"w"`` (text) or ``"wb"``.
+
+    Raises OSError as ``open()`` would (no folder, no permission, disk full); see
+    :func:`cannot_write` for the operator's one line.
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_open: mode {mode!r} (use 'w' or 'wb')")
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        old_mode = stat.S_IMODE(os.stat(path).st_mode) if os.path.isfile(path) else None
+    except OSError:
+        old_mode = None
+    fd, tmp = _create_beside(folder, os.path.basename(path))
+    try:
+        if old_mode is not None:
+            os.chmod(tmp, old_mode)
+        if mode == "wb":
+            f = os.fdopen(fd, "wb")
+        else:
+            f = os.fdopen(fd, "w", encoding=encoding, newline=newline)
+        with f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    _sync_folder(folder)
+
+
+def atomic_write_text(path, text: str, *, encoding: str = "utf-8", newline: str | None = None) -> None:
+    """Write ``text`` to ``path`` atomically (see :func:`atomic_open`)."""
+    with atomic_open(path, "w", encoding=encoding, newline=newline) as f:
+        f.write(text)
+
+
+def atomic_write_bytes(path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_open`)."""
+    with atomic_open(path, "wb") as f:
+        f.write(data)
+
+
+def atomic_write_json(path, obj, *, indent: int | None = 2) -> None:
+    """``json.dump(obj, indent=indent)`` to ``path`` atomically; an object json cannot
+    write raises before ``path`` is touched."""
+    atomic_write_text(path, json.dumps(obj, indent=indent))
+
+
+@contextmanager
+def cannot_write(path, what: str = "") -> Iterator[None]:
+    """Turn an OSError inside the block into the operator's one line,
+    ``<path>: cannot write[ what]: <reason>`` (an InputError: exit status 2)."""
+    try:
+        yield
+    except OSError as exc:
+        label = f"cannot write {what}" if what else "cannot write"
+        raise InputError(path, None, f"{label}: {exc.strerror or exc}") from None
+
+
+def _create_beside(folder: str, name: str) -> tuple[int, str]:
+    """A new hidden file in ``folder``, created with mode 0o666 so that the umask applies
+    as it does to ``open()``; returns (descriptor, path)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0) | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        tmp = os.path.join(folder, f".{name}.{os.urandom(4).hex()}.tmp")
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary name beside {name} in {folder}")
+
+
+def _sync_folder(folder: str) -> None:
+    """fsync the folder so the rename itself survives a power cut (where the OS allows it)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
