@@ -141,6 +141,30 @@ def mean_standard_error(y, dt_s: float, max_fraction: float = 1.0 / 3.0) -> Mean
     )
 
 
+def hold_mean_se(seg, t_s) -> np.ndarray | None:
+    """The standard error of a hold's mean, per column of ``seg`` (N, k), with correlated
+    noise (bias instability) included: the larger of the white ``σ/sqrt(n)`` and the fitted
+    noise model (white + bias instability + random walk) at the hold's length. ``t_s``: the
+    rows' times (the step is their median difference); rows with a non-finite value are
+    dropped. None when fewer than 16 rows are left or the times do not advance (then the
+    caller falls back to ``σ/sqrt(n)``). P1 uses it for every position, the accelerometer's
+    and the gyro's: std/sqrt(n) alone understates it when the bias wanders during the hold."""
+    seg = np.asarray(seg, dtype=float)
+    t_s = np.asarray(t_s, dtype=float)
+    seg = seg[np.all(np.isfinite(seg), axis=1)]
+    if len(seg) < 16 or len(t_s) < 2:
+        return None
+    dt = float(np.median(np.diff(t_s)))
+    if not dt > 0:
+        return None
+    me = mean_standard_error(seg, dt)
+    if me.se_model is None:
+        return np.asarray(me.se_white, dtype=float)
+    # the fitted model at the hold's length: the raw Allan maximum over a few τ of one short
+    # hold scatters upward
+    return np.maximum(np.asarray(me.se_white, dtype=float), np.asarray(me.se_model, dtype=float))
+
+
 def time_needed_s(me: MeanError, accuracy: float) -> np.ndarray:
     """Record length for a 1-sigma of ``accuracy`` (same unit as the data), per axis.
 

@@ -130,3 +130,91 @@ def test_no_module_imports_another_modules_private_name():
             ):
                 bad.append(f"{rel}:{node.lineno}: {node.value.id}.{node.attr}")
     assert not bad, "\n".join(bad)
+
+
+# ---------------------------------------------------------------- no import circles
+
+
+def _module_graph(package: str) -> dict[str, set[str]]:
+    """Module → the modules of ``package`` it imports anywhere in its source (function-level
+    and relative imports included); ``from a.b import c`` counts as ``a.b.c`` when that is a
+    module, else as ``a.b``."""
+    import ast
+
+    files = {".".join(p.relative_to(ROOT).with_suffix("").parts): p for p in (ROOT / package).rglob("*.py")}
+    files = {(m[: -len(".__init__")] if m.endswith(".__init__") else m): p for m, p in files.items()}
+    graph: dict[str, set[str]] = {m: set() for m in files}
+    for here, path in files.items():
+        is_pkg = path.name == "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = here.split(".") if is_pkg else here.split(".")[:-1]
+                    parts = parts[: len(parts) - (node.level - 1)]
+                    base = ".".join(parts + ([base] if base else []))
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in files else base for a in node.names]
+            for t in targets:
+                while t and t not in files:  # `import a.b.c` of a name inside a module
+                    t = t.rpartition(".")[0]
+                if t and t != here:
+                    graph[here].add(t)
+    return graph
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan)."""
+    index, low, on, stack, out, counter = {}, {}, set(), [], [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_circle_finder_finds_a_circle_hidden_in_a_function(tmp_path, monkeypatch):
+    """The check below can fail: two modules importing each other, one inside a function."""
+    pkg = tmp_path / "toypkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from toypkg.sub import b\n")
+    (pkg / "sub" / "b.py").write_text("def f():\n    from .. import a\n    return a\n")
+    (pkg / "c.py").write_text("import toypkg.a\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    graph = _module_graph("toypkg")
+    assert graph["toypkg.sub.b"] == {"toypkg.a"} and graph["toypkg.c"] == {"toypkg.a"}
+    assert _circles(graph) == [["toypkg.a", "toypkg.sub.b"]]
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_import_circles(package):
+    """No two modules import each other, directly or round a loop, even inside functions
+    (a circle hidden in a function still ties the two modules' changes together)."""
+    circles = _circles(_module_graph(package))
+    assert not circles, "\n".join(" <-> ".join(c) for c in circles)

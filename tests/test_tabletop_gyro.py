@@ -136,6 +136,7 @@ def test_diagnosis_input_names_a_hidden_g_sensitivity(g_sens, named):
         "accel-tabletop", seed=5, extra_positions=8, hold_s=10, move_s=3, init_rest_s=20, gyro_g_sensitivity=g_sens
     )
     cap = Capture(dict(sim.meta), dict(sim.columns))
-    inp = tabletop_gyro.diagnosis_input(cap, tabletop.calibrate(cap))
+    prep = tabletop.prepare(cap)
+    inp = tabletop_gyro.diagnosis_input(cap, tabletop.calibrate(cap, prepared=prep), prep)
     names = [e["name"] for e in diagnose(inp.problem).effects]
     assert ("g_sensitivity" in names) is named

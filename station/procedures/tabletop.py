@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solvers import tabletop as T
+from solvers.allan import hold_mean_se
 from solvers.errors import SolverError
 from solvers.models import accel as accel_model
 from solvers.units import ACCEL_UNITS
@@ -108,7 +109,7 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
                     float(t[stop - 1]),
                     d,
                     s,
-                    se=mean_se(seg, t[start:stop]),
+                    se=hold_mean_se(seg, t[start:stop]),
                 )
             )
         return out, "position column", True
@@ -130,31 +131,11 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
             int(iv.n),
             float(iv.t_start_s),
             float(iv.t_stop_s),
-            se=mean_se(a[iv.start : iv.stop], t[iv.start : iv.stop]),
+            se=hold_mean_se(a[iv.start : iv.stop], t[iv.start : iv.stop]),
         )
         for k, iv in enumerate(st.intervals)
     ]
     return out, "static intervals found automatically (no position column)", True
-
-
-def mean_se(seg: np.ndarray, t: np.ndarray) -> np.ndarray | None:
-    """The standard error of a position's mean with correlated noise (bias instability)
-    included, from its Allan deviation (solvers/allan.py), as P4 does: std/sqrt(n) alone
-    understates it when the bias wanders during the hold."""
-    from solvers.allan import mean_standard_error
-
-    seg = seg[np.all(np.isfinite(seg), axis=1)]
-    if len(seg) < 16 or len(t) < 2:
-        return None
-    dt = float(np.median(np.diff(t)))
-    if not dt > 0:
-        return None
-    me = mean_standard_error(seg, dt)
-    if me.se_model is None:
-        return np.asarray(me.se_white, dtype=float)
-    # the fitted noise model (white + bias instability + random walk) at the hold's length:
-    # the raw Allan maximum over a few τ of one short hold scatters upward
-    return np.maximum(np.asarray(me.se_white, dtype=float), np.asarray(me.se_model, dtype=float))
 
 
 def check_saturation(capture, positions: list[T.Position]) -> None:

@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from solvers import tabletop_gyro as TG
+from solvers.allan import hold_mean_se
 from solvers.errors import SolverError
 from solvers.models import accel
 from solvers.units import si_factor
@@ -55,8 +56,6 @@ def _start_scale(capture, holds, motions, notes: list[str]) -> float:
 def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np.ndarray, list[str]] | None:
     """Holds, motions between consecutive holds, the per-sample gyro noise and notes; None
     when the capture has no gyro time series."""
-    from station.procedures.tabletop import mean_se
-
     y = _gyro(capture)
     if y is None or not positions or any(p.t_start_s is None for p in positions):
         return None
@@ -71,7 +70,7 @@ def inputs(capture, positions, B, M) -> tuple[list[TG.Hold], list[TG.Motion], np
         ok = np.all(np.isfinite(seg), axis=1)
         if ok.sum() < 16:
             continue
-        se = mean_se(seg[ok], t[i0 : i1 + 1][ok])
+        se = hold_mean_se(seg[ok], t[i0 : i1 + 1][ok])
         sd = seg[ok].std(axis=0, ddof=1)
         se = se if se is not None else sd / math.sqrt(ok.sum())
         f = accel.p1_apply(p.mean[None], B, M)[0]
@@ -212,20 +211,21 @@ def format_lines(block: dict) -> list[str]:
     return lines
 
 
-def diagnosis_input(capture, base: dict, prepared=None):
+def diagnosis_input(capture, base: dict, prepared):
     """The gyro problem of a P1 session for ``station diagnose`` (helper i12 wires it beside the
     accelerometer's): the holds' gyro samples in rad/s through the session's fitted ``K``, the
     calibrated specific force, one label per hold. The baseline is a constant bias; the gyro
     model's effects (temperature, time drift, g-sensitivity, Earth rate) are the candidates
-    (``solvers.diagnose.problems.gyro_problem``). None when the result has no gyro block."""
+    (``solvers.diagnose.problems.gyro_problem``). ``prepared``: ``tabletop.prepare(capture)``,
+    the holds the accelerometer's calibration used (this module never imports tabletop: it is
+    the lower of the two). None when the result has no gyro block."""
     from solvers.diagnose import problems as DP
-    from station.procedures import tabletop
     from station.procedures.contract import DiagnosisInput
 
     gb = (base or {}).get("gyro")
     if not isinstance(gb, dict) or "params" not in gb:
         return None
-    prep = prepared if prepared is not None else tabletop.prepare(capture)
+    prep = prepared
     B, M = np.asarray(base["params"]["B"], float), np.asarray(base["params"]["M"], float)
     A = np.linalg.inv(np.asarray(gb["params"]["K"], float))
     t = np.asarray(capture.columns["t"], dtype=float)
