@@ -86,26 +86,40 @@ def effect_blocks(name: str, size: float, rng: np.random.Generator, params: dict
 
 def rotvec_matrices(phi) -> np.ndarray:
     """``exp([φ]×)`` for rotation vectors (..., 3) → (..., 3, 3) (Rodrigues, exact)."""
-    phi = np.asarray(phi, dtype=float)
-    th = np.linalg.norm(phi, axis=-1)[..., None, None]
-    K = skew(phi)
-    small = th < 1e-8
-    ths = np.where(small, 1.0, th)
-    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(ths) / ths)
-    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
-    return np.eye(3) + a * K + b * (K @ K)
+
+    def coefficients(th, ths, small):
+        return np.where(small, 1.0 - th**2 / 6.0, np.sin(ths) / ths), _one_minus_cos_over_th2(th, ths, small)
+
+    return _so3_series(phi, 1e-8, coefficients)
 
 
 def right_jacobian(phi) -> np.ndarray:
     """SO(3) right Jacobian ``J_r(φ)``: ``exp([φ + δ]×) ≈ exp([φ]×) exp([J_r δ]×)``, (..., 3, 3)."""
+
+    def coefficients(th, ths, small):
+        b = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
+        return -_one_minus_cos_over_th2(th, ths, small), b
+
+    return _so3_series(phi, 1e-6, coefficients)
+
+
+def _so3_series(phi, small_rad: float, coefficients) -> np.ndarray:
+    """``I + a [φ]× + b [φ]×²`` for rotation vectors (..., 3), the scalars ``(a, b) =
+    coefficients(θ, θ_safe, small)`` of ``θ = |φ|``: below ``small_rad`` they take their
+    Taylor series in θ (``small`` is True there and ``θ_safe`` 1, so the closed forms stay
+    finite)."""
     phi = np.asarray(phi, dtype=float)
     th = np.linalg.norm(phi, axis=-1)[..., None, None]
     K = skew(phi)
-    small = th < 1e-6
+    small = th < small_rad
     ths = np.where(small, 1.0, th)
-    a = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
-    b = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
-    return np.eye(3) - a * K + b * (K @ K)
+    a, b = coefficients(th, ths, small)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def _one_minus_cos_over_th2(th, ths, small):
+    """``(1 − cos θ) / θ²`` (its series ``1/2 − θ²/24`` where ``small``)."""
+    return np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
 
 
 def skew(v: np.ndarray) -> np.ndarray:
