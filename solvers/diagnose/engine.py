@@ -517,40 +517,6 @@ class _Eval:
         return self.D / self.infl
 
 
-class _Rounds:
-    """The rounds of one linearisation, one per fold set (made when first asked for)."""
-
-    def __init__(self, A, r0, sigma, fold_map, primary):
-        self.args = (A, r0, sigma, primary)
-        self.fold_map = fold_map
-        self.rounds: dict = {}
-        self.cvs: dict = {}
-
-    def get(self, key) -> _Round:
-        key = key if key in self.fold_map else None
-        if key not in self.rounds:
-            A, r0, sigma, primary = self.args
-            self.rounds[key] = _Round(A, r0, sigma, self.fold_map[key], primary)
-        return self.rounds[key]
-
-    def cv0(self, key) -> float:
-        key = key if key in self.fold_map else None
-        if key not in self.cvs:
-            A, r0, sigma, primary = self.args
-            self.cvs[key] = cv_rms(A, r0, sigma, self.fold_map[key], primary)
-        return self.cvs[key]
-
-
-def _gram_rank(G: np.ndarray) -> int:
-    """Rank of a Gram matrix (columns scaled first), as matrix_rank of the tall matrix would give."""
-    if G.shape[0] == 0:
-        return 0
-    d = np.sqrt(np.clip(np.diag(G), 0.0, None))
-    d = np.where(d > 0, d, 1.0)
-    w = np.linalg.eigvalsh(G / np.outer(d, d))
-    return int(np.sum(w > max(w.max(), 1e-300) * 1e-20)) if w.size else 0
-
-
 class _Round:
     """One round of candidate tests at a fixed linearisation ``r0 + A δ``: the Gram blocks of
     ``A`` (total and per CV fold) are formed once, each candidate adds only its own."""
