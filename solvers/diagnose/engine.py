@@ -39,7 +39,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import gammaincc, gammainccinv
+from scipy.special import fdtri, gammaincc, gammainccinv
 
 from solvers import linalg
 from solvers.fit import FitResult, fit
@@ -90,6 +90,8 @@ class Problem:
     generic_width: int = 3  # outputs per sample the generic extension adds to (axes, beams)
     generic_scale: float = 2.0  # the generic extension's margin over the canonical test (nulls)
     fold_sets: dict = field(default_factory=dict)  # other CV groupings by name (e.g. "time": blocks within holds)
+    dead_rtol: float = DEAD_RTOL  # a candidate column less outside the baseline's span than this: dead
+    cv_groups: np.ndarray | None = None  # the default CV folds when they are not ``groups`` (P2: rows across mountings)
     screened: list = field(default_factory=list)  # quality findings of rows left out before the effect search
 
 
@@ -187,6 +189,19 @@ def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, p
 def chi2_isf(p: float, k: int) -> float:
     """Upper-tail quantile of χ²_k."""
     return 2.0 * float(gammainccinv(k / 2.0, p))
+
+
+def deviance_quantile(problem: Problem, k: int, m: int, n: int, dof: int) -> float:
+    """Level-α/m quantile of the deviance ``n ln(RSS₀/RSS₁)`` of k added parameters with an
+    unknown noise scale and ``dof`` residual degrees of freedom left: the exact F test,
+    ``n ln(1 + k F_k,dof(1 − α/m) / dof)``, which tends to ``χ²_k(1 − α/m)`` for many rows.
+    A table of a few dozen rows (P2) would otherwise pass a candidate on noise far more often
+    than α says. Problems with several row kinds (one noise scale each) keep the χ² quantile."""
+    k = max(k, 1)
+    p = ALPHA / max(m, 1)
+    if problem.row_types is not None or dof <= 0:
+        return chi2_isf(p, k)
+    return n * math.log1p(k * float(fdtri(k, dof, 1.0 - p)) / dof)
 
 
 def selection_threshold(problem: Problem, k: int, n: int, m: int) -> float:
@@ -302,7 +317,7 @@ def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.
     _, blocks, J, perp, names, free = best
     norm = np.linalg.norm(J, axis=0)
     pnorm = np.linalg.norm(perp, axis=0)
-    keep = (norm > 0) & (pnorm > DEAD_RTOL * np.where(norm > 0, norm, 1.0))
+    keep = (norm > 0) & (pnorm > problem.dead_rtol * np.where(norm > 0, norm, 1.0))
     if not keep.any():
         return _Cand(
             c,
@@ -606,7 +621,8 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
 def _passes(problem, ev: _Eval, m: int, cv_cur: float, rank_cur: int, n: int, scale: float = 1.0) -> bool:
     if ev.k <= 0 or ev.cv >= cv_cur or n - rank_cur - ev.k < MIN_DOF:
         return False
-    return ev.D_rob > scale * problem.threshold * chi2_isf(ALPHA / max(m, 1), max(ev.k, 1))
+    q = deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k)
+    return ev.D_rob > scale * problem.threshold * q
 
 
 def _confused(best: _Eval, others: list[_Eval]) -> list[dict]:
@@ -627,7 +643,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     sigma = np.asarray(problem.sigma, dtype=float).ravel()
     problem.sigma = sigma
     n = sigma.size
-    folds = folds_of(problem.groups)
+    folds = folds_of(problem.groups if problem.cv_groups is None else problem.cv_groups)
     fold_map = {None: folds, **{k: folds_of(v) for k, v in problem.fold_sets.items()}}
     primary = None if problem.row_types is None else (np.asarray(problem.row_types) == 0)
     if baseline_fit is None:
@@ -713,7 +729,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 deviance[ev.cc.cand.name] = {
                     "D": ev.D_rob,
                     "k": ev.k,
-                    "q": chi2_isf(ALPHA / max(m, 1), max(ev.k, 1)),
+                    "q": deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k),
                     "cv_lower": bool(ev.cv < rounds.cv0(ev.cc.cand.folds)),
                     "inflation": ev.infl,
                 }
