@@ -91,6 +91,7 @@ class Problem:
     generic_scale: float = 2.0  # the generic extension's margin over the canonical test (nulls)
     fold_sets: dict = field(default_factory=dict)  # other CV groupings by name (e.g. "time": blocks within holds)
     dead_rtol: float = DEAD_RTOL  # a candidate column less outside the baseline's span than this: dead
+    cv_rows: dict = field(default_factory=dict)  # fold set name → rows its held-out RMS is taken on
     cv_groups: np.ndarray | None = None  # the default CV folds when they are not ``groups`` (P2: rows across mountings)
     screened: list = field(default_factory=list)  # quality findings of rows left out before the effect search
 
@@ -167,9 +168,10 @@ def folds_of(groups: np.ndarray) -> np.ndarray:
     return (inv * MAX_FOLDS) // len(uniq)
 
 
-def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, primary=None) -> float:
+def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, primary=None, rows=None) -> float:
     """RMS (data units) of held-out predictions of the linearised model ``r + A d``, over the
-    ``primary`` rows (all when None; auxiliary rows of other units still help the fit)."""
+    ``primary`` rows (all when None; auxiliary rows of other units still help the fit);
+    only over ``rows`` (a mask) when given."""
     out = r.copy()
     if A.shape[1]:
         G, b = A.T @ A, A.T @ r
@@ -183,6 +185,8 @@ def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, p
         e = out * float(np.median(sigma[primary]))
     else:
         e = out * sigma
+    if rows is not None:
+        e = e[rows]
     return float(np.sqrt(np.mean(e**2)))
 
 
@@ -536,8 +540,8 @@ class _Round:
     """One round of candidate tests at a fixed linearisation ``r0 + A δ``: the Gram blocks of
     ``A`` (total and per CV fold) are formed once, each candidate adds only its own."""
 
-    def __init__(self, A, r0, sigma, folds, primary):
-        self.A, self.r0, self.sigma, self.primary = A, r0, sigma, primary
+    def __init__(self, A, r0, sigma, folds, primary, rows=None):
+        self.A, self.r0, self.sigma, self.primary, self.rows = A, r0, sigma, primary, rows
         self.fold_ids = [np.flatnonzero(folds == f) for f in np.unique(folds)]
         self.GA = A.T @ A
         self.bA = A.T @ r0
@@ -566,6 +570,8 @@ class _Round:
             cv = out * float(np.median(self.sigma[self.primary]))
         else:
             cv = out * self.sigma
+        if self.rows is not None:
+            cv = cv[self.rows]
         return d, e, float(np.sqrt(np.mean(cv**2)))
 
 
@@ -582,15 +588,22 @@ class _Rounds:
         key = key if key in self.fold_map else None
         if key not in self.rounds:
             A, r0, sigma, primary = self.args
-            self.rounds[key] = _Round(A, r0, sigma, self.fold_map[key], primary)
+            folds, rows = self._folds(key)
+            self.rounds[key] = _Round(A, r0, sigma, folds, primary, rows)
         return self.rounds[key]
 
     def cv0(self, key) -> float:
         key = key if key in self.fold_map else None
         if key not in self.cvs:
             A, r0, sigma, primary = self.args
-            self.cvs[key] = cv_rms(A, r0, sigma, self.fold_map[key], primary)
+            folds, rows = self._folds(key)
+            self.cvs[key] = cv_rms(A, r0, sigma, folds, primary, rows)
         return self.cvs[key]
+
+    def _folds(self, key):
+        """(fold per row, rows the held-out RMS is taken over or None) of a fold set."""
+        f = self.fold_map[key]
+        return f if isinstance(f, tuple) else (f, None)
 
 
 def _gram_rank(G: np.ndarray) -> int:
@@ -645,6 +658,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     n = sigma.size
     folds = folds_of(problem.groups if problem.cv_groups is None else problem.cv_groups)
     fold_map = {None: folds, **{k: folds_of(v) for k, v in problem.fold_sets.items()}}
+    for k, rows in problem.cv_rows.items():  # a fold set whose held-out RMS is taken on some rows only
+        fold_map[k] = (fold_map.get(k, folds), np.asarray(rows, bool))
     primary = None if problem.row_types is None else (np.asarray(problem.row_types) == 0)
     if baseline_fit is None:
         baseline_fit = fit(problem.residual, problem.baseline, free=problem.free, sigma=sigma)
@@ -934,7 +949,23 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 cvs.append(cv_rms(Jt, _weighted(problem, st), sigma, folds, primary))
         for i, e in enumerate(effects):
             e["cv_rms_before"], e["cv_rms_after"] = cvs[i], cvs[i + 1]
-            e["gain"] = 1.0 - cvs[i + 1] / cvs[i] if cvs[i] > 0 else 0.0
+            key = picked[i][0].cand.folds
+            if key in problem.cv_rows:  # validated on some rows only (compass dip): its gain there
+                st, fr = {k: ext.params[k] for k in base_params}, dict(problem.free)
+                for oc, _ in picked[:i]:
+                    st.update({k: ext.params[k] for k in oc.params})
+                    fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+                fs, rows = fold_map[key]
+                Jb, _, _ = jacobian(problem, st, fr)
+                before = cv_rms(Jb, _weighted(problem, st), sigma, fs, primary, rows)
+                oc = picked[i][0]
+                st.update({k: ext.params[k] for k in oc.params})
+                fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+                Ja, _, _ = jacobian(problem, st, fr)
+                after = cv_rms(Ja, _weighted(problem, st), sigma, fs, primary, rows)
+                e["cv_rms_before"], e["cv_rms_after"] = before, after
+            b, a = e["cv_rms_before"], e["cv_rms_after"]
+            e["gain"] = 1.0 - a / b if b > 0 else 0.0
     if generic_effect:
         best, corr, cv_g = generic_effect
         desc = dict(best.desc)

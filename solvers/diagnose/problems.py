@@ -37,7 +37,7 @@ from solvers.tabletop import perp_basis
 THRESHOLDS = {
     "accel-tabletop": 2.2,  # 1.8 (1.7 on the independent generator's nulls): placement errors, bias instability
     "accel-centrifuge": 1.25,  # 1.0 (0.8 independent)
-    "compass": 1.65,  # 1.4 (1.75 independent): hand tremor, filtered magnetometer noise
+    "compass": 2.2,  # 1.4 (2.15 on 80 independent nulls, seeds 50000+: a hard iron that wanders over the capture)
     "gyro-drift": 1.5,  # 0.8 (1.4 on the independent generator's nulls): bias instability in the block means
     "ldv": 1.05,  # 0.95 (0.84 independent): white noise
 }
@@ -598,12 +598,12 @@ def compass_problem(
     cands = [
         _temp_candidate(T),
         _time_candidate(t),
-        Candidate("mag_accel_misalignment", {"rho": np.zeros(3)})
+        Candidate("mag_accel_misalignment", {"rho": np.zeros(3)}, folds="dip")
         if have_dip
         else Candidate(
             "mag_accel_misalignment", reason="no static accelerometer holds: the dip angle cannot be checked"
         ),
-        Candidate("field_anomaly", {"field_scale": np.array(1.0), "dc_dip": np.array(0.0)})
+        Candidate("field_anomaly", {"field_scale": np.array(1.0), "dc_dip": np.array(0.0)}, folds="dip")
         if dip_known
         else Candidate(
             "field_anomaly",
@@ -639,6 +639,10 @@ def compass_problem(
     if T is not None:
         prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
     prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), -1)])
+    if have_dip:
+        # what changes only the dip (a rotation of the magnetometer, a bent field) is validated
+        # on the held-out dip rows: the magnitudes' held-out RMS cannot move with it
+        prob.cv_rows = {"dip": prob.row_types == 1}
     if dip_known:
         prob.scale_free = {"c_dip": True}
     m0 = (y - h0) @ W0.T
