@@ -37,7 +37,7 @@ from solvers.tabletop import perp_basis
 THRESHOLDS = {
     "accel-tabletop": 2.2,  # 1.8 (1.7 on the independent generator's nulls): placement errors, bias instability
     "accel-centrifuge": 1.25,  # 1.0 (0.8 independent)
-    "compass": 2.2,  # 1.4 (2.15 on 80 independent nulls, seeds 50000+: a hard iron that wanders over the capture)
+    "compass": 2.4,  # 1.4 (2.3 on 90 independent nulls, seeds 50000+: a hard iron that wanders over the capture)
     "gyro-drift": 1.5,  # 0.8 (1.4 on the independent generator's nulls): bias instability in the block means
     "ldv": 1.05,  # 0.95 (0.84 independent): white noise
 }
@@ -639,6 +639,9 @@ def compass_problem(
     if T is not None:
         prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
     prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), -1)])
+    # F is already raised for the wandering hard iron, which a smooth function of time fits as
+    # well as a drift does: no second margin for the generic extension on top of it
+    prob.generic_scale = 1.0
     if have_dip:
         # what changes only the dip (a rotation of the magnetometer, a bent field) is validated
         # on the held-out dip rows: the magnitudes' held-out RMS cannot move with it
