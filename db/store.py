@@ -30,7 +30,7 @@ from datetime import timedelta
 
 from db import params as P
 from db.codec import capture_digest, decode_column, encode_column
-from db.integrity import anchor_hash, record_hash, settings_hash
+from db.integrity import ANCHOR_COLUMNS, SETTINGS_COLUMNS, anchor_hash, record_hash, settings_hash
 from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
 
 BUSY_TIMEOUT_S = 30.0
@@ -902,7 +902,7 @@ class Store:
 
     # Tables and columns verify reads; a missing one is a damaged schema (reported, not a crash).
     _VERIFY_SCHEMA = {
-        "devices": ("id", "model", "sensor_kinds", "notes", "interval_days", "tolerances", "created"),
+        "devices": SETTINGS_COLUMNS,  # the columns a device's settings hash covers
         "calibrations": (
             "id",
             "device_id",
@@ -929,19 +929,7 @@ class Store:
             "drift_rate_per_year",
             "due",
         ),
-        "anchors": (
-            "id",
-            "time",
-            "device_id",
-            "event",
-            "head_id",
-            "head_hash",
-            "n_calibrations",
-            "settings_hash",
-            "capture_id",
-            "prev_hash",
-            "hash",
-        ),
+        "anchors": ANCHOR_COLUMNS + ("hash",),
     }
 
     def _schema_problems(self) -> tuple[list[dict], set[str]]:
