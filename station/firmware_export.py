@@ -49,9 +49,9 @@ import json
 import math
 import re
 
-from solvers.frames import G_STANDARD_MPS2
 from solvers.units import si_factor
 from station.errors import UnsupportedError
+from station.procedures import registry
 
 FORMATS = ("json", "ardupilot", "px4", "qgc", "c-header")
 AXES = "XYZ"
@@ -105,22 +105,24 @@ def _gyro_offsets_rad_s(cal: dict, factor: float, ex: Export) -> list[float]:
     """
     raw = (cal.get("extra") or {}).get("drift_raw")
     if isinstance(raw, dict) and raw.get("axes") == "the capture's gx gy gz":
-        body = _vec(cal["params"], "drift")
-        offsets = [x * factor for x in _vec(raw, "value")]
+        body = vector(cal["params"], "drift")
+        offsets = [x * factor for x in vector(raw, "value")]
         if any(not math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-15) for a, b in zip(offsets, body)):
             ex.note("drift mapped back from P4's body frame (x fwd, y up, z right) to the sensor's gx gy gz")
         return offsets
-    return _vec(cal["params"], "drift")
+    return vector(cal["params"], "drift")
 
 
-def _vec(params: dict, name: str, n: int = 3) -> list[float]:
+def vector(params: dict, name: str, n: int = 3) -> list[float]:
+    """``params[name]`` as n floats (None → NaN); UnsupportedError when it is not an n-vector."""
     v = params.get(name)
     if not isinstance(v, list) or len(v) != n:
         raise UnsupportedError(f"the calibration has no {n}-vector '{name}'")
     return [float("nan") if x is None else float(x) for x in v]
 
 
-def _mat(params: dict, name: str) -> list[list[float]]:
+def matrix(params: dict, name: str) -> list[list[float]]:
+    """``params[name]`` as 3x3 floats (None → NaN); UnsupportedError when it is not 3x3."""
     m = params.get(name)
     if not isinstance(m, list) or len(m) != 3 or any(not isinstance(r, list) or len(r) != 3 for r in m):
         raise UnsupportedError(f"the calibration has no 3x3 matrix '{name}'")
@@ -206,45 +208,23 @@ def _check_range(fmt: str, name: str, value: float, lo: float | None, hi: float 
 
 def _accel_offsets_scales(cal: dict, meta: dict, fmt: str, ex: Export) -> tuple[list[float], list[float]]:
     """Per axis (offset m/s², scale) such that a = (a_fw - offset) * scale, a_fw in m/s²."""
-    p, procedure = cal["params"], cal["procedure"]
+    procedure = cal["procedure"]
     unit, k = _unit(meta, "accel_unit", "accel", fmt, procedure)
-    if procedure == "accel-tabletop":
-        B, M = _vec(p, "B"), _mat(p, "M")
-        scales = [M[i][i] / k for i in range(3)]
-        offsets = [-B[i] / scales[i] for i in range(3)]
-        ex.note(
-            f"from A = B + M V (P1) with V in {unit}: scale = M_ii / ({k:.6g} m/s^2 per {unit}), "
-            "offset = -B_i / scale_i (sign flipped: the firmware subtracts it before scaling)"
-        )
-        off_diag = max(abs(M[i][j] / M[i][i]) for i in range(3) for j in range(3) if i != j)
-        ex.note(
-            f"dropped: off-diagonal M_ij (cross-axis, largest |M_ij/M_ii| = {off_diag:.3g}); "
-            "the firmware has no cross-axis accelerometer terms"
-        )
-    elif procedure == "accel-centrifuge":
-        S, b = _vec(p, "S"), _vec(p, "b")
-        scales = [G_STANDARD_MPS2 / (k * S[i]) for i in range(3)]
-        offsets = [k * b[i] for i in range(3)]
-        ex.note(
-            f"from N = S Phi [f + D f^2] + b (P2), f in g, N in {unit}: scale = g0 / (S_i * {k:.6g} m/s^2 per {unit}), "
-            f"offset = b_i in m/s^2 (g0 = {G_STANDARD_MPS2} m/s^2, the firmware's)"
-        )
-        dropped = ["D (second-order, g/g^2)"]
-        if "gamma" in p:
-            dropped.append("gamma (misalignment)")
-        ex.note("dropped: " + ", ".join(dropped) + "; the firmware model is offset and scale only")
-    else:
-        raise AssertionError(procedure)
+    entry = registry.get(procedure)
+    convert = getattr(entry.load(), "firmware_accel", None) if entry is not None else None
+    if convert is None:
+        raise UnsupportedError(f"{fmt}: procedure '{procedure}' has no accelerometer offsets and scales")
+    offsets, scales, notes = convert(cal["params"], k, unit)  # the procedure module's conversion
+    for line in notes:
+        ex.note(line)
     return offsets, scales
 
 
 # --- formats ----------------------------------------------------------------------------
 
-KIND = {"accel-tabletop": "accel", "accel-centrifuge": "accel", "gyro-drift": "gyro", "compass": "mag"}
-
 
 def _kind(cal: dict, fmt: str, firmware: str) -> str:
-    kind = KIND.get(cal["procedure"])
+    kind = registry.firmware_kind(cal["procedure"])
     if kind is None:
         raise UnsupportedError(f"{fmt}: procedure '{cal['procedure']}' has no parameters in {firmware}")
     return kind
@@ -318,7 +298,7 @@ def _mag_fit(cal: dict, meta: dict, fmt: str, unit_per: float):
     import numpy as np
 
     unit, nT_per_unit = _unit(meta, "mag_unit", "mag", fmt, cal["procedure"])
-    h, W = _vec(cal["params"], "hard_iron"), _mat(cal["params"], "soft_iron")
+    h, W = vector(cal["params"], "hard_iron"), matrix(cal["params"], "soft_iron")
     c = nT_per_unit / unit_per  # firmware units per capture unit
     A = np.asarray(W, dtype=float) / (unit_per * c)
     return unit, A, c * np.asarray(h, dtype=float)
@@ -574,21 +554,13 @@ def _dims(value) -> str:
     return dims
 
 
-C_UNITS = {
-    "accel-tabletop": "V in the capture's accel_unit ({accel_unit}), A in m/s^2; B in m/s^2, M in m/s^2 per {accel_unit}",
-    "accel-centrifuge": "f in g, N in the capture's accel_unit ({accel_unit}); b in {accel_unit}, D in g/g^2",
-    "compass": "m_raw and hard_iron in the capture's mag_unit ({mag_unit}); soft_iron maps {mag_unit} to nT",
-    "gyro-drift": "rates in rad/s; body axes x forward, y up, z right",
-    "ldv": "velocities in m/s, angles in degrees",
-}
-
-
 def _c_header(cal: dict, meta: dict | None = None) -> str:
     meta = meta or {}
     guard = "STATION_CALIBRATION_" + str(cal["id"])
     prefix = (_c_ident(str(cal["device_id"])).strip("_") or "device").lower() + "_" + _c_ident(cal["procedure"]).lower()
     prefix = _c_ident(prefix)
-    units = C_UNITS.get(cal["procedure"], "SI unless the name says otherwise").format(
+    entry = registry.get(cal["procedure"])
+    units = (entry.units_note if entry is not None else registry.Procedure.units_note).format(
         accel_unit=meta.get("accel_unit", "?"), mag_unit=meta.get("mag_unit", "?")
     )
     lines = [f"/* {_c_comment(line)} */" for line in _header(cal)]

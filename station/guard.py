@@ -84,41 +84,26 @@ def check_extremes(capture) -> None:
     check_columns(capture)
 
 
-# Columns a procedure reads as measurements: present but empty in every row is a refusal.
-_MEASURED = {
-    "accel-tabletop": ("ax", "ay", "az"),
-    "accel-centrifuge": ("ax", "ay", "az", "speed_rad_s"),
-    "compass": ("mx", "my", "mz", "ax", "ay", "az", "gx", "gy", "gz"),
-    "gyro-drift": ("gx", "gy", "gz", "ax", "ay", "az", "ref_gx", "ref_gy", "ref_gz"),
-    "ldv": (
-        "vl1",
-        "vl2",
-        "vl3",
-        "vx",
-        "vy",
-        "vz",
-        "vn",
-        "ve",
-        "vd",
-        "roll_deg",
-        "pitch_deg",
-        "yaw_deg",
-        "wx",
-        "wy",
-        "wz",
-    ),
-}
-_BEAMS = ("vl1", "vl2", "vl3")
+def _procedure_module(capture):
+    """The capture's procedure module (registry), None for a procedure the station lacks."""
+    from station.procedures import registry
+
+    entry = registry.get(capture.procedure)
+    return entry.load() if entry is not None else None
 
 
 def check_columns(capture) -> None:
-    """Refuse a measured column that holds no value at all, and an LDV beam that never changes.
+    """Refuse a measured column that holds no value at all, and a column that must change but
+    never does (an LDV beam).
 
     An all-empty column (a sensor that gave nothing) and a beam reading one value throughout
     (a dead or saturated beam: its angles and scale factor have nothing to come from) cannot
-    support the procedure; the refusal names the column instead of returning nulls.
+    support the procedure; the refusal names the column instead of returning nulls. Which
+    columns: the procedure module's ``MEASURED`` and ``DEAD_IF_CONSTANT``.
     """
-    for name in _MEASURED.get(capture.procedure, ()):
+    module = _procedure_module(capture)
+    dead_if_constant = getattr(module, "DEAD_IF_CONSTANT", ())
+    for name in getattr(module, "MEASURED", ()):
         col = capture.columns.get(name)
         if col is None or len(col) == 0:
             continue
@@ -130,30 +115,17 @@ def check_columns(capture) -> None:
                 capture.header_line,
                 f"column '{name}' is empty in every row: the sensor gave no data for it",
             )
-        if capture.procedure == "ldv" and name in _BEAMS and len(arr) > 1 and finite.min() == finite.max():
-            raise UnsupportedError(
-                f"{capture.path or 'capture'}: ldv: beam '{name}' reads {finite[0] + 0.0:g} m/s in every "
-                "row: a dead or saturated beam, its angles and scale factor cannot be determined"
-            )
-
-
-# The parameters each procedure exists to deliver; any of them non-finite is a refusal. Others
-# may be null on purpose (the IGRF reference without a place, the Earth rate without a latitude).
-_CORE = {
-    "accel-tabletop": ("B", "M"),
-    "accel-centrifuge": ("S", "b", "D"),
-    "compass": ("hard_iron", "soft_iron"),
-    "gyro-drift": ("drift",),
-    "ldv": ("beam1", "beam2", "beam3"),
-}
+        if name in dead_if_constant and len(arr) > 1 and finite.min() == finite.max():
+            says = module.DEAD_IF_CONSTANT_SAYS.format(name=name, value=finite[0] + 0.0)
+            raise UnsupportedError(f"{capture.path or 'capture'}: {capture.procedure}: {says}")
 
 
 def check_result(capture, result: dict) -> None:
-    """Refuse a result whose core parameters (``_CORE``) are not all finite numbers: a fit the
-    data cannot carry is a refusal naming the parameter, not a result with nulls. A result
-    whose every uncertainty is null is refused too.
+    """Refuse a result whose core parameters (the procedure module's ``CORE_PARAMS``) are not
+    all finite numbers: a fit the data cannot carry is a refusal naming the parameter, not a
+    result with nulls. A result whose every uncertainty is null is refused too.
     """
-    core = _CORE.get(capture.procedure)
+    core = getattr(_procedure_module(capture), "CORE_PARAMS", None)
 
     def walk(value, name):
         if isinstance(value, dict):

@@ -19,18 +19,10 @@ from html import escape
 import numpy as np
 
 from station import __version__
-from station.procedures.review import assess, flatten, p1_residuals, result_unit
+from station.procedures import registry
+from station.procedures.review import assess, flatten, result_unit
 
 K_COVERAGE = 2.0
-
-# procedure -> (short name, what it calibrates, source document)
-PROCEDURES = {
-    "accel-tabletop": ("P1", "accelerometer triad on a level table, 12+ static positions", "CN102636665A"),
-    "accel-centrifuge": ("P2", "accelerometer triad on a centrifuge (quadratic coefficient)", "Wang & Li 2021"),
-    "compass": ("P3", "electronic compass: hard and soft iron against the IGRF field", "CN102252689A"),
-    "gyro-drift": ("P4", "MEMS gyro drift at power-up", "source 003 (gyro drift at power-up)"),
-    "ldv": ("P5", "three-beam laser velocimeter mounting angles and scale factor", "CN102706365A"),
-}
 
 # capture metadata keys the report states (entered on Connect, or in the capture file)
 META_OPERATOR = ("operator",)
@@ -134,51 +126,14 @@ def _e(x) -> str:
 def _figures(rep: dict) -> list[tuple[str, str]]:
     """(caption, svg) for each figure this calibration has data for."""
     from station import svgplot
-    from station.capture import Capture
 
     cal, result, meta, columns = rep["calibration"], rep["calibration"]["result"], rep["meta"], rep["columns"]
     proc = cal["procedure"]
     figs = []
-    if proc == "accel-tabletop" and all(c in columns for c in ("ax", "ay", "az")):
-        positions = result.get("positions")
-        if isinstance(positions, list) and positions and "residual_mps2" in positions[0]:
-            # a time series: the fit's own per-position holds
-            res = [(str(p.get("label") or i + 1), None, p["residual_mps2"]) for i, p in enumerate(positions)]
-        else:  # a table of averages: one row per position
-            res = p1_residuals(Capture(dict(meta), dict(columns), None), result)
-        if res:
-            figs.append(
-                (
-                    "Residual per position: |B + M V| − g, mm/s² (the norm the fit makes equal to local g)",
-                    svgplot.bar_plot(
-                        [r[0] for r in res],
-                        [1000.0 * r[2] for r in res],
-                        y_label="|B + M V| − g  [mm/s²]",
-                        title="residual per position",
-                    ),
-                )
-            )
-    if proc == "compass" and all(c in columns for c in ("mx", "my", "mz")):
-        try:
-            W = np.asarray(result["params"]["soft_iron"], dtype=float)
-            h = np.asarray(result["params"]["hard_iron"], dtype=float)
-            m = np.column_stack([columns[c] for c in ("mx", "my", "mz")]) - h
-            m = m[np.isfinite(m).all(axis=1)] @ W.T
-            d = m / np.linalg.norm(m, axis=1, keepdims=True)
-            cov = result.get("coverage")
-            cap = (
-                f" ({100 * cov:.0f} % of the sphere within 30° of a visited direction)"
-                if isinstance(cov, float)
-                else ""
-            )
-            figs.append(
-                (
-                    f"Coverage: calibrated field directions on the unit sphere{cap}",
-                    svgplot.sphere_plot(d.tolist(), title="compass coverage"),
-                )
-            )
-        except (KeyError, TypeError, ValueError):
-            pass
+    entry = registry.get(proc)
+    own = getattr(entry.load(), "report_figures", None) if entry is not None else None
+    if own is not None:  # the procedure's own figures (its module's report_figures)
+        figs += own(result, meta, columns)
     allan = result.get("allan")
     if isinstance(allan, dict) and allan.get("tau_s") and allan.get("adev_rad_s"):
         tau = allan["tau_s"]
@@ -264,7 +219,8 @@ def render_html(rep: dict) -> str:
     result = cal["result"]
     a = rep["assessment"]
     proc = cal["procedure"]
-    short, what, source = PROCEDURES.get(proc, (proc, proc, "—"))
+    entry = registry.get(proc)
+    short, what, source = (entry.code, entry.description, entry.source) if entry is not None else (proc, proc, "—")
     review = cal.get("review") or {}
     decision = review.get("decision") or ("accepted" if cal["accepted"] else "rejected")
     word = review.get("verdict") or a.verdict

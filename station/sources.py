@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solvers.simulate import NOMINAL_ACCEL_SCALE_V_PER_MPS2, NOMINAL_ACCEL_ZERO_V
+from station.procedures import registry
 
 
 @dataclass
@@ -47,125 +48,6 @@ class SourceStats:
     last_error: str = ""
 
 
-class CentrifugeImu:
-    """A simulated P2 bench (``station sim``'s centrifuge): the triad of
-    ``solvers.simulate.simulate_centrifuge(seed)`` (its S, b, D, outputs in g) mounted in
-    one of ``solvers.simulate.centrifuge_orientations`` and spun at ω on radius R.
-
-    ``set_orientation("k@ω")`` asks for orientation k (1-based) at ω rad/s; the bench then
-    changes over like a real one: a speed change ramps for ``ramp_s``; a new orientation
-    first spins down, is handled (remounted) for ``handle_s``, then spins up. The speed it
-    holds is the set point within its controller's error (1e-8 relative, 1σ, a new one each
-    time it is set: an encoder-locked drive; P2 needs it, since |f| moves twice the relative
-    speed error and at 36 g a 1e-6 error is already 7e-5 g, ten times a row's averaged
-    noise); the gyro on the table (1e-3 rad/s noise per sample) measures it. Specific force
-    in the table frame (radial out, tangential, up) is ``(−ω²R/g, 0, 1)`` g (the simulator's
-    convention); the forward model is ``solvers.models.accel.forward``. The gyro reads the
-    table's rate, ``(0, 0, ω)`` in the table frame, in rad/s."""
-
-    def __init__(
-        self,
-        *,
-        seed: int = 0,
-        rate_hz: float = 100.0,
-        radius_m: float = 1.0,
-        g_mps2: float = 9.8,
-        noise_g: float = 1e-4,
-        ramp_s: float = 2.0,
-        handle_s: float = 3.0,
-    ):
-        from solvers.simulate import centrifuge_orientations, simulate_centrifuge
-
-        sim = simulate_centrifuge(seed, radius_m=radius_m, g_mps2=g_mps2)
-        self.params = {k: np.asarray(sim.truth[k], float) for k in ("S", "b", "D")}
-        self.orients = centrifuge_orientations(20)
-        self.rate_hz, self.radius_m, self.g_mps2 = float(rate_hz), float(radius_m), float(g_mps2)
-        self.noise_g, self.ramp_s, self.handle_s = noise_g, ramp_s, handle_s
-        self.speed_error = 1e-8
-        self.rng = np.random.default_rng(seed + 1)
-        self.device_id = f"SIM-CFG-{seed:04d}"
-        self.units = {"accel_unit": "g", "gyro_unit": "rad/s"}
-        self.site: dict = {}
-        self.positions = [f"{k}@0" for k in range(1, 21)]
-        self._i = 0  # samples produced
-        self._plan = [(-math.inf, 1, 0.0, 1, 0.0, "steady")]  # (t0, k0, w0, k1, w1, kind)
-        self.k, self.w = 1, 0.0
-
-    def truth(self) -> dict:
-        return {k: v.tolist() for k, v in self.params.items()}
-
-    def set_orientation(self, name: str) -> None:
-        k_s, _, w_s = str(name).partition("@")
-        k, w = int(k_s), float(w_s or 0.0)
-        if not 1 <= k <= len(self.orients) or not (math.isfinite(w) and w >= 0):
-            raise ValueError(f"unknown centrifuge setting {name!r}: 'k@omega', k in 1..{len(self.orients)}")
-        t = self._i / self.rate_hz
-        k0, w0 = (float(x[0]) for x in self._state(t)[:2])
-        k0 = int(k0)
-        w = w * (1.0 + self.speed_error * self.rng.normal()) if w > 0 else 0.0
-        if k == k0:
-            self._plan = [(t, k0, w0, k, w, "ramp")]
-        else:
-            t1, t2 = t + self.ramp_s, t + 2 * self.ramp_s + self.handle_s
-            self._plan = [
-                (t, k0, w0, k0, 0.0, "ramp"),
-                (t1, k, 0.0, k, 0.0, "handle"),
-                (t1 + self.handle_s, k, 0.0, k, w, "ramp"),
-                (t2, k, w, k, w, "steady"),
-            ]
-        self.k, self.w = k, w
-
-    def _state(self, t):
-        """(orientation, ω, handled) at device times t (arrays)."""
-        t = np.atleast_1d(np.asarray(t, float))
-        k = np.full(len(t), self._plan[0][3], dtype=int)
-        w = np.full(len(t), self._plan[0][4], dtype=float)
-        handled = np.zeros(len(t), dtype=bool)
-        for t0, k0, w0, k1, w1, kind in self._plan:  # noqa: B007
-            on = t >= t0
-            k[on] = k1
-            if kind == "ramp":
-                x = np.clip((t[on] - t0) / self.ramp_s, 0.0, 1.0)
-                w[on] = w0 + (w1 - w0) * x
-            else:
-                w[on] = w1
-            handled[on] = kind == "handle"
-        return k, w, handled
-
-    def read(self, n: int) -> dict:
-        from solvers.models import accel as accel_model
-
-        t = (self._i + np.arange(n)) / self.rate_hz
-        self._i += n
-        k, w, handled = self._state(t)
-        f = np.empty((n, 3))
-        g = np.empty((n, 3))
-        for kk in np.unique(k):
-            sel = k == kk
-            C_t_b = self.orients[kk - 1]
-            ws = w[sel]
-            f_t = np.column_stack([-ws * ws * self.radius_m / self.g_mps2, np.zeros_like(ws), np.ones_like(ws)])
-            f[sel] = f_t @ C_t_b  # rows of C_t_bᵀ f_t
-            g[sel] = np.column_stack([np.zeros_like(ws), np.zeros_like(ws), ws]) @ C_t_b
-        shake = np.where(handled[:, None], self.rng.normal(scale=0.3, size=(n, 3)), 0.0)
-        y = accel_model.forward(f + shake, self.params) + self.rng.normal(scale=self.noise_g, size=(n, 3))
-        g = g + self.rng.normal(scale=1e-3, size=(n, 3))
-        nan = np.full(n, np.nan)
-        return {
-            "t_s": t,
-            "ax": y[:, 0],
-            "ay": y[:, 1],
-            "az": y[:, 2],
-            "gx": g[:, 0],
-            "gy": g[:, 1],
-            "gz": g[:, 2],
-            "mx": nan,
-            "my": nan,
-            "mz": nan,
-            "temp_c": np.full(n, 25.0),
-        }
-
-
 class SimSource:
     """The built-in simulated bench device (``solvers.simulate.LiveImu``), paced by a clock.
 
@@ -186,28 +68,19 @@ class SimSource:
         speed: float = 1.0,
         clock=time.monotonic,
         max_batch_s: float = 1.0,
-        procedure: str = "accel-tabletop",
+        procedure: str = registry.DEFAULT,
     ):
-        from solvers.simulate import LiveImu
+        # a procedure's guide module makes its device (a guided run: its procedure's)
+        entry, reference = registry.device_of(procedure)
+        guide = entry.guide() if entry is not None else None
+        if guide is None:
+            from solvers.simulate import SimulationError
 
-        if procedure == "accel-centrifuge":
-            self.imu = CentrifugeImu(seed=seed, rate_hz=rate_hz)
-        elif procedure == "ldv":  # the vehicle with INS/DGPS and the LDV, 10 Hz
-            from solvers.simulate import LiveVehicle
-
-            rate_hz = 10.0
-            self.imu = LiveVehicle(seed=seed, rate_hz=rate_hz)
-        else:  # the gyro noise (Allan) run holds the unit still like P4; mode A adds the reference
-            self.imu = LiveImu(
-                procedure="gyro-drift" if procedure in ("gyro-noise", "gyro-reference") else procedure,
-                seed=seed,
-                rate_hz=rate_hz,
-                hold_s=1e9,
-                reference=procedure == "gyro-reference",
-            )
+            raise SimulationError(f"unknown procedure {procedure!r}")
+        self.imu = guide.live_device(seed=seed, rate_hz=rate_hz, reference=reference)
         self.procedure = procedure
         self.positions = list(self.imu.positions)
-        self.rate_hz = float(rate_hz)
+        self.rate_hz = float(self.imu.rate_hz)
         self.speed = float(speed)
         self.clock = clock
         self.max_batch_s = max_batch_s
@@ -221,13 +94,11 @@ class SimSource:
         self._rate_window: list[tuple[float, int]] = []
 
     @staticmethod
-    def device_id_for(seed: int, procedure: str = "accel-tabletop") -> str:
-        """The id the simulated device reports (as solvers.simulate.LiveImu names it)."""
-        if procedure == "accel-centrifuge":
-            return f"SIM-CFG-{seed:04d}"  # CentrifugeImu, simulate_centrifuge's triad
-        if procedure in ("gyro-noise", "gyro-reference"):
-            procedure = "gyro-drift"
-        return f"SIM-{procedure.upper()[:3]}-{seed:04d}"
+    def device_id_for(seed: int, procedure: str = registry.DEFAULT) -> str:
+        """The id the simulated device reports (its guide's live_device), without making it:
+        the registry's ``sim_device`` prefix and the seed."""
+        entry, _ = registry.device_of(procedure)
+        return f"{entry.sim_device}-{seed:04d}" if entry is not None else f"SIM-{procedure.upper()[:3]}-{seed:04d}"
 
     def start(self) -> SimSource:
         self._t0 = self.clock()

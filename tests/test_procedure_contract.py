@@ -118,6 +118,9 @@ from station.procedures.contract import DiagnosisInput
 
 MODEL = "T = T_ref + c"
 DIAGNOSIS_BASELINE = True
+MEASURED = ("temp_c", "ref_temp_c")
+CORE_PARAMS = ("c",)
+PARAM_UNITS = {"c": "°C"}
 
 
 def prepare(capture):
@@ -171,6 +174,9 @@ def test_a_sixth_procedure_is_one_entry_and_one_module(tmp_path, monkeypatch, ca
         screen=None,
         result_unit="°C",
         doc="toy",
+        description="thermometer against a reference thermometer, one offset",
+        source="toy document T-6",
+        units_note="temperatures in degrees Celsius",
     )
     monkeypatch.setattr(registry, "PROCEDURES", registry.PROCEDURES + (toy,))
     rng = np.random.default_rng(6)
@@ -192,3 +198,88 @@ def test_a_sixth_procedure_is_one_entry_and_one_module(tmp_path, monkeypatch, ca
     opt = next(a for a in sub.choices["simulate"]._actions if "--procedure" in a.option_strings)
     assert "thermo-offset" in opt.choices
     assert "toy_thermo" in sys.modules
+
+    # the per-procedure facts the rest of the station reads come from the entry and the module
+    db = tmp_path / "station.db"
+    assert main(["devices", "add", "TH-1", "--kind", "temp", "--db", str(db)]) == 0  # its sensor kind
+    assert main(["calibrate", str(path), "--save", "--db", str(db)]) == 0
+    capsys.readouterr()
+    assert main(["export", "1", "--format", "c-header", "--db", str(db)]) == 0
+    assert "/* units: temperatures in degrees Celsius */" in capsys.readouterr().out  # units_note
+    assert main(["export", "1", "--format", "px4", "--db", str(db)]) == 2  # no firmware parameters
+    assert "procedure 'thermo-offset' has no parameters in PX4" in capsys.readouterr().err
+    page = tmp_path / "report.html"
+    assert main(["report", "1", "--out", str(page), "--db", str(db)]) == 0
+    html = page.read_text(encoding="utf-8")
+    assert "thermometer against a reference thermometer, one offset" in html and "toy document T-6" in html
+
+    from station.procedures.review import param_unit
+
+    assert param_unit(result, "c") == "°C"  # the module's PARAM_UNITS
+    empty = tmp_path / "empty.csv"
+    empty.write_text("\n".join(lines[:4] + [f"{a:.3f},,{c:.5f}" for a, c in zip(t, ref)]) + "\n", encoding="utf-8")
+    assert main(["calibrate", str(empty)]) == 2  # the module's MEASURED: an all-empty column
+    assert "column 'temp_c' is empty in every row" in capsys.readouterr().err
+
+
+def test_no_table_keyed_by_a_procedure_outside_the_registry():
+    """A string equal to a procedure's name or code (P1…P5), docstrings aside, stands only in
+    the registry and in that procedure's own files (module, guide, screen): no table or
+    switch elsewhere is keyed by a procedure."""
+    import ast
+
+    by_word = {p.name: p for p in ENTRIES} | {p.code: p for p in ENTRIES}
+    found = set()
+    for path in sorted(p for d in ("station", "db") for p in (ROOT / d).rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        docs = {
+            id(n.body[0].value)
+            for n in ast.walk(tree)
+            if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+            and n.body
+            and isinstance(n.body[0], ast.Expr)
+            and isinstance(n.body[0].value, ast.Constant)
+        }
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.Constant) and isinstance(node.value, str)) or id(node) in docs:
+                continue
+            entry = by_word.get(node.value)
+            if entry is None or rel == "station/procedures/registry.py":
+                continue
+            own = {f"station/procedures/{entry.stem}.py", f"station/procedures/{entry.stem}_guide.py"}
+            if rel in own | {f"station/screens/{entry.stem}.py"}:
+                continue
+            found.add((rel, node.value, node.lineno))
+    assert not found, "\n".join(f"{f}:{n}: {w!r}" for f, w, n in sorted(found))
+
+
+def test_the_lists_the_cli_offers_are_the_registry():
+    """demo, import and devices offer what the registry says (built when the parser is)."""
+    from station.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+
+    def choices(command, option, parser=None):
+        parser = parser or sub.choices[command]
+        return tuple(next(a for a in parser._actions if option in a.option_strings).choices)
+
+    assert choices("demo", "--procedure") == registry.demos()
+    assert set(registry.demos()) == {p.name for p in ENTRIES if p.screen} | {"gyro-reference"}
+    assert choices("import", "--procedure") == registry.importable() == ("accel-tabletop", "compass", "gyro-drift")
+    devices = sub.choices["devices"]
+    add = next(a for a in devices._actions if a.__class__.__name__ == "_SubParsersAction").choices["add"]
+    assert choices(None, "--kind", add) == registry.sensor_kinds() == ("accel", "mag", "gyro", "ldv")
+
+
+@pytest.mark.parametrize("name", list(registry.guided()))
+def test_the_simulated_device_is_the_guides_and_says_the_registrys_id(name):
+    """Every guided run's simulated device comes from its procedure's guide module and
+    reports the id the Connect screen shows before starting it (registry ``sim_device``)."""
+    from station.sources import SimSource
+
+    src = SimSource(seed=7, procedure=name, clock=lambda: 0.0)
+    assert src.device_id == SimSource.device_id_for(7, name)
+    entry, reference = registry.device_of(name)
+    assert entry.guide().__name__ == f"station.procedures.{entry.stem}_guide"
+    assert bool(getattr(src.imu, "reference", False)) == reference

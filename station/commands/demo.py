@@ -10,8 +10,6 @@ import sys
 
 from station.procedures import registry
 
-DEMOS = ("accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "gyro-reference", "ldv")
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -23,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
     p.add_argument(
         "--procedure",
-        choices=DEMOS,
+        choices=registry.demos(),
         default=registry.DEFAULT,
         help="P1 (default), P2 on the centrifuge (60 rows: try --speed 10), the P3 compass sweep, "
         "P4 on a static base or with a reference IMU (180 s: try --speed 6), P5 LDV on a vehicle "
@@ -57,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     from station.sources import SimSource
 
     device = SimSource(seed=args.seed, speed=args.speed, procedure=args.procedure)
-    average_s = max(args.average_s, 180.0) if args.procedure in ("gyro-drift", "gyro-reference") else args.average_s
+    entry, _ = registry.device_of(args.procedure)
+    average_s = max(args.average_s, getattr(entry.guide(), "DEMO_MIN_AVERAGE_S", 0.0))
     app = make_app(
         None if args.no_save else db_path(args),
         device=device,
@@ -71,118 +70,24 @@ def run(args: argparse.Namespace) -> int:
 
 
 def headless(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
-    """The demo without a screen, on a simulated clock (runs as fast as the CPU allows)."""
+    """The demo without a screen, on a simulated clock (runs as fast as the CPU allows): the
+    procedure's guide module drives it (``headless_demo``)."""
+    from station.sources import SimSource
+
     out = out if out is not None else sys.stdout  # looked up now: stdout may have been replaced
-    if getattr(args, "procedure", "accel-tabletop") == "compass":
-        return headless_compass(args, db, out, max_device_s)
-    if getattr(args, "procedure", "accel-tabletop") == "ldv":
-        return headless_ldv(args, db, out, max_device_s)
-    if getattr(args, "procedure", "accel-tabletop") != "accel-tabletop":
+    name = getattr(args, "procedure", registry.DEFAULT)
+    entry = registry.get(name)
+    guide_module = entry.guide() if entry is not None else None
+    if not hasattr(guide_module, "headless_demo"):
         from station.errors import UnsupportedError
 
-        raise UnsupportedError("demo --headless: P1, P3 (compass) and P5 (ldv) only; run the others in the TUI")
-    from station.procedures.tabletop_guide import GuideConfig, P1Guide, ScriptedOperator
-    from station.sources import SimSource
-
+        have = [p for p in registry.PROCEDURES if p.screen and hasattr(p.guide(), "headless_demo")]
+        said = [p.code if p.name == registry.DEFAULT else f"{p.code} ({p.name})" for p in have]
+        listed = ", ".join(said[:-1]) + " and " + said[-1] if len(said) > 1 else "".join(said)
+        raise UnsupportedError(f"demo --headless: {listed} only; run the others in the TUI")
     now = [0.0]
-    src = SimSource(seed=args.seed, speed=1.0, clock=lambda: now[0]).start()
-    guide = P1Guide(
-        sample_rate_hz=src.rate_hz,
-        accel_unit=src.units["accel_unit"],
-        device_id=src.device_id,
-        config=GuideConfig(average_s=args.average_s, settle_s=1.0),
-        nominal=src.nominal,
-        site=src.site,
-    )
-    operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=6.0)
-    last_phase = None
-    last_capture_t = 0.0
-    while guide.phase not in ("done", "aborted") and now[0] < max_device_s:
-        now[0] += 0.05
-        b = src.drain()
-        if b is None:
-            continue
-        st = guide.update(b.t_s, b.accel, b.gyro, b.temp_c)
-        operator.step(guide, st.t_s)
-        for kind, detail in guide.take_events():
-            print(f"{st.t_s:7.1f} s  {kind:<9} {detail}", file=out)
-            last_capture_t = st.t_s
-        # the unit still sits at the previous position right after a capture: not a mistake
-        if st.wrong_face and st.is_still and st.t_s - last_capture_t > 4.0 and last_phase != "wrong":
-            print(f"{st.t_s:7.1f} s  wrong face up at {st.step_name} ({st.angle_deg:.0f}°)", file=out)
-            last_phase = "wrong"
-        elif not st.wrong_face and last_phase == "wrong":
-            last_phase = None
-    if guide.phase != "done":
-        from station.errors import UnsupportedError
-
-        raise UnsupportedError(f"demo did not finish within {max_device_s:g} s of device time")
-    return _calibrate_and_save(guide, src.device_id, db, out)
-
-
-def headless_compass(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
-    """The P3 sweep without a screen: the scripted operator visits the sphere positions."""
-    out = out if out is not None else sys.stdout
-    from station.procedures.compass_guide import CompassConfig, CompassGuide, SweepOperator, sweep_positions
-    from station.sources import SimSource
-
-    now = [0.0]
-    src = SimSource(seed=args.seed, clock=lambda: now[0], procedure="compass").start()
-    guide = CompassGuide(
-        sample_rate_hz=src.rate_hz,
-        units=src.units,
-        device_id=src.device_id,
-        site=src.site,
-        config=CompassConfig(min_s=30.0),
-    )
-    operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
-    shown = -1
-    while guide.phase == "sweep" and now[0] < max_device_s:
-        now[0] += 0.05
-        b = src.drain()
-        if b is None:
-            continue
-        st = guide.update(b.t_s, b.accel, b.gyro, b.mag, b.temp_c)
-        operator.step(guide, st.t_s)
-        if int(st.coverage * 10) != shown:
-            shown = int(st.coverage * 10)
-            print(f"{st.t_s:7.1f} s  coverage {100 * st.coverage:3.0f} %", file=out)
-    return _calibrate_and_save(guide, src.device_id, db, out)
-
-
-def headless_ldv(args, db: str | None, out=None, max_device_s: float = 900.0) -> int:
-    """P5 without a screen: the demo driver sets off straight, then turns and climbs; the
-    conditioning of the velocity set is printed as it builds."""
-    import numpy as np
-
-    out = out if out is not None else sys.stdout
-    from station.procedures.ldv_guide import Driver, LdvGuide
-    from station.sources import SimSource
-
-    now = [0.0]
-    src = SimSource(seed=args.seed, clock=lambda: now[0], procedure="ldv").start()
-    guide = LdvGuide(sample_rate_hz=src.rate_hz, device_id=src.device_id, site=src.site)
-    driver = Driver(src.place)
-    verdict = None
-    while guide.phase == "record" and now[0] < max_device_s:
-        now[0] += 0.5
-        b = src.drain()
-        if b is None:
-            continue
-        e = b.extra
-        st = guide.update(
-            b.t_s,
-            np.column_stack([e["vl1"], e["vl2"], e["vl3"]]),
-            np.column_stack([e["vx"], e["vy"], e["vz"]]),
-            b.gyro,
-            b.temp_c,
-        )
-        said = driver.step(guide, st.t_s)
-        if said:
-            print(f"{st.t_s:7.1f} s  driver: {said}", file=out)
-        if st.verdict != verdict:
-            verdict = st.verdict
-            print(f"{st.t_s:7.1f} s  conditioning {verdict} (κ {st.kappa:.3g}, {st.n_epochs} moving epochs)", file=out)
+    src = SimSource(seed=args.seed, speed=1.0, clock=lambda: now[0], procedure=name).start()
+    guide = guide_module.headless_demo(src, now, average_s=args.average_s, out=out, max_device_s=max_device_s)
     return _calibrate_and_save(guide, src.device_id, db, out)
 
 

@@ -8,6 +8,7 @@ import sys
 
 from station.commands._dbutil import add_db_option, fmt_num, open_store, print_json, require_device
 from station.errors import InputError
+from station.procedures import registry
 from station.textsafe import safe
 
 
@@ -25,8 +26,8 @@ def register(subparsers) -> None:
         action="append",
         dest="kinds",
         metavar="KIND",
-        choices=("accel", "gyro", "mag", "ldv"),
-        help="sensor kind (accel, gyro, mag, ldv); repeatable",
+        choices=registry.sensor_kinds(),
+        help=f"sensor kind ({', '.join(registry.sensor_kinds())}); repeatable",
     )
     add.add_argument(
         "--tolerance",

@@ -24,7 +24,8 @@ import numpy as np
 
 from station.capture import Capture
 from station.errors import InputError
-from station.importers.options import IMPORTABLE, PRIMARY
+from station.importers.options import primary as primary_kind
+from station.procedures import registry
 
 KINDS = ("accel", "gyro", "mag")
 COLUMNS = {
@@ -150,12 +151,13 @@ def to_capture(
     kinds: tuple[str, ...] | None = None,
 ) -> Capture:
     """The capture of ``imported`` for ``procedure``: rows at the primary sensor's samples."""
-    if procedure not in PRIMARY:
+    primary = primary_kind(procedure)
+    if primary is None:
         raise InputError(
             None,
             None,
             f"--procedure {procedure!r}: import makes captures for "
-            f"{', '.join(IMPORTABLE)} (a log holds no LDV or centrifuge-speed data)",
+            f"{', '.join(registry.importable())} (a log holds no LDV or centrifuge-speed data)",
         )
     streams = {}
     for kind in KINDS:
@@ -170,7 +172,6 @@ def to_capture(
                         f"{int(bad.any(axis=1).sum())} {NAME[kind]} samples hold infinite values: left empty"
                     )
                 streams[kind] = s
-    primary = PRIMARY[procedure]
     if primary not in streams:
         found = ", ".join(NAME[k] for k in streams) or "no accelerometer, gyro or magnetometer"
         raise InputError(path, None, f"{procedure} needs {NAME[primary]} data; this file has {found}")

@@ -13,11 +13,11 @@ from station.errors import InputError
 from station.importers._common import NAME, Imported, to_capture
 from station.importers.options import (
     FORMATS,
-    IMPORTABLE,
-    PRIMARY,
     ImportOptions,
     options_from_args,
+    primary,
 )
+from station.procedures import registry
 
 _SUFFIX = {".ulg": "px4", ".bin": "ardupilot", ".tlog": "tlog"}
 
@@ -66,7 +66,7 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
             path,
             instance=opts.instance,
             source=opts.source,
-            primary=PRIMARY.get(opts.procedure or ""),
+            primary=primary(opts.procedure),
         )
     if fmt in ("ardupilot", "tlog"):
         from station.importers import ardupilot
@@ -87,10 +87,10 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
 def infer_procedure(path, imported: Imported, fmt: str) -> str:
     """The procedure when the data leave only one (a magnetometer alone: compass)."""
     kinds = set(imported.streams)
-    if kinds == {"mag"}:
-        return "compass"
+    if kinds == {"mag"}:  # a magnetometer alone: the one procedure that calibrates it
+        return next(p for p in registry.importable() if primary(p) == "mag")
     have = ", ".join(NAME[k] for k in imported.streams) or "no sensor data"
-    fits = [p for p in IMPORTABLE if PRIMARY[p] in kinds] or list(IMPORTABLE)
+    fits = [p for p in registry.importable() if primary(p) in kinds] or list(registry.importable())
     raise InputError(
         path,
         None,
@@ -117,7 +117,7 @@ def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     if device is None and fmt == "px4":
         from station.importers import px4
 
-        device = px4.default_device(imported, PRIMARY[procedure])
+        device = px4.default_device(imported, primary(procedure))
     return to_capture(path, imported, procedure, device=device), list(imported.warnings)
 
 

@@ -7,16 +7,21 @@ import argparse
 from dataclasses import dataclass, field
 
 from station.errors import InputError
+from station.procedures import registry
 
 FORMATS = ("px4", "ardupilot", "tlog", "ros", "euroc", "csv")
 FORMAT_HELP = (
     "px4 (.ulg), ardupilot (.bin DataFlash), tlog (.tlog MAVLink), ros (.bag, .db3, .mcap, "
     "rosbag2 folder), euroc (EuRoC/Kalibr imu CSV), csv (any CSV with --map/--unit)"
 )
-# Procedures a log can feed: the sensor each calibrates gives the capture's rows.
-PRIMARY = {"accel-tabletop": "accel", "compass": "mag", "gyro-drift": "gyro"}
-IMPORTABLE = tuple(PRIMARY)
 TARGETS = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c")
+
+
+def primary(procedure: str | None) -> str | None:
+    """The sensor kind whose samples are the rows of ``procedure``'s capture made from a log;
+    None when a log cannot feed it (registry: ``from_logs``)."""
+    p = registry.get(procedure)
+    return p.sensor_kind if p is not None and p.from_logs else None
 
 
 @dataclass
@@ -64,11 +69,12 @@ def add_arguments(parser: argparse.ArgumentParser, *, for_import: bool = False) 
     g.add_argument(
         "--procedure",
         dest="import_procedure",
-        choices=IMPORTABLE,
+        choices=registry.importable(),
         default=None,
         required=for_import,
-        help="the procedure the data are for (sets the capture's rows: accel samples for "
-        "accel-tabletop, gyro for gyro-drift, mag for compass)"
+        help="the procedure the data are for (sets the capture's rows: "
+        + ", ".join(f"{primary(p)} samples for {p}" for p in registry.importable())
+        + ")"
         + ("" if for_import else "; needed for a log unless it holds only magnetometer data"),
     )
     g.add_argument(

@@ -29,6 +29,14 @@ from station.procedures.contract import DiagnosisInput
 
 MODEL = "N = S Φ [f + D f∘f] + b,  |f|² = A² + 1,  A = ω²R/g"
 DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
+# station.guard: columns read as measurements (present but empty in every row: refused), and
+# the parameters this procedure exists to deliver (any of them non-finite: refused)
+MEASURED = ("ax", "ay", "az", "speed_rad_s")
+CORE_PARAMS = ("S", "b", "D")
+# station.procedures.review: each parameter block's unit; the residual above which the model
+# does not describe the data at all (5 % of g, in the result's g)
+PARAM_UNITS = {"S": "g per g", "b": "g", "D": "g/g^2", "gamma": "rad"}
+RESIDUAL_LIMIT = 0.05
 BASES = ("exact", "exact-gamma", "paper", "paper-3rd")
 
 
@@ -317,3 +325,24 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         "a row that disagrees with the norm condition: a transcription error or a mounting that shifted",
         group_kind="mounting",
     )
+
+
+def firmware_accel(params: dict, k: float, unit: str) -> tuple[list[float], list[float], list[str]]:
+    """P2 as a flight firmware's accelerometer offsets and scales (``station.firmware_export``:
+    ``a = (a_fw - offset) * scale``, a_fw in m/s²); ``k`` m/s² per ``unit`` of the capture's N.
+    Returns (offsets m/s², scales, notes for the export's comments)."""
+    from solvers.frames import G_STANDARD_MPS2
+    from station.firmware_export import vector
+
+    S, b = vector(params, "S"), vector(params, "b")
+    scales = [G_STANDARD_MPS2 / (k * S[i]) for i in range(3)]
+    offsets = [k * b[i] for i in range(3)]
+    dropped = ["D (second-order, g/g^2)"]
+    if "gamma" in params:
+        dropped.append("gamma (misalignment)")
+    notes = [
+        f"from N = S Phi [f + D f^2] + b (P2), f in g, N in {unit}: scale = g0 / (S_i * {k:.6g} m/s^2 per {unit}), "
+        f"offset = b_i in m/s^2 (g0 = {G_STANDARD_MPS2} m/s^2, the firmware's)",
+        "dropped: " + ", ".join(dropped) + "; the firmware model is offset and scale only",
+    ]
+    return offsets, scales, notes

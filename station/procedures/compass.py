@@ -30,6 +30,12 @@ from station.procedures.contract import DiagnosisInput
 
 MODEL = "m = W (m_raw - h), |m| = F (IGRF total field at the capture's place and date)"
 DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
+# station.guard: columns read as measurements (present but empty in every row: refused), and
+# the parameters this procedure exists to deliver (any of them non-finite: refused)
+MEASURED = ("mx", "my", "mz", "ax", "ay", "az", "gx", "gy", "gz")
+CORE_PARAMS = ("hard_iron", "soft_iron")
+# station.procedures.review: each parameter block's unit ({mag_unit}: the result's, else raw)
+PARAM_UNITS = {"hard_iron": "{mag_unit}", "soft_iron": "nT per {mag_unit}"}
 REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
 METHODS = ("rls", "batch", "ellipsoid")
 
@@ -371,3 +377,30 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         t[good], y[good], W0, h0, F, incl, noise_raw=noise, temp_c=None if temp is None else temp[good], **static
     )
     return DiagnosisInput(prob, {}, "a sample far off the field sphere: a magnetic disturbance nearby or a glitch")
+
+
+def report_figures(result: dict, meta: dict, columns: dict) -> list[tuple[str, str]]:
+    """The calibration report's figures of P3 (``station.report``): (caption, svg) of the
+    calibrated field directions on the unit sphere."""
+    from station import svgplot
+
+    figs: list[tuple[str, str]] = []
+    if not all(c in columns for c in ("mx", "my", "mz")):
+        return figs
+    try:
+        W = np.asarray(result["params"]["soft_iron"], dtype=float)
+        h = np.asarray(result["params"]["hard_iron"], dtype=float)
+        m = np.column_stack([columns[c] for c in ("mx", "my", "mz")]) - h
+        m = m[np.isfinite(m).all(axis=1)] @ W.T
+        d = m / np.linalg.norm(m, axis=1, keepdims=True)
+        cov = result.get("coverage")
+        cap = f" ({100 * cov:.0f} % of the sphere within 30° of a visited direction)" if isinstance(cov, float) else ""
+        figs.append(
+            (
+                f"Coverage: calibrated field directions on the unit sphere{cap}",
+                svgplot.sphere_plot(d.tolist(), title="compass coverage"),
+            )
+        )
+    except (KeyError, TypeError, ValueError):
+        pass
+    return figs

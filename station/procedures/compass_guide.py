@@ -246,3 +246,37 @@ class SweepOperator:
         self.place(self.positions[self._k])
         self._next = t_s + self.hold_s + 2.5  # the simulated move takes 2.5 s
         return self.positions[self._k]
+
+
+def live_device(*, seed: int, rate_hz: float, reference: bool = False):
+    """The simulated bench device for this procedure (``station.sources.SimSource``'s): the
+    unit held where the operator puts it (``solvers.simulate.LiveImu``)."""
+    from solvers.simulate import LiveImu
+
+    return LiveImu(procedure="compass", seed=seed, rate_hz=rate_hz, hold_s=1e9, reference=reference)
+
+
+def headless_demo(src, now: list, *, average_s: float, out, max_device_s: float = 900.0) -> CompassGuide:
+    """``station demo --headless --procedure compass``: the scripted operator visits the
+    sphere positions on the started simulated device ``src`` (clock ``now[0]``, advanced
+    here); coverage lines go to ``out``. Returns the guide when the sweep is over."""
+    guide = CompassGuide(
+        sample_rate_hz=src.rate_hz,
+        units=src.units,
+        device_id=src.device_id,
+        site=src.site,
+        config=CompassConfig(min_s=30.0),
+    )
+    operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
+    shown = -1
+    while guide.phase == "sweep" and now[0] < max_device_s:
+        now[0] += 0.05
+        b = src.drain()
+        if b is None:
+            continue
+        st = guide.update(b.t_s, b.accel, b.gyro, b.mag, b.temp_c)
+        operator.step(guide, st.t_s)
+        if int(st.coverage * 10) != shown:
+            shown = int(st.coverage * 10)
+            print(f"{st.t_s:7.1f} s  coverage {100 * st.coverage:3.0f} %", file=out)
+    return guide

@@ -7,6 +7,15 @@ baseline calibration into the problem the diagnosis engine (``solvers.diagnose``
 A module satisfies :class:`ProcedureModule` structurally (``isinstance`` works on it: the
 protocol is runtime-checkable); ``tests/test_procedure_contract.py`` checks every module of
 the registry.
+
+Optional constants the station's checks read where a module has them: ``MEASURED`` (columns
+read as measurements) and ``CORE_PARAMS`` (parameters it exists to deliver) for
+``station.guard``; ``DEAD_IF_CONSTANT``/``DEAD_IF_CONSTANT_SAYS`` (columns that must change);
+``PARAM_UNITS`` (a unit per parameter block, or per ``.<leaf>``), ``RESIDUAL_LIMIT`` (in the
+result unit) and ``ZERO_IS_A_RESULT`` for ``station.procedures.review``. Optional functions:
+``report_figures(result, meta, columns)`` (``station.report``), ``results_lines(result)`` and
+``position_residuals(capture, result)`` (the TUI's Results), ``firmware_accel(params, k,
+unit)`` (``station.firmware_export``).
 """
 
 from __future__ import annotations

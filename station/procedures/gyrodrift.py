@@ -41,6 +41,14 @@ from station.procedures.contract import DiagnosisInput
 
 MODEL = "ω' = ω − ε (P4); mode B: ε^b = ω̄^b − C_b_n ω_ie^n, body x fwd, y up, z right, nav N-U-E"
 DIAGNOSIS_BASELINE = False  # diagnosis_input fits its own baseline (the drift is a block of the problem)
+# station.guard: columns read as measurements (present but empty in every row: refused), and
+# the parameters this procedure exists to deliver (any of them non-finite: refused)
+MEASURED = ("gx", "gy", "gz", "ax", "ay", "az", "ref_gx", "ref_gy", "ref_gz")
+CORE_PARAMS = ("drift",)
+# station.procedures.review: each parameter block's unit; a drift indistinguishable from zero
+# is a good gyro, not a failed fit
+PARAM_UNITS = {"drift": "rad/s", "earth_rate_body": "rad/s"}
+ZERO_IS_A_RESULT = True
 
 # Devices whose captures are known to break the conventions (their SOURCE.md).
 KNOWN_CONVENTIONS = {

@@ -19,6 +19,9 @@ import numpy as np
 
 from solvers.stillness import StillnessTracker
 
+# `station demo`: P4 averages 180 s at the least (the drift is not resolved in less)
+DEMO_MIN_AVERAGE_S = 180.0
+
 
 @dataclass
 class HoldConfig:
@@ -208,24 +211,9 @@ class HoldGuide:
         cols = {"t": t, "ax": a[:, 0], "ay": a[:, 1], "az": a[:, 2], "gx": g[:, 0], "gy": g[:, 1], "gz": g[:, 2]}
         if np.isfinite(temp).any():
             cols["temp_c"] = temp
-        meta = {
-            "station-capture": "1",
-            "procedure": self.procedure,
-            "device": self.device_id or "unknown",
-            "gyro_mode": "static",
-            "heading_deg": repr(float(self.config.heading_deg)),
-            "date": self.started[:10],
-            "sample_rate_hz": repr(self.sample_rate_hz),
-        }
-        if self.config.frame:
-            meta["frame"] = self.config.frame
-        for k in ("accel_unit", "gyro_unit"):
-            if self.units.get(k):
-                meta[k] = self.units[k]
-        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
-            if key in self.site:
-                meta[key] = repr(float(self.site[key]))
-        meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
+        meta = _capture_meta(
+            self, {"gyro_mode": "static", "heading_deg": repr(float(self.config.heading_deg))}, extra_meta
+        )
         return Capture(meta=meta, columns=cols)
 
 
@@ -445,22 +433,36 @@ class ReferenceGuide:
         }
         if np.isfinite(temp).any():
             cols["temp_c"] = temp
-        meta = {
-            "station-capture": "1",
-            "procedure": self.procedure,
-            "device": self.device_id or "unknown",
-            "gyro_mode": "reference",
-            "reference_drift_deg_h": repr(float(self.config.reference_drift_deg_h)),
-            "date": self.started[:10],
-            "sample_rate_hz": repr(self.sample_rate_hz),
-        }
-        if self.config.frame:
-            meta["frame"] = self.config.frame
-        for k in ("accel_unit", "gyro_unit"):
-            if self.units.get(k):
-                meta[k] = self.units[k]
-        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
-            if key in self.site:
-                meta[key] = repr(float(self.site[key]))
-        meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
-        return Capture(meta=meta, columns=cols)
+        mode = {"gyro_mode": "reference", "reference_drift_deg_h": repr(float(self.config.reference_drift_deg_h))}
+        return Capture(meta=_capture_meta(self, mode, extra_meta), columns=cols)
+
+
+def _capture_meta(guide, mode: dict[str, str], extra_meta: dict | None) -> dict[str, str]:
+    """A P4 guide's capture metadata, in the file's order: format, procedure, device, the
+    mode's keys, date, rate, frame, units, site, then ``extra_meta``."""
+    meta = {
+        "station-capture": "1",
+        "procedure": guide.procedure,
+        "device": guide.device_id or "unknown",
+        **mode,
+        "date": guide.started[:10],
+        "sample_rate_hz": repr(guide.sample_rate_hz),
+    }
+    if guide.config.frame:
+        meta["frame"] = guide.config.frame
+    for k in ("accel_unit", "gyro_unit"):
+        if guide.units.get(k):
+            meta[k] = guide.units[k]
+    for key in ("latitude_deg", "longitude_deg", "altitude_m"):
+        if key in guide.site:
+            meta[key] = repr(float(guide.site[key]))
+    meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
+    return meta
+
+
+def live_device(*, seed: int, rate_hz: float, reference: bool = False):
+    """The simulated bench device for this procedure (``station.sources.SimSource``'s): the
+    unit held where the operator puts it (``solvers.simulate.LiveImu``)."""
+    from solvers.simulate import LiveImu
+
+    return LiveImu(procedure="gyro-drift", seed=seed, rate_hz=rate_hz, hold_s=1e9, reference=reference)

@@ -47,6 +47,34 @@ from station.procedures.contract import DiagnosisInput
 
 MODEL = "V_L = (1 + δK)(V_x cos α + V_y cos β + V_z cos γ) (P5), per beam"
 DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
+# station.guard: columns read as measurements (present but empty in every row: refused), and
+# the parameters this procedure exists to deliver (any of them non-finite: refused)
+MEASURED = (
+    "vl1",
+    "vl2",
+    "vl3",
+    "vx",
+    "vy",
+    "vz",
+    "vn",
+    "ve",
+    "vd",
+    "roll_deg",
+    "pitch_deg",
+    "yaw_deg",
+    "wx",
+    "wy",
+    "wz",
+)
+CORE_PARAMS = ("beam1", "beam2", "beam3")
+# station.guard: a beam reading one value in every row is dead or saturated (refused)
+# station.procedures.review: a unit by parameter name (".dK": the dK of any beam)
+PARAM_UNITS = {".dK": "1"}
+DEAD_IF_CONSTANT = ("vl1", "vl2", "vl3")
+DEAD_IF_CONSTANT_SAYS = (
+    "beam '{name}' reads {value:g} m/s in every row: a dead or saturated beam, its angles and scale "
+    "factor cannot be determined"
+)
 NAV_COLS = ("vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg")
 BODY_COLS = ("vx", "vy", "vz")
 
@@ -271,3 +299,12 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     X0 = np.array([base["fit"][f"beam{j + 1}"]["X"] for j in range(3)], float)
     prob = DP.ldv_problem(pick("t"), v_b, vl, X0, temp_c=pick("temp_c"), omega_body_rad_s=W)
     return DiagnosisInput(prob, {"rows": rows}, "a sample far off: a dropout of the LDV or the reference")
+
+
+def results_lines(result: dict) -> list[str]:
+    """What the TUI's Results summary says of P5 beyond the residual: the velocity set's
+    conditioning."""
+    cond = (result.get("params") or {}).get("condition_number")
+    if isinstance(cond, (int, float)):
+        return [f"velocity set: cond(HᵀH) = {cond:.3g} (well enough conditioned to separate the angles)"]
+    return []

@@ -280,3 +280,40 @@ class Driver:
             self.place("turns")
             return "turns"
         return None
+
+
+def live_device(*, seed: int, rate_hz: float, reference: bool = False):
+    """The simulated vehicle with INS/DGPS and the LDV (``solvers.simulate.LiveVehicle``) at
+    its own 10 Hz, whatever ``rate_hz`` asks."""
+    from solvers.simulate import LiveVehicle
+
+    return LiveVehicle(seed=seed, rate_hz=10.0)
+
+
+def headless_demo(src, now: list, *, average_s: float, out, max_device_s: float = 900.0) -> LdvGuide:
+    """``station demo --headless --procedure ldv``: the demo driver sets off straight, then
+    turns and climbs, on the started simulated vehicle ``src`` (clock ``now[0]``, advanced
+    here); the conditioning of the velocity set goes to ``out`` as it builds."""
+    guide = LdvGuide(sample_rate_hz=src.rate_hz, device_id=src.device_id, site=src.site)
+    driver = Driver(src.place)
+    verdict = None
+    while guide.phase == "record" and now[0] < max_device_s:
+        now[0] += 0.5
+        b = src.drain()
+        if b is None:
+            continue
+        e = b.extra
+        st = guide.update(
+            b.t_s,
+            np.column_stack([e["vl1"], e["vl2"], e["vl3"]]),
+            np.column_stack([e["vx"], e["vy"], e["vz"]]),
+            b.gyro,
+            b.temp_c,
+        )
+        said = driver.step(guide, st.t_s)
+        if said:
+            print(f"{st.t_s:7.1f} s  driver: {said}", file=out)
+        if st.verdict != verdict:
+            verdict = st.verdict
+            print(f"{st.t_s:7.1f} s  conditioning {verdict} (κ {st.kappa:.3g}, {st.n_epochs} moving epochs)", file=out)
+    return guide

@@ -8,7 +8,9 @@ numerics. A procedure's code lives under one file stem (``docs/ARCHITECTURE.md``
 - ``station/procedures/<stem>.py``: the module of :class:`station.procedures.contract.ProcedureModule`
   (``prepare``, ``calibrate``, ``format_text``, ``diagnosis_input``);
 - ``station/procedures/<stem>_guide.py`` and ``station/screens/<stem>.py`` when it is guided
-  in the TUI; ``docs/<doc>.md``; ``tests/test_<stem>.py``.
+  in the TUI; ``docs/<doc>.md``; ``tests/test_<stem>.py``. The guide module also holds its
+  simulated live device (``live_device``) and, optionally, its scripted demo without a screen
+  (``headless_demo``, ``DEMO_MIN_AVERAGE_S``).
 
 Adding a procedure: one :class:`Procedure` entry in :data:`PROCEDURES` and its module.
 ``solvers/simulate.py`` keeps its own list (solvers never import the station); a test holds
@@ -35,10 +37,29 @@ class Procedure:
     screen: str | None  # "module:Class" of its guided TUI screen, None when not guided
     result_unit: str  # the unit of its calibrate result's ``residual_rms``
     doc: str  # its page under docs/
+    # what the calibration report says of it: what it calibrates, how; the document it follows
+    description: str = ""
+    source: str = "—"
+    # its result maps onto flight-firmware parameters of its sensor kind (station export
+    # --format px4|ardupilot|qgc); the conversion is station/firmware_export.py's
+    firmware: bool = False
+    # a flight log or foreign CSV can feed it (station import; calibrate/diagnose --procedure):
+    # the samples of its sensor kind become the capture's rows
+    from_logs: bool = False
+    # the units line of its C header (station export --format c-header); {accel_unit} and
+    # {mag_unit} are the capture's
+    units_note: str = "SI unless the name says otherwise"
+    # the simulated device's id prefix ("SIM-ACC" → SIM-ACC-0007 for seed 7): what the Connect
+    # screen shows before the device is started (its guide's live_device reports the same)
+    sim_device: str = ""
 
     def load(self):
         """The procedure's module (imported on first use)."""
         return importlib.import_module(self.module)
+
+    def guide(self):
+        """Its UI-free guide module (``station.procedures.<stem>_guide``), None when not guided."""
+        return importlib.import_module(f"station.procedures.{self.stem}_guide") if self.screen else None
 
 
 @dataclass(frozen=True)
@@ -50,6 +71,9 @@ class GuidedRun:
     name: str
     title: str
     screen: str
+    procedure: str  # the procedure whose simulated device (and guide) it runs
+    reference: bool = False  # that device carries a reference IMU
+    demo: bool = False  # `station demo --procedure <name>` offers it
 
 
 PROCEDURES: tuple[Procedure, ...] = (
@@ -64,6 +88,12 @@ PROCEDURES: tuple[Procedure, ...] = (
         screen="station.screens.tabletop:ProcedureScreen",
         result_unit="m/s²",
         doc="accel",
+        description="accelerometer triad on a level table, 12+ static positions",
+        source="CN102636665A",
+        firmware=True,
+        from_logs=True,
+        units_note="V in the capture's accel_unit ({accel_unit}), A in m/s^2; B in m/s^2, M in m/s^2 per {accel_unit}",
+        sim_device="SIM-ACC",
     ),
     Procedure(
         name="accel-centrifuge",
@@ -76,6 +106,11 @@ PROCEDURES: tuple[Procedure, ...] = (
         screen="station.screens.centrifuge:CentrifugeScreen",
         result_unit="g",
         doc="accel",
+        description="accelerometer triad on a centrifuge (quadratic coefficient)",
+        source="Wang & Li 2021",
+        firmware=True,
+        units_note="f in g, N in the capture's accel_unit ({accel_unit}); b in {accel_unit}, D in g/g^2",
+        sim_device="SIM-CFG",
     ),
     Procedure(
         name="compass",
@@ -88,6 +123,12 @@ PROCEDURES: tuple[Procedure, ...] = (
         screen="station.screens.compass:CompassScreen",
         result_unit="nT",
         doc="compass",
+        description="electronic compass: hard and soft iron against the IGRF field",
+        source="CN102252689A",
+        firmware=True,
+        from_logs=True,
+        units_note="m_raw and hard_iron in the capture's mag_unit ({mag_unit}); soft_iron maps {mag_unit} to nT",
+        sim_device="SIM-COM",
     ),
     Procedure(
         name="gyro-drift",
@@ -100,6 +141,12 @@ PROCEDURES: tuple[Procedure, ...] = (
         screen="station.screens.gyrodrift:HoldScreen",
         result_unit="rad/s",
         doc="gyrodrift",
+        description="MEMS gyro drift at power-up",
+        source="source 003 (gyro drift at power-up)",
+        firmware=True,
+        from_logs=True,
+        units_note="rates in rad/s; body axes x forward, y up, z right",
+        sim_device="SIM-GYR",
     ),
     Procedure(
         name="ldv",
@@ -112,12 +159,24 @@ PROCEDURES: tuple[Procedure, ...] = (
         screen="station.screens.ldv:LdvScreen",
         result_unit="m/s",
         doc="ldv",
+        description="three-beam laser velocimeter mounting angles and scale factor",
+        source="CN102706365A",
+        units_note="velocities in m/s, angles in degrees",
+        sim_device="SIM-LDV",
     ),
 )
 
 GUIDED_RUNS: tuple[GuidedRun, ...] = (
-    GuidedRun("gyro-reference", "P4 gyro drift, reference IMU", "station.screens.gyrodrift:ReferenceScreen"),
-    GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen"),
+    GuidedRun(
+        "gyro-reference",
+        "P4 gyro drift, reference IMU",
+        "station.screens.gyrodrift:ReferenceScreen",
+        procedure="gyro-drift",
+        reference=True,
+        demo=True,
+    ),
+    # the gyro noise (Allan) run holds the unit still like P4
+    GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen", procedure="gyro-drift"),
 )
 
 DEFAULT = PROCEDURES[0].name
@@ -139,6 +198,43 @@ def sensor_kinds() -> tuple[str, ...]:
 def get(name: str | None) -> Procedure | None:
     """The procedure called ``name``, None when there is none."""
     return next((p for p in PROCEDURES if p.name == name), None)
+
+
+def firmware_kind(name: str | None) -> str | None:
+    """The sensor kind whose flight-firmware parameters ``name``'s result sets; None: none."""
+    p = get(name)
+    return p.sensor_kind if p is not None and p.firmware else None
+
+
+def importable() -> tuple[str, ...]:
+    """The procedures a flight log or foreign CSV can feed (``station import --procedure``)."""
+    return tuple(p.name for p in PROCEDURES if p.from_logs)
+
+
+def short_code(name):
+    """P1…P5 for a procedure's name (the name itself when it is none of the registry's)."""
+    p = get(name)
+    return p.code if p is not None else name
+
+
+def guided_run(name: str | None) -> GuidedRun | None:
+    """The guided run (not itself a procedure) called ``name``, None when there is none."""
+    return next((r for r in GUIDED_RUNS if r.name == name), None)
+
+
+def device_of(name: str) -> tuple[Procedure | None, bool]:
+    """The procedure whose simulated device procedure or guided run ``name`` runs, and
+    whether that device carries a reference IMU ((None, False) for an unknown name)."""
+    run = guided_run(name)
+    if run is not None:
+        return get(run.procedure), run.reference
+    return get(name), False
+
+
+def demos() -> tuple[str, ...]:
+    """What ``station demo --procedure`` offers: the guided procedures, then the guided runs
+    marked ``demo``."""
+    return tuple(p.name for p in PROCEDURES if p.screen) + tuple(r.name for r in GUIDED_RUNS if r.demo)
 
 
 def result_title(name: str | None) -> str:

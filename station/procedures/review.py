@@ -116,19 +116,18 @@ def param_unit(result: dict, name: str) -> str:
         return "nT"
     if leaf.endswith("_mps"):
         return "m/s"
-    proc = result.get("procedure")
-    if proc == "compass":
-        mag = result.get("mag_unit") or "raw"
-        return {"hard_iron": mag, "soft_iron": f"nT per {mag}"}.get(block, "")
-    if proc == "accel-tabletop":
-        return {"B": "m/s^2", "M": "m/s^2 per raw unit"}.get(block, "")
-    if proc == "accel-centrifuge":
-        return {"S": "g per g", "b": "g", "D": "g/g^2", "gamma": "rad"}.get(block, "")
-    if proc == "gyro-drift" and block in ("drift", "earth_rate_body"):
-        return "rad/s"
-    if proc == "ldv" and leaf == "dK":
-        return "1"
-    return ""
+    # the procedure module's PARAM_UNITS: by block, or ".<leaf>" for a leaf of any block
+    table = getattr(_procedure_module(result), "PARAM_UNITS", {})
+    unit = table.get(block, table.get("." + leaf))
+    return "" if unit is None else unit.format(mag_unit=result.get("mag_unit") or "raw")
+
+
+def _procedure_module(result: dict):
+    """The result's procedure module (registry), None for a procedure the station lacks."""
+    from station.procedures import registry
+
+    entry = registry.get(result.get("procedure"))
+    return entry.load() if entry is not None else None
 
 
 def result_unit(result: dict) -> str:
@@ -160,7 +159,9 @@ def fit_checks(result: dict, chi2_limit: float = 100.0) -> list[str]:
         out.append("the fit returned non-finite values")
     pairs = [(v, sigmas[k]) for k, v in values.items() if _finite(v) and _finite(sigmas.get(k))]
     # A gyro drift indistinguishable from zero is a good gyro, not a failed fit.
-    if result.get("procedure") != "gyro-drift" and len(pairs) >= 2 and all(s >= abs(v) for v, s in pairs):
+    module = _procedure_module(result)
+    zero_is_a_result = getattr(module, "ZERO_IS_A_RESULT", False)
+    if not zero_is_a_result and len(pairs) >= 2 and all(s >= abs(v) for v, s in pairs):
         out.append(
             f"every parameter's σ is larger than its value ({len(pairs)} of {len(pairs)}): "
             "the data determine none of them"
@@ -169,9 +170,9 @@ def fit_checks(result: dict, chi2_limit: float = 100.0) -> list[str]:
     # 5 % of g on an accelerometer means the model does not describe the data at all (a
     # working triad on a bench leaves milli-g; e.g. a centrifuge that never turned).
     res = result.get("residual_rms")
-    bound = {"accel-tabletop": 0.05 * 9.80665, "accel-centrifuge": 0.05}.get(result.get("procedure"))
+    bound = getattr(module, "RESIDUAL_LIMIT", None)
     if bound is not None and _finite(res) and res > bound:
-        unit = "m/s²" if result.get("procedure") == "accel-tabletop" else "g"
+        unit = result_unit({"procedure": result.get("procedure")})
         out.append(
             f"residual {res:.3g} {unit} RMS is above 5 % of g ({bound:.3g} {unit}): "
             "the model does not describe these data"

@@ -33,6 +33,14 @@ from station.procedures.contract import DiagnosisInput
 
 MODEL = "A = B + M V"
 DIAGNOSIS_BASELINE = True  # diagnosis_input starts from the calibrate result
+# station.guard: columns read as measurements (present but empty in every row: refused), and
+# the parameters this procedure exists to deliver (any of them non-finite: refused)
+MEASURED = ("ax", "ay", "az")
+CORE_PARAMS = ("B", "M")
+# station.procedures.review: each parameter block's unit; the residual above which the model
+# does not describe the data at all (5 % of g, in the result's m/s²)
+PARAM_UNITS = {"B": "m/s^2", "M": "m/s^2 per raw unit"}
+RESIDUAL_LIMIT = 0.05 * 9.80665
 METHODS = {
     "norm": ("norm", "auto"),
     "upper-triangular": ("norm", "upper-triangular"),
@@ -396,3 +404,60 @@ def _moved_positions(capture) -> list[dict]:
         return Q.moved_positions(st.still_mask, capture.columns["position"])
     except (SolverError, ValueError):
         return []
+
+
+def report_figures(result: dict, meta: dict, columns: dict) -> list[tuple[str, str]]:
+    """The calibration report's figures of P1 (``station.report``): (caption, svg) of the
+    residual per position."""
+    from station import svgplot
+    from station.capture import Capture
+    from station.procedures.review import p1_residuals
+
+    figs: list[tuple[str, str]] = []
+    if not all(c in columns for c in ("ax", "ay", "az")):
+        return figs
+    positions = result.get("positions")
+    if isinstance(positions, list) and positions and "residual_mps2" in positions[0]:
+        # a time series: the fit's own per-position holds
+        res = [(str(p.get("label") or i + 1), None, p["residual_mps2"]) for i, p in enumerate(positions)]
+    else:  # a table of averages: one row per position
+        res = p1_residuals(Capture(dict(meta), dict(columns), None), result)
+    if res:
+        figs.append(
+            (
+                "Residual per position: |B + M V| − g, mm/s² (the norm the fit makes equal to local g)",
+                svgplot.bar_plot(
+                    [r[0] for r in res],
+                    [1000.0 * r[2] for r in res],
+                    y_label="|B + M V| − g  [mm/s²]",
+                    title="residual per position",
+                ),
+            )
+        )
+    return figs
+
+
+def position_residuals(capture, result: dict) -> list[tuple[str, float, float]]:
+    """The TUI's Results table of P1: per position (name, |B + M V| [m/s²], |B + M V| − g [m/s²])."""
+    from station.procedures.review import p1_residuals
+
+    return p1_residuals(capture, result)
+
+
+def firmware_accel(params: dict, k: float, unit: str) -> tuple[list[float], list[float], list[str]]:
+    """P1 as a flight firmware's accelerometer offsets and scales (``station.firmware_export``:
+    ``a = (a_fw - offset) * scale``, a_fw in m/s²); ``k`` m/s² per ``unit`` of the capture's V.
+    Returns (offsets m/s², scales, notes for the export's comments)."""
+    from station.firmware_export import matrix, vector
+
+    B, M = vector(params, "B"), matrix(params, "M")
+    scales = [M[i][i] / k for i in range(3)]
+    offsets = [-B[i] / scales[i] for i in range(3)]
+    off_diag = max(abs(M[i][j] / M[i][i]) for i in range(3) for j in range(3) if i != j)
+    notes = [
+        f"from A = B + M V (P1) with V in {unit}: scale = M_ii / ({k:.6g} m/s^2 per {unit}), "
+        "offset = -B_i / scale_i (sign flipped: the firmware subtracts it before scaling)",
+        f"dropped: off-diagonal M_ij (cross-axis, largest |M_ij/M_ii| = {off_diag:.3g}); "
+        "the firmware has no cross-axis accelerometer terms",
+    ]
+    return offsets, scales, notes

@@ -40,6 +40,10 @@ from solvers.stillness import StillnessTracker
 from station.fileio import atomic_write_json
 from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
+# the guide keeps its captured positions in a resume file (station.procedures.state): an
+# aborted run resumes (the TUI says so before it aborts)
+RESUMABLE = True
+
 STATE_VERSION = 1
 PHASES = ("noise", "place", "settle", "average", "done", "aborted")
 STATUSES = ("pending", "captured", "skipped")
@@ -755,3 +759,49 @@ class ScriptedOperator:
             self.place(where)
             return where
         return None
+
+
+def live_device(*, seed: int, rate_hz: float, reference: bool = False):
+    """The simulated bench device for this procedure (``station.sources.SimSource``'s): the
+    unit held where the operator puts it (``solvers.simulate.LiveImu``)."""
+    from solvers.simulate import LiveImu
+
+    return LiveImu(procedure="accel-tabletop", seed=seed, rate_hz=rate_hz, hold_s=1e9, reference=reference)
+
+
+def headless_demo(src, now: list, *, average_s: float, out, max_device_s: float = 900.0) -> P1Guide:
+    """``station demo --headless``: the scripted operator (one wrong face on purpose) runs
+    P1 on the started simulated device ``src``, whose clock reads ``now[0]`` (advanced here,
+    as fast as the CPU allows); event lines go to ``out``. Returns the finished guide."""
+    from station.errors import UnsupportedError
+
+    guide = P1Guide(
+        sample_rate_hz=src.rate_hz,
+        accel_unit=src.units["accel_unit"],
+        device_id=src.device_id,
+        config=GuideConfig(average_s=average_s, settle_s=1.0),
+        nominal=src.nominal,
+        site=src.site,
+    )
+    operator = ScriptedOperator(src.place, reaction_s=1.0, mistakes={"y_down": "y_up"}, mistake_s=6.0)
+    last_phase = None
+    last_capture_t = 0.0
+    while guide.phase not in ("done", "aborted") and now[0] < max_device_s:
+        now[0] += 0.05
+        b = src.drain()
+        if b is None:
+            continue
+        st = guide.update(b.t_s, b.accel, b.gyro, b.temp_c)
+        operator.step(guide, st.t_s)
+        for kind, detail in guide.take_events():
+            print(f"{st.t_s:7.1f} s  {kind:<9} {detail}", file=out)
+            last_capture_t = st.t_s
+        # the unit still sits at the previous position right after a capture: not a mistake
+        if st.wrong_face and st.is_still and st.t_s - last_capture_t > 4.0 and last_phase != "wrong":
+            print(f"{st.t_s:7.1f} s  wrong face up at {st.step_name} ({st.angle_deg:.0f}°)", file=out)
+            last_phase = "wrong"
+        elif not st.wrong_face and last_phase == "wrong":
+            last_phase = None
+    if guide.phase != "done":
+        raise UnsupportedError(f"demo did not finish within {max_device_s:g} s of device time")
+    return guide

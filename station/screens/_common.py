@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
+from station.procedures import registry
 
 
 def start_source(src) -> bool:
@@ -70,9 +71,10 @@ class GuidedScreenMixin:
         """`a`: abort only once the operator confirms (y / Enter; n / Esc keeps the run)."""
         from station.screens.decide import ConfirmScreen
 
+        entry = registry.get(self.app.session.procedure)
         keep = (
             " (captured positions are kept: Resume continues)"
-            if self.app.session.procedure == "accel-tabletop"
+            if entry is not None and getattr(entry.guide(), "RESUMABLE", False)
             else " (nothing of this run is saved)"
         )
         self.app.push_screen(ConfirmScreen("Abort this run?" + keep), lambda yes: self.action_abort() if yes else None)

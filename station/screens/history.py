@@ -20,9 +20,7 @@ from station.widgets.title import TitleBar
 
 def _short(procedure: str) -> str:
     """P1..P5 for the table (the procedure's name is on its Results and in the report)."""
-    return {"accel-tabletop": "P1", "accel-centrifuge": "P2", "compass": "P3", "gyro-drift": "P4", "ldv": "P5"}.get(
-        procedure, procedure
-    )
+    return registry.short_code(procedure)
 
 
 from station.messages import StoreLoaded  # noqa: E402

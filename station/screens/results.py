@@ -17,7 +17,7 @@ from textual.widgets import DataTable, Footer, Static
 from station.formatting import num
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
-from station.procedures.review import assess, p1_residuals, param_rows, result_unit, review_record
+from station.procedures.review import assess, param_rows, result_unit, review_record
 from station.screens.export import export_files
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar
@@ -120,9 +120,9 @@ class ResultsScreen(Screen):
             f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"
         ]
         lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
-        cond = (r.get("params") or {}).get("condition_number") if r.get("procedure") == "ldv" else None
-        if isinstance(cond, (int, float)):
-            lines.append(f"velocity set: cond(HᵀH) = {cond:.3g} (well enough conditioned to separate the angles)")
+        entry = registry.get(r.get("procedure"))
+        module = entry.load() if entry is not None else None
+        lines += [tui_markup(x) for x in getattr(module, "results_lines", lambda _r: [])(r)]  # its own lines
         lines += [f"[yellow]warning: {tui_markup(w)}[/]" for w in (r.get("warnings") or [])]
         if a.failed:
             lines.append("[b]s[/] decides: save as rejected (reason) or accept as override (note) · [b]n[/] re-do")
@@ -164,7 +164,7 @@ class ResultsScreen(Screen):
             lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
             summary.update("\n".join(lines))
         residuals.clear(columns=True)
-        rows_res = p1_residuals(self.capture, r) if r.get("procedure") == "accel-tabletop" else []
+        rows_res = getattr(module, "position_residuals", lambda _c, _r: [])(self.capture, r)
         residuals.display = bool(rows_res)
         residuals.add_columns("position", "|B+MV| m/s²", "residual mm/s²")
         for name, norm, res in rows_res:
