@@ -113,6 +113,20 @@ def _gyro_offsets_rad_s(cal: dict, factor: float, ex: Export) -> list[float]:
     return vector(cal["params"], "drift")
 
 
+def _set_gyro_offsets(cal: dict, meta: dict, fmt: str, ex: Export, use: InUse, off_names, label: str) -> None:
+    """Set the firmware's gyro offsets ``off_names`` (rad/s, the sensor's axes): the drift,
+    composed with the offsets in use when the board had corrected the data (``label`` names
+    them in the note: OFF = OFF_in_use + drift)."""
+    _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
+    drift = _gyro_offsets_rad_s(cal, factor, ex)
+    if use.corrected:
+        o_old = use.need(off_names, "gyro offsets")
+        drift = [o_old[i] + drift[i] for i in range(3)]
+        ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift")
+    for name, v in zip(off_names, drift):
+        ex.set(name, v)
+
+
 def vector(params: dict, name: str, n: int = 3) -> list[float]:
     """``params[name]`` as n floats (None → NaN); UnsupportedError when it is not an n-vector."""
     v = params.get(name)
@@ -338,14 +352,7 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         for name, v in zip(names["scale"], scale):
             ex.set(name, v)
     elif kind == "gyro":
-        _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
-        drift = _gyro_offsets_rad_s(cal, factor, ex)
-        if use.corrected:
-            o_old = use.need(names["off"], "gyro offsets")
-            drift = [o_old[i] + drift[i] for i in range(3)]
-            ex.note("composed with the parameters in use: GYROFFS = GYROFFS_in_use + drift")
-        for name, v in zip(names["off"], drift):
-            ex.set(name, v)
+        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "GYROFFS")
         ex.note(f"{names['off'][0][:-2]} = drift in rad/s, same sign (ArduPilot subtracts it); per raw axis gx, gy, gz")
         ex.note("ArduPilot re-estimates gyro offsets at every boot unless INS_GYR_CAL = 0")
     else:
@@ -444,14 +451,7 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         for name, v in zip(names["scale"], scale):
             ex.set(name, v)
     elif kind == "gyro":
-        _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
-        drift = _gyro_offsets_rad_s(cal, factor, ex)
-        if use.corrected:
-            o_old = use.need(names["off"], "gyro offsets")
-            drift = [o_old[k] + drift[k] for k in range(3)]
-            ex.note("composed with the parameters in use: OFF = OFF_in_use + drift")
-        for name, v in zip(names["off"], drift):
-            ex.set(name, v)
+        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "OFF")
         ex.note("CAL_GYRO_OFF = drift in rad/s, same sign (PX4 subtracts it); per raw axis gx, gy, gz")
     else:
         unit, A, ch = _mag_fit(cal, meta, fmt, 1e5)  # nT per gauss
