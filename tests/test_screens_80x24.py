@@ -108,6 +108,9 @@ def test_quit_during_a_run_asks_first_and_counters_start_with_the_run(tmp_path):
     clock.t_s = 30.0  # the device ran on while nobody read it: 29.5 s of samples lost
     src.drain()
     assert src.stats().dropped > 1000
+    # and again while the operator fills in Connect: nobody reads it, so the samples it could
+    # not keep are counted when the procedure first reads it (they were shown as dropped)
+    clock.t_s = 60.0
 
     async def story():
         app = make_app(None, device=src, start="procedure", average_s=60.0)
@@ -192,3 +195,31 @@ def test_connect_remembers_the_lab_and_writes_it_into_the_capture(tmp_path):
         meta = s.capture_info(cal["capture_id"])["meta"]
     assert cal["operator"] == "Ann Lee"
     assert meta["place"] == "Lab 2, bench 3" and meta["reference_equipment"] == "granite table GT-4"
+
+
+def test_the_step_list_follows_the_current_step_past_the_bottom_of_the_screen():
+    """P2's 60 rows are taller than the step list at 80x24: as the run moves on (here the
+    operator skips 30 rows), the current row stays in view (it stayed on rows 1-20)."""
+    clock = BenchClock()
+    src = SimSource(seed=1, procedure="accel-centrifuge", clock=clock)
+
+    async def story():
+        app = make_app(None, device=src, start="procedure", average_s=30.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            g = app.screen.guide
+            assert len(g.steps) == 60
+            await run_bench(
+                pilot,
+                src,
+                clock,
+                lambda: app.screen.last_status is not None and app.screen.last_status.phase == "change",
+            )
+            for k in range(30):
+                await pilot.press("s")
+                await wait_for(pilot, lambda k=k: g.index == k + 1)
+            await wait_for(pilot, lambda: "▶ 31" in text_of(app, "#steps"))
+            return text_of(app, "#steps")
+
+    steps = asyncio.run(story())
+    assert "– 30" in steps and " 1  1 @" not in steps  # scrolled: the first rows are above

@@ -107,7 +107,11 @@ class GuidedScreenMixin:
         ``update(batch)`` feeds the guide and returns its status (under the lock);
         ``status()`` is the LiveUpdate payload (under the lock); ``accept(batch)`` skips
         batches the guide cannot use; ``with_hz`` adds the measured post rate."""
-        base = src.stats()  # the counters count this procedure only, not what came before it
+        # The counters count this procedure only. A source left running while nobody read it
+        # (the Connect screen, a previous run) counts the samples it could not keep as dropped
+        # when it is next read: read it once first, then take the base.
+        pending = src.drain()
+        base = src.stats()
 
         def counted():
             st = src.stats()
@@ -123,7 +127,7 @@ class GuidedScreenMixin:
         posts = 0
         t_posts = time.monotonic()
         while not worker.is_cancelled:
-            b = src.drain()
+            b, pending = (pending if pending is not None else src.drain()), None
             if b is not None and len(b) and (accept is None or accept(b)):
                 with self._lock:
                     st = update(b)
