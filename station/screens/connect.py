@@ -110,7 +110,7 @@ class ConnectScreen(Screen):
             with Horizontal(classes="row"):
                 yield Label("Average (s)")
                 yield Input(value=f"{s.average_s:g}", id="average", type="number", compact=True)
-                yield Label("  per position (source: 180–300 s)")
+                yield Label("per position (source: 180–300 s)", classes="inner")
             with Horizontal(id="buttons"):
                 yield Button("Start \\[F5]", id="start", variant="primary", compact=True)
                 yield Button("Resume \\[F6]", id="resume", compact=True, disabled=True)
