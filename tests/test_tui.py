@@ -121,13 +121,11 @@ def test_connect_refuses_a_bad_averaging_time_and_a_missing_port():
         async with app.run_test(size=SIZE) as pilot:
             app.screen.query_one("#average").value = "abc"
             await pilot.press("f5")
-            await pilot.pause(0.1)
-            assert "positive number" in text_of(app, "#status")
+            await wait_for(pilot, lambda: "positive number" in text_of(app, "#status"))
             app.screen.query_one("#average").value = "5"
             app.screen.query_one("#source").value = "other"
             await pilot.press("f5")
-            await pilot.pause(0.1)
-            assert "Type a port" in text_of(app, "#status")
+            await wait_for(pilot, lambda: "Type a port" in text_of(app, "#status"))
             assert screen_name(app) == "ConnectScreen"
 
     asyncio.run(story())
@@ -138,12 +136,11 @@ def test_help_opens_and_closes_with_the_keyboard():
         app = make_app(None)
         async with app.run_test(size=SIZE) as pilot:
             await pilot.press("f1")
-            await pilot.pause(0.05)
-            assert screen_name(app) == "HelpScreen"
-            assert "s skip" in text_of(app, "HelpScreen Static") and "g diagnose" in text_of(app, "HelpScreen Static")
+            await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
+            await wait_for(pilot, lambda: "g diagnose" in text_of(app, "HelpScreen Static"))
+            assert "s skip" in text_of(app, "HelpScreen Static")
             await pilot.press("escape")
-            await pilot.pause(0.05)
-            assert screen_name(app) == "ConnectScreen"
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
 
     asyncio.run(story())
 
@@ -337,7 +334,7 @@ def test_results_compare_with_the_previous_calibration_and_export(tmp_path):
             await wait_for(pilot, lambda: getattr(app.screen, "exported", None))
             paths = app.screen.exported
             await pilot.press("d")
-            await pilot.pause(0.05)
+            await wait_for(pilot, lambda: "Discarded" in text_of(app, "#saved"))
             saved = text_of(app, "#saved")
         return summary, row, paths, saved
 
@@ -389,6 +386,9 @@ def test_history_lists_devices_calibrations_and_drift(tmp_path):
             p0 = app.screen.param_index
             await pilot.press("p")
             p1 = app.screen.param_index
+            # the due line and the start-up reminder come from two workers: wait for both
+            await wait_for(pilot, lambda: "IMU-7: overdue" in text_of(app, "#due"))
+            await wait_for(pilot, lambda: any("overdue: IMU-7" in n.message for n in app._notifications))
             due = text_of(app, "#due")
             notes = [n.message for n in app._notifications]
         return first, p0, p1, due, notes
@@ -413,12 +413,10 @@ def test_diagnose_a_stored_calibration_from_history(tmp_path):
                 lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2,
             )
             await pilot.press("g")  # the newest calibration is under the cursor
-            await wait_for(
-                pilot, lambda: screen_name(app) == "DiagnoseScreen" and app.screen.report is not None, timeout_s=40
-            )
+            await wait_for(pilot, lambda: screen_name(app) == "DiagnoseScreen" and app.screen.report is not None)
             title, report = screen_lines(app)[0], app.screen.report
             await pilot.press("escape")
-            await pilot.pause(0.05)
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen")
             back = screen_name(app)
         return title, report, back
 
@@ -455,13 +453,13 @@ def test_import_an_ldv_file_with_its_conditioning_check(tmp_path):
                         and "…" not in text_of(app, "#status")
                         and text_of(app, "#status").strip() != ""
                     ),
-                    timeout_s=30,
                 )
                 out[key] = " ".join(text_of(app, "#status").split())
             app.screen.query_one("#path").value = good
             await pilot.press("enter")
-            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=30)
-            await pilot.pause(0.2)
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
+            # the summary is drawn once the device's record is read (a worker): wait for it
+            await wait_for(pilot, lambda: "cond(HᵀH) =" in text_of(app, "#summary"))
             out["title"] = screen_lines(app)[0]
             out["summary"] = " ".join(text_of(app, "#summary").split())
         return out
@@ -502,7 +500,7 @@ def test_procedure_reads_the_simulated_device_over_a_real_pty():
                         and app.screen.updates > 10
                     ),
                 )
-                await wait_for(pilot, lambda: not app.screen.last_status.calibrating, timeout_s=10)
+                await wait_for(pilot, lambda: not app.screen.last_status.calibrating)
                 readouts = text_of(app, "#readouts")
                 st = app.screen.last_status
                 src = app.session.source

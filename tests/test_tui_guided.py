@@ -20,26 +20,30 @@ def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
 
     async def story():
         app = make_app(None, average_s=60.0)
-        now = [0.0]  # the bench clock: 5 s pass (the noise rest), then it stands still, so the
-        # pilot's key presses (which wait for an idle process) are not slowed by the stream
+        # the bench clock runs (each step consumed) until the noise rest is over, then it
+        # stands still, so the pilot's key presses (which wait for an idle process) are not
+        # slowed by the stream
+        clock = BenchClock()
         async with app.run_test(size=SIZE) as pilot:
             assert "P2 accelerometer, centrifuge" in [str(o[0]) for o in app.screen.query_one("#procedure")._options]
             app.screen.query_one("#procedure").value = "accel-centrifuge"
-            app.session.source = SimSource(seed=1, procedure="accel-centrifuge", clock=lambda: now[0])
+            src = app.session.source = SimSource(seed=1, procedure="accel-centrifuge", clock=clock)
             await pilot.press("f5")
             await wait_for(pilot, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.guide is not None)
             g = app.screen.guide
-            for _ in range(50):
-                now[0] += 0.1
-                await pilot.pause(0.01)
-            await wait_for(pilot, lambda: app.screen.last_status.phase == "change")
+            await run_bench(
+                pilot,
+                src,
+                clock,
+                lambda: app.screen.last_status is not None and app.screen.last_status.phase == "change",
+                step_s=0.1,
+            )
             assert "Mount in orientation 1, spin at 6.28 rad/s" in text_of(app, "#prompt")
             footer = screen_lines(app)[-1]
             assert "m Type row" in footer and "s Skip" in footer and "f Fit now" in footer
             await pilot.press("m")
             await pilot.press(*"1.5", "enter", *"abc", "enter", *"0.2", "enter", *"6.28", "enter")
-            await pilot.pause(0.2)
-            assert "ay: 'abc' is not a number" in text_of(app, "#entry-error")
+            await wait_for(pilot, lambda: "ay: 'abc' is not a number" in text_of(app, "#entry-error"))
             assert g.n_captured == 0 and g.index == 0
             app.screen.query_one("#in-ay").value = "-0.25"
             app.screen.query_one("#in-speed").focus()
@@ -53,7 +57,7 @@ def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
             await wait_for(pilot, lambda: g.steps[1].status == "skipped")
             assert "Mount in orientation 1, spin at 18.8 rad/s" in text_of(app, "#prompt")
             await pilot.press("f")  # 1 row: too few to fit
-            await pilot.pause(0.1)
+            await wait_for(pilot, lambda: any("at least" in n.message for n in app._notifications))
             assert screen_name(app) == "CentrifugeScreen"
             await pilot.press("a")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
@@ -125,7 +129,8 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
             await wait_for(pilot, lambda: "ARW" in text_of(app, "#table"))
             table = text_of(app, "#table")
             assert all(f"   {ax}  " in table for ax in "xyz") and "P4 needs" in table
-            assert "Allan deviation" in "\n".join(screen_lines(app)[1:3])
+            # the plot is painted on its own refresh: wait for its title
+            await wait_for(pilot, lambda: "Allan deviation" in "\n".join(screen_lines(app)[1:3]))
             await wait_for(pilot, lambda: "t Accuracy" in screen_lines(app)[-1])
             assert "e Export" in screen_lines(app)[-1]
             r = scr.report
