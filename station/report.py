@@ -313,7 +313,7 @@ def render_html(rep: dict) -> str:
     h.append("</table>")
     h.append(
         f"<p>Residual RMS {_n(result.get('residual_rms'), '.4g')} {escape(result_unit(result))} · "
-        f"{_e(result.get('n_positions'))} positions / rows.</p>"
+        f"{_e(registry.count_text(result.get('procedure'), result.get('n_positions')))}.</p>"
     )
     if review.get("reasons") or a.reasons:
         h.append(

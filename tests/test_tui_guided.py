@@ -95,10 +95,12 @@ def test_centrifuge_live_run_to_a_saved_result(tmp_path):
             )
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.25)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
-            return screen_lines(app)[0], app.screen.result, scr.guide, app.screen.capture
+            summary = " ".join(text_of(app, "#summary").split())
+            return screen_lines(app)[0], summary, app.screen.result, scr.guide, app.screen.capture
 
-    title, result, guide, capture = asyncio.run(story())
+    title, summary, result, guide, capture = asyncio.run(story())
     assert "P2 centrifuge result" in title and result["n_positions"] == 12
+    assert "· 12 rows ·" in summary  # rows of the table, not "positions"
     # every row at the asked speed as the gyro measured it
     for s in guide.steps:
         assert s.how == "live" and abs(s.rate_gyro_rad_s / s.speed_rad_s - 1) < 0.02

@@ -52,6 +52,7 @@ class Procedure:
     # the simulated device's id prefix ("SIM-ACC" → SIM-ACC-0007 for seed 7): what the Connect
     # screen shows before the device is started (its guide's live_device reports the same)
     sim_device: str = ""
+    counts: tuple[str, str] = ("position", "positions")  # what its result's n_positions counts
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -111,6 +112,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         firmware=True,
         units_note="f in g, N in the capture's accel_unit ({accel_unit}); b in {accel_unit}, D in g/g^2",
         sim_device="SIM-CFG",
+        counts=("row", "rows"),
     ),
     Procedure(
         name="compass",
@@ -129,6 +131,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         from_logs=True,
         units_note="m_raw and hard_iron in the capture's mag_unit ({mag_unit}); soft_iron maps {mag_unit} to nT",
         sim_device="SIM-COM",
+        counts=("distinct orientation", "distinct orientations"),
     ),
     Procedure(
         name="gyro-drift",
@@ -163,6 +166,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         source="CN102706365A",
         units_note="velocities in m/s, angles in degrees",
         sim_device="SIM-LDV",
+        counts=("epoch", "epochs"),
     ),
 )
 
@@ -243,6 +247,13 @@ def result_title(name: str | None) -> str:
     if p is None:
         return f"{name} result"
     return f"{p.code} {p.short} result" if p.short else f"{p.code} result"
+
+
+def count_text(name: str | None, n) -> str:
+    """'12 positions', '60 rows', '1 record': what a result's ``n_positions`` counts."""
+    p = get(name)
+    one, many = p.counts if p is not None else ("position", "positions")
+    return f"{n} {one if n == 1 else many}"
 
 
 def guided() -> dict[str, str]:

@@ -18,7 +18,7 @@ from station.formatting import num
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
 from station.procedures.review import assess, param_rows, result_unit, review_record
-from station.screens.export import export_files
+from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar
 
@@ -117,7 +117,7 @@ class ResultsScreen(Screen):
         unit = result_unit(r)
         lines = [
             f"[{style}] {word.upper()} [/] residual {num(r.get('residual_rms'), '.3g')} {unit} RMS · "
-            f"{r.get('n_positions', self.capture.n_rows)} positions · {prev}"
+            f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))} · {prev}"
         ]
         lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
         entry = registry.get(r.get("procedure"))
@@ -283,7 +283,7 @@ class ResultsScreen(Screen):
         if message.error:
             self.notify(f"Export failed: {message.error}", severity="error")
         else:
-            self.notify("Exported " + ", ".join(os.path.basename(p) for p in message.paths), timeout=6)
+            self.notify(exported_text(message.paths), timeout=8)
             self.exported = message.paths
 
     def action_report(self) -> None:
