@@ -223,3 +223,27 @@ def test_the_step_list_follows_the_current_step_past_the_bottom_of_the_screen():
 
     steps = asyncio.run(story())
     assert "– 30" in steps and " 1  1 @" not in steps  # scrolled: the first rows are above
+
+
+def test_connect_says_what_the_averaging_time_means_for_the_procedure_picked():
+    """It read "per position" (cut from "per position (source: 180–300 s)") for every
+    procedure, while P4 takes it as the record's length and P3/P5 do not use it."""
+
+    async def story():
+        app = make_app(None)
+        seen = {}
+        async with app.run_test(size=SIZE) as pilot:
+            for procedure in ("accel-tabletop", "gyro-drift", "ldv"):
+                app.screen.query_one("#procedure").value = procedure
+                want = registry.average_means(procedure)
+                await wait_for(pilot, lambda w=want: w in text_of(app, "#average-means"))
+                seen[procedure] = next(line for line in screen_lines(app) if "Average (s)" in line)
+        return seen
+
+    from station.procedures import registry
+
+    seen = asyncio.run(story())
+    assert "per position (source: 180–300 s)" in seen["accel-tabletop"]
+    assert "record length (P4 asks ≥ 180 s)" in seen["gyro-drift"]
+    assert "not used" in seen["ldv"]
+    assert all(len(line) <= 80 for line in seen.values())

@@ -208,10 +208,9 @@ class LdvGuide:
                 msg = "Poorly conditioned still: keep turning and changing slope"
             elif not enough:
                 left = max(c.min_s - rec, c.good_for_s - good_s, 0.0)
-                msg = (
-                    f"Well conditioned: keep driving and turning ({max(c.min_epochs - self._epochs, 0)} "
-                    f"epochs, {left:.0f} s to go)"
-                )
+                more = max(c.min_epochs - self._epochs, 0)
+                togo = (f"{more} epochs, " if more else "") + f"{left:.0f} s to go"  # not "0 epochs"
+                msg = f"Well conditioned: keep driving and turning ({togo})"
         return LdvStatus(
             phase=self.phase,
             kappa=kappa,

@@ -53,6 +53,8 @@ class Procedure:
     # screen shows before the device is started (its guide's live_device reports the same)
     sim_device: str = ""
     counts: tuple[str, str] = ("position", "positions")  # what its result's n_positions counts
+    # what the Connect screen's "Average (s)" is for it (P4: the record's length)
+    average: str = "not used"
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -75,6 +77,7 @@ class GuidedRun:
     procedure: str  # the procedure whose simulated device (and guide) it runs
     reference: bool = False  # that device carries a reference IMU
     demo: bool = False  # `station demo --procedure <name>` offers it
+    average: str = "record length"  # what the Connect screen's "Average (s)" is for it
 
 
 PROCEDURES: tuple[Procedure, ...] = (
@@ -95,6 +98,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         from_logs=True,
         units_note="V in the capture's accel_unit ({accel_unit}), A in m/s^2; B in m/s^2, M in m/s^2 per {accel_unit}",
         sim_device="SIM-ACC",
+        average="per position (source: 180–300 s)",
     ),
     Procedure(
         name="accel-centrifuge",
@@ -113,6 +117,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         units_note="f in g, N in the capture's accel_unit ({accel_unit}); b in {accel_unit}, D in g/g^2",
         sim_device="SIM-CFG",
         counts=("row", "rows"),
+        average="per row (speed held steady)",
     ),
     Procedure(
         name="compass",
@@ -132,6 +137,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         units_note="m_raw and hard_iron in the capture's mag_unit ({mag_unit}); soft_iron maps {mag_unit} to nT",
         sim_device="SIM-COM",
         counts=("distinct orientation", "distinct orientations"),
+        average="not used: the sweep ends at 80 % coverage",
     ),
     Procedure(
         name="gyro-drift",
@@ -150,6 +156,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         from_logs=True,
         units_note="rates in rad/s; body axes x forward, y up, z right",
         sim_device="SIM-GYR",
+        average="record length (P4 asks ≥ 180 s)",
     ),
     Procedure(
         name="ldv",
@@ -167,6 +174,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         units_note="velocities in m/s, angles in degrees",
         sim_device="SIM-LDV",
         counts=("epoch", "epochs"),
+        average="not used: the drive ends when κ allows",
     ),
 )
 
@@ -178,6 +186,7 @@ GUIDED_RUNS: tuple[GuidedRun, ...] = (
         procedure="gyro-drift",
         reference=True,
         demo=True,
+        average="record length (P4 asks ≥ 180 s)",
     ),
     # the gyro noise (Allan) run holds the unit still like P4
     GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen", procedure="gyro-drift"),
@@ -261,6 +270,15 @@ def guided() -> dict[str, str]:
     out = {p.name: f"{p.code} {p.title}" for p in PROCEDURES if p.screen}
     out.update({r.name: r.title for r in GUIDED_RUNS})
     return out
+
+
+def average_means(name: str | None) -> str:
+    """What the Connect screen's "Average (s)" is for procedure or guided run ``name``."""
+    run = guided_run(name)
+    if run is not None:
+        return run.average
+    p = get(name)
+    return p.average if p is not None else ""
 
 
 def screen_for(name: str):

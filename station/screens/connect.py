@@ -110,7 +110,7 @@ class ConnectScreen(Screen):
             with Horizontal(classes="row"):
                 yield Label("Average (s)")
                 yield Input(value=f"{s.average_s:g}", id="average", type="number", compact=True)
-                yield Label("per position (source: 180–300 s)", classes="inner")
+                yield Label(self._average_means(), id="average-means", classes="inner")
             with Horizontal(id="buttons"):
                 yield Button("Start \\[F5]", id="start", variant="primary", compact=True)
                 yield Button("Resume \\[F6]", id="resume", compact=True, disabled=True)
@@ -118,6 +118,16 @@ class ConnectScreen(Screen):
                 yield Button("Import file \\[F7]", id="import", compact=True)
         yield Static("", id="status")
         yield Footer()
+
+    def _average_means(self, procedure: str | None = None) -> str:
+        s = self.app.session
+        if procedure is None:
+            procedure = s.procedure if s.procedure in registry.guided() else registry.DEFAULT
+        return registry.average_means(procedure)
+
+    @on(Select.Changed, "#procedure")
+    def _procedure_picked(self, event: Select.Changed) -> None:
+        self.query_one("#average-means", Label).update(self._average_means(str(event.value)))
 
     def _source_options(self):
         opts = [("Built-in simulated device", SIM)]
