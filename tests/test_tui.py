@@ -333,6 +333,8 @@ def test_results_compare_with_the_previous_calibration_and_export(tmp_path):
             await pilot.press("e")
             await wait_for(pilot, lambda: getattr(app.screen, "exported", None))
             paths = app.screen.exported
+            # the operator is told where the files are, not only their names
+            await wait_for(pilot, lambda: any(f"in {tmp_path}" in n.message for n in app._notifications))
             await pilot.press("d")
             await wait_for(pilot, lambda: "Discarded" in text_of(app, "#saved"))
             saved = text_of(app, "#saved")

@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from station.fileio import atomic_write_json
 from station.messages import Exported
+from station.textsafe import tui_markup
 
 
 def export_files(screen, capture, what: str, payload: Callable) -> None:
@@ -29,3 +30,10 @@ def export_files(screen, capture, what: str, payload: Callable) -> None:
         screen.post_message(Exported(paths))
     except Exception as exc:  # noqa: BLE001
         screen.post_message(Exported([], error=str(exc)))
+
+
+def exported_text(paths) -> str:
+    """'Exported a.csv, a.json in FOLDER' (markup-safe): the operator is told where they are."""
+    folders = {os.path.dirname(os.path.abspath(p)) for p in paths}
+    where = f" in {folders.pop()}" if len(folders) == 1 else ""
+    return tui_markup("Exported " + ", ".join(os.path.basename(p) for p in paths) + where)

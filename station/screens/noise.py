@@ -6,7 +6,6 @@ typed in (``station.procedures.noise``, numerics in ``solvers.allan``)."""
 from __future__ import annotations
 
 import math
-import os
 
 from textual import on, work
 from textual.app import ComposeResult
@@ -19,7 +18,7 @@ from textual_plotext import PlotextPlot
 
 from station.messages import Exported
 from station.procedures.noise import AXES, PRACTICAL_RECORD_S, format_duration
-from station.screens.export import export_files
+from station.screens.export import export_files, exported_text
 from station.screens.gyrodrift import HoldScreen
 from station.widgets.title import TitleBar
 
@@ -197,4 +196,4 @@ class AllanScreen(Screen):
             self.notify(f"Export failed: {message.error}", severity="error")
         else:
             self.exported = message.paths
-            self.notify("Exported " + ", ".join(os.path.basename(p) for p in message.paths), timeout=6)
+            self.notify(exported_text(message.paths), timeout=8)
