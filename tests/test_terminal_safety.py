@@ -165,10 +165,18 @@ def test_history_screen_shows_hostile_ids_escaped_one_row_each(hostile_db):
     async def story():
         app = make_app(str(db), start="history")
         async with app.run_test(size=(120, 40)) as pilot:
-            t_end = time.monotonic() + 30
-            while time.monotonic() < t_end and not (
-                type(app.screen).__name__ == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2
-            ):
+
+            def painted():
+                lines = [strip.text for strip in app.screen._compositor.render_strips()]
+                return (
+                    type(app.screen).__name__ == "HistoryScreen"
+                    and app.screen.query_one("#calibrations").row_count == 2
+                    and "EVIL" in "\n".join(lines)  # the rows are painted a refresh after row_count
+                )
+
+            t_end = time.monotonic() + 120  # a safety net for a hung app, not a pace
+            while not painted():
+                assert time.monotonic() < t_end, "the History screen never showed the two calibrations"
                 await pilot.pause(0.05)
             devices = app.screen.query_one("#devices")
             lines = [strip.text for strip in app.screen._compositor.render_strips()]

@@ -53,12 +53,12 @@ def test_tabletop_snapshot(snap_compare, size):
         for k in range(1, 18):  # 17 s of device time in 1 s steps, each consumed before the next
             clock.t = float(k)
             await _settle(pilot, lambda: guide.status().t_s >= clock.t - 1e-6)
+        # the guide's events (and their notices) are posted before the update that carries
+        # this time: once it is shown, nothing more is on its way
         await _settle(
             pilot, lambda: app.screen.last_status is not None and app.screen.last_status.t_s >= clock.t - 1e-6
         )
-        await pilot.pause(0.2)
         app.clear_notifications()
-        await pilot.pause(0.05)
 
     assert snap_compare(app, terminal_size=size, run_before=run_before)
 
@@ -73,8 +73,8 @@ def test_results_snapshot(snap_compare, size):
 
     async def run_before(pilot):
         await app.push_screen(ResultsScreen(cap, result, None, None))
+        # drawn in one go once the device's record is read (a worker)
         await _settle(pilot, lambda: app.screen.query_one("#params").row_count > 0)
-        await pilot.pause(0.1)
 
     assert snap_compare(app, terminal_size=size, run_before=run_before)
 
@@ -94,9 +94,14 @@ def test_history_snapshot(snap_compare, size, tmp_path):
                 type(app.screen).__name__ == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 3
             ),
         )
-        await pilot.pause(0.2)
+        # three workers: the devices, the device's history and drift (rows and plot in one
+        # handler), and the app's due list whose reminder is a notice: wait for all of them,
+        # then take the notice away (it raced the picture when a fixed pause stood here)
+        await _settle(
+            pilot, lambda: len(app.screen.drift) > 0 and "IMU-7" in str(app.screen.query_one("#due").render())
+        )
+        await _settle(pilot, lambda: len(app.due) > 0 and len(app._notifications) > 0)
         app.clear_notifications()
-        await pilot.pause(0.05)
 
     assert snap_compare(app, terminal_size=size, run_before=run_before)
 
@@ -129,9 +134,7 @@ def test_centrifuge_snapshot(snap_compare, size):
                 guide.n_captured == 1 and app.screen.last_status is not None and app.screen.last_status.n_captured == 1
             ),
         )
-        await pilot.pause(0.2)
         app.clear_notifications()
-        await pilot.pause(0.05)
 
     assert snap_compare(app, terminal_size=size, run_before=run_before)
 
@@ -158,6 +161,5 @@ def test_noise_snapshot(snap_compare, size):
     async def run_before(pilot):
         await app.push_screen(AllanScreen(cap, report))
         await _settle(pilot, lambda: "P4 needs" in str(app.screen.query_one("#table").render()))
-        await pilot.pause(0.2)
 
     assert snap_compare(app, terminal_size=size, run_before=run_before)
