@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -70,20 +71,76 @@ def test_station_demo_in_tmux_saves_a_calibration(tmp_path):
 
 
 def _wait_pane(sock, cond, timeout_s, what):
+    """Poll the pane until ``cond(screen)``; the timeout is a safety net for a hung app,
+    generous so that a loaded machine only makes the test slower."""
     t_end = time.monotonic() + timeout_s
     screen = ""
     while time.monotonic() < t_end:
         screen = pane(sock)
         if cond(screen):
             return screen
-        time.sleep(0.3)
+        time.sleep(0.3)  # polling interval, not a pace
     raise AssertionError(f"{what}: not seen within {timeout_s:g} s:\n{screen}")
 
 
 def _keys(sock, *keys):
+    """Keys in order (the terminal queues them; the app reads them in turn)."""
     for k in keys:
         tmux(sock, "send-keys", "-t", "demo", k)
-        time.sleep(0.4)  # one key at a time, as a person types (select lists open on Enter)
+
+
+def _procedure_line(screen: str) -> str:
+    return next((line for line in screen.splitlines() if line.startswith(" Procedure ")), "")
+
+
+def _pick(sock, title):
+    """On Connect (focus on Start, as it is on arrival and on return): shift-tab twice to
+    the procedure list, open it, wait until it is open, move to ``title``, choose it."""
+    from station.procedures import registry
+
+    titles = list(registry.guided().values())
+    screen = _wait_pane(sock, lambda s: "f5 Start" in s and _procedure_line(s), 60, "the Connect screen")
+    now = next(t for t in titles if t in _procedure_line(screen))
+    _keys(sock, "BTab", "BTab", "Enter")
+    _wait_pane(sock, lambda s: titles[-1] in s and titles[0] in s and "▲" in _procedure_line(s), 60, "the list open")
+    step = titles.index(title) - titles.index(now)
+    _keys(sock, *(["Down"] * step if step > 0 else ["Up"] * -step), "Enter")
+    _wait_pane(sock, lambda s: title in _procedure_line(s) and "▼" in _procedure_line(s), 60, f"{title} picked")
+
+
+def _save(sock, result_title, n):
+    """On Results: wait for the summary (drawn once the device's record is read), save."""
+    _wait_pane(sock, lambda s: result_title in s and " RMS " in s, 240, result_title)
+    _keys(sock, "s")
+    _wait_pane(sock, lambda s: f"Saved as calibration #{n}" in s, 60, f"save #{n}")
+    _keys(sock, "n")
+
+
+def _start_tui(sock, db, *extra):
+    cmd = (
+        f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station tui --db {db} --speed 20 "
+        f"{' '.join(extra)}; echo EXIT=$?; sleep 30"
+    )
+    tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
+
+
+def _quit(sock):
+    _wait_pane(sock, lambda s: "f5 Start" in s, 60, "Connect again")
+    _keys(sock, "C-q")
+    _wait_pane(sock, lambda s: "EXIT=" in s, 30, "the exit")
+    assert "EXIT=0" in pane(sock)
+
+
+def _history(db, device):
+    out = subprocess.run(
+        [sys.executable, "-m", "station", "history", device, "--json", "--db", str(db)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
 
 
 def test_p1_and_p5_by_keys_alone_in_tmux(tmp_path):
@@ -92,17 +149,13 @@ def test_p1_and_p5_by_keys_alone_in_tmux(tmp_path):
     the conditioning says when it is enough, saved. The simulated device runs 20x."""
     sock = f"test-keys-{os.getpid()}"
     db = tmp_path / "station.db"
-    cmd = (
-        f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station tui --db {db} --speed 20 "
-        f"--average-s 2; echo EXIT=$?; sleep 30"
-    )
-    tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
+    _start_tui(sock, db, "--average-s 2")
     try:
         _wait_pane(sock, lambda s: "f5 Start" in s, 60, "the Connect screen")
         _keys(sock, "F5")
         _wait_pane(sock, lambda s: "P1 accelerometer, level table" in s and "p Place (sim)" in s, 60, "P1")
         placed = {"x_up"}  # the unit starts on x_up
-        t_end = time.monotonic() + 240
+        t_end = time.monotonic() + 300
         screen = ""
         while time.monotonic() < t_end:
             screen = pane(sock)
@@ -114,38 +167,83 @@ def test_p1_and_p5_by_keys_alone_in_tmux(tmp_path):
             if step and step not in placed:
                 placed.add(step)
                 _keys(sock, "p")
-            time.sleep(0.3)
+            time.sleep(0.3)  # polling interval
         else:
-            raise AssertionError("P1 not finished by keys within 240 s:\n" + screen)
+            raise AssertionError("P1 not finished by keys within 300 s:\n" + screen)
         assert len(placed) == 12
-        _keys(sock, "s")
-        _wait_pane(sock, lambda s: "Saved as calibration #1" in s, 30, "the P1 save")
-        _keys(sock, "n")
-        _wait_pane(sock, lambda s: "f5 Start" in s, 30, "Connect again")
-        _keys(sock, "BTab", "BTab", "Enter", "Down", "Down", "Down", "Down", "Enter")
-        _wait_pane(sock, lambda s: "P5 laser velocimeter" in s, 10, "P5 picked")
+        _save(sock, "P1 result", 1)
+        _pick(sock, "P5 laser velocimeter")
         _keys(sock, "F5")
         _wait_pane(sock, lambda s: "d Drive/stop (sim)" in s and "Parked" in s, 60, "P5 parked")
         _keys(sock, "d")
         _wait_pane(sock, lambda s: "ILL-CONDITIONED" in s and "straight" in s, 60, "straight driving refused")
         _keys(sock, "t")
-        # the summary is drawn once the device's tolerances are read (a worker): wait for it
-        screen = _wait_pane(sock, lambda s: "P5 LDV result" in s and "cond(HᵀH)" in s, 180, "the P5 result")
-        _keys(sock, "s")
-        _wait_pane(sock, lambda s: "Saved as calibration #2" in s, 30, "the P5 save")
-        _keys(sock, "C-q")
-        _wait_pane(sock, lambda s: "EXIT=" in s, 15, "the exit")
-        assert "EXIT=0" in pane(sock)
+        screen = _wait_pane(sock, lambda s: "P5 LDV result" in s and "cond(HᵀH)" in s, 240, "the P5 result")
+        assert "epochs" in screen  # what its count counts
+        _save(sock, "P5 LDV result", 2)
+        _quit(sock)
     finally:
         tmux(sock, "kill-server", check=False)
     for device, procedure in (("SIM-ACC-0000", "accel-tabletop"), ("SIM-LDV-0000", "ldv")):
-        out = subprocess.run(
-            [sys.executable, "-m", "station", "history", device, "--json", "--db", str(db)],
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
-            timeout=60,
-        )
-        assert out.returncode == 0, out.stderr
-        records = json.loads(out.stdout)
+        records = _history(db, device)
         assert len(records) == 1 and records[0]["procedure"] == procedure
+
+
+def test_p2_p3_and_p4_in_both_modes_by_keys_alone_in_tmux(tmp_path):
+    """The other procedures the same way, each picked on Connect: P2 (`p` mounts and spins
+    the centrifuge for each asked row, `f` fits after 12 rows, four orientations), P3 (`p`
+    sweeps the compass until the coverage is enough), P4 on a static base (hold still) and
+    with the reference IMU (`p` runs the rate table); each saved."""
+    sock = f"test-keys2-{os.getpid()}"
+    db = tmp_path / "station.db"
+    _start_tui(sock, db, "--average-s 60")  # per P2 row; the P4 record (≥ 30 s)
+    try:
+        _pick(sock, "P2 accelerometer, centrifuge")
+        _keys(sock, "F5")
+        _wait_pane(sock, lambda s: "p Spin (sim)" in s and "/60 captured" in s, 60, "P2")
+        last = None
+        t_end = time.monotonic() + 300
+        screen = ""
+        while time.monotonic() < t_end:
+            screen = pane(sock)
+            m = re.search(r"(\d+)/60 captured", screen)
+            n = int(m.group(1)) if m else None
+            if n is not None and n >= 12:
+                break
+            if "waiting for the change" in screen and n is not None and n != last:
+                last = n  # one turn of the hand per asked row
+                _keys(sock, "p")
+            time.sleep(0.3)  # polling interval
+        else:
+            raise AssertionError("P2: 12 rows not captured by keys within 300 s:\n" + screen)
+        _keys(sock, "f")
+        screen = _wait_pane(sock, lambda s: "P2 centrifuge result" in s and " RMS " in s, 240, "the P2 result")
+        assert "12 rows" in screen and "g/g^2" in screen  # D, the quadratic coefficient, with its unit
+        _save(sock, "P2 centrifuge result", 1)
+
+        _pick(sock, "P3 compass sweep")
+        _keys(sock, "F5")
+        _wait_pane(sock, lambda s: "p Sweep (sim)" in s and "Coverage" in s, 60, "P3")
+        _keys(sock, "p")
+        _save(sock, "P3 compass result", 2)
+
+        _pick(sock, "P4 gyro drift, static base")
+        _keys(sock, "F5")
+        _wait_pane(sock, lambda s: "Stillness" in s and "mean rate so far" in s, 60, "P4 static")
+        _save(sock, "P4 gyro drift result", 3)
+
+        _pick(sock, "P4 gyro drift, reference IMU")
+        _keys(sock, "F5")
+        _wait_pane(sock, lambda s: "p Rate table (sim)" in s and "unit − reference" in s, 60, "P4 reference")
+        _keys(sock, "p")
+        _wait_pane(sock, lambda s: "rate table ON" in s, 60, "the rate table running")
+        _save(sock, "P4 gyro drift result", 4)
+        _quit(sock)
+    finally:
+        tmux(sock, "kill-server", check=False)
+    (p2,) = _history(db, "SIM-CFG-0000")
+    assert p2["procedure"] == "accel-centrifuge" and p2["n_positions"] == 12
+    (p3,) = _history(db, "SIM-COM-0000")
+    assert p3["procedure"] == "compass"
+    p4 = _history(db, "SIM-GYR-0000")
+    assert [r["params"]["mode"] for r in p4] == ["static", "reference"]

@@ -247,3 +247,21 @@ def test_connect_says_what_the_averaging_time_means_for_the_procedure_picked():
     assert "record length (P4 asks ≥ 180 s)" in seen["gyro-drift"]
     assert "not used" in seen["ldv"]
     assert all(len(line) <= 80 for line in seen.values())
+
+
+def test_a_refused_fit_says_why_in_words_not_none():
+    """A P4 hold shorter than the fit allows: Results said "No calibration: None: mode B:
+    ..." (the live capture has no file name) and "410 positions captured"."""
+    clock = BenchClock()
+    src = SimSource(seed=7, procedure="gyro-drift", clock=clock)
+
+    async def story():
+        app = make_app(None, device=src, start="procedure", average_s=10.0, settle_s=0.5)
+        async with app.run_test(size=SIZE) as pilot:
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.5)
+            await wait_for(pilot, lambda: "too short" in text_of(app, "#summary"))
+            return " ".join(text_of(app, "#summary").split())
+
+    summary = asyncio.run(story())
+    assert "None" not in summary and "is too short for a drift" in summary
+    assert "rows recorded" in summary and "positions" not in summary

@@ -134,7 +134,7 @@ def _gyro_factor(capture, warnings: list[str]) -> float:
         lsb = capture.float_meta("gyro_counts_per_deg_s")
         if lsb is None or lsb <= 0:
             raise UnsupportedError(
-                f"{capture.path}: gyro_unit is 'counts' and no 'gyro_counts_per_deg_s' gives "
+                f"{capture.path or 'capture'}: gyro_unit is 'counts' and no 'gyro_counts_per_deg_s' gives "
                 "the scale (MPU-6050 at ±250 °/s: 131); add it to the metadata"
             )
         warnings.append(f"gyro in counts: nominal scale {lsb:g} counts per °/s used (its error scales the drift)")
@@ -148,7 +148,7 @@ def _gyro_factor(capture, warnings: list[str]) -> float:
 def _dt(capture) -> float:
     if not capture.is_time_series and "n" in capture.columns:
         raise UnsupportedError(
-            f"{capture.path}: a table of averages cannot give a drift's error (Allan "
+            f"{capture.path or 'capture'}: a table of averages cannot give a drift's error (Allan "
             "deviation): gyro-drift needs the time series"
         )
     if capture.is_time_series:
@@ -159,7 +159,7 @@ def _dt(capture) -> float:
     rate = capture.float_meta("sample_rate_hz")
     if rate is None or rate <= 0:
         raise UnsupportedError(
-            f"{capture.path}: gyro drift needs a time series: a 't' column with at least two "
+            f"{capture.path or 'capture'}: gyro drift needs a time series: a 't' column with at least two "
             "increasing times, or sample_rate_hz"
         )
     return 1.0 / rate
@@ -242,7 +242,7 @@ def calibrate(
         else:
             res, me_for_acc, n_pos, resid = _mode_b(capture, w_b, C, asign, dt, warnings)
     except SolverError as exc:
-        raise UnsupportedError(f"{capture.path}: {exc}") from None
+        raise UnsupportedError(f"{capture.path or 'capture'}: {exc}") from None
     warnings[:0] = []
     warnings += res.warnings
     acc, acc_w = gd.accuracy_statement(me_for_acc, res.sigma_rad_s, acc_rad_s)
@@ -296,7 +296,7 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
         warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
         return [(ok, head0, "1")]
     if not st.intervals:
-        raise UnsupportedError(f"{capture.path}: no static interval found; mode B needs the unit at rest")
+        raise UnsupportedError(f"{capture.path or 'capture'}: no static interval found; mode B needs the unit at rest")
     # group intervals of the same orientation (accelerometer direction within 5°)
     groups: list[list] = []
     for iv in st.intervals:
@@ -359,7 +359,7 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
     ok = _finite_rows([w_b, f_b], warnings, "gyro or accelerometer")
     if f_b is not None and ok.any() and not np.linalg.norm(f_b[ok].mean(axis=0)) > 0:
         raise UnsupportedError(
-            f"{capture.path}: the accelerometer reads zero on average, so mode B has no "
+            f"{capture.path or 'capture'}: the accelerometer reads zero on average, so mode B has no "
             "pitch and roll (a dead or unconnected sensor?): check the ax ay az columns"
         )
     lat = capture.float_meta("latitude_deg")
@@ -536,7 +536,7 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
     order = np.flatnonzero(use)
     if len(order) < 16:
         raise UnsupportedError(
-            f"{capture.path}: gyro-drift: {len(order)} static samples; diagnosis needs a "
+            f"{capture.path or 'capture'}: gyro-drift: {len(order)} static samples; diagnosis needs a "
             "static record (P4 asks for >= 3 min)"
         )
     f_mps2 = None
@@ -544,7 +544,7 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         gnorm = float(np.median(np.linalg.norm(f_b[use], axis=1)))
         if not gnorm > 0:
             raise UnsupportedError(
-                f"{capture.path}: the accelerometer reads zero on average (a dead or "
+                f"{capture.path or 'capture'}: the accelerometer reads zero on average (a dead or "
                 "unconnected sensor?): check the ax ay az columns"
             )
         f_mps2 = f_b[use] * (frames.G_STANDARD_MPS2 / gnorm)

@@ -171,7 +171,7 @@ def aligned_velocities(capture, reference=None, warnings=None):
             return v_ref[ok], vl[ok], dict(info, reference=kind, rows=np.flatnonzero(ok))
         if t_ref is None:
             raise UnsupportedError(
-                f"{capture.path}: rows hold either LDV or reference samples but there is no time column to align them"
+                f"{capture.path or 'capture'}: rows hold either LDV or reference samples but there is no time column to align them"
             )
         info["alignment"] = (
             "'ref_t' column" if tcol == "ref_t" else "interleaved rows on 't'"
@@ -218,7 +218,7 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
     try:
         res = ldv_solver.calibrate_ldv(v_b, vl, ref_sigma_mps=ref_sigma, force=force)
     except SolverError as exc:
-        raise UnsupportedError(f"{capture.path}: {exc}") from None
+        raise UnsupportedError(f"{capture.path or 'capture'}: {exc}") from None
     warnings += res.warnings
     params, unc, fit = {}, {}, {}
     for j, b in enumerate(res.beams):

@@ -101,7 +101,7 @@ class ResultsScreen(Screen):
         if self.result is None:
             summary.update(
                 f"[b red]No calibration: {tui_markup(self.error)}[/]\n"
-                f"{self.capture.n_rows} positions captured; e exports them as a capture file."
+                f"{self.capture.n_rows} rows recorded; e exports them as a capture file."
             )
             params.display = residuals.display = False
             return
