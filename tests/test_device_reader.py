@@ -66,7 +66,7 @@ def pty_link(tmp_path):
     p.close()
 
 
-def wait_for(cond, timeout_s=5.0):
+def wait_for(cond, timeout_s=60.0):  # a safety net, not a pace: loaded machines
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
         if cond():
@@ -75,7 +75,7 @@ def wait_for(cond, timeout_s=5.0):
     return False
 
 
-def collect(reader: Reader, n: int, timeout_s=5.0) -> Batch:
+def collect(reader: Reader, n: int, timeout_s=60.0) -> Batch:
     got: list[Batch] = []
     total = 0
 

@@ -37,7 +37,7 @@ def pty_pair():
     os.close(slave)
 
 
-def read_all(reader: Reader, n: int, timeout_s: float = 5.0) -> Batch:
+def read_all(reader: Reader, n: int, timeout_s: float = 60.0) -> Batch:
     got, total, end = [], 0, time.monotonic() + timeout_s
     while total < n and time.monotonic() < end:
         b = reader.drain()
@@ -51,7 +51,7 @@ def read_all(reader: Reader, n: int, timeout_s: float = 5.0) -> Batch:
 
 def settle(reader: Reader) -> None:
     """pyserial flushes input on open: write only once the reader has the port."""
-    end = time.monotonic() + 5
+    end = time.monotonic() + 60
     while not reader.stats().connected and time.monotonic() < end:
         time.sleep(0.01)
     time.sleep(0.05)

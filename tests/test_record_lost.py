@@ -56,7 +56,7 @@ class Bench:
             self.unplug()
 
 
-def _wait(cond, what, timeout_s=15.0):
+def _wait(cond, what, timeout_s=60.0):
     end = time.monotonic() + timeout_s
     while not cond():
         assert time.monotonic() < end, f"timed out waiting for {what}"

@@ -31,7 +31,7 @@ class Clock:
         return self.t
 
 
-async def wait_for(pilot, cond, timeout_s=60.0, step_s=0.02):
+async def wait_for(pilot, cond, timeout_s=120.0, step_s=0.02):
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
         if cond():
