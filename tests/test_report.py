@@ -5,6 +5,7 @@ at their pixels). Skips the browser part only when chromium is not installed."""
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -20,6 +21,8 @@ from db import Store
 from station.capture import read_capture, write_capture
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+# CI (.ci/run) installs chromium and sets this: there the browser test must run, not skip
+REQUIRED = "chromium" in os.environ.get("STATION_REQUIRE_TOOLS", "").split()
 
 
 def _sim(tmp_path, procedure, seed, device, date, **meta):
@@ -215,8 +218,9 @@ def _chromium(tmp: Path, url: str, *args: str) -> subprocess.CompletedProcess:
     )
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
+@pytest.mark.skipif(CHROMIUM is None and not REQUIRED, reason="chromium is not installed (apt-get install chromium)")
 def test_report_renders_in_headless_chromium(filled):
+    assert CHROMIUM is not None, "STATION_REQUIRE_TOOLS names chromium, but it is not installed"
     tmp, db, ids = filled
     out, page = _report(tmp, db, ids["p1-2"])
     # 1. the browser loads the whole page: every section and figure is in its DOM
