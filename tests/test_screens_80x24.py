@@ -265,3 +265,27 @@ def test_a_refused_fit_says_why_in_words_not_none():
     summary = asyncio.run(story())
     assert "None" not in summary and "is too short for a drift" in summary
     assert "rows recorded" in summary and "positions" not in summary
+
+
+def test_results_open_with_the_parameters_focused(tmp_path):
+    """The focus was on the summary's invisible scroll container: PgDn did nothing and no
+    widget showed the focus until Tab; the parameter table has it, with its bar."""
+    from station.screens.results import ResultsScreen
+
+    cap, result = p1_result("IMU-8")
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id="IMU-8")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            await wait_for(pilot, lambda: app.focused is not None)
+            focused = app.focused.id
+            params = app.screen.query_one("#params")
+            await pilot.press("pagedown")
+            await wait_for(pilot, lambda: params.cursor_row > 0)
+            return focused, screen_lines(app)
+
+    focused, lines = asyncio.run(story())
+    assert focused == "params"
+    assert any(line.startswith("▊") or line.startswith("█") or line.startswith("▌") for line in lines[3:8])

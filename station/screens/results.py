@@ -25,6 +25,9 @@ from station.widgets.title import TitleBar
 
 class ResultsScreen(Screen):
     SUB_TITLE = "P1 result"
+    # the parameters have the focus (its bar shows it; arrows and PgDn scroll them at once),
+    # not the summary's scroll container, which nothing showed as focused
+    AUTO_FOCUS = "#params"
     CSS = """
     ResultsScreen #notes { height: auto; max-height: 7; }
     ResultsScreen #summary { height: auto; padding: 0 1; }
