@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solvers.stillness import StillnessTracker
+from station.procedures.guide_base import GuideBase
 
 PHASES = ("noise", "change", "place", "settle", "average", "done", "aborted")
 STATUSES = ("pending", "captured", "skipped")
@@ -178,7 +179,7 @@ class CentrifugeStatus:
 _GYRO_RAD_S = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
 
 
-class CentrifugeGuide:
+class CentrifugeGuide(GuideBase):
     procedure = "accel-centrifuge"
 
     def __init__(
@@ -238,10 +239,6 @@ class CentrifugeGuide:
     @property
     def can_fit(self) -> bool:
         return self.n_captured >= MIN_FIT_ROWS
-
-    def take_events(self) -> list[tuple[str, str]]:
-        ev, self._events = self._events, []
-        return ev
 
     # ------------------------------------------------------------ live stream
 
@@ -467,11 +464,6 @@ class CentrifugeGuide:
         st = self.tracker.state
         self.phase = "noise" if st.calibrating else "place"
         self._message = self.steps[index].prompt
-
-    def abort(self) -> None:
-        self.phase = "aborted"
-        self._message = "Aborted"
-        self._events.append(("aborted", ""))
 
     def finish(self) -> bool:
         """End now with what is captured (at least MIN_FIT_ROWS rows)."""

@@ -25,6 +25,7 @@ import numpy as np
 
 from solvers.compass import MIN_COVERAGE
 from solvers.detectors import FieldCoverage
+from station.procedures.guide_base import GuideBase
 
 PHASES = ("sweep", "done", "aborted")
 
@@ -68,7 +69,7 @@ class CompassStatus:
     message: str
 
 
-class CompassGuide:
+class CompassGuide(GuideBase):
     procedure = "compass"
 
     def __init__(
@@ -144,11 +145,6 @@ class CompassGuide:
             self._message = "Turn the unit slowly through every orientation (all faces up, all headings)"
         return self.status()
 
-    def _finish(self, why: str) -> None:
-        self.phase = "done"
-        self._message = f"Done: {why}"
-        self._events.append(("done", why))
-
     def finish(self) -> None:
         """The operator ends the recording now."""
         if self.phase == "sweep":
@@ -158,15 +154,6 @@ class CompassGuide:
         self.phase = "sweep"
         self._reset()
         self._events.append(("restarted", "recording restarted"))
-
-    def abort(self) -> None:
-        self.phase = "aborted"
-        self._message = "Aborted"
-        self._events.append(("aborted", ""))
-
-    def take_events(self) -> list[tuple[str, str]]:
-        ev, self._events = self._events, []
-        return ev
 
     def status(self) -> CompassStatus:
         m, rate, t = self._last if self._last is not None else (np.full(3, np.nan), math.nan, math.nan)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solvers.stillness import StillnessTracker
+from station.procedures.guide_base import GuideBase
 
 # `station demo`: P4 averages 180 s at the least (the drift is not resolved in less)
 DEMO_MIN_AVERAGE_S = 180.0
@@ -62,7 +63,7 @@ class HoldStatus:
     message: str
 
 
-class HoldGuide:
+class HoldGuide(GuideBase):
     procedure = "gyro-drift"
 
     def __init__(
@@ -102,10 +103,6 @@ class HoldGuide:
         self._sum = np.zeros(3)
         self._t0 = math.nan
         self._t1 = math.nan
-
-    def take_events(self) -> list[tuple[str, str]]:
-        ev, self._events = self._events, []
-        return ev
 
     def update(self, t_s, accel, gyro, temp_c=None) -> HoldStatus:
         t_s = np.asarray(t_s, float)
@@ -166,11 +163,6 @@ class HoldGuide:
         self._n += len(t)
         self._sum += g.sum(axis=0)
         self._t1 = float(t[-1])
-
-    def abort(self) -> None:
-        self.phase = "aborted"
-        self._message = "Aborted"
-        self._events.append(("aborted", ""))
 
     def restart(self) -> None:
         if self.phase in ("average", "done"):
@@ -262,7 +254,7 @@ class ReferenceStatus:
     settle_left_s: float = math.nan
 
 
-class ReferenceGuide:
+class ReferenceGuide(GuideBase):
     """P4 mode A live: record the unit's gyro and the reference IMU's side by side for
     ``duration_s`` while the rate table turns both. Live, the procedure's own numbers:
     the running drift ``ε = mean(ω − ω_ref)`` ± its white-noise standard error, how much
@@ -303,10 +295,6 @@ class ReferenceGuide:
         self._srd = np.zeros((3, 3))  # Σ Ω dᵀ
         self._t0 = math.nan
         self._t1 = math.nan
-
-    def take_events(self) -> list[tuple[str, str]]:
-        ev, self._events = self._events, []
-        return ev
 
     def update(self, t_s, accel, gyro, ref, temp_c=None) -> ReferenceStatus:
         """t_s (n,), accel (n, 3) raw, gyro (n, 3) in the gyro unit, ref (n, 3) in rad/s (the
@@ -399,11 +387,6 @@ class ReferenceGuide:
             t_s=self._t1,
             message=msg,
         )
-
-    def abort(self) -> None:
-        self.phase = "aborted"
-        self._message = "Aborted"
-        self._events.append(("aborted", ""))
 
     def restart(self) -> None:
         if self.phase in ("average", "done"):

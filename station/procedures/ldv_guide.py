@@ -28,6 +28,7 @@ import numpy as np
 
 from solvers.ldv import KAPPA_REFUSE, KAPPA_WARN
 from solvers.models import ldv as ldv_model
+from station.procedures.guide_base import GuideBase
 
 BEAMS = ("vl1", "vl2", "vl3")
 REF = ("vx", "vy", "vz")
@@ -74,7 +75,7 @@ class LdvStatus:
     message: str
 
 
-class LdvGuide:
+class LdvGuide(GuideBase):
     procedure = "ldv"
 
     def __init__(
@@ -100,10 +101,6 @@ class LdvGuide:
         self._good_since = math.nan  # device time κ last came down to KAPPA_WARN
         self._last = None
         self._message = "Drive: the station records the beams and the INS/DGPS velocity"
-
-    def take_events(self) -> list[tuple[str, str]]:
-        ev, self._events = self._events, []
-        return ev
 
     @property
     def kappa(self) -> float:
@@ -147,11 +144,6 @@ class LdvGuide:
             self._finish(f"time limit {self.config.max_s:.0f} s reached at κ {st.kappa:.3g}")
         return self.status()
 
-    def _finish(self, why: str) -> None:
-        self.phase = "done"
-        self._message = f"Done: {why}"
-        self._events.append(("done", why))
-
     def finish(self) -> None:
         """The operator ends the recording now (the calibration judges what it got)."""
         if self.phase == "record":
@@ -161,11 +153,6 @@ class LdvGuide:
         self.phase = "record"
         self._reset()
         self._events.append(("restarted", "recording restarted"))
-
-    def abort(self) -> None:
-        self.phase = "aborted"
-        self._message = "Aborted"
-        self._events.append(("aborted", ""))
 
     def _estimate(self):
         try:
