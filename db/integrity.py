@@ -67,8 +67,12 @@ ANCHOR_COLUMNS = (
     "prev_hash",
 )
 # Device columns under the anchors (everything a person could change to move a due date or
-# loosen a tolerance).
+# loosen a tolerance). Settings version 2 (migration 0004_limits_anchored) adds the absolute
+# limits; its hashes are written ``2:<hex>``, so an anchor says which columns it covers and
+# anchors written before keep verifying.
 SETTINGS_COLUMNS = ("id", "model", "sensor_kinds", "notes", "interval_days", "tolerances", "created")
+SETTINGS_COLUMNS_V2 = ("limits",)
+SETTINGS_VERSION = 2
 
 
 def _digest(content: dict) -> str:
@@ -80,5 +84,17 @@ def anchor_hash(row: dict) -> str:
     return _digest({k: row.get(k) for k in ANCHOR_COLUMNS})
 
 
-def settings_hash(device_row: dict) -> str:
-    return _digest({k: device_row.get(k) for k in SETTINGS_COLUMNS})
+def settings_hash(device_row: dict, version: int = SETTINGS_VERSION) -> str:
+    """The hash of a device's settings as an anchor stores it: version 1 (the bare hex
+    digest) covers ``SETTINGS_COLUMNS``, version 2 (``2:<hex>``) the limits too."""
+    content = {k: device_row.get(k) for k in SETTINGS_COLUMNS}
+    if version < 2:
+        return _digest(content)
+    content.update({k: device_row.get(k) for k in SETTINGS_COLUMNS_V2})
+    return f"{version}:{_digest(content)}"
+
+
+def settings_version(stored_hash: str) -> int:
+    """The settings version an anchor's ``settings_hash`` was written with (1: no prefix)."""
+    head, sep, _ = (stored_hash or "").partition(":")
+    return int(head) if sep and head.isdigit() else 1

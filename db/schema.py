@@ -183,11 +183,17 @@ _REVIEW = [
     """,
 ]
 
+# The anchors' settings hash covers devices.limits (settings version 2, db/integrity.py):
+# no SQL; the station appends a `settings` anchor for every device after it (the limits as
+# found become the anchored state). Anchors written before keep their version-1 hash.
+_LIMITS_ANCHORED: list[str] = []
+
 # (name, statements), applied in this order. Append only.
 MIGRATIONS: list[tuple[str, list[str]]] = [
     ("0001_initial", _INITIAL),
     ("0002_anchors", _ANCHORS),
     ("0003_review", _REVIEW),
+    ("0004_limits_anchored", _LIMITS_ANCHORED),
 ]
 
 MIGRATION_NAMES = [name for name, _ in MIGRATIONS]

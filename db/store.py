@@ -30,7 +30,15 @@ from datetime import timedelta
 
 from db import params as P
 from db.codec import capture_digest, decode_column, encode_column
-from db.integrity import ANCHOR_COLUMNS, SETTINGS_COLUMNS, anchor_hash, record_hash, settings_hash
+from db.integrity import (
+    ANCHOR_COLUMNS,
+    SETTINGS_COLUMNS,
+    SETTINGS_COLUMNS_V2,
+    anchor_hash,
+    record_hash,
+    settings_hash,
+    settings_version,
+)
 from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
 
 BUSY_TIMEOUT_S = 30.0
@@ -127,6 +135,9 @@ class Store:
         if "0002_anchors" in names:
             for (device_id,) in conn.execute("SELECT id FROM devices ORDER BY id").fetchall():
                 self._append_anchor(conn, device_id, "baseline")
+        elif "0004_limits_anchored" in names:  # the limits as found, under the anchors from now on
+            for (device_id,) in conn.execute("SELECT id FROM devices ORDER BY id").fetchall():
+                self._append_anchor(conn, device_id, "settings")
 
     def _append_anchor(self, conn, device_id: str, event: str, capture_id: int | None = None) -> None:
         """Append one anchor: the device's chain head, calibration count and settings hash now."""
@@ -902,7 +913,7 @@ class Store:
 
     # Tables and columns verify reads; a missing one is a damaged schema (reported, not a crash).
     _VERIFY_SCHEMA = {
-        "devices": SETTINGS_COLUMNS,  # the columns a device's settings hash covers
+        "devices": SETTINGS_COLUMNS + SETTINGS_COLUMNS_V2,  # the columns a device's settings hash covers
         "calibrations": (
             "id",
             "device_id",
@@ -967,7 +978,7 @@ class Store:
         chain), `capture changed`, `anchor tampered`, `anchors removed`, `calibration removed`
         (a chain head or the newest records: the anchors or the id counter remember them),
         `device removed`, `device added` (outside the station), `settings changed` (model,
-        notes, interval, tolerances), `schedule changed` (differs from the one recomputed from
+        notes, interval, tolerances, limits), `schedule changed` (differs from the one recomputed from
         the calibrations), `orphaned capture`, `capture missing`. Findings that follow from
         an earlier one on the same device (its schedule after an edited calibration) are not
         repeated.
@@ -1099,13 +1110,13 @@ class Store:
                     }
                 )
                 flagged.add(device_id)
-            if settings_hash(dev) != a["settings_hash"]:
+            if settings_hash(dev, settings_version(a["settings_hash"])) != a["settings_hash"]:
                 problems.append(
                     {
                         "kind": "settings changed",
                         "device_id": device_id,
-                        "detail": "model, notes, interval or tolerances differ from what the station last "
-                        "wrote (changed outside `station devices add`)",
+                        "detail": "model, notes, interval, tolerances or limits differ from what the station "
+                        "last wrote (changed outside `station devices add` and the TUI)",
                     }
                 )
                 flagged.add(device_id)

@@ -37,7 +37,9 @@ def record(tmp_path):
     path = str(tmp_path / "station.db")
     now = datetime.now(UTC)
     with Store(path) as s:
-        s.add_device("IMU-7", model="ADXL", interval_days=30, notes="bench 2", tolerances={"B": 0.05})
+        s.add_device(
+            "IMU-7", model="ADXL", interval_days=30, notes="bench 2", tolerances={"B": 0.05}, limits={"B": (-0.5, 0.5)}
+        )
         for k, days in enumerate((400, 200, 40)):
             meta, cols = small_capture(seed=k, device="IMU-7")
             s.save_calibration(
@@ -99,8 +101,11 @@ def test_deleting_the_newest_calibration_and_its_anchor_is_seen(capsys, record):
         "UPDATE devices SET interval_days = 3650 WHERE id = 'IMU-7'",
         "UPDATE devices SET notes = 'all fine' WHERE id = 'IMU-7'",
         "UPDATE devices SET model = 'other' WHERE id = 'IMU-7'",
+        # the limits set through `station devices add --limit B=-0.5:0.5`, widened behind its back
+        "UPDATE devices SET limits = '{\"B\": [-5.0, 5.0]}' WHERE id = 'IMU-7'",
+        "UPDATE devices SET limits = '{}' WHERE id = 'IMU-7'",
     ],
-    ids=["tolerances", "interval", "notes", "model"],
+    ids=["tolerances", "interval", "notes", "model", "limits widened", "limits removed"],
 )
 def test_changing_device_settings_is_seen(capsys, record, sql):
     path, _ = record
@@ -113,6 +118,65 @@ def test_settings_changed_through_the_station_verify(capsys, record):
     path, _ = record
     assert _cli(capsys, "devices", "add", "IMU-7", "--interval-days", "90", "--notes", "moved", "--db", path)[0] == 0
     assert _kinds(capsys, path) == (0, [])
+    assert _cli(capsys, "devices", "add", "IMU-7", "--limit", "B=-0.2:0.2", "--db", path)[0] == 0
+    assert _kinds(capsys, path) == (0, [])
+    _edit(path, "UPDATE devices SET limits = '{\"B\": [-0.2, 2.0]}' WHERE id = 'IMU-7'")
+    code, out, _ = _cli(capsys, "verify", "--db", path)
+    assert code == 1 and "settings changed" in out and "IMU-7" in out and "limits" in out
+
+
+def test_limits_of_a_database_from_before_0004_are_anchored_when_it_is_opened(capsys, tmp_path):
+    """A database whose anchors predate the limits' hashing (migrations 0001-0003 only, limits
+    set then): it verifies as it is, opening it anchors the limits as found, and an edit of
+    them afterwards is seen."""
+    from sqlite_utils import Database, Migrations
+
+    from db.integrity import settings_hash
+    from db.schema import MIGRATIONS
+
+    path = str(tmp_path / "old.db")
+    conn = sqlite3.connect(path)
+    old = Migrations("station")
+    for name, statements in MIGRATIONS[:3]:
+
+        def run(db, statements=statements):
+            for sql in statements:
+                db.execute(sql)
+
+        run.__name__ = name
+        old(name=name)(run)
+    old.apply(Database(conn))
+    created = "2024-01-01T00:00:00Z"
+    conn.execute("INSERT INTO devices (id, created, limits) VALUES ('OLD-2', ?, ?)", [created, '{"B": [-0.5, 0.5]}'])
+    dev = dict(zip(("id", "created"), ("OLD-2", created)))
+    dev.update({"model": None, "sensor_kinds": "[]", "notes": None, "interval_days": None, "tolerances": "{}"})
+    row = {
+        "time": created,
+        "device_id": "OLD-2",
+        "event": "settings",
+        "head_id": None,
+        "head_hash": None,
+        "n_calibrations": 0,
+        "settings_hash": settings_hash(dev, 1),  # as the station wrote it before 0004
+        "capture_id": None,
+        "prev_hash": None,
+    }
+    from db.integrity import anchor_hash
+
+    cur = conn.execute(
+        f"INSERT INTO anchors ({', '.join(row)}, hash) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, '')", list(row.values())
+    )
+    row["id"] = cur.lastrowid
+    conn.execute("UPDATE anchors SET hash = ? WHERE id = ?", [anchor_hash(row), row["id"]])
+    conn.commit()
+    conn.close()
+    assert _kinds(capsys, path) == (0, [])  # opened by the new code: migrated, old anchor intact
+    raw = sqlite3.connect(path)
+    hashes = [r[0] for r in raw.execute("SELECT settings_hash FROM anchors WHERE device_id = 'OLD-2' ORDER BY id")]
+    raw.close()
+    assert len(hashes) == 2 and ":" not in hashes[0] and hashes[1].startswith("2:")
+    _edit(path, "UPDATE devices SET limits = '{\"B\": [-9.0, 9.0]}' WHERE id = 'OLD-2'")
+    assert _kinds(capsys, path) == (1, [("settings changed", "OLD-2")])
 
 
 def test_moving_a_due_date_in_the_schedule_is_seen(capsys, record):
