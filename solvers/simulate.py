@@ -905,6 +905,11 @@ class LiveImu:
         )
 
     @property
+    def channels(self) -> tuple[str, ...]:
+        """Outputs beyond the IMU's (capture column names): the reference IMU's gyro."""
+        return ("ref_gx", "ref_gy", "ref_gz") if self.reference else ()
+
+    @property
     def driving(self) -> str | None:
         """'sweep' or 'table' while a continuous motion runs, else None."""
         return self._drive[0] if self._drive else None
@@ -1077,6 +1082,8 @@ class LiveVehicle:
         self._driving = False
         self._turns = False
         self.temp_c = 15.0
+
+    channels = ("vl1", "vl2", "vl3", "vx", "vy", "vz")  # beams and the reference body velocity
 
     @property
     def driving(self) -> bool:

@@ -65,7 +65,7 @@ def doc_sentences() -> list[bytes]:
 
 def test_every_sentence_in_the_protocol_doc_is_valid():
     found = doc_sentences()
-    assert len(found) == 13  # header, 4 data, 6 commands, 2 answers
+    assert len(found) == 16  # header, 4 data, 3 of version 2, 6 commands, 2 answers
     p = StationParser()
     for s in found:
         p.feed(s + b"\r\n")
@@ -88,6 +88,28 @@ def test_the_documented_worked_example():
     assert p.stats.parse_errors == 0 and p.stats.gaps == 2 and p.stats.gap_events == 1 and p.stats.restarts == 0
     np.testing.assert_array_equal(block.seq, [65535, 0, 3])
     assert np.diff(block.t_dev_us).tolist() == [10_000.0, 30_000.0]
+
+
+def test_the_documented_version_2_example():
+    """The reference-IMU example: three channels named in the header, their values after
+    temp_c; the vehicle's header; the same bytes read as version 1 lose only the channels."""
+    v2 = [s + b"\r\n" for s in doc_sentences()[5:8]]
+    assert v2[0] == header_sentence(
+        Header("SIM-GYR-0024", "V", "rad/s", "uT", 100.0, channels=("ref_gx", "ref_gy", "ref_gz"))
+    )
+    p, ev, block = parse(b"".join(v2[:2]))
+    assert p.stats.parse_errors == 0 and ev[0].version == 2 and ev[0].channels == ("ref_gx", "ref_gy", "ref_gz")
+    np.testing.assert_array_equal(block.values[0, 3:6], [0.00021, -0.00005, 0.05012])
+    assert [block.extra[k][0] for k in ("ref_gx", "ref_gy", "ref_gz")] == [0.00019, -0.00004, 0.05009]
+    p, ev, _ = parse(v2[2])
+    assert ev[0].channels == ("vl1", "vl2", "vl3", "vx", "vy", "vz") and ev[0].accel_unit == ev[0].mag_unit == ""
+    one = sentence(*v2[0][1:].split(b"*")[0].decode().replace("STH,2,", "STH,1,").split(","))
+    p, ev, block = parse(one + v2[1])
+    assert p.stats.parse_errors == 0 and ev[0].channels == () and block.extra == {} and block.values[0, 9] == 24.02
+    # a channel no version knows, or one named twice: the header is malformed
+    for bad in ("STH,2,X,V,,,100,ref_gx,wind", "STH,2,X,V,,,100,vl1,vl1"):
+        p, ev, _ = parse(sentence(*bad.split(",")))
+        assert ev == [] and p.stats.errors["malformed"] == 1
 
 
 def test_the_documented_arduino_sentences_parse():

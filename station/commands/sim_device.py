@@ -36,8 +36,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the simulator's samples in real time until interrupted. Accepts $STC commands on the same "
         "port (docs/protocol.md).",
     )
-    p.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="sample rate (default 100)")
-    p.add_argument("--procedure", default=registry.DEFAULT, choices=registry.names())
+    p.add_argument(
+        "--rate", type=float, default=None, metavar="HZ", help="sample rate (default 100; the LDV vehicle 10)"
+    )
+    p.add_argument(
+        "--procedure",
+        default=registry.DEFAULT,
+        choices=registry.names() + ("gyro-reference",),
+        help="the bench it simulates; gyro-reference: P4 mode A (the unit on a reference IMU, "
+        "ref_gx..ref_gz); ldv: the vehicle (beams vl1..vl3, reference vx..vz, body rates as the gyro)",
+    )
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--effect", action="append", metavar="NAME=VALUE", help="an effect of diagnose.md and its size")
@@ -49,23 +57,32 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from solvers.simulate import LiveImu
+    from solvers.simulate import LiveImu, LiveVehicle
     from station.device.simdevice import SimDevice
 
+    if args.rate is None:
+        args.rate = 10.0 if args.procedure == "ldv" else 100.0
     if not (0.1 <= args.rate <= 100_000):
         raise InputError(None, None, f"--rate {args.rate:g}: must be 0.1..100000 Hz")
     if args.hold <= 0:
         raise InputError(None, None, "--hold must be positive")
-    try:
-        imu = LiveImu(
-            procedure=args.procedure,
-            seed=args.seed,
-            rate_hz=args.rate,
-            effects=_effects(args.effect),
-            hold_s=args.hold,
-        )
-    except ValueError as exc:  # SimulationError: unknown effect for the procedure, ...
-        raise InputError(None, None, str(exc).splitlines()[0]) from None
+    effects = _effects(args.effect)
+    if args.procedure == "ldv":  # the same vehicle as the built-in device's P5 (station.sources)
+        if effects or args.auto:
+            raise InputError(None, None, "--procedure ldv: the vehicle takes no --effect or --auto (drive it)")
+        imu = LiveVehicle(seed=args.seed, rate_hz=args.rate)
+    else:
+        try:
+            imu = LiveImu(
+                procedure="gyro-drift" if args.procedure == "gyro-reference" else args.procedure,
+                seed=args.seed,
+                rate_hz=args.rate,
+                effects=effects,
+                hold_s=args.hold,
+                reference=args.procedure == "gyro-reference",
+            )
+        except ValueError as exc:  # SimulationError: unknown effect for the procedure, ...
+            raise InputError(None, None, str(exc).splitlines()[0]) from None
     if args.auto:
         imu.set_auto(True)
     dev = SimDevice(imu, protocol=args.protocol, mavlink_scaled=args.mavlink_scaled)

@@ -1,12 +1,17 @@
 """The station line protocol: NMEA-style ASCII sentences (docs/protocol.md).
 
-    $STH,<ver>,<device_id>,<accel_unit>,<gyro_unit>,<mag_unit>,<rate_hz>*CS   header
-    $STD,<seq>,<t_device_us>,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c*CS             data
+    $STH,<ver>,<device_id>,<accel_unit>,<gyro_unit>,<mag_unit>,<rate_hz>[,<channel>...]*CS   header
+    $STD,<seq>,<t_device_us>,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c[,<value>...]*CS             data
     $STC,<verb>[,<arg>...]*CS                                              host -> device
     $STA,<verb>,OK|ERR[,<text>]*CS                                         device -> host
 
 `CS` is the XOR of the bytes between `$` and `*`, two hex digits; lines end in CRLF
 (a bare LF is accepted). `seq` counts modulo 65536, `t_device_us` modulo 2**32.
+
+Version 2 (backward compatible: version-1 parsers ignore trailing fields) lets a header
+name extra channels after `rate_hz`, capture column names in the capture format's units
+(`ref_gx` rad/s, `vl1` m/s, `vx` m/s, ...: `CHANNELS`); each data sentence then carries
+their values after `temp_c`, in that order. A version-1 header has none.
 
 `StationParser` is incremental: feed it byte chunks of any size; it survives garbage,
 partial lines, checksum errors, binary noise and wrapping counters, counts every
@@ -22,11 +27,35 @@ from operator import xor
 
 import numpy as np
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2  # 2: extra channels (a v1 header, without them, is still sent as 1)
 SEQ_MODULO = 1 << 16
 TIME_MODULO = 1 << 32
 MAX_LINE = 256  # bytes from `$` to LF; longer partial lines are discarded
 SENSOR_FIELDS = ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c")
+# Extra channels a version-2 header may name: the capture format's columns beyond the
+# sensors, each in the unit the capture format gives it (../shared/spec/capture-format.md).
+CHANNELS = {
+    "speed_rad_s": "rad/s",
+    "ref_gx": "rad/s",
+    "ref_gy": "rad/s",
+    "ref_gz": "rad/s",
+    "vl1": "m/s",
+    "vl2": "m/s",
+    "vl3": "m/s",
+    "vx": "m/s",
+    "vy": "m/s",
+    "vz": "m/s",
+    "vn": "m/s",
+    "ve": "m/s",
+    "vd": "m/s",
+    "roll_deg": "deg",
+    "pitch_deg": "deg",
+    "yaw_deg": "deg",
+    "wx": "rad/s",
+    "wy": "rad/s",
+    "wz": "rad/s",
+    "heading_deg": "deg",
+}
 ERROR_KINDS = ("checksum", "malformed", "too_long", "noise")
 _HEX = frozenset(b"0123456789abcdefABCDEF")
 _NAN = math.nan
@@ -44,20 +73,22 @@ class Header:
     gyro_unit: str = ""
     mag_unit: str = ""
     rate_hz: float = math.nan
-    version: int = PROTOCOL_VERSION
+    version: int = 1
     at_sample: int = 0  # parser's sample count when it arrived
+    channels: tuple[str, ...] = ()  # version 2: extra channels after temp_c (CHANNELS)
 
     @property
     def units(self) -> dict[str, str]:
         return {"accel_unit": self.accel_unit, "gyro_unit": self.gyro_unit, "mag_unit": self.mag_unit}
 
     def same_device(self, other: Header | None) -> bool:
-        return other is not None and (self.device_id, self.accel_unit, self.gyro_unit, self.mag_unit) == (
-            other.device_id,
-            other.accel_unit,
-            other.gyro_unit,
-            other.mag_unit,
-        )
+        return other is not None and (
+            self.device_id,
+            self.accel_unit,
+            self.gyro_unit,
+            self.mag_unit,
+            self.channels,
+        ) == (other.device_id, other.accel_unit, other.gyro_unit, other.mag_unit, other.channels)
 
 
 @dataclass(frozen=True)
@@ -99,26 +130,45 @@ class SampleBlock:
     """Samples parsed since the last `take()`.
 
     `seq` as sent (wrapped), `t_dev_us` the device clock unwrapped (float64, exact to
-    2**53 us), `values` shape (n, 10) in SENSOR_FIELDS order, NaN where a field was empty.
+    2**53 us), `values` shape (n, 10) in SENSOR_FIELDS order, NaN where a field was empty;
+    `extra`: the header's extra channels by name, each (n,) (empty without any).
     """
 
     seq: np.ndarray
     t_dev_us: np.ndarray
     values: np.ndarray
+    extra: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.seq)
 
     @classmethod
-    def from_rows(cls, rows: list) -> SampleBlock | None:
-        """Rows ``[seq, t_dev_us, *values]`` as a block (None when there are none); an
-        'inf' from a device is no usable value: NaN."""
+    def from_rows(cls, rows: list, channels: tuple[str, ...] = ()) -> SampleBlock | None:
+        """Rows ``[seq, t_dev_us, *values, *channel values]`` as a block (None when there
+        are none); an 'inf' from a device is no usable value: NaN."""
         if not rows:
             return None
         arr = np.array(rows, dtype=np.float64)
         vals = arr[:, 2:]
         vals[np.isinf(vals)] = np.nan
-        return cls(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=vals)
+        n = len(SENSOR_FIELDS)
+        extra = {name: vals[:, n + i].copy() for i, name in enumerate(channels)}
+        return cls(seq=arr[:, 0].astype(np.int64), t_dev_us=arr[:, 1], values=vals[:, :n].copy(), extra=extra)
+
+    @staticmethod
+    def concat(blocks: list[SampleBlock]) -> SampleBlock | None:
+        """Blocks in order as one; a channel some blocks lack is NaN there."""
+        if not blocks:
+            return None
+        if len(blocks) == 1:
+            return blocks[0]
+        names = list(dict.fromkeys(k for b in blocks for k in b.extra))
+        return SampleBlock(
+            np.concatenate([b.seq for b in blocks]),
+            np.concatenate([b.t_dev_us for b in blocks]),
+            np.concatenate([b.values for b in blocks]),
+            {k: np.concatenate([b.extra.get(k, np.full(len(b), np.nan)) for b in blocks]) for k in names},
+        )
 
 
 @dataclass
@@ -173,8 +223,13 @@ def format_value(v: float, digits: int = 7) -> str:
 
 
 def header_sentence(h: Header) -> bytes:
+    """`$STH`: version 1 without extra channels (what every v1 parser reads), 2 with them."""
     rate = "" if h.rate_hz != h.rate_hz else format_value(h.rate_hz, 9)
-    return sentence("STH", h.version, h.device_id, h.accel_unit, h.gyro_unit, h.mag_unit, rate)
+    bad = [c for c in h.channels if c not in CHANNELS]
+    if bad:
+        raise ValueError(f"unknown channel(s) {', '.join(bad)}: known are {', '.join(CHANNELS)}")
+    version = max(h.version, 2) if h.channels else h.version
+    return sentence("STH", version, h.device_id, h.accel_unit, h.gyro_unit, h.mag_unit, rate, *h.channels)
 
 
 def data_sentence(seq: int, t_dev_us: int, values, digits: int = 7) -> bytes:
@@ -188,7 +243,8 @@ def data_sentence(seq: int, t_dev_us: int, values, digits: int = 7) -> bytes:
 
 
 def data_sentences(seq0: int, t_dev_us, values, digits: int = 7) -> bytes:
-    """Consecutive `$STD` sentences for a block: seq0, seq0+1, ...; values shape (n, 10)."""
+    """Consecutive `$STD` sentences for a block: seq0, seq0+1, ...; values shape (n, 10),
+    or (n, 10 + k) with the values of the header's k extra channels after temp_c."""
     fmt = f".{digits}g"
     out = []
     for i, (t, row) in enumerate(zip(np.asarray(t_dev_us).tolist(), np.asarray(values, dtype=float).tolist())):
@@ -250,6 +306,8 @@ class StationParser:
         self._buf = b""
         self._skipping = False
         self._rows: list[list[float]] = []
+        self._channels: tuple[str, ...] = ()  # of the current header: the rows' extra values
+        self._blocks: list[SampleBlock] = []  # rows taken off at a change of channels
         self._last_seq: int | None = None
         self._last_t_raw = 0
         self._t_us = 0
@@ -288,7 +346,9 @@ class StationParser:
     def take(self) -> SampleBlock | None:
         """The samples parsed since the last call, or None."""
         rows, self._rows = self._rows, []
-        return SampleBlock.from_rows(rows)
+        blocks, self._blocks = self._blocks, []
+        last = SampleBlock.from_rows(rows, self._channels)
+        return SampleBlock.concat(blocks + ([last] if last is not None else []))
 
     def reset_stream(self) -> None:
         """Drop the partial line (after a reconnect). Sequence and clock continuity are
@@ -351,10 +411,13 @@ class StationParser:
         if len(fields) < 13:
             st.errors["malformed"] += 1
             return
+        k = len(self._channels)
         try:
             seq = int(fields[1])
             t_raw = int(fields[2])
             vals = [float(v) if v else _NAN for v in fields[3:13]]
+            if k:  # the header's extra channels; missing trailing fields are missing values
+                vals += [float(v) if v else _NAN for v in fields[13 : 13 + k]] + [_NAN] * max(0, 13 + k - len(fields))
         except ValueError:
             st.errors["malformed"] += 1
             return
@@ -398,7 +461,16 @@ class StationParser:
                 rate = float(fields[6]) if fields[6] else _NAN
             except ValueError:
                 return None
-            h = Header(fields[2], fields[3], fields[4], fields[5], rate, version, at)
+            # version 2: the extra channels; names this parser does not know are malformed
+            channels = tuple(fields[7:]) if version >= 2 else ()
+            if any(c not in CHANNELS for c in channels) or len(set(channels)) != len(channels):
+                return None
+            h = Header(fields[2], fields[3], fields[4], fields[5], rate, version, at, channels)
+            if channels != self._channels:
+                if self._rows:  # rows before it carry the old channels
+                    self._blocks.append(SampleBlock.from_rows(self._rows, self._channels))
+                    self._rows = []
+                self._channels = channels
             self.header = h
             self._header_just_seen = True
             return h

@@ -52,12 +52,14 @@ class PortError(StationError):
 
 @dataclass
 class Batch:
-    """Samples in arrival order. `values` shape (n, 10) in SENSOR_FIELDS order."""
+    """Samples in arrival order. `values` shape (n, 10) in SENSOR_FIELDS order; `extra`
+    the extra channels a version-2 header names (``ref_gx``, ``vl1``, ...), each (n,)."""
 
     t_s: np.ndarray
     seq: np.ndarray
     segment: np.ndarray
     values: np.ndarray
+    extra: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -67,16 +69,27 @@ class Batch:
             return self.t_s
         if name == "segment":
             return self.segment.astype(np.float64)
+        if name in self.extra:
+            return self.extra[name]
+        if name not in SENSOR_FIELDS:
+            return np.full(len(self), np.nan)  # a channel this batch's device did not send
         return self.values[:, SENSOR_FIELDS.index(name)]
 
     @property
     def columns(self) -> dict[str, np.ndarray]:
         cols = {"t": self.t_s, "segment": self.segment.astype(np.float64)}
         cols.update({name: self.values[:, i] for i, name in enumerate(SENSOR_FIELDS)})
+        cols.update(self.extra)
         return cols
 
     def select(self, mask) -> Batch:
-        return Batch(self.t_s[mask], self.seq[mask], self.segment[mask], self.values[mask])
+        return Batch(
+            self.t_s[mask],
+            self.seq[mask],
+            self.segment[mask],
+            self.values[mask],
+            {k: v[mask] for k, v in self.extra.items()},
+        )
 
     @staticmethod
     def concat(batches: list[Batch]) -> Batch | None:
@@ -84,11 +97,13 @@ class Batch:
             return None
         if len(batches) == 1:
             return batches[0]
+        names = list(dict.fromkeys(k for b in batches for k in b.extra))
         return Batch(
             np.concatenate([b.t_s for b in batches]),
             np.concatenate([b.seq for b in batches]),
             np.concatenate([b.segment for b in batches]),
             np.concatenate([b.values for b in batches]),
+            {k: np.concatenate([b.column(k) for b in batches]) for k in names},
         )
 
 
@@ -455,7 +470,7 @@ class Reader:
                     self._events.append(GapEvent(g.segment, g.reason, g.t_s, float(t_s[a]), g.down_s, missed, g.error))
                     self._pending_gap = None
             self._last_t_s = float(t_s[b - 1])
-        batch = Batch(t_s, block.seq, seg, block.values)
+        batch = Batch(t_s, block.seq, seg, block.values, dict(getattr(block, "extra", {}) or {}))
         with self._lock:
             self._stats.samples += n
             self._rate(host_now, self._stats.samples)

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.device.protocol import SENSOR_FIELDS, Header
+from station.device.protocol import Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
 from station.errors import InputError, StationError
 from station.fileio import atomic_open
@@ -67,12 +67,14 @@ def _known_units() -> dict[str, tuple[str, ...]]:
 
 
 def columns_for(header: Header | None) -> list[str]:
-    """`t`, `segment`, the sensors the header says the device has (all without one), `temp_c`."""
+    """`t`, `segment`, the sensors the header says the device has (all without one), `temp_c`,
+    then the header's extra channels (protocol version 2: `ref_gx`, `vl1`, ...)."""
     cols = ["t", "segment"]
     for key, names in SENSOR_GROUPS.items():
         if header is None or getattr(header, key):
             cols.extend(names)
     cols.append("temp_c")
+    cols.extend(getattr(header, "channels", ()) if header is not None else ())
     return cols
 
 
@@ -85,8 +87,7 @@ def _fmt(x: float) -> str:
 
 def format_rows(batch: Batch, columns: list[str]) -> str:
     """CSV rows for a batch: t to the microsecond, values as repr (round-trip exact)."""
-    idx = [SENSOR_FIELDS.index(c) for c in columns[2:]]
-    vals = batch.values[:, idx].tolist()
+    vals = np.column_stack([batch.column(c) for c in columns[2:]]).tolist()
     t = batch.t_s.tolist()
     seg = batch.segment.tolist()
     out = []

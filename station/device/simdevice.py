@@ -78,7 +78,10 @@ class SimDevice:
         write_every_s: float = 0.002,
         mavlink_scaled: bool = False,
         digits: int = 7,
+        speed: float = 1.0,
     ) -> None:
+        """speed: device seconds per wall second (1: real time; tests fast-forward a bench
+        whose procedure takes minutes). The device clock in every sentence is its own."""
         if protocol not in ("station", "mavlink"):
             raise ValueError(f"unknown protocol {protocol!r}")
         self.imu = imu
@@ -87,6 +90,10 @@ class SimDevice:
         self.max_pending_s = max_pending_s
         self.write_every_s = write_every_s
         self.digits = digits
+        self.speed = float(speed)
+        # outputs beyond the IMU's, sent as protocol-2 extra channels (the reference IMU,
+        # the LDV's beams and reference velocity)
+        self.channels = tuple(getattr(imu, "channels", ()))
         self.stats = SimStats()
         self.master: int | None = None
         self.slave: int | None = None
@@ -142,13 +149,23 @@ class SimDevice:
 
     def header(self) -> Header:
         u = self.imu.units
-        return Header(self.imu.device_id, u["accel_unit"], u["gyro_unit"], u["mag_unit"], self.imu.rate_hz)
+        return Header(
+            self.imu.device_id,
+            u.get("accel_unit", ""),
+            u.get("gyro_unit", ""),
+            u.get("mag_unit", ""),
+            self.imu.rate_hz,
+            channels=self.channels,
+        )
 
     def _encode(self, d: dict[str, np.ndarray]) -> bytes:
         n = len(d["t_s"])
         t_us = np.rint(d["t_s"] * 1e6).astype(np.int64)
         if self._mav is None:
-            values = np.column_stack([d[k] for k in SENSOR_FIELDS])
+            nan = np.full(n, np.nan)
+            if "gx" not in d and "wx" in d:  # the vehicle's body rates are its gyro
+                d = dict(d, gx=d["wx"], gy=d["wy"], gz=d["wz"])
+            values = np.column_stack([d.get(k, nan) for k in SENSOR_FIELDS + self.channels])
             out = data_sentences(self._seq, t_us, values, self.digits)
             self._seq += n
             return out
@@ -181,7 +198,7 @@ class SimDevice:
 
     def _bytes_per_s(self) -> float:
         per = self._encoded_bytes / self._encoded_samples if self._encoded_samples else 120.0
-        return per * self.imu.rate_hz
+        return per * self.imu.rate_hz * self.speed
 
     def _flush(self) -> None:
         while self._pending:
@@ -215,6 +232,8 @@ class SimDevice:
             if v == "ORIENT" and a:
                 imu.set_orientation(a[0])
                 return True, a[0]
+            if v in ("TEMP", "AUTO") and not hasattr(imu, "set_auto"):
+                return False, f"this device ({imu.device_id}) has no {v.lower()} control"
             if v == "TEMP" and a:
                 t = float(a[0])
                 if not math.isfinite(t):
@@ -282,7 +301,7 @@ class SimDevice:
             if now >= next_header:
                 self._queue(self._header_bytes(), 0)
                 next_header += self.header_every_s
-            rate = self.imu.rate_hz
+            rate = self.imu.rate_hz * self.speed  # samples per wall second
             due = int((now - self._t0) * rate) - (self.stats.samples - self._sent_at_t0)
             if due > 0:
                 n = min(due, max(1, int(rate * 0.05)))  # at most 50 ms per step
