@@ -127,6 +127,14 @@ class FieldCoverage:
         """(max + min) / 2 per axis, 0 on axes not yet turned over (see the class docstring)."""
         return self._midrange()[0]
 
+    def turned_over(self) -> bool:
+        """Every axis has been turned over (its range exceeds half the field), so
+        :meth:`midrange_centre` is a hard-iron estimate on all three."""
+        if not self._n_kept:
+            return False
+        _, field = self._midrange()
+        return bool(np.all(self._hi - self._lo > 0.5 * field))
+
     def _midrange(self) -> tuple[np.ndarray, float]:
         if not self._n_kept:
             return np.zeros(3), 0.0

@@ -206,10 +206,38 @@ class SerialSource:
             np.column_stack([c["gx"], c["gy"], c["gz"]]),
             c["temp_c"],
             np.column_stack([c["mx"], c["my"], c["mz"]]),
+            dict(b.extra) or None,  # protocol 2's extra channels: ref_gx.., vl1.., vx..
         )
 
     def place(self, name: str) -> None:
         self.reader.command("ORIENT", name)
+
+    # what an acknowledged $STC,ORIENT,<name> leaves the simulated bench doing: (property, value)
+    _BENCH = {
+        "sweep": ("driving", "sweep"),
+        "table": ("driving", "table"),
+        "still": ("driving", None),
+        "drive": ("driving", True),
+        "stop": ("driving", False),
+        "turns": ("turning", True),
+        "straight": ("turning", False),
+    }
+
+    def bench(self, what: str):
+        """The simulated bench's state (``driving``, ``turning``) as the device acknowledged
+        it (``$STA,ORIENT,OK,<name>``), as ``SimSource.bench`` reads it in-process; None for
+        a device that is not `station sim-device`."""
+        if not self.device_id.startswith("SIM-"):
+            return None
+        h = self.reader.header
+        vehicle = h is not None and "vl1" in h.channels
+        state = {"driving": False, "turning": False} if vehicle else {"driving": None}
+        for ack in list(self.reader.acks):
+            if ack.verb != "ORIENT" or not ack.ok:
+                continue
+            key, value = self._BENCH.get(ack.text, ("driving", None))  # a position ends a drive
+            state[key] = value
+        return state.get(what)
 
     def stats(self) -> SourceStats:
         s = self.reader.stats()

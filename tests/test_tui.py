@@ -547,3 +547,51 @@ def test_bad_options_are_one_line_and_exit_2(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "positive" in err
+
+
+def test_history_l_views_and_edits_a_devices_limits(tmp_path):
+    """`l` on History: the device's limits with their units and the value in use; a bad
+    entry is one line and stores nothing; a good one is stored through the store (the
+    CLI's `devices show` reads it, `verify` passes); `NAME=` removes one."""
+    from db.store import Store
+    from station.cli import main
+
+    db = str(tmp_path / "station.db")
+    seed_history(db, "IMU-7", n=2)
+    Store(db).add_device("IMU-7", limits={"B": (-0.5, 0.5)})
+    in_use = Store(db).history("IMU-7")[-1]["params"]["M"][0][0]
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(
+                pilot,
+                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2,
+            )
+            assert "l Limits" in screen_lines(app)[-1]
+            await pilot.press("l")
+            await wait_for(pilot, lambda: screen_name(app) == "LimitsScreen" and "-0.5" in text_of(app, "#current"))
+            shown = text_of(app, "#current")
+            params = text_of(app, "#params")
+            await pilot.press(*"M[0][0]=2:1", "enter")
+            await wait_for(pilot, lambda: "expected NAME=LOW:HIGH" in text_of(app, "#error"))
+            bad = text_of(app, "#error")
+            low = round(in_use, 3) + 0.01  # a limit the calibration in use is outside of
+            await pilot.press(*["backspace"] * 11, *f"M[0][0]={low}:", "enter")
+            await wait_for(pilot, lambda: "M[0][0]" in text_of(app, "#current"))
+            after = text_of(app, "#current")
+            await pilot.press(*"B=", "enter")
+            await wait_for(pilot, lambda: "B " not in text_of(app, "#current").replace("B[", ""))
+            final = text_of(app, "#current")
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen")
+        return shown, params, bad, after, final, low
+
+    shown, params, bad, after, final, low = asyncio.run(story())
+    assert "B" in shown and "-0.5 … 0.5" in shown and "m/s" in shown
+    assert "P1: B, M" in params
+    assert "'M[0][0]=2:1'" in bad
+    assert f"{low:g} …" in after and "OUTSIDE" in after and "in use" in after
+    assert "M[0][0]" in final and "-0.5" not in final
+    assert Store(db).get_device("IMU-7")["limits"] == {"M[0][0]": [low, None]}
+    assert main(["verify", "--db", db]) == 0

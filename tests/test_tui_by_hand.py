@@ -258,3 +258,92 @@ def test_p5_by_hand_d_drives_t_turns_and_the_conditioning_says_when_it_is_enough
         b, u = rec["params"][f"beam{j + 1}"], rec["uncertainty"][f"beam{j + 1}"]
         for key in ("alpha_deg", "beta_deg", "gamma_deg"):
             assert abs(b[key] - truth[key][j]) < 6 * u[key] + 0.05, (j, key, b[key], truth[key][j], u[key])
+
+
+def _magnetic_heading_deg(imu) -> float:
+    """Truth: the heading of the simulated unit's body x from magnetic north (its attitude and
+    the field it was given), for comparison with the station's."""
+    x_ned = imu.C[:, 0]
+    return (math.degrees(math.atan2(x_ned[1], x_ned[0]) - math.atan2(imu.m_ned[1], imu.m_ned[0]))) % 360.0
+
+
+def _angle_diff_deg(a, b) -> float:
+    return abs((a - b + 180.0) % 360.0 - 180.0)
+
+
+async def _level_and_read(pilot, app, clock, src):
+    """`l`: the simulated unit is set down level; once it has settled, the live readout."""
+    await pilot.press("l")
+    await wait_for(pilot, lambda: src.imu._move is not None)
+    await run_until(pilot, app, clock, lambda: src.imu._move is None, step_s=0.5, max_device_s=clock.t + 30)
+    await run_until(pilot, app, clock, lambda t=clock.t: clock.t >= t + 1.0, step_s=0.5)
+    await wait_for(pilot, lambda: app.screen.last_status is not None and app.screen.last_status.t_s >= clock.t - 0.1)
+    return app.screen.last_status
+
+
+def test_p3_live_tilt_and_heading_nominal_front_end_then_the_units_p1_calibration(tmp_path):
+    """The simulated compass module's accelerometer reads volts: the live readout converts it
+    with the device's declared zero and scale (nominal) or, once the unit has a P1
+    calibration in the database, with that. Level reads a tilt near 0; the heading follows
+    the sweep; with the P1 calibration and a swept hard iron it agrees with the unit's true
+    magnetic heading. The fitted capture carries the front end, so the P3 result has its
+    per-position tilt and heading too."""
+    from station.calibrate import calibrate_capture
+    from station.capture import read_capture
+    from station.cli import main
+
+    db = str(tmp_path / "station.db")
+    seen = {}
+
+    async def story(label):
+        clock = Clock()
+        src = SimSource(seed=23, clock=clock, procedure="compass", max_batch_s=5.0)
+        app = make_app(db, device=src)
+        app.session.extra["compass_min_s"] = 900.0  # keep sweeping until the test says
+        async with app.run_test(size=SIZE) as pilot:
+            await connect(pilot, app, "CompassScreen")
+            await wait_for(pilot, lambda: "l Level (sim)" in screen_text(app).splitlines()[-1])
+            level = await _level_and_read(pilot, app, clock, src)
+            text = screen_text(app)
+            heads = []
+            await pilot.press("p")
+            await wait_for(pilot, lambda: src.bench("driving") == "sweep")
+            for _ in range(40):  # 80 s of sweeping: every axis turned over
+                await run_until(pilot, app, clock, lambda t=clock.t: clock.t >= t + 2.0, step_s=1.0)
+                heads.append(app.screen.guide.status().heading_deg)
+            await pilot.press("p")
+            await wait_for(pilot, lambda: src.bench("driving") is None)
+            swept = await _level_and_read(pilot, app, clock, src)
+            truth = _magnetic_heading_deg(src.imu)
+            await pilot.press("f")
+            cal_id = await save(pilot, app)
+            seen[label] = (level, text, heads, swept, truth, cal_id, app.screen.capture)
+
+    asyncio.run(story("nominal"))
+    level, text, heads, swept, truth, _, capture = seen["nominal"]
+    assert level.tilt_from == "nominal (data sheet)" and "tilt: nominal (data sheet)" in text
+    assert math.hypot(level.pitch_deg, level.roll_deg) < 6.0, level  # the data sheet's zero: a few degrees
+    assert "pitch" in text and "heading" in text and " mag" in text
+    assert swept.heading_from.startswith("sweep midrange")
+    h = np.radians([x for x in heads if math.isfinite(x)])
+    assert len(h) >= 30 and np.hypot(np.mean(np.cos(h)), np.mean(np.sin(h))) < 0.7  # headings all round
+    assert capture.meta["accel_frontend"] == "nominal (data sheet)" and capture.meta["accel_offset"]
+
+    # the same physical triad calibrated on the level table (station simulate, same seed)
+    p1 = tmp_path / "p1.csv"
+    assert main(["simulate", "--procedure", "accel-tabletop", "--seed", "23", "--out", str(p1)]) == 0
+    cap = read_capture(str(p1))
+    with Store(db) as s:
+        p1_id = s.save_calibration(calibrate_capture(cap), meta=cap.meta, columns=cap.columns, device_id="SIM-COM-0023")
+    asyncio.run(story("p1"))
+    level, text, heads, swept, truth, cal_id, capture = seen["p1"]
+    assert level.tilt_from.startswith(f"P1 calibration #{p1_id}")
+    assert math.hypot(level.pitch_deg, level.roll_deg) < 1.0, level  # level within the placement error
+    assert math.hypot(swept.pitch_deg, swept.roll_deg) < 1.0, swept
+    assert swept.heading_from.startswith("compass calibration #")  # the nominal run's, saved above
+    assert _angle_diff_deg(swept.heading_deg, truth) < 1.5, (swept.heading_deg, truth)
+    rec = Store(db).calibration(cal_id)
+    assert capture.meta["accel_frontend"].startswith(f"P1 calibration #{p1_id}")
+    res = calibrate_capture(capture)
+    assert res["accel_frontend"].startswith("P1 calibration") and res["headings"]
+    assert not any("no tilt" in w for w in res["warnings"]) and rec["procedure"] == "compass"

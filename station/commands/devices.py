@@ -42,7 +42,7 @@ def register(subparsers) -> None:
         default=[],
         metavar="NAME=LOW:HIGH",
         help="absolute limits of a parameter (M[0][0]=0.98:1.02) or block (B=-0.5:0.5), in its units; "
-        "leave one end empty for none (S=0.9:); repeatable",
+        "leave one end empty for none (S=0.9:); NAME= removes one; repeatable",
     )
     add.set_defaults(func=_add)
 
@@ -74,29 +74,43 @@ def _tolerances(items: list[str]) -> dict | None:
     return out
 
 
+def parse_limit(item: str) -> tuple[str, list | None]:
+    """``NAME=LOW:HIGH`` (either end may be empty, not both) → (name, [low, high]);
+    ``NAME=`` → (name, None): remove that limit. ValueError says what is wrong. The CLI's
+    ``--limit`` and the TUI's limits editor read the same syntax."""
+    name, sep, span = item.strip().partition("=")
+    name = name.strip()
+    if sep and name and not span.strip():
+        return name, None
+    low, colon, high = span.partition(":")
+    try:
+        pair = [float(low) if low.strip() else None, float(high) if high.strip() else None]
+    except ValueError:
+        pair = None
+    if (
+        not sep
+        or not colon
+        or not name
+        or pair is None
+        or pair == [None, None]
+        or any(x is not None and not math.isfinite(x) for x in pair)
+        or (None not in pair and pair[0] > pair[1])
+    ):
+        raise ValueError(
+            f"{item!r}: expected NAME=LOW:HIGH with LOW <= HIGH (one end may be empty), or NAME= to remove"
+        )
+    return name, pair
+
+
 def _limits(items: list[str]) -> dict | None:
     if not items:
         return None
     out = {}
     for item in items:
-        name, sep, span = item.partition("=")
-        low, colon, high = span.partition(":")
         try:
-            pair = [float(low) if low.strip() else None, float(high) if high.strip() else None]
-        except ValueError:
-            pair = None
-        if (
-            not sep
-            or not colon
-            or not name
-            or pair is None
-            or pair == [None, None]
-            or any(x is not None and not math.isfinite(x) for x in pair)
-            or (None not in pair and pair[0] > pair[1])
-        ):
-            raise InputError(
-                None, None, f"--limit {item!r}: expected NAME=LOW:HIGH with LOW <= HIGH (one end may be empty)"
-            )
+            name, pair = parse_limit(item)
+        except ValueError as exc:
+            raise InputError(None, None, f"--limit {exc}") from None
         out[name] = pair
     return out
 

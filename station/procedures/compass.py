@@ -174,14 +174,25 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     if a is None:
         warnings.append("no accelerometer columns: no tilt, no heading")
         return
+    from station.procedures.accel_frontend import OFFSET_KEY, SCALE_KEY, Frontend, FrontendError
+
+    try:
+        frontend = Frontend.from_meta(capture.meta)
+    except FrontendError as exc:
+        raise InputError(capture.path, capture.meta_lines.get(exc.key), f"metadata {exc}") from None
     a_factor = si_factor("accel", capture.meta.get("accel_unit"))
-    if a_factor is None:
+    if frontend is not None:  # a raw accelerometer with its zero and scale (accel_frontend.py)
+        f_g = frontend(a) / G_STANDARD_MPS2
+        result["accel_frontend"] = frontend.source
+    elif a_factor is None:
         warnings.append(
             f"accel_unit {capture.meta.get('accel_unit')!r} has no physical factor: "
-            "no tilt, no heading (calibrate the accelerometer first)"
+            f"no tilt, no heading (give '{OFFSET_KEY}' and '{SCALE_KEY}', e.g. from the unit's "
+            "P1 calibration)"
         )
         return
-    f_g = a * (a_factor / G_STANDARD_MPS2)
+    else:
+        f_g = a * (a_factor / G_STANDARD_MPS2)
     w = _xyz(capture, "g")
     w_factor = si_factor("gyro", capture.meta.get("gyro_unit"))
     if w is None and all(c in capture.columns for c in ("gx", "gy")):

@@ -13,6 +13,15 @@ Phases: ``sweep`` (recording) → ``done`` when coverage ≥ ``target_coverage``
 ``min_s`` have been recorded (or the operator finishes early), ``aborted``. The recording
 becomes a time-series :class:`station.capture.Capture` for ``calibrate_capture``
 (``station/procedures/compass.py``). Times are the samples' own ``t_s``.
+
+Live tilt and heading (what a bench engineer checks first: level reads 0°, heading follows
+the turn): pitch and roll from the last 0.2 s of the accelerometer through its front end
+(``station.procedures.accel_frontend``: the device's P1 calibration, else its declared
+zero and scale; a raw unit with neither shows none), the tilt-compensated magnetic heading
+of body x (``solvers.compass.heading_deg``; body x forward, y right, z down) from the field
+corrected by the device's last compass calibration if given, else by the sweep's own
+midrange centre (hard iron only) once every axis has been turned over, else uncorrected.
+The front end goes into the capture's metadata, so the fit's per-position headings use it.
 """
 
 from __future__ import annotations
@@ -23,8 +32,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solvers import compass as C
 from solvers.compass import MIN_COVERAGE
 from solvers.detectors import FieldCoverage
+from solvers.frames import G_STANDARD_MPS2
+from solvers.units import si_factor
 from station.procedures.guide_base import GuideBase
 
 PHASES = ("sweep", "done", "aborted")
@@ -67,6 +79,11 @@ class CompassStatus:
     turn_rate: float  # |gyro| in the gyro's raw unit
     t_s: float
     message: str
+    pitch_deg: float = math.nan  # live tilt (NaN: no accelerometer front end)
+    roll_deg: float = math.nan
+    heading_deg: float = math.nan  # magnetic heading of body x (NaN: no tilt, or |pitch| too large)
+    tilt_from: str = ""  # where the accelerometer's zero and scale came from ('' none)
+    heading_from: str = ""  # the field correction in use
 
 
 class CompassGuide(GuideBase):
@@ -80,10 +97,31 @@ class CompassGuide(GuideBase):
         device_id: str = "",
         site: dict | None = None,
         config: CompassConfig | None = None,
+        accel_frontend=None,
+        mag_calibration: dict | None = None,
     ):
+        """accel_frontend: a ``station.procedures.accel_frontend.Frontend`` for a raw
+        accelerometer (None: physical units, or no tilt). mag_calibration: the device's last
+        accepted compass calibration record (``params.hard_iron``, ``soft_iron``) for the
+        live heading (None: the sweep's midrange centre)."""
         self.config = config or CompassConfig()
         self.sample_rate_hz = float(sample_rate_hz)
         self.units = dict(units)
+        self.frontend = accel_frontend
+        if self.frontend is None:
+            k = si_factor("accel", self.units.get("accel_unit"))
+            if k is not None:
+                from station.procedures.accel_frontend import Frontend
+
+                self.frontend = Frontend(np.zeros(3), k * np.eye(3), f"{self.units['accel_unit']} (physical unit)")
+        self.mag_cal = None
+        if mag_calibration is not None:
+            p = mag_calibration["params"]
+            self.mag_cal = (
+                np.asarray(p["soft_iron"], float),
+                np.asarray(p["hard_iron"], float),
+                f"compass calibration #{mag_calibration.get('id')}",
+            )
         self.device_id = device_id
         self.site = dict(site or {})
         self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -99,6 +137,7 @@ class CompassGuide(GuideBase):
         self._t0 = math.nan
         self._t1 = math.nan
         self._last = None
+        self._attitude = (math.nan, math.nan, math.nan, "", "")
         self._message = "Turn the unit slowly through every orientation (all faces up, all headings)"
 
     # ------------------------------------------------------------ cells
@@ -133,6 +172,8 @@ class CompassGuide(GuideBase):
         self.field.update(mag)
         k = min(len(t_s), max(1, int(self.sample_rate_hz * 0.1)))
         self._last = (mag[-k:].mean(axis=0), float(np.linalg.norm(np.nanmean(gyro[-k:], axis=0))), self._t1)
+        k2 = min(len(t_s), max(1, int(self.sample_rate_hz * 0.2)))
+        self._attitude = self._tilt_heading(np.nanmean(accel[-k2:], axis=0), np.nanmean(mag[-k2:], axis=0))
         c = self.config
         rec = self._t1 - self._t0
         if self.coverage >= c.target_coverage and rec >= c.min_s:
@@ -144,6 +185,27 @@ class CompassGuide(GuideBase):
         else:
             self._message = "Turn the unit slowly through every orientation (all faces up, all headings)"
         return self.status()
+
+    def _tilt_heading(self, a_raw: np.ndarray, m_raw: np.ndarray) -> tuple:
+        """(pitch°, roll°, magnetic heading°, tilt source, heading source) of one mean sample."""
+        nan = (math.nan, math.nan, math.nan, "", "")
+        if self.frontend is None or not np.isfinite(a_raw).all():
+            return nan
+        f = self.frontend(a_raw) / G_STANDARD_MPS2
+        if not np.linalg.norm(f) > 0:
+            return nan
+        pitch, roll = C.pitch_roll_from_accel(f)
+        head, source = math.nan, ""
+        if np.isfinite(m_raw).all():
+            if self.mag_cal is not None:
+                W, h, source = self.mag_cal
+                m = C.calibrated(m_raw[None, :], W, h)
+            elif self.field.turned_over():
+                m, source = (m_raw - self.field.midrange_centre())[None, :], "sweep midrange (hard iron only)"
+            else:
+                m, source = m_raw[None, :], "uncorrected (turn every axis over)"
+            head = float(C.heading_deg(m, pitch, roll)[0][0])
+        return (math.degrees(pitch[0]), math.degrees(roll[0]), head, self.frontend.source, source)
 
     def finish(self) -> None:
         """The operator ends the recording now."""
@@ -171,6 +233,7 @@ class CompassGuide(GuideBase):
             rate,
             t,
             self._message,
+            *self._attitude,
         )
 
     # ------------------------------------------------------------ the capture
@@ -199,6 +262,8 @@ class CompassGuide(GuideBase):
         for k in ("accel_unit", "gyro_unit", "mag_unit"):
             if self.units.get(k):
                 meta[k] = self.units[k]
+        if self.frontend is not None and si_factor("accel", self.units.get("accel_unit")) is None:
+            meta.update(self.frontend.meta())  # the fit's tilt and headings use the same front end
         for key in ("latitude_deg", "longitude_deg", "altitude_m"):
             if key in self.site:
                 meta[key] = repr(float(self.site[key]))

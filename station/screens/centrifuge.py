@@ -21,7 +21,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, Input, Label, OptionList, Static
+from textual.widgets import Input, Label, OptionList, Static
 from textual.worker import get_current_worker
 
 from station.formatting import num
@@ -29,7 +29,7 @@ from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFai
 from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
 from station.widgets.steps import StepList
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 FIELDS = ("ax", "ay", "az", "speed")
 
@@ -97,7 +97,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
                 yield Static("", id="entry-error")
                 yield Static("", id="message")
                 yield Static("", id="progress")
-        yield Footer()
+        yield footer()
 
     def _bench(self, key: str, default: float) -> float:
         """The session's (or the simulated centrifuge's) radius / local g, else ``default``."""

@@ -17,14 +17,15 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Static
 from textual.worker import get_current_worker
 
 from station.formatting import num
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
+from station.textsafe import tui_markup
 from station.widgets.live import bar
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 class CompassScreen(GuidedScreenMixin, Screen):
@@ -33,7 +34,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
     CompassScreen #right { width: 1fr; padding: 0 1; }
     CompassScreen #instruction { height: 3; }
     CompassScreen #progress { height: 2; }
-    CompassScreen #readouts { height: 4; margin-top: 1; }
+    CompassScreen #readouts { height: 6; margin-top: 1; }
     CompassScreen #message { height: 1; text-style: bold; }
     """
     BINDINGS = [
@@ -41,6 +42,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
         Binding("r", "restart", "Restart"),
         Binding("a", "ask_abort", "Abort"),
         Binding("p", "sim_sweep", "Sweep (sim)"),
+        Binding("l", "sim_level", "Level (sim)"),
     ]
 
     def __init__(self) -> None:
@@ -64,7 +66,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
                 yield Static("", id="progress")
                 yield Static("", id="readouts")
                 yield Static("", id="message")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.query_one("#map").border_title = "Sphere coverage"
@@ -79,13 +81,24 @@ class CompassScreen(GuidedScreenMixin, Screen):
         src = s.source
 
         def make_guide():
+            from station.procedures.accel_frontend import for_device
+
             cfg = CompassConfig(min_s=s.extra.get("compass_min_s", 60.0))
+            device_id = s.device_id or src.device_id
+            # the unit's own P1 (zero and scale) and compass calibrations, when it has them
+            p1, mag = [], None
+            store = s.open_store()
+            if store is not None:
+                p1 = store.history(device_id, "accel-tabletop")
+                mag = next((c for c in reversed(store.history(device_id, "compass")) if c["accepted"]), None)
             return CompassGuide(
                 sample_rate_hz=source_rate_hz(src),
                 units=src.units,
-                device_id=s.device_id or src.device_id,
+                device_id=device_id,
                 site=getattr(src, "site", None),
                 config=cfg,
+                accel_frontend=for_device(p1, src.units.get("accel_unit"), getattr(src, "nominal", None)),
+                mag_calibration=mag,
             )
 
         if not self._start_guide(src, make_guide):
@@ -122,11 +135,23 @@ class CompassScreen(GuidedScreenMixin, Screen):
         self.query_one("#progress", Static).update(t)
         m = st.field_raw
         stats = message.stats
+        if st.tilt_from:
+            attitude = (
+                f"pitch {num(st.pitch_deg, '+6.1f')}°  roll {num(st.roll_deg, '+6.1f')}°  "
+                f"heading {num(st.heading_deg, '5.1f')}° mag\n"
+                f"tilt: {tui_markup(st.tilt_from)}\nheading: {tui_markup(st.heading_from)}\n"
+            )
+        else:
+            unit = units.get("accel_unit") or "no unit"
+            attitude = (
+                f"no tilt, no heading: accelerometer in {tui_markup(unit)}\nwith no P1 calibration or zero/scale\n\n"
+            )
         self.query_one("#readouts", Static).update(
             f"mag  {num(m[0], '8.2f')} {num(m[1], '8.2f')} {num(m[2], '8.2f')} {units.get('mag_unit') or 'raw'}"
             f"  |m| {num(st.field_norm_raw, '.2f')}\n"
             f"turn {num(st.turn_rate, '.3f')} {units.get('gyro_unit') or 'raw'}\n"
-            f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
+            + attitude
+            + f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
             + ("" if stats.connected else "   DISCONNECTED")
         )
         self.query_one("#message", Static).update(st.message)
@@ -157,6 +182,10 @@ class CompassScreen(GuidedScreenMixin, Screen):
 
     def action_abort(self) -> None:
         self._abort("P3 aborted: nothing saved")
+
+    def action_sim_level(self) -> None:
+        """The simulated unit: set it down level (z down: pitch and roll 0°) at some heading."""
+        self._sim_place("z_down", "Simulated unit: set down level")
 
     def action_sim_sweep(self) -> None:
         """The simulated unit: start turning it through every orientation, or stop."""

@@ -11,12 +11,12 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import Button, Footer, Input, Label, Select, Static
+from textual.widgets import Button, Input, Label, Select, Static
 
 from station.messages import Connected, SourceFailed, StoreLoaded
 from station.procedures import registry
 from station.textsafe import tui_markup, tui_text
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 SIM = "sim"
 OTHER = "other"
@@ -117,7 +117,7 @@ class ConnectScreen(Screen):
                 yield Button("History \\[F2]", id="history", compact=True)
                 yield Button("Import file \\[F7]", id="import", compact=True)
         yield Static("", id="status")
-        yield Footer()
+        yield footer()
 
     def _average_means(self, procedure: str | None = None) -> str:
         s = self.app.session

@@ -9,10 +9,10 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import VerticalScroll
 from textual.screen import Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Static
 
 from station.messages import StoreLoaded
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 class DiagnoseScreen(Screen):
@@ -32,7 +32,7 @@ class DiagnoseScreen(Screen):
         yield TitleBar(f"diagnose {what}")
         with VerticalScroll():
             yield Static("Diagnosing: fitting the baseline and the candidate effects…", id="report")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.analyse()

@@ -16,15 +16,15 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Static
 from textual.worker import get_current_worker
 
 from solvers.units import si_factor
 from station.formatting import num
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
-from station.screens._common import GuidedScreenMixin, source_rate_hz
+from station.screens._common import GuidedScreenMixin, is_simulated, source_rate_hz
 from station.widgets.live import CountdownBar, StabilityBar
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 SIM_FRAME = "x forward, y left, z up"  # the simulated unit lies level with z up
 
@@ -64,7 +64,7 @@ class HoldScreen(GuidedScreenMixin, Screen):
                 yield CountdownBar(id="countdown")
             yield Static("", id="readouts")
             yield Static("", id="message")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.stream()
@@ -78,7 +78,7 @@ class HoldScreen(GuidedScreenMixin, Screen):
         src = s.source
 
         def make_guide():
-            frame = s.extra.get("frame") or (SIM_FRAME if src.kind == "sim" else "")
+            frame = s.extra.get("frame") or (SIM_FRAME if is_simulated(src) else "")
             cfg = HoldConfig(duration_s=s.average_s, settle_s=s.settle_s, frame=frame)
             return HoldGuide(
                 sample_rate_hz=source_rate_hz(src),
@@ -184,7 +184,7 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
                 yield CountdownBar(id="countdown")
             yield Static("", id="readouts")
             yield Static("", id="message")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.stream()
@@ -198,7 +198,7 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
         src = s.source
 
         def make_guide():
-            frame = s.extra.get("frame") or (SIM_FRAME if src.kind == "sim" else "")
+            frame = s.extra.get("frame") or (SIM_FRAME if is_simulated(src) else "")
             cfg = ReferenceConfig(
                 duration_s=s.average_s,
                 frame=frame,

@@ -12,6 +12,7 @@ HELP = """\
 [b]Calibration station: keys[/]
 
 [b]Everywhere[/]  F1 help · ctrl+q quit · tab/shift+tab move · enter choose
+            F2 history · ctrl+p command palette
 [b]Connect[/]     F5 start · F6 resume a P1 · F7 import a file · F2 history
 [b]P1[/]          s skip · r redo (the current average, or the last captured
             position when done) · enter on a step: redo it · a abort
@@ -19,11 +20,15 @@ HELP = """\
 [b]P2[/]          m type a row (ax ay az speed, enter) · esc back · s skip
             r redo · enter on a step: redo it · a abort · f fit (≥ 10)
 [b]P3, P4[/]      f finish now (P3) · r restart the recording · a abort
+            simulated: p sweep, l set level (P3) · p rate table (P4 ref.)
+[b]P5[/]          f finish now · r restart · a abort · simulated: d drive or
+            stop, t turns and hills or straight
 [b]Noise run[/]   as P4; its result: t accuracy asked · e export · n new run
-[b]Results[/]     s save · d discard · e export (CSV + JSON) · g diagnose ·
-            n new run · F2 history
+[b]Results[/]     s save · x reject · d discard · e export (CSV + JSON) ·
+            r report · g diagnose · n new run · F2 history
 [b]History[/]     up/down device · p next parameter · tab to the calibrations,
-            g diagnose the one under the cursor · escape back
+            g diagnose the one under the cursor · l the device's limits
+            · escape back
 
 [b]P1 in short[/]  Put the unit in each of the 12 positions the drawing shows
 and let go. When it is still and in position the station waits a moment,

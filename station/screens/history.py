@@ -10,12 +10,12 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Static
+from textual.widgets import DataTable, Static
 from textual_plotext import PlotextPlot
 
 from station.procedures import registry
 from station.timeaxis import time_axis
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 def _short(procedure: str) -> str:
@@ -41,6 +41,7 @@ class HistoryScreen(Screen):
         Binding("escape", "app.pop_screen", "Back"),
         Binding("p", "next_param", "Next parameter"),
         Binding("g", "diagnose", "Diagnose"),
+        Binding("l", "limits", "Limits"),
     ]
 
     def __init__(self) -> None:
@@ -60,7 +61,7 @@ class HistoryScreen(Screen):
             with Vertical(id="right"):
                 yield DataTable(id="calibrations", cursor_type="row", zebra_stripes=True)
                 yield PlotextPlot(id="plot")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         t = self.query_one("#devices", DataTable)
@@ -159,6 +160,15 @@ class HistoryScreen(Screen):
             return
         row = table.get_row_at(table.cursor_row)
         self.app.push_screen(DiagnoseScreen(calibration_id=int(row[0])))
+
+    def action_limits(self) -> None:
+        """View and edit the highlighted device's absolute limits (station.screens.limits)."""
+        from station.screens.limits import LimitsScreen
+
+        if not self.device_id:
+            self.notify("No device to set limits for", severity="warning")
+            return
+        self.app.push_screen(LimitsScreen(self.device_id))
 
     def action_next_param(self) -> None:
         if self.drift:

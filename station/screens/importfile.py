@@ -11,10 +11,10 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, Input, Static
+from textual.widgets import Input, Static
 
 from station.messages import CalibrationReady
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 class ImportScreen(Screen):
@@ -35,7 +35,7 @@ class ImportScreen(Screen):
             )
             yield Input(placeholder="path/to/capture.csv, then Enter", id="path")
             yield Static("", id="status")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.query_one("#path", Input).focus()

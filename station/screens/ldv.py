@@ -22,7 +22,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Static
 from textual.worker import get_current_worker
 
 from solvers.ldv import KAPPA_REFUSE, KAPPA_WARN
@@ -30,7 +30,7 @@ from station.formatting import num
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.live import bar
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 def kappa_bar(kappa: float, width: int = 16) -> float:
@@ -77,7 +77,7 @@ class LdvScreen(GuidedScreenMixin, Screen):
             yield Static("", id="readouts")
             yield Static("", id="estimate")
             yield Static("", id="message")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.stream()

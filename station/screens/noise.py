@@ -13,14 +13,14 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.screen import Screen
-from textual.widgets import Footer, Input, Label, Static
+from textual.widgets import Input, Label, Static
 from textual_plotext import PlotextPlot
 
 from station.messages import Exported
 from station.procedures.noise import AXES, PRACTICAL_RECORD_S, format_duration
 from station.screens.export import export_files, exported_text
 from station.screens.gyrodrift import HoldScreen
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 class NoiseReady(Message):
@@ -102,7 +102,7 @@ class AllanScreen(Screen):
                 yield Input(value=f"{self.app.session.extra.get('accuracy_deg_h', 1.0):g}", id="accuracy", compact=True)
                 yield Label("  (t, type, Enter)")
             yield Static("", id="status")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.call_after_refresh(self.set_focus, None)  # the keys stay in the footer

@@ -12,7 +12,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical, VerticalScroll
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Static
+from textual.widgets import DataTable, Static
 
 from station.formatting import num
 from station.messages import Exported, Saved, StoreLoaded
@@ -20,7 +20,7 @@ from station.procedures import registry
 from station.procedures.review import assess, param_rows, result_unit, review_record
 from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 class ResultsScreen(Screen):
@@ -46,7 +46,7 @@ class ResultsScreen(Screen):
         Binding("r", "report", "Report"),
         Binding("g", "diagnose", "Diagnose"),
         Binding("n", "new", "New run"),
-        Binding("f2", "history", "History"),
+        Binding("f2", "history", "History", show=False),  # F1 lists it: the footer keeps to 80 columns
     ]
 
     def __init__(self, capture, result: dict | None, error: str | None = None, previous: dict | None = None):
@@ -71,7 +71,7 @@ class ResultsScreen(Screen):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
             yield DataTable(id="residuals", zebra_stripes=True, cursor_type="row")
         yield Static("", id="saved")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.load_device()

@@ -17,14 +17,14 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
-from textual.widgets import Footer, OptionList, Static
+from textual.widgets import OptionList, Static
 from textual.worker import get_current_worker
 
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz, start_source
 from station.widgets.live import CountdownBar, OrientationIndicator, PlacementView, Readouts, StabilityBar
 from station.widgets.steps import StepList
-from station.widgets.title import TitleBar
+from station.widgets.title import TitleBar, footer
 
 
 class ProcedureScreen(GuidedScreenMixin, Screen):
@@ -68,7 +68,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
                 yield Readouts(id="readouts")
                 yield Static("", id="message")
                 yield Static("", id="progress")
-        yield Footer()
+        yield footer()
 
     def on_mount(self) -> None:
         self.query_one("#steps").border_title = "Steps"

@@ -95,6 +95,9 @@ class CountdownBar(Static):
         elif st.phase == "change":  # P2: the last row is in; remount or change speed first
             t.append(bar(0.0, self.WIDTH))
             t.append(" after the change")
+        elif getattr(st, "at_speed", True) is False:  # P2: still or not, the rate is what is wrong
+            t.append(bar(0.0, self.WIDTH))
+            t.append(" not at the asked speed", style="bold red")
         else:
             t.append(bar(0.0, self.WIDTH))
             t.append(f" {mmss(average_s)} when still")

@@ -3,7 +3,13 @@ screenshots stay deterministic."""
 
 from __future__ import annotations
 
-from textual.widgets import Static
+from textual.widgets import Footer, Static
+
+
+def footer() -> Footer:
+    """Every screen's footer: compact, without the command palette's entry (ctrl+p still
+    opens it; F1 says so), so each screen's keys fit in 80 columns."""
+    return Footer(compact=True, show_command_palette=False)
 
 
 class TitleBar(Static):

@@ -1,0 +1,167 @@
+"""A device's absolute limits, viewed and edited where a bench engineer looks for the
+device: History, ``l`` on the highlighted device.
+
+The same store call as ``station devices add ID --limit NAME=LOW:HIGH`` (``Store.add_device``,
+so the change is anchored and ``station verify`` sees any edit made behind the station's
+back) and the same syntax (``station.commands.devices.parse_limit``): ``NAME=LOW:HIGH``
+sets one (either end may be empty), ``NAME=`` removes it. Each limit is shown with its
+unit and the value of the calibration in use, so the engineer sees what it is checked on.
+"""
+
+from __future__ import annotations
+
+import math
+
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.screen import ModalScreen
+from textual.widgets import Input, Static
+
+from station.messages import StoreLoaded
+from station.textsafe import tui_markup
+
+
+def _fmt(x) -> str:
+    return "…" if x is None else format(float(x), "g")
+
+
+def _scalar(params: dict, name: str):
+    """The value of ``name`` (``B``, ``B[0]``, ``M[0][1]``, ``beam1.dK``) in ``params``, or None."""
+    import re
+
+    node = params
+    for part in re.findall(r"[^.\[\]]+|\[\d+\]", name):
+        try:
+            node = node[int(part[1:-1])] if part.startswith("[") else node[part]
+        except (KeyError, IndexError, TypeError, ValueError):
+            return None
+    return node
+
+
+class LimitsScreen(ModalScreen):
+    """The limits of ``device_id``; dismisses with True when something was changed."""
+
+    CSS = """
+    LimitsScreen { align: center middle; }
+    LimitsScreen #box { width: 78; height: auto; max-height: 22; border: round $primary; background: $surface;
+                        padding: 0 1; }
+    LimitsScreen #current { height: auto; max-height: 9; }
+    LimitsScreen #params { height: auto; max-height: 3; color: $text-muted; }
+    LimitsScreen #error { height: auto; color: $error; }
+    LimitsScreen Input:focus { border: tall $accent; }
+    """
+    BINDINGS = [Binding("escape", "close", "Back", priority=True)]
+
+    def __init__(self, device_id: str) -> None:
+        super().__init__()
+        self.device_id = device_id
+        self.limits: dict = {}
+        self.changed = False
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="box"):
+            yield Static(f"[b]Limits of {tui_markup(self.device_id)}[/]: absolute, in each parameter's unit", id="head")
+            yield Static("reading…", id="current")
+            yield Static("", id="params")
+            yield Static("NAME=LOW:HIGH sets one (an end may be empty), NAME= removes it:")
+            yield Input(placeholder="e.g. B=-0.5:0.5  M[0][0]=0.98:1.02  S=0.9:", id="edit")
+            yield Static("Enter apply · esc back")
+            yield Static("", id="said")
+            yield Static("", id="error")
+
+    def on_mount(self) -> None:
+        self.query_one("#edit", Input).focus()
+        self.load()
+
+    @work(thread=True, exclusive=True, group="limits", exit_on_error=False, description="read the device")
+    def load(self) -> None:
+        try:
+            store = self.app.session.open_store()
+            if store is None:
+                raise RuntimeError("no database (start the station with --db or STATION_DB)")
+            device = store.get_device(self.device_id)
+            if device is None:
+                raise RuntimeError(f"no device {self.device_id!r} in the database")
+            in_use = {}
+            for h in store.history(self.device_id):  # oldest first: the newest accepted wins
+                if h["accepted"]:
+                    in_use[h["procedure"]] = h
+            self.post_message(StoreLoaded("limits", {"limits": device.get("limits") or {}, "in_use": in_use}))
+        except Exception as exc:  # noqa: BLE001 - one line in the box
+            self.post_message(StoreLoaded("limits", None, error=str(exc)))
+
+    def on_store_loaded(self, message: StoreLoaded) -> None:
+        message.stop()
+        if message.error:
+            self.query_one("#current", Static).update("")
+            self.query_one("#error", Static).update(tui_markup(message.error))
+            return
+        from station.procedures import registry
+        from station.procedures.review import param_unit
+
+        self.limits = message.data["limits"]
+        in_use = message.data["in_use"]
+        lines = []
+        for name, (low, high) in sorted(self.limits.items()):
+            unit, now = "", None
+            for proc, h in in_use.items():
+                v = _scalar(h["params"], name)
+                if v is not None:
+                    unit = param_unit(dict(h["extra"] or {}, procedure=proc, params=h["params"]), name)
+                    now = v
+                    break
+            shown = ""
+            if isinstance(now, (int, float)) and math.isfinite(now):
+                inside = (low is None or now >= low) and (high is None or now <= high)
+                shown = f"   in use {now:.6g}" + ("" if inside else "  [b red]OUTSIDE[/]")
+            lines.append(f"{tui_markup(name):<12} {_fmt(low):>10} … {_fmt(high):<10} {tui_markup(unit)}" + shown)
+        self.query_one("#current", Static).update("\n".join(lines) or "no limits set")
+        blocks = []
+        for proc, h in in_use.items():
+            entry = registry.get(proc)
+            code = entry.code if entry is not None else proc
+            names = [k for k, v in h["params"].items() if not isinstance(v, (str, bool)) and v is not None]
+            blocks.append(f"{code}: {', '.join(names)}")
+        self.query_one("#params", Static).update(
+            tui_markup("parameters in use: " + "; ".join(blocks)) if blocks else "no accepted calibration yet"
+        )
+
+    @on(Input.Submitted, "#edit")
+    def apply(self, event: Input.Submitted) -> None:
+        from station.commands.devices import parse_limit
+
+        text = event.value.strip()
+        if not text:
+            return
+        try:
+            name, pair = parse_limit(text)
+        except ValueError as exc:
+            self.query_one("#said", Static).update("")
+            self.query_one("#error", Static).update(tui_markup(str(exc)))
+            return
+        if pair is None and name not in self.limits:
+            self.query_one("#error", Static).update(tui_markup(f"no limit {name!r} to remove"))
+            return
+        self.store_limit(name, pair)
+
+    @work(thread=True, exclusive=True, group="limits-save", exit_on_error=False, description="store a limit")
+    def store_limit(self, name: str, pair) -> None:
+        try:
+            store = self.app.session.open_store()
+            store.add_device(self.device_id, limits={name: pair})
+            self.app.call_from_thread(self._stored, name, pair)
+        except Exception as exc:  # noqa: BLE001 - one line in the box, nothing changed
+            self.app.call_from_thread(self.query_one("#error", Static).update, tui_markup(f"not stored: {exc}"))
+
+    def _stored(self, name: str, pair) -> None:
+        self.changed = True
+        self.query_one("#edit", Input).value = ""
+        said = f"removed {name}" if pair is None else f"{name} = {_fmt(pair[0])} … {_fmt(pair[1])}"
+        self.query_one("#error", Static).update("")
+        self.query_one("#said", Static).update(tui_markup(f"stored: {said}"))
+        self.load()
+
+    def action_close(self) -> None:
+        self.dismiss(self.changed)
