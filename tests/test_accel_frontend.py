@@ -83,6 +83,7 @@ def test_a_bad_front_end_is_one_line_and_exit_2(capture_g, tmp_path, meta, key):
 
 def test_the_units_p1_calibration_comes_before_the_data_sheet():
     p1_v = {
+        "procedure": "accel-tabletop",
         "id": 7,
         "time": "2026-11-20T10:00:00Z",
         "accepted": True,

@@ -80,9 +80,8 @@ def test_cli_choices_are_the_registry():
     seen = 0
     for name in ("simulate", "record", "sim-device", "walkthrough", "history", "drift"):
         opt = next(a for a in sub.choices[name]._actions if "--procedure" in a.option_strings)
-        # sim-device also simulates the bench of P4 mode A, a guided run of gyro-drift
-        extra = ("gyro-reference",) if name == "sim-device" else ()
-        assert "gyro-reference" in {r.name for r in registry.GUIDED_RUNS}
+        # sim-device also simulates the benches of the guided runs with a reference IMU (P4 mode A)
+        extra = tuple(r.name for r in registry.GUIDED_RUNS if r.reference) if name == "sim-device" else ()
         assert tuple(opt.choices) == registry.names() + extra, name
         seen += 1
     assert seen == 6

@@ -28,6 +28,12 @@ def _effects(items: list[str] | None) -> dict[str, float]:
     return out
 
 
+def benches() -> tuple[str, ...]:
+    """What `--procedure` takes: every procedure, and the guided runs whose device carries a
+    reference IMU (P4 mode A)."""
+    return registry.names() + tuple(r.name for r in registry.GUIDED_RUNS if r.reference)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "sim-device",
@@ -37,14 +43,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "port (docs/protocol.md).",
     )
     p.add_argument(
-        "--rate", type=float, default=None, metavar="HZ", help="sample rate (default 100; the LDV vehicle 10)"
+        "--rate", type=float, default=None, metavar="HZ", help="sample rate (default 100; a bench's own otherwise)"
     )
     p.add_argument(
         "--procedure",
         default=registry.DEFAULT,
-        choices=registry.names() + ("gyro-reference",),
-        help="the bench it simulates; gyro-reference: P4 mode A (the unit on a reference IMU, "
-        "ref_gx..ref_gz); ldv: the vehicle (beams vl1..vl3, reference vx..vz, body rates as the gyro)",
+        choices=benches(),
+        help="the bench it simulates, as the TUI's built-in device (a guided run with a reference IMU "
+        "adds its ref_gx..ref_gz; the LDV's vehicle sends its beams and reference velocity)",
     )
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
     p.add_argument("--seed", type=int, default=0)
@@ -57,32 +63,40 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from solvers.simulate import LiveImu, LiveVehicle
+    from solvers.simulate import LiveImu
     from station.device.simdevice import SimDevice
 
-    if args.rate is None:
-        args.rate = 10.0 if args.procedure == "ldv" else 100.0
-    if not (0.1 <= args.rate <= 100_000):
+    if args.rate is not None and not (0.1 <= args.rate <= 100_000):
         raise InputError(None, None, f"--rate {args.rate:g}: must be 0.1..100000 Hz")
     if args.hold <= 0:
         raise InputError(None, None, "--hold must be positive")
     effects = _effects(args.effect)
-    if args.procedure == "ldv":  # the same vehicle as the built-in device's P5 (station.sources)
-        if effects or args.auto:
-            raise InputError(None, None, "--procedure ldv: the vehicle takes no --effect or --auto (drive it)")
-        imu = LiveVehicle(seed=args.seed, rate_hz=args.rate)
-    else:
+    # the bench the TUI's built-in device runs for this procedure (its guide module makes it)
+    entry, reference = registry.device_of(args.procedure)
+    bench = entry.guide().live_device(seed=args.seed, rate_hz=args.rate or 100.0, reference=reference)
+    if isinstance(bench, LiveImu):  # the unit in the operator's hand: effects, hold, scripted operator
         try:
             imu = LiveImu(
-                procedure="gyro-drift" if args.procedure == "gyro-reference" else args.procedure,
+                procedure=bench.procedure,
                 seed=args.seed,
-                rate_hz=args.rate,
+                rate_hz=args.rate or 100.0,
                 effects=effects,
                 hold_s=args.hold,
-                reference=args.procedure == "gyro-reference",
+                reference=reference,
             )
         except ValueError as exc:  # SimulationError: unknown effect for the procedure, ...
             raise InputError(None, None, str(exc).splitlines()[0]) from None
+    else:  # another bench (the centrifuge, the vehicle): driven by its own commands
+        if effects or args.auto or args.protocol != "station":
+            raise InputError(
+                None,
+                None,
+                f"--procedure {args.procedure}: this bench takes no --effect or --auto and speaks the station "
+                "protocol only (drive it with $STC,ORIENT)",
+            )
+        imu = bench
+        if args.rate is not None:
+            imu.rate_hz = float(args.rate)
     if args.auto:
         imu.set_auto(True)
     dev = SimDevice(imu, protocol=args.protocol, mavlink_scaled=args.mavlink_scaled)

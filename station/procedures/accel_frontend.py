@@ -66,12 +66,16 @@ class Frontend:
     @classmethod
     def from_p1(cls, record: dict) -> Frontend:
         """A stored P1 calibration (a ``Store.history`` row): its B and M."""
+        from station.procedures import registry
+
         p = record["params"]
         when = str(record.get("time") or "")[:10]
+        entry = registry.get(record.get("procedure"))
+        code = entry.code if entry is not None else str(record.get("procedure") or "")
         return cls(
             np.asarray(p["B"], float).reshape(3),
             np.asarray(p["M"], float).reshape(3, 3),
-            f"P1 calibration #{record.get('id')}" + (f" ({when})" if when else ""),
+            f"{code} calibration #{record.get('id')}" + (f" ({when})" if when else ""),
         )
 
     @classmethod
@@ -130,11 +134,12 @@ def _numbers(text: str, key: str, sizes: tuple[int, ...]) -> np.ndarray:
 def for_device(history: list[dict], accel_unit: str | None, nominal=None) -> Frontend | None:
     """The front end a bench engineer expects for a unit whose accelerometer reads
     ``accel_unit``: its last accepted P1 calibration in that unit (``history``: the
-    device's ``accel-tabletop`` records, oldest first), else the device's ``nominal``
-    ``(zero, sensitivity per m/s²)``, else None."""
+    device's calibrations, oldest first; those of the form ``A = B + M V`` count), else
+    the device's ``nominal`` ``(zero, sensitivity per m/s²)``, else None."""
     for rec in reversed(history or []):
         unit = ((rec.get("extra") or {}).get("units") or {}).get("V")
-        if rec.get("accepted") and unit == accel_unit and "B" in rec.get("params", {}):
+        params = rec.get("params") or {}
+        if rec.get("accepted") and unit == accel_unit and "B" in params and "M" in params:
             return Frontend.from_p1(rec)
     if nominal is not None:
         return Frontend.from_nominal(*nominal)

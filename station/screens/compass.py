@@ -89,7 +89,7 @@ class CompassScreen(GuidedScreenMixin, Screen):
             p1, mag = [], None
             store = s.open_store()
             if store is not None:
-                p1 = store.history(device_id, "accel-tabletop")
+                p1 = store.history(device_id)  # for_device takes the A = B + M V ones
                 mag = next((c for c in reversed(store.history(device_id, "compass")) if c["accepted"]), None)
             return CompassGuide(
                 sample_rate_hz=source_rate_hz(src),
