@@ -520,7 +520,11 @@ def test_procedure_reads_the_simulated_device_over_a_real_pty():
     rate = float(re.search(r"(\d+) Hz", readouts).group(1))
     assert rate > 50  # estimated from host arrival times: loose on a loaded machine
     assert src.rate_hz == 200.0  # from the device's header
-    assert "errors 0" in readouts
+    # no parse error, unless the device discarded output the host did not read in time (a
+    # UART into the void: a loaded machine can stall the app for half a second, and the cut
+    # sentence is one error)
+    errors = int(re.search(r"errors (\d+)", readouts).group(1))
+    assert errors == 0 or dev.stats.dropped > 0, (errors, dev.stats)
     assert st.angle_deg < 5  # sim-device nominal: x_up from the start
 
 
