@@ -301,3 +301,27 @@ def test_results_screen_saves_a_fail_only_by_decision(tmp_path):
         assert not cal["accepted"] and cal["review"]["note"] == "bias jumped"
         assert cal["review"]["verdict"] == "fail" and cal["review"]["previous_calibration_id"] == previous["id"]
         assert s.reference("IMU-7", "accel-tabletop")["id"] == previous["id"]
+
+
+@pytest.mark.parametrize("procedure", ["accel-tabletop", "accel-centrifuge", "compass", "gyro-drift", "ldv"])
+def test_every_procedure_says_which_calibration_it_saved_on_stderr(tmp_path, procedure):
+    """`calibrate --save` names the stored calibration on stderr for every procedure (README
+    "Accepting a result"); stdout stays the result alone: with --json one JSON object
+    (calibrate.md), whose calibration_id is the same number; without, the text result."""
+    db = tmp_path / "s.db"
+    path = _sim(tmp_path, procedure, 5)
+    r = _save(db, path)
+    assert r.returncode == 0, r.stderr
+    cal_id = json.loads(r.stdout)["calibration_id"]  # the whole of stdout is the JSON object
+    assert r.stderr == f"station: saved calibration {cal_id} as accepted\n"
+    with Store(str(db)) as s:
+        assert s.calibration(cal_id)["procedure"] == procedure
+    second = _sim(tmp_path, procedure, 6)
+    cap = read_capture(second)
+    cap.meta["device"] = read_capture(path).meta["device"] + "-B"  # another unit: nothing to compare
+    write_capture(second, cap)
+    r = run_station("calibrate", second, "--save", "--db", db, "--reject", "bench test only")
+    assert r.returncode == 3, r.stderr
+    assert r.stderr.startswith("station: saved calibration ") and r.stderr.endswith(" as rejected\n")
+    new_id = int(r.stderr.split()[3])
+    assert new_id != cal_id and f"calibration #{new_id} as rejected" in r.stdout

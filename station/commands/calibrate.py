@@ -8,6 +8,9 @@ checks) and the exit status says what happened:
     1  FAIL, not saved: give --reject REASON or --override NOTE to decide
     2  bad input, or the capture is already saved (nothing saved)
     3  saved as rejected (--reject REASON): kept in the history, never the reference
+
+Whatever is saved says so on stderr, one line, ``station: saved calibration N as DECISION``
+(stdout holds only the result: with --json, one JSON object, calibrate.md).
 """
 
 from __future__ import annotations
@@ -190,4 +193,6 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
         raise InputError(path, None, f"cannot save to the station database: {exc}") from None
     except ValueError as exc:  # the store's refusals (e.g. an empty device id)
         raise InputError(None, None, str(exc)) from None
+    # stdout holds only the result (calibrate.md: with --json, one JSON object): the id on stderr
+    print(f"station: saved calibration {result['calibration_id']} as {decision}", file=sys.stderr)
     return 3 if decision == "rejected" else 0
