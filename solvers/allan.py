@@ -29,7 +29,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["oadev", "octave_taus", "mean_standard_error", "MeanError", "time_needed_s", "noise_fit", "NoiseFit"]
+__all__ = [
+    "oadev",
+    "octave_taus",
+    "mean_standard_error",
+    "MeanError",
+    "time_needed_s",
+    "noise_fit",
+    "NoiseFit",
+    "white_random_walk",
+]
 
 
 def octave_taus(n: int, dt_s: float, max_fraction: float = 0.25, per_octave: int = 1) -> np.ndarray:
@@ -201,22 +210,26 @@ class NoiseFit:
 
     ``white`` N is the white-noise density (ADEV = N/√τ): u·√s = u/√Hz, Kalibr's
     ``*_noise_density``; ``random_walk`` K is the rate random walk (ADEV = K √(τ/3)): u/√s =
-    u/s/√Hz, Kalibr's ``*_random_walk``; ``bias_instability`` B = min ADEV / 0.664 (u) at
-    ``bias_instability_tau_s``. N and K come from the weighted non-negative fit of
-    ``AVAR = N²/τ + c1 + K² τ/3``, each point weighted by its standard deviation
-    ``AVAR √(2/edf)`` (edf: Greenhall's algorithm, allantools.edf_greenhall, for the noise the
-    model says dominates at that τ). Their 1-sigma (``*_sigma``) is the scatter of the same fit
-    over ``n_boot`` records simulated from the fitted white noise and random walk (Kalibr's
-    discrete model): overlapping Allan estimates at neighbouring τ are strongly correlated, and
-    the fit's own covariance understated the scatter 2.6 (N) and 3.7 (K) times. Measured by
-    benchmarks/bench_noise.py (6 records x 3 axes per length, N = 4e-4, K = 4e-5, 200 Hz),
-    rms((estimate - truth) / sigma): N 0.97 / 1.01 / 1.17 and K 2.58 / 2.29 / 1.81 for records
-    of 300 / 600 / 1800 s. N's sigma is honest; K's is still understated about 2x (the
-    bootstrap runs at the fitted K, and records with K under-estimated get too small a
-    spread). ``random_walk_min_duration_s`` says how long a record K needs (callers warn).
-    When K fits to 0 it is not resolved (``random_walk_sigma`` is then the scatter of K over
-    records with none). ``adev_lo``/``adev_hi``: 68 % confidence interval of each ADEV point
-    (allantools.confidence_interval, chi-squared with that edf).
+    u/s/√Hz, Kalibr's ``*_random_walk``. N and K are the maximum-likelihood estimates of
+    Kalibr's discrete model (white noise plus a random walk of the bias) from the spectrum of
+    the first differences (:func:`white_random_walk`); their 1-sigma comes from the same
+    likelihood (N: its curvature; K: the larger side of the likelihood-ratio 68 % interval
+    ``random_walk_lo``..``random_walk_hi``, which does not shrink with a low estimate).
+
+    Why not the Allan fit: N and K used to come from a weighted fit of the Allan variance with a
+    parametric-bootstrap sigma. Its K was biased low (mean 0.75 K, 1 record in 10 at K = 0, for
+    300 s records of benchmarks/bench_noise.py) and the bootstrap, run at the low estimate, gave
+    those records too small a sigma: rms((K̂ - K)/σ) was 2.6 / 2.3 / 1.8 at 300 / 600 / 1800 s.
+    The likelihood estimate gives about 1.0 at each length (docs/benchmarks.md).
+
+    ``bias_instability`` B = min ADEV / 0.664 (u) at ``bias_instability_tau_s``. ``model`` is the
+    weighted non-negative fit ``AVAR = c0/τ + c1 + c2 τ`` of the Allan deviation (each point
+    weighted by ``AVAR √(2/edf)``, edf from Greenhall's algorithm, allantools.edf_greenhall, for
+    the noise that dominates at that τ); ``adev_lo``/``adev_hi``: 68 % confidence interval of
+    each ADEV point (allantools.confidence_interval, chi-squared with that edf).
+    ``random_walk_min_duration_s`` says how long a record K needs (callers warn).
+    Bias instability (flicker) is not in Kalibr's model nor in this fit (its effect on K is not
+    measured); the Allan curve and ``bias_instability`` show it.
     """
 
     taus_s: np.ndarray
@@ -230,12 +243,14 @@ class NoiseFit:
     random_walk_sigma: np.ndarray
     bias_instability: np.ndarray
     bias_instability_tau_s: np.ndarray
-    model: np.ndarray  # (k, 3): c0 = N², c1, c2 = K²/3
+    model: np.ndarray  # (k, 3): AVAR = c0/τ + c1 + c2 τ
     duration_s: float
     n: int
     # record length for which K's sigma holds: the longest τ (T/3) at least 4x the τ where
     # white noise and random walk cross (√3 N / K); inf when K fits to 0
     random_walk_min_duration_s: np.ndarray | None = None
+    random_walk_lo: np.ndarray | None = None  # 68 % likelihood-ratio interval of K
+    random_walk_hi: np.ndarray | None = None
 
 
 def _alpha(c, tau: float) -> int:
@@ -251,9 +266,117 @@ def _wls(A0, av, sd):
     return c
 
 
-def noise_fit(
-    y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3.0, n_boot: int = 20, seed: int = 0
-) -> NoiseFit:
+TAPER_FRACTION = 0.1  # Tukey taper of the differences: 5 % cosine at each end
+
+
+@dataclass
+class WhiteRandomWalk:
+    """:func:`white_random_walk` per axis (k,): N, K and their uncertainty."""
+
+    white: np.ndarray
+    white_sigma: np.ndarray
+    random_walk: np.ndarray
+    random_walk_sigma: np.ndarray  # max(K - lo, hi - K): the larger side of the 68 % interval
+    random_walk_lo: np.ndarray
+    random_walk_hi: np.ndarray
+
+
+def white_random_walk(y, dt_s: float, taper: float = TAPER_FRACTION) -> WhiteRandomWalk:
+    """Maximum-likelihood white-noise density N and rate random walk K of rates ``y`` (N,) or (N, k).
+
+    Model (Kalibr's discrete one): ``y_i = b_i + N/√dt w_i``, ``b_i = b_{i-1} + K √dt v_i``. The
+    differences ``d_i = y_i − y_{i−1}`` are stationary with spectrum ``S(ω) = a (2 − 2 cos ω) + b``,
+    ``a = N²/dt``, ``b = K² dt``. Whittle's likelihood of their periodogram is maximised by
+    iteratively reweighted least squares (``b ≥ 0``). Two details make it honest at the low
+    frequencies K lives at: the differences are tapered (Tukey, ``taper``) because the plain
+    periodogram leaks ``2a/n`` of white noise into every bin, over 100 times ``b`` for typical
+    gyros; and the model is the *expected* tapered periodogram (``a (2 − 2ρ₁ cos ω) + b``, ρ₁ the
+    taper's lag-1 autocorrelation). The taper correlates neighbouring bins; the variance is the
+    sandwich ``F⁻¹ M F⁻¹`` with that correlation (lags 1-3). K's interval: where twice the
+    log-likelihood ratio, scaled by the sandwich/Fisher variance ratio, reaches 1 (a 68 %
+    interval; the lower end is 0 when the data do not exclude it). K's 1-sigma is the larger side
+    of that interval: the interval is lopsided when K is poorly resolved (its upper side longer
+    when the estimate is low), and half its width understated the error of low estimates (rms z
+    1.4 instead of 1.0 for 300 s records in benchmarks/bench_noise.py).
+    """
+    from scipy.optimize import brentq
+    from scipy.signal.windows import tukey
+
+    from solvers.linalg import lstsq
+
+    y = np.asarray(y, dtype=float)
+    Y = y[:, None] if y.ndim == 1 else y
+    d = np.diff(Y, axis=0)
+    n, k = d.shape
+    h = tukey(n, taper)
+    h /= math.sqrt(float(np.sum(h * h)))
+    d = d - (h @ d) / np.sum(h)  # a steady ramp of the rate (warm-up) is no random walk
+    rho1 = float(np.sum(h[1:] * h[:-1]))
+    j = np.arange(1, (n - 1) // 2 + 1)
+    w = 2.0 * np.pi * j / n
+    periodogram = np.abs(np.fft.rfft(d * h[:, None], axis=0)[j]) ** 2
+    G = np.column_stack([2.0 - 2.0 * rho1 * np.cos(w), np.ones_like(w)])
+    corr2 = np.abs(np.fft.fft(h * h)[:4]) ** 2  # squared correlation of bins 1..3 apart
+    out = {name: np.full(k, np.nan) for name in ("a", "b", "sa", "lo", "hi")}
+    for ax in range(k):
+        P = periodogram[:, ax]
+        if not np.all(np.isfinite(P)) or not np.any(P > 0):
+            continue
+        S = np.full(len(w), float(P.mean()))
+        p = np.zeros(2)
+        for _ in range(200):
+            U = G / S[:, None]
+            q = lstsq(U, P / S)[0]
+            if q[1] < 0:  # b ≥ 0: white noise alone
+                q = np.array([np.sum(G[:, 0] * P / S**2) / np.sum(G[:, 0] ** 2 / S**2), 0.0])
+            q[0] = max(q[0], 1e-300)
+            done = np.allclose(q, p, rtol=1e-9, atol=0.0)
+            p, S = q, G @ q
+            if done:
+                break
+        U = G / S[:, None]
+        F = U.T @ U
+        M = F.copy()
+        for lag in range(1, 4):
+            C = U[:-lag].T @ U[lag:]
+            M += corr2[lag] * (C + C.T)
+        Fi = np.linalg.inv(F)
+        cov = Fi @ M @ Fi
+        kappa = cov[1, 1] / Fi[1, 1]
+
+        def nll(b, a=p[0], P=P):
+            S = G[:, 0] * a + b
+            return float(np.sum(np.log(S) + P / S))
+
+        ll0 = nll(p[1])
+
+        def excess(log_b):
+            return 2.0 * (nll(math.exp(log_b)) - ll0) / kappa - 1.0
+
+        scale = math.sqrt(cov[1, 1]) if p[1] == 0 else max(p[1], math.sqrt(cov[1, 1]))
+        top = math.log(scale)
+        while excess(top) < 0:
+            top += 1.0
+        bottom = math.log(p[1]) if p[1] > 0 else top - 60.0
+        out["hi"][ax] = math.exp(brentq(excess, bottom, top, xtol=1e-6))
+        if p[1] > 0 and excess(math.log(p[1]) - 60.0) > 0:
+            out["lo"][ax] = math.exp(brentq(excess, math.log(p[1]) - 60.0, math.log(p[1]), xtol=1e-6))
+        else:
+            out["lo"][ax] = 0.0
+        out["a"][ax], out["b"][ax], out["sa"][ax] = p[0], p[1], math.sqrt(cov[0, 0])
+    white = np.sqrt(out["a"] * dt_s)
+    lo, hi = np.sqrt(out["lo"] / dt_s), np.sqrt(out["hi"] / dt_s)
+    return WhiteRandomWalk(
+        white=white,
+        white_sigma=np.sqrt(dt_s) * out["sa"] / (2.0 * np.sqrt(out["a"])),
+        random_walk=np.sqrt(out["b"] / dt_s),
+        random_walk_sigma=np.maximum(hi - np.sqrt(out["b"] / dt_s), np.sqrt(out["b"] / dt_s) - lo),
+        random_walk_lo=lo,
+        random_walk_hi=hi,
+    )
+
+
+def noise_fit(y, dt_s: float, per_octave: int = 2, max_fraction: float = 1.0 / 3.0) -> NoiseFit:
     """White-noise density, bias instability and rate random walk of rates ``y`` (N,) or (N, k)."""
     import allantools
 
@@ -280,24 +403,14 @@ def noise_fit(
             pred = A0 @ c if np.any(c > 0) else av
             sds[:, j] = np.maximum(pred, 1e-300) * np.sqrt(2.0 / edf[:, j])
             model[j] = _wls(A0, av, sds[:, j])
-    white, rw = np.sqrt(model[:, 0]), np.sqrt(3.0 * model[:, 2])
-    # parametric bootstrap: the same fit on records simulated from the fitted N and K
-    rng = np.random.default_rng(seed)
-    boot = np.empty((n_boot, k, 2))
-    for b in range(n_boot):
-        sim = white / math.sqrt(dt_s) * rng.normal(size=(n, k))
-        sim += np.cumsum(rw * math.sqrt(dt_s) * rng.normal(size=(n, k)), axis=0)
-        _, ad_b, _ = oadev(sim, dt_s, grid)
-        for j in range(k):
-            c = _wls(A0, ad_b[:, j] ** 2, sds[:, j])
-            boot[b, j] = math.sqrt(c[0]), math.sqrt(3.0 * c[2])
-    spread = boot.std(axis=0, ddof=1) if n_boot > 1 else np.full((k, 2), np.nan)
+    wr = white_random_walk(Y, dt_s)
+    white, rw = wr.white, wr.random_walk
     lo, hi = np.empty_like(adev), np.empty_like(adev)
     for i in range(len(taus)):
         for j in range(k):
             lo[i, j], hi[i, j] = allantools.confidence_interval(adev[i, j], edf[i, j], ci=CI_1SIGMA)
     imin = np.argmin(adev, axis=0)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         need = np.where(rw > 0, 12.0 * math.sqrt(3.0) * white / np.where(rw > 0, rw, 1.0), np.inf)
     return NoiseFit(
         taus_s=taus,
@@ -306,13 +419,15 @@ def noise_fit(
         adev_hi=hi,
         edf=edf,
         white=white,
-        white_sigma=spread[:, 0],
+        white_sigma=wr.white_sigma,
         random_walk=rw,
-        random_walk_sigma=spread[:, 1],
+        random_walk_sigma=wr.random_walk_sigma,
         bias_instability=adev[imin, np.arange(k)] / BIAS_INSTABILITY_FACTOR,
         bias_instability_tau_s=taus[imin],
         model=model,
         duration_s=n * dt_s,
         n=n,
         random_walk_min_duration_s=need,
+        random_walk_lo=wr.random_walk_lo,
+        random_walk_hi=wr.random_walk_hi,
     )

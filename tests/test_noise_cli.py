@@ -9,6 +9,7 @@ b_d[k] = b_d[k-1] + sigma_b * sqrt(dt) * w[k], w ~ N(0, 1), per axis.
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -67,7 +68,7 @@ def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_
         s = doc["sensors"][kind]
         z_n = (np.array(s["noise_density"]) - N) / np.array(s["noise_density_sigma"])
         z_k = (np.array(s["random_walk"]) - K) / np.array(s["random_walk_sigma"])
-        # N's sigma is honest; K's is understated ~2x (benchmarks/bench_noise.py): 3 sigma here
+        # both sigmas are honest (rms z ≈ 1 in benchmarks/bench_noise.py): 3 sigma per axis here
         assert np.all(np.abs(z_n) < 3) and np.all(np.abs(z_k) < 3), (kind, z_n, z_k)
         # the 68 % interval of each ADEV point brackets it
         adev, lo, hi = (np.array(s[k]) for k in ("adev", "adev_lo_68", "adev_hi_68"))
@@ -101,7 +102,8 @@ def test_text_with_plot_and_bad_input(capsys, tmp_path, monkeypatch):
     code, out, err = run(capsys, "noise", cap)
     assert code == 0 and "rad/s/√Hz" in out and "m/s³/√Hz" in out and "Allan deviation" in out
     assert "\x1b[" not in out  # not a terminal: no colour
-    assert "random walk poorly resolved" in out  # 120 s is too short for K's sigma (crossover ~26-40 s)
+    # 120 s is too short for K (crossover ~26-40 s): an axis fitted 0, or K's sigma not to be trusted
+    assert re.search(r"random walk (poorly|not) resolved", out), out
     table = tmp_path / "table.csv"
     write_capture(
         table,

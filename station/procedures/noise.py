@@ -137,7 +137,7 @@ SENSORS = {"gyro": (("gx", "gy", "gz"), "gyro_unit"), "accel": (("ax", "ay", "az
 SI_UNIT = {"gyro": "rad/s", "accel": "m/s^2"}
 
 
-def imu_noise(capture, n_boot: int = 20) -> dict:
+def imu_noise(capture) -> dict:
     """Allan analysis of each sensor of a still time-series capture (solvers.allan.noise_fit).
 
     Returns {"sample_rate_hz", "duration_s", "sensors": {"gyro"|"accel": NoiseFit in SI}}. Raises
@@ -169,7 +169,7 @@ def imu_noise(capture, n_boot: int = 20) -> dict:
         if len(y) < 100:
             out["skipped"][kind] = f"only {len(y)} samples"
             continue
-        out["sensors"][kind] = allan.noise_fit(y, 1.0 / rate, n_boot=n_boot)
+        out["sensors"][kind] = allan.noise_fit(y, 1.0 / rate)
         out["duration_s"] = len(y) / rate
     if not out["sensors"]:
         why = "; ".join(f"{k}: {v}" for k, v in out["skipped"].items()) or "no gx gy gz or ax ay az columns"
@@ -221,7 +221,7 @@ def kalibr_yaml(result: dict, rostopic: str = "/imu0") -> str:
     """Kalibr's imu.yaml: one value per sensor, the largest of the three axes (conservative:
     Kalibr models every axis with the same density), per-axis figures and 1-sigma in comments."""
     lines = [
-        "# IMU noise model for Kalibr (station noise): Allan deviation of a still record",
+        "# IMU noise model for Kalibr (station noise): white noise and bias random walk of a still record",
         f"# {result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz; each value is the largest "
         "of the three axes",
     ]
