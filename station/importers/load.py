@@ -98,27 +98,53 @@ def infer_procedure(path, imported: Imported, fmt: str) -> str:
     )
 
 
+def is_station_capture(path) -> bool:
+    """Whether ``path`` starts with the station capture's first line."""
+    from station.importers.csvfiles import first_line
+
+    return first_line(path).replace(" ", "").startswith("#station-capture:")
+
+
 def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     """``path`` as a capture (not yet written) and the reader's warnings."""
     fmt = opts.fmt or detect(path)
     if fmt is None:
-        from station.importers.csvfiles import first_line
-
-        if first_line(path).replace(" ", "").startswith("#station-capture:"):
+        if is_station_capture(path):
             raise InputError(
                 path,
                 1,
                 "already a station capture: calibrate, diagnose and inspect read it as it is",
             )
         fmt = "csv"
-    imported = read(path, opts, fmt)
-    procedure = opts.procedure or infer_procedure(path, imported, fmt)
-    device = opts.device
+    return capture_of(path, read(path, opts, fmt), fmt, opts.procedure, opts.device)
+
+
+def capture_of(
+    path, imported: Imported, fmt: str, procedure: str | None, device: str | None = None
+) -> tuple[Capture, list[str]]:
+    """What :func:`read` found as the capture of ``procedure`` (None: the one the data leave),
+    and the reader's warnings. ``imported`` is not changed (the TUI's Import screen builds
+    captures of several procedures from one reading)."""
+    imported = Imported(dict(imported.streams), dict(imported.meta), list(imported.warnings))
+    procedure = procedure or infer_procedure(path, imported, fmt)
     if device is None and fmt == "px4":
         from station.importers import px4
 
         device = px4.default_device(imported, primary(procedure))
     return to_capture(path, imported, procedure, device=device), list(imported.warnings)
+
+
+def checked(path, capture: Capture) -> Capture:
+    """``capture`` written and read back by the capture reader (its checks, exactly as
+    ``station import`` followed by ``calibrate`` would meet them), named after ``path``."""
+    with tempfile.TemporaryDirectory(prefix="station-import-") as tmp:
+        tmp_path = os.path.join(tmp, "capture.csv")
+        write_capture(tmp_path, capture)
+        out = read_capture(tmp_path)
+    out.path = os.fspath(path)
+    out.meta_lines = {}
+    out.header_line = None
+    return out
 
 
 def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
@@ -142,14 +168,7 @@ def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
                 capture.meta["procedure"] = opts.procedure
             return capture, []
     capture, warnings = import_file(path, ImportOptions(**{**opts.__dict__, "fmt": fmt}))
-    with tempfile.TemporaryDirectory(prefix="station-import-") as tmp:
-        tmp_path = os.path.join(tmp, "capture.csv")
-        write_capture(tmp_path, capture)
-        checked = read_capture(tmp_path)
-    checked.path = os.fspath(path)
-    checked.meta_lines = {}
-    checked.header_line = None
-    return checked, warnings
+    return checked(path, capture), warnings
 
 
 def load_for_command(args: argparse.Namespace) -> Capture:

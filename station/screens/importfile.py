@@ -1,6 +1,13 @@
-"""Import: calibrate a capture file recorded elsewhere (any procedure; P5 LDV runs come
-this way, from the vehicle's logger). The conditioning check is the procedure's own: an
-ill-conditioned LDV velocity set is refused with one line saying what to drive."""
+"""Import: calibrate or diagnose a file recorded elsewhere.
+
+A station capture is calibrated as its 'procedure' metadata says (P5 LDV runs come this
+way, from the vehicle's logger; the conditioning check is the procedure's own). A log — PX4
+``.ulg``, ArduPilot ``.bin``/``.tlog``, ROS bag/MCAP, EuRoC/Kalibr CSV — is read by the same
+loader as ``station import`` (``station.importers.load``: :func:`read`, then
+:func:`capture_of` and :func:`checked` for the procedure picked here); the screen shows what
+it found (sensors, rates, device ids, the calibration parameters in use) before the operator
+picks the procedure and goes on to a calibration or a diagnosis.
+"""
 
 from __future__ import annotations
 
@@ -9,52 +16,199 @@ import os
 from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Vertical
+from textual.containers import Horizontal, VerticalScroll
+from textual.message import Message
 from textual.screen import Screen
-from textual.widgets import Input, Static
+from textual.widgets import Button, Input, Select, Static
 
 from station.messages import CalibrationReady
+from station.textsafe import tui_markup
 from station.widgets.title import TitleBar, footer
+
+PROCEDURE_NAMES = {"accel-tabletop": "accelerometer (P1)", "compass": "compass", "gyro-drift": "gyro drift (P4)"}
+
+
+class LogRead(Message):
+    """A worker read a log: its format and the importer's :class:`Imported` (or an error)."""
+
+    def __init__(self, path: str, fmt: str | None, imported, error: str | None = None, source: str = "auto") -> None:
+        super().__init__()
+        self.source = source
+        self.path = path
+        self.fmt = fmt
+        self.imported = imported
+        self.error = error
+
+
+class CaptureBuilt(Message):
+    """The capture of the log for the procedure picked, on its way to a diagnosis."""
+
+    def __init__(self, capture, error: str | None = None) -> None:
+        super().__init__()
+        self.capture = capture
+        self.error = error
+
+
+WIDTH = 76  # 80 columns less the padding and the scroll bar
+
+
+def _wrapped(items: list[str], indent: str, max_lines: int) -> list[str]:
+    """``items`` joined by two spaces, wrapped at WIDTH, at most ``max_lines`` (then '+N more')."""
+    lines: list[str] = []
+    line = indent
+    for i, item in enumerate(items):
+        last = len(lines) + 1 == max_lines
+        if len(line) + len(item) + 2 > WIDTH - (12 if last else 0) and line.strip():
+            if last:
+                lines.append(line + f"(+{len(items) - i} more)")
+                return lines
+            lines.append(line.rstrip())
+            line = indent
+        line += item + "  "
+    if line.strip():
+        lines.append(line.rstrip())
+    return lines
+
+
+def summary_lines(path: str, fmt: str, imported) -> list[str]:
+    """What the loader found, as plain text lines of at most 76 characters (markup-escape them)."""
+    import textwrap
+
+    import numpy as np
+
+    from station.textsafe import safe
+
+    meta = imported.meta
+    head = f"{os.path.basename(path)}: {fmt}"
+    if meta.get("firmware") and meta["firmware"] != fmt:
+        head += f", firmware {meta['firmware']}"
+    if meta.get("corrected") is not None:
+        head += f", corrected by the board: {meta['corrected']}"
+    lines = textwrap.wrap(safe(head), WIDTH) or [""]
+    short = {"accel": "accel", "gyro": "gyro", "mag": "mag"}
+    for kind, s in imported.streams.items():
+        t = np.asarray(s.t_s, dtype=float)
+        d = np.diff(t)
+        d = d[d > 0]
+        rate = f"{1.0 / float(np.median(d)):.4g} Hz" if len(d) else "one sample"
+        span = float(t[-1] - t[0]) if len(t) else 0.0
+        ident = f", id {s.device_id}" if s.device_id else ""
+        text = f"{short[kind]:<5} {len(t)} samples, {rate}, {span:.0f} s, {s.unit}{ident} ({s.source})"
+        lines += textwrap.wrap(safe(text), WIDTH, initial_indent="  ", subsequent_indent="        ")
+    if not imported.streams:
+        lines.append("  no accelerometer, gyro or magnetometer data")
+    params = {k[len("param.") :]: v for k, v in meta.items() if k.startswith("param.")}
+    if params:
+        lines.append(f"in use: {len(params)} calibration parameters")
+        ids = [k for k in params if k.endswith("_ID") or k.endswith("DEV_ID")]
+        rest = [k for k in params if k not in ids]
+        lines += _wrapped([safe(f"{k}={params[k]}") for k in ids + rest], "  ", 3)
+    else:
+        lines.append("in use: no calibration parameters in the log (an export cannot compose)")
+    for w in imported.warnings[:2]:
+        lines += textwrap.wrap(safe(f"warning: {w}"), WIDTH, subsequent_indent="  ")
+    return lines
 
 
 class ImportScreen(Screen):
     CSS = """
-    ImportScreen #body { padding: 1 1; }
-    ImportScreen #path { margin: 1 0; }
+    ImportScreen #body { padding: 0 1; }
+    ImportScreen #path { margin: 1 0 0 0; }
     ImportScreen #status { height: auto; }
+    ImportScreen #found { height: auto; margin-top: 1; }
+    ImportScreen #device { height: auto; }
+    ImportScreen #choose { height: 1; display: none; }
+    ImportScreen #choose.shown { display: block; }
+    ImportScreen #choose Select { width: 24; margin-right: 2; }
+    ImportScreen #choose #source { width: 16; }
+    ImportScreen #choose Button { margin-right: 2; }
     """
-    BINDINGS = [Binding("escape", "app.pop_screen", "Back")]
+    BINDINGS = [
+        Binding("escape", "app.pop_screen", "Back"),
+        Binding("f5", "calibrate_log", "Calibrate", show=False),
+        Binding("f6", "diagnose_log", "Diagnose", show=False),
+    ]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.path: str | None = None
+        self.fmt: str | None = None
+        self.imported = None
+        self.source = "auto"
 
     def compose(self) -> ComposeResult:
-        yield TitleBar("import a capture file")
-        with Vertical(id="body"):
-            yield Static(
-                "Capture file (station-capture CSV, ../shared/spec/capture-format.md). Its\n"
-                "'procedure' metadata says how to calibrate it; P5 (LDV) checks that the\n"
-                "velocities turn enough to separate the beam angles."
-            )
-            yield Input(placeholder="path/to/capture.csv, then Enter", id="path")
+        yield TitleBar("import a log or capture file")
+        with VerticalScroll(id="body"):
+            yield Static("A station capture, or a log: .ulg, .bin, .tlog, ROS bag/MCAP, EuRoC/Kalibr CSV")
+            yield Input(placeholder="path/to/file, then Enter", id="path", compact=True)
             yield Static("", id="status")
+            with Horizontal(id="choose"):
+                yield Select(
+                    [(v, k) for k, v in PROCEDURE_NAMES.items()], id="procedure", allow_blank=False, compact=True
+                )
+                yield Select(
+                    [("PX4: auto", "auto"), ("raw topics", "raw"), ("combined", "combined")],
+                    id="source",
+                    allow_blank=False,
+                    compact=True,
+                )
+                yield Button("Calibrate \\[F5]", id="calibrate", variant="primary", compact=True)
+                yield Button("Diagnose \\[F6]", id="diagnose", compact=True)
+            yield Static("", id="device")
+            yield Static("", id="found")
         yield footer()
 
     def on_mount(self) -> None:
         self.query_one("#path", Input).focus()
+
+    def _status(self, text: str) -> None:
+        self.query_one("#status", Static).update(text)
 
     @on(Input.Submitted, "#path")
     def _go(self, event: Input.Submitted) -> None:
         path = os.path.expanduser(event.value.strip())
         if not path:
             return
-        self.query_one("#status", Static).update(f"Reading and calibrating {path}…")
-        self.calibrate(path)
+        self.imported = None
+        self.query_one("#found", Static).update("")
+        self.query_one("#device", Static).update("")
+        self.query_one("#choose").remove_class("shown")
+        self._status(f"Reading {tui_markup(path)}…")
+        self.query_one("#source", Select).value = "auto"
+        self.read_file(path)
 
-    @work(thread=True, exclusive=True, group="import", exit_on_error=False, description="calibrate a file")
-    def calibrate(self, path: str) -> None:
+    @on(Select.Changed, "#source")
+    def _reread(self, event: Select.Changed) -> None:
+        """PX4: the raw per-sensor topics or sensor_combined (``station import --source``)."""
+        if self.imported is None or self.fmt != "px4" or event.value == self.source:
+            return
+        self._status(f"Reading {tui_markup(self.path)} ({event.value})…")
+        self.read_file(self.path, str(event.value))
+
+    @work(thread=True, exclusive=True, group="import", exit_on_error=False, description="read a file")
+    def read_file(self, path: str, source: str = "auto") -> None:
+        from station.errors import StationError
+        from station.importers import load
+        from station.importers.options import ImportOptions
+
+        try:
+            fmt = load.detect(path)
+            if fmt is None and os.path.isfile(path) and load.is_station_capture(path):
+                self._calibrate_capture(path)
+                return
+            fmt = fmt or "csv"
+            self.post_message(LogRead(path, fmt, load.read(path, ImportOptions(source=source), fmt), source=source))
+        except (StationError, OSError, ValueError) as exc:  # one line: file: what is wrong
+            self.post_message(LogRead(path, None, None, error=str(exc)))
+
+    def _calibrate_capture(self, path: str, capture=None) -> None:
+        """In the worker: calibrate a capture (read from ``path`` unless given), compare with
+        the device's last accepted calibration, hand the result over."""
         from station.calibrate import calibrate_capture
         from station.capture import read_capture
 
         try:
-            capture = read_capture(path)
+            capture = capture if capture is not None else read_capture(path)
         except Exception as exc:  # noqa: BLE001 - InputError: file:line: what is wrong
             self.post_message(CalibrationReady(None, None, error=str(exc)))
             return
@@ -72,10 +226,94 @@ class ImportScreen(Screen):
         except Exception as exc:  # noqa: BLE001 - UnsupportedError: one line
             self.post_message(CalibrationReady(capture, None, error=str(exc), previous=previous))
 
+    def on_log_read(self, message: LogRead) -> None:
+        if message.error:
+            self._status(f"[b red]{tui_markup(message.error)}[/]")
+            return
+        from station.importers.options import IMPORTABLE, PRIMARY
+
+        self.path, self.fmt, self.imported = message.path, message.fmt, message.imported
+        self.source = message.source
+        self.query_one("#source", Select).display = self.fmt == "px4"
+        kinds = set(self.imported.streams)
+        fits = [p for p in IMPORTABLE if PRIMARY[p] in kinds]
+        found = summary_lines(message.path, message.fmt, self.imported)
+        self.query_one("#found", Static).update("\n".join(tui_markup(line) for line in found))
+        if not fits:
+            self._status("[b red]nothing to calibrate: no sensor a procedure needs[/]")
+            return
+        select = self.query_one("#procedure", Select)
+        keep = select.value if select.value in fits else None
+        select.set_options([(PROCEDURE_NAMES.get(p, p), p) for p in fits])
+        select.value = keep or ("compass" if kinds == {"mag"} else fits[0])
+        self.query_one("#choose").add_class("shown")
+        self._status("Pick the procedure, then Calibrate (F5) or Diagnose (F6).")
+        self._show_device()
+        select.focus()
+
+    @on(Select.Changed, "#procedure")
+    def _show_device(self) -> None:
+        """The device id the capture will carry (PX4: board, uid and the procedure's sensor)."""
+        procedure = self._procedure()
+        if self.imported is None or procedure is None:
+            return
+        from station.importers.options import PRIMARY
+
+        device = self.imported.meta.get("device")
+        if self.fmt == "px4":
+            from station.importers import px4
+
+            device = px4.default_device(self.imported, PRIMARY[procedure])
+        self.query_one("#device", Static).update(f"device {tui_markup(device)}" if device else "")
+
+    def _procedure(self) -> str | None:
+        value = self.query_one("#procedure", Select).value
+        return value if isinstance(value, str) else None
+
+    @on(Button.Pressed, "#calibrate")
+    def action_calibrate_log(self) -> None:
+        procedure = self._procedure()
+        if self.imported is None or procedure is None:
+            return
+        self._status(f"Calibrating {tui_markup(os.path.basename(self.path))} as {procedure}…")
+        self.build(procedure, diagnose=False)
+
+    @on(Button.Pressed, "#diagnose")
+    def action_diagnose_log(self) -> None:
+        procedure = self._procedure()
+        if self.imported is None or procedure is None:
+            return
+        self._status(f"Preparing {tui_markup(os.path.basename(self.path))} for a diagnosis as {procedure}…")
+        self.build(procedure, diagnose=True)
+
+    @work(thread=True, exclusive=True, group="import", exit_on_error=False, description="import a log")
+    def build(self, procedure: str, diagnose: bool) -> None:
+        from station.errors import StationError
+        from station.importers import load
+
+        try:
+            capture, _ = load.capture_of(self.path, self.imported, self.fmt, procedure)
+            capture = load.checked(self.path, capture)
+        except (StationError, OSError, ValueError) as exc:
+            self.post_message(CaptureBuilt(None, error=str(exc)))
+            return
+        if diagnose:
+            self.post_message(CaptureBuilt(capture))
+        else:
+            self._calibrate_capture(self.path, capture)
+
+    def on_capture_built(self, message: CaptureBuilt) -> None:
+        if message.error:
+            self._status(f"[b red]{tui_markup(message.error)}[/]")
+            return
+        from station.screens.diagnose import DiagnoseScreen
+
+        self.app.session.device_id = message.capture.meta.get("device") or self.app.session.device_id
+        self.app.push_screen(DiagnoseScreen(message.capture))
+
     def on_calibration_ready(self, message: CalibrationReady) -> None:
-        status = self.query_one("#status", Static)
         if message.result is None:
-            status.update(f"[b red]{message.error}[/]")
+            self._status(f"[b red]{tui_markup(message.error)}[/]")
             return
         from station.screens.results import ResultsScreen
 

@@ -1,0 +1,142 @@
+"""The TUI's Import screen (F7 on Connect) with logs: a real PX4 log from ../shared/data/px4_ulog
+read by the same loader as `station import`, what it found shown at 80x24, the procedure
+picked, and on to a calibration (Results) or the procedure's own refusal in one line.
+
+The ArduPilot .bin that goes all the way to Results is WRITTEN BY PYMAVLINK'S OWN DataFlash
+encoder (tests/test_import_ardupilot.py's DataFlashWriter): no real ArduPilot log is in ../shared.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station.app import make_app
+from station.capture import read_capture
+from station.importers import load
+from station.importers.options import ImportOptions
+from tests.station_run import run_station
+from tests.test_import_ardupilot import PARAMS, DataFlashWriter
+from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for
+
+PX4 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "px4_ulog" / "original"
+
+
+def _settled(app) -> bool:
+    s = text_of(app, "#status").strip()
+    return s != "" and "…" not in s
+
+
+async def _open(pilot, app, path):
+    await pilot.press("f7")
+    await wait_for(pilot, lambda: screen_name(app) == "ImportScreen")
+    app.screen.query_one("#path").value = str(path)
+    await pilot.press("enter")
+    await wait_for(pilot, lambda: _settled(app), timeout_s=60)
+
+
+def test_a_real_px4_log_shows_what_it_holds_then_the_procedures_own_refusal(tmp_path):
+    log = PX4 / "sample_log_small.ulg"
+    if not log.exists():
+        pytest.skip("../shared/data/px4_ulog is not here")
+    # what `station import` reads from the same file: the screen must show the same
+    imported = load.read(log, ImportOptions(), "px4")
+    cli = run_station("calibrate", log, "--procedure", "gyro-drift")
+    assert cli.returncode == 2
+    refusal = cli.stderr.strip().splitlines()[-1].split(": ", 1)[1]  # past 'station: '
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        out = {}
+        async with app.run_test(size=SIZE) as pilot:
+            await _open(pilot, app, log)
+            out["screen"] = "\n".join(screen_lines(app))
+            out["found"] = text_of(app, "#found")
+            out["device"] = text_of(app, "#device")
+            out["status"] = text_of(app, "#status")
+            out["options"] = [str(p[0]) for p in app.screen.query_one("#procedure")._options]
+            app.screen.query_one("#procedure").value = "gyro-drift"
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: "Calibrating" not in text_of(app, "#status"), timeout_s=60)
+            out["refused"] = " ".join(text_of(app, "#status").split())
+            out["still"] = screen_name(app)
+            # the board-corrected sensor_combined instead (the warning says it holds more samples)
+            app.screen.query_one("#source").value = "combined"
+            await wait_for(pilot, lambda: "board: true" in text_of(app, "#found"), timeout_s=60)
+            out["combined"] = text_of(app, "#found")
+        return out
+
+    out = asyncio.run(story())
+    found = out["found"]
+    # the sensors with their device ids (the loader's), the slots' CAL_*_ID in use, the device
+    for kind, s in imported.streams.items():
+        assert f"{len(s.t_s)} samples" in found and str(s.device_id) in found, (kind, found)
+    assert f"in use: {sum(k.startswith('param.') for k in imported.meta)} calibration parameters" in found
+    assert f"CAL_ACC0_ID={imported.meta['param.CAL_ACC0_ID']}" in found.replace("\n", " ").replace("  ", " ")
+    assert "sample_log_small.ulg: px4, corrected by the board: false" in found
+    assert "device " + load.capture_of(log, imported, "px4", "accel-tabletop")[0].meta["device"] in out["device"]
+    assert "Calibrate" in out["screen"] and "Diagnose" in out["screen"]
+    assert out["options"] == ["accelerometer (P1)", "compass", "gyro drift (P4)"]
+    # 80x24: every line of what it found fits (nothing cut at the right edge)
+    assert all(len(line) <= 80 for line in out["screen"].splitlines())
+    # the calibration's own refusal, the same words as the command line's, one line
+    assert " ".join(refusal.split()).replace(" ", "") in out["refused"].replace(" ", "")
+    assert out["still"] == "ImportScreen"
+    combined = load.read(log, ImportOptions(source="combined"), "px4")
+    assert "corrected by the board: true" in out["combined"]
+    assert f"accel {len(combined.streams['accel'].t_s)} samples" in out["combined"]
+
+
+def test_a_dataflash_log_goes_on_to_results_and_to_a_diagnosis(tmp_path):
+    """A still gyro record of 200 s at 50 Hz in a .bin: picked as gyro drift, the screen hands
+    the capture the loader built to the Results screen (the drift equals the mean of the log's
+    gyro samples), and Diagnose opens the diagnosis of the same capture."""
+    log = tmp_path / "00000007.BIN"
+    rng = np.random.default_rng(11)
+    w = DataFlashWriter(log)
+    for name, value in PARAMS.items():
+        w.param(1000, name, value)
+    drift = np.array([0.002, -0.001, 0.0005])
+    gyros = []
+    for k in range(10_000):
+        gyro = drift + rng.normal(0, 0.002, 3)
+        gyros.append(np.asarray(gyro, dtype=np.float32))
+        w.imu(500_000 + k * 20_000, 0, gyro, (0.0, 0.0, -9.8))
+    w.close()
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        out = {}
+        async with app.run_test(size=SIZE) as pilot:
+            await _open(pilot, app, log)
+            out["found"] = text_of(app, "#found")
+            app.screen.query_one("#procedure").value = "gyro-drift"
+            await pilot.press("f6")
+            await wait_for(pilot, lambda: screen_name(app) == "DiagnoseScreen", timeout_s=60)
+            out["diag_capture"] = app.screen.capture
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "ImportScreen")
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=120)
+            out["title"] = screen_lines(app)[0]
+            out["result"] = app.screen.result
+        return out
+
+    out = asyncio.run(story())
+    assert "10000 samples, 50 Hz" in out["found"] and "00000007.BIN: ardupilot, corrected" in out["found"]
+    assert "INS_GYR_ID=2752772" in out["found"]
+    # the capture is the one `station import --procedure gyro-drift` writes
+    cli = tmp_path / "cli.csv"
+    assert run_station("import", log, "--procedure", "gyro-drift", "--out", cli).returncode == 0
+    want = read_capture(cli)
+    got = out["diag_capture"]
+    assert got.meta["procedure"] == "gyro-drift" and got.meta == want.meta
+    assert set(got.columns) == set(want.columns)
+    for name in want.columns:
+        np.testing.assert_array_equal(got.columns[name], want.columns[name])
+    assert "P4" in out["title"] or "drift" in out["title"].lower()
+    mean = np.mean(np.asarray(gyros, dtype=np.float64), axis=0)
+    np.testing.assert_allclose(out["result"]["params"]["drift"], mean, rtol=0, atol=1e-9)
