@@ -350,7 +350,7 @@ def white_random_walk(y, dt_s: float, taper: float = TAPER_FRACTION) -> WhiteRan
 
         ll0 = nll(p[1])
 
-        def excess(log_b):
+        def excess(log_b, nll=nll, ll0=ll0, kappa=kappa):
             return 2.0 * (nll(math.exp(log_b)) - ll0) / kappa - 1.0
 
         scale = math.sqrt(cov[1, 1]) if p[1] == 0 else max(p[1], math.sqrt(cov[1, 1]))
