@@ -30,8 +30,19 @@ parameters in use as `param.<NAME>`): the fitted correction acts on top of the p
 use, and the export composes the new absolute parameters from both (accel:
 `o = o_old + o_fit / s_old`, `s = s_old * s_fit`; gyro `o = o_old + o_fit`; compass through
 the matrices, below). It refuses, in one line, when the parameters in use are not in the
-capture, when they come from another firmware, or when the board rotation in use is not
-the identity (the corrected data are in the body frame, the parameters in the sensor frame).
+capture, when they come from another firmware, or when a board rotation cannot be composed.
+
+Board rotation (the corrected data are in the body frame; where the firmware applies its
+parameters, below): the fitted correction is taken to that frame first. ArduPilot INS offsets
+and scales act in the sensor frame before `AHRS_ORIENTATION` (`_rotate_and_correct_accel`,
+`_rotate_and_correct_gyro`); its compass offsets and matrix act after the rotation to the body
+frame (`rotate_field`, then `correct_field`), so they compose with no rotation at all. PX4 applies
+`R = Dcm(SENS_BOARD_{X,Y,Z}_OFF) · rot` after its offsets, scales and matrix (`Correct()`), rot =
+`SENS_BOARD_ROT` for an internal sensor (`CAL_*n_ROT` = -1), `CAL_*n_ROT` for an external one.
+Gyro offsets and the PX4 magnetometer (full symmetric matrix) compose under any rotation; the
+accelerometer's per-axis scales only under one that maps axes onto axes (whole 90° steps, no
+level adjustment), unless the fitted scales are equal: otherwise one line refuses. Rotation
+numbers: `ROTATIONS` (PX4 `rot_lookup[]`, ArduPilot `rotations.h`; custom ones refused).
 
 Bounds the firmware enforces are checked before anything is written: ArduPilot accel
 offsets within ±3.5 m/s^2 (the INS_ACCOFFS @Range and `_accel_max_abs_offsets`) and scales
@@ -113,15 +124,20 @@ def _gyro_offsets_rad_s(cal: dict, factor: float, ex: Export) -> list[float]:
     return vector(cal["params"], "drift")
 
 
-def _set_gyro_offsets(cal: dict, meta: dict, fmt: str, ex: Export, use: InUse, off_names, label: str) -> None:
+def _set_gyro_offsets(
+    cal: dict, meta: dict, fmt: str, ex: Export, use: InUse, off_names, label: str, R=None, rot_name=None
+) -> None:
     """Set the firmware's gyro offsets ``off_names`` (rad/s, the sensor's axes): the drift,
     composed with the offsets in use when the board had corrected the data (``label`` names
-    them in the note: OFF = OFF_in_use + drift)."""
+    them in the note: OFF = OFF_in_use + drift), through the board rotation ``R`` (body ← the
+    frame the offsets act in; None: identity) read from ``rot_name``."""
     _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
     drift = _gyro_offsets_rad_s(cal, factor, ex)
     if use.corrected:
         o_old = use.need(off_names, "gyro offsets")
-        drift = [o_old[i] + drift[i] for i in range(3)]
+        drift = _compose_gyro(o_old, drift, R)
+        if R is not None:
+            ex.note(f"drift taken from the body frame to the sensor frame: R^T drift, R from {rot_name}")
         ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift")
     for name, v in zip(off_names, drift):
         ex.set(name, v)
@@ -193,18 +209,80 @@ class InUse:
             )
         return [self.params[n] for n in names]
 
-    def identity_rotation(self, names: list[str], ex: Export) -> None:
-        """Refuse unless the board rotation parameters in use are all 0 (note when unknown)."""
-        known = {n: self.params[n] for n in names if n in self.params}
-        bad = {n: v for n, v in known.items() if abs(v) > 1e-3}  # PX4 SITL stores SENS_BOARD_X_OFF = 1e-6 deg
-        if bad:
-            n, v = next(iter(bad.items()))
-            raise UnsupportedError(
-                f"{self.fmt}: the board rotation in use is not the identity ({n} = {v:g}): the corrected data are in the "
-                "body frame and the parameters in the sensor frame; composing across a rotation is not supported"
-            )
-        if len(known) < len(names):
-            ex.note(f"assumed no board rotation ({', '.join(n for n in names if n not in known)} not in the capture)")
+    def rotation(self, enum_name: str, ex: Export, level_names: tuple[str, ...] = ()):
+        """The rotation R (body ← the frame the parameters act in) of the rotation parameters in
+        use, or None when it is the identity; a note when they are not in the capture, a one-line
+        refusal when the firmware's rotation cannot be known (custom, unknown number)."""
+        import numpy as np
+
+        names = (enum_name, *level_names)
+        missing = [n for n in names if n not in self.params]
+        if missing:
+            ex.note(f"assumed no board rotation ({', '.join(missing)} not in the capture)")
+        value = self.params.get(enum_name)
+        R = np.eye(3)
+        if value is not None and value != -1:
+            R = rotation_matrix(self.firmware, value, enum_name, self.fmt)
+        # PX4's board level adjustment (Utilities.cpp GetSensorLevelAdjustment): Dcm(Euler(x, y, z deg)) first
+        level = [self.params.get(n, 0.0) for n in level_names]
+        if any(abs(v) > 1e-3 for v in level):  # PX4 SITL stores SENS_BOARD_X_OFF = 1e-6 deg
+            R = _euler_dcm(*level) @ R
+        return None if np.allclose(R, np.eye(3), atol=1e-9) else R
+
+
+# Rotation enums: roll, pitch, yaw in degrees, R = Rz(yaw) Ry(pitch) Rx(roll) (the firmwares'
+# Euler 3-2-1; PX4 src/lib/conversion/rotation.{h,cpp} get_rot_matrix and rot_lookup[]; ArduPilot
+# libraries/AP_Math/rotations.h, the same names and numbers 0-40, then 41 PITCH_7, 42 ROLL_45,
+# 43 ROLL_315; its 38 and CUSTOM (100, 101, 102) are left out: refused, not guessed).
+_COMMON_ROT = (
+    (0, 0, 0), (0, 0, 45), (0, 0, 90), (0, 0, 135), (0, 0, 180), (0, 0, 225), (0, 0, 270), (0, 0, 315),
+    (180, 0, 0), (180, 0, 45), (180, 0, 90), (180, 0, 135), (0, 180, 0), (180, 0, 225), (180, 0, 270),
+    (180, 0, 315), (90, 0, 0), (90, 0, 45), (90, 0, 90), (90, 0, 135), (270, 0, 0), (270, 0, 45),
+    (270, 0, 90), (270, 0, 135), (0, 90, 0), (0, 270, 0), (0, 180, 90), (0, 180, 270), (90, 90, 0),
+    (180, 90, 0), (270, 90, 0), (90, 180, 0), (270, 180, 0), (90, 270, 0), (180, 270, 0), (270, 270, 0),
+    (90, 180, 90), (90, 0, 270), (90, 68, 293), (0, 315, 0), (90, 315, 0),
+)  # fmt: skip
+ROTATIONS = {
+    "px4": dict(
+        enumerate(
+            _COMMON_ROT
+            + ((270, 0, 180), (270, 0, 270), (0, 90, 180), (0, 9, 180), (0, 45, 0), (270, 0, 225), (270, 0, 315))
+        )
+    ),
+    "ardupilot": {
+        **{i: r for i, r in enumerate(_COMMON_ROT) if i != 38},
+        41: (0, 7, 0),
+        42: (45, 0, 0),
+        43: (315, 0, 0),
+    },
+}
+
+
+def _euler_dcm(roll_deg: float, pitch_deg: float, yaw_deg: float):
+    from solvers.frames import rot_x, rot_y, rot_z
+
+    return rot_z(math.radians(yaw_deg)) @ rot_y(math.radians(pitch_deg)) @ rot_x(math.radians(roll_deg))
+
+
+def rotation_matrix(firmware: str, value: float, name: str, fmt: str):
+    """The firmware's rotation ``value`` of parameter ``name`` as a matrix (body ← sensor)."""
+    rpy = ROTATIONS[firmware].get(int(value)) if float(value).is_integer() else None
+    if rpy is None:
+        raise UnsupportedError(
+            f"{fmt}: {name} = {value:g} is a rotation the station does not know (custom or unlisted): "
+            "the corrected data cannot be taken back to the sensor frame; set it to a listed rotation or "
+            "calibrate the raw sensor data"
+        )
+    return _euler_dcm(*rpy)
+
+
+def _signed_permutation(R) -> bool:
+    import numpy as np
+
+    A = np.abs(np.asarray(R))
+    return bool(
+        np.allclose(np.sort(A, axis=1), [[0, 0, 1]] * 3, atol=1e-6) and np.allclose(A.sum(axis=0), 1, atol=1e-6)
+    )
 
 
 def _check_range(fmt: str, name: str, value: float, lo: float | None, hi: float | None, why: str) -> None:
@@ -318,6 +396,44 @@ def _mag_fit(cal: dict, meta: dict, fmt: str, unit_per: float):
     return unit, A, c * np.asarray(h, dtype=float)
 
 
+def _compose_gyro(o_old, drift, R) -> list[float]:
+    """New offsets: the board gives ``R (w − o_old)``, the fit removes a body-frame drift ``d``:
+    ``R (w − o_old − Rᵀ d)``, so ``o = o_old + Rᵀ d`` (any rotation)."""
+    import numpy as np
+
+    d = np.asarray(drift, dtype=float)
+    if R is not None:
+        d = R.T @ d
+    return [float(o_old[i] + d[i]) for i in range(3)]
+
+
+def _compose_accel(off, scale, o_old, s_old, R, fmt, rot_name, use, ex):
+    """New (offsets, scales): the board gives ``R (s_old ∘ (a − o_old))``, the fit applies
+    ``s_fit ∘ (x − o_fit)`` in the body frame. ``Rᵀ diag(s_fit) R`` is diagonal only when R maps
+    axes onto axes (a signed permutation): then ``s = s_old ∘ |Rᵀ| s_fit``,
+    ``o = o_old + (Rᵀ o_fit) / s_old``; else the firmware's per-axis scales cannot hold it."""
+    import numpy as np
+
+    o_fit, s_fit = np.asarray(off, dtype=float), np.asarray(scale, dtype=float)
+    if R is not None:
+        if not _signed_permutation(R):
+            if np.ptp(s_fit) > 1e-6 * np.max(np.abs(s_fit)):
+                value = use.get(rot_name)
+                raise UnsupportedError(
+                    f"{fmt}: the board rotation in use ({rot_name} = {value:g}"
+                    f"{', with the SENS_BOARD_*_OFF level adjustment' if fmt == 'px4' else ''}) mixes the sensor's "
+                    "axes: the fitted per-axis scales, in the body frame, are not per-axis scales in the sensor frame "
+                    "where the firmware applies them; calibrate the raw sensor data (or a board rotation of whole "
+                    "90° steps)"
+                )
+        o_fit = R.T @ o_fit
+        s_fit = np.abs(R.T) @ s_fit
+    return (
+        [float(o_old[i] + o_fit[i] / s_old[i]) for i in range(3)],
+        [float(s_old[i] * s_fit[i]) for i in range(3)],
+    )
+
+
 def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
     import numpy as np
 
@@ -329,19 +445,25 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         si = (meta or {}).get("sensor_instance")
         n = int(si) + 1 if si not in (None, "") and use.source_firmware == "ardupilot" and 0 <= int(si) <= 2 else 1
     names = _ap_names(kind, n)
-    if use.corrected:
-        use.identity_rotation(["AHRS_ORIENTATION"], ex)
+    # INS offsets and scales act in the sensor frame, before AHRS_ORIENTATION
+    # (_rotate_and_correct_accel/_gyro); the compass's after its rotation to the body frame
+    # (AP_Compass_Backend: rotate_field, then correct_field), so it needs none
+    R = use.rotation("AHRS_ORIENTATION", ex) if use.corrected and kind != "mag" else None
     if kind == "accel":
         off, scale = _accel_offsets_scales(cal, meta, fmt, ex)
         if use.corrected:
             o_old = use.need(names["off"], "accelerometer offsets")
             s_old = use.need(names["scale"], "accelerometer scales")
             s_old = [s if s != 0 else 1.0 for s in s_old]  # 0 = never calibrated: AP_InertialSensor::init sets 1
-            off = [o_old[i] + off[i] / s_old[i] for i in range(3)]
-            scale = [s_old[i] * scale[i] for i in range(3)]
+            off, scale = _compose_accel(off, scale, o_old, s_old, R, fmt, "AHRS_ORIENTATION", use, ex)
             ex.note(
                 "composed with the parameters in use: OFFS = OFFS_in_use + OFFS_fit / SCAL_in_use, "
                 "SCAL = SCAL_in_use * SCAL_fit"
+                + (
+                    ""
+                    if R is None
+                    else " (fit taken from the body frame to the sensor frame: R^T OFFS_fit, R^T SCAL_fit R)"
+                )
             )
         for name, v in zip(names["off"], off):
             _check_range(fmt, name, v, -AP_ACC_OFFS_MAX_MPS2, AP_ACC_OFFS_MAX_MPS2, "INS_ACCOFFS @Range")
@@ -352,7 +474,7 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         for name, v in zip(names["scale"], scale):
             ex.set(name, v)
     elif kind == "gyro":
-        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "GYROFFS")
+        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "GYROFFS", R, "AHRS_ORIENTATION")
         ex.note(f"{names['off'][0][:-2]} = drift in rad/s, same sign (ArduPilot subtracts it); per raw axis gx, gy, gz")
         ex.note("ArduPilot re-estimates gyro offsets at every boot unless INS_GYR_CAL = 0")
     else:
@@ -420,8 +542,14 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             f"{names['id']} in use): PX4 applies {names['id'][:-3]}_* only to the sensor whose device id is "
             f"{names['id']}; give --device-id (the device_id of the board's sensor_{kind})"
         )
+    R = rot_name = None
     if use.corrected:
-        use.identity_rotation(["SENS_BOARD_ROT", "SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"], ex)
+        # Correct(): R · (...), R = level adjustment · rotation; the rotation is CAL_*n_ROT for an
+        # external sensor (ROT ≥ 0), SENS_BOARD_ROT for an internal one (ROT = -1)
+        rot_in_use = use.get(names["rot"])
+        external = rot_in_use is not None and rot_in_use >= 0
+        rot_name = names["rot"] if external else "SENS_BOARD_ROT"
+        R = use.rotation(rot_name, ex, ("SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"))
     ex.set_int(names["id"], dev)
     prio = use.get(names["prio"])
     ex.set_int(names["prio"], int(prio) if prio is not None and 0 < prio <= 100 else PX4_DEFAULT_PRIORITY)
@@ -438,11 +566,15 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         if use.corrected:
             o_old = use.need(names["off"], "accelerometer offsets")
             s_old = use.need(names["scale"], "accelerometer scales")
-            off = [o_old[k] + off[k] / s_old[k] for k in range(3)]
-            scale = [s_old[k] * scale[k] for k in range(3)]
+            off, scale = _compose_accel(off, scale, o_old, s_old, R, fmt, rot_name, use, ex)
             ex.note(
                 "composed with the parameters in use: OFF = OFF_in_use + OFF_fit / SCALE_in_use, "
                 "SCALE = SCALE_in_use * SCALE_fit"
+                + (
+                    ""
+                    if R is None
+                    else " (fit taken from the body frame to the sensor frame: R^T OFF_fit, R^T SCALE_fit R)"
+                )
             )
         for name, v in zip(names["scale"], scale):
             _check_range(fmt, name, v, 0.0, None, "Accelerometer::set_scale")
@@ -451,7 +583,7 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         for name, v in zip(names["scale"], scale):
             ex.set(name, v)
     elif kind == "gyro":
-        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "OFF")
+        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "OFF", R, rot_name)
         ex.note("CAL_GYRO_OFF = drift in rad/s, same sign (PX4 subtracts it); per raw axis gx, gy, gz")
     else:
         unit, A, ch = _mag_fit(cal, meta, fmt, 1e5)  # nT per gauss
@@ -463,9 +595,14 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             S_old = np.diag(dia)
             for v, (r, c) in zip(odi, ODIAG_PAIRS):
                 S_old[r, c] = S_old[c, r] = v
-            # m = A (S_old (r − o_old) − c h) = A S_old (r − o_old − S_old⁻¹ c h)
-            off = o_old + np.linalg.solve(S_old, ch)
-            A = A @ S_old
+            # m = A (R S_old (r − o_old) − c h) = R (Rᵀ A R) S_old (r − o_old − S_old⁻¹ Rᵀ c h)
+            Rm = np.eye(3) if R is None else R
+            off = o_old + np.linalg.solve(S_old, Rm.T @ ch)
+            A = Rm.T @ A @ Rm @ S_old
+            if R is not None:
+                ex.note(
+                    f"fit taken from the body frame to the sensor frame with R from {rot_name}: R^T A R, R^T hard_iron"
+                )
             ex.note(
                 "composed with the parameters in use: SCALE/ODIAG = symmetric part of (fit matrix x matrix in use), "
                 "OFF = OFF_in_use + (matrix in use)^-1 * hard_iron"

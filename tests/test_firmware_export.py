@@ -359,8 +359,10 @@ def test_composition_refusals_are_one_line(capsys, tmp_path):
     assert "no param.INS_ACCSCAL_X" in err and "in use are unknown" in err
     code, out, err = export_with(cap.meta, "px4")
     assert code == 2 and out == "" and "corrected by ardupilot parameters" in err
-    code, out, err = export_with(dict(cap.meta, **{"param.AHRS_ORIENTATION": "4"}))
-    assert code == 2 and out == "" and "AHRS_ORIENTATION = 4" in err
+    # yaw 45°: per-axis scales in the body frame are no per-axis scales in the sensor frame
+    # (whole 90° steps compose: tests/test_firmware_rotation.py)
+    code, out, err = export_with(dict(cap.meta, **{"param.AHRS_ORIENTATION": "1"}))
+    assert code == 2 and out == "" and "AHRS_ORIENTATION = 1" in err and "mixes the sensor's axes" in err
     code, out, err = export_with(dict(cap.meta, **{"param.INS_ACCSCAL_X": "1.3"}))  # composed scale ~1.27
     assert code == 2 and out == "" and "INS_ACCSCAL_X" in err and "0.8..1.2" in err
 
