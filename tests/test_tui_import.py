@@ -79,7 +79,7 @@ def test_a_real_px4_log_shows_what_it_holds_then_the_procedures_own_refusal(tmp_
     assert "sample_log_small.ulg: px4, corrected by the board: false" in found
     assert "device " + load.capture_of(log, imported, "px4", "accel-tabletop")[0].meta["device"] in out["device"]
     assert "Calibrate" in out["screen"] and "Diagnose" in out["screen"]
-    assert out["options"] == ["accelerometer (P1)", "compass", "gyro drift (P4)"]
+    assert out["options"] == ["P1 accelerometer", "P3 compass", "P4 gyro drift"]  # registry: code, short
     # 80x24: every line of what it found fits (nothing cut at the right edge)
     assert all(len(line) <= 80 for line in out["screen"].splitlines())
     # the calibration's own refusal, the same words as the command line's, one line

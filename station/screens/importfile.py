@@ -25,7 +25,22 @@ from station.messages import CalibrationReady
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar, footer
 
-PROCEDURE_NAMES = {"accel-tabletop": "accelerometer (P1)", "compass": "compass", "gyro-drift": "gyro drift (P4)"}
+
+def procedure_label(name: str) -> str:
+    """The procedure picker's words for ``name``: its code and what it calibrates (registry)."""
+    from station.importers._common import NAME
+    from station.procedures import registry
+
+    p = registry.get(name)
+    return f"{p.code} {p.short or NAME.get(p.sensor_kind, p.sensor_kind)}" if p is not None else name
+
+
+def procedure_options(kinds=None) -> list[tuple[str, str]]:
+    """(label, name) of every procedure a log can feed (with ``kinds``: whose sensor it has)."""
+    from station.importers.options import primary
+    from station.procedures import registry
+
+    return [(procedure_label(n), n) for n in registry.importable() if kinds is None or primary(n) in kinds]
 
 
 class LogRead(Message):
@@ -143,9 +158,7 @@ class ImportScreen(Screen):
             yield Input(placeholder="path/to/file, then Enter", id="path", compact=True)
             yield Static("", id="status")
             with Horizontal(id="choose"):
-                yield Select(
-                    [(v, k) for k, v in PROCEDURE_NAMES.items()], id="procedure", allow_blank=False, compact=True
-                )
+                yield Select(procedure_options(), id="procedure", allow_blank=False, compact=True)
                 yield Select(
                     [("PX4: auto", "auto"), ("raw topics", "raw"), ("combined", "combined")],
                     id="source",
@@ -230,13 +243,14 @@ class ImportScreen(Screen):
         if message.error:
             self._status(f"[b red]{tui_markup(message.error)}[/]")
             return
-        from station.importers.options import IMPORTABLE, PRIMARY
+        from station.importers.options import primary
 
         self.path, self.fmt, self.imported = message.path, message.fmt, message.imported
         self.source = message.source
         self.query_one("#source", Select).display = self.fmt == "px4"
         kinds = set(self.imported.streams)
-        fits = [p for p in IMPORTABLE if PRIMARY[p] in kinds]
+        options = procedure_options(kinds)
+        fits = [name for _, name in options]
         found = summary_lines(message.path, message.fmt, self.imported)
         self.query_one("#found", Static).update("\n".join(tui_markup(line) for line in found))
         if not fits:
@@ -244,8 +258,10 @@ class ImportScreen(Screen):
             return
         select = self.query_one("#procedure", Select)
         keep = select.value if select.value in fits else None
-        select.set_options([(PROCEDURE_NAMES.get(p, p), p) for p in fits])
-        select.value = keep or ("compass" if kinds == {"mag"} else fits[0])
+        select.set_options(options)
+        # a magnetometer alone: the one procedure that calibrates it (load.infer_procedure's rule)
+        only_mag = [n for n in fits if primary(n) == "mag"] if kinds == {"mag"} else []
+        select.value = keep or (only_mag or fits)[0]
         self.query_one("#choose").add_class("shown")
         self._status("Pick the procedure, then Calibrate (F5) or Diagnose (F6).")
         self._show_device()
@@ -257,13 +273,13 @@ class ImportScreen(Screen):
         procedure = self._procedure()
         if self.imported is None or procedure is None:
             return
-        from station.importers.options import PRIMARY
+        from station.importers.options import primary
 
         device = self.imported.meta.get("device")
         if self.fmt == "px4":
             from station.importers import px4
 
-            device = px4.default_device(self.imported, PRIMARY[procedure])
+            device = px4.default_device(self.imported, primary(procedure))
         self.query_one("#device", Static).update(f"device {tui_markup(device)}" if device else "")
 
     def _procedure(self) -> str | None:
