@@ -2,6 +2,7 @@
 
     nice -n 10 python benchmarks/bench_diagnose_independent.py [--nulls 200] [--trials 20]
         [--sizes 10,3.5] [--procedures P,...] [--jobs 2] [--seed0 70000] [--effects NAME,...]
+        [--dump DIR]
 
 Every capture is a real file (written by the generator, read by ``station.capture``) given
 to the same ``analyse`` that ``station diagnose`` runs. Per procedure:
@@ -18,11 +19,17 @@ to the same ``analyse`` that ``station diagnose`` runs. Per procedure:
 Scenarios where the effect has no driver (constant temperature, a table without time,
 < 3 orientations for g-sensitivity, no body rate for the LDV lever arm) are skipped and
 the next scenario drawn. Nothing tells the code which effect was hidden.
+
+``--dump DIR`` writes one JSON file per failing capture (a null with a verdict, an effect
+not named or named with a wrong extra name): the scenario, the hidden effect and size, and
+the diagnosis (verdict, candidates, effects, quality), to study what went wrong. The
+capture itself is rebuilt from the scenario (``diag_generator.RENDER[proc](sc, effect, size)``).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -41,6 +48,42 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import diag_generator as G  # noqa: E402
+
+DUMP: str | None = None
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, (np.integer, np.bool_)):
+        return x.item()
+    return x
+
+
+def _set_dump(path):
+    global DUMP
+    DUMP = path
+
+
+def _dump(kind, proc, seed, sc, effect, size, out):
+    if DUMP is None:
+        return
+    os.makedirs(DUMP, exist_ok=True)
+    keep = ("verdict", "candidates", "effects", "quality", "baseline", "extended")
+    doc = {"kind": kind, "procedure": proc, "seed": seed, "effect": effect, "size": size, "scenario": sc}
+    doc["diagnosis"] = {k: out[k] for k in keep if k in out} if isinstance(out, dict) else out
+    for k in ("baseline", "extended"):
+        if k in doc["diagnosis"]:
+            doc["diagnosis"][k] = {kk: v for kk, v in doc["diagnosis"][k].items() if kk != "params"}
+    name = f"{proc}_{effect or 'null'}_{seed}_{size:.3g}.json" if effect else f"{proc}_null_{seed}.json"
+    with open(os.path.join(DUMP, name), "w") as fh:
+        json.dump(_jsonable(doc), fh, indent=1)
 
 
 def _analyse(meta, cols):
@@ -68,6 +111,8 @@ def _null(args):
         out = _analyse(r.meta, r.columns)
     except Exception as exc:  # a refused capture is its own outcome
         return {"error": f"{type(exc).__name__}: {exc}"[:200]}
+    if out["verdict"]:
+        _dump("null", proc, seed, sc, None, 0.0, out)
     return {"verdict": out["verdict"], "seconds": time.perf_counter() - t0}
 
 
@@ -95,6 +140,12 @@ def _trial(args):
                 if effect in group:
                     tied |= group
             res.append({"verdict": out["verdict"], "size": size, "tied": sorted(tied - {effect})})
+            if effect in G.UNLISTED[proc]:
+                bad = not any(v.startswith("residual:") for v in out["verdict"])
+            else:
+                bad = effect not in out["verdict"] or any(v != effect and v not in tied for v in out["verdict"])
+            if bad:
+                _dump(f"{k:g}sigma", proc, seed, sc, effect, size, out)
         except Exception as exc:
             res.append({"error": f"{type(exc).__name__}: {exc}"[:200]})
     return res
@@ -109,10 +160,11 @@ def main(argv=None) -> int:
     ap.add_argument("--effects", default="", help="only these effects (default: all of each procedure)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--seed0", type=int, default=70000)
+    ap.add_argument("--dump", default=None, help="write each failing capture's diagnosis as JSON into DIR")
     a = ap.parse_args(argv)
     sizes = [float(x) for x in a.sizes.split(",") if x]
     only = {x for x in a.effects.split(",") if x}
-    with ProcessPoolExecutor(a.jobs) as ex:
+    with ProcessPoolExecutor(a.jobs, initializer=_set_dump, initargs=(a.dump,)) as ex:
         for proc in [p for p in a.procedures.split(",") if p]:
             if a.nulls:
                 res = list(ex.map(_null, [(proc, a.seed0 + k) for k in range(a.nulls)]))

@@ -74,6 +74,14 @@ def _diagnose(path, capsys) -> dict:
     return json.loads(out)
 
 
+def _row_labels(path) -> list[str]:
+    from station.capture import read_capture
+    from station.procedures.diagnose import analyse
+
+    _, diag, _ = analyse(read_capture(path))
+    return diag.problem.row_labels
+
+
 def _named(result: dict) -> set[str]:
     return set(result["verdict"])
 
@@ -167,6 +175,10 @@ def test_moved_position_and_gap_are_named(tmp_path, capsys):
     gaps = [q for q in res["quality"] if q["kind"] == "gap"]
     assert len(gaps) == 1 and gaps[0]["duration_s"] == pytest.approx(4.01, abs=0.02)
     assert isinstance(gaps[0]["line"], int)
+    # the screen leaves both out of the effect search, and says so
+    moved = next(q for q in res["quality"] if q["kind"] == "moved")
+    assert moved["screened"] and gaps[0]["screened"] and isinstance(moved["line_stop"], int)
+    assert not any(lab.startswith("position y_up ") for lab in _row_labels(path))
 
 
 def test_json_shape_is_exactly_the_contract(tmp_path, capsys):

@@ -70,3 +70,51 @@ def test_unlisted_bias_step_is_named_outside_the_library(tmp_path, capsys):
     e = next(e for e in res["effects"] if e["name"] == "residual:time")
     assert e["shape"] == "step" and abs(e["params"]["at"] - t_step) < 0.1 * t[-1]
     assert e["gain"] > 0 and set(e["correlation"]) <= {"temperature_bias", "time_drift"}
+
+
+def _header_line(path) -> int:
+    return next(i for i, line in enumerate(open(path).read().splitlines(), start=1) if not line.startswith("#"))
+
+
+def test_real_clipping_is_screened_by_line(shared_data, capsys):
+    # the MPU-6050 tabletop session: the gyro clips at -32768 during two hand moves
+    path = str(shared_data / "mpu6050_unc" / "mpu6050_unc_calibration.capture.csv")
+    rc, out = _run(capsys, "diagnose", path, "--json")
+    assert rc == 0
+    sat = {(q["column"], q["line"]) for q in json.loads(out)["quality"] if q["kind"] == "saturation"}
+    assert sat == {("gx", 6674), ("gz", 8778)}
+    assert all(q["screened"] for q in json.loads(out)["quality"] if q["kind"] == "saturation")
+
+
+def test_defects_in_a_real_gyro_record_are_named_and_left_out(shared_data, tmp_path, capsys):
+    """A real static gyro record with a clipped stretch and a lost stretch put in at times drawn
+    here: both named by line under ``quality`` and left out of the effect search, so the
+    verdict is the clean record's (without the screen the stuck stretch is ten outlying blocks
+    and structured residuals)."""
+    from station.capture import read_capture
+
+    path = str(shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv")
+    rc, out = _run(capsys, "diagnose", path, "--json")
+    clean = json.loads(out)
+    cap = read_capture(path)
+    n = cap.n_rows
+    rng = np.random.default_rng(31)
+    a = int(rng.uniform(0.15, 0.4) * n)  # 3 s stuck at the record's extreme reading (clipping)
+    b = int(rng.uniform(0.6, 0.85) * n)  # 2 s of samples lost
+    cols = {k: np.array(v, copy=True) for k, v in cap.columns.items()}
+    cols["gx"][a : a + 300] = cols["gx"].max()  # still for the stillness detector: only the screen sees it
+    keep = np.ones(n, bool)
+    keep[b : b + 200] = False
+    cols = {k: v[keep] for k, v in cols.items()}
+    p = tmp_path / "defects.csv"
+    write_capture(str(p), Capture(meta=dict(cap.meta), columns=cols))
+    rc, out = _run(capsys, "diagnose", str(p), "--json")
+    assert rc == 0
+    res = json.loads(out)
+    head = _header_line(str(p))
+    q = {x["kind"]: x for x in res["quality"]}
+    assert q["saturation"]["line"] == head + 1 + a and q["saturation"]["screened"] is True
+    assert q["gap"]["line"] == head + 1 + b and q["gap"]["screened"] is True
+    assert q["gap"]["duration_s"] > 1.9
+    assert "outlier" not in q and "residuals_not_white" not in q
+    assert res["verdict"] == clean["verdict"]

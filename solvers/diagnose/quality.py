@@ -10,6 +10,7 @@ OUTLIER_SIGMA = 5.0  # |studentized residual| beyond this is a finding
 GAP_FACTOR = 5.0  # a time step this many times the median is a gap
 SATURATION_RUN = 5  # this many equal consecutive samples at a column's extreme
 MOVED_FRACTION = 0.1  # a labelled position with more than this fraction of moving samples
+GAP_MARGIN_S = 1.0  # samples this close to a gap are left out of the effect search (settling after it)
 
 
 def gaps(t_s) -> list[dict]:
@@ -36,8 +37,15 @@ def gaps(t_s) -> list[dict]:
     return out
 
 
+def _runs(at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    edges = np.diff(np.concatenate([[0], at.astype(int), [0]]))
+    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+
+
 def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
-    """Runs of SATURATION_RUN or more identical values at a column's extreme reading."""
+    """Runs of SATURATION_RUN or more identical values at a column's extreme reading: one
+    finding per column and extreme (its longest run), with every such run in ``runs``
+    (row start, stop) for the screen."""
     out = []
     for name, x in columns.items():
         x = np.asarray(x, float)
@@ -49,11 +57,11 @@ def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
             if at.sum() < SATURATION_RUN:
                 continue
             # longest run
-            edges = np.diff(np.concatenate([[0], at.astype(int), [0]]))
-            starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+            starts, stops = _runs(at)
             lengths = stops - starts
             k = int(np.argmax(lengths))
             if lengths[k] >= SATURATION_RUN:
+                long = lengths >= SATURATION_RUN
                 out.append(
                     {
                         "kind": "saturation",
@@ -61,6 +69,7 @@ def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
                         "row": int(starts[k]),
                         "value": float(extreme),
                         "samples": int(at.sum()),
+                        "runs": [(int(a), int(b)) for a, b in zip(starts[long], stops[long])],
                         "explanation": f"{name} stuck at {extreme:g}, its extreme reading, for {int(lengths[k])} "
                         "consecutive samples: the sensor is at its range limit (clipping)",
                     }
@@ -116,3 +125,51 @@ def outliers(studentized, row_labels, explain: str) -> list[dict]:
         }
         for k in big
     ]
+
+
+def screen(n: int, t_s=None, columns: dict | None = None, moved=()) -> tuple[np.ndarray, list[dict]]:
+    """The data-quality screen run before any effect is sought (one for every procedure):
+    ``(bad, findings)`` with ``bad`` (n,) the rows to leave out of the effect search and a
+    finding per cause (rows as row indices, ``"screened": True``, ``screened_rows`` how many):
+
+    - a gap (``gaps``): the samples within GAP_MARGIN_S (or one median step) of it on either
+      side — whatever the link lost, the unit may have been touched or be settling;
+    - saturation (``saturation`` of ``columns``): every run at the extreme reading and
+      SATURATION_RUN samples either side (the true value is unknown there);
+    - a moved position (``moved``, from ``moved_positions``): all of its rows (its mean mixes
+      two attitudes)."""
+    bad = np.zeros(int(n), bool)
+    findings: list[dict] = []
+    if t_s is not None:
+        t = np.asarray(t_s, float)
+        for q in gaps(t):
+            k = q["row"]
+            ok = np.isfinite(t)
+            step = float(np.median(np.diff(t[ok]))) if ok.sum() > 2 else 0.0
+            margin = max(GAP_MARGIN_S, step)
+            before, after = float(t[k] - q["duration_s"]), float(t[k])
+            m = ok & (t >= before - margin) & (t <= after + margin)
+            q["screened_rows"] = int((m & ~bad).sum())
+            q["screened"] = True
+            q["explanation"] += f"; the samples within {margin:g} s of it are left out of the effect search"
+            bad |= m
+            findings.append(q)
+    for q in saturation(columns or {}):
+        m = np.zeros(int(n), bool)
+        for a, b in q.pop("runs"):
+            m[max(0, a - SATURATION_RUN) : min(int(n), b + SATURATION_RUN)] = True
+        q["screened_rows"] = int((m & ~bad).sum())
+        q["screened"] = True
+        q["explanation"] += "; those samples (and their neighbours) are left out of the effect search"
+        bad |= m
+        findings.append(q)
+    for q in moved:
+        q = dict(q)
+        m = np.zeros(int(n), bool)
+        m[q["row"] : q["row_stop"]] = True
+        q["screened_rows"] = int((m & ~bad).sum())
+        q["screened"] = True
+        q["explanation"] += "; the position is left out of the effect search"
+        bad |= m
+        findings.append(q)
+    return bad, findings

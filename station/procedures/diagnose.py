@@ -28,13 +28,57 @@ def _line(capture, row: int) -> int | None:
 
 # ---------------------------------------------------------------- quality
 
+SENSOR_COLUMNS = ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "vl1", "vl2", "vl3")
+
+
+def moved_positions(capture) -> list[dict]:
+    """Labelled positions of a time series during which the unit moved (rows: capture row
+    indices; ``solvers.diagnose.quality.moved_positions`` on the stillness detector's mask)."""
+    if not (capture.is_time_series and "position" in capture.columns and any(capture.columns["position"])):
+        return []
+    from solvers.stillness import detect_static_intervals
+
+    a = np.column_stack([np.asarray(capture.columns[c], float) for c in ("ax", "ay", "az") if c in capture.columns])
+    if a.shape[1] != 3:
+        return []
+    g = (
+        np.column_stack([np.asarray(capture.columns[c], float) for c in ("gx", "gy", "gz")])
+        if all(c in capture.columns for c in ("gx", "gy", "gz"))
+        else None
+    )
+    try:
+        st = detect_static_intervals(capture.columns["t"], a, g, nan_policy="omit")
+        return Q.moved_positions(st.still_mask, capture.columns["position"])
+    except (SolverError, ValueError):
+        return []
+
+
+def screen(capture, moved=()) -> tuple[np.ndarray, list[dict]]:
+    """The data-quality screen of a time-series capture (``solvers.diagnose.quality.screen``):
+    ``(bad, findings)``, ``bad`` per capture row (left out of the effect search), the findings
+    by file line (``line``, ``line_stop``) with ``"screened": True``. A procedure's
+    ``diagnosis_input`` calls it before building its problem and puts the findings in
+    ``problem.screened``; ``moved`` are its moved-position findings (rows as row indices)."""
+    n = capture.n_rows
+    if not (capture.is_time_series and "t" in capture.columns):
+        return np.zeros(n, bool), []
+    cols = {c: capture.columns[c] for c in SENSOR_COLUMNS if c in capture.columns}
+    bad, found = Q.screen(n, capture.columns["t"], cols, moved)
+    for q in found:
+        q["line"] = _line(capture, q.pop("row"))
+        if "row_stop" in q:
+            q["line_stop"] = _line(capture, q.pop("row_stop") - 1)
+    return bad, found
+
 
 def _quality(capture, diag, inp) -> list[dict]:
     out: list[dict] = list(diag.problem.screened)  # rows the data-quality screen left out, by line
+    seen = {(q.get("kind"), q.get("line"), q.get("column")) for q in out}
     if capture.is_time_series and "t" in capture.columns:
         for q in Q.gaps(capture.columns["t"]):
             q["line"] = _line(capture, q.pop("row"))
-            out.append(q)
+            if (q["kind"], q["line"], None) not in seen:
+                out.append(q)
     num = {
         c: v
         for c, v in capture.columns.items()
@@ -43,7 +87,9 @@ def _quality(capture, diag, inp) -> list[dict]:
     if capture.is_time_series:
         for q in Q.saturation(num):
             q["line"] = _line(capture, q.pop("row"))
-            out.append(q)
+            q.pop("runs", None)
+            if (q["kind"], q["line"], q["column"]) not in seen:
+                out.append(q)
     for q in inp.quality:
         q = dict(q)
         q["line"] = _line(capture, q.pop("row"))

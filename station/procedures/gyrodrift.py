@@ -532,7 +532,11 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         Cbn[m] = Cnb.T
         if lat is not None:
             E[m] = gyro_model.earth_rate_body(lat, Cnb)
-    use = label != ""
+    # the data-quality screen: gaps, saturated samples, moved positions are left out
+    from station.procedures.diagnose import moved_positions, screen
+
+    bad, screened = screen(capture, moved_positions(capture))
+    use = (label != "") & ~bad
     order = np.flatnonzero(use)
     if len(order) < 16:
         raise UnsupportedError(
@@ -559,4 +563,5 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         C_b_n=Cbn[order],
     )
     prob.unit = unit
+    prob.screened = screened
     return DiagnosisInput(prob, {"rows": order}, "a block far off the others: a knock, the unit moved, or a bias jump")

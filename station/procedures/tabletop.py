@@ -19,7 +19,7 @@ labels), ``six-position`` (step 8 only).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -304,12 +304,82 @@ def _col(capture, name):
     return None if x is None else np.asarray(x, float)
 
 
+MIN_SCREENED_POSITIONS = 10  # positions left out by the screen only while this many remain
+
+
+def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dict]]:
+    """The data-quality screen (``station.procedures.diagnose.screen``) for P1: the positions
+    the effect search uses, the capture rows it leaves out (time series) and the findings.
+    Left out: gaps, saturated samples, moved positions, and the positions the calibration
+    flags as disagreeing with the rest far beyond the noise (``outlier`` in its result) —
+    while MIN_SCREENED_POSITIONS remain, else they are named and kept."""
+    from station.procedures.diagnose import _line, screen
+
+    bad, found = screen(capture, _moved_positions(capture))
+    rows = (base or {}).get("positions") or []
+    flagged = {k for k, r in enumerate(rows) if r.get("outlier") and k < len(positions)}
+    t = _col(capture, "t") if capture.is_time_series else None
+    span = {}
+    for k, p in enumerate(positions):
+        if t is not None and p.t_start_s is not None:
+            i0, i1 = int(np.searchsorted(t, p.t_start_s)), int(np.searchsorted(t, p.t_stop_s, side="right"))
+            span[k] = (i0, i1)
+    for k in sorted(flagged):
+        r, p = rows[k], positions[k]
+        i0, i1 = span.get(k, (k, k + 1))
+        found.append(
+            {
+                "kind": "outlier",
+                "position": p.label,
+                "where": f"position {p.label}",
+                "line": _line(capture, i0),
+                "line_stop": _line(capture, i1 - 1),
+                "residual_mps2": r.get("residual_mps2"),
+                "screened": True,
+                "explanation": f"|A| − g = {r.get('residual_mps2', float('nan')):+.3g} m/s², far beyond the other "
+                "positions' spread (the calibration flags it: was it still, or touching something?); "
+                "left out of the effect search",
+            }
+        )
+    drop = set(flagged)
+    for k, (i0, i1) in span.items():  # mostly screened samples (a moved position): the position goes
+        if i1 > i0 and bad[i0:i1].mean() > 0.5:
+            drop.add(k)
+    keep = [k for k in range(len(positions)) if k not in drop]
+    if len(keep) < MIN_SCREENED_POSITIONS:
+        keep = list(range(len(positions)))
+        for q in found:
+            if q["kind"] in ("outlier", "moved"):
+                q["screened"] = False
+                q["explanation"] = q["explanation"].split("; left out")[0].split("; the position is left")[0]
+                q["explanation"] += f"; kept: fewer than {MIN_SCREENED_POSITIONS} positions would remain"
+    out = []
+    for k in keep:
+        p = positions[k]
+        if k in span and bad is not None:
+            i0, i1 = span[k]
+            a = _accel(capture)[i0:i1][~bad[i0:i1]]
+            a = a[np.all(np.isfinite(a), axis=1)]
+            if len(a) < i1 - i0 and len(a) >= 2:  # some samples screened (a gap's margin): the mean of the rest
+                p = replace(
+                    p,
+                    mean=a.mean(axis=0),
+                    std=a.std(axis=0, ddof=1),
+                    n=len(a),
+                    se=mean_se(a, t[i0:i1][~bad[i0:i1]]) if len(a) >= 16 else p.se,
+                )
+        out.append(p)
+    return out, (bad if capture.is_time_series else None), found
+
+
 def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
-    """The P1 diagnosis problem around the baseline ``base`` (a calibrate result)."""
+    """The P1 diagnosis problem around the baseline ``base`` (a calibrate result), on what
+    the data-quality screen (``_screen``) leaves."""
     from solvers.diagnose import problems as DP
 
     prep = prepared if prepared is not None else prepare(capture)
-    g, positions, noise_known = prep.g_mps2, prep.positions, prep.noise_known
+    g, noise_known = prep.g_mps2, prep.noise_known
+    positions, bad, screened = _screen(capture, prep.positions, base)
     B, M = np.asarray(base["params"]["B"], float), np.asarray(base["params"]["M"], float)
     dirs = [p.direction for p in positions]
     if sum(d is not None for d in dirs) < 3:
@@ -323,8 +393,10 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         if temp is not None:
             temp_mean = np.array([np.nanmean(temp[(t >= p.t_start_s) & (t <= p.t_stop_s)]) for p in positions])
     else:
-        temp_mean = temp
+        keep = [k for k, p in enumerate(prep.positions) if any(p is q for q in positions)]
+        temp_mean = temp[keep] if temp is not None else None
         t_mean = _col(capture, "t")
+        t_mean = t_mean[keep] if t_mean is not None else None
     std = np.array([p.std if p.std is not None else np.full(3, np.nan) for p in positions])
     se = np.array([p.se for p in positions]) if all(p.se is not None for p in positions) else None
     prob = DP.tabletop_problem(
@@ -341,15 +413,15 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         temp_c=temp_mean,
         noise_known=noise_known,
         se=se,
-        sub=_sub_holds(capture, positions) if capture.is_time_series else None,
+        sub=_sub_holds(capture, positions, bad) if capture.is_time_series else None,
     )
+    prob.screened = screened
     drivers = {"position": [p.label for p in positions], "time_s": t_mean, "temp_c": temp_mean}
     return DiagnosisInput(
         prob,
         drivers,
         "a position that disagrees with the others: the unit moved, a wrong label, or a knock",
         group_kind="position",
-        quality=tuple(_moved_positions(capture)),
     )
 
 
@@ -357,7 +429,7 @@ SUB_HOLDS = 4  # parts a hold is cut into for diagnosis (time-resolved evidence)
 MIN_SUB_SAMPLES = 25  # a hold shorter than SUB_HOLDS × this stays one row
 
 
-def _sub_holds(capture, positions) -> dict | None:
+def _sub_holds(capture, positions, bad=None) -> dict | None:
     """Each position's samples cut into SUB_HOLDS consecutive parts: their means and standard
     errors from the same Allan model the calibration uses (solvers.allan.mean_standard_error)."""
     from solvers.allan import mean_standard_error
@@ -369,7 +441,8 @@ def _sub_holds(capture, positions) -> dict | None:
     for k, p in enumerate(positions):
         if p.t_start_s is None or p.t_stop_s is None:
             return None
-        idx = np.flatnonzero((t >= p.t_start_s) & (t <= p.t_stop_s) & np.all(np.isfinite(a), axis=1))
+        ok = np.all(np.isfinite(a), axis=1) if bad is None else np.all(np.isfinite(a), axis=1) & ~bad
+        idx = np.flatnonzero((t >= p.t_start_s) & (t <= p.t_stop_s) & ok)
         parts = SUB_HOLDS if len(idx) >= SUB_HOLDS * MIN_SUB_SAMPLES else 1
         for j, chunk in enumerate(np.array_split(idx, parts)):
             dt = float(np.median(np.diff(t[chunk]))) if len(chunk) > 1 else 1.0
@@ -387,23 +460,9 @@ def _sub_holds(capture, positions) -> dict | None:
 
 
 def _moved_positions(capture) -> list[dict]:
-    """Labelled positions of a time series during which the unit moved (rows: capture row indices)."""
-    if not (capture.is_time_series and "position" in capture.columns and any(capture.columns["position"])):
-        return []
-    from solvers.diagnose import quality as Q
-    from solvers.stillness import detect_static_intervals
+    from station.procedures.diagnose import moved_positions
 
-    a = _accel(capture)
-    g = (
-        np.column_stack([_col(capture, c) for c in ("gx", "gy", "gz")])
-        if all(c in capture.columns for c in ("gx", "gy", "gz"))
-        else None
-    )
-    try:
-        st = detect_static_intervals(capture.columns["t"], a, g, nan_policy="omit")
-        return Q.moved_positions(st.still_mask, capture.columns["position"])
-    except (SolverError, ValueError):
-        return []
+    return moved_positions(capture)
 
 
 def report_figures(result: dict, meta: dict, columns: dict) -> list[tuple[str, str]]:
