@@ -251,3 +251,28 @@ def test_row_far_beyond_the_noise_is_named_by_line(tmp_path, capsys):
     assert out, res["quality"]
     header = next(i for i, line in enumerate(open(path).read().splitlines(), start=1) if not line.startswith("#"))
     assert out[0]["where"].startswith(f"line {header + 18} ")  # data row 18 (index 17)
+
+
+@pytest.mark.parametrize("seed", [61, 62])
+def test_tabletop_session_gyro_is_diagnosed_beside_the_accelerometer(tmp_path, capsys, seed):
+    """A P1 session with a gyro: `station diagnose` diagnoses the gyro's holds too (the result's
+    ``gyro`` part, same shape). Whether a g-sensitivity is hidden in the gyro is drawn here."""
+    rng = np.random.default_rng(seed)
+    hidden = bool(rng.integers(2)) if seed != 62 else not bool(np.random.default_rng(61).integers(2))
+    sim = simulate(
+        "accel-tabletop",
+        seed=seed,
+        extra_positions=8,
+        hold_s=10,
+        move_s=3,
+        init_rest_s=20,
+        gyro_g_sensitivity=3e-3 if hidden else 0.0,
+    )
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    assert set(res) == TOP_KEYS | {"gyro"}
+    gyro = res["gyro"]
+    assert set(gyro) == TOP_KEYS and gyro["procedure"] == "gyro-tabletop"
+    assert ("g_sensitivity" in gyro["verdict"]) is hidden, gyro["verdict"]
+    assert res["verdict"] == []  # the accelerometer has nothing hidden
+    cand = {c["name"]: c for c in gyro["candidates"]}
+    assert cand["earth_rate"]["resolvable"] is False and "g_sensitivity" in cand["earth_rate"]["reason"]

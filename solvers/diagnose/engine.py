@@ -113,6 +113,7 @@ class Diagnosis:
     extended_model: str
     problem: Problem
     deviance: dict = field(default_factory=dict)  # first round: {name: {D, k, q, cv_lower}} (benchmark)
+    subs: dict = field(default_factory=dict)  # {key: (Diagnosis, input)} of a second sensor (station diagnose)
 
     def rms(self, fitres: FitResult) -> float:
         """Residual RMS in data units over the primary rows (all rows of one kind)."""
@@ -401,7 +402,8 @@ def serial_inflation(e: np.ndarray, s: np.ndarray, series: np.ndarray | None) ->
 # ---------------------------------------------------------------- generic extension
 
 GENERIC_STEP_GRID = np.linspace(0.1, 0.9, 13)  # step positions, fractions of the driver's range
-GENERIC_PERIODS = 10  # periods scanned, span/30 … span/1.5 (log)
+GENERIC_CYCLES = np.arange(1.5, 30.01, 1.0)  # periodic: cycles over the span scanned (one apart: independent)
+GENERIC_REFINE = 21  # a scanned family's best member is refined on this many values within ±1 grid step
 GENERIC_SMOOTH_KNOTS = (3, 5)  # piecewise-linear bases (complexity chosen by CV)
 
 
@@ -451,7 +453,21 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
             blocks = {"bR": np.zeros((p, width))}
             return (Candidate(f"residual:{drv}", blocks, setup=setup, folds=_fold_for(drv)), dict(desc, driver=drv))
 
-        if per_axis:  # a scale linear in temperature / time acting on each axis' input
+        if per_axis:  # a smooth function of each axis' own input (its linear part is the scale)
+            if all(v.ndim == 2 and v.shape[1] == width for v in vals):
+                a_lo = np.min([v.min(axis=0) for v in vals], axis=0)
+                a_hi = np.max([v.max(axis=0) for v in vals], axis=0)
+                for K in GENERIC_SMOOTH_KNOTS:
+
+                    def axis_fn(x, K=K, a_lo=a_lo, a_hi=a_hi):  # hats on K knots over each axis' range (all rows)
+                        out = []
+                        for j in range(x.shape[1]):
+                            c = np.linspace(a_lo[j], a_hi[j], K)
+                            h = max((a_hi[j] - a_lo[j]) / (K - 1), 1e-300)
+                            out.append(np.clip(1.0 - np.abs(x[:, j, None] - c[None, 1:]) / h, 0.0, None))
+                        return np.stack(out, axis=2)
+
+                    out.append(make(axis_fn, K - 1, {"shape": "smooth", "knots": K, "per_axis": True}))
             continue
         base = drv.split(":")[0]
         if base not in ("time", "temperature"):
@@ -480,24 +496,41 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
                     )
                 )
         if base == "time":  # a bias that jumps (a current switched on, a knock)
-            family = []
-            for f in GENERIC_STEP_GRID:
-                x0 = lo + f * span
-                family.append(
-                    make(lambda x, x0=x0: (x >= x0).astype(float)[:, None] - 0.5, 1, {"shape": "step", "at": x0})
+
+            def step(x0, make=make):
+                return make(lambda x, x0=x0: (x >= x0).astype(float)[:, None] - 0.5, 1, {"shape": "step", "at": x0})
+
+            dx = float(GENERIC_STEP_GRID[1] - GENERIC_STEP_GRID[0]) * span
+            out.append(
+                (
+                    "scan",
+                    [step(lo + f * span) for f in GENERIC_STEP_GRID],
+                    lambda d, step=step, dx=dx: [
+                        step(x) for x in np.linspace(d["at"] - dx, d["at"] + dx, GENERIC_REFINE)
+                    ],
                 )
-            out.append(("scan", family))
-        if base == "time":
-            fam = []
-            for P in np.geomspace(span / 30.0, span / 1.5, GENERIC_PERIODS):
-                fam.append(
-                    make(
-                        lambda x, P=P: np.column_stack([np.sin(2 * np.pi * x / P), np.cos(2 * np.pi * x / P)]),
-                        2,
-                        {"shape": "periodic", "period": float(P)},
-                    )
+            )
+
+            def periodic(c, make=make, span=span):  # c cycles over the span
+                P = span / c
+                return make(
+                    lambda x, P=P: np.column_stack([np.sin(2 * np.pi * x / P), np.cos(2 * np.pi * x / P)]),
+                    2,
+                    {"shape": "periodic", "period": float(P)},
                 )
-            out.append(("scan", fam))
+
+            dc = float(GENERIC_CYCLES[1] - GENERIC_CYCLES[0])
+            out.append(
+                (
+                    "scan",
+                    [periodic(c) for c in GENERIC_CYCLES],
+                    lambda d, periodic=periodic, span=span, dc=dc: [
+                        periodic(c)
+                        for c in np.linspace(span / d["period"] - dc, span / d["period"] + dc, GENERIC_REFINE)
+                        if c > 0.5
+                    ],
+                )
+            )
         for K in GENERIC_SMOOTH_KNOTS:
             out.append(make(lambda x, K=K: _hat_basis(x, K), K - 1, {"shape": "smooth", "knots": K}))
     return out
@@ -811,9 +844,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     gens = generic_candidates(problem)
     m_gen = sum(len(item[1]) if item[0] == "scan" else 1 for item in gens)  # every basis tried is a test
 
-    def generic_round(state, free, named):
+    def generic_round(state, free, named, ranked=False):
         """The best generic candidate that passes against the model at ``state`` and that no
-        library candidate (other than ``named``) explains: (eval, correlations, held-out RMS) or None.
+        library candidate (other than ``named``) explains: (eval, correlations, held-out RMS) or None;
+        ``ranked``: every such candidate, best first (a list).
         "Far from noise along a driver" is what this test asks, every basis counted: a
         portmanteau test first would miss slow structure (a drift, a long period)."""
         r0 = _weighted(problem, state)
@@ -839,6 +873,16 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     best_fam = (rss, cand, cc, desc)
             if best_fam is None:
                 continue
+            if item[0] == "scan" and len(item) > 2:  # refine around the best grid value (not counted as tests)
+                for cand, desc in item[2](best_fam[3]):
+                    cand.setup()
+                    cc = _candidate_columns(problem, state, cand, Q0, r0)
+                    if cc.reason is not None:
+                        continue
+                    Jp = cc.J - Q0 @ (Q0.T @ cc.J)
+                    rss = _lstsq_rss(Jp, rp)[1]
+                    if rss < best_fam[0]:
+                        best_fam = (rss, cand, cc, desc)
             _, cand, cc, desc = best_fam
             if item[0] == "scan":
                 cand.setup()
@@ -854,22 +898,27 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             if _passes(problem, ev, m_gen, rounds.cv0(ev.cc.cand.folds), rank_cur, n, problem.generic_scale)
         ]
         if not passing:
-            return None
-        best = min(passing, key=lambda ev: ev.cv)
-        corr = {}  # how much of its signature each library candidate's columns hold, at this state
+            return [] if ranked else None
+        lib = []
         for c in problem.candidates:
             if c.reason is not None or c.name in named:
                 continue
             cc = _candidate_columns(problem, state, c, Q0, r0)
             if cc.reason is not None or cc.J.shape[1] == 0:
                 continue
-            P = _orth(np.hstack([J0, cc.J]))
-            proj = P @ (P.T @ best.sig)
+            lib.append((c.name, _orth(np.hstack([J0, cc.J]))))
+        out = []
+        for best in sorted(passing, key=lambda ev: ev.cv)[: 3 if ranked else 1]:
+            corr = {}  # how much of its signature each library candidate's columns hold, at this state
             nb = float(np.linalg.norm(best.sig))
-            corr[c.name] = float(np.linalg.norm(proj) / nb) if nb > 0 else 0.0
-        if any(v > CONFUSION_CORR for v in corr.values()):
-            return None
-        return best, corr, cv_g
+            for name, P in lib:
+                proj = P @ (P.T @ best.sig)
+                corr[name] = float(np.linalg.norm(proj) / nb) if nb > 0 else 0.0
+            if not any(v > CONFUSION_CORR for v in corr.values()):
+                out.append((best, corr, cv_g))
+        if ranked:
+            return out
+        return out[0] if out else None
 
     def with_generic(best, state, free):
         best.cc.cand.setup()
@@ -890,9 +939,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             # the library effects may have taken part of a structure none of them is (a bias step
             # seen as a drift): try the generic one against the baseline, then keep only the library
             # effects that still earn their place beside it, and it beside them
-            res0 = generic_round(dict(base_params), dict(problem.free), set())
-            if res0 is not None:
-                flags = {k: dict(v) for k, v in entries.items()}
+            # (each generic candidate that passes, best held-out RMS first, until one displaces them)
+            flags = {k: dict(v) for k, v in entries.items()}
+            for res0 in generic_round(dict(base_params), dict(problem.free), set(), ranked=True):
                 fit2, st2, fr2 = with_generic(res0[0], state, free)
                 picked2, fit2, st2, fr2 = prune(list(picked), fit2, extra=res0[0].cc, min_items=1)
                 # the generic term must pass against the library effects that remain
@@ -916,9 +965,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     res0[0].cc.cand.setup()
                     picked, cur_fit, state, free = picked2, fit2, st2, fr2
                     generic_effect = (res0[0], res0[1], cv_rms(J0, r0, sigma, folds, primary))
-                else:
-                    entries.clear()
-                    entries.update(flags)
+                    break
+                entries.clear()
+                entries.update({k: dict(v) for k, v in flags.items()})
 
     ext = cur_fit
     Je, _, _ = jacobian(problem, ext.params, free)

@@ -159,11 +159,20 @@ def gyro_problem(
                 reason="part of the baseline here: the latitude is known and the Earth rate is removed (mode B)",
             )
         )
-    elif Cb is None or not multi:
+    elif not multi:
         cands.append(
             Candidate(
                 "earth_rate",
                 reason="one static orientation and no latitude: the Earth rate cannot be told from the bias",
+            )
+        )
+    elif Cb is None:
+        cands.append(
+            Candidate(
+                "earth_rate",
+                reason="no heading per position (a tabletop session knows only the gravity direction): the "
+                "Earth rate's horizontal part is unknown and its vertical part lies along the specific "
+                "force, where g_sensitivity's G f holds it too",
             )
         )
     else:

@@ -149,9 +149,32 @@ def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
 
     with quiet_stdout():
         inp, diag = guarded(capture, run)
+    out = _result(capture, capture.procedure, diag, inp)
+    # a second sensor the same session calibrates (P1's gyro: station.procedures.tabletop_gyro)
+    subs = getattr(module, "SUB_DIAGNOSES", {})
+    for key, (name, make) in subs.items():
+
+        def run_sub(make=make):
+            try:
+                sub = make(capture, base, prepared)
+                return None if sub is None else (sub, diagnose(sub.problem))
+            except SolverError as exc:  # the first sensor's diagnosis stands on its own
+                return str(exc)
+
+        with quiet_stdout():
+            got = guarded(capture, run_sub)
+        if isinstance(got, str):
+            out[key] = {"procedure": name, "error": f"diagnosis failed: {got}"}
+        elif got is not None:
+            out[key] = _result(capture, name, got[1], got[0])
+            diag.subs[key] = (got[1], got[0])
+    return out, diag, inp
+
+
+def _result(capture, procedure, diag, inp) -> dict:
     bp = diag.baseline
-    out = {
-        "procedure": capture.procedure,
+    return {
+        "procedure": procedure,
         "baseline": {
             "model": diag.model,
             "params": bp.params,
@@ -169,7 +192,6 @@ def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
         "quality": _quality(capture, diag, inp),
         "verdict": diag.verdict,
     }
-    return out, diag, inp
 
 
 def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plot_width: int = 78) -> str:
@@ -236,6 +258,14 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plo
     L += _per_group(diag, inp.group_kind)
     if plots:
         L.append(_plots(diag, plot_width))
+    for key, val in result.items():
+        if isinstance(val, dict) and "error" in val and "procedure" in val:
+            L.append(f"--- {key}: {val['procedure']}: {val['error']}")
+    for key, (sdiag, sinp) in diag.subs.items():
+        if key in result:
+            L.append("")
+            L.append(f"--- {key}: {result[key]['procedure']} (the same session's second sensor)")
+            L.append(format_text(result[key], sdiag, sinp, plots=False, plot_width=plot_width))
     return "\n".join(L)
 
 

@@ -304,6 +304,14 @@ def _col(capture, name):
     return None if x is None else np.asarray(x, float)
 
 
+def _gyro_diagnosis(capture, base, prepared):
+    from station.procedures import tabletop_gyro
+
+    return tabletop_gyro.diagnosis_input(capture, base, prepared)
+
+
+# diagnoses of the session's second sensor: result key → (procedure name, input builder or None)
+SUB_DIAGNOSES = {"gyro": ("gyro-tabletop", _gyro_diagnosis)}
 MIN_SCREENED_POSITIONS = 10  # positions left out by the screen only while this many remain
 
 

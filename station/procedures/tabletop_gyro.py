@@ -212,8 +212,9 @@ def format_lines(block: dict) -> list[str]:
 
 
 def diagnosis_input(capture, base: dict, prepared):
-    """The gyro problem of a P1 session for ``station diagnose`` (helper i12 wires it beside the
-    accelerometer's): the holds' gyro samples in rad/s through the session's fitted ``K``, the
+    """The gyro problem of a P1 session for ``station diagnose`` (the ``gyro`` part of the
+    accel-tabletop diagnosis, ``tabletop.SUB_DIAGNOSES``): the holds' gyro samples in rad/s
+    through the session's fitted ``K``, the
     calibrated specific force, one label per hold. The baseline is a constant bias; the gyro
     model's effects (temperature, time drift, g-sensitivity, Earth rate) are the candidates
     (``solvers.diagnose.problems.gyro_problem``). ``prepared``: ``tabletop.prepare(capture)``,
@@ -221,6 +222,7 @@ def diagnosis_input(capture, base: dict, prepared):
     the lower of the two). None when the result has no gyro block."""
     from solvers.diagnose import problems as DP
     from station.procedures.contract import DiagnosisInput
+    from station.procedures.diagnose import moved_positions, screen
 
     gb = (base or {}).get("gyro")
     if not isinstance(gb, dict) or "params" not in gb:
@@ -232,9 +234,10 @@ def diagnosis_input(capture, base: dict, prepared):
     y = _gyro(capture)
     raw_a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
     temp = capture.columns.get("temp_c")
+    bad, screened = screen(capture, moved_positions(capture))  # the data-quality screen, as the accelerometer's
     rows, labels = [], []
     for p in sorted(prep.positions, key=lambda q: q.t_start_s):
-        i = np.flatnonzero((t >= p.t_start_s) & (t <= p.t_stop_s) & np.all(np.isfinite(y), axis=1))
+        i = np.flatnonzero((t >= p.t_start_s) & (t <= p.t_stop_s) & np.all(np.isfinite(y), axis=1) & ~bad)
         rows.append(i)
         labels += [p.label] * len(i)
     idx = np.concatenate(rows)
@@ -246,6 +249,7 @@ def diagnosis_input(capture, base: dict, prepared):
         None,
         np.array(labels, dtype=object),
     )
+    prob.screened = screened
     drivers = {"position": labels, "time_s": t[idx]}
     return DiagnosisInput(
         prob, drivers, "a hold whose gyro mean disagrees: the unit moved, or the bias jumped", group_kind="time block"
