@@ -34,13 +34,17 @@ from solvers.tabletop import perp_basis
 
 # Deviance-test scales F from null simulations (bench_diagnose.py --null-only --trials 200).
 # The comment gives that run's 95th-percentile null score; F is set a little above it.
+# GENERIC_SCALES: the margin of residual:<driver> over F where it was measured per procedure
+# (the independent generator's nulls, seeds 5100+ P1 and 6000+ P4: the largest generic score
+# 1.35-1.9 in F units for P1, 99th percentile 1.27 for P4); elsewhere the engine's default 2.
 THRESHOLDS = {
-    "accel-tabletop": 2.2,  # 1.8 (1.7 on the independent generator's nulls): placement errors, bias instability
+    "accel-tabletop": 2.5,  # 1.8 (independent generator: 12/200 false alarms at 2.2, all time/temperature): bias instability
     "accel-centrifuge": 1.25,  # 1.0 (0.8 independent)
     "compass": 2.4,  # 1.4 (2.3 on 90 independent nulls, seeds 50000+: a hard iron that wanders over the capture)
     "gyro-drift": 1.5,  # 0.8 (1.4 on the independent generator's nulls): bias instability in the block means
     "ldv": 1.05,  # 0.95 (0.84 independent): white noise
 }
+GENERIC_SCALES = {"accel-tabletop": 1.0, "gyro-drift": 1.1}
 MIN_TEMP_SPAN_C = 0.2  # a temperature that varies less than this cannot resolve a temperature term
 
 
@@ -199,6 +203,7 @@ def gyro_problem(
         prob.drivers["temperature [°C]"] = np.repeat(Tb, 3)
     prob.series = np.tile(np.arange(3), len(idx))
     prob.generic = [(cond, {"time": tb, "temperature": Tb})]
+    prob.generic_scale = GENERIC_SCALES["gyro-drift"]
     return prob
 
 
@@ -405,6 +410,7 @@ def tabletop_problem(
         ),
     )
     nn = len(s_n)
+    prob.generic_scale = GENERIC_SCALES["accel-tabletop"]
     prob.row_types = np.concatenate([np.zeros(nn, int), np.ones(len(s_v), int)])
     pad = np.full(len(s_v), np.nan)
     prob.drivers = {"position #": np.concatenate([pos_n + 1.0, pad])}
