@@ -84,6 +84,12 @@ def test_real_clipping_is_screened_by_line(shared_data, capsys):
     sat = {(q["column"], q["line"]) for q in json.loads(out)["quality"] if q["kind"] == "saturation"}
     assert sat == {("gx", 6674), ("gz", 8778)}
     assert all(q["screened"] for q in json.loads(out)["quality"] if q["kind"] == "saturation")
+    # a hand-held compass capture: the gyro clips at ±250 °/s in two fast turns
+    path = str(shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv")
+    rc, out = _run(capsys, "diagnose", path, "--json")
+    sat = [q for q in json.loads(out)["quality"] if q["kind"] == "saturation"]
+    assert {(q["column"], q["line"]) for q in sat} == {("gx", 6481), ("gx", 6506)}
+    assert all(q["screened"] and q["screened_rows"] >= 10 for q in sat)
 
 
 def test_defects_in_a_real_gyro_record_are_named_and_left_out(shared_data, tmp_path, capsys):

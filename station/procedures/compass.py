@@ -351,11 +351,15 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     """The P3 diagnosis problem around the baseline ``base`` (a calibrate result)."""
     from solvers.diagnose import problems as DP
     from solvers.stillness import detect_static_intervals
+    from station.procedures.diagnose import screen
 
     prep = prepared if prepared is not None else prepare(capture)
     y, good, t = prep.y, prep.good, prep.t
     if t is None:
         t = np.asarray(capture.columns["t"], float) if "t" in capture.columns else None
+    bad, screened = screen(capture)  # gaps and saturated samples: left out of the effect search
+    if len(bad) == len(good) and (good & ~bad).sum() >= 16:
+        good = good & ~bad
     if t is None:
         raise UnsupportedError(f"{capture.path or 'capture'}: compass diagnosis needs a time series ('t' column)")
     W0 = np.asarray(base["params"]["soft_iron"], float)
@@ -387,6 +391,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     prob = DP.compass_problem(
         t[good], y[good], W0, h0, F, incl, noise_raw=noise, temp_c=None if temp is None else temp[good], **static
     )
+    prob.screened = screened
     return DiagnosisInput(prob, {}, "a sample far off the field sphere: a magnetic disturbance nearby or a glitch")
 
 

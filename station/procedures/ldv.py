@@ -286,9 +286,14 @@ def format_text(result: dict) -> str:
 def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
     """The P5 diagnosis problem around the baseline ``base`` (a calibrate result)."""
     from solvers.diagnose import problems as DP
+    from station.procedures.diagnose import screen
 
     prep = prepared if prepared is not None else prepare(capture)
     v_b, vl, rows = prep.v_body, prep.vl, prep.info.get("rows")
+    bad, screened = screen(capture)  # gaps and saturated samples: left out of the effect search
+    if rows is not None and bad[rows].any() and (~bad[rows]).sum() >= 16:
+        keep = ~bad[np.asarray(rows)]
+        v_b, vl, rows = v_b[keep], vl[keep], np.asarray(rows)[keep]
 
     def pick(name):
         return None if name not in capture.columns or rows is None else np.asarray(capture.columns[name], float)[rows]
@@ -298,6 +303,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         W = np.column_stack([pick(c) for c in ("wx", "wy", "wz")])
     X0 = np.array([base["fit"][f"beam{j + 1}"]["X"] for j in range(3)], float)
     prob = DP.ldv_problem(pick("t"), v_b, vl, X0, temp_c=pick("temp_c"), omega_body_rad_s=W)
+    prob.screened = screened
     return DiagnosisInput(prob, {"rows": rows}, "a sample far off: a dropout of the LDV or the reference")
 
 
