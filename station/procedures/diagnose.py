@@ -22,8 +22,12 @@ def _where(capture) -> str:
     return capture.path or "capture"
 
 
-def _line(capture, row: int) -> int | None:
+def file_line(capture, row: int) -> int | None:
+    """The file line of capture row ``row`` (0-based), None for a capture not read from a file."""
     return None if capture.header_line is None else int(capture.header_line) + 1 + int(row)
+
+
+_line = file_line
 
 
 # ---------------------------------------------------------------- quality

@@ -321,9 +321,10 @@ def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dic
     Left out: gaps, saturated samples, moved positions, and the positions the calibration
     flags as disagreeing with the rest far beyond the noise (``outlier`` in its result) —
     while MIN_SCREENED_POSITIONS remain, else they are named and kept."""
-    from station.procedures.diagnose import _line, screen
+    from station.procedures.diagnose import file_line, screen
 
-    bad, found = screen(capture, _moved_positions(capture))
+    moved = _moved_positions(capture)
+    bad, found = screen(capture, moved)
     rows = (base or {}).get("positions") or []
     flagged = {k for k, r in enumerate(rows) if r.get("outlier") and k < len(positions)}
     t = _col(capture, "t") if capture.is_time_series else None
@@ -340,8 +341,8 @@ def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dic
                 "kind": "outlier",
                 "position": p.label,
                 "where": f"position {p.label}",
-                "line": _line(capture, i0),
-                "line_stop": _line(capture, i1 - 1),
+                "line": file_line(capture, i0),
+                "line_stop": file_line(capture, i1 - 1),
                 "residual_mps2": r.get("residual_mps2"),
                 "screened": True,
                 "explanation": f"|A| − g = {r.get('residual_mps2', float('nan')):+.3g} m/s², far beyond the other "
@@ -356,6 +357,8 @@ def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dic
     keep = [k for k in range(len(positions)) if k not in drop]
     if len(keep) < MIN_SCREENED_POSITIONS:
         keep = list(range(len(positions)))
+        if moved:  # the moved positions stay: only gaps and saturated samples are left out
+            bad, _ = screen(capture)
         for q in found:
             if q["kind"] in ("outlier", "moved"):
                 q["screened"] = False
@@ -449,8 +452,10 @@ def _sub_holds(capture, positions, bad=None) -> dict | None:
     for k, p in enumerate(positions):
         if p.t_start_s is None or p.t_stop_s is None:
             return None
-        ok = np.all(np.isfinite(a), axis=1) if bad is None else np.all(np.isfinite(a), axis=1) & ~bad
-        idx = np.flatnonzero((t >= p.t_start_s) & (t <= p.t_stop_s) & ok)
+        inside = (t >= p.t_start_s) & (t <= p.t_stop_s) & np.all(np.isfinite(a), axis=1)
+        idx = np.flatnonzero(inside if bad is None else inside & ~bad)
+        if len(idx) < 2:  # all of it screened (kept only because too few positions would remain)
+            idx = np.flatnonzero(inside)
         parts = SUB_HOLDS if len(idx) >= SUB_HOLDS * MIN_SUB_SAMPLES else 1
         for j, chunk in enumerate(np.array_split(idx, parts)):
             dt = float(np.median(np.diff(t[chunk]))) if len(chunk) > 1 else 1.0
