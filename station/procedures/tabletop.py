@@ -377,7 +377,7 @@ def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dic
                     mean=a.mean(axis=0),
                     std=a.std(axis=0, ddof=1),
                     n=len(a),
-                    se=mean_se(a, t[i0:i1][~bad[i0:i1]]) if len(a) >= 16 else p.se,
+                    se=hold_mean_se(a, t[i0:i1][~bad[i0:i1]]) if len(a) >= 16 else p.se,
                 )
         out.append(p)
     return out, (bad if capture.is_time_series else None), found
