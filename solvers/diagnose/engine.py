@@ -532,7 +532,18 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
                 )
             )
         for K in GENERIC_SMOOTH_KNOTS:
-            out.append(make(lambda x, K=K: _hat_basis(x, K), K - 1, {"shape": "smooth", "knots": K}))
+            if base in ("time", "temperature"):
+                # the interior hats only (zero at both ends of the range): what a line (the
+                # library's time_drift, temperature_bias) cannot be, so a smooth term never
+                # stands in for a linear one
+
+                def interior(x, K=K, lo=lo, hi=hi):
+                    c = np.linspace(lo, hi, K)[1:-1]
+                    return np.clip(1.0 - np.abs(x[:, None] - c[None, :]) / ((hi - lo) / (K - 1)), 0.0, None)
+
+                out.append(make(interior, K - 2, {"shape": "smooth", "knots": K}))
+            else:
+                out.append(make(lambda x, K=K: _hat_basis(x, K), K - 1, {"shape": "smooth", "knots": K}))
     return out
 
 
@@ -927,6 +938,12 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         fit_ = _refit(problem, state, free, sigma)
         return fit_, dict(fit_.params), free
 
+    def model_bic(fit_, free_) -> float:
+        """Gaussian BIC of a fitted model (unknown noise scale per kind of row)."""
+        return typed_fit_term(fit_.weighted_residuals, types) + len(Packer.build(fit_.params, free_).names) * math.log(
+            n
+        )
+
     generic_effect = None
     if gens:
         res = generic_round(state, free, {oc.cand.name for oc, _ in picked})
@@ -934,7 +951,13 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             generic_effect = res
             cur_fit, state, free = with_generic(res[0], state, free)
             if picked:  # a library effect that only stood in for this structure is dropped now
+                kept = (list(picked), cur_fit, state, free, {k: dict(v) for k, v in entries.items()})
                 picked, cur_fit, state, free = prune(picked, cur_fit, extra=res[0].cc, min_items=1)
+                if len(picked) < len(kept[0]) and model_bic(cur_fit, free) > model_bic(kept[1], kept[3]):
+                    # dropping them fits worse than keeping them beside it: they explain their part
+                    picked, cur_fit, state, free = kept[:4]
+                    entries.clear()
+                    entries.update(kept[4])
         elif picked:
             # the library effects may have taken part of a structure none of them is (a bias step
             # seen as a drift): try the generic one against the baseline, then keep only the library
@@ -961,7 +984,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     ok = _passes(
                         problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n, problem.generic_scale
                     )
-                if ok and len(picked2) < len(picked):
+                # and the model it leaves must fit better than the library's (BIC): a drift is not
+                # replaced by a step that only approximates it
+                if ok and len(picked2) < len(picked) and model_bic(fit2, fr2) < model_bic(cur_fit, free):
                     res0[0].cc.cand.setup()
                     picked, cur_fit, state, free = picked2, fit2, st2, fr2
                     generic_effect = (res0[0], res0[1], cv_rms(J0, r0, sigma, folds, primary))
