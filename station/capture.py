@@ -65,7 +65,7 @@ _NUMERIC_META: dict[str, tuple] = {
 }
 
 # Units shown by `station inspect` for the columns the spec names.
-_COLUMN_UNITS = {
+COLUMN_UNITS = {
     "t": "s",
     "temp_c": "°C",
     "speed_rad_s": "rad/s",
@@ -187,7 +187,7 @@ class Capture:
         key = _RAW_COLUMN_UNIT_KEY.get(base)
         if key is not None:
             return self.meta.get(key) or None
-        return _COLUMN_UNITS.get(base)
+        return COLUMN_UNITS.get(base)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Capture):

@@ -27,6 +27,8 @@ from operator import xor
 
 import numpy as np
 
+from station.capture import COLUMN_UNITS
+
 PROTOCOL_VERSION = 2  # 2: extra channels (a v1 header, without them, is still sent as 1)
 SEQ_MODULO = 1 << 16
 TIME_MODULO = 1 << 32
@@ -34,28 +36,7 @@ MAX_LINE = 256  # bytes from `$` to LF; longer partial lines are discarded
 SENSOR_FIELDS = ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c")
 # Extra channels a version-2 header may name: the capture format's columns beyond the
 # sensors, each in the unit the capture format gives it (../shared/spec/capture-format.md).
-CHANNELS = {
-    "speed_rad_s": "rad/s",
-    "ref_gx": "rad/s",
-    "ref_gy": "rad/s",
-    "ref_gz": "rad/s",
-    "vl1": "m/s",
-    "vl2": "m/s",
-    "vl3": "m/s",
-    "vx": "m/s",
-    "vy": "m/s",
-    "vz": "m/s",
-    "vn": "m/s",
-    "ve": "m/s",
-    "vd": "m/s",
-    "roll_deg": "deg",
-    "pitch_deg": "deg",
-    "yaw_deg": "deg",
-    "wx": "rad/s",
-    "wy": "rad/s",
-    "wz": "rad/s",
-    "heading_deg": "deg",
-}
+CHANNELS = {c: u for c, u in COLUMN_UNITS.items() if c not in ("t", "temp_c", "n", "position")}
 ERROR_KINDS = ("checksum", "malformed", "too_long", "noise")
 _HEX = frozenset(b"0123456789abcdefABCDEF")
 _NAN = math.nan
