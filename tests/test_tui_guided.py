@@ -55,7 +55,9 @@ def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
             await wait_for(pilot, lambda: "✓" in str(steps.get_option_at_index(0).prompt))
             await pilot.press("escape", "s")
             await wait_for(pilot, lambda: g.steps[1].status == "skipped")
-            assert "Mount in orientation 1, spin at 18.8 rad/s" in text_of(app, "#prompt")
+            # the prompt asks for the speed exactly as the step list writes it
+            assert "Mount in orientation 1, spin at 18.85 rad/s" in text_of(app, "#prompt")
+            assert "18.85" in str(steps.get_option_at_index(2).prompt)
             await pilot.press("f")  # 1 row: too few to fit
             await wait_for(pilot, lambda: any("at least" in n.message for n in app._notifications))
             assert screen_name(app) == "CentrifugeScreen"

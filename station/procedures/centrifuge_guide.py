@@ -146,7 +146,7 @@ class CentrifugeStep:
     @property
     def prompt(self) -> str:
         return (
-            f"Mount in orientation {self.orientation}, spin at {self.speed_rad_s:.3g} rad/s "
+            f"Mount in orientation {self.orientation}, spin at {self.speed_rad_s:.2f} rad/s "
             f"({self.speed_rad_s / (2 * math.pi):.3g} rev/s)"
         )
 
