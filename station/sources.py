@@ -21,6 +21,30 @@ from solvers.simulate import NOMINAL_ACCEL_SCALE_V_PER_MPS2, NOMINAL_ACCEL_ZERO_
 from station.procedures import registry
 
 
+def parse_site(text: str) -> dict:
+    """``"LAT, LON[, ALT_M]"`` (WGS-84 degrees, metres) -> ``{"latitude_deg", "longitude_deg",
+    "altitude_m"}`` (altitude 0 when left out). Raises ValueError with one line on bad input."""
+    parts = [p.strip() for p in str(text).replace(";", ",").split(",")]
+    if len(parts) not in (2, 3) or not all(parts):
+        raise ValueError(f"site {text!r}: expected LAT,LON or LAT,LON,ALT_M (degrees, metres)")
+    try:
+        lat, lon, alt = (float(p) for p in (parts + ["0"])[:3])
+    except ValueError:
+        raise ValueError(f"site {text!r}: LAT, LON and ALT_M must be numbers") from None
+    if not (math.isfinite(lat) and -90.0 <= lat <= 90.0):
+        raise ValueError(f"site {text!r}: latitude must be within -90..90 degrees")
+    if not (math.isfinite(lon) and -180.0 <= lon <= 360.0):
+        raise ValueError(f"site {text!r}: longitude must be within -180..360 degrees")
+    if not (math.isfinite(alt) and -1000.0 <= alt <= 100000.0):
+        raise ValueError(f"site {text!r}: altitude must be within -1000..100000 m")
+    return {"latitude_deg": lat, "longitude_deg": lon, "altitude_m": alt}
+
+
+def site_text(site: dict) -> str:
+    """The inverse of :func:`parse_site`: ``"39.98, 116.35, 50"``."""
+    return f"{site['latitude_deg']:g}, {site['longitude_deg']:g}, {site.get('altitude_m', 0.0):g}"
+
+
 @dataclass
 class Samples:
     """A batch: t_s (n,) device time [s], accel, gyro, mag (n, 3) raw, temp_c (n,);

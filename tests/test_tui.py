@@ -528,6 +528,55 @@ def test_procedure_reads_the_simulated_device_over_a_real_pty():
     assert st.angle_deg < 5  # sim-device nominal: x_up from the start
 
 
+def test_a_serial_device_gets_the_benchs_site_and_the_station_remembers_it(tmp_path):
+    """A device on a port does not know where it is: `--site` gives the bench's place (for
+    P1's gravity, P4's Earth rate, P3's IGRF), it is remembered in the database, and the
+    next session on a serial device gets it without the option."""
+    from db.store import Store
+    from solvers.simulate import LiveImu
+    from station.device.simdevice import SimDevice
+    from station.sources import SerialSource, parse_site
+
+    db = str(tmp_path / "station.db")
+    dev = SimDevice(LiveImu(seed=7, rate_hz=100, hold_s=1e9))
+    path = dev.open()
+    stop = threading.Event()
+    t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
+    t.start()
+    sites = []
+    try:
+        for given in (parse_site("39.98, 116.35, 52"), None):
+
+            async def story(given=given):
+                app = make_app(db, device=SerialSource(path))
+                if given is not None:
+                    app.session.extra["site"] = given
+                async with app.run_test(size=SIZE) as pilot:
+                    await pilot.press("f5")
+                    await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+                    src = app.session.source
+                    sites.append(dict(src.site))
+                src.stop()
+
+            asyncio.run(story())
+    finally:
+        stop.set()
+        t.join(2)
+        dev.close()
+    want = {"latitude_deg": 39.98, "longitude_deg": 116.35, "altitude_m": 52.0}
+    assert sites == [want, want]
+    assert Store(db).settings()["site"] == "39.98, 116.35, 52"
+
+
+@pytest.mark.parametrize("site", ["91,0", "40", "north,east", "40,10,nan"])
+def test_a_bad_site_is_one_line_and_exit_2(site, capsys):
+    from station.cli import main
+
+    assert main(["tui", "--site", site]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--site" in err
+
+
 # ---------------------------------------------------------------- the commands
 
 

@@ -27,6 +27,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--device-id", default=None, help="serial number of the device under test")
     p.add_argument("--model", default="", help="model of the device under test")
+    p.add_argument(
+        "--site",
+        default=None,
+        metavar="LAT,LON[,ALT_M]",
+        help="where the bench is (WGS-84 degrees, metres), for a serial device: gravity (P1), Earth rate (P4), "
+        "IGRF field (P3); remembered in the database (default: the one remembered)",
+    )
     p.add_argument("--state-dir", default=None, help="folder of resume files (default: next to the database)")
     p.set_defaults(func=run)
 
@@ -44,6 +51,16 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, f"--speed must be positive, got {args.speed:g}")
     if args.average_s is not None and not args.average_s > 0:
         raise InputError(None, None, f"--average-s must be positive, got {args.average_s:g}")
+    site = None
+    if args.site is not None:
+        from station.sources import parse_site
+
+        try:
+            site = parse_site(args.site)
+        except ValueError as exc:
+            raise InputError(None, None, f"--site: {exc}") from None
+        if args.sim:
+            raise InputError(None, None, "--site is for a serial device: the simulated device has its own site")
     if not (sys.stdin.isatty() and sys.stdout.isatty()):  # (without one Textual spins a core)
         raise InputError(
             None,
@@ -73,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
         start=start,
     )
     app.session.extra["sim_speed"] = args.speed
+    if site is not None:
+        app.session.extra["site"] = site
     app.run()
     src = app.session.source
     if src is not None:

@@ -70,6 +70,13 @@ class CompassScreen(GuidedScreenMixin, Screen):
 
     def on_mount(self) -> None:
         self.query_one("#map").border_title = "Sphere coverage"
+        site = getattr(self.app.session.source, "site", None) or {}
+        if "latitude_deg" not in site:
+            self.notify(
+                "No site: the field will not be IGRF-anchored. Start with --site LAT,LON[,ALT_M] to set it.",
+                severity="warning",
+                timeout=8,
+            )
         self.stream()
 
     @work(thread=True, exclusive=True, group="stream", exit_on_error=False, description="read the device")

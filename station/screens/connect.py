@@ -329,15 +329,26 @@ class ConnectScreen(Screen):
             elif src.kind == "serial" and not src.reader.running:
                 src.start()
             device_id = s.device_id or src.device_id or "unknown"
+            site = s.extra.get("site")  # `station --site`, else the one remembered
             if s.db_path:
                 from db.store import Store
+                from station.sources import parse_site, site_text
 
                 store = s.open_store() or Store(s.db_path)
                 s.extra["_store"] = store
                 store.set_settings({k: s.extra.get(k, "") for k in LAB_FIELDS})
+                if site:
+                    store.set_settings({"site": site_text(site)})
+                elif store.settings().get("site"):
+                    try:
+                        site = parse_site(store.settings()["site"])
+                    except ValueError:
+                        site = None
                 known = store.get_device(device_id)
                 if known is None or (s.model and known.get("model") != s.model):
                     store.add_device(device_id, model=s.model or None)
+            if src.kind == "serial" and site and not src.site:
+                src.site = dict(site)  # a serial device does not know where it is
             self.post_message(Connected(src, device_id))
         except Exception as exc:  # noqa: BLE001 - shown as one line
             self.post_message(SourceFailed(str(exc)))
