@@ -112,6 +112,28 @@ def test_the_documented_version_2_example():
         assert ev == [] and p.stats.errors["malformed"] == 1
 
 
+def test_a_host_that_joins_a_running_version_2_stream_keeps_the_extra_channels():
+    """Rows that arrive before the first header (the host connected mid-stream) carry their
+    extra values; the parser holds them until the header names them, whichever way the
+    bytes are cut and however often the host takes samples meanwhile."""
+    h = Header("SIM-GYR-0024", "V", "rad/s", "uT", 100.0, version=2, channels=("ref_gx", "ref_gy", "ref_gz"))
+    rows = [row(k) + [0.001 * k, -0.002 * k, 0.5 + k] for k in range(8)]
+    data = b"".join(data_sentence(k, 10_000 * k, rows[k]) for k in range(5)) + header_sentence(h)
+    data += b"".join(data_sentence(k, 10_000 * k, rows[k]) for k in range(5, 8))
+    p = StationParser()
+    blocks = []
+    for i in range(0, len(data), 37):
+        p.feed(data[i : i + 37])
+        blocks.append(p.take())
+    block = type(blocks[-1]).concat([b for b in blocks if b is not None])
+    assert p.stats.parse_errors == 0 and len(block) == 8
+    np.testing.assert_array_equal(block.extra["ref_gz"], [0.5 + k for k in range(8)])
+    np.testing.assert_array_equal(block.extra["ref_gx"], [0.001 * k for k in range(8)])
+    # a version-1 device that never sends a header: its rows are not held
+    p, _, block = parse(stream(range(3)))
+    assert block is not None and len(block) == 3 and block.extra == {}
+
+
 def test_the_documented_arduino_sentences_parse():
     """The sketch's payloads, built the way its snprintf builds them."""
     text = DOC.read_text()

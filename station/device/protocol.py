@@ -29,6 +29,7 @@ import numpy as np
 
 from station.capture import COLUMN_UNITS
 
+PRE_HEADER_HOLD_US = 2_000_000  # device time held before a first header (then released without extras)
 PROTOCOL_VERSION = 2  # 2: extra channels (a v1 header, without them, is still sent as 1)
 SEQ_MODULO = 1 << 16
 TIME_MODULO = 1 << 32
@@ -294,6 +295,9 @@ class StationParser:
         self._t_us = 0
         self._header_just_seen = False
         self._synced = False  # a `$` seen since the stream (re)started
+        # rows met before the first header (a host that joins a running stream): their
+        # trailing values, kept until the header says which channels they are
+        self._pre_extra: list[list[float]] = []
 
     # -- public
 
@@ -325,7 +329,15 @@ class StationParser:
         return events
 
     def take(self) -> SampleBlock | None:
-        """The samples parsed since the last call, or None."""
+        """The samples parsed since the last call, or None. Rows before the first header
+        are held (up to PRE_HEADER_HOLD_US of device time) until it names their extra channels."""
+        if (
+            self.header is None
+            and any(self._pre_extra)  # trailing values: a version-2 device
+            and self._rows[-1][1] - self._rows[0][1] < PRE_HEADER_HOLD_US
+        ):
+            return None
+        self._pre_extra = []
         rows, self._rows = self._rows, []
         blocks, self._blocks = self._blocks, []
         last = SampleBlock.from_rows(rows, self._channels)
@@ -397,6 +409,7 @@ class StationParser:
             seq = int(fields[1])
             t_raw = int(fields[2])
             vals = [float(v) if v else _NAN for v in fields[3:13]]
+            pre = [float(v) if v else _NAN for v in fields[13:]] if self.header is None else None
             if k:  # the header's extra channels; missing trailing fields are missing values
                 vals += [float(v) if v else _NAN for v in fields[13 : 13 + k]] + [_NAN] * max(0, 13 + k - len(fields))
         except ValueError:
@@ -430,6 +443,8 @@ class StationParser:
         self._last_t_raw = t_raw
         self._header_just_seen = False
         self._rows.append([seq, self._t_us, *vals])
+        if pre is not None:
+            self._pre_extra.append(pre)
         st.samples += 1
 
     def _other(self, kind: str, fields: list[str]):
@@ -447,6 +462,12 @@ class StationParser:
             if any(c not in CHANNELS for c in channels) or len(set(channels)) != len(channels):
                 return None
             h = Header(fields[2], fields[3], fields[4], fields[5], rate, version, at, channels)
+            if self.header is None and self._pre_extra and len(self._pre_extra) == len(self._rows):
+                k = len(channels)  # the first header names the held rows' trailing values
+                for row, extra in zip(self._rows, self._pre_extra, strict=True):
+                    row.extend((extra + [_NAN] * k)[:k])
+                self._channels = channels
+            self._pre_extra = []
             if channels != self._channels:
                 if self._rows:  # rows before it carry the old channels
                     self._blocks.append(SampleBlock.from_rows(self._rows, self._channels))
