@@ -101,7 +101,10 @@ def _pick(sock, title):
     from station.procedures import registry
 
     titles = list(registry.guided().values())
-    screen = _wait_pane(sock, lambda s: "f5 Start" in s and _procedure_line(s), 60, "the Connect screen")
+    # (a pane caught mid-redraw can show a part of the line: wait for a whole title)
+    screen = _wait_pane(
+        sock, lambda s: "f5 Start" in s and any(t in _procedure_line(s) for t in titles), 60, "the Connect screen"
+    )
     now = next(t for t in titles if t in _procedure_line(screen))
     _keys(sock, "BTab", "BTab", "Enter")
     _wait_pane(sock, lambda s: titles[-1] in s and titles[0] in s and "▲" in _procedure_line(s), 60, "the list open")
