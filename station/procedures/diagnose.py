@@ -256,7 +256,7 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plo
         )
     for q in r["quality"]:
         where = q.get("where") if q.get("screened") else (q.get("position") or q.get("where") or q.get("column") or "")
-        line = f" line {q['line']}" if q.get("line") else ""
+        line = f" line {q['line']}" if q.get("line") and f"line {q['line']} " not in f"{where} " else ""
         L.append(f"quality     {q['kind']} {where}{line}: {q['explanation']}")
     L.append("verdict     " + (", ".join(r["verdict"]) if r["verdict"] else "none"))
     L += _per_group(diag, inp.group_kind)
