@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import os
 import threading
 import time
@@ -233,17 +234,33 @@ def test_gyro_drift_hold_to_a_saved_result(tmp_path):
             await wait_for(
                 pilot, lambda: "left" in text_of(app, "#countdown") and "still" in text_of(app, "#stability")
             )
+            recording = text_of(app, "#readouts")
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=1.0)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            params = app.screen.query_one("#params")
+            shown = {params.get_row_at(i)[0]: params.get_row_at(i) for i in range(params.row_count)}
+            summary = str(app.screen.query_one("#summary").render())
             title = screen_lines(app)[0]
-        return title
+        return title, recording, shown, summary
 
-    title = asyncio.run(story())
+    title, recording, shown, summary = asyncio.run(story())
     assert "P4 gyro drift result" in title
     from db.store import Store
 
     hist = Store(db).history("SIM-GYR-0005")
     assert len(hist) == 1 and hist[0]["procedure"] == "gyro-drift"
+    # one unit for the drift on screen, while recording and on Results: °/h (1 °/h = π/648000
+    # rad/s); the stored result keeps rad/s (calibrate.md)
+    deg_h = math.radians(1.0) / 3600.0
+    assert "°/h" in recording and "rad/s" not in recording
+    assert "rad/s" not in summary and "°/h RMS" in summary
+    for i in range(3):
+        name, value, sigma, unit = shown[f"drift[{i}]"][:4]
+        stored, stored_sigma = hist[0]["params"]["drift"][i], hist[0]["uncertainty"]["drift"][i]
+        assert unit == "°/h" and shown[f"earth_rate_body[{i}]"][3] == "°/h"
+        # the table's 7 and 2 significant digits
+        assert float(value) == pytest.approx(stored / deg_h, rel=1e-6)
+        assert float(sigma) == pytest.approx(stored_sigma / deg_h, rel=0.05)
 
 
 def test_wrong_face_up_is_shown_and_blocks_capture():

@@ -12,7 +12,8 @@ Optional constants the station's checks read where a module has them: ``MEASURED
 read as measurements) and ``CORE_PARAMS`` (parameters it exists to deliver) for
 ``station.guard``; ``DEAD_IF_CONSTANT``/``DEAD_IF_CONSTANT_SAYS`` (columns that must change);
 ``PARAM_UNITS`` (a unit per parameter block, or per ``.<leaf>``), ``RESIDUAL_LIMIT`` (in the
-result unit) and ``ZERO_IS_A_RESULT`` for ``station.procedures.review``. Optional functions:
+result unit), ``ZERO_IS_A_RESULT`` and ``DISPLAY_UNITS`` (the unit a screen shows a block
+or ``residual_rms`` in, when not the stored one) for ``station.procedures.review``. Optional functions:
 ``report_figures(result, meta, columns)`` (``station.report``), ``results_lines(result)`` and
 ``position_residuals(capture, result)`` (the TUI's Results), ``firmware_accel(params, k,
 unit)`` (``station.firmware_export``).

@@ -18,7 +18,7 @@ by an explicit decision: rejected with a reason, or accepted as an override with
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -120,6 +120,60 @@ def param_unit(result: dict, name: str) -> str:
     table = getattr(_procedure_module(result), "PARAM_UNITS", {})
     unit = table.get(block, table.get("." + leaf))
     return "" if unit is None else unit.format(mag_unit=result.get("mag_unit") or "raw")
+
+
+def display_unit(result: dict, name: str) -> tuple[float, str] | None:
+    """How the screens show parameter (or ``residual_rms``) ``name`` when not in its stored
+    unit: (factor, unit), shown = stored * factor; None: as stored. From the procedure
+    module's ``DISPLAY_UNITS`` ({block: (unit, factor or factor(result))}), e.g. P4's drift
+    in °/h; the stored result, exports and the database keep the stored unit."""
+    table = getattr(_procedure_module(result), "DISPLAY_UNITS", {})
+    spec = table.get(_block(name))
+    if spec is None:
+        return None
+    unit, factor = spec
+    f = factor(result) if callable(factor) else factor
+    if not (_finite(f) and f > 0):
+        return None
+    return float(f), unit.format(mag_unit=result.get("mag_unit") or "raw")
+
+
+def shown_rows(result: dict, rows: list[ParamRow]) -> list[ParamRow]:
+    """``rows`` in the units the screens show (:func:`display_unit`); value, σ, the value in
+    use and the tolerance scaled alike (Δ/σ and the checks are unchanged)."""
+    out = []
+    for row in rows:
+        disp = display_unit(result, row.name)
+        if disp is None:
+            out.append(row)
+            continue
+        f, unit = disp
+        lim = None if row.limit is None else tuple(None if x is None else x * f for x in row.limit)
+        out.append(
+            replace(
+                row,
+                value=_scaled(row.value, f),
+                sigma=_scaled(row.sigma, f),
+                previous=_scaled(row.previous, f),
+                tolerance=_scaled(row.tolerance, f),
+                unit=unit,
+                limit=lim,
+            )
+        )
+    return out
+
+
+def _scaled(x, f: float):
+    return x * f if _finite(x) else x
+
+
+def shown_residual(result: dict) -> tuple[float | None, str]:
+    """The residual RMS and its unit as the screens show them."""
+    res = result.get("residual_rms")
+    disp = display_unit(result, "residual_rms")
+    if disp is None:
+        return res, result_unit(result)
+    return (res * disp[0] if _finite(res) else res), disp[1]
 
 
 def _procedure_module(result: dict):

@@ -29,6 +29,12 @@ from station.widgets.title import TitleBar, footer
 SIM_FRAME = "x forward, y left, z up"  # the simulated unit lies level with z up
 
 
+def _deg_h(unit: str) -> float:
+    """Factor from the gyro ``unit`` to °/h (the unit P4's screens show rates in); NaN for a
+    unit without a physical factor."""
+    return 3600.0 / math.radians(1.0) * (si_factor("gyro", unit) or math.nan)
+
+
 class HoldScreen(GuidedScreenMixin, Screen):
     CSS = """
     HoldScreen #body { padding: 0 1; }
@@ -102,8 +108,14 @@ class HoldScreen(GuidedScreenMixin, Screen):
         self.query_one(CountdownBar).show(st, g.config.duration_s if g else math.nan)
         m, stats = st.gyro_mean, message.stats
         unit = self.app.session.source.units.get("gyro_unit") or "raw"
+        k, fmt = _deg_h(unit), "10.1f"  # °/h, as the Results screen shows the drift
+        if math.isfinite(k):
+            unit = "°/h"
+        else:  # a raw unit (counts without a scale): as it comes
+            k, fmt = 1.0, "10.6f"
         self.query_one("#readouts", Static).update(
-            f"mean rate so far  {num(m[0], '10.6f')} {num(m[1], '10.6f')} {num(m[2], '10.6f')} {unit}\n"
+            f"mean rate so far  {num(m[0] * k, fmt)} {num(m[1] * k, fmt)} {num(m[2] * k, fmt)} {unit}"
+            " (Earth rate included)\n"
             f"{st.n_samples} samples   temp {num(st.temp_c, '.1f')} °C\n"
             f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
             + ("" if stats.connected else "   DISCONNECTED")
@@ -233,7 +245,7 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
         self.query_one(CountdownBar).show(st, g.config.duration_s if g else math.nan)
         unit = self.app.session.source.units.get("gyro_unit") or "raw"
         stats = message.stats
-        k = 3600.0 / math.radians(1.0) * (si_factor("gyro", unit) or math.nan)  # unit → °/h
+        k = _deg_h(unit)
         e, se = st.drift, st.drift_se
         mount = (
             "—"

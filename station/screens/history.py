@@ -120,13 +120,15 @@ class HistoryScreen(Screen):
             self.device_id = message.data["id"]
             self.history = message.data["history"]
             self.drift = [d for d in message.data["drift"] if d["n"] >= 1]
+            from station.procedures.review import shown_residual
+
             c = self.query_one("#calibrations", DataTable)
             c.clear()
             for h in reversed(self.history):
                 res = h["residual_rms"]
                 in_use = h["accepted"] and h.get("superseded_by") is None
-                entry = registry.get(h["procedure"])
-                unit = entry.result_unit if entry is not None else ""
+                # in the unit its Results screen shows it in (P4: °/h)
+                res, unit = shown_residual({"procedure": h["procedure"], "residual_rms": res})
                 decision = (h.get("review") or {}).get("decision")
                 state = (
                     "in use"
@@ -187,23 +189,26 @@ class HistoryScreen(Screen):
         d = self.drift[self.param_index]
         axis = time_axis(d["times"], n_ticks=3)
         x = axis["x"]
-        plt.plot(x, d["values"], marker="dot")
+        k, unit = self._unit(d)  # shown = stored * k, in the unit its Results screen shows
+        values = [v * k for v in d["values"]]
+        plt.plot(x, values, marker="dot")
         if all(isinstance(s, (int, float)) and math.isfinite(s) for s in d["sigmas"] or []) and d["sigmas"]:
-            plt.plot(x, [v + s for v, s in zip(d["values"], d["sigmas"])], color="gray")
-            plt.plot(x, [v - s for v, s in zip(d["values"], d["sigmas"])], color="gray")
+            plt.plot(x, [v + s * k for v, s in zip(values, d["sigmas"])], color="gray")
+            plt.plot(x, [v - s * k for v, s in zip(values, d["sigmas"])], color="gray")
         plt.xlim(*axis["xlim"])
         plt.xticks(axis["ticks"], axis["labels"])
-        unit = self._unit(d)
         rate = d.get("rate_per_year")
-        rate_txt = f" {rate:+.3g} {unit}/yr" if isinstance(rate, (int, float)) else ""
+        rate_txt = f" {rate * k:+.3g} {unit}/yr" if isinstance(rate, (int, float)) else ""
         plt.title(f"{safe(d['param'])} [{unit or '1'}] {self.param_index + 1}/{len(self.drift)}{rate_txt}")
         plt.xlabel(axis["label"])
         w.refresh()
 
-    def _unit(self, d: dict) -> str:
-        from station.procedures.review import param_unit
+    def _unit(self, d: dict) -> tuple[float, str]:
+        """(factor, unit) of the plotted parameter: shown = stored * factor."""
+        from station.procedures.review import display_unit, param_unit
 
         for h in reversed(self.history):
             if h["procedure"] == d["procedure"]:
-                return param_unit(dict(h["extra"], procedure=h["procedure"], params=h["params"]), d["param"])
-        return ""
+                result = dict(h["extra"], procedure=h["procedure"], params=h["params"])
+                return display_unit(result, d["param"]) or (1.0, param_unit(result, d["param"]))
+        return 1.0, ""

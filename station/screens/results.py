@@ -17,7 +17,7 @@ from textual.widgets import DataTable, Static
 from station.formatting import num
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
-from station.procedures.review import assess, param_rows, result_unit, review_record
+from station.procedures.review import assess, param_rows, review_record, shown_residual, shown_rows
 from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar, footer
@@ -117,9 +117,9 @@ class ResultsScreen(Screen):
             if self.previous
             else "no previous calibration"
         )
-        unit = result_unit(r)
+        res, unit = shown_residual(r)  # in the unit the parameters below are shown in
         lines = [
-            f"[{style}] {word.upper()} [/] residual {num(r.get('residual_rms'), '.3g')} {unit} RMS · "
+            f"[{style}] {word.upper()} [/] residual {num(res, '.3g')} {unit} RMS · "
             f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))} · {prev}"
         ]
         lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
@@ -132,7 +132,7 @@ class ResultsScreen(Screen):
         summary.update("\n".join(lines))
         params.clear(columns=True)
         params.add_columns("param", "value", "± 1σ", "unit", "in use", "Δ/σ", "tol", "ok")
-        for row in rows:
+        for row in shown_rows(r, rows):
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
             params.add_row(
                 row.name,
@@ -147,7 +147,7 @@ class ResultsScreen(Screen):
         gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
         if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
             prev_g = ((self.previous or {}).get("extra") or {}).get("gyro")
-            for row in param_rows(gyro, prev_g if isinstance(prev_g, dict) else None):
+            for row in shown_rows(gyro, param_rows(gyro, prev_g if isinstance(prev_g, dict) else None)):
                 params.add_row(
                     "gyro " + row.name,
                     num(row.value, ".7g"),
