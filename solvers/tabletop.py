@@ -478,7 +478,7 @@ def calibrate(
             s_est = 1e-3 * g_mps2
             warnings.append(
                 "no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
-                f"a norm noise of {s_est:.3g} m/s²"
+                f"a norm noise of {s_est:.3g} m/s^2"
             )
         sig_n = np.full(len(positions), s_est)
     res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
@@ -512,7 +512,7 @@ def calibrate(
         p = positions[k]
         when = f" (t {p.t_start_s:.1f}–{p.t_stop_s:.1f} s)" if p.t_start_s is not None else ""
         warnings.append(
-            f"position {p.label or k + 1}{when} disagrees with the rest: |A| − g = {rk:+.3g} m/s² "
+            f"position {p.label or k + 1}{when} disagrees with the rest: |A| − g = {rk:+.3g} m/s^2 "
             f"against the fit of the others, {abs(zk):.0f}σ; was it still, or touching something? "
             "(it is kept in the fit)"
         )
@@ -526,7 +526,7 @@ def calibrate(
     if not noise_known:
         warnings.append(
             f"no per-position noise given: the norm noise is estimated from the residuals "
-            f"({s_n[0]:.3g} m/s²), so uncertainties include any model misfit"
+            f"({s_n[0]:.3g} m/s^2), so uncertainties include any model misfit"
         )
     if gauge == "table":
         sig_deg = sorted({round(math.degrees(p.placement_sigma_rad), 2) for p in known})
@@ -575,7 +575,7 @@ def _step8_result(positions, g_mps2, s8, warnings, noise_known) -> P1Result:
     clusters = orientation_clusters(accel.p1_apply(V, B, M))
     warnings = warnings + [
         "six-position (step 8) linear solution only: its accuracy is limited by how well the "
-        "device was placed (σ ≈ 0.4° → ~0.07 m/s²), not by the sensor noise; the norm-condition "
+        "device was placed (σ ≈ 0.4° → ~0.07 m/s^2), not by the sensor noise; the norm-condition "
         f"refinement needs at least {MIN_DISTINCT} distinct orientations"
     ]
     return P1Result(

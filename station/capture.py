@@ -58,7 +58,7 @@ _NUMERIC_META: dict[str, tuple] = {
     "latitude_deg": (lambda x: -90.0 <= x <= 90.0, "must be between -90 and 90"),
     "longitude_deg": (lambda x: -180.0 <= x <= 360.0, "must be between -180 and 360"),
     "altitude_m": (lambda x: -12000.0 <= x <= 1.0e6, "must be between -12000 and 1000000 (m above the ellipsoid)"),
-    "g_mps2": (lambda x: 0.0 < x <= 1000.0, "must be positive and at most 1000 m/s²"),
+    "g_mps2": (lambda x: 0.0 < x <= 1000.0, "must be positive and at most 1000 m/s^2"),
     "radius_m": (lambda x: 0.0 < x <= 1.0e4, "must be positive and at most 10000 m"),
     "heading_deg": (lambda x: -360.0 <= x <= 720.0, "must be between -360 and 720"),
     "sample_rate_hz": (lambda x: 0.0 < x <= 1.0e9, "must be positive and at most 1e9"),
@@ -170,13 +170,13 @@ class Capture:
         g = self.float_meta("g_mps2")
         if g is not None:
             if not 9.7 < g < 9.9:
-                raise InputError(self.path, self.meta_lines.get("g_mps2"), f"g_mps2 {g} m/s² is not a local gravity")
+                raise InputError(self.path, self.meta_lines.get("g_mps2"), f"g_mps2 {g} m/s^2 is not a local gravity")
             return g
         lat = self.float_meta("latitude_deg")
         if lat is not None:
             return frames.normal_gravity_mps2(lat, self.float_meta("altitude_m", 0.0))
         warnings.append(
-            "no g_mps2 and no latitude_deg: using standard gravity 9.80665 m/s² (local g differs by up "
+            "no g_mps2 and no latitude_deg: using standard gravity 9.80665 m/s^2 (local g differs by up "
             "to 0.3 %, which goes straight into the scale factors)"
         )
         return frames.G_STANDARD_MPS2

@@ -145,7 +145,7 @@ def test_p2_by_hand_the_p_key_mounts_and_spins_the_centrifuge(tmp_path):
             await connect(pilot, app, "CentrifugeScreen")
             g = app.screen.guide
             text = screen_text(app)
-            assert "above ↑turn" in text and "Radius" in text and "m/s²" in text
+            assert "above ↑turn" in text and "Radius" in text and "m/s^2" in text
             await pilot.press("tab")  # from the step list to the radius field
             await wait_for(pilot, lambda: app.focused is not None and app.focused.id == "radius")
             await pilot.press("end", *["backspace"] * 6, *"abc", "enter")

@@ -69,8 +69,8 @@ def _text(result: dict) -> str:
             out.append("accelerometer noise density           bias instability         random walk")
             for i, a in enumerate("xyz"):
                 out.append(
-                    f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} m/s²/√Hz"
-                    f"  {_g(f.bias_instability[i])} m/s² at {_g(f.bias_instability_tau_s[i])} s"
+                    f"  {a}  {_g(f.white[i])} ± {_g(f.white_sigma[i])} m/s^2/√Hz"
+                    f"  {_g(f.bias_instability[i])} m/s^2 at {_g(f.bias_instability_tau_s[i])} s"
                     f"  {_g(f.random_walk[i])} ± {_g(f.random_walk_sigma[i])} m/s³/√Hz"
                 )
     from station.procedures.noise import random_walk_warning
@@ -100,7 +100,7 @@ def _plot(result: dict) -> str:
         plt.yscale("log")
         for i, a in enumerate("xyz"):
             plt.plot(f.taus_s.tolist(), f.adev[:, i].tolist(), label=a, marker="dot")
-        plt.title(f"{kind} Allan deviation [{'rad/s' if kind == 'gyro' else 'm/s²'}] against τ [s]")
+        plt.title(f"{kind} Allan deviation [{'rad/s' if kind == 'gyro' else 'm/s^2'}] against τ [s]")
         text = plt.build()
         figs.append(text if color else plt.uncolorize(text))
     return "\n".join(figs) + "\n"

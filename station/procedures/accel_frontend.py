@@ -90,7 +90,7 @@ class Frontend:
             raise FrontendError(
                 SCALE_KEY if off_s is not None else OFFSET_KEY,
                 f"'{SCALE_KEY if off_s is None else OFFSET_KEY}' without '{missing}': give both "
-                "(the zero-g output and m/s² per unit) or neither",
+                "(the zero-g output and m/s^2 per unit) or neither",
             )
         off = _numbers(off_s, OFFSET_KEY, (3,))
         s = _numbers(scale_s, SCALE_KEY, (1, 3, 9))

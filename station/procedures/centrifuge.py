@@ -264,7 +264,7 @@ def format_text(result: dict) -> str:
         if k in r["params"]:
             lines += param_lines(f"{k} [{u[k]}]", r["params"][k], r["uncertainty"].get(k))
     lines.append(f"residual   {r['residual_rms']:.3g} g RMS of |f| − sqrt(A²+1)")
-    lines.append(f"rows       {r['rows_used']} used of {r['n_rows']} (R = {r['radius_m']} m, g = {r['g_mps2']} m/s²)")
+    lines.append(f"rows       {r['rows_used']} used of {r['n_rows']} (R = {r['radius_m']} m, g = {r['g_mps2']} m/s^2)")
     for w in r["warnings"]:
         lines.append(f"warning    {w}")
     return "\n".join(lines)

@@ -209,7 +209,7 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         dev = np.abs(np.diag(res.M) / s - 1.0)
         if np.any(dev > 0.2):
             warnings.append(
-                f"scale factors differ from the nominal {s:g} m/s² per {unit} by up to "
+                f"scale factors differ from the nominal {s:g} m/s^2 per {unit} by up to "
                 f"{100 * dev.max():.0f} %: check accel_unit"
             )
     t_known = [p for p in positions if p.direction is not None]
@@ -276,12 +276,12 @@ def format_text(result: dict) -> str:
     lines = [
         f"procedure  accel-tabletop (P1, {r['method']})",
         f"device     {r.get('device')}",
-        f"model      {r['model']}   (V in {unit}, A in m/s²)",
+        f"model      {r['model']}   (V in {unit}, A in m/s^2)",
         f"gauge      {r['gauge_description']}",
     ]
-    lines += param_lines("B [m/s²]", r["params"]["B"], r["uncertainty"]["B"])
-    lines += param_lines(f"M [m/s² per {unit}]", r["params"]["M"], r["uncertainty"]["M"])
-    lines.append(f"residual   {r['residual_rms']:.3g} m/s² RMS of |A| − g (g = {r['g_mps2']:.5f} m/s²)")
+    lines += param_lines("B [m/s^2]", r["params"]["B"], r["uncertainty"]["B"])
+    lines += param_lines(f"M [m/s^2 per {unit}]", r["params"]["M"], r["uncertainty"]["M"])
+    lines.append(f"residual   {r['residual_rms']:.3g} m/s^2 RMS of |A| − g (g = {r['g_mps2']:.5f} m/s^2)")
     lines.append(
         f"positions  {r['n_positions']} ({r['positions_found_by']}), {r['n_distinct_orientations']} "
         f"distinct orientations, condition {num(r['position_set_condition'], '.3g', '∞ (singular)')}"
@@ -289,7 +289,7 @@ def format_text(result: dict) -> str:
     for p in r["positions"]:
         span = f"{p['t_start_s']:8.1f}–{p['t_stop_s']:8.1f} s" if p["t_start_s"] is not None else " " * 21
         flag = "  <- disagrees" if p["outlier"] else ""
-        lines.append(f"  {p['label']:>8} {span} n={p['n']:<6} |A|−g = {p['residual_mps2']:+.2e} m/s²{flag}")
+        lines.append(f"  {p['label']:>8} {span} n={p['n']:<6} |A|−g = {p['residual_mps2']:+.2e} m/s^2{flag}")
     for w in r["warnings"]:
         lines.append(f"warning    {w}")
     if r.get("gyro") is not None:
@@ -345,7 +345,7 @@ def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dic
                 "line_stop": file_line(capture, i1 - 1),
                 "residual_mps2": r.get("residual_mps2"),
                 "screened": True,
-                "explanation": f"|A| − g = {r.get('residual_mps2', float('nan')):+.3g} m/s², far beyond the other "
+                "explanation": f"|A| − g = {r.get('residual_mps2', float('nan')):+.3g} m/s^2, far beyond the other "
                 "positions' spread (the calibration flags it: was it still, or touching something?); "
                 "left out of the effect search",
             }
@@ -497,11 +497,11 @@ def report_figures(result: dict, meta: dict, columns: dict) -> list[tuple[str, s
     if res:
         figs.append(
             (
-                "Residual per position: |B + M V| − g, mm/s² (the norm the fit makes equal to local g)",
+                "Residual per position: |B + M V| − g, mm/s^2 (the norm the fit makes equal to local g)",
                 svgplot.bar_plot(
                     [r[0] for r in res],
                     [1000.0 * r[2] for r in res],
-                    y_label="|B + M V| − g  [mm/s²]",
+                    y_label="|B + M V| − g  [mm/s^2]",
                     title="residual per position",
                 ),
             )

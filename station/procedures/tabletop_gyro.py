@@ -198,7 +198,7 @@ def format_lines(block: dict) -> list[str]:
         return [f"gyro       not calibrated: {b['error']}"] + [f"warning    {w}" for w in b.get("warnings", [])]
     u = b["units"]
     lines = [
-        f"gyro       {b['model']} (y in {u['y']}, ω in rad/s, f in m/s²), from {b['n_rotations']} rotations "
+        f"gyro       {b['model']} (y in {u['y']}, ω in rad/s, f in m/s^2), from {b['n_rotations']} rotations "
         f"between {b['n_holds']} holds"
     ]
     lines += param_lines(f"K [{u['K']}]", jsonable(b["params"]["K"]), jsonable(b["uncertainty"]["K"]))

@@ -85,7 +85,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
                     yield Input(value=f"{self._bench('radius_m', 1.0):g}", id="radius", compact=True)
                     yield Label("m  local g ")
                     yield Input(value=f"{self._bench('g_mps2', 9.8):g}", id="gravity", compact=True)
-                    yield Label("m/s²")
+                    yield Label("m/s^2")
                 with Vertical(id="indicators"):
                     yield StabilityBar(id="stability")
                     yield CountdownBar(id="countdown")

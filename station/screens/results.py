@@ -169,7 +169,7 @@ class ResultsScreen(Screen):
         residuals.clear(columns=True)
         rows_res = getattr(module, "position_residuals", lambda _c, _r: [])(self.capture, r)
         residuals.display = bool(rows_res)
-        residuals.add_columns("position", "|B+MV| m/s²", "residual mm/s²")
+        residuals.add_columns("position", "|B+MV| m/s^2", "residual mm/s^2")
         for name, norm, res in rows_res:
             residuals.add_row(name, num(norm, ".5f"), num(res * 1000.0, "+.2f"))
 

@@ -113,7 +113,7 @@ class Readouts(Static):
         r, f, g = st.raw, st.f_mps2, st.gyro
         lines = [
             f"raw  {num(r[0], '9.4f')} {num(r[1], '9.4f')} {num(r[2], '9.4f')} {au}",
-            f"f    {num(f[0], '9.3f')} {num(f[1], '9.3f')} {num(f[2], '9.3f')} m/s²  |a| {num(st.norm_mps2, '.3f')}",
+            f"f    {num(f[0], '9.3f')} {num(f[1], '9.3f')} {num(f[2], '9.3f')} m/s^2  |a| {num(st.norm_mps2, '.3f')}",
             f"rate {num(g[0], '9.4f')} {num(g[1], '9.4f')} {num(g[2], '9.4f')} {gu}",
             f"temp {num(st.temp_c, '.1f')} °C   {num(stats.rate_hz, '.0f')} Hz   "
             f"errors {stats.parse_errors}   dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED"),
