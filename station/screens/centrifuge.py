@@ -27,7 +27,7 @@ from textual.worker import get_current_worker
 from station.formatting import num
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
-from station.widgets.live import CountdownBar, StabilityBar
+from station.widgets.live import CountdownBar, SteadyBar
 from station.widgets.steps import StepList
 from station.widgets.title import TitleBar, footer
 
@@ -87,7 +87,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
                     yield Input(value=f"{self._bench('g_mps2', 9.8):g}", id="gravity", compact=True)
                     yield Label("m/s^2")
                 with Vertical(id="indicators"):
-                    yield StabilityBar(id="stability")
+                    yield SteadyBar(id="stability")
                     yield CountdownBar(id="countdown")
                 yield Static("", id="readouts")
                 with Horizontal(id="manual"):
@@ -176,7 +176,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
         if k is not None and self._shown.get("_k") != k:
             self._shown["_k"] = k
             self._put("#drawing", "\n".join(mounting_drawing(k, g.config.n_orientations)))
-        self.query_one(StabilityBar).show(st)
+        self.query_one(SteadyBar).show(st)
         self.query_one(CountdownBar).show(st, g.config.average_s)
         r, stats = st.raw, message.stats
         au = self.app.session.source.units.get("accel_unit") or "raw"

@@ -42,21 +42,50 @@ class StabilityBar(Static):
     """Still or moving: a bar of the stillness detector's level (< 1 is still), seconds held."""
 
     WIDTH = 14
+    LABEL = "Stillness   "
 
     def show(self, st) -> None:
-        t = Text("Stillness   ")
+        t = Text(self.LABEL)
         if st.calibrating:
-            t.append("measuring noise… hold still", style="yellow")
+            t.append(self.calibrating_text(), style="yellow")
         else:
             # level: decision statistic / threshold; draw 1/level so a steady unit fills the bar
             lvl = st.level
             frac = 1.0 if lvl <= 0 else min(1.0, 1.0 / lvl) if math.isfinite(lvl) else 0.0
             t.append(bar(frac, self.WIDTH), style="green" if st.is_still else "red")
-            if st.is_still:
-                t.append(f" still {st.still_for_s:4.1f} s", style="green")
-            else:
-                t.append(" moving", style="bold red")
+            word, style = self.state_text(st)
+            t.append(f" {word}", style=style)
         self.update(t)
+
+    def calibrating_text(self) -> str:
+        return "measuring noise… hold still"
+
+    def state_text(self, st) -> tuple[str, str]:
+        if st.is_still:
+            return f"still {st.still_for_s:4.1f} s", "green"
+        return "moving", "bold red"
+
+
+class SteadyBar(StabilityBar):
+    """The same detector on a centrifuge (P2): a steady output at a steady table rate, not a
+    unit standing still; it says whether the measured rate is the asked one."""
+
+    LABEL = "Steadiness  "
+
+    def calibrating_text(self) -> str:
+        return "measuring noise… keep the table stopped"
+
+    def state_text(self, st) -> tuple[str, str]:
+        if not st.is_still:
+            return "changing", "bold red"
+        rate = getattr(st, "table_rate_rad_s", math.nan)
+        if not (isinstance(rate, float) and math.isfinite(rate)):
+            return f"steady {st.still_for_s:4.1f} s", "green"
+        if abs(rate) < 0.05:  # rad/s: the table stands
+            return f"steady, stopped {st.still_for_s:4.1f} s", "yellow"
+        if getattr(st, "at_speed", True):
+            return f"steady at speed {st.still_for_s:4.1f} s", "green"
+        return "steady, not at speed", "yellow"
 
 
 class OrientationIndicator(Static):
