@@ -205,14 +205,27 @@ def test_compass_sweep_from_connect_to_a_saved_result(tmp_path):
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             title = screen_lines(app)[0]
             assert not app.screen.query_one("#residuals").display  # P1-only table
-        return title
+            params = app.screen.query_one("#params")
+            shown = {params.get_row_at(i)[0]: params.get_row_at(i) for i in range(params.row_count)}
+        return title, shown
 
-    title = asyncio.run(story())
+    title, shown = asyncio.run(story())
     assert "P3 compass result" in title
     from db.store import Store
 
     hist = Store(db).history("SIM-COM-0003")
     assert len(hist) == 1 and hist[0]["procedure"] == "compass"
+    # soft iron on screen as a ratio (calibrated per raw field, both in the capture's unit):
+    # ~1 on the diagonal; stored as nT per mag_unit (calibrate.md), e.g. ~1000 nT per uT
+    unit = hist[0]["extra"]["mag_unit"]
+    per_unit_nT = {"nT": 1.0, "uT": 1e3, "gauss": 1e5}[unit]
+    for i in range(3):
+        for j in range(3):
+            name, value, _, shown_unit = shown[f"soft_iron[{i}][{j}]"][:4]
+            assert shown_unit == f"{unit}/{unit}"
+            assert float(value) == pytest.approx(hist[0]["params"]["soft_iron"][i][j] / per_unit_nT, rel=1e-6)
+        # a simulated magnetometer's scale errors are a few percent, not a factor
+        assert 0.8 < float(shown[f"soft_iron[{i}][{i}]"][1]) < 1.2
 
 
 def test_gyro_drift_hold_to_a_saved_result(tmp_path):

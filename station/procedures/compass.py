@@ -36,6 +36,18 @@ MEASURED = ("mx", "my", "mz", "ax", "ay", "az", "gx", "gy", "gz")
 CORE_PARAMS = ("hard_iron", "soft_iron")
 # station.procedures.review: each parameter block's unit ({mag_unit}: the result's, else raw)
 PARAM_UNITS = {"hard_iron": "{mag_unit}", "soft_iron": "nT per {mag_unit}"}
+
+
+def _soft_iron_ratio(result: dict) -> float | None:
+    """nT per mag_unit → mag_unit per mag_unit (a ratio, ~1 on the diagonal): divided by the
+    nT in one mag_unit; None for a unit without a physical factor."""
+    f = si_factor("mag", result.get("mag_unit"))
+    return None if f is None else 1.0 / f
+
+
+# what the screens show it in: W as a ratio, calibrated field per raw field in the capture's
+# unit (the result, its exports and the database keep nT per mag_unit)
+DISPLAY_UNITS = {"soft_iron": ("{mag_unit}/{mag_unit}", _soft_iron_ratio)}
 REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
 METHODS = ("rls", "batch", "ellipsoid")
 
