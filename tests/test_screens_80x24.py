@@ -292,3 +292,52 @@ def test_results_open_with_the_parameters_focused(tmp_path):
     focused, lines = asyncio.run(story())
     assert focused == "params"
     assert any(line.startswith("▊") or line.startswith("█") or line.startswith("▌") for line in lines[3:8])
+
+
+def test_tab_into_a_field_and_typing_edits_its_text():
+    """Textual's Input selects its whole text when focused, so Tab to the averaging time (or
+    P2's radius) and a keystroke replaced the value; the station's fields keep it."""
+    clock = BenchClock()
+    src = SimSource(seed=0, clock=clock, procedure="accel-centrifuge")
+
+    async def story():
+        app = make_app(None, device=src)
+        seen = {}
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: app.focused is not None and app.focused.id == "start")
+            await pilot.press("shift+tab")  # Start → the averaging time above it
+            field = app.focused
+            seen["average"] = (field.id, field.value)
+            await pilot.press("5")
+            seen["average"] += (field.value,)
+            field.value = seen["average"][1]
+            await pilot.press("f5")  # P2 on the simulated centrifuge: the step list has the focus
+            await wait_for(pilot, lambda: screen_name(app) == "CentrifugeScreen" and app.focused is not None)
+            await pilot.press("tab")  # the step list → the radius
+            field = app.focused
+            seen["radius"] = (field.id, field.value)
+            await pilot.press("2")
+            seen["radius"] += (field.value,)
+        return seen
+
+    seen = asyncio.run(story())
+    assert seen["average"][0] == "average" and seen["average"][2] == seen["average"][1] + "5", seen
+    assert seen["radius"][0] == "radius" and seen["radius"][2] == seen["radius"][1] + "2", seen
+
+
+def test_every_text_field_of_the_tui_is_the_stations_field():
+    """The fix above holds where each screen makes its fields through ``Field``; a bare
+    ``Input(`` in a screen would bring the old selection back."""
+    import pathlib
+
+    import station
+
+    root = pathlib.Path(station.__file__).parent
+    bare = [
+        f"{p.relative_to(root)}:{n}"
+        for p in root.rglob("*.py")
+        if p.name != "field.py"
+        for n, line in enumerate(p.read_text().splitlines(), 1)
+        if re.search(r"(?<![A-Za-z_])Input\(", line)
+    ]
+    assert not bare, bare

@@ -27,6 +27,7 @@ from textual.worker import get_current_worker
 from station.formatting import num
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz
+from station.widgets.field import Field
 from station.widgets.live import CountdownBar, SteadyBar
 from station.widgets.steps import StepList
 from station.widgets.title import TitleBar, footer
@@ -82,9 +83,9 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
                 yield Static("", id="drawing")
                 with Horizontal(id="bench"):
                     yield Label("Radius ")
-                    yield Input(value=f"{self._bench('radius_m', 1.0):g}", id="radius", compact=True)
+                    yield Field(value=f"{self._bench('radius_m', 1.0):g}", id="radius", compact=True)
                     yield Label("m  local g ")
-                    yield Input(value=f"{self._bench('g_mps2', 9.8):g}", id="gravity", compact=True)
+                    yield Field(value=f"{self._bench('g_mps2', 9.8):g}", id="gravity", compact=True)
                     yield Label("m/s^2")
                 with Vertical(id="indicators"):
                     yield SteadyBar(id="stability")
@@ -93,7 +94,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
                 with Horizontal(id="manual"):
                     yield Label("m types ")
                     for name in FIELDS:
-                        yield Input(placeholder=name, id=f"in-{name}", compact=True)
+                        yield Field(placeholder=name, id=f"in-{name}", compact=True)
                 yield Static("", id="entry-error")
                 yield Static("", id="message")
                 yield Static("", id="progress")

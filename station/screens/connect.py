@@ -16,6 +16,7 @@ from textual.widgets import Button, Input, Label, Select, Static
 from station.messages import Connected, SourceFailed, StoreLoaded
 from station.procedures import registry
 from station.textsafe import tui_markup, tui_text
+from station.widgets.field import Field
 from station.widgets.title import TitleBar, footer
 
 SIM = "sim"
@@ -72,26 +73,26 @@ class ConnectScreen(Screen):
                 )
             with Horizontal(classes="row"):
                 yield Label("Port or URL")
-                yield Input(
+                yield Field(
                     placeholder="/dev/ttyUSB0, socket://host:port (when Source is Other)", id="port", compact=True
                 )
             with Horizontal(classes="row"):
                 yield Label("Serial number")
-                yield Input(value=s.device_id, placeholder="default: what it reports", id="serial", compact=True)
+                yield Field(value=s.device_id, placeholder="default: what it reports", id="serial", compact=True)
                 yield Label("model", classes="inner")
-                yield Input(value=s.model, placeholder="e.g. ADXL335 triad", id="model", compact=True)
+                yield Field(value=s.model, placeholder="e.g. ADXL335 triad", id="model", compact=True)
             with Horizontal(classes="row"):
                 yield Label("Registered")
                 yield Select([], prompt="pick a registered device", id="known", compact=True)
             # entered once, remembered in the database (settings), written into each capture
             with Horizontal(classes="row"):
                 yield Label("Operator")
-                yield Input(value=s.extra.get("operator", ""), placeholder="your name", id="operator", compact=True)
+                yield Field(value=s.extra.get("operator", ""), placeholder="your name", id="operator", compact=True)
                 yield Label("place", classes="inner")
-                yield Input(value=s.extra.get("place", ""), placeholder="lab, bench", id="place", compact=True)
+                yield Field(value=s.extra.get("place", ""), placeholder="lab, bench", id="place", compact=True)
             with Horizontal(classes="row"):
                 yield Label("Reference")
-                yield Input(
+                yield Field(
                     value=s.extra.get("reference_equipment", ""),
                     placeholder="reference equipment (table, turntable, IMU: model and serial)",
                     id="reference",
@@ -109,7 +110,7 @@ class ConnectScreen(Screen):
                 )
             with Horizontal(classes="row"):
                 yield Label("Average (s)")
-                yield Input(value=f"{s.average_s:g}", id="average", type="number", compact=True)
+                yield Field(value=f"{s.average_s:g}", id="average", type="number", compact=True)
                 yield Label(self._average_means(), id="average-means", classes="inner")
             with Horizontal(id="buttons"):
                 yield Button("Start \\[F5]", id="start", variant="primary", compact=True)

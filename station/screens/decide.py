@@ -14,6 +14,8 @@ from textual.containers import Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Input, Static
 
+from station.widgets.field import Field
+
 
 class DecideScreen(ModalScreen):
     """A failed result: the operator saves it as rejected, or accepts it with a note."""
@@ -49,7 +51,7 @@ class DecideScreen(ModalScreen):
                 lines.append(f"… and {len(self.reasons) - 6} more")
             yield Static("\n".join(lines), id="why")
             yield Static("A reason (rejected) or a note saying why it is accepted anyway:")
-            yield Input(placeholder="reason / note (required)", id="note")
+            yield Field(placeholder="reason / note (required)", id="note")
             keys = "ctrl+r save as rejected · " + ("ctrl+o accept as override · " if self.failed else "")
             yield Static(keys + "esc back (re-do: n new run)")
             yield Static("", id="error")

@@ -23,6 +23,7 @@ from textual.widgets import Button, Input, Select, Static
 
 from station.messages import CalibrationReady
 from station.textsafe import tui_markup
+from station.widgets.field import Field
 from station.widgets.title import TitleBar, footer
 
 
@@ -155,7 +156,7 @@ class ImportScreen(Screen):
         yield TitleBar("import a log or capture file")
         with VerticalScroll(id="body"):
             yield Static("A station capture, or a log: .ulg, .bin, .tlog, ROS bag/MCAP, EuRoC/Kalibr CSV")
-            yield Input(placeholder="path/to/file, then Enter", id="path", compact=True)
+            yield Field(placeholder="path/to/file, then Enter", id="path", compact=True)
             yield Static("", id="status")
             with Horizontal(id="choose"):
                 yield Select(procedure_options(), id="procedure", allow_blank=False, compact=True)

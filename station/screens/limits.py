@@ -21,6 +21,7 @@ from textual.widgets import Input, Static
 
 from station.messages import StoreLoaded
 from station.textsafe import tui_markup
+from station.widgets.field import Field
 
 
 def _fmt(x) -> str:
@@ -66,7 +67,7 @@ class LimitsScreen(ModalScreen):
             yield Static("reading…", id="current")
             yield Static("", id="params")
             yield Static("NAME=LOW:HIGH sets one (an end may be empty), NAME= removes it:")
-            yield Input(placeholder="e.g. B=-0.5:0.5  M[0][0]=0.98:1.02  S=0.9:", id="edit")
+            yield Field(placeholder="e.g. B=-0.5:0.5  M[0][0]=0.98:1.02  S=0.9:", id="edit")
             yield Static("Enter apply · esc back")
             yield Static("", id="said")
             yield Static("", id="error")

@@ -20,6 +20,7 @@ from station.messages import Exported
 from station.procedures.noise import AXES, PRACTICAL_RECORD_S, format_duration
 from station.screens.export import export_files, exported_text
 from station.screens.gyrodrift import HoldScreen
+from station.widgets.field import Field
 from station.widgets.title import TitleBar, footer
 
 
@@ -99,7 +100,7 @@ class AllanScreen(Screen):
             yield Static("", id="table")
             with Horizontal(id="ask"):
                 yield Label("P4 accuracy asked (°/h):")
-                yield Input(value=f"{self.app.session.extra.get('accuracy_deg_h', 1.0):g}", id="accuracy", compact=True)
+                yield Field(value=f"{self.app.session.extra.get('accuracy_deg_h', 1.0):g}", id="accuracy", compact=True)
                 yield Label("  (t, type, Enter)")
             yield Static("", id="status")
         yield footer()
