@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from textual import work
 from textual.app import App
 from textual.binding import Binding
+from textual.notifications import Notify
 
 from station.messages import StoreLoaded
 from station.procedures import registry
@@ -77,6 +78,7 @@ class StationApp(App):
         self.session = session
         self.start = start
         self.due: list = []  # the due/overdue list read at start-up
+        self.notices: list = []  # every notification (textual.notifications.Notification), in order
 
     def on_mount(self) -> None:
         from station.screens.connect import ConnectScreen
@@ -89,6 +91,14 @@ class StationApp(App):
 
             self.push_screen(HistoryScreen())
         self.call_after_refresh(self.load_due)  # after the first paint: start-up stays fast
+
+    def on_notify(self, message: Notify) -> None:
+        """Keep the notice for the screens that show notices in their own place (Connect's
+        lines under its buttons); Textual shows the toast on the others."""
+        self.notices = [n for n in self.notices if not n.has_expired] + [message.notification]
+        for screen in self.screen_stack:
+            if hasattr(screen, "show_notices"):
+                screen.show_notices()
 
     @work(thread=True, exclusive=True, group="due", exit_on_error=False, description="read due devices")
     def load_due(self) -> None:

@@ -341,3 +341,52 @@ def test_every_text_field_of_the_tui_is_the_stations_field():
         if re.search(r"(?<![A-Za-z_])Input\(", line)
     ]
     assert not bare, bare
+
+
+def test_notices_never_cover_the_connect_buttons(tmp_path):
+    """Back on Connect after an abort, its notice (a toast, bottom right, for 4 s) lay over
+    the buttons; with a recalibration reminder and its line on top there was less room still.
+    On Connect the notices are lines under the buttons, gone when they expire."""
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    seed_history(db, "IMU-7", n=1, interval_days=30, start_year=2021)  # overdue: its line and notice
+    clock = BenchClock()
+    src = SimSource(seed=5, procedure="gyro-drift", clock=clock)
+
+    def buttons_clear(app) -> bool:
+        """Every cell of every button is the button's own (no toast or other widget on it)."""
+        for button in app.screen.query("Button"):
+            r = button.region
+            for x in range(r.x, r.right):
+                if app.screen.get_widget_at(x, r.y)[0] is not button:
+                    return False
+        return True
+
+    async def story():
+        app = make_app(db, device=src, average_s=180.0)
+        frames = []
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await wait_for(pilot, lambda: "IMU-7" in text_of(app, "#notices"))
+            frames.append((buttons_clear(app), screen_lines(app)))
+            await pilot.press("f5")
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "HoldScreen" and app.screen.updates > 2)
+            await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await wait_for(pilot, lambda: "aborted" in text_of(app, "#notices"))
+            frames.append((buttons_clear(app), screen_lines(app)))
+            await wait_for(pilot, lambda: "aborted" not in text_of(app, "#notices"), timeout_s=30.0)
+            frames.append((buttons_clear(app), screen_lines(app)))
+        return frames
+
+    frames = asyncio.run(story())
+    for clear, lines in frames:
+        assert clear, "\n".join(lines)
+        row = next(i for i, line in enumerate(lines) if "Start [F5]" in line)
+        assert all(b in lines[row] for b in ("Resume [F6]", "History [F2]", "Import file [F7]")), lines[row]
+    # the abort's notice was shown, below the buttons, in words
+    lines = frames[1][1]
+    row = next(i for i, line in enumerate(lines) if "Start [F5]" in line)
+    assert any("P4 aborted: nothing saved" in line for line in lines[row + 1 :]), "\n".join(lines)

@@ -43,6 +43,9 @@ class ConnectScreen(Screen):
     ConnectScreen #buttons Button { margin-right: 2; }
     ConnectScreen #due { color: $warning; padding: 0 1; height: auto; }
     ConnectScreen #status { padding: 0 1; height: auto; }
+    /* notices are lines under the buttons here, not toasts over them (80x24) */
+    ConnectScreen ToastHolder { display: none; }
+    ConnectScreen #notices { padding: 0 1; height: auto; max-height: 2; }
     ConnectScreen #title { text-style: bold; padding: 0 1; }
     """
 
@@ -118,6 +121,7 @@ class ConnectScreen(Screen):
                 yield Button("History \\[F2]", id="history", compact=True)
                 yield Button("Import file \\[F7]", id="import", compact=True)
         yield Static("", id="status")
+        yield Static("", id="notices")
         yield footer()
 
     def _average_means(self, procedure: str | None = None) -> str:
@@ -154,11 +158,13 @@ class ConnectScreen(Screen):
             self.query_one("#protocol", Select).value = src.protocol
         self.call_after_refresh(self.load_devices)
         self.show_due(getattr(self.app, "due", []))
+        self.show_notices()
         self._check_resume()
         self.query_one("#start", Button).focus()
 
     def on_screen_resume(self) -> None:
         self.query_one("#start", Button).focus()  # back from a run: the same keys as at start-up
+        self.show_notices()
         self._check_resume()
         self.load_devices()
 
@@ -305,6 +311,23 @@ class ConnectScreen(Screen):
         self.query_one("#start", Button).disabled = True
         self._status("Connecting…")
         self.open_source(choice, port, self.query_one("#protocol", Select).value)
+
+    def show_notices(self) -> None:
+        """The app's notices still current (``StationApp.notices``), newest last, as lines
+        under the buttons: a toast, bottom right, covered them at 80x24."""
+        if not self.query("#notices"):  # not composed yet: on_mount shows them
+            return
+        notices = [n for n in getattr(self.app, "notices", []) if not n.has_expired][-2:]
+        style = {"error": "b red", "warning": "yellow"}
+        lines = []
+        for n in notices:
+            text = " ".join(f"{n.title}: {n.message}".split()) if n.title else " ".join(n.message.split())
+            if not n.markup:
+                text = tui_markup(text)
+            lines.append(f"[{style[n.severity]}]{text}[/]" if n.severity in style else text)
+        self.query_one("#notices", Static).update("\n".join(lines))
+        if notices:  # again when the first goes
+            self.set_timer(max(min(n.time_left for n in notices), 0.0) + 0.05, self.show_notices)
 
     def _status(self, text: str, error: bool = False) -> None:
         text = tui_markup(text)  # device ids, ports and errors come from outside
