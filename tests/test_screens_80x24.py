@@ -390,3 +390,35 @@ def test_notices_never_cover_the_connect_buttons(tmp_path):
     lines = frames[1][1]
     row = next(i for i, line in enumerate(lines) if "Start [F5]" in line)
     assert any("P4 aborted: nothing saved" in line for line in lines[row + 1 :]), "\n".join(lines)
+
+
+def test_results_l_sets_the_devices_limits_and_judges_the_result_again(tmp_path):
+    """Limits were reachable from History only; after a calibration the operator is on
+    Results: `l` opens the same editor there, and the verdict is drawn again with them."""
+    from station.screens.results import ResultsScreen
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    seed_history(db, "IMU-7", n=1)
+    cap, result = p1_result("IMU-7", drift=0.02)
+
+    async def story():
+        app = make_app(db, device_id="IMU-7")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            before = text_of(app, "#summary")
+            await pilot.press("l")
+            await wait_for(
+                pilot, lambda: screen_name(app) == "LimitsScreen" and "no limits" in text_of(app, "#current")
+            )
+            await pilot.press(*"B=5:6", "enter")  # B is a few cm/s², far below 5 m/s^2
+            await wait_for(pilot, lambda: "B " in text_of(app, "#current"))
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen" and "FAIL" in text_of(app, "#summary"))
+            return before, " ".join(text_of(app, "#summary").split())
+
+    before, after = asyncio.run(story())
+    assert "NO TOLERANCE" in before and "FAIL" not in before
+    assert "B[0] =" in after and "outside its limits 5 … 6" in after
+    assert Store(db).get_device("IMU-7")["limits"] == {"B": [5.0, 6.0]}

@@ -25,7 +25,8 @@ HELP = """\
             stop, t turns and hills or straight
 [b]Noise run[/]   as P4; its result: t accuracy asked · e export · n new run
 [b]Results[/]     s save · x reject · d discard · e export (CSV + JSON) ·
-            r report · g diagnose · n new run · F2 history
+            r report · g diagnose · n new run · l the device's limits
+            · F2 history
 [b]History[/]     up/down device · p next parameter · tab to the calibrations,
             g diagnose the one under the cursor · l the device's limits
             · escape back

@@ -1,5 +1,5 @@
 """A device's absolute limits, viewed and edited where a bench engineer looks for the
-device: History, ``l`` on the highlighted device.
+device: History, ``l`` on the highlighted device; Results, ``l`` after a calibration.
 
 The same store call as ``station devices add ID --limit NAME=LOW:HIGH`` (``Store.add_device``,
 so the change is anchored and ``station verify`` sees any edit made behind the station's

@@ -47,6 +47,7 @@ class ResultsScreen(Screen):
         Binding("g", "diagnose", "Diagnose"),
         Binding("n", "new", "New run"),
         Binding("f2", "history", "History", show=False),  # F1 lists it: the footer keeps to 80 columns
+        Binding("l", "limits", "Limits", show=False),  # F1 lists it too
     ]
 
     def __init__(self, capture, result: dict | None, error: str | None = None, previous: dict | None = None):
@@ -316,6 +317,24 @@ class ResultsScreen(Screen):
     def action_new(self) -> None:
         self.app.session.guide = None
         self.app.pop_screen()
+
+    def action_limits(self) -> None:
+        """View and edit the device's absolute limits (as from History); the verdict is drawn
+        again with them while the result is not saved yet."""
+        from station.screens.limits import LimitsScreen
+
+        if not self.app.session.device_id:
+            self.notify("No device to set limits for", severity="warning")
+            return
+        self.app.push_screen(LimitsScreen(self.app.session.device_id), self._limits_closed)
+
+    def _limits_closed(self, changed) -> None:
+        if not changed:
+            return
+        if self.calibration_id is not None:
+            self.notify(f"Limits saved; calibration #{self.calibration_id} keeps the verdict it was saved with")
+            return
+        self.load_device()  # the device's record again: tolerances and limits, then draw()
 
     def action_history(self) -> None:
         from station.screens.history import HistoryScreen
