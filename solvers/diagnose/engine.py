@@ -46,7 +46,8 @@ from solvers.fit import FitResult, fit
 from solvers.params import Packer, as_params
 
 DEAD_RTOL = 1e-2  # a column whose part outside the baseline's span is below this fraction: not identifiable
-CONFUSION_CORR = 0.9  # |corr| of fitted signatures above this: the data cannot tell the two apart
+CONFUSION_CORR = 0.9  # |corr| of a generic term's signature with a library candidate's span: the same structure
+RIVAL_CORR = 0.8  # |corr| of two candidates' fitted signatures above this: compared head to head
 MAX_FOLDS = 10
 ALPHA = 0.05  # family-wise level the per-candidate deviance quantiles start from
 MIN_DOF = 3  # an extension must leave this many degrees of freedom
@@ -675,24 +676,57 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
     return _Eval(cc, db, cvc, sig, int(k), D, infl)
 
 
-def _passes(problem, ev: _Eval, m: int, cv_cur: float, rank_cur: int, n: int, scale: float = 1.0) -> bool:
-    if ev.k <= 0 or ev.cv >= cv_cur or n - rank_cur - ev.k < MIN_DOF:
+def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float = 1.0) -> bool:
+    """The deviance test alone (no held-out test)."""
+    if ev.k <= 0 or n - rank_cur - ev.k < MIN_DOF:
         return False
     q = deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k)
     return ev.D_rob > scale * problem.threshold * q
 
 
-def _confused(best: _Eval, others: list[_Eval]) -> list[dict]:
-    out = []
+def _passes(problem, ev: _Eval, m: int, cv_cur: float, rank_cur: int, n: int, scale: float = 1.0) -> bool:
+    return ev.cv < cv_cur and _significant(problem, ev, m, rank_cur, n, scale)
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    den = float(np.linalg.norm(a) * np.linalg.norm(b))
+    return float(a @ b) / den if den > 0 else 0.0
+
+
+def _score(ev: _Eval, n: int) -> float:
+    """The BIC change of adding ``ev``'s candidate alone, its deviance taken net of serial correlation."""
+    return ev.k * math.log(n) - ev.D_rob
+
+
+def decisive_margin(problem: Problem) -> float:
+    """BIC margin by which one of two correlated candidates must beat the other for the data to
+    tell them apart: ``F·χ²₁(1 − α)``. The deviance difference of two one-signature models is
+    about N(±s², 4s²) for a separation of s noise σ, so a wrong decision past this margin has a
+    probability below Φ(−√margin) (< 0.1 % at F = 2.5) whatever s is."""
+    return problem.threshold * chi2_isf(ALPHA, 1)
+
+
+def _head_to_head(problem: Problem, best: _Eval, others: list[_Eval], n: int) -> tuple[list[dict], _Eval | None]:
+    """``best`` against each other candidate whose fitted signature (projected off the current
+    model) correlates with its own by more than RIVAL_CORR, each alone added to the current model:
+    (``confused_with`` entries of the rivals within the decisive margin, the rival that beats
+    ``best`` by more than it or None). A rival ``best`` beats by more than the margin is neither:
+    it is tested again against the refitted model."""
+    tied, better, worst = [], None, 0.0
+    dec = decisive_margin(problem)
     for r in others:
-        if r is best:
+        if r is best or r.k <= 0:
             continue
-        a, b = best.sig, r.sig
-        den = float(np.linalg.norm(a) * np.linalg.norm(b))
-        corr = float(a @ b) / den if den > 0 else 0.0
-        if abs(corr) > CONFUSION_CORR:
-            out.append({"name": r.cc.cand.name, "correlation": corr})
-    return out
+        corr = _corr(best.sig, r.sig)
+        if abs(corr) <= RIVAL_CORR:
+            continue
+        margin = _score(best, n) - _score(r, n)  # > 0: r explains the data better
+        if margin > dec:
+            if margin > worst:
+                better, worst = r, margin
+        elif margin >= -dec:
+            tied.append({"name": r.cc.cand.name, "correlation": corr})
+    return tied, better
 
 
 def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnosis:
@@ -748,6 +782,96 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     remaining = [c for c in problem.candidates if c.reason is None]
     deviance: dict = {}
     first = True
+
+    def prune(picked, cur_fit, extra=None, min_items=2):
+        """Drop each picked effect that no longer passes against all the others (and ``extra``,
+        the generic effect, kept), refitted without it; returns (picked, fit, params, free)."""
+        if len(picked) + (extra is not None) >= min_items:
+            for item in list(picked):
+                cc = item[0]
+                others = [p for p in picked if p is not item] + ([(extra, None)] if extra is not None else [])
+                st = {k: cur_fit.params[k] for k in base_params}
+                fr = dict(problem.free)
+                for oc, _ in others:
+                    st.update({k: cur_fit.params[k] for k in oc.params})
+                    fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+                without = _refit(problem, st, fr, sigma)
+                r0 = without.weighted_residuals
+                J0, _, _ = jacobian(problem, without.params, fr)
+                Q0 = _orth(J0)
+                cand = _candidate_columns(problem, without.params, cc.cand, Q0, r0)
+                if cand.reason is not None:
+                    ok = False
+                else:
+                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
+                    ok = _passes(
+                        problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n
+                    )
+                if not ok:
+                    picked.remove(item)
+                    entries[cc.cand.name]["selected"] = False
+                    cur_fit = without
+        keep = list(picked) + ([(extra, None)] if extra is not None else [])
+        free = dict(problem.free)
+        for oc, _ in keep:
+            free.update({k: v for k, v in oc.free.items() if k in oc.params})
+        state = {k: v for k, v in cur_fit.params.items() if k in base_params or any(k in oc.params for oc, _ in keep)}
+        if keep:
+            cur_fit = _refit(problem, state, free, sigma)
+            return picked, cur_fit, dict(cur_fit.params), free
+        return picked, baseline_fit, dict(base_params), free
+
+    def refit_with(items, fit_):
+        """The model with the baseline and ``items``' blocks, refitted from ``fit_``'s values."""
+        st = {k: fit_.params[k] for k in base_params}
+        fr = dict(problem.free)
+        for oc, _ in items:
+            st.update({k: fit_.params[k] for k in oc.params})
+            fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+        return (_refit(problem, st, fr, sigma) if items else baseline_fit), fr
+
+    def pairs(picked, cur_fit):
+        """Two picked effects whose signatures correlate by more than RIVAL_CORR, each alone added to
+        the model with the others: the better (BIC) is kept; the other goes in its ``confused_with``
+        when the margin is not decisive, and is dropped when it is."""
+        changed = True
+        while changed and len(picked) > 1:
+            changed = False
+            for i in range(len(picked)):
+                for j in range(i + 1, len(picked)):
+                    a, b = picked[i], picked[j]
+                    wo, fr = refit_with([p for p in picked if p is not a and p is not b], cur_fit)
+                    r0 = wo.weighted_residuals
+                    J0, _, _ = jacobian(problem, wo.params, fr)
+                    Q0 = _orth(J0)
+                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                    evs = []
+                    for oc, _ in (a, b):
+                        cand = _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
+                        if cand.reason is None:
+                            evs.append(
+                                _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
+                            )
+                    if len(evs) < 2 or min(ev.k for ev in evs) <= 0 or abs(_corr(evs[0].sig, evs[1].sig)) <= RIVAL_CORR:
+                        continue
+                    margin = _score(evs[0], n) - _score(evs[1], n)  # > 0: b explains the data better
+                    win, lose = (b, a) if margin > 0 else (a, b)
+                    if abs(margin) <= decisive_margin(problem):
+                        corr = _corr(evs[0].sig, evs[1].sig)
+                        win[1]["confused_with"] = win[1]["confused_with"] + [
+                            {"name": lose[1]["name"], "correlation": corr},
+                            *lose[1]["confused_with"],
+                        ]
+                    picked = [p for p in picked if p is not lose]
+                    entries[lose[0].cand.name]["selected"] = False
+                    cur_fit, _ = refit_with(picked, cur_fit)
+                    changed = True
+                    break
+                if changed:
+                    break
+        return picked, cur_fit
+
     # greedy forward selection; after each pick the extended model is refitted nonlinearly and
     # the rest are tested again against it (a candidate that only soaks up what another one's
     # linearisation left behind does not pass then)
@@ -797,7 +921,12 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         if not passing:
             break
         best = min(passing, key=lambda ev: ev.delta_bic)
-        confused = _confused(best, passing)
+        confused, better = _head_to_head(problem, best, evals, n)
+        if better is not None:
+            # a correlated rival explains the data decisively better but fails its held-out test:
+            # this one would only stand in for it, and is not named
+            remaining = [c for c in remaining if c.name != best.cc.cand.name]
+            continue
         cc = best.cc
         entries[cc.cand.name]["selected"] = True
         picked.append((cc, {"name": cc.cand.name, "cv_rms_before": cv_cur, "confused_with": confused}))
@@ -807,48 +936,14 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         state = dict(cur_fit.params)
         drop = {cc.cand.name} | {c["name"] for c in confused}
         remaining = [c for c in remaining if c.name not in drop]
+        if len(picked) > 1:  # the earlier picks must still earn their place beside this one
+            picked, cur_fit, state, free = prune(picked, cur_fit)
 
-    def prune(picked, cur_fit, extra=None, min_items=2):
-        """Drop each picked effect that no longer passes against all the others (and ``extra``,
-        the generic effect, kept), refitted without it; returns (picked, fit, params, free)."""
-        if len(picked) + (extra is not None) >= min_items:
-            for item in list(picked):
-                cc = item[0]
-                others = [p for p in picked if p is not item] + ([(extra, None)] if extra is not None else [])
-                st = {k: cur_fit.params[k] for k in base_params}
-                fr = dict(problem.free)
-                for oc, _ in others:
-                    st.update({k: cur_fit.params[k] for k in oc.params})
-                    fr.update({k: v for k, v in oc.free.items() if k in oc.params})
-                without = _refit(problem, st, fr, sigma)
-                r0 = without.weighted_residuals
-                J0, _, _ = jacobian(problem, without.params, fr)
-                Q0 = _orth(J0)
-                cand = _candidate_columns(problem, without.params, cc.cand, Q0, r0)
-                if cand.reason is not None:
-                    ok = False
-                else:
-                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
-                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
-                    ok = _passes(
-                        problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n
-                    )
-                if not ok:
-                    picked.remove(item)
-                    entries[cc.cand.name]["selected"] = False
-                    cur_fit = without
-        keep = list(picked) + ([(extra, None)] if extra is not None else [])
-        free = dict(problem.free)
-        for oc, _ in keep:
-            free.update({k: v for k, v in oc.free.items() if k in oc.params})
-        state = {k: v for k, v in cur_fit.params.items() if k in base_params or any(k in oc.params for oc, _ in keep)}
-        if keep:
-            cur_fit = _refit(problem, state, free, sigma)
-            return picked, cur_fit, dict(cur_fit.params), free
-        return picked, baseline_fit, dict(base_params), free
-
-    # name only what still earns its place against all the others, refitted
+    # name only what still earns its place against all the others, refitted; of two that the data
+    # barely separate, only the better (the other in its confused_with, or dropped when decisively worse)
     if len(picked) > 1:
+        picked, cur_fit, state, free = prune(picked, cur_fit)
+        picked, cur_fit = pairs(picked, cur_fit)
         picked, cur_fit, state, free = prune(picked, cur_fit)
 
     # effects outside the library: a smooth function of one driver (residual:<driver>)
