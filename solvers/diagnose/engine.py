@@ -1040,6 +1040,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         )
 
     generic_effect = None
+    generic_tied: list[dict] = []  # library effects the generic one displaced by a margin that is not decisive
     if gens:
         res = generic_round(state, free, {oc.cand.name for oc, _ in picked})
         if res is not None:
@@ -1082,6 +1083,17 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 # and the model it leaves must fit better than the library's (BIC): a drift is not
                 # replaced by a step that only approximates it
                 if ok and len(picked2) < len(picked) and model_bic(fit2, fr2) < model_bic(cur_fit, free):
+                    # not decisively better (the scanned place or period counted as a parameter): the
+                    # data cannot tell the two apart (a drift with slow wander against a step), and the
+                    # library effects it displaced are named with it (head to head, as for two candidates)
+                    kx = math.log(n) if ("at" in res0[0].desc or "period" in res0[0].desc) else 0.0
+                    if model_bic(cur_fit, free) - model_bic(fit2, fr2) - kx <= decisive_margin(problem):
+                        for oc, e in picked:
+                            if not any(oc is p[0] for p in picked2):
+                                c = float(res0[1].get(e["name"], 0.0))
+                                for t in [{"name": e["name"], "correlation": c}, *e["confused_with"]]:
+                                    if t["name"] not in {g["name"] for g in generic_tied}:
+                                        generic_tied.append(t)
                     res0[0].cc.cand.setup()
                     picked, cur_fit, state, free = picked2, fit2, st2, fr2
                     generic_effect = (res0[0], res0[1], cv_rms(J0, r0, sigma, folds, primary))
@@ -1148,13 +1160,14 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 "cv_rms_before": cv_g,
                 "cv_rms_after": cv_ext,
                 "gain": 1.0 - cv_ext / cv_g if cv_g > 0 else 0.0,
-                "confused_with": [],
+                "confused_with": generic_tied,
                 "shape": desc.get("shape"),
                 "driver": drv,
                 "correlation": corr,
             }
         )
         verdict.append(name)
+        verdict += [c["name"] for c in generic_tied]
     rw = ext.weighted_residuals
     scale = math.sqrt(ext.chi2 / ext.dof) if ext.dof > 0 else 1.0
     stud = rw / max(scale, 1e-300)
