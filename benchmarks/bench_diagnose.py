@@ -82,7 +82,9 @@ def run_one(procedure: str, seed: int, effects: dict | None = None) -> dict:
     out, diag, _ = analyse(cap)
     dt = time.perf_counter() - t0
     cv0 = out["baseline"]["cv_rms"]  # noqa: F841
-    score = max([d["D"] / d["q"] for d in diag.deviance.values() if d["cv_lower"] and d["k"] > 0] + [0.0])
+    # in units of the procedure's F (a candidate tested on one row kind alone: its own F rescaled)
+    F = diag.problem.threshold
+    score = max([d["score"] * F / d["F"] for d in diag.deviance.values() if d["cv_lower"] and d["k"] > 0] + [0.0])
     n = len(diag.problem.sigma)
     dchi = {}
     for c in out["candidates"]:

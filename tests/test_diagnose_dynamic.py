@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from solvers.diagnose.engine import ALPHA, chi2_isf, deviance_quantile
+from solvers.diagnose.engine import ALPHA, Candidate, Problem, chi2_isf, deviance_quantile, diagnose
 from station.cli import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -77,6 +77,40 @@ def test_deviance_quantile_is_the_exact_f_test_on_a_small_table():
     assert rate_chi2 > 3 * ALPHA, rate_chi2
     # many rows: the same quantile as χ²
     assert deviance_quantile(prob, k, 5, 10**6, 10**6 - p - k) == pytest.approx(chi2_isf(ALPHA / 5, k), rel=1e-3)
+
+
+def test_a_row_kind_of_its_own_gets_the_exact_f_test_on_its_rows():
+    """Two kinds of row, each with a noise scale the engine must estimate: 60 primary rows that
+    pin the 3 baseline parameters, and 10 auxiliary rows (stated noise wrong by 2) that a
+    3-parameter candidate alone moves (the compass dip rows and a magnetometer rotation).
+    Through ``diagnose``, on null data, the candidate's deviance on its own rows exceeds the
+    bound of its own F test at the stated level; the χ² bound passes noise about three times
+    too often on ten rows."""
+    rng = np.random.default_rng(3)
+    n0, n1, p, k, trials = 60, 10, 3, 3, 600
+    X0 = rng.normal(size=(n0 + n1, p))
+    X0[n0:] *= 0.1  # the baseline barely moves the auxiliary rows
+    Xc = np.zeros((n0 + n1, k))
+    Xc[n0:] = rng.normal(size=(n1, k))
+    hits = hits_chi2 = 0
+    for _ in range(trials):
+        y = rng.normal(size=n0 + n1)
+
+        def residual(q, y=y):
+            return X0 @ q["a"] + (Xc @ q["c"] if "c" in q else 0.0) - y
+
+        sigma = np.concatenate([np.ones(n0), np.full(n1, 0.5)])
+        prob = Problem("t", "", residual, sigma, np.arange(n0 + n1) % 7, {"a": np.zeros(p)}, {"a": True}, [], 1.0)
+        prob.candidates = [Candidate("rotation", {"c": np.zeros(k)})]
+        prob.row_types = np.concatenate([np.zeros(n0, int), np.ones(n1, int)])
+        prob.kind_thresholds = {1: 1.0}
+        d = diagnose(prob).deviance["rotation"]
+        assert d["kind"] == 1 and d["k"] == k
+        hits += d["D"] > d["bound"]
+        hits_chi2 += d["D"] > chi2_isf(ALPHA, k)
+    se = math.sqrt(ALPHA * (1 - ALPHA) / trials)
+    assert abs(hits / trials - ALPHA) < 4 * se, hits / trials
+    assert hits_chi2 / trials > 2 * ALPHA, hits_chi2 / trials
 
 
 @pytest.mark.parametrize("seed", [611, 612, 613])

@@ -28,6 +28,9 @@ Method (docs/diagnose.md):
    ``cv_rms`` *and* leaves at least MIN_DOF degrees of freedom. Other candidates that also
    pass and whose fitted signatures correlate with the chosen one's by more than
    ``CONFUSION_CORR`` are reported with it (``confused_with``) and not fitted on top.
+   A candidate that moves only the rows of one kind with a threshold of its own
+   (``Problem.kind_thresholds``: the compass dip rows) is tested on those rows alone, with
+   the exact F test of their own count and degrees of freedom (``kind_quantile``).
 6. The extended model is refitted nonlinearly (``solvers.fit``) with the selected blocks;
    its residuals are tested for whiteness (Ljung–Box on time-ordered rows) or against χ².
 """
@@ -95,6 +98,10 @@ class Problem:
     cv_rows: dict = field(default_factory=dict)  # fold set name → rows its held-out RMS is taken on
     cv_groups: np.ndarray | None = None  # the default CV folds when they are not ``groups`` (P2: rows across mountings)
     screened: list = field(default_factory=list)  # quality findings of rows left out before the effect search
+    # row kind → scale F of the exact F test of a candidate whose columns touch only that kind's
+    # rows (its own rows, noise scale and residual degrees of freedom: ``kind_quantile``); a
+    # candidate touching several kinds, or a kind not listed, keeps the procedure's test
+    kind_thresholds: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -208,6 +215,22 @@ def deviance_quantile(problem: Problem, k: int, m: int, n: int, dof: int) -> flo
     if problem.row_types is not None or dof <= 0:
         return chi2_isf(p, k)
     return n * math.log1p(k * float(fdtri(k, dof, 1.0 - p)) / dof)
+
+
+def kind_quantile(k: int, m: int, n_kind: int, dof_kind: float, scale: float = 1.0) -> float:
+    """Bound on the deviance ``n_t ln(RSS₀/RSS₁)`` over the ``n_t`` rows of one kind when k
+    parameters that move only those rows are added, with that kind's noise scale unknown
+    (estimated from the same rows) and ``dof_kind`` degrees of freedom left in them: the exact
+    F test at level α/m, ``n_t ln(1 + k·scale·F_k,dof(1 − α/m) / dof)``, its F statistic
+    ``(RSS₀ − RSS₁)/k / (RSS₁/dof)`` held to ``scale`` times the F quantile (a noise that is
+    not white inflates that variance ratio). With a dozen rows (the compass dip rows) this
+    is far above ``χ²_k``, and a χ² bound would saturate: the deviance of a large effect grows
+    only as ``n_t ln(1 + λ/n_t)``."""
+    k = max(k, 1)
+    p = ALPHA / max(m, 1)
+    if dof_kind <= 0:
+        return math.inf
+    return n_kind * math.log1p(k * scale * float(fdtri(k, dof_kind, 1.0 - p)) / dof_kind)
 
 
 def selection_threshold(problem: Problem, k: int, n: int, m: int) -> float:
@@ -575,6 +598,9 @@ class _Eval:
     D: float  # deviance (unknown noise scale per row kind)
     infl: float  # serial-correlation inflation of that deviance
     desc: dict | None = None
+    kind: int | None = None  # the one row kind its columns touch, when tested on it alone (kind_thresholds)
+    n_kind: int = 0  # rows of that kind
+    dof_kind: float = 0.0  # their residual degrees of freedom with the candidate fitted
 
     @property
     def D_rob(self) -> float:
@@ -673,15 +699,54 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
     sig = cc.J @ d[A.shape[1] :]
     sig = sig - QA @ (QA.T @ sig)
     infl = serial_inflation(e, sig, problem.series)
-    return _Eval(cc, db, cvc, sig, int(k), D, infl)
+    ev = _Eval(cc, db, cvc, sig, int(k), D, infl)
+    t = _only_kind(problem, cc.J, types)
+    if t is not None and k > 0:
+        # tested on its own rows: their deviance, against the residual degrees of freedom they
+        # have left (rows minus the leverage the model puts on them, minus k)
+        sel = types == t
+        r_cur = rnd.r0 - QA @ (QA.T @ rnd.r0)  # the current model's residual (linearised)
+        rss0, rss1 = float(r_cur[sel] @ r_cur[sel]), float(e[sel] @ e[sel])
+        ev.kind, ev.n_kind = int(t), int(sel.sum())
+        ev.dof_kind = ev.n_kind - float(np.sum(QA[sel] ** 2)) - k
+        ev.D = ev.n_kind * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
+        ev.infl = serial_inflation(np.where(sel, e, 0.0), np.where(sel, sig, 0.0), problem.series)
+    return ev
+
+
+def _only_kind(problem, J: np.ndarray, types) -> int | None:
+    """The row kind that holds all of ``J``'s columns (to 1e-9 of their energy) when it has
+    its own test (``problem.kind_thresholds``), else None."""
+    if types is None or not problem.kind_thresholds or J.shape[1] == 0:
+        return None
+    tot = float(np.sum(J**2))
+    for t in problem.kind_thresholds:
+        sel = types == t
+        if sel.any() and float(np.sum(J[~sel] ** 2)) <= 1e-9 * tot:
+            return t
+    return None
+
+
+def _bound(problem, ev: _Eval, m: int, n: int, rank_cur: int, scale: float = 1.0) -> tuple[float, float]:
+    """(bound on ``ev.D_rob``, score): the row kind's own exact F test where the candidate
+    touches one kind with a threshold of its own, else the procedure's ``F·q``. The score is the
+    threshold scale at which the candidate would sit on the bound (the null benchmark's statistic)."""
+    if ev.kind is not None:
+        F = problem.kind_thresholds[ev.kind] * scale
+        fstat = math.expm1(ev.D_rob / ev.n_kind) * ev.dof_kind / max(ev.k, 1) if ev.dof_kind > 0 else 0.0
+        crit = float(fdtri(max(ev.k, 1), ev.dof_kind, 1.0 - ALPHA / max(m, 1))) if ev.dof_kind > 0 else math.inf
+        return kind_quantile(ev.k, m, ev.n_kind, ev.dof_kind, F), fstat / crit
+    q = deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k)
+    return scale * problem.threshold * q, ev.D_rob / q
 
 
 def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float = 1.0) -> bool:
     """The deviance test alone (no held-out test)."""
     if ev.k <= 0 or n - rank_cur - ev.k < MIN_DOF:
         return False
-    q = deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k)
-    return ev.D_rob > scale * problem.threshold * q
+    if ev.kind is not None and ev.dof_kind < MIN_DOF:
+        return False
+    return ev.D_rob > _bound(problem, ev, m, n, rank_cur, scale)[0]
 
 
 def _passes(problem, ev: _Eval, m: int, cv_cur: float, rank_cur: int, n: int, scale: float = 1.0) -> bool:
@@ -909,10 +974,15 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         rank_cur = _gram_rank(J0.T @ J0)
         if first:
             for ev in evals:
+                bound, score = _bound(problem, ev, m, n, rank_cur)
                 deviance[ev.cc.cand.name] = {
                     "D": ev.D_rob,
                     "k": ev.k,
                     "q": deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k),
+                    "bound": bound,
+                    "score": score,  # the threshold scale F at which it would just pass
+                    "F": problem.threshold if ev.kind is None else problem.kind_thresholds[ev.kind],
+                    "kind": ev.kind,
                     "cv_lower": bool(ev.cv < rounds.cv0(ev.cc.cand.folds)),
                     "inflation": ev.infl,
                 }
