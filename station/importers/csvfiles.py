@@ -50,11 +50,54 @@ KALIBR_UNITS = {
 _NUMBER = re.compile(r"\s*[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\s*")
 
 
+_MAX_LINE_BYTES = 1 << 20  # a line longer than this is no CSV row (the capture reader's limit)
+_CHUNK_BYTES = 1 << 20
+
+
+def _read_bounded(f, path) -> bytes:
+    """The whole file, read in chunks that are checked as they come: a NUL byte or a line
+    longer than ``_MAX_LINE_BYTES`` stops the reading at once (``/dev/zero``, a binary blob or
+    a file without line ends would otherwise be read whole into memory)."""
+    parts: list[bytes] = []
+    lines_before = 0  # newlines in the chunks already read
+    run = 0  # bytes since the last newline
+    too_long = f"line longer than {_MAX_LINE_BYTES} bytes: not a CSV row"
+    while True:
+        chunk = f.read(_CHUNK_BYTES)  # no longer than the limit: a longer line crosses a chunk's end
+        if not chunk:
+            return b"".join(parts)
+        nul = chunk.find(b"\0")
+        if nul >= 0:
+            raise InputError(
+                path, lines_before + chunk.count(b"\n", 0, nul) + 1, "NUL byte: binary data, not a CSV file"
+            )
+        first = chunk.find(b"\n")
+        if first < 0:
+            run += len(chunk)
+        elif run + first > _MAX_LINE_BYTES:
+            raise InputError(path, lines_before + 1, too_long)
+        else:
+            run = len(chunk) - chunk.rfind(b"\n") - 1
+        lines_before += chunk.count(b"\n")
+        if run > _MAX_LINE_BYTES:
+            raise InputError(path, lines_before + 1, too_long)
+        parts.append(chunk)
+
+
+def _cells(path, lineno: int, text: str, delimiter: str) -> list[str]:
+    """One line's fields; the csv module's own refusals (a field over its size limit, a stray
+    quote in strict mode) as one line naming the line."""
+    try:
+        return next(csv.reader([text], delimiter=delimiter, skipinitialspace=delimiter == " "))
+    except csv.Error as exc:
+        raise InputError(path, lineno, f"not a CSV row: {exc}") from None
+
+
 def _open_text(path) -> tuple[list[str], int]:
     """The file's lines (no line ends) and nothing else; InputError for what is not text."""
     try:
         with open(path, "rb") as f:
-            data = f.read()
+            data = _read_bounded(f, path)
     except FileNotFoundError:
         raise InputError(path, None, "no such file") from None
     except IsADirectoryError:
@@ -63,9 +106,6 @@ def _open_text(path) -> tuple[list[str], int]:
         raise InputError(path, None, "permission denied") from None
     except OSError as exc:
         raise InputError(path, None, f"cannot open: {exc.strerror or exc}") from None
-    if b"\0" in data:
-        line = data[: data.index(b"\0")].count(b"\n") + 1
-        raise InputError(path, line, "NUL byte: binary data, not a CSV file")
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     try:
@@ -123,7 +163,7 @@ def _rows(
         text = lines[i]
         if not text.strip() or text.lstrip().startswith("#"):
             continue
-        cells = next(csv.reader([text], delimiter=delimiter, skipinitialspace=delimiter == " "))
+        cells = _cells(path, i + 1, text, delimiter)
         if len(cells) != ncols:
             raise InputError(path, i + 1, f"{len(cells)} fields where the header has {ncols}")
         for target, j in cols.items():
@@ -288,7 +328,7 @@ def read_plain(
     if hi is None:
         raise InputError(path, 1, "empty file: no header row")
     delimiter = _sniff_delimiter(lines[hi])
-    header = [c.strip() for c in next(csv.reader([lines[hi]], delimiter=delimiter, skipinitialspace=delimiter == " "))]
+    header = [c.strip() for c in _cells(path, hi + 1, lines[hi], delimiter)]
     if all(_NUMBER.fullmatch(c) for c in header if c):
         raise InputError(
             path,
