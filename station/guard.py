@@ -42,11 +42,12 @@ def _data_line(capture, row: int) -> int | None:
     return capture.header_line + 1 + int(row)
 
 
-def check_extremes(capture) -> None:
+def check_extremes(capture, columns: bool = True) -> None:
     """Refuse numbers beyond ``MAX_ABS`` and a time axis that does not advance.
 
     InputError ``file:line: column 'ax': 1e+200 is beyond ...``; the first offending row
-    in file order is named.
+    in file order is named. ``columns``: also :func:`check_columns` (the procedure's measured
+    columns; False for a command that reads whichever sensors are there, such as ``noise``).
     """
     first: tuple[int, str, float] | None = None
     for name, col in capture.columns.items():
@@ -81,7 +82,8 @@ def check_extremes(capture) -> None:
         positive = steps[steps > 0]
         if positive.size and not np.isfinite(positive.min() / max(abs(t[0]), abs(t[-1]))):
             raise InputError(capture.path, _data_line(capture, 0), "column 't': the time axis cannot be resolved")
-    check_columns(capture)
+    if columns:
+        check_columns(capture)
 
 
 def _procedure_module(capture):

@@ -87,3 +87,74 @@ def test_import_of_a_good_file_still_reads_every_row(tmp_path):
     from station.capture import read_capture
 
     assert read_capture(out).n_rows == 400
+
+
+# --- station noise ---------------------------------------------------------------------------
+
+MPU_STATIC = ("mpu6050_unc", "mpu6050_unc_static_test.capture.csv")  # gyro and accel in counts
+
+
+def _with_meta(src, dst, key_value: str, after: str = "# gyro_unit: counts\n"):
+    text = src.read_text()
+    assert after in text
+    dst.write_text(text.replace(after, after + f"# {key_value}\n", 1))
+    return dst
+
+
+def test_noise_refuses_numbers_no_instrument_reports_naming_line_and_column(tmp_path, shared_data):
+    src = shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv"
+    lines = src.read_text().splitlines(True)[:1200]
+    k = next(i for i, line in enumerate(lines) if line.startswith("t,")) + 5
+    cells = lines[k].split(",")
+    cells[4] = "1e308"  # gx
+    lines[k] = ",".join(cells)
+    bad = tmp_path / "huge.csv"
+    bad.write_text("".join(lines))
+    _one_line_refusal(run_station("noise", bad, "--json"), f"{bad}:{k + 1}:", "column 'gx'", "beyond")
+
+
+def test_noise_refuses_a_time_axis_that_does_not_advance(tmp_path, shared_data):
+    src = shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv"
+    lines = src.read_text().splitlines(True)[:1200]
+    h = next(i for i, line in enumerate(lines) if line.startswith("t,"))
+    lines[h + 1 :] = ["0" + line[line.index(",") :] for line in lines[h + 1 :]]
+    bad = tmp_path / "frozen.csv"
+    bad.write_text("".join(lines))
+    _one_line_refusal(run_station("noise", bad, "--json"), f"{bad}:", "does not advance")
+
+
+def test_noise_refusal_names_the_file(shared_data):
+    src = shared_data.joinpath(*MPU_STATIC)
+    _one_line_refusal(run_station("noise", src, "--json"), f"{src}: ", "gyro_counts_per_deg_s")
+
+
+def test_noise_of_gyro_counts_uses_the_nominal_scale_the_procedures_read(tmp_path, shared_data):
+    """The MPU-6050 record in counts with its nominal 131 counts per °/s (the scale P4 reads)
+    gives the figures of the same record converted to °/s by hand (two routes, one answer),
+    and a noise density of the datasheet's order (InvenSense PS-MPU-6000A-00 rev 3.4: rate
+    noise spectral density 0.005 °/s/√Hz typical; the board's filter setting moves it, so a
+    factor 3 either way, where a missing scale would be 131 times off)."""
+    import json
+
+    import numpy as np
+
+    from station.capture import Capture, read_capture, write_capture
+
+    src = shared_data.joinpath(*MPU_STATIC)
+    counts = _with_meta(src, tmp_path / "counts.csv", "gyro_counts_per_deg_s: 131")
+    res = run_station("noise", counts, "--json")
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(res.stdout)
+    assert any("131" in n for n in doc["notes"])
+    cap = read_capture(src)
+    cols = {k: np.asarray(v) for k, v in cap.columns.items()}
+    for c in ("gx", "gy", "gz"):
+        cols[c] = cols[c] / 131.0
+    meta = dict(cap.meta, gyro_unit="deg/s")
+    by_hand = tmp_path / "degs.csv"
+    write_capture(by_hand, Capture(meta, cols))
+    ref = json.loads(run_station("noise", by_hand, "--json").stdout)
+    np.testing.assert_allclose(doc["sensors"]["gyro"]["noise_density"], ref["sensors"]["gyro"]["noise_density"], 1e-6)
+    datasheet_rad = np.radians(0.005)
+    nd = np.asarray(doc["sensors"]["gyro"]["noise_density"])
+    assert np.all((nd > datasheet_rad / 3) & (nd < datasheet_rad * 3)), nd

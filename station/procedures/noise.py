@@ -137,33 +137,62 @@ SENSORS = {"gyro": (("gx", "gy", "gz"), "gyro_unit"), "accel": (("ax", "ay", "az
 SI_UNIT = {"gyro": "rad/s", "accel": "m/s^2"}
 
 
+def _factor(capture, kind: str, unit_key: str) -> tuple[float | None, str]:
+    """SI factor of a sensor's columns and how it was found: the unit, or for gyro counts the
+    nominal ``gyro_counts_per_rad_s`` / ``gyro_counts_per_deg_s`` the procedures also read."""
+    unit = capture.meta.get(unit_key)
+    k = si_factor(kind, unit)
+    if k is None and kind == "gyro" and unit == "counts":
+        per_rad = capture.float_meta("gyro_counts_per_rad_s")
+        per_deg = capture.float_meta("gyro_counts_per_deg_s")
+        if per_rad and per_rad > 0:
+            return 1.0 / per_rad, f"gyro in counts: nominal {per_rad:g} counts per rad/s"
+        if per_deg and per_deg > 0:
+            return math.radians(1.0) / per_deg, f"gyro in counts: nominal {per_deg:g} counts per °/s"
+    if k is None:
+        why = f"{unit_key} {unit or 'unknown'!r} has no physical factor"
+        if kind == "gyro" and unit == "counts":
+            why += " (give gyro_counts_per_deg_s in the metadata)"
+        return None, why
+    return k, ""
+
+
 def imu_noise(capture) -> dict:
     """Allan analysis of each sensor of a still time-series capture (solvers.allan.noise_fit).
 
     Returns {"sample_rate_hz", "duration_s", "sensors": {"gyro"|"accel": NoiseFit in SI}}. Raises
-    ValueError (one line) when the capture has no usable sensor: not a time series, raw
-    units without a physical factor, under 100 rows, no rate.
+    UnsupportedError (one line, naming the file) when the capture has no usable sensor: not a
+    time series, raw units without a physical factor, under 100 rows, no rate; InputError for
+    numbers no instrument produces or a time axis that does not advance (station.guard).
     """
     from station.errors import UnsupportedError
+    from station.guard import check_extremes
 
+    where = f"{capture.path}: " if capture.path else ""
     if not capture.is_time_series:
-        raise UnsupportedError("a table of averages has no noise to analyse: give a still time-series recording")
+        raise UnsupportedError(
+            f"{where}a table of averages has no noise to analyse: give a still time-series recording"
+        )
+    check_extremes(capture, columns=False)
     rate = capture.float_meta("sample_rate_hz")
     t = capture.columns["t"]
     if rate is None and len(t) > 2:
         step = float(np.median(np.diff(t)))
         rate = 1.0 / step if step > 0 else None
     if not rate or not math.isfinite(rate) or rate <= 0:
-        raise UnsupportedError("no sample rate: the capture has no sample_rate_hz and its t column does not advance")
-    out: dict = {"sample_rate_hz": float(rate), "sensors": {}, "skipped": {}}
+        raise UnsupportedError(
+            f"{where}no sample rate: the capture has no sample_rate_hz and its t column does not advance"
+        )
+    out: dict = {"sample_rate_hz": float(rate), "sensors": {}, "skipped": {}, "notes": []}
     for kind, (cols, unit_key) in SENSORS.items():
         if not all(c in capture.columns for c in cols):
             continue
-        unit = capture.meta.get(unit_key)
-        k = si_factor(kind, unit)
+        k, how = _factor(capture, kind, unit_key)
         if k is None:
-            out["skipped"][kind] = f"{unit_key} {unit or 'unknown'!r} has no physical factor"
+            out["skipped"][kind] = how
             continue
+        if how:
+            out["notes"].append(how)
         y = np.column_stack([capture.columns[c] for c in cols]) * k
         y = y[np.all(np.isfinite(y), axis=1)]
         if len(y) < 100:
@@ -173,7 +202,7 @@ def imu_noise(capture) -> dict:
         out["duration_s"] = len(y) / rate
     if not out["sensors"]:
         why = "; ".join(f"{k}: {v}" for k, v in out["skipped"].items()) or "no gx gy gz or ax ay az columns"
-        raise UnsupportedError(f"no gyro or accelerometer to analyse ({why})")
+        raise UnsupportedError(f"{where}no gyro or accelerometer to analyse ({why})")
     return out
 
 
@@ -201,6 +230,8 @@ def noise_json(result: dict) -> dict:
             "adev_lo_68": f.adev_lo.T.tolist(),
             "adev_hi_68": f.adev_hi.T.tolist(),
         }
+    if result.get("notes"):
+        doc["notes"] = list(result["notes"])
     return doc
 
 
