@@ -28,6 +28,25 @@ from station.importers.options import primary as primary_kind
 from station.procedures import registry
 
 KINDS = ("accel", "gyro", "mag")
+
+FRD = "x forward, y right, z down"  # PX4's, ArduPilot's and MAVLink's vehicle body frame
+_FRD_WORDS = {(0, 1): "forward", (0, -1): "back", (1, 1): "right", (1, -1): "left", (2, 1): "down", (2, -1): "up"}
+
+
+def frame_in_frd(R) -> str | None:
+    """The capture's ``frame`` metadata (where its x, y and z point on the vehicle, read by P4)
+    for data whose axes reach the FRD body frame through ``R`` (body ← data); None when R does
+    not map axes onto axes."""
+    out = []
+    for j, axis in enumerate("xyz"):
+        col = np.asarray(R, dtype=float)[:, j]
+        i = int(np.argmax(np.abs(col)))
+        if abs(abs(col[i]) - 1.0) > 1e-6:
+            return None
+        out.append(f"{axis} {_FRD_WORDS[(i, 1 if col[i] > 0 else -1)]}")
+    return ", ".join(out)
+
+
 COLUMNS = {
     "accel": ("ax", "ay", "az"),
     "gyro": ("gx", "gy", "gz"),

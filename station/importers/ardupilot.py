@@ -32,7 +32,7 @@ import struct
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import Imported, Stream, fmt_param, iso_utc
+from station.importers._common import FRD, Imported, Stream, fmt_param, iso_utc
 
 PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
@@ -234,7 +234,8 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             temps if kind == "accel" else None,
         )
         streams[kind] = stream
-    meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true"}
+    # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
+    meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
     warnings = []
     if late:
         meta["params_changed"] = ",".join(sorted(late))
@@ -437,6 +438,8 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     if firmware:
         meta["firmware"] = firmware
     meta["corrected"] = "false" if (name == "RAW_IMU" and firmware != "ardupilot") else "true"
+    if meta["corrected"] == "true":  # scaled and rotated to the body frame: MAVLink's FRD
+        meta["frame"] = FRD
     if board_uid:
         meta["board_uid"] = str(board_uid)
     if arrivals[name] > 946684800:  # the ground station's clock (UTC) when the first sample came

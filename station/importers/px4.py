@@ -27,7 +27,7 @@ import io
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import Imported, Stream, fmt_param, iso_utc
+from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, iso_utc
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
@@ -246,11 +246,41 @@ def read(
         meta["board_uid"] = uid
     if info.get("ver_sw"):
         meta["firmware_version"] = str(info.get("ver_sw_branch") or info["ver_sw"])
+    frame = FRD if meta["corrected"] == "true" else _board_frame(params, streams)
+    if frame:
+        meta["frame"] = frame
     _place_and_date(ulog, t0_us, meta)
     for name in sorted(params):
         if name.startswith(PARAM_PREFIXES):
             meta[f"param.{name}"] = fmt_param(params[name])
     return Imported(streams, meta, warnings)
+
+
+def _board_frame(params: dict, streams: dict) -> str | None:
+    """Where the raw topics' axes point on the vehicle: the board frame reaches the FRD body frame
+    through ``CAL_*n_ROT`` (an external sensor, ≥ 0) or ``SENS_BOARD_ROT`` (an internal one;
+    ``Correct()``, src/lib/sensor_calibration). None when the rotation is not in the log, not a
+    listed one, or not the same for the accelerometer and the gyro. The level adjustment
+    ``SENS_BOARD_*_OFF`` (a few degrees) is left out: P4 measures the tilt itself."""
+    from station.errors import UnsupportedError
+    from station.firmware_export import rotation_matrix
+
+    frames = set()
+    for kind in ("accel", "gyro"):
+        s = streams.get(kind)
+        if s is None:
+            continue
+        rot = params.get(f"{CAL_PREFIX[kind]}{s.instance}_ROT") if s.instance is not None else None
+        name = f"{CAL_PREFIX[kind]}{s.instance}_ROT"
+        if rot is None or rot < 0:
+            rot, name = params.get("SENS_BOARD_ROT"), "SENS_BOARD_ROT"
+        if rot is None:
+            return None
+        try:
+            frames.add(frame_in_frd(rotation_matrix("px4", rot, name, "px4")))
+        except UnsupportedError:
+            return None
+    return frames.pop() if len(frames) == 1 else None
 
 
 def default_device(imported: Imported, kind: str) -> str | None:
