@@ -15,7 +15,7 @@ import sys
 import warnings
 
 from station import __version__
-from station.errors import StationError
+from station.errors import StationError, take_deferred_warnings
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
@@ -96,10 +96,16 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings(), _safe_streams(args):
         if not debug:  # numerics' RuntimeWarnings are not the operator's business: results carry warnings
             warnings.simplefilter("ignore", RuntimeWarning)
+        take_deferred_warnings()  # none from an earlier main() in this process
         try:
-            return int(func(args) or 0)
+            status = int(func(args) or 0)
+            for where, w in take_deferred_warnings():
+                print(f"station: {where}: warning: {w}", file=sys.stderr)
+            return status
         except StationError as exc:
-            print(f"station: {exc}", file=sys.stderr)
+            held = take_deferred_warnings()
+            also = "".join(f"; warning: {w}" for _, w in held)
+            print(f"station: {exc}{also}", file=sys.stderr)
             return exc.exit_status
         except KeyboardInterrupt:
             print("station: interrupted", file=sys.stderr)
@@ -110,9 +116,10 @@ def main(argv: list[str] | None = None) -> int:
             if debug:
                 raise
             where = getattr(args, "file", None) or getattr(args, "command", None) or "station"
+            also = "".join(f"; warning: {w}" for _, w in take_deferred_warnings())
             print(
                 f"station: {where}: cannot process this input ({type(exc).__name__}: {exc}); "
-                "STATION_DEBUG=1 shows the traceback",
+                f"STATION_DEBUG=1 shows the traceback{also}",
                 file=sys.stderr,
             )
             return 2

@@ -27,3 +27,21 @@ class InputError(StationError):
 
 class UnsupportedError(StationError):
     """A valid capture that cannot support the procedure (too few positions, ...)."""
+
+
+# Warnings met while reading the input (an importer's "the raw topics hold 6 samples"), held until
+# the command ends: printed after a result, folded into the one error line of a refusal (an
+# error is one line on stderr, whatever was noticed before it).
+_deferred: list[tuple[str, str]] = []
+
+
+def defer_warning(where: str, text: str) -> None:
+    """Hold warning ``text`` about ``where`` (the file) until the command ends (station.cli.main)."""
+    _deferred.append((str(where), text))
+
+
+def take_deferred_warnings() -> list[tuple[str, str]]:
+    """The held (where, text) warnings, oldest first; the list is emptied."""
+    out = list(_deferred)
+    _deferred.clear()
+    return out

@@ -158,3 +158,28 @@ def test_noise_of_gyro_counts_uses_the_nominal_scale_the_procedures_read(tmp_pat
     datasheet_rad = np.radians(0.005)
     nd = np.asarray(doc["sensors"]["gyro"]["noise_density"])
     assert np.all((nd > datasheet_rad / 3) & (nd < datasheet_rad * 3)), nd
+
+
+# --- a log that warns, then cannot be calibrated ------------------------------------------------
+
+
+@pytest.mark.parametrize("command", ["calibrate", "diagnose", "inspect"])
+def test_a_warning_before_a_refusal_is_part_of_the_one_error_line(shared_data, command):
+    """A real CubeOrange log whose raw sensor topics were logged at 1 Hz: the importer warns
+    (sensor_combined holds more), then P4 refuses the 5 samples. The refusal stays one line
+    and carries the warning, which says what to do."""
+    log = shared_data / "px4_ulog" / "original" / "sample_log_small.ulg"
+    res = run_station(command, log, "--procedure", "gyro-drift", *(["--json"] if command != "inspect" else []))
+    if command == "inspect":  # inspect succeeds: the warning comes after the summary
+        assert res.returncode == 0, res.stderr
+        assert res.stderr.count("\n") == 1 and "warning: the raw sensor topics hold" in res.stderr
+        return
+    _one_line_refusal(res, f"{log}: ", "warning: the raw sensor topics hold 6 samples", "--source combined")
+
+
+def test_warnings_of_one_run_do_not_leak_into_the_next(shared_data, tmp_path):
+    log = shared_data / "px4_ulog" / "original" / "sample_log_small.ulg"
+    run_station("calibrate", log, "--procedure", "gyro-drift", "--json")
+    res = run_station("calibrate", tmp_path / "missing.csv")
+    _one_line_refusal(res, "no such file")
+    assert "warning:" not in res.stderr

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 from pathlib import Path
 
@@ -172,8 +171,11 @@ def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
 
 
 def load_for_command(args: argparse.Namespace) -> Capture:
-    """``calibrate FILE`` / ``diagnose FILE``: the capture; the reader's warnings on stderr."""
+    """``calibrate FILE`` / ``diagnose FILE``: the capture; the reader's warnings go to stderr
+    when the command ends (after its result, or inside its one error line)."""
+    from station.errors import defer_warning
+
     capture, warnings = load_capture(args.file, options_from_args(args))
     for w in warnings:
-        print(f"station: {args.file}: warning: {w}", file=sys.stderr)
+        defer_warning(args.file, w)
     return capture
