@@ -46,7 +46,8 @@ def test_a_real_px4_log_shows_what_it_holds_then_the_procedures_own_refusal(tmp_
     imported = load.read(log, ImportOptions(), "px4")
     cli = run_station("calibrate", log, "--procedure", "gyro-drift")
     assert cli.returncode == 2
-    refusal = cli.stderr.strip().splitlines()[-1].split(": ", 1)[1]  # past 'station: '
+    assert cli.stderr.count("\n") == 1  # one line: the refusal, then the reader's warning
+    refusal = cli.stderr.strip().split(": ", 1)[1].split("; warning: ")[0]  # past 'station: ', before the warning
 
     async def story():
         app = make_app(str(tmp_path / "s.db"))
