@@ -81,6 +81,25 @@ def default_db_path() -> str:
     return os.path.join(base, "station", "station.db")
 
 
+SQLITE_MAGIC = b"SQLite format 3\x00"  # the first 16 bytes of every SQLite 3 database file
+
+
+def _refuse_non_sqlite(path: str) -> None:
+    """sqlite3.DatabaseError for an existing non-empty file that is not an SQLite database.
+
+    SQLite itself takes a file shorter than its 100-byte header for an empty database and
+    writes a new one over it: a one-byte text file given as the database was replaced."""
+    if path.startswith("file:") or not os.path.isfile(path):
+        return
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(SQLITE_MAGIC))
+    except OSError:
+        return  # sqlite3.connect says why
+    if head and head != SQLITE_MAGIC:
+        raise sqlite3.DatabaseError("file is not a database (not SQLite: left as it is)")
+
+
 def _loads(text, default=None):
     if text is None:
         return default
@@ -100,6 +119,7 @@ class Store:
         self.path = os.fspath(path)
         memory = self.path == ":memory:" or self.path.startswith("file::memory:")
         if not memory:
+            _refuse_non_sqlite(self.path)
             parent = os.path.dirname(os.path.abspath(self.path))
             os.makedirs(parent, exist_ok=True)
         self._lock = threading.RLock()

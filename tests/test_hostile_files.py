@@ -183,3 +183,28 @@ def test_warnings_of_one_run_do_not_leak_into_the_next(shared_data, tmp_path):
     res = run_station("calibrate", tmp_path / "missing.csv")
     _one_line_refusal(res, "no such file")
     assert "warning:" not in res.stderr
+
+
+# --- --db that is not a database ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("content", [b"", b"x", b"notes\n", b"device,interval\nIMU-1,365\n"])
+@pytest.mark.parametrize("command", [["devices", "list"], ["due"], ["verify"], ["history", "IMU-1"]])
+def test_a_reading_command_leaves_a_file_that_is_no_database_as_it_was(tmp_path, content, command):
+    """SQLite takes a file shorter than its 100-byte header for an empty database and writes
+    one over it: `station due --db notes.txt` replaced a one-line text file and said "nothing
+    due"; an empty file became a database the same way."""
+    path = tmp_path / "notes.txt"
+    path.write_bytes(content)
+    res = run_station(*command, "--db", path)
+    _one_line_refusal(res, str(path))
+    assert path.read_bytes() == content
+
+
+def test_saving_into_a_short_text_file_leaves_it_as_it_was(tmp_path, shared_data):
+    path = tmp_path / "notes.txt"
+    path.write_bytes(b"x")
+    cap = shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv"
+    res = run_station("calibrate", cap, "--save", "--override", "test", "--db", path)
+    _one_line_refusal(res, str(path), "not a database")
+    assert path.read_bytes() == b"x"

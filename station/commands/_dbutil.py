@@ -32,6 +32,8 @@ def require_existing(path: str) -> None:
         )
     if os.path.isdir(path):
         raise InputError(path, None, "is a directory, not a station database")
+    if os.path.isfile(path) and os.path.getsize(path) == 0:  # SQLite would make it a database
+        raise InputError(path, None, "empty file, not a station database (mistyped --db or $STATION_DB?)")
 
 
 @contextmanager
