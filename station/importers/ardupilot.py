@@ -51,7 +51,17 @@ DF_DEFAULT = {
     "mag": "mgauss",
 }  # ArduPilot LogStructure IMU/MAG
 GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06T00:00:00Z
-GPS_LEAP_S = 18.0  # GPS − UTC since 2017-01-01
+# GPS − UTC [s] from each leap second on (IERS Bulletin C), keyed by GPS seconds since the GPS
+# epoch (UTC 1999-01-01, 2006-01-01, 2009-01-01, 2012-07-01, 2015-07-01, 2017-01-01)
+_GPS_LEAPS = ((599184013.0, 13.0), (820108814.0, 14.0), (914803215.0, 15.0), (1025136016.0, 16.0),
+              (1119744017.0, 17.0), (1167264018.0, 18.0))  # fmt: skip
+
+
+def gps_minus_utc_s(gps_s: float) -> float:
+    """GPS − UTC at ``gps_s`` seconds after the GPS epoch (leap seconds up to 2017-01-01)."""
+    return next((leap for start, leap in reversed(_GPS_LEAPS) if gps_s >= start), _GPS_LEAPS[0][1])
+
+
 MAV_AUTOPILOT = {3: "ardupilot", 12: "px4"}
 # pymavlink's unit strings → capture units (per sensor: 'mG' is milli-g in MAVLink)
 MAV_UNITS = {
@@ -165,7 +175,8 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 continue
             first_ofs = min(first_ofs, int(c["_offset"][keep][0]))
             fmt = log.formats[log.name_to_id[name]]
-            t_us = c["TimeUS"][keep].astype(np.float64)
+            # TimeUS: µs since boot; logs before ArduPilot 3.3 (2015) have TimeMS, ms since boot
+            t_us = c["TimeUS"][keep].astype(np.float64) if "TimeUS" in c else c["TimeMS"][keep] * 1000.0
             fields = {
                 "gyro": ("GyrX", "GyrY", "GyrZ"),
                 "accel": ("AccX", "AccY", "AccZ"),
@@ -186,14 +197,15 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                     late.add(pname)
         if cols["GPS"] is not None:
             c = cols["GPS"]
+            if "TimeUS" not in c and "T" in c and "Week" in c:  # before 3.3: TimeMS = GPS ms of week, T = boot ms
+                c = dict(c, TimeUS=c["T"] * 1000.0, GWk=c["Week"], GMS=c["TimeMS"])
             keys = [k for k in ("TimeUS", "Status", "GWk", "GMS", "Lat", "Lng", "Alt") if k in c]
             for values in zip(*(c[k].tolist() for k in keys)):
                 d = dict(zip(keys, values))
                 _df_gps(d, fixes)
-                if gps_utc_offset is None and d.get("GWk") and d.get("Status", 0) >= 3:
-                    gps_utc_offset = (
-                        GPS_EPOCH_UNIX_S + d["GWk"] * 604800.0 + d["GMS"] * 1e-3 - GPS_LEAP_S - d["TimeUS"] * 1e-6
-                    )
+                if gps_utc_offset is None and d.get("GWk") and d.get("Status", 0) >= 3 and "TimeUS" in d:
+                    gps_s = d["GWk"] * 604800.0 + d["GMS"] * 1e-3
+                    gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         first_us = float(min(r[0, 0] for r in rows.values())) if rows else None
     except InputError:
         raise
