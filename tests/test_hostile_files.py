@@ -208,3 +208,16 @@ def test_saving_into_a_short_text_file_leaves_it_as_it_was(tmp_path, shared_data
     res = run_station("calibrate", cap, "--save", "--override", "test", "--db", path)
     _one_line_refusal(res, str(path), "not a database")
     assert path.read_bytes() == b"x"
+
+
+def test_noise_of_a_record_with_motion_says_so(shared_data):
+    """The full-sphere compass turn (half of it moving) gave Allan figures with no word that
+    they are not the sensor's noise; the real still records of the same board give none."""
+    import json
+
+    turn = json.loads(
+        run_station("noise", shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv", "--json").stdout
+    )
+    assert any("of the record moves" in w for w in turn.get("warnings", [])), turn.get("warnings")
+    still = run_station("noise", shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv", "--json")
+    assert "warnings" not in json.loads(still.stdout)

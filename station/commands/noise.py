@@ -79,6 +79,7 @@ def _text(result: dict) -> str:
         w = random_walk_warning(f, kind)
         if w:
             out.append(f"warning: {w}")
+    out.extend(f"warning: {w}" for w in result.get("warnings", []))
     out.extend(f"note: {n}" for n in result.get("notes", []))
     for kind, why in result.get("skipped", {}).items():
         out.append(f"{kind}: not analysed ({why})")

@@ -203,7 +203,41 @@ def imu_noise(capture) -> dict:
     if not out["sensors"]:
         why = "; ".join(f"{k}: {v}" for k, v in out["skipped"].items()) or "no gx gy gz or ax ay az columns"
         raise UnsupportedError(f"{where}no gyro or accelerometer to analyse ({why})")
+    moving = _moving_share(capture)
+    if moving is not None and moving > MOVING_SHARE_WARN:
+        out["warnings"] = [
+            f"{moving:.0%} of the record moves (stillness detection): the Allan deviation of a record with motion "
+            "is not the sensor's noise; record with the unit at rest"
+        ]
     return out
+
+
+# Share of moving samples above which the figures are said not to be the sensor's noise. The
+# stillness detector (solvers.stillness) finds every sample of the real still records in
+# ../shared/data (MPU-6050, sunsided) at rest; a full-sphere turn record is half moving.
+MOVING_SHARE_WARN = 0.01
+
+
+def _moving_share(capture) -> float | None:
+    """The share of rows the stillness detector does not find at rest; None without an
+    accelerometer (it detects motion from the accelerometer's variance) or when it fails."""
+    from solvers.errors import SolverError
+    from solvers.stillness import detect_static_intervals
+
+    if not all(c in capture.columns for c in ("ax", "ay", "az")):
+        return None
+    accel = np.column_stack([capture.columns[c] for c in ("ax", "ay", "az")])
+    gyro = (
+        np.column_stack([capture.columns[c] for c in ("gx", "gy", "gz")])
+        if all(c in capture.columns for c in ("gx", "gy", "gz"))
+        else None
+    )
+    try:
+        st = detect_static_intervals(capture.columns["t"], accel, gyro, nan_policy="omit")
+    except (SolverError, ValueError):
+        return None
+    still = sum(iv.stop - iv.start for iv in st.intervals)
+    return 1.0 - still / len(accel)
 
 
 def noise_json(result: dict) -> dict:
@@ -232,6 +266,8 @@ def noise_json(result: dict) -> dict:
         }
     if result.get("notes"):
         doc["notes"] = list(result["notes"])
+    if result.get("warnings"):
+        doc["warnings"] = list(result["warnings"])
     return doc
 
 
