@@ -140,4 +140,6 @@ def test_a_dataflash_log_goes_on_to_results_and_to_a_diagnosis(tmp_path):
         np.testing.assert_array_equal(got.columns[name], want.columns[name])
     assert "P4" in out["title"] or "drift" in out["title"].lower()
     mean = np.mean(np.asarray(gyros, dtype=np.float64), axis=0)
-    np.testing.assert_allclose(out["result"]["params"]["drift"], mean, rtol=0, atol=1e-9)
+    # on the log's own axes (x forward, y right, z down); in P4's frame (x forward, y up, z right)
+    np.testing.assert_allclose(out["result"]["drift_raw"]["value"], mean, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out["result"]["params"]["drift"], [mean[0], -mean[2], mean[1]], rtol=0, atol=1e-9)
