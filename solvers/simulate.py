@@ -656,17 +656,19 @@ def simulate_ldv(
     beam_noise_mps: float = 0.01,
     ref_noise_mps: float = 0.005,
     site: dict | None = None,
+    cruise_mps: float = 10.0,
 ) -> Simulation:
     """P5: a vehicle with INS/DGPS and a three-beam LDV; ``maneuver`` 'varied' (turns,
     hills, braking: body velocity directions spread) or 'straight' (the ill-conditioned
-    case the source warns of); ``reference`` 'body' (vx vy vz) or 'nav' (vn ve vd + attitude)."""
+    case the source warns of); ``reference`` 'body' (vx vy vz) or 'nav' (vn ve vd + attitude);
+    ``cruise_mps`` the mean forward speed (the drive varies it by ±8 m/s)."""
     effects = _check_effects("ldv", effects)
     rng = np.random.default_rng(seed)
     site = dict(DEFAULT_SITE, **(site or {}))
     n = int(round(duration_s * rate_hz))
     t = np.arange(n) / rate_hz
     ph = rng.uniform(0, 2 * np.pi, size=6)
-    fwd = 10.0 + 6.0 * np.sin(2 * np.pi * t / 97.0 + ph[0]) + 2.0 * np.sin(2 * np.pi * t / 23.0 + ph[1])
+    fwd = cruise_mps + 6.0 * np.sin(2 * np.pi * t / 97.0 + ph[0]) + 2.0 * np.sin(2 * np.pi * t / 23.0 + ph[1])
     if maneuver == "straight":
         lat_v = 0.01 * np.sin(2 * np.pi * t / 31.0 + ph[2])
         vert_v = 0.01 * np.sin(2 * np.pi * t / 41.0 + ph[3])

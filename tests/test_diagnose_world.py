@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from solvers.simulate import simulate
 from station.capture import Capture, write_capture
@@ -160,3 +161,58 @@ def test_compass_nine_holds_null_names_nothing(tmp_path, capsys):
         rc, out = _run(capsys, "diagnose", path, "--json")
         assert rc == 0
         assert json.loads(out)["verdict"] == [], seed
+
+
+def _ldv_drive(seed, tmp_path, kind, size):
+    """A 25 m/s drive (speed ±8 m/s: a scale in temperature is 0.98 correlated with a bias in
+    temperature) with a temperature cycle drawn here, and ``kind`` ('scale' or 'bias', per °C)
+    put on the beams with per-beam coefficients drawn here, never passed to the code."""
+    rng = np.random.default_rng(seed)
+    sim = simulate("ldv", seed=seed, duration_s=600.0, cruise_mps=25.0)
+    t = np.asarray(sim.columns["t"], float)
+    cycles, phase = rng.uniform(1.3, 2.2), rng.uniform(0, 2 * np.pi)
+    temp = 20.0 + rng.uniform(3, 5) * np.sin(2 * np.pi * cycles * t / t[-1] + phase)
+    temp = np.round(temp + rng.normal(scale=0.02, size=len(t)), 3)
+    k = rng.choice([-1.0, 1.0], 3) * rng.uniform(0.5, 1.0, 3) * size
+    cols = {c: np.array(v, copy=True) for c, v in sim.columns.items()}
+    cols["temp_c"] = temp
+    for j in range(3):
+        c = f"vl{j + 1}"
+        if kind == "scale":
+            cols[c] = cols[c] * (1.0 + k[j] * (temp - temp.mean()))
+        else:
+            cols[c] = cols[c] + k[j] * (temp - temp.mean())
+    p = tmp_path / f"ldv_{kind}_{seed}.csv"
+    write_capture(str(p), Capture(meta=dict(sim.meta), columns=cols))
+    return str(p), k, temp
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_ldv_scale_in_temperature_is_named_outside_the_library(tmp_path, capsys, seed):
+    """An LDV scale factor linear in temperature (up to 8e-5 /°C): ``temperature_bias`` fits
+    most of it (a bias in temperature at a nearly steady speed, correlation ≈ 0.98), the
+    generic scale in temperature fits it clearly better and is named ``residual:temperature``
+    instead, with each forward beam's coefficient recovered within its uncertainty."""
+    path, k, temp = _ldv_drive(seed, tmp_path, "scale", 8e-5)
+    rc, out = _run(capsys, "diagnose", path, "--json")
+    assert rc == 0
+    res = json.loads(out)
+    assert res["verdict"] == ["residual:temperature"], res["verdict"]
+    e = res["effects"][0]
+    assert e["params"]["acts_on"] == "scale" and e["gain"] > 0
+    # the basis is (T − T_min)/span − 1/2 times each beam's nominal output: bR = k · span
+    span = float(temp.max() - temp.min())
+    bR, s = np.asarray(e["params"]["bR"], float)[0], np.asarray(e["uncertainty"]["bR"], float)[0]
+    for j in (0, 1):  # the forward-looking beams (the third sees little of the forward speed)
+        assert abs(bR[j] / span - k[j]) < 4 * s[j] / span, (j, bR[j] / span, k[j], s[j] / span)
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_ldv_bias_in_temperature_stays_the_library_name(tmp_path, capsys, seed):
+    """The same drives with a bias linear in temperature instead: the library's name, no
+    ``residual:`` (the generic scale does not take what the library explains)."""
+    path, _, _ = _ldv_drive(seed, tmp_path, "bias", 1e-3)
+    rc, out = _run(capsys, "diagnose", path, "--json")
+    assert rc == 0
+    verdict = json.loads(out)["verdict"]
+    assert "temperature_bias" in verdict and not any(v.startswith("residual:") for v in verdict), verdict

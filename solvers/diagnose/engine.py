@@ -54,6 +54,9 @@ RIVAL_CORR = 0.8  # |corr| of two candidates' fitted signatures above this: comp
 MAX_FOLDS = 10
 ALPHA = 0.05  # family-wise level the per-candidate deviance quantiles start from
 MIN_DOF = 3  # an extension must leave this many degrees of freedom
+# a generic term displaces library effects whose columns hold most (> CONFUSION_CORR) of its
+# signature only when its model's BIC is lower by this much (χ²₁(0.95)): a clearly better fit
+DISPLACE_MARGIN = 3.84
 
 
 @dataclass
@@ -1020,10 +1023,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     gens = generic_candidates(problem)
     m_gen = sum(len(item[1]) if item[0] == "scan" else 1 for item in gens)  # every basis tried is a test
 
-    def generic_round(state, free, named, ranked=False):
+    def generic_round(state, free, named, ranked=False, allow=frozenset()):
         """The best generic candidate that passes against the model at ``state`` and that no
         library candidate (other than ``named``) explains: (eval, correlations, held-out RMS) or None;
-        ``ranked``: every such candidate, best first (a list).
+        ``ranked``: every such candidate, best first (a list); ``allow``: library candidates whose
+        correlation with it does not rule it out (the ones it may displace on a better fit).
         "Far from noise along a driver" is what this test asks, every basis counted: a
         portmanteau test first would miss slow structure (a drift, a long period)."""
         r0 = _weighted(problem, state)
@@ -1090,7 +1094,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             for name, P in lib:
                 proj = P @ (P.T @ best.sig)
                 corr[name] = float(np.linalg.norm(proj) / nb) if nb > 0 else 0.0
-            if not any(v > CONFUSION_CORR for v in corr.values()):
+            if not any(v > CONFUSION_CORR for name, v in corr.items() if name not in allow):
                 out.append((best, corr, cv_g))
         if ranked:
             return out
@@ -1130,7 +1134,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             # effects that still earn their place beside it, and it beside them
             # (each generic candidate that passes, best held-out RMS first, until one displaces them)
             flags = {k: dict(v) for k, v in entries.items()}
-            for res0 in generic_round(dict(base_params), dict(problem.free), set(), ranked=True):
+            # the library names given (picked or tied to a pick) may have stood in for it however
+            # correlated: it may displace them on a clearly better fit
+            held = {oc.cand.name for oc, _ in picked} | {c["name"] for _, e in picked for c in e["confused_with"]}
+            for res0 in generic_round(dict(base_params), dict(problem.free), set(), ranked=True, allow=held):
                 fit2, st2, fr2 = with_generic(res0[0], state, free)
                 picked2, fit2, st2, fr2 = prune(list(picked), fit2, extra=res0[0].cc, min_items=1)
                 # the generic term must pass against the library effects that remain
@@ -1152,7 +1159,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     )
                 # and the model it leaves must fit better than the library's (BIC): a drift is not
                 # replaced by a step that only approximates it
-                if ok and len(picked2) < len(picked) and model_bic(fit2, fr2) < model_bic(cur_fit, free):
+                # (clearly better, by DISPLACE_MARGIN, where a library effect held most of its signature)
+                margin = DISPLACE_MARGIN if any(res0[1].get(x, 0.0) > CONFUSION_CORR for x in held) else 0.0
+                if ok and len(picked2) < len(picked) and model_bic(fit2, fr2) + margin < model_bic(cur_fit, free):
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
                     # library effects it displaced are named with it (head to head, as for two candidates)
