@@ -1113,6 +1113,19 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             n
         )
 
+    def _beyond(cand_, fit_, free_) -> bool:
+        """Whether generic candidate ``cand_`` passes against the model ``fit_`` at one test's
+        level (F·χ²_k(1 − α)): structure the library effects in it leave unexplained."""
+        r0_ = fit_.weighted_residuals
+        J0_, _, _ = jacobian(problem, fit_.params, free_)
+        cand_.setup()
+        cc_ = _candidate_columns(problem, fit_.params, cand_, _orth(J0_), r0_)
+        if cc_.reason is not None:
+            return False
+        rr_ = _Rounds(J0_, r0_, sigma, fold_map, primary)
+        ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), typed_fit_term(r0_, types), types, n)
+        return _passes(problem, ev_, 1, rr_.cv0(cand_.folds), _gram_rank(J0_.T @ J0_), n)
+
     generic_effect = None
     generic_tied: list[dict] = []  # library effects the generic one displaced by a margin that is not decisive
     if gens:
@@ -1161,6 +1174,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 # replaced by a step that only approximates it
                 # (clearly better, by DISPLACE_MARGIN, where a library effect held most of its signature)
                 margin = DISPLACE_MARGIN if any(res0[1].get(x, 0.0) > CONFUSION_CORR for x in held) else 0.0
+                if ok and margin > 0:
+                    # and it explains what the library effects leave: it passes beside them (one test)
+                    ok = _beyond(res0[0].cc.cand, cur_fit, free)
                 if ok and len(picked2) < len(picked) and model_bic(fit2, fr2) + margin < model_bic(cur_fit, free):
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
