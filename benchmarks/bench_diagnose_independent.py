@@ -134,11 +134,7 @@ def _trial(args):
         r = G.RENDER[proc](sc, effect, size)
         try:
             out = _analyse(r.meta, r.columns)
-            tied = set()  # names the data could not tell from the hidden one (confused_with)
-            for e in out["effects"]:
-                group = {e["name"]} | {c["name"] for c in e["confused_with"]}
-                if effect in group:
-                    tied |= group
+            tied = G.tied_names(out, effect)  # names the data could not tell from the hidden one
             res.append({"verdict": out["verdict"], "size": size, "tied": sorted(tied - {effect})})
             if effect in G.UNLISTED[proc]:
                 bad = not any(v.startswith("residual:") for v in out["verdict"])

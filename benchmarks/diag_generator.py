@@ -836,6 +836,17 @@ RENDER = {
 }
 
 
+def tied_names(result: dict, name: str) -> set[str]:
+    """The names a diagnose result gives as indistinguishable from ``name`` (itself included):
+    every effect whose ``confused_with`` group holds it."""
+    out = {name}
+    for e in result["effects"]:
+        group = {e["name"]} | {c["name"] for c in e["confused_with"]}
+        if name in group:
+            out |= group
+    return out
+
+
 def applicable(sc: dict, effect: str) -> bool:
     """Whether a scenario can show the effect at all (its driver exists and varies)."""
     p = sc["procedure"]

@@ -43,16 +43,6 @@ def _scenario(procedure, rng, effect=None):
     raise AssertionError("no applicable scenario")
 
 
-def _tied(res: dict, name: str) -> set[str]:
-    """The names the report gives as indistinguishable from ``name`` (itself included)."""
-    out = {name}
-    for e in res["effects"]:
-        group = {e["name"]} | {c["name"] for c in e["confused_with"]}
-        if name in group:
-            out |= group
-    return out
-
-
 def test_deviance_quantile_is_the_exact_f_test_on_a_small_table():
     """Null regressions of 16 rows on 9 baseline columns, 3 candidate columns: the deviance
     ``n ln(RSS0/RSS1)`` exceeds the engine's quantile at the stated level; the χ² quantile
@@ -123,7 +113,7 @@ def test_centrifuge_hidden_input_effect_named_alone(tmp_path, capsys, seed):
     size, _ = G.size_for(sc, hidden, 10.0)
     res = _diagnose(tmp_path, G.RENDER["accel-centrifuge"](sc, hidden, size), capsys)
     assert hidden in res["verdict"], (hidden, res["verdict"], res["candidates"])
-    assert set(res["verdict"]) <= _tied(res, hidden), (hidden, res["verdict"])
+    assert set(res["verdict"]) <= G.tied_names(res, hidden), (hidden, res["verdict"])
 
 
 @pytest.mark.parametrize("seed", [621, 622])
@@ -162,4 +152,4 @@ def test_ldv_hidden_effect_named_alone(tmp_path, capsys, seed):
     size, _ = G.size_for(sc, hidden, 10.0)
     res = _diagnose(tmp_path, G.RENDER["ldv"](sc, hidden, size), capsys)
     assert hidden in res["verdict"], (hidden, res["verdict"], res["candidates"])
-    assert set(res["verdict"]) <= _tied(res, hidden), (hidden, res["verdict"])
+    assert set(res["verdict"]) <= G.tied_names(res, hidden), (hidden, res["verdict"])

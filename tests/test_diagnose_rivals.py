@@ -25,16 +25,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import diag_generator as G  # noqa: E402
 
 
-def _tied(res: dict, name: str) -> set[str]:
-    """The names the report gives as indistinguishable from ``name`` (itself included)."""
-    out = {name}
-    for e in res["effects"]:
-        group = {e["name"]} | {c["name"] for c in e["confused_with"]}
-        if name in group:
-            out |= group
-    return out
-
-
 def _diagnose_generated(tmp_path, capsys, procedure, hidden, seed) -> dict:
     """Diagnose a capture the generator draws from ``seed`` with ``hidden`` at 10σ."""
     rng = np.random.default_rng(seed)
@@ -62,7 +52,7 @@ def test_p1_input_effect_is_not_named_beside_its_rival_untied(tmp_path, capsys, 
     rival = next(x for x in ("quadratic", "scale_asymmetry") if x != hidden)
     res = _diagnose_generated(tmp_path, capsys, "accel-tabletop", hidden, seed)
     assert hidden in res["verdict"], (hidden, res["verdict"], res["candidates"])
-    assert rival not in res["verdict"] or rival in _tied(res, hidden), (hidden, res["verdict"], res["effects"])
+    assert rival not in res["verdict"] or rival in G.tied_names(res, hidden), (hidden, res["verdict"], res["effects"])
 
 
 def test_p4_drift_with_wander_is_not_replaced_by_a_step_untied(tmp_path, capsys):
@@ -72,7 +62,7 @@ def test_p4_drift_with_wander_is_not_replaced_by_a_step_untied(tmp_path, capsys)
     to it. (Seed 442000 named only ``residual:time`` before.)"""
     res = _diagnose_generated(tmp_path, capsys, "gyro-drift", "time_drift", 442000)
     assert "time_drift" in res["verdict"], (res["verdict"], res["candidates"])
-    assert set(res["verdict"]) <= _tied(res, "time_drift"), (res["verdict"], res["effects"])
+    assert set(res["verdict"]) <= G.tied_names(res, "time_drift"), (res["verdict"], res["effects"])
 
 
 def _linear_problem(rng, corr, sep, n=120):
