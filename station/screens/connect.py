@@ -361,11 +361,12 @@ class ConnectScreen(Screen):
                 store = s.open_store() or Store(s.db_path)
                 s.extra["_store"] = store
                 store.set_settings({k: s.extra.get(k, "") for k in LAB_FIELDS})
+                remembered = store.settings().get("site")
                 if site:
                     store.set_settings({"site": site_text(site)})
-                elif store.settings().get("site"):
+                elif remembered:
                     try:
-                        site = parse_site(store.settings()["site"])
+                        site = parse_site(remembered)
                     except ValueError:
                         site = None
                 known = store.get_device(device_id)
