@@ -10,6 +10,8 @@ import re
 import subprocess
 import sys
 
+import numpy as np
+
 from db import Store
 from station.app import make_app
 from station.sources import SimSource
@@ -422,3 +424,74 @@ def test_results_l_sets_the_devices_limits_and_judges_the_result_again(tmp_path)
     assert "NO TOLERANCE" in before and "FAIL" not in before
     assert "B[0] =" in after and "outside its limits 5 … 6" in after
     assert Store(db).get_device("IMU-7")["limits"] == {"B": [5.0, 6.0]}
+
+
+def _simulated_result(procedure: str, seed: int, **options):
+    from solvers.simulate import simulate
+    from station.calibrate import calibrate_capture
+    from station.capture import Capture
+
+    sim = simulate(procedure, seed=seed, **options)
+    cap = Capture(dict(sim.meta), {k: np.asarray(v) for k, v in sim.columns.items()})
+    return cap, calibrate_capture(cap)
+
+
+def test_limits_and_tolerances_are_shown_and_typed_in_the_units_results_shows(tmp_path):
+    """P4's drift is on Results in °/h: its limits editor showed and took rad/s (a limit typed
+    as 2000, meant as °/h, was stored as 2000 rad/s) and the FAIL reasons said rad/s beside
+    a table in °/h. Now one unit on the screen, typed in it, stored in rad/s (1 °/h =
+    π/648000 rad/s); the compass's soft iron alike as a ratio (uT/uT, stored nT per uT)."""
+    import math
+
+    from station.screens.results import ResultsScreen
+
+    db = str(tmp_path / "s.db")
+    deg_h = math.pi / 648000.0
+    cap, result = _simulated_result("gyro-drift", 401000, duration_s=60)
+    Store(db).add_device("G1", tolerances={"drift": 1.0 * deg_h}, limits={"drift": (-0.001, 0.001)})
+    previous = {"id": 1, "time": "2026-01-01T00:00:00Z", "params": dict(result["params"])}
+    previous["params"]["drift"] = [x - 5.0 * deg_h for x in result["params"]["drift"]]  # 5 °/h ago
+    mcap, mresult = _simulated_result("compass", 401001)
+    assert mresult["mag_unit"] == "uT"
+    Store(db).add_device("M1")
+
+    async def story():
+        app = make_app(db, device_id="G1")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, previous))
+            await wait_for(pilot, lambda: "FAIL" in text_of(app, "#summary"))
+            reasons = " ".join(text_of(app, "#summary").split())
+            await pilot.press("l")
+            await wait_for(pilot, lambda: screen_name(app) == "LimitsScreen" and "drift" in text_of(app, "#current"))
+            shown = text_of(app, "#current")
+            await pilot.press(*"drift=-2000:2000", "enter")
+            await wait_for(pilot, lambda: "stored" in text_of(app, "#said"))
+            said = text_of(app, "#said")
+            await wait_for(pilot, lambda: "-2000 … 2000" in text_of(app, "#current"))
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
+            app.session.device_id = "M1"
+            await app.push_screen(ResultsScreen(mcap, mresult, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            await pilot.press("l")
+            await wait_for(
+                pilot, lambda: screen_name(app) == "LimitsScreen" and "no limits" in text_of(app, "#current")
+            )
+            await pilot.press(*"soft_iron=0.9:1.1", "enter")
+            await wait_for(pilot, lambda: "soft_iron" in text_of(app, "#current"))
+            soft = text_of(app, "#current")
+        return reasons, shown, said, soft
+
+    reasons, shown, said, soft = asyncio.run(story())
+    assert "rad/s" not in reasons and "rad/s" not in shown
+    # 5 °/h changed against 1 °/h allowed; 0.001 rad/s is 206.265 °/h
+    assert re.search(r"drift\[0\] changed \+5(\.0+\d*)? °/h \(tolerance 1 °/h\)", reasons), reasons
+    outside = [i for i, x in enumerate(result["params"]["drift"]) if abs(x) > 0.001]
+    for i in outside:
+        assert f"drift[{i}] = " in reasons and "outside its limits -206.265 … 206.265 °/h" in reasons
+    assert "-206.265 … 206.265" in shown and "°/h" in shown
+    assert "drift = -2000 … 2000 °/h" in said
+    low, high = Store(db).get_device("G1")["limits"]["drift"]
+    assert math.isclose(high, 2000 * deg_h, rel_tol=1e-12) and math.isclose(low, -2000 * deg_h, rel_tol=1e-12)
+    assert "0.9 … 1.1" in soft and "uT/uT" in soft
+    assert Store(db).get_device("M1")["limits"]["soft_iron"] == [900.0, 1100.0]

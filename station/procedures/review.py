@@ -138,6 +138,53 @@ def display_unit(result: dict, name: str) -> tuple[float, str] | None:
     return float(f), unit.format(mag_unit=result.get("mag_unit") or "raw")
 
 
+def shown_value(result: dict, name: str, x):
+    """Stored value ``x`` of ``name`` in the unit the screens show (:func:`display_unit`)."""
+    disp = display_unit(result, name)
+    return x if disp is None else _scaled(x, disp[0])
+
+
+def stored_value(result: dict, name: str, x):
+    """A value of ``name`` typed in the unit the screens show, in its stored unit (the inverse
+    of :func:`shown_value`: what a limit or tolerance entered on a screen is stored as)."""
+    disp = display_unit(result, name)
+    return x if disp is None or not _finite(x) else x / disp[0]
+
+
+def shown_unit(result: dict, name: str) -> str:
+    """The unit the screens show ``name`` in: its display unit, else its stored unit."""
+    disp = display_unit(result, name)
+    return disp[1] if disp is not None else param_unit(result, name)
+
+
+def record_result(record: dict) -> dict:
+    """A stored calibration (``Store.history`` or ``Store.reference`` row) as the result
+    the unit functions read: its procedure, parameters and extra fields (``mag_unit``)."""
+    return dict(
+        record.get("extra") or {},
+        procedure=record.get("procedure"),
+        params=record.get("params") or {},
+        uncertainty=record.get("uncertainty") or {},
+        residual_rms=record.get("residual_rms"),
+    )
+
+
+def unit_context(name: str, results) -> dict:
+    """The result that tells the unit of parameter ``name`` (``drift``, ``soft_iron[0][0]``):
+    the first of ``results`` whose parameters hold it; else a bare result of the one
+    procedure whose module names its block in ``PARAM_UNITS`` (a display factor that needs
+    the result, e.g. the compass's per ``mag_unit``, then falls back to the stored unit);
+    else {} (no unit known: as stored)."""
+    block = _block(name)
+    for result in results:
+        if result and (block in (result.get("params") or {}) or name in flatten(result.get("params") or {})):
+            return result
+    from station.procedures import registry
+
+    owners = [p.name for p in registry.PROCEDURES if block in getattr(p.load(), "PARAM_UNITS", {})]
+    return {"procedure": owners[0]} if len(owners) == 1 else {}
+
+
 def shown_rows(result: dict, rows: list[ParamRow]) -> list[ParamRow]:
     """``rows`` in the units the screens show (:func:`display_unit`); value, σ, the value in
     use and the tolerance scaled alike (Δ/σ and the checks are unchanged)."""
@@ -288,21 +335,26 @@ def verdict(rows: list[ParamRow], result: dict, tolerances: dict | None = None) 
     """("pass" | "fail" | "no tolerance", reasons)."""
     tolerances = tolerances or {}
     reasons = []
-    for r in rows:
-        u = f" {r.unit}" if r.unit and r.unit != "1" else ""
+    # judged on the stored values, said in the units the screens show (shown_rows)
+    for r, s in zip(rows, shown_rows(result, rows)):
+        u = f" {s.unit}" if s.unit and s.unit != "1" else ""
         if r.tolerance is not None and r.previous is not None and abs(r.value - r.previous) > r.tolerance:
-            reasons.append(f"{r.name} changed {r.value - r.previous:+.3g}{u} (tolerance {r.tolerance:g}{u})")
+            reasons.append(f"{s.name} changed {s.value - s.previous:+.3g}{u} (tolerance {s.tolerance:g}{u})")
         if r.in_limits is False:
-            lo, hi = r.limit
+            lo, hi = s.limit
             span = f"{'-∞' if lo is None else format(lo, 'g')} … {'∞' if hi is None else format(hi, 'g')}"
-            reasons.append(f"{r.name} = {_fmt(r.value)}{u} outside its limits {span}{u}")
+            reasons.append(f"{s.name} = {_fmt(s.value)}{u} outside its limits {span}{u}")
     checked = any(r.ok is not None for r in rows)
     tol_res = tolerances.get("residual_rms")
     res = result.get("residual_rms")
     if tol_res is not None and _finite(res):
         checked = True
         if res > float(tol_res):
-            reasons.append(f"residual {res:.3g} above tolerance {float(tol_res):g}")
+            shown, unit = shown_residual(result)
+            u = f" {unit}" if unit else ""
+            reasons.append(
+                f"residual {shown:.3g}{u} above tolerance {shown_value(result, 'residual_rms', float(tol_res)):g}{u}"
+            )
     if not checked:
         return "no tolerance", []
     return ("fail" if reasons else "pass"), reasons

@@ -6,6 +6,12 @@ so the change is anchored and ``station verify`` sees any edit made behind the s
 back) and the same syntax (``station.commands.devices.parse_limit``): ``NAME=LOW:HIGH``
 sets one (either end may be empty), ``NAME=`` removes it. Each limit is shown with its
 unit and the value of the calibration in use, so the engineer sees what it is checked on.
+
+Limits are shown and typed in the unit the Results screen shows the parameter in (P4's
+drift in °/h, the compass's soft iron as a ratio) and stored in the parameter's stored
+unit, through ``station.procedures.review``'s one conversion (``shown_value`` /
+``stored_value``); the unit comes from the result on screen, else the calibrations of the
+device (``review.unit_context``).
 """
 
 from __future__ import annotations
@@ -55,15 +61,18 @@ class LimitsScreen(ModalScreen):
     """
     BINDINGS = [Binding("escape", "close", "Back", priority=True)]
 
-    def __init__(self, device_id: str) -> None:
+    def __init__(self, device_id: str, result: dict | None = None) -> None:
+        """``result``: the result on screen (Results), the first to tell a parameter's unit."""
         super().__init__()
         self.device_id = device_id
+        self.result = result
         self.limits: dict = {}
+        self.contexts: list[dict] = [result] if result else []  # review.unit_context's results
         self.changed = False
 
     def compose(self) -> ComposeResult:
         with Vertical(id="box"):
-            yield Static(f"[b]Limits of {tui_markup(self.device_id)}[/]: absolute, in each parameter's unit", id="head")
+            yield Static(f"[b]Limits of {tui_markup(self.device_id)}[/]: absolute, in the units shown", id="head")
             yield Static("reading…", id="current")
             yield Static("", id="params")
             yield Static("NAME=LOW:HIGH sets one (an end may be empty), NAME= removes it:")
@@ -86,10 +95,12 @@ class LimitsScreen(ModalScreen):
             if device is None:
                 raise RuntimeError(f"no device {self.device_id!r} in the database")
             in_use = {}
-            for h in store.history(self.device_id):  # oldest first: the newest accepted wins
+            history = store.history(self.device_id)
+            for h in history:  # oldest first: the newest accepted wins
                 if h["accepted"]:
                     in_use[h["procedure"]] = h
-            self.post_message(StoreLoaded("limits", {"limits": device.get("limits") or {}, "in_use": in_use}))
+            data = {"limits": device.get("limits") or {}, "in_use": in_use, "history": history}
+            self.post_message(StoreLoaded("limits", data))
         except Exception as exc:  # noqa: BLE001 - one line in the box
             self.post_message(StoreLoaded("limits", None, error=str(exc)))
 
@@ -100,23 +111,29 @@ class LimitsScreen(ModalScreen):
             self.query_one("#error", Static).update(tui_markup(message.error))
             return
         from station.procedures import registry
-        from station.procedures.review import param_unit
+        from station.procedures.review import record_result, shown_unit, shown_value, unit_context
 
         self.limits = message.data["limits"]
         in_use = message.data["in_use"]
+        # the units: the result on screen, the calibrations in use, then any of the device's (newest first)
+        self.contexts = ([self.result] if self.result else []) + [
+            record_result(h) for h in [*in_use.values(), *reversed(message.data["history"])]
+        ]
         lines = []
         for name, (low, high) in sorted(self.limits.items()):
-            unit, now = "", None
-            for proc, h in in_use.items():
+            ctx = unit_context(name, self.contexts)
+            now = None
+            for h in in_use.values():
                 v = _scalar(h["params"], name)
                 if v is not None:
-                    unit = param_unit(dict(h["extra"] or {}, procedure=proc, params=h["params"]), name)
                     now = v
                     break
             shown = ""
             if isinstance(now, (int, float)) and math.isfinite(now):
                 inside = (low is None or now >= low) and (high is None or now <= high)
-                shown = f"   in use {now:.6g}" + ("" if inside else "  [b red]OUTSIDE[/]")
+                shown = f"   in use {shown_value(ctx, name, now):.6g}" + ("" if inside else "  [b red]OUTSIDE[/]")
+            low, high = (None if x is None else shown_value(ctx, name, x) for x in (low, high))
+            unit = shown_unit(ctx, name) if ctx else ""
             lines.append(f"{tui_markup(name):<12} {_fmt(low):>10} … {_fmt(high):<10} {tui_markup(unit)}" + shown)
         self.query_one("#current", Static).update("\n".join(lines) or "no limits set")
         blocks = []
@@ -147,11 +164,27 @@ class LimitsScreen(ModalScreen):
             return
         self.store_limit(name, pair)
 
+    def _stored_pair(self, name: str, pair):
+        """A typed pair (in the unit shown) in the parameter's stored unit."""
+        from station.procedures.review import stored_value, unit_context
+
+        if pair is None:
+            return None
+        ctx = unit_context(name, self.contexts)
+        return [None if x is None else stored_value(ctx, name, x) for x in pair]
+
+    def _shown_text(self, name: str, pair) -> str:
+        from station.procedures.review import shown_unit, unit_context
+
+        ctx = unit_context(name, self.contexts)
+        unit = shown_unit(ctx, name) if ctx else ""
+        return f"{name} = {_fmt(pair[0])} … {_fmt(pair[1])}" + (f" {unit}" if unit and unit != "1" else "")
+
     @work(thread=True, exclusive=True, group="limits-save", exit_on_error=False, description="store a limit")
     def store_limit(self, name: str, pair) -> None:
         try:
             store = self.app.session.open_store()
-            store.add_device(self.device_id, limits={name: pair})
+            store.add_device(self.device_id, limits={name: self._stored_pair(name, pair)})
             self.app.call_from_thread(self._stored, name, pair)
         except Exception as exc:  # noqa: BLE001 - one line in the box, nothing changed
             self.app.call_from_thread(self.query_one("#error", Static).update, tui_markup(f"not stored: {exc}"))
@@ -159,7 +192,7 @@ class LimitsScreen(ModalScreen):
     def _stored(self, name: str, pair) -> None:
         self.changed = True
         self.query_one("#edit", Input).value = ""
-        said = f"removed {name}" if pair is None else f"{name} = {_fmt(pair[0])} … {_fmt(pair[1])}"
+        said = f"removed {name}" if pair is None else self._shown_text(name, pair)
         self.query_one("#error", Static).update("")
         self.query_one("#said", Static).update(tui_markup(f"stored: {said}"))
         self.load()

@@ -326,7 +326,7 @@ class ResultsScreen(Screen):
         if not self.app.session.device_id:
             self.notify("No device to set limits for", severity="warning")
             return
-        self.app.push_screen(LimitsScreen(self.app.session.device_id), self._limits_closed)
+        self.app.push_screen(LimitsScreen(self.app.session.device_id, self.result), self._limits_closed)
 
     def _limits_closed(self, changed) -> None:
         if not changed:
