@@ -34,7 +34,7 @@ import numpy as np
 
 from solvers.units import ACCEL_UNITS, GYRO_UNITS, MAG_UNITS, RAW_UNITS
 from station.errors import InputError
-from station.fileio import atomic_open, cannot_write
+from station.fileio import atomic_open, cannot_write, open_input
 from station.procedures import registry
 
 FORMAT_VERSION = "1"
@@ -308,16 +308,7 @@ class _Head:
 
 
 def _open(path) -> io.BufferedReader:
-    try:
-        return open(path, "rb")
-    except FileNotFoundError:
-        raise InputError(path, None, "no such file") from None
-    except IsADirectoryError:
-        raise InputError(path, None, "is a directory, not a capture file") from None
-    except PermissionError:
-        raise InputError(path, None, "permission denied") from None
-    except OSError as exc:
-        raise InputError(path, None, f"cannot open: {exc.strerror or exc}") from None
+    return open_input(path, "a capture file")
 
 
 def _decode(path: str, raw: bytes, lineno: int) -> str:

@@ -6,6 +6,11 @@ fsynced, and only then renamed over the target (``os.replace``, atomic on POSIX 
 Windows volume). Any exception on the way, ``KeyboardInterrupt`` included, removes the
 temporary file and leaves the target as it was.
 
+Reading goes through :func:`open_input` (or, for a library that opens the path itself,
+:func:`check_input` first): a path that is not a regular file (a named pipe, a device, a
+socket) is refused before anything opens it, since reading one can block for ever or never
+end.
+
 Permissions: a file that already exists keeps its mode; a new one gets what ``open()`` would
 give it (0o666 less the umask), not ``tempfile.mkstemp``'s 0o600. Newlines: as ``open()``
 with the same ``newline`` argument (binary modes write the bytes as given).
@@ -13,6 +18,7 @@ with the same ``newline`` argument (binary modes write the bytes as given).
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import stat
@@ -87,6 +93,68 @@ def cannot_write(path, what: str = "") -> Iterator[None]:
     except OSError as exc:
         label = f"cannot write {what}" if what else "cannot write"
         raise InputError(path, None, f"{label}: {exc.strerror or exc}") from None
+
+
+_KINDS = (
+    (stat.S_ISFIFO, "a named pipe (FIFO)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def _refuse_kind(path, mode: int, what: str, folder: bool) -> None:
+    if stat.S_ISREG(mode) or (folder and stat.S_ISDIR(mode)):
+        return
+    if stat.S_ISDIR(mode):
+        raise InputError(path, None, f"is a directory, not {what}")
+    kind = next((name for test, name in _KINDS if test(mode)), "not a file")
+    raise InputError(path, None, f"{kind}, not a regular file: refused (reading it could block or never end)")
+
+
+def check_input(path, what: str = "a capture file", *, folder: bool = False) -> None:
+    """Refuse ``path`` as input unless it is a regular file (or, with ``folder``, a directory):
+    InputError ``<path>: a named pipe (FIFO), not a regular file ...``, ``<path>: no such
+    file``, ``<path>: permission denied``. ``os.stat`` follows links and never blocks; call
+    this before a library opens the path itself (:func:`open_input` calls it too)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise InputError(path, None, "no such file") from None
+    except PermissionError:
+        raise InputError(path, None, "permission denied") from None
+    except (OSError, ValueError) as exc:  # a name too long, a loop of links, a NUL in the name
+        raise InputError(path, None, f"cannot open: {getattr(exc, 'strerror', None) or exc}") from None
+    _refuse_kind(path, mode, what, folder)
+
+
+def open_input(path, what: str = "a capture file") -> io.BufferedReader:
+    """``open(path, "rb")`` for input, refusing what :func:`check_input` refuses.
+
+    The file is opened without blocking (``O_NONBLOCK``: a FIFO swapped in after the check
+    does not hang the open) and checked again on the open descriptor, so the check and the
+    reading see the same file. ``what``: the words for a directory (``is a directory, not
+    <what>``)."""
+    check_input(path, what)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(path, flags)
+    except FileNotFoundError:
+        raise InputError(path, None, "no such file") from None
+    except IsADirectoryError:
+        raise InputError(path, None, f"is a directory, not {what}") from None
+    except PermissionError:
+        raise InputError(path, None, "permission denied") from None
+    except OSError as exc:
+        raise InputError(path, None, f"cannot open: {exc.strerror or exc}") from None
+    try:
+        _refuse_kind(path, os.fstat(fd).st_mode, what, False)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+    except BaseException:
+        os.close(fd)
+        raise
+    return os.fdopen(fd, "rb")
 
 
 def _create_beside(folder: str, name: str) -> tuple[int, str]:

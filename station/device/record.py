@@ -39,7 +39,7 @@ import numpy as np
 from station.device.protocol import Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
 from station.errors import InputError, StationError
-from station.fileio import atomic_open
+from station.fileio import atomic_open, open_input
 
 SENSOR_GROUPS = {"accel_unit": ("ax", "ay", "az"), "gyro_unit": ("gx", "gy", "gz"), "mag_unit": ("mx", "my", "mz")}
 PARTIAL_SUFFIX = ".partial"
@@ -157,7 +157,7 @@ def _head_text(meta: dict[str, str], columns: list[str]) -> str:
 def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str], *, cut_tail: bool = False) -> int:
     """Copy src's data rows under a new head into dst atomically; returns rows copied."""
     rows = 0
-    with open(src, "rb") as fin, atomic_open(dst, "wb") as fout:
+    with open_input(src) as fin, atomic_open(dst, "wb") as fout:
         # skip the old head: metadata lines, then the header row
         while True:
             line = fin.readline()

@@ -21,6 +21,7 @@ import numpy as np
 
 from station.capture import UNIT_KEYS
 from station.errors import InputError
+from station.fileio import open_input
 from station.importers._common import COLUMNS, Imported, Stream
 from station.importers.options import TARGETS
 
@@ -96,16 +97,10 @@ def _cells(path, lineno: int, text: str, delimiter: str) -> list[str]:
 def _open_text(path) -> tuple[list[str], int]:
     """The file's lines (no line ends) and nothing else; InputError for what is not text."""
     try:
-        with open(path, "rb") as f:
+        with open_input(path, "a CSV file") as f:
             data = _read_bounded(f, path)
-    except FileNotFoundError:
-        raise InputError(path, None, "no such file") from None
-    except IsADirectoryError:
-        raise InputError(path, None, "is a directory, not a CSV file") from None
-    except PermissionError:
-        raise InputError(path, None, "permission denied") from None
-    except OSError as exc:
-        raise InputError(path, None, f"cannot open: {exc.strerror or exc}") from None
+    except OSError as exc:  # reading, after the open
+        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     try:
@@ -118,9 +113,9 @@ def _open_text(path) -> tuple[list[str], int]:
 
 def first_line(path) -> str:
     try:
-        with open(path, "rb") as f:
+        with open_input(path) as f:
             raw = f.readline(4096)
-    except OSError:
+    except (InputError, OSError):  # the reader that follows says why
         return ""
     return raw.lstrip(b"\xef\xbb\xbf").decode("utf-8", "replace").strip()
 

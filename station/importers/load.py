@@ -9,6 +9,7 @@ from pathlib import Path
 
 from station.capture import Capture, read_capture, write_capture
 from station.errors import InputError
+from station.fileio import check_input
 from station.importers._common import NAME, Imported, to_capture
 from station.importers.options import (
     FORMATS,
@@ -18,6 +19,14 @@ from station.importers.options import (
 )
 from station.procedures import registry
 
+_WHAT = {
+    "px4": "a ULog file",
+    "ardupilot": "an ArduPilot DataFlash log",
+    "tlog": "a MAVLink log",
+    "ros": "a ROS bag",
+    "euroc": "a CSV file",
+    "csv": "a CSV file",
+}
 _SUFFIX = {".ulg": "px4", ".bin": "ardupilot", ".tlog": "tlog"}
 
 
@@ -54,8 +63,8 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
             f"--map, --unit and --rate apply to plain CSV files (this is read as {fmt}: its units come from the file)",
         )
     p = Path(path)
-    if not p.exists():
-        raise InputError(path, None, "no such file")
+    # the one check before a reader (ours or a library's) opens the path: no FIFO, no device
+    check_input(path, _WHAT[fmt], folder=fmt == "ros")
     if p.is_file() and p.stat().st_size == 0:
         raise InputError(path, None, "empty file")
     if fmt == "px4":

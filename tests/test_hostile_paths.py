@@ -1,0 +1,80 @@
+"""Paths that are not plain files, given where a command reads a file: a named pipe (FIFO)
+blocked every reading command for ever, a character device was read as if it were data.
+Each is refused before anything opens it: one line on stderr naming the path, exit status 2,
+nothing on stdout, nothing written. The real CLI in a subprocess, with a timeout, so a
+command that blocks fails the test instead of hanging it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tests.station_run import ROOT
+
+GYRO_CSV = ("--procedure", "gyro-drift", "--map", "t=time_s,gx=gx,gy=gy,gz=gz", "--unit", "gyro=rad/s,t=s")
+
+
+def _station(*args, timeout: float = 120) -> subprocess.CompletedProcess:
+    try:
+        return subprocess.run(
+            [sys.executable, "-m", "station", *map(str, args)],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            stdin=subprocess.DEVNULL,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"station {' '.join(map(str, args))}: still running after {timeout} s (blocked on its input)")
+
+
+def _one_line_refusal(res, *needles):
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
+    assert res.stdout == ""
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("station: "), res.stderr
+    assert "cannot process this input" not in res.stderr, res.stderr
+    for n in needles:
+        assert n in res.stderr, res.stderr
+
+
+# (command before the file, command after it, the file's name): every way a file is read
+READERS = [
+    (["calibrate"], [], "x.csv"),
+    (["diagnose"], ["--no-plots"], "x.csv"),
+    (["inspect"], [], "x.csv"),
+    (["noise"], ["--no-plot"], "x.csv"),
+    (["import"], [*GYRO_CSV, "--out", "{out}"], "x.csv"),
+    (["import"], ["--procedure", "gyro-drift", "--out", "{out}"], "x.csv"),
+    (["import"], ["--procedure", "gyro-drift", "--format", "euroc", "--out", "{out}"], "data.csv"),
+    (["calibrate"], ["--procedure", "compass"], "x.bin"),
+    (["calibrate"], ["--procedure", "compass"], "x.tlog"),
+    (["calibrate"], ["--procedure", "compass"], "x.ulg"),
+    (["inspect"], ["--procedure", "compass"], "x.bag"),
+    (["record", "--recover"], [], "x.csv.partial"),
+]
+
+
+@pytest.mark.parametrize(("before", "after", "name"), READERS, ids=lambda v: " ".join(v) if isinstance(v, list) else v)
+def test_a_named_pipe_is_refused_not_waited_on(tmp_path, before, after, name):
+    fifo = tmp_path / name
+    os.mkfifo(fifo)
+    out = tmp_path / "out.csv"
+    res = _station(*before, fifo, *[a.format(out=out) for a in after], timeout=60)
+    _one_line_refusal(res, f"{fifo}: ", "named pipe (FIFO), not a regular file")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", [["inspect"], ["noise", "--no-plot"], ["import", *GYRO_CSV, "--out", "{out}"]])
+def test_a_character_device_is_refused_by_what_it_is(tmp_path, command):
+    """/dev/null reads as an empty file and /dev/zero as endless NUL bytes: neither is a capture
+    or a log, and a serial port or a terminal given by mistake would block; all are refused
+    by their kind before they are opened."""
+    out = tmp_path / "out.csv"
+    for dev in ("/dev/null", "/dev/zero"):
+        res = _station(command[0], dev, *[a.format(out=out) for a in command[1:]], timeout=60)
+        _one_line_refusal(res, f"{dev}: ", "character device, not a regular file")
+    assert not out.exists()
