@@ -444,8 +444,12 @@ def _hat_basis(x: np.ndarray, knots: int) -> np.ndarray:
 
 
 def _fold_for(driver: str) -> str | None:
-    """Temporal and thermal structure is validated on time blocks where a problem has them."""
-    return "time" if driver in ("time", "temperature") else None
+    """Temporal and thermal structure is validated on time blocks where a problem has them, a
+    generic function of the input on the problem's ``input`` folds where it has them (P1: whole
+    positions, whose per-position noise a smooth function of the input would fit otherwise)."""
+    if driver in ("time", "temperature"):
+        return "time"
+    return "input" if driver in ("input", "input_axis") else None
 
 
 def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:

@@ -432,6 +432,9 @@ def tabletop_problem(
         # of 9–15 parameters on 9–30 positions extrapolates through a fold it does not determine
         # (its held-out RMS 50–400 times the baseline's) and a real effect fails the held-out test
         prob.cv_groups = prob.fold_sets["time"]
+        # a generic smooth function of the input (up to 12 parameters) keeps whole positions out:
+        # on parts it also fits each position's bias instability, which the parts of a hold share
+        prob.fold_sets["input"] = groups
         prob.series = np.concatenate([np.zeros(nn, int), np.full(len(s_v), -1)])
         prob.drivers["time [s]"] = np.concatenate([cond_n.t_s, pad])
         if cond_n.temp_c is not None:
