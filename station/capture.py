@@ -97,6 +97,54 @@ _RAW_COLUMN_UNIT_KEY = {
     for c in cols.split()
 }
 
+# Plausibility bounds: magnitudes beyond these no sensor of the kind reports, so a cell beyond
+# one is refused on its line (a corrupt or hostile file, not a measurement). Each is a large
+# multiple of the widest full-scale range of any part of the kind: accelerations up to
+# 1e7 m/s^2 (about 1e6 g; shock accelerometers reach 200 000 g), angular rates up to
+# 1e4 rad/s (about 570 000 deg/s; MEMS gyros reach 20 000 deg/s), magnetic fields up to
+# 1e10 nT (10 T; 3-D Hall sensors reach 0.3 T), velocities up to 1e5 m/s. In SI; a column in
+# another physical unit is bounded by the same quantity in its unit (gyro_unit: deg/s gives
+# 5.7e5 deg/s). The reader applies them (a file that breaks one is refused on its line); raw
+# units (V, mV, counts), angles, time and unknown columns have none there: any finite number
+# reads, and the numerics' guard (station.guard) bounds them by MAX_ABS.
+PLAUSIBLE_SI = {"accel": 1e7, "gyro": 1e4, "mag": 1e10, "velocity": 1e5}
+# Largest magnitude of any other numeric cell: raw counts (32-bit), Unix time in ns (1.7e18)
+# fit; 1e20 squared is 1e40 and the fourth powers some fits form stay far from float64's 1.8e308.
+MAX_ABS = 1e20
+_KIND_WORDS = {"accel": "accelerometer", "gyro": "gyro", "mag": "magnetometer", "velocity": "velocity sensor"}
+_FIXED_UNIT_KIND = {"rad/s": ("gyro", 1.0), "m/s": ("velocity", 1.0)}
+
+
+def plausible_limit(name: str, meta: dict[str, str]) -> tuple[float, str] | None:
+    """The largest magnitude a column ``name`` in a physical unit (under metadata ``meta``) can
+    hold and why: ``(bound, reason)``, the reason ready for "... is beyond {reason}"
+    (PLAUSIBLE_SI); None for a column without a physical unit."""
+    from solvers.units import si_factor
+
+    base = name[:-4] if name.endswith("_std") else name
+    key = _RAW_COLUMN_UNIT_KEY.get(base)
+    kind = factor = unit = None
+    if key is not None:
+        unit = meta.get(key) or None
+        kind = key[: -len("_unit")]
+        factor = si_factor(kind, unit) if unit in UNIT_KEYS[key] else None
+    elif COLUMN_UNITS.get(base) in _FIXED_UNIT_KIND:
+        unit = COLUMN_UNITS[base]
+        kind, factor = _FIXED_UNIT_KIND[unit]
+    if not factor:
+        return None
+    bound = PLAUSIBLE_SI[kind] / factor
+    return bound, f"what any {_KIND_WORDS[kind]} reports (magnitudes up to {bound:.3g} {unit} are accepted)"
+
+
+def column_limit(name: str, meta: dict[str, str]) -> tuple[float, str]:
+    """:func:`plausible_limit`, else the generic ``MAX_ABS`` (the numerics' guard)."""
+    return plausible_limit(name, meta) or (
+        MAX_ABS,
+        f"what any instrument reports (magnitudes up to {MAX_ABS:g} are accepted)",
+    )
+
+
 # A number as the format writes it: no nan/inf words, no underscores, no hex.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NONFINITE_WORDS = {"nan", "inf", "infinity"}
@@ -420,11 +468,13 @@ def _fill_empty_fields(data: bytes) -> bytes:
 class _Parser:
     """Parses blocks of data lines into column arrays, carrying state (t, labels) across blocks."""
 
-    def __init__(self, path: str, names: list[str]):
+    def __init__(self, path: str, names: list[str], meta: dict[str, str] | None = None):
         self.path = path
         self.names = names
         self.ncols = len(names)
         self.text = [j for j, n in enumerate(names) if n in TEXT_COLUMNS]
+        limits = {j: plausible_limit(n, meta or {}) for j, n in enumerate(names) if j not in self.text}
+        self.limits = {j: v for j, v in limits.items() if v is not None}
         self.t_index = names.index("t") if "t" in names else None
         self.n_index = names.index("n") if "n" in names else None
         self.std_index = [j for j, n in enumerate(names) if n.endswith("_std") and n not in TEXT_COLUMNS]
@@ -492,6 +542,10 @@ class _Parser:
             col = np.ascontiguousarray(arr[f"f{j}"] if self.text else arr[:, j], dtype=np.float64)
             if not (np.isfinite(col).all() if not empties or j == self.t_index else not np.isinf(col).any()):
                 return None
+            if j in self.limits:
+                with np.errstate(invalid="ignore"):
+                    if (np.abs(col) > self.limits[j][0]).any():
+                        return None  # the per-cell path names the line
             if j == self.t_index and (col[0] < self.prev_t or np.any(col[1:] < col[:-1])):
                 return None
             if j == self.n_index and not np.all(np.isnan(col) | ((col >= 1) & (col == np.floor(col)))):
@@ -571,6 +625,8 @@ class _Parser:
         x = float(v)
         if not math.isfinite(x):
             raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is out of range")
+        if j in self.limits and abs(x) > self.limits[j][0]:
+            raise InputError(self.path, lineno, f"column '{name}': {x:g} is beyond {self.limits[j][1]}")
         if j == self.t_index:
             if x < self.prev_t:
                 raise InputError(self.path, lineno, f"t goes backwards: {v} after {self.prev_t_text}")
@@ -611,7 +667,7 @@ def _count_lines(block: bytes) -> int:
 
 def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[dict[str, np.ndarray]]:
     path = head.path
-    parser = _Parser(path, head.header)
+    parser = _Parser(path, head.header, head.meta)
     with _open(path) as f:
         f.seek(head.data_offset)
         sample = f.readline(_MAX_DATA_LINE + 1)

@@ -1,8 +1,9 @@
 """Guards between hostile or extreme input and the numerics.
 
-- :func:`check_extremes`: a capture whose numbers no instrument can produce (beyond
-  ``MAX_ABS`` in magnitude, where squares and sums of squares start to overflow float64)
-  or whose time axis does not advance is refused before any fit sees it, naming the
+- :func:`check_extremes`: a capture whose numbers no instrument can produce (beyond the
+  column's bound, ``station.capture.column_limit``: a plausibility bound per sensor kind and
+  unit, else ``MAX_ABS``, where squares and sums of squares start to overflow float64) or
+  whose time axis does not advance is refused before any fit sees it, naming the
   file, the line and the column.
 - :func:`quiet_stdout`: text that a dependency prints while the numerics run (LAPACK's
   ``** On entry to DLASCL ...`` from C, a Python ``print`` in a library) is caught at the
@@ -25,12 +26,9 @@ import threading
 
 import numpy as np
 
+from station.capture import MAX_ABS, column_limit  # noqa: F401 - MAX_ABS: the generic bound, here as before
 from station.errors import InputError, UnsupportedError
 
-# Largest magnitude accepted in a capture's numeric columns. Raw counts (32-bit), nT,
-# rad/s and even Unix time in nanoseconds (1.7e18) fit; 1e20 squared is 1e40 and the
-# fourth powers some fits form stay far from float64's 1.8e308.
-MAX_ABS = 1e20
 _MAX_CAPTURED_BYTES = 1 << 16
 _LOCK = threading.RLock()  # process-wide fd 1; nested blocks (same thread) are fine
 
@@ -43,32 +41,28 @@ def _data_line(capture, row: int) -> int | None:
 
 
 def check_extremes(capture, columns: bool = True) -> None:
-    """Refuse numbers beyond ``MAX_ABS`` and a time axis that does not advance.
+    """Refuse numbers beyond the column's bound (``column_limit``) and a time axis that does not advance.
 
     InputError ``file:line: column 'ax': 1e+200 is beyond ...``; the first offending row
     in file order is named. ``columns``: also :func:`check_columns` (the procedure's measured
     columns; False for a command that reads whichever sensors are there, such as ``noise``).
     """
-    first: tuple[int, str, float] | None = None
+    first: tuple[int, str, float, str] | None = None
     for name, col in capture.columns.items():
         arr = np.asarray(col)
         if arr.dtype.kind != "f" or arr.size == 0:
             continue
+        bound, reason = column_limit(name, capture.meta)
         with np.errstate(invalid="ignore"):
-            bad = np.abs(arr) > MAX_ABS
+            bad = np.abs(arr) > bound
         bad |= np.isinf(arr)
         if bad.any():
             k = int(np.argmax(bad))
             if first is None or k < first[0]:
-                first = (k, name, float(arr[k]))
+                first = (k, name, float(arr[k]), reason)
     if first is not None:
-        k, name, value = first
-        raise InputError(
-            capture.path,
-            _data_line(capture, k),
-            f"column '{name}': {value:g} is beyond what any instrument reports "
-            f"(magnitudes up to {MAX_ABS:g} are accepted)",
-        )
+        k, name, value, reason = first
+        raise InputError(capture.path, _data_line(capture, k), f"column '{name}': {value:g} is beyond {reason}")
     t = capture.columns.get("t")
     if t is not None and len(t) > 1:
         t = np.asarray(t, dtype=float)

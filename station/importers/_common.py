@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.capture import Capture
+from station.capture import Capture, plausible_limit
 from station.errors import InputError
 from station.importers.options import primary as primary_kind
 from station.procedures import registry
@@ -129,6 +129,25 @@ def clean_stream(path, stream: Stream) -> Stream | None:
     )
 
 
+def _check_limit(path, s: Stream) -> None:
+    """Refuse a sample beyond what any sensor of its kind reports (station.capture.plausible_limit,
+    in the stream's unit), naming the sample's time in the log: a corrupt record, not a reading."""
+    names = COLUMNS[s.kind]
+    limit = plausible_limit(names[0], {f"{s.kind}_unit": s.unit})
+    if limit is None:  # raw units: any finite number (the fits' guard bounds them)
+        return
+    bound, reason = limit
+    with np.errstate(invalid="ignore"):
+        over = np.abs(s.xyz) > bound
+    if over.any():
+        i, j = (int(k) for k in np.argwhere(over)[0])
+        raise InputError(
+            path,
+            None,
+            f"{NAME[s.kind]} sample at t = {s.t_s[i]:.6g} s in the log: {names[j]} = {s.xyz[i, j]:g} is beyond {reason}",
+        )
+
+
 def _median_period(t: np.ndarray) -> float:
     d = np.diff(t)
     d = d[d > 0]
@@ -190,6 +209,7 @@ def to_capture(
                     imported.warnings.append(
                         f"{int(bad.any(axis=1).sum())} {NAME[kind]} samples hold infinite values: left empty"
                     )
+                _check_limit(path, s)
                 streams[kind] = s
     if primary not in streams:
         found = ", ".join(NAME[k] for k in streams) or "no accelerometer, gyro or magnetometer"

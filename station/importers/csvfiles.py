@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from station.capture import UNIT_KEYS
+from station.capture import UNIT_KEYS, plausible_limit
 from station.errors import InputError
 from station.fileio import open_input
 from station.importers._common import COLUMNS, Imported, Stream
@@ -179,6 +179,24 @@ def _rows(
     return {t: (np.asarray(v, dtype=object if t == int_time else np.float64)) for t, v in out.items()}, linenos
 
 
+def _check_limits(path, values: dict[str, np.ndarray], linenos: list[int], units: dict[str, str]) -> None:
+    """Refuse a cell beyond what any sensor of its kind reports (station.capture.plausible_limit,
+    in the unit the file declares), naming its line, as the capture reader would."""
+    meta = {f"{kind}_unit": unit for kind, unit in units.items()}
+    for target, col in values.items():
+        if target not in KIND_OF:
+            continue
+        limit = plausible_limit(target, meta)
+        if limit is None:  # raw units: any finite number (the fits' guard bounds them)
+            continue
+        bound, reason = limit
+        with np.errstate(invalid="ignore"):
+            over = np.abs(np.asarray(col, dtype=np.float64)) > bound
+        if over.any():
+            i = int(np.argmax(over))
+            raise InputError(path, linenos[i], f"column '{target}': {float(col[i]):g} is beyond {reason}")
+
+
 def _time_seconds(path, t, linenos: list[int], factor: float, integer: bool) -> np.ndarray:
     """Seconds from the first row; t must not go backwards (the line that does is named)."""
     if integer:
@@ -279,6 +297,7 @@ def read_euroc(path, *, kinds=None) -> Imported:
             f"not an EuRoC/Kalibr IMU header: no column for {', '.join(missing)}",
         )
     values, linenos = _rows(path, lines, 1, ",", len(header), cols, int_time="t")
+    _check_limits(path, values, linenos, units)
     t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True)
     streams = _streams(path, values, t_s, units, "EuRoC/Kalibr CSV")
     if kinds is not None:
@@ -380,6 +399,7 @@ def read_plain(
     if rate_hz is not None and not (0 < rate_hz < math.inf):
         raise InputError(None, None, f"--rate must be a positive number of Hz, got {rate_hz:g}")
     values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
+    _check_limits(path, values, linenos, units)
     if "t" in values:
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False)
     else:
