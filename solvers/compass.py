@@ -705,6 +705,11 @@ def check_orientations(
         y = y[np.all(np.isfinite(y), axis=1)]
         # About the midrange centre even sensor noise points everywhere: first ask whether
         # the field itself turned (its range against its size, as a sweep makes ~2×).
+        if len(y) and not np.any(y):
+            raise CoverageTooLow(
+                "no magnetometer data (all zero): every sample reads 0, 0, 0 "
+                "(a magnetometer not fitted, disabled or never read)"
+            )
         span = float(np.max(np.ptp(y, axis=0))) if len(y) else 0.0
         size = float(np.median(np.linalg.norm(y - np.median(y, axis=0), axis=1)) + np.linalg.norm(np.median(y, axis=0)))
         if len(y) and span < 0.1 * max(size, 1e-300):

@@ -210,6 +210,13 @@ def to_capture(
                         f"{int(bad.any(axis=1).sum())} {NAME[kind]} samples hold infinite values: left empty"
                     )
                 _check_limit(path, s)
+                finite = s.xyz[np.isfinite(s.xyz)]
+                if finite.size and not finite.any():  # a sensor not fitted, disabled or never read
+                    zero = f"no {NAME[kind]} data (all zero): every {s.source} sample reads 0, 0, 0"
+                    if kind == primary:
+                        raise InputError(path, None, f"{procedure}: {zero}")
+                    imported.warnings.append(f"{zero}: left out")
+                    continue
                 streams[kind] = s
     if primary not in streams:
         found = ", ".join(NAME[k] for k in streams) or "no accelerometer, gyro or magnetometer"

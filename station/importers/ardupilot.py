@@ -422,8 +422,6 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         if kinds is not None and kind not in kinds:
             continue
         values = np.array([[getattr(m, f) for f in fields] for _, m in samples], dtype=np.float64)
-        if kind == "mag" and not np.any(values):
-            continue  # no compass behind this IMU message
         unit = MAV_UNITS.get((kind, units.get(fields[0], "")))
         if name == "RAW_IMU" and firmware != "ardupilot":
             unit = "counts"  # the MAVLink standard's raw ADC values
