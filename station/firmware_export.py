@@ -48,8 +48,8 @@ Bounds the firmware enforces are checked before anything is written: ArduPilot a
 offsets within ±3.5 m/s^2 (the INS_ACCOFFS @Range and `_accel_max_abs_offsets`) and scales
 0.8..1.2 (`AccelCalibrator::accept_result`, the INS_ACCSCAL @Range); compass offsets below
 COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI| < 1
-(`CompassCalibrator::fit_acceptable`); PX4 scales positive and finite
-(`Accelerometer::set_scale`).
+(`CompassCalibrator::fit_acceptable`); PX4 accelerometer and magnetometer scales within
+0.1..3.0 (their min and max in PX4's parameter definitions, `module.yaml`).
 
 Raw volts or counts and the LDV have no parameters in either firmware and are refused.
 """
@@ -72,6 +72,9 @@ AP_ACC_SCALE_RANGE = (0.8, 1.2)
 AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS = 1800.0
 AP_COMPASS_DIA_RANGE = (0.2, 5.0)
 AP_COMPASS_ODI_MAX = 1.0
+# CAL_ACCn_{X,Y,Z}SCALE and CAL_MAGn_{X,Y,Z}SCALE: min 0.1, max 3.0 (PX4's parameter
+# definitions, src/modules/sensors/module.yaml); the offsets and ODIAG have no documented range.
+PX4_SCALE_RANGE = (0.1, 3.0)
 PX4_DEFAULT_PRIORITY = 50  # calibration::Accelerometer::DEFAULT_PRIORITY (internal sensors)
 QGC_REAL32, QGC_INT32 = 9, 6  # MAV_PARAM_TYPE
 
@@ -577,7 +580,7 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
                 )
             )
         for name, v in zip(names["scale"], scale):
-            _check_range(fmt, name, v, 0.0, None, "Accelerometer::set_scale")
+            _check_range(fmt, name, v, *PX4_SCALE_RANGE, "its min and max in PX4's parameter definitions")
         for name, v in zip(names["off"], off):
             ex.set(name, v)
         for name, v in zip(names["scale"], scale):
@@ -609,7 +612,7 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             )
         P = _symmetric_part(A)
         for name, k in zip(names["scale"], range(3)):
-            _check_range(fmt, name, P[k, k], 0.0, None, "Magnetometer scale")
+            _check_range(fmt, name, P[k, k], *PX4_SCALE_RANGE, "its min and max in PX4's parameter definitions")
         for name, v in zip(names["off"], off):
             ex.set(name, v)
         for name, k in zip(names["scale"], range(3)):
