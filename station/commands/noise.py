@@ -16,6 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "noise",
         help="Allan deviation, noise density, bias instability and random walk of a still IMU record",
+        epilog="A record that moves (stillness detection) gets a warning and no figures, exit status 1.",
         description="Allan deviation of the gyro and accelerometer of a still time-series capture, with 68 %% "
         "confidence intervals; white-noise density, bias instability and rate random walk per axis, each "
         "with its 1-sigma; a terminal plot. --format kalibr writes Kalibr's imu.yaml (rad/s/sqrt(Hz), "
@@ -49,6 +50,11 @@ def _g(x: float) -> str:
 
 
 def _text(result: dict) -> str:
+    if result.get("withheld"):
+        out = [f"{result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz"]
+        out.extend(f"warning: {w}" for w in result.get("warnings", []))
+        out.append(result["withheld"])
+        return "\n".join(out) + "\n"
     out = [
         (
             f"{result.get('duration_s', 0):.0f} s at {result['sample_rate_hz']:g} Hz (still record; Allan deviation, "
@@ -118,6 +124,12 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "kalibr" and os.path.isdir(out_path):
         raise InputError(out_path, None, "is a folder: give --out a file name")
     result = imu_noise(read_capture(args.file))
+    if result.get("withheld"):  # a record that moves: the warning, no figures, no imu.yaml; exit 1
+        if args.json:
+            print(json.dumps(noise_json(result), indent=2))
+        else:
+            sys.stdout.write(_text(result))
+        return 1
     if args.format == "kalibr":
         _write_atomic(out_path, kalibr_yaml(result, args.rostopic))
     if args.json:

@@ -160,7 +160,10 @@ def _factor(capture, kind: str, unit_key: str) -> tuple[float | None, str]:
 def imu_noise(capture) -> dict:
     """Allan analysis of each sensor of a still time-series capture (solvers.allan.noise_fit).
 
-    Returns {"sample_rate_hz", "duration_s", "sensors": {"gyro"|"accel": NoiseFit in SI}}. Raises
+    Returns {"sample_rate_hz", "duration_s", "sensors": {"gyro"|"accel": NoiseFit in SI}}. A
+    record that moves (over MOVING_SHARE_WARN of its samples, by the stillness detector) has no
+    sensor's noise to give: "sensors" is empty, "withheld" says why and "warnings" holds the
+    warning (its Allan figures are not the sensor's noise: a turn gave 1e-151 ± 9e+144). Raises
     UnsupportedError (one line, naming the file) when the capture has no usable sensor: not a
     time series, raw units without a physical factor, under 100 rows, no rate; InputError for
     numbers no instrument produces or a time axis that does not advance (station.guard).
@@ -184,6 +187,18 @@ def imu_noise(capture) -> dict:
             f"{where}no sample rate: the capture has no sample_rate_hz and its t column does not advance"
         )
     out: dict = {"sample_rate_hz": float(rate), "sensors": {}, "skipped": {}, "notes": []}
+    moving = _moving_share(capture)
+    if moving is not None and moving > MOVING_SHARE_WARN:
+        warning = (
+            f"{moving:.0%} of the record moves (stillness detection): the Allan deviation of a record with motion "
+            "is not the sensor's noise; record with the unit at rest"
+        )
+        out.update(
+            duration_s=float(t[-1] - t[0]),
+            warnings=[warning],
+            withheld=f"figures withheld: {moving:.0%} of the record moves, so no figure would be the sensor's noise",
+        )
+        return out
     for kind, (cols, unit_key) in SENSORS.items():
         if not all(c in capture.columns for c in cols):
             continue
@@ -203,12 +218,6 @@ def imu_noise(capture) -> dict:
     if not out["sensors"]:
         why = "; ".join(f"{k}: {v}" for k, v in out["skipped"].items()) or "no gx gy gz or ax ay az columns"
         raise UnsupportedError(f"{where}no gyro or accelerometer to analyse ({why})")
-    moving = _moving_share(capture)
-    if moving is not None and moving > MOVING_SHARE_WARN:
-        out["warnings"] = [
-            f"{moving:.0%} of the record moves (stillness detection): the Allan deviation of a record with motion "
-            "is not the sensor's noise; record with the unit at rest"
-        ]
     return out
 
 
@@ -268,6 +277,8 @@ def noise_json(result: dict) -> dict:
         doc["notes"] = list(result["notes"])
     if result.get("warnings"):
         doc["warnings"] = list(result["warnings"])
+    if result.get("withheld"):
+        doc["withheld"] = result["withheld"]
     return doc
 
 
