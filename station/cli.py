@@ -80,6 +80,14 @@ def _safe_streams(args: argparse.Namespace):
         sys.stdout, sys.stderr = out, err
 
 
+def _one_line(text: str) -> str:
+    """An error or warning line with any newline or control character in it (a file name
+    holding one, a library's multi-line message) shown escaped: it stays one line."""
+    from station.textsafe import safe
+
+    return safe(text)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -100,12 +108,12 @@ def main(argv: list[str] | None = None) -> int:
         try:
             status = int(func(args) or 0)
             for where, w in take_deferred_warnings():
-                print(f"station: {where}: warning: {w}", file=sys.stderr)
+                print(_one_line(f"station: {where}: warning: {w}"), file=sys.stderr)
             return status
         except StationError as exc:
             held = take_deferred_warnings()
             also = "".join(f"; warning: {w}" for _, w in held)
-            print(f"station: {exc}{also}", file=sys.stderr)
+            print(_one_line(f"station: {exc}{also}"), file=sys.stderr)
             return exc.exit_status
         except KeyboardInterrupt:
             print("station: interrupted", file=sys.stderr)
@@ -118,8 +126,10 @@ def main(argv: list[str] | None = None) -> int:
             where = getattr(args, "file", None) or getattr(args, "command", None) or "station"
             also = "".join(f"; warning: {w}" for _, w in take_deferred_warnings())
             print(
-                f"station: {where}: cannot process this input ({type(exc).__name__}: {exc}); "
-                f"STATION_DEBUG=1 shows the traceback{also}",
+                _one_line(
+                    f"station: {where}: cannot process this input ({type(exc).__name__}: {exc}); "
+                    f"STATION_DEBUG=1 shows the traceback{also}"
+                ),
                 file=sys.stderr,
             )
             return 2

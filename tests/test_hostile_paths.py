@@ -78,3 +78,15 @@ def test_a_character_device_is_refused_by_what_it_is(tmp_path, command):
         res = _station(command[0], dev, *[a.format(out=out) for a in command[1:]], timeout=60)
         _one_line_refusal(res, f"{dev}: ", "character device, not a regular file")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", [["inspect"], ["calibrate"], ["noise"], ["import", *GYRO_CSV, "--out", "{out}"]])
+def test_a_path_with_a_newline_keeps_the_refusal_on_one_line(tmp_path, command):
+    """The file name is part of the one line: its newline (or any control character) is shown
+    escaped, so the refusal stays one line a script can read."""
+    path = tmp_path / "bad\nname\x1b[31m.csv"
+    path.write_text("not a capture\n")
+    out = tmp_path / "out.csv"
+    res = _station(command[0], path, *[a.format(out=out) for a in command[1:]])
+    _one_line_refusal(res, "bad\\nname\\x1b[31m.csv")
+    assert not out.exists()

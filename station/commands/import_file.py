@@ -36,10 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import os
-    import sys
 
     from station.capture import write_capture
-    from station.errors import InputError
+    from station.errors import InputError, defer_warning
     from station.importers.load import import_file
     from station.importers.options import options_from_args
 
@@ -47,8 +46,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(args.out, None, "--out is the input file: choose another name")
     capture, warnings = import_file(args.file, options_from_args(args))
     write_capture(args.out, capture)
-    for w in warnings:
-        print(f"station: {args.file}: warning: {w}", file=sys.stderr)
+    for w in warnings:  # printed when the command ends, one line each (station.cli)
+        defer_warning(args.file, w)
     t = capture.columns["t"]
     cols = [c for c in capture.columns if c != "t"]
     params = sum(1 for k in capture.meta if k.startswith("param."))
