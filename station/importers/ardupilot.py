@@ -105,6 +105,19 @@ def _open_error(path, exc: Exception, what: str) -> InputError:
     return InputError(path, None, f"not a readable {what} ({type(exc).__name__}: {exc})")
 
 
+_HEAD_BYTES = 1 << 20
+
+
+def _no_header_in_head(path, markers: tuple[bytes, ...]) -> bool:
+    """Whether the first MiB of ``path`` holds none of ``markers`` (a message header): then it
+    is no log, and pymavlink would search the whole file byte by byte (2 GiB of zeros: minutes)."""
+    from station.fileio import open_input
+
+    with open_input(path, "a log file") as f:
+        head = f.read(_HEAD_BYTES)
+    return bool(head) and not any(m in head for m in markers)
+
+
 def _params_meta(params: dict[str, float], meta: dict[str, str]) -> None:
     for name in sorted(params):
         if name.startswith(PARAM_PREFIXES):
@@ -131,6 +144,10 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     from pymavlink import DFReader
 
     inst = 0 if instance is None else int(instance)
+    if _no_header_in_head(path, (b"\xa3\x95",)):  # DataFlash message header (DFReader_binary HEAD1, HEAD2)
+        raise InputError(
+            path, None, "no IMU or MAG messages in the DataFlash log (no DataFlash message header in its first 1 MiB)"
+        )
     # pymavlink's compiled indexer prints "bad header" lines straight to file descriptor 2, past
     # any Python redirection: its pure-Python indexer (same result) prints through sys.stderr.
     fast = os.environ.get("PYMAVLINK_FAST_INDEX")
@@ -346,6 +363,12 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             None,
             None,
             f"--instance {inst}: a MAVLink log carries IMU instances 0, 1, 2",
+        )
+    if _no_header_in_head(path, (b"\xfe", b"\xfd")):  # MAVLink 1 and 2 start-of-frame bytes
+        raise InputError(
+            path,
+            None,
+            f"no {' / '.join(IMU_MESSAGES[inst])} messages in the MAVLink log (no MAVLink frame in its first 1 MiB)",
         )
     try:
         with _quiet():
