@@ -349,6 +349,7 @@ def read_plain(
             hi + 1,
             "no header row: this line holds numbers; the first line must name the columns",
         )
+    given = bool(mapping)
     if not mapping:  # a header that already uses the capture's names
         mapping = {c: c for c in header if c in TARGETS}
         if not mapping:
@@ -361,6 +362,15 @@ def read_plain(
     cols: dict[str, int] = {}
     for target, source in mapping.items():
         if source in header:
+            same = [j + 1 for j, name in enumerate(header) if name == source]
+            if len(same) > 1:
+                where = f"--map {target}={source}: " if given else ""
+                raise InputError(
+                    path,
+                    hi + 1,
+                    f"{where}{len(same)} columns are named {source!r} (columns {', '.join(map(str, same[:-1]))} "
+                    f"and {same[-1]}): say which by its number, e.g. --map {target}={same[0]}",
+                )
             cols[target] = header.index(source)
         elif source.isdigit() and 1 <= int(source) <= len(header):
             cols[target] = int(source) - 1
