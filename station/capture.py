@@ -34,7 +34,7 @@ import numpy as np
 
 from solvers.units import ACCEL_UNITS, GYRO_UNITS, MAG_UNITS, RAW_UNITS
 from station.errors import InputError
-from station.fileio import atomic_open, cannot_write, open_input
+from station.fileio import atomic_open, cannot_write, looks_utf16, open_input
 from station.procedures import registry
 
 FORMAT_VERSION = "1"
@@ -396,7 +396,7 @@ def _read_head(path: str) -> _Head:
             if lineno == 1:
                 if raw.startswith(codecs.BOM_UTF8):
                     raw = raw[len(codecs.BOM_UTF8) :]
-                elif raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+                elif looks_utf16(raw + f.peek(64)[:64]):  # with a byte-order mark or without
                     raise InputError(path, 1, "UTF-16 text; capture files are UTF-8")
             text = _decode(path, raw, lineno)
             stripped = text.strip()

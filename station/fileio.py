@@ -157,6 +157,21 @@ def open_input(path, what: str = "a capture file") -> io.BufferedReader:
     return os.fdopen(fd, "rb")
 
 
+def looks_utf16(raw: bytes) -> bool:
+    """Whether bytes from a file's start are UTF-16 text (a spreadsheet's "Unicode text"):
+    its byte-order mark, or ASCII characters with a NUL byte beside each (no mark)."""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return True
+    head = raw[: 64 - len(raw[:64]) % 2]
+    if len(head) < 4:
+        return False
+    even, odd = head[0::2], head[1::2]
+    return any(
+        not nul.strip(b"\0") and all(32 <= b < 127 or b in (9, 10, 13) for b in text)
+        for text, nul in ((even, odd), (odd, even))
+    )
+
+
 def _create_beside(folder: str, name: str) -> tuple[int, str]:
     """A new hidden file in ``folder``, created with mode 0o666 so that the umask applies
     as it does to ``open()``; returns (descriptor, path)."""

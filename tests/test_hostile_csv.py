@@ -32,3 +32,20 @@ def test_import_refuses_a_mapped_column_name_that_appears_twice(tmp_path, mappin
     res = run_station("import", src, "--procedure", "accel-tabletop", *mapping, "--unit", "accel=g,t=s", "--out", out)
     _one_line_refusal(res, f"{src}:1: ", "'ax'", "columns 2 and 3")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be"])
+def test_utf16_text_is_named_as_such(tmp_path, encoding):
+    """A spreadsheet's "Unicode text" export (UTF-16, with or without its byte-order mark) was
+    refused as "NUL byte: binary data"; it is text in another encoding, and the line says so."""
+    text = "time_s,ax,ay,az\n" + "".join(f"{i * 0.01:.2f},0.01,0.02,1.0\n" for i in range(200))
+    src = tmp_path / "u16.csv"
+    src.write_bytes(text.encode(encoding))
+    res = run_station(
+        "import", src, "--procedure", "accel-tabletop", "--map", "t=time_s,ax=ax,ay=ay,az=az",
+        "--unit", "accel=g,t=s", "--out", tmp_path / "o.csv",
+    )  # fmt: skip
+    _one_line_refusal(res, f"{src}:1: ", "UTF-16 text", "UTF-8")
+    cap = tmp_path / "u16.capture.csv"
+    cap.write_bytes(("# station-capture: 1\n# procedure: gyro-drift\nt,gx,gy,gz\n0,1,2,3\n").encode(encoding))
+    _one_line_refusal(run_station("inspect", cap), f"{cap}:1: ", "UTF-16 text", "UTF-8")

@@ -21,7 +21,7 @@ import numpy as np
 
 from station.capture import UNIT_KEYS, plausible_limit
 from station.errors import InputError
-from station.fileio import open_input
+from station.fileio import looks_utf16, open_input
 from station.importers._common import COLUMNS, Imported, Stream
 from station.importers.options import TARGETS
 
@@ -68,6 +68,8 @@ def _read_bounded(f, path) -> bytes:
         if not chunk:
             return b"".join(parts)
         nul = chunk.find(b"\0")
+        if nul >= 0 and not parts and looks_utf16(chunk):
+            raise InputError(path, 1, "UTF-16 text; CSV files are read as UTF-8 (save the file as UTF-8)")
         if nul >= 0:
             raise InputError(
                 path, lines_before + chunk.count(b"\n", 0, nul) + 1, "NUL byte: binary data, not a CSV file"
