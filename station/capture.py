@@ -283,10 +283,12 @@ def _looks_numeric(text: str) -> bool:
 
 
 def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
-    """Known metadata keys hold valid values (procedure, units, numbers, date, gyro_mode)."""
+    """Known metadata keys hold valid values (procedure, units, numbers, date, gyro_mode); of
+    several bad lines, the first in the file is named."""
+    problems: list[tuple[str, str]] = []
 
-    def bad(key: str, message: str):
-        raise InputError(path, lines.get(key), message)
+    def bad(key: str, message: str) -> None:
+        problems.append((key, message))
 
     proc = meta.get("procedure")
     if proc is not None and registry.get(proc) is None:
@@ -297,14 +299,15 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
             continue
         if unit in KNOWN_UNITS:
             bad(key, f"{key} {_show(unit)} is not {_UNIT_KIND[key]} unit (expected one of {', '.join(allowed)})")
-        bad(key, f"unknown {key} {_show(unit)} (expected one of {', '.join(allowed)})")
+        else:
+            bad(key, f"unknown {key} {_show(unit)} (expected one of {', '.join(allowed)})")
     for key, (ok, why) in _NUMERIC_META.items():
         if key not in meta:
             continue
         x = _meta_number(meta[key])
         if x is None:
             bad(key, f"metadata '{key}': {_show(meta[key])} is not a number")
-        if ok is not None and not ok(x):
+        elif ok is not None and not ok(x):
             bad(key, f"metadata '{key}': {_show(meta[key])} {why}")
     if "date" in meta:
         try:
@@ -314,6 +317,10 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
     mode = meta.get("gyro_mode")
     if mode is not None and mode not in GYRO_MODES:
         bad("gyro_mode", f"unknown gyro_mode {_show(mode)} (expected one of {', '.join(GYRO_MODES)})")
+    if problems:
+        order = [(lines.get(key) is None, lines.get(key) or 0, i) for i, (key, _) in enumerate(problems)]
+        key, message = problems[min(range(len(problems)), key=order.__getitem__)]
+        raise InputError(path, lines.get(key), message)
 
 
 def _header_problem(names: list[str]) -> str | None:

@@ -49,3 +49,12 @@ def test_utf16_text_is_named_as_such(tmp_path, encoding):
     cap = tmp_path / "u16.capture.csv"
     cap.write_bytes(("# station-capture: 1\n# procedure: gyro-drift\nt,gx,gy,gz\n0,1,2,3\n").encode(encoding))
     _one_line_refusal(run_station("inspect", cap), f"{cap}:1: ", "UTF-16 text", "UTF-8")
+
+
+def test_of_several_bad_metadata_lines_the_first_is_named(tmp_path):
+    """NaN in two numeric keys: the refusal named line 4 (latitude_deg) before line 3
+    (sample_rate_hz), in the order the reader checks keys, not the file's."""
+    rows = ["# station-capture: 1", "# procedure: gyro-drift", "# sample_rate_hz: nan", "# latitude_deg: NaN"]
+    path = tmp_path / "nan.csv"
+    path.write_text("\n".join(rows + ["t,gx,gy,gz", "0,1,2,3", "0.1,1,2,3"]) + "\n")
+    _one_line_refusal(run_station("inspect", path), f"{path}:3: metadata 'sample_rate_hz': 'nan' is not a number")
