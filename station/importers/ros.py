@@ -23,6 +23,7 @@ IMU = "sensor_msgs/msg/Imu"
 MAG = "sensor_msgs/msg/MagneticField"
 TEMP = "sensor_msgs/msg/Temperature"
 SUFFIXES = (".bag", ".db3", ".mcap")
+ROS1_MAGIC = b"#ROSBAG V2.0\n"  # the first line of every ROS 1 bag (format 2.0, the one rosbag writes)
 
 
 def is_bag(path) -> bool:
@@ -70,6 +71,13 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
     p = Path(path)
     if not p.exists():
         raise InputError(path, None, "no such file")
+    if p.suffix.lower() == ".bag" and p.is_file():  # rosbags reads the whole file before it looks at the magic
+        from station.fileio import open_input
+
+        with open_input(path, "a ROS bag") as f:
+            magic = f.read(len(ROS1_MAGIC))
+        if magic != ROS1_MAGIC:
+            raise InputError(path, None, "not a ROS 1 bag (it does not start with '#ROSBAG V2.0')")
     store = get_typestore(Stores.ROS1_NOETIC if p.suffix.lower() == ".bag" else Stores.LATEST)
     try:
         reader = AnyReader([p], default_typestore=store)
