@@ -34,16 +34,21 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
     ``with`` block ends without an exception. ``mode`` is ``"w"`` (text) or ``"wb"``.
 
     Raises OSError as ``open()`` would (no folder, no permission, disk full); see
-    :func:`cannot_write` for the operator's one line.
+    :func:`cannot_write` for the operator's one line. A target that exists and is not a
+    regular file (a named pipe, a device such as /dev/null) is an InputError: the rename would
+    replace it.
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_open: mode {mode!r} (use 'w' or 'wb')")
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     try:
-        old_mode = stat.S_IMODE(os.stat(path).st_mode) if os.path.isfile(path) else None
+        st = os.stat(path)
     except OSError:
-        old_mode = None
+        st = None
+    if st is not None and not stat.S_ISDIR(st.st_mode):  # a folder: the rename says why
+        _refuse_kind(path, st.st_mode, "a file", False, "the new file would replace it")
+    old_mode = stat.S_IMODE(st.st_mode) if st is not None and stat.S_ISREG(st.st_mode) else None
     fd, tmp = _create_beside(folder, os.path.basename(path))
     try:
         if old_mode is not None:
@@ -103,13 +108,13 @@ _KINDS = (
 )
 
 
-def _refuse_kind(path, mode: int, what: str, folder: bool) -> None:
+def _refuse_kind(path, mode: int, what: str, folder: bool, why: str = "reading it could block or never end") -> None:
     if stat.S_ISREG(mode) or (folder and stat.S_ISDIR(mode)):
         return
     if stat.S_ISDIR(mode):
         raise InputError(path, None, f"is a directory, not {what}")
     kind = next((name for test, name in _KINDS if test(mode)), "not a file")
-    raise InputError(path, None, f"{kind}, not a regular file: refused (reading it could block or never end)")
+    raise InputError(path, None, f"{kind}, not a regular file: refused ({why})")
 
 
 def check_input(path, what: str = "a capture file", *, folder: bool = False) -> None:

@@ -8,6 +8,7 @@ command that blocks fails the test instead of hanging it.
 from __future__ import annotations
 
 import os
+import stat
 import subprocess
 import sys
 
@@ -111,3 +112,27 @@ def test_a_2_gib_sparse_file_of_zeros_as_a_log_is_refused_at_once(tmp_path, suff
     res = _station("import", log, "--procedure", "gyro-drift", "--out", out, timeout=60)
     _one_line_refusal(res, f"{log}: ", says, "first 1 MiB" if suffix != ".bag" else "#ROSBAG V2.0")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["simulate", "--procedure", "compass", "--seed", "1", "--out", "{target}"],
+        ["import", "{src}", *GYRO_CSV, "--out", "{target}"],
+        ["noise", "{still}", "--format", "kalibr", "--no-plot", "--out", "{target}"],
+    ],
+    ids=["simulate", "import", "noise-kalibr"],
+)
+def test_an_output_path_that_is_no_regular_file_is_refused_not_replaced(tmp_path, shared_data, command):
+    """The atomic write renames its new file over the target: a named pipe (or, for root,
+    /dev/null) given as --out was replaced by a regular file without a word. It is refused and
+    left as it was."""
+    target = tmp_path / "out.fifo"
+    os.mkfifo(target)
+    src = tmp_path / "in.csv"
+    src.write_text("time_s,gx,gy,gz\n" + "".join(f"{i * 0.01:.2f},0.01,0.02,-0.01\n" for i in range(400)))
+    still = shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv"
+    res = _station(*[a.format(target=target, src=src, still=still) for a in command], timeout=60)
+    _one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
+    assert stat.S_ISFIFO(os.stat(target).st_mode)
+    assert sorted(os.listdir(tmp_path)) == ["in.csv", "out.fifo"]
