@@ -136,3 +136,21 @@ def test_an_output_path_that_is_no_regular_file_is_refused_not_replaced(tmp_path
     _one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
     assert stat.S_ISFIFO(os.stat(target).st_mode)
     assert sorted(os.listdir(tmp_path)) == ["in.csv", "out.fifo"]
+
+
+def test_a_file_name_with_a_newline_is_one_field_in_a_result(tmp_path):
+    """A result names its file in one field: inspect's 'file:' line, import's and simulate's
+    summary line; a newline in the name is shown escaped instead of forging a line."""
+    sim = tmp_path / "sim\nname.csv"
+    res = _station("simulate", "--procedure", "gyro-drift", "--seed", "1", "--out", sim)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("\n") == 1 and "sim\\nname.csv" in res.stdout, res.stdout
+    res = _station("inspect", sim)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines()[0].endswith("sim\\nname.csv") and res.stdout.splitlines()[1].startswith("procedure:")
+    src = tmp_path / "bench\nfile.csv"
+    src.write_text("time_s,gx,gy,gz\n" + "".join(f"{i * 0.01:.2f},0.01,0.02,-0.01\n" for i in range(400)))
+    out = tmp_path / "out\nfile.csv"
+    res = _station("import", src, *GYRO_CSV, "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("\n") == 1 and "out\\nfile.csv" in res.stdout, res.stdout

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from station.textsafe import safe
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     from station.importers.options import add_arguments
@@ -54,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     units = ", ".join(f"{k[:-5]} {v}" for k, v in capture.meta.items() if k.endswith("_unit"))
     corrected = capture.meta.get("corrected")
     print(
-        f"{args.out}: {capture.procedure}, {capture.n_rows} rows, {float(t[-1]):.6g} s, "
+        f"{safe(args.out)}: {capture.procedure}, {capture.n_rows} rows, {float(t[-1]):.6g} s, "
         f"{capture.meta.get('sample_rate_hz')} Hz; columns {', '.join(cols)} ({units}); "
         f"{params} firmware parameters{'' if corrected is None else f'; corrected: {corrected}'}"
     )

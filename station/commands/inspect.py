@@ -6,6 +6,8 @@ import argparse
 import json
 import math
 
+from station.textsafe import safe
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     from station.importers.options import add_arguments
@@ -79,7 +81,7 @@ def _g(x: float | None, digits: int = 6) -> str:
 
 def format_text(s: dict) -> str:
     lines = [
-        f"file:       {s['file']}",
+        f"file:       {safe(s['file'])}",
         f"procedure:  {s['procedure'] or '(none: commands that need one will refuse it)'}",
         f"device:     {s['device'] or '(none)'}",
         f"kind:       {s['kind']}",

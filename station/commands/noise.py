@@ -10,6 +10,7 @@ import sys
 
 from station.errors import InputError
 from station.fileio import atomic_write_text, cannot_write
+from station.textsafe import safe
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -139,5 +140,5 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot:
         sys.stdout.write(_plot(result))
     if args.format == "kalibr":
-        sys.stdout.write(f"wrote {out_path}\n")
+        sys.stdout.write(f"wrote {safe(out_path)}\n")
     return 0

@@ -10,6 +10,7 @@ import threading
 
 from station.errors import InputError
 from station.procedures import registry
+from station.textsafe import safe
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -68,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.recover:
         path = recover_partial(args.recover, args.out)
-        print(f"recovered {args.recover} -> {path}")
+        print(f"recovered {safe(args.recover)} -> {safe(path)}")
         return 0
     if not args.port:
         raise InputError(None, None, "--port is required (a device path or a pyserial URL)")

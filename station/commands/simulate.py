@@ -7,6 +7,7 @@ import argparse
 from station.errors import InputError
 from station.fileio import atomic_write_json, cannot_write
 from station.procedures import registry
+from station.textsafe import safe
 
 
 def parse_assignments(items: list[str] | None, what: str) -> dict[str, float | str]:
@@ -147,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         _write_json(args.truth, sim.truth)
     n = len(next(iter(sim.columns.values())))
     print(
-        f"wrote {args.out}: {args.procedure}, {n} rows, device {sim.meta.get('device')}"
+        f"wrote {safe(args.out)}: {args.procedure}, {n} rows, device {sim.meta.get('device')}"
         + (f", effects {effects}" if effects else "")
     )
     return 0
