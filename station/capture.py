@@ -152,6 +152,9 @@ _NONFINITE_WORDS = {"nan", "inf", "infinity"}
 _FAST_BYTES = bytes(range(0x20, 0x7F)) + b"\t\n"
 _LABEL_WIDTH = 32  # fixed width of the text field in the fast path; longer labels take the slow path
 _MAX_HEAD_LINE = 1 << 20
+# Metadata lines a head may hold: real captures hold tens to a few hundred (the firmware
+# parameters in use); a file of millions (40 MB: a minute, 1 GB of memory) is no capture.
+MAX_META_LINES = 65536
 _MAX_DATA_LINE = 1 << 20  # a data line longer than this is refused (no capture row is 1 MiB)
 BLOCK_BYTES = 8 << 20  # the reader's text budget: a block is at most this plus one line
 DEFAULT_CHUNK_ROWS = 65536
@@ -419,6 +422,8 @@ def _read_head(path: str) -> _Head:
                 key, value = key.strip(), value.strip()
                 if not sep or not key:
                     raise InputError(path, lineno, f"metadata line without 'key: value': {_show(stripped)}")
+                if len(head.meta) > MAX_META_LINES:  # the first line counted is station-capture
+                    raise InputError(path, lineno, f"more than {MAX_META_LINES} metadata lines: not a capture head")
                 if key in head.meta:
                     raise InputError(
                         path, lineno, f"duplicate metadata key '{key}' (first on line {head.meta_lines[key]})"
@@ -769,6 +774,8 @@ def _meta_for_writing(path, meta: dict[str, str]) -> dict[str, str]:
                 f"metadata '{key}': {_show(value)} cannot be written (spaces at the ends or a control character)",
             )
         out[key] = value
+    if len(out) > MAX_META_LINES + 1:  # the reader's limit (station-capture is the first line)
+        raise InputError(path, None, f"{len(out) - 1} metadata keys: a capture holds at most {MAX_META_LINES}")
     _check_meta(path, out, {})
     return out
 
