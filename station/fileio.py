@@ -42,12 +42,7 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
         raise ValueError(f"atomic_open: mode {mode!r} (use 'w' or 'wb')")
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
-    try:
-        st = os.stat(path)
-    except OSError:
-        st = None
-    if st is not None and not stat.S_ISDIR(st.st_mode):  # a folder: the rename says why
-        _refuse_kind(path, st.st_mode, "a file", False, "the new file would replace it")
+    st = check_output(path)
     old_mode = stat.S_IMODE(st.st_mode) if st is not None and stat.S_ISREG(st.st_mode) else None
     fd, tmp = _create_beside(folder, os.path.basename(path))
     try:
@@ -131,6 +126,19 @@ def check_input(path, what: str = "a capture file", *, folder: bool = False) -> 
     except (OSError, ValueError) as exc:  # a name too long, a loop of links, a NUL in the name
         raise InputError(path, None, f"cannot open: {getattr(exc, 'strerror', None) or exc}") from None
     _refuse_kind(path, mode, what, folder)
+
+
+def check_output(path) -> os.stat_result | None:
+    """Refuse an output ``path`` that exists and is no regular file (a named pipe, a device):
+    the atomic rename would replace it. Returns its stat (None when it does not exist; a
+    folder is left to the rename, which says why)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    if not stat.S_ISDIR(st.st_mode):
+        _refuse_kind(path, st.st_mode, "a file", False, "the new file would replace it")
+    return st
 
 
 def open_input(path, what: str = "a capture file") -> io.BufferedReader:

@@ -154,3 +154,13 @@ def test_a_file_name_with_a_newline_is_one_field_in_a_result(tmp_path):
     res = _station("import", src, *GYRO_CSV, "--out", out)
     assert res.returncode == 0, res.stderr
     assert res.stdout.count("\n") == 1 and "out\\nfile.csv" in res.stdout, res.stdout
+
+
+def test_record_refuses_an_output_that_is_no_regular_file_before_recording(tmp_path):
+    """record writes its capture only at the end (atomically): a named pipe as --out was found
+    out after the whole recording. It is refused before the port is opened."""
+    target = tmp_path / "out.fifo"
+    os.mkfifo(target)
+    res = _station("record", "--port", tmp_path / "no-such-port", "--seconds", "1", "--out", target, timeout=60)
+    _one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
+    assert stat.S_ISFIFO(os.stat(target).st_mode)

@@ -9,6 +9,7 @@ import sys
 import threading
 
 from station.errors import InputError
+from station.fileio import check_output
 from station.procedures import registry
 from station.textsafe import safe
 
@@ -77,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, "--out is required")
     if os.path.isdir(args.out):
         raise InputError(args.out, None, "is a folder: give --out a file name for the capture")
+    check_output(args.out)  # a named pipe or a device: found out before, not after, the recording
     folder = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(folder):
         raise InputError(args.out, None, f"cannot write: no folder {folder}")
