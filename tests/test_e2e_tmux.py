@@ -234,12 +234,15 @@ def test_p2_p3_and_p4_in_both_modes_by_keys_alone_in_tmux(tmp_path):
 
         _pick(sock, "P4 gyro drift, static base")
         _keys(sock, "F5")
-        _wait_pane(sock, lambda s: "Stillness" in s and "mean rate so far" in s, 60, "P4 static")
+        # the live mean in the axes of the result's drift (it was the device's own)
+        _wait_pane(sock, lambda s: "Stillness" in s and "P4 body axes: x forward, y up, z right" in s, 60, "P4 static")
         _save(sock, "P4 gyro drift result", 3)
 
         _pick(sock, "P4 gyro drift, reference IMU")
         _keys(sock, "F5")
-        _wait_pane(sock, lambda s: "p Rate table (sim)" in s and "unit − reference" in s, 60, "P4 reference")
+        _wait_pane(
+            sock, lambda s: "p Rate table (sim)" in s and "unit − reference" in s and "P4 body axes" in s, 60, "P4 ref."
+        )
         _keys(sock, "p")
         _wait_pane(sock, lambda s: "rate table ON" in s, 60, "the rate table running")
         _save(sock, "P4 gyro drift result", 4)

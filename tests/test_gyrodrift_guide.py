@@ -50,6 +50,15 @@ def test_hold_records_and_the_p4_fit_recovers_the_drift():
     got = np.asarray(result["drift_raw"]["value"])
     sig = np.asarray(result["drift_raw"]["sigma"])
     assert np.all(np.abs(got - eps) < 4 * sig), (got, eps, sig)
+    # the live mean is shown in the axes of the result's drift (P4's body frame, x forward,
+    # y up, z right), not the device's (x forward, y left, z up): for one position mode B
+    # is ε = mean ω^b − ω_ie^b, so the mean is drift + earth_rate_body
+    want = np.asarray(result["params"]["drift"]) + np.asarray(result["params"]["earth_rate_body"])
+    sig_b = np.asarray(result["uncertainty"]["drift"])
+    assert st.axes == "P4 body axes: x forward, y up, z right"
+    assert np.all(np.abs(np.asarray(st.gyro_mean_body) - want) < sig_b), (st.gyro_mean_body, want, sig_b)
+    # in the device's axes it is another vector (y and z swapped, a sign): the check can fail
+    assert not np.all(np.abs(np.asarray(st.gyro_mean) - want) < sig_b)
 
 
 def test_moving_restarts_the_recording():
@@ -113,6 +122,24 @@ def test_mode_a_live_drift_and_the_capture_recover_the_units_drift():
     truth_p4 = np.array([truth[0], truth[2], -truth[1]])  # x fwd, y up, z right
     err = np.abs(np.asarray(res["params"]["drift"]) - truth_p4)
     assert np.all(err < 4 * np.asarray(res["uncertainty"]["drift"]))
+    # live, the same axes as the result: the screen's drift is the result's (same samples)
+    assert st.axes == "P4 body axes: x forward, y up, z right"
+    live = np.asarray(st.drift_body) / guide._unit_per_rad_s()
+    assert np.all(np.abs(live - np.asarray(res["params"]["drift"])) < 0.5 * np.asarray(res["uncertainty"]["drift"]))
+    assert np.allclose(st.drift_se_body, np.asarray(st.drift_se)[[0, 2, 1]])
+
+
+def test_live_p4_numbers_in_the_devices_axes_when_its_frame_is_not_understood():
+    """A frame P4 cannot read (calibrate refuses it): the live numbers stay in the device's
+    axes and say so, rather than claiming P4's."""
+    from station.procedures.gyrodrift_guide import ReferenceConfig, ReferenceGuide
+
+    for frame in ("x forward, y forward, z up", "x forward, y right, z up"):  # not a triad; left-handed
+        hold = HoldGuide(sample_rate_hz=100.0, units={"gyro_unit": "rad/s"}, config=HoldConfig(frame=frame))
+        ref = ReferenceGuide(sample_rate_hz=100.0, units={"gyro_unit": "rad/s"}, config=ReferenceConfig(frame=frame))
+        assert "device's axes" in hold.status().axes and "device's axes" in ref.status().axes
+    hold = HoldGuide(sample_rate_hz=100.0, units={"gyro_unit": "rad/s"}, config=HoldConfig(frame=SIM_FRAME))
+    assert hold.status().axes == "P4 body axes: x forward, y up, z right"
 
 
 def test_mode_a_live_mounting_check_catches_a_tilted_unit():

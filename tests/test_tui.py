@@ -266,6 +266,7 @@ def test_gyro_drift_hold_to_a_saved_result(tmp_path):
     # rad/s); the stored result keeps rad/s (calibrate.md)
     deg_h = math.radians(1.0) / 3600.0
     assert "°/h" in recording and "rad/s" not in recording
+    assert "P4 body axes: x forward, y up, z right" in recording  # the result's axes, not the device's
     assert "rad/s" not in summary and "°/h RMS" in summary
     for i in range(3):
         name, value, sigma, unit = shown[f"drift[{i}]"][:4]

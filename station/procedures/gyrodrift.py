@@ -85,6 +85,21 @@ def frame_matrix(text: str) -> np.ndarray:
     return M
 
 
+BODY_AXES = "x forward, y up, z right"  # P4's body frame, the axes of its drift
+
+
+def body_axes(meta: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``(C_fur_cap, gyro_flips)`` from capture metadata alone (``frame``, ``gyro_flip``, a
+    known device's conventions): what :func:`prepare` applies to the gyro columns, so
+    ``C_fur_cap @ (gyro_flips * ω_capture)`` is a rate in P4's body frame, the drift's
+    axes (without a ``frame`` the capture's axes are taken as P4's). InputError for a
+    frame that is not a right-handed triad."""
+    from station.capture import Capture
+
+    C, _, flips = _conventions(Capture(meta=dict(meta), columns={}), [])
+    return C, flips
+
+
 def _line(capture, key):
     return capture.meta_lines.get(key) if hasattr(capture, "meta_lines") else None
 

@@ -56,11 +56,14 @@ class HoldStatus:
     settle_left_s: float
     countdown_s: float
     progress: float
-    gyro_mean: tuple[float, float, float]  # running mean of the recording (raw gyro unit)
+    gyro_mean: tuple[float, float, float]  # running mean of the recording (raw gyro unit, capture axes)
     n_samples: int
     temp_c: float
     t_s: float
     message: str
+    # the same mean in the axes of the result's drift (P4's body frame; see ``axes``)
+    gyro_mean_body: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    axes: str = ""  # what gyro_mean_body's x, y, z are
 
 
 class HoldGuide(GuideBase):
@@ -95,6 +98,7 @@ class HoldGuide(GuideBase):
         self._events: list[tuple[str, str]] = []
         self._message = "Place the unit level, forward axis at the set heading; keep it still"
         self._last = None
+        self._axes = _body_axes(self)
         self._reset()
 
     def _reset(self) -> None:
@@ -190,6 +194,8 @@ class HoldGuide(GuideBase):
             temp_c=temp,
             t_s=t,
             message=self._message,
+            gyro_mean_body=tuple(float(x) for x in _to_body(self._axes, mean)),
+            axes=self._axes[2],
         )
 
     def capture(self, extra_meta: dict | None = None):
@@ -246,6 +252,10 @@ class ReferenceStatus:
     n_samples: int
     t_s: float
     message: str
+    # drift and drift_se in the axes of the result's drift (P4's body frame; see ``axes``)
+    drift_body: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    drift_se_body: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    axes: str = ""
     # HoldStatus look-alike fields, so the P1 widgets draw the countdown
     is_still: bool = True
     still_for_s: float = 0.0
@@ -283,6 +293,7 @@ class ReferenceGuide(GuideBase):
         self.phase = "wait"
         self._events: list[tuple[str, str]] = []
         self._message = "Waiting for the reference IMU"
+        self._axes = _body_axes(self)
         self._reset()
 
     def _reset(self) -> None:
@@ -357,6 +368,7 @@ class ReferenceGuide(GuideBase):
     def status(self) -> ReferenceStatus:
         c = self.config
         eps, se, motion, M = self._checks()
+        r_mean = self._sr / self._n if self._n else np.full(3, np.nan)
         rec = (self._t1 - self._t0) if math.isfinite(self._t0) else 0.0
         cmax = cbias = math.nan
         ok = True
@@ -386,6 +398,11 @@ class ReferenceGuide(GuideBase):
             n_samples=self._n,
             t_s=self._t1,
             message=msg,
+            # ε = mean(ω) − mean(Ω): the unit's gyro turned (and flipped) as P4 turns it, the
+            # reference (capture format: already right-handed) only turned
+            drift_body=tuple(float(x) for x in _to_body(self._axes, eps + r_mean) - _to_body(self._axes, r_mean, 1)),
+            drift_se_body=tuple(float(x) for x in _to_body(self._axes, se, 1, magnitude=True)),
+            axes=self._axes[2],
         )
 
     def restart(self) -> None:
@@ -418,6 +435,34 @@ class ReferenceGuide(GuideBase):
             cols["temp_c"] = temp
         mode = {"gyro_mode": "reference", "reference_drift_deg_h": repr(float(self.config.reference_drift_deg_h))}
         return Capture(meta=_capture_meta(self, mode, extra_meta), columns=cols)
+
+
+def _body_axes(guide) -> tuple[np.ndarray | None, np.ndarray | None, str]:
+    """``(C_fur_cap, gyro_flips, what the axes are)`` from the metadata the guide's capture
+    will carry, read by P4 itself (``gyrodrift.body_axes``): the live numbers are then in
+    the axes of the result's drift. A frame P4 cannot read (the calibration will refuse it)
+    leaves the device's own axes, said so."""
+    from station.errors import InputError
+    from station.procedures import gyrodrift
+
+    try:
+        C, flips = gyrodrift.body_axes(_capture_meta(guide, {}, None))
+    except InputError:
+        return None, None, "the device's axes (frame not understood)"
+    return C, flips, f"P4 body axes: {gyrodrift.BODY_AXES}"
+
+
+def _to_body(axes, v, flips=None, magnitude=False) -> np.ndarray:
+    """``v`` (3,) in the capture's axes → P4's body frame by ``axes`` (:func:`_body_axes`);
+    ``flips=1``: no gyro sign flips (the reference); ``magnitude``: a spread, not a vector
+    (C is a signed permutation, so a spread only moves to its axis)."""
+    C, f = axes[0], axes[1]
+    v = np.asarray(v, float)
+    if C is None:
+        return v
+    if magnitude:
+        return np.abs(C) @ v
+    return C @ (v * (f if flips is None else flips))
 
 
 def _capture_meta(guide, mode: dict[str, str], extra_meta: dict | None) -> dict[str, str]:

@@ -40,7 +40,7 @@ class HoldScreen(GuidedScreenMixin, Screen):
     HoldScreen #body { padding: 0 1; }
     HoldScreen #instruction { height: 4; }
     HoldScreen #indicators { height: 2; margin-top: 1; }
-    HoldScreen #readouts { height: 3; margin-top: 1; }
+    HoldScreen #readouts { height: 4; margin-top: 1; }
     HoldScreen #message { height: 1; text-style: bold; margin-top: 1; }
     """
     BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "ask_abort", "Abort")]
@@ -106,16 +106,17 @@ class HoldScreen(GuidedScreenMixin, Screen):
         g = self.guide
         self.query_one(StabilityBar).show(st)
         self.query_one(CountdownBar).show(st, g.config.duration_s if g else math.nan)
-        m, stats = st.gyro_mean, message.stats
+        m, stats = st.gyro_mean_body, message.stats  # in the axes of the result's drift
         unit = self.app.session.source.units.get("gyro_unit") or "raw"
-        k, fmt = _deg_h(unit), "10.1f"  # °/h, as the Results screen shows the drift
+        k, fmt = _deg_h(unit), "+.1f"  # °/h, as the Results screen shows the drift
         if math.isfinite(k):
             unit = "°/h"
         else:  # a raw unit (counts without a scale): as it comes
-            k, fmt = 1.0, "10.6f"
+            k, fmt = 1.0, "+.6f"
         self.query_one("#readouts", Static).update(
-            f"mean rate so far  {num(m[0] * k, fmt)} {num(m[1] * k, fmt)} {num(m[2] * k, fmt)} {unit}"
-            " (Earth rate included)\n"
+            f"mean so far, Earth rate included; {st.axes}\n"
+            + "   ".join(f"{ax} {num(m[i] * k, fmt):>10}" for i, ax in enumerate("xyz"))
+            + f" {unit}\n"
             f"{st.n_samples} samples   temp {num(st.temp_c, '.1f')} °C\n"
             f"{num(stats.rate_hz, '.0f')} Hz   errors {stats.parse_errors}   dropped {stats.dropped}"
             + ("" if stats.connected else "   DISCONNECTED")
@@ -246,7 +247,7 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
         unit = self.app.session.source.units.get("gyro_unit") or "raw"
         stats = message.stats
         k = _deg_h(unit)
-        e, se = st.drift, st.drift_se
+        e, se = st.drift_body, st.drift_se_body  # in the axes of the result's drift
         mount = (
             "—"
             if not math.isfinite(st.coupling_max)
@@ -254,7 +255,7 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
             + ("[green]OK[/]" if st.mounting_ok else "[b red]CHECK THE MOUNTING[/]")
         )
         self.query_one("#readouts", Static).update(
-            "drift (unit − reference), °/h ± 1σ (white noise)\n"
+            f"drift (unit − reference) °/h ± 1σ, {st.axes}\n"
             + "   ".join(f"{ax} {num(e[i] * k, '+9.1f')} ± {num(se[i] * k, '.1f')}" for i, ax in enumerate("xyz"))
             + "\n"
             f"reference motion {num(st.motion, '.3f')} {unit} RMS"
