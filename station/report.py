@@ -20,7 +20,18 @@ import numpy as np
 
 from station import __version__
 from station.procedures import registry
-from station.procedures.review import assess, flatten, result_unit
+from station.procedures.review import (
+    assess,
+    display_unit,
+    flatten,
+    param_unit,
+    record_result,
+    result_unit,
+    shown_residual,
+    shown_rows,
+    shown_unit,
+    shown_value,
+)
 
 K_COVERAGE = 2.0
 
@@ -161,13 +172,11 @@ def _figures(rep: dict) -> list[tuple[str, str]]:
         for name in first:
             blocks.setdefault(name.split("[", 1)[0], []).append(name)
         times = [_posix(h["time"]) for h in hist]
-        from station.procedures.review import param_unit
-
         for block, names in list(blocks.items())[:4]:
             series = []
-            for name in names[:6]:
-                vals = [flatten(h["params"]).get(name) for h in hist]
-                sig = [flatten(h["uncertainty"]).get(name) for h in hist]
+            for name in names[:6]:  # in the units the screens show (each calibration's own factor)
+                vals = [_shown(h, name, flatten(h["params"]).get(name)) for h in hist]
+                sig = [_shown(h, name, flatten(h["uncertainty"]).get(name)) for h in hist]
                 v0 = vals[0]
                 if v0 is None:
                     continue
@@ -182,7 +191,7 @@ def _figures(rep: dict) -> list[tuple[str, str]]:
                 )
             if not series:
                 continue
-            unit = param_unit(result, names[0])
+            unit = shown_unit(result, names[0])
             figs.append(
                 (
                     f"Drift history of {block}: change since the first accepted calibration "
@@ -198,6 +207,23 @@ def _figures(rep: dict) -> list[tuple[str, str]]:
                 )
             )
     return figs
+
+
+def _shown(record: dict, name: str, x):
+    return None if x is None else shown_value(record_result(record), name, x)
+
+
+def _stored_units_note(result: dict, rows) -> str:
+    """Which parameters the page shows in another unit than the stored result's (its JSON,
+    exports and database), e.g. P4's drift: '' when none."""
+    said = {}
+    for r in rows:
+        block = r.name.split("[", 1)[0]
+        if block not in said and display_unit(result, r.name) is not None:
+            said[block] = f"{block} in {param_unit(result, r.name) or 'its stored unit'}"
+    if display_unit(result, "residual_rms") is not None:
+        said["residual_rms"] = f"the residual in {result_unit(result)}"
+    return ", ".join(said.values())
 
 
 CSS = """
@@ -287,14 +313,20 @@ def render_html(rep: dict) -> str:
     h.append(
         "<h2>Parameters</h2><p>u: standard uncertainty (1σ, from the fit's covariance); U = k·u, "
         f"expanded uncertainty with coverage factor k = {K_COVERAGE:g} (about 95 %). "
-        "Tolerance: the largest change from the calibration in use; limits: absolute.</p>"
+        "Tolerance: the largest change from the calibration in use; limits: absolute."
+        + (
+            f" Shown in the units of the station's screens; the stored result and its exports keep {escape(note)}."
+            if (note := _stored_units_note(result, a.rows))
+            else ""
+        )
+        + "</p>"
     )
     h.append(
         "<table class='params' id='params'><tr><th>parameter</th><th>value</th><th>u (k=1)</th>"
         "<th>U (k=2)</th><th>unit</th><th>previous</th><th>change</th><th>tolerance / limits</th>"
         "<th>check</th></tr>"
     )
-    for r in a.rows:
+    for r in shown_rows(result, a.rows):  # in the units the screens show (the checks were made as stored)
         U = K_COVERAGE * r.sigma if isinstance(r.sigma, (int, float)) and r.sigma is not None else None
         change = (r.value - r.previous) if (r.previous is not None and r.value is not None) else None
         lim = []
@@ -311,8 +343,9 @@ def render_html(rep: dict) -> str:
             f"<td class='num'>{_n(change, '+.3g')}</td><td>{escape(' '.join(lim)) or '—'}</td><td>{ok}</td></tr>"
         )
     h.append("</table>")
+    res, res_unit = shown_residual(result)
     h.append(
-        f"<p>Residual RMS {_n(result.get('residual_rms'), '.4g')} {escape(result_unit(result))} · "
+        f"<p>Residual RMS {_n(res, '.4g')} {escape(res_unit)} · "
         f"{_e(registry.count_text(result.get('procedure'), result.get('n_positions')))}.</p>"
     )
     if review.get("reasons") or a.reasons:

@@ -174,7 +174,7 @@ def test_history_text(capsys, filled):
     lines = out.splitlines()
     assert code == 0 and lines[0] == "device IMU-1: 3 calibrations of accel-tabletop, oldest first"
     assert "2024-01-01T00:00:00Z  accel-tabletop  accepted, superseded by #2" in lines[1]
-    assert lines[2].strip().startswith("B: 0.1±0.01  0.2±0.01  0.3±0.01")
+    assert lines[2].strip().startswith("B [m/s^2]: 0.1±0.01  0.2±0.01  0.3±0.01")
 
 
 # --- drift -----------------------------------------------------------------------------

@@ -262,3 +262,44 @@ def test_report_renders_in_headless_chromium(filled):
     img = _png_rgb(shot.read_bytes())
     assert (img.max(axis=2) < 100).mean() > 0.01  # text covers more than 1 % of the first screen
     assert img[:60].std() > 10  # the title is there
+
+
+@pytest.mark.skipif(CHROMIUM is None and not REQUIRED, reason="chromium is not installed (apt-get install chromium)")
+def test_report_shows_p4_and_the_compass_in_the_units_of_the_screens_in_chromium(filled):
+    """The page as the browser builds it: P4's drift in °/h and the compass's soft iron as a
+    ratio (uT/uT), as on the Results screen (it said rad/s and nT per uT); the stored
+    result keeps its units, and the page says which."""
+    import math
+
+    assert CHROMIUM is not None, "STATION_REQUIRE_TOOLS names chromium, but it is not installed"
+    tmp, db, ids = filled
+    deg_h = math.pi / 648000.0  # 1 °/h in rad/s
+    for proc, block, factor, unit, stored in (
+        ("gyro-drift", "drift", 1.0 / deg_h, "°/h", "rad/s"),
+        ("compass", "soft_iron", 1e-3, "uT/uT", "nT per uT"),
+    ):
+        out, _ = _report(tmp, db, ids[proc])
+        r = _chromium(tmp, out.as_uri(), "--dump-dom")
+        assert r.returncode == 0, r.stderr[-2000:]
+        dom = r.stdout.replace('id="params"', "id='params'")
+        rows = _table_rows(dom, "params")
+        by_name = {row[0]: row for row in rows[1:]}
+        with Store(str(db)) as s:
+            cal = s.calibration(ids[proc])
+        values = np.asarray(cal["params"][block], float).ravel()
+        sigmas = np.asarray(cal["uncertainty"][block], float).ravel()
+        names = [n for n in by_name if n.startswith(block + "[")]
+        assert len(names) == len(values), names
+        for name, v, s_ in zip(names, values, sigmas):
+            row = by_name[name]
+            assert row[4] == unit, row
+            assert float(row[1]) == pytest.approx(v * factor, rel=1e-6, abs=1e-9)
+            if s_ > 0:
+                assert float(row[2]) == pytest.approx(s_ * factor, rel=0.05)
+        text = re.sub(r"<[^>]+>", " ", dom)
+        assert f"{block} in {stored}" in " ".join(text.split())  # what the JSON and exports keep
+        if proc == "gyro-drift":
+            res = re.search(r"Residual RMS (\S+) (\S+) ·", " ".join(text.split()))
+            assert res and res.group(2) == "°/h"
+            assert float(res.group(1)) == pytest.approx(cal["residual_rms"] / deg_h, rel=1e-3)
+            assert not [row for row in rows[1:] if "rad/s" in row[4]]

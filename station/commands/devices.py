@@ -161,7 +161,27 @@ def _list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _with_units(name: str, values: list, contexts: list[dict], fmt) -> str:
+    """``NAME=LOW:HIGH`` (or ``NAME=VALUE``) as ``--limit``/``--tolerance`` take it, in the
+    stored unit, said, and in the unit the screens show when that is another one: e.g.
+    ``drift=-0.001:0.001 rad/s (-206.265:206.265 °/h)``."""
+    from station.procedures.review import display_unit, param_unit, shown_value, unit_context
+
+    ctx = unit_context(name, contexts)
+    stored = safe(f"{name}=" + ":".join(fmt(v) for v in values))
+    unit = param_unit(ctx, name) if ctx else ""
+    if unit and unit != "1":
+        stored += f" {safe(unit)}"
+    disp = display_unit(ctx, name) if ctx else None
+    if disp is None:
+        return stored
+    shown = ":".join(fmt(None if v is None else shown_value(ctx, name, v)) for v in values)
+    return f"{stored} ({safe(shown)} {safe(disp[1])})"
+
+
 def _show(args: argparse.Namespace) -> int:
+    from station.procedures.review import record_result
+
     with open_store(args) as store:
         device = require_device(store, args.id)
         history = store.history(args.id)
@@ -175,17 +195,19 @@ def _show(args: argparse.Namespace) -> int:
         device["latest"] = {p: {"id": h["id"], "time": h["time"]} for p, h in latest.items()}
         print_json(device)
         return 0
+    contexts = [record_result(h) for h in [*latest.values(), *reversed(history)]]
     out = [
         f"device: {safe(device['id'])}",
         f"model: {safe(device['model'] or '-')}",
         f"sensor kinds: {safe(', '.join(device['sensor_kinds']) or '-')}",
         f"interval: {fmt_num(device['interval_days'])} days" if device["interval_days"] else "interval: -",
-        "tolerances: " + (", ".join(f"{safe(k)}={fmt_num(v)}" for k, v in device["tolerances"].items()) or "-"),
+        "tolerances: "
+        + (", ".join(_with_units(k, [v], contexts, fmt_num) for k, v in device["tolerances"].items()) or "-"),
         "limits: "
         + (
             ", ".join(
-                f"{safe(k)}={'' if lo is None else format(lo, 'g')}:{'' if hi is None else format(hi, 'g')}"
-                for k, (lo, hi) in device.get("limits", {}).items()
+                _with_units(k, pair, contexts, lambda x: "" if x is None else format(x, "g"))
+                for k, pair in device.get("limits", {}).items()
             )
             or "-"
         ),

@@ -24,6 +24,33 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+_SCALED = ("value_in_use", "rate_per_year", "rate_sigma_per_year", "trend_value_at_last", "tolerance")
+
+
+def _shown(store, device_id: str, trends: list[dict]) -> list[dict]:
+    """``trends`` in the units the screens show (P4's drift in °/h, the compass's soft iron
+    as a ratio), each with its ``unit``; the unit is read from the calibration in use of
+    its procedure (``--json`` keeps the stored units)."""
+    from station.procedures.review import record_result, shown_unit, shown_value
+
+    contexts: dict[str, dict] = {}
+    out = []
+    for t in trends:
+        proc, name = t["procedure"], t["param"]
+        if proc not in contexts:
+            ref = store.reference(device_id, proc)
+            contexts[proc] = record_result(ref) if ref else {"procedure": proc}
+        ctx = contexts[proc]
+
+        def f(x, name=name, ctx=ctx):
+            return None if x is None else shown_value(ctx, name, x)
+
+        shown = {k: f(t[k]) for k in _SCALED}
+        shown.update(values=[f(v) for v in t["values"]], sigmas=[f(v) for v in t["sigmas"]])
+        out.append(dict(t, **shown, unit=shown_unit(ctx, name)))
+    return out
+
+
 def _significance(t: dict) -> float:
     if t["rate_per_year"] is None:
         return -1.0
@@ -64,7 +91,10 @@ def _plot(trends: list[dict]) -> str:
         rate = (
             ""
             if t["rate_per_year"] is None
-            else (f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} /year")
+            else (
+                f"  {fmt_num(t['rate_per_year'], 3)} ± {fmt_num(t['rate_sigma_per_year'], 2)} "
+                f"{t.get('unit') or ''}/year".replace(" /year", "/year")
+            )
         )
         plt.title(safe(f"{t['procedure']} {t['param']}{rate}"))
         plt.xlim(*axis["xlim"])
@@ -79,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
     with open_store(args) as store:
         require_device(store, args.id)
         trends = store.drift(args.id, procedure=args.procedure, param=args.param)
+        if not args.json:
+            trends = _shown(store, args.id, trends)
     if args.param and not trends:
         raise InputError(None, None, f"no coefficient named {args.param!r} in this device's accepted calibrations")
     if args.json:
@@ -88,13 +120,14 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(f"device {safe(args.id)}: no accepted calibrations yet\n")
         return 0
     out = [f"device {safe(args.id)}: drift per year over its accepted calibrations (weighted linear fit)"]
-    header = ("PROCEDURE", "PARAM", "N", "IN_USE", "RATE/YEAR", "±SIGMA", "TOLERANCE", "LEAVES_TOLERANCE")
+    header = ("PROCEDURE", "PARAM", "UNIT", "N", "IN_USE", "RATE/YEAR", "±SIGMA", "TOLERANCE", "LEAVES_TOLERANCE")
     rows = [header]
     for t in trends:
         rows.append(
             (
                 safe(t["procedure"]),
                 safe(t["param"]),
+                safe(t["unit"] or "-"),
                 str(t["n"]),
                 fmt_num(t["value_in_use"]),
                 fmt_num(t["rate_per_year"], 3),

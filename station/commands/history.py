@@ -18,10 +18,15 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _param_lines(params: dict, uncertainty: dict) -> list[str]:
-    """One line per top-level parameter: `B: 0.1±0.001  0.2±0.001  ...`."""
+def _param_lines(record: dict) -> list[str]:
+    """One line per top-level parameter: `B [m/s^2]: 0.1±0.001  0.2±0.001  ...`, in the units
+    the screens show (P4's drift in °/h, the compass's soft iron as a ratio; ``--json``
+    keeps the stored units)."""
     from db.params import flatten
+    from station.procedures.review import record_result, shown_unit, shown_value
 
+    result = record_result(record)
+    params, uncertainty = record["params"], record["uncertainty"]
     lines = []
     for key, value in params.items():
         if isinstance(value, str):
@@ -33,9 +38,12 @@ def _param_lines(params: dict, uncertainty: dict) -> list[str]:
         for name, v in vals.items():
             label = name[len(key) :]
             s = sig.get(name)
-            text = fmt_num(v) + (f"±{fmt_num(s, 2)}" if s is not None else "")
+            text = fmt_num(shown_value(result, name, v)) + (
+                f"±{fmt_num(shown_value(result, name, s), 2)}" if s is not None else ""
+            )
             parts.append(f"{safe(label)}={text}" if label.startswith(".") else text)
-        lines.append(f"{safe(key)}: " + "  ".join(parts))
+        unit = shown_unit(result, key) if not isinstance(value, dict) else ""
+        lines.append(f"{safe(key)}{f' [{safe(unit)}]' if unit and unit != '1' else ''}: " + "  ".join(parts))
     return lines
 
 
@@ -46,17 +54,20 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(records)
         return 0
+    from station.procedures.review import record_result, shown_residual
+
     what = f" of {args.procedure}" if args.procedure else ""
     out = [f"device {safe(args.id)}: {len(records)} calibration{'s' if len(records) != 1 else ''}{what}, oldest first"]
     for r in records:
         status = "accepted" if r["accepted"] else "rejected"
         if r["superseded_by"] is not None:
             status += f", superseded by #{r['superseded_by']}"
+        res, unit = shown_residual(record_result(r))
         out.append(
             f"#{r['id']}  {safe(r['time'])}  {safe(r['procedure'])}  {status}  residual_rms "
-            f"{fmt_num(r['residual_rms'], 4)}  software {safe(r['software_version'] or '-')}"
+            f"{fmt_num(res, 4)}{f' {safe(unit)}' if unit else ''}  software {safe(r['software_version'] or '-')}"
         )
-        out.extend("    " + line for line in _param_lines(r["params"], r["uncertainty"]))
+        out.extend("    " + line for line in _param_lines(r))
         out.extend(f"    warning: {safe(w)}" for w in r["warnings"])
     sys.stdout.write("\n".join(out) + "\n")
     return 0

@@ -325,9 +325,16 @@ def format_text(result: dict) -> str:
         f"device     {result.get('device')}",
         f"model      {result.get('model')}",
     ]
+    from station.procedures.review import shown_unit, shown_value
+
     p, u = result["params"], result["uncertainty"]
-    lines += param_lines("hard_iron", jsonable(p["hard_iron"]), jsonable(u["hard_iron"]))
-    lines += param_lines("soft_iron", jsonable(p["soft_iron"]), jsonable(u["soft_iron"]))
+
+    def shown(block, x):
+        return [shown(block, v) for v in x] if isinstance(x, list) else shown_value(result, block, x)
+
+    for block in ("hard_iron", "soft_iron"):  # in the units the screens show (soft iron: a ratio)
+        value, sigma = (shown(block, jsonable(x)) for x in (p[block], u[block]))
+        lines += param_lines(f"{block} [{shown_unit(result, block)}]", value, sigma)
     ref = p["reference"]
     if result.get("igrf_anchored"):
         lines.append(
@@ -352,8 +359,6 @@ def format_text(result: dict) -> str:
             f"  held {h['index']:>2}: pitch {h['pitch_deg']:7.2f}°  roll {h['roll_deg']:7.2f}°  "
             f"heading {h['heading_magnetic_deg']:7.2f}° magnetic, {h['heading_true_deg']:7.2f}° true"
         )
-    if result.get("calibration_id") is not None:
-        lines.append(f"saved      calibration {result['calibration_id']}")
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)

@@ -467,18 +467,25 @@ def _result(capture, res: gd.DriftResult, mode, n_pos, resid, acc, me, C, flips,
 
 
 def format_text(result: dict) -> str:
+    """The result for a person, in the units the screens show (drift and rates in °/h,
+    ``DISPLAY_UNITS``); ``--json`` keeps rad/s."""
+    from station.procedures.review import shown_residual, shown_unit, shown_value
+
     p, u = result["params"], result["uncertainty"]
-    d, s = np.asarray(p["drift"]), np.asarray(u["drift"])
+    unit = shown_unit(result, "drift")
+    d = [shown_value(result, "drift", float(v)) for v in p["drift"]]
+    s = [shown_value(result, "drift", float(v)) for v in u["drift"]]
     lines = [
         f"procedure  gyro-drift ({p['mode']})",
         f"device     {result.get('device')}",
         f"model      {result['model']}",
-        "drift      "
-        + "  ".join(f"{a} {v:+.4e} ± {e:.1e} rad/s ({v / gd.DEG_H_RAD_S:+.1f} °/h)" for a, v, e in zip("xyz", d, s)),
+        "drift      " + "  ".join(f"{a} {v:+.2f} ± {e:.2g}" for a, v, e in zip("xyz", d, s)) + f" {unit}",
+        f"           body axes {BODY_AXES}",
     ]
     if p.get("earth_rate_body") is not None:
-        e = np.asarray(p["earth_rate_body"])
-        lines.append("earth rate " + "  ".join(f"{a} {v:+.3e}" for a, v in zip("xyz", e)) + " rad/s removed")
+        e = [shown_value(result, "earth_rate_body", float(v)) for v in p["earth_rate_body"]]
+        unit_e = shown_unit(result, "earth_rate_body")
+        lines.append("earth rate " + "  ".join(f"{a} {v:+.3f}" for a, v in zip("xyz", e)) + f" {unit_e} removed")
     if "pitch_deg" in p:
         pr = p["pitch_deg"]
         if isinstance(pr, list):
@@ -503,7 +510,8 @@ def format_text(result: dict) -> str:
                 else ""
             )
         )
-    lines.append(f"residual   {result['residual_rms']:.4g} rad/s RMS (noise about the model)")
+    res, res_unit = shown_residual(result)
+    lines.append(f"residual   {res:.4g} {res_unit} RMS (noise about the model)")
     lines.append(f"positions  {result['n_positions']}")
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
