@@ -255,3 +255,80 @@ def test_p2_p3_and_p4_in_both_modes_by_keys_alone_in_tmux(tmp_path):
     assert p3["procedure"] == "compass"
     p4 = _history(db, "SIM-GYR-0000")
     assert [r["params"]["mode"] for r in p4] == ["static", "reference"]
+
+
+def test_a_new_users_walkthrough_at_80x24_in_tmux(tmp_path):
+    """The README's first command (`python3 dev.py station`) for a new user (a home with no
+    database yet) at 80x24, every screen a first visit reaches: Help read to its end, History,
+    a P4 file imported to Results, its limits set in °/h, its diagnosis; then quit. What was
+    cut or misplaced at this size: Help lines wrapped to the box's edge, the diagnosis's long
+    lines wrapped to the screen's edge, and Limits said "no database" until something was
+    saved (the first limit now makes it)."""
+    import math
+
+    from station_run import run_station
+
+    sock = f"test-walk-{os.getpid()}"
+    home = tmp_path / "home"
+    home.mkdir()
+    capture = tmp_path / "p4.csv"
+    r = run_station(
+        "simulate", "--procedure", "gyro-drift", "--seed", 403000, "--option", "duration_s=60", "--out", capture
+    )
+    assert r.returncode == 0, r.stderr
+    env = f"env -u STATION_DB -u XDG_DATA_HOME HOME={home} TERM=xterm-256color"
+    cmd = f"cd {ROOT} && {env} {sys.executable} dev.py station; echo EXIT=$?; sleep 30"
+    tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
+    try:
+        _wait_pane(sock, lambda s: "f5 Start" in s and "Built-in simulated device" in s, 120, "the Connect screen")
+        _keys(sock, "F1")
+        screen = _wait_pane(sock, lambda s: "Calibration station: keys" in s, 60, "Help")
+        assert "simulated: p rate table (P4 reference IMU)" in screen
+        assert not [line for line in screen.splitlines() if re.match(r"^ │ [a-z(]", line)], screen  # no stray wraps
+        _keys(sock, "End")
+        screen = _wait_pane(sock, lambda s: "│ position." in s, 60, "the end of Help")
+        _keys(sock, "Escape", "F2")
+        _wait_pane(sock, lambda s: "No devices yet" in s and "esc Back" in s, 60, "History")
+        _keys(sock, "Escape")
+        _wait_pane(sock, lambda s: "f5 Start" in s, 60, "Connect again")
+        _keys(sock, "F7")
+        _wait_pane(sock, lambda s: "path/to/file" in s, 60, "Import")
+        _keys(sock, str(capture), "Enter")
+        _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " RMS " in s and "°/h" in s, 240, "P4 Results")
+        _keys(sock, "l")
+        _wait_pane(sock, lambda s: "the first one registers this new unit" in s, 60, "Limits of a new unit")
+        _keys(sock, "drift=-2000:2000", "Enter")
+        _wait_pane(sock, lambda s: "stored: drift = -2000 … 2000 °/h" in s, 60, "the limit stored")
+        _keys(sock, "Escape")
+        _wait_pane(sock, lambda s: "P4 gyro drift result" in s and "Limits of" not in s, 60, "Results again")
+        _keys(sock, "g")
+        screen = _wait_pane(sock, lambda s: "verdict" in s and "baseline" in s, 240, "the diagnosis")
+        lines = screen.splitlines()[1:-1]
+        labels = (
+            "procedure",
+            "baseline",
+            "candidates",
+            "extended",
+            "verdict",
+            "measured",
+            "effect",
+            "quality",
+            "WARNING",
+        )
+        assert all(not line.strip() or line[1:].startswith((" ", *labels)) for line in lines), screen
+        _keys(sock, "Escape")
+        # judged again with the limit set: inside it
+        _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " PASS " in s, 60, "Results again")
+        _keys(sock, "C-q")
+        _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
+        _keys(sock, "y")
+        _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
+        assert "EXIT=0" in pane(sock)
+    finally:
+        tmux(sock, "kill-server", check=False)
+    from db import Store
+
+    with Store(str(home / ".local" / "share" / "station" / "station.db")) as s:
+        (device,) = s.list_devices()
+        low, high = device["limits"]["drift"]
+    assert math.isclose(high, 2000 * math.pi / 648000, rel_tol=1e-12) and math.isclose(low, -high, rel_tol=1e-12)

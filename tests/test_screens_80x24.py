@@ -495,3 +495,60 @@ def test_limits_and_tolerances_are_shown_and_typed_in_the_units_results_shows(tm
     assert math.isclose(high, 2000 * deg_h, rel_tol=1e-12) and math.isclose(low, -2000 * deg_h, rel_tol=1e-12)
     assert "0.9 … 1.1" in soft and "uT/uT" in soft
     assert Store(db).get_device("M1")["limits"]["soft_iron"] == [900.0, 1100.0]
+
+
+def test_help_lines_fit_the_box_at_80x24():
+    """F1 at 80x24: every line of the keys fits the box beside its scroll bar. A longer one
+    wrapped to the box's left edge ('ref.)' and 'on.' alone under the key column), where it
+    read as a new entry; all of it is reached by scrolling."""
+    from textual.widgets import Static
+
+    from station.screens.help import HELP
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f1")
+            await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
+            text = app.screen.query_one(Static)
+            await wait_for(pilot, lambda: text.size.height > 0)
+            height = text.size.height
+            box = app.screen.query_one("#help")
+            await pilot.press("end")
+            await wait_for(pilot, lambda: box.scroll_y == box.max_scroll_y)
+            return height, screen_lines(app)
+
+    height, lines = asyncio.run(story())
+    assert height == len(HELP.split("\n"))  # one screen row per line (the last one empty): nothing wrapped
+    assert any("simulated: p rate table (P4 reference IMU)" in line for line in lines)
+    assert any(line.strip(" │").startswith("position.") for line in lines)  # the last line, reached
+
+
+def test_diagnose_screen_lines_continue_under_their_text_at_80x24():
+    """A P4 diagnosis at 80x24: its long lines (an unresolvable effect's reason, the
+    candidates' rule, the per-time-block rows) wrapped to the screen's left edge, where a
+    continuation read as a new entry. Now each line fits, continued under its own text."""
+    from station.screens.diagnose import DiagnoseScreen
+
+    cap, _ = _simulated_result("gyro-drift", 401002, duration_s=60)
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(DiagnoseScreen(capture=cap))
+            await wait_for(pilot, lambda: app.screen.report is not None)
+            report = app.screen.report
+            shown = screen_lines(app)
+        return report, shown
+
+    report, shown = asyncio.run(story())
+    text = [line for line in report.splitlines() if "\x1b" not in line]  # the plots have their own width
+    assert "unresolvable: " in report and "per time block" in report
+    assert all(len(line) <= 74 for line in text), [line for line in text if len(line) > 74]
+    reason = next(i for i, line in enumerate(text) if "unresolvable: " in line)
+    column = text[reason].index("unresolvable: ")
+    assert text[reason + 1].startswith(" " * column) and text[reason + 1][column] != " "
+    # on screen: no line of the report begins at the screen's edge but the labels' own
+    labels = ("procedure", "baseline", "candidates", "extended", "verdict", "measured", "effect", "quality", "WARNING")
+    body = [line[1:] for line in shown[1:-1] if line.strip()]
+    assert all(line.startswith(" ") or line.startswith(labels) for line in body), body

@@ -8,6 +8,7 @@ its capture once (``prepare``), calibrates the baseline from it and builds its p
 from __future__ import annotations
 
 import re
+import textwrap
 
 import numpy as np
 
@@ -198,7 +199,22 @@ def _result(capture, procedure, diag, inp) -> dict:
     }
 
 
-def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plot_width: int = 78) -> str:
+def _hang(line: str, width: int) -> list[str]:
+    """``line`` in lines of at most ``width`` columns, each continuation under the line's
+    text column (after its label and the spaces that follow it), so that it never reads as
+    a new entry (a screen's own wrapping starts it at the left edge)."""
+    if len(line) <= width:
+        return [line]
+    m = re.match(r"\s*\S+(?: \S+)*?\s{2,}", line)  # the label and the run of spaces after it
+    indent = len(m.group(0)) if m and len(m.group(0)) <= width // 2 else len(line) - len(line.lstrip()) + 2
+    return textwrap.wrap(line, width, subsequent_indent=" " * indent, break_on_hyphens=False) or [line]
+
+
+def format_text(
+    result: dict, diag, inp: DiagnosisInput, plots: bool = True, plot_width: int = 78, width: int | None = None
+) -> str:
+    """The findings for a person; ``width``: wrap the text lines to it (the TUI's), each
+    continuation indented under its text (the plots take ``plot_width``)."""
     from station.calibrate import jsonable
 
     r = jsonable(result)
@@ -260,6 +276,8 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plo
         L.append(f"quality     {q['kind']} {where}{line}: {q['explanation']}")
     L.append("verdict     " + (", ".join(r["verdict"]) if r["verdict"] else "none"))
     L += _per_group(diag, inp.group_kind)
+    if width is not None:
+        L = [part for line in L for part in _hang(line, width)]
     if plots:
         L.append(_plots(diag, plot_width))
     for key, val in result.items():
@@ -269,7 +287,7 @@ def format_text(result: dict, diag, inp: DiagnosisInput, plots: bool = True, plo
         if key in result:
             L.append("")
             L.append(f"--- {key}: {result[key]['procedure']} (the same session's second sensor)")
-            L.append(format_text(result[key], sdiag, sinp, plots=False, plot_width=plot_width))
+            L.append(format_text(result[key], sdiag, sinp, plots=False, plot_width=plot_width, width=width))
     return "\n".join(L)
 
 
@@ -283,6 +301,7 @@ def _per_group(diag, kind: str) -> list[str]:
     if not uniq or len(uniq) > 40:
         return []
     out = [f"measured − simulated per {kind} [{prob.unit}]: mean (RMS), baseline → extended"]
+    rows = []
     for u in uniq:
         m = keep & (g == u)
         first = int(np.flatnonzero(m)[0])
@@ -292,12 +311,16 @@ def _per_group(diag, kind: str) -> list[str]:
             name = f"position {hit.group(1)}"
         if kind == "time block" and "time [s]" in prob.drivers:
             tt = np.asarray(prob.drivers["time [s]"])[m]
-            name = f"t {np.nanmin(tt):8.1f}–{np.nanmax(tt):8.1f} s"
-        out.append(
-            f"  {name:<28} {np.mean(base[m]):+.3e} ({np.sqrt(np.mean(base[m] ** 2)):.2e})  →  "
-            f"{np.mean(ext[m]):+.3e} ({np.sqrt(np.mean(ext[m] ** 2)):.2e})"
+            name = f"t {np.nanmin(tt):.1f}–{np.nanmax(tt):.1f} s"
+        rows.append(
+            (
+                name,
+                f"{np.mean(base[m]):+.3e} ({np.sqrt(np.mean(base[m] ** 2)):.2e})  →  "
+                f"{np.mean(ext[m]):+.3e} ({np.sqrt(np.mean(ext[m] ** 2)):.2e})",
+            )
         )
-    return out
+    w = max(len(name) for name, _ in rows)  # as wide as the longest name: a row fits 80 columns
+    return out + [f"  {name:<{w}}  {text}" for name, text in rows]
 
 
 def _plots(diag, width: int = 78) -> str:

@@ -52,7 +52,8 @@ class DiagnoseScreen(Screen):
 
             result, diag, inp = analyse(capture)
             width = max(40, self.size.width - 6)  # padding and the scroll bar: a wider plot wraps
-            self.post_message(StoreLoaded("diagnose", format_text(result, diag, inp, plots=True, plot_width=width)))
+            text = format_text(result, diag, inp, plots=True, plot_width=width, width=width)
+            self.post_message(StoreLoaded("diagnose", text))
         except Exception as exc:  # noqa: BLE001 - one line on screen
             self.post_message(StoreLoaded("diagnose", None, error=str(exc)))
 

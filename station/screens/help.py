@@ -20,7 +20,8 @@ HELP = """\
 [b]P2[/]          m type a row (ax ay az speed, enter) · esc back · s skip
             r redo · enter on a step: redo it · a abort · f fit (≥ 10)
 [b]P3, P4[/]      f finish now (P3) · r restart the recording · a abort
-            simulated: p sweep, l set level (P3) · p rate table (P4 ref.)
+            simulated: p sweep, l set level (P3)
+            simulated: p rate table (P4 reference IMU)
 [b]P5[/]          f finish now · r restart · a abort · simulated: d drive or
             stop, t turns and hills or straight
 [b]Noise run[/]   as P4; its result: t accuracy asked · e export · n new run
@@ -31,14 +32,18 @@ HELP = """\
             g diagnose the one under the cursor · l the device's limits
             · escape back
 
-[b]P1 in short[/]  Put the unit in each of the 12 positions the drawing shows
-and let go. When it is still and in position the station waits a moment,
-then averages for the set time (the source asks 3–5 minutes) and moves on.
-"Wrong face up" means the unit is upside down for this position.
+[b]P1 in short[/]  Put the unit in each of the 12 positions the drawing
+shows and let go. When it is still and in position the station waits a
+moment, then averages for the set time (the source asks 3–5 minutes)
+and moves on. "Wrong face up" means the unit is upside down for this
+position.
 """
 
 
 class HelpScreen(ModalScreen):
+    """The keys. Every line of HELP fits the box at 80 columns with its scroll bar (72
+    columns of text): a wrapped line lost its indent and read as another screen's."""
+
     CSS = """
     HelpScreen { align: center middle; }
     HelpScreen #help { width: 78; max-height: 22; border: round $accent; background: $surface; padding: 0 1; }

@@ -88,18 +88,19 @@ class LimitsScreen(ModalScreen):
     @work(thread=True, exclusive=True, group="limits", exit_on_error=False, description="read the device")
     def load(self) -> None:
         try:
-            store = self.app.session.open_store()
-            if store is None:
+            s = self.app.session
+            if not s.db_path:
                 raise RuntimeError("no database (start the station with --db or STATION_DB)")
-            device = store.get_device(self.device_id)
-            if device is None:
-                raise RuntimeError(f"no device {self.device_id!r} in the database")
+            store = s.open_store()  # None: nothing saved yet (the first save or limit makes it)
+            device = store.get_device(self.device_id) if store is not None else None
+            if device is None:  # a new unit (Results of its first run): a limit set here registers it
+                device = {"limits": {}, "new": True}
             in_use = {}
-            history = store.history(self.device_id)
+            history = store.history(self.device_id) if store is not None else []
             for h in history:  # oldest first: the newest accepted wins
                 if h["accepted"]:
                     in_use[h["procedure"]] = h
-            data = {"limits": device.get("limits") or {}, "in_use": in_use, "history": history}
+            data = {"limits": device.get("limits") or {}, "in_use": in_use, "history": history, "new": "new" in device}
             self.post_message(StoreLoaded("limits", data))
         except Exception as exc:  # noqa: BLE001 - one line in the box
             self.post_message(StoreLoaded("limits", None, error=str(exc)))
@@ -135,7 +136,8 @@ class LimitsScreen(ModalScreen):
             low, high = (None if x is None else shown_value(ctx, name, x) for x in (low, high))
             unit = shown_unit(ctx, name) if ctx else ""
             lines.append(f"{tui_markup(name):<12} {_fmt(low):>10} … {_fmt(high):<10} {tui_markup(unit)}" + shown)
-        self.query_one("#current", Static).update("\n".join(lines) or "no limits set")
+        none = "no limits set" + ("; the first one registers this new unit" if message.data["new"] else "")
+        self.query_one("#current", Static).update("\n".join(lines) or tui_markup(none))
         blocks = []
         for proc, h in in_use.items():
             entry = registry.get(proc)
@@ -183,7 +185,12 @@ class LimitsScreen(ModalScreen):
     @work(thread=True, exclusive=True, group="limits-save", exit_on_error=False, description="store a limit")
     def store_limit(self, name: str, pair) -> None:
         try:
-            store = self.app.session.open_store()
+            from db.store import Store
+
+            s = self.app.session
+            store = s.open_store()
+            if store is None:  # a new user's first entry makes the database (the session's one Store)
+                store = s.extra["_store"] = Store(s.db_path)
             store.add_device(self.device_id, limits={name: self._stored_pair(name, pair)})
             self.app.call_from_thread(self._stored, name, pair)
         except Exception as exc:  # noqa: BLE001 - one line in the box, nothing changed
