@@ -201,6 +201,9 @@ def test_compass_sweep_from_connect_to_a_saved_result(tmp_path):
             await pilot.press("f5")
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2)
             await wait_for(pilot, lambda: "+z" in text_of(app, "#map") and "Coverage" in text_of(app, "#progress"))
+            # both lines in sight at 80x24: a longer coverage line wrapped and hid 'Recorded'
+            progress = text_of(app, "#progress")
+            assert "Recorded" in progress and "samples" in progress, progress
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.5)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             title = screen_lines(app)[0]

@@ -133,6 +133,8 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
             await wait_for(pilot, lambda: "ARW" in text_of(app, "#table"))
             table = text_of(app, "#table")
             assert all(f"   {ax}  " in table for ax in "xyz") and "P4 needs" in table
+            # the axes said: the device's, while the hold before showed P4's body axes
+            assert "axes as the device reports them" in table
             # the plot is painted on its own refresh: wait for its title
             await wait_for(pilot, lambda: "Allan deviation" in "\n".join(screen_lines(app)[1:3]))
             await wait_for(pilot, lambda: "t Accuracy" in screen_lines(app)[-1])

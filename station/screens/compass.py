@@ -130,12 +130,13 @@ class CompassScreen(GuidedScreenMixin, Screen):
         units = self.app.session.source.units
         self.query_one("#map", Static).update("+z\n" + "\n".join(cov_map) + "\n-z")
         t = Text("Coverage ")
+        # 48 columns beside the map at 80: a longer line wrapped and pushed 'Recorded' out of sight
         t.append(
-            bar(st.coverage / st.target if st.target else 0, 16), style="green" if st.coverage >= st.target else "cyan"
+            bar(st.coverage / st.target if st.target else 0, 12), style="green" if st.coverage >= st.target else "cyan"
         )
         t.append(
             f" {100 * st.coverage:3.0f} % of {100 * st.target:.0f} %"
-            + ("" if st.enough else " (fit needs 40 %)")
+            + ("" if st.enough else " (fit ≥ 40 %)")
             + f"\nRecorded {st.recorded_s:5.0f} s, "
             f"{st.n_samples} samples"
         )

@@ -143,6 +143,7 @@ class AllanScreen(Screen):
             if need is not None:
                 line += f"   {format_duration(need[k]):>9}"
             lines.append(line)
+        lines.append("axes as the device reports them (P4's result: x forward, y up, z right)")
         return "\n".join(lines)
 
     def _answer(self, text: str) -> None:
