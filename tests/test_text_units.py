@@ -93,3 +93,18 @@ def test_history_drift_and_devices_show_in_the_units_of_the_screens(saved, capsy
     assert head[:5] == ["PROCEDURE", "PARAM", "UNIT", "N", "IN_USE"] and row[2] == "°/h"
     assert float(row[4]) == pytest.approx(js["params"]["drift"][1] / DEG_H, rel=1e-5)
     assert float(row[head.index("TOLERANCE")]) == pytest.approx(1e-5 / DEG_H, rel=1e-5)
+
+
+def test_diagnose_text_p4_residuals_in_deg_per_hour_json_in_rad_per_s(tmp_path):
+    path = tmp_path / "p4.csv"
+    r = run_station(
+        "simulate", "--procedure", "gyro-drift", "--seed", 402002, "--option", "duration_s=60", "--out", path
+    )
+    assert r.returncode == 0, r.stderr
+    text = run_station("diagnose", path, "--no-plots").stdout
+    js = json.loads(run_station("diagnose", path, "--json").stdout)
+    res = re.search(r"baseline .*\n +residual (\S+) (\S+) RMS, held-out (\S+)", text)
+    assert res.group(2) == "°/h", text
+    assert float(res.group(1)) == pytest.approx(js["baseline"]["residual_rms"] / DEG_H, rel=1e-3)
+    assert float(res.group(3)) == pytest.approx(js["baseline"]["cv_rms"] / DEG_H, rel=1e-3)
+    assert "per time block [°/h]" in text and "rad/s" not in text

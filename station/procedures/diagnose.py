@@ -210,15 +210,27 @@ def _hang(line: str, width: int) -> list[str]:
     return textwrap.wrap(line, width, subsequent_indent=" " * indent, break_on_hyphens=False) or [line]
 
 
+def _said_in(procedure: str | None, unit: str) -> tuple[float, str]:
+    """(factor, unit) the residuals are said in: the unit the screens show the procedure's
+    residual in (``review.display_unit``, e.g. P4's °/h) when they are in its stored unit;
+    else as they are (1, ``unit``). The JSON keeps the stored unit."""
+    from station.procedures.review import display_unit, result_unit
+
+    if unit != result_unit({"procedure": procedure}):
+        return 1.0, unit
+    return display_unit({"procedure": procedure}, "residual_rms") or (1.0, unit)
+
+
 def format_text(
     result: dict, diag, inp: DiagnosisInput, plots: bool = True, plot_width: int = 78, width: int | None = None
 ) -> str:
-    """The findings for a person; ``width``: wrap the text lines to it (the TUI's), each
-    continuation indented under its text (the plots take ``plot_width``)."""
+    """The findings for a person, residuals in the unit the screens show them in
+    (:func:`_said_in`); ``width``: wrap the text lines to it (the TUI's), each continuation
+    indented under its text (the plots take ``plot_width``)."""
     from station.calibrate import jsonable
 
     r = jsonable(result)
-    unit = diag.problem.unit
+    scale, unit = _said_in(r.get("procedure"), diag.problem.unit)
     L = [f"procedure   {r['procedure']}"]
     for q in r["quality"]:  # structured residuals are said first, before any verdict
         if q["kind"] == "residuals_not_white":
@@ -228,7 +240,8 @@ def format_text(
             )
     L += [
         f"baseline    {r['baseline']['model']}",
-        f"            residual {r['baseline']['residual_rms']:.4g} {unit} RMS, held-out {r['baseline']['cv_rms']:.4g}",
+        f"            residual {scale * r['baseline']['residual_rms']:.4g} {unit} RMS, "
+        f"held-out {scale * r['baseline']['cv_rms']:.4g}",
         f"candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {diag.problem.threshold:g}, "
         "and a lower held-out RMS; refitted and re-tested after each pick)",
     ]
@@ -237,10 +250,10 @@ def format_text(
             L.append(f"  {c['name']:<24} unresolvable: {c['reason']}")
         else:
             mark = "  <- selected" if c["selected"] else ""
-            L.append(f"  {c['name']:<24} ΔBIC {c['delta_bic']:+10.1f}   held-out RMS {c['cv_rms']:.4g}{mark}")
+            L.append(f"  {c['name']:<24} ΔBIC {c['delta_bic']:+10.1f}   held-out RMS {scale * c['cv_rms']:.4g}{mark}")
     for e in r["effects"]:
         L.append(
-            f"effect      {e['name']}: held-out RMS {e['cv_rms_before']:.4g} → {e['cv_rms_after']:.4g} "
+            f"effect      {e['name']}: held-out RMS {scale * e['cv_rms_before']:.4g} → {scale * e['cv_rms_after']:.4g} "
             f"(gain {100 * e['gain']:.1f} %)"
         )
         for c in e["confused_with"]:
@@ -262,7 +275,8 @@ def format_text(
             )
     L.append(f"extended    {r['extended']['model']}")
     L.append(
-        f"            residual {r['extended']['residual_rms']:.4g} {unit} RMS, held-out {r['extended']['cv_rms']:.4g}"
+        f"            residual {scale * r['extended']['residual_rms']:.4g} {unit} RMS, "
+        f"held-out {scale * r['extended']['cv_rms']:.4g}"
     )
     rt = diag.residual_test
     if rt.get("p_value") is not None:
@@ -275,11 +289,11 @@ def format_text(
         line = f" line {q['line']}" if q.get("line") and f"line {q['line']} " not in f"{where} " else ""
         L.append(f"quality     {q['kind']} {where}{line}: {q['explanation']}")
     L.append("verdict     " + (", ".join(r["verdict"]) if r["verdict"] else "none"))
-    L += _per_group(diag, inp.group_kind)
+    L += _per_group(diag, inp.group_kind, scale, unit)
     if width is not None:
         L = [part for line in L for part in _hang(line, width)]
     if plots:
-        L.append(_plots(diag, plot_width))
+        L.append(_plots(diag, plot_width, scale, unit))
     for key, val in result.items():
         if isinstance(val, dict) and "error" in val and "procedure" in val:
             L.append(f"--- {key}: {val['procedure']}: {val['error']}")
@@ -291,16 +305,16 @@ def format_text(
     return "\n".join(L)
 
 
-def _per_group(diag, kind: str) -> list[str]:
+def _per_group(diag, kind: str, k: float = 1.0, unit: str | None = None) -> list[str]:
     """Measured − simulated per CV group (position, mounting or time block), baseline and extended."""
     prob = diag.problem
     keep = np.ones(len(prob.sigma), bool) if prob.row_types is None else np.asarray(prob.row_types) == 0
     g = np.asarray(prob.groups)
-    base, ext = -diag.baseline.residuals, -diag.extended.residuals
+    base, ext = -k * diag.baseline.residuals, -k * diag.extended.residuals  # measured − simulated, said in unit
     uniq = list(dict.fromkeys(g[keep].tolist()))
     if not uniq or len(uniq) > 40:
         return []
-    out = [f"measured − simulated per {kind} [{prob.unit}]: mean (RMS), baseline → extended"]
+    out = [f"measured − simulated per {kind} [{unit or prob.unit}]: mean (RMS), baseline → extended"]
     rows = []
     for u in uniq:
         m = keep & (g == u)
@@ -323,7 +337,7 @@ def _per_group(diag, kind: str) -> list[str]:
     return out + [f"  {name:<{w}}  {text}" for name, text in rows]
 
 
-def _plots(diag, width: int = 78) -> str:
+def _plots(diag, width: int = 78, k: float = 1.0, unit: str | None = None) -> str:
     """Measured − simulated (the fitted baseline, primary rows) against each driver, each
     ``width`` columns wide (the screen passes its own width: a wider plot wraps)."""
     try:
@@ -331,7 +345,7 @@ def _plots(diag, width: int = 78) -> str:
     except ImportError:  # pragma: no cover - plotext is a dependency
         return ""
     prob = diag.problem
-    res = -np.asarray(diag.baseline.residuals, float)  # measured − simulated
+    res = -k * np.asarray(diag.baseline.residuals, float)  # measured − simulated, said in unit
     keep = np.ones(len(res), bool) if prob.row_types is None else np.asarray(prob.row_types) == 0
     out = []
     series = dict(prob.drivers) or {"row": np.arange(len(res), dtype=float)}
@@ -346,6 +360,6 @@ def _plots(diag, width: int = 78) -> str:
         plt.theme("clear")
         plt.plot_size(width, 13)
         plt.scatter(xs.tolist(), ys.tolist(), marker="dot")
-        plt.title(f"measured − simulated baseline [{prob.unit}] against {name}")
+        plt.title(f"measured − simulated baseline [{unit or prob.unit}] against {name}")
         out.append(plt.build())
     return "\n".join(out)
