@@ -93,6 +93,19 @@ def test_real_clipping_is_screened_by_line(shared_data, capsys):
     assert all(q["screened"] and q["screened_rows"] >= 10 for q in sat)
 
 
+def test_text_report_on_real_data_names_quality_findings_cleanly(shared_data, capsys):
+    """The text report a user reads off a pipe: each quality finding says its column and
+    line (never "None"), and the plots carry no colour codes, raw or escaped."""
+    path = str(shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv")
+    rc, out = _run(capsys, "diagnose", path)
+    assert rc == 0
+    quality = [ln for ln in out.splitlines() if ln.startswith("quality")]
+    assert any("saturation gx line 6481:" in ln for ln in quality), quality
+    assert not any("None" in ln or " :" in ln for ln in quality), quality
+    assert "measured − simulated baseline" in out  # the plots are there
+    assert "\x1b" not in out and "\\x1b" not in out
+
+
 def test_defects_in_a_real_gyro_record_are_named_and_left_out(shared_data, tmp_path, capsys):
     """A real static gyro record with a clipped stretch and a lost stretch put in at times drawn
     here: both named by line under ``quality`` and left out of the effect search, so the

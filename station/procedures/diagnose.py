@@ -285,9 +285,14 @@ def format_text(
             f"({'noise-like' if rt['white'] else 'NOT noise-like'})"
         )
     for q in r["quality"]:
-        where = q.get("where") if q.get("screened") else (q.get("position") or q.get("where") or q.get("column") or "")
-        line = f" line {q['line']}" if q.get("line") and f"line {q['line']} " not in f"{where} " else ""
-        L.append(f"quality     {q['kind']} {where}{line}: {q['explanation']}")
+        if q.get("screened"):
+            where = q.get("where") or q.get("column") or ""
+        else:
+            where = q.get("position") or q.get("where") or q.get("column") or ""
+        where = str(where)
+        line = f"line {q['line']}" if q.get("line") and f"line {q['line']} " not in f"{where} " else ""
+        head = " ".join(x for x in (q["kind"], where, line) if x)
+        L.append(f"quality     {head}: {q['explanation']}")
     L.append("verdict     " + (", ".join(r["verdict"]) if r["verdict"] else "none"))
     L += _per_group(diag, inp.group_kind, scale, unit)
     if width is not None:
@@ -361,5 +366,5 @@ def _plots(diag, width: int = 78, k: float = 1.0, unit: str | None = None) -> st
         plt.plot_size(width, 13)
         plt.scatter(xs.tolist(), ys.tolist(), marker="dot")
         plt.title(f"measured − simulated baseline [{unit or prob.unit}] against {name}")
-        out.append(plt.build())
+        out.append(plt.uncolorize(plt.build()))  # the "clear" theme still ends lines with a colour reset
     return "\n".join(out)
