@@ -276,3 +276,17 @@ def test_tabletop_session_gyro_is_diagnosed_beside_the_accelerometer(tmp_path, c
     assert res["verdict"] == []  # the accelerometer has nothing hidden
     cand = {c["name"]: c for c in gyro["candidates"]}
     assert cand["earth_rate"]["resolvable"] is False and "g_sensitivity" in cand["earth_rate"]["reason"]
+
+
+def test_candidate_with_no_degrees_of_freedom_left_is_unresolvable(tmp_path, capsys):
+    """A centrifuge table of 6 mountings at 2 speeds: 12 rows for the baseline's 9 parameters.
+    A 3-parameter candidate would fit the rest exactly; it is reported unresolvable with the
+    reason, not listed with a large ΔBIC beside an empty verdict."""
+    from solvers.simulate import simulate_centrifuge
+
+    sim = simulate_centrifuge(seed=7, n_orientations=6, speeds_rad_s=(2 * np.pi, 4 * np.pi))
+    res = _diagnose(_write(tmp_path, sim), capsys)
+    assert res["verdict"] == []
+    three = [c for c in res["candidates"] if c.get("reason") is None or "degrees of freedom" in c["reason"]]
+    assert three and all(c.get("resolvable") is False for c in three), res["candidates"]
+    assert all("leave 0 degrees of freedom" in c["reason"] for c in three)

@@ -981,6 +981,14 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         rank_cur = _gram_rank(J0.T @ J0)
         if first:
             for ev in evals:
+                left = ev.dof_kind if ev.kind is not None else n - rank_cur - ev.k
+                if ev.k > 0 and left < MIN_DOF:
+                    rows = f"{ev.n_kind} rows of its kind" if ev.kind is not None else f"{n} rows"
+                    entries[ev.cc.cand.name]["resolvable"] = False
+                    entries[ev.cc.cand.name]["reason"] = (
+                        f"too few rows: {rows} for the model's {rank_cur} parameters and this "
+                        f"candidate's {ev.k} leave {left:.0f} degrees of freedom (at least {MIN_DOF} needed)"
+                    )
                 bound, score = _bound(problem, ev, m, n, rank_cur)
                 deviance[ev.cc.cand.name] = {
                     "D": ev.D_rob,
