@@ -153,3 +153,37 @@ def test_ldv_hidden_effect_named_alone(tmp_path, capsys, seed):
     res = _diagnose(tmp_path, G.RENDER["ldv"](sc, hidden, size), capsys)
     assert hidden in res["verdict"], (hidden, res["verdict"], res["candidates"])
     assert set(res["verdict"]) <= G.tied_names(res, hidden), (hidden, res["verdict"])
+
+
+def test_a_candidate_with_its_own_f_is_tested_at_it():
+    """A procedure whose slowly wandering noise sets a high F for slow candidates keeps a
+    lower F measured for a candidate that noise does not move (``cand_thresholds``). Two
+    2-parameter candidates in 200 rows of white noise, the same effect size (Δχ² ≈ 14) hidden
+    in one of them per trial (drawn here): under its own F = 1 the first is named in most
+    trials, under the procedure's F = 3 the second in few; on nulls neither F names more than
+    the stated level allows."""
+    rng = np.random.default_rng(11)
+    n, p, k, trials = 200, 3, 2, 150
+    X0 = rng.normal(size=(n, p))
+    Xa, Xb = rng.normal(size=(n, k)), rng.normal(size=(n, k))
+    named = {"own": 0, "proc": 0, "null": 0}
+    for i in range(trials):
+        which = ("own", "proc", "null")[i % 3]
+        beta = rng.normal(size=k)
+        beta *= math.sqrt(14.0) / np.linalg.norm((Xa if which == "own" else Xb) @ beta)
+        y = rng.normal(size=n) + (Xa @ beta if which == "own" else Xb @ beta if which == "proc" else 0.0)
+
+        def residual(q, y=y):
+            r = X0 @ q["a"] - y
+            return r + (Xa @ q["ca"] if "ca" in q else 0.0) + (Xb @ q["cb"] if "cb" in q else 0.0)
+
+        prob = Problem("t", "", residual, np.ones(n), np.arange(n) % 8, {"a": np.zeros(p)}, {"a": True}, [], 3.0)
+        prob.candidates = [Candidate("own", {"ca": np.zeros(k)}), Candidate("proc", {"cb": np.zeros(k)})]
+        prob.cand_thresholds = {"own": 1.0}
+        res = diagnose(prob)
+        assert res.deviance["own"]["F"] == 1.0 and res.deviance["proc"]["F"] == 3.0
+        named[which] += (which in res.verdict) if which != "null" else bool(res.verdict)
+    per = trials // 3
+    assert named["own"] / per > 0.75, named
+    assert named["proc"] / per < 0.35, named
+    assert named["null"] / per <= 2 * ALPHA + 3 * math.sqrt(ALPHA / per), named

@@ -105,6 +105,11 @@ class Problem:
     # rows (its own rows, noise scale and residual degrees of freedom: ``kind_quantile``); a
     # candidate touching several kinds, or a kind not listed, keeps the procedure's test
     kind_thresholds: dict = field(default_factory=dict)
+    # candidate name → its own scale F, where the nulls measured it apart from the procedure's:
+    # a noise that wanders slowly in time (bias instability, a hard iron that creeps) inflates
+    # the deviance of candidates with slow signatures far more than of those that change with
+    # each orientation, which the serial-correlation inflation (a finite window) under-corrects
+    cand_thresholds: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -739,12 +744,20 @@ def _bound(problem, ev: _Eval, m: int, n: int, rank_cur: int, scale: float = 1.0
     touches one kind with a threshold of its own, else the procedure's ``F·q``. The score is the
     threshold scale at which the candidate would sit on the bound (the null benchmark's statistic)."""
     if ev.kind is not None:
-        F = problem.kind_thresholds[ev.kind] * scale
+        F = candidate_threshold(problem, ev.cc.cand.name, ev.kind) * scale
         fstat = math.expm1(ev.D_rob / ev.n_kind) * ev.dof_kind / max(ev.k, 1) if ev.dof_kind > 0 else 0.0
         crit = float(fdtri(max(ev.k, 1), ev.dof_kind, 1.0 - ALPHA / max(m, 1))) if ev.dof_kind > 0 else math.inf
         return kind_quantile(ev.k, m, ev.n_kind, ev.dof_kind, F), fstat / crit
     q = deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k)
-    return scale * problem.threshold * q, ev.D_rob / q
+    return scale * candidate_threshold(problem, ev.cc.cand.name) * q, ev.D_rob / q
+
+
+def candidate_threshold(problem: Problem, name: str, kind: int | None = None) -> float:
+    """The scale F of a candidate's test: its own where the nulls measured one, else its row
+    kind's (a candidate tested on one kind of rows), else the procedure's."""
+    if name in problem.cand_thresholds:
+        return problem.cand_thresholds[name]
+    return problem.kind_thresholds[kind] if kind is not None else problem.threshold
 
 
 def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float = 1.0) -> bool:
@@ -996,7 +1009,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     "q": deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k),
                     "bound": bound,
                     "score": score,  # the threshold scale F at which it would just pass
-                    "F": problem.threshold if ev.kind is None else problem.kind_thresholds[ev.kind],
+                    "F": candidate_threshold(problem, ev.cc.cand.name, ev.kind),
                     "kind": ev.kind,
                     "cv_lower": bool(ev.cv < rounds.cv0(ev.cc.cand.folds)),
                     "inflation": ev.infl,

@@ -242,7 +242,7 @@ def format_text(
         f"baseline    {r['baseline']['model']}",
         f"            residual {scale * r['baseline']['residual_rms']:.4g} {unit} RMS, "
         f"held-out {scale * r['baseline']['cv_rms']:.4g}",
-        f"candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {diag.problem.threshold:g}, "
+        f"candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {_f_text(diag.problem)}, "
         "and a lower held-out RMS; refitted and re-tested after each pick)",
     ]
     for c in r["candidates"]:
@@ -308,6 +308,12 @@ def format_text(
             L.append(f"--- {key}: {result[key]['procedure']} (the same session's second sensor)")
             L.append(format_text(result[key], sdiag, sinp, plots=False, plot_width=plot_width, width=width))
     return "\n".join(L)
+
+
+def _f_text(prob) -> str:
+    """The procedure's F, and any candidate's own (measured on nulls) beside it."""
+    own = {k: v for k, v in prob.cand_thresholds.items() if v != prob.threshold}
+    return f"{prob.threshold:g}" + "".join(f", {k} {v:g}" for k, v in own.items())
 
 
 def _per_group(diag, kind: str, k: float = 1.0, unit: str | None = None) -> list[str]:
