@@ -6,6 +6,7 @@ its time drawn here and never passed to the code) named as ``residual:time``."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -71,6 +72,9 @@ def test_unlisted_bias_step_is_named_outside_the_library(tmp_path, capsys):
     e = next(e for e in res["effects"] if e["name"] == "residual:time")
     assert e["shape"] == "step" and abs(e["params"]["at"] - t_step) < 0.1 * t[-1]
     assert e["gain"] > 0 and set(e["correlation"]) <= {"temperature_bias", "time_drift"}
+    rc, text = _run(capsys, "diagnose", str(p), "--no-plots")
+    at = re.search(r"^ +at = (\S+) s$", text, re.M)  # the step's place in its driver's unit, 6 figures
+    assert at and abs(float(at.group(1)) - e["params"]["at"]) <= 1e-5 * abs(e["params"]["at"]), text
 
 
 def _header_line(path) -> int:

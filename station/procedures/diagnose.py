@@ -267,7 +267,7 @@ def format_text(
             )
         for k, v in e["params"].items():
             if k not in e["uncertainty"]:  # a residual effect's description (step place, period, knots)
-                L.append(f"            {k} = {v}")
+                L.append(f"            {k} = {_described(v)}{_driver_unit(e, k)}")
                 continue
             L.append(
                 f"            {k} = {np.round(np.asarray(v, dtype=float), 8).tolist()} ± "
@@ -308,6 +308,31 @@ def format_text(
             L.append(f"--- {key}: {result[key]['procedure']} (the same session's second sensor)")
             L.append(format_text(result[key], sdiag, sinp, plots=False, plot_width=plot_width, width=width))
     return "\n".join(L)
+
+
+DRIVER_UNITS = {
+    "time": "s",
+    "temperature": "°C",
+    "speed": "rad/s",
+    "rate": "rad/s",
+}  # what a residual term's place is measured in
+
+
+def _described(v):
+    """A residual term's description value, numbers to 6 significant figures."""
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, (list, tuple)) and all(isinstance(x, (int, float)) for x in v):
+        return "[" + ", ".join(f"{x:.6g}" for x in v) + "]"
+    return v
+
+
+def _driver_unit(e: dict, key: str) -> str:
+    """The unit of a residual term's place or period: its driver's (time in s, …)."""
+    if key not in ("at", "period") or not isinstance(e["params"].get(key), (int, float)):
+        return ""
+    unit = DRIVER_UNITS.get(str(e.get("driver")))
+    return f" {unit}" if unit else ""
 
 
 def _f_text(prob) -> str:
