@@ -33,3 +33,14 @@ def run_station(*args, subprocess_run: bool = False) -> subprocess.CompletedProc
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = main([str(a) for a in args])
     return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
+
+
+def assert_one_line_refusal(res: subprocess.CompletedProcess, *needles: str) -> None:
+    """Bad input as the station must refuse it: exit 2, nothing on stdout, one line on stderr
+    starting ``station: `` (not the catch-all for an unexpected error), naming each needle."""
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
+    assert res.stdout == ""
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("station: "), res.stderr
+    assert "cannot process this input" not in res.stderr, res.stderr
+    for n in needles:
+        assert n in res.stderr, res.stderr

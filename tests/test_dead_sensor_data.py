@@ -11,16 +11,8 @@ import numpy as np
 import pytest
 
 from station.capture import Capture, read_capture, write_capture
-from tests.station_run import run_station
+from tests.station_run import assert_one_line_refusal, run_station
 from tests.test_import_ardupilot import DataFlashWriter
-
-
-def _one_line_refusal(res, *needles):
-    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
-    assert res.stdout == ""
-    assert res.stderr.count("\n") == 1 and res.stderr.startswith("station: "), res.stderr
-    for n in needles:
-        assert n in res.stderr, res.stderr
 
 
 def _bin_with_zero_mag(path, n=400):
@@ -41,7 +33,7 @@ def test_a_log_whose_magnetometer_reads_only_zeros_says_so_for_the_compass(tmp_p
     log = _bin_with_zero_mag(tmp_path / "nomag.bin")
     out = tmp_path / "out.csv"
     res = run_station(command[0], log, "--procedure", "compass", *[a.format(out=out) for a in command[1:]])
-    _one_line_refusal(res, f"{log}: ", "no magnetometer data (all zero)")
+    assert_one_line_refusal(res, f"{log}: ", "no magnetometer data (all zero)")
     assert "not turned" not in res.stderr
     assert not out.exists()
 
@@ -66,4 +58,4 @@ def test_a_capture_whose_magnetometer_reads_only_zeros_says_so(tmp_path, shared_
     path = tmp_path / "zero.csv"
     write_capture(path, Capture(dict(src.meta), cols))
     for command in ("calibrate", "diagnose"):
-        _one_line_refusal(run_station(command, path), f"{path}: ", "no magnetometer data (all zero)")
+        assert_one_line_refusal(run_station(command, path), f"{path}: ", "no magnetometer data (all zero)")

@@ -7,16 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.station_run import run_station
-
-
-def _one_line_refusal(res, *needles):
-    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
-    assert res.stdout == ""
-    assert res.stderr.count("\n") == 1 and res.stderr.startswith("station: "), res.stderr
-    assert "cannot process this input" not in res.stderr, res.stderr
-    for n in needles:
-        assert n in res.stderr, res.stderr
+from tests.station_run import assert_one_line_refusal, run_station
 
 
 @pytest.mark.parametrize("mapping", [("--map", "t=time_s,ax=ax,ay=ay,az=az"), ()])
@@ -30,7 +21,7 @@ def test_import_refuses_a_mapped_column_name_that_appears_twice(tmp_path, mappin
     src.write_text("\n".join(rows) + "\n")
     out = tmp_path / "out.csv"
     res = run_station("import", src, "--procedure", "accel-tabletop", *mapping, "--unit", "accel=g,t=s", "--out", out)
-    _one_line_refusal(res, f"{src}:1: ", "'ax'", "columns 2 and 3")
+    assert_one_line_refusal(res, f"{src}:1: ", "'ax'", "columns 2 and 3")
     assert not out.exists()
 
 
@@ -45,10 +36,10 @@ def test_utf16_text_is_named_as_such(tmp_path, encoding):
         "import", src, "--procedure", "accel-tabletop", "--map", "t=time_s,ax=ax,ay=ay,az=az",
         "--unit", "accel=g,t=s", "--out", tmp_path / "o.csv",
     )  # fmt: skip
-    _one_line_refusal(res, f"{src}:1: ", "UTF-16 text", "UTF-8")
+    assert_one_line_refusal(res, f"{src}:1: ", "UTF-16 text", "UTF-8")
     cap = tmp_path / "u16.capture.csv"
     cap.write_bytes(("# station-capture: 1\n# procedure: gyro-drift\nt,gx,gy,gz\n0,1,2,3\n").encode(encoding))
-    _one_line_refusal(run_station("inspect", cap), f"{cap}:1: ", "UTF-16 text", "UTF-8")
+    assert_one_line_refusal(run_station("inspect", cap), f"{cap}:1: ", "UTF-16 text", "UTF-8")
 
 
 def test_of_several_bad_metadata_lines_the_first_is_named(tmp_path):
@@ -57,7 +48,7 @@ def test_of_several_bad_metadata_lines_the_first_is_named(tmp_path):
     rows = ["# station-capture: 1", "# procedure: gyro-drift", "# sample_rate_hz: nan", "# latitude_deg: NaN"]
     path = tmp_path / "nan.csv"
     path.write_text("\n".join(rows + ["t,gx,gy,gz", "0,1,2,3", "0.1,1,2,3"]) + "\n")
-    _one_line_refusal(run_station("inspect", path), f"{path}:3: metadata 'sample_rate_hz': 'nan' is not a number")
+    assert_one_line_refusal(run_station("inspect", path), f"{path}:3: metadata 'sample_rate_hz': 'nan' is not a number")
 
 
 def test_a_head_of_endless_metadata_lines_is_refused_at_its_limit(tmp_path):
@@ -71,4 +62,6 @@ def test_a_head_of_endless_metadata_lines_is_refused_at_its_limit(tmp_path):
         f.write("# station-capture: 1\n# procedure: gyro-drift\n")
         f.writelines(f"# k{i}: v\n" for i in range(MAX_META_LINES + 10))
         f.write("t,gx,gy,gz\n0,1,2,3\n0.1,1,2,3\n")
-    _one_line_refusal(run_station("inspect", path), f"{path}:{MAX_META_LINES + 2}: ", "more than 65536 metadata lines")
+    assert_one_line_refusal(
+        run_station("inspect", path), f"{path}:{MAX_META_LINES + 2}: ", "more than 65536 metadata lines"
+    )

@@ -13,19 +13,10 @@ import sys
 
 import pytest
 
-from tests.station_run import ROOT, run_station
+from tests.station_run import ROOT, assert_one_line_refusal, run_station
 
 SMALL = "\n".join(["time_s,gx,gy,gz"] + [f"{i * 0.01:.2f},0.01,0.02,-0.01" for i in range(400)]) + "\n"
 IMPORT = ("--procedure", "gyro-drift", "--map", "t=time_s,gx=gx,gy=gy,gz=gz", "--unit", "gyro=rad/s,t=s")
-
-
-def _one_line_refusal(res, *needles):
-    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
-    assert res.stdout == ""
-    assert res.stderr.count("\n") == 1 and res.stderr.startswith("station: "), res.stderr
-    assert "cannot process this input" not in res.stderr, res.stderr
-    for n in needles:
-        assert n in res.stderr, res.stderr
 
 
 def _limit_memory():  # the child's address space: far above what a 1 MB CSV needs, far below "all of it"
@@ -49,7 +40,7 @@ def test_import_of_a_huge_file_of_nul_bytes_stops_at_once(tmp_path):
         timeout=300,
         preexec_fn=_limit_memory,
     )
-    _one_line_refusal(res, f"{src}:1:", "NUL byte")
+    assert_one_line_refusal(res, f"{src}:1:", "NUL byte")
     assert not out.exists()
 
 
@@ -57,7 +48,7 @@ def test_import_of_a_file_without_line_ends_is_refused_by_line_length(tmp_path):
     src = tmp_path / "one_line.csv"
     src.write_bytes(b"time_s,gx,gy,gz," + b"7" * (3 << 20))
     out = tmp_path / "out.csv"
-    _one_line_refusal(run_station("import", src, *IMPORT, "--out", out), f"{src}:1:", "line longer than")
+    assert_one_line_refusal(run_station("import", src, *IMPORT, "--out", out), f"{src}:1:", "line longer than")
     assert not out.exists()
 
 
@@ -69,7 +60,9 @@ def test_import_of_a_field_over_the_csv_modules_limit_names_the_line(tmp_path):
     lines[7] = lines[7] + "9" * 500_000
     src.write_text("\n".join(lines) + "\n")
     out = tmp_path / "out.csv"
-    _one_line_refusal(run_station("import", src, *IMPORT, "--out", out), f"{src}:8:", "field larger than field limit")
+    assert_one_line_refusal(
+        run_station("import", src, *IMPORT, "--out", out), f"{src}:8:", "field larger than field limit"
+    )
     assert not out.exists()
 
 
@@ -80,7 +73,7 @@ def test_import_nul_byte_is_named_by_its_line(tmp_path, where):
     lines[k] = lines[k].replace("0.02", "0.0\0")
     src = tmp_path / "nul.csv"
     src.write_text("\n".join(lines) + "\n")
-    _one_line_refusal(run_station("import", src, *IMPORT, "--out", tmp_path / "o.csv"), f"{src}:{k + 1}:", "NUL")
+    assert_one_line_refusal(run_station("import", src, *IMPORT, "--out", tmp_path / "o.csv"), f"{src}:{k + 1}:", "NUL")
 
 
 def test_import_of_a_good_file_still_reads_every_row(tmp_path):
@@ -115,7 +108,7 @@ def test_noise_refuses_numbers_no_instrument_reports_naming_line_and_column(tmp_
     lines[k] = ",".join(cells)
     bad = tmp_path / "huge.csv"
     bad.write_text("".join(lines))
-    _one_line_refusal(run_station("noise", bad, "--json"), f"{bad}:{k + 1}:", "column 'gx'", "beyond")
+    assert_one_line_refusal(run_station("noise", bad, "--json"), f"{bad}:{k + 1}:", "column 'gx'", "beyond")
 
 
 def test_noise_refuses_a_time_axis_that_does_not_advance(tmp_path, shared_data):
@@ -125,12 +118,12 @@ def test_noise_refuses_a_time_axis_that_does_not_advance(tmp_path, shared_data):
     lines[h + 1 :] = ["0" + line[line.index(",") :] for line in lines[h + 1 :]]
     bad = tmp_path / "frozen.csv"
     bad.write_text("".join(lines))
-    _one_line_refusal(run_station("noise", bad, "--json"), f"{bad}:", "does not advance")
+    assert_one_line_refusal(run_station("noise", bad, "--json"), f"{bad}:", "does not advance")
 
 
 def test_noise_refusal_names_the_file(shared_data):
     src = shared_data.joinpath(*MPU_STATIC)
-    _one_line_refusal(run_station("noise", src, "--json"), f"{src}: ", "gyro_counts_per_deg_s")
+    assert_one_line_refusal(run_station("noise", src, "--json"), f"{src}: ", "gyro_counts_per_deg_s")
 
 
 def test_noise_of_gyro_counts_uses_the_nominal_scale_the_procedures_read(tmp_path, shared_data):
@@ -179,14 +172,14 @@ def test_a_warning_before_a_refusal_is_part_of_the_one_error_line(shared_data, c
         assert res.returncode == 0, res.stderr
         assert res.stderr.count("\n") == 1 and "warning: the raw sensor topics hold" in res.stderr
         return
-    _one_line_refusal(res, f"{log}: ", "warning: the raw sensor topics hold 6 samples", "--source combined")
+    assert_one_line_refusal(res, f"{log}: ", "warning: the raw sensor topics hold 6 samples", "--source combined")
 
 
 def test_warnings_of_one_run_do_not_leak_into_the_next(shared_data, tmp_path):
     log = shared_data / "px4_ulog" / "original" / "sample_log_small.ulg"
     run_station("calibrate", log, "--procedure", "gyro-drift", "--json")
     res = run_station("calibrate", tmp_path / "missing.csv")
-    _one_line_refusal(res, "no such file")
+    assert_one_line_refusal(res, "no such file")
     assert "warning:" not in res.stderr
 
 
@@ -202,7 +195,7 @@ def test_a_reading_command_leaves_a_file_that_is_no_database_as_it_was(tmp_path,
     path = tmp_path / "notes.txt"
     path.write_bytes(content)
     res = run_station(*command, "--db", path)
-    _one_line_refusal(res, str(path))
+    assert_one_line_refusal(res, str(path))
     assert path.read_bytes() == content
 
 
@@ -211,7 +204,7 @@ def test_saving_into_a_short_text_file_leaves_it_as_it_was(tmp_path, shared_data
     path.write_bytes(b"x")
     cap = shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv"
     res = run_station("calibrate", cap, "--save", "--override", "test", "--db", path)
-    _one_line_refusal(res, str(path), "not a database")
+    assert_one_line_refusal(res, str(path), "not a database")
     assert path.read_bytes() == b"x"
 
 

@@ -14,7 +14,7 @@ import sys
 
 import pytest
 
-from tests.station_run import ROOT
+from tests.station_run import ROOT, assert_one_line_refusal
 
 GYRO_CSV = ("--procedure", "gyro-drift", "--map", "t=time_s,gx=gx,gy=gy,gz=gz", "--unit", "gyro=rad/s,t=s")
 
@@ -31,15 +31,6 @@ def _station(*args, timeout: float = 120) -> subprocess.CompletedProcess:
         )
     except subprocess.TimeoutExpired:
         pytest.fail(f"station {' '.join(map(str, args))}: still running after {timeout} s (blocked on its input)")
-
-
-def _one_line_refusal(res, *needles):
-    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
-    assert res.stdout == ""
-    assert res.stderr.count("\n") == 1 and res.stderr.startswith("station: "), res.stderr
-    assert "cannot process this input" not in res.stderr, res.stderr
-    for n in needles:
-        assert n in res.stderr, res.stderr
 
 
 # (command before the file, command after it, the file's name): every way a file is read
@@ -65,7 +56,7 @@ def test_a_named_pipe_is_refused_not_waited_on(tmp_path, before, after, name):
     os.mkfifo(fifo)
     out = tmp_path / "out.csv"
     res = _station(*before, fifo, *[a.format(out=out) for a in after], timeout=60)
-    _one_line_refusal(res, f"{fifo}: ", "named pipe (FIFO), not a regular file")
+    assert_one_line_refusal(res, f"{fifo}: ", "named pipe (FIFO), not a regular file")
     assert not out.exists()
 
 
@@ -77,7 +68,7 @@ def test_a_character_device_is_refused_by_what_it_is(tmp_path, command):
     out = tmp_path / "out.csv"
     for dev in ("/dev/null", "/dev/zero"):
         res = _station(command[0], dev, *[a.format(out=out) for a in command[1:]], timeout=60)
-        _one_line_refusal(res, f"{dev}: ", "character device, not a regular file")
+        assert_one_line_refusal(res, f"{dev}: ", "character device, not a regular file")
     assert not out.exists()
 
 
@@ -89,7 +80,7 @@ def test_a_path_with_a_newline_keeps_the_refusal_on_one_line(tmp_path, command):
     path.write_text("not a capture\n")
     out = tmp_path / "out.csv"
     res = _station(command[0], path, *[a.format(out=out) for a in command[1:]])
-    _one_line_refusal(res, "bad\\nname\\x1b[31m.csv")
+    assert_one_line_refusal(res, "bad\\nname\\x1b[31m.csv")
     assert not out.exists()
 
 
@@ -110,7 +101,7 @@ def test_a_2_gib_sparse_file_of_zeros_as_a_log_is_refused_at_once(tmp_path, suff
         f.truncate(2 << 30)
     out = tmp_path / "out.csv"
     res = _station("import", log, "--procedure", "gyro-drift", "--out", out, timeout=60)
-    _one_line_refusal(res, f"{log}: ", says, "first 1 MiB" if suffix != ".bag" else "#ROSBAG V2.0")
+    assert_one_line_refusal(res, f"{log}: ", says, "first 1 MiB" if suffix != ".bag" else "#ROSBAG V2.0")
     assert not out.exists()
 
 
@@ -133,7 +124,7 @@ def test_an_output_path_that_is_no_regular_file_is_refused_not_replaced(tmp_path
     src.write_text("time_s,gx,gy,gz\n" + "".join(f"{i * 0.01:.2f},0.01,0.02,-0.01\n" for i in range(400)))
     still = shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv"
     res = _station(*[a.format(target=target, src=src, still=still) for a in command], timeout=60)
-    _one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
+    assert_one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
     assert stat.S_ISFIFO(os.stat(target).st_mode)
     assert sorted(os.listdir(tmp_path)) == ["in.csv", "out.fifo"]
 
@@ -162,5 +153,5 @@ def test_record_refuses_an_output_that_is_no_regular_file_before_recording(tmp_p
     target = tmp_path / "out.fifo"
     os.mkfifo(target)
     res = _station("record", "--port", tmp_path / "no-such-port", "--seconds", "1", "--out", target, timeout=60)
-    _one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
+    assert_one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
     assert stat.S_ISFIFO(os.stat(target).st_mode)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from station.capture import Capture, read_capture, write_capture
-from tests.station_run import run_station
+from tests.station_run import assert_one_line_refusal, run_station
 
 # Widest full-scale ranges of real parts (datasheets): Endevco 7270A-200K piezoresistive shock
 # accelerometer ±200 000 g; Analog Devices ADXRS649 gyro ±20 000 °/s; TI TMAG5170A2 3-D Hall
@@ -22,15 +22,6 @@ from tests.station_run import run_station
 WIDEST_ACCEL_G = 200_000.0
 WIDEST_GYRO_DEG_S = 20_000.0
 WIDEST_MAG_GAUSS = 3_000.0  # 300 mT
-
-
-def _one_line_refusal(res, *needles):
-    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
-    assert res.stdout == ""
-    assert res.stderr.count("\n") == 1 and res.stderr.startswith("station: "), res.stderr
-    assert "cannot process this input" not in res.stderr, res.stderr
-    for n in needles:
-        assert n in res.stderr, res.stderr
 
 
 def _capture(path, units: dict[str, str], cells: dict[str, float], n: int = 300):
@@ -61,7 +52,7 @@ UNITS = {"accel_unit": "g", "gyro_unit": "deg/s", "mag_unit": "gauss"}
 def test_a_magnitude_beyond_any_sensor_is_refused_on_its_line(tmp_path, column, value, command):
     path = tmp_path / "c.csv"
     line = _capture(path, UNITS, {column: value})
-    _one_line_refusal(run_station(command, path), f"{path}:{line}: column '{column}': {value:g} is beyond")
+    assert_one_line_refusal(run_station(command, path), f"{path}:{line}: column '{column}': {value:g} is beyond")
 
 
 def test_the_full_scale_of_the_widest_parts_reads(tmp_path):
@@ -94,7 +85,7 @@ def test_raw_units_keep_the_generic_bound_of_the_numerics(tmp_path, slow):
     raw = {"accel_unit": "counts", "gyro_unit": "counts", "mag_unit": "counts"}
     line = _capture(path, raw, {"gx": 1e21})
     assert read_capture(path, _force_slow=slow).columns["gx"][150] == 1e21
-    _one_line_refusal(
+    assert_one_line_refusal(
         run_station("calibrate", path), f"{path}:{line}: column 'gx': 1e+21 is beyond what any instrument"
     )
 
@@ -110,7 +101,7 @@ def test_import_of_a_plain_csv_refuses_the_cell_by_its_line(tmp_path, unit, valu
     src.write_text("\n".join(rows) + "\n")
     out = tmp_path / "out.csv"
     res = run_station("import", src, *PLAIN, "--unit", f"accel={unit},t=s", "--out", out)
-    _one_line_refusal(res, f"{src}:8: column 'ax': {float(value):g} is beyond")
+    assert_one_line_refusal(res, f"{src}:8: column 'ax': {float(value):g} is beyond")
     assert not out.exists()
 
 
@@ -130,5 +121,5 @@ def test_import_of_a_log_refuses_a_sample_beyond_any_accelerometer(tmp_path):
     w.close()
     out = tmp_path / "out.csv"
     res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
-    _one_line_refusal(res, f"{log}: ", "accelerometer", "1e+30", "is beyond", "t = 0.8 s")
+    assert_one_line_refusal(res, f"{log}: ", "accelerometer", "1e+30", "is beyond", "t = 0.8 s")
     assert not out.exists()
