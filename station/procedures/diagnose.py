@@ -310,12 +310,8 @@ def format_text(
     return "\n".join(L)
 
 
-DRIVER_UNITS = {
-    "time": "s",
-    "temperature": "°C",
-    "speed": "rad/s",
-    "rate": "rad/s",
-}  # what a residual term's place is measured in
+# the unit a residual term's place (a step's "at") or period is measured in, by its driver
+DRIVER_UNITS = {"time": "s", "temperature": "°C", "speed": "rad/s", "rate": "rad/s"}
 
 
 def _described(v):
