@@ -10,7 +10,7 @@ import re
 
 import numpy as np
 import pytest
-from station_run import run_station
+from station_run import assert_one_line_refusal, run_station
 
 DEG_H = math.pi / 648000.0  # 1 °/h in rad/s
 
@@ -80,19 +80,20 @@ def test_history_drift_and_devices_show_in_the_units_of_the_screens(saved, capsy
     rec = json.loads(run_station("history", "G1", "--json", "--db", db).stdout)[0]
     assert rec["params"]["drift"] == pytest.approx(js["params"]["drift"])
 
-    assert run_station("devices", "--db", db, "add", "G1", "--limit", "drift=-0.001:0.001").returncode == 0
-    assert run_station("devices", "--db", db, "add", "G1", "--tolerance", "drift=1e-5").returncode == 0
+    # typed in °/h as the screens show it; stored in rad/s
+    assert run_station("devices", "--db", db, "add", "G1", "--limit", "drift=-206.265:206.265").returncode == 0
+    assert run_station("devices", "--db", db, "add", "G1", "--tolerance", "drift=2.06265").returncode == 0
     show = run_station("devices", "--db", db, "show", "G1").stdout
-    # as --limit takes it (stored unit, said), and as the screens show it
-    assert "limits: drift=-0.001:0.001 rad/s (-206.265:206.265 °/h)" in show
-    assert "tolerances: drift=1e-05 rad/s (2.06265 °/h)" in show
+    # as --limit takes it (the screens' unit, said), and the stored value with its unit
+    assert "limits: drift=-206.265:206.265 °/h (stored -0.001:0.001 rad/s)" in show
+    assert "tolerances: drift=2.06265 °/h (stored 1e-05 rad/s)" in show
 
     table = run_station("drift", "G1", "--no-plot", "--db", db).stdout.splitlines()
     head = table[1].split()
     row = next(line.split() for line in table if line.split()[1:2] == ["drift[1]"])
     assert head[:5] == ["PROCEDURE", "PARAM", "UNIT", "N", "IN_USE"] and row[2] == "°/h"
     assert float(row[4]) == pytest.approx(js["params"]["drift"][1] / DEG_H, rel=1e-5)
-    assert float(row[head.index("TOLERANCE")]) == pytest.approx(1e-5 / DEG_H, rel=1e-5)
+    assert float(row[head.index("TOLERANCE")]) == pytest.approx(2.06265, rel=1e-5)
 
 
 def test_diagnose_text_p4_residuals_in_deg_per_hour_json_in_rad_per_s(tmp_path):
@@ -108,3 +109,66 @@ def test_diagnose_text_p4_residuals_in_deg_per_hour_json_in_rad_per_s(tmp_path):
     assert float(res.group(1)) == pytest.approx(js["baseline"]["residual_rms"] / DEG_H, rel=1e-3)
     assert float(res.group(3)) == pytest.approx(js["baseline"]["cv_rms"] / DEG_H, rel=1e-3)
     assert "per time block [°/h]" in text and "rad/s" not in text
+
+
+def _device_json(db, device):
+    r = run_station("devices", "show", device, "--json", "--db", db)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def test_limits_and_tolerances_typed_in_the_units_printed(saved, tmp_path):
+    """--limit/--tolerance take what the text and screens print (P4 drift in °/h, the
+    compass's soft iron as a ratio); the database keeps rad/s and nT per uT; a FAIL names the
+    limit as it was typed."""
+    db, out = saved
+    # a new unit, no calibration yet: the drift's unit is P4's all the same
+    new = tmp_path / "new.db"
+    r = run_station("devices", "add", "G9", "--limit", "drift=-20:", "--tolerance", "drift=2", "--db", new)
+    assert r.returncode == 0, r.stderr
+    d = _device_json(new, "G9")
+    assert d["limits"]["drift"] == [pytest.approx(-20 * DEG_H, rel=1e-12), None]
+    assert d["tolerances"]["drift"] == pytest.approx(2 * DEG_H, rel=1e-12)
+
+    # the calibration in use, read in °/h: a limit half its largest drift fails it
+    drift_deg_h = np.asarray(out["gyro-drift"][1]["params"]["drift"]) / DEG_H
+    k = int(np.argmax(abs(drift_deg_h)))
+    half = round(abs(drift_deg_h[k]) / 2, 3)
+    assert half > 0.05, drift_deg_h  # a limit the old rad/s reading would pass by far
+    assert run_station("devices", "add", "G1", "--limit", f"drift[{k}]=-{half}:{half}", "--db", db).returncode == 0
+    assert _device_json(db, "G1")["limits"][f"drift[{k}]"] == pytest.approx([-half * DEG_H, half * DEG_H])
+    r = run_station("calibrate", db.parent / "gyro-drift.csv", "--device", "G1", "--save", "--db", db)
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert f"drift[{k}] = {drift_deg_h[k]:.6g} °/h outside its limits {-half:g} … {half:g} °/h" in r.stderr
+    assert run_station("devices", "add", "G1", "--limit", f"drift[{k}]=", "--db", db).returncode == 0
+
+    # the residual in P4's unit, told by G1's calibration
+    assert run_station("devices", "add", "G1", "--tolerance", "residual_rms=30", "--db", db).returncode == 0
+    assert _device_json(db, "G1")["tolerances"]["residual_rms"] == pytest.approx(30 * DEG_H, rel=1e-12)
+    assert "residual_rms=30 °/h (stored " in run_station("devices", "show", "G1", "--db", db).stdout
+
+    # the compass's soft iron as a ratio, stored per the capture's unit (uT: nT per uT)
+    assert out["compass"][1]["mag_unit"] == "uT"
+    r = run_station("devices", "add", "M1", "--limit", "soft_iron[0][0]=0.9:1.1", "--db", db)
+    assert r.returncode == 0, r.stderr
+    assert _device_json(db, "M1")["limits"]["soft_iron[0][0]"] == pytest.approx([900.0, 1100.0])
+    show = run_station("devices", "show", "M1", "--db", db).stdout
+    assert "soft_iron[0][0]=0.9:1.1 uT/uT (stored 900:1100 nT per uT)" in show
+
+
+@pytest.mark.parametrize(
+    "args,needles",
+    [
+        (["--limit", "drift=abc"], ["--limit 'drift=abc'", "LOW:HIGH", "drift is in °/h"]),
+        (["--limit", "drift=5:-5"], ["--limit 'drift=5:-5'", "LOW <= HIGH", "drift is in °/h"]),
+        (["--tolerance", "drift=-1"], ["--tolerance 'drift=-1'", "positive", "drift is in °/h"]),
+        (["--tolerance", "drift=inf"], ["--tolerance 'drift=inf'", "positive", "°/h"]),
+        (["--tolerance", "residual_rms=5"], ["residual_rms", "no calibration yet"]),
+        (["--limit", "soft_iron[0][0]=0.9:1.1"], ["soft_iron", "no calibration yet"]),
+        (["--limit", "B=0.5", "--model", "X"], ["--limit 'B=0.5'", "LOW:HIGH"]),
+    ],
+)
+def test_bad_limit_or_tolerance_one_line_nothing_written(tmp_path, args, needles):
+    db = tmp_path / "none.db"
+    assert_one_line_refusal(run_station("devices", "add", "G9", *args, "--db", db), *needles)
+    assert not db.exists()  # refused before the database is made

@@ -11,6 +11,12 @@ from station.errors import InputError
 from station.procedures import registry
 from station.textsafe import safe
 
+# the unit --tolerance and --limit take, as devices show, history and the screens print it
+_UNITS_HELP = (
+    "in the unit the station prints it in (P4 drift and earth_rate_body in °/h, the compass's "
+    "soft_iron as a ratio, e.g. uT/uT; others as stored: devices show says each)"
+)
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("devices", help="add, list and show devices")
@@ -34,15 +40,16 @@ def register(subparsers) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="largest acceptable change of a parameter (B[0]) or block (B) from its calibrated value; repeatable",
+        help="largest acceptable change of a parameter (B[0]) or block (B) from its calibrated value, "
+        f"{_UNITS_HELP}; residual_rms: the fit's residual, in its procedure's unit (P4 °/h); repeatable",
     )
     add.add_argument(
         "--limit",
         action="append",
         default=[],
         metavar="NAME=LOW:HIGH",
-        help="absolute limits of a parameter (M[0][0]=0.98:1.02) or block (B=-0.5:0.5), in its units; "
-        "leave one end empty for none (S=0.9:); NAME= removes one; repeatable",
+        help="absolute limits of a parameter (M[0][0]=0.98:1.02) or block (B=-0.5:0.5), "
+        f"{_UNITS_HELP}; leave one end empty for none (S=0.9:); NAME= removes one; repeatable",
     )
     add.set_defaults(func=_add)
 
@@ -58,19 +65,42 @@ def register(subparsers) -> None:
         add_db_option(parser)
 
 
-def _tolerances(items: list[str]) -> dict | None:
+def _typed(option: str, item: str, name: str, contexts: list[dict]) -> tuple[dict, str]:
+    """The unit context of ``name`` typed in ``option`` (review.typed_context); a name whose
+    unit cannot be known is refused in one line."""
+    from station.procedures.review import typed_context
+
+    try:
+        return typed_context(name, contexts)
+    except ValueError as exc:
+        raise InputError(None, None, f"{option} {item!r}: {exc}") from None
+
+
+def _in_unit(name: str, unit: str) -> str:
+    """'; drift is in °/h' for an error message ('' when the unit is none or unknown)."""
+    return f"; {name} is in {unit}" if unit and unit != "1" else ""
+
+
+def _tolerances(items: list[str], contexts: list[dict]) -> dict | None:
+    """``NAME=VALUE`` typed in the unit the station shows ``NAME`` in → {name: stored value}."""
+    from station.procedures.review import stored_value
+
     if not items:
         return None
     out = {}
     for item in items:
         name, sep, value = item.rpartition("=")
+        name = name.strip()
+        ctx, unit = _typed("--tolerance", item, name, contexts) if sep and name else ({}, "")
         try:
             number = float(value)
         except ValueError:
             number = None
-        if not sep or not name or number is None or not number > 0:
-            raise InputError(None, None, f"--tolerance {item!r}: expected NAME=VALUE with a positive number")
-        out[name] = number
+        if not sep or not name or number is None or not (number > 0 and math.isfinite(number)):
+            raise InputError(
+                None, None, f"--tolerance {item!r}: expected NAME=VALUE with a positive number{_in_unit(name, unit)}"
+            )
+        out[name] = stored_value(ctx, name, number)
     return out
 
 
@@ -102,22 +132,60 @@ def parse_limit(item: str) -> tuple[str, list | None]:
     return name, pair
 
 
-def _limits(items: list[str]) -> dict | None:
+def _limits(items: list[str], contexts: list[dict]) -> dict | None:
+    """``NAME=LOW:HIGH`` typed in the unit the station shows ``NAME`` in → {name: stored pair}."""
+    from station.procedures.review import stored_value
+
     if not items:
         return None
     out = {}
     for item in items:
+        name = item.strip().partition("=")[0].strip()
         try:
             name, pair = parse_limit(item)
         except ValueError as exc:
-            raise InputError(None, None, f"--limit {exc}") from None
+            unit = _typed("--limit", item, name, contexts)[1] if name and "=" in item else ""
+            raise InputError(None, None, f"--limit {exc}{_in_unit(name, unit)}") from None
+        if pair is not None:  # NAME= removes whatever unit it was in
+            ctx = _typed("--limit", item, name, contexts)[0]
+            pair = [None if x is None else stored_value(ctx, name, x) for x in pair]
         out[name] = pair
     return out
+
+
+def _contexts(history: list[dict]) -> list[dict]:
+    """A device's calibrations as the results that tell its parameters' units
+    (review.unit_context): the accepted one of each procedure first, then newest first."""
+    from station.procedures.review import record_result
+
+    latest = {h["procedure"]: h for h in history if h["accepted"]}  # oldest first: the newest wins
+    return [record_result(h) for h in [*latest.values(), *reversed(history)]]
+
+
+def _device_contexts(args: argparse.Namespace) -> list[dict]:
+    """:func:`_contexts` of the device being added, read without making a database ([] when
+    there is none yet, or no such device)."""
+    from station.cli import db_path
+    from station.commands._dbutil import require_existing
+
+    try:
+        require_existing(db_path(args))
+    except InputError:
+        return []  # no database yet: adding the device makes it
+    with open_store(args) as store:
+        if store.get_device(args.id) is None:
+            return []
+        return _contexts(store.history(args.id))
 
 
 def _add(args: argparse.Namespace) -> int:
     if args.interval_days is not None and not args.interval_days > 0:
         raise InputError(None, None, f"--interval-days must be positive, got {args.interval_days:g}")
+    # typed in the units the station shows, stored in the parameters' own: read and converted
+    # before anything is written (a refusal leaves no database and no change behind)
+    contexts = _device_contexts(args) if args.tolerance or args.limit else []
+    tolerances = _tolerances(args.tolerance, contexts)
+    limits = _limits(args.limit, contexts)
     with open_store(args, create=True) as store:  # adding a device is how a database is made
         existed = store.get_device(args.id) is not None
         device = store.add_device(
@@ -126,8 +194,8 @@ def _add(args: argparse.Namespace) -> int:
             notes=args.notes,
             interval_days=args.interval_days,
             sensor_kinds=args.kinds,
-            tolerances=_tolerances(args.tolerance),
-            limits=_limits(args.limit),
+            tolerances=tolerances,
+            limits=limits,
         )
     sys.stdout.write(f"{'updated' if existed else 'added'} device {safe(device['id'])}\n")
     return 0
@@ -162,26 +230,28 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _with_units(name: str, values: list, contexts: list[dict], fmt) -> str:
-    """``NAME=LOW:HIGH`` (or ``NAME=VALUE``) as ``--limit``/``--tolerance`` take it, in the
-    stored unit, said, and in the unit the screens show when that is another one: e.g.
-    ``drift=-0.001:0.001 rad/s (-206.265:206.265 °/h)``."""
-    from station.procedures.review import display_unit, param_unit, shown_value, unit_context
+    """``NAME=LOW:HIGH`` (or ``NAME=VALUE``) as ``--limit``/``--tolerance`` take it: in the
+    unit the screens show, said, and the stored value when that is in another unit: e.g.
+    ``drift=-206.265:206.265 °/h (stored -0.001:0.001 rad/s)``."""
+    from station.procedures.review import display_unit, param_unit, result_unit, shown_value, typed_context
 
-    ctx = unit_context(name, contexts)
-    stored = safe(f"{name}=" + ":".join(fmt(v) for v in values))
-    unit = param_unit(ctx, name) if ctx else ""
-    if unit and unit != "1":
-        stored += f" {safe(unit)}"
+    try:
+        ctx, unit = typed_context(name, contexts)
+    except ValueError:  # unit unknown: as stored, no unit said
+        ctx, unit = {}, ""
     disp = display_unit(ctx, name) if ctx else None
+    shown = values if disp is None else [None if v is None else shown_value(ctx, name, v) for v in values]
+    text = safe(f"{name}=" + ":".join(fmt(v) for v in shown))
+    if unit and unit != "1":
+        text += f" {safe(unit)}"
     if disp is None:
-        return stored
-    shown = ":".join(fmt(None if v is None else shown_value(ctx, name, v)) for v in values)
-    return f"{stored} ({safe(shown)} {safe(disp[1])})"
+        return text
+    stored_unit = result_unit(ctx) if name == "residual_rms" else param_unit(ctx, name)
+    stored = ":".join(fmt(v) for v in values)
+    return f"{text} (stored {safe(stored)}" + (f" {safe(stored_unit)})" if stored_unit else ")")
 
 
 def _show(args: argparse.Namespace) -> int:
-    from station.procedures.review import record_result
-
     with open_store(args) as store:
         device = require_device(store, args.id)
         history = store.history(args.id)
@@ -195,7 +265,7 @@ def _show(args: argparse.Namespace) -> int:
         device["latest"] = {p: {"id": h["id"], "time": h["time"]} for p, h in latest.items()}
         print_json(device)
         return 0
-    contexts = [record_result(h) for h in [*latest.values(), *reversed(history)]]
+    contexts = _contexts(history)
     out = [
         f"device: {safe(device['id'])}",
         f"model: {safe(device['model'] or '-')}",

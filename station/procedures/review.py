@@ -185,6 +185,43 @@ def unit_context(name: str, results) -> dict:
     return {"procedure": owners[0]} if len(owners) == 1 else {}
 
 
+def typed_context(name: str, results) -> tuple[dict, str]:
+    """The result whose units a person types a limit or tolerance of ``name`` in (as the
+    screens show it), and that unit ('' when dimensionless or unknown): :func:`unit_context`;
+    for ``residual_rms`` the one procedure of ``results`` (the device's calibrations).
+    ValueError, one line, when that unit cannot be known: a residual with no calibration to
+    tell its procedure or with procedures whose residual units differ; a display unit that
+    needs the result (the compass's soft iron, per the capture's mag_unit) with none."""
+    if name == "residual_rms":
+        by_unit: dict[str, dict] = {}
+        for result in results:
+            if result and result.get("procedure"):
+                by_unit.setdefault(shown_residual(result)[1], result)
+        if not by_unit:
+            raise ValueError(
+                "residual_rms is in the unit of a procedure's residual (P4 °/h, P1 m/s^2, ...) "
+                "and the device has no calibration yet to tell which"
+            )
+        if len(by_unit) > 1:
+            raise ValueError(
+                f"residual_rms has a different unit in each of the device's procedures ({', '.join(by_unit)})"
+            )
+        ((unit, ctx),) = by_unit.items()
+        return ctx, unit
+    ctx = unit_context(name, results)
+    if not ctx:
+        return {}, ""
+    if not ctx.get("params"):  # a bare procedure: no result to tell a per-capture display factor
+        spec = getattr(_procedure_module(ctx), "DISPLAY_UNITS", {}).get(_block(name))
+        if spec is not None and callable(spec[1]):
+            unit = spec[0].format(mag_unit="mag_unit")
+            raise ValueError(
+                f"{_block(name)} is shown as {unit}, stored per the capture's unit, "
+                "and the device has no calibration yet to tell it"
+            )
+    return ctx, shown_unit(ctx, name)
+
+
 def shown_rows(result: dict, rows: list[ParamRow]) -> list[ParamRow]:
     """``rows`` in the units the screens show (:func:`display_unit`); value, σ, the value in
     use and the tolerance scaled alike (Δ/σ and the checks are unchanged)."""
