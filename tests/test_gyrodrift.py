@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from station_run import assert_one_line_refusal
 from station_run import capture_of as _cap
 from station_run import run_station as _station
 
@@ -207,26 +208,18 @@ def _write(tmp_path, sim, name="c.csv"):
     return path
 
 
-def _one_line_refusal(r, *needles):
-    assert r.returncode == 2, r.stdout + r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in r.stderr
-    for n in needles:
-        assert n in lines[0]
-
-
 def test_cli_refuses_too_short_a_record(tmp_path):
     sim = simulate("gyro-drift", seed=6, mode="static", duration_s=10.0)
-    _one_line_refusal(_station("calibrate", _write(tmp_path, sim), subprocess_run=True), "too short", "3 min")
+    assert_one_line_refusal(_station("calibrate", _write(tmp_path, sim), subprocess_run=True), "too short", "3 min")
 
 
 def test_cli_refuses_missing_columns(tmp_path):
     sim = simulate("gyro-drift", seed=7, mode="reference")
     del sim.columns["ref_gz"]
-    _one_line_refusal(_station("calibrate", _write(tmp_path, sim)), "ref_gz")
+    assert_one_line_refusal(_station("calibrate", _write(tmp_path, sim)), "ref_gz")
     sim2 = simulate("gyro-drift", seed=7, mode="static")
     del sim2.columns["gy"]
-    _one_line_refusal(_station("calibrate", _write(tmp_path, sim2, "d.csv")), "gy")
+    assert_one_line_refusal(_station("calibrate", _write(tmp_path, sim2, "d.csv")), "gy")
 
 
 def test_table_of_averages_refused(tmp_path):
@@ -250,7 +243,7 @@ def test_table_of_averages_refused(tmp_path):
             },
         ),
     )
-    _one_line_refusal(_station("calibrate", path), "table of averages")
+    assert_one_line_refusal(_station("calibrate", path), "table of averages")
 
 
 def test_cli_refuses_counts_without_a_scale_and_uses_one_given(tmp_path):
@@ -258,7 +251,7 @@ def test_cli_refuses_counts_without_a_scale_and_uses_one_given(tmp_path):
     for k in ("gx", "gy", "gz"):
         sim.columns[k] = np.round(sim.columns[k] / DEG * 131.0)
     sim.meta["gyro_unit"] = "counts"
-    _one_line_refusal(_station("calibrate", _write(tmp_path, sim)), "gyro_counts_per_deg_s")
+    assert_one_line_refusal(_station("calibrate", _write(tmp_path, sim)), "gyro_counts_per_deg_s")
     sim.meta["gyro_counts_per_deg_s"] = "131"
     r = _station("calibrate", _write(tmp_path, sim, "e.csv"), "--json")
     assert r.returncode == 0, r.stderr
