@@ -303,6 +303,40 @@ def test_wrong_face_up_is_shown_and_blocks_capture():
     asyncio.run(story())
 
 
+def test_p1_live_rate_reads_in_degrees_per_second():
+    """P1's live readout gives the gyro in °/s, as an operator reads a rate, from a device
+    that streams rad/s; the guide's status (and so the capture) keeps the device's unit."""
+    import re
+
+    async def story():
+        clock = BenchClock()
+        src = SimSource(seed=3, clock=clock)
+        app = make_app(None, device=src, start="procedure", average_s=60.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            src.place("y_up")  # a quarter turn from x_up: tens of °/s for a few seconds
+            seen = {}
+
+            def turning() -> bool:
+                st = app.screen.last_status  # drawn in the same handler as the readout
+                if st is None or not all(map(math.isfinite, st.gyro)):
+                    return False
+                seen["gyro"], seen["text"] = st.gyro, str(app.screen.query_one("#readouts").render())
+                return max(map(abs, st.gyro)) > math.radians(10.0)
+
+            await run_bench(pilot, src, clock, turning, step_s=0.05)
+            return src.units["gyro_unit"], seen
+
+    unit, seen = asyncio.run(story())
+    assert unit == "rad/s"  # what the device streams
+    line = next(x for x in seen["text"].splitlines() if x.startswith("rate"))
+    assert line.endswith(" °/s") and "rad/s" not in seen["text"], seen["text"]
+    shown = [float(v) for v in re.findall(r"[-+]?\d+\.\d+", line)]
+    # printed to 0.001 °/s; 1 rad/s = 180/π °/s
+    assert shown == pytest.approx([math.degrees(w) for w in seen["gyro"]], abs=6e-4)
+    assert max(map(abs, shown)) > 10.0
+
+
 def test_skip_redo_abort_and_resume(tmp_path):
     db = str(tmp_path / "station.db")
 

@@ -8,6 +8,7 @@ import math
 from rich.text import Text
 from textual.widgets import Static
 
+from solvers.units import si_factor
 from station.formatting import num
 from station.procedures.tabletop_guide import position_drawing
 
@@ -133,17 +134,27 @@ class CountdownBar(Static):
         self.update(t)
 
 
+def rate_deg_s(gyro, unit: str | None) -> tuple[tuple[float, float, float], str, str]:
+    """A gyro reading in the device's ``unit`` as an operator reads a rate: (values, unit,
+    format), in °/s for a physical unit (rad/s, mrad/s, ...); a raw unit (counts, V, none)
+    as it comes, with its name."""
+    factor = si_factor("gyro", unit)  # unit → rad/s
+    if factor is None:
+        return tuple(gyro), unit or "raw", "9.4f"
+    return tuple(math.degrees(x * factor) for x in gyro), "°/s", "9.3f"
+
+
 class Readouts(Static):
-    """Raw and calibrated-so-far values, |a|, rates, temperature, sample rate, parse errors."""
+    """Raw and calibrated-so-far values, |a|, rates (°/s), temperature, sample rate, parse errors."""
 
     def show(self, st, stats, units: dict) -> None:
         au = units.get("accel_unit") or "raw"
-        gu = units.get("gyro_unit") or "raw"
-        r, f, g = st.raw, st.f_mps2, st.gyro
+        r, f = st.raw, st.f_mps2
+        g, gu, gf = rate_deg_s(st.gyro, units.get("gyro_unit"))
         lines = [
             f"raw  {num(r[0], '9.4f')} {num(r[1], '9.4f')} {num(r[2], '9.4f')} {au}",
             f"f    {num(f[0], '9.3f')} {num(f[1], '9.3f')} {num(f[2], '9.3f')} m/s^2  |a| {num(st.norm_mps2, '.3f')}",
-            f"rate {num(g[0], '9.4f')} {num(g[1], '9.4f')} {num(g[2], '9.4f')} {gu}",
+            f"rate {num(g[0], gf)} {num(g[1], gf)} {num(g[2], gf)} {gu}",
             f"temp {num(st.temp_c, '.1f')} °C   {num(stats.rate_hz, '.0f')} Hz   "
             f"errors {stats.parse_errors}   dropped {stats.dropped}" + ("" if stats.connected else "   DISCONNECTED"),
         ]
