@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from station.capture import read_capture
-from tests.station_run import run_station
+from tests.station_run import assert_one_line_refusal, run_station
 
 EUROC = (
     "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
@@ -132,6 +132,38 @@ def test_plain_csv_with_map_units_and_time_in_ms(tmp_path):
     np.testing.assert_allclose(c.columns["t"], t_ms / 1000, atol=1e-12)
     np.testing.assert_array_equal(c.columns["mx"], mag[:, 0])
     np.testing.assert_array_equal(c.columns["gz"], gyr[:, 2])
+
+
+def test_a_plain_csv_of_many_megabytes_reads_whole_and_names_a_bad_line_far_in(tmp_path):
+    """The reader streams the file a megabyte at a time: rows across the seams (CRLF ends, a
+    UTF-8 byte-order mark, non-ASCII comments, a line end split between reads) come back
+    exactly, and a bad cell deep in the file is named by its line."""
+    rng = np.random.default_rng(5)
+    n = 100_000  # ~3.5 MiB: several reads
+    t_ms = np.arange(n) * 10
+    acc = np.round(rng.normal(0, 0.01, (n, 3)) + [0, 0, 1], 6)
+    rows = [f"{t},{x!r},{y!r},{z!r}" for t, (x, y, z) in zip(t_ms.tolist(), acc.tolist())]
+    for i in range(0, n, 997):  # comments and blank lines among the rows, not rows
+        rows[i] += "\r\n# bench note: 20 °C, Ω≈μ\r\n"
+    text = "\ufefftime_ms,acc_x,acc_y,acc_z\r\n" + "\r\n".join(rows) + "\r\n"
+    assert len(text.encode()) > 3 * (1 << 20)
+    src = tmp_path / "big.csv"
+    src.write_bytes(text.encode())
+    opts = ["--procedure", "accel-tabletop", "--map", "t=time_ms,ax=acc_x,ay=acc_y,az=acc_z", "--unit", "accel=g,t=ms"]
+    out = tmp_path / "o.csv"
+    res = run_station("import", src, "--out", out, *opts)
+    assert res.returncode == 0, res.stderr
+    c = read_capture(out)
+    np.testing.assert_allclose(c.columns["t"], t_ms / 1000, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(np.column_stack([c.columns[k] for k in ("ax", "ay", "az")]), acc)
+
+    k = 55_555  # the row's line: the header, its rows before it, two lines per note before it
+    lineno = 1 + k + 1 + 2 * len(range(0, k, 997))
+    bad = text.replace("\r\n" + rows[k] + "\r\n", "\r\n" + rows[k].replace(",", ",x", 1) + "\r\n")
+    src.write_bytes(bad.encode())
+    res = run_station("import", src, "--out", tmp_path / "bad.csv", *opts)
+    assert_one_line_refusal(res, f"big.csv:{lineno}: column 'ax'", "is not a number")
+    assert not (tmp_path / "bad.csv").exists()
 
 
 def test_plain_csv_without_time_uses_rate(tmp_path):

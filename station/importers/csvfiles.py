@@ -13,9 +13,11 @@ mag=uT,t=ms``); without a time column ``--rate HZ`` numbers the rows. Lines star
 
 from __future__ import annotations
 
+import codecs
 import csv
 import math
 import re
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -53,22 +55,25 @@ _NUMBER = re.compile(r"\s*[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]
 
 _MAX_LINE_BYTES = 1 << 20  # a line longer than this is no CSV row (the capture reader's limit)
 _CHUNK_BYTES = 1 << 20
+_FLUSH_ROWS = 1 << 16  # parsed rows kept as Python floats before they become an array chunk
+# what str.splitlines ends a line at ("\r\n" is one end)
+_LINE_ENDS = "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"
 
 
-def _read_bounded(f, path) -> bytes:
-    """The whole file, read in chunks that are checked as they come: a NUL byte or a line
-    longer than ``_MAX_LINE_BYTES`` stops the reading at once (``/dev/zero``, a binary blob or
-    a file without line ends would otherwise be read whole into memory)."""
-    parts: list[bytes] = []
+def _chunks(f, path) -> Iterator[bytes]:
+    """The file in chunks, each checked as it comes: a NUL byte or a line longer than
+    ``_MAX_LINE_BYTES`` stops the reading at once (``/dev/zero``, a binary blob or a file
+    without line ends would otherwise be read on and on)."""
     lines_before = 0  # newlines in the chunks already read
     run = 0  # bytes since the last newline
+    first_chunk = True
     too_long = f"line longer than {_MAX_LINE_BYTES} bytes: not a CSV row"
     while True:
         chunk = f.read(_CHUNK_BYTES)  # no longer than the limit: a longer line crosses a chunk's end
         if not chunk:
-            return b"".join(parts)
+            return
         nul = chunk.find(b"\0")
-        if nul >= 0 and not parts and looks_utf16(chunk):
+        if nul >= 0 and first_chunk and looks_utf16(chunk):
             raise InputError(path, 1, "UTF-16 text; CSV files are read as UTF-8 (save the file as UTF-8)")
         if nul >= 0:
             raise InputError(
@@ -84,7 +89,65 @@ def _read_bounded(f, path) -> bytes:
         lines_before += chunk.count(b"\n")
         if run > _MAX_LINE_BYTES:
             raise InputError(path, lines_before + 1, too_long)
-        parts.append(chunk)
+        first_chunk = False
+        yield chunk
+
+
+def _check_text(path) -> None:
+    """Read the file once, keeping nothing: InputError for what is not text (a NUL byte, an
+    overlong line, then the first byte that is not UTF-8, naming its line)."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    bad = None  # the first UTF-8 error: reported once no NUL or overlong line follows it
+    lines_before = 0
+    try:
+        with open_input(path, "a CSV file") as f:
+            for chunk in _chunks(f, path):
+                if bad is None:
+                    try:
+                        decoder.decode(chunk)
+                    except UnicodeDecodeError as exc:  # exc.object: the bytes held over, then this chunk
+                        bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
+                lines_before += chunk.count(b"\n")
+    except OSError as exc:  # reading, after the open
+        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    if bad is None:
+        try:
+            decoder.decode(b"", final=True)
+        except UnicodeDecodeError as exc:  # a character cut off by the end of the file
+            bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
+    if bad is not None:
+        raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x}")
+
+
+def _strip_end(line: str) -> str:
+    if line.endswith("\r\n"):
+        return line[:-2]
+    return line[:-1] if line and line[-1] in _LINE_ENDS else line
+
+
+def _lines(path) -> Iterator[str]:
+    """The lines of a file :func:`_check_text` passed, without their ends, as
+    ``text.splitlines()`` of the whole decoded file gives them, read a chunk at a time."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    carry = ""  # an unfinished line (or one ending in "\r", whose "\n" may come next)
+    start = True  # a byte order mark at the start is no text
+    try:
+        with open_input(path, "a CSV file") as f:
+            for chunk in _chunks(f, path):
+                text = decoder.decode(chunk)
+                if start and text:
+                    text, start = text.removeprefix("\ufeff"), False
+                pieces = (carry + text).splitlines(keepends=True)
+                carry = ""
+                if pieces and (pieces[-1][-1] not in _LINE_ENDS or pieces[-1][-1] == "\r"):
+                    carry = pieces.pop()
+                for piece in pieces:
+                    yield _strip_end(piece)
+            yield from (carry + decoder.decode(b"", final=True)).splitlines()
+    except OSError as exc:
+        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(path, None, "changed while it was read: not UTF-8 text any more") from None
 
 
 def _cells(path, lineno: int, text: str, delimiter: str) -> list[str]:
@@ -96,21 +159,11 @@ def _cells(path, lineno: int, text: str, delimiter: str) -> list[str]:
         raise InputError(path, lineno, f"not a CSV row: {exc}") from None
 
 
-def _open_text(path) -> tuple[list[str], int]:
-    """The file's lines (no line ends) and nothing else; InputError for what is not text."""
-    try:
-        with open_input(path, "a CSV file") as f:
-            data = _read_bounded(f, path)
-    except OSError as exc:  # reading, after the open
-        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data[: exc.start].count(b"\n") + 1
-        raise InputError(path, line, f"not UTF-8 text: byte 0x{data[exc.start]:02x}") from None
-    return text.splitlines(), len(data)
+def _open_text(path) -> Iterator[tuple[int, str]]:
+    """The file's lines (no line ends) with their numbers, streamed: the whole file is never
+    held. InputError for what is not text, raised here, before any line is given."""
+    _check_text(path)
+    return enumerate(_lines(path), 1)
 
 
 def first_line(path) -> str:
@@ -146,42 +199,61 @@ def _number(path, lineno: int, name: str, cell: str) -> float:
 
 def _rows(
     path,
-    lines: list[str],
-    start: int,
+    lines: Iterator[tuple[int, str]],
+    first_lineno: int,
     delimiter: str,
     ncols: int,
     cols: dict[str, int],
     int_time: str | None = None,
-) -> tuple[dict[str, np.ndarray], list[int]]:
-    """Parse data lines from index ``start``: ``{target: values}`` and each row's line number."""
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Parse the data lines ``lines`` ((number, text), the first numbered ``first_lineno``):
+    ``{target: values}`` and each row's line number. Rows become float64 array chunks as they
+    come (``_FLUSH_ROWS`` at a time), so a large file is held once, as numbers."""
+    done: dict[str, list] = {t: [] for t in cols if t != int_time}  # array chunks
     out: dict[str, list] = {t: [] for t in cols}
+    ints: list[int] = out[int_time] if int_time else []
+    line_chunks: list[np.ndarray] = []
     linenos: list[int] = []
-    for i in range(start, len(lines)):
-        text = lines[i]
+
+    def flush() -> None:
+        for t in done:
+            done[t].append(np.asarray(out[t], dtype=np.float64))
+            out[t] = []
+        line_chunks.append(np.asarray(linenos, dtype=np.int64))
+        linenos.clear()
+
+    for lineno, text in lines:
         if not text.strip() or text.lstrip().startswith("#"):
             continue
-        cells = _cells(path, i + 1, text, delimiter)
+        cells = _cells(path, lineno, text, delimiter)
         if len(cells) != ncols:
-            raise InputError(path, i + 1, f"{len(cells)} fields where the header has {ncols}")
+            raise InputError(path, lineno, f"{len(cells)} fields where the header has {ncols}")
         for target, j in cols.items():
             if target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
                 cell = cells[j].strip()
                 if not re.fullmatch(r"[+-]?[0-9]+", cell):
                     raise InputError(
                         path,
-                        i + 1,
+                        lineno,
                         f"column '{target}': {cell[:40]!r} is not a whole number of ns",
                     )
-                out[target].append(int(cell))
+                ints.append(int(cell))
             else:
-                out[target].append(_number(path, i + 1, target, cells[j]))
-        linenos.append(i + 1)
-    if not linenos:
-        raise InputError(path, start + 1, "no data rows after the header")
-    return {t: (np.asarray(v, dtype=object if t == int_time else np.float64)) for t, v in out.items()}, linenos
+                out[target].append(_number(path, lineno, target, cells[j]))
+        linenos.append(lineno)
+        if len(linenos) >= _FLUSH_ROWS:
+            flush()
+    flush()
+    numbers = np.concatenate(line_chunks)
+    if not numbers.size:
+        raise InputError(path, first_lineno, "no data rows after the header")
+    values = {t: np.concatenate(chunks) for t, chunks in done.items()}
+    if int_time:
+        values[int_time] = np.asarray(ints, dtype=object)
+    return {t: values[t] for t in cols}, numbers
 
 
-def _check_limits(path, values: dict[str, np.ndarray], linenos: list[int], units: dict[str, str]) -> None:
+def _check_limits(path, values: dict[str, np.ndarray], linenos: np.ndarray, units: dict[str, str]) -> None:
     """Refuse a cell beyond what any sensor of its kind reports (station.capture.plausible_limit,
     in the unit the file declares), naming its line, as the capture reader would."""
     meta = {f"{kind}_unit": unit for kind, unit in units.items()}
@@ -196,10 +268,10 @@ def _check_limits(path, values: dict[str, np.ndarray], linenos: list[int], units
             over = np.abs(np.asarray(col, dtype=np.float64)) > bound
         if over.any():
             i = int(np.argmax(over))
-            raise InputError(path, linenos[i], f"column '{target}': {float(col[i]):g} is beyond {reason}")
+            raise InputError(path, int(linenos[i]), f"column '{target}': {float(col[i]):g} is beyond {reason}")
 
 
-def _time_seconds(path, t, linenos: list[int], factor: float, integer: bool) -> np.ndarray:
+def _time_seconds(path, t, linenos: np.ndarray, factor: float, integer: bool) -> np.ndarray:
     """Seconds from the first row; t must not go backwards (the line that does is named)."""
     if integer:
         t0 = t[0]
@@ -207,12 +279,12 @@ def _time_seconds(path, t, linenos: list[int], factor: float, integer: bool) -> 
     else:
         if np.isnan(t).any():
             i = int(np.flatnonzero(np.isnan(t))[0])
-            raise InputError(path, linenos[i], "the time column is empty (every row needs its time)")
+            raise InputError(path, int(linenos[i]), "the time column is empty (every row needs its time)")
         ts = (t - t[0]) * factor
     back = np.flatnonzero(np.diff(ts) < 0)
     if back.size:
         i = int(back[0]) + 1
-        raise InputError(path, linenos[i], "time goes backwards")
+        raise InputError(path, int(linenos[i]), "time goes backwards")
     return ts
 
 
@@ -254,10 +326,11 @@ def _streams(
 
 
 def read_euroc(path, *, kinds=None) -> Imported:
-    lines, _ = _open_text(path)
-    if not lines:
+    lines = _open_text(path)
+    first = next(lines, None)
+    if first is None:
         raise InputError(path, 1, "empty file")
-    header = [c.strip() for c in lines[0].lstrip("#").split(",")]
+    header = [c.strip() for c in first[1].lstrip("#").split(",")]
     cols: dict[str, int] = {}
     units: dict[str, str] = {}
     for j, cell in enumerate(header):
@@ -298,7 +371,7 @@ def read_euroc(path, *, kinds=None) -> Imported:
             1,
             f"not an EuRoC/Kalibr IMU header: no column for {', '.join(missing)}",
         )
-    values, linenos = _rows(path, lines, 1, ",", len(header), cols, int_time="t")
+    values, linenos = _rows(path, lines, 2, ",", len(header), cols, int_time="t")
     _check_limits(path, values, linenos, units)
     t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True)
     streams = _streams(path, values, t_s, units, "EuRoC/Kalibr CSV")
@@ -336,19 +409,16 @@ def read_plain(
     for key in units:
         if key not in ("t", "accel", "gyro", "mag"):
             raise InputError(None, None, f"--unit {key}=…: expected t, accel, gyro or mag")
-    lines, _ = _open_text(path)
-    hi = next(
-        (i for i, s in enumerate(lines) if s.strip() and not s.lstrip().startswith("#")),
-        None,
-    )
+    lines = _open_text(path)
+    hi, head = next(((n, s) for n, s in lines if s.strip() and not s.lstrip().startswith("#")), (None, ""))
     if hi is None:
         raise InputError(path, 1, "empty file: no header row")
-    delimiter = _sniff_delimiter(lines[hi])
-    header = [c.strip() for c in _cells(path, hi + 1, lines[hi], delimiter)]
+    delimiter = _sniff_delimiter(head)
+    header = [c.strip() for c in _cells(path, hi, head, delimiter)]
     if all(_NUMBER.fullmatch(c) for c in header if c):
         raise InputError(
             path,
-            hi + 1,
+            hi,
             "no header row: this line holds numbers; the first line must name the columns",
         )
     given = bool(mapping)
@@ -357,7 +427,7 @@ def read_plain(
         if not mapping:
             raise InputError(
                 path,
-                hi + 1,
+                hi,
                 f"no column is named like a capture column ({', '.join(TARGETS)}): "
                 "say which is which with --map, e.g. --map t=time,ax=acc_x,ay=acc_y,az=acc_z",
             )
@@ -369,7 +439,7 @@ def read_plain(
                 where = f"--map {target}={source}: " if given else ""
                 raise InputError(
                     path,
-                    hi + 1,
+                    hi,
                     f"{where}{len(same)} columns are named {source!r} (columns {', '.join(map(str, same[:-1]))} "
                     f"and {same[-1]}): say which by its number, e.g. --map {target}={same[0]}",
                 )
@@ -379,7 +449,7 @@ def read_plain(
         else:
             raise InputError(
                 path,
-                hi + 1,
+                hi,
                 f"--map {target}={source}: no column {source!r} in the header ({', '.join(header)})",
             )
     kinds_present = {KIND_OF[c] for c in cols if c in KIND_OF}
