@@ -778,17 +778,22 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(a @ b) / den if den > 0 else 0.0
 
 
-def _score(ev: _Eval, n: int) -> float:
-    """The BIC change of adding ``ev``'s candidate alone, its deviance taken net of serial correlation."""
-    return ev.k * math.log(n) - ev.D_rob
-
-
 def decisive_margin(problem: Problem) -> float:
     """BIC margin by which one of two correlated candidates must beat the other for the data to
     tell them apart: ``F·χ²₁(1 − α)``. The deviance difference of two one-signature models is
     about N(±s², 4s²) for a separation of s noise σ, so a wrong decision past this margin has a
     probability below Φ(−√margin) (< 0.1 % at F = 2.5) whatever s is."""
     return problem.threshold * chi2_isf(ALPHA, 1)
+
+
+def _rival_margin(a: _Eval, b: _Eval, n: int) -> float:
+    """``score(a) − score(b)`` (> 0: ``b`` explains the data better) with both deviances taken
+    net of the larger of their two serial-correlation inflations: two candidates that explain
+    the same structure are compared on one noise scale, so the comparison is decided by the fit
+    and not by the two inflation estimates (a slow signature's inflation against 1 for one that
+    changes with each position)."""
+    infl = max(a.infl, b.infl)
+    return (a.k - b.k) * math.log(n) - (a.D - b.D) / infl
 
 
 def _head_to_head(problem: Problem, best: _Eval, others: list[_Eval], n: int) -> tuple[list[dict], _Eval | None]:
@@ -805,7 +810,7 @@ def _head_to_head(problem: Problem, best: _Eval, others: list[_Eval], n: int) ->
         corr = _corr(best.sig, r.sig)
         if abs(corr) <= RIVAL_CORR:
             continue
-        margin = _score(best, n) - _score(r, n)  # > 0: r explains the data better
+        margin = _rival_margin(best, r, n)  # > 0: r explains the data better
         if margin > dec:
             if margin > worst:
                 better, worst = r, margin
@@ -940,7 +945,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                             )
                     if len(evs) < 2 or min(ev.k for ev in evs) <= 0 or abs(_corr(evs[0].sig, evs[1].sig)) <= RIVAL_CORR:
                         continue
-                    margin = _score(evs[0], n) - _score(evs[1], n)  # > 0: b explains the data better
+                    margin = _rival_margin(evs[0], evs[1], n)  # > 0: b explains the data better
                     win, lose = (b, a) if margin > 0 else (a, b)
                     if abs(margin) <= decisive_margin(problem):
                         corr = _corr(evs[0].sig, evs[1].sig)
