@@ -497,6 +497,64 @@ def test_limits_and_tolerances_are_shown_and_typed_in_the_units_results_shows(tm
     assert Store(db).get_device("M1")["limits"]["soft_iron"] == [900.0, 1100.0]
 
 
+def test_limits_editor_refuses_a_soft_iron_limit_the_device_cannot_unit_yet_as_the_cli_does(tmp_path):
+    """The compass's soft iron is typed as a ratio and stored in nT per the capture's unit:
+    with no compass calibration of the device that unit is unknown. `devices add --limit`
+    refused it; the limits editor stored 0.9:1.1 as 'nT per raw'. Now the same refusal, one
+    message whole in the box at 80x24, nothing stored and, for a new user, no database made."""
+    from station.cli import main
+    from station.screens.results import ResultsScreen
+    from tests.station_run import run_station
+    from tests.tui_data import seed_history
+
+    db = tmp_path / "s.db"
+    seed_history(str(db), "IMU-7", n=1)  # a P1 calibration only
+    Store(str(db)).add_device("IMU-7", limits={"B": (-0.5, 0.5)})
+    before = Store(str(db)).get_device("IMU-7")
+    entry = "soft_iron[0][0]=0.9:1.1"
+    cli = run_station("devices", "add", "IMU-7", "--limit", entry, "--db", db)
+    assert cli.returncode == 2 and cli.stderr.startswith(f"station: --limit {entry!r}: "), cli.stderr
+    said_by_cli = cli.stderr.strip().removeprefix("station: --limit ")
+    assert "no calibration yet" in said_by_cli
+    new_db = tmp_path / "new.db"  # a new user's first run, on Results: no database yet
+    cap, result = p1_result("NEW-1")
+
+    def shown(app):
+        return " ".join((text_of(app, "#error") + " " + text_of(app, "#said")).split())
+
+    async def story(path, open_editor, **options):
+        app = make_app(str(path), **options)
+        async with app.run_test(size=SIZE) as pilot:
+            await open_editor(app, pilot)
+            await pilot.press("l")
+            await wait_for(
+                pilot, lambda: screen_name(app) == "LimitsScreen" and "reading" not in text_of(app, "#current")
+            )
+            await pilot.press(*entry, "enter")
+            await wait_for(pilot, lambda: shown(app))
+            return shown(app), screen_lines(app)
+
+    async def history(app, pilot):
+        await wait_for(
+            pilot, lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 1
+        )
+
+    async def results(app, pilot):
+        await app.push_screen(ResultsScreen(cap, result, None, None))
+        await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+
+    for path, open_editor, options in ((db, history, {"start": "history"}), (new_db, results, {"device_id": "NEW-1"})):
+        message, lines = asyncio.run(story(path, open_editor, **options))
+        assert message == " ".join(said_by_cli.split()), (message, said_by_cli)  # the CLI's words, whole
+        assert "Traceback" not in "\n".join(lines)
+        assert all(len(line) <= 80 for line in lines) and len(lines) == 24
+        box = "\n".join(lines)
+        assert "Enter apply" in box and entry in box  # the field and its keys still on screen
+    assert Store(str(db)).get_device("IMU-7") == before
+    assert not new_db.exists()
+    assert main(["verify", "--db", str(db)]) == 0
+
+
 def test_help_lines_fit_the_box_at_80x24():
     """F1 at 80x24: every line of the keys fits the box beside its scroll bar. A longer one
     wrapped to the box's left edge ('ref.)' and 'on.' alone under the key column), where it

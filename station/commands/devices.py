@@ -65,15 +65,22 @@ def register(subparsers) -> None:
         add_db_option(parser)
 
 
-def _typed(option: str, item: str, name: str, contexts: list[dict]) -> tuple[dict, str]:
-    """The unit context of ``name`` typed in ``option`` (review.typed_context); a name whose
-    unit cannot be known is refused in one line."""
+def _typed_unit(item: str, name: str, contexts: list[dict]) -> tuple[dict, str]:
+    """review.typed_context of ``name`` typed in ``item``; its ValueError names the item."""
     from station.procedures.review import typed_context
 
     try:
         return typed_context(name, contexts)
     except ValueError as exc:
-        raise InputError(None, None, f"{option} {item!r}: {exc}") from None
+        raise ValueError(f"{item!r}: {exc}") from None
+
+
+def _typed(option: str, item: str, name: str, contexts: list[dict]) -> tuple[dict, str]:
+    """:func:`_typed_unit` for ``option``: a name whose unit cannot be known is refused in one line."""
+    try:
+        return _typed_unit(item, name, contexts)
+    except ValueError as exc:
+        raise InputError(None, None, f"{option} {exc}") from None
 
 
 def _in_unit(name: str, unit: str) -> str:
@@ -132,30 +139,45 @@ def parse_limit(item: str) -> tuple[str, list | None]:
     return name, pair
 
 
-def _limits(items: list[str], contexts: list[dict]) -> dict | None:
-    """``NAME=LOW:HIGH`` typed in the unit the station shows ``NAME`` in → {name: stored pair}."""
+def typed_limit(item: str, contexts: list[dict]) -> tuple[str, list | None, str]:
+    """``NAME=LOW:HIGH`` typed in the unit the station shows ``NAME`` in (:func:`parse_limit`)
+    → (name, [low, high] in the stored unit, the typed unit); ``NAME=`` → (name, None, ''):
+    remove it, whatever unit it was in. ``contexts``: the results that tell the units, the
+    device's calibrations (:func:`unit_contexts`). ValueError, one line: a bad entry (with
+    the unit ``NAME`` is typed in), or a unit they cannot tell yet (review.typed_context).
+    The CLI's ``--limit`` and the TUI's limits editor convert and refuse through this."""
     from station.procedures.review import stored_value
 
+    name = item.strip().partition("=")[0].strip()
+    try:
+        name, pair = parse_limit(item)
+    except ValueError as exc:
+        unit = _typed_unit(item, name, contexts)[1] if name and "=" in item else ""
+        raise ValueError(f"{exc}{_in_unit(name, unit)}") from None
+    if pair is None:
+        return name, None, ""
+    ctx, unit = _typed_unit(item, name, contexts)
+    return name, [None if x is None else stored_value(ctx, name, x) for x in pair], unit
+
+
+def _limits(items: list[str], contexts: list[dict]) -> dict | None:
+    """``NAME=LOW:HIGH`` typed in the unit the station shows ``NAME`` in → {name: stored pair}."""
     if not items:
         return None
     out = {}
     for item in items:
-        name = item.strip().partition("=")[0].strip()
         try:
-            name, pair = parse_limit(item)
+            name, pair, _ = typed_limit(item, contexts)
         except ValueError as exc:
-            unit = _typed("--limit", item, name, contexts)[1] if name and "=" in item else ""
-            raise InputError(None, None, f"--limit {exc}{_in_unit(name, unit)}") from None
-        if pair is not None:  # NAME= removes whatever unit it was in
-            ctx = _typed("--limit", item, name, contexts)[0]
-            pair = [None if x is None else stored_value(ctx, name, x) for x in pair]
+            raise InputError(None, None, f"--limit {exc}") from None
         out[name] = pair
     return out
 
 
-def _contexts(history: list[dict]) -> list[dict]:
-    """A device's calibrations as the results that tell its parameters' units
-    (review.unit_context): the accepted one of each procedure first, then newest first."""
+def unit_contexts(history: list[dict]) -> list[dict]:
+    """A device's calibrations (``Store.history``, oldest first) as the results that tell its
+    parameters' units (review.unit_context): the accepted one of each procedure first, then
+    newest first."""
     from station.procedures.review import record_result
 
     latest = {h["procedure"]: h for h in history if h["accepted"]}  # oldest first: the newest wins
@@ -163,7 +185,7 @@ def _contexts(history: list[dict]) -> list[dict]:
 
 
 def _device_contexts(args: argparse.Namespace) -> list[dict]:
-    """:func:`_contexts` of the device being added, read without making a database ([] when
+    """:func:`unit_contexts` of the device being added, read without making a database ([] when
     there is none yet, or no such device)."""
     from station.cli import db_path
     from station.commands._dbutil import require_existing
@@ -175,7 +197,7 @@ def _device_contexts(args: argparse.Namespace) -> list[dict]:
     with open_store(args) as store:
         if store.get_device(args.id) is None:
             return []
-        return _contexts(store.history(args.id))
+        return unit_contexts(store.history(args.id))
 
 
 def _add(args: argparse.Namespace) -> int:
@@ -265,7 +287,7 @@ def _show(args: argparse.Namespace) -> int:
         device["latest"] = {p: {"id": h["id"], "time": h["time"]} for p, h in latest.items()}
         print_json(device)
         return 0
-    contexts = _contexts(history)
+    contexts = unit_contexts(history)
     out = [
         f"device: {safe(device['id'])}",
         f"model: {safe(device['model'] or '-')}",

@@ -9,9 +9,10 @@ unit and the value of the calibration in use, so the engineer sees what it is ch
 
 Limits are shown and typed in the unit the Results screen shows the parameter in (P4's
 drift in °/h, the compass's soft iron as a ratio) and stored in the parameter's stored
-unit, through ``station.procedures.review``'s one conversion (``shown_value`` /
-``stored_value``); the unit comes from the result on screen, else the calibrations of the
-device (``review.unit_context``).
+unit, converted and refused as ``--limit`` is (``station.commands.devices.typed_limit``):
+the unit comes from the result on screen, else the calibrations of the device; a limit
+whose unit they cannot tell yet (soft iron with no compass calibration) is one line in
+the box and nothing is stored.
 """
 
 from __future__ import annotations
@@ -111,15 +112,14 @@ class LimitsScreen(ModalScreen):
             self.query_one("#current", Static).update("")
             self.query_one("#error", Static).update(tui_markup(message.error))
             return
+        from station.commands.devices import unit_contexts
         from station.procedures import registry
-        from station.procedures.review import record_result, shown_unit, shown_value, unit_context
+        from station.procedures.review import shown_unit, shown_value, unit_context
 
         self.limits = message.data["limits"]
         in_use = message.data["in_use"]
         # the units: the result on screen, the calibrations in use, then any of the device's (newest first)
-        self.contexts = ([self.result] if self.result else []) + [
-            record_result(h) for h in [*in_use.values(), *reversed(message.data["history"])]
-        ]
+        self.contexts = ([self.result] if self.result else []) + unit_contexts(message.data["history"])
         lines = []
         for name, (low, high) in sorted(self.limits.items()):
             ctx = unit_context(name, self.contexts)
@@ -150,56 +150,51 @@ class LimitsScreen(ModalScreen):
 
     @on(Input.Submitted, "#edit")
     def apply(self, event: Input.Submitted) -> None:
-        from station.commands.devices import parse_limit
-
         text = event.value.strip()
-        if not text:
-            return
-        try:
-            name, pair = parse_limit(text)
-        except ValueError as exc:
-            self.query_one("#said", Static).update("")
-            self.query_one("#error", Static).update(tui_markup(str(exc)))
-            return
-        if pair is None and name not in self.limits:
-            self.query_one("#error", Static).update(tui_markup(f"no limit {name!r} to remove"))
-            return
-        self.store_limit(name, pair)
-
-    def _stored_pair(self, name: str, pair):
-        """A typed pair (in the unit shown) in the parameter's stored unit."""
-        from station.procedures.review import stored_value, unit_context
-
-        if pair is None:
-            return None
-        ctx = unit_context(name, self.contexts)
-        return [None if x is None else stored_value(ctx, name, x) for x in pair]
-
-    def _shown_text(self, name: str, pair) -> str:
-        from station.procedures.review import shown_unit, unit_context
-
-        ctx = unit_context(name, self.contexts)
-        unit = shown_unit(ctx, name) if ctx else ""
-        return f"{name} = {_fmt(pair[0])} … {_fmt(pair[1])}" + (f" {unit}" if unit and unit != "1" else "")
+        if text:
+            self.store_limit(text)
 
     @work(thread=True, exclusive=True, group="limits-save", exit_on_error=False, description="store a limit")
-    def store_limit(self, name: str, pair) -> None:
+    def store_limit(self, text: str) -> None:
+        """``text`` converted and refused as ``station devices add --limit`` does
+        (``devices.typed_limit``, with the units the result on screen and the device's
+        calibrations tell), read from the store at the moment it is stored; a refusal is one
+        line in the box and stores nothing (a new user's database is not made)."""
         try:
             from db.store import Store
+            from station.commands.devices import parse_limit, typed_limit, unit_contexts
 
             s = self.app.session
-            store = s.open_store()
+            store = s.open_store()  # None: no database yet
+            device = store.get_device(self.device_id) if store is not None else None
+            history = store.history(self.device_id) if device is not None else []
+            contexts = ([self.result] if self.result else []) + unit_contexts(history)
+            try:
+                name, stored, unit = typed_limit(text, contexts)
+            except ValueError as exc:  # a bad entry, or a unit the calibrations cannot tell yet
+                self.app.call_from_thread(self._refused, str(exc))
+                return
+            if stored is None and name not in ((device or {}).get("limits") or {}):
+                self.app.call_from_thread(self._refused, f"no limit {name!r} to remove")
+                return
             if store is None:  # a new user's first entry makes the database (the session's one Store)
                 store = s.extra["_store"] = Store(s.db_path)
-            store.add_device(self.device_id, limits={name: self._stored_pair(name, pair)})
-            self.app.call_from_thread(self._stored, name, pair)
+            store.add_device(self.device_id, limits={name: stored})
+            typed = parse_limit(text)[1]  # as typed, for the line that says what was stored
+            self.app.call_from_thread(self._stored, name, typed, unit)
         except Exception as exc:  # noqa: BLE001 - one line in the box, nothing changed
-            self.app.call_from_thread(self.query_one("#error", Static).update, tui_markup(f"not stored: {exc}"))
+            self.app.call_from_thread(self._refused, f"not stored: {exc}")
 
-    def _stored(self, name: str, pair) -> None:
+    def _refused(self, text: str) -> None:
+        self.query_one("#said", Static).update("")
+        self.query_one("#error", Static).update(tui_markup(text))
+
+    def _stored(self, name: str, pair, unit: str) -> None:
         self.changed = True
         self.query_one("#edit", Input).value = ""
-        said = f"removed {name}" if pair is None else self._shown_text(name, pair)
+        said = f"removed {name}" if pair is None else f"{name} = {_fmt(pair[0])} … {_fmt(pair[1])}"
+        if pair is not None and unit and unit != "1":
+            said += f" {unit}"
         self.query_one("#error", Static).update("")
         self.query_one("#said", Static).update(tui_markup(f"stored: {said}"))
         self.load()
