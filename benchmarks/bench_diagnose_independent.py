@@ -118,12 +118,8 @@ def _null(args):
 
 def _trial(args):
     proc, effect, seed, sizes = args
-    rng = np.random.default_rng(seed)
-    for _ in range(50):
-        sc = G.SCENARIOS[proc](rng)
-        if G.applicable(sc, effect):
-            break
-    else:
+    sc = G.scenario_for(proc, np.random.default_rng(seed), effect)
+    if sc is None:
         return None
     res = []
     for k in sizes:

@@ -864,6 +864,17 @@ def applicable(sc: dict, effect: str) -> bool:
 # ------------------------------------------------------------------ detection σ of the true extension
 
 
+def scenario_for(procedure: str, rng, effect: str | None = None, tries: int = 50) -> dict | None:
+    """The first scenario ``rng`` draws for ``procedure`` in which ``effect`` applies (the first
+    drawn when None), or None when none of ``tries`` draws does (the benchmark's and the tests'
+    one way of drawing a trial)."""
+    for _ in range(tries):
+        sc = SCENARIOS[procedure](rng)
+        if effect is None or applicable(sc, effect):
+            return sc
+    return None
+
+
 def _kernel_apply(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
     """``Σ_j exp(−|i − j| dt/τ) x_j`` on a uniform grid (two recursive passes)."""
     from scipy.signal import lfilter

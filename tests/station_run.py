@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -44,3 +45,37 @@ def assert_one_line_refusal(res: subprocess.CompletedProcess, *needles: str) -> 
     assert "cannot process this input" not in res.stderr, res.stderr
     for n in needles:
         assert n in res.stderr, res.stderr
+
+
+def _generator():
+    """benchmarks/diag_generator.py, the independent generator of diagnosis captures."""
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    import diag_generator
+
+    return diag_generator
+
+
+def diagnose_rendered(tmp_path, capsys, rendered, meta_drop=()) -> dict:
+    """``station diagnose FILE --json`` through the real CLI on a capture the generator rendered
+    (written as its CSV, without the metadata keys ``meta_drop``); exit 0 is asserted."""
+    from station.cli import main
+
+    meta = {k: v for k, v in rendered.meta.items() if k not in meta_drop}
+    path = tmp_path / "capture.csv"
+    _generator().write_csv(str(path), meta, rendered.columns)
+    rc = main(["diagnose", str(path), "--json"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    return json.loads(out)
+
+
+def diagnose_generated(tmp_path, capsys, procedure, hidden, seed, k_sigma=10.0):
+    """(diagnosis, size, rendered capture) of the capture the generator draws from ``seed`` with
+    ``hidden`` at ``k_sigma`` of its detection σ; the name goes to the generator only."""
+    G = _generator()
+    sc = G.scenario_for(procedure, np.random.default_rng(seed), hidden)
+    assert sc is not None, f"no scenario of {procedure} from seed {seed} where {hidden} applies"
+    size, _ = G.size_for(sc, hidden, k_sigma)
+    rendered = G.RENDER[procedure](sc, hidden, size)
+    return diagnose_rendered(tmp_path, capsys, rendered), size, rendered

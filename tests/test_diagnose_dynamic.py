@@ -10,37 +10,24 @@ it cannot tell from the hidden one (``confused_with``).
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from station_run import diagnose_rendered
 
 from solvers.diagnose.engine import ALPHA, Candidate, Problem, chi2_isf, deviance_quantile, diagnose
-from station.cli import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import diag_generator as G  # noqa: E402
 
 
-def _diagnose(tmp_path, rendered, capsys, meta_drop=()) -> dict:
-    meta = {k: v for k, v in rendered.meta.items() if k not in meta_drop}
-    path = tmp_path / "capture.csv"
-    G.write_csv(str(path), meta, rendered.columns)
-    rc = main(["diagnose", str(path), "--json"])
-    out = capsys.readouterr().out
-    assert rc == 0
-    return json.loads(out)
-
-
 def _scenario(procedure, rng, effect=None):
-    for _ in range(50):
-        sc = G.SCENARIOS[procedure](rng)
-        if effect is None or G.applicable(sc, effect):
-            return sc
-    raise AssertionError("no applicable scenario")
+    sc = G.scenario_for(procedure, rng, effect)
+    assert sc is not None, "no applicable scenario"
+    return sc
 
 
 def test_deviance_quantile_is_the_exact_f_test_on_a_small_table():
@@ -111,7 +98,7 @@ def test_centrifuge_hidden_input_effect_named_alone(tmp_path, capsys, seed):
     hidden = str(rng.choice(["misalignment", "cubic", "lever_arm"]))
     sc = _scenario("accel-centrifuge", rng, hidden)
     size, _ = G.size_for(sc, hidden, 10.0)
-    res = _diagnose(tmp_path, G.RENDER["accel-centrifuge"](sc, hidden, size), capsys)
+    res = diagnose_rendered(tmp_path, capsys, G.RENDER["accel-centrifuge"](sc, hidden, size))
     assert hidden in res["verdict"], (hidden, res["verdict"], res["candidates"])
     assert set(res["verdict"]) <= G.tied_names(res, hidden), (hidden, res["verdict"])
 
@@ -119,7 +106,7 @@ def test_centrifuge_hidden_input_effect_named_alone(tmp_path, capsys, seed):
 @pytest.mark.parametrize("seed", [621, 622])
 def test_centrifuge_null_table_says_nothing(tmp_path, capsys, seed):
     sc = _scenario("accel-centrifuge", np.random.default_rng(seed))
-    res = _diagnose(tmp_path, G.RENDER["accel-centrifuge"](sc), capsys)
+    res = diagnose_rendered(tmp_path, capsys, G.RENDER["accel-centrifuge"](sc))
     assert res["verdict"] == [], res["candidates"]
 
 
@@ -131,11 +118,11 @@ def test_field_anomaly_seen_in_the_dip_with_a_site_unresolvable_without(tmp_path
     sc = _scenario("compass", rng)
     size, _ = G.size_for(sc, "field_anomaly", 10.0)
     r = G.RENDER["compass"](sc, "field_anomaly", size)
-    res = _diagnose(tmp_path, r, capsys)
+    res = diagnose_rendered(tmp_path, capsys, r)
     assert "field_anomaly" in res["verdict"], res["candidates"]
     eff = next(e for e in res["effects"] if e["name"] == "field_anomaly")
     assert abs(eff["params"]["dc_dip"]) > 3 * eff["uncertainty"]["dc_dip"]
-    res2 = _diagnose(tmp_path, r, capsys, meta_drop=("latitude_deg", "longitude_deg", "altitude_m", "date"))
+    res2 = diagnose_rendered(tmp_path, capsys, r, meta_drop=("latitude_deg", "longitude_deg", "altitude_m", "date"))
     fa = next(c for c in res2["candidates"] if c["name"] == "field_anomaly")
     assert fa.get("resolvable") is False and "site" in fa["reason"]
     assert "field_anomaly" not in res2["verdict"]
@@ -150,7 +137,7 @@ def test_ldv_hidden_effect_named_alone(tmp_path, capsys, seed):
     sc = _scenario("ldv", rng, hidden)
     sc["duration"] = min(sc["duration"], 400.0)  # a shorter drive: the test's time
     size, _ = G.size_for(sc, hidden, 10.0)
-    res = _diagnose(tmp_path, G.RENDER["ldv"](sc, hidden, size), capsys)
+    res = diagnose_rendered(tmp_path, capsys, G.RENDER["ldv"](sc, hidden, size))
     assert hidden in res["verdict"], (hidden, res["verdict"], res["candidates"])
     assert set(res["verdict"]) <= G.tied_names(res, hidden), (hidden, res["verdict"])
 

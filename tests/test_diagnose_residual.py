@@ -6,13 +6,10 @@ the diagnosis recovered.
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from station.cli import main
+from station_run import diagnose_generated
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import diag_generator as G  # noqa: E402
@@ -29,18 +26,7 @@ def _diagnose_generated(tmp_path, capsys, monkeypatch, procedure, hidden, seed, 
         return drawn[-1]
 
     monkeypatch.setattr(G, "_patterns", record)
-    rng = np.random.default_rng(seed)
-    for _ in range(50):
-        sc = G.SCENARIOS[procedure](rng)
-        if G.applicable(sc, hidden):
-            break
-    size, _ = G.size_for(sc, hidden, k_sigma)
-    r = G.RENDER[procedure](sc, hidden, size)
-    path = tmp_path / "capture.csv"
-    G.write_csv(str(path), r.meta, r.columns)
-    rc = main(["diagnose", str(path), "--json"])
-    res = json.loads(capsys.readouterr().out)
-    assert rc == 0
+    res, size, r = diagnose_generated(tmp_path, capsys, procedure, hidden, seed, k_sigma)
     return res, drawn[-1], size, r.columns
 
 

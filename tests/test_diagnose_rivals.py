@@ -9,7 +9,6 @@ counts how often the other is named instead without being tied to it.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -18,9 +17,9 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 from scipy.stats import norm
+from station_run import diagnose_generated
 
 from solvers.diagnose.engine import Candidate, Problem, decisive_margin, diagnose
-from station.cli import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import diag_generator as G  # noqa: E402
@@ -28,19 +27,7 @@ import diag_generator as G  # noqa: E402
 
 def _diagnose_generated(tmp_path, capsys, procedure, hidden, seed) -> dict:
     """Diagnose a capture the generator draws from ``seed`` with ``hidden`` at 10σ."""
-    rng = np.random.default_rng(seed)
-    for _ in range(50):
-        sc = G.SCENARIOS[procedure](rng)
-        if G.applicable(sc, hidden):
-            break
-    size, _ = G.size_for(sc, hidden, 10.0)
-    r = G.RENDER[procedure](sc, hidden, size)
-    path = tmp_path / "capture.csv"
-    G.write_csv(str(path), r.meta, r.columns)
-    rc = main(["diagnose", str(path), "--json"])
-    res = json.loads(capsys.readouterr().out)
-    assert rc == 0
-    return res
+    return diagnose_generated(tmp_path, capsys, procedure, hidden, seed)[0]
 
 
 @pytest.mark.parametrize("hidden,seed", [("scale_asymmetry", 433000), ("quadratic", 483004)])
@@ -88,10 +75,7 @@ def test_p1_bias_step_displaces_the_drift_that_stood_in_for_it(tmp_path, capsys)
     res = _diagnose_generated(tmp_path, capsys, "accel-tabletop", "bias_step", 501002)
     assert "residual:time" in res["verdict"], (res["verdict"], res["candidates"])
     e = next(e for e in res["effects"] if e["name"] == "residual:time")
-    rng = np.random.default_rng(501002)
-    sc = G.SCENARIOS["accel-tabletop"](rng)
-    while not G.applicable(sc, "bias_step"):  # as _diagnose_generated draws it
-        sc = G.SCENARIOS["accel-tabletop"](rng)
+    sc = G.scenario_for("accel-tabletop", np.random.default_rng(501002), "bias_step")  # as it was drawn
     size, _ = G.size_for(sc, "bias_step", 10.0)
     jump = G.tabletop_render(sc, "bias_step", size, noise=False).raw - G.tabletop_render(sc, noise=False).raw
     t = np.arange(len(jump)) / sc["rate"]
