@@ -79,7 +79,7 @@ def _cli(*args, timeout=180):
 # --------------------------------------------------------------------------- the hang
 
 
-@pytest.mark.parametrize("command", ["calibrate", "diagnose"])
+@pytest.mark.parametrize("command", ["calibrate", "diagnose", "inspect"])
 def test_one_cell_of_1e200_in_a_p2_table_is_refused_at_once_naming_line_and_column(sims, tmp_path, command):
     src = sims("accel-centrifuge")
     c = read_capture(src)
@@ -216,7 +216,7 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("command", ["calibrate", "diagnose"])
+@pytest.mark.parametrize("command", ["calibrate", "diagnose", "inspect"])
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_extreme_input_gets_a_reason_not_the_last_resort_error(sims, tmp_path, case, command):
     _, procedure, options, fn, expect = case

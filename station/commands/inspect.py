@@ -115,8 +115,11 @@ def format_text(s: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from station.guard import check_extremes
     from station.importers.load import load_for_command
 
-    s = summary(load_for_command(args))
+    capture = load_for_command(args)
+    check_extremes(capture)  # "every check the station applies": what calibrate and diagnose refuse
+    s = summary(capture)
     print(json.dumps(s, indent=2, ensure_ascii=False) if args.json else format_text(s))
     return 0
