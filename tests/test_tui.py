@@ -132,6 +132,29 @@ def test_connect_refuses_a_bad_averaging_time_and_a_missing_port():
     asyncio.run(story())
 
 
+@pytest.mark.parametrize("procedure", ["gyro-drift", "gyro-reference"])
+def test_connect_refuses_a_p4_record_too_short_for_its_fit_before_recording(procedure):
+    """A record length left at a short P1 average (1 s) ran P4 for that long, then said the
+    record was too short: refused on Connect instead, nothing recorded."""
+    from solvers.gyrodrift import MIN_DURATION_S
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#procedure").value = procedure
+            app.screen.query_one("#average").value = "1"
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: "too short" in text_of(app, "#status"))
+            status = " ".join(text_of(app, "#status").split())
+            assert f"at least {MIN_DURATION_S:g} s" in status and "P4 asks ≥ 180 s" in status
+            assert screen_name(app) == "ConnectScreen" and app.session.source is None
+            app.screen.query_one("#average").value = f"{MIN_DURATION_S:g}"
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) != "ConnectScreen")
+
+    asyncio.run(story())
+
+
 def test_help_opens_and_closes_with_the_keyboard():
     async def story():
         app = make_app(None)

@@ -55,6 +55,9 @@ class Procedure:
     counts: tuple[str, str] = ("position", "positions")  # what its result's n_positions counts
     # what the Connect screen's "Average (s)" is for it (P4: the record's length)
     average: str = "not used"
+    # the shortest "Average (s)" its fit takes [s]: the Connect screen refuses less before
+    # anything is recorded (P4: solvers.gyrodrift.MIN_DURATION_S; a test holds them equal)
+    min_average_s: float = 0.0
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -78,6 +81,7 @@ class GuidedRun:
     reference: bool = False  # that device carries a reference IMU
     demo: bool = False  # `station demo --procedure <name>` offers it
     average: str = "record length"  # what the Connect screen's "Average (s)" is for it
+    min_average_s: float = 0.0  # the shortest it takes [s] (Procedure.min_average_s)
 
 
 PROCEDURES: tuple[Procedure, ...] = (
@@ -157,6 +161,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         units_note="rates in rad/s; body axes x forward, y up, z right",
         sim_device="SIM-GYR",
         average="record length (P4 asks ≥ 180 s)",
+        min_average_s=30.0,
     ),
     Procedure(
         name="ldv",
@@ -187,6 +192,7 @@ GUIDED_RUNS: tuple[GuidedRun, ...] = (
         reference=True,
         demo=True,
         average="record length (P4 asks ≥ 180 s)",
+        min_average_s=30.0,
     ),
     # the gyro noise (Allan) run holds the unit still like P4
     GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen", procedure="gyro-drift"),
@@ -279,6 +285,15 @@ def average_means(name: str | None) -> str:
         return run.average
     p = get(name)
     return p.average if p is not None else ""
+
+
+def min_average_s(name: str | None) -> float:
+    """The shortest "Average (s)" procedure or guided run ``name`` takes [s] (0: any positive)."""
+    run = guided_run(name)
+    if run is not None:
+        return run.min_average_s
+    p = get(name)
+    return p.min_average_s if p is not None else 0.0
 
 
 def screen_for(name: str):

@@ -296,9 +296,15 @@ class ConnectScreen(Screen):
         except ValueError:
             self._status("Average (s) must be a positive number of seconds", error=True)
             return
+        procedure = self.query_one("#procedure", Select).value
+        shortest = registry.min_average_s(procedure)
+        if average < shortest:  # refused now, not after the whole record
+            what = registry.average_means(procedure)
+            self._status(f"Average (s) {average:g} is too short: at least {shortest:g} s, {what}", error=True)
+            return
         s.average_s = average
         s.resume = resume
-        s.procedure = self.query_one("#procedure", Select).value
+        s.procedure = procedure
         s.model = self.query_one("#model", Input).value.strip()
         s.device_id = self.query_one("#serial", Input).value.strip()
         for key, widget in LAB_FIELDS.items():
