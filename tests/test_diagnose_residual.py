@@ -41,3 +41,16 @@ def test_compass_periodic_bias_between_scan_periods_is_found(tmp_path, capsys, m
     assert e["shape"] == "periodic", e
     # one cycle over the record is 1/6 of a period here: 3 % is a fifth of that
     assert abs(e["params"]["period"] / pat["period_s"] - 1.0) < 0.03, (e["params"]["period"], pat["period_s"])
+
+
+def test_p1_generic_term_counts_holds_not_parts(tmp_path, capsys):
+    """A temperature bias at 10σ in a P1 time series of 9 unlabelled holds (4 parts each, 36
+    norm rows): the parts of a hold share its bias instability, so the data hold 9 independent
+    values and the baseline's 9 parameters take them all. A periodic term in time (two
+    columns per axis and its period, 7 parameters) counted against the 36 rows passed and was
+    named with the temperature bias tied to it: it fitted the hold means, noise included.
+    Counted in holds it has no degrees of freedom left, and the temperature bias (validated on
+    the time within the holds) is named without a ``residual:`` term."""
+    res = diagnose_generated(tmp_path, capsys, "accel-tabletop", "temperature_bias", 493014)[0]
+    assert "temperature_bias" in res["verdict"], (res["verdict"], res["candidates"])
+    assert not any(v.startswith("residual:") for v in res["verdict"]), (res["verdict"], res["effects"])

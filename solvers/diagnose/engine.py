@@ -110,6 +110,9 @@ class Problem:
     # the deviance of candidates with slow signatures far more than of those that change with
     # each orientation, which the serial-correlation inflation (a finite window) under-corrects
     cand_thresholds: dict = field(default_factory=dict)
+    # per row: the id of the group of rows whose noise is one (``independent_groups``); None:
+    # every row its own. What the generic extension's degrees of freedom are counted in.
+    shared_noise: np.ndarray | None = None
 
 
 @dataclass
@@ -619,6 +622,7 @@ class _Eval:
     kind: int | None = None  # the one row kind its columns touch, when tested on it alone (kind_thresholds)
     n_kind: int = 0  # rows of that kind
     dof_kind: float = 0.0  # their residual degrees of freedom with the candidate fitted
+    groups_left: int | None = None  # a generic term: degrees of freedom left in independent groups
 
     @property
     def D_rob(self) -> float:
@@ -705,6 +709,36 @@ def _gram_rank(G: np.ndarray) -> int:
     return int(np.sum(w > max(w.max(), 1e-300) * 1e-20)) if w.size else 0
 
 
+def independent_groups(problem: Problem, A: np.ndarray, J: np.ndarray) -> int:
+    """Degrees of freedom the data have left, counted in independent groups of rows, after the
+    model ``A`` (weighted Jacobian) and a generic term's columns ``J``: the groups
+    (``problem.shared_noise``) minus the rank the two together have on the groups' shared noise
+    (each column projected per group on the shared direction ``1/σ`` of its rows, as a common
+    offset in the data is in the weighted rows). A model that leaves none can fit every
+    group's mean, noise included, and the rows within groups cannot test it.
+
+    What it counts, per procedure: P1 time series, the holds (the 4 parts of a hold share its
+    bias instability, so a smooth function of time sees one value per hold beyond what changes
+    within it) and each labelled position's direction row (placement errors are independent);
+    every other problem (P1 table of averages, P2, compass, P4, LDV), the rows."""
+    n = A.shape[0]
+    g = np.arange(n) if problem.shared_noise is None else np.asarray(problem.shared_noise)
+    _, inv = np.unique(g, return_inverse=True)
+    w = 1.0 / np.asarray(problem.sigma, float)
+    M = np.hstack([A, J])
+    U = np.zeros((int(inv.max()) + 1, M.shape[1]))
+    np.add.at(U, inv, w[:, None] * M)
+    return U.shape[0] - _gram_rank(U.T @ U)
+
+
+def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: bool) -> _Eval:
+    """Set a generic term's ``groups_left`` (``independent_groups``, its scanned place or period
+    counted as one more parameter) where the problem says which rows share their noise."""
+    if problem.shared_noise is not None:
+        ev.groups_left = independent_groups(problem, A, ev.cc.J) - int(scanned)
+    return ev
+
+
 def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
     A, QA = rnd.A, rnd.QA
     Jp = cc.J - QA @ (QA.T @ cc.J)
@@ -771,6 +805,8 @@ def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float
     if ev.k <= 0 or n - rank_cur - ev.k < MIN_DOF:
         return False
     if ev.kind is not None and ev.dof_kind < MIN_DOF:
+        return False
+    if ev.groups_left is not None and ev.groups_left < MIN_DOF:
         return False
     return ev.D_rob > _bound(problem, ev, m, n, rank_cur, scale)[0]
 
@@ -1105,6 +1141,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 ev.desc = desc
                 if item[0] == "scan":
                     ev.k += 1  # the scanned location or period
+                _count_groups(problem, ev, J0, item[0] == "scan")
                 if chosen is None:
                     chosen = ev
                 if not _significant(problem, ev, m_gen, rank_cur, n, problem.generic_scale):
@@ -1155,7 +1192,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             n
         )
 
-    def _beyond(cand_, fit_, free_) -> bool:
+    def _beyond(cand_, fit_, free_, scanned=False) -> bool:
         """Whether generic candidate ``cand_``, fitted beside the library effects of the model
         ``fit_``, explains what they leave: a lower held-out RMS and a deviance above the
         decisive margin (the one that tells two correlated candidates apart, ``F·χ²₁(1 − α)``).
@@ -1173,6 +1210,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         rr_ = _Rounds(J0_, r0_, sigma, fold_map, primary)
         ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), typed_fit_term(r0_, types), types, n)
         if ev_.k <= 0 or n - _gram_rank(J0_.T @ J0_) - ev_.k < MIN_DOF:
+            return False
+        if _count_groups(problem, ev_, J0_, scanned).groups_left is not None and ev_.groups_left < MIN_DOF:
             return False
         return ev_.cv < rr_.cv0(cand_.folds) and ev_.D_rob > decisive_margin(problem)
 
@@ -1217,6 +1256,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     rr = _Rounds(J0, r0, sigma, fold_map, primary)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
                     ev.k += 1 if "at" in res0[0].desc or "period" in res0[0].desc else 0
+                    _count_groups(problem, ev, J0, "at" in res0[0].desc or "period" in res0[0].desc)
                     ok = _passes(
                         problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n, problem.generic_scale
                     )
@@ -1226,7 +1266,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 margin = DISPLACE_MARGIN if any(res0[1].get(x, 0.0) > CONFUSION_CORR for x in held) else 0.0
                 if ok and margin > 0:
                     # and it explains what the library effects leave: it passes beside them (one test)
-                    ok = _beyond(res0[0].cc.cand, cur_fit, free)
+                    ok = _beyond(res0[0].cc.cand, cur_fit, free, "at" in res0[0].desc or "period" in res0[0].desc)
                 if ok and len(picked2) < len(picked) and model_bic(fit2, fr2) + margin < model_bic(cur_fit, free):
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the

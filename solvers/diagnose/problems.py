@@ -448,6 +448,9 @@ def tabletop_problem(
         # on parts it also fits each position's bias instability, which the parts of a hold share
         prob.fold_sets["input"] = groups
         prob.series = np.concatenate([np.zeros(nn, int), np.full(len(s_v), -1)])
+        # the parts of a hold share its bias instability: a generic term's degrees of freedom are
+        # counted in holds (each direction row its own: placement errors are independent)
+        prob.shared_noise = np.concatenate([pos_n, m + np.arange(len(s_v))])
         prob.drivers["time [s]"] = np.concatenate([cond_n.t_s, pad])
         if cond_n.temp_c is not None:
             prob.drivers["temperature [°C]"] = np.concatenate([cond_n.temp_c, pad])
