@@ -820,12 +820,16 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(a @ b) / den if den > 0 else 0.0
 
 
-def decisive_margin(problem: Problem) -> float:
-    """BIC margin by which one of two correlated candidates must beat the other for the data to
-    tell them apart: ``F·χ²₁(1 − α)``. The deviance difference of two one-signature models is
-    about N(±s², 4s²) for a separation of s noise σ, so a wrong decision past this margin has a
-    probability below Φ(−√margin) (< 0.1 % at F = 2.5) whatever s is."""
-    return problem.threshold * chi2_isf(ALPHA, 1)
+def decisive_margin(problem: Problem, k: int = 1) -> float:
+    """BIC margin by which one of two correlated candidates of at most ``k`` parameters each
+    must beat the other for the data to tell them apart: ``F·χ²_k(1 − α)``. The deviance
+    difference of two one-signature models is about N(±s², 4s²) for a separation of s noise
+    σ, so a wrong decision past ``F·χ²₁(1 − α)`` has a probability below Φ(−√margin) (< 0.1 %
+    at F = 2.5) whatever s is. Two k-parameter candidates whose fitted signatures agree still
+    span different k-dimensional spaces: each takes the noise along its own other k − 1
+    directions, and the difference of those two χ²-like parts (of up to k degrees of freedom)
+    decides between them when the signal does not."""
+    return problem.threshold * chi2_isf(ALPHA, max(k, 1))
 
 
 def _rival_margin(a: _Eval, b: _Eval, n: int) -> float:
@@ -845,10 +849,10 @@ def _head_to_head(problem: Problem, best: _Eval, others: list[_Eval], n: int) ->
     ``best`` by more than it or None). A rival ``best`` beats by more than the margin is neither:
     it is tested again against the refitted model."""
     tied, better, worst = [], None, 0.0
-    dec = decisive_margin(problem)
     for r in others:
         if r is best or r.k <= 0:
             continue
+        dec = decisive_margin(problem, max(best.k, r.k))
         corr = _corr(best.sig, r.sig)
         if abs(corr) <= RIVAL_CORR:
             continue
@@ -989,7 +993,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                         continue
                     margin = _rival_margin(evs[0], evs[1], n)  # > 0: b explains the data better
                     win, lose = (b, a) if margin > 0 else (a, b)
-                    if abs(margin) <= decisive_margin(problem):
+                    if abs(margin) <= decisive_margin(problem, max(ev.k for ev in evs)):
                         corr = _corr(evs[0].sig, evs[1].sig)
                         win[1]["confused_with"] = win[1]["confused_with"] + [
                             {"name": lose[1]["name"], "correlation": corr},
@@ -1271,8 +1275,16 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
                     # library effects it displaced are named with it (head to head, as for two candidates)
-                    kx = math.log(n) if ("at" in res0[0].desc or "period" in res0[0].desc) else 0.0
-                    if model_bic(cur_fit, free) - model_bic(fit2, fr2) - kx <= decisive_margin(problem):
+                    scanned = "at" in res0[0].desc or "period" in res0[0].desc
+                    kx = math.log(n) if scanned else 0.0
+                    # the margin of the larger of the two parts the models do not share (as for two
+                    # candidates: each fits the noise along its own other directions)
+                    n_wo = len(Packer.build(st_wo, fr_wo).names)
+                    k_gen = len(Packer.build(fit2.params, fr2).names) - n_wo + int(scanned)
+                    k_lib = len(Packer.build(cur_fit.params, free).names) - n_wo
+                    if model_bic(cur_fit, free) - model_bic(fit2, fr2) - kx <= decisive_margin(
+                        problem, max(k_gen, k_lib)
+                    ):
                         for oc, e in picked:
                             if not any(oc is p[0] for p in picked2):
                                 c = float(res0[1].get(e["name"], 0.0))
