@@ -739,3 +739,41 @@ def test_history_l_views_and_edits_a_devices_limits(tmp_path):
     assert "M[0][0]" in final and "-0.5" not in final
     assert Store(db).get_device("IMU-7")["limits"] == {"M[0][0]": [low, None]}
     assert main(["verify", "--db", db]) == 0
+
+
+def test_history_l_shows_a_block_limit_against_every_value_in_use(tmp_path):
+    """A block limit (`B`, P4's `drift`) applies to each of its elements: the box showed no
+    value in use and no OUTSIDE for it, so a limit every calibration in use broke looked met."""
+    from db.store import Store
+
+    db = str(tmp_path / "station.db")
+    seed_history(db, "IMU-7", n=2)
+    b = Store(db).history("IMU-7")[-1]["params"]["B"]
+    low, high = min(b), max(b)
+    Store(db).add_device("IMU-7", limits={"B": (low, high), "M": (-100.0, 100.0)})
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(
+                pilot,
+                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2,
+            )
+            await pilot.press("l")
+            await wait_for(pilot, lambda: screen_name(app) == "LimitsScreen" and "in use" in text_of(app, "#current"))
+            inside = text_of(app, "#current").splitlines()
+            await pilot.press(*f"B={(low + high) / 2}:", "enter")  # the lower elements now outside
+            await wait_for(pilot, lambda: "OUTSIDE" in text_of(app, "#current"))
+            outside = text_of(app, "#current").splitlines()
+        return inside, outside
+
+    def entry(lines, name):  # a limit's line and its continuation (the value in use when it does not fit beside)
+        k = next(i for i, line in enumerate(lines) if line.startswith(name + " "))
+        more = lines[k + 1] if k + 1 < len(lines) and lines[k + 1].startswith("             ") else ""
+        return " ".join((lines[k] + " " + more).split())
+
+    inside, outside = asyncio.run(story())
+    assert f"in use {low:.6g} … {high:.6g}" in entry(inside, "B") and "OUTSIDE" not in " ".join(inside)
+    # whole at 80x24: the values in use and OUTSIDE are not cut off at the box's edge
+    assert entry(outside, "B").endswith(f"in use {low:.6g} … {high:.6g} OUTSIDE")
+    assert "in use" in entry(outside, "M") and "OUTSIDE" not in entry(outside, "M")

@@ -30,6 +30,8 @@ from station.messages import StoreLoaded
 from station.textsafe import tui_markup
 from station.widgets.field import Field
 
+_BOX_TEXT_WIDTH = 74  # #box: 78 columns less its border and padding
+
 
 def _fmt(x) -> str:
     return "…" if x is None else format(float(x), "g")
@@ -55,7 +57,7 @@ class LimitsScreen(ModalScreen):
     LimitsScreen { align: center middle; }
     LimitsScreen #box { width: 78; height: auto; max-height: 22; border: round $primary; background: $surface;
                         padding: 0 1; }
-    LimitsScreen #current { height: auto; max-height: 9; }
+    LimitsScreen #current { height: auto; max-height: 12; }
     LimitsScreen #params { height: auto; max-height: 3; color: $text-muted; }
     LimitsScreen #error { height: auto; color: $error; }
     LimitsScreen Input:focus { border: tall $accent; }
@@ -114,7 +116,7 @@ class LimitsScreen(ModalScreen):
             return
         from station.commands.devices import unit_contexts
         from station.procedures import registry
-        from station.procedures.review import shown_unit, shown_value, unit_context
+        from station.procedures.review import flatten, shown_unit, shown_value, unit_context
 
         self.limits = message.data["limits"]
         in_use = message.data["in_use"]
@@ -129,13 +131,22 @@ class LimitsScreen(ModalScreen):
                 if v is not None:
                     now = v
                     break
+            # a block (drift, B, M) is limited element by element: its values in use, min … max
+            values = [x for x in flatten(now).values() if x is not None and math.isfinite(x)]
             shown = ""
-            if isinstance(now, (int, float)) and math.isfinite(now):
-                inside = (low is None or now >= low) and (high is None or now <= high)
-                shown = f"   in use {shown_value(ctx, name, now):.6g}" + ("" if inside else "  [b red]OUTSIDE[/]")
+            if values:
+                inside = all((low is None or x >= low) and (high is None or x <= high) for x in values)
+                shows = sorted(shown_value(ctx, name, x) for x in values)
+                span = f"{shows[0]:.6g}" if len(shows) == 1 else f"{shows[0]:.6g} … {shows[-1]:.6g}"
+                shown = f"in use {span}" + ("" if inside else "  OUTSIDE")
             low, high = (None if x is None else shown_value(ctx, name, x) for x in (low, high))
             unit = shown_unit(ctx, name) if ctx else ""
-            lines.append(f"{tui_markup(name):<12} {_fmt(low):>10} … {_fmt(high):<10} {tui_markup(unit)}" + shown)
+            line = f"{name:<12} {_fmt(low):>10} … {_fmt(high):<10} {unit}"
+            text = tui_markup(line)
+            if shown:  # beside the limit when it fits the box (80x24), else under it: never cut off
+                sep = "   " if len(line) + 3 + len(shown) <= _BOX_TEXT_WIDTH else "\n" + " " * 13
+                text += sep + shown.replace("OUTSIDE", "[b red]OUTSIDE[/]")
+            lines.append(text)
         none = "no limits set" + ("; the first one registers this new unit" if message.data["new"] else "")
         self.query_one("#current", Static).update("\n".join(lines) or tui_markup(none))
         blocks = []
