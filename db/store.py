@@ -43,6 +43,9 @@ from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
 
 BUSY_TIMEOUT_S = 30.0
 MAX_PREDICTION_YEARS = 1000.0  # a drift slower than tolerance per millennium predicts no exit
+# the longest recalibration interval [days]: 100 years (a due date must stay a date)
+MAX_INTERVAL_DAYS = 36525.0
+SQLITE_INT_RANGE = range(-(1 << 63), 1 << 63)  # a row id beyond SQLite's INTEGER names no row
 
 _RESULT_COLUMNS = ("procedure", "device", "model", "params", "uncertainty", "residual_rms", "n_positions", "warnings")
 
@@ -282,8 +285,8 @@ class Store:
         self._check_id(device_id)
         if interval_days is not None:
             interval_days = float(interval_days)
-            if not interval_days > 0:
-                raise ValueError(f"interval_days must be positive, got {interval_days}")
+            if not 0 < interval_days <= MAX_INTERVAL_DAYS:
+                raise ValueError(f"interval_days must be positive, at most {MAX_INTERVAL_DAYS:g}, got {interval_days}")
         if tolerances is not None:
             for name, value in tolerances.items():
                 if value is not None and not (isinstance(value, (int, float)) and value > 0):
@@ -470,7 +473,9 @@ class Store:
 
     def _read_capture(self, capture_id):
         with self._lock:
-            row = self.conn.execute("SELECT * FROM captures WHERE id = ?", [capture_id]).fetchone()
+            row = None
+            if capture_id in SQLITE_INT_RANGE:
+                row = self.conn.execute("SELECT * FROM captures WHERE id = ?", [capture_id]).fetchone()
             if row is None:
                 raise NotFound(f"no capture {capture_id}")
             cols = self.conn.execute(
@@ -673,7 +678,9 @@ class Store:
 
     def calibration(self, calibration_id: int) -> dict:
         """One calibration with its `result` rebuilt in the calibrate.md shape, and its hashes."""
-        rows = self._query("SELECT * FROM calibrations WHERE id = ?", [calibration_id])
+        rows = []
+        if calibration_id in SQLITE_INT_RANGE:
+            rows = self._query("SELECT * FROM calibrations WHERE id = ?", [calibration_id])
         if not rows:
             raise NotFound(f"no calibration {calibration_id}")
         row = rows[0]

@@ -98,6 +98,14 @@ def test_db_option_before_the_action_and_env(capsys, db, monkeypatch):
         (["devices", "add", "X", "--tolerance", "B"], "--tolerance 'B'"),
         (["devices", "add", "X", "--tolerance", "B=-1"], "positive"),
         (["devices", "add", "X", "--interval-days", "0"], "--interval-days must be positive"),
+        # no date lies that far: was the catch-all 'cannot process this input (OverflowError ...)'
+        (["devices", "add", "X", "--interval-days", "inf"], "at most 36525 (100 years), got inf"),
+        (["devices", "add", "X", "--interval-days", "1e308"], "at most 36525 (100 years), got 1e+308"),
+        # an id beyond SQLite's INTEGER names no record (was the catch-all, OverflowError)
+        (["export", "99999999999999999999", "--format", "json"], "no calibration 99999999999999999999"),
+        (["report", "99999999999999999999"], "no calibration 99999999999999999999"),
+        (["recompute", "99999999999999999999"], "no calibration 99999999999999999999"),
+        (["export-capture", "99999999999999999999"], "no capture 99999999999999999999"),
         (["devices", "add", " "], "non-empty"),
         (["devices", "show", "nope"], 'no device "nope"'),
         (["history", "nope"], 'no device "nope"'),

@@ -201,8 +201,14 @@ def _device_contexts(args: argparse.Namespace) -> list[dict]:
 
 
 def _add(args: argparse.Namespace) -> int:
-    if args.interval_days is not None and not args.interval_days > 0:
-        raise InputError(None, None, f"--interval-days must be positive, got {args.interval_days:g}")
+    from db.store import MAX_INTERVAL_DAYS
+
+    if args.interval_days is not None and not 0 < args.interval_days <= MAX_INTERVAL_DAYS:
+        raise InputError(
+            None,
+            None,
+            f"--interval-days must be positive, at most {MAX_INTERVAL_DAYS:g} (100 years), got {args.interval_days:g}",
+        )
     # typed in the units the station shows, stored in the parameters' own: read and converted
     # before anything is written (a refusal leaves no database and no change behind)
     contexts = _device_contexts(args) if args.tolerance or args.limit else []
