@@ -125,6 +125,7 @@ def test_simulate_truth_to_an_unwritable_place(tmp_path, capsys, where):
         ("ldv", "maneuver=bogus", "choose varied or straight"),  # was: silently 'varied'
         ("ldv", "reference=bogus", "choose body or nav"),  # was: silently 'body'
         ("ldv", "duration_s=1e12", "more samples than fit in memory"),  # was: MemoryError traceback
+        ("accel-tabletop", "hold_s=1e308", "more samples than fit in memory"),  # was: the catch-all, OverflowError
         ("compass", "site=x", "not settable"),
     ],
 )
@@ -132,6 +133,16 @@ def test_simulate_bad_option(tmp_path, capsys, procedure, option, says):
     out_file = tmp_path / "x.csv"
     code, _, err = run(capsys, "simulate", "--procedure", procedure, "--out", out_file, "--option", option)
     assert code == 2 and says in one_line(err)
+    assert not out_file.exists()
+
+
+def test_simulate_a_count_no_bench_has_is_refused_not_run(tmp_path):
+    """extra_positions=1e308 drew positions one by one, for ever (in a subprocess: a hang fails)."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    out_file = tmp_path / "x.csv"
+    args = ["simulate", "--procedure", "accel-tabletop", "--out", out_file, "--option", "extra_positions=1e308"]
+    assert_one_line_refusal(run_station(*args, subprocess_run=True), "extra_positions=1e+308: at most 1000")
     assert not out_file.exists()
 
 

@@ -62,6 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 # What the command line can set, checked here so a bad value gets one line, not a traceback.
 _FLAGS = {"averages", "label_positions"}
 _COUNTS = {"extra_positions": 0, "n_orientations": 1}  # integer, at least this
+# ... and at most this: P1 draws its extra positions one by one (1e308 never returned)
+_COUNT_MAX = {"extra_positions": 1000}
 _CHOICES = {"mode": ("static", "reference"), "maneuver": ("varied", "straight"), "reference": ("body", "nav")}
 _POSITIVE = {"rate_hz", "hold_s", "duration_s", "radius_m", "g_mps2"}  # > 0; other numbers >= 0 unless angles
 _SIGNED = {"latitude_deg", "pitch_deg", "roll_deg", "table_tilt_deg"}  # any finite value
@@ -101,6 +103,8 @@ def _option_value(name: str, value):
     if name in _COUNTS:
         if value != int(value) or value < _COUNTS[name]:
             raise InputError(None, None, f"--option {name}={value:g}: must be a whole number >= {_COUNTS[name]}")
+        if value > _COUNT_MAX.get(name, math.inf):
+            raise InputError(None, None, f"--option {name}={value:g}: at most {_COUNT_MAX[name]}")
         return int(value)
     if name in _POSITIVE and value <= 0:
         raise InputError(None, None, f"--option {name}={value:g}: must be positive")
@@ -139,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
         sim = simulate(args.procedure, seed=args.seed, effects=effects, **options)
     except (SimulationError, TypeError) as exc:
         raise InputError(None, None, f"simulate: {exc}") from None
-    except MemoryError:
+    except (MemoryError, OverflowError):  # OverflowError: a length beyond any integer (hold_s=1e308)
         raise InputError(None, None, "simulate: the options ask for more samples than fit in memory") from None
     except (ValueError, IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
         raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
