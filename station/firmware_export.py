@@ -75,6 +75,7 @@ AP_COMPASS_ODI_MAX = 1.0
 # CAL_ACCn_{X,Y,Z}SCALE and CAL_MAGn_{X,Y,Z}SCALE: min 0.1, max 3.0 (PX4's parameter
 # definitions, src/modules/sensors/module.yaml); the offsets and ODIAG have no documented range.
 PX4_SCALE_RANGE = (0.1, 3.0)
+INT32 = range(-(1 << 31), 1 << 31)  # an integer parameter's values
 PX4_DEFAULT_PRIORITY = 50  # calibration::Accelerometer::DEFAULT_PRIORITY (internal sensors)
 QGC_REAL32, QGC_INT32 = 9, 6  # MAV_PARAM_TYPE
 
@@ -96,7 +97,10 @@ class Export:
         self.values.append((name, float(value)))
 
     def set_int(self, name: str, value: int) -> None:
-        self.values.append((name, int(value)))
+        value = int(value)
+        if value not in INT32:  # PX4's CAL_*n_ID, _PRIO, _ROT (module.yaml: int32; QGC type 6)
+            raise UnsupportedError(f"{name} = {value}: beyond the firmware's int32 parameter ({INT32[0]}..{INT32[-1]})")
+        self.values.append((name, value))
 
 
 def _unit(meta: dict, key: str, kind: str, fmt: str, procedure: str) -> tuple[str, float]:

@@ -375,6 +375,17 @@ def test_px4_without_a_device_id_is_refused_and_device_id_option_works(capsys, d
     assert code == 0 and "param set CAL_GYRO0_ID 2424842" in out
 
 
+@pytest.mark.parametrize("fmt", ["px4", "qgc"])
+@pytest.mark.parametrize("device_id", ["99999999999999999999", "2147483648", "-2147483649"])
+def test_px4_device_id_beyond_an_int32_parameter_is_refused(capsys, db, fmt, device_id):
+    """CAL_*n_ID is an int32 parameter (PX4's module.yaml; QGC type 6): a --device-id beyond it
+    was written as it came, a line no vehicle takes."""
+    cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
+    code, out, err = run(capsys, "export", cid, "--format", fmt, "--device-id", device_id, "--db", db)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"CAL_GYRO0_ID = {device_id}" in err and "int32" in err
+
+
 def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     """Simulated P3 raw field r [uT] -> ArduPilot's correction in use d = P_old (r + o_old)
     (mGauss, AP_Compass_Backend::correct_field) -> capture of d (gauss) marked corrected ->
