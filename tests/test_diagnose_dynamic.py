@@ -174,3 +174,35 @@ def test_a_candidate_with_its_own_f_is_tested_at_it():
     assert named["own"] / per > 0.75, named
     assert named["proc"] / per < 0.35, named
     assert named["null"] / per <= 2 * ALPHA + 3 * math.sqrt(ALPHA / per), named
+
+
+def test_a_long_ldv_drive_keeps_every_sample():
+    """A drive of three times ``max_rows`` samples becomes runs of three consecutive samples,
+    inputs and outputs averaged: the row σ is the sample σ / √3, so a slow effect keeps all
+    its information (every third sample, as kept before, had the full σ and a third of it),
+    and the run means obey the same forward model exactly (it is linear in v, T and t)."""
+    from solvers.diagnose.problems import ldv_problem
+    from solvers.models import Conditions
+    from solvers.models import ldv as ldv_model
+
+    rng = np.random.default_rng(5)
+    n, sigma_mps = 3000, 0.01
+    t = np.arange(n) * 0.02
+    v = np.column_stack([60 + 5 * np.sin(t / 7), 2 * np.sin(t / 3 + 1), 1.5 * np.cos(t / 5)])
+    temp = 20 + 4 * np.sin(t / 20)
+    X = ldv_model.X_from_angles(np.array([0.01, -0.02, 0.005]), [30, 90, 60], [60, 30, 90], [90, 60, 30])
+    truth = {"X": X, "o": np.array([0.02, -0.01, 0.03]), "bT": np.array([0.004, 0.0, -0.003]),
+             "bt": np.array([1e-4, -2e-4, 0.0])}  # fmt: skip
+
+    def drive(noise):
+        ref = ldv_problem(t, v, v @ X.T, X, temp_c=temp, max_rows=1000).generic[0][0]
+        cond = Conditions(t_s=t, temp_c=temp, temp_ref_c=ref.temp_ref_c, t_ref_s=ref.t_ref_s)
+        y = ldv_model.forward(v, truth, cond) + noise * rng.standard_normal((n, 3))
+        return ldv_problem(t, v, y, X, temp_c=temp, max_rows=1000)
+
+    exact = drive(0.0)
+    assert exact.sigma.size == 3 * 1000
+    assert np.max(np.abs(exact.residual(truth))) < 1e-9
+    noisy = drive(sigma_mps)
+    rows_sigma = np.std(noisy.residual(truth))
+    assert abs(rows_sigma / (sigma_mps / math.sqrt(3)) - 1) < 0.1, rows_sigma
