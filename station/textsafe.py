@@ -142,7 +142,8 @@ def tui_text(value):
 
 
 def tui_markup(value) -> str:
-    """Text from outside placed inside a Textual markup string: escaped and markup-quoted."""
-    from textual.markup import escape
+    """Text from outside placed inside a Textual markup string: escaped and markup-quoted.
 
-    return escape(safe(value))
+    Every ``[`` is escaped: Textual's ``escape()`` leaves one that looks like no tag
+    (``rfc2217://[::1``), and its parser then read the closing tag after it as text."""
+    return safe(value).replace("[", "\\[")

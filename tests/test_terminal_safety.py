@@ -187,3 +187,18 @@ def test_history_screen_shows_hostile_ids_escaped_one_row_each(hostile_db):
     screen = "\n".join(lines)
     assert not any(ch in screen for ch in "\x1b\x07\r\x9b\x85\u202e")
     assert "EVIL\\x1b]0;pwned" in screen
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["rfc2217://[::1: Invalid IPv6 URL", "q [::1]:5 [", "ends with [", "a [b] c [/] d", "[red]x[/red]", "C:\\[x]"],
+)
+def test_tui_markup_keeps_every_bracket_as_text_inside_a_style(text):
+    """Textual's escape() left a '[' that looks like no tag ('[::1'), and its parser then took
+    the style's closing tag for text: Connect showed 'Cannot connect: ... Invalid IPv6 URL[/]'."""
+    from textual.content import Content
+
+    from station.textsafe import tui_markup
+
+    content = Content.from_markup(f"[b red]{tui_markup(text)}[/] and [b]more[/]")
+    assert content.plain == f"{text} and more"
