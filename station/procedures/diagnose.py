@@ -241,7 +241,7 @@ def format_text(
     L += [
         f"baseline    {r['baseline']['model']}",
         f"            residual {scale * r['baseline']['residual_rms']:.4g} {unit} RMS, "
-        f"held-out {scale * r['baseline']['cv_rms']:.4g}",
+        f"held-out {scale * r['baseline']['cv_rms']:.4g} {unit} RMS",
         f"candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {_f_text(diag.problem)}, "
         "and a lower held-out RMS; refitted and re-tested after each pick)",
     ]
@@ -250,10 +250,12 @@ def format_text(
             L.append(f"  {c['name']:<24} unresolvable: {c['reason']}")
         else:
             mark = "  <- selected" if c["selected"] else ""
-            L.append(f"  {c['name']:<24} ΔBIC {c['delta_bic']:+10.1f}   held-out RMS {scale * c['cv_rms']:.4g}{mark}")
+            L.append(
+                f"  {c['name']:<24} ΔBIC {c['delta_bic']:+10.1f}   held-out RMS {scale * c['cv_rms']:.4g} {unit}{mark}"
+            )
     for e in r["effects"]:
         L.append(
-            f"effect      {e['name']}: held-out RMS {scale * e['cv_rms_before']:.4g} → {scale * e['cv_rms_after']:.4g} "
+            f"effect      {e['name']}: held-out RMS {scale * e['cv_rms_before']:.4g} → {scale * e['cv_rms_after']:.4g} {unit} "
             f"(gain {100 * e['gain']:.1f} %)"
         )
         for c in e["confused_with"]:
@@ -276,7 +278,7 @@ def format_text(
     L.append(f"extended    {r['extended']['model']}")
     L.append(
         f"            residual {scale * r['extended']['residual_rms']:.4g} {unit} RMS, "
-        f"held-out {scale * r['extended']['cv_rms']:.4g}"
+        f"held-out {scale * r['extended']['cv_rms']:.4g} {unit} RMS"
     )
     rt = diag.residual_test
     if rt.get("p_value") is not None:
