@@ -15,7 +15,16 @@ import numpy as np
 from db import Store
 from station.app import make_app
 from station.sources import SimSource
-from tests.test_tui import SIZE, BenchClock, run_bench, screen_lines, screen_name, text_of, wait_for
+from tests.test_tui import (
+    SIZE,
+    BenchClock,
+    history_shown,
+    run_bench,
+    screen_lines,
+    screen_name,
+    text_of,
+    wait_for,
+)
 from tests.tui_data import p1_result
 
 
@@ -87,10 +96,7 @@ def test_history_shows_times_of_day_and_a_date_axis(tmp_path):
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(
-                pilot,
-                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 3,
-            )
+            await history_shown(pilot, app, 3)
             # the rows and the plot are painted on later refreshes than row_count says: wait for what is asserted
             want = ("date and time (UTC)", "2026-11-23 17:05", "2026-11-23 08:15")
             await wait_for(pilot, lambda: all(w in "\n".join(screen_lines(app)) for w in want))
@@ -535,9 +541,7 @@ def test_limits_editor_refuses_a_soft_iron_limit_the_device_cannot_unit_yet_as_t
             return shown(app), screen_lines(app)
 
     async def history(app, pilot):
-        await wait_for(
-            pilot, lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 1
-        )
+        await history_shown(pilot, app, 1)
 
     async def results(app, pilot):
         await app.push_screen(ResultsScreen(cap, result, None, None))

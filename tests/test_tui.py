@@ -36,6 +36,14 @@ async def wait_for(pilot, cond, timeout_s=120.0, step_s=0.05):
     raise AssertionError(f"timed out after {timeout_s} s waiting for {cond}")
 
 
+async def history_shown(pilot, app, rows: int):
+    """Wait until History is the screen and its table holds ``rows`` calibrations."""
+    await wait_for(
+        pilot,
+        lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == rows,
+    )
+
+
 class BenchClock:
     """The simulated bench's clock, advanced by the test (``SimSource(clock=...)``): the
     device only moves on when the test says so, so no phase can pass unseen and a loaded
@@ -469,10 +477,7 @@ def test_history_lists_devices_calibrations_and_drift(tmp_path):
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=(120, 40)) as pilot:
-            await wait_for(
-                pilot,
-                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 3,
-            )
+            await history_shown(pilot, app, 3)
             await wait_for(pilot, lambda: len(app.screen.drift) > 1)  # 'p' needs the drift loaded
             devices = app.screen.query_one("#devices")
             first = devices.get_row_at(0)
@@ -501,10 +506,7 @@ def test_diagnose_a_stored_calibration_from_history(tmp_path):
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(
-                pilot,
-                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2,
-            )
+            await history_shown(pilot, app, 2)
             await pilot.press("g")  # the newest calibration is under the cursor
             await wait_for(pilot, lambda: screen_name(app) == "DiagnoseScreen" and app.screen.report is not None)
             title, report = screen_lines(app)[0], app.screen.report
@@ -708,10 +710,7 @@ def test_history_l_views_and_edits_a_devices_limits(tmp_path):
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(
-                pilot,
-                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2,
-            )
+            await history_shown(pilot, app, 2)
             assert "l Limits" in screen_lines(app)[-1]
             await pilot.press("l")
             await wait_for(pilot, lambda: screen_name(app) == "LimitsScreen" and "-0.5" in text_of(app, "#current"))
@@ -755,10 +754,7 @@ def test_history_l_shows_a_block_limit_against_every_value_in_use(tmp_path):
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=SIZE) as pilot:
-            await wait_for(
-                pilot,
-                lambda: screen_name(app) == "HistoryScreen" and app.screen.query_one("#calibrations").row_count == 2,
-            )
+            await history_shown(pilot, app, 2)
             await pilot.press("l")
             await wait_for(pilot, lambda: screen_name(app) == "LimitsScreen" and "in use" in text_of(app, "#current"))
             inside = text_of(app, "#current").splitlines()
