@@ -614,3 +614,35 @@ def test_diagnose_screen_lines_continue_under_their_text_at_80x24():
     labels = ("procedure", "baseline", "candidates", "extended", "verdict", "measured", "effect", "quality", "WARNING")
     body = [line[1:] for line in shown[1:-1] if line.strip()]
     assert all(line.startswith(" ") or line.startswith(labels) for line in body), body
+
+
+def test_limits_example_uses_the_devices_own_parameter_names(tmp_path):
+    """The limits box's example said ``B=… M[0][0]=… S=…`` (P1/P2 names) on a P4 gyro whose
+    only limited parameter is ``drift``: from Results (the result on screen) and from
+    History (the device's newest calibration) it now names the procedure's parameters."""
+    from station.screens.limits import LimitsScreen
+    from station.screens.results import ResultsScreen
+
+    db = str(tmp_path / "s.db")
+    cap, result = _simulated_result("gyro-drift", 401002, duration_s=60)
+    Store(db).save_calibration(result, meta=dict(cap.meta), columns=dict(cap.columns), device_id="G2")
+
+    async def story():
+        app = make_app(db, device_id="G2")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            await pilot.press("l")
+            await wait_for(pilot, lambda: screen_name(app) == "LimitsScreen")
+            from_results = app.screen.query_one("#edit").placeholder
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
+            await app.push_screen(LimitsScreen("G2"))
+            await wait_for(pilot, lambda: "reading" not in text_of(app, "#current"))
+            await wait_for(pilot, lambda: "drift" in app.screen.query_one("#edit").placeholder)
+            return from_results, app.screen.query_one("#edit").placeholder
+
+    from_results, from_history = asyncio.run(story())
+    for shown in (from_results, from_history):
+        assert "drift=" in shown and "°/h" in shown, shown
+        assert "M[0][0]" not in shown and "B" not in shown, shown

@@ -48,6 +48,7 @@ def _soft_iron_ratio(result: dict) -> float | None:
 # what the screens show it in: W as a ratio, calibrated field per raw field in the capture's
 # unit (the result, its exports and the database keep nT per mag_unit)
 DISPLAY_UNITS = {"soft_iron": ("{mag_unit}/{mag_unit}", _soft_iron_ratio)}
+LIMIT_EXAMPLE = "e.g. hard_iron[0]=-5:5  soft_iron[0][0]=0.9:1.1"  # the limits box's example, as shown
 REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
 METHODS = ("rls", "batch", "ellipsoid")
 

@@ -51,6 +51,7 @@ PARAM_UNITS = {"drift": "rad/s", "earth_rate_body": "rad/s"}
 # what the screens show them in (a bench engineer reads gyro drift in °/h); the result, its
 # exports and the database keep rad/s
 DISPLAY_UNITS = {k: ("°/h", 1.0 / gd.DEG_H_RAD_S) for k in ("drift", "earth_rate_body", "residual_rms")}
+LIMIT_EXAMPLE = "e.g. drift=-10:10  (°/h)"  # the limits box's example, in the unit shown
 ZERO_IS_A_RESULT = True
 
 # Devices whose captures are known to break the conventions (their SOURCE.md).

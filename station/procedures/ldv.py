@@ -70,6 +70,7 @@ CORE_PARAMS = ("beam1", "beam2", "beam3")
 # station.guard: a beam reading one value in every row is dead or saturated (refused)
 # station.procedures.review: a unit by parameter name (".dK": the dK of any beam)
 PARAM_UNITS = {".dK": "1"}
+LIMIT_EXAMPLE = "e.g. beam1.dK=-0.02:0.02  beam1.alpha_deg=58:62"  # the limits box's example (screens/limits.py)
 DEAD_IF_CONSTANT = ("vl1", "vl2", "vl3")
 DEAD_IF_CONSTANT_SAYS = (
     "beam '{name}' reads {value:g} m/s in every row: a dead or saturated beam, its angles and scale "

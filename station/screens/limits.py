@@ -32,6 +32,20 @@ from station.widgets.field import Field
 
 _BOX_TEXT_WIDTH = 74  # #box: 78 columns less its border and padding
 
+GENERIC_EXAMPLE = "e.g. NAME=LOW:HIGH, a name from the parameters in use"
+
+
+def example_for(procedure: str | None) -> str:
+    """The edit box's placeholder for a device calibrated with ``procedure``: its module's
+    ``LIMIT_EXAMPLE`` (its own parameter names, in the units shown: P4's drift in °/h),
+    else the syntax alone."""
+    from station.procedures import registry
+
+    entry = registry.get(procedure) if procedure else None
+    if entry is None:
+        return GENERIC_EXAMPLE
+    return getattr(entry.load(), "LIMIT_EXAMPLE", None) or GENERIC_EXAMPLE
+
 
 def _fmt(x) -> str:
     return "…" if x is None else format(float(x), "g")
@@ -79,7 +93,7 @@ class LimitsScreen(ModalScreen):
             yield Static("reading…", id="current")
             yield Static("", id="params")
             yield Static("NAME=LOW:HIGH sets one (an end may be empty), NAME= removes it:")
-            yield Field(placeholder="e.g. B=-0.5:0.5  M[0][0]=0.98:1.02  S=0.9:", id="edit")
+            yield Field(placeholder=example_for((self.result or {}).get("procedure")), id="edit")
             yield Static("Enter apply · esc back")
             yield Static("", id="said")
             yield Static("", id="error")
@@ -155,6 +169,9 @@ class LimitsScreen(ModalScreen):
             code = entry.code if entry is not None else proc
             names = [k for k, v in h["params"].items() if not isinstance(v, (str, bool)) and v is not None]
             blocks.append(f"{code}: {', '.join(names)}")
+        if not self.result:  # History: the device's newest calibration tells its parameters
+            newest = message.data["history"][-1]["procedure"] if message.data["history"] else None
+            self.query_one("#edit", Input).placeholder = example_for(newest)
         self.query_one("#params", Static).update(
             tui_markup("parameters in use: " + "; ".join(blocks)) if blocks else "no accepted calibration yet"
         )
