@@ -773,3 +773,48 @@ def test_history_l_shows_a_block_limit_against_every_value_in_use(tmp_path):
     # whole at 80x24: the values in use and OUTSIDE are not cut off at the box's edge
     assert entry(outside, "B").endswith(f"in use {low:.6g} … {high:.6g} OUTSIDE")
     assert "in use" in entry(outside, "M") and "OUTSIDE" not in entry(outside, "M")
+
+
+def test_a_port_typed_while_source_is_simulated_is_the_port_used(tmp_path):
+    """Typing a port with Source left at "Built-in simulated device" and pressing Enter
+    silently ran the simulator. The typed port is what the bench engineer means: Source
+    switches to Other as it is typed, and the run reads that port (a real pty); choosing
+    the simulator again with the port still typed is refused with the reason."""
+    from solvers.simulate import LiveImu
+    from station.device.simdevice import SimDevice
+
+    dev = SimDevice(LiveImu(seed=7, rate_hz=200, hold_s=1e9))
+    path = dev.open()
+    stop = threading.Event()
+    t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
+    t.start()
+    try:
+
+        async def story():
+            app = make_app(None)
+            async with app.run_test(size=SIZE) as pilot:
+                await pilot.click("#port")
+                await pilot.press(*path)
+                assert app.screen.query_one("#source").value == "other"
+                app.screen.query_one("#source").value = "sim"  # the simulator chosen again
+                await pilot.press("f5")
+                await wait_for(pilot, lambda: "clear the port" in text_of(app, "#status"))
+                refused = " ".join(text_of(app, "#status").split())
+                assert screen_name(app) == "ConnectScreen" and app.session.source is None
+                app.screen.query_one("#port").value = ""
+                await pilot.click("#port")
+                await pilot.press(*path, "enter")
+                await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+                src = app.session.source
+                kind, port = src.kind, getattr(src, "port", None)
+                await wait_for(pilot, lambda: app.screen.updates > 3)
+                src.stop()
+                return refused, kind, port
+
+        refused, kind, port = asyncio.run(story())
+    finally:
+        stop.set()
+        t.join(timeout=10)
+        dev.close()
+    assert kind == "serial" and port == path
+    assert path in refused and "simulated" in refused

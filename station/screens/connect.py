@@ -217,6 +217,14 @@ class ConnectScreen(Screen):
             self.query_one("#model", Input).value = d.get("model") or ""
             self._check_resume()
 
+    @on(Input.Changed, "#port")
+    def _port_typed(self, event: Input.Changed) -> None:
+        """A port typed while Source is the simulated device means that port: Source follows
+        (the operator sees it switch to Other), so Start never silently runs the simulator."""
+        source = self.query_one("#source", Select)
+        if event.value.strip() and source.value == SIM:
+            source.value = OTHER
+
     @on(Input.Changed, "#serial")
     def _serial_changed(self) -> None:
         self._check_resume()
@@ -314,6 +322,14 @@ class ConnectScreen(Screen):
         if choice == OTHER and not port and not (s.source is not None and s.source.kind == "serial"):
             self._status("Type a port or URL, or choose the simulated device", error=True)
             return
+        if choice == SIM and port:  # chosen again after the port was typed: which one is meant?
+            self._status(
+                f"Source is the simulated device but port {port} is typed: clear the port, or choose Other port or URL",
+                error=True,
+            )
+            return
+        if choice not in (SIM, OTHER) and not port:
+            port = str(choice)  # a port picked from the list
         self.query_one("#start", Button).disabled = True
         self._status("Connecting…")
         self.open_source(choice, port, self.query_one("#protocol", Select).value)
