@@ -324,3 +324,48 @@ def test_a_different_device_on_the_port_ends_the_recording_keeping_what_came_bef
         and cap.n_rows == 50
         and list(cap.columns) == ["t", "segment", "ax", "ay", "az", "temp_c"]
     )
+
+
+def _refused_port() -> int:
+    """A local TCP port nothing listens on (bound, then closed)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize(
+    ("protocol", "port", "says"),
+    [
+        ("station", "socket://host:99999", "port number 99999 is out of range 1-65535: expected socket://HOST:PORT"),
+        ("station", "socket://localhost:", "no port number: expected socket://HOST:PORT"),
+        ("station", "rfc2217://host:70000", "port number 70000 is out of range 1-65535: expected rfc2217://HOST:PORT"),
+        ("station", "socket://127.0.0.1:{refused}", "cannot open: Connection refused"),
+        ("station", "loop://?bad=1", "unknown option 'bad'"),
+        ("station", "foo://x", "unknown URL scheme 'foo'"),
+        ("station", "{tmp}/no-such-tty", "cannot open: No such file or directory"),
+        ("mavlink", "udp:host:99999", "port number 99999 is out of range 1-65535: expected udp:HOST:PORT"),
+        ("mavlink", "tcp:", "no port number: expected tcp:HOST:PORT"),
+        ("mavlink", "tcp:127.0.0.1:{refused}", "cannot open: Connection refused"),
+    ],
+)
+def test_a_bad_port_or_url_is_one_line_saying_what_is_wrong(tmp_path, protocol, port, says):
+    """pyserial's own text reached the operator: ``socket://host:99999`` gave
+    ``'debug|info|warning|error'`` (its format string failing on the bad port),
+    ``loop://?bad=1`` a KeyError, ``/dev/x`` "could not open port /dev/x: [Errno 2] ...", and
+    pymavlink printed "... sleeping" on stdout. Now one line: the port, what is wrong."""
+    from tests.station_run import assert_one_line_refusal
+
+    port = port.format(refused=_refused_port(), tmp=tmp_path)
+    out = tmp_path / "rec.csv"
+    res = subprocess.run(
+        [sys.executable, "-m", "station", "record", "--protocol", protocol, "--port", port, "--seconds", "1"]
+        + ["--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert_one_line_refusal(res, f"station: {port}: {says}")
+    assert not out.exists()
+    assert "Errno" not in res.stderr and "could not open port" not in res.stderr.lower()

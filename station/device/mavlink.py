@@ -28,6 +28,8 @@ without `send()`) loses nothing, since its IMU timestamps advance.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 
 import numpy as np
@@ -320,7 +322,9 @@ class NetworkPort:
         from pymavlink import mavutil
 
         self.url, self.timeout_s = url, timeout_s
-        self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=190, autoreconnect=True)
+        # pymavlink prints its connect retries ("... sleeping") on stdout: the caller says why it failed
+        with contextlib.redirect_stdout(io.StringIO()):
+            self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=190, autoreconnect=True)
 
     def read(self, n: int) -> bytes:
         import select

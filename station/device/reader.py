@@ -154,12 +154,89 @@ def make_parser(protocol: str, mavlink_source: str | None = None, request_hz: fl
     raise ValueError(f"unknown protocol {protocol!r} (station or mavlink)")
 
 
+NETWORK_PREFIXES = ("udp:", "udpin:", "udpout:", "udpbcast:", "tcp:", "tcpin:")  # = mavlink.NETWORK_PREFIXES
+# pyserial's URL schemes: what each looks like, the options it takes (None: not checked here)
+URL_SCHEMES = {
+    "socket": ("socket://HOST:PORT", {"logging"}),
+    "rfc2217": ("rfc2217://HOST:PORT", {"logging", "ign_set_control", "poll_modem", "timeout"}),
+    "loop": ("loop://", {"logging"}),
+    "spy": ("spy://DEVICE", None),
+    "alt": ("alt://DEVICE?class=NAME", None),
+    "hwgrep": ("hwgrep://REGEXP", None),
+    "cp2110": ("cp2110://BUS:DEVICE:INTERFACE", None),
+}
+LOG_LEVELS = ("debug", "info", "warning", "error")
+
+
+def _port_number_problem(text: str, form: str) -> str | None:
+    if not text.isdigit():
+        return f"port number {text!r} is not a number: expected {form}" if text else f"no port number: expected {form}"
+    if not 1 <= int(text) <= 65535:
+        return f"port number {int(text)} is out of range 1-65535: expected {form}"
+    return None
+
+
+def port_problem(port: str) -> str | None:
+    """What is wrong with a device path or URL before anything is opened (a host and port
+    number, a URL scheme, its options), None when nothing can be said yet: pyserial's own
+    messages for these quote its format strings or fail inside them."""
+    from urllib.parse import parse_qs, urlsplit
+
+    if not port.strip():
+        return "no port given"
+    if port.lower().startswith(NETWORK_PREFIXES):
+        scheme, _, rest = port.partition(":")
+        host, sep, number = rest.rpartition(":")
+        form = f"{scheme.lower()}:HOST:PORT"
+        return _port_number_problem(number, form) if sep else f"no port number: expected {form}"
+    if "://" not in port:
+        return None  # a device path: the system says what is wrong with it
+    scheme = port.split("://", 1)[0].lower()
+    if scheme not in URL_SCHEMES:
+        known = ", ".join(f"{k}://" for k in URL_SCHEMES)
+        return f"unknown URL scheme {scheme!r}: a device path such as /dev/ttyUSB0, or one of {known}"
+    form, options = URL_SCHEMES[scheme]
+    try:
+        parts = urlsplit(port)
+    except ValueError as exc:  # a bad IPv6 bracket
+        return f"not a valid URL ({exc}): expected {form}"
+    if scheme in ("socket", "rfc2217"):
+        host, sep, number = parts.netloc.rpartition(":")
+        if not sep:
+            return f"no port number: expected {form}"
+        problem = _port_number_problem(number, form)
+        if problem:
+            return problem
+    if options is not None:
+        for option, values in parse_qs(parts.query, keep_blank_values=True).items():
+            if option not in options:
+                return f"unknown option {option!r}: {scheme}:// takes {', '.join(sorted(options))}"
+            if option == "logging" and values[0] not in LOG_LEVELS:
+                return f"logging={values[0]!r}: one of {', '.join(LOG_LEVELS)}"
+    return None
+
+
+def open_error_text(port: str, exc: BaseException) -> str:
+    """One line for a port that did not open: the system's reason without pyserial's
+    "could not open port PORT: [Errno N] ..." wrapping."""
+    import os
+
+    errno = getattr(exc, "errno", None)
+    if isinstance(errno, int) and errno > 0:
+        return os.strerror(errno)
+    import re
+
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    prefix = f"could not open port {port}: "
+    if text.lower().startswith(prefix.lower()):
+        text = text[len(prefix) :]
+    return re.sub(r"^\[Errno -?\d+\] ", "", text)
+
+
 def open_port(port: str, baud: int = 115200, timeout_s: float = 0.02):
     """A device path or any pyserial URL, opened, raw 8N1; a MAVLink network endpoint
     (`udp:HOST:PORT`, `udpout:`, `tcp:`, `tcpin:`) through pymavlink's connection layer."""
-    if port.lower().startswith(
-        ("udp:", "udpin:", "udpout:", "udpbcast:", "tcp:", "tcpin:")
-    ):  # = mavlink.NETWORK_PREFIXES
+    if port.lower().startswith(NETWORK_PREFIXES):
         from station.device.mavlink import NetworkPort  # pymavlink's import is slow: only for these
 
         return NetworkPort(port, timeout_s)
@@ -231,11 +308,14 @@ class Reader:
         opened, unless `wait_for_port` (then the thread keeps trying)."""
         if self._thread is not None:
             return self
+        problem = port_problem(self.port)  # never retried: waiting would not mend it
+        if problem:
+            raise PortError(f"{self.port}: {problem}")
         if not wait_for_port:
             try:
                 self._ser = open_port(self.port, self.baud, self.poll_s)
-            except (serial.SerialException, OSError, ValueError) as exc:
-                raise PortError(f"{self.port}: cannot open: {exc}") from None
+            except Exception as exc:  # noqa: BLE001 - pyserial's URL handlers raise KeyError, TypeError ...
+                raise PortError(f"{self.port}: cannot open: {open_error_text(self.port, exc)}") from None
             self._on_connect()
         self._thread = threading.Thread(target=self._run, name=f"reader {self.port}", daemon=True)
         self._thread.start()
