@@ -141,9 +141,16 @@ def tui_text(value):
     return Text(safe(value))
 
 
+ZWSP = "\u200b"  # zero-width space: ends a trailing backslash in markup (tui_markup)
+
+
 def tui_markup(value) -> str:
     """Text from outside placed inside a Textual markup string: escaped and markup-quoted.
 
     Every ``[`` is escaped: Textual's ``escape()`` leaves one that looks like no tag
-    (``rfc2217://[::1``), and its parser then read the closing tag after it as text."""
-    return safe(value).replace("[", "\\[")
+    (``rfc2217://[::1``), and its parser then read the closing tag after it as text.
+    A trailing backslash is followed by a zero-width space: Textual takes any ``[`` after a
+    backslash for text, so ``C:\\dir\\`` ate the closing tag placed after it; the space
+    takes no cell on the screen."""
+    text = safe(value).replace("[", "\\[")
+    return text + ZWSP if text.endswith("\\") else text

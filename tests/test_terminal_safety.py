@@ -202,3 +202,42 @@ def test_tui_markup_keeps_every_bracket_as_text_inside_a_style(text):
 
     content = Content.from_markup(f"[b red]{tui_markup(text)}[/] and [b]more[/]")
     assert content.plain == f"{text} and more"
+
+
+@pytest.mark.parametrize("text", ["C:\\dir\\", "a\\", "two\\\\", "\\", "x\\[y]\\"])
+def test_tui_markup_keeps_a_trailing_backslash_literal(text):
+    """A trailing backslash made Textual read the closing tag after it as text: 'C:\\dir\\'
+    showed as 'C:\\dir[/] and more' with the style running on. Now the backslash is shown, the
+    style ends where it should, and the screen shows no other character (zero cells)."""
+    from rich.cells import cell_len
+    from textual.content import Content
+
+    from station.textsafe import tui_markup
+
+    content = Content.from_markup(f"[b red]{tui_markup(text)}[/] and [b]more[/]")
+    shown = content.plain.replace("\u200b", "")
+    assert shown == f"{text} and more"
+    assert cell_len(content.plain) == len(shown)
+    styled = {content.plain[s.start : s.end].replace("\u200b", "") for s in content.spans}
+    assert styled == {text, "more"}
+
+
+def test_a_device_id_ending_in_a_backslash_on_screen(tmp_path):
+    """The limits box's title, '[b]Limits of {id}[/]: absolute, ...', read 'Limits of BENCH\\[/]:'
+    for a device called 'BENCH\\' on the real screen."""
+    from station.app import make_app
+    from station.screens.limits import LimitsScreen
+    from tests.test_tui import SIZE, screen_name, text_of, wait_for
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id="BENCH\\")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(LimitsScreen("BENCH\\"))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "LimitsScreen" and "reading" not in text_of(app, "#current")
+            )
+            return text_of(app, "#head")
+
+    head = asyncio.run(story())
+    assert "Limits of BENCH\\: absolute, in the units shown" in head.replace("\u200b", ""), head
+    assert "[/]" not in head
