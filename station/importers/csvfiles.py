@@ -197,6 +197,20 @@ def _number(path, lineno: int, name: str, cell: str) -> float:
     return x
 
 
+def _join(chunks: list[np.ndarray], dtype) -> np.ndarray:
+    """``np.concatenate(chunks)`` emptying ``chunks`` as it copies: each chunk is freed once
+    copied, so the column is held about once, not twice (chunks and result) at the end."""
+    out = np.empty(sum(len(c) for c in chunks), dtype=dtype)
+    at = 0
+    chunks.reverse()  # pop from the end, first chunk first
+    while chunks:
+        c = chunks.pop()
+        out[at : at + len(c)] = c
+        at += len(c)
+        del c
+    return out
+
+
 def _rows(
     path,
     lines: Iterator[tuple[int, str]],
@@ -244,10 +258,10 @@ def _rows(
         if len(linenos) >= _FLUSH_ROWS:
             flush()
     flush()
-    numbers = np.concatenate(line_chunks)
+    numbers = _join(line_chunks, np.int64)
     if not numbers.size:
         raise InputError(path, first_lineno, "no data rows after the header")
-    values = {t: np.concatenate(chunks) for t, chunks in done.items()}
+    values = {t: _join(chunks, np.float64) for t, chunks in done.items()}
     if int_time:
         values[int_time] = np.asarray(ints, dtype=object)
     return {t: values[t] for t in cols}, numbers
@@ -306,10 +320,13 @@ def _streams(
                 None,
                 f"{kind}: map all three of {', '.join(cols)} (got {', '.join(present)})",
             )
+        xyz = np.empty((len(t_s), 3), dtype=np.float64)
+        for j, c in enumerate(cols):  # each column freed once stacked: the samples held once
+            xyz[:, j] = values.pop(c)
         streams[kind] = Stream(
             kind,
             t_s,
-            np.column_stack([values[c] for c in cols]),
+            xyz,
             units[kind],
             source,
             temp_c=values.get("temp_c") if kind == "accel" else None,
