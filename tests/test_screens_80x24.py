@@ -646,3 +646,31 @@ def test_limits_example_uses_the_devices_own_parameter_names(tmp_path):
     for shown in (from_results, from_history):
         assert "drift=" in shown and "°/h" in shown, shown
         assert "M[0][0]" not in shown and "B" not in shown, shown
+
+
+def test_a_soft_iron_limit_stored_before_any_compass_calibration_says_no_invented_unit(tmp_path):
+    """The limits editor once stored a soft iron limit for a device with no compass
+    calibration as typed (it refuses that now); such a row in a real database file was
+    listed as 'nT per raw', and a hard iron one as 'raw': a unit no capture had said. It is
+    now listed in the stored unit with the capture's magnetometer unit named as not known
+    ('nT per mag_unit'); once a compass calibration tells it, its unit is said."""
+    from station.screens.limits import LimitsScreen
+
+    db = str(tmp_path / "s.db")
+    Store(db).add_device("M9", limits={"soft_iron": [0.9, 1.1], "hard_iron": [-5.0, 5.0]})  # as the old editor did
+
+    async def story():
+        app = make_app(db, device_id="M9")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(LimitsScreen("M9"))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "LimitsScreen" and "soft_iron" in text_of(app, "#current")
+            )
+            return text_of(app, "#current")
+
+    shown = asyncio.run(story())
+    assert "raw" not in shown, shown
+    soft = next(line for line in shown.splitlines() if "soft_iron" in line)
+    hard = next(line for line in shown.splitlines() if "hard_iron" in line)
+    assert soft.split()[-1] == "mag_unit" and "nT per mag_unit" in soft, soft
+    assert hard.split()[-1] == "mag_unit", hard

@@ -119,7 +119,16 @@ def param_unit(result: dict, name: str) -> str:
     # the procedure module's PARAM_UNITS: by block, or ".<leaf>" for a leaf of any block
     table = getattr(_procedure_module(result), "PARAM_UNITS", {})
     unit = table.get(block, table.get("." + leaf))
-    return "" if unit is None else unit.format(mag_unit=result.get("mag_unit") or "raw")
+    return "" if unit is None else unit.format(mag_unit=_mag_unit(result))
+
+
+def _mag_unit(result: dict) -> str:
+    """The magnetometer unit of ``result``'s capture; for a bare procedure (no calibration
+    to tell it: a limit stored before the device's first compass calibration) the words
+    ``mag_unit``, not a guess ("nT per raw" was shown for such a soft iron limit)."""
+    if result.get("mag_unit"):
+        return str(result["mag_unit"])
+    return "raw" if result.get("params") else "mag_unit"
 
 
 def display_unit(result: dict, name: str) -> tuple[float, str] | None:
@@ -135,7 +144,7 @@ def display_unit(result: dict, name: str) -> tuple[float, str] | None:
     f = factor(result) if callable(factor) else factor
     if not (_finite(f) and f > 0):
         return None
-    return float(f), unit.format(mag_unit=result.get("mag_unit") or "raw")
+    return float(f), unit.format(mag_unit=_mag_unit(result))
 
 
 def shown_value(result: dict, name: str, x):
