@@ -173,6 +173,24 @@ def test_truncated_real_log_is_refused_or_imported_whole(tmp_path, px4_dir):
         assert res.returncode == 2 and res.stderr.count("\n") == 1 and not (tmp_path / "cut.csv").exists()
 
 
+def test_a_log_cut_inside_a_message_is_imported_with_a_warning_saying_so(tmp_path, px4_dir):
+    """pyulog stops without a word where a file ends inside a message: a log cut by a power
+    loss imported as a shorter dataset and nothing said it. Now a warning names the byte
+    where it is cut and what was imported; the whole log says nothing of the kind."""
+    data = (px4_dir / "sample.ulg").read_bytes()
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes(data[: len(data) // 3])
+    capture, res = _import(tmp_path, cut, "--procedure", "gyro-drift")
+    assert res.stderr.count("\n") == 1, res.stderr
+    assert f"cut.ulg: warning: the log is cut short inside a message at byte {len(data) // 3}" in res.stderr
+    n = len(capture.columns["t"])
+    assert f"the samples before it are imported, {n} rows up to" in res.stderr
+    whole, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "gyro-drift")
+    assert "cut short" not in res.stderr
+    assert 0 < n < len(whole.columns["t"])
+    np.testing.assert_array_equal(capture.columns["gx"], whole.columns["gx"][:n])  # what is there, whole
+
+
 def test_bad_instance_names_the_ones_there(tmp_path, px4_dir):
     res = run_station(
         "import",

@@ -38,6 +38,30 @@ PARAM_PREFIXES = ("CAL_", "SENS_BOARD_")
 SOURCES = ("auto", "raw", "combined")
 
 
+class _CutWatch:
+    """The log file as pyulog reads it, remembering the last read that came back short:
+    pyulog stops without a word where a cut file ends inside a message."""
+
+    def __init__(self, fh) -> None:
+        self._fh = fh
+        self.short: tuple[int, int, int] | None = None  # (asked, got, where) of the last read, when short
+
+    def read(self, n=-1):
+        data = self._fh.read(n)
+        self.short = (n, len(data), self._fh.tell()) if n is not None and 0 < n and len(data) < n else None
+        return data
+
+    def cut_at(self) -> int | None:
+        """The byte where the log ends inside a message, None when it ends between two
+        (the last read asked for a message header and found the end of the file)."""
+        if self.short is None or self.short[:2] == (3, 0):
+            return None
+        return self.short[2]
+
+    def __getattr__(self, name):
+        return getattr(self._fh, name)
+
+
 def _load(path):
     from pyulog import ULog
 
@@ -48,8 +72,11 @@ def _load(path):
         *GPS_TOPICS,
     ]
     try:
-        with contextlib.redirect_stdout(io.StringIO()):  # pyulog reports oddities on stdout
-            return ULog(str(path), wanted)
+        with open(path, "rb") as fh, contextlib.redirect_stdout(io.StringIO()):  # pyulog reports oddities on stdout
+            watch = _CutWatch(fh)
+            ulog = ULog(watch, wanted)
+            ulog.station_cut_at = watch.cut_at()
+            return ulog
     except FileNotFoundError:
         raise InputError(path, None, "no such file") from None
     except IsADirectoryError:
@@ -233,6 +260,12 @@ def read(
             params[name] = value
         elif ts <= t1_us:
             late.add(name)
+    cut = getattr(ulog, "station_cut_at", None)
+    if cut is not None:  # a power loss or a copy cut short: what was written before it is whole
+        warnings.append(
+            f"the log is cut short inside a message at byte {cut}: the samples before it are imported, "
+            f"{len(next(iter(streams.values())).t_s)} rows up to {max(s.t_s[-1] for s in streams.values()):g} s"
+        )
     if late:
         meta["params_changed"] = ",".join(sorted(late))
         warnings.append(
