@@ -282,3 +282,29 @@ def _shift(params, name, amount):
     last = tokens[-1]
     key = int(last[1:-1]) if last.startswith("[") else last
     obj[key] = obj[key] + amount
+
+
+@pytest.mark.parametrize(
+    ("argv", "option"),
+    [
+        (["export", "{cid}", "--format", "json", "-o", "{db}"], "-o"),
+        (["export", "{cid}", "--format", "px4", "-o", "{link}"], "-o"),
+        (["export-capture", "--calibration", "{cid}", "-o", "{db}"], "-o"),
+        (["report", "{cid}", "--out", "{db}"], "--out"),
+    ],
+)
+def test_an_output_that_is_the_database_is_refused_and_the_database_kept(tmp_path, capsys, db, argv, option):
+    """`station export ID -o station.db --db station.db` replaced the whole database with the
+    export (an atomic rename over it): every device and calibration gone. Refused, the
+    database unchanged and still readable; also through a link to it."""
+    cid = _save(db, gyro_result(device="G"))
+    link = tmp_path / "link.db"
+    link.symlink_to(db)
+    before = open(db, "rb").read()
+    args = [a.format(cid=cid, db=db, link=link) for a in argv]
+    code, out, err = run(capsys, *args, "--db", db)
+    assert code == 2 and out == "" and err.count("\n") == 1, err
+    assert f"{option} is the station database: choose another name" in err
+    assert open(db, "rb").read() == before
+    with Store(db) as s:
+        assert s.calibration(cid)["device_id"] == "G"

@@ -36,6 +36,29 @@ def require_existing(path: str) -> None:
         raise InputError(path, None, "empty file, not a station database (mistyped --db or $STATION_DB?)")
 
 
+def refuse_database_as_output(args, out: str | None, option: str) -> None:
+    """Refuse an output ``out`` that is the station database (or its -wal, -shm, -journal
+    file): the atomic write would replace the whole database with the export."""
+    import os
+
+    from station.cli import db_path
+
+    if not out or out == "-":
+        return
+    path = db_path(args)
+    if path == ":memory:" or path.startswith("file:"):
+        return
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        db_file = path + suffix
+        try:
+            same = os.path.samefile(out, db_file)
+        except (OSError, ValueError):  # one of them does not exist (or cannot be named)
+            same = False
+        if same:
+            what = "the station database" + (f"'s {suffix[1:]} file" if suffix else "")
+            raise InputError(out, None, f"{option} is {what}: choose another name (nothing written)")
+
+
 @contextmanager
 def open_store(args, create: bool = False):
     """The Store at `station.cli.db_path(args)`; db-layer ValueError/NotFound -> InputError.

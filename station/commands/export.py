@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from station.commands._dbutil import open_store
+from station.commands._dbutil import open_store, refuse_database_as_output
 from station.errors import InputError
 from station.fileio import atomic_write_text, cannot_write
 
@@ -49,6 +49,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from station.firmware_export import export
 
+    refuse_database_as_output(args, args.output, "-o")
     with open_store(args) as store:
         cal = store.calibration(args.calibration_id)
         meta = store.capture_info(cal["capture_id"])["meta"] if cal["capture_id"] is not None else {}

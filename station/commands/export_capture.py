@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from station.commands._dbutil import open_store
+from station.commands._dbutil import open_store, refuse_database_as_output
 from station.errors import InputError
 
 
@@ -28,6 +28,7 @@ def run(args: argparse.Namespace) -> int:
 
     if (args.capture_id is None) == (args.calibration is None):
         raise InputError(None, None, "export-capture: give a CAPTURE_ID or --calibration ID (one of them)")
+    refuse_database_as_output(args, args.output, "-o")
     with open_store(args) as store:
         capture_id = args.capture_id
         if capture_id is None:

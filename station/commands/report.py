@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from station.commands._dbutil import open_store
+from station.commands._dbutil import open_store, refuse_database_as_output
 from station.fileio import atomic_write_text, cannot_write
 
 
@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out not in (None, "-") and not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
         raise InputError(args.out, None, "its folder does not exist")
+    refuse_database_as_output(args, args.out, "--out")
     with open_store(args) as store:
         with cannot_write(args.out, "the report"):
             path = write_report(store, args.calibration_id, args.out)
