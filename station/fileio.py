@@ -128,6 +128,17 @@ def check_input(path, what: str = "a capture file", *, folder: bool = False) -> 
     _refuse_kind(path, mode, what, folder)
 
 
+def same_file(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one file: the same file when both exist (links,
+    ``./``), else the same resolved path (one output named twice before it exists)."""
+    try:
+        if os.path.exists(a) and os.path.exists(b):
+            return os.path.samefile(a, b)
+        return os.path.realpath(a) == os.path.realpath(b)
+    except (OSError, ValueError):
+        return False
+
+
 def check_output(path) -> os.stat_result | None:
     """Refuse an output ``path`` that exists and is no regular file (a named pipe, a device):
     the atomic rename would replace it. Returns its stat (None when it does not exist; a

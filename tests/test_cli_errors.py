@@ -112,6 +112,28 @@ def test_simulate_truth_to_an_unwritable_place(tmp_path, capsys, where):
     assert not [p for p in tmp_path.rglob(".truth-*")]
 
 
+def test_an_output_named_twice_or_the_input_is_refused_and_nothing_replaced(tmp_path, capsys):
+    """`simulate --out c.csv --truth ./c.csv` wrote the capture, then the truth over it (a JSON
+    file where the capture was, exit 0); `noise rec.csv --format kalibr --out rec.csv`
+    replaced the record with its imu.yaml. Both refused before anything is written."""
+    out = tmp_path / "c.csv"
+    code, stdout, err = run(
+        capsys, "simulate", "--procedure", "gyro-drift", "--out", out, "--truth", tmp_path / "." / "c.csv"
+    )
+    assert code == 2 and stdout == ""
+    assert "--truth is the --out file" in one_line(err)
+    assert not out.exists()
+    code, _, err = run(capsys, "simulate", "--procedure", "gyro-drift", "--out", out, "--seed", "400002")
+    assert code == 0, err
+    before = out.read_bytes()
+    (tmp_path / "link.csv").symlink_to(out)
+    for target in (out, tmp_path / "link.csv"):
+        code, stdout, err = run(capsys, "noise", out, "--format", "kalibr", "--out", target)
+        assert code == 2 and stdout == ""
+        assert one_line(err) == f"station: {target}: --out is the input file: choose another name"
+    assert out.read_bytes() == before
+
+
 @pytest.mark.parametrize(
     "procedure, option, says",
     [

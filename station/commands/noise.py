@@ -9,7 +9,7 @@ import os
 import sys
 
 from station.errors import InputError
-from station.fileio import atomic_write_text, cannot_write
+from station.fileio import atomic_write_text, cannot_write, same_file
 from station.textsafe import safe
 
 
@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
     out_path = args.out or "imu.yaml"
     if args.format == "kalibr" and os.path.isdir(out_path):
         raise InputError(out_path, None, "is a folder: give --out a file name")
+    if args.format == "kalibr" and same_file(out_path, args.file):  # the yaml would replace the record
+        raise InputError(out_path, None, "--out is the input file: choose another name")
     result = imu_noise(read_capture(args.file))
     if result.get("withheld"):  # a record that moves: the warning, no figures, no imu.yaml; exit 1
         if args.json:
