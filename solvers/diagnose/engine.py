@@ -113,6 +113,13 @@ class Problem:
     # per row: the id of the group of rows whose noise is one (``independent_groups``); None:
     # every row its own. What the generic extension's degrees of freedom are counted in.
     shared_noise: np.ndarray | None = None
+    # a row the tested model fits with a leverage above this is left out of the held-out comparison
+    # of that model with the current one (None: every row counts): it alone determines some
+    # direction of the parameters, so its held-out prediction is an extrapolation along that
+    # direction and tests nothing (a P2 table with one high speed: each of its rows carries the
+    # baseline's D and the cubic's C3 by itself, and their held-out errors, 10-100 times the
+    # noise, decided against a 10σ cubic)
+    cv_max_leverage: float | None = None
 
 
 @dataclass
@@ -623,6 +630,7 @@ class _Eval:
     n_kind: int = 0  # rows of that kind
     dof_kind: float = 0.0  # their residual degrees of freedom with the candidate fitted
     groups_left: int | None = None  # a generic term: degrees of freedom left in independent groups
+    cv_ref: float | None = None  # the current model's held-out RMS over the rows ``cv`` is taken on (None: all)
 
     @property
     def D_rob(self) -> float:
@@ -633,8 +641,10 @@ class _Round:
     """One round of candidate tests at a fixed linearisation ``r0 + A δ``: the Gram blocks of
     ``A`` (total and per CV fold) are formed once, each candidate adds only its own."""
 
-    def __init__(self, A, r0, sigma, folds, primary, rows=None):
+    def __init__(self, A, r0, sigma, folds, primary, rows=None, max_leverage=None):
         self.A, self.r0, self.sigma, self.primary, self.rows = A, r0, sigma, primary, rows
+        self.max_leverage = max_leverage
+        self.out0 = None  # the current model's held-out residuals (weighted), when rows are masked
         self.fold_ids = [np.flatnonzero(folds == f) for f in np.unique(folds)]
         self.GA = A.T @ A
         self.bA = A.T @ r0
@@ -642,8 +652,8 @@ class _Round:
         self.bAf = [A[i].T @ r0[i] for i in self.fold_ids]
         self.QA = _orth(A)
 
-    def solve(self, J):
-        """(δ, full residual e, held-out RMS) of ``r0 + [A J] δ``."""
+    def _held_out(self, J):
+        """Full-fit step δ, residual e and held-out residuals (weighted) of ``r0 + [A J] δ``."""
         A, r0 = self.A, self.r0
         p0 = A.shape[1]
         C = A.T @ J
@@ -659,20 +669,37 @@ class _Round:
             bf = np.concatenate([bAf, Ji.T @ ri])
             df = _solve_normal(G - Gf, -(b - bf))
             out[i] = ri + Ai @ df[:p0] + Ji @ df[p0:]
+        return d, e, out
+
+    def _rms(self, out, keep=None) -> float:
         if self.primary is not None:
             cv = out * float(np.median(self.sigma[self.primary]))
         else:
             cv = out * self.sigma
-        if self.rows is not None:
-            cv = cv[self.rows]
-        return d, e, float(np.sqrt(np.mean(cv**2)))
+        mask = np.ones(len(cv), bool) if self.rows is None else np.asarray(self.rows, bool).copy()
+        if keep is not None:
+            mask &= keep
+        return float(np.sqrt(np.mean(cv[mask] ** 2))) if mask.any() else 0.0
+
+    def solve(self, J):
+        """(δ, full residual e, held-out RMS, the current model's held-out RMS over the same rows
+        or None when that is all of them) of ``r0 + [A J] δ``."""
+        d, e, out = self._held_out(J)
+        if self.max_leverage is None:
+            return d, e, self._rms(out), None
+        Q = _orth(np.hstack([self.A, J]))
+        keep = np.sum(Q**2, axis=1) <= self.max_leverage
+        if self.out0 is None:
+            self.out0 = self._held_out(np.zeros((len(self.r0), 0)))[2]
+        return d, e, self._rms(out, keep), self._rms(self.out0, keep)
 
 
 class _Rounds:
     """The rounds of one linearisation, one per fold set (made when first asked for)."""
 
-    def __init__(self, A, r0, sigma, fold_map, primary):
+    def __init__(self, A, r0, sigma, fold_map, primary, max_leverage=None):
         self.args = (A, r0, sigma, primary)
+        self.max_leverage = max_leverage
         self.fold_map = fold_map
         self.rounds: dict = {}
         self.cvs: dict = {}
@@ -682,7 +709,7 @@ class _Rounds:
         if key not in self.rounds:
             A, r0, sigma, primary = self.args
             folds, rows = self._folds(key)
-            self.rounds[key] = _Round(A, r0, sigma, folds, primary, rows)
+            self.rounds[key] = _Round(A, r0, sigma, folds, primary, rows, self.max_leverage)
         return self.rounds[key]
 
     def cv0(self, key) -> float:
@@ -743,7 +770,7 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
     A, QA = rnd.A, rnd.QA
     Jp = cc.J - QA @ (QA.T @ cc.J)
     k = _gram_rank(Jp.T @ Jp) if Jp.shape[1] else 0
-    d, e, cvc = rnd.solve(cc.J)
+    d, e, cvc, cv_ref = rnd.solve(cc.J)
     if cc.cand.scan is not None and k > 0:
         k += 1  # the scanned scalar (hard-iron step time) is a parameter too
     D = term_cur - typed_fit_term(e, types)
@@ -751,7 +778,7 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
     sig = cc.J @ d[A.shape[1] :]
     sig = sig - QA @ (QA.T @ sig)
     infl = serial_inflation(e, sig, problem.series)
-    ev = _Eval(cc, db, cvc, sig, int(k), D, infl)
+    ev = _Eval(cc, db, cvc, sig, int(k), D, infl, cv_ref=cv_ref)
     t = _only_kind(problem, cc.J, types)
     if t is not None and k > 0:
         # tested on its own rows: their deviance, against the residual degrees of freedom they
@@ -811,8 +838,14 @@ def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float
     return ev.D_rob > _bound(problem, ev, m, n, rank_cur, scale)[0]
 
 
+def _cv_lower(ev: _Eval, cv_cur: float) -> bool:
+    """Whether ``ev`` predicts held-out rows better than the current model (held-out RMS
+    ``cv_cur``), over the rows its held-out RMS is taken on (``Problem.cv_max_leverage``)."""
+    return ev.cv < (cv_cur if ev.cv_ref is None else ev.cv_ref)
+
+
 def _passes(problem, ev: _Eval, m: int, cv_cur: float, rank_cur: int, n: int, scale: float = 1.0) -> bool:
-    return ev.cv < cv_cur and _significant(problem, ev, m, rank_cur, n, scale)
+    return _cv_lower(ev, cv_cur) and _significant(problem, ev, m, rank_cur, n, scale)
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
@@ -950,7 +983,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 if cand.reason is not None:
                     ok = False
                 else:
-                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                    rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
                     ok = _passes(
                         problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n
@@ -992,7 +1025,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     r0 = wo.weighted_residuals
                     J0, _, _ = jacobian(problem, wo.params, fr)
                     Q0 = _orth(J0)
-                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                    rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
                     evs = []
                     for oc, _ in (a, b):
                         cand = _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
@@ -1029,7 +1062,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         term_cur = typed_fit_term(r0, types)
         cv_cur = cv_rms(J0, r0, sigma, folds, primary)
         cands = [_candidate_columns(problem, state, c, Q0, r0) for c in remaining]
-        rounds = _Rounds(J0, r0, sigma, fold_map, primary)
+        rounds = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
         evals = []
         for cc in cands:
             if cc.reason is not None:
@@ -1073,7 +1106,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     "score": score,  # the threshold scale F at which it would just pass
                     "F": candidate_threshold(problem, ev.cc.cand.name, ev.kind),
                     "kind": ev.kind,
-                    "cv_lower": bool(ev.cv < rounds.cv0(ev.cc.cand.folds)),
+                    "cv_lower": _cv_lower(ev, rounds.cv0(ev.cc.cand.folds)),
                     "inflation": ev.infl,
                 }
         first = False
@@ -1126,7 +1159,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         rank_cur = _gram_rank(J0.T @ J0)
         evals = []
         rp = r0 - Q0 @ (Q0.T @ r0)
-        rounds = _Rounds(J0, r0, sigma, fold_map, primary)
+        rounds = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
         for item in gens:
             family = item[1] if item[0] == "scan" else [item]
             pool = []  # (residual sum of squares it leaves, candidate, columns, description)
@@ -1161,7 +1194,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     chosen = ev
                 if not _significant(problem, ev, m_gen, rank_cur, n, problem.generic_scale):
                     break
-                if ev.cv < rounds.cv0(cand.folds):
+                if _cv_lower(ev, rounds.cv0(cand.folds)):
                     chosen = ev
                     break
             chosen.cc.cand.setup()
@@ -1237,13 +1270,13 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         cc_ = _candidate_columns(problem, fit_.params, cand_, _orth(J0_), r0_)
         if cc_.reason is not None:
             return False
-        rr_ = _Rounds(J0_, r0_, sigma, fold_map, primary)
+        rr_ = _Rounds(J0_, r0_, sigma, fold_map, primary, problem.cv_max_leverage)
         ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), typed_fit_term(r0_, types), types, n)
         if ev_.k <= 0 or n - _gram_rank(J0_.T @ J0_) - ev_.k < MIN_DOF:
             return False
         if _count_groups(problem, ev_, J0_, scanned).groups_left is not None and ev_.groups_left < MIN_DOF:
             return False
-        return ev_.cv < rr_.cv0(cand_.folds) and ev_.D_rob > decisive_margin(problem)
+        return _cv_lower(ev_, rr_.cv0(cand_.folds)) and ev_.D_rob > decisive_margin(problem)
 
     generic_effect = None
     generic_tied: list[dict] = []  # library effects the generic one displaced by a margin that is not decisive
@@ -1283,7 +1316,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 cand = _candidate_columns(problem, wo.params, res0[0].cc.cand, Q0, r0)
                 ok = False
                 if cand.reason is None:
-                    rr = _Rounds(J0, r0, sigma, fold_map, primary)
+                    rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
                     ev.k += 1 if "at" in res0[0].desc or "period" in res0[0].desc else 0
                     _count_groups(problem, ev, J0, "at" in res0[0].desc or "period" in res0[0].desc)
