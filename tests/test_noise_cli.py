@@ -14,7 +14,7 @@ import re
 import numpy as np
 import pytest
 
-from station.capture import Capture, write_capture
+from station.capture import Capture, read_capture, write_capture
 from station.cli import main
 
 RATE_HZ = 200.0
@@ -122,3 +122,36 @@ def test_text_with_plot_and_bad_input(capsys, tmp_path, monkeypatch):
     assert code == 2 and out == "" and err.count("\n") == 1 and "table of averages" in err
     code, out, err = run(capsys, "noise", cap, "--out", tmp_path / "x.yaml")
     assert code == 2 and "--format kalibr" in err and not (tmp_path / "x.yaml").exists()
+
+
+def test_a_stated_rate_the_time_column_contradicts_is_refused(capsys, tmp_path):
+    """A record stating 2 Hz on 200 Hz rows gave a noise density 10x too high (the Allan
+    analysis took the stated rate over the t column) with exit 0. Now one line naming the
+    metadata's line and both rates, nothing written; a record with a gap (an unplug) or
+    bursty time stamps still gives its figures, at the stated rate."""
+    cap = still_capture(tmp_path / "still.csv", seed=4, seconds=120.0)
+    text = cap.read_text()
+    lines = text.splitlines()
+    lineno = next(i for i, line in enumerate(lines, 1) if line.startswith("# sample_rate_hz"))
+    bad = tmp_path / "bad.csv"
+    bad.write_text(text.replace("# sample_rate_hz: 200.0", "# sample_rate_hz: 2"))
+    code, out, err = run(capsys, "noise", bad, "--format", "kalibr", "--out", tmp_path / "imu.yaml")
+    assert code == 2 and out == "" and err.count("\n") == 1, err
+    assert f"bad.csv:{lineno}: metadata 'sample_rate_hz': 2 Hz, but the t column holds 200 rows per second" in err
+    assert not (tmp_path / "imu.yaml").exists()
+    good = json.loads(run(capsys, "noise", cap, "--json")[1])
+    # an unplug: a third of the rows gone from the middle (rows per second fall, the median step does not)
+    c = read_capture(cap)
+    n = len(c.columns["t"])
+    keep = np.r_[0 : n // 3, 2 * n // 3 : n]
+    gap = tmp_path / "gap.csv"
+    write_capture(gap, Capture(meta=dict(c.meta), columns={k: v[keep] for k, v in c.columns.items()}, path=gap))
+    code, out, err = run(capsys, "noise", gap, "--json")
+    assert code == 0, err
+    assert json.loads(out)["sample_rate_hz"] == good["sample_rate_hz"] == RATE_HZ
+    # bursty host stamps: rows arrive in fives with one time each (the median step is 0)
+    bursty = tmp_path / "bursty.csv"
+    t = np.repeat(c.columns["t"][::5], 5)[:n]
+    write_capture(bursty, Capture(meta=dict(c.meta), columns=dict(c.columns, t=t), path=bursty))
+    code, out, err = run(capsys, "noise", bursty, "--json")
+    assert code == 0, err
