@@ -173,3 +173,32 @@ def test_bad_limit_or_tolerance_one_line_nothing_written(tmp_path, args, needles
     db = tmp_path / "none.db"
     assert_one_line_refusal(run_station("devices", "add", "G9", *args, "--db", db), *needles)
     assert not db.exists()  # refused before the database is made
+
+
+def test_a_limit_that_limits_nothing_of_the_device_is_refused(tmp_path, capsys):
+    """`--limit dirft=-10:10` (a typo) or `B[9]=...` on a device whose calibrations say what
+    it has was stored and never checked: every later calibration passed it by. Refused in one
+    line naming what the device has; nothing stored. A limit for another procedure's first
+    calibration, and any limit on a device with no calibration yet, are still taken."""
+    from db import Store
+    from station.cli import main
+
+    db = str(tmp_path / "s.db")
+    cap = tmp_path / "p1.csv"
+    assert main(["simulate", "--procedure", "accel-tabletop", "--out", str(cap), "--seed", "400003"]) == 0
+    assert main(["calibrate", str(cap), "--save", "--device", "A1", "--db", db]) == 0
+    capsys.readouterr()
+    for item, says in [
+        ("dirft=-10:10", "no parameter 'dirft' in this device's calibrations (B, M)"),
+        ("B[9]=-1:1", "B of this device is B[0] … B[2]: no B[9]"),
+        ("M[3][0]=0:1", "M of this device is M[0][0] … M[2][2]: no M[3][0]"),
+    ]:
+        code = main(["devices", "add", "A1", "--limit", item, "--db", db])
+        out, err = capsys.readouterr()
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"--limit {item!r}: {says}" in err
+    assert Store(db).get_device("A1")["limits"] == {}
+    for item in ("B[2]=-25:25", "M=-20:20", "residual_rms=:0.01", "drift=-10:10"):  # drift: P4's, not yet run
+        assert main(["devices", "add", "A1", "--limit", item, "--db", db]) == 0, capsys.readouterr().err
+    assert sorted(Store(db).get_device("A1")["limits"]) == ["B[2]", "M", "drift", "residual_rms"]
+    assert main(["devices", "add", "NEW", "--limit", "anything=0:1", "--db", db]) == 0

@@ -156,8 +156,39 @@ def typed_limit(item: str, contexts: list[dict]) -> tuple[str, list | None, str]
         raise ValueError(f"{exc}{_in_unit(name, unit)}") from None
     if pair is None:
         return name, None, ""
+    _check_limit_name(item, name, contexts)
     ctx, unit = _typed_unit(item, name, contexts)
     return name, [None if x is None else stored_value(ctx, name, x) for x in pair], unit
+
+
+def _check_limit_name(item: str, name: str, contexts: list[dict]) -> None:
+    """ValueError when the device's calibrations show ``name`` limits nothing: an element
+    beyond its block (``B[9]``), or a name no calibrated procedure has and no other
+    procedure's parameter list claims (a typo: ``dirft``). A limit was stored and never
+    checked. Without a calibration nothing is known and nothing is refused."""
+    from station.procedures.review import _block, flatten, unit_context
+
+    names: dict[str, set[str]] = {}  # block -> its scalar names, over the device's calibrations
+    procedures = set()
+    for ctx in contexts:
+        params = (ctx or {}).get("params")
+        if not params:
+            continue
+        procedures.add(ctx.get("procedure"))
+        for key in flatten(params):
+            names.setdefault(_block(key), set()).add(key)
+    if not names or name == "residual_rms" or name in names or any(name in keys for keys in names.values()):
+        return
+    block = _block(name)
+    if block in names:
+        keys = sorted(names[block])
+        span = keys[0] if len(keys) == 1 else f"{keys[0]} … {keys[-1]}"
+        raise ValueError(f"{item!r}: {block} of this device is {span}: no {name}")
+    owner = unit_context(name, []).get("procedure")
+    if owner is not None and owner not in procedures:
+        return  # another procedure's parameter: a limit for its first calibration
+    shown = ", ".join(sorted(names))
+    raise ValueError(f"{item!r}: no parameter {name!r} in this device's calibrations ({shown})")
 
 
 def _limits(items: list[str], contexts: list[dict]) -> dict | None:
