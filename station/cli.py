@@ -15,7 +15,7 @@ import sys
 import warnings
 
 from station import __version__
-from station.errors import StationError, take_deferred_warnings
+from station.errors import InputError, StationError, take_deferred_warnings
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
@@ -47,6 +47,33 @@ def build_parser() -> argparse.ArgumentParser:
         for name in set(sub.choices) - before:
             _common(sub.choices[name])
     return parser
+
+
+# arguments that are text the station stores or writes (ids, names, notes, limits), not paths:
+# a path may hold any bytes the system allows, these must be characters
+TEXT_ARGS = ("id", "device", "model", "notes", "operator", "reject", "override", "limit", "tolerance", "meta")
+
+
+def _check_text_args(args: argparse.Namespace) -> None:
+    """Refuse a text argument holding bytes that are not UTF-8 (kept by Python as lone
+    surrogates): SQLite's encoder failed on them deep inside and the line blamed the
+    database ("cannot read the station database: 'utf-8' codec can't encode ...")."""
+    for name in TEXT_ARGS:
+        value = getattr(args, name, None)
+        for text in value if isinstance(value, list) else [value]:
+            if not isinstance(text, str):
+                continue
+            bad = [ch for ch in text if 0xDC80 <= ord(ch) <= 0xDCFF]
+            if bad:
+                from station.textsafe import safe
+
+                shown = text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+                option = name if name == "id" else "--" + name
+                raise InputError(
+                    None,
+                    None,
+                    f"{option} '{safe(shown)}': not UTF-8 text (byte 0x{ord(bad[0]) - 0xDC00:02x}); give it in UTF-8",
+                )
 
 
 def db_path(args: argparse.Namespace) -> str:
@@ -106,6 +133,7 @@ def main(argv: list[str] | None = None) -> int:
             warnings.simplefilter("ignore", RuntimeWarning)
         take_deferred_warnings()  # none from an earlier main() in this process
         try:
+            _check_text_args(args)
             status = int(func(args) or 0)
             for where, w in take_deferred_warnings():
                 print(_one_line(f"station: {where}: warning: {w}"), file=sys.stderr)

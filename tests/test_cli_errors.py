@@ -546,3 +546,35 @@ def test_an_unexpected_error_is_still_one_line(monkeypatch, capsys):
     monkeypatch.setenv("STATION_DEBUG", "1")
     with pytest.raises(ZeroDivisionError):
         main(["walkthrough"])
+
+
+def test_text_arguments_that_are_not_utf8_are_refused_naming_the_argument(tmp_path, ldv_capture):
+    """`--device $'ab\\xff'` (a byte that is no UTF-8 character, from a script or a serial
+    number read raw) failed inside SQLite's encoder and the line blamed the database: "cannot
+    read the station database: 'utf-8' codec can't encode ...". Now the argument is named,
+    its bytes shown escaped, and no database is made. A file name may hold such bytes."""
+    import os
+
+    db = tmp_path / "s.db"
+    cases = [
+        ([b"calibrate", os.fsencode(ldv_capture), b"--save", b"--device", b"ab\xff\x1b"], "--device 'ab\\xff\\x1b'"),
+        ([b"devices", b"add", b"X\xfe"], "id 'X\\xfe'"),
+        ([b"devices", b"add", b"X", b"--limit", b"dr\xffift=1:2"], "--limit 'dr\\xffift=1:2'"),
+    ]
+    for argv, says in cases:
+        res = subprocess.run(
+            [os.fsencode(sys.executable), b"-m", b"station", *argv, b"--db", os.fsencode(db)],
+            cwd=ROOT,
+            capture_output=True,
+            timeout=120,
+        )
+        err = res.stderr.decode("utf-8")
+        assert res.returncode == 2 and res.stdout == b"" and err.count("\n") == 1, err
+        assert err.startswith(f"station: {says}: not UTF-8 text (byte 0x"), err
+        assert "database" not in err and not db.exists()
+    odd = tmp_path / os.fsdecode(b"n\xffame.csv")
+    odd.write_bytes(ldv_capture.read_bytes())
+    res = subprocess.run(
+        [sys.executable, "-m", "station", "calibrate", str(odd)], cwd=ROOT, capture_output=True, timeout=120
+    )
+    assert res.returncode == 0, res.stderr
