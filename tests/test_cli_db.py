@@ -111,6 +111,10 @@ def test_db_option_before_the_action_and_env(capsys, db, monkeypatch):
         (["history", "nope"], 'no device "nope"'),
         (["drift", "nope"], 'no device "nope"'),
         (["due", "--within", "-3"], "--within must not be negative"),
+        # was "cannot convert float NaN to integer" and the catch-all OverflowError
+        (["due", "--within", "nan"], "--within must be at most 36525 days (100 years), got nan"),
+        (["due", "--within", "1e400"], "--within must be at most 36525 days (100 years), got inf"),
+        (["due", "--within", "1e6"], "--within must be at most 36525 days (100 years), got 1e+06"),
     ],
 )
 def test_bad_input_one_line_exit_2(capsys, db, argv, needle):

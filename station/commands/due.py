@@ -13,6 +13,8 @@ from station.commands._dbutil import open_store, print_json
 from station.errors import InputError
 from station.textsafe import safe
 
+MAX_WITHIN_DAYS = 36525.0  # the longest recalibration interval a device may have (db.store.MAX_INTERVAL_DAYS)
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -31,6 +33,10 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.within < 0:
         raise InputError(None, None, f"--within must not be negative, got {args.within:g}")
+    if not args.within <= MAX_WITHIN_DAYS:  # NaN and inf too: they failed deep in the date arithmetic
+        raise InputError(
+            None, None, f"--within must be at most {MAX_WITHIN_DAYS:g} days (100 years), got {args.within:g}"
+        )
     with open_store(args) as store:
         items = store.due(within_days=args.within, now=args.now)
     if args.json:
