@@ -250,3 +250,30 @@ def test_inspect_shows_what_import_would_write_and_instance_spares_other_sensors
     assert s["metadata"]["sensor_device_id"] == "2621474"  # sensor_gyro[2], CAL_GYRO2_ID
     assert [c["name"] for c in s["columns"] if c["name"].startswith("m")] == []
     assert "no sensor_mag[2]" in res.stderr
+
+
+def test_an_instance_asked_of_a_log_with_one_combined_stream_is_refused(tmp_path, px4_dir):
+    """`--instance 5` on a log that has only sensor_combined (no per-sensor topics) imported
+    the board's selected sensor without a word: the bench engineer asked for another IMU.
+    Refused naming why; --instance 0 (or none) still reads it."""
+    from tests.station_run import assert_one_line_refusal
+
+    out = tmp_path / "o.csv"
+    res = run_station("import", px4_dir / "sample.ulg", "--procedure", "gyro-drift", "--out", out, "--instance", "5")
+    assert_one_line_refusal(res, "sample.ulg: --instance 5: the log has no sensor_accel/sensor_gyro/sensor_mag topics")
+    assert not out.exists()
+    res = run_station(
+        "import",
+        px4_dir / "sample_log_small.ulg",
+        "--procedure",
+        "gyro-drift",
+        "--out",
+        out,
+        "--source",
+        "combined",
+        "--instance",
+        "1",
+    )
+    assert_one_line_refusal(res, "--instance 1: sensor_combined holds one stream, the board's selected sensor")
+    assert not out.exists()
+    _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "gyro-drift", "--instance", "0")

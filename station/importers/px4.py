@@ -203,6 +203,18 @@ def read(
                 "--source combined reads those (already corrected by the board)"
             )
     else:
+        if instance not in (None, 0):  # one stream: the board's selected sensor, whatever was asked
+            raise InputError(
+                path,
+                None,
+                f"--instance {instance}: "
+                + (
+                    "the log has no sensor_accel/sensor_gyro/sensor_mag topics to pick it from; "
+                    if not have_raw
+                    else ""
+                )
+                + "sensor_combined holds one stream, the board's selected sensor (--instance 0 or none reads it)",
+            )
         d = combined[min(combined)].data
         t_us = np.asarray(d["timestamp"], dtype=np.int64)
         selection = _topics(ulog, "sensor_selection")
