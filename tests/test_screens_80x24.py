@@ -674,3 +674,25 @@ def test_a_soft_iron_limit_stored_before_any_compass_calibration_says_no_invente
     hard = next(line for line in shown.splitlines() if "hard_iron" in line)
     assert soft.split()[-1] == "mag_unit" and "nT per mag_unit" in soft, soft
     assert hard.split()[-1] == "mag_unit", hard
+
+
+def test_history_status_words_fit_their_column(tmp_path):
+    """History's device list showed "never c" for a device never calibrated (a 7-wide column
+    cut "never calibrated"): every status Store.due gives is now said whole in the column."""
+    from station.screens.history import STATUS_WIDTH
+
+    db = str(tmp_path / "s.db")
+    Store(db).add_device("NEW-1")
+
+    async def story():
+        app = make_app(db)
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f2")
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "NEW-1" in text_of(app, "#devices"))
+            return text_of(app, "#devices")
+
+    shown = asyncio.run(story())
+    row = next(line for line in shown.splitlines() if "NEW-1" in line)
+    assert "no cal" in row and "never c" not in row, row
+    for word in ("overdue", "due", "ok", "no cal"):
+        assert len(word) <= STATUS_WIDTH

@@ -26,6 +26,9 @@ def _short(procedure: str) -> str:
 from station.messages import StoreLoaded  # noqa: E402
 from station.textsafe import safe, tui_markup  # noqa: E402
 
+STATUS_WIDTH = 7  # the devices table's status column: "overdue"
+SHORT_STATUS = {"never calibrated": "no cal"}  # Store.due's statuses that do not fit STATUS_WIDTH
+
 
 class HistoryScreen(Screen):
     SUB_TITLE = "devices and calibrations"
@@ -66,8 +69,9 @@ class HistoryScreen(Screen):
     def on_mount(self) -> None:
         t = self.query_one("#devices", DataTable)
         t.add_columns("device", "n")
-        # fixed width: "overdue" fits whatever render sees the rows first (the snapshot raced on it)
-        t.add_column("status", width=7)
+        # fixed width: "overdue" fits whatever render sees the rows first (the snapshot raced on it);
+        # the longer words are said shorter (SHORT_STATUS): "never calibrated" read "never c"
+        t.add_column("status", width=STATUS_WIDTH)
         c = self.query_one("#calibrations", DataTable)
         c.add_columns("#", "time (UTC)", "proc", "residual", "state")
         self.load()
@@ -107,6 +111,7 @@ class HistoryScreen(Screen):
             for d in self.devices:
                 st = status.get(d["id"])
                 word = st["status"] if st else "ok"
+                word = SHORT_STATUS.get(word, word)
                 t.add_row(tui_markup(d["id"]), str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
             text = "\n".join(tui_markup(f"{d['device_id']}: {d['status']} — {d['reason']}"[:200]) for d in bad[:3])
