@@ -54,3 +54,34 @@ def test_p1_generic_term_counts_holds_not_parts(tmp_path, capsys):
     res = diagnose_generated(tmp_path, capsys, "accel-tabletop", "temperature_bias", 493014)[0]
     assert "temperature_bias" in res["verdict"], (res["verdict"], res["candidates"])
     assert not any(v.startswith("residual:") for v in res["verdict"]), (res["verdict"], res["effects"])
+
+
+def test_p1_periodic_bias_within_holds_costs_holds_only_its_part_on_their_means(tmp_path, capsys, monkeypatch):
+    """A periodic bias at 10σ in a P1 time series of 17 unlabelled holds of 44 s (4 parts each)
+    with a period of about 3 holds: about half of the periodic term's energy beyond the baseline
+    varies within the holds, which the parts test (on their own time blocks). Counted as its whole rank on the hold means
+    (6 columns and the period beside the baseline's 9 on 17 holds: 1 left) it was refused at a
+    deviance of 130 and nothing was named; counted in proportion to its energy on the hold means
+    (`engine.independent_groups`) it leaves more than 3, and ``residual:time`` is named,
+    periodic, its period recovered."""
+    res, pat, _, _ = _diagnose_generated(tmp_path, capsys, monkeypatch, "accel-tabletop", "periodic_bias", 463015)
+    assert "residual:time" in res["verdict"], (res["verdict"], res["candidates"])
+    e = next(x for x in res["effects"] if x["name"] == "residual:time")
+    assert e["shape"] == "periodic", e
+    assert abs(e["params"]["period"] / pat["period_s"] - 1.0) < 0.05, (e["params"]["period"], pat["period_s"])
+
+
+def test_p1_bias_step_counts_holds_in_the_model_it_is_named_in(tmp_path, capsys, monkeypatch):
+    """A bias step at 10σ in a P1 time series of 16 unlabelled holds, taken first by the library's
+    time drift: the step passes against the baseline (16 − 9 − 3 − its place = 3 holds left) and
+    displaces the drift (tied to it), but its degrees of freedom were also counted beside the drift
+    it displaces (0 left) and nothing outside the library was named. Counted in the model it is
+    named in, ``residual:time`` is named, a step within a tenth of the record (about one hold and
+    move) of the hidden one's time."""
+    res, pat, _, cols = _diagnose_generated(tmp_path, capsys, monkeypatch, "accel-tabletop", "bias_step", 481026)
+    assert "residual:time" in res["verdict"], (res["verdict"], res["candidates"])
+    e = next(x for x in res["effects"] if x["name"] == "residual:time")
+    assert e["shape"] == "step", e
+    # the generator's step is at a fraction of the record; 16 holds: one hold and move is 1/16 of it
+    t = cols["t"]
+    assert abs(e["params"]["at"] - (t[0] + pat["at"] * (t[-1] - t[0]))) < 0.1 * (t[-1] - t[0]), (e["params"], pat)

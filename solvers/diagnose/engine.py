@@ -54,6 +54,7 @@ RIVAL_CORR = 0.8  # |corr| of two candidates' fitted signatures above this: comp
 MAX_FOLDS = 10
 ALPHA = 0.05  # family-wise level the per-candidate deviance quantiles start from
 MIN_DOF = 3  # an extension must leave this many degrees of freedom
+GROUPS_TOL = 1e-6  # round-off in an effective count of groups (a step between two holds leaves a whole number)
 # a generic term displaces library effects whose columns hold most (> CONFUSION_CORR) of its
 # signature only when its model's BIC is lower by this much (χ²₁(0.95)): a clearly better fit
 DISPLACE_MARGIN = 3.84
@@ -629,7 +630,7 @@ class _Eval:
     kind: int | None = None  # the one row kind its columns touch, when tested on it alone (kind_thresholds)
     n_kind: int = 0  # rows of that kind
     dof_kind: float = 0.0  # their residual degrees of freedom with the candidate fitted
-    groups_left: int | None = None  # a generic term: degrees of freedom left in independent groups
+    groups_left: float | None = None  # a generic term: degrees of freedom left in independent groups
     cv_ref: float | None = None  # the current model's held-out RMS over the rows ``cv`` is taken on (None: all)
 
     @property
@@ -736,13 +737,17 @@ def _gram_rank(G: np.ndarray) -> int:
     return int(np.sum(w > max(w.max(), 1e-300) * 1e-20)) if w.size else 0
 
 
-def independent_groups(problem: Problem, A: np.ndarray, J: np.ndarray) -> int:
+def independent_groups(problem: Problem, A: np.ndarray, J: np.ndarray) -> float:
     """Degrees of freedom the data have left, counted in independent groups of rows, after the
     model ``A`` (weighted Jacobian) and a generic term's columns ``J``: the groups
-    (``problem.shared_noise``) minus the rank the two together have on the groups' shared noise
-    (each column projected per group on the shared direction ``1/σ`` of its rows, as a common
-    offset in the data is in the weighted rows). A model that leaves none can fit every
-    group's mean, noise included, and the rows within groups cannot test it.
+    (``problem.shared_noise``) minus the rank the model has on the groups' shared noise (each
+    column projected per group on the shared direction ``1/σ`` of its rows, as a common offset
+    in the data is in the weighted rows) minus the term's **effective** rank there: of the
+    term's part beyond the model (orthonormal columns ``q``), the energy ``Σ |P q|²`` that lies
+    on the group means the model leaves free (``P``). A model that leaves no group free can fit
+    every group's mean, noise included, and the rows within groups cannot test it; a term whose
+    energy lies within groups (a period shorter than a hold averages out in its mean) is tested
+    by the rows within them, and costs the groups only the part it has on their means.
 
     What it counts, per procedure: P1 time series, the holds (the 4 parts of a hold share its
     bias instability, so a smooth function of time sees one value per hold beyond what changes
@@ -752,10 +757,30 @@ def independent_groups(problem: Problem, A: np.ndarray, J: np.ndarray) -> int:
     g = np.arange(n) if problem.shared_noise is None else np.asarray(problem.shared_noise)
     _, inv = np.unique(g, return_inverse=True)
     w = 1.0 / np.asarray(problem.sigma, float)
-    M = np.hstack([A, J])
-    U = np.zeros((int(inv.max()) + 1, M.shape[1]))
-    np.add.at(U, inv, w[:, None] * M)
-    return U.shape[0] - _gram_rank(U.T @ U)
+    ng = int(inv.max()) + 1
+    # orthonormal directions of the group means in the weighted rows: row i of group g has w_i / |w_g|
+    wn = np.sqrt(np.bincount(inv, weights=w**2, minlength=ng))
+    u = w / wn[inv]
+
+    def means(M):  # each column's coordinates on the group-mean directions (ng × columns)
+        U = np.zeros((ng, M.shape[1]))
+        np.add.at(U, inv, u[:, None] * M)
+        return U
+
+    UA = means(A)
+    r_A = _gram_rank(UA.T @ UA)
+    QA = _orth(A)
+    Jp = J - QA @ (QA.T @ J)  # the term beyond the model (what its deviance is made of)
+    nJ = np.linalg.norm(J, axis=0)
+    Uj, sj, _ = np.linalg.svd(Jp / np.where(nJ > 0, nJ, 1.0), full_matrices=False)
+    Qt = Uj[:, sj > 1e-10]  # its directions, as many as the rank its test counts (_gram_rank)
+    if Qt.shape[1] == 0:
+        return float(ng - r_A)
+    Ut = means(Qt)
+    # the group means the model leaves free: remove the model's span there
+    QUA = _orth(UA) if r_A else np.zeros((ng, 0))
+    Ut = Ut - QUA @ (QUA.T @ Ut)
+    return float(ng - r_A - float(np.sum(Ut**2)))
 
 
 def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: bool) -> _Eval:
@@ -833,7 +858,7 @@ def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float
         return False
     if ev.kind is not None and ev.dof_kind < MIN_DOF:
         return False
-    if ev.groups_left is not None and ev.groups_left < MIN_DOF:
+    if ev.groups_left is not None and ev.groups_left < MIN_DOF - GROUPS_TOL:
         return False
     return ev.D_rob > _bound(problem, ev, m, n, rank_cur, scale)[0]
 
@@ -1144,11 +1169,13 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     # every basis tried is a test (a scan: its grid members, or the independent ones it says)
     m_gen = sum((item[3] if len(item) > 3 else len(item[1])) if item[0] == "scan" else 1 for item in gens)
 
-    def generic_round(state, free, named, ranked=False, allow=frozenset()):
+    def generic_round(state, free, named, ranked=False, allow=frozenset(), groups=True):
         """The best generic candidate that passes against the model at ``state`` and that no
         library candidate (other than ``named``) explains: (eval, correlations, held-out RMS) or None;
         ``ranked``: every such candidate, best first (a list); ``allow``: library candidates whose
-        correlation with it does not rule it out (the ones it may displace on a better fit).
+        correlation with it does not rule it out (the ones it may displace on a better fit);
+        ``groups``: its degrees of freedom in independent groups counted here (False: the caller
+        counts them beside the model it is finally named in, ``_groups_ok``).
         "Far from noise along a driver" is what this test asks, every basis counted: a
         portmanteau test first would miss slow structure (a drift, a long period)."""
         r0 = _weighted(problem, state)
@@ -1189,7 +1216,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 ev.desc = desc
                 if item[0] == "scan":
                     ev.k += 1  # the scanned location or period
-                _count_groups(problem, ev, J0, item[0] == "scan")
+                if groups:
+                    _count_groups(problem, ev, J0, item[0] == "scan")
                 if chosen is None:
                     chosen = ev
                 if not _significant(problem, ev, m_gen, rank_cur, n, problem.generic_scale):
@@ -1255,7 +1283,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     def npar(free_, fit_) -> int:
         return len(Packer.build(fit_.params, free_).names)
 
-    def _beyond(cand_, fit_, free_, scanned=False) -> bool:
+    def _beyond(cand_, fit_, free_) -> bool:
         """Whether generic candidate ``cand_``, fitted beside the library effects of the model
         ``fit_``, explains what they leave: a lower held-out RMS and a deviance above the
         decisive margin (the one that tells two correlated candidates apart, ``F·χ²₁(1 − α)``).
@@ -1274,15 +1302,31 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), typed_fit_term(r0_, types), types, n)
         if ev_.k <= 0 or n - _gram_rank(J0_.T @ J0_) - ev_.k < MIN_DOF:
             return False
-        if _count_groups(problem, ev_, J0_, scanned).groups_left is not None and ev_.groups_left < MIN_DOF:
-            return False
         return _cv_lower(ev_, rr_.cv0(cand_.folds)) and ev_.D_rob > decisive_margin(problem)
+
+    def _groups_ok(ev_, fit_, free_) -> bool:
+        """Whether generic term ``ev_`` leaves ``MIN_DOF`` degrees of freedom in independent groups
+        (``independent_groups``) beside the model ``fit_`` it is named in, its own block taken out:
+        the library effects it displaced are no part of that model."""
+        if problem.shared_noise is None:
+            return True
+        fr = {k: v for k, v in free_.items() if k not in ev_.cc.params}
+        Jm, _, _ = jacobian(problem, {k: v for k, v in fit_.params.items() if k not in ev_.cc.params}, fr)
+        scanned = ev_.desc is not None and ("at" in ev_.desc or "period" in ev_.desc)
+        return independent_groups(problem, Jm, ev_.cc.J) - int(scanned) >= MIN_DOF - GROUPS_TOL
 
     generic_effect = None
     generic_tied: list[dict] = []  # library effects the generic one displaced by a margin that is not decisive
     if gens:
-        res = generic_round(state, free, {oc.cand.name for oc, _ in picked})
-        if res is not None:
+        # beside library effects it may displace, its groups are counted in the model it ends in;
+        # when they are too few there, the best term that has them beside every library effect
+        named = {oc.cand.name for oc, _ in picked}
+        res = None
+        for counted in [False, True] if picked and problem.shared_noise is not None else [True]:
+            res = generic_round(state, free, named, groups=counted)
+            if res is None:
+                break
+            before = (list(picked), cur_fit, state, free, {k: dict(v) for k, v in entries.items()})
             generic_effect = res
             cur_fit, state, free = with_generic(res[0], state, free)
             if picked:  # a library effect that only stood in for this structure is dropped now
@@ -1293,7 +1337,14 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     picked, cur_fit, state, free = kept[:4]
                     entries.clear()
                     entries.update(kept[4])
-        elif picked:
+            if counted or _groups_ok(res[0], cur_fit, free):
+                break
+            # beside the library effects that stay it fits the group means, noise included
+            picked, cur_fit, state, free = before[:4]
+            entries.clear()
+            entries.update(before[4])
+            generic_effect = res = None
+        if res is None and picked:
             # the library effects may have taken part of a structure none of them is (a bias step
             # seen as a drift): try the generic one against the baseline, then keep only the library
             # effects that still earn their place beside it, and it beside them
@@ -1345,7 +1396,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     margin = 0.0
                 elif ok and margin > 0:
                     # and it explains what the library effects leave: it passes beside them (one test)
-                    ok = _beyond(res0[0].cc.cand, cur_fit, free, "at" in res0[0].desc or "period" in res0[0].desc)
+                    ok = _beyond(res0[0].cc.cand, cur_fit, free)
                 if ok and len(picked2) < len(picked) and gain > margin:
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
