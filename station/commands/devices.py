@@ -166,7 +166,10 @@ def _check_limit_name(item: str, name: str, contexts: list[dict]) -> None:
     beyond its block (``B[9]``), or a name no calibrated procedure has and no other
     procedure's parameter list claims (a typo: ``dirft``). A limit was stored and never
     checked. Without a calibration nothing is known and nothing is refused."""
-    from station.procedures.review import _block, flatten, unit_context
+    from station.procedures.review import flatten, unit_context
+
+    def _block(key: str) -> str:  # B[0] -> B, as limits name a block (review.param_rows)
+        return key.split("[", 1)[0]
 
     names: dict[str, set[str]] = {}  # block -> its scalar names, over the device's calibrations
     procedures = set()
