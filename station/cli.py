@@ -26,8 +26,16 @@ def _common(parser: argparse.ArgumentParser) -> None:
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a usage error on one line (what is wrong and where the help is), not the
+    whole usage block before it; subcommand parsers are made of the same class."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="station",
         description="Calibration station for inertial and magnetic sensors. "
         "With no command, starts the operator TUI on the built-in simulated device.",

@@ -17,6 +17,7 @@ import pytest
 
 from station.capture import Capture, read_capture, write_capture
 from station.cli import main
+from tests.station_run import run_station
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -479,7 +480,22 @@ def test_argument_errors_exit_2(tmp_path, capsys, argv):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "error: argument" in err and "Traceback" not in err
+    assert err.count("\n") == 1 and "usage:" not in err, err  # was: the whole usage block first
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (("calibrate", "--procedure", "foo", "x.csv"), "invalid choice: 'foo'"),
+        (("calibrate",), "required: file"),
+        (("frob",), "invalid choice: 'frob'"),
+    ],
+)
+def test_usage_errors_are_one_line_naming_the_help(argv, needle):
+    res = run_station(*argv, subprocess_run=True)  # was: 5-12 lines of usage before the error
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.count("\n") == 1 and needle in res.stderr and "--help'" in res.stderr, res.stderr
 
 
 @pytest.mark.parametrize("command", ["history", "drift"])
