@@ -58,7 +58,9 @@ class DriftResult:
     warnings: list[str] = field(default_factory=list)
 
 
-def _check_length(n: int, dt_s: float, what: str) -> list[str]:
+def check_length(n: int, dt_s: float, what: str) -> list[str]:
+    """Refuse (``RecordTooShort``) a record under ``MIN_DURATION_S`` or 64 samples; warn under
+    the source's 3 min."""
     T = n * dt_s
     if n < 64 or T < MIN_DURATION_S:
         raise RecordTooShort(
@@ -78,7 +80,7 @@ def drift_reference(omega_rad_s, ref_rad_s, dt_s: float, ref_drift_rad_s: float 
     """
     w = np.asarray(omega_rad_s, dtype=float)
     r = np.asarray(ref_rad_s, dtype=float)
-    warnings = _check_length(len(w), dt_s, "mode A")
+    warnings = check_length(len(w), dt_s, "mode A")
     me = allan.mean_standard_error(w - r, dt_s)
     sigma = np.sqrt(me.se**2 + ref_drift_rad_s**2)
     extra = {"ref_drift_rad_s": ref_drift_rad_s}
@@ -162,7 +164,7 @@ def drift_static(
     rate cannot be removed; the drift is the plain mean (with a warning).
     """
     w = np.asarray(omega_rad_s, dtype=float)
-    warnings = _check_length(len(w), dt_s, "mode B")
+    warnings = check_length(len(w), dt_s, "mode B")
     me = allan.mean_standard_error(w, dt_s)
     res = DriftResult("static", me.mean.copy(), me.se.copy(), me, warnings=warnings)
     if f_body is not None:

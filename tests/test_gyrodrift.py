@@ -208,9 +208,12 @@ def _write(tmp_path, sim, name="c.csv"):
     return path
 
 
-def test_cli_refuses_too_short_a_record(tmp_path):
-    sim = simulate("gyro-drift", seed=6, mode="static", duration_s=10.0)
-    assert_one_line_refusal(_station("calibrate", _write(tmp_path, sim), subprocess_run=True), "too short", "3 min")
+@pytest.mark.parametrize("command", ["calibrate", "diagnose"])
+@pytest.mark.parametrize("mode", ["static", "reference"])
+def test_cli_refuses_too_short_a_record(tmp_path, command, mode):
+    sim = simulate("gyro-drift", seed=6, mode=mode, duration_s=10.0)
+    # diagnose was: a baseline of 280 °/h and exit 0 on 10 s calibrate refuses
+    assert_one_line_refusal(_station(command, _write(tmp_path, sim), subprocess_run=True), "too short", "3 min")
 
 
 def test_cli_refuses_missing_columns(tmp_path):

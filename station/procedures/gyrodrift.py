@@ -522,6 +522,7 @@ def format_text(result: dict) -> str:
 def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None = None) -> DiagnosisInput:
     """The P4 diagnosis problem (it fits its own baseline: ``base`` is not used)."""
     from solvers.diagnose import problems as DP
+    from solvers.gyrodrift import check_length
 
     prep = prepared if prepared is not None else prepare(capture)
     warnings = list(prep.warnings)
@@ -579,6 +580,8 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
                 "unconnected sensor?): check the ax ay az columns"
             )
         f_mps2 = f_b[use] * (frames.G_STANDARD_MPS2 / gnorm)
+    # what calibrate refuses diagnose refuses: a few seconds hold no drift, nor an effect on it
+    check_length(len(order), dt, "mode A" if mode_ref else "mode B")
     temp = np.asarray(capture.columns["temp_c"], float)[order] if "temp_c" in capture.columns else None
     prob = DP.gyro_problem(
         t[order],
