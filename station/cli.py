@@ -71,6 +71,11 @@ def _check_text_args(args: argparse.Namespace) -> None:
         for text in value if isinstance(value, list) else [value]:
             if not isinstance(text, str):
                 continue
+            if name in ("id", "device") and not text.strip():
+                # was: `calibrate --device ''` fell back to the capture's device without a word
+                raise InputError(
+                    None, None, f"{'ID' if name == 'id' else '--device'} '{text}': a device id must be non-empty text"
+                )
             bad = [ch for ch in text if 0xDC80 <= ord(ch) <= 0xDCFF]
             if bad:
                 from station.textsafe import safe

@@ -17,7 +17,7 @@ import pytest
 
 from station.capture import Capture, read_capture, write_capture
 from station.cli import main
-from tests.station_run import run_station
+from tests.station_run import assert_one_line_refusal, run_station
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -594,3 +594,22 @@ def test_text_arguments_that_are_not_utf8_are_refused_naming_the_argument(tmp_pa
         [sys.executable, "-m", "station", "calibrate", str(odd)], cwd=ROOT, capture_output=True, timeout=120
     )
     assert res.returncode == 0, res.stderr
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("calibrate", "{tmp}/c.csv", "--device", ""),  # was: the capture's device, without a word
+        ("calibrate", "{tmp}/c.csv", "--device", "  "),
+        ("history", ""),
+        ("devices", "add", " "),
+    ],
+)
+def test_an_empty_device_id_is_refused(tmp_path, argv):
+    path = tmp_path / "c.csv"
+    path.write_text(
+        "# station-capture: 1\n# procedure: gyro-drift\n# device: G-1\n# gyro_unit: rad/s\nt,gx,gy,gz\n0,1,2,3\n"
+    )
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert_one_line_refusal(run_station("--db", tmp_path / "s.db", *argv), "a device id must be non-empty text")
+    assert not (tmp_path / "s.db").exists() or "G-1" not in (tmp_path / "s.db").read_bytes().decode("latin-1")
