@@ -4,6 +4,7 @@ the simulated device (in-process, or on a real pty through the serial reader).""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import math
 import os
@@ -79,6 +80,26 @@ async def run_bench(pilot, src, clock: BenchClock, until, step_s=0.2, max_device
         if _consumed(src):
             clock.t_s += step_s
         await pilot.pause(0.01)
+
+
+@contextlib.contextmanager
+def simulated_device_on_a_pty(seed: int, rate_hz: float):
+    """The built-in device serving a real pseudo-terminal from a thread; yields the device and
+    its port's path, and stops the thread and closes the pty on the way out."""
+    from solvers.simulate import LiveImu
+    from station.device.simdevice import SimDevice
+
+    dev = SimDevice(LiveImu(seed=seed, rate_hz=rate_hz, hold_s=1e9))
+    path = dev.open()
+    stop = threading.Event()
+    t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
+    t.start()
+    try:
+        yield dev, path
+    finally:
+        stop.set()
+        t.join(10)
+        dev.close()
 
 
 def screen_name(app) -> str:
@@ -570,16 +591,9 @@ def test_import_an_ldv_file_with_its_conditioning_check(tmp_path):
 
 
 def test_procedure_reads_the_simulated_device_over_a_real_pty():
-    from solvers.simulate import LiveImu
-    from station.device.simdevice import SimDevice
     from station.sources import SerialSource
 
-    dev = SimDevice(LiveImu(seed=6, rate_hz=200, hold_s=1e9))
-    path = dev.open()
-    stop = threading.Event()
-    t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
-    t.start()
-    try:
+    with simulated_device_on_a_pty(seed=6, rate_hz=200) as (dev, path):
 
         async def story():
             app = make_app(None, device=SerialSource(path))
@@ -603,10 +617,6 @@ def test_procedure_reads_the_simulated_device_over_a_real_pty():
             return readouts, st, src
 
         readouts, st, src = asyncio.run(story())
-    finally:
-        stop.set()
-        t.join(2)
-        dev.close()
     assert src.device_id == "SIM-ACC-0006"
     import re
 
@@ -626,18 +636,11 @@ def test_a_serial_device_gets_the_benchs_site_and_the_station_remembers_it(tmp_p
     P1's gravity, P4's Earth rate, P3's IGRF), it is remembered in the database, and the
     next session on a serial device gets it without the option."""
     from db.store import Store
-    from solvers.simulate import LiveImu
-    from station.device.simdevice import SimDevice
     from station.sources import SerialSource, parse_site
 
     db = str(tmp_path / "station.db")
-    dev = SimDevice(LiveImu(seed=7, rate_hz=100, hold_s=1e9))
-    path = dev.open()
-    stop = threading.Event()
-    t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
-    t.start()
     sites = []
-    try:
+    with simulated_device_on_a_pty(seed=7, rate_hz=100) as (_, path):
         for given in (parse_site("39.98, 116.35, 52"), None):
 
             async def story(given=given):
@@ -652,10 +655,6 @@ def test_a_serial_device_gets_the_benchs_site_and_the_station_remembers_it(tmp_p
                 src.stop()
 
             asyncio.run(story())
-    finally:
-        stop.set()
-        t.join(2)
-        dev.close()
     want = {"latitude_deg": 39.98, "longitude_deg": 116.35, "altitude_m": 52.0}
     assert sites == [want, want]
     assert Store(db).settings()["site"] == "39.98, 116.35, 52"
@@ -780,15 +779,8 @@ def test_a_port_typed_while_source_is_simulated_is_the_port_used(tmp_path):
     silently ran the simulator. The typed port is what the bench engineer means: Source
     switches to Other as it is typed, and the run reads that port (a real pty); choosing
     the simulator again with the port still typed is refused with the reason."""
-    from solvers.simulate import LiveImu
-    from station.device.simdevice import SimDevice
 
-    dev = SimDevice(LiveImu(seed=7, rate_hz=200, hold_s=1e9))
-    path = dev.open()
-    stop = threading.Event()
-    t = threading.Thread(target=dev.run, args=(stop,), daemon=True)
-    t.start()
-    try:
+    with simulated_device_on_a_pty(seed=7, rate_hz=200) as (_, path):
 
         async def story():
             app = make_app(None)
@@ -812,9 +804,5 @@ def test_a_port_typed_while_source_is_simulated_is_the_port_used(tmp_path):
                 return refused, kind, port
 
         refused, kind, port = asyncio.run(story())
-    finally:
-        stop.set()
-        t.join(timeout=10)
-        dev.close()
     assert kind == "serial" and port == path
     assert path in refused and "simulated" in refused
