@@ -166,10 +166,7 @@ def _check_limit_name(item: str, name: str, contexts: list[dict]) -> None:
     beyond its block (``B[9]``), or a name no calibrated procedure has and no other
     procedure's parameter list claims (a typo: ``dirft``). A limit was stored and never
     checked. Without a calibration nothing is known and nothing is refused."""
-    from station.procedures.review import flatten, unit_context
-
-    def _block(key: str) -> str:  # B[0] -> B, as limits name a block (review.param_rows)
-        return key.split("[", 1)[0]
+    from station.procedures.review import block_of, flatten, unit_context
 
     names: dict[str, set[str]] = {}  # block -> its scalar names, over the device's calibrations
     procedures = set()
@@ -179,10 +176,10 @@ def _check_limit_name(item: str, name: str, contexts: list[dict]) -> None:
             continue
         procedures.add(ctx.get("procedure"))
         for key in flatten(params):
-            names.setdefault(_block(key), set()).add(key)
+            names.setdefault(block_of(key), set()).add(key)
     if not names or name == "residual_rms" or name in names or any(name in keys for keys in names.values()):
         return
-    block = _block(name)
+    block = block_of(name)
     if block in names:
         keys = sorted(names[block])
         span = keys[0] if len(keys) == 1 else f"{keys[0]} … {keys[-1]}"

@@ -43,7 +43,9 @@ def flatten(obj, prefix: str = "") -> dict[str, float | None]:
     return out
 
 
-def _block(name: str) -> str:
+def block_of(name: str) -> str:
+    """The block a parameter name belongs to (``M[0][1]`` → ``M``): limits and tolerances
+    may name a block or one of its elements."""
     return name.split("[", 1)[0]
 
 
@@ -84,13 +86,13 @@ def param_rows(
             row.previous = p
             s2 = sum(x * x for x in (row.sigma, prev_s.get(name)) if _finite(x))
             row.change_sigma = (v - p) / math.sqrt(s2) if s2 > 0 else None
-        tol = tolerances.get(name, tolerances.get(_block(name)))
+        tol = tolerances.get(name, tolerances.get(block_of(name)))
         if tol is not None and _finite(float(tol)):
             row.tolerance = float(tol)
             if row.previous is not None:
                 row.ok = abs(v - row.previous) <= row.tolerance
         row.unit = param_unit(result, name)
-        lim = limits.get(name, limits.get(_block(name)))
+        lim = limits.get(name, limits.get(block_of(name)))
         if lim is not None:
             low, high = (None if x is None else float(x) for x in lim)
             row.limit = (low, high)
@@ -105,7 +107,7 @@ def param_rows(
 
 def param_unit(result: dict, name: str) -> str:
     """The unit of one scalar parameter (``B[0]``, ``beam1.alpha_deg``), '' when dimensionless."""
-    block = _block(name)
+    block = block_of(name)
     leaf = name.rsplit(".", 1)[-1]
     units = result.get("units") if isinstance(result.get("units"), dict) else {}
     if block in units:
@@ -137,7 +139,7 @@ def display_unit(result: dict, name: str) -> tuple[float, str] | None:
     module's ``DISPLAY_UNITS`` ({block: (unit, factor or factor(result))}), e.g. P4's drift
     in °/h; the stored result, exports and the database keep the stored unit."""
     table = getattr(_procedure_module(result), "DISPLAY_UNITS", {})
-    spec = table.get(_block(name))
+    spec = table.get(block_of(name))
     if spec is None:
         return None
     unit, factor = spec
@@ -184,7 +186,7 @@ def unit_context(name: str, results) -> dict:
     procedure whose module names its block in ``PARAM_UNITS`` (a display factor that needs
     the result, e.g. the compass's per ``mag_unit``, then falls back to the stored unit);
     else {} (no unit known: as stored)."""
-    block = _block(name)
+    block = block_of(name)
     for result in results:
         if result and (block in (result.get("params") or {}) or name in flatten(result.get("params") or {})):
             return result
@@ -221,11 +223,11 @@ def typed_context(name: str, results) -> tuple[dict, str]:
     if not ctx:
         return {}, ""
     if not ctx.get("params"):  # a bare procedure: no result to tell a per-capture display factor
-        spec = getattr(_procedure_module(ctx), "DISPLAY_UNITS", {}).get(_block(name))
+        spec = getattr(_procedure_module(ctx), "DISPLAY_UNITS", {}).get(block_of(name))
         if spec is not None and callable(spec[1]):
             unit = spec[0].format(mag_unit="mag_unit")
             raise ValueError(
-                f"{_block(name)} is shown as {unit}, stored per the capture's unit, "
+                f"{block_of(name)} is shown as {unit}, stored per the capture's unit, "
                 "and the device has no calibration yet to tell it"
             )
     return ctx, shown_unit(ctx, name)
