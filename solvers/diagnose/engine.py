@@ -900,6 +900,12 @@ def _rival_margin(a: _Eval, b: _Eval, n: int) -> float:
     return (a.k - b.k) * math.log(n) - (a.D - b.D) / infl
 
 
+def _scanned(desc: dict | None) -> bool:
+    """Whether a generic candidate is the best member of a scanned family: its place (a step's
+    ``at``) or ``period`` was searched for, one parameter more than its columns."""
+    return bool(desc) and ("at" in desc or "period" in desc)
+
+
 def _single_basis(desc: dict | None) -> bool:
     """Whether a generic candidate is one fixed basis (a line in a driver, a scale linear in
     time or temperature): one test of k parameters, as a library candidate is, so it is compared
@@ -1312,7 +1318,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             return True
         fr = {k: v for k, v in free_.items() if k not in ev_.cc.params}
         Jm, _, _ = jacobian(problem, {k: v for k, v in fit_.params.items() if k not in ev_.cc.params}, fr)
-        scanned = ev_.desc is not None and ("at" in ev_.desc or "period" in ev_.desc)
+        scanned = _scanned(ev_.desc)
         return independent_groups(problem, Jm, ev_.cc.J) - int(scanned) >= MIN_DOF - GROUPS_TOL
 
     generic_effect = None
@@ -1369,8 +1375,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 if cand.reason is None:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
-                    ev.k += 1 if "at" in res0[0].desc or "period" in res0[0].desc else 0
-                    _count_groups(problem, ev, J0, "at" in res0[0].desc or "period" in res0[0].desc)
+                    ev.k += int(_scanned(res0[0].desc))
+                    _count_groups(problem, ev, J0, _scanned(res0[0].desc))
                     ok = _passes(
                         problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n, problem.generic_scale
                     )
@@ -1401,7 +1407,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
                     # library effects it displaced are named with it (head to head, as for two candidates)
-                    scanned = "at" in res0[0].desc or "period" in res0[0].desc
+                    scanned = _scanned(res0[0].desc)
                     kx = math.log(n) if scanned else 0.0
                     # the margin of the larger of the two parts the models do not share (as for two
                     # candidates: each fits the noise along its own other directions)
