@@ -158,6 +158,8 @@ MAX_META_LINES = 65536
 _MAX_DATA_LINE = 1 << 20  # a data line longer than this is refused (no capture row is 1 MiB)
 BLOCK_BYTES = 8 << 20  # the reader's text budget: a block is at most this plus one line
 DEFAULT_CHUNK_ROWS = 65536
+# t's rate / the stated sample_rate_hz: beyond both ways of reading t, the file contradicts itself
+RATE_AGREEMENT = (0.8, 1.25)
 
 
 # ------------------------------------------------------------------------------------ Capture
@@ -210,6 +212,35 @@ class Capture:
         if number is None:
             raise InputError(self.path, self.meta_lines.get(key), f"metadata '{key}': {_show(value)} is not a number")
         return number
+
+    def series_rate_hz(self, consequence: str) -> float | None:
+        """The sample rate of a time series (Hz): metadata ``sample_rate_hz`` where the ``t``
+        column agrees with it, else ``t``'s median step; None when neither gives a rate.
+
+        A stated rate that ``t`` contradicts is an InputError on its metadata line, ending with
+        ``consequence`` (what the rate scales). Both the median step (not fooled by gaps) and
+        rows over the duration (not fooled by bursty host time stamps) must disagree beyond
+        RATE_AGREEMENT for the file to contradict itself."""
+        stated = self.float_meta("sample_rate_hz")
+        t = np.asarray(self.columns.get("t", ()), dtype=np.float64)
+        t = t[np.isfinite(t)]
+        steps = np.diff(t)
+        median = float(np.median(steps)) if steps.size else 0.0
+        span = float(t[-1] - t[0]) if t.size else 0.0
+        if stated is not None and stated > 0:
+            if span > 0:
+                by_rows = (len(t) - 1) / span
+                rates = [by_rows] + ([1.0 / median] if median > 0 else [])
+                low, high = RATE_AGREEMENT
+                if all(not low <= r / stated <= high for r in rates):
+                    raise InputError(
+                        self.path,
+                        self.meta_lines.get("sample_rate_hz"),
+                        f"metadata 'sample_rate_hz': {stated:g} Hz, but the t column holds {by_rows:.6g} rows per "
+                        f"second ({len(t)} rows over {span:g} s): correct sample_rate_hz or t ({consequence})",
+                    )
+            return stated
+        return 1.0 / median if median > 0 else None
 
     def local_gravity_mps2(self, warnings: list[str]) -> float:
         """Local gravity for this capture, one policy for every procedure: metadata ``g_mps2``

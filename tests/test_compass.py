@@ -485,3 +485,30 @@ def test_six_to_eight_orientations_axis_aligned_ellipsoid_only(tmp_path, capsys)
     assert np.all(np.abs(np.diag(W - params["W"]) / np.diag(sW)) < 4.0)
     assert np.all(np.abs((h - params["h"]) / sh) < 4.0)
     assert any("axis-aligned" in w for w in res["warnings"])
+
+
+@pytest.mark.parametrize("stated_hz", ["5", "500"])
+def test_a_stated_rate_the_time_column_contradicts_is_refused(tmp_path, stated_hz):
+    """The filters' cut-offs and the Kalman step came from metadata sample_rate_hz even when the t
+    column said otherwise (a 5 Hz label on 50 Hz rows filtered at a tenth of the cut-off, exit 0).
+    Now calibrate and diagnose refuse it on the metadata's line, as ``station noise`` does; without
+    the key the t column gives the same result as the true label."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    sim = simulate("compass", seed=5)
+    assert sim.meta["sample_rate_hz"] == "50.0"
+    good = _write(tmp_path, sim, name="good.csv")
+    lines = good.read_text().splitlines()
+    lineno = next(i for i, line in enumerate(lines, 1) if line.startswith("# sample_rate_hz"))
+    bad = tmp_path / "bad.csv"
+    bad.write_text(good.read_text().replace("# sample_rate_hz: 50.0", f"# sample_rate_hz: {stated_hz}"))
+    for command in ("calibrate", "diagnose"):
+        res = run_station(command, bad, "--json")
+        assert_one_line_refusal(
+            res, f"bad.csv:{lineno}: metadata 'sample_rate_hz': {stated_hz} Hz", "50 rows per second"
+        )
+    unlabelled = _write(tmp_path, {k: v for k, v in sim.meta.items() if k != "sample_rate_hz"}, sim.columns, "t.csv")
+    by_t, by_label = _run_json(unlabelled)["headings"], _run_json(good)["headings"]
+    assert len(by_t) == len(by_label)
+    for a, b in zip(by_t, by_label):  # t's median step is 0.02 s to the last bit, not the label's 1/50
+        assert a["heading_true_deg"] == pytest.approx(b["heading_true_deg"], abs=1e-9)

@@ -213,11 +213,7 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     rate = None
     y_all = _xyz(capture, "m")
     if t is not None:
-        dt = np.diff(t)
-        rate = capture.float_meta("sample_rate_hz")
-        if not rate or rate <= 0:
-            med = float(np.nanmedian(dt)) if len(dt) else 0.0
-            rate = 1.0 / med if med > 0 else None
+        rate = capture.series_rate_hz("the filters' cut-offs and the Kalman filter's step scale with the rate")
     if rate:
         f_f = C.lowpass(np.nan_to_num(f_g), C.ACCEL_CUTOFF_HZ, rate)
         y_f = C.lowpass(np.where(np.isfinite(y_all), y_all, np.nanmean(y_all, axis=0)), C.MAG_CUTOFF_HZ, rate)

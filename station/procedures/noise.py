@@ -157,34 +157,6 @@ def _factor(capture, kind: str, unit_key: str) -> tuple[float | None, str]:
     return k, ""
 
 
-RATE_AGREEMENT = (0.8, 1.25)  # t's rate / the stated rate: beyond both ways of reading t, the file contradicts itself
-
-
-def _check_stated_rate(capture, rate_hz: float, t) -> None:
-    """Refuse a stated ``sample_rate_hz`` that the t column contradicts: the Allan figures
-    scale with the rate (a 1 Hz label on 100 Hz rows gave a noise density 10x too high).
-    Both the median step (not fooled by gaps) and rows over the duration (not fooled by
-    bursty host time stamps) must disagree beyond RATE_AGREEMENT."""
-    from station.errors import InputError
-
-    steps = np.diff(np.asarray(t, dtype=np.float64))
-    steps = steps[np.isfinite(steps)]
-    span = float(t[-1] - t[0])
-    if not steps.size or not span > 0:
-        return
-    median = float(np.median(steps))
-    by_rows = (len(t) - 1) / span
-    low, high = RATE_AGREEMENT
-    rates = [r for r in (by_rows, 1.0 / median if median > 0 else None) if r is not None]
-    if rates and all(not low <= r / rate_hz <= high for r in rates):
-        raise InputError(
-            capture.path,
-            capture.meta_lines.get("sample_rate_hz"),
-            f"metadata 'sample_rate_hz': {rate_hz:g} Hz, but the t column holds {by_rows:.6g} rows per second "
-            f"({len(t)} rows over {span:g} s): correct sample_rate_hz or t (the Allan figures scale with the rate)",
-        )
-
-
 def imu_noise(capture) -> dict:
     """Allan analysis of each sensor of a still time-series capture (solvers.allan.noise_fit).
 
@@ -205,13 +177,8 @@ def imu_noise(capture) -> dict:
             f"{where}a table of averages has no noise to analyse: give a still time-series recording"
         )
     check_extremes(capture, columns=False)
-    rate = capture.float_meta("sample_rate_hz")
+    rate = capture.series_rate_hz("the Allan figures scale with the rate")
     t = capture.columns["t"]
-    if rate is not None and math.isfinite(rate) and rate > 0 and len(t) > 2:
-        _check_stated_rate(capture, rate, t)
-    if rate is None and len(t) > 2:
-        step = float(np.median(np.diff(t)))
-        rate = 1.0 / step if step > 0 else None
     if not rate or not math.isfinite(rate) or rate <= 0:
         raise UnsupportedError(
             f"{where}no sample rate: the capture has no sample_rate_hz and its t column does not advance"
