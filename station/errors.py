@@ -45,3 +45,14 @@ def take_deferred_warnings() -> list[tuple[str, str]]:
     out = list(_deferred)
     _deferred.clear()
     return out
+
+
+def require_positive(option: str, value: float | None, unit: str = "") -> None:
+    """Refuse a numeric command-line option that is not a finite positive number (0, negative,
+    nan, inf) as one line; None (the option not given) passes."""
+    import math
+
+    if value is not None and not (value > 0 and math.isfinite(value)):
+        raise InputError(
+            None, None, f"{option} must be a positive number{' of ' + unit if unit else ''}, got {value:g}"
+        )

@@ -520,6 +520,31 @@ def test_record_out_a_folder_or_missing_folder_is_one_line_before_recording(tmp_
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
+@pytest.mark.parametrize("value", ["inf", "nan", "-1", "0"])
+@pytest.mark.parametrize(
+    "argv, option",
+    [
+        (("record", "--port", "/dev/null", "--out", "{tmp}/x.csv", "--seconds"), "--seconds"),
+        (("record", "--port", "/dev/null", "--protocol", "mavlink", "--out", "{tmp}/x.csv", "--mavlink-rate"), None),
+        (("sim-device", "--seconds"), "--seconds"),
+        (("sim-device", "--hold"), "--hold"),
+        (("demo", "--headless", "--no-save", "--average-s"), "--average-s"),
+    ],
+)
+def test_a_duration_or_rate_that_is_no_positive_number_is_refused_before_anything_runs(tmp_path, argv, option, value):
+    """`record --seconds inf` went on to open the port and record until killed, `sim-device
+    --seconds nan` streamed forever, `--mavlink-rate nan` was sent to the flight controller, and
+    `demo --average-s inf` would never finish a position: now one line naming the option, exit 2,
+    before a port is opened (here /dev/null, which no port opens: the old code said so instead)."""
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    option = option or argv[-1]
+    if option == "--mavlink-rate" and value == "0":
+        value = "-0.5"  # 0 is documented: ask the flight controller for nothing
+    res = run_station(*argv, value, subprocess_run=True)
+    assert_one_line_refusal(res, f"{option} must be a positive number", f"got {value}")
+    assert not (tmp_path / "x.csv").exists()
+
+
 def _gyro_capture(tmp_path, rows: int | None = None, zero_accel: bool = False):
     from solvers.simulate import simulate
     from station.capture import Capture, write_capture

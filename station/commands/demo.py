@@ -37,10 +37,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from station.cli import db_path
-    from station.errors import InputError
+    from station.errors import InputError, require_positive
 
-    if not args.average_s > 0 or not args.speed > 0:
-        raise InputError(None, None, "--average-s and --speed must be positive")
+    require_positive("--average-s", args.average_s, "seconds")
+    require_positive("--speed", args.speed)
     if args.headless:
         return headless(args, None if args.no_save else db_path(args))
     import sys

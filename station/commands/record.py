@@ -8,7 +8,7 @@ import signal
 import sys
 import threading
 
-from station.errors import InputError
+from station.errors import InputError, require_positive
 from station.fileio import check_output
 from station.procedures import registry
 from station.textsafe import safe
@@ -82,8 +82,9 @@ def run(args: argparse.Namespace) -> int:
     folder = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(folder):
         raise InputError(args.out, None, f"cannot write: no folder {folder}")
-    if args.seconds is not None and not args.seconds > 0:
-        raise InputError(None, None, "--seconds must be positive")
+    require_positive("--seconds", args.seconds, "seconds")
+    if args.mavlink_rate != 0:  # 0: ask the flight controller for nothing
+        require_positive("--mavlink-rate", args.mavlink_rate, "Hz")
     if args.baud <= 0:
         raise InputError(None, None, "--baud must be positive")
     try:

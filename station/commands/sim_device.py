@@ -11,7 +11,7 @@ import signal
 import sys
 import threading
 
-from station.errors import InputError
+from station.errors import InputError, require_positive
 from station.procedures import registry
 
 
@@ -68,8 +68,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.rate is not None and not (0.1 <= args.rate <= 100_000):
         raise InputError(None, None, f"--rate {args.rate:g}: must be 0.1..100000 Hz")
-    if args.hold <= 0:
-        raise InputError(None, None, "--hold must be positive")
+    require_positive("--hold", args.hold, "seconds")
+    require_positive("--seconds", args.seconds, "seconds")
     effects = _effects(args.effect)
     # the bench the TUI's built-in device runs for this procedure (its guide module makes it)
     entry, reference = registry.device_of(args.procedure)

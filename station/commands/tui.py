@@ -43,14 +43,10 @@ def run(args: argparse.Namespace) -> int:
 
     from station.app import make_app
     from station.cli import db_path
-    from station.errors import InputError
+    from station.errors import InputError, require_positive
 
-    if not args.speed > 0:
-        from station.errors import InputError
-
-        raise InputError(None, None, f"--speed must be positive, got {args.speed:g}")
-    if args.average_s is not None and not args.average_s > 0:
-        raise InputError(None, None, f"--average-s must be positive, got {args.average_s:g}")
+    require_positive("--speed", args.speed)
+    require_positive("--average-s", args.average_s, "seconds")
     site = None
     if args.site is not None:
         from station.sources import parse_site
