@@ -1275,15 +1275,18 @@ def _samples_digest(meta_text: str, encoded: list[dict]) -> str:
 
 
 def _check_limit(name, value) -> list:
-    """[low, high] from a pair (either end None = open); low <= high."""
+    """[low, high] from a pair (either end None = open), or [low, high, unit] from a triple whose
+    third item names the unit of the two (text); low <= high."""
     try:
-        low, high = value
+        low, high, *unit = value
         low = None if low is None else float(low)
         high = None if high is None else float(high)
+        if len(unit) > 1 or (unit and not (isinstance(unit[0], str) and unit[0].strip())):
+            raise ValueError
     except (TypeError, ValueError):
-        raise ValueError(f"limit {name!r} must be a pair (low, high), got {value!r}") from None
+        raise ValueError(f"limit {name!r} must be a pair (low, high) or (low, high, unit), got {value!r}") from None
     if (low is None and high is None) or any(x is not None and x != x for x in (low, high)):
         raise ValueError(f"limit {name!r} needs at least one finite end, got {value!r}")
     if low is not None and high is not None and low > high:
         raise ValueError(f"limit {name!r}: low {low:g} is above high {high:g}")
-    return [low, high]
+    return [low, high, *unit]

@@ -152,7 +152,7 @@ def test_limits_and_tolerances_typed_in_the_units_printed(saved, tmp_path):
     assert out["compass"][1]["mag_unit"] == "uT"
     r = run_station("devices", "add", "M1", "--limit", "soft_iron[0][0]=0.9:1.1", "--db", db)
     assert r.returncode == 0, r.stderr
-    assert _device_json(db, "M1")["limits"]["soft_iron[0][0]"] == pytest.approx([900.0, 1100.0])
+    assert _device_json(db, "M1")["limits"]["soft_iron[0][0]"] == pytest.approx([900.0, 1100.0, "nT per uT"])
     show = run_station("devices", "show", "M1", "--db", db).stdout
     assert "soft_iron[0][0]=0.9:1.1 uT/uT (stored 900:1100 nT per uT)" in show
 
@@ -165,7 +165,6 @@ def test_limits_and_tolerances_typed_in_the_units_printed(saved, tmp_path):
         (["--tolerance", "drift=-1"], ["--tolerance 'drift=-1'", "positive", "drift is in °/h"]),
         (["--tolerance", "drift=inf"], ["--tolerance 'drift=inf'", "positive", "°/h"]),
         (["--tolerance", "residual_rms=5"], ["residual_rms", "no calibration yet"]),
-        (["--limit", "soft_iron[0][0]=0.9:1.1"], ["soft_iron", "no calibration yet"]),
         (["--limit", "B=0.5", "--model", "X"], ["--limit 'B=0.5'", "LOW:HIGH"]),
     ],
 )
@@ -202,3 +201,48 @@ def test_a_limit_that_limits_nothing_of_the_device_is_refused(tmp_path, capsys):
         assert main(["devices", "add", "A1", "--limit", item, "--db", db]) == 0, capsys.readouterr().err
     assert sorted(Store(db).get_device("A1")["limits"]) == ["B[2]", "M", "drift", "residual_rms"]
     assert main(["devices", "add", "NEW", "--limit", "anything=0:1", "--db", db]) == 0
+
+
+def test_a_soft_iron_limit_keeps_its_unit_whatever_the_captures_unit(tmp_path):
+    """The compass's soft iron is typed as a ratio and stored per the capture's mag_unit. A limit
+    set before the device's first compass calibration was refused (no unit to convert to), and
+    one stored unitless was read in whatever unit a later capture had: 0.9:1.1 typed as a ratio
+    read as nT per uT failed every compass calibration; 500:2000 nT per uT read as nT per gauss
+    too. The limit now keeps its unit (a ratio, or nT per uT) and each result reads it in its own."""
+    from station.capture import Capture, read_capture, write_capture
+
+    db = tmp_path / "s.db"
+    cap = tmp_path / "c.csv"
+    assert run_station("simulate", "--procedure", "compass", "--out", cap, "--seed", "7").returncode == 0
+    r = run_station("devices", "add", "M9", "--limit", "soft_iron[0][0]=0.5:2", "--db", db)
+    assert r.returncode == 0, r.stderr  # before any compass calibration: typed as a ratio, kept so
+    assert _device_json(db, "M9")["limits"]["soft_iron[0][0]"] == [0.5, 2.0, "ratio"]
+    r = run_station("calibrate", cap, "--device", "M9", "--save", "--db", db)
+    assert r.returncode == 0 and "PASS" in r.stdout, (r.stdout, r.stderr)
+    assert "soft_iron[0][0]=0.5:2 uT/uT (stored 0.5:2 ratio)" in run_station("devices", "show", "M9", "--db", db).stdout
+    r = run_station("devices", "add", "M9", "--limit", "soft_iron[1][1]=0.5:2", "--db", db)
+    assert r.returncode == 0, r.stderr  # after one: in that calibration's stored unit, said
+    assert _device_json(db, "M9")["limits"]["soft_iron[1][1]"] == pytest.approx([500.0, 2000.0, "nT per uT"])
+    # the same unit in gauss: 1 gauss = 100 uT, so the stored soft iron is 100x, the ratio the same
+    c = read_capture(cap)
+    gauss = tmp_path / "gauss.csv"
+    cols = {k: v / 100.0 if k in ("mx", "my", "mz") else v for k, v in c.columns.items()}
+    write_capture(gauss, Capture(dict(c.meta, mag_unit="gauss"), cols))
+    r = run_station("calibrate", gauss, "--device", "M9", "--save", "--db", db)
+    assert r.returncode == 0 and "PASS" in r.stdout, (r.stdout, r.stderr)
+    # and a limit the soft iron is outside fails in the unit it was typed in
+    assert run_station("devices", "add", "M9", "--limit", "soft_iron[0][0]=0.5:0.6", "--db", db).returncode == 0
+    r = run_station("calibrate", gauss, "--device", "M9", "--save", "--db", db)
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert re.search(
+        r"soft_iron\[0\]\[0\] = [01]\.\d+ gauss/gauss outside its limits 0\.5 … 0\.6 gauss/gauss", r.stderr
+    )
+    # a unit no result converts to (a raw one) is not passed unread: the result fails, saying why
+    from db import Store
+
+    Store(str(db)).add_device("M9", limits={"soft_iron[0][0]": [500.0, 2000.0, "nT per counts"]})
+    r = run_station("calibrate", cap, "--device", "M9", "--save", "--db", db)
+    assert r.returncode == 1
+    assert (
+        "soft_iron[0][0]: its limit is in nT per counts, which does not convert to this result's nT per uT" in r.stderr
+    )

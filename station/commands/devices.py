@@ -146,19 +146,38 @@ def typed_limit(item: str, contexts: list[dict]) -> tuple[str, list | None, str]
     device's calibrations (:func:`unit_contexts`). ValueError, one line: a bad entry (with
     the unit ``NAME`` is typed in), or a unit they cannot tell yet (review.typed_context).
     The CLI's ``--limit`` and the TUI's limits editor convert and refuse through this."""
-    from station.procedures.review import stored_value
+    from station.procedures import review
 
     name = item.strip().partition("=")[0].strip()
     try:
         name, pair = parse_limit(item)
     except ValueError as exc:
-        unit = _typed_unit(item, name, contexts)[1] if name and "=" in item else ""
+        unit = _limit_unit_typed(item, name, contexts)[1] if name and "=" in item else ""
         raise ValueError(f"{exc}{_in_unit(name, unit)}") from None
     if pair is None:
         return name, None, ""
     _check_limit_name(item, name, contexts)
-    ctx, unit = _typed_unit(item, name, contexts)
-    return name, [None if x is None else stored_value(ctx, name, x) for x in pair], unit
+    ctx, unit = _limit_unit_typed(item, name, contexts)
+    if ctx is None:  # typed as a ratio before the device's first compass calibration: kept so, said so
+        return name, [*pair, review.RATIO], unit
+    stored = [None if x is None else review.stored_value(ctx, name, x) for x in pair]
+    stored_unit = review.limit_unit(ctx, name, typed_as_shown=False)
+    return name, stored + ([stored_unit] if stored_unit else []), unit
+
+
+def _limit_unit_typed(item: str, name: str, contexts: list[dict]) -> tuple[dict | None, str]:
+    """:func:`_typed_unit` for a limit: where no calibration tells the capture's unit but the
+    screens show ``name`` alike for every capture (the soft iron's ratio), (None, that unit):
+    the limit is stored in it, with its unit (review.limit_unit), and read in each result's."""
+    from station.procedures.review import RATIO, limit_unit, ratio_unit, unit_context
+
+    try:
+        return _typed_unit(item, name, contexts)
+    except ValueError:
+        ctx = unit_context(name, contexts)
+        if limit_unit(ctx, name, typed_as_shown=True) != RATIO:
+            raise
+        return None, ratio_unit(ctx, name)
 
 
 def _check_limit_name(item: str, name: str, contexts: list[dict]) -> None:
@@ -310,6 +329,24 @@ def _with_units(name: str, values: list, contexts: list[dict], fmt) -> str:
     return f"{text} (stored {safe(stored)}" + (f" {safe(stored_unit)})" if stored_unit else ")")
 
 
+def _limit_text(name: str, lim, contexts: list[dict]) -> str:
+    """A stored limit as ``--limit`` takes it (:func:`_with_units`); one stored with its unit
+    (review.limit_parts) is shown in the unit the device's calibrations show ``name`` in where
+    it converts, its stored values and unit said."""
+    from station.procedures.review import limit_parts, shown_limit, unit_context
+
+    def fmt(x):
+        return "" if x is None else format(x, "g")
+
+    low, high, unit = limit_parts(lim)
+    if unit is None:
+        return _with_units(name, [low, high], contexts, fmt)
+    shown_low, shown_high, shown_unit = shown_limit(unit_context(name, contexts), name, lim)
+    text = safe(f"{name}={fmt(shown_low)}:{fmt(shown_high)}") + (f" {safe(shown_unit)}" if shown_unit else "")
+    stored = safe(f"{fmt(low)}:{fmt(high)} {unit}")
+    return text if (shown_low, shown_high, shown_unit) == (low, high, unit) else f"{text} (stored {stored})"
+
+
 def _show(args: argparse.Namespace) -> int:
     with open_store(args) as store:
         device = require_device(store, args.id)
@@ -332,14 +369,7 @@ def _show(args: argparse.Namespace) -> int:
         f"interval: {fmt_num(device['interval_days'])} days" if device["interval_days"] else "interval: -",
         "tolerances: "
         + (", ".join(_with_units(k, [v], contexts, fmt_num) for k, v in device["tolerances"].items()) or "-"),
-        "limits: "
-        + (
-            ", ".join(
-                _with_units(k, pair, contexts, lambda x: "" if x is None else format(x, "g"))
-                for k, pair in device.get("limits", {}).items()
-            )
-            or "-"
-        ),
+        "limits: " + (", ".join(_limit_text(k, lim, contexts) for k, lim in device.get("limits", {}).items()) or "-"),
         f"created: {safe(device['created'])}",
         f"calibrations: {len(history)}",
     ]

@@ -6,8 +6,9 @@ Tolerances are the device's (``db.store.Store.get_device(...)['tolerances']``): 
 largest change of a parameter (or block, e.g. ``B``) from the value in use that is still
 acceptable, in the parameter's units; ``residual_rms`` limits the fit's residual.
 Limits (``...['limits']``) are absolute: ``{name or block: [low, high]}`` (either end
-None). The previous calibration is the calibration in use: the last *accepted* one
-(``Store.reference``); a rejected calibration is never compared against.
+None), or ``[low, high, unit]`` where the stored unit depends on the capture
+(:func:`limit_parts`). The previous calibration is the calibration in use: the last
+*accepted* one (``Store.reference``); a rejected calibration is never compared against.
 
 A result FAILS when a parameter leaves its tolerance or limits, the residual exceeds its
 tolerance, or the fit fails its own checks (``fit_checks``). A failed result is saved only
@@ -65,6 +66,7 @@ class ParamRow:
     unit: str = ""
     limit: tuple | None = None  # (low, high), either may be None
     in_limits: bool | None = None
+    limit_unread: str | None = None  # the stored limit's unit when it cannot be read in this result's
 
 
 def param_rows(
@@ -94,7 +96,13 @@ def param_rows(
         row.unit = param_unit(result, name)
         lim = limits.get(name, limits.get(block_of(name)))
         if lim is not None:
-            low, high = (None if x is None else float(x) for x in lim)
+            bounds = limit_in(result, name, lim)
+            if bounds is None:  # a unit this result's cannot be converted to: not passed unread
+                row.limit_unread = limit_parts(lim)[2]
+                row.in_limits = row.ok = False
+                rows.append(row)
+                continue
+            low, high = bounds
             row.limit = (low, high)
             if _finite(v):
                 row.in_limits = (low is None or v >= low) and (high is None or v <= high)
@@ -122,6 +130,81 @@ def param_unit(result: dict, name: str) -> str:
     table = getattr(_procedure_module(result), "PARAM_UNITS", {})
     unit = table.get(block, table.get("." + leaf))
     return "" if unit is None else unit.format(mag_unit=_mag_unit(result))
+
+
+RATIO = "ratio"  # the unit of a soft-iron limit typed before the device's first compass calibration
+
+
+def limit_parts(lim) -> tuple[float | None, float | None, str | None]:
+    """A stored limit as (low, high, unit): ``[low, high]`` is in the parameter's stored unit;
+    ``[low, high, unit]`` says the unit its values are in (written where the stored unit
+    depends on the capture: the compass's hard and soft iron, per its ``mag_unit``)."""
+    low, high, *unit = lim
+    return (
+        (None if low is None else float(low)),
+        (None if high is None else float(high)),
+        (str(unit[0]) if unit else None),
+    )
+
+
+def _per_capture_template(result: dict, name: str) -> str | None:
+    """The stored-unit template of ``name`` when it depends on the capture (``nT per {mag_unit}``)."""
+    template = getattr(_procedure_module(result), "PARAM_UNITS", {}).get(block_of(name))
+    return template if template and "{mag_unit}" in template else None
+
+
+def limit_unit(result: dict, name: str, typed_as_shown: bool) -> str | None:
+    """The unit a limit of ``name`` is stored with (:func:`limit_parts`), None where the stored
+    unit is the procedure's own. ``result`` tells the capture's unit (a calibration of the
+    device); with none, a limit typed in a unit shown the same for every capture (the soft
+    iron's ratio: ``typed_as_shown``) is stored as :data:`RATIO`, anything else without a unit."""
+    if _per_capture_template(result, name) is None:
+        return None
+    if result.get("mag_unit"):
+        return param_unit(result, name)
+    shown_alike = getattr(_procedure_module(result), "DISPLAY_UNITS", {}).get(block_of(name)) is not None
+    return RATIO if typed_as_shown and shown_alike else None
+
+
+def ratio_unit(result: dict, name: str) -> str:
+    """How the screens show ``name`` where that is alike for every capture (the soft iron's
+    ``{mag_unit}/{mag_unit}``), with the capture's unit, or the words ``mag_unit`` when no
+    calibration tells it."""
+    spec = getattr(_procedure_module(result), "DISPLAY_UNITS", {}).get(block_of(name))
+    return "" if spec is None else spec[0].format(mag_unit=_mag_unit(result))
+
+
+def limit_in(result: dict, name: str, lim) -> tuple[float | None, float | None] | None:
+    """Stored limit ``lim`` of ``name`` as (low, high) in ``result``'s stored unit of it; None when
+    the limit's unit cannot be converted to that (a raw unit, or a ratio against a raw unit).
+    A limit stored without a unit is read as stored."""
+    low, high, unit = limit_parts(lim)
+    template = _per_capture_template(result, name)
+    if unit is None or template is None or unit == param_unit(result, name):
+        return low, high
+    if unit == RATIO:
+        disp = display_unit(result, name)
+        return None if disp is None else tuple(None if x is None else x / disp[0] for x in (low, high))
+    from solvers.units import MAG_UNITS, si_factor
+
+    source = next((u for u in MAG_UNITS if template.format(mag_unit=u) == unit), None)
+    f_source, f_here = MAG_UNITS.get(source), si_factor("mag", result.get("mag_unit"))
+    if f_source is None or f_here is None:
+        return None
+    k = f_source / f_here if template.startswith("{mag_unit}") else f_here / f_source  # in it, or per it
+    return tuple(None if x is None else x * k for x in (low, high))
+
+
+def shown_limit(result: dict, name: str, lim) -> tuple[float | None, float | None, str]:
+    """Stored limit ``lim`` of ``name`` as the screens show it: (low, high, unit) in the unit
+    ``result`` (the calibration that tells the units, or a bare procedure) shows ``name`` in;
+    a limit that cannot be read in that unit as stored, with its own unit."""
+    low, high, unit = limit_parts(lim)
+    bounds = limit_in(result, name, lim) if result.get("params") or unit is None else None
+    if bounds is not None:
+        low, high = (None if x is None else shown_value(result, name, x) for x in bounds)
+        return low, high, shown_unit(result, name) if result else ""
+    return low, high, ratio_unit(result, name) if unit == RATIO else (unit or "")
 
 
 def _mag_unit(result: dict) -> str:
@@ -388,7 +471,12 @@ def verdict(rows: list[ParamRow], result: dict, tolerances: dict | None = None) 
         u = f" {s.unit}" if s.unit and s.unit != "1" else ""
         if r.tolerance is not None and r.previous is not None and abs(r.value - r.previous) > r.tolerance:
             reasons.append(f"{s.name} changed {s.value - s.previous:+.3g}{u} (tolerance {s.tolerance:g}{u})")
-        if r.in_limits is False:
+        if r.limit_unread is not None:
+            reasons.append(
+                f"{s.name}: its limit is in {r.limit_unread}, which does not convert to this result's {r.unit or 'unit'}: "
+                "set the limit again"
+            )
+        elif r.in_limits is False:
             lo, hi = s.limit
             span = f"{'-∞' if lo is None else format(lo, 'g')} … {'∞' if hi is None else format(hi, 'g')}"
             reasons.append(f"{s.name} = {_fmt(s.value)}{u} outside its limits {span}{u}")

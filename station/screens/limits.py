@@ -130,15 +130,16 @@ class LimitsScreen(ModalScreen):
             return
         from station.commands.devices import unit_contexts
         from station.procedures import registry
-        from station.procedures.review import flatten, shown_unit, shown_value, unit_context
+        from station.procedures.review import flatten, limit_in, shown_limit, shown_value, unit_context
 
         self.limits = message.data["limits"]
         in_use = message.data["in_use"]
         # the units: the result on screen, the calibrations in use, then any of the device's (newest first)
         self.contexts = ([self.result] if self.result else []) + unit_contexts(message.data["history"])
         lines = []
-        for name, (low, high) in sorted(self.limits.items()):
+        for name, lim in sorted(self.limits.items()):
             ctx = unit_context(name, self.contexts)
+            bounds = limit_in(ctx, name, lim)  # in the stored unit of the calibrations in use
             now = None
             for h in in_use.values():
                 v = _scalar(h["params"], name)
@@ -148,13 +149,13 @@ class LimitsScreen(ModalScreen):
             # a block (drift, B, M) is limited element by element: its values in use, min … max
             values = [x for x in flatten(now).values() if x is not None and math.isfinite(x)]
             shown = ""
-            if values:
+            if values and bounds is not None:
+                low, high = bounds
                 inside = all((low is None or x >= low) and (high is None or x <= high) for x in values)
                 shows = sorted(shown_value(ctx, name, x) for x in values)
                 span = f"{shows[0]:.6g}" if len(shows) == 1 else f"{shows[0]:.6g} … {shows[-1]:.6g}"
                 shown = f"in use {span}" + ("" if inside else "  OUTSIDE")
-            low, high = (None if x is None else shown_value(ctx, name, x) for x in (low, high))
-            unit = shown_unit(ctx, name) if ctx else ""
+            low, high, unit = shown_limit(ctx, name, lim)
             line = f"{name:<12} {_fmt(low):>10} … {_fmt(high):<10} {unit}"
             text = tui_markup(line)
             if shown:  # beside the limit when it fits the box (80x24), else under it: never cut off
