@@ -433,6 +433,9 @@ def _read_head(path: str) -> _Head:
                     raise InputError(path, 1, "empty file")
                 raise InputError(path, lineno, "no header row (a line of column names must follow the metadata)")
             if len(raw) == _MAX_HEAD_LINE and not raw.endswith(b"\n"):
+                if b"\r" in raw and raw.lstrip(codecs.BOM_UTF8).startswith(b"#") and b"\0" not in raw:
+                    # a whole capture with old Mac line endings reads as one line
+                    raise InputError(path, lineno, "carriage returns (\\r) end the lines; use LF or CRLF line endings")
                 raise InputError(path, lineno, f"line longer than {_MAX_HEAD_LINE} bytes: not a capture file")
             if lineno == 1:
                 if raw.startswith(codecs.BOM_UTF8):

@@ -204,6 +204,12 @@ BAD = [
         1,
         "stray carriage return (\\r) inside the line; use LF or CRLF line endings",
     ),
+    (  # a whole capture on one 'line' (over 1 MiB): was 'line longer than 1048576 bytes: not a capture file'
+        "bare-cr-endings-long",
+        b"# station-capture: 1\r# procedure: accel-tabletop\rt,ax\r" + b"0.000,1.000\r" * 100000,
+        1,
+        "carriage returns (\\r) end the lines; use LF or CRLF line endings",
+    ),
     (
         "quote-in-label",
         _good('1.5,"x_p",2.4,1.5,1.6\n'),
