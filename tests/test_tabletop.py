@@ -3,6 +3,7 @@ seeds, the two stages, the gauge, unsupportable captures refused with the reason
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -228,3 +229,39 @@ def test_table_without_noise_columns_and_numbered_positions(tmp_path, capsys):
     assert any("estimated from the residuals" in w for w in res["warnings"])
     M, sM = np.array(res["params"]["M"]), np.array(res["uncertainty"]["M"])
     assert np.all(np.abs(M - np.array(sim.truth["M"])) < 5 * sM)
+
+
+def test_a_table_of_averages_with_a_missing_value_is_named_by_its_line(tmp_path):
+    """A P1 table of averages with an empty ax was refused as 'file: row 2: ...' with no line
+    of the file; a row with an empty n made every later row's n print as 1 and dropped the
+    given noise of all rows without saying which row lacked it. Now the line is named."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    table = tmp_path / "table.csv"
+    assert (
+        run_station("simulate", "--procedure", "accel-tabletop", "--out", table, "--option", "averages=1").returncode
+        == 0
+    )
+    lines = table.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("position,"))
+    names = lines[header].split(",")
+    second = lines[header + 2].split(",")  # line header + 3 of the file
+
+    def with_empty(column):
+        row = list(second)
+        row[names.index(column)] = ""
+        path = tmp_path / f"no_{column}.csv"
+        path.write_text("\n".join(lines[: header + 2] + [",".join(row)] + lines[header + 3 :]) + "\n")
+        return path
+
+    for command in ("calibrate", "diagnose"):
+        assert_one_line_refusal(
+            run_station(command, with_empty("ax"), "--json"),
+            f"no_ax.csv:{header + 3}: accelerometer average is missing",
+        )
+    res = run_station("calibrate", with_empty("n"), "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert any(f"(line {header + 3}) without n >= 2" in w for w in out["warnings"]), out["warnings"]
+    ns = [p["n"] for p in out["positions"]]
+    assert ns[1] == 1 and all(n == int(second[names.index("n")]) for n in ns[2:]), ns

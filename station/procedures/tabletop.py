@@ -81,16 +81,27 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
         n = capture.columns.get("n")
         noise_known = all(s is not None for s in stds) and n is not None
         out = []
+        first = (capture.header_line or 0) + 1
+        unmeasured = []  # lines of rows without their n or standard deviations
         for k in range(len(a)):
             if not np.all(np.isfinite(a[k])):
-                raise InputError(capture.path, None, f"row {k + 1}: accelerometer average is missing")
+                raise InputError(
+                    capture.path, first + k if capture.header_line else None, "accelerometer average is missing"
+                )
             lab = str(labels[k]) if labels is not None and labels[k] else str(k + 1)
             d, s = T.known_direction(lab)
             std = np.array([float(x[k]) for x in stds]) if noise_known else None
-            nk = int(n[k]) if noise_known and np.isfinite(n[k]) else 1
+            nk = int(n[k]) if n is not None and np.isfinite(n[k]) and n[k] >= 1 else 1
             if noise_known and (not np.all(np.isfinite(std)) or nk < 2):
-                noise_known = False
+                unmeasured.append(first + k)
             out.append(T.Position(lab, a[k], std, nk, direction=d, placement_sigma_rad=s))
+        if unmeasured:  # one policy for the table: the noise of every row, or of none
+            noise_known = False
+            shown = ", ".join(map(str, unmeasured[:5])) + (" …" if len(unmeasured) > 5 else "")
+            warnings.append(
+                f"{len(unmeasured)} of {len(a)} rows (line {shown}) without n >= 2 and their standard deviations: "
+                "the given noise of the others is not used either"
+            )
         if not noise_known:
             for p in out:
                 p.std = None
