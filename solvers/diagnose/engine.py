@@ -464,6 +464,12 @@ def _hat_basis(x: np.ndarray, knots: int) -> np.ndarray:
     return B[:, 1:] - B[:, 1:].mean(axis=0)
 
 
+def _slope(fn, x: np.ndarray) -> np.ndarray:
+    """``d fn(x)[n, p, k] / d x[n, k]`` of a per-axis basis (central differences, 1e-6 of each axis' range)."""
+    e = 1e-6 * np.maximum(np.ptp(x, axis=0), 1e-300)
+    return (fn(x + e) - fn(x - e)) / (2 * e)
+
+
 def _fold_for(driver: str) -> str | None:
     """Temporal and thermal structure is validated on time blocks where a problem has them, a
     generic function of the input on the problem's ``input`` folds where it has them (P1: whole
@@ -501,6 +507,9 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
                 for cond, d in conds:
                     x = np.asarray(d[drv], float)
                     cond.extra["basis"] = fn(x)
+                    # d basis / d input per axis (N, p, k): a term in the measured input moves with
+                    # the output's noise, which a problem whose weights follow the model needs
+                    cond.extra["basis_dinput"] = _slope(fn, x) if per_axis else None
 
             blocks = {"bR": np.zeros((p, width))}
             return (Candidate(f"residual:{drv}", blocks, setup=setup, folds=_fold_for(drv)), dict(desc, driver=drv))
@@ -533,6 +542,7 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
                         for cond, d in conds:
                             x = (np.asarray(d[drv], float) - lo) / span - 0.5
                             cond.extra["basis"] = (x[:, None] * np.asarray(d["input_axis"], float))[:, None, :]
+                            cond.extra["basis_dinput"] = np.broadcast_to(x[:, None, None], cond.extra["basis"].shape)
 
                     return setup
 
