@@ -67,6 +67,14 @@ CAND_THRESHOLDS: dict = {
 # P2: a row fitted with a leverage above this is left out of the held-out comparison of two models
 # (engine.Problem.cv_max_leverage)
 CV_MAX_LEVERAGE = 0.95
+# LDV: the measured reference velocity is delayed by an all-pass Fourier shift of its content
+# below this fraction of the sample rate (models.Conditions.delay_band_hz), not by linear
+# interpolation, which averages neighbouring samples' noise at any delay off the sample grid and
+# so pulled the fitted delay 2-3 times too far (a 10σ delay of -5.1 ms fitted as -12.7 ms). Above
+# a quarter of the rate linear interpolation itself keeps only 71 % of the amplitude at half a
+# sample, and the derivative of the shift there (the delay's column at τ = 0) is mostly the
+# reference's noise: shifting all of it cut a 3.5σ delay's deviance from 10.8 to 3.1.
+LDV_DELAY_BAND_FS = 0.25
 MIN_TEMP_SPAN_C = 0.2  # a temperature that varies less than this cannot resolve a temperature term
 
 
@@ -276,8 +284,14 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     v, y, t = runs(v), runs(y), runs(t)
     T = runs(temp_c)
     W = runs(omega_body_rad_s)
+    dt = float(np.median(np.diff(t))) if t is not None and m > 1 else 0.0
     cond = Conditions(
-        t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0, omega_body_rad_s=W
+        t_s=t,
+        temp_c=T,
+        temp_ref_c=_ref(T),
+        t_ref_s=float(np.mean(t)) if t is not None else 0.0,
+        omega_body_rad_s=W,
+        delay_band_hz=LDV_DELAY_BAND_FS / dt if dt > 0 else None,
     )
     r0 = v @ np.asarray(X0).T - y
     sig_beam = np.maximum(np.std(r0, axis=0), 1e-12)

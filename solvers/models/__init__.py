@@ -28,6 +28,12 @@ class Conditions:
     omega_rad_s: centrifuge speed [rad/s] (N,); centripetal_dir: (N, 3) body-frame unit
     vector of the centripetal specific force; f_mps2: (N, 3) specific force for gyro
     g-sensitivity; omega_body_rad_s: (N, 3) body rate for the LDV lever arm.
+    delay_band_hz: how a delayed input is formed between samples (LDV ``time_delay``): None,
+    linear interpolation (exact for a piecewise-linear input: a simulated drive); a value, an
+    all-pass Fourier shift of the input's content below that frequency (``math.inf``: all of
+    it) on a uniform time base, which keeps the energy of the input's noise whatever the delay
+    (a measured, noisy reference, whose linear interpolation averages neighbouring samples'
+    noise and so fits better at any delay off the sample grid).
     """
 
     t_s: np.ndarray | None = None
@@ -39,6 +45,7 @@ class Conditions:
     centripetal_dir: np.ndarray | None = None
     f_mps2: np.ndarray | None = None
     omega_body_rad_s: np.ndarray | None = None
+    delay_band_hz: float | None = None
     extra: dict = field(default_factory=dict)
 
 

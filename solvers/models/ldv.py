@@ -9,7 +9,7 @@ form is ``X_j = (1 + δK_j) u_j``; block ``X`` [3x3] holds the three beams as ro
 
 - baseline: ``X`` [3x3].
 - effects (diagnose.md): ``time_delay`` → ``tau_s`` (scalar, s; needs ``cond.t_s``; the
-  velocity is interpolated in time); ``lever_arm`` → ``r`` [3] m (needs
+  velocity is interpolated in time, or shifted all-pass below ``cond.delay_band_hz``); ``lever_arm`` → ``r`` [3] m (needs
   ``cond.omega_body_rad_s``); ``offset`` → ``o`` [3] m/s; ``temperature_bias`` → ``bT``
   [3]; ``time_drift`` → ``bt`` [3] m/s per s.
 """
@@ -45,7 +45,37 @@ def angles_from_X(X) -> dict:
     return {"dK": norm - 1.0, "alpha_deg": ang[:, 0], "beta_deg": ang[:, 1], "gamma_deg": ang[:, 2]}
 
 
-def _delayed(arr: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
+def _uniform(t: np.ndarray) -> bool:
+    """Whether the samples are equally spaced (to 0.1 % of a step)."""
+    if len(t) < 4 or t[-1] <= t[0]:
+        return False
+    dt = (t[-1] - t[0]) / (len(t) - 1)
+    return bool(np.max(np.abs(np.diff(t) - dt)) <= 1e-3 * dt)
+
+
+def _allpass_delayed(arr: np.ndarray, t: np.ndarray, tau: float, band_hz: float) -> np.ndarray:
+    """``arr(t − τ)`` by a Fourier phase shift of its content below ``band_hz`` (uniform ``t``):
+    the line through the first and last samples is taken out first (so the periodic extension
+    has no jump) and shifted exactly; the remainder's spectrum is multiplied by
+    ``exp(−2πi f τ)`` below the band and left as it is above it. Both are unitary, so white
+    noise in ``arr`` keeps its energy at every τ."""
+    n = len(t)
+    span = t[-1] - t[0]
+    slope = (arr[-1] - arr[0]) / span
+    line = arr[0] + (t - t[0])[:, None] * slope
+    spec = np.fft.rfft(arr - line, axis=0)
+    f = np.fft.rfftfreq(n, span / (n - 1))
+    phase = np.where(f < band_hz, np.exp(-2j * np.pi * f * tau), 1.0)
+    if n % 2 == 0:
+        phase[-1] = phase[-1].real  # the Nyquist term of a real series stays real
+    return np.fft.irfft(spec * phase[:, None], n=n, axis=0) + line - tau * slope
+
+
+def _delayed(arr: np.ndarray, t: np.ndarray, tau: float, band_hz: float | None = None) -> np.ndarray:
+    """``arr(t − τ)``: linear interpolation (``band_hz`` None, or a non-uniform ``t``), else
+    ``_allpass_delayed``."""
+    if band_hz is not None and tau != 0.0 and _uniform(t):
+        return _allpass_delayed(arr, t, tau, band_hz)
     return np.column_stack([np.interp(t - tau, t, arr[:, k]) for k in range(arr.shape[1])])
 
 
@@ -61,9 +91,9 @@ def body_velocity_at_beam(v_body_mps, params: dict, cond: Conditions | None = No
         if cond is None or cond.t_s is None:
             raise ValueError("time_delay needs the time (cond.t_s)")
         t = np.asarray(cond.t_s, dtype=float)
-        v = _delayed(v, t, float(params["tau_s"]))
+        v = _delayed(v, t, float(params["tau_s"]), cond.delay_band_hz)
         if w is not None:
-            w = _delayed(w, t, float(params["tau_s"]))
+            w = _delayed(w, t, float(params["tau_s"]), cond.delay_band_hz)
     if w is not None:
         v = v + np.cross(w, np.asarray(params["r"], dtype=float))
     return v
