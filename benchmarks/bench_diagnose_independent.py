@@ -12,7 +12,8 @@ to the same ``analyse`` that ``station diagnose`` runs. Per procedure:
 - each canonical effect at each size (k σ of the true extension's detection σ,
   ``diag_generator.size_for``): detection = the hidden name in the verdict (named or as
   confused with the chosen one); wrong = any other name in the verdict that is not
-  reported as confused with the hidden one; clean = the hidden name and nothing else;
+  reported as confused with the hidden one; right = named with no wrong name (only names the
+  data could not tell from it beside it); clean = the hidden name and nothing else;
 - each unlisted effect (bias step, periodic bias, temperature-dependent scale): found =
   a ``residual:<driver>`` name in the verdict; canonical = a canonical name instead.
 
@@ -209,6 +210,10 @@ def main(argv=None) -> int:
                     else:
                         hit = sum(effect in r["verdict"] for r in rows)
                         wrong = sum(any(v != effect and v not in r["tied"] for v in r["verdict"]) for r in rows)
+                        right = sum(
+                            effect in r["verdict"] and not any(v != effect and v not in r["tied"] for v in r["verdict"])
+                            for r in rows
+                        )
                         clean = sum(r["verdict"] == [effect] for r in rows)
                         extra: dict[str, int] = {}
                         for r in rows:
@@ -216,7 +221,7 @@ def main(argv=None) -> int:
                                 if v != effect:
                                     extra[v] = extra.get(v, 0) + 1
                         cells.append(
-                            f"{k:g}σ: named {100 * hit / n:5.1f}%  wrong {100 * wrong / n:5.1f}%  "
+                            f"{k:g}σ: named {100 * hit / n:5.1f}%  right {100 * right / n:5.1f}%  wrong {100 * wrong / n:5.1f}%  "
                             f"clean {100 * clean / n:5.1f}% {extra}"
                         )
                     errs = sum(1 for r in res if "error" in r[i])
