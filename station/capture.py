@@ -52,6 +52,22 @@ UNIT_KEYS: dict[str, tuple[str, ...]] = {
 assert set(_RAW_ORDER) == set(RAW_UNITS)
 KNOWN_UNITS = frozenset(u for units in UNIT_KEYS.values() for u in units)
 _UNIT_KIND = {"accel_unit": "an acceleration", "gyro_unit": "an angular-rate", "mag_unit": "a magnetic-field"}
+# Other spellings of the same units that other tools write (micro sign or Greek mu, m/s2,
+# dps, ...): read as the unit they name; a written capture uses the names above.
+UNIT_ALIASES: dict[str, dict[str, str]] = {
+    "accel_unit": {"m/s2": "m/s^2", "m/s²": "m/s^2", "m/s/s": "m/s^2", "m s^-2": "m/s^2", "ms^-2": "m/s^2"},
+    "gyro_unit": {
+        "dps": "deg/s",
+        "deg/sec": "deg/s",
+        "°/s": "deg/s",
+        "rad/sec": "rad/s",
+        "rad s^-1": "rad/s",
+        "deg/hr": "deg/h",
+        "°/h": "deg/h",
+        "dph": "deg/h",
+    },
+    "mag_unit": {"µT": "uT", "μT": "uT", "Gauss": "gauss", "Gs": "gauss", "mGauss": "mgauss", "milligauss": "mgauss"},
+}
 
 # Metadata keys that must hold a finite number, with an optional validity check.
 _NUMERIC_META: dict[str, tuple] = {
@@ -475,6 +491,9 @@ def _read_head(path: str) -> _Head:
             saw_header = True
             break
     assert saw_header
+    for key, aliases in UNIT_ALIASES.items():
+        if head.meta.get(key) in aliases:
+            head.meta[key] = aliases[head.meta[key]]
     _check_meta(path, head.meta, head.meta_lines)
     return head
 
