@@ -52,6 +52,13 @@ UNIT_KEYS: dict[str, tuple[str, ...]] = {
 assert set(_RAW_ORDER) == set(RAW_UNITS)
 KNOWN_UNITS = frozenset(u for units in UNIT_KEYS.values() for u in units)
 _UNIT_KIND = {"accel_unit": "an acceleration", "gyro_unit": "an angular-rate", "mag_unit": "a magnetic-field"}
+# The metadata keys capture-format.md defines; one in other letter case is read as it.
+SPEC_KEYS = frozenset(
+    (
+        "procedure device accel_unit gyro_unit mag_unit latitude_deg longitude_deg altitude_m date g_mps2"
+        " radius_m heading_deg gyro_mode sample_rate_hz"
+    ).split()
+)
 # Other spellings of the same units that other tools write (micro sign or Greek mu, m/s2,
 # dps, ...): read as the unit they name; a written capture uses the names above.
 UNIT_ALIASES: dict[str, dict[str, str]] = {
@@ -491,6 +498,10 @@ def _read_head(path: str) -> _Head:
             saw_header = True
             break
     assert saw_header
+    for key in [k for k in head.meta if k not in SPEC_KEYS and k.lower() in SPEC_KEYS]:
+        if key.lower() not in head.meta:  # 'MAG_UNIT', 'Sample_Rate_Hz': the key it spells
+            head.meta[key.lower()] = head.meta.pop(key)
+            head.meta_lines[key.lower()] = head.meta_lines.pop(key)
     for key, aliases in UNIT_ALIASES.items():
         if head.meta.get(key) in aliases:
             head.meta[key] = aliases[head.meta[key]]

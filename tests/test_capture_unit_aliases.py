@@ -71,3 +71,14 @@ def test_a_unit_no_tool_writes_is_still_refused(tmp_path):
     path = tmp_path / "bad.csv"
     _respelt(src, path, "# gyro_unit: deg/s", "# gyro_unit: furlongs/fortnight")
     assert_one_line_refusal(run_station("calibrate", path, "--json"), "gyro_unit", "furlongs/fortnight")
+
+
+def test_a_metadata_key_in_other_letter_case_is_read_as_the_key(tmp_path):
+    """'MAG_UNIT: uT' was ignored as an unknown key: the compass then calibrated in raw units."""
+    src = DATA / "sunsided_marg" / "sunsided_full_sphere.capture.csv"
+    plain, upper = tmp_path / "plain.csv", tmp_path / "upper.csv"
+    _in_microtesla(src, plain, "uT")
+    _respelt(plain, upper, "# mag_unit: uT", "# MAG_UNIT: uT")
+    got = _calibrated(upper)
+    assert got["mag_unit"] == "uT"
+    assert got == _calibrated(plain)
