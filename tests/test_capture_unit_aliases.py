@@ -82,3 +82,20 @@ def test_a_metadata_key_in_other_letter_case_is_read_as_the_key(tmp_path):
     got = _calibrated(upper)
     assert got["mag_unit"] == "uT"
     assert got == _calibrated(plain)
+
+
+def test_a_compass_capture_with_a_place_and_no_date_is_calibrated_unanchored(tmp_path):
+    """A place without a date gives no IGRF field: calibrated as with no place, saying why
+    (it was refused, and the whole capture lost for one missing metadata line)."""
+    src = DATA / "sunsided_marg" / "sunsided_full_sphere.capture.csv"
+    text = src.read_text(encoding="utf-8")
+    date_line = next(line for line in text.splitlines() if line.startswith("# date:"))
+    no_place = tmp_path / "no_place.csv"
+    no_place.write_text(text.replace(date_line + "\n", ""), encoding="utf-8")
+    no_date = tmp_path / "no_date.csv"
+    no_date.write_text(text.replace(date_line, "# latitude_deg: 48.14\n# longitude_deg: 11.58"), encoding="utf-8")
+    got, plain = _calibrated(no_date), _calibrated(no_place)
+    assert any("no 'date'" in w and "NOT IGRF-anchored" in w for w in got["warnings"]), got["warnings"]
+    assert got["igrf_anchored"] is False and plain["igrf_anchored"] is False
+    for name in ("hard_iron", "soft_iron"):
+        assert got["params"][name] == plain["params"][name]

@@ -71,11 +71,12 @@ def _reference(capture, warnings: list[str]) -> dict | None:
         return None
     date = capture.meta.get("date")
     if not date:
-        raise InputError(
-            capture.path,
-            None,
-            "metadata has latitude_deg/longitude_deg but no 'date': the IGRF field needs the date of the recording",
+        warnings.append(
+            "metadata has latitude_deg/longitude_deg but no 'date' (the IGRF field needs the date of "
+            "the recording): no IGRF reference; the field magnitude is normalised to the data's own "
+            "mean radius, so the calibration is NOT IGRF-anchored (add '# date: YYYY-MM-DD')"
         )
+        return None
     alt = capture.float_meta("altitude_m", 0.0)
     try:
         _, note = igrf_date(date)
