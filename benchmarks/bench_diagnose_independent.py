@@ -209,11 +209,9 @@ def main(argv=None) -> int:
                         )
                     else:
                         hit = sum(effect in r["verdict"] for r in rows)
-                        wrong = sum(any(v != effect and v not in r["tied"] for v in r["verdict"]) for r in rows)
-                        right = sum(
-                            effect in r["verdict"] and not any(v != effect and v not in r["tied"] for v in r["verdict"])
-                            for r in rows
-                        )
+                        wrong_in = [any(v != effect and v not in r["tied"] for v in r["verdict"]) for r in rows]
+                        wrong = sum(wrong_in)
+                        right = sum(effect in r["verdict"] and not w for r, w in zip(rows, wrong_in))
                         clean = sum(r["verdict"] == [effect] for r in rows)
                         extra: dict[str, int] = {}
                         for r in rows:

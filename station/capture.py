@@ -52,13 +52,6 @@ UNIT_KEYS: dict[str, tuple[str, ...]] = {
 assert set(_RAW_ORDER) == set(RAW_UNITS)
 KNOWN_UNITS = frozenset(u for units in UNIT_KEYS.values() for u in units)
 _UNIT_KIND = {"accel_unit": "an acceleration", "gyro_unit": "an angular-rate", "mag_unit": "a magnetic-field"}
-# The metadata keys capture-format.md defines; one in other letter case is read as it.
-SPEC_KEYS = frozenset(
-    (
-        "procedure device accel_unit gyro_unit mag_unit latitude_deg longitude_deg altitude_m date g_mps2"
-        " radius_m heading_deg gyro_mode sample_rate_hz"
-    ).split()
-)
 # Other spellings of the same units that other tools write (micro sign or Greek mu, m/s2,
 # dps, ...): read as the unit they name; a written capture uses the names above.
 UNIT_ALIASES: dict[str, dict[str, str]] = {
@@ -86,6 +79,9 @@ _NUMERIC_META: dict[str, tuple] = {
     "heading_deg": (lambda x: -360.0 <= x <= 720.0, "must be between -360 and 720"),
     "sample_rate_hz": (lambda x: 0.0 < x <= 1.0e9, "must be positive and at most 1e9"),
 }
+# The metadata keys capture-format.md defines (those _check_meta checks); one in other letter
+# case is read as it.
+SPEC_KEYS = frozenset({"procedure", "device", "date", "gyro_mode", *UNIT_KEYS, *_NUMERIC_META})
 
 # Units shown by `station inspect` for the columns the spec names.
 COLUMN_UNITS = {

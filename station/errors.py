@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 
 
@@ -50,8 +51,6 @@ def take_deferred_warnings() -> list[tuple[str, str]]:
 def require_positive(option: str, value: float | None, unit: str = "") -> None:
     """Refuse a numeric command-line option that is not a finite positive number (0, negative,
     nan, inf) as one line; None (the option not given) passes."""
-    import math
-
     if value is not None and not (value > 0 and math.isfinite(value)):
         raise InputError(
             None, None, f"{option} must be a positive number{' of ' + unit if unit else ''}, got {value:g}"

@@ -679,12 +679,12 @@ def compass_problem(
     g0 = gain(W0, mag_model.inverse(y_all, {"W": W0, "h": np.asarray(h0, float)}, cond))
 
     def residual(p):
-        q = {k: v for k, v in p.items() if k not in ("c_dip", "field_scale", "dc_dip", "rho")}
+        q = {k: v for k, v in p.items() if k not in ("c_dip", "field_scale", "dc_dip")}
         F = field_nT * float(p.get("field_scale", 1.0))
         c_dip = p["c_dip"] + p["dc_dip"] if "dc_dip" in p else p.get("c_dip")
-        m_w = mag_model.inverse(y_all, q, cond)  # the rotation ρ leaves |m| as it is
+        # the rotation ρ leaves |m| as it is
+        m_w = mag_model.inverse(y_all, {k: v for k, v in q.items() if k != "rho"}, cond)
         mag = block_mean((np.linalg.norm(m_w, axis=1) - F) * (g0 / gain(q["W"], m_w, q.get("bR"))))
-        q = {k: v for k, v in p.items() if k not in ("c_dip", "field_scale", "dc_dip")}
         if not have_dip:
             return mag
         m = mag_model.inverse(ys, q, cond_s)
