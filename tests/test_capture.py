@@ -767,3 +767,37 @@ def test_export_capture_gives_back_the_stored_capture(shared_data, tmp_path):
     missing = _station("export-capture", str(capture_id + 1), "--db", str(db))
     assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "Traceback" not in missing.stderr
     assert f"no capture {capture_id + 1}" in missing.stderr
+
+
+def _with_rate(src, dst, rate: str):
+    """``src`` with its sample_rate_hz line stated as ``rate``; the line number it sits on."""
+    lines = src.read_text(encoding="utf-8").splitlines(keepends=True)
+    at = next(i for i, line in enumerate(lines) if line.startswith("# sample_rate_hz:"))
+    lines[at] = f"# sample_rate_hz: {rate}\n"
+    dst.write_text("".join(lines), encoding="utf-8")
+    return at + 1
+
+
+def test_inspect_refuses_a_compass_rate_that_t_contradicts(shared_data, tmp_path):
+    # the real sunsided record logged at 99.05 Hz, stated as 50 Hz: calibrate refuses it, so must inspect
+    path = tmp_path / "sphere.capture.csv"
+    line = _with_rate(shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv", path, "50")
+    out = _station("inspect", str(path))
+    assert out.returncode == 2 and out.stdout == "" and out.stderr.count("\n") == 1, out.stderr
+    assert f"{path}:{line}:" in out.stderr and "sample_rate_hz" in out.stderr and "t column" in out.stderr
+    calibrated = _station("calibrate", str(path))
+    assert calibrated.returncode == 2 and f"{path}:{line}:" in calibrated.stderr
+
+
+def test_inspect_warns_of_a_rate_that_t_contradicts(shared_data, tmp_path):
+    # the real imu_tk record logged at 100 Hz, stated as 400 Hz: P1 does not use the rate, noise does
+    path = tmp_path / "xsens.capture.csv"
+    line = _with_rate(shared_data / "imu_tk_xsens" / "imu_tk_xsens.capture.csv", path, "400")
+    out = _station("inspect", str(path), "--json")
+    assert out.returncode == 0, out.stderr
+    (warning,) = json.loads(out.stdout)["warnings"]
+    assert warning.startswith(f"line {line}:") and "400 Hz" in warning and "station noise" in warning
+    text = _station("inspect", str(path)).stdout
+    assert re.search(rf"^warning:\s+line {line}: metadata 'sample_rate_hz': 400 Hz", text, re.M)
+    plain = _station("inspect", str(shared_data / "imu_tk_xsens" / "imu_tk_xsens.capture.csv"), "--json")
+    assert json.loads(plain.stdout)["warnings"] == []

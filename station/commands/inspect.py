@@ -72,7 +72,26 @@ def summary(capture) -> dict:
         columns.append(entry)
     out["columns"] = columns
     out["metadata"] = dict(capture.meta)
+    out["warnings"] = rate_warnings(capture)
     return out
+
+
+def rate_warnings(capture) -> list[str]:
+    """A stated ``sample_rate_hz`` that the ``t`` column contradicts: an InputError where the
+    capture's own procedure would refuse it (compass), else a warning naming what refuses it."""
+    from station.errors import InputError
+    from station.procedures.compass import RATE_CONSEQUENCE
+
+    own = capture.procedure == "compass"  # the one calibration that scales with the rate
+    try:
+        capture.series_rate_hz(
+            RATE_CONSEQUENCE if own else "`station noise` refuses it: the Allan figures scale with the rate"
+        )
+    except InputError as exc:
+        if own:
+            raise
+        return [f"line {exc.line}: {exc.message}" if exc.line else exc.message]
+    return []
 
 
 def _g(x: float | None, digits: int = 6) -> str:
@@ -111,6 +130,7 @@ def format_text(s: dict) -> str:
         lines.append(text.rstrip())
     lines.append("metadata:")
     lines.extend(f"  {k}: {v}" for k, v in s["metadata"].items())
+    lines.extend(f"warning:    {safe(w)}" for w in s["warnings"])
     return "\n".join(lines)
 
 

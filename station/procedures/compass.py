@@ -51,6 +51,7 @@ DISPLAY_UNITS = {"soft_iron": ("{mag_unit}/{mag_unit}", _soft_iron_ratio)}
 LIMIT_EXAMPLE = "e.g. hard_iron[0]=-5:5  soft_iron[0][0]=0.9:1.1"  # the limits box's example, as shown
 REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
 METHODS = ("rls", "batch", "ellipsoid")
+RATE_CONSEQUENCE = "the filters' cut-offs and the Kalman filter's step scale with the rate"  # why t must agree
 
 
 def _xyz(capture, prefix: str) -> np.ndarray | None:
@@ -214,7 +215,7 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     rate = None
     y_all = _xyz(capture, "m")
     if t is not None:
-        rate = capture.series_rate_hz("the filters' cut-offs and the Kalman filter's step scale with the rate")
+        rate = capture.series_rate_hz(RATE_CONSEQUENCE)
     if rate:
         f_f = C.lowpass(np.nan_to_num(f_g), C.ACCEL_CUTOFF_HZ, rate)
         y_f = C.lowpass(np.where(np.isfinite(y_all), y_all, np.nanmean(y_all, axis=0)), C.MAG_CUTOFF_HZ, rate)
