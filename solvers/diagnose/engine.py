@@ -442,6 +442,57 @@ def serial_inflation(e: np.ndarray, s: np.ndarray, series: np.ndarray | None) ->
     return max(1.0, num / den) if den > 0 else 1.0
 
 
+def shared_inflation(problem: Problem, Q: np.ndarray, e: np.ndarray, s: np.ndarray) -> float:
+    """How much noise that the rows of a group share (``problem.shared_noise``: the parts of a P1
+    hold share its slow bias instability) inflates the variance of the statistic ``sᵀe`` over the
+    one noise scale the deviance assumes: a one-way random-effects split of the residual ``e`` of
+    the tested model (orthonormal columns ``Q``), on the groups of two rows or more, into the
+    mean square of the group means (directions ``1/σ`` of each group's weighted rows) and the mean
+    square within groups, each over its own degrees of freedom (the model's leverage on those
+    directions taken out). ``s``'s energy on the group means is weighed with the first, the rest
+    of it with the second, against the pooled mean square; rows in no shared group count 1. A
+    signature that lives on the hold means (a line in time) is tested against the scatter of the
+    hold means, not against the within-hold scatter that makes most of the rows' residual. At
+    least 1; 1 where either part has no degrees of freedom left."""
+    if problem.shared_noise is None:
+        return 1.0
+    g = np.asarray(problem.shared_noise)
+    _, inv, cnt = np.unique(g, return_inverse=True, return_counts=True)
+    multi = cnt[inv] >= 2
+    if not multi.any():
+        return 1.0
+    idx = np.flatnonzero(multi)
+    _, gi = np.unique(inv[idx], return_inverse=True)
+    ng = int(gi.max()) + 1
+    w = 1.0 / np.asarray(problem.sigma, float)[idx]
+    u = w / np.sqrt(np.bincount(gi, weights=w**2, minlength=ng))[gi]
+
+    def means(x):  # coordinates on the group-mean directions
+        return (
+            np.bincount(gi, weights=u * x, minlength=ng)
+            if x.ndim == 1
+            else np.stack([np.bincount(gi, weights=u * c, minlength=ng) for c in x.T], axis=1)
+        )
+
+    eg, sg, Qg = e[idx], s[idx], Q[idx]
+    ssb = float(np.sum(means(eg) ** 2))
+    ssw = float(eg @ eg) - ssb
+    tr_b = float(np.sum(means(Qg) ** 2)) if Qg.shape[1] else 0.0
+    tr_w = float(np.sum(Qg**2)) - tr_b
+    dof_b, dof_w = ng - tr_b, len(idx) - ng - tr_w
+    if dof_b < 1 or dof_w < 1 or ssw <= 0:
+        return 1.0
+    msb, msw = ssb / dof_b, ssw / dof_w
+    pooled = (ssb + ssw) / (dof_b + dof_w)
+    s2 = float(sg @ sg)
+    tot = float(s @ s)
+    if s2 <= 0 or tot <= 0:
+        return 1.0
+    sb = float(np.sum(means(sg) ** 2))
+    var = (sb * msb + (s2 - sb) * msw) / pooled
+    return max(1.0, (var + (tot - s2)) / tot)
+
+
 # ---------------------------------------------------------------- generic extension
 
 GENERIC_STEP_GRID = np.linspace(0.1, 0.9, 13)  # step positions, fractions of the driver's range
@@ -801,7 +852,10 @@ def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: bool) -> 
     return ev
 
 
-def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
+def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool = False) -> _Eval:
+    """The tests of one candidate added to the round's model; ``shared``: its deviance is also taken
+    net of the noise the rows of a group share (``shared_inflation``, a test beside library effects
+    already named)."""
     A, QA = rnd.A, rnd.QA
     Jp = cc.J - QA @ (QA.T @ cc.J)
     k = _gram_rank(Jp.T @ Jp) if Jp.shape[1] else 0
@@ -813,6 +867,8 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n) -> _Eval:
     sig = cc.J @ d[A.shape[1] :]
     sig = sig - QA @ (QA.T @ sig)
     infl = serial_inflation(e, sig, problem.series)
+    if shared and problem.shared_noise is not None:
+        infl = max(infl, shared_inflation(problem, _orth(np.hstack([A, cc.J])), e, sig))
     ev = _Eval(cc, db, cvc, sig, int(k), D, infl, cv_ref=cv_ref)
     t = _only_kind(problem, cc.J, types)
     if t is not None and k > 0:
@@ -1025,7 +1081,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     ok = False
                 else:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
-                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
+                    ev = _evaluate(
+                        problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n, shared=True
+                    )
                     ok = _passes(
                         problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n
                     )
@@ -1072,7 +1130,15 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                         cand = _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
                         if cand.reason is None:
                             evs.append(
-                                _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
+                                _evaluate(
+                                    problem,
+                                    cand,
+                                    rr.get(cand.cand.folds),
+                                    typed_fit_term(r0, types),
+                                    types,
+                                    n,
+                                    shared=len(picked) > 2,
+                                )
                             )
                     if len(evs) < 2 or min(ev.k for ev in evs) <= 0 or abs(_corr(evs[0].sig, evs[1].sig)) <= RIVAL_CORR:
                         continue
@@ -1117,7 +1183,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                         "reason": cc.reason,
                     }
                 continue
-            ev = _evaluate(problem, cc, rounds.get(cc.cand.folds), term_cur, types, n)
+            ev = _evaluate(problem, cc, rounds.get(cc.cand.folds), term_cur, types, n, shared=bool(picked))
             evals.append(ev)
             if first:
                 entries[cc.cand.name] = {
