@@ -78,15 +78,15 @@ def summary(capture) -> dict:
 
 def rate_warnings(capture) -> list[str]:
     """A stated ``sample_rate_hz`` that the ``t`` column contradicts: an InputError where the
-    capture's own procedure would refuse it (compass), else a warning naming what refuses it."""
+    capture's own procedure would refuse it (its module names a ``RATE_CONSEQUENCE``: what scales
+    with the rate), else a warning naming what refuses it."""
     from station.errors import InputError
-    from station.procedures.compass import RATE_CONSEQUENCE
+    from station.procedures import registry
 
-    own = capture.procedure == "compass"  # the one calibration that scales with the rate
+    entry = registry.get(capture.procedure)
+    own = getattr(entry.load(), "RATE_CONSEQUENCE", None) if entry is not None else None
     try:
-        capture.series_rate_hz(
-            RATE_CONSEQUENCE if own else "`station noise` refuses it: the Allan figures scale with the rate"
-        )
+        capture.series_rate_hz(own or "`station noise` refuses it: the Allan figures scale with the rate")
     except InputError as exc:
         if own:
             raise

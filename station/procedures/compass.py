@@ -51,7 +51,8 @@ DISPLAY_UNITS = {"soft_iron": ("{mag_unit}/{mag_unit}", _soft_iron_ratio)}
 LIMIT_EXAMPLE = "e.g. hard_iron[0]=-5:5  soft_iron[0][0]=0.9:1.1"  # the limits box's example, as shown
 REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
 METHODS = ("rls", "batch", "ellipsoid")
-RATE_CONSEQUENCE = "the filters' cut-offs and the Kalman filter's step scale with the rate"  # why t must agree
+# what scales with the sample rate: a stated rate that t contradicts is refused (calibrate, inspect)
+RATE_CONSEQUENCE = "the filters' cut-offs and the Kalman filter's step scale with the rate"
 
 
 def _xyz(capture, prefix: str) -> np.ndarray | None:
