@@ -144,6 +144,9 @@ def _trial(args):
     return res
 
 
+FINAL_SEED0 = 600000  # seeds kept for the final measurement (tuning uses 400000 to 599999)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--nulls", type=int, default=200)
@@ -157,6 +160,12 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     sizes = [float(x) for x in a.sizes.split(",") if x]
     only = {x for x in a.effects.split(",") if x}
+    # seeds from FINAL_SEED0 up are kept for the final measurement: a tuning run must stay below
+    top = a.seed0 + max(a.nulls, 1000 * 97 + a.trials if a.trials else 0)
+    if a.seed0 < FINAL_SEED0 < top:
+        ap.error(
+            f"seeds {a.seed0}..{top} reach the final set ({FINAL_SEED0}+): use --seed0 {FINAL_SEED0 - top + a.seed0} or lower"
+        )
     with ProcessPoolExecutor(a.jobs, initializer=_set_dump, initargs=(a.dump,)) as ex:
         for proc in [p for p in a.procedures.split(",") if p]:
             if a.nulls:
