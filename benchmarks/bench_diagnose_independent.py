@@ -144,6 +144,11 @@ def _trial(args):
     return res
 
 
+def _offset(effect: str) -> int:
+    """Where an effect's trial seeds start after ``--seed0`` (1000 to 97000)."""
+    return 1000 * (1 + zlib.crc32(effect.encode()) % 97)
+
+
 FINAL_SEED0 = 600000  # seeds kept for the final measurement (tuning uses 400000 to 599999)
 
 
@@ -161,7 +166,9 @@ def main(argv=None) -> int:
     sizes = [float(x) for x in a.sizes.split(",") if x]
     only = {x for x in a.effects.split(",") if x}
     # seeds from FINAL_SEED0 up are kept for the final measurement: a tuning run must stay below
-    top = a.seed0 + max(a.nulls, 1000 * 97 + a.trials if a.trials else 0)
+    procs = [p for p in a.procedures.split(",") if p]
+    offsets = [_offset(e) for p in procs for e in G.CANONICAL[p] + G.UNLISTED[p] if not only or e in only]
+    top = a.seed0 + max([a.nulls] + ([max(offsets) + a.trials] if a.trials and offsets else []))
     if a.seed0 < FINAL_SEED0 < top:
         ap.error(
             f"seeds {a.seed0}..{top} reach the final set ({FINAL_SEED0}+): use --seed0 {FINAL_SEED0 - top + a.seed0} or lower"
@@ -194,10 +201,7 @@ def main(argv=None) -> int:
                 res = list(
                     ex.map(
                         _trial,
-                        [
-                            (proc, effect, a.seed0 + 1000 * (1 + zlib.crc32(effect.encode()) % 97) + j, sizes)
-                            for j in range(a.trials)
-                        ],
+                        [(proc, effect, a.seed0 + _offset(effect) + j, sizes) for j in range(a.trials)],
                     )
                 )
                 res = [r for r in res if r is not None]
