@@ -442,6 +442,23 @@ def serial_inflation(e: np.ndarray, s: np.ndarray, series: np.ndarray | None) ->
     return max(1.0, num / den) if den > 0 else 1.0
 
 
+def group_means(groups: np.ndarray, sigma: np.ndarray):
+    """(means, ng): ``means(x)`` gives a row vector's or matrix's coordinates on the ``ng`` groups'
+    mean directions in the weighted rows, orthonormal (row i of group g has ``w_i / |w_g|``,
+    ``w = 1/σ``: a common offset of the group in the data)."""
+    _, inv = np.unique(groups, return_inverse=True)
+    ng = int(inv.max()) + 1
+    w = 1.0 / sigma
+    u = w / np.sqrt(np.bincount(inv, weights=w**2, minlength=ng))[inv]
+
+    def means(x: np.ndarray) -> np.ndarray:
+        U = np.zeros((ng,) + x.shape[1:])
+        np.add.at(U, inv, u.reshape((-1,) + (1,) * (x.ndim - 1)) * x)
+        return U
+
+    return means, ng
+
+
 def shared_inflation(problem: Problem, Q: np.ndarray, e: np.ndarray, s: np.ndarray) -> float:
     """How much noise that the rows of a group share (``problem.shared_noise``: the parts of a P1
     hold share its slow bias instability) inflates the variance of the statistic ``sᵀe`` over the
@@ -462,18 +479,7 @@ def shared_inflation(problem: Problem, Q: np.ndarray, e: np.ndarray, s: np.ndarr
     if not multi.any():
         return 1.0
     idx = np.flatnonzero(multi)
-    _, gi = np.unique(inv[idx], return_inverse=True)
-    ng = int(gi.max()) + 1
-    w = 1.0 / np.asarray(problem.sigma, float)[idx]
-    u = w / np.sqrt(np.bincount(gi, weights=w**2, minlength=ng))[gi]
-
-    def means(x):  # coordinates on the group-mean directions
-        return (
-            np.bincount(gi, weights=u * x, minlength=ng)
-            if x.ndim == 1
-            else np.stack([np.bincount(gi, weights=u * c, minlength=ng) for c in x.T], axis=1)
-        )
-
+    means, ng = group_means(inv[idx], np.asarray(problem.sigma, float)[idx])
     eg, sg, Qg = e[idx], s[idx], Q[idx]
     ssb = float(np.sum(means(eg) ** 2))
     ssw = float(eg @ eg) - ssb
@@ -816,18 +822,7 @@ def independent_groups(problem: Problem, A: np.ndarray, J: np.ndarray) -> float:
     every other problem (P1 table of averages, P2, compass, P4, LDV), the rows."""
     n = A.shape[0]
     g = np.arange(n) if problem.shared_noise is None else np.asarray(problem.shared_noise)
-    _, inv = np.unique(g, return_inverse=True)
-    w = 1.0 / np.asarray(problem.sigma, float)
-    ng = int(inv.max()) + 1
-    # orthonormal directions of the group means in the weighted rows: row i of group g has w_i / |w_g|
-    wn = np.sqrt(np.bincount(inv, weights=w**2, minlength=ng))
-    u = w / wn[inv]
-
-    def means(M):  # each column's coordinates on the group-mean directions (ng × columns)
-        U = np.zeros((ng, M.shape[1]))
-        np.add.at(U, inv, u[:, None] * M)
-        return U
-
+    means, ng = group_means(g, np.asarray(problem.sigma, float))
     UA = means(A)
     r_A = _gram_rank(UA.T @ UA)
     QA = _orth(A)
