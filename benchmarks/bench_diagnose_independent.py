@@ -174,7 +174,7 @@ def main(argv=None) -> int:
             f"seeds {a.seed0}..{top} reach the final set ({FINAL_SEED0}+): use --seed0 {FINAL_SEED0 - top + a.seed0} or lower"
         )
     with ProcessPoolExecutor(a.jobs, initializer=_set_dump, initargs=(a.dump,)) as ex:
-        for proc in [p for p in a.procedures.split(",") if p]:
+        for proc in procs:
             if a.nulls:
                 res = list(ex.map(_null, [(proc, a.seed0 + k) for k in range(a.nulls)]))
                 ok = [r for r in res if "error" not in r]

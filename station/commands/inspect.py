@@ -81,12 +81,12 @@ def rate_warnings(capture) -> list[str]:
     capture's own procedure would refuse it (its module names a ``RATE_CONSEQUENCE``: what scales
     with the rate), else a warning naming what refuses it."""
     from station.errors import InputError
-    from station.procedures import registry
+    from station.procedures import noise, registry
 
     entry = registry.get(capture.procedure)
     own = getattr(entry.load(), "RATE_CONSEQUENCE", None) if entry is not None else None
     try:
-        capture.series_rate_hz(own or "`station noise` refuses it: the Allan figures scale with the rate")
+        capture.series_rate_hz(own or f"`station noise` refuses it: {noise.RATE_CONSEQUENCE}")
     except InputError as exc:
         if own:
             raise

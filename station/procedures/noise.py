@@ -32,6 +32,7 @@ from solvers.units import si_factor
 DEG_H_RAD_S = math.radians(1.0) / 3600.0  # 1 °/h in rad/s
 BIAS_INSTABILITY_FACTOR = 0.664  # ADEV floor = sqrt(2 ln 2 / π) · B (IEEE 952, flicker rate noise)
 AXES = ("x", "y", "z")
+RATE_CONSEQUENCE = "the Allan figures scale with the rate"  # why a stated rate that t contradicts is refused
 
 
 @dataclass
@@ -177,7 +178,7 @@ def imu_noise(capture) -> dict:
             f"{where}a table of averages has no noise to analyse: give a still time-series recording"
         )
     check_extremes(capture, columns=False)
-    rate = capture.series_rate_hz("the Allan figures scale with the rate")
+    rate = capture.series_rate_hz(RATE_CONSEQUENCE)
     t = capture.columns["t"]
     if not rate or not math.isfinite(rate) or rate <= 0:
         raise UnsupportedError(
