@@ -1430,6 +1430,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             # the library names given (picked or tied to a pick) may have stood in for it however
             # correlated: it may displace them on a clearly better fit
             held = {oc.cand.name for oc, _ in picked} | {c["name"] for _, e in picked for c in e["confused_with"]}
+            tie = None  # a generic term that fits better than the library effects but not decisively
             for res0 in generic_round(dict(base_params), dict(problem.free), set(), ranked=True, allow=held):
                 fit2, st2, fr2 = with_generic(res0[0], state, free)
                 picked2, fit2, st2, fr2 = prune(list(picked), fit2, extra=res0[0].cc, min_items=1)
@@ -1474,6 +1475,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 elif ok and margin > 0:
                     # and it explains what the library effects leave: it passes beside them (one test)
                     ok = _beyond(res0[0].cc.cand, cur_fit, free)
+                    if not ok and tie is None and len(picked2) < len(picked) and gain > margin:
+                        # it fits better than the library effects it would displace and passes
+                        # where they are not fitted, but explains nothing decisive beside them
+                        tie = (res0, picked2)
                 if ok and len(picked2) < len(picked) and gain > margin:
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
@@ -1498,6 +1503,19 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     break
                 entries.clear()
                 entries.update({k: dict(v) for k, v in flags.items()})
+            if generic_effect is None and tie is not None:
+                # the data cannot tell the two explanations apart: the library effects stay named
+                # and the generic term is named with those it would displace (a bias step 0.97
+                # correlated with a drift at 10σ leaves about 2.4σ beside it: no decisive margin
+                # either way, while the step model fits better)
+                (gen, corr_g, _), kept2 = tie
+                name_g = f"residual:{gen.desc['driver']}"
+                for oc, e in picked:
+                    if not any(oc is p[0] for p in kept2):
+                        e["confused_with"] = [
+                            *e["confused_with"],
+                            {"name": name_g, "correlation": float(corr_g.get(e["name"], 0.0))},
+                        ]
 
     ext = cur_fit
     Je, _, _ = jacobian(problem, ext.params, free)
