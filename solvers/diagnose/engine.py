@@ -121,6 +121,9 @@ class Problem:
     # baseline's D and the cubic's C3 by itself, and their held-out errors, 10-100 times the
     # noise, decided against a 10σ cubic)
     cv_max_leverage: float | None = None
+    # the auxiliary rows' noise scale (variance components) measured again after each selection,
+    # against the refitted extended model, instead of once on the baseline (compass: measured there)
+    aux_scale_refit: bool = False
 
 
 @dataclass
@@ -670,6 +673,24 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
 # ---------------------------------------------------------------- the engine
 
 
+def _aux_scales(problem: Problem, fit_: FitResult, free: dict, sigma: np.ndarray) -> None:
+    """Variance components: the auxiliary rows (row kinds other than 0, prior σ) get the noise
+    scale their residuals show under the model of ``fit_`` (``free``), with the ``scale_free``
+    blocks freed for this step only (e.g. the compass dip constant); ``sigma`` is scaled in place.
+    The primary rows keep their measured noise (the χ² test is about them)."""
+    sfit = fit_
+    if problem.scale_free:
+        sfit = fit(problem.residual, fit_.params, free={**free, **problem.scale_free}, sigma=sigma)
+    rw = sfit.weighted_residuals
+    for k in np.unique(problem.row_types):
+        if k == 0:
+            continue
+        sel = problem.row_types == k
+        s = math.sqrt(float(np.mean(rw[sel] ** 2))) if sel.any() else 1.0
+        if s > 0:
+            sigma[sel] *= s
+
+
 def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> FitResult:
     """Nonlinear refit from the linearised step at ``params``."""
     Jx, _, packer = jacobian(problem, params, free)
@@ -1014,19 +1035,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     if baseline_fit is None:
         baseline_fit = fit(problem.residual, problem.baseline, free=problem.free, sigma=sigma)
     if problem.row_types is not None:
-        # variance components: auxiliary rows (prior σ) get the noise scale their residuals show
-        # (with ``scale_free`` blocks freed for this step only: e.g. the compass dip constant)
-        sfit = baseline_fit
-        if problem.scale_free:
-            sfit = fit(problem.residual, baseline_fit.params, free={**problem.free, **problem.scale_free}, sigma=sigma)
-        rw = sfit.weighted_residuals
-        for k in np.unique(problem.row_types):
-            if k == 0:
-                continue  # the primary rows keep their measured noise (the χ² test is about them)
-            sel = problem.row_types == k
-            s = math.sqrt(float(np.mean(rw[sel] ** 2))) if sel.any() else 1.0
-            if s > 0:
-                sigma[sel] *= s
+        _aux_scales(problem, baseline_fit, problem.free, sigma)
         problem.sigma = sigma
         baseline_fit = fit(problem.residual, baseline_fit.params, free=problem.free, sigma=sigma)
     types = None if problem.row_types is None else np.asarray(problem.row_types)
@@ -1228,6 +1237,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         state.update(cc.params)
         free.update({k: v for k, v in cc.free.items() if k in cc.params})
         cur_fit = _refit(problem, state, free, sigma)
+        if problem.aux_scale_refit and types is not None:
+            # the auxiliary rows' noise measured again against the model as it now stands: on the
+            # baseline an effect not yet modelled (a rotation in the compass dip rows) inflated it
+            _aux_scales(problem, cur_fit, free, sigma)
+            cur_fit = _refit(problem, dict(cur_fit.params), free, sigma)
         state = dict(cur_fit.params)
         drop = {cc.cand.name} | {c["name"] for c in confused}
         remaining = [c for c in remaining if c.name not in drop]
