@@ -686,9 +686,14 @@ def _aux_scales(problem: Problem, fit_: FitResult, free: dict, sigma: np.ndarray
         if k == 0:
             continue
         sel = problem.row_types == k
-        s = math.sqrt(float(np.mean(rw[sel] ** 2))) if sel.any() else 1.0
+        s = math.sqrt(float(np.mean(rw[sel] ** 2)))
         if s > 0:
             sigma[sel] *= s
+
+
+def _displaced(picked: list, kept: list) -> list:
+    """The items of ``picked`` (candidate columns, effect entry) that ``kept`` no longer holds."""
+    return [item for item in picked if not any(item[0] is k[0] for k in kept)]
 
 
 def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> FitResult:
@@ -1475,9 +1480,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     # one fixed basis against the library effects it displaces: head to head, as two
                     # library candidates are (both deviances net of the larger serial-correlation
                     # inflation): the better fit is named, the other tied to it within the decisive margin
-                    gone = [oc for oc, _ in picked if not any(oc is p[0] for p in picked2)]
                     infl = ev.infl
-                    for oc in gone:
+                    for oc, _ in _displaced(picked, picked2):
                         lcc = _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
                         if lcc.reason is None and lcc.J.shape[1]:
                             lev = _evaluate(problem, lcc, rr.get(oc.cand.folds), typed_fit_term(r0, types), types, n)
@@ -1486,14 +1490,15 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                         npar(fr2, fit2) - npar(free, cur_fit)
                     ) * math.log(n)
                     margin = 0.0
-                elif ok and margin > 0:
+                displaces = len(picked2) < len(picked) and gain > margin
+                if ok and margin > 0 and not _single_basis(res0[0].desc):
                     # and it explains what the library effects leave: it passes beside them (one test)
                     ok = _beyond(res0[0].cc.cand, cur_fit, free)
-                    if not ok and tie is None and len(picked2) < len(picked) and gain > margin:
+                    if not ok and tie is None and displaces:
                         # it fits better than the library effects it would displace and passes
                         # where they are not fitted, but explains nothing decisive beside them
                         tie = (res0, picked2)
-                if ok and len(picked2) < len(picked) and gain > margin:
+                if ok and displaces:
                     # not decisively better (the scanned place or period counted as a parameter): the
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
                     # library effects it displaced are named with it (head to head, as for two candidates)
@@ -1505,12 +1510,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     k_gen = len(Packer.build(fit2.params, fr2).names) - n_wo + int(scanned)
                     k_lib = len(Packer.build(cur_fit.params, free).names) - n_wo
                     if gain - kx <= decisive_margin(problem, max(k_gen, k_lib)):
-                        for oc, e in picked:
-                            if not any(oc is p[0] for p in picked2):
-                                c = float(res0[1].get(e["name"], 0.0))
-                                for t in [{"name": e["name"], "correlation": c}, *e["confused_with"]]:
-                                    if t["name"] not in {g["name"] for g in generic_tied}:
-                                        generic_tied.append(t)
+                        for _, e in _displaced(picked, picked2):
+                            c = float(res0[1].get(e["name"], 0.0))
+                            for t in [{"name": e["name"], "correlation": c}, *e["confused_with"]]:
+                                if t["name"] not in {g["name"] for g in generic_tied}:
+                                    generic_tied.append(t)
                     res0[0].cc.cand.setup()
                     picked, cur_fit, state, free = picked2, fit2, st2, fr2
                     generic_effect = (res0[0], res0[1], cv_rms(J0, r0, sigma, folds, primary))
@@ -1523,13 +1527,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 # correlated with a drift at 10σ leaves about 2.4σ beside it: no decisive margin
                 # either way, while the step model fits better)
                 (gen, corr_g, _), kept2 = tie
-                name_g = f"residual:{gen.desc['driver']}"
-                for oc, e in picked:
-                    if not any(oc is p[0] for p in kept2):
-                        e["confused_with"] = [
-                            *e["confused_with"],
-                            {"name": name_g, "correlation": float(corr_g.get(e["name"], 0.0))},
-                        ]
+                for _, e in _displaced(picked, kept2):
+                    e["confused_with"] = [
+                        *e["confused_with"],
+                        {"name": gen.cc.cand.name, "correlation": float(corr_g.get(e["name"], 0.0))},
+                    ]
 
     ext = cur_fit
     Je, _, _ = jacobian(problem, ext.params, free)
