@@ -142,14 +142,17 @@ def _exact(N, rho, sigma_N, gamma_free, initial) -> P2Result:
     best, first_error = None, None
     for p0 in (paper_or_linear_start(N, rho), initial_guess(N, rho)):
         try:
-            res = _exact_from(N, rho, sigma_N, gamma_free, p0)
+            with np.errstate(over="ignore", invalid="ignore"):  # a far start may step through huge values
+                res = _exact_from(N, rho, sigma_N, gamma_free, p0)
         except NotIdentifiable as exc:
             first_error = first_error or exc
+            continue
+        if not np.isfinite(res.residual_rms):
             continue
         if best is None or res.residual_rms < best.residual_rms:
             best = res
     if best is None:
-        raise first_error
+        raise first_error or NotIdentifiable("the fit diverged from both starts (paper's closed forms and linear)")
     return best
 
 
