@@ -9,6 +9,7 @@ import numpy as np
 OUTLIER_SIGMA = 5.0  # |studentized residual| beyond this is a finding
 GAP_FACTOR = 5.0  # a time step this many times the median is a gap
 SATURATION_RUN = 5  # this many equal consecutive samples at a column's extreme
+ORDINARY_REPEAT = 0.02  # such runs in more than this fraction of the other samples: a quantised, quiet column
 MOVED_FRACTION = 0.1  # a labelled position with more than this fraction of moving samples
 GAP_MARGIN_S = 1.0  # samples this close to a gap are left out of the effect search (settling after it)
 
@@ -42,17 +43,43 @@ def _runs(at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
 
 
+def _ordinary_repeats(x: np.ndarray, ok: np.ndarray) -> bool:
+    """True when runs of SATURATION_RUN equal values are ordinary away from the extremes (more
+    than ORDINARY_REPEAT of those samples): a quiet sensor read through a coarse quantiser (ADC
+    counts, a magnetometer's LSB above its noise) holds one value for many samples at any
+    attitude, so such a run at the extreme is no sign of clipping."""
+    inner = ok & (x != np.nanmax(x)) & (x != np.nanmin(x))
+    if inner.sum() < 10:
+        return False
+    xi = x[inner]
+    new_run = np.r_[True, xi[1:] != xi[:-1]]
+    lengths = np.diff(np.r_[np.flatnonzero(new_run), len(xi)])
+    return float(lengths[lengths >= SATURATION_RUN].sum()) > ORDINARY_REPEAT * len(xi)
+
+
+def _adc_limit(value: float) -> bool:
+    """An integer reading at a two's-complement or unsigned ADC limit (±2^k or 2^k − 1, k ≥ 7)."""
+    v = abs(value)
+    if v != round(v) or v < 127:
+        return False
+    return any(v == 2**k or v == 2**k - 1 for k in range(7, 33))
+
+
 def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
     """Runs of SATURATION_RUN or more identical values at a column's extreme reading: one
     finding per column and extreme (its longest run), with every such run in ``runs``
-    (row start, stop) for the screen."""
+    (row start, stop) for the screen. In a column where such runs are ordinary anywhere
+    (``_ordinary_repeats``: quantised and quiet) only an extreme at an ADC limit counts."""
     out = []
     for name, x in columns.items():
         x = np.asarray(x, float)
         ok = np.isfinite(x)
         if ok.sum() < 10 or np.ptp(x[ok]) == 0:
             continue
+        ordinary = _ordinary_repeats(x, ok)
         for extreme in (np.nanmax(x), np.nanmin(x)):
+            if ordinary and not _adc_limit(float(extreme)):
+                continue
             at = ok & (x == extreme)
             if at.sum() < SATURATION_RUN:
                 continue

@@ -1,0 +1,40 @@
+"""Captures of shapes the diagnose generator never writes (benchmarks/redteam_captures.py), through
+the real ``station diagnose`` / ``station calibrate`` commands."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+
+from tests.station_run import ROOT, run_station
+
+
+def _gen():
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    import redteam_captures
+
+    return redteam_captures
+
+
+def _write(tmp_path, proc, opts, effect=None, fmt=None, seed=4242):
+    G = _gen()
+    gen = G.PROCS[proc][0]
+    meta, cols, truth = gen(np.random.default_rng(seed), opts, effect)
+    path = tmp_path / f"{proc}.capture.csv"
+    G.write(path, meta, cols, fmt or {}, np.random.default_rng(seed + 1))
+    return path, truth
+
+
+def test_quiet_quantised_magnetometer_is_not_called_saturated(tmp_path):
+    """A magnetometer in ADC counts whose noise is below one count holds one reading for many
+    samples in every hold: at the hold with the extreme reading that is not clipping, and
+    screening it out would drop good holds from the effect search."""
+    path, _ = _write(tmp_path, "compass", {"unit": "counts", "noise": 20.0, "temp": "constant"})
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert [q for q in out["quality"] if q["kind"] == "saturation"] == []
+    assert out["verdict"] == []
