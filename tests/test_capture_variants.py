@@ -38,3 +38,15 @@ def test_quiet_quantised_magnetometer_is_not_called_saturated(tmp_path):
     out = json.loads(res.stdout)
     assert [q for q in out["quality"] if q["kind"] == "saturation"] == []
     assert out["verdict"] == []
+
+
+def test_quiet_gyro_in_counts_reading_one_value_is_diagnosed(tmp_path):
+    """A static gyro in counts whose noise is a fraction of a count reads one value nearly all
+    the time: that value is its column's extreme, yet no clipping. Calling it saturation
+    screened out every sample and refused the capture ("0 static samples")."""
+    path, _ = _write(tmp_path, "gyro-drift", {"unit": "counts", "noise": 2e-5, "duration_s": 200.0, "rate": 50.0})
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert [q for q in out["quality"] if q["kind"] == "saturation"] == []
+    assert out["verdict"] == []

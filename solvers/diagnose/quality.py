@@ -47,10 +47,11 @@ def _ordinary_repeats(x: np.ndarray, ok: np.ndarray) -> bool:
     """True when runs of SATURATION_RUN equal values are ordinary away from the extremes (more
     than ORDINARY_REPEAT of those samples): a quiet sensor read through a coarse quantiser (ADC
     counts, a magnetometer's LSB above its noise) holds one value for many samples at any
-    attitude, so such a run at the extreme is no sign of clipping."""
+    attitude (a quiet gyro may read one or two values all along), so such a run at the extreme
+    is no sign of clipping."""
     inner = ok & (x != np.nanmax(x)) & (x != np.nanmin(x))
-    if inner.sum() < 10:
-        return False
+    if inner.sum() < max(10, 0.05 * ok.sum()):
+        return True  # nearly every sample at one of two readings: a quantiser's, not a signal clipped at both ends
     xi = x[inner]
     new_run = np.r_[True, xi[1:] != xi[:-1]]
     lengths = np.diff(np.r_[np.flatnonzero(new_run), len(xi)])
