@@ -79,6 +79,12 @@ def times(rng, n, rate, jitter=0.0, gap=None, origin=0.0):
     return t + origin, keep
 
 
+def coarse(t, resolution_s):
+    """Time stamps written with a coarse resolution (host clock ticks, whole seconds): many rows
+    share one value; ``t`` stays non-decreasing, as capture-format.md asks."""
+    return np.floor(t / resolution_s) * resolution_s if resolution_s else t
+
+
 def slerp_dirs(d0, d1, n):
     w = np.linspace(0, 1, n + 2)[1:-1, None]
     v = (1 - w) * d0 + w * d1
@@ -316,6 +322,7 @@ def p4(rng, o, effect):
     rate, dur = o.get("rate", 100.0), o.get("duration_s", 300.0)
     n = int(rate * dur)
     t, keep = times(rng, n, rate, o.get("jitter", 0.0), o.get("gap"), o.get("t0", 0.0))
+    t_written = coarse(t, o.get("t_res", 0.0))
     die, rec = temperature(rng, t, o.get("temp", "warmup"), o.get("temp_q", 0.0), o.get("temp_lag", 0.0))
     eps = rng.normal(scale=0.003, size=3)
     params = {"eps": eps}
@@ -333,7 +340,7 @@ def p4(rng, o, effect):
         y = gyro_model.forward(w, params, cond) + rng.normal(scale=o.get("noise", 2e-3), size=(n, 3))
         ref = w + rng.normal(scale=1e-5, size=(n, 3))
         meta["gyro_mode"] = "reference"
-        cols = {"t": t, "gx": y[:, 0] * k, "gy": y[:, 1] * k, "gz": y[:, 2] * k}
+        cols = {"t": t_written, "gx": y[:, 0] * k, "gy": y[:, 1] * k, "gz": y[:, 2] * k}
         cols.update({"ref_gx": ref[:, 0], "ref_gy": ref[:, 1], "ref_gz": ref[:, 2]})
     else:
         p, r = math.radians(o.get("pitch", 3.0)), math.radians(o.get("roll", -2.0))
@@ -343,7 +350,7 @@ def p4(rng, o, effect):
         f = C.T @ np.array([0.0, g, 0.0])
         acc = f + rng.normal(scale=0.02, size=(n, 3))
         meta.update({"gyro_mode": "static", "accel_unit": "m/s^2", "heading_deg": o.get("heading", 0.0)})
-        cols = {"t": t, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2]}
+        cols = {"t": t_written, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2]}
         cols.update({"gx": y[:, 0] * k, "gy": y[:, 1] * k, "gz": y[:, 2] * k})
     if unit == "counts":
         for c in ("gx", "gy", "gz"):
@@ -474,6 +481,8 @@ CASES = {
         "B_no_temp": {"no_temp": True},
         "B_short": {"duration_s": 20.0},
         "B_counts_quiet": {"unit": "counts", "noise": 2e-5},
+        "B_epoch_whole_seconds": {"t0": 1.7e9, "t_res": 1.0},
+        "A_epoch_whole_seconds": {"mode": "A", "t0": 1.7e9, "t_res": 1.0},
         "A": {"mode": "A"},
         "A_deg_epoch_jitter": {"mode": "A", "unit": "deg/s", "t0": 1.7e9, "jitter": 0.3},
         "A_gap_no_temp": {"mode": "A", "gap": (5000, 8000), "no_temp": True},

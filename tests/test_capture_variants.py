@@ -50,3 +50,20 @@ def test_quiet_gyro_in_counts_reading_one_value_is_diagnosed(tmp_path):
     out = json.loads(res.stdout)
     assert [q for q in out["quality"] if q["kind"] == "saturation"] == []
     assert out["verdict"] == []
+
+
+def _whole_second_p4(tmp_path):
+    """P4 mode B logged at 50 Hz with t in whole epoch seconds: 50 rows share each stamp."""
+    opts = {"t0": 1.7e9, "t_res": 1.0, "duration_s": 200.0, "rate": 50.0, "temp": "constant"}
+    return _write(tmp_path, "gyro-drift", opts)
+
+
+def test_gyro_drift_calibrates_with_coarse_time_stamps(tmp_path):
+    """t non-decreasing (capture-format.md) with many rows per stamp: the median step is 0, so
+    the step comes from the rows over the span instead of a refusal."""
+    path, truth = _whole_second_p4(tmp_path)
+    res = run_station("calibrate", path, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    drift, sigma = np.array(out["params"]["drift"]), np.array(out["uncertainty"]["drift"])
+    assert np.all(np.abs(drift - truth["eps"]) < 4 * sigma + 1e-7), (drift, truth["eps"], sigma)
