@@ -67,3 +67,14 @@ def test_gyro_drift_calibrates_with_coarse_time_stamps(tmp_path):
     out = json.loads(res.stdout)
     drift, sigma = np.array(out["params"]["drift"]), np.array(out["uncertainty"]["drift"])
     assert np.all(np.abs(drift - truth["eps"]) < 4 * sigma + 1e-7), (drift, truth["eps"], sigma)
+
+
+def test_coarse_time_stamps_are_not_gaps(tmp_path):
+    """Each tick of a whole-second stamp is 1 s after 49 zero steps: against a median step of 0
+    every tick was a gap, every sample screened out and the capture refused."""
+    path, _ = _whole_second_p4(tmp_path)
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert [q for q in out["quality"] if q["kind"] == "gap"] == []
+    assert out["verdict"] == []

@@ -15,7 +15,8 @@ GAP_MARGIN_S = 1.0  # samples this close to a gap are left out of the effect sea
 
 
 def gaps(t_s) -> list[dict]:
-    """Steps in ``t`` larger than GAP_FACTOR × the median step: (row index after the gap, …)."""
+    """Steps in ``t`` larger than GAP_FACTOR × the median step (× the stamps' tick where most rows
+    share their time stamp): (row index after the gap, …)."""
     t = np.asarray(t_s, float)
     ok = np.isfinite(t)
     idx = np.flatnonzero(ok)
@@ -23,6 +24,10 @@ def gaps(t_s) -> list[dict]:
         return []
     d = np.diff(t[idx])
     med = float(np.median(d))
+    if med <= 0:  # coarse time stamps (whole seconds): most rows share their t; the stamp's tick is the step
+        med = float(np.median(d[d > 0])) if np.any(d > 0) else 0.0
+        if med <= 0:
+            return []
     out = []
     for k in np.flatnonzero(d > GAP_FACTOR * med):
         out.append(
