@@ -455,6 +455,7 @@ CASES = {
         "quiet": {"noise": 0.0005},
         "counts_quiet": {"unit": "counts", "noise": 0.0003},
         "unit_g_offset": {"unit": "g", "t0": 5000.0},
+        "epoch_whole_seconds": {"t0": 1.7e9, "t_res": 1.0},
     },
     "accel-centrifuge": {
         "plain": {},
@@ -470,6 +471,7 @@ CASES = {
         "nT_gap_labels": {"unit": "nT", "gap": (200, 400), "labels": True},
         "counts_tempq": {"unit": "counts", "temp_q": 0.0625, "temp_lag": 30.0},
         "no_temp": {"no_temp": True},
+        "epoch_whole_seconds": {"t0": 1.7e9, "t_res": 1.0},
         "short": {"n_h": 9, "hold_s": 1.5, "rate": 25.0},
         "noisy": {"noise": 400.0},
         "counts_quiet": {"unit": "counts", "noise": 20.0},
@@ -496,6 +498,7 @@ CASES = {
         "gap_tempq": {"gap": (2000, 3000), "temp_q": 0.0625, "temp_lag": 60.0},
         "no_temp": {"no_temp": True},
         "short": {"duration_s": 60.0},
+        "epoch_whole_seconds": {"t0": 1.7e9, "t_res": 1.0, "duration_s": 300.0},
         "noisy": {"noise": 0.1},
     },
 }
@@ -608,6 +611,8 @@ def main(argv=None):
                     for eff in (None,) if which == "null" else effects[:1] if fname != "plain" else effects:
                         rng = np.random.default_rng(a.seed)
                         meta, cols, truth = gen(rng, opts, eff)
+                        if "t" in cols:
+                            cols["t"] = coarse(cols["t"], opts.get("t_res", 0.0))
                         if eff:
                             truth["effect"] = eff
                         path = out / f"{proc}.{case}.{fname}.{eff or 'null'}.capture.csv"

@@ -23,6 +23,8 @@ def _write(tmp_path, proc, opts, effect=None, fmt=None, seed=4242):
     G = _gen()
     gen = G.PROCS[proc][0]
     meta, cols, truth = gen(np.random.default_rng(seed), opts, effect)
+    if "t" in cols:  # time stamps written at a coarse tick (whole seconds) where asked
+        cols["t"] = G.coarse(cols["t"], opts.get("t_res", 0.0))
     path = tmp_path / f"{proc}.capture.csv"
     G.write(path, meta, cols, fmt or {}, np.random.default_rng(seed + 1))
     return path, truth
@@ -78,3 +80,15 @@ def test_coarse_time_stamps_are_not_gaps(tmp_path):
     out = json.loads(res.stdout)
     assert [q for q in out["quality"] if q["kind"] == "gap"] == []
     assert out["verdict"] == []
+
+
+def test_tabletop_diagnoses_with_coarse_time_stamps(tmp_path):
+    """P1 at 50 Hz with t in whole epoch seconds: a hold's part has a median step of 0, which
+    made its standard error infinite and the diagnosis fail ("residual is not finite")."""
+    opts = {"hold_s": 12.0, "rate": 50.0, "t0": 1.7e9, "t_res": 1.0, "temp": "constant"}
+    path, _ = _write(tmp_path, "accel-tabletop", opts)
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["verdict"] == []
+    assert np.isfinite(out["baseline"]["cv_rms"])

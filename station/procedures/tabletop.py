@@ -461,6 +461,9 @@ def _sub_holds(capture, positions, bad=None) -> dict | None:
     a = _accel(capture)
     temp = _col(capture, "temp_c")
     out: dict[str, list] = {"V": [], "se": [], "pos": [], "part": [], "t": [], "temp": []}
+    tf = t[np.isfinite(t)]
+    # coarse stamps (whole seconds): a chunk's median step is 0; the rows over the capture's span give it
+    step_all = float(tf[-1] - tf[0]) / (len(tf) - 1) if len(tf) > 1 and tf[-1] > tf[0] else 1.0
     for k, p in enumerate(positions):
         if p.t_start_s is None or p.t_stop_s is None:
             return None
@@ -470,7 +473,8 @@ def _sub_holds(capture, positions, bad=None) -> dict | None:
             idx = np.flatnonzero(inside)
         parts = SUB_HOLDS if len(idx) >= SUB_HOLDS * MIN_SUB_SAMPLES else 1
         for j, chunk in enumerate(np.array_split(idx, parts)):
-            dt = float(np.median(np.diff(t[chunk]))) if len(chunk) > 1 else 1.0
+            dt = float(np.median(np.diff(t[chunk]))) if len(chunk) > 1 else step_all
+            dt = dt if dt > 0 else step_all
             me = mean_standard_error(a[chunk], dt)
             out["V"].append(me.mean)
             out["se"].append(me.se)
