@@ -456,6 +456,7 @@ CASES = {
         "counts_quiet": {"unit": "counts", "noise": 0.0003},
         "unit_g_offset": {"unit": "g", "t0": 5000.0},
         "epoch_whole_seconds": {"t0": 1.7e9, "t_res": 1.0},
+        "whole_seconds_unlabelled": {"t_res": 1.0, "labels": False},
     },
     "accel-centrifuge": {
         "plain": {},
@@ -472,6 +473,7 @@ CASES = {
         "counts_tempq": {"unit": "counts", "temp_q": 0.0625, "temp_lag": 30.0},
         "no_temp": {"no_temp": True},
         "epoch_whole_seconds": {"t0": 1.7e9, "t_res": 1.0},
+        "whole_seconds_labels": {"t_res": 1.0, "labels": True},
         "short": {"n_h": 9, "hold_s": 1.5, "rate": 25.0},
         "noisy": {"noise": 400.0},
         "counts_quiet": {"unit": "counts", "noise": 20.0},

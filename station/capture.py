@@ -316,6 +316,30 @@ def _same_array(a: np.ndarray, b: np.ndarray) -> bool:
 # ----------------------------------------------------------------------------- small helpers
 
 
+def strictly_increasing_t(t) -> np.ndarray:
+    """``t`` for algorithms that need strictly increasing times (the stillness detector).
+
+    capture-format.md lets ``t`` repeat (non-decreasing): coarse stamps (whole seconds, host
+    clock ticks) give many rows one value. Each run of equal stamps is spread evenly over the
+    tick to the next stamp (the last run at the previous run's step), so gaps stay where they
+    are. A ``t`` that already increases, or that is not finite and non-decreasing, is returned
+    as it is (the caller's own check names the problem)."""
+    t = np.asarray(t, dtype=float)
+    if len(t) < 2 or not np.all(np.isfinite(t)):
+        return t
+    d = np.diff(t)
+    if np.all(d > 0) or np.any(d < 0):
+        return t
+    starts = np.flatnonzero(np.r_[True, d > 0])
+    lengths = np.diff(np.r_[starts, len(t)])
+    if len(starts) < 2:
+        return t
+    step = np.diff(t[starts]) / lengths[:-1]
+    step = np.r_[step, step[-1]]
+    run = np.repeat(np.arange(len(starts)), lengths)
+    return t[starts][run] + (np.arange(len(t)) - starts[run]) * step[run]
+
+
 def _show(value: str, limit: int = 40) -> str:
     """A field value quoted for a message: 'abc', or repr() when it holds odd characters."""
     if len(value) > limit:

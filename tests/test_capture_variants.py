@@ -92,3 +92,17 @@ def test_tabletop_diagnoses_with_coarse_time_stamps(tmp_path):
     out = json.loads(res.stdout)
     assert out["verdict"] == []
     assert np.isfinite(out["baseline"]["cv_rms"])
+
+
+def test_tabletop_finds_positions_with_coarse_time_stamps(tmp_path):
+    """No position column and t in whole seconds (non-decreasing, capture-format.md): the
+    stillness detector needs increasing times and the capture was refused ("t_s does not
+    increase"); ties are now spread over their tick and the calibration recovers the truth."""
+    opts = {"hold_s": 12.0, "rate": 50.0, "t_res": 1.0, "labels": False, "temp": "constant"}
+    path, truth = _write(tmp_path, "accel-tabletop", opts)
+    res = run_station("calibrate", path, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["n_positions"] == 12
+    M, Mt = np.array(out["params"]["M"]), truth["M"]
+    assert np.abs(M.T @ M - Mt.T @ Mt).max() < 1e-3 * np.abs(Mt.T @ Mt).max()

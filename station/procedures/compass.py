@@ -25,6 +25,7 @@ from solvers.errors import SolverError
 from solvers.frames import G_STANDARD_MPS2
 from solvers.geomag import igrf_date, igrf_reference
 from solvers.units import si_factor
+from station.capture import strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -290,7 +291,7 @@ def _held_headings(t, f_g, w, pitch, roll, mh, th, warnings) -> list[dict]:
         from solvers.stillness import detect_static_intervals
 
         still = detect_static_intervals(
-            t, np.nan_to_num(f_g), None if w is None else np.nan_to_num(w), nan_policy="omit"
+            strictly_increasing_t(t), np.nan_to_num(f_g), None if w is None else np.nan_to_num(w), nan_policy="omit"
         )
     except (SolverError, ValueError) as exc:
         warnings.append(f"no held orientations found for per-position headings ({exc})")
@@ -391,7 +392,9 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         gyro = _xyz(capture, "g")
         ok = good & np.all(np.isfinite(a), axis=1)
         try:
-            st = detect_static_intervals(t[ok], a[ok], None if gyro is None else gyro[ok], nan_policy="omit")
+            st = detect_static_intervals(
+                strictly_increasing_t(t[ok]), a[ok], None if gyro is None else gyro[ok], nan_policy="omit"
+            )
             idx = np.flatnonzero(ok)
             ivs = [iv for iv in st.intervals if iv.n >= 5]
             if len(ivs) >= 4:

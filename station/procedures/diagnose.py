@@ -15,6 +15,7 @@ import numpy as np
 from solvers.diagnose import diagnose
 from solvers.diagnose import quality as Q
 from solvers.errors import SolverError
+from station.capture import strictly_increasing_t
 from station.errors import UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -52,7 +53,7 @@ def moved_positions(capture) -> list[dict]:
         else None
     )
     try:
-        st = detect_static_intervals(capture.columns["t"], a, g, nan_policy="omit")
+        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"]), a, g, nan_policy="omit")
         return Q.moved_positions(st.still_mask, capture.columns["position"])
     except (SolverError, ValueError):
         return []

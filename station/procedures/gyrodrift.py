@@ -36,6 +36,7 @@ from solvers import gyrodrift as gd
 from solvers.errors import SolverError
 from solvers.models import gyro as gyro_model
 from solvers.units import si_factor
+from station.capture import strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -317,7 +318,7 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
 
     idx = np.flatnonzero(ok)
     try:
-        st = detect_static_intervals(capture.columns["t"][idx], f_b[idx], w_b[idx])
+        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"][idx]), f_b[idx], w_b[idx])
     except SolverError as exc:
         warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
         return [(ok, head0, "1")]

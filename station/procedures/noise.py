@@ -28,6 +28,7 @@ import numpy as np
 
 from solvers import allan
 from solvers.units import si_factor
+from station.capture import strictly_increasing_t
 
 DEG_H_RAD_S = math.radians(1.0) / 3600.0  # 1 °/h in rad/s
 BIAS_INSTABILITY_FACTOR = 0.664  # ADEV floor = sqrt(2 ln 2 / π) · B (IEEE 952, flicker rate noise)
@@ -240,7 +241,7 @@ def _moving_share(capture) -> float | None:
         else None
     )
     try:
-        st = detect_static_intervals(capture.columns["t"], accel, gyro, nan_policy="omit")
+        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"]), accel, gyro, nan_policy="omit")
     except (SolverError, ValueError):
         return None
     still = sum(iv.stop - iv.start for iv in st.intervals)

@@ -28,6 +28,7 @@ from solvers.allan import hold_mean_se
 from solvers.errors import SolverError
 from solvers.models import accel as accel_model
 from solvers.units import ACCEL_UNITS
+from station.capture import strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -139,7 +140,7 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
     if all(c in capture.columns for c in ("gx", "gy", "gz")):
         gyro = np.column_stack([np.asarray(capture.columns[c], dtype=float) for c in ("gx", "gy", "gz")])
     try:
-        st = detect_static_intervals(t, a, gyro, nan_policy="omit")
+        st = detect_static_intervals(strictly_increasing_t(t), a, gyro, nan_policy="omit")
     except (SolverError, ValueError) as exc:
         raise UnsupportedError(f"{_where(capture)}: accel-tabletop: cannot find static positions: {exc}") from None
     warnings += [f"stillness: {w}" for w in st.warnings]
