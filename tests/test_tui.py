@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import datetime
 import json
 import math
 import os
@@ -264,12 +265,17 @@ def test_compass_sweep_from_connect_to_a_saved_result(tmp_path):
             shown = {params.get_row_at(i)[0]: params.get_row_at(i) for i in range(params.row_count)}
         return title, shown
 
+    day_before = datetime.datetime.now(datetime.UTC).date().isoformat()
     title, shown = asyncio.run(story())
+    day_after = datetime.datetime.now(datetime.UTC).date().isoformat()
     assert "P3 compass result" in title
     from db.store import Store
 
     hist = Store(db).history("SIM-COM-0003")
     assert len(hist) == 1 and hist[0]["procedure"] == "compass"
+    # filed today, at the run's start (the built-in bench had the simulator's fixed date: a sweep
+    # made today went into the history, and the due date, days in the past at midnight)
+    assert hist[0]["time"][:10] in (day_before, day_after), hist[0]["time"]
     # soft iron on screen as a ratio (calibrated per raw field, both in the capture's unit):
     # ~1 on the diagonal; stored as nT per mag_unit (calibrate.md), e.g. ~1000 nT per uT
     unit = hist[0]["extra"]["mag_unit"]

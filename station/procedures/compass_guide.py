@@ -302,10 +302,16 @@ class SweepOperator:
 
 def live_device(*, seed: int, rate_hz: float, reference: bool = False):
     """The simulated bench device for this procedure (``station.sources.SimSource``'s): the
-    unit held where the operator puts it (``solvers.simulate.LiveImu``)."""
+    unit held where the operator puts it (``solvers.simulate.LiveImu``), in today's field (UTC
+    date): the capture takes its ``date`` from the bench's site, and a calibration is stored at
+    its capture's date, so a bench at the simulator's fixed date filed a sweep made today days
+    (later years) in the past, already overdue."""
     from solvers.simulate import LiveImu
 
-    return LiveImu(procedure="compass", seed=seed, rate_hz=rate_hz, hold_s=1e9, reference=reference)
+    today = _dt.datetime.now(_dt.UTC).date().isoformat()
+    return LiveImu(
+        procedure="compass", seed=seed, rate_hz=rate_hz, hold_s=1e9, reference=reference, site={"date": today}
+    )
 
 
 def headless_demo(src, now: list, *, average_s: float, out, max_device_s: float = 900.0) -> CompassGuide:
