@@ -9,8 +9,8 @@ Formats:
 - `c-header`: every scalar of the result as `float`, prefixed by the device, with the model and
   units stated.
 
-What each firmware does with its parameters (read in its source; tests/test_firmware_names.py
-lists the files and commits):
+What each firmware does with its parameters (read in its source; tests/test_firmware_export.py
+lists the files and commits, README "Firmware parameters" links them):
 
 | firmware | sensor | applied to driver output in the sensor frame | parameters (instance n) |
 |---|---|---|---|
@@ -330,13 +330,16 @@ def _kind(cal: dict, fmt: str, firmware: str) -> str:
 
 
 def _device_id(meta: dict, kind: str) -> int | None:
+    """The sensor's device id in the capture, None when unknown (0: no device, below)."""
     for key in (f"{kind}_device_id", "sensor_device_id"):
         v = (meta or {}).get(key)
         if v not in (None, ""):
             try:
-                return int(float(v))
+                dev = int(float(v))
             except ValueError:
                 continue
+            if dev != 0:
+                return dev
     return None
 
 
@@ -533,6 +536,13 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
     fmt = "px4"
     kind = _kind(cal, fmt, "PX4")
     use = InUse(meta, fmt, "px4")
+    if device_id == 0:
+        # PX4 takes CAL_*n_ID = 0 for a free slot: no sensor ever matches it
+        # (calibration::FindCurrentCalibrationIndex returns -1 for device id 0)
+        raise UnsupportedError(
+            f"px4: --device-id 0 is no sensor: PX4 applies {_px4_names(kind, 0)['id'][:-4]}n_* only to the sensor "
+            f"whose device id CAL_*n_ID holds, and 0 marks a free slot; give the device_id of the board's sensor_{kind}"
+        )
     dev = device_id if device_id is not None else _device_id(meta, kind)
     slot = _slot(use, dev, lambda k: _px4_names(kind, k), (0, 1, 2, 3))
     i = instance if instance is not None else slot

@@ -502,3 +502,17 @@ def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_pa
     assert np.abs(S - S_true).max() < 5e-3, S - S_true
     # the fit alone would miss the offsets in use by far more than its sigma
     assert np.all(np.abs(np.asarray(res["params"]["hard_iron"]) - h_true_G) > 4 * sigma_off + 5e-5)
+
+
+@pytest.mark.parametrize("fmt", ["px4", "qgc"])
+def test_px4_device_id_zero_is_no_sensor(capsys, db, fmt):
+    """PX4 takes CAL_*n_ID = 0 for a free slot and never applies it to a sensor
+    (src/lib/sensor_calibration/Utilities.cpp, FindCurrentCalibrationIndex: device id 0 → -1):
+    `--device-id 0` wrote `CAL_GYRO0_ID 0` and exit 0, a file the vehicle silently ignores; a
+    capture whose sensor_device_id is 0 falls back to the id in use, else is refused."""
+    cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
+    code, out, err = run(capsys, "export", cid, "--format", fmt, "--device-id", "0", "--db", db)
+    assert code == 2 and out == "" and err.count("\n") == 1 and "free slot" in err
+    cid = _save(db, gyro_result(device="H"), gyro_unit="rad/s", sensor_device_id="0")
+    code, out, err = run(capsys, "export", cid, "--format", fmt, "--db", db)
+    assert code == 2 and out == "" and err.count("\n") == 1 and "--device-id" in err
