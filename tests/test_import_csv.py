@@ -291,3 +291,35 @@ def test_a_station_capture_needs_no_import(tmp_path):
     src.write_text("# station-capture: 1\n# procedure: accel-tabletop\n# accel_unit: g\nt,ax,ay,az\n0,0,0,1\n")
     res = run_station("import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
     assert res.returncode == 2 and f"{src}:1: already a station capture" in res.stderr
+
+
+def test_a_loggers_preamble_above_the_header_is_skipped_and_said(tmp_path, shared_data):
+    """The MPU-6050 logger's files (shared data, mpu6050_unc) open with 'Fs,100', 'Logging
+    Type,1', ... and name the columns on line 5: the first line was taken for the header, so
+    neither `--map ax=ax,...` nor the capture's own names could import them. The
+    header is now the first line naming the columns asked for, the lines above it are said in a
+    warning, and a bad cell further on still names its own line."""
+    src = shared_data / "mpu6050_unc" / "original" / "imu_static_test.csv"
+    lines = src.read_text().splitlines()
+    assert lines[4] == "ax,ay,az,gx,gy,gz"  # the file as its logger wrote it
+    rows = np.array([[float(c) for c in line.split(",")] for line in lines[5:] if line.strip()])
+    units = ("--unit", "accel=counts,gyro=counts", "--rate", "100")
+    for opts in ((), ("--map", "ax=ax,ay=ay,az=az,gx=gx,gy=gy,gz=gz")):
+        out = tmp_path / "o.csv"
+        res = run_station("import", src, "--procedure", "gyro-drift", *opts, *units, "--out", out)
+        assert res.returncode == 0, res.stderr
+        assert "lines 1-4 above the header (line 5)" in res.stderr and "'Fs,100'" in res.stderr
+        cap = read_capture(out)
+        got = np.column_stack([cap.columns[c] for c in ("ax", "ay", "az", "gx", "gy", "gz")])
+        np.testing.assert_array_equal(got, rows)  # every data row, none of the preamble
+        out.unlink()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(lines[:9] + ["748,244,oops,-480,193,-83"] + lines[10:]) + "\n")
+    res = run_station("import", bad, "--procedure", "gyro-drift", *units, "--out", tmp_path / "b.csv")
+    assert_one_line_refusal(res, f"{bad}:10:", "'oops'")
+    assert not (tmp_path / "b.csv").exists()
+    # a name no line has is still refused against the first line
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--map", "ax=acc_x", *units, "--out", tmp_path / "c.csv"
+    )
+    assert_one_line_refusal(res, f"{src}:1:", "no column 'acc_x'")

@@ -407,6 +407,32 @@ def _sniff_delimiter(header: str) -> str:
     return " "
 
 
+PREAMBLE_MAX_LINES = 50  # how far below the first line a header under a logger's preamble is looked for
+
+
+def _names_columns(header: list[str], mapping: dict[str, str]) -> bool:
+    """Whether ``header`` is the header row for ``mapping``: it holds every source column given
+    by name (a number names no header), or, with no --map, a capture column's name."""
+    if not mapping:
+        return any(c in TARGETS for c in header)
+    named = [src for src in mapping.values() if not src.isdigit()]
+    return not named or all(src in header for src in named)
+
+
+def _later_header(path, lines: Iterator[tuple[int, str]], mapping: dict[str, str]) -> tuple[int, str] | None:
+    """(line number, text) of the first of the next PREAMBLE_MAX_LINES lines that is the header
+    for ``mapping`` (lines read from ``lines``, which then goes on after it), None when none is."""
+    for lineno, text in lines:
+        if lineno > PREAMBLE_MAX_LINES + 1:
+            return None
+        if not text.strip() or text.lstrip().startswith("#"):
+            continue
+        cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text))]
+        if _names_columns(cells, mapping) and not all(_NUMBER.fullmatch(c) for c in cells if c):
+            return lineno, text
+    return None
+
+
 def read_plain(
     path,
     *,
@@ -438,6 +464,20 @@ def read_plain(
             hi,
             "no header row: this line holds numbers; the first line must name the columns",
         )
+    warnings: list[str] = []
+    if not _names_columns(header, mapping):
+        # a logger's preamble above the header ('Fs,100', 'Logging Type,1', ...): the header is
+        # the first line that names the columns asked for; the lines above it are said, not read
+        found = _later_header(path, lines, mapping)
+        if found is not None:
+            first, first_text = hi, head
+            hi, head = found
+            delimiter = _sniff_delimiter(head)
+            header = [c.strip() for c in _cells(path, hi, head, delimiter)]
+            warnings.append(
+                f"lines {first}-{hi - 1} above the header (line {hi}) are not data: skipped "
+                f"(line {first}: {first_text.strip()[:40]!r})"
+            )
     given = bool(mapping)
     if not mapping:  # a header that already uses the capture's names
         mapping = {c: c for c in header if c in TARGETS}
@@ -512,4 +552,4 @@ def read_plain(
     )
     if kinds is not None:
         streams = {k: s for k, s in streams.items() if k in kinds}
-    return Imported(streams, {}, [])
+    return Imported(streams, {}, warnings)
