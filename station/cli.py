@@ -128,15 +128,29 @@ def _one_line(text: str) -> str:
     return safe(text)
 
 
+def _tui_options_first(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """``station --port PORT`` (README: the TUI "unless --port is given") as ``station tui
+    --port PORT``: options with no command are the TUI's. Argparse took the port for a command
+    name ("invalid choice: '/dev/ttyUSB0'"). A line naming a command, or only the station's
+    own options (-h, --version), is left as it is."""
+    commands = parser._subparsers._group_actions[0].choices if parser._subparsers else {}
+    if "tui" not in commands or not argv or not argv[0].startswith("-") or argv[0] in ("-h", "--help", "--version"):
+        return argv
+    if any(a in commands for a in argv):
+        return argv
+    return ["tui", *argv]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    argv = _tui_options_first(parser, list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     func = getattr(args, "func", None)
     if func is None:
         # No subcommand: the TUI on the simulated device when it exists, else the demo.
         tui = parser._subparsers._group_actions[0].choices.get("tui") if parser._subparsers else None
         if tui is not None:
-            args = parser.parse_args(["tui", *(sys.argv[1:] if argv is None else argv)])  # keep --db
+            args = parser.parse_args(["tui", *argv])  # keep --db
         else:
             args = parser.parse_args(["walkthrough"])
         func = args.func

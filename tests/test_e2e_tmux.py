@@ -332,3 +332,46 @@ def test_a_new_users_walkthrough_at_80x24_in_tmux(tmp_path):
         (device,) = s.list_devices()
         low, high = device["limits"]["drift"]
     assert math.isclose(high, 2000 * math.pi / 648000, rel_tol=1e-12) and math.isclose(low, -high, rel_tol=1e-12)
+
+
+def test_station_with_only_port_starts_the_tui_on_that_device_in_tmux(tmp_path):
+    """README: `station` is the TUI "on the built-in simulated device unless --port is given".
+    `station --port /dev/ttyUSB0` was refused by the argument parser (the port taken for a
+    command name); it is `station tui --port ...`: Connect with the port filled in, and Start
+    reads the device."""
+    import signal
+
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "station", "sim-device", "--seed", "5"],
+        cwd=ROOT,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+    )
+    sock = f"test-port-{os.getpid()}"
+    try:
+        port = sim.stdout.readline().strip()
+        assert port.startswith("/dev/pts/"), port
+        cmd = (
+            f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station --port {port} --db {tmp_path / 'st.db'}; "
+            "echo EXIT=$?; sleep 30"
+        )
+        tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
+        screen = _wait_pane(
+            sock,
+            lambda s: ("f5 Start" in s and f"Port or URL     {port}" in s and "Other port" in s) or "EXIT=" in s,
+            120,
+            "the Connect screen with the port",
+        )
+        assert "EXIT=" not in screen, screen
+        _keys(sock, "F5")
+        _wait_pane(sock, lambda s: "Stillness" in s and "0/12 captured" in s, 120, "P1 on the serial device")
+        _keys(sock, "a")
+        _wait_pane(sock, lambda s: "y yes" in s, 60, "the abort question")
+        _keys(sock, "y")
+        _quit(sock)
+    finally:
+        tmux(sock, "kill-server", check=False)
+        sim.send_signal(signal.SIGINT)
+        sim.wait(20)
+        sim.stdout.close()
