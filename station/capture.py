@@ -316,6 +316,24 @@ def _same_array(a: np.ndarray, b: np.ndarray) -> bool:
 # ----------------------------------------------------------------------------- small helpers
 
 
+def fill_missing(values, x=None) -> np.ndarray:
+    """A slowly varying column (``temp_c``) with a few empty fields (missing values,
+    capture-format.md): each missing value linearly interpolated over ``x`` (time; the row
+    order when None) from its finite neighbours, the nearest one at the ends. With no finite
+    value, or none missing, the column is returned as it is."""
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(v)
+    if ok.all() or not ok.any():
+        return v
+    xs = np.arange(len(v), dtype=float) if x is None else np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(xs)):
+        xs = np.arange(len(v), dtype=float)
+    order = np.argsort(xs[ok], kind="stable")
+    out = v.copy()
+    out[~ok] = np.interp(xs[~ok], xs[ok][order], v[ok][order])
+    return out
+
+
 def strictly_increasing_t(t) -> np.ndarray:
     """``t`` for algorithms that need strictly increasing times (the stillness detector).
 

@@ -106,3 +106,36 @@ def test_tabletop_finds_positions_with_coarse_time_stamps(tmp_path):
     assert out["n_positions"] == 12
     M, Mt = np.array(out["params"]["M"]), truth["M"]
     assert np.abs(M.T @ M - Mt.T @ Mt).max() < 1e-3 * np.abs(Mt.T @ Mt).max()
+
+
+def _blank(path, column, rows):
+    """Empty the field ``column`` (a missing value, capture-format.md) in the given data rows."""
+    lines = path.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    k = lines[head].split(",").index(column)
+    for r in rows:
+        f = lines[head + 1 + r].split(",")
+        f[k] = ""
+        lines[head + 1 + r] = ",".join(f)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_one_missing_temperature_keeps_the_temperature_candidate_p4(tmp_path):
+    """A large temperature bias in a P4 record with two empty temp_c fields: the empty fields
+    dropped the temperature candidate ("no temperature in the capture") and another name was
+    given; they are interpolated from their neighbours now."""
+    opts = {"duration_s": 200.0, "rate": 50.0}
+    path, _ = _write(tmp_path, "gyro-drift", opts, effect="temperature_bias")
+    _blank(path, "temp_c", [100, 5000])
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["verdict"] == ["temperature_bias"]
+
+
+def test_one_missing_temperature_keeps_the_temperature_candidate_p2(tmp_path):
+    """The same in a centrifuge table: one row's temp_c empty."""
+    path, _ = _write(tmp_path, "accel-centrifuge", {}, effect="temperature_bias")
+    _blank(path, "temp_c", [7])
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["verdict"] == ["temperature_bias"]

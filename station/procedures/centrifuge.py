@@ -24,6 +24,7 @@ import numpy as np
 
 from solvers import centrifuge as C
 from solvers.errors import SolverError
+from station.capture import fill_missing
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -288,6 +289,8 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         if "elapsed_s" in capture.columns and not capture.is_time_series
         else None
     )
+    if temp is not None:  # a few empty temp_c fields: interpolated, not the whole temperature candidate lost
+        temp = fill_missing(temp, el)
     # the calibration's own screen (solvers.centrifuge.screen_rows): rows that disagree with the
     # model far beyond the others are left out of the effect search too, and named by line
     rejected = {r["line"]: r for r in base.get("rejected_rows") or []}

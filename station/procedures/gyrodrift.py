@@ -36,7 +36,7 @@ from solvers import gyrodrift as gd
 from solvers.errors import SolverError
 from solvers.models import gyro as gyro_model
 from solvers.units import si_factor
-from station.capture import strictly_increasing_t
+from station.capture import fill_missing, strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -590,7 +590,7 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         f_mps2 = f_b[use] * (frames.G_STANDARD_MPS2 / gnorm)
     # what calibrate refuses diagnose refuses: a few seconds hold no drift, nor an effect on it
     check_length(len(order), dt, "mode A" if mode_ref else "mode B")
-    temp = np.asarray(capture.columns["temp_c"], float)[order] if "temp_c" in capture.columns else None
+    temp = fill_missing(capture.columns["temp_c"], t)[order] if "temp_c" in capture.columns else None
     prob = DP.gyro_problem(
         t[order],
         w_b[order],

@@ -28,7 +28,7 @@ from solvers.allan import hold_mean_se
 from solvers.errors import SolverError
 from solvers.models import accel as accel_model
 from solvers.units import ACCEL_UNITS
-from station.capture import strictly_increasing_t
+from station.capture import fill_missing, strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -418,7 +418,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
             temp_mean = np.array([np.nanmean(temp[(t >= p.t_start_s) & (t <= p.t_stop_s)]) for p in positions])
     else:
         keep = [k for k, p in enumerate(prep.positions) if any(p is q for q in positions)]
-        temp_mean = temp[keep] if temp is not None else None
+        temp_mean = fill_missing(temp, _col(capture, "t"))[keep] if temp is not None else None
         t_mean = _col(capture, "t")
         t_mean = t_mean[keep] if t_mean is not None else None
     std = np.array([p.std if p.std is not None else np.full(3, np.nan) for p in positions])
