@@ -139,3 +139,19 @@ def test_one_missing_temperature_keeps_the_temperature_candidate_p2(tmp_path):
     res = run_station("diagnose", path, "--json")
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout)["verdict"] == ["temperature_bias"]
+
+
+def test_one_missing_temperature_keeps_the_temperature_candidate_compass(tmp_path):
+    path, _ = _write(tmp_path, "compass", {}, effect="temperature_bias")
+    _blank(path, "temp_c", [30, 500])
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["verdict"] == ["temperature_bias"]
+
+
+def test_one_missing_temperature_keeps_the_temperature_candidate_ldv(tmp_path):
+    path, _ = _write(tmp_path, "ldv", {"duration_s": 200.0, "rate": 10.0}, effect="temperature_bias")
+    _blank(path, "temp_c", [30, 500])
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    assert "temperature_bias" in json.loads(res.stdout)["verdict"]

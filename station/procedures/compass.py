@@ -25,7 +25,7 @@ from solvers.errors import SolverError
 from solvers.frames import G_STANDARD_MPS2
 from solvers.geomag import igrf_date, igrf_reference
 from solvers.units import si_factor
-from station.capture import strictly_increasing_t
+from station.capture import fill_missing, strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -385,7 +385,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     F = float(base["field_nT"])
     incl = base["params"]["reference"].get("inclination_deg")
     noise = base.get("noise_raw") or 1.0
-    temp = np.asarray(capture.columns["temp_c"], float) if "temp_c" in capture.columns else None
+    temp = fill_missing(capture.columns["temp_c"], t) if "temp_c" in capture.columns else None
     static = {}
     a = _xyz(capture, "a")
     if a is not None:

@@ -42,6 +42,7 @@ import numpy as np
 from solvers import frames
 from solvers import ldv as ldv_solver
 from solvers.errors import SolverError
+from station.capture import fill_missing
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -303,7 +304,10 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     if rows is not None and all(c in capture.columns for c in ("wx", "wy", "wz")):
         W = np.column_stack([pick(c) for c in ("wx", "wy", "wz")])
     X0 = np.array([base["fit"][f"beam{j + 1}"]["X"] for j in range(3)], float)
-    prob = DP.ldv_problem(pick("t"), v_b, vl, X0, temp_c=pick("temp_c"), omega_body_rad_s=W)
+    temp = None
+    if rows is not None and "temp_c" in capture.columns:  # a few empty fields: interpolated over time
+        temp = fill_missing(capture.columns["temp_c"], capture.columns.get("t"))[rows]
+    prob = DP.ldv_problem(pick("t"), v_b, vl, X0, temp_c=temp, omega_body_rad_s=W)
     prob.screened = screened
     return DiagnosisInput(prob, {"rows": rows}, "a sample far off: a dropout of the LDV or the reference")
 
