@@ -85,3 +85,18 @@ def test_p1_bias_step_counts_holds_in_the_model_it_is_named_in(tmp_path, capsys,
     # the generator's step is at a fraction of the record; 16 holds: one hold and move is 1/16 of it
     t = cols["t"]
     assert abs(e["params"]["at"] - (t[0] + pat["at"] * (t[-1] - t[0]))) < 0.1 * (t[-1] - t[0]), (e["params"], pat)
+
+
+def test_p1_periodic_bias_on_few_holds_needs_one_hold_left_not_three(tmp_path, capsys, monkeypatch):
+    """A periodic bias at 10σ in a P1 time series of 16 unlabelled holds of 20 s with a period of
+    about 3.4 holds: the periodic term (6 columns and its period) passes against the baseline
+    (deviance 81 against a bound of 61) and lowers the held-out RMS, but beside the baseline's 9
+    parameters it leaves 2.1 hold means free (`engine.independent_groups`), short of the 3 every
+    generic term needed, and nothing was named. P1 asks for one hold mean left
+    (``problems.GENERIC_MIN_GROUPS``, measured on nulls): ``residual:time`` is named alone,
+    periodic, its period recovered."""
+    res, pat, _, _ = _diagnose_generated(tmp_path, capsys, monkeypatch, "accel-tabletop", "periodic_bias", 513007)
+    assert res["verdict"] == ["residual:time"], (res["verdict"], res["candidates"])
+    e = next(x for x in res["effects"] if x["name"] == "residual:time")
+    assert e["shape"] == "periodic", e
+    assert abs(e["params"]["period"] / pat["period_s"] - 1.0) < 0.05, (e["params"]["period"], pat["period_s"])

@@ -114,6 +114,8 @@ class Problem:
     # per row: the id of the group of rows whose noise is one (``independent_groups``); None:
     # every row its own. What the generic extension's degrees of freedom are counted in.
     shared_noise: np.ndarray | None = None
+    # the groups a generic term must leave free beside the model it is named in (``independent_groups``)
+    min_groups: float = MIN_DOF
     # a row the tested model fits with a leverage above this is left out of the held-out comparison
     # of that model with the current one (None: every row counts): it alone determines some
     # direction of the parameters, so its held-out prediction is an extrapolation along that
@@ -945,7 +947,7 @@ def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float
         return False
     if ev.kind is not None and ev.dof_kind < MIN_DOF:
         return False
-    if ev.groups_left is not None and ev.groups_left < MIN_DOF - GROUPS_TOL:
+    if ev.groups_left is not None and ev.groups_left < problem.min_groups - GROUPS_TOL:
         return False
     return ev.D_rob > _bound(problem, ev, m, n, rank_cur, scale)[0]
 
@@ -1401,7 +1403,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         return _cv_lower(ev_, rr_.cv0(cand_.folds)) and ev_.D_rob > decisive_margin(problem)
 
     def _groups_ok(ev_, fit_, free_) -> bool:
-        """Whether generic term ``ev_`` leaves ``MIN_DOF`` degrees of freedom in independent groups
+        """Whether generic term ``ev_`` leaves ``problem.min_groups`` degrees of freedom in independent groups
         (``independent_groups``) beside the model ``fit_`` it is named in, its own block taken out:
         the library effects it displaced are no part of that model."""
         if problem.shared_noise is None:
@@ -1409,7 +1411,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         fr = {k: v for k, v in free_.items() if k not in ev_.cc.params}
         Jm, _, _ = jacobian(problem, {k: v for k, v in fit_.params.items() if k not in ev_.cc.params}, fr)
         scanned = _scanned(ev_.desc)
-        return independent_groups(problem, Jm, ev_.cc.J) - int(scanned) >= MIN_DOF - GROUPS_TOL
+        return independent_groups(problem, Jm, ev_.cc.J) - int(scanned) >= problem.min_groups - GROUPS_TOL
 
     generic_effect = None
     generic_tied: list[dict] = []  # library effects the generic one displaced by a margin that is not decisive

@@ -55,6 +55,9 @@ THRESHOLDS = {
     "gyro-drift": 1.25,  # 0.8 (independent nulls: 2.5 % false alarms at 1.25, 200 nulls, seeds 470000+; 2 % at 1.5): bias instability in the block means
     "ldv": 1.05,  # 0.95 (0.84 independent): white noise
 }
+# GENERIC_MIN_GROUPS[procedure]: the independent groups of rows (P1 time series: holds) a generic
+# term must leave free beside its model (engine.independent_groups); elsewhere engine.MIN_DOF
+GENERIC_MIN_GROUPS = {"accel-tabletop": 1.0}  # P1 nulls 460000+: docs/benchmarks.md, "P1 generic terms on few holds"
 GENERIC_SCALES = {"accel-tabletop": 1.0, "gyro-drift": 1.1, "accel-centrifuge": 1.5, "compass": 0.75, "ldv": 1.5}
 # KIND_THRESHOLDS[procedure][row kind]: F of the exact F test on that kind's rows alone, for a
 # candidate that moves only them (engine.kind_quantile), measured on the independent
@@ -486,6 +489,7 @@ def tabletop_problem(
         # the parts of a hold share its bias instability: a generic term's degrees of freedom are
         # counted in holds (each direction row its own: placement errors are independent)
         prob.shared_noise = np.concatenate([pos_n, m + np.arange(len(s_v))])
+        prob.min_groups = GENERIC_MIN_GROUPS["accel-tabletop"]
         prob.drivers["time [s]"] = np.concatenate([cond_n.t_s, pad])
         if cond_n.temp_c is not None:
             prob.drivers["temperature [°C]"] = np.concatenate([cond_n.temp_c, pad])
