@@ -380,6 +380,14 @@ def _px4_names(kind: str, i: int) -> dict:
     return out
 
 
+def _px4_lacks(use: InUse, names: dict, name: str) -> bool:
+    """Whether the firmware has no parameter ``name``: the capture holds the PX4 board's own
+    calibration parameters (its log or MAVLink list: the slot's offsets are there) and not this
+    one. Older PX4 releases have no CAL_*n_PRIO (CAL_*_PRIME instead) and no CAL_MAGn_*ODIAG;
+    a `param set` of a name the firmware lacks fails and a QGroundControl file loads with errors."""
+    return use.source_firmware == "px4" and names["off"][0] in use.params and name not in use.params
+
+
 def _slot(in_use: InUse, device_id: int | None, names, slots) -> int | None:
     """The slot whose `_ID` parameter in use holds `device_id` (the firmware's own lookup)."""
     if device_id is None:
@@ -569,7 +577,10 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         R = use.rotation(rot_name, ex, ("SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"))
     ex.set_int(names["id"], dev)
     prio = use.get(names["prio"])
-    ex.set_int(names["prio"], int(prio) if prio is not None and 0 < prio <= 100 else PX4_DEFAULT_PRIORITY)
+    if _px4_lacks(use, names, names["prio"]):
+        ex.note(f"{names['prio']} not written: the firmware's parameters in the capture have none (an older PX4)")
+    else:
+        ex.set_int(names["prio"], int(prio) if prio is not None and 0 < prio <= 100 else PX4_DEFAULT_PRIORITY)
     rot = use.get(names["rot"])
     if rot is not None:
         ex.set_int(names["rot"], int(rot))
@@ -631,8 +642,14 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             ex.set(name, v)
         for name, k in zip(names["scale"], range(3)):
             ex.set(name, P[k, k])
-        for name, (r, c) in zip(names["odiag"], ODIAG_PAIRS):
-            ex.set(name, P[r, c])
+        if _px4_lacks(use, names, names["odiag"][0]):
+            ex.note(
+                f"{names['odiag'][0][:-6]}*ODIAG not written: the firmware's parameters in the capture have none (an "
+                f"older PX4, diagonal scales only); dropped off-diagonal, largest |{max(abs(P[r, c]) for r, c in ODIAG_PAIRS):.3g}|"
+            )
+        else:
+            for name, (r, c) in zip(names["odiag"], ODIAG_PAIRS):
+                ex.set(name, P[r, c])
         ex.note(f"CAL_MAG_OFF = hard_iron in gauss, same sign (PX4 subtracts it); hard_iron was in {unit}")
         ex.note(
             "CAL_MAG_SCALE/ODIAG = symmetric part sqrtm(W^T W) of soft_iron, rescaled to map gauss to gauss; "

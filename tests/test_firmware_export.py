@@ -516,3 +516,64 @@ def test_px4_device_id_zero_is_no_sensor(capsys, db, fmt):
     cid = _save(db, gyro_result(device="H"), gyro_unit="rad/s", sensor_device_id="0")
     code, out, err = run(capsys, "export", cid, "--format", fmt, "--db", db)
     assert code == 2 and out == "" and err.count("\n") == 1 and "--device-id" in err
+
+
+def test_px4_export_of_an_older_px4_log_writes_only_names_that_firmware_has(capsys, db, shared_data):
+    """sample.ulg is an older PX4 (CAL_GYRO_PRIME, CAL_GYRO0_XSCALE; no CAL_*n_PRIO): its gyro
+    calibrated straight from the log exported `param set CAL_GYRO0_PRIO 50`, a parameter that
+    firmware does not have (the shell's `param set` fails on it, QGroundControl's load reports
+    it). Every name written is now in the parameter list the log itself holds (read by pyulog)."""
+    pyulog = pytest.importorskip("pyulog")
+    log = shared_data / "px4_ulog" / "original" / "sample.ulg"
+    in_log = set(pyulog.ULog(str(log), []).initial_parameters)
+    assert "CAL_GYRO0_XOFF" in in_log and "CAL_GYRO0_PRIO" not in in_log  # the firmware as it is
+    code, out, err = run(capsys, "calibrate", log, "--procedure", "gyro-drift", "--save", "--json", "--db", db)
+    assert code in (0, 1), err
+    if code == 1:  # a FAIL verdict on a flight log: accepted as an override, as an operator would
+        code, out, err = run(
+            capsys, "calibrate", log, "--procedure", "gyro-drift", "--save", "--json", "--override", "x", "--db", db
+        )
+    cid = json.loads(out)["calibration_id"]
+    for fmt in ("px4", "qgc"):
+        code, out, err = run(capsys, "export", cid, "--format", fmt, "--db", db)
+        assert code == 0, err
+        written = set(names_in(out, fmt))
+        assert {"CAL_GYRO0_ID", "CAL_GYRO0_XOFF"} <= written and written <= in_log, written - in_log
+        assert "CAL_GYRO0_PRIO not written" in out
+
+
+def test_px4_magnetometer_for_a_firmware_without_odiag_writes_the_diagonal_only(capsys, tmp_path):
+    """An older PX4 has CAL_MAGn_{X,Y,Z}SCALE but no ODIAG and no PRIO (sample.ulg's list):
+    data it corrected with diagonal scales are exported with the names it has, the dropped
+    off-diagonal said in a comment; the diagonal is the truth's."""
+    from solvers.simulate import simulate
+
+    sim = simulate("compass", seed=5)
+    r_G = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) / 100.0  # uT -> gauss
+    o_old, s_old = np.array([0.031, -0.045, 0.012]), np.array([0.98, 1.02, 1.0])
+    d_G = (r_G - o_old) * s_old
+    meta = dict(
+        sim.meta,
+        mag_unit="gauss",
+        corrected="true",
+        firmware="px4",
+        mag_device_id="396809",
+        **{"param.CAL_MAG0_ID": "396809", "param.CAL_MAG0_ROT": "-1", "param.SENS_BOARD_ROT": "0"},
+        **{f"param.CAL_MAG0_{a}OFF": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+        **{f"param.CAL_MAG0_{a}SCALE": repr(float(s_old[i])) for i, a in enumerate(XYZ)},
+    )
+    path = tmp_path / "mag.csv"
+    write_capture(path, Capture(meta=meta, columns=dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
+    assert code == 0, err
+    for fmt in ("px4", "qgc"):
+        code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", fmt, "--db", db)
+        assert code == 0, err
+        p = names_in(text, fmt)
+        assert not [n for n in p if "ODIAG" in n or "PRIO" in n], p
+        assert "CAL_MAG0_*ODIAG not written" in text and "CAL_MAG0_PRIO not written" in text
+        W_true = np.asarray(sim.truth["soft_iron"]) * 100.0 / 1e5
+        vals, vecs = np.linalg.eigh(W_true.T @ W_true)
+        S_true = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
+        assert np.abs(np.array([p[f"CAL_MAG0_{a}SCALE"] for a in XYZ]) - np.diag(S_true)).max() < 5e-3
