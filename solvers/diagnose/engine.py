@@ -72,6 +72,9 @@ class Candidate:
     reason: str | None = None
     setup: Callable[[], None] | None = None  # generic candidates: write the driver basis into the conditions
     folds: str | None = None  # the problem's fold set that validates it (None: the default groups)
+    # the free elements once it is in the model (the refits), where they are more than those it is
+    # tested with: directions that only a large effect makes count (None: the tested ones)
+    refit_free: dict | None = None
 
 
 @dataclass
@@ -102,6 +105,9 @@ class Problem:
     cv_rows: dict = field(default_factory=dict)  # fold set name → rows its held-out RMS is taken on
     cv_groups: np.ndarray | None = None  # the default CV folds when they are not ``groups`` (P2: rows across mountings)
     screened: list = field(default_factory=list)  # quality findings of rows left out before the effect search
+    # a constant the baseline lacks → {time-like candidate: its driver}: the constant is that candidate's
+    # value at its own zero, which the data do not fix (a drift from power-up has a mean); both named: tied
+    intercept_of: dict = field(default_factory=dict)
     # row kind → scale F of the exact F test of a candidate whose columns touch only that kind's
     # rows (its own rows, noise scale and residual degrees of freedom: ``kind_quantile``); a
     # candidate touching several kinds, or a kind not listed, keeps the procedure's test
@@ -323,12 +329,57 @@ class _Cand:
     J: np.ndarray  # weighted Jacobian columns (identifiable ones)
     names: list[str]
     reason: str | None = None
+    model_free: dict | None = None  # once picked: its free elements in the model (``refit_free`` when it earned them)
 
 
 def _free_of(c: Candidate) -> dict:
     if c.free is not None:
         return dict(c.free)
     return {k: True for k in c.blocks if not (c.scan and k == c.scan[0])}
+
+
+def _free_in_model(cc: _Cand) -> dict:
+    """The free elements of a picked candidate in the extended model's refits."""
+    return dict(cc.model_free) if cc.model_free is not None else cc.free
+
+
+def _with_refit_free(problem: Problem, cc: _Cand, fit_: FitResult, free: dict, sigma: np.ndarray):
+    """``(fit, free)`` of the model with the picked ``cc`` given its ``refit_free`` elements, when they
+    lower χ² by the decisive margin of as many parameters (``fit_``'s noise scale taken beside
+    them); else ``fit_`` and ``free`` as they are. Sets ``cc.model_free`` to what the model keeps."""
+    rf = cc.cand.refit_free
+    if rf is None:
+        return fit_, free
+    free2 = {**free, **{k: v for k, v in rf.items() if k in cc.params}}
+    k_extra = len(Packer.build(fit_.params, free2).names) - len(Packer.build(fit_.params, free).names)
+    if k_extra <= 0:
+        return fit_, free
+    try:
+        fit2 = _refit(problem, dict(fit_.params), free2, sigma)
+    except Exception:
+        return fit_, free
+    s2 = fit2.chi2 / max(fit2.dof, 1)
+    if not (np.isfinite(fit2.chi2) and s2 > 0) or (fit_.chi2 - fit2.chi2) / s2 <= decisive_margin(problem, k_extra):
+        return fit_, free
+    cc.model_free = {k: v for k, v in free2.items() if k in cc.params}
+    return fit2, free2
+
+
+def _tie_intercepts(problem: Problem, named: list[dict]) -> None:
+    """Each named constant of ``problem.intercept_of`` and each named time-like effect it is the zero
+    point of go in each other's ``confused_with``, with the correlation of the constant and the
+    driver counted from its lowest value (a drift that starts at zero)."""
+    by_name = {e["name"]: e for e in named}
+    for const, drivers in problem.intercept_of.items():
+        for other, x in drivers.items():
+            if const not in by_name or other not in by_name or x is None:
+                continue
+            d = np.asarray(x, float) - float(np.nanmin(x))
+            rms = float(np.sqrt(np.nanmean(d * d)))
+            corr = float(np.nanmean(d) / rms) if rms > 0 else 0.0
+            for a, b in ((const, other), (other, const)):
+                if all(c["name"] != b for c in by_name[a]["confused_with"]):
+                    by_name[a]["confused_with"] = [*by_name[a]["confused_with"], {"name": b, "correlation": corr}]
 
 
 def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.ndarray, r0: np.ndarray) -> _Cand:
@@ -1082,7 +1133,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 fr = dict(problem.free)
                 for oc, _ in others:
                     st.update({k: cur_fit.params[k] for k in oc.params})
-                    fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+                    fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
                 without = _refit(problem, st, fr, sigma)
                 r0 = without.weighted_residuals
                 J0, _, _ = jacobian(problem, without.params, fr)
@@ -1105,7 +1156,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         keep = list(picked) + ([(extra, None)] if extra is not None else [])
         free = dict(problem.free)
         for oc, _ in keep:
-            free.update({k: v for k, v in oc.free.items() if k in oc.params})
+            free.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
         state = {k: v for k, v in cur_fit.params.items() if k in base_params or any(k in oc.params for oc, _ in keep)}
         if keep:
             cur_fit = _refit(problem, state, free, sigma)
@@ -1118,7 +1169,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         fr = dict(problem.free)
         for oc, _ in items:
             st.update({k: fit_.params[k] for k in oc.params})
-            fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+            fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
         return (_refit(problem, st, fr, sigma) if items else baseline_fit), fr
 
     def pairs(picked, cur_fit):
@@ -1242,8 +1293,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         entries[cc.cand.name]["selected"] = True
         picked.append((cc, {"name": cc.cand.name, "cv_rms_before": cv_cur, "confused_with": confused}))
         state.update(cc.params)
-        free.update({k: v for k, v in cc.free.items() if k in cc.params})
+        free.update({k: v for k, v in _free_in_model(cc).items() if k in cc.params})
         cur_fit = _refit(problem, state, free, sigma)
+        cur_fit, free = _with_refit_free(problem, cc, cur_fit, free, sigma)
         if problem.aux_scale_refit and types is not None:
             # the auxiliary rows' noise measured again against the model as it now stands: on the
             # baseline an effect not yet modelled (a rotation in the compass dip rows) inflated it
@@ -1365,7 +1417,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     def with_generic(best, state, free):
         best.cc.cand.setup()
         state = {**state, **best.cc.params}
-        free = {**free, **{k: v for k, v in best.cc.free.items() if k in best.cc.params}}
+        free = {**free, **{k: v for k, v in _free_in_model(best.cc).items() if k in best.cc.params}}
         fit_ = _refit(problem, state, free, sigma)
         return fit_, dict(fit_.params), free
 
@@ -1540,6 +1592,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     cv_ext = cv_rms(Je, ext.weighted_residuals, sigma, folds, primary) if (picked or generic_effect) else cv0
     if not picked and not generic_effect:
         ext = baseline_fit
+    _tie_intercepts(problem, [e for _, e in picked])
     effects: list[dict] = []
     for cc, e in picked:
         e = dict(e)
@@ -1556,7 +1609,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             st[k] = ext.params[k]
         for i, (cc, _) in enumerate(picked):
             st.update({k: ext.params[k] for k in cc.params})
-            fr.update({k: v for k, v in cc.free.items() if k in cc.params})
+            fr.update({k: v for k, v in _free_in_model(cc).items() if k in cc.params})
             if i == len(picked) - 1 and not generic_effect:
                 cvs.append(cv_ext)
             else:
@@ -1569,13 +1622,13 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 st, fr = {k: ext.params[k] for k in base_params}, dict(problem.free)
                 for oc, _ in picked[:i]:
                     st.update({k: ext.params[k] for k in oc.params})
-                    fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+                    fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
                 fs, rows = fold_map[key]
                 Jb, _, _ = jacobian(problem, st, fr)
                 before = cv_rms(Jb, _weighted(problem, st), sigma, fs, primary, rows)
                 oc = picked[i][0]
                 st.update({k: ext.params[k] for k in oc.params})
-                fr.update({k: v for k, v in oc.free.items() if k in oc.params})
+                fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
                 Ja, _, _ = jacobian(problem, st, fr)
                 after = cv_rms(Ja, _weighted(problem, st), sigma, fs, primary, rows)
                 e["cv_rms_before"], e["cv_rms_after"] = before, after
@@ -1619,7 +1672,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         cv0,
         cand_list,
         effects,
-        verdict,
+        list(dict.fromkeys(verdict)),
         ext,
         cv_ext,
         names,

@@ -339,6 +339,9 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     if T is not None:
         prob.drivers["temperature [°C]"] = np.repeat(T, 3)
     prob.series = np.tile(np.arange(3), len(v))
+    # the baseline has no constant: a drift or a temperature bias from a zero outside the capture
+    # (power-up, 25 °C) brings its mean with it, which the offset takes; both named, they are tied
+    prob.intercept_of = {"offset": {"time_drift": t, "temperature_bias": T}}
     prob.generic = [
         (
             cond,
@@ -510,6 +513,34 @@ def tabletop_problem(
 # ---------------------------------------------------------------- P2 centrifuge
 
 
+def _all_gamma_identifiable(N, base: dict, sigma: np.ndarray, residual) -> bool:
+    """Whether the table determines all six installation angles, by calibrate's exact-gamma rule
+    (condition number under 1e6, each angle's σ under ``GAMMA_SIGMA_MAX``), linearised at γ = 0.
+
+    The misalignment is tested in the triangular gauge (three angles: the other three are a
+    rotation of the unknown input, seen only through ``D f∘f``). Once it is large (1e-3 rad at
+    tens of g) that rotation is no longer invisible: the triangular fit leaves several times the
+    noise, which a drift or a temperature term then took for itself. Where the rest is
+    determined, the extended model frees all six, as calibrate does."""
+    from solvers.centrifuge import GAMMA_SIGMA_MAX
+
+    J = accel_model.p2_norm_jacobian(N, {**base, "gamma": np.zeros(6)})[1] / sigma[:, None]
+    norm = np.linalg.norm(J, axis=0)
+    if not np.all(norm > 0):
+        return False
+    sv = np.linalg.svd(J / norm, compute_uv=False)
+    if not sv[-1] > 0 or sv[0] / sv[-1] >= 1e6:
+        return False
+    r = residual(base) / sigma
+    dof = len(r) - J.shape[1]
+    if dof <= 0:
+        return False
+    step, *_ = np.linalg.lstsq(J, r, rcond=None)  # the noise scale beside a linearised γ, not the baseline's misfit
+    s2 = max(float(np.sum((r - J @ step) ** 2)) / dof, 1e-300)
+    cov = np.linalg.pinv(J.T @ J) * s2
+    return bool(np.all(np.sqrt(np.abs(np.diag(cov)[9:])) < GAMMA_SIGMA_MAX))
+
+
 def centrifuge_problem(
     N, speed_rad_s, radius_m, g_mps2, params0, *, labels, sigma_N=None, temp_c=None, elapsed_s=None
 ) -> Problem:
@@ -557,7 +588,12 @@ def centrifuge_problem(
     cands = [
         _temp_candidate(T),
         _time_candidate(t),
-        Candidate("misalignment", {"gamma": np.zeros(6)}, free={"gamma": GAMMA_FREE}),
+        Candidate(
+            "misalignment",
+            {"gamma": np.zeros(6)},
+            free={"gamma": GAMMA_FREE},
+            refit_free={"gamma": np.ones(6, bool)} if _all_gamma_identifiable(N, base, sigma, residual) else None,
+        ),
         Candidate("cubic", {"C3": np.zeros(3)}),
     ]
     cands.append(
