@@ -55,3 +55,14 @@ def test_ldv_offset_beside_a_drift_from_its_own_zero_is_tied_with_it(tmp_path, c
         if hidden in names:
             group |= names
     assert set(res["verdict"]) <= group, res["verdict"]
+
+
+def test_p2_six_angles_not_freed_where_no_degree_of_freedom_is_left(tmp_path, capsys):
+    """A table of as many rows as the model with six angles has parameters (independent generator,
+    seed 556024: a 10σ cubic term, named with a misalignment): freed, the angles fitted the rows
+    exactly, a zero χ² looked like a decisive gain, and every name was then dropped (verdict []).
+    With no degree of freedom left to measure the gain against, the three angles stay fixed."""
+    from station_run import diagnose_generated
+
+    res = diagnose_generated(tmp_path, capsys, "accel-centrifuge", "cubic", 556024)[0]
+    assert "cubic" in res["verdict"], (res["verdict"], res["candidates"])

@@ -345,8 +345,9 @@ def _free_in_model(cc: _Cand) -> dict:
 
 def _with_refit_free(problem: Problem, cc: _Cand, fit_: FitResult, free: dict, sigma: np.ndarray):
     """``(fit, free)`` of the model with the picked ``cc`` given its ``refit_free`` elements, when they
-    lower χ² by the decisive margin of as many parameters (``fit_``'s noise scale taken beside
-    them); else ``fit_`` and ``free`` as they are. Sets ``cc.model_free`` to what the model keeps."""
+    lower χ² by the decisive margin of as many parameters, ``F·k·F_{k,ν}(1 − α)`` with the noise
+    scale taken beside them on ν degrees of freedom (none left: never); else ``fit_`` and ``free``
+    as they are. Sets ``cc.model_free`` to what the model keeps."""
     rf = cc.cand.refit_free
     if rf is None:
         return fit_, free
@@ -358,8 +359,12 @@ def _with_refit_free(problem: Problem, cc: _Cand, fit_: FitResult, free: dict, s
         fit2 = _refit(problem, dict(fit_.params), free2, sigma)
     except Exception:
         return fit_, free
-    s2 = fit2.chi2 / max(fit2.dof, 1)
-    if not (np.isfinite(fit2.chi2) and s2 > 0) or (fit_.chi2 - fit2.chi2) / s2 <= decisive_margin(problem, k_extra):
+    if fit2.dof < 1 or not (np.isfinite(fit2.chi2) and fit2.chi2 > 0):
+        return fit_, free  # no noise left to measure the gain against (a table of as many rows as parameters)
+    s2 = fit2.chi2 / fit2.dof
+    # the decisive margin with the noise scale estimated on fit2.dof degrees of freedom (F, not χ²)
+    margin = problem.threshold * k_extra * float(fdtri(k_extra, fit2.dof, 1.0 - ALPHA))
+    if (fit_.chi2 - fit2.chi2) / s2 <= margin:
         return fit_, free
     cc.model_free = {k: v for k, v in free2.items() if k in cc.params}
     return fit2, free2
