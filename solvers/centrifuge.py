@@ -118,7 +118,7 @@ def exact_fit(N, rho, *, sigma_N=None, gamma: bool = False, initial: dict | None
         return _exact(N, rho, sigma_N, None, initial)
     try:
         res = _exact(N, rho, sigma_N, np.ones(6, bool), initial)
-        if res.fit.condition_number < 1e6 and np.all(res.sigma["gamma"] < GAMMA_SIGMA_MAX):
+        if res.fit.condition_number < GAMMA_CONDITION_MAX and np.all(res.sigma["gamma"] < GAMMA_SIGMA_MAX):
             res.extra["gamma_gauge"] = "all"
             return res
     except NotIdentifiable:
@@ -129,6 +129,7 @@ def exact_fit(N, rho, *, sigma_N=None, gamma: bool = False, initial: dict | None
 
 
 GAMMA_SIGMA_MAX = 1e-2  # rad: a γ known worse than this is not worth reporting as determined
+GAMMA_CONDITION_MAX = 1e6  # all six angles are fitted only where the fit is conditioned better than this
 
 
 def _exact(N, rho, sigma_N, gamma_free, initial) -> P2Result:

@@ -339,8 +339,9 @@ def _free_of(c: Candidate) -> dict:
 
 
 def _free_in_model(cc: _Cand) -> dict:
-    """The free elements of a picked candidate in the extended model's refits."""
-    return dict(cc.model_free) if cc.model_free is not None else cc.free
+    """The free elements of a picked candidate's blocks in the extended model's refits."""
+    free = cc.model_free if cc.model_free is not None else cc.free
+    return {k: v for k, v in free.items() if k in cc.params}
 
 
 def _with_refit_free(problem: Problem, cc: _Cand, fit_: FitResult, free: dict, sigma: np.ndarray):
@@ -366,7 +367,7 @@ def _with_refit_free(problem: Problem, cc: _Cand, fit_: FitResult, free: dict, s
     margin = problem.threshold * k_extra * float(fdtri(k_extra, fit2.dof, 1.0 - ALPHA))
     if (fit_.chi2 - fit2.chi2) / s2 <= margin:
         return fit_, free
-    cc.model_free = {k: v for k, v in free2.items() if k in cc.params}
+    cc.model_free = free2
     return fit2, free2
 
 
@@ -1138,7 +1139,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 fr = dict(problem.free)
                 for oc, _ in others:
                     st.update({k: cur_fit.params[k] for k in oc.params})
-                    fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
+                    fr.update(_free_in_model(oc))
                 without = _refit(problem, st, fr, sigma)
                 r0 = without.weighted_residuals
                 J0, _, _ = jacobian(problem, without.params, fr)
@@ -1161,7 +1162,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         keep = list(picked) + ([(extra, None)] if extra is not None else [])
         free = dict(problem.free)
         for oc, _ in keep:
-            free.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
+            free.update(_free_in_model(oc))
         state = {k: v for k, v in cur_fit.params.items() if k in base_params or any(k in oc.params for oc, _ in keep)}
         if keep:
             cur_fit = _refit(problem, state, free, sigma)
@@ -1174,7 +1175,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         fr = dict(problem.free)
         for oc, _ in items:
             st.update({k: fit_.params[k] for k in oc.params})
-            fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
+            fr.update(_free_in_model(oc))
         return (_refit(problem, st, fr, sigma) if items else baseline_fit), fr
 
     def pairs(picked, cur_fit):
@@ -1298,7 +1299,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         entries[cc.cand.name]["selected"] = True
         picked.append((cc, {"name": cc.cand.name, "cv_rms_before": cv_cur, "confused_with": confused}))
         state.update(cc.params)
-        free.update({k: v for k, v in _free_in_model(cc).items() if k in cc.params})
+        free.update(_free_in_model(cc))
         cur_fit = _refit(problem, state, free, sigma)
         cur_fit, free = _with_refit_free(problem, cc, cur_fit, free, sigma)
         if problem.aux_scale_refit and types is not None:
@@ -1422,7 +1423,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     def with_generic(best, state, free):
         best.cc.cand.setup()
         state = {**state, **best.cc.params}
-        free = {**free, **{k: v for k, v in _free_in_model(best.cc).items() if k in best.cc.params}}
+        free = {**free, **_free_in_model(best.cc)}
         fit_ = _refit(problem, state, free, sigma)
         return fit_, dict(fit_.params), free
 
@@ -1614,7 +1615,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             st[k] = ext.params[k]
         for i, (cc, _) in enumerate(picked):
             st.update({k: ext.params[k] for k in cc.params})
-            fr.update({k: v for k, v in _free_in_model(cc).items() if k in cc.params})
+            fr.update(_free_in_model(cc))
             if i == len(picked) - 1 and not generic_effect:
                 cvs.append(cv_ext)
             else:
@@ -1627,13 +1628,13 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 st, fr = {k: ext.params[k] for k in base_params}, dict(problem.free)
                 for oc, _ in picked[:i]:
                     st.update({k: ext.params[k] for k in oc.params})
-                    fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
+                    fr.update(_free_in_model(oc))
                 fs, rows = fold_map[key]
                 Jb, _, _ = jacobian(problem, st, fr)
                 before = cv_rms(Jb, _weighted(problem, st), sigma, fs, primary, rows)
                 oc = picked[i][0]
                 st.update({k: ext.params[k] for k in oc.params})
-                fr.update({k: v for k, v in _free_in_model(oc).items() if k in oc.params})
+                fr.update(_free_in_model(oc))
                 Ja, _, _ = jacobian(problem, st, fr)
                 after = cv_rms(Ja, _weighted(problem, st), sigma, fs, primary, rows)
                 e["cv_rms_before"], e["cv_rms_after"] = before, after

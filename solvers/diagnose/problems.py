@@ -515,21 +515,21 @@ def tabletop_problem(
 
 def _all_gamma_identifiable(N, base: dict, sigma: np.ndarray, residual) -> bool:
     """Whether the table determines all six installation angles, by calibrate's exact-gamma rule
-    (condition number under 1e6, each angle's σ under ``GAMMA_SIGMA_MAX``), linearised at γ = 0.
+    (condition number under ``GAMMA_CONDITION_MAX``, each angle's σ under ``GAMMA_SIGMA_MAX``), linearised at γ = 0.
 
     The misalignment is tested in the triangular gauge (three angles: the other three are a
     rotation of the unknown input, seen only through ``D f∘f``). Once it is large (1e-3 rad at
     tens of g) that rotation is no longer invisible: the triangular fit leaves several times the
     noise, which a drift or a temperature term then took for itself. Where the rest is
     determined, the extended model frees all six, as calibrate does."""
-    from solvers.centrifuge import GAMMA_SIGMA_MAX
+    from solvers.centrifuge import GAMMA_CONDITION_MAX, GAMMA_SIGMA_MAX
 
     J = accel_model.p2_norm_jacobian(N, {**base, "gamma": np.zeros(6)})[1] / sigma[:, None]
     norm = np.linalg.norm(J, axis=0)
     if not np.all(norm > 0):
         return False
     sv = np.linalg.svd(J / norm, compute_uv=False)
-    if not sv[-1] > 0 or sv[0] / sv[-1] >= 1e6:
+    if not sv[-1] > 0 or sv[0] / sv[-1] >= GAMMA_CONDITION_MAX:
         return False
     r = residual(base) / sigma
     dof = len(r) - J.shape[1]
