@@ -334,6 +334,18 @@ def fill_missing(values, x=None) -> np.ndarray:
     return out
 
 
+def span_step_s(t) -> float | None:
+    """The mean step of a time column over its span, ``(t_last − t_first) / (rows − 1)`` over its
+    finite values: the sample step where coarse stamps (whole seconds, host clock ticks; ``t``
+    may repeat, capture-format.md) make the median step 0. None with fewer than two finite
+    times or no span."""
+    t = np.asarray(t, dtype=float)
+    t = t[np.isfinite(t)]
+    if len(t) < 2 or not t[-1] > t[0]:
+        return None
+    return float(t[-1] - t[0]) / (len(t) - 1)
+
+
 def strictly_increasing_t(t) -> np.ndarray:
     """``t`` for algorithms that need strictly increasing times (the stillness detector).
 

@@ -36,7 +36,7 @@ from solvers import gyrodrift as gd
 from solvers.errors import SolverError
 from solvers.models import gyro as gyro_model
 from solvers.units import si_factor
-from station.capture import fill_missing, strictly_increasing_t
+from station.capture import fill_missing, span_step_s, strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -171,19 +171,18 @@ def _dt(capture) -> float:
             f"{capture.path or 'capture'}: a table of averages cannot give a drift's error (Allan "
             "deviation): gyro-drift needs the time series"
         )
-    span = 0.0
+    coarse_step = None
     if capture.is_time_series:
         t = capture.columns["t"]
-        t = t[np.isfinite(t)]
-        d = np.diff(t)
+        d = np.diff(t[np.isfinite(t)])
         if len(d) and np.median(d) > 0:
             return float(np.median(d))
-        span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
-    rate = capture.float_meta("sample_rate_hz")
-    if (rate is None or rate <= 0) and span > 0:
         # coarse time stamps (whole seconds, host clock ticks): most rows share their t with the
         # previous one (t is non-decreasing), so the median step is 0; the rows over the span give the step
-        return span / (len(t) - 1)
+        coarse_step = span_step_s(t)
+    rate = capture.float_meta("sample_rate_hz")
+    if (rate is None or rate <= 0) and coarse_step is not None:
+        return coarse_step
     if rate is None or rate <= 0:
         raise UnsupportedError(
             f"{capture.path or 'capture'}: gyro drift needs a time series: a 't' column with at least two "

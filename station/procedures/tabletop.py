@@ -28,7 +28,7 @@ from solvers.allan import hold_mean_se
 from solvers.errors import SolverError
 from solvers.models import accel as accel_model
 from solvers.units import ACCEL_UNITS
-from station.capture import fill_missing, strictly_increasing_t
+from station.capture import fill_missing, span_step_s, strictly_increasing_t
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
 
@@ -462,9 +462,8 @@ def _sub_holds(capture, positions, bad=None) -> dict | None:
     a = _accel(capture)
     temp = _col(capture, "temp_c")
     out: dict[str, list] = {"V": [], "se": [], "pos": [], "part": [], "t": [], "temp": []}
-    tf = t[np.isfinite(t)]
     # coarse stamps (whole seconds): a chunk's median step is 0; the rows over the capture's span give it
-    step_all = float(tf[-1] - tf[0]) / (len(tf) - 1) if len(tf) > 1 and tf[-1] > tf[0] else 1.0
+    step_all = span_step_s(t) or 1.0
     for k, p in enumerate(positions):
         if p.t_start_s is None or p.t_stop_s is None:
             return None
