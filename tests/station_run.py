@@ -36,6 +36,14 @@ def run_station(*args, subprocess_run: bool = False) -> subprocess.CompletedProc
     return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
 
 
+def station_json(*args) -> dict:
+    """``station ARGS`` through ``run_station`` that must succeed (exit 0, stderr shown if not):
+    its stdout, one JSON object."""
+    res = run_station(*args)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)
+
+
 def assert_one_line_refusal(res: subprocess.CompletedProcess, *needles: str) -> None:
     """Bad input as the station must refuse it: exit 2, nothing on stdout, one line on stderr
     starting ``station: `` (not the catch-all for an unexpected error), naming each needle."""

@@ -3,12 +3,11 @@ the real ``station diagnose`` / ``station calibrate`` commands."""
 
 from __future__ import annotations
 
-import json
 import sys
 
 import numpy as np
 
-from tests.station_run import ROOT, run_station
+from tests.station_run import ROOT, station_json
 
 
 def _gen():
@@ -35,9 +34,7 @@ def test_quiet_quantised_magnetometer_is_not_called_saturated(tmp_path):
     samples in every hold: at the hold with the extreme reading that is not clipping, and
     screening it out would drop good holds from the effect search."""
     path, _ = _write(tmp_path, "compass", {"unit": "counts", "noise": 20.0, "temp": "constant"})
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout)
+    out = station_json("diagnose", path, "--json")
     assert [q for q in out["quality"] if q["kind"] == "saturation"] == []
     assert out["verdict"] == []
 
@@ -47,9 +44,7 @@ def test_quiet_gyro_in_counts_reading_one_value_is_diagnosed(tmp_path):
     the time: that value is its column's extreme, yet no clipping. Calling it saturation
     screened out every sample and refused the capture ("0 static samples")."""
     path, _ = _write(tmp_path, "gyro-drift", {"unit": "counts", "noise": 2e-5, "duration_s": 200.0, "rate": 50.0})
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout)
+    out = station_json("diagnose", path, "--json")
     assert [q for q in out["quality"] if q["kind"] == "saturation"] == []
     assert out["verdict"] == []
 
@@ -64,9 +59,7 @@ def test_gyro_drift_calibrates_with_coarse_time_stamps(tmp_path):
     """t non-decreasing (capture-format.md) with many rows per stamp: the median step is 0, so
     the step comes from the rows over the span instead of a refusal."""
     path, truth = _whole_second_p4(tmp_path)
-    res = run_station("calibrate", path, "--json")
-    assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout)
+    out = station_json("calibrate", path, "--json")
     drift, sigma = np.array(out["params"]["drift"]), np.array(out["uncertainty"]["drift"])
     assert np.all(np.abs(drift - truth["eps"]) < 4 * sigma + 1e-7), (drift, truth["eps"], sigma)
 
@@ -75,9 +68,7 @@ def test_coarse_time_stamps_are_not_gaps(tmp_path):
     """Each tick of a whole-second stamp is 1 s after 49 zero steps: against a median step of 0
     every tick was a gap, every sample screened out and the capture refused."""
     path, _ = _whole_second_p4(tmp_path)
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout)
+    out = station_json("diagnose", path, "--json")
     assert [q for q in out["quality"] if q["kind"] == "gap"] == []
     assert out["verdict"] == []
 
@@ -87,9 +78,7 @@ def test_tabletop_diagnoses_with_coarse_time_stamps(tmp_path):
     made its standard error infinite and the diagnosis fail ("residual is not finite")."""
     opts = {"hold_s": 12.0, "rate": 50.0, "t0": 1.7e9, "t_res": 1.0, "temp": "constant"}
     path, _ = _write(tmp_path, "accel-tabletop", opts)
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout)
+    out = station_json("diagnose", path, "--json")
     assert out["verdict"] == []
     assert np.isfinite(out["baseline"]["cv_rms"])
 
@@ -100,9 +89,7 @@ def test_tabletop_finds_positions_with_coarse_time_stamps(tmp_path):
     increase"); ties are now spread over their tick and the calibration recovers the truth."""
     opts = {"hold_s": 12.0, "rate": 50.0, "t_res": 1.0, "labels": False, "temp": "constant"}
     path, truth = _write(tmp_path, "accel-tabletop", opts)
-    res = run_station("calibrate", path, "--json")
-    assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout)
+    out = station_json("calibrate", path, "--json")
     assert out["n_positions"] == 12
     M, Mt = np.array(out["params"]["M"]), truth["M"]
     assert np.abs(M.T @ M - Mt.T @ Mt).max() < 1e-3 * np.abs(Mt.T @ Mt).max()
@@ -127,31 +114,23 @@ def test_one_missing_temperature_keeps_the_temperature_candidate_p4(tmp_path):
     opts = {"duration_s": 200.0, "rate": 50.0}
     path, _ = _write(tmp_path, "gyro-drift", opts, effect="temperature_bias")
     _blank(path, "temp_c", [100, 5000])
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    assert json.loads(res.stdout)["verdict"] == ["temperature_bias"]
+    assert station_json("diagnose", path, "--json")["verdict"] == ["temperature_bias"]
 
 
 def test_one_missing_temperature_keeps_the_temperature_candidate_p2(tmp_path):
     """The same in a centrifuge table: one row's temp_c empty."""
     path, _ = _write(tmp_path, "accel-centrifuge", {}, effect="temperature_bias")
     _blank(path, "temp_c", [7])
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    assert json.loads(res.stdout)["verdict"] == ["temperature_bias"]
+    assert station_json("diagnose", path, "--json")["verdict"] == ["temperature_bias"]
 
 
 def test_one_missing_temperature_keeps_the_temperature_candidate_compass(tmp_path):
     path, _ = _write(tmp_path, "compass", {}, effect="temperature_bias")
     _blank(path, "temp_c", [30, 500])
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    assert json.loads(res.stdout)["verdict"] == ["temperature_bias"]
+    assert station_json("diagnose", path, "--json")["verdict"] == ["temperature_bias"]
 
 
 def test_one_missing_temperature_keeps_the_temperature_candidate_ldv(tmp_path):
     path, _ = _write(tmp_path, "ldv", {"duration_s": 200.0, "rate": 10.0}, effect="temperature_bias")
     _blank(path, "temp_c", [30, 500])
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    assert "temperature_bias" in json.loads(res.stdout)["verdict"]
+    assert "temperature_bias" in station_json("diagnose", path, "--json")["verdict"]
