@@ -72,9 +72,34 @@ def test_station_demo_in_tmux_saves_a_calibration(tmp_path):
     assert records[0]["n_positions"] == 12
 
 
+# sock -> the file the app started by _start_tui writes its threads' stacks to on SIGUSR1
+STACKS: dict[str, str] = {}
+
+
+def _stacks(sock) -> str:
+    """Every thread's stack of the app in ``sock`` (started by _start_tui), or ''."""
+    import signal
+
+    path = STACKS.get(sock)
+    if not path or not os.path.exists(path + ".pid"):
+        return ""
+    try:
+        with open(path + ".pid") as f:
+            os.kill(int(f.read()), signal.SIGUSR1)
+    except (OSError, ValueError):
+        return ""
+    t_end = time.monotonic() + 10
+    while time.monotonic() < t_end and not os.path.getsize(path):
+        time.sleep(0.1)  # waiting on the dump, not a pace
+    time.sleep(0.5)  # the rest of the threads
+    with open(path) as f:
+        return f.read()
+
+
 def _wait_pane(sock, cond, timeout_s, what):
     """Poll the pane until ``cond(screen)``; the timeout is a safety net for a hung app,
-    generous so that a loaded machine only makes the test slower."""
+    generous so that a loaded machine only makes the test slower. On a timeout the
+    message carries the screen and, for an app started by _start_tui, its threads' stacks."""
     t_end = time.monotonic() + timeout_s
     screen = ""
     while time.monotonic() < t_end:
@@ -82,7 +107,10 @@ def _wait_pane(sock, cond, timeout_s, what):
         if cond(screen):
             return screen
         time.sleep(0.3)  # polling interval, not a pace
-    raise AssertionError(f"{what}: not seen within {timeout_s:g} s:\n{screen}")
+    stacks = _stacks(sock)
+    raise AssertionError(
+        f"{what}: not seen within {timeout_s:g} s:\n{screen}" + (f"\nthreads:\n{stacks}" if stacks else "")
+    )
 
 
 def _keys(sock, *keys):
@@ -122,8 +150,11 @@ def _save(sock, result_title, n):
 
 
 def _start_tui(sock, db, *extra):
+    STACKS[sock] = str(db) + ".stacks"
+    runner = os.path.join(ROOT, "tests", "_stacks_run.py")
     cmd = (
-        f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station tui --db {db} --speed 20 "
+        f"cd {ROOT} && TERM=xterm-256color STATION_TEST_STACKS={STACKS[sock]} {sys.executable} {runner} tui "
+        f"--db {db} --speed 20 "
         f"{' '.join(extra)}; echo EXIT=$?; sleep 30"
     )
     tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
