@@ -36,6 +36,27 @@ def test_p2_large_misalignment_named_alone_with_all_six_angles(tmp_path, capsys,
     assert np.all(np.abs(gamma - np.asarray(sim.truth["gamma"])) < 5 * sig + 1e-6), (gamma, sim.truth["gamma"], sig)
 
 
+@pytest.mark.parametrize("seed,dr_m", [(1, 0.05), (2, 0.05), (1, 0.10)])
+def test_p2_lever_arm_of_centimetres_named_alone_with_its_sign(tmp_path, capsys, seed, dr_m):
+    """Each accelerometer a few cm off the table radius (1.5 m): the axis farther out sees the
+    centripetal input times ``1 + dr/R``. The mounting's centripetal direction, a nuisance of the
+    fit, was taken once from the baseline, which the lever arm itself bends by dr/R; the fitted
+    lever arm then left ``A (dr/R)²`` (far above the noise at tens of g) and a misalignment, a
+    temperature bias and a drift were named beside it. Its sign was also reversed: the direction
+    was taken away from the axis, where the model's ``c`` points toward it."""
+    sim = simulate("accel-centrifuge", seed=seed, effects={"lever_arm": dr_m})
+    path = tmp_path / "p2.csv"
+    write_capture(str(path), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
+    assert main(["diagnose", str(path), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["verdict"] == ["lever_arm"], [(e["name"], e["gain"]) for e in res["effects"]]
+    assert res["extended"]["residual_rms"] < sim.truth["noise_g"]
+    eff = res["effects"][0]
+    dr = np.asarray(eff["params"]["dr"])
+    sig = np.asarray(eff["uncertainty"]["dr"])
+    assert np.all(np.abs(dr - np.asarray(sim.truth["dr"])) < 5 * sig), (dr, sim.truth["dr"], sig)
+
+
 @pytest.mark.parametrize("hidden,size", [("time_drift", 0.066), ("temperature_bias", 2.3e-3)])
 def test_ldv_offset_beside_a_drift_from_its_own_zero_is_tied_with_it(tmp_path, capsys, hidden, size):
     """LDV on the station's simulator: a drift from t = 0 or a temperature bias about 25 °C (30σ),

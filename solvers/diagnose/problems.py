@@ -17,6 +17,7 @@ null distribution says by how much.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -549,20 +550,13 @@ def centrifuge_problem(
     w = np.asarray(speed_rad_s, float)
     rho = norm_target(w, radius_m, g_mps2)
     labels = [str(x) for x in labels]
-    # centripetal direction per mounting: the change of f with speed (f = −A c + up)
-    f0 = accel_model.inverse(N, params0)
-    c_dir = np.full((len(N), 3), np.nan)
-    for lab in dict.fromkeys(labels):
-        idx = [k for k, x in enumerate(labels) if x == lab]
-        if len(idx) >= 2 and np.ptp(w[idx]) > 0:
-            A = accel_model.centrifuge_input_g(w[idx], radius_m, g_mps2)
-            H = np.column_stack([-A, np.ones(len(idx))])
-            coef, *_ = linalg.lstsq(H, f0[idx], rcond=None)
-            c = coef[0] / max(np.linalg.norm(coef[0]), 1e-12)
-            c_dir[idx] = c
     T = np.asarray(temp_c, float) if temp_c is not None else None
     t = np.asarray(elapsed_s, float) if elapsed_s is not None else None
-    have_c = np.all(np.isfinite(c_dir))
+    A_g = accel_model.centrifuge_input_g(w, radius_m, g_mps2)
+    f0 = accel_model.inverse(N, params0)
+    mounts = [np.flatnonzero(np.array([x == lab for x in labels])) for lab in dict.fromkeys(labels)]
+    mounts = [idx for idx in mounts if len(idx) >= 2 and np.ptp(w[idx]) > 0]
+    have_c = sum(len(idx) for idx in mounts) == len(N)
     cond = Conditions(
         t_s=t,
         temp_c=T,
@@ -570,11 +564,34 @@ def centrifuge_problem(
         t_ref_s=float(np.mean(t)) if t is not None else 0.0,
         input_unit_mps2=g_mps2,
         omega_rad_s=w,
-        centripetal_dir=np.nan_to_num(c_dir),
+        centripetal_dir=np.zeros((len(N), 3)),
     )
 
+    def centripetal_dir(p) -> np.ndarray:
+        """Per mounting, the body-frame centripetal direction c (toward the axis) that ``p``
+        implies: the change of ``u`` with the centripetal input, ``u = A (1 + dr/R)∘c + up``, so c
+        ∝ that change divided by ``1 + dr/R`` (each axis at its own radius), then refined on the
+        exact inverse. Re-estimated for every ``p``: taken once from the baseline, a lever arm of a
+        few cm bends c by dr/R and the fitted lever arm leaves ``A (dr/R)²`` behind, which a
+        misalignment or a drift then took."""
+        dr = np.asarray(p.get("dr", np.zeros(3)), float)
+
+        def slopes(f, scale):
+            c_dir = np.zeros((len(N), 3))
+            for idx in mounts:
+                coef, *_ = linalg.lstsq(np.column_stack([A_g[idx], np.ones(len(idx))]), f[idx], rcond=None)
+                c = coef[0] / scale
+                c_dir[idx] = c / max(np.linalg.norm(c), 1e-12)
+            return c_dir
+
+        c_dir = slopes(accel_model.inverse(N, {k: v for k, v in p.items() if k != "dr"}, cond), 1.0 + dr / radius_m)
+        for _ in range(2):  # on the exact inverse (the input polynomial after the lever arm): c ← c_true − (dr/R) δc
+            c_dir = slopes(accel_model.inverse(N, p, dataclasses.replace(cond, centripetal_dir=c_dir)), 1.0)
+        return c_dir
+
     def residual(p):
-        return np.linalg.norm(accel_model.inverse(N, p, cond), axis=1) - rho
+        c = cond if "dr" not in p else dataclasses.replace(cond, centripetal_dir=centripetal_dir(p))
+        return np.linalg.norm(accel_model.inverse(N, p, c), axis=1) - rho
 
     if sigma_N is not None:
         from solvers.centrifuge import row_sigma

@@ -52,8 +52,9 @@ SHAPES = {
 
 def centrifuge_input_g(speed_rad_s, radius_m: float, g_mps2: float):
     """P2's centripetal input ``A = ω² R / g`` in g at table speed ω (rad/s), radius R (m),
-    local gravity g (m/s²): the specific force is ``f = −A c + up`` (c the centripetal
-    direction from the axis; source 001 eq. 6)."""
+    local gravity g (m/s²): the specific force is ``f = A c + up`` (c the centripetal
+    direction, the unit vector from the triad toward the axis; source 001 eq. 6), so an axis
+    ``dr`` farther out sees ``A (1 + dr/R) c`` (the ``lever_arm`` term)."""
     return np.asarray(speed_rad_s, dtype=float) ** 2 * radius_m / g_mps2
 
 
