@@ -445,7 +445,8 @@ def _compose_accel(off, scale, o_old, s_old, R, fmt, rot_name, use, ex):
                     "90° steps)"
                 )
         o_fit = R.T @ o_fit
-        s_fit = np.abs(R.T) @ s_fit
+        if _signed_permutation(R):  # Rᵀ diag(s) R = diag(|Rᵀ| s); for equal scales it is s I under any R
+            s_fit = np.abs(R.T) @ s_fit
     return (
         [float(o_old[i] + o_fit[i] / s_old[i]) for i in range(3)],
         [float(s_old[i] * s_fit[i]) for i in range(3)],
