@@ -47,8 +47,8 @@ numbers: `ROTATIONS` (PX4 `rot_lookup[]`, ArduPilot `rotations.h`; custom ones r
 Bounds the firmware enforces are checked before anything is written: ArduPilot accel
 offsets within ±3.5 m/s^2 (the INS_ACCOFFS @Range and `_accel_max_abs_offsets`) and scales
 0.8..1.2 (`AccelCalibrator::accept_result`, the INS_ACCSCAL @Range); compass offsets below
-COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI| < 1
-(`CompassCalibrator::fit_acceptable`); PX4 accelerometer and magnetometer scales within
+COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI| < 1, all
+strict as `CompassCalibrator::fit_acceptable` tests them; PX4 accelerometer and magnetometer scales within
 0.1..3.0 (their min and max in PX4's parameter definitions, `module.yaml`).
 
 Raw volts or counts and the LDV have no parameters in either firmware and are refused.
@@ -292,11 +292,19 @@ def _signed_permutation(R) -> bool:
     )
 
 
-def _check_range(fmt: str, name: str, value: float, lo: float | None, hi: float | None, why: str) -> None:
-    if not math.isfinite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
+def _check_range(
+    fmt: str, name: str, value: float, lo: float | None, hi: float | None, why: str, strict: bool = False
+) -> None:
+    """Refuse ``value`` outside lo..hi (``strict``: the bounds themselves too, as the firmware's
+    test is ``lo < value < hi``)."""
+    below = lo is not None and (value <= lo if strict else value < lo)
+    above = hi is not None and (value >= hi if strict else value > hi)
+    if not math.isfinite(value) or below or above:
         rng = (
             f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (f"> {lo:g}" if lo is not None else f"< {hi:g}")
         )
+        if strict and lo is not None and hi is not None:
+            rng = f"strictly between {lo:g} and {hi:g}"
         raise UnsupportedError(
             f"{fmt}: {name} = {value:.6g} is outside what the firmware accepts ({rng}, {why}); nothing written"
         )
@@ -518,13 +526,20 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             )
         P = _symmetric_part(A)
         offs_max = use.get("COMPASS_OFFS_MAX") or AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS
+        # CompassCalibrator::fit_acceptable: |offset| < COMPASS_OFFS_MAX, 0.2 < diag < 5, |offdiag| < 1
         for name, v in zip(names["off"], ofs):
-            _check_range(fmt, name, v, -offs_max, offs_max, "COMPASS_OFFS_MAX")
+            _check_range(fmt, name, v, -offs_max, offs_max, "COMPASS_OFFS_MAX", strict=True)
         for name, i in zip(names["dia"], range(3)):
-            _check_range(fmt, name, P[i, i], *AP_COMPASS_DIA_RANGE, "CompassCalibrator::fit_acceptable")
+            _check_range(fmt, name, P[i, i], *AP_COMPASS_DIA_RANGE, "CompassCalibrator::fit_acceptable", strict=True)
         for name, (i, j) in zip(names["odi"], ODIAG_PAIRS):
             _check_range(
-                fmt, name, P[i, j], -AP_COMPASS_ODI_MAX, AP_COMPASS_ODI_MAX, "CompassCalibrator::fit_acceptable"
+                fmt,
+                name,
+                P[i, j],
+                -AP_COMPASS_ODI_MAX,
+                AP_COMPASS_ODI_MAX,
+                "CompassCalibrator::fit_acceptable",
+                strict=True,
             )
         for name, v in zip(names["off"], ofs):
             ex.set(name, v)
