@@ -23,7 +23,15 @@ lists the files and commits, README "Firmware parameters" links them):
 
 PX4 applies slot n only to the sensor whose device id is `CAL_*n_ID`: the export writes the
 id (from the capture's `sensor_device_id`/`<kind>_device_id`, the parameters in use, or
-`--device-id`) and refuses without one.
+`--device-id`) and refuses without one. `CAL_*n_PRIO` is left as PX4's own calibration leaves
+it (ParametersUpdate, ParametersSave): the priority in use when the firmware accepts it (-1,
+0..100; 0 = disabled stays 0), else the firmware's default for the sensor, 75 external, 50
+internal, and -1 ("Uninitialized", which PX4 replaces by one of the two when it loads the slot)
+where the capture cannot say which. External: the log's own `<kind>_external`
+(sensor_mag.is_external), else `CAL_*n_ROT` in use (PX4 forces -1 on an internal sensor), else
+the device id's bus type (`calibration::DeviceExternal`: UAVCAN, serial, MAVLink external,
+simulation internal; I2C and SPI depend on the board). `CAL_*n_ROT` is written only as it is in
+use: an external sensor's mounting is not in the data (a comment says to set it).
 
 Data already corrected by the board (capture metadata `corrected: true`, `firmware`, and the
 parameters in use as `param.<NAME>`): the fitted correction acts on top of the parameters in
@@ -76,7 +84,14 @@ AP_COMPASS_ODI_MAX = 1.0
 # definitions, src/modules/sensors/module.yaml); the offsets and ODIAG have no documented range.
 PX4_SCALE_RANGE = (0.1, 3.0)
 INT32 = range(-(1 << 31), 1 << 31)  # an integer parameter's values
-PX4_DEFAULT_PRIORITY = 50  # calibration::Accelerometer::DEFAULT_PRIORITY (internal sensors)
+# calibration::{Accelerometer,Gyroscope,Magnetometer}: DEFAULT_PRIORITY (internal sensor),
+# DEFAULT_EXTERNAL_PRIORITY; CAL_*n_PRIO -1 = "Uninitialized" (module.yaml), which
+# ParametersUpdate() replaces with one of the two (no error); 0 = disabled, valid 0..100
+PX4_DEFAULT_PRIORITY, PX4_DEFAULT_EXTERNAL_PRIORITY, PX4_PRIORITY_UNSET = 50, 75, -1
+# PX4 device id (src/lib/drivers/device/Device.hpp DeviceStructure): bus_type in its low 3 bits;
+# calibration::DeviceExternal (Utilities.cpp): UAVCAN, SERIAL, MAVLINK external, SIMULATION
+# internal, I2C/SPI as the board's bus configuration says (not known here)
+PX4_BUS_EXTERNAL = {3: True, 4: False, 5: True, 6: True}
 QGC_REAL32, QGC_INT32 = 9, 6  # MAV_PARAM_TYPE
 
 
@@ -396,6 +411,57 @@ def _px4_lacks(use: InUse, names: dict, name: str) -> bool:
     return use.source_firmware == "px4" and names["off"][0] in use.params and name not in use.params
 
 
+def _px4_external(meta: dict, kind: str, use: InUse, names: dict, device_id: int) -> bool | None:
+    """Whether PX4 takes the sensor for an external one, None when the capture cannot say.
+
+    In this order: the log's own flag (`<kind>_external`, sensor_mag.is_external); the slot's
+    CAL_*n_ROT in use (PX4 forces -1 on an internal sensor, 0..40 on an external one:
+    ParametersUpdate); the device id's bus type (calibration::DeviceExternal)."""
+    flag = str((meta or {}).get(f"{kind}_external", "")).strip().lower()
+    if flag in ("true", "false"):
+        return flag == "true"
+    rot = use.get(names["rot"])
+    if rot is not None:
+        return rot >= 0
+    return PX4_BUS_EXTERNAL.get(int(device_id) & 0x7)
+
+
+def _px4_priority_rotation(use: InUse, names: dict, external: bool | None, ex: Export) -> None:
+    """CAL_*n_PRIO and CAL_*n_ROT as PX4's own calibration leaves them (ParametersUpdate, then
+    ParametersSave): a priority in use that the firmware accepts (-1 or 0..100) is kept, an
+    invalid or unknown one becomes the firmware's default for the sensor (75 external, 50
+    internal; -1 "Uninitialized" when the capture cannot say which, so the firmware picks on
+    load); the rotation in use is kept, and none is made up (an external sensor's mounting is not
+    in the data)."""
+    prio, rot = use.get(names["prio"]), use.get(names["rot"])
+    default = {True: PX4_DEFAULT_EXTERNAL_PRIORITY, False: PX4_DEFAULT_PRIORITY, None: PX4_PRIORITY_UNSET}[external]
+    kind_word = {True: "an external sensor", False: "an internal sensor", None: "a sensor the capture does not place"}
+    if _px4_lacks(use, names, names["prio"]):
+        ex.note(f"{names['prio']} not written: the firmware's parameters in the capture have none (an older PX4)")
+    elif prio is not None and (prio == PX4_PRIORITY_UNSET or 0 <= prio <= 100) and float(prio).is_integer():
+        ex.set_int(names["prio"], int(prio))
+        if prio == 0:
+            ex.note(f"{names['prio']} = 0 as in use: the slot is disabled, PX4 will not use this sensor")
+    else:
+        ex.set_int(names["prio"], default)
+        was = "not in the capture" if prio is None else f"{prio:g} in use is outside -1..100, which PX4 resets"
+        ex.note(
+            f"{names['prio']} = {default} ({was}): PX4's default for {kind_word[external]}"
+            + (" (it sets 50 internal, 75 external when it loads the slot)" if external is None else "")
+        )
+    if rot is not None:
+        ex.set_int(names["rot"], int(rot))
+    elif not _px4_lacks(use, names, names["rot"]):
+        ex.note(
+            f"{names['rot']} not written (not in use in the capture): "
+            + (
+                "set it to the external sensor's mounting rotation (PX4 takes one outside 0..40 as none)"
+                if external
+                else "-1 for an internal sensor (PX4's default), the mounting rotation for an external one"
+            )
+        )
+
+
 def _slot(in_use: InUse, device_id: int | None, names, slots) -> int | None:
     """The slot whose `_ID` parameter in use holds `device_id` (the firmware's own lookup)."""
     if device_id is None:
@@ -583,28 +649,16 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             f"{names['id']} in use): PX4 applies {names['id'][:-3]}_* only to the sensor whose device id is "
             f"{names['id']}; give --device-id (the device_id of the board's sensor_{kind})"
         )
+    external = _px4_external(meta, kind, use, names, dev)
     R = rot_name = None
     if use.corrected:
         # Correct(): R · (...), R = level adjustment · rotation; the rotation is CAL_*n_ROT for an
-        # external sensor (ROT ≥ 0), SENS_BOARD_ROT for an internal one (ROT = -1)
-        rot_in_use = use.get(names["rot"])
-        external = rot_in_use is not None and rot_in_use >= 0
+        # external sensor (ROT ≥ 0; PX4 takes one outside 0..40 as none), SENS_BOARD_ROT for an
+        # internal one (ROT = -1)
         rot_name = names["rot"] if external else "SENS_BOARD_ROT"
         R = use.rotation(rot_name, ex, ("SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"))
     ex.set_int(names["id"], dev)
-    prio = use.get(names["prio"])
-    if _px4_lacks(use, names, names["prio"]):
-        ex.note(f"{names['prio']} not written: the firmware's parameters in the capture have none (an older PX4)")
-    else:
-        ex.set_int(names["prio"], int(prio) if prio is not None and 0 < prio <= 100 else PX4_DEFAULT_PRIORITY)
-    rot = use.get(names["rot"])
-    if rot is not None:
-        ex.set_int(names["rot"], int(rot))
-    else:
-        ex.note(
-            f"{names['rot']} not written (not in use in the capture): -1 for an internal sensor, "
-            "the mounting rotation for an external one"
-        )
+    _px4_priority_rotation(use, names, external, ex)
     if kind == "accel":
         off, scale = _accel_offsets_scales(cal, meta, fmt, ex)
         if use.corrected:
