@@ -435,7 +435,6 @@ def _px4_priority_rotation(use: InUse, names: dict, external: bool | None, ex: E
     in the data)."""
     prio, rot = use.get(names["prio"]), use.get(names["rot"])
     default = {True: PX4_DEFAULT_EXTERNAL_PRIORITY, False: PX4_DEFAULT_PRIORITY, None: PX4_PRIORITY_UNSET}[external]
-    kind_word = {True: "an external sensor", False: "an internal sensor", None: "a sensor the capture does not place"}
     if _px4_lacks(use, names, names["prio"]):
         ex.note(f"{names['prio']} not written: the firmware's parameters in the capture have none (an older PX4)")
     elif prio is not None and (prio == PX4_PRIORITY_UNSET or 0 <= prio <= 100) and float(prio).is_integer():
@@ -445,10 +444,15 @@ def _px4_priority_rotation(use: InUse, names: dict, external: bool | None, ex: E
     else:
         ex.set_int(names["prio"], default)
         was = "not in the capture" if prio is None else f"{prio:g} in use is outside -1..100, which PX4 resets"
-        ex.note(
-            f"{names['prio']} = {default} ({was}): PX4's default for {kind_word[external]}"
-            + (" (it sets 50 internal, 75 external when it loads the slot)" if external is None else "")
-        )
+        if external is None:
+            ex.note(
+                f"{names['prio']} = -1 ({was}; nor does the capture say whether the sensor is external): PX4 "
+                "replaces -1 (Uninitialized) with 75 for an external sensor, 50 for an internal one, when it loads it"
+            )
+        else:
+            ex.note(
+                f"{names['prio']} = {default} ({was}): PX4's default for an {'ex' if external else 'in'}ternal sensor"
+            )
     if rot is not None:
         ex.set_int(names["rot"], int(rot))
     elif not _px4_lacks(use, names, names["rot"]):

@@ -249,7 +249,13 @@ def _devid(bus_type: int, bus: int = 1, address: int = 0x1E, devtype: int = 0x09
         ("mag", 197388, {}, 50, "default for an internal sensor"),  # SITL's (SIMULATION) compass
         ("mag", 592905, {"mag_external": "true"}, 75, "external"),  # I2C, the log's is_external
         ("mag", 589858, {"mag_external": "false"}, 50, "internal"),  # SPI, the log's is_external
-        ("mag", 592905, {}, -1, "sets 50 internal, 75 external"),  # I2C, nothing says: PX4 picks on load
+        (
+            "mag",
+            592905,
+            {},
+            -1,
+            "replaces -1 (Uninitialized) with 75 for an external sensor, 50 for an internal",
+        ),  # I2C, nothing says: PX4 picks on load
         ("accel", _devid(3), {}, 75, "external"),
         ("gyro", 1310988, {}, 50, "internal"),
         # in use: kept as PX4's own calibration keeps it, unless PX4 would reset it
