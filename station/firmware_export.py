@@ -431,8 +431,9 @@ def _px4_priority_rotation(use: InUse, names: dict, external: bool | None, ex: E
     ParametersSave): a priority in use that the firmware accepts (-1 or 0..100) is kept, an
     invalid or unknown one becomes the firmware's default for the sensor (75 external, 50
     internal; -1 "Uninitialized" when the capture cannot say which, so the firmware picks on
-    load); the rotation in use is kept, and none is made up (an external sensor's mounting is not
-    in the data)."""
+    load); the rotation in use is kept (as PX4 resets it where it contradicts the sensor: 0 for
+    an external sensor's negative one, -1 for an internal sensor's), and none is made up (an
+    external sensor's mounting is not in the data)."""
     prio, rot = use.get(names["prio"]), use.get(names["rot"])
     default = {True: PX4_DEFAULT_EXTERNAL_PRIORITY, False: PX4_DEFAULT_PRIORITY, None: PX4_PRIORITY_UNSET}[external]
     if _px4_lacks(use, names, names["prio"]):
@@ -454,7 +455,12 @@ def _px4_priority_rotation(use: InUse, names: dict, external: bool | None, ex: E
                 f"{names['prio']} = {default} ({was}): PX4's default for an {'ex' if external else 'in'}ternal sensor"
             )
     if rot is not None:
-        ex.set_int(names["rot"], int(rot))
+        # ParametersUpdate resets an external sensor's negative ROT to 0 (none), an internal one's to -1
+        fixed = 0 if external and rot < 0 else -1 if external is False and rot != -1 else int(rot)
+        ex.set_int(names["rot"], fixed)
+        if fixed != rot:
+            where = "an external" if external else "an internal"
+            ex.note(f"{names['rot']} = {fixed} for {rot:g} in use: what PX4 resets it to for {where} sensor")
     elif not _px4_lacks(use, names, names["rot"]):
         ex.note(
             f"{names['rot']} not written (not in use in the capture): "

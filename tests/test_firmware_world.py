@@ -282,6 +282,11 @@ def test_px4_rotation_is_the_one_in_use_or_none(capsys, tmp_path):
     assert "CAL_MAG0_ROT" not in p and "mounting rotation" in text
     p, text = _px4_export(capsys, db, "mag", 592905, **{"param.CAL_MAG0_ROT": "6", "param.CAL_MAG0_ID": "592905"})
     assert p["CAL_MAG0_ROT"] == 6 and p["CAL_MAG0_PRIO"] == 75  # ROT >= 0 in use: PX4 treats it as external
+    # the log's own is_external against the ROT in use: PX4 resets ROT as ParametersUpdate does
+    p, text = _px4_export(capsys, db, "mag", 592905, mag_external="true", **{"param.CAL_MAG0_ROT": "-1"})
+    assert p["CAL_MAG0_ROT"] == 0 and "resets it to for an external sensor" in text
+    p, text = _px4_export(capsys, db, "mag", 589858, mag_external="false", **{"param.CAL_MAG0_ROT": "4"})
+    assert p["CAL_MAG0_ROT"] == -1 and p["CAL_MAG0_PRIO"] == 50 and "for an internal sensor" in text
 
 
 def test_ardupilot_param_file_reads_back_through_pymavlink(capsys, tmp_path):
