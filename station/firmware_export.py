@@ -147,20 +147,35 @@ def _gyro_offsets_rad_s(cal: dict, factor: float, ex: Export) -> list[float]:
 
 
 def _set_gyro_offsets(
-    cal: dict, meta: dict, fmt: str, ex: Export, use: InUse, off_names, label: str, R=None, rot_name=None
+    cal: dict,
+    meta: dict,
+    fmt: str,
+    ex: Export,
+    use: InUse,
+    off_names,
+    label: str,
+    R=None,
+    rot_name=None,
+    scale_names=(),
 ) -> None:
     """Set the firmware's gyro offsets ``off_names`` (rad/s, the sensor's axes): the drift,
     composed with the offsets in use when the board had corrected the data (``label`` names
     them in the note: OFF = OFF_in_use + drift), through the board rotation ``R`` (body ← the
-    frame the offsets act in; None: identity) read from ``rot_name``."""
+    frame the offsets act in; None: identity) read from ``rot_name``, and the per-axis gyro
+    scales in use ``scale_names`` where the firmware has them (older PX4: (w - OFF) * SCALE)."""
     _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
     drift = _gyro_offsets_rad_s(cal, factor, ex)
     if use.corrected:
         o_old = use.need(off_names, "gyro offsets")
-        drift = _compose_gyro(o_old, drift, R)
+        s_old = [use.get(n) for n in scale_names]
+        s_old = s_old if s_old and all(v is not None and v > 0 for v in s_old) else None
+        drift = _compose_gyro(o_old, drift, R, s_old)
         if R is not None:
             ex.note(f"drift taken from the body frame to the sensor frame: R^T drift, R from {rot_name}")
-        ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift")
+        if s_old is not None and any(v != 1 for v in s_old):
+            ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift / SCALE_in_use")
+        else:
+            ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift")
     for name, v in zip(off_names, drift):
         ex.set(name, v)
 
@@ -498,14 +513,17 @@ def _mag_fit(cal: dict, meta: dict, fmt: str, unit_per: float):
     return unit, A, c * np.asarray(h, dtype=float)
 
 
-def _compose_gyro(o_old, drift, R) -> list[float]:
-    """New offsets: the board gives ``R (w − o_old)``, the fit removes a body-frame drift ``d``:
-    ``R (w − o_old − Rᵀ d)``, so ``o = o_old + Rᵀ d`` (any rotation)."""
+def _compose_gyro(o_old, drift, R, s_old=None) -> list[float]:
+    """New offsets: the board gives ``R ((w − o_old) ∘ s_old)`` (s_old = 1 where the firmware has
+    no gyro scales), the fit removes a body-frame drift ``d``: ``R ((w − o_old − (Rᵀ d) / s_old) ∘
+    s_old)``, so ``o = o_old + (Rᵀ d) / s_old`` (any rotation)."""
     import numpy as np
 
     d = np.asarray(drift, dtype=float)
     if R is not None:
         d = R.T @ d
+    if s_old is not None:
+        d = d / np.asarray(s_old, dtype=float)
     return [float(o_old[i] + d[i]) for i in range(3)]
 
 
@@ -691,7 +709,9 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         for name, v in zip(names["scale"], scale):
             ex.set(name, v)
     elif kind == "gyro":
-        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "OFF", R, rot_name)
+        # older PX4 (CAL_GYROn_xSCALE, e.g. sample.ulg's list) applied (w - OFF) * SCALE in the driver
+        gyro_scales = [f"{names['off'][i][:-3]}SCALE" for i in range(3)]
+        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "OFF", R, rot_name, gyro_scales)
         ex.note("CAL_GYRO_OFF = drift in rad/s, same sign (PX4 subtracts it); per raw axis gx, gy, gz")
     else:
         unit, A, ch = _mag_fit(cal, meta, fmt, 1e5)  # nT per gauss

@@ -398,3 +398,27 @@ def test_a_calibration_that_changes_nothing_exports_an_ardupilot_logs_own_parame
         pytest.skip("no real ArduPilot .bin log in ../shared/data")
     for log in logs:
         assert ardupilot_round_trip(capsys, tmp_path, log), log
+
+
+def test_older_px4_gyro_scales_in_use_divide_the_composed_drift(capsys, tmp_path, shared_data):
+    """Older PX4 has CAL_GYROn_{X,Y,Z}SCALE (sample.ulg's own list holds them) and its driver gave
+    (w - OFF) * SCALE (src/lib/drivers/gyroscope/PX4Gyroscope.cpp, PX4Gyroscope::update of the
+    v1.10 line: `((raw * scaling) - _calibration_offset).emult(_calibration_scale)`): a drift D
+    seen in those data is D / SCALE in the driver's input, so OFF = OFF_in_use + D / SCALE.
+    With scales 1.05, 0.95, 1.0 the composed offsets were OFF_in_use + D, off by 5 %."""
+    in_log = ulog(shared_data / "px4_ulog" / "original" / "sample.ulg", ["sensor_combined"]).initial_parameters
+    assert {"CAL_GYRO0_XSCALE", "CAL_GYRO0_XOFF"} <= set(in_log) and "CAL_GYRO0_PRIO" not in in_log
+    o_old, s_old, D = np.array([0.01, -0.02, 0.005]), np.array([1.05, 0.95, 1.0]), np.array([0.021, -0.019, 0.003])
+    meta = {"corrected": "true", "firmware": "px4", "gyro_device_id": "2162688", "param.CAL_GYRO0_ID": "2162688",
+            "param.SENS_BOARD_ROT": "0"}  # fmt: skip
+    meta.update({f"param.CAL_GYRO0_{a}OFF": repr(float(o_old[i])) for i, a in enumerate(XYZ)})
+    meta.update({f"param.CAL_GYRO0_{a}SCALE": repr(float(s_old[i])) for i, a in enumerate(XYZ)})
+    m, cols = small_capture(procedure="gyro-drift", gyro_unit="rad/s", **meta)
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        cid = s.save_calibration(gyro_result(device="old-px4", drift=tuple(D)), meta=m, columns=cols)
+    code, text, err = run(capsys, "export", cid, "--format", "qgc", "--db", db)
+    assert code == 0, err
+    got = qgc_load(text, in_log)
+    assert np.allclose([got[f"CAL_GYRO0_{a}OFF"] for a in XYZ], o_old + D / s_old, rtol=1e-6, atol=1e-9)
+    assert "CAL_GYRO0_PRIO" not in got and "drift / SCALE_in_use" in text
