@@ -36,8 +36,8 @@ use: an external sensor's mounting is not in the data (a comment says to set it)
 Data already corrected by the board (capture metadata `corrected: true`, `firmware`, and the
 parameters in use as `param.<NAME>`): the fitted correction acts on top of the parameters in
 use, and the export composes the new absolute parameters from both (accel:
-`o = o_old + o_fit / s_old`, `s = s_old * s_fit`; gyro `o = o_old + o_fit` (`/ s_old` on an older PX4 with gyro scales); compass through
-the matrices, below). It refuses, in one line, when the parameters in use are not in the
+`o = o_old + o_fit / s_old`, `s = s_old * s_fit`; gyro `o = o_old + o_fit`, `/ s_old` on an
+older PX4 with gyro scales; compass through the matrices, below). It refuses, in one line, when the parameters in use are not in the
 capture, when they come from another firmware, or when a board rotation cannot be composed.
 
 Board rotation (the corrected data are in the body frame; where the firmware applies its
