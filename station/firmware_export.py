@@ -687,6 +687,12 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         R = use.rotation(rot_name, ex, ("SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"))
     ex.set_int(names["id"], dev)
     _px4_priority_rotation(use, names, external, ex)
+    if not (use.source_firmware == "px4" and names["off"][0] in use.params):
+        # v1.11 (the CubeOrange log) has CAL_*n_EN, no _PRIO, no CAL_MAGn_*ODIAG; v1.12 brought both
+        ex.note(
+            "names of PX4 v1.12 and later (CAL_*n_PRIO, CAL_MAGn_*ODIAG): the capture holds no parameter list of the "
+            "board, so its version is unknown; for an older PX4 export a capture recorded from it (its log, MAVLink)"
+        )
     if kind == "accel":
         off, scale = _accel_offsets_scales(cal, meta, fmt, ex)
         if use.corrected:

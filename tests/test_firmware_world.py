@@ -189,6 +189,7 @@ def test_a_calibration_that_changes_nothing_exports_the_logs_own_parameters(caps
                 code, text, err = run(capsys, "export", cid, "--format", fmt, "--db", db)
                 assert code == 0, (source, inst, err)
                 got = qgc_load(text, params) if fmt == "qgc" else px4_shell_load(text, params)
+                assert "names of PX4 v1.12 and later" not in text  # the board's own list decided
                 assert written in ({}, got), "px4 and qgc files differ"
                 written = got
             n = slots[0] if slots else int(re.search(rf"CAL_{S[kind]}(\d)_ID", " ".join(written))[1])
@@ -271,6 +272,8 @@ def test_px4_priority_is_what_px4s_own_calibration_leaves(capsys, tmp_path, kind
     if says:
         assert says in text
     assert p[f"CAL_{S[kind]}0_ID"] == device_id
+    # without the board's own list the firmware's version is unknown, and the file says for which it is
+    assert "names of PX4 v1.12 and later" in text
 
 
 def test_px4_rotation_is_the_one_in_use_or_none(capsys, tmp_path):
