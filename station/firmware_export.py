@@ -37,8 +37,9 @@ Data already corrected by the board (capture metadata `corrected: true`, `firmwa
 parameters in use as `param.<NAME>`): the fitted correction acts on top of the parameters in
 use, and the export composes the new absolute parameters from both (accel:
 `o = o_old + o_fit / s_old`, `s = s_old * s_fit`; gyro `o = o_old + o_fit`, `/ s_old` on an
-older PX4 with gyro scales; compass through the matrices, below). It refuses, in one line, when the parameters in use are not in the
-capture, when they come from another firmware, or when a board rotation cannot be composed.
+older PX4 with gyro scales; compass through the matrices, below). It refuses, in one line,
+when the parameters in use are not in the capture, when they come from another firmware, or
+when a board rotation cannot be composed.
 
 Board rotation (the corrected data are in the body frame; where the firmware applies its
 parameters, below): the fitted correction is taken to that frame first. ArduPilot INS offsets
@@ -56,8 +57,8 @@ Bounds the firmware enforces are checked before anything is written: ArduPilot a
 offsets within ±3.5 m/s^2 (the INS_ACCOFFS @Range and `_accel_max_abs_offsets`) and scales
 0.8..1.2 (`AccelCalibrator::accept_result`, the INS_ACCSCAL @Range); compass offsets below
 COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI| < 1, all
-strict as `CompassCalibrator::fit_acceptable` tests them; PX4 accelerometer and magnetometer scales within
-0.1..3.0 (their min and max in PX4's parameter definitions, `module.yaml`).
+strict as `CompassCalibrator::fit_acceptable` tests them; PX4 accelerometer and magnetometer
+scales within 0.1..3.0 (their min and max in PX4's parameter definitions, `module.yaml`).
 
 Raw volts or counts and the LDV have no parameters in either firmware and are refused.
 """
