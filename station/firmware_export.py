@@ -23,14 +23,23 @@ lists the files and commits, README "Firmware parameters" links them):
 
 PX4 applies slot n only to the sensor whose device id is `CAL_*n_ID`: the export writes the
 id (from the capture's `sensor_device_id`/`<kind>_device_id`, the parameters in use, or
-`--device-id`) and refuses without one.
+`--device-id`) and refuses without one. `CAL_*n_PRIO` is left as PX4's own calibration leaves
+it (ParametersUpdate, ParametersSave): the priority in use when the firmware accepts it (-1,
+0..100; 0 = disabled stays 0), else the firmware's default for the sensor, 75 external, 50
+internal, and -1 ("Uninitialized", which PX4 replaces by one of the two when it loads the slot)
+where the capture cannot say which. External: the log's own `<kind>_external`
+(sensor_mag.is_external), else `CAL_*n_ROT` in use (PX4 forces -1 on an internal sensor), else
+the device id's bus type (`calibration::DeviceExternal`: UAVCAN, serial, MAVLink external,
+simulation internal; I2C and SPI depend on the board). `CAL_*n_ROT` is written only as it is in
+use: an external sensor's mounting is not in the data (a comment says to set it).
 
 Data already corrected by the board (capture metadata `corrected: true`, `firmware`, and the
 parameters in use as `param.<NAME>`): the fitted correction acts on top of the parameters in
 use, and the export composes the new absolute parameters from both (accel:
-`o = o_old + o_fit / s_old`, `s = s_old * s_fit`; gyro `o = o_old + o_fit`; compass through
-the matrices, below). It refuses, in one line, when the parameters in use are not in the
-capture, when they come from another firmware, or when a board rotation cannot be composed.
+`o = o_old + o_fit / s_old`, `s = s_old * s_fit`; gyro `o = o_old + o_fit`, `/ s_old` on an
+older PX4 with gyro scales; compass through the matrices, below). It refuses, in one line,
+when the parameters in use are not in the capture, when they come from another firmware, or
+when a board rotation cannot be composed.
 
 Board rotation (the corrected data are in the body frame; where the firmware applies its
 parameters, below): the fitted correction is taken to that frame first. ArduPilot INS offsets
@@ -47,9 +56,9 @@ numbers: `ROTATIONS` (PX4 `rot_lookup[]`, ArduPilot `rotations.h`; custom ones r
 Bounds the firmware enforces are checked before anything is written: ArduPilot accel
 offsets within ±3.5 m/s^2 (the INS_ACCOFFS @Range and `_accel_max_abs_offsets`) and scales
 0.8..1.2 (`AccelCalibrator::accept_result`, the INS_ACCSCAL @Range); compass offsets below
-COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI| < 1
-(`CompassCalibrator::fit_acceptable`); PX4 accelerometer and magnetometer scales within
-0.1..3.0 (their min and max in PX4's parameter definitions, `module.yaml`).
+COMPASS_OFFS_MAX (in use, else its default 1800 mGauss), DIA within 0.2..5, |ODI| < 1, all
+strict as `CompassCalibrator::fit_acceptable` tests them; PX4 accelerometer and magnetometer
+scales within 0.1..3.0 (their min and max in PX4's parameter definitions, `module.yaml`).
 
 Raw volts or counts and the LDV have no parameters in either firmware and are refused.
 """
@@ -76,7 +85,14 @@ AP_COMPASS_ODI_MAX = 1.0
 # definitions, src/modules/sensors/module.yaml); the offsets and ODIAG have no documented range.
 PX4_SCALE_RANGE = (0.1, 3.0)
 INT32 = range(-(1 << 31), 1 << 31)  # an integer parameter's values
-PX4_DEFAULT_PRIORITY = 50  # calibration::Accelerometer::DEFAULT_PRIORITY (internal sensors)
+# calibration::{Accelerometer,Gyroscope,Magnetometer}: DEFAULT_PRIORITY (internal sensor),
+# DEFAULT_EXTERNAL_PRIORITY; CAL_*n_PRIO -1 = "Uninitialized" (module.yaml), which
+# ParametersUpdate() replaces with one of the two (no error); 0 = disabled, valid 0..100
+PX4_DEFAULT_PRIORITY, PX4_DEFAULT_EXTERNAL_PRIORITY, PX4_PRIORITY_UNSET = 50, 75, -1
+# PX4 device id (src/lib/drivers/device/Device.hpp DeviceStructure): bus_type in its low 3 bits;
+# calibration::DeviceExternal (Utilities.cpp): UAVCAN, SERIAL, MAVLINK external, SIMULATION
+# internal, I2C/SPI as the board's bus configuration says (not known here)
+PX4_BUS_EXTERNAL = {3: True, 4: False, 5: True, 6: True}
 QGC_REAL32, QGC_INT32 = 9, 6  # MAV_PARAM_TYPE
 
 
@@ -132,20 +148,35 @@ def _gyro_offsets_rad_s(cal: dict, factor: float, ex: Export) -> list[float]:
 
 
 def _set_gyro_offsets(
-    cal: dict, meta: dict, fmt: str, ex: Export, use: InUse, off_names, label: str, R=None, rot_name=None
+    cal: dict,
+    meta: dict,
+    fmt: str,
+    ex: Export,
+    use: InUse,
+    off_names,
+    label: str,
+    R=None,
+    rot_name=None,
+    scale_names=(),
 ) -> None:
     """Set the firmware's gyro offsets ``off_names`` (rad/s, the sensor's axes): the drift,
     composed with the offsets in use when the board had corrected the data (``label`` names
     them in the note: OFF = OFF_in_use + drift), through the board rotation ``R`` (body ← the
-    frame the offsets act in; None: identity) read from ``rot_name``."""
+    frame the offsets act in; None: identity) read from ``rot_name``, and the per-axis gyro
+    scales in use ``scale_names`` where the firmware has them (older PX4: (w - OFF) * SCALE)."""
     _, factor = _unit(meta, "gyro_unit", "gyro", fmt, cal["procedure"])
     drift = _gyro_offsets_rad_s(cal, factor, ex)
     if use.corrected:
         o_old = use.need(off_names, "gyro offsets")
-        drift = _compose_gyro(o_old, drift, R)
+        s_old = [use.get(n) for n in scale_names]
+        s_old = s_old if s_old and all(v is not None and v > 0 for v in s_old) else None
+        drift = _compose_gyro(o_old, drift, R, s_old)
         if R is not None:
             ex.note(f"drift taken from the body frame to the sensor frame: R^T drift, R from {rot_name}")
-        ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift")
+        if s_old is not None and any(v != 1 for v in s_old):
+            ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift / SCALE_in_use")
+        else:
+            ex.note(f"composed with the parameters in use: {label} = {label}_in_use + drift")
     for name, v in zip(off_names, drift):
         ex.set(name, v)
 
@@ -292,11 +323,19 @@ def _signed_permutation(R) -> bool:
     )
 
 
-def _check_range(fmt: str, name: str, value: float, lo: float | None, hi: float | None, why: str) -> None:
-    if not math.isfinite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
+def _check_range(
+    fmt: str, name: str, value: float, lo: float | None, hi: float | None, why: str, strict: bool = False
+) -> None:
+    """Refuse ``value`` outside lo..hi (``strict``: the bounds themselves too, as the firmware's
+    test is ``lo < value < hi``)."""
+    below = lo is not None and (value <= lo if strict else value < lo)
+    above = hi is not None and (value >= hi if strict else value > hi)
+    if not math.isfinite(value) or below or above:
         rng = (
             f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (f"> {lo:g}" if lo is not None else f"< {hi:g}")
         )
+        if strict and lo is not None and hi is not None:
+            rng = f"strictly between {lo:g} and {hi:g}"
         raise UnsupportedError(
             f"{fmt}: {name} = {value:.6g} is outside what the firmware accepts ({rng}, {why}); nothing written"
         )
@@ -388,6 +427,67 @@ def _px4_lacks(use: InUse, names: dict, name: str) -> bool:
     return use.source_firmware == "px4" and names["off"][0] in use.params and name not in use.params
 
 
+def _px4_external(meta: dict, kind: str, use: InUse, names: dict, device_id: int) -> bool | None:
+    """Whether PX4 takes the sensor for an external one, None when the capture cannot say.
+
+    In this order: the log's own flag (`<kind>_external`, sensor_mag.is_external); the slot's
+    CAL_*n_ROT in use (PX4 forces -1 on an internal sensor, 0..40 on an external one:
+    ParametersUpdate); the device id's bus type (calibration::DeviceExternal)."""
+    flag = str((meta or {}).get(f"{kind}_external", "")).strip().lower()
+    if flag in ("true", "false"):
+        return flag == "true"
+    rot = use.get(names["rot"])
+    if rot is not None:
+        return rot >= 0
+    return PX4_BUS_EXTERNAL.get(int(device_id) & 0x7)
+
+
+def _px4_priority_rotation(use: InUse, names: dict, external: bool | None, ex: Export) -> None:
+    """CAL_*n_PRIO and CAL_*n_ROT as PX4's own calibration leaves them (ParametersUpdate, then
+    ParametersSave): a priority in use that the firmware accepts (-1 or 0..100) is kept, an
+    invalid or unknown one becomes the firmware's default for the sensor (75 external, 50
+    internal; -1 "Uninitialized" when the capture cannot say which, so the firmware picks on
+    load); the rotation in use is kept (as PX4 resets it where it contradicts the sensor: 0 for
+    an external sensor's negative one, -1 for an internal sensor's), and none is made up (an
+    external sensor's mounting is not in the data)."""
+    prio, rot = use.get(names["prio"]), use.get(names["rot"])
+    default = {True: PX4_DEFAULT_EXTERNAL_PRIORITY, False: PX4_DEFAULT_PRIORITY, None: PX4_PRIORITY_UNSET}[external]
+    if _px4_lacks(use, names, names["prio"]):
+        ex.note(f"{names['prio']} not written: the firmware's parameters in the capture have none (an older PX4)")
+    elif prio is not None and (prio == PX4_PRIORITY_UNSET or 0 <= prio <= 100) and float(prio).is_integer():
+        ex.set_int(names["prio"], int(prio))
+        if prio == 0:
+            ex.note(f"{names['prio']} = 0 as in use: the slot is disabled, PX4 will not use this sensor")
+    else:
+        ex.set_int(names["prio"], default)
+        was = "not in the capture" if prio is None else f"{prio:g} in use is outside -1..100, which PX4 resets"
+        if external is None:
+            ex.note(
+                f"{names['prio']} = -1 ({was}; nor does the capture say whether the sensor is external): PX4 "
+                "replaces -1 (Uninitialized) with 75 for an external sensor, 50 for an internal one, when it loads it"
+            )
+        else:
+            ex.note(
+                f"{names['prio']} = {default} ({was}): PX4's default for an {'ex' if external else 'in'}ternal sensor"
+            )
+    if rot is not None:
+        # ParametersUpdate resets an external sensor's negative ROT to 0 (none), an internal one's to -1
+        fixed = 0 if external and rot < 0 else -1 if external is False and rot != -1 else int(rot)
+        ex.set_int(names["rot"], fixed)
+        if fixed != rot:
+            where = "an external" if external else "an internal"
+            ex.note(f"{names['rot']} = {fixed} for {rot:g} in use: what PX4 resets it to for {where} sensor")
+    elif not _px4_lacks(use, names, names["rot"]):
+        ex.note(
+            f"{names['rot']} not written (not in use in the capture): "
+            + (
+                "set it to the external sensor's mounting rotation (PX4 takes one outside 0..40 as none)"
+                if external
+                else "-1 for an internal sensor (PX4's default), the mounting rotation for an external one"
+            )
+        )
+
+
 def _slot(in_use: InUse, device_id: int | None, names, slots) -> int | None:
     """The slot whose `_ID` parameter in use holds `device_id` (the firmware's own lookup)."""
     if device_id is None:
@@ -414,14 +514,17 @@ def _mag_fit(cal: dict, meta: dict, fmt: str, unit_per: float):
     return unit, A, c * np.asarray(h, dtype=float)
 
 
-def _compose_gyro(o_old, drift, R) -> list[float]:
-    """New offsets: the board gives ``R (w − o_old)``, the fit removes a body-frame drift ``d``:
-    ``R (w − o_old − Rᵀ d)``, so ``o = o_old + Rᵀ d`` (any rotation)."""
+def _compose_gyro(o_old, drift, R, s_old=None) -> list[float]:
+    """New offsets: the board gives ``R ((w − o_old) ∘ s_old)`` (s_old = 1 where the firmware has
+    no gyro scales), the fit removes a body-frame drift ``d``: ``R ((w − o_old − (Rᵀ d) / s_old) ∘
+    s_old)``, so ``o = o_old + (Rᵀ d) / s_old`` (any rotation)."""
     import numpy as np
 
     d = np.asarray(drift, dtype=float)
     if R is not None:
         d = R.T @ d
+    if s_old is not None:
+        d = d / np.asarray(s_old, dtype=float)
     return [float(o_old[i] + d[i]) for i in range(3)]
 
 
@@ -445,7 +548,8 @@ def _compose_accel(off, scale, o_old, s_old, R, fmt, rot_name, use, ex):
                     "90° steps)"
                 )
         o_fit = R.T @ o_fit
-        s_fit = np.abs(R.T) @ s_fit
+        if _signed_permutation(R):  # Rᵀ diag(s) R = diag(|Rᵀ| s); for equal scales it is s I under any R
+            s_fit = np.abs(R.T) @ s_fit
     return (
         [float(o_old[i] + o_fit[i] / s_old[i]) for i in range(3)],
         [float(s_old[i] * s_fit[i]) for i in range(3)],
@@ -517,13 +621,20 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             )
         P = _symmetric_part(A)
         offs_max = use.get("COMPASS_OFFS_MAX") or AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS
+        # CompassCalibrator::fit_acceptable: |offset| < COMPASS_OFFS_MAX, 0.2 < diag < 5, |offdiag| < 1
         for name, v in zip(names["off"], ofs):
-            _check_range(fmt, name, v, -offs_max, offs_max, "COMPASS_OFFS_MAX")
+            _check_range(fmt, name, v, -offs_max, offs_max, "COMPASS_OFFS_MAX", strict=True)
         for name, i in zip(names["dia"], range(3)):
-            _check_range(fmt, name, P[i, i], *AP_COMPASS_DIA_RANGE, "CompassCalibrator::fit_acceptable")
+            _check_range(fmt, name, P[i, i], *AP_COMPASS_DIA_RANGE, "CompassCalibrator::fit_acceptable", strict=True)
         for name, (i, j) in zip(names["odi"], ODIAG_PAIRS):
             _check_range(
-                fmt, name, P[i, j], -AP_COMPASS_ODI_MAX, AP_COMPASS_ODI_MAX, "CompassCalibrator::fit_acceptable"
+                fmt,
+                name,
+                P[i, j],
+                -AP_COMPASS_ODI_MAX,
+                AP_COMPASS_ODI_MAX,
+                "CompassCalibrator::fit_acceptable",
+                strict=True,
             )
         for name, v in zip(names["off"], ofs):
             ex.set(name, v)
@@ -567,27 +678,21 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
             f"{names['id']} in use): PX4 applies {names['id'][:-3]}_* only to the sensor whose device id is "
             f"{names['id']}; give --device-id (the device_id of the board's sensor_{kind})"
         )
+    external = _px4_external(meta, kind, use, names, dev)
     R = rot_name = None
     if use.corrected:
         # Correct(): R · (...), R = level adjustment · rotation; the rotation is CAL_*n_ROT for an
-        # external sensor (ROT ≥ 0), SENS_BOARD_ROT for an internal one (ROT = -1)
-        rot_in_use = use.get(names["rot"])
-        external = rot_in_use is not None and rot_in_use >= 0
+        # external sensor (ROT ≥ 0; PX4 takes one outside 0..40 as none), SENS_BOARD_ROT for an
+        # internal one (ROT = -1)
         rot_name = names["rot"] if external else "SENS_BOARD_ROT"
         R = use.rotation(rot_name, ex, ("SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"))
     ex.set_int(names["id"], dev)
-    prio = use.get(names["prio"])
-    if _px4_lacks(use, names, names["prio"]):
-        ex.note(f"{names['prio']} not written: the firmware's parameters in the capture have none (an older PX4)")
-    else:
-        ex.set_int(names["prio"], int(prio) if prio is not None and 0 < prio <= 100 else PX4_DEFAULT_PRIORITY)
-    rot = use.get(names["rot"])
-    if rot is not None:
-        ex.set_int(names["rot"], int(rot))
-    else:
+    _px4_priority_rotation(use, names, external, ex)
+    if not (use.source_firmware == "px4" and names["off"][0] in use.params):
+        # v1.11 (the CubeOrange log) has CAL_*n_EN, no _PRIO, no CAL_MAGn_*ODIAG; v1.12 brought both
         ex.note(
-            f"{names['rot']} not written (not in use in the capture): -1 for an internal sensor, "
-            "the mounting rotation for an external one"
+            "names of PX4 v1.12 and later (CAL_*n_PRIO, CAL_MAGn_*ODIAG): the capture holds no parameter list of the "
+            "board, so its version is unknown; for an older PX4 export a capture recorded from it (its log, MAVLink)"
         )
     if kind == "accel":
         off, scale = _accel_offsets_scales(cal, meta, fmt, ex)
@@ -611,7 +716,9 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         for name, v in zip(names["scale"], scale):
             ex.set(name, v)
     elif kind == "gyro":
-        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "OFF", R, rot_name)
+        # older PX4 (CAL_GYROn_xSCALE, e.g. sample.ulg's list) applied (w - OFF) * SCALE in the driver
+        gyro_scales = [f"{names['off'][i][:-3]}SCALE" for i in range(3)]
+        _set_gyro_offsets(cal, meta, fmt, ex, use, names["off"], "OFF", R, rot_name, gyro_scales)
         ex.note("CAL_GYRO_OFF = drift in rad/s, same sign (PX4 subtracts it); per raw axis gx, gy, gz")
     else:
         unit, A, ch = _mag_fit(cal, meta, fmt, 1e5)  # nT per gauss

@@ -20,6 +20,7 @@ from pymavlink import DFReader, mavutil
 
 from solvers.frames import normal_gravity_mps2
 from station.capture import read_capture
+from station.importers.ardupilot import PARAM_PREFIXES
 from tests.station_run import run_station
 
 IMU_COLS = "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"
@@ -132,11 +133,13 @@ PARAMS = {
 }
 
 
-def write_bin(path, n=200, units=True, late_param=False):
+def write_bin(path, n=200, units=True, late_param=False, split_dump=False):
     rng = np.random.default_rng(3)
     w = DataFlashWriter(path, units=units)
-    for name, value in PARAMS.items():
-        w.param(1000, name, value)
+    names = list(PARAMS)
+    first = names[: len(names) // 3] if split_dump else names  # the rest of the dump after the data start
+    for name in first:
+        w.param(1000, name, PARAMS[name])
     truth = {0: [], 1: []}
     for k in range(n):
         t = 500_000 + k * 2500  # 400 Hz
@@ -151,6 +154,9 @@ def write_bin(path, n=200, units=True, late_param=False):
             w.gps(t, 47.397742, 8.545594, 488.0)
         if late_param and k == n // 2:
             w.param(t, "INS_ACCOFFS_X", 0.3)
+        if split_dump and k == 5:
+            for name in names[len(first) :]:
+                w.param(t, name, PARAMS[name])
     w.close()
     return {i: np.asarray(v) for i, v in truth.items()}
 
@@ -229,6 +235,28 @@ def test_bin_parameter_changed_during_the_data_is_flagged(tmp_path):
     c = read_capture(out)
     assert np.float32(float(c.meta["param.INS_ACCOFFS_X"])) == np.float32(0.0512)  # the value at the start
     assert c.meta["params_changed"] == "INS_ACCOFFS_X" and "INS_ACCOFFS_X" in res.stderr
+
+
+def test_bin_start_up_parameter_dump_written_among_the_first_samples_is_in_use(tmp_path):
+    """ArduPilot writes its start-up PARM dump while the sensor data already flow: in a real
+    ArduPlane 3.8.2 log (ArduPilot/pymavlink tests/test.BIN, blob a39b77e3b75adc7dac38f052011f2039115de248)
+    123 of its 809 PARM records come before the first IMU record and the other 686 after it,
+    each name once. Those were all flagged 'changed while the data were logged' and left out of
+    param.*, so no export could compose with them; a name's first PARM is its value in use."""
+    log = tmp_path / "dump.bin"
+    write_bin(log, split_dump=True)
+    out = tmp_path / "dump.csv"
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
+    assert res.returncode == 0, res.stderr
+    c = read_capture(out)
+    assert "params_changed" not in c.meta and "changed" not in res.stderr
+    for name, value in PARAMS.items():
+        if name.startswith(PARAM_PREFIXES):  # the ones the capture keeps
+            assert np.float32(float(c.meta[f"param.{name}"])) == np.float32(value), name
+    assert "param.INS_GYR2_ID" in c.meta and "param.COMPASS_DEV_ID" in c.meta  # from the dump's later part
+    write_bin(log, split_dump=True, late_param=True)  # a change after the dump is still one
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
+    assert res.returncode == 0 and read_capture(out).meta["params_changed"] == "INS_ACCOFFS_X"
 
 
 def _static_positions(rng, g, n_pos=12, hold_s=4.0, move_s=1.0, rate=100.0):

@@ -72,6 +72,7 @@ class Stream:
     device_id: int | None = None
     instance: int | None = None
     temp_c: np.ndarray | None = None
+    external: bool | None = None  # the firmware's own word (PX4 sensor_mag.is_external), None: not said
 
 
 @dataclass
@@ -126,6 +127,7 @@ def clean_stream(path, stream: Stream) -> Stream | None:
         stream.device_id,
         stream.instance,
         temp,
+        stream.external,
     )
 
 
@@ -277,6 +279,8 @@ def to_capture(
     for kind, s in streams.items():
         if s.device_id is not None:
             meta[f"{kind}_device_id"] = str(int(s.device_id))
+        if s.external is not None:
+            meta[f"{kind}_external"] = "true" if s.external else "false"
     meta["import_source"] = "; ".join(dict.fromkeys(streams[k].source for k in KINDS if k in streams))
     if how:
         meta["import_align"] = f"rows at the {primary} samples; " + ", ".join(how)

@@ -7,7 +7,8 @@ DataFlash (``DFReader_binary``), ArduPilot's ``LogStructure`` definitions:
   the second and third IMU ``IMU2``/``IMU3`` (no ``I`` field).
 - ``MAG`` (``TimeUS,I,MagX,MagY,MagZ,OfsX,…``, units ``G`` × multiplier ``C`` = 10⁻³): milligauss,
   offsets, diagonals and motor compensation applied, body frame.
-- ``PARM`` (``Name,Value``): the parameters; their value before the first sample is the one in use.
+- ``PARM`` (``Name,Value``): the parameters; a name's first record is its value in use (the
+  start-up dump runs on among the first samples), a later different one a change.
   Where the log carries ``FMTU``/``UNIT``/``MULT``, the units are taken from it.
 
 MAVLink logs (``.tlog``: each message preceded by its 8-byte big-endian arrival time in µs, as
@@ -208,9 +209,11 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             c = cols["PARM"]
             for ofs, raw, value in zip(c["_offset"].tolist(), c["Name"].tolist(), c["Value"].tolist()):
                 pname = _df_text(raw)
-                if ofs < first_ofs:
+                # ArduPilot writes its start-up dump of every parameter while the sensor data
+                # already flow: a name's first PARM is its value in use, a later different one a change
+                if ofs < first_ofs or pname not in params:
                     params[pname] = value
-                elif pname.startswith(PARAM_PREFIXES) and params.get(pname) != value:
+                elif pname.startswith(PARAM_PREFIXES) and params[pname] != value:
                     late.add(pname)
         if cols["GPS"] is not None:
             c = cols["GPS"]

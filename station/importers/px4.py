@@ -108,6 +108,13 @@ def _slot(params: dict, kind: str, device_id: int | None) -> int | None:
     return None
 
 
+def _external(data: dict) -> bool | None:
+    """The topic's own ``is_external`` (sensor_mag has it: the driver's word that the sensor is
+    not on the board), or None when the topic has no such field or it changes during the log."""
+    flags = np.unique(np.asarray(data.get("is_external", []), dtype=bool))
+    return bool(flags[0]) if len(flags) == 1 else None
+
+
 def read(
     path,
     *,
@@ -188,6 +195,7 @@ def read(
                 device_id,
                 _slot(params, kind, device_id),
                 None if temp is None else np.asarray(temp, dtype=np.float64),
+                _external(d),
             )
             if device_id is not None and streams[kind].instance is None:
                 warnings.append(
