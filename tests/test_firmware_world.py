@@ -36,10 +36,10 @@
   01462ce627b16b9d076e1f5c3560671caf128d4f: UNKNOWN 0, I2C 1, SPI 2, UAVCAN 3, SIMULATION 4,
   SERIAL 5).
 - ArduPilot's own parameter list in a real DataFlash log (PARM records, read by pymavlink's
-  DFReader): `ardupilot_round_trip` runs on every .bin under ../shared/data/*/original. None is
-  there yet; run by hand on pymavlink's tests/test.BIN (ArduPilot/pymavlink, blob
-  a39b77e3b75adc7dac38f052011f2039115de248: ArduPlane V3.8.2 on a Pixhawk, AHRS_ORIENTATION 8,
-  two IMUs, three compasses) it reproduced INS_ACC{,2}OFFS/SCAL, INS_GYR{,2}OFFS and
+  DFReader): `ardupilot_round_trip` runs on pymavlink's tests/test.BIN (kept in tests/data/
+  ardupilot_pymavlink, blob a39b77e3b75adc7dac38f052011f2039115de248: ArduPlane V3.8.2 on a
+  Pixhawk, AHRS_ORIENTATION 8, two IMUs, three compasses) and on every .bin under
+  ../shared/data/*/original: it reproduces INS_ACC{,2}OFFS/SCAL, INS_GYR{,2}OFFS and
   COMPASS_OFS/DIA/ODI{,2,3} exactly.
 - ArduPilot's compass calibrator: libraries/AP_Compass/CompassCalibrator.cpp fit_acceptable:
   |offset| < _offset_max (COMPASS_OFFS_MAX), 0.2 < diag < 5.0, |offdiag| < 1.0, all strict.
@@ -50,6 +50,7 @@ from __future__ import annotations
 import contextlib
 import io
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -394,11 +395,11 @@ def ardupilot_round_trip(capsys, tmp_path, log) -> list:
 
 
 def test_a_calibration_that_changes_nothing_exports_an_ardupilot_logs_own_parameters(capsys, tmp_path, shared_data):
-    """The same as for PX4 on every real ArduPilot DataFlash log under ../shared/data (none is
-    there yet: the test waits for one)."""
-    logs = sorted(p for p in shared_data.glob("*/original/*") if p.suffix.lower() == ".bin")
-    if not logs:
-        pytest.skip("no real ArduPilot .bin log in ../shared/data")
+    """The same as for PX4 on every real ArduPilot DataFlash log: pymavlink's own test log
+    (tests/data/ardupilot_pymavlink, SOURCE.md there) and any .bin under ../shared/data."""
+    here = Path(__file__).resolve().parent / "data"
+    logs = sorted(p for p in [*here.glob("*/*"), *shared_data.glob("*/original/*")] if p.suffix.lower() == ".bin")
+    assert logs
     for log in logs:
         assert ardupilot_round_trip(capsys, tmp_path, log), log
 
