@@ -57,6 +57,24 @@ def test_p2_lever_arm_of_centimetres_named_alone_with_its_sign(tmp_path, capsys,
     assert np.all(np.abs(dr - np.asarray(sim.truth["dr"])) < 5 * sig), (dr, sim.truth["dr"], sig)
 
 
+@pytest.mark.parametrize("seed,size_uT", [(1, 5.7), (2, 19.0)])
+def test_compass_large_hard_iron_step_timed_to_its_sample_and_named_alone(tmp_path, capsys, seed, size_uT):
+    """A hard-iron step of 300 and 1000 times what the capture resolves: the step's time is found
+    on a grid and then on grids a tenth as fine, down to the samples it falls between. Refined once
+    only (1/400 of the span), a few samples sat on the wrong side of the step, and a generic step
+    (`residual:time`) split the step with it (both seeds named it before)."""
+    sim = simulate("compass", seed=seed, effects={"time_varying_hard_iron": size_uT})
+    path = tmp_path / "compass.csv"
+    write_capture(str(path), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
+    assert main(["diagnose", str(path), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["verdict"] == ["time_varying_hard_iron"], [(e["name"], e["gain"]) for e in res["effects"]]
+    eff, truth = res["effects"][0], sim.truth["effect_blocks"]
+    dh, sig = np.asarray(eff["params"]["dh"]), np.asarray(eff["uncertainty"]["dh"])
+    assert np.all(np.abs(dh - np.asarray(truth["dh"])) < 5 * sig), (dh, truth["dh"], sig)
+    assert abs(eff["params"]["t_on_s"] - float(truth["t_on_s"])) < 1.0 / float(sim.meta["sample_rate_hz"])
+
+
 @pytest.mark.parametrize("hidden,size", [("time_drift", 0.066), ("temperature_bias", 2.3e-3)])
 def test_ldv_offset_beside_a_drift_from_its_own_zero_is_tied_with_it(tmp_path, capsys, hidden, size):
     """LDV on the station's simulator: a drift from t = 0 or a temperature bias about 25 °C (30σ),

@@ -394,10 +394,12 @@ def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.
     grid = [None] if c.scan is None else list(c.scan[1])
     best = None
     if c.scan is not None and len(grid) > 2:
-        # coarse grid, then a fine one around the best coarse value
+        # coarse grid, then finer ones around the best value, each a tenth of the last: a step's
+        # time matters only through the samples it falls between, and at 1/400 of the span a
+        # large step put a few samples on the wrong side, which a generic step then took
         step = float(grid[1] - grid[0])
-        scores = []
-        for value in grid:
+
+        def score(value):
             blocks = as_params(c.blocks)
             blocks[c.scan[0]] = np.array(float(value))
             params = {**base_params, **blocks}
@@ -405,8 +407,17 @@ def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.
             free.update(_free_of(c))
             J, _, _ = jacobian(problem, params, free)
             perp = J - Q @ (Q.T @ J)
-            scores.append(_lstsq_rss(perp, r0 - Q @ (Q.T @ r0))[1])
-        v0 = float(grid[int(np.argmin(scores))])
+            return _lstsq_rss(perp, r0 - Q @ (Q.T @ r0))[1]
+
+        scores = [score(v) for v in grid]
+        v0, best_rss = float(grid[int(np.argmin(scores))]), min(scores)
+        for _ in range(SCAN_ZOOMS - 1):
+            fine = np.linspace(v0 - step, v0 + step, 21)
+            scores = [score(v) for v in fine]
+            if min(scores) >= best_rss:  # nothing finer to find (the RSS is flat between samples)
+                break
+            v0, best_rss = float(fine[int(np.argmin(scores))]), min(scores)
+            step /= 10.0
         grid = list(np.linspace(v0 - step, v0 + step, 21))
     for value in grid:
         blocks = as_params(c.blocks)
@@ -570,6 +581,7 @@ GENERIC_STEP_GRID = np.linspace(0.1, 0.9, 13)  # step positions, fractions of th
 # went to a member the noise favoured (a compass periodic bias at 10σ: D 47 there, 125 at its period)
 GENERIC_CYCLES = np.arange(1.5, 30.01, 0.5)
 GENERIC_CYCLE_TESTS = int(round(float(GENERIC_CYCLES[-1] - GENERIC_CYCLES[0]))) + 1
+SCAN_ZOOMS = 4  # a library candidate's scanned scalar: the coarse grid's step over 10, 100, 1000 around its best
 GENERIC_REFINE = 21  # a scanned family's best member is refined on this many values within ±1 grid step
 GENERIC_SMOOTH_KNOTS = (3, 5)  # piecewise-linear bases (complexity chosen by CV)
 
