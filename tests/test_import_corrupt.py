@@ -65,3 +65,21 @@ def test_corrupt_log_one_line_or_a_valid_capture(tmp_path, sources, suffix, kind
     else:
         assert res.returncode == 2 and res.stdout == "" and not out.exists()
         assert res.stderr.count("\n") == 1 and str(log) in res.stderr
+
+
+def test_a_ulog_parameter_whose_type_is_corrupt_is_left_out_with_a_warning(tmp_path, shared_data):
+    """One flipped byte in a parameter's definition ('float' -> 'flxat') leaves pyulog with the
+    value as raw bytes; the import ended in the catch-all ('could not convert string to float').
+    The parameter is left out of param.*, named in a warning, and the rest is imported."""
+    data = (shared_data / "px4_ulog" / "original" / "sample_log_small.ulg").read_bytes()
+    assert data.count(b"float CAL_ACC0_XOFF") == 1
+    log = tmp_path / "flipped.ulg"
+    log.write_bytes(data.replace(b"float CAL_ACC0_XOFF", b"flxat CAL_ACC0_XOFF"))
+    out = tmp_path / "out.csv"
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--source", "combined", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("\n") == 1 and res.stdout.startswith(f"{out}: ")
+    assert "CAL_ACC0_XOFF" in res.stderr and "warning" in res.stderr, res.stderr
+    meta = read_capture(out).meta
+    assert "param.CAL_ACC0_XOFF" not in meta
+    assert meta["param.CAL_ACC0_YOFF"] == "-0.043480888"

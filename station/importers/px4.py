@@ -87,6 +87,13 @@ def _load(path):
         raise InputError(path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})") from None
 
 
+def _readable_param(name, value) -> bool:
+    """A parameter as a firmware writes it: a name (no control characters, no ':') and an int or
+    float. A flipped byte in its definition ('flxat CAL_ACC0_XOFF') leaves pyulog the raw bytes."""
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    return number and isinstance(name, str) and name.isprintable() and ":" not in name and name == name.strip() != ""
+
+
 def _topics(ulog, name: str) -> dict[int, object]:
     return {d.multi_id: d for d in ulog.data_list if d.name == name and len(d.data.get("timestamp", ())) > 0}
 
@@ -123,7 +130,11 @@ def read(
     if source not in SOURCES:
         raise InputError(None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}")
     ulog = _load(path)
-    params = dict(ulog.initial_parameters)
+    params = {name: v for name, v in ulog.initial_parameters.items() if _readable_param(name, v)}
+    unreadable = sorted(
+        {repr(name) for name, v in ulog.initial_parameters.items() if not _readable_param(name, v)}
+        | {repr(name) for _, name, v in ulog.changed_parameters if not _readable_param(name, v)}
+    )
     info = ulog.msg_info_dict
     raw = {kind: _topics(ulog, topic) for kind, topic in RAW_TOPICS.items()}
     wanted = tuple(kinds or RAW_TOPICS)
@@ -266,7 +277,7 @@ def read(
     # parameters in use at the start of the data; any change while the data run is listed
     late: set[str] = set()
     for ts, name, value in sorted(ulog.changed_parameters, key=lambda c: c[0]):
-        if not name.startswith(PARAM_PREFIXES):
+        if not _readable_param(name, value) or not name.startswith(PARAM_PREFIXES):
             continue
         if ts <= t0_us:
             params[name] = value
@@ -277,6 +288,11 @@ def read(
         warnings.append(
             f"the log is cut short inside a message at byte {cut}: the samples before it are imported, "
             f"{len(next(iter(streams.values())).t_s)} rows up to {max(s.t_s[-1] for s in streams.values()):g} s"
+        )
+    if unreadable:
+        warnings.append(
+            f"{len(unreadable)} parameter(s) with no number in the log (a corrupt definition): "
+            f"{', '.join(unreadable[:5])}{' ...' if len(unreadable) > 5 else ''} left out of param.*"
         )
     if late:
         meta["params_changed"] = ",".join(sorted(late))
