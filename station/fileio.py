@@ -142,7 +142,14 @@ def same_file(a, b) -> bool:
 def check_output(path) -> os.stat_result | None:
     """Refuse an output ``path`` that exists and is no regular file (a named pipe, a device):
     the atomic rename would replace it. Returns its stat (None when it does not exist; a
-    folder is left to the rename, which says why)."""
+    folder is left to the rename, which says why). ``-`` is refused too: to the operator it is
+    standard output (``report -o -``), which a file write never is; a file named so is ``./-``."""
+    if os.fspath(path) == "-":
+        raise InputError(
+            None,
+            None,
+            "'-' as an output file: standard output is not written here; name a file (./- for one named '-')",
+        )
     try:
         st = os.stat(path)
     except (OSError, ValueError):

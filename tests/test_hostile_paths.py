@@ -155,3 +155,30 @@ def test_record_refuses_an_output_that_is_no_regular_file_before_recording(tmp_p
     res = _station("record", "--port", tmp_path / "no-such-port", "--seconds", "1", "--out", target, timeout=60)
     assert_one_line_refusal(res, f"{target}: ", "named pipe (FIFO), not a regular file")
     assert stat.S_ISFIFO(os.stat(target).st_mode)
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["simulate", "--procedure", "gyro-drift", "--seed", "1", "--out", "-"],
+        ["simulate", "--procedure", "gyro-drift", "--seed", "1", "--out", "{sim}", "--truth", "-"],
+        ["import", "{src}", *GYRO_CSV, "--out", "-"],
+        ["noise", "{still}", "--format", "kalibr", "--no-plot", "--out", "-"],
+        ["record", "--port", "{port}", "--seconds", "1", "--out", "-"],
+    ],
+    ids=["simulate", "simulate-truth", "import", "noise-kalibr", "record"],
+)
+def test_dash_as_an_output_file_is_refused_not_written_as_a_file_named_dash(tmp_path, shared_data, command):
+    """'-' is standard output to the operator (report -o -, export -o -); these commands write
+    only files and made one named '-' in the current folder (simulate --truth - beside a
+    complete capture). Refused before anything runs; a file named '-' is still ./-."""
+    src = tmp_path / "in.csv"
+    src.write_text("time_s,gx,gy,gz\n" + "".join(f"{i * 0.01:.2f},0.01,0.02,-0.01\n" for i in range(400)))
+    still = shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv"
+    sim = tmp_path / "sim.csv"
+    args = [a.format(src=src, still=still, sim=sim, port=tmp_path / "no-such-port") for a in command]
+    res = subprocess.run(
+        [sys.executable, "-m", "station", *args], cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
+    assert_one_line_refusal(res, "'-'", "standard output")
+    assert sorted(os.listdir(tmp_path)) == ["in.csv"]
