@@ -30,13 +30,30 @@ _WHAT = {
 _SUFFIX = {".ulg": "px4", ".bin": "ardupilot", ".tlog": "tlog"}
 
 
+# a binary log's first bytes: ULog's file magic, a DataFlash message header (HEAD1, HEAD2)
+_MAGIC = ((b"ULog\x01\x12\x35", "px4", "a PX4 ULog file"), (b"\xa3\x95", "ardupilot", "an ArduPilot DataFlash log"))
+
+
+def _by_content(path) -> str | None:
+    """The log format ``path``'s first bytes announce, or None (a FIFO or device is never opened here)."""
+    from station.fileio import open_input
+
+    try:
+        with open_input(path) as f:
+            head = f.read(8)
+    except (InputError, OSError):
+        return None
+    return next((fmt for magic, fmt, _ in _MAGIC if head.startswith(magic)), None)
+
+
 def detect(path) -> str | None:
-    """The format of ``path`` by its name (and, for CSV, its header line); None for a station
-    capture or a file this cannot tell (then it is read as a capture, whose reader explains)."""
+    """The format of ``path`` by its first bytes (a ULog or DataFlash log under any name), else
+    its name (and, for CSV, its header line); None for a station capture or a file this cannot
+    tell (then it is read as a capture, whose reader explains)."""
     from station.importers import csvfiles, ros
 
     p = Path(path)
-    fmt = _SUFFIX.get(p.suffix.lower())
+    fmt = _by_content(path) or _SUFFIX.get(p.suffix.lower())
     if fmt:
         return fmt
     if ros.is_bag(p):
@@ -124,7 +141,12 @@ def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
                 "already a station capture: calibrate, diagnose and inspect read it as it is",
             )
         fmt = "csv"
-    return capture_of(path, read(path, opts, fmt), fmt, opts.procedure, opts.device)
+    capture, warnings = capture_of(path, read(path, opts, fmt), fmt, opts.procedure, opts.device)
+    suffix = Path(path).suffix
+    if not opts.fmt and _SUFFIX.get(suffix.lower(), fmt) != fmt:  # a .ulg copied as .bin, ...
+        what = next(w for _, f, w in _MAGIC if f == fmt)
+        warnings.insert(0, f"named {suffix} but {what} by its first bytes: read as one")
+    return capture, warnings
 
 
 def capture_of(
