@@ -66,6 +66,34 @@ def test_calibrate_save_into_a_file_that_is_not_a_database(tmp_path, capsys, ldv
     assert db.read_bytes() == before  # refused, not overwritten
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [["calibrate", "{cap}", "--save", "--device", "D"], ["devices", "add", "E"], ["devices", "list"], ["verify"]],
+    ids=["save", "devices-add", "devices-list", "verify"],
+)
+def test_a_database_of_a_newer_station_is_refused_and_left_as_it_was(tmp_path, capsys, ldv_capture, argv):
+    """A database a newer station migrated (a schema step this version does not have) was read
+    and written as if it were this version's: a save skipped what the newer schema keeps and
+    anchors, verify passed it. Every command refuses it in one line and leaves it as it was."""
+    import sqlite3
+
+    db = tmp_path / "station.db"
+    assert run(capsys, "--db", db, "devices", "add", "D")[0] == 0
+    raw = sqlite3.connect(db)
+    with raw:
+        raw.execute(
+            "INSERT INTO _sqlite_migrations (migration_set, name, applied_at) VALUES ('station', '0099_future', 'x')"
+        )
+    raw.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    raw.close()
+    before = db.read_bytes()
+    code, out, err = run(capsys, "--db", db, *[a.format(cap=ldv_capture) for a in argv])
+    assert code == 2 and out == ""
+    line = one_line(err)
+    assert str(db) in line and "newer" in line and "0099_future" in line, line
+    assert db.read_bytes() == before
+
+
 def test_calibrate_save_into_a_directory(tmp_path, capsys, ldv_capture):
     folder = tmp_path / "adir"
     folder.mkdir()
