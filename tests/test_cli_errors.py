@@ -666,3 +666,39 @@ def test_an_empty_device_id_is_refused(tmp_path, argv):
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     assert_one_line_refusal(run_station("--db", tmp_path / "s.db", *argv), "a device id must be non-empty text")
     assert not (tmp_path / "s.db").exists() or "G-1" not in (tmp_path / "s.db").read_bytes().decode("latin-1")
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (
+            [
+                "simulate",
+                "--procedure",
+                "ldv",
+                "--out",
+                "{out}",
+                "--option",
+                "duration_s=10",
+                "--option",
+                "duration_s=20",
+            ],
+            "--option: duration_s given twice",
+        ),
+        (
+            ["simulate", "--procedure", "ldv", "--out", "{out}", "--effect", "offset=1", "--effect", " offset=5"],
+            "--effect: offset given twice",
+        ),
+        (["devices", "add", "D", "--tolerance", "B=1", "--tolerance", "B=2"], "--tolerance: B given twice"),
+        (["devices", "add", "D", "--limit", "B=1:2", "--limit", "B=3:4"], "--limit: B given twice"),
+    ],
+    ids=["simulate-option", "simulate-effect", "devices-tolerance", "devices-limit"],
+)
+def test_a_name_given_twice_is_refused_as_import_refuses_it(tmp_path, capsys, argv, says):
+    """`--option duration_s=10 --option duration_s=20` simulated 20 s, `--tolerance B=1
+    --tolerance B=2` stored 2, without a word (the last one won); import's --map, --unit and
+    --topic refuse a name given twice. So do these, before anything is written."""
+    out = tmp_path / "sim.csv"
+    code, stdout, err = run(capsys, "--db", tmp_path / "station.db", *[a.format(out=out) for a in argv])
+    assert code == 2 and stdout == "" and says in one_line(err), err
+    assert sorted(os.listdir(tmp_path)) == []

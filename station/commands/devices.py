@@ -107,6 +107,8 @@ def _tolerances(items: list[str], contexts: list[dict]) -> dict | None:
             raise InputError(
                 None, None, f"--tolerance {item!r}: expected NAME=VALUE with a positive number{_in_unit(name, unit)}"
             )
+        if name in out:
+            raise InputError(None, None, f"--tolerance: {name} given twice")
         out[name] = stored_value(ctx, name, number)
     return out
 
@@ -220,6 +222,8 @@ def _limits(items: list[str], contexts: list[dict]) -> dict | None:
             name, pair, _ = typed_limit(item, contexts)
         except ValueError as exc:
             raise InputError(None, None, f"--limit {exc}") from None
+        if name in out:
+            raise InputError(None, None, f"--limit: {name} given twice")
         out[name] = pair
     return out
 

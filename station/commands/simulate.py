@@ -16,6 +16,8 @@ def parse_assignments(items: list[str] | None, what: str) -> dict[str, float | s
         if "=" not in item:
             raise InputError(None, None, f"{what} {item!r}: expected NAME=VALUE")
         name, value = item.split("=", 1)
+        if name.strip() in out:  # the last one would win without a word (import's --map refuses it too)
+            raise InputError(None, None, f"{what}: {name.strip()} given twice")
         try:
             out[name.strip()] = float(value)
         except ValueError:
