@@ -83,3 +83,25 @@ def test_a_ulog_parameter_whose_type_is_corrupt_is_left_out_with_a_warning(tmp_p
     meta = read_capture(out).meta
     assert "param.CAL_ACC0_XOFF" not in meta
     assert meta["param.CAL_ACC0_YOFF"] == "-0.043480888"
+
+
+def test_a_gps_time_that_is_no_calendar_date_leaves_the_date_out_with_a_warning(tmp_path):
+    """A flipped byte in the GPS message's TimeUS put the log's start 290 000 years before
+    Christ: the import ended in the catch-all ('year -541429 is out of range'). The samples
+    are imported without a date, and a warning says why."""
+    import struct
+
+    log = tmp_path / "gps.bin"
+    write_bin(log)
+    data = log.read_bytes()
+    gms = struct.pack("<IH", 3000, 2300)  # GPS: TimeUS (Q), I, Status (B B), GMS (I), GWk (H)
+    assert data.count(gms) == 1
+    i = data.index(gms) - 10
+    assert struct.unpack("<Q", data[i : i + 8]) == (525000,)
+    log.write_bytes(data[:i] + struct.pack("<Q", 2**63 + 525000) + data[i + 8 :])
+    out = tmp_path / "out.csv"
+    res = run_station("import", log, "--procedure", "compass", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert "warning" in res.stderr and "no calendar date" in res.stderr, res.stderr
+    meta = read_capture(out).meta
+    assert "date" not in meta and "latitude_deg" in meta

@@ -27,7 +27,7 @@ import io
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, iso_utc
+from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, set_date
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
@@ -310,7 +310,7 @@ def read(
     frame = FRD if meta["corrected"] == "true" else _board_frame(params, streams)
     if frame:
         meta["frame"] = frame
-    _place_and_date(ulog, t0_us, meta)
+    _place_and_date(ulog, t0_us, meta, warnings)
     for name in sorted(params):
         if name.startswith(PARAM_PREFIXES):
             meta[f"param.{name}"] = fmt_param(params[name])
@@ -353,7 +353,7 @@ def default_device(imported: Imported, kind: str) -> str | None:
     return f"{name}-{kind}{s.device_id}" if s is not None and s.device_id else name
 
 
-def _place_and_date(ulog, t0_us: float, meta: dict[str, str]) -> None:
+def _place_and_date(ulog, t0_us: float, meta: dict[str, str], warnings: list[str]) -> None:
     """``date`` from the GPS's UTC time, ``latitude_deg``… from its 3-D fixes (median)."""
     for name in GPS_TOPICS:
         topics = _topics(ulog, name)
@@ -365,7 +365,7 @@ def _place_and_date(ulog, t0_us: float, meta: dict[str, str]) -> None:
         good = utc > 0
         if good.any():
             i = int(np.flatnonzero(good)[0])
-            meta["date"] = iso_utc((utc[i] - ts[i] + t0_us) * 1e-6)
+            set_date(meta, warnings, (utc[i] - ts[i] + t0_us) * 1e-6, "GPS")
         fix = np.asarray(d.get("fix_type", np.zeros(len(ts))))
         fixed = fix >= 3
         if fixed.any():
