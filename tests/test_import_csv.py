@@ -323,3 +323,33 @@ def test_a_loggers_preamble_above_the_header_is_skipped_and_said(tmp_path, share
         "import", src, "--procedure", "gyro-drift", "--map", "ax=acc_x", *units, "--out", tmp_path / "c.csv"
     )
     assert_one_line_refusal(res, f"{src}:1:", "no column 'acc_x'")
+
+
+@pytest.mark.parametrize(("bits", "unit", "step"), [(32, "us", 10_000), (16, "ms", 10), (32, "ms", 10)])
+def test_a_wrapping_counter_as_time_is_unwrapped_with_a_warning(tmp_path, bits, unit, step):
+    """A logger's time stamp from a 32-bit micros() (wraps after 71.6 min) or a 16-bit
+    millisecond counter (65.5 s) was refused at the wrap ('time goes backwards'): the log could
+    not be imported at all. Each wrap adds 2**bits; a warning says so; the rows are all kept."""
+    wrap = 2**bits
+    counts = (wrap - 5 * step + step * np.arange(400)) % wrap
+    src = tmp_path / "logger.csv"
+    src.write_text("t,gx,gy,gz\n" + "".join(f"{c},0.01,0.02,-0.01\n" for c in counts))
+    out = tmp_path / "out.csv"
+    res = run_station("import", src, "--procedure", "gyro-drift", "--unit", f"gyro=rad/s,t={unit}", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert f"wraps at 2^{bits}" in res.stderr and "line 7" in res.stderr, res.stderr
+    t = read_capture(out).columns["t"]
+    scale = {"us": 1e-6, "ms": 1e-3}[unit]
+    np.testing.assert_allclose(t, step * scale * np.arange(400), atol=1e-9)
+
+
+def test_a_time_column_that_goes_back_by_less_than_a_wrap_is_still_refused(tmp_path):
+    """Unwrapping takes only a fall from near the counter's top to near its start: a row out of
+    order is refused as before."""
+    counts = [1000, 2000, 3000, 1500, 4000]  # an unwrap by 2^16 would make it a 62 s jump forward
+    src = tmp_path / "logger.csv"
+    src.write_text("t,gx,gy,gz\n" + "".join(f"{c},0.01,0.02,-0.01\n" for c in counts))
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--unit", "gyro=rad/s,t=us", "--out", tmp_path / "o.csv"
+    )
+    assert_one_line_refusal(res, ":5: time goes backwards")
