@@ -247,6 +247,11 @@ def test_plain_csv_without_time_uses_rate(tmp_path):
             ("--unit", "accel=g"),
             ":3: time goes backwards",
         ),
+        (  # was: 'fewer than 2 accelerometer samples where all sensors overlap', no line
+            "t,ax,ay,az\n" + "5,1,2,3\n" * 50,
+            ("--unit", "accel=g"),
+            ":2: the time axis does not advance (50 rows, all at t = 5)",
+        ),
         (
             "t,ax,ay,az\n0,1,2,3\n",
             ("--unit", "accel=furlongs"),

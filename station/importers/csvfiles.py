@@ -318,6 +318,8 @@ def _time_seconds(path, t, linenos: np.ndarray, factor: float, integer: bool, wa
             raise InputError(path, int(linenos[i]), "the time column is empty (every row needs its time)")
         t = _unwrapped(t, linenos, warnings)
         ts = (t - t[0]) * factor
+    if len(ts) > 1 and ts[-1] == ts[0] and not np.diff(ts).any():  # as the capture reader says it
+        raise InputError(path, int(linenos[0]), f"the time axis does not advance ({len(ts)} rows, all at t = {t[0]:g})")
     back = np.flatnonzero(np.diff(ts) < 0)
     if back.size:
         i = int(back[0]) + 1
