@@ -188,6 +188,15 @@ def open_input(path, what: str = "a capture file") -> io.BufferedReader:
     return os.fdopen(fd, "rb")
 
 
+# a binary log's first bytes: ULog's file magic, a DataFlash message header (HEAD1, HEAD2)
+LOG_MAGIC = ((b"ULog\x01\x12\x35", "px4", "a PX4 ULog file"), (b"\xa3\x95", "ardupilot", "an ArduPilot DataFlash log"))
+
+
+def log_kind(head: bytes) -> tuple[str, str] | None:
+    """(format, words) of the binary log whose first bytes are ``head``, or None."""
+    return next(((fmt, words) for magic, fmt, words in LOG_MAGIC if head.startswith(magic)), None)
+
+
 def looks_utf16(raw: bytes) -> bool:
     """Whether bytes from a file's start are UTF-16 text (a spreadsheet's "Unicode text"):
     its byte-order mark, or ASCII characters with a NUL byte beside each (no mark)."""

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from station.capture import Capture, read_capture, write_capture
 from station.errors import InputError
-from station.fileio import check_input
+from station.fileio import LOG_MAGIC, check_input
 from station.importers._common import NAME, Imported, to_capture
 from station.importers.options import (
     FORMATS,
@@ -30,20 +30,16 @@ _WHAT = {
 _SUFFIX = {".ulg": "px4", ".bin": "ardupilot", ".tlog": "tlog"}
 
 
-# a binary log's first bytes: ULog's file magic, a DataFlash message header (HEAD1, HEAD2)
-_MAGIC = ((b"ULog\x01\x12\x35", "px4", "a PX4 ULog file"), (b"\xa3\x95", "ardupilot", "an ArduPilot DataFlash log"))
-
-
 def _by_content(path) -> str | None:
     """The log format ``path``'s first bytes announce, or None (a FIFO or device is never opened here)."""
-    from station.fileio import open_input
+    from station.fileio import log_kind, open_input
 
     try:
         with open_input(path) as f:
-            head = f.read(8)
+            kind = log_kind(f.read(8))
     except (InputError, OSError):
         return None
-    return next((fmt for magic, fmt, _ in _MAGIC if head.startswith(magic)), None)
+    return kind[0] if kind else None
 
 
 def detect(path) -> str | None:
@@ -119,7 +115,7 @@ def infer_procedure(path, imported: Imported, fmt: str) -> str:
     raise InputError(
         path,
         None,
-        f"a {fmt} file with {have} data: say which procedure with --procedure ({', '.join(fits)})",
+        f"{_WHAT[fmt]} with {have} data: say which procedure with --procedure ({', '.join(fits)})",
     )
 
 
@@ -144,7 +140,7 @@ def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     capture, warnings = capture_of(path, read(path, opts, fmt), fmt, opts.procedure, opts.device)
     suffix = Path(path).suffix
     if not opts.fmt and _SUFFIX.get(suffix.lower(), fmt) != fmt:  # a .ulg copied as .bin, ...
-        what = next(w for _, f, w in _MAGIC if f == fmt)
+        what = next(w for _, f, w in LOG_MAGIC if f == fmt)
         warnings.insert(0, f"named {suffix} but {what} by its first bytes: read as one")
     return capture, warnings
 
