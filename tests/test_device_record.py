@@ -369,3 +369,19 @@ def test_a_bad_port_or_url_is_one_line_saying_what_is_wrong(tmp_path, protocol, 
     assert_one_line_refusal(res, f"station: {port}: {says}")
     assert not out.exists()
     assert "Errno" not in res.stderr and "could not open port" not in res.stderr.lower()
+
+
+@pytest.mark.parametrize("spelling", ["same", "dot"])
+def test_recover_into_the_partial_itself_is_refused_and_the_partial_kept(tmp_path, spelling):
+    """record --recover k.csv.partial --out k.csv.partial wrote the capture over the partial,
+    then removed the partial as recovered: exit 0, 'recovered', and the recording gone."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    partial = tmp_path / "k.csv.partial"
+    res = run_station("simulate", "--procedure", "gyro-drift", "--seed", "1", "--out", partial)
+    assert res.returncode == 0, res.stderr
+    before = partial.read_bytes()
+    out = partial if spelling == "same" else tmp_path / "." / partial.name
+    res = run_station("record", "--recover", partial, "--out", out)
+    assert_one_line_refusal(res, "the .partial file being recovered")
+    assert partial.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["k.csv.partial"]

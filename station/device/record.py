@@ -39,7 +39,7 @@ import numpy as np
 from station.device.protocol import Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
 from station.errors import InputError, StationError
-from station.fileio import atomic_open, open_input
+from station.fileio import atomic_open, open_input, same_file
 
 SENSOR_GROUPS = {"accel_unit": ("ax", "ay", "az"), "gyro_unit": ("gx", "gy", "gz"), "mag_unit": ("mx", "my", "mz")}
 PARTIAL_SUFFIX = ".partial"
@@ -192,6 +192,8 @@ def recover_partial(partial: str, out: str | None = None) -> str:
         if not partial.endswith(PARTIAL_SUFFIX):
             raise InputError(partial, None, f"not a {PARTIAL_SUFFIX} file; give --out")
         out = partial[: -len(PARTIAL_SUFFIX)]
+    if same_file(out, partial):  # written over, then removed as recovered: the recording gone
+        raise InputError(out, None, "--out is the .partial file being recovered: choose another name")
     meta, header, _ = iter_capture_chunks(partial)  # validates the head
     meta = dict(meta)
     meta["complete"] = "false"
