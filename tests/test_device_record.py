@@ -385,3 +385,23 @@ def test_recover_into_the_partial_itself_is_refused_and_the_partial_kept(tmp_pat
     res = run_station("record", "--recover", partial, "--out", out)
     assert_one_line_refusal(res, "the .partial file being recovered")
     assert partial.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["k.csv.partial"]
+
+
+def test_a_new_recording_does_not_replace_a_partial_not_yet_recovered(tmp_path):
+    """A killed recording leaves k.csv.partial; the next `record --out k.csv` wrote its own
+    rows into that name and removed it when done: the killed recording was lost without a
+    word. Refused before the port is opened, the partial kept; the writer itself never
+    truncates one either."""
+    from station.device.record import CaptureStream
+    from station.errors import InputError
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    partial = tmp_path / "k.csv.partial"
+    res = run_station("simulate", "--procedure", "gyro-drift", "--seed", "1", "--out", partial)
+    assert res.returncode == 0, res.stderr
+    before = partial.read_bytes()
+    res = run_station("record", "--port", tmp_path / "no-such-port", "--seconds", "1", "--out", tmp_path / "k.csv")
+    assert_one_line_refusal(res, f"{partial}: ", "record --recover")
+    with pytest.raises(InputError, match="record --recover"):
+        CaptureStream(str(tmp_path / "k.csv"), ["t", "ax", "ay", "az"], {"accel_unit": "V"})
+    assert partial.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["k.csv.partial"]

@@ -96,6 +96,19 @@ def format_rows(batch: Batch, columns: list[str]) -> str:
     return "".join(out)
 
 
+def refuse_unrecovered(out: str) -> None:
+    """Refuse a recording into ``out`` while ``<out>.partial`` exists: the rows of a killed
+    recording, not yet recovered, which the new one would write over and remove."""
+    partial = os.fspath(out) + PARTIAL_SUFFIX
+    if os.path.lexists(partial):
+        raise InputError(
+            partial,
+            None,
+            f"a killed recording's rows, not yet recovered: station record --recover {partial} "
+            "first (or remove the file)",
+        )
+
+
 class CaptureStream:
     """Writes a capture incrementally to `<out>.partial`, then finishes it as `<out>`."""
 
@@ -108,8 +121,11 @@ class CaptureStream:
         head["complete"] = "false"
         if os.path.isdir(self.out):
             raise InputError(self.out, None, "is a folder: give --out a file name for the capture")
-        try:
-            self._f = open(self.partial, "w", encoding="utf-8", newline="\n")
+        try:  # "x": a partial a killed recording left is never truncated (refuse_unrecovered says why)
+            self._f = open(self.partial, "x", encoding="utf-8", newline="\n")
+        except FileExistsError:
+            refuse_unrecovered(self.out)
+            raise
         except OSError as exc:
             raise InputError(self.partial, None, f"cannot write: {exc.strerror or exc}") from None
         self._f.write(_head_text(head, columns))
