@@ -702,3 +702,34 @@ def test_a_name_given_twice_is_refused_as_import_refuses_it(tmp_path, capsys, ar
     code, stdout, err = run(capsys, "--db", tmp_path / "station.db", *[a.format(out=out) for a in argv])
     assert code == 2 and stdout == "" and says in one_line(err), err
     assert sorted(os.listdir(tmp_path)) == []
+
+
+@pytest.mark.parametrize(
+    "argv", [["calibrate", "{cap}", "--save", "--device", "D"], ["devices", "add", "E"]], ids=["save", "devices-add"]
+)
+def test_a_database_another_connection_holds_is_named_as_such_and_left_as_it_was(
+    tmp_path, capsys, ldv_capture, monkeypatch, argv
+):
+    """A second connection holding a write transaction (another station saving, a sqlite3
+    shell left in BEGIN) past the busy wait gave 'database is locked', which read as a
+    damaged file. The line says another process held it, for how long, and that nothing was
+    written; the holder's transaction and the file are untouched. (The 30 s wait is shortened.)"""
+    import sqlite3
+
+    import db.store
+
+    db_file = tmp_path / "station.db"
+    assert run(capsys, "--db", db_file, "devices", "add", "D")[0] == 0
+    monkeypatch.setattr(db.store, "BUSY_TIMEOUT_S", 0.2)
+    holder = sqlite3.connect(db_file, isolation_level=None)
+    holder.execute("BEGIN IMMEDIATE")  # the write lock, as a save in progress holds it
+    try:
+        code, out, err = run(capsys, "--db", db_file, *[a.format(cap=ldv_capture) for a in argv])
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+    assert code == 2 and out == ""
+    line = one_line(err)
+    assert str(db_file) in line and "another process held it" in line and "nothing written" in line, line
+    code, out, _ = run(capsys, "--db", db_file, "verify")
+    assert code == 0, out
