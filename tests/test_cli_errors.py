@@ -139,6 +139,27 @@ def test_simulate_truth_to_an_unwritable_place(tmp_path, capsys, where):
     assert code == 2
     assert one_line(err).startswith(f"station: {target}: cannot write")
     assert not [p for p in tmp_path.rglob(".truth-*")]
+    assert not (tmp_path / "c.csv").exists()  # was: the capture written, the truth refused after it
+
+
+@pytest.mark.parametrize(
+    ("out", "says"),
+    [("{tmp}/", "cannot write: is a folder"), ("{tmp}/new/", "cannot write: is a folder"), ("", "empty file name")],
+    ids=["folder-slash", "missing-folder-slash", "empty"],
+)
+@pytest.mark.parametrize("command", ["simulate", "export-capture"])
+def test_an_output_that_names_a_folder_says_so(tmp_path, capsys, db_with_calibration, out, says, command):
+    """--out DIR/ said 'cannot write: Not a directory' about a directory; --out '' said
+    'cannot write: No such file or directory' naming nothing."""
+    target = out.format(tmp=tmp_path)
+    argv = {
+        "simulate": ["simulate", "--procedure", "accel-centrifuge", "--out", target],
+        "export-capture": ["export-capture", "1", "-o", target],
+    }[command]
+    before = sorted(os.listdir(tmp_path))
+    code, stdout, err = run(capsys, "--db", db_with_calibration, *argv)
+    assert code == 2 and stdout == "" and says in one_line(err), err
+    assert sorted(os.listdir(tmp_path)) == before
 
 
 def test_an_output_named_twice_or_the_input_is_refused_and_nothing_replaced(tmp_path, capsys):

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError:
         raise InputError(None, None, f"--vehicle {args.vehicle!r}: expected SYSID,COMPID, e.g. 1,1") from None
     text = export(cal, meta, args.format, args.instance, device_id=args.device_id, vehicle=(sysid, compid))
-    if args.output and args.output != "-":
+    if args.output is not None and args.output != "-":
         with cannot_write(args.output):
             atomic_write_text(args.output, text)
     else:
