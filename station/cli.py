@@ -15,7 +15,7 @@ import sys
 import warnings
 
 from station import __version__
-from station.errors import InputError, StationError, take_deferred_warnings
+from station.errors import InputError, OutputError, StationError, take_deferred_warnings
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
@@ -113,7 +113,7 @@ def _safe_streams(args: argparse.Namespace):
         return
     as_json = bool(getattr(args, "json", False)) or getattr(args, "format", None) == "json"
     out, err = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = SafeStream(out, json=as_json), SafeStream(err)
+    sys.stdout, sys.stderr = SafeStream(out, json=as_json, name="standard output"), SafeStream(err)
     try:
         yield
     finally:
@@ -141,6 +141,17 @@ def _tui_options_first(parser: argparse.ArgumentParser, argv: list[str]) -> list
     return ["tui", *argv]
 
 
+def _quiet_stdout() -> None:
+    """After standard output failed: what is left in its buffer goes to the null device, so
+    the interpreter's flush at exit adds no 'Exception ignored' lines to the one error line."""
+    try:
+        fd = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(fd, 1)
+        os.close(fd)
+    except OSError:
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     argv = _tui_options_first(parser, list(sys.argv[1:] if argv is None else argv))
@@ -162,9 +173,15 @@ def main(argv: list[str] | None = None) -> int:
         try:
             _check_text_args(args)
             status = int(func(args) or 0)
+            sys.stdout.flush()  # a full disk behind '> file' is found here, not at exit
             for where, w in take_deferred_warnings():
                 print(_one_line(f"station: {where}: warning: {w}"), file=sys.stderr)
             return status
+        except OutputError as exc:
+            _quiet_stdout()
+            take_deferred_warnings()
+            print(_one_line(f"station: {exc}"), file=sys.stderr)
+            return exc.exit_status
         except StationError as exc:
             held = take_deferred_warnings()
             also = "".join(f"; warning: {w}" for _, w in held)
