@@ -783,10 +783,12 @@ def _blocks(f, block_bytes: int, path: str, first_line: int) -> Iterator[bytes]:
             block += tail
             start = block.rfind(b"\n", 0, len(block) - 1) + 1
             if len(block.rstrip(b"\r\n")) - start > _MAX_DATA_LINE:
+                nul = block.find(b"\0", start)
                 raise InputError(
                     path,
                     lineno + block.count(b"\n", 0, start),
-                    f"line longer than {_MAX_DATA_LINE} bytes: not a capture row",
+                    f"line longer than {_MAX_DATA_LINE} bytes: not a capture row"
+                    + (f" (NUL bytes from column {nul - start + 1}: a part never written?)" if nul >= 0 else ""),
                 )
         lineno += block.count(b"\n")
         yield block
