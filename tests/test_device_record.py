@@ -405,3 +405,18 @@ def test_a_new_recording_does_not_replace_a_partial_not_yet_recovered(tmp_path):
     with pytest.raises(InputError, match="record --recover"):
         CaptureStream(str(tmp_path / "k.csv"), ["t", "ax", "ay", "az"], {"accel_unit": "V"})
     assert partial.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["k.csv.partial"]
+
+
+@pytest.mark.parametrize("key", ["complete", "incomplete", "recovered", "gaps", "gap_1", "samples", "station-capture"])
+def test_meta_cannot_set_what_the_recording_says_about_itself(tmp_path, key):
+    """--meta incomplete=... on a recording that ran to its end gave 'complete: true' beside
+    'incomplete: ...'; --meta recovered=true marked a live recording as recovered. The keys
+    the recording writes about itself are refused, before the port is opened."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    out = tmp_path / "r.csv"
+    res = run_station(
+        "record", "--port", tmp_path / "no-such-port", "--seconds", "1", "--meta", f"{key}=x", "--out", out
+    )
+    assert_one_line_refusal(res, f"--meta {key}", "the recording writes it")
+    assert os.listdir(tmp_path) == []

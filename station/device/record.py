@@ -29,6 +29,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 import tempfile
 import threading
 import time
@@ -344,6 +345,14 @@ def record(
             stream.abandon()
 
 
+# what a recording writes about itself (_start_meta, _end_meta, the ending, recover_partial)
+_OWN_KEYS = frozenset(
+    {"station-capture", "recorded_at", "source", "protocol", "baud", "nominal_rate_hz", "samples", "gaps"}
+    | {"parse_errors", "parse_errors_by_kind", "dropped", "reconnects", "restarts", "segments", "duration_s"}
+    | {"complete", "incomplete", "last_data_s", "recovered"}
+)
+
+
 def _check_extra_meta(directory: str, procedure: str | None, extra: dict[str, str] | None) -> None:
     """Refuse metadata the capture reader would refuse, before the port is opened."""
     from station.capture import iter_capture_chunks
@@ -355,6 +364,8 @@ def _check_extra_meta(directory: str, procedure: str | None, extra: dict[str, st
     for k in meta:
         if not k or ":" in k or k != k.strip() or not k.isprintable():
             raise InputError(None, None, f"--meta {k!r}: not a usable key")
+        if k.lower() in _OWN_KEYS or re.fullmatch(r"gap_\d+", k.lower()):
+            raise InputError(None, None, f"--meta {k}: the recording writes it (what it saw of the device), not --meta")
     fd, tmp = tempfile.mkstemp(prefix=".station-record.", suffix=".tmp", dir=directory)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
