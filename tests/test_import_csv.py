@@ -358,3 +358,26 @@ def test_a_time_column_that_goes_back_by_less_than_a_wrap_is_still_refused(tmp_p
         "import", src, "--procedure", "gyro-drift", "--unit", "gyro=rad/s,t=us", "--out", tmp_path / "o.csv"
     )
     assert_one_line_refusal(res, ":5: time goes backwards")
+
+
+@pytest.mark.parametrize(
+    ("mapping", "extra", "says"),
+    [
+        ("t=t,gx=a,gy=a,gz=c", (), "--map: column 'a' (2) is given for both gx and gy"),
+        ("t=1,gx=2,gy=3,gz=4,temp_c=a", (), "--map: column 'a' (2) is given for both gx and temp_c"),
+        ("t=t,gx=a,gy=b,gz=c", ("--rate", "100"), "--rate is for a file without a time column"),
+    ],
+    ids=["one-column-two-axes", "by-name-and-number", "rate-beside-t"],
+)
+def test_a_mapping_that_cannot_mean_what_it_says_is_refused(tmp_path, mapping, extra, says):
+    """--map gx=a,gy=a gave two gyro axes one column's samples, --map gx=2,temp_c=a made the
+    gyro's x rate the temperature, and --rate beside a mapped t column was ignored: each
+    imported with exit 0. Refused in one line, nothing written."""
+    src = tmp_path / "bench.csv"
+    src.write_text("t,a,b,c\n" + "".join(f"{i * 0.01:.2f},0.1,0.2,0.3\n" for i in range(300)))
+    out = tmp_path / "out.csv"
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--map", mapping, "--unit", "gyro=rad/s,t=s", *extra, "--out", out
+    )
+    assert_one_line_refusal(res, says)
+    assert not out.exists()

@@ -534,6 +534,15 @@ def read_plain(
                 hi,
                 f"--map {target}={source}: no column {source!r} in the header ({', '.join(header)})",
             )
+    taken: dict[int, str] = {}
+    for target, j in cols.items():  # one column's samples as two quantities (gx=a,gy=a; gx=2,temp_c=a)
+        if j in taken:
+            raise InputError(
+                path, hi, f"--map: column {header[j]!r} ({j + 1}) is given for both {taken[j]} and {target}"
+            )
+        taken[j] = target
+    if rate_hz is not None and "t" in cols:
+        raise InputError(None, None, "--rate is for a file without a time column; t is mapped (leave out one of them)")
     kinds_present = {KIND_OF[c] for c in cols if c in KIND_OF}
     for kind in sorted(kinds_present):
         unit = units.get(kind)
