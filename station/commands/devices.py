@@ -98,6 +98,11 @@ def _tolerances(items: list[str], contexts: list[dict]) -> dict | None:
     for item in items:
         name, sep, value = item.rpartition("=")
         name = name.strip()
+        if sep and name:
+            try:  # a typo (dirft) was stored and never checked, as a limit's was
+                _check_limit_name(item, name, contexts)
+            except ValueError as exc:
+                raise InputError(None, None, f"--tolerance {exc}") from None
         ctx, unit = _typed("--tolerance", item, name, contexts) if sep and name else ({}, "")
         try:
             number = float(value)
