@@ -141,6 +141,36 @@ def _tui_options_first(parser: argparse.ArgumentParser, argv: list[str]) -> list
     return ["tui", *argv]
 
 
+class _Terminated(BaseException):
+    """SIGTERM (kill, timeout, systemd stop) raised where the command is, so that what it was
+    writing unwinds as on Ctrl-C: the atomic write's temporary removed, a transaction rolled back."""
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds(args: argparse.Namespace):
+    """While a command runs (not the TUI, which owns its signals), SIGTERM raises _Terminated.
+    Only in the main thread and only where SIGTERM has its default action (an ignored one stays
+    ignored); the old handler is put back after."""
+    import signal
+    import threading
+
+    def _raise(signum, frame):  # noqa: ARG001
+        raise _Terminated()
+
+    if (
+        getattr(args, "command", None) in _TERMINAL_APPS
+        or threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+    ):
+        yield
+        return
+    signal.signal(signal.SIGTERM, _raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _quiet_stdout() -> None:
     """After standard output failed: what is left in its buffer goes to the null device, so
     the interpreter's flush at exit adds no 'Exception ignored' lines to the one error line."""
@@ -166,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
             args = parser.parse_args(["walkthrough"])
         func = args.func
     debug = bool(os.environ.get("STATION_DEBUG"))
-    with warnings.catch_warnings(), _safe_streams(args):
+    with warnings.catch_warnings(), _safe_streams(args), _sigterm_unwinds(args):
         if not debug:  # numerics' RuntimeWarnings are not the operator's business: results carry warnings
             warnings.simplefilter("ignore", RuntimeWarning)
         take_deferred_warnings()  # none from an earlier main() in this process
@@ -190,6 +220,9 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print("station: interrupted", file=sys.stderr)
             return 130
+        except _Terminated:
+            print("station: terminated", file=sys.stderr)
+            return 143
         except BrokenPipeError:
             return 0
         except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
