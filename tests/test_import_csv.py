@@ -381,3 +381,18 @@ def test_a_mapping_that_cannot_mean_what_it_says_is_refused(tmp_path, mapping, e
     )
     assert_one_line_refusal(res, says)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("device", ["IMU\n42", "\x1b[31mIMU", " IMU"])
+def test_a_device_id_no_capture_can_hold_is_refused_naming_the_option(tmp_path, device):
+    """import --device 'IMU<newline>42' read the whole file, then blamed the output
+    ('out.csv: metadata 'device' ... cannot be written'). Refused first, naming --device."""
+    src = tmp_path / "bench.csv"
+    src.write_text("t,a,b,c\n" + "".join(f"{i * 0.01:.2f},0.1,0.2,0.3\n" for i in range(300)))
+    out = tmp_path / "out.csv"
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--map", "t=t,gx=a,gy=b,gz=c", "--unit", "gyro=rad/s,t=s",
+        "--device", device, "--out", out,
+    )  # fmt: skip
+    assert_one_line_refusal(res, "--device ", "control character or spaces at its ends")
+    assert str(out) not in res.stderr and not out.exists()
