@@ -46,11 +46,6 @@ def run(args: argparse.Namespace) -> int:
     from station.importers.options import options_from_args
 
     check_output(args.out)
-    device = getattr(args, "device", None)
-    if device is not None and (device != device.strip() or not device.isprintable()):  # found before the reading
-        raise InputError(
-            None, None, f"--device {device!r}: a capture's device cannot hold a control character or spaces at its ends"
-        )
     if os.path.exists(args.out) and os.path.exists(args.file) and os.path.samefile(args.out, args.file):
         raise InputError(args.out, None, "--out is the input file: choose another name")
     capture, warnings = import_file(args.file, options_from_args(args))

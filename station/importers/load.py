@@ -128,6 +128,11 @@ def is_station_capture(path) -> bool:
 
 def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     """``path`` as a capture (not yet written) and the reader's warnings."""
+    device = opts.device
+    if device is not None and (device != device.strip() or not device.isprintable()):  # found before the reading
+        raise InputError(
+            None, None, f"--device {device!r}: a capture's device cannot hold a control character or spaces at its ends"
+        )
     fmt = opts.fmt or detect(path)
     if fmt is None:
         if is_station_capture(path):
