@@ -105,3 +105,24 @@ def test_a_gps_time_that_is_no_calendar_date_leaves_the_date_out_with_a_warning(
     assert "warning" in res.stderr and "no calendar date" in res.stderr, res.stderr
     meta = read_capture(out).meta
     assert "date" not in meta and "latitude_deg" in meta
+
+
+@pytest.mark.parametrize("command", ["import", "inspect"])
+def test_a_control_character_in_a_logs_text_is_kept_escaped_not_the_whole_log_refused(tmp_path, shared_data, command):
+    """One flipped byte in the ULog's hardware name (ver_hw 'CUBEPILOT_...' -> 'C<LF>BEPILOT_...')
+    made the board and device metadata unwritable: import refused the whole log, and
+    calibrate, diagnose and inspect named the importer's temporary file (station-import-.../capture.csv).
+    The text is kept with the character shown escaped, a warning says so, the samples are read."""
+    data = bytearray((shared_data / "px4_ulog" / "original" / "sample_log_small.ulg").read_bytes())
+    i = data.index(b"ver_hwCUBEPILOT") + len(b"ver_hw")
+    data[i + 1] = 0x0A
+    log = tmp_path / "hw.ulg"
+    log.write_bytes(bytes(data))
+    out = tmp_path / "out.csv"
+    args = ["--out", out] if command == "import" else []
+    res = run_station(command, log, "--procedure", "gyro-drift", "--source", "combined", *args)
+    assert res.returncode == 0, res.stderr
+    assert "station-import" not in res.stderr and "control character" in res.stderr, res.stderr
+    if command == "import":
+        meta = read_capture(out).meta
+        assert meta["board"].startswith("C\\nBEPILOT_CUBEORANGE") and meta["device"].startswith("C\\nBEPILOT")

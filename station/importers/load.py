@@ -162,7 +162,26 @@ def capture_of(
         from station.importers import px4
 
         device = px4.default_device(imported, primary(procedure))
-    return to_capture(path, imported, procedure, device=device), list(imported.warnings)
+    capture = to_capture(path, imported, procedure, device=device)
+    _escape_text(capture.meta, imported.warnings)
+    return capture, list(imported.warnings)
+
+
+def _escape_text(meta: dict[str, str], warnings: list[str]) -> None:
+    """Metadata text from a log (a board name, a firmware string) with a control character or
+    spaces at its ends, which no capture can hold, kept with the characters shown escaped and
+    a warning: one flipped byte in a name refused the whole log."""
+    from station.textsafe import safe
+
+    changed = []
+    for key, value in meta.items():
+        if isinstance(value, str) and (value != value.strip() or not value.isprintable()):
+            meta[key] = safe(value.strip()) or "?"
+            changed.append(key)
+    if changed:
+        warnings.append(
+            f"metadata {', '.join(changed)} held a control character (a corrupt log?): kept with it shown escaped"
+        )
 
 
 def checked(path, capture: Capture) -> Capture:
@@ -170,8 +189,11 @@ def checked(path, capture: Capture) -> Capture:
     ``station import`` followed by ``calibrate`` would meet them), named after ``path``."""
     with tempfile.TemporaryDirectory(prefix="station-import-") as tmp:
         tmp_path = os.path.join(tmp, "capture.csv")
-        write_capture(tmp_path, capture)
-        out = read_capture(tmp_path)
+        try:
+            write_capture(tmp_path, capture)
+            out = read_capture(tmp_path)
+        except InputError as exc:  # named after the file the operator gave, not the temporary one
+            raise InputError(path, None, f"{exc.message} (in the capture made from it)") from None
     out.path = os.fspath(path)
     out.meta_lines = {}
     out.header_line = None
