@@ -400,7 +400,8 @@ def test_a_device_id_no_capture_can_hold_is_refused_naming_the_option(tmp_path, 
 
 def test_calibrate_of_a_log_with_a_device_id_no_capture_can_hold_names_the_option(shared_data):
     """calibrate flight.ulg --device 'a<newline>b' named the importer's temporary capture
-    ('station-import-.../capture.csv: metadata 'device' ...', in the system's temporary folder), a path the operator never gave."""
+    ('station-import-.../capture.csv: metadata 'device' ...', in the system's temporary folder),
+    a path the operator never gave."""
     log = shared_data / "px4_ulog" / "original" / "sample_log_small.ulg"
     res = run_station("calibrate", log, "--procedure", "gyro-drift", "--device", "a\nb")
     assert_one_line_refusal(res, "--device 'a\\nb'", "control character")
