@@ -147,14 +147,16 @@ def test_simulate_truth_to_an_unwritable_place(tmp_path, capsys, where):
     [("{tmp}/", "cannot write: is a folder"), ("{tmp}/new/", "cannot write: is a folder"), ("", "empty file name")],
     ids=["folder-slash", "missing-folder-slash", "empty"],
 )
-@pytest.mark.parametrize("command", ["simulate", "export-capture"])
-def test_an_output_that_names_a_folder_says_so(tmp_path, capsys, db_with_calibration, out, says, command):
+@pytest.mark.parametrize("command", ["simulate", "export-capture", "report"])
+def test_an_output_that_names_a_folder_says_so(tmp_path, capsys, monkeypatch, db_with_calibration, out, says, command):
     """--out DIR/ said 'cannot write: Not a directory' about a directory; --out '' said
-    'cannot write: No such file or directory' naming nothing."""
+    'cannot write: No such file or directory' naming nothing (report wrote its default name)."""
+    monkeypatch.chdir(tmp_path)  # a default-named file would appear here
     target = out.format(tmp=tmp_path)
     argv = {
         "simulate": ["simulate", "--procedure", "accel-centrifuge", "--out", target],
         "export-capture": ["export-capture", "1", "-o", target],
+        "report": ["report", "1", "-o", target],  # -o '' wrote calibration-1.html in the current folder
     }[command]
     before = sorted(os.listdir(tmp_path))
     code, stdout, err = run(capsys, "--db", db_with_calibration, *argv)
