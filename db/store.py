@@ -131,6 +131,12 @@ class Store:
         try:
             self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
             self.conn.execute("PRAGMA foreign_keys = ON")
+            newer = self._unknown_migrations()
+            if newer:  # written by a newer station: reading or writing it as this schema could lose what it keeps
+                raise sqlite3.DatabaseError(
+                    f"written by a newer station (schema step {', '.join(newer)}, which this version does not "
+                    "have): use that version or a later one (left as it is)"
+                )
             if not memory and self.conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
                 self.conn.execute("PRAGMA journal_mode = WAL")
             if self._pending_migrations():
@@ -142,6 +148,16 @@ class Store:
             raise
 
     # --- plumbing -----------------------------------------------------------------------
+
+    def _unknown_migrations(self) -> list[str]:
+        """Migrations of the station's set that this version does not have (a newer station's)."""
+        try:
+            rows = self.conn.execute(
+                "SELECT name FROM _sqlite_migrations WHERE migration_set = ? ORDER BY id", [MIGRATION_SET]
+            ).fetchall()
+        except sqlite3.OperationalError:
+            return []
+        return [r[0] for r in rows if r[0] not in MIGRATION_NAMES]
 
     def _pending_migrations(self) -> list[str]:
         try:

@@ -34,7 +34,7 @@ import numpy as np
 
 from solvers.units import ACCEL_UNITS, GYRO_UNITS, MAG_UNITS, RAW_UNITS
 from station.errors import InputError
-from station.fileio import atomic_open, cannot_write, looks_utf16, open_input
+from station.fileio import atomic_open, cannot_write, log_kind, looks_utf16, open_input
 from station.procedures import registry
 
 FORMAT_VERSION = "1"
@@ -511,6 +511,11 @@ def _read_head(path: str) -> _Head:
                     raise InputError(path, lineno, "carriage returns (\\r) end the lines; use LF or CRLF line endings")
                 raise InputError(path, lineno, f"line longer than {_MAX_HEAD_LINE} bytes: not a capture file")
             if lineno == 1:
+                log = log_kind(raw + f.peek(8)[:8])
+                if log:  # station noise flight.ulg: not 'NUL byte at column 13'
+                    raise InputError(
+                        path, None, f"{log[1]}, not a capture: turn it into one with station import FILE --procedure P"
+                    )
                 if raw.startswith(codecs.BOM_UTF8):
                     raw = raw[len(codecs.BOM_UTF8) :]
                 elif looks_utf16(raw + f.peek(64)[:64]):  # with a byte-order mark or without
@@ -778,10 +783,12 @@ def _blocks(f, block_bytes: int, path: str, first_line: int) -> Iterator[bytes]:
             block += tail
             start = block.rfind(b"\n", 0, len(block) - 1) + 1
             if len(block.rstrip(b"\r\n")) - start > _MAX_DATA_LINE:
+                nul = block.find(b"\0", start)
                 raise InputError(
                     path,
                     lineno + block.count(b"\n", 0, start),
-                    f"line longer than {_MAX_DATA_LINE} bytes: not a capture row",
+                    f"line longer than {_MAX_DATA_LINE} bytes: not a capture row"
+                    + (f" (NUL bytes from column {nul - start + 1}: a part never written?)" if nul >= 0 else ""),
                 )
         lineno += block.count(b"\n")
         yield block

@@ -15,7 +15,7 @@ import sys
 import warnings
 
 from station import __version__
-from station.errors import InputError, StationError, take_deferred_warnings
+from station.errors import InputError, OutputError, StationError, take_deferred_warnings
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
@@ -113,7 +113,7 @@ def _safe_streams(args: argparse.Namespace):
         return
     as_json = bool(getattr(args, "json", False)) or getattr(args, "format", None) == "json"
     out, err = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = SafeStream(out, json=as_json), SafeStream(err)
+    sys.stdout, sys.stderr = SafeStream(out, json=as_json, name="standard output"), SafeStream(err)
     try:
         yield
     finally:
@@ -141,6 +141,47 @@ def _tui_options_first(parser: argparse.ArgumentParser, argv: list[str]) -> list
     return ["tui", *argv]
 
 
+class _Terminated(BaseException):
+    """SIGTERM (kill, timeout, systemd stop) raised where the command is, so that what it was
+    writing unwinds as on Ctrl-C: the atomic write's temporary removed, a transaction rolled back."""
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds(args: argparse.Namespace):
+    """While a command runs (not the TUI, which owns its signals), SIGTERM raises _Terminated.
+    Only in the main thread and only where SIGTERM has its default action (an ignored one stays
+    ignored); the old handler is put back after."""
+    import signal
+    import threading
+
+    def _raise(signum, frame):  # noqa: ARG001
+        raise _Terminated()
+
+    if (
+        getattr(args, "command", None) in _TERMINAL_APPS
+        or threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+    ):
+        yield
+        return
+    signal.signal(signal.SIGTERM, _raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _quiet_stdout() -> None:
+    """After standard output failed: what is left in its buffer goes to the null device, so
+    the interpreter's flush at exit adds no 'Exception ignored' lines to the one error line."""
+    try:
+        fd = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(fd, 1)
+        os.close(fd)
+    except OSError:
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     argv = _tui_options_first(parser, list(sys.argv[1:] if argv is None else argv))
@@ -155,16 +196,22 @@ def main(argv: list[str] | None = None) -> int:
             args = parser.parse_args(["walkthrough"])
         func = args.func
     debug = bool(os.environ.get("STATION_DEBUG"))
-    with warnings.catch_warnings(), _safe_streams(args):
+    with warnings.catch_warnings(), _safe_streams(args), _sigterm_unwinds(args):
         if not debug:  # numerics' RuntimeWarnings are not the operator's business: results carry warnings
             warnings.simplefilter("ignore", RuntimeWarning)
         take_deferred_warnings()  # none from an earlier main() in this process
         try:
             _check_text_args(args)
             status = int(func(args) or 0)
+            sys.stdout.flush()  # a full disk behind '> file' is found here, not at exit
             for where, w in take_deferred_warnings():
                 print(_one_line(f"station: {where}: warning: {w}"), file=sys.stderr)
             return status
+        except OutputError as exc:
+            _quiet_stdout()
+            take_deferred_warnings()
+            print(_one_line(f"station: {exc}"), file=sys.stderr)
+            return exc.exit_status
         except StationError as exc:
             held = take_deferred_warnings()
             also = "".join(f"; warning: {w}" for _, w in held)
@@ -173,6 +220,9 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print("station: interrupted", file=sys.stderr)
             return 130
+        except _Terminated:
+            print("station: terminated", file=sys.stderr)
+            return 143
         except BrokenPipeError:
             return 0
         except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback

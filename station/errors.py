@@ -26,6 +26,11 @@ class InputError(StationError):
         return ":".join(where + [" " + self.message]) if where else self.message
 
 
+class OutputError(StationError):
+    """Standard output cannot take the result (a full disk behind ``> file``, a closed stream):
+    not the input's fault, so the line names standard output."""
+
+
 class UnsupportedError(StationError):
     """A valid capture that cannot support the procedure (too few positions, ...)."""
 

@@ -141,8 +141,24 @@ def same_file(a, b) -> bool:
 
 def check_output(path) -> os.stat_result | None:
     """Refuse an output ``path`` that exists and is no regular file (a named pipe, a device):
-    the atomic rename would replace it. Returns its stat (None when it does not exist; a
-    folder is left to the rename, which says why)."""
+    the atomic rename would replace it; and one that names a folder or lies in none (the
+    rename said 'Not a directory' of a folder). Returns its stat (None when it does not
+    exist). ``-`` is refused too: to the operator it is standard output (``report -o -``),
+    which a file write never is; a file named so is ``./-``."""
+    path = os.fspath(path)
+    if path == "-":
+        raise InputError(
+            None,
+            None,
+            "'-' as an output file: standard output is not written here; name a file (./- for one named '-')",
+        )
+    if not path:
+        raise InputError(None, None, "cannot write: an empty file name")
+    if path.endswith(("/", os.sep)) or os.path.isdir(path):
+        raise InputError(path, None, "cannot write: is a folder; give a file name")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(path, None, f"cannot write: no folder {folder}")
     try:
         st = os.stat(path)
     except (OSError, ValueError):
@@ -179,6 +195,15 @@ def open_input(path, what: str = "a capture file") -> io.BufferedReader:
         os.close(fd)
         raise
     return os.fdopen(fd, "rb")
+
+
+# a binary log's first bytes: ULog's file magic, a DataFlash message header (HEAD1, HEAD2)
+LOG_MAGIC = ((b"ULog\x01\x12\x35", "px4", "a PX4 ULog file"), (b"\xa3\x95", "ardupilot", "an ArduPilot DataFlash log"))
+
+
+def log_kind(head: bytes) -> tuple[str, str] | None:
+    """(format, words) of the binary log whose first bytes are ``head``, or None."""
+    return next(((fmt, words) for magic, fmt, words in LOG_MAGIC if head.startswith(magic)), None)
 
 
 def looks_utf16(raw: bytes) -> bool:

@@ -16,9 +16,12 @@ stdout/stderr by a command (keeping the line breaks the command itself writes).
 
 from __future__ import annotations
 
+import contextlib
 import io
 import re
 import unicodedata
+
+from station.errors import OutputError
 
 _NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
 
@@ -97,25 +100,46 @@ class SafeStream(io.TextIOBase):
     Everything else (``buffer``, ``fileno``, ``isatty``, ``encoding``) is the wrapped stream's.
     """
 
-    def __init__(self, stream, *, json: bool = False):
+    def __init__(self, stream, *, json: bool = False, name: str | None = None):
         self._stream = stream
         self._json = json
+        self._name = name  # "standard output": a failed write is an OutputError naming it
+
+    @contextlib.contextmanager
+    def _failing(self):
+        """A write that fails (no space, a closed stream) as an OutputError naming the stream;
+        a broken pipe (``| head``) stays a BrokenPipeError."""
+        if self._name is None:
+            yield
+            return
+        if self._stream is None:
+            raise OutputError(f"cannot write {self._name}: it is closed")
+        try:
+            yield
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise OutputError(f"cannot write {self._name}: {exc.strerror or exc}") from None
 
     def write(self, s: str) -> int:
-        self._stream.write(safe_json_text(s) if self._json else safe(s, keep_newlines=True))
+        with self._failing():
+            self._stream.write(safe_json_text(s) if self._json else safe(s, keep_newlines=True))
         return len(s)
 
     def write_trusted(self, s: str) -> int:
         """Text the station composed with its own escape sequences (a coloured plot), every
         outside string in it already passed through :func:`safe`."""
-        return self._stream.write(s)
+        with self._failing():
+            return self._stream.write(s)
 
     def writelines(self, lines) -> None:
         for line in lines:
             self.write(line)
 
     def flush(self) -> None:
-        self._stream.flush()
+        with self._failing():
+            if self._stream is not None:
+                self._stream.flush()
 
     def writable(self) -> bool:
         return True

@@ -211,6 +211,14 @@ def test_drift_json_and_text_with_plot(capsys, filled):
     assert code == 2 and "no coefficient named 'Q[9]'" in err
 
 
+@pytest.mark.parametrize("json_flag", [[], ["--json"]])
+def test_drift_of_an_empty_param_name_is_refused(capsys, filled, json_flag):
+    """--param '' (an unset shell variable) said 'no accepted calibrations yet' (or printed [])
+    with exit 0 about a device that has three; an empty name is no coefficient."""
+    code, out, err = run(capsys, "drift", "IMU-1", "--param", "", *json_flag, "--db", filled)
+    assert code == 2 and out == "" and err.count("\n") == 1 and "no coefficient named ''" in err
+
+
 # --- due -------------------------------------------------------------------------------
 
 

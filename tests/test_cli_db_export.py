@@ -308,3 +308,24 @@ def test_an_output_that_is_the_database_is_refused_and_the_database_kept(tmp_pat
     assert open(db, "rb").read() == before
     with Store(db) as s:
         assert s.calibration(cid)["device_id"] == "G"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["export", "{cid}", "--format", "json"], ["export", "{cid}", "--format", "px4"], ["export-capture", "{cap}"]],
+    ids=["export-json", "export-px4", "export-capture"],
+)
+def test_dash_as_output_is_standard_output_as_for_report(tmp_path, capsys, db, monkeypatch, argv):
+    """`-o -` wrote a file named '-' in the current folder (report takes '-' as stdout, as its
+    help says): the same export on stdout, no file made."""
+    cid = _save(db, accel_result(device="A", B=B_TRUE, M=M_TRUE), accel_unit="m/s^2")
+    with Store(db) as s:
+        cap = s.calibration(cid)["capture_id"]
+    monkeypatch.chdir(tmp_path)
+    args = [a.format(cid=cid, cap=cap) for a in argv]
+    code, plain, err = run(capsys, *args, "--db", db)
+    assert code == 0 and plain, err
+    code, dashed, err = run(capsys, *args, "-o", "-", "--db", db)
+    assert code == 0 and err == ""
+    assert dashed == plain
+    assert not (tmp_path / "-").exists()

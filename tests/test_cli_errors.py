@@ -66,6 +66,34 @@ def test_calibrate_save_into_a_file_that_is_not_a_database(tmp_path, capsys, ldv
     assert db.read_bytes() == before  # refused, not overwritten
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [["calibrate", "{cap}", "--save", "--device", "D"], ["devices", "add", "E"], ["devices", "list"], ["verify"]],
+    ids=["save", "devices-add", "devices-list", "verify"],
+)
+def test_a_database_of_a_newer_station_is_refused_and_left_as_it_was(tmp_path, capsys, ldv_capture, argv):
+    """A database a newer station migrated (a schema step this version does not have) was read
+    and written as if it were this version's: a save skipped what the newer schema keeps and
+    anchors, verify passed it. Every command refuses it in one line and leaves it as it was."""
+    import sqlite3
+
+    db = tmp_path / "station.db"
+    assert run(capsys, "--db", db, "devices", "add", "D")[0] == 0
+    raw = sqlite3.connect(db)
+    with raw:
+        raw.execute(
+            "INSERT INTO _sqlite_migrations (migration_set, name, applied_at) VALUES ('station', '0099_future', 'x')"
+        )
+    raw.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    raw.close()
+    before = db.read_bytes()
+    code, out, err = run(capsys, "--db", db, *[a.format(cap=ldv_capture) for a in argv])
+    assert code == 2 and out == ""
+    line = one_line(err)
+    assert str(db) in line and "newer" in line and "0099_future" in line, line
+    assert db.read_bytes() == before
+
+
 def test_calibrate_save_into_a_directory(tmp_path, capsys, ldv_capture):
     folder = tmp_path / "adir"
     folder.mkdir()
@@ -111,6 +139,29 @@ def test_simulate_truth_to_an_unwritable_place(tmp_path, capsys, where):
     assert code == 2
     assert one_line(err).startswith(f"station: {target}: cannot write")
     assert not [p for p in tmp_path.rglob(".truth-*")]
+    assert not (tmp_path / "c.csv").exists()  # was: the capture written, the truth refused after it
+
+
+@pytest.mark.parametrize(
+    ("out", "says"),
+    [("{tmp}/", "cannot write: is a folder"), ("{tmp}/new/", "cannot write: is a folder"), ("", "empty file name")],
+    ids=["folder-slash", "missing-folder-slash", "empty"],
+)
+@pytest.mark.parametrize("command", ["simulate", "export-capture", "report"])
+def test_an_output_that_names_a_folder_says_so(tmp_path, capsys, monkeypatch, db_with_calibration, out, says, command):
+    """--out DIR/ said 'cannot write: Not a directory' about a directory; --out '' said
+    'cannot write: No such file or directory' naming nothing (report wrote its default name)."""
+    monkeypatch.chdir(tmp_path)  # a default-named file would appear here
+    target = out.format(tmp=tmp_path)
+    argv = {
+        "simulate": ["simulate", "--procedure", "accel-centrifuge", "--out", target],
+        "export-capture": ["export-capture", "1", "-o", target],
+        "report": ["report", "1", "-o", target],  # -o '' wrote calibration-1.html in the current folder
+    }[command]
+    before = sorted(os.listdir(tmp_path))
+    code, stdout, err = run(capsys, "--db", db_with_calibration, *argv)
+    assert code == 2 and stdout == "" and says in one_line(err), err
+    assert sorted(os.listdir(tmp_path)) == before
 
 
 def test_an_output_named_twice_or_the_input_is_refused_and_nothing_replaced(tmp_path, capsys):
@@ -638,3 +689,94 @@ def test_an_empty_device_id_is_refused(tmp_path, argv):
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     assert_one_line_refusal(run_station("--db", tmp_path / "s.db", *argv), "a device id must be non-empty text")
     assert not (tmp_path / "s.db").exists() or "G-1" not in (tmp_path / "s.db").read_bytes().decode("latin-1")
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (
+            [
+                "simulate",
+                "--procedure",
+                "ldv",
+                "--out",
+                "{out}",
+                "--option",
+                "duration_s=10",
+                "--option",
+                "duration_s=20",
+            ],
+            "--option: duration_s given twice",
+        ),
+        (
+            ["simulate", "--procedure", "ldv", "--out", "{out}", "--effect", "offset=1", "--effect", " offset=5"],
+            "--effect: offset given twice",
+        ),
+        (["devices", "add", "D", "--tolerance", "B=1", "--tolerance", "B=2"], "--tolerance: B given twice"),
+        (["devices", "add", "D", "--limit", "B=1:2", "--limit", "B=3:4"], "--limit: B given twice"),
+    ],
+    ids=["simulate-option", "simulate-effect", "devices-tolerance", "devices-limit"],
+)
+def test_a_name_given_twice_is_refused_as_import_refuses_it(tmp_path, capsys, argv, says):
+    """`--option duration_s=10 --option duration_s=20` simulated 20 s, `--tolerance B=1
+    --tolerance B=2` stored 2, without a word (the last one won); import's --map, --unit and
+    --topic refuse a name given twice. So do these, before anything is written."""
+    out = tmp_path / "sim.csv"
+    code, stdout, err = run(capsys, "--db", tmp_path / "station.db", *[a.format(out=out) for a in argv])
+    assert code == 2 and stdout == "" and says in one_line(err), err
+    assert sorted(os.listdir(tmp_path)) == []
+
+
+@pytest.mark.parametrize(
+    "argv", [["calibrate", "{cap}", "--save", "--device", "D"], ["devices", "add", "E"]], ids=["save", "devices-add"]
+)
+def test_a_database_another_connection_holds_is_named_as_such_and_left_as_it_was(
+    tmp_path, capsys, ldv_capture, monkeypatch, argv
+):
+    """A second connection holding a write transaction (another station saving, a sqlite3
+    shell left in BEGIN) past the busy wait gave 'database is locked', which read as a
+    damaged file. The line says another process held it, for how long, and that nothing was
+    written; the holder's transaction and the file are untouched. (The 30 s wait is shortened.)"""
+    import sqlite3
+
+    import db.store
+
+    db_file = tmp_path / "station.db"
+    assert run(capsys, "--db", db_file, "devices", "add", "D")[0] == 0
+    monkeypatch.setattr(db.store, "BUSY_TIMEOUT_S", 0.2)
+    holder = sqlite3.connect(db_file, isolation_level=None)
+    holder.execute("BEGIN IMMEDIATE")  # the write lock, as a save in progress holds it
+    try:
+        code, out, err = run(capsys, "--db", db_file, *[a.format(cap=ldv_capture) for a in argv])
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+    assert code == 2 and out == ""
+    line = one_line(err)
+    assert str(db_file) in line and "another process held it" in line and "nothing written" in line, line
+    code, out, _ = run(capsys, "--db", db_file, "verify")
+    assert code == 0, out
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full on this system")
+@pytest.mark.parametrize("command", ["calibrate", "calibrate-json", "export-capture", "inspect"])
+def test_a_full_standard_output_is_named_not_blamed_on_the_input(tmp_path, ldv_capture, db_with_calibration, command):
+    """`station export-capture 1 > cap.csv` on a full disk said 'ldv.csv: cannot process this
+    input (OSError: No space left on device)', blaming the capture; a short result failed only
+    at exit, with Python's 'Exception ignored' lines. One line names standard output."""
+    argv = {
+        "calibrate": ["calibrate", ldv_capture],
+        "calibrate-json": ["calibrate", ldv_capture, "--json"],
+        "export-capture": ["--db", db_with_calibration, "export-capture", "1"],
+        "inspect": ["inspect", ldv_capture],
+    }[command]
+    with open("/dev/full", "w") as full:
+        res = subprocess.run(
+            [sys.executable, "-m", "station", *map(str, argv)],
+            stdout=full,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=120,
+        )
+    assert res.returncode == 2, res.stderr
+    assert res.stderr == "station: cannot write standard output: No space left on device\n", res.stderr

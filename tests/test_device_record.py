@@ -369,3 +369,54 @@ def test_a_bad_port_or_url_is_one_line_saying_what_is_wrong(tmp_path, protocol, 
     assert_one_line_refusal(res, f"station: {port}: {says}")
     assert not out.exists()
     assert "Errno" not in res.stderr and "could not open port" not in res.stderr.lower()
+
+
+@pytest.mark.parametrize("spelling", ["same", "dot"])
+def test_recover_into_the_partial_itself_is_refused_and_the_partial_kept(tmp_path, spelling):
+    """record --recover k.csv.partial --out k.csv.partial wrote the capture over the partial,
+    then removed the partial as recovered: exit 0, 'recovered', and the recording gone."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    partial = tmp_path / "k.csv.partial"
+    res = run_station("simulate", "--procedure", "gyro-drift", "--seed", "1", "--out", partial)
+    assert res.returncode == 0, res.stderr
+    before = partial.read_bytes()
+    out = partial if spelling == "same" else tmp_path / "." / partial.name
+    res = run_station("record", "--recover", partial, "--out", out)
+    assert_one_line_refusal(res, "the .partial file being recovered")
+    assert partial.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["k.csv.partial"]
+
+
+def test_a_new_recording_does_not_replace_a_partial_not_yet_recovered(tmp_path):
+    """A killed recording leaves k.csv.partial; the next `record --out k.csv` wrote its own
+    rows into that name and removed it when done: the killed recording was lost without a
+    word. Refused before the port is opened, the partial kept; the writer itself never
+    truncates one either."""
+    from station.device.record import CaptureStream
+    from station.errors import InputError
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    partial = tmp_path / "k.csv.partial"
+    res = run_station("simulate", "--procedure", "gyro-drift", "--seed", "1", "--out", partial)
+    assert res.returncode == 0, res.stderr
+    before = partial.read_bytes()
+    res = run_station("record", "--port", tmp_path / "no-such-port", "--seconds", "1", "--out", tmp_path / "k.csv")
+    assert_one_line_refusal(res, f"{partial}: ", "record --recover")
+    with pytest.raises(InputError, match="record --recover"):
+        CaptureStream(str(tmp_path / "k.csv"), ["t", "ax", "ay", "az"], {"accel_unit": "V"})
+    assert partial.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["k.csv.partial"]
+
+
+@pytest.mark.parametrize("key", ["complete", "incomplete", "recovered", "gaps", "gap_1", "samples", "station-capture"])
+def test_meta_cannot_set_what_the_recording_says_about_itself(tmp_path, key):
+    """--meta incomplete=... on a recording that ran to its end gave 'complete: true' beside
+    'incomplete: ...'; --meta recovered=true marked a live recording as recovered. The keys
+    the recording writes about itself are refused, before the port is opened."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    out = tmp_path / "r.csv"
+    res = run_station(
+        "record", "--port", tmp_path / "no-such-port", "--seconds", "1", "--meta", f"{key}=x", "--out", out
+    )
+    assert_one_line_refusal(res, f"--meta {key}", "the recording writes it")
+    assert os.listdir(tmp_path) == []

@@ -108,7 +108,7 @@ def test_no_folder_is_one_operator_line_and_creates_nothing(tmp_path):
     with pytest.raises(InputError) as info:
         with cannot_write(path):
             atomic_write_text(path, "x")
-    assert str(info.value) == f"{path}: cannot write: No such file or directory"
+    assert str(info.value) == f"{path}: cannot write: no folder {path.parent}"  # checked before anything is made
     assert os.listdir(tmp_path) == []
 
 

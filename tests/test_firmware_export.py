@@ -577,3 +577,18 @@ def test_px4_magnetometer_for_a_firmware_without_odiag_writes_the_diagonal_only(
         vals, vecs = np.linalg.eigh(W_true.T @ W_true)
         S_true = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
         assert np.abs(np.array([p[f"CAL_MAG0_{a}SCALE"] for a in XYZ]) - np.diag(S_true)).max() < 5e-3
+
+
+@pytest.mark.parametrize("vehicle", ["-1,999", "0,1", "256,1", "1,-1", "1,256"])
+def test_qgc_vehicle_ids_outside_mavlinks_byte_are_refused(capsys, db, vehicle):
+    """MAVLink's system and component ids are one byte each, system 1-255 (0 is broadcast):
+    --vehicle=-1,999 wrote '-1<TAB>999<TAB>CAL_...' lines that no vehicle answers to."""
+    cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
+    code, out, err = run(
+        capsys, "export", cid, "--format", "qgc", "--device-id", "2424842", f"--vehicle={vehicle}", "--db", db
+    )
+    assert code == 2 and out == "" and err.count("\n") == 1 and f"--vehicle {vehicle!r}" in err and "1-255" in err
+    code, out, err = run(
+        capsys, "export", cid, "--format", "qgc", "--device-id", "2424842", "--vehicle=255,0", "--db", db
+    )
+    assert code == 0 and "255\t0\tCAL_GYRO0_ID" in out, err

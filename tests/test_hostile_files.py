@@ -7,6 +7,7 @@ stdout, nothing written.
 
 from __future__ import annotations
 
+import os
 import resource
 import subprocess
 import sys
@@ -219,3 +220,15 @@ def test_noise_of_a_record_with_motion_says_so(shared_data):
     assert any("of the record moves" in w for w in turn.get("warnings", [])), turn.get("warnings")
     still = run_station("noise", shared_data / "sunsided_marg" / "sunsided_unmoved_x_forward.capture.csv", "--json")
     assert "warnings" not in json.loads(still.stdout)
+
+
+def test_a_capture_cut_into_a_1_gib_hole_of_zeros_names_the_hole_at_once(tmp_path):
+    """A capture whose file was sized but never written past a point (a crash, a copy onto a
+    full card): a sparse 1 GiB of NUL bytes after 200 good rows. Refused at once on the line
+    where the hole starts, saying what is there (it said only 'line longer than 1048576 bytes')."""
+    path = tmp_path / "holed.csv"
+    rows = "".join(f"{i * 0.01:.2f},0.01,0.02,-0.03\n" for i in range(200))
+    path.write_text("# station-capture: 1\n# procedure: gyro-drift\n# gyro_unit: rad/s\nt,gx,gy,gz\n" + rows)
+    os.truncate(path, 2**30)
+    res = run_station("calibrate", path, subprocess_run=True)
+    assert_one_line_refusal(res, f"{path}:205: ", "NUL bytes from column 1")

@@ -65,3 +65,64 @@ def test_corrupt_log_one_line_or_a_valid_capture(tmp_path, sources, suffix, kind
     else:
         assert res.returncode == 2 and res.stdout == "" and not out.exists()
         assert res.stderr.count("\n") == 1 and str(log) in res.stderr
+
+
+def test_a_ulog_parameter_whose_type_is_corrupt_is_left_out_with_a_warning(tmp_path, shared_data):
+    """One flipped byte in a parameter's definition ('float' -> 'flxat') leaves pyulog with the
+    value as raw bytes; the import ended in the catch-all ('could not convert string to float').
+    The parameter is left out of param.*, named in a warning, and the rest is imported."""
+    data = (shared_data / "px4_ulog" / "original" / "sample_log_small.ulg").read_bytes()
+    assert data.count(b"float CAL_ACC0_XOFF") == 1
+    log = tmp_path / "flipped.ulg"
+    log.write_bytes(data.replace(b"float CAL_ACC0_XOFF", b"flxat CAL_ACC0_XOFF"))
+    out = tmp_path / "out.csv"
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--source", "combined", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("\n") == 1 and res.stdout.startswith(f"{out}: ")
+    assert "CAL_ACC0_XOFF" in res.stderr and "warning" in res.stderr, res.stderr
+    meta = read_capture(out).meta
+    assert "param.CAL_ACC0_XOFF" not in meta
+    assert meta["param.CAL_ACC0_YOFF"] == "-0.043480888"
+
+
+def test_a_gps_time_that_is_no_calendar_date_leaves_the_date_out_with_a_warning(tmp_path):
+    """A flipped byte in the GPS message's TimeUS put the log's start 290 000 years before
+    Christ: the import ended in the catch-all ('year -541429 is out of range'). The samples
+    are imported without a date, and a warning says why."""
+    import struct
+
+    log = tmp_path / "gps.bin"
+    write_bin(log)
+    data = log.read_bytes()
+    gms = struct.pack("<IH", 3000, 2300)  # GPS: TimeUS (Q), I, Status (B B), GMS (I), GWk (H)
+    assert data.count(gms) == 1
+    i = data.index(gms) - 10
+    assert struct.unpack("<Q", data[i : i + 8]) == (525000,)
+    log.write_bytes(data[:i] + struct.pack("<Q", 2**63 + 525000) + data[i + 8 :])
+    out = tmp_path / "out.csv"
+    res = run_station("import", log, "--procedure", "compass", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert "warning" in res.stderr and "no calendar date" in res.stderr, res.stderr
+    meta = read_capture(out).meta
+    assert "date" not in meta and "latitude_deg" in meta
+
+
+@pytest.mark.parametrize("command", ["import", "inspect"])
+def test_a_control_character_in_a_logs_text_is_kept_escaped_not_the_whole_log_refused(tmp_path, shared_data, command):
+    """One flipped byte in the ULog's hardware name (ver_hw 'CUBEPILOT_...' -> 'C<LF>BEPILOT_...')
+    made the board and device metadata unwritable: import refused the whole log, and
+    calibrate, diagnose and inspect named the importer's temporary file (station-import-.../capture.csv).
+    The text is kept with the character shown escaped, a warning says so, the samples are read."""
+    data = bytearray((shared_data / "px4_ulog" / "original" / "sample_log_small.ulg").read_bytes())
+    i = data.index(b"ver_hwCUBEPILOT") + len(b"ver_hw")
+    data[i + 1] = 0x0A
+    log = tmp_path / "hw.ulg"
+    log.write_bytes(bytes(data))
+    out = tmp_path / "out.csv"
+    args = ["--out", out] if command == "import" else []
+    res = run_station(command, log, "--procedure", "gyro-drift", "--source", "combined", *args)
+    assert res.returncode == 0, res.stderr
+    assert "station-import" not in res.stderr and "control character" in res.stderr, res.stderr
+    if command == "import":
+        meta = read_capture(out).meta
+        assert meta["board"].startswith("C\\nBEPILOT_CUBEORANGE") and meta["device"].startswith("C\\nBEPILOT")

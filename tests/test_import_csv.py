@@ -247,6 +247,11 @@ def test_plain_csv_without_time_uses_rate(tmp_path):
             ("--unit", "accel=g"),
             ":3: time goes backwards",
         ),
+        (  # was: 'fewer than 2 accelerometer samples where all sensors overlap', no line
+            "t,ax,ay,az\n" + "5,1,2,3\n" * 50,
+            ("--unit", "accel=g"),
+            ":2: the time axis does not advance (50 rows, all at t = 5)",
+        ),
         (
             "t,ax,ay,az\n0,1,2,3\n",
             ("--unit", "accel=furlongs"),
@@ -323,3 +328,81 @@ def test_a_loggers_preamble_above_the_header_is_skipped_and_said(tmp_path, share
         "import", src, "--procedure", "gyro-drift", "--map", "ax=acc_x", *units, "--out", tmp_path / "c.csv"
     )
     assert_one_line_refusal(res, f"{src}:1:", "no column 'acc_x'")
+
+
+@pytest.mark.parametrize(("bits", "unit", "step"), [(32, "us", 10_000), (16, "ms", 10), (32, "ms", 10)])
+def test_a_wrapping_counter_as_time_is_unwrapped_with_a_warning(tmp_path, bits, unit, step):
+    """A logger's time stamp from a 32-bit micros() (wraps after 71.6 min) or a 16-bit
+    millisecond counter (65.5 s) was refused at the wrap ('time goes backwards'): the log could
+    not be imported at all. Each wrap adds 2**bits; a warning says so; the rows are all kept."""
+    wrap = 2**bits
+    counts = (wrap - 5 * step + step * np.arange(400)) % wrap
+    src = tmp_path / "logger.csv"
+    src.write_text("t,gx,gy,gz\n" + "".join(f"{c},0.01,0.02,-0.01\n" for c in counts))
+    out = tmp_path / "out.csv"
+    res = run_station("import", src, "--procedure", "gyro-drift", "--unit", f"gyro=rad/s,t={unit}", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert f"wraps at 2^{bits}" in res.stderr and "line 7" in res.stderr, res.stderr
+    t = read_capture(out).columns["t"]
+    scale = {"us": 1e-6, "ms": 1e-3}[unit]
+    np.testing.assert_allclose(t, step * scale * np.arange(400), atol=1e-9)
+
+
+def test_a_time_column_that_goes_back_by_less_than_a_wrap_is_still_refused(tmp_path):
+    """Unwrapping takes only a fall from near the counter's top to near its start: a row out of
+    order is refused as before."""
+    counts = [1000, 2000, 3000, 1500, 4000]  # an unwrap by 2^16 would make it a 62 s jump forward
+    src = tmp_path / "logger.csv"
+    src.write_text("t,gx,gy,gz\n" + "".join(f"{c},0.01,0.02,-0.01\n" for c in counts))
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--unit", "gyro=rad/s,t=us", "--out", tmp_path / "o.csv"
+    )
+    assert_one_line_refusal(res, ":5: time goes backwards")
+
+
+@pytest.mark.parametrize(
+    ("mapping", "extra", "says"),
+    [
+        ("t=t,gx=a,gy=a,gz=c", (), "--map: column 'a' (2) is given for both gx and gy"),
+        ("t=1,gx=2,gy=3,gz=4,temp_c=a", (), "--map: column 'a' (2) is given for both gx and temp_c"),
+        ("t=t,gx=a,gy=b,gz=c", ("--rate", "100"), "--rate is for a file without a time column"),
+    ],
+    ids=["one-column-two-axes", "by-name-and-number", "rate-beside-t"],
+)
+def test_a_mapping_that_cannot_mean_what_it_says_is_refused(tmp_path, mapping, extra, says):
+    """--map gx=a,gy=a gave two gyro axes one column's samples, --map gx=2,temp_c=a made the
+    gyro's x rate the temperature, and --rate beside a mapped t column was ignored: each
+    imported with exit 0. Refused in one line, nothing written."""
+    src = tmp_path / "bench.csv"
+    src.write_text("t,a,b,c\n" + "".join(f"{i * 0.01:.2f},0.1,0.2,0.3\n" for i in range(300)))
+    out = tmp_path / "out.csv"
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--map", mapping, "--unit", "gyro=rad/s,t=s", *extra, "--out", out
+    )
+    assert_one_line_refusal(res, says)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("device", ["IMU\n42", "\x1b[31mIMU", " IMU"])
+def test_a_device_id_no_capture_can_hold_is_refused_naming_the_option(tmp_path, device):
+    """import --device 'IMU<newline>42' read the whole file, then blamed the output
+    ('out.csv: metadata 'device' ... cannot be written'). Refused first, naming --device."""
+    src = tmp_path / "bench.csv"
+    src.write_text("t,a,b,c\n" + "".join(f"{i * 0.01:.2f},0.1,0.2,0.3\n" for i in range(300)))
+    out = tmp_path / "out.csv"
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--map", "t=t,gx=a,gy=b,gz=c", "--unit", "gyro=rad/s,t=s",
+        "--device", device, "--out", out,
+    )  # fmt: skip
+    assert_one_line_refusal(res, "--device ", "control character or spaces at its ends")
+    assert str(out) not in res.stderr and not out.exists()
+
+
+def test_calibrate_of_a_log_with_a_device_id_no_capture_can_hold_names_the_option(shared_data):
+    """calibrate flight.ulg --device 'a<newline>b' named the importer's temporary capture
+    ('station-import-.../capture.csv: metadata 'device' ...', in the system's temporary folder),
+    a path the operator never gave."""
+    log = shared_data / "px4_ulog" / "original" / "sample_log_small.ulg"
+    res = run_station("calibrate", log, "--procedure", "gyro-drift", "--device", "a\nb")
+    assert_one_line_refusal(res, "--device 'a\\nb'", "control character")
+    assert "station-import" not in res.stderr

@@ -277,3 +277,33 @@ def test_an_instance_asked_of_a_log_with_one_combined_stream_is_refused(tmp_path
     assert_one_line_refusal(res, "--instance 1: sensor_combined holds one stream, the board's selected sensor")
     assert not out.exists()
     _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "gyro-drift", "--instance", "0")
+
+
+@pytest.mark.parametrize("wrong", [".bin", ".tlog", ".BIN"])
+def test_a_ulog_under_another_logs_suffix_is_read_as_the_ulog_it_is(tmp_path, px4_dir, wrong):
+    """A .ulg copied as .bin (or .tlog) was read by the DataFlash or MAVLink reader: 'no IMU or
+    MAG messages in the DataFlash log', the data lost. The ULog header says what it is: the
+    same capture as from the .ulg, with a warning naming the mismatch."""
+    log = px4_dir / "sample_log_small.ulg"
+    renamed = tmp_path / f"flight{wrong}"
+    renamed.write_bytes(log.read_bytes())
+    want, _ = _import(tmp_path, log, "--procedure", "gyro-drift", "--source", "combined")
+    got, res = _import(tmp_path, renamed, "--procedure", "gyro-drift", "--source", "combined")
+    assert "a PX4 ULog file" in res.stderr and wrong in res.stderr, res.stderr
+    assert got.meta == want.meta and got.columns.keys() == want.columns.keys()
+    for k in want.columns:
+        np.testing.assert_array_equal(got.columns[k], want.columns[k])
+
+
+def test_a_dataflash_log_named_ulg_is_read_as_the_dataflash_log_it_is(tmp_path):
+    """The other way round: a DataFlash .bin named .ulg was refused by pyulog ('Failed to parse header')."""
+    from tests.test_import_ardupilot import write_bin
+
+    write_bin(tmp_path / "a.bin")
+    (tmp_path / "a.ulg").write_bytes((tmp_path / "a.bin").read_bytes())
+    want, _ = _import(tmp_path, tmp_path / "a.bin", "--procedure", "compass")
+    got, res = _import(tmp_path, tmp_path / "a.ulg", "--procedure", "compass")
+    assert "an ArduPilot DataFlash log" in res.stderr and ".ulg" in res.stderr, res.stderr
+    assert got.meta == want.meta
+    for k in want.columns:
+        np.testing.assert_array_equal(got.columns[k], want.columns[k])

@@ -16,6 +16,7 @@ import pytest
 
 from station.capture import Capture, read_capture, write_capture
 from station.cli import main
+from tests.station_run import assert_one_line_refusal, run_station
 
 RATE_HZ = 200.0
 GYRO_N, GYRO_K = (3e-4, 4e-4, 5e-4), (2e-5, 4e-5, 3e-5)  # rad/s/√Hz, rad/s²/√Hz
@@ -155,3 +156,13 @@ def test_a_stated_rate_the_time_column_contradicts_is_refused(capsys, tmp_path):
     write_capture(bursty, Capture(meta=dict(c.meta), columns=dict(c.columns, t=t), path=bursty))
     code, out, err = run(capsys, "noise", bursty, "--json")
     assert code == 0, err
+
+
+@pytest.mark.parametrize("name", ["sample_log_small.ulg", "flight.csv"])
+def test_noise_of_a_binary_log_says_what_it_is_and_how_to_read_it(tmp_path, shared_data, name):
+    """`station noise flight.ulg` said 'NUL byte at column 13: binary data, not a text
+    capture'; the file is a PX4 ULog, whatever its name, and station import reads it."""
+    log = tmp_path / name
+    log.write_bytes((shared_data / "px4_ulog" / "original" / "sample_log_small.ulg").read_bytes())
+    res = run_station("noise", log, "--no-plot")
+    assert_one_line_refusal(res, f"{log}: a PX4 ULog file, not a capture", "station import")

@@ -265,3 +265,23 @@ def test_a_table_of_averages_with_a_missing_value_is_named_by_its_line(tmp_path)
     assert any(f"(line {header + 3}) without n >= 2" in w for w in out["warnings"]), out["warnings"]
     ns = [p["n"] for p in out["positions"]]
     assert ns[1] == 1 and all(n == int(second[names.index("n")]) for n in ns[2:]), ns
+
+
+@pytest.mark.parametrize("seed", [14, 15, 16])
+def test_a_position_read_far_from_its_label_is_named_as_mislabelled(tmp_path, capsys, seed):
+    """A table with y_up's row labelled x_up (a typo, a step recorded twice) was calibrated
+    with exit 0; the labels fix the gauge, the fit twisted, and the only word was 'residuals
+    29x the noise ... (temperature, non-linearity, moving positions?)'. The row whose reading
+    lies far from its label's direction is named; the truly labelled table names none."""
+    import json
+
+    sim = simulate("accel-tabletop", seed=seed, hold_s=5.0, move_s=2.0, averages=True)
+    res = json.loads(_cli(capsys, _write(tmp_path, sim, "ok.csv"), "--json")[1])
+    assert not any("mislabelled" in w for w in res["warnings"]), res["warnings"]
+    labels = np.array(sim.columns["position"], dtype=object)
+    k = int(np.flatnonzero(labels == "y_up")[0])
+    labels[k] = "x_up"
+    code, out, err = _cli(capsys, _write(tmp_path, sim, "typo.csv", {**sim.columns, "position": labels}), "--json")
+    assert code == 0, err
+    said = [w for w in json.loads(out)["warnings"] if "mislabelled" in w]
+    assert len(said) == 1 and "x_up" in said[0] and f"row {k + 1}" in said[0], said

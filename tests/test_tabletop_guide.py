@@ -169,6 +169,61 @@ def test_resume_from_the_state_file(tmp_path):
     assert resumed.phase == "done" and resumed.n_captured == 12
 
 
+def _damaged(state: dict, how: str) -> dict:
+    state = json.loads(json.dumps(state))
+    first = state["steps"][0]
+    if how == "index":
+        state["index"] = 999
+    elif how == "no direction":
+        del first["direction"]
+    elif how == "mean text":
+        first["mean"] = "abc"
+    elif how == "mean short":
+        first["mean"] = [1.0, 2.0]
+    elif how == "mean nan":
+        first["mean"] = [1.0, float("nan"), 2.0]
+    elif how == "status":
+        first["status"] = "eaten"
+    elif how == "extra key":
+        first["colour"] = "red"
+    elif how == "config":
+        state["config"]["average_s"] = -1
+    elif how == "rate":
+        state["sample_rate_hz"] = "fast"
+    elif how == "steps":
+        state["steps"] = {"x_up": first}
+    return state
+
+
+@pytest.mark.parametrize(
+    ("how", "says"),
+    [
+        ("index", "index 999"),
+        ("no direction", "step 1"),
+        ("mean text", "step 1"),
+        ("mean short", "step 1"),
+        ("mean nan", "step 1"),
+        ("status", "step 1"),
+        ("extra key", "step 1"),
+        ("config", "config"),
+        ("rate", "sample_rate_hz"),
+        ("steps", "steps"),
+    ],
+)
+def test_a_damaged_resume_file_is_refused_naming_what_is_wrong(tmp_path, how, says):
+    """A resume file edited or damaged (an index beyond the steps crashed the TUI on the first
+    live update; a text mean reached the fit; a missing key surfaced as the bare "'direction'")
+    is refused as a whole with one ValueError naming the field, so the operator starts anew."""
+    path = str(tmp_path / "resume.json")
+    sim, guide = make(state_path=path)
+    feed(guide, sim, 13)
+    state = json.loads(open(path).read())
+    P1Guide.from_state(state, nominal=SIM_NOMINAL)  # the file as written resumes
+    with pytest.raises(ValueError, match="resume state") as err:
+        P1Guide.from_state(_damaged(state, how), nominal=SIM_NOMINAL)
+    assert says in str(err.value)
+
+
 def test_orientation_is_learned_without_a_nominal_scale():
     sim = LiveImu(seed=5, rate_hz=RATE_HZ, hold_s=1e9)
     guide = P1Guide(

@@ -203,6 +203,32 @@ def test_a_limit_that_limits_nothing_of_the_device_is_refused(tmp_path, capsys):
     assert main(["devices", "add", "NEW", "--limit", "anything=0:1", "--db", db]) == 0
 
 
+def test_a_tolerance_that_names_nothing_of_the_device_is_refused_as_a_limit_is(tmp_path, capsys):
+    """`--tolerance dirft=10` (a typo) was stored and never checked, so the drift trend that
+    should have scheduled the device early never could; the same typo in --limit is refused.
+    The tolerance is refused with the limit's words; the right names are still taken."""
+    from db import Store
+    from station.cli import main
+
+    db = str(tmp_path / "s.db")
+    cap = tmp_path / "p1.csv"
+    assert main(["simulate", "--procedure", "accel-tabletop", "--out", str(cap), "--seed", "400003"]) == 0
+    assert main(["calibrate", str(cap), "--save", "--device", "A1", "--db", db]) == 0
+    capsys.readouterr()
+    for item, says in [
+        ("dirft=10", "no parameter 'dirft' in this device's calibrations (B, M)"),
+        ("B[9]=0.1", "B of this device is B[0] … B[2]: no B[9]"),
+    ]:
+        code = main(["devices", "add", "A1", "--tolerance", item, "--db", db])
+        out, err = capsys.readouterr()
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"--tolerance {item!r}: {says}" in err
+    assert Store(db).get_device("A1")["tolerances"] == {}
+    for item in ("B[2]=0.1", "M=0.01", "drift=10"):  # drift: P4's, not yet run
+        assert main(["devices", "add", "A1", "--tolerance", item, "--db", db]) == 0, capsys.readouterr().err
+    assert sorted(Store(db).get_device("A1")["tolerances"]) == ["B[2]", "M", "drift"]
+
+
 def test_a_soft_iron_limit_keeps_its_unit_whatever_the_captures_unit(tmp_path):
     """The compass's soft iron is typed as a ratio and stored per the capture's mag_unit. A limit
     set before the device's first compass calibration was refused (no unit to convert to), and

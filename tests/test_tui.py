@@ -435,6 +435,37 @@ def test_skip_redo_abort_and_resume(tmp_path):
     asyncio.run(story())
 
 
+def test_a_damaged_resume_file_is_said_on_screen_not_a_crash(tmp_path):
+    """A resume file whose index points beyond its steps (edited, damaged) took F6 into the
+    procedure screen and crashed the TUI at the first live update (IndexError, a traceback
+    in the terminal). The screen says what is wrong with the file; Start begins anew."""
+    from station.procedures.state import default_state_path
+    from station.procedures.tabletop_guide import GuideConfig, P1Guide
+
+    db = str(tmp_path / "station.db")
+    src = SimSource(seed=5, clock=BenchClock())
+    path = default_state_path(src.device_id, base=str(tmp_path))
+    guide = P1Guide(sample_rate_hz=100.0, accel_unit="V", device_id=src.device_id, config=GuideConfig())
+    state = guide.to_state()
+    state["index"] = 999
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(state, fh)
+
+    async def story():
+        app = make_app(db, device=src, start="connect", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE) as pilot:
+            resume = app.screen.query_one("#resume")
+            await wait_for(pilot, lambda: not resume.disabled)
+            await pilot.press("f6")
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+            message = app.screen.query_one("#message")
+            await wait_for(pilot, lambda: "resume state: index 999" in str(message.render()))
+            await pilot.pause(0.5)
+            assert app.is_running and screen_name(app) == "ProcedureScreen"
+
+    asyncio.run(story())
+
+
 def test_results_compare_with_the_previous_calibration_and_export(tmp_path):
     """A device with history and a tolerance on B: the new result shows Δ/σ and pass/fail."""
     from station.capture import read_capture

@@ -301,3 +301,21 @@ def test_an_export_carries_the_anchor_that_exposes_a_rolled_back_file(capsys, tm
     assert _cli(capsys, "verify", "--db", path)[0] == 0
     code, out, _ = _cli(capsys, "verify", "--anchor", anchor, "--db", path)
     assert code == 1 and f"anchor missing: database: anchor {anchor}" in out
+
+
+def test_an_anchor_that_is_no_hash_is_refused_and_a_pasted_one_still_verifies(capsys, tmp_path):
+    """verify --anchor '' (an unset variable) or a typo said 'anchor missing ... removed or
+    rewritten' with exit 1, the tamper alarm, on an intact record; so did the right hash pasted
+    with a trailing newline or in capitals. No sha256 is refused as a usage error (exit 2);
+    spaces around it and letter case do not matter."""
+    path = str(tmp_path / "station.db")
+    with Store(path) as s:
+        meta, cols = small_capture(seed=1, device="IMU-9")
+        cid = s.save_calibration(accel_result(device="IMU-9"), meta=meta, columns=cols)
+    anchor = json.loads(_cli(capsys, "export", cid, "--format", "json", "--db", path)[1])["anchor"]
+    for typed in (f"{anchor}\n", f" {anchor.upper()} "):
+        code, out, err = _cli(capsys, "verify", "--anchor", typed, "--db", path)
+        assert code == 0 and out.startswith("ok: "), (out, err)
+    for typed in ("", "zz", anchor[:-1], anchor + "0", "g" * 64):
+        code, out, err = _cli(capsys, "verify", "--anchor", typed, "--db", path)
+        assert code == 2 and out == "" and err.count("\n") == 1 and "not an anchor hash" in err, (typed, out, err)

@@ -59,6 +59,20 @@ def refuse_database_as_output(args, out: str | None, option: str) -> None:
             raise InputError(out, None, f"{option} is {what}: choose another name (nothing written)")
 
 
+def db_error_text(exc: Exception) -> str:
+    """SQLite's reason, with what 'database is locked' means here: another connection held
+    the write lock for the whole busy wait, and this command wrote nothing."""
+    from db.store import BUSY_TIMEOUT_S
+
+    text = str(exc)
+    if isinstance(exc, sqlite3.OperationalError) and ("locked" in text or "busy" in text):
+        text += (
+            f": another process held it for the whole {BUSY_TIMEOUT_S:g} s wait (another station saving, "
+            "a sqlite3 shell in a transaction); nothing written, try again when it is done"
+        )
+    return text
+
+
 @contextmanager
 def open_store(args, create: bool = False):
     """The Store at `station.cli.db_path(args)`; db-layer ValueError/NotFound -> InputError.
@@ -83,7 +97,7 @@ def open_store(args, create: bool = False):
     except ValueError as exc:
         raise InputError(None, None, str(exc)) from None
     except sqlite3.Error as exc:  # e.g. a read-only file or folder, a full disk
-        raise InputError(path, None, f"station database: {exc}") from None
+        raise InputError(path, None, f"station database: {db_error_text(exc)}") from None
     finally:
         store.close()
 

@@ -144,6 +144,7 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
 
     from db.store import DuplicateCapture
     from station.cli import db_path
+    from station.commands._dbutil import db_error_text
     from station.errors import InputError
     from station.procedures.review import review_record
     from station.store import judge, save_result
@@ -190,7 +191,7 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
     except DuplicateCapture as exc:
         raise InputError(args.file, None, str(exc)) from None
     except (sqlite3.Error, OSError) as exc:
-        raise InputError(path, None, f"cannot save to the station database: {exc}") from None
+        raise InputError(path, None, f"cannot save to the station database: {db_error_text(exc)}") from None
     except ValueError as exc:  # the store's refusals (e.g. an empty device id)
         raise InputError(None, None, str(exc)) from None
     # stdout holds only the result (calibrate.md: with --json, one JSON object): the id on stderr

@@ -98,6 +98,11 @@ def _tolerances(items: list[str], contexts: list[dict]) -> dict | None:
     for item in items:
         name, sep, value = item.rpartition("=")
         name = name.strip()
+        if sep and name:
+            try:  # a typo (dirft) was stored and never checked, as a limit's was
+                _check_limit_name(item, name, contexts)
+            except ValueError as exc:
+                raise InputError(None, None, f"--tolerance {exc}") from None
         ctx, unit = _typed("--tolerance", item, name, contexts) if sep and name else ({}, "")
         try:
             number = float(value)
@@ -107,6 +112,8 @@ def _tolerances(items: list[str], contexts: list[dict]) -> dict | None:
             raise InputError(
                 None, None, f"--tolerance {item!r}: expected NAME=VALUE with a positive number{_in_unit(name, unit)}"
             )
+        if name in out:
+            raise InputError(None, None, f"--tolerance: {name} given twice")
         out[name] = stored_value(ctx, name, number)
     return out
 
@@ -220,6 +227,8 @@ def _limits(items: list[str], contexts: list[dict]) -> dict | None:
             name, pair, _ = typed_limit(item, contexts)
         except ValueError as exc:
             raise InputError(None, None, f"--limit {exc}") from None
+        if name in out:
+            raise InputError(None, None, f"--limit: {name} given twice")
         out[name] = pair
     return out
 

@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         trends = store.drift(args.id, procedure=args.procedure, param=args.param)
         if not args.json:
             trends = _shown(store, args.id, trends)
-    if args.param and not trends:
+    if args.param is not None and not trends:
         raise InputError(None, None, f"no coefficient named {args.param!r} in this device's accepted calibrations")
     if args.json:
         print_json(trends)

@@ -42,7 +42,7 @@ def register(subparsers) -> None:
         metavar="SYSID,COMPID",
         help="qgc: the vehicle and component id columns (default 1,1)",
     )
-    p.add_argument("-o", "--output", metavar="FILE", help="write to FILE (atomically) instead of stdout")
+    p.add_argument("-o", "--output", metavar="FILE", help="write to FILE (atomically) instead of stdout (- for stdout)")
     p.set_defaults(func=run)
 
 
@@ -57,8 +57,12 @@ def run(args: argparse.Namespace) -> int:
         sysid, compid = (int(x) for x in args.vehicle.split(","))
     except ValueError:
         raise InputError(None, None, f"--vehicle {args.vehicle!r}: expected SYSID,COMPID, e.g. 1,1") from None
+    if not (1 <= sysid <= 255 and 0 <= compid <= 255):  # MAVLink: one byte each, system 0 is broadcast
+        raise InputError(
+            None, None, f"--vehicle {args.vehicle!r}: MAVLink ids are a system 1-255 and a component 0-255"
+        )
     text = export(cal, meta, args.format, args.instance, device_id=args.device_id, vehicle=(sysid, compid))
-    if args.output:
+    if args.output is not None and args.output != "-":
         with cannot_write(args.output):
             atomic_write_text(args.output, text)
     else:

@@ -19,7 +19,7 @@ def register(subparsers) -> None:
     )
     p.add_argument("capture_id", metavar="CAPTURE_ID", type=int, nargs="?", help="capture id")
     p.add_argument("--calibration", metavar="ID", type=int, help="export the capture of this calibration")
-    p.add_argument("-o", "--output", metavar="FILE", help="write FILE (atomically) instead of stdout")
+    p.add_argument("-o", "--output", metavar="FILE", help="write FILE (atomically) instead of stdout (- for stdout)")
     p.set_defaults(func=run)
 
 
@@ -36,8 +36,9 @@ def run(args: argparse.Namespace) -> int:
             if capture_id is None:
                 raise InputError(None, None, f"calibration {args.calibration} was stored without its capture")
         meta, columns = store.load_capture(capture_id)
-    capture = Capture(meta=dict(meta), columns=columns, path=args.output)
-    if args.output:
+    to_file = args.output not in (None, "-")
+    capture = Capture(meta=dict(meta), columns=columns, path=args.output if to_file else None)
+    if to_file:
         write_capture(args.output, capture)
     else:
         format_capture(capture, sys.stdout)

@@ -41,9 +41,11 @@ def run(args: argparse.Namespace) -> int:
 
     from station.capture import write_capture
     from station.errors import InputError, defer_warning
+    from station.fileio import check_output
     from station.importers.load import import_file
     from station.importers.options import options_from_args
 
+    check_output(args.out)
     if os.path.exists(args.out) and os.path.exists(args.file) and os.path.samefile(args.out, args.file):
         raise InputError(args.out, None, "--out is the input file: choose another name")
     capture, warnings = import_file(args.file, options_from_args(args))

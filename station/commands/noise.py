@@ -9,7 +9,7 @@ import os
 import sys
 
 from station.errors import InputError
-from station.fileio import atomic_write_text, cannot_write, same_file
+from station.fileio import atomic_write_text, cannot_write, check_output, same_file
 from station.textsafe import safe
 
 
@@ -122,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out and args.format != "kalibr":
         raise InputError(None, None, "--out is for --format kalibr (the imu.yaml)")
     out_path = args.out or "imu.yaml"
+    if args.format == "kalibr":
+        check_output(out_path)
     if args.format == "kalibr" and os.path.isdir(out_path):
         raise InputError(out_path, None, "is a folder: give --out a file name")
     if args.format == "kalibr" and same_file(out_path, args.file):  # the yaml would replace the record

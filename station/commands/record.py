@@ -66,7 +66,7 @@ def _meta(items: list[str] | None) -> dict[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     from station.device.mavlink import parse_source
-    from station.device.record import record, recover_partial
+    from station.device.record import record, recover_partial, refuse_unrecovered
 
     if args.recover:
         path = recover_partial(args.recover, args.out)
@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     if os.path.isdir(args.out):
         raise InputError(args.out, None, "is a folder: give --out a file name for the capture")
     check_output(args.out)  # a named pipe or a device: found out before, not after, the recording
+    refuse_unrecovered(args.out)
     folder = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(folder):
         raise InputError(args.out, None, f"cannot write: no folder {folder}")

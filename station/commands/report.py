@@ -46,6 +46,8 @@ def write_report(store, calibration_id: int, out: str | None) -> str:
 def run(args: argparse.Namespace) -> int:
     from station.errors import InputError
 
+    if args.out == "":  # an unset variable: not the default name in the current folder
+        raise InputError(None, None, "--out '': an empty file name (leave --out out for calibration-ID.html)")
     if args.out not in (None, "-") and not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
         raise InputError(args.out, None, "its folder does not exist")
     refuse_database_as_output(args, args.out, "--out")

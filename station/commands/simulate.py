@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from station.errors import InputError
-from station.fileio import atomic_write_json, cannot_write, same_file
+from station.fileio import atomic_write_json, cannot_write, check_output, same_file
 from station.procedures import registry
 from station.textsafe import safe
 
@@ -16,6 +16,8 @@ def parse_assignments(items: list[str] | None, what: str) -> dict[str, float | s
         if "=" not in item:
             raise InputError(None, None, f"{what} {item!r}: expected NAME=VALUE")
         name, value = item.split("=", 1)
+        if name.strip() in out:  # the last one would win without a word (import's --map refuses it too)
+            raise InputError(None, None, f"{what}: {name.strip()} given twice")
         try:
             out[name.strip()] = float(value)
         except ValueError:
@@ -125,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
     from solvers.simulate import SimulationError, simulate
     from station.capture import Capture, write_capture
 
+    check_output(args.out)  # found out before the simulation, and before the capture is written beside a truth
+    if args.truth:
+        check_output(args.truth)
     if args.truth and same_file(args.truth, args.out):  # the truth would replace the capture
         raise InputError(args.truth, None, "--truth is the --out file: give the truth its own name")
     effects = parse_assignments(args.effect, "--effect")

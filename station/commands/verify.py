@@ -9,6 +9,7 @@ import sqlite3
 import sys
 
 from station.commands._dbutil import open_store
+from station.errors import InputError
 from station.textsafe import safe
 
 
@@ -27,11 +28,26 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _anchor(text: str) -> str:
+    """An anchor as typed or pasted: a sha256 hex digest (spaces around it and letter case do
+    not matter); anything else is a usage error, not the tamper alarm of a missing anchor."""
+    anchor = text.strip().lower()
+    if len(anchor) != 64 or any(c not in "0123456789abcdef" for c in anchor):
+        raise InputError(
+            None,
+            None,
+            f"--anchor {safe(repr(text))}: not an anchor hash (64 hex digits, as an export's "
+            "'# station anchor' line or JSON 'anchor' gives it)",
+        )
+    return anchor
+
+
 def run(args: argparse.Namespace) -> int:
+    anchors = [_anchor(a) for a in args.anchor]
     with open_store(args) as store:
         sound = store.integrity_check()
         problems = store.verify()
-        for anchor in args.anchor:
+        for anchor in anchors:
             try:
                 held = store.has_anchor(anchor)
             except sqlite3.Error:  # no anchors table: reported by verify as a damaged schema

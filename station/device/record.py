@@ -29,6 +29,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 import tempfile
 import threading
 import time
@@ -39,7 +40,7 @@ import numpy as np
 from station.device.protocol import Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
 from station.errors import InputError, StationError
-from station.fileio import atomic_open, open_input
+from station.fileio import atomic_open, open_input, same_file
 
 SENSOR_GROUPS = {"accel_unit": ("ax", "ay", "az"), "gyro_unit": ("gx", "gy", "gz"), "mag_unit": ("mx", "my", "mz")}
 PARTIAL_SUFFIX = ".partial"
@@ -96,6 +97,19 @@ def format_rows(batch: Batch, columns: list[str]) -> str:
     return "".join(out)
 
 
+def refuse_unrecovered(out: str) -> None:
+    """Refuse a recording into ``out`` while ``<out>.partial`` exists: the rows of a killed
+    recording, not yet recovered, which the new one would write over and remove."""
+    partial = os.fspath(out) + PARTIAL_SUFFIX
+    if os.path.lexists(partial):
+        raise InputError(
+            partial,
+            None,
+            f"a killed recording's rows, not yet recovered: station record --recover {partial} "
+            "first (or remove the file)",
+        )
+
+
 class CaptureStream:
     """Writes a capture incrementally to `<out>.partial`, then finishes it as `<out>`."""
 
@@ -108,8 +122,11 @@ class CaptureStream:
         head["complete"] = "false"
         if os.path.isdir(self.out):
             raise InputError(self.out, None, "is a folder: give --out a file name for the capture")
-        try:
-            self._f = open(self.partial, "w", encoding="utf-8", newline="\n")
+        try:  # "x": a partial a killed recording left is never truncated (refuse_unrecovered says why)
+            self._f = open(self.partial, "x", encoding="utf-8", newline="\n")
+        except FileExistsError:
+            refuse_unrecovered(self.out)
+            raise
         except OSError as exc:
             raise InputError(self.partial, None, f"cannot write: {exc.strerror or exc}") from None
         self._f.write(_head_text(head, columns))
@@ -192,6 +209,8 @@ def recover_partial(partial: str, out: str | None = None) -> str:
         if not partial.endswith(PARTIAL_SUFFIX):
             raise InputError(partial, None, f"not a {PARTIAL_SUFFIX} file; give --out")
         out = partial[: -len(PARTIAL_SUFFIX)]
+    if same_file(out, partial):  # written over, then removed as recovered: the recording gone
+        raise InputError(out, None, "--out is the .partial file being recovered: choose another name")
     meta, header, _ = iter_capture_chunks(partial)  # validates the head
     meta = dict(meta)
     meta["complete"] = "false"
@@ -326,6 +345,14 @@ def record(
             stream.abandon()
 
 
+# what a recording writes about itself (_start_meta, _end_meta, the ending, recover_partial)
+_OWN_KEYS = frozenset(
+    {"station-capture", "recorded_at", "source", "protocol", "baud", "nominal_rate_hz", "samples", "gaps"}
+    | {"parse_errors", "parse_errors_by_kind", "dropped", "reconnects", "restarts", "segments", "duration_s"}
+    | {"complete", "incomplete", "last_data_s", "recovered"}
+)
+
+
 def _check_extra_meta(directory: str, procedure: str | None, extra: dict[str, str] | None) -> None:
     """Refuse metadata the capture reader would refuse, before the port is opened."""
     from station.capture import iter_capture_chunks
@@ -337,6 +364,8 @@ def _check_extra_meta(directory: str, procedure: str | None, extra: dict[str, st
     for k in meta:
         if not k or ":" in k or k != k.strip() or not k.isprintable():
             raise InputError(None, None, f"--meta {k!r}: not a usable key")
+        if k.lower() in _OWN_KEYS or re.fullmatch(r"gap_\d+", k.lower()):
+            raise InputError(None, None, f"--meta {k}: the recording writes it (what it saw of the device), not --meta")
     fd, tmp = tempfile.mkstemp(prefix=".station-record.", suffix=".tmp", dir=directory)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:

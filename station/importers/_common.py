@@ -103,9 +103,23 @@ def fmt_param(value) -> str:
     return repr(x)
 
 
-def iso_utc(unix_s: float) -> str:
-    """A Unix time as the capture's ``date``: ISO date-time, UTC, whole seconds."""
-    return _dt.datetime.fromtimestamp(unix_s, _dt.UTC).replace(tzinfo=None).isoformat(timespec="seconds")
+def iso_utc(unix_s: float) -> str | None:
+    """A Unix time as the capture's ``date``: ISO date-time, UTC, whole seconds; None when it
+    is no calendar date (beyond years 1-9999, not finite: a corrupt time field)."""
+    try:
+        return _dt.datetime.fromtimestamp(unix_s, _dt.UTC).replace(tzinfo=None).isoformat(timespec="seconds")
+    except (ValueError, OverflowError, OSError):
+        return None
+
+
+def set_date(meta: dict[str, str], warnings: list[str], unix_s: float, clock: str) -> None:
+    """``meta["date"]`` from a log's ``clock`` (e.g. "GPS"), or a warning when that time is no
+    calendar date (a flipped byte in a time field): the samples are kept, without a date."""
+    text = iso_utc(unix_s)
+    if text is None:
+        warnings.append(f"the {clock} time gives no calendar date ({unix_s:.6g} s from 1970): the capture has no date")
+    else:
+        meta["date"] = text
 
 
 def clean_stream(path, stream: Stream) -> Stream | None:

@@ -33,7 +33,7 @@ import struct
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import FRD, Imported, Stream, fmt_param, iso_utc
+from station.importers._common import FRD, Imported, Stream, fmt_param, set_date
 
 PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
@@ -276,7 +276,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             "(param.* holds the values at the start)"
         )
     if gps_utc_offset is not None and first_us is not None:
-        meta["date"] = iso_utc(gps_utc_offset + first_us * 1e-6)
+        set_date(meta, warnings, gps_utc_offset + first_us * 1e-6, "GPS")
     _place(fixes, meta)
     _params_meta(params, meta)
     return Imported(streams, meta, warnings)
@@ -478,10 +478,10 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         meta["frame"] = FRD
     if board_uid:
         meta["board_uid"] = str(board_uid)
-    if arrivals[name] > 946684800:  # the ground station's clock (UTC) when the first sample came
-        meta["date"] = iso_utc(arrivals[name])
-    _place(fixes, meta)
     warnings = []
+    if arrivals[name] > 946684800:  # the ground station's clock (UTC) when the first sample came
+        set_date(meta, warnings, arrivals[name], "ground station's")
+    _place(fixes, meta)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
         warnings.append(f"parameters changed while the data were logged: {', '.join(sorted(late))}")

@@ -285,8 +285,30 @@ def _check_limits(path, values: dict[str, np.ndarray], linenos: np.ndarray, unit
             raise InputError(path, int(linenos[i]), f"column '{target}': {float(col[i]):g} is beyond {reason}")
 
 
-def _time_seconds(path, t, linenos: np.ndarray, factor: float, integer: bool) -> np.ndarray:
-    """Seconds from the first row; t must not go backwards (the line that does is named)."""
+def _unwrapped(t: np.ndarray, linenos: np.ndarray, warnings: list[str]) -> np.ndarray:
+    """A logger's time stamp from a 16- or 32-bit counter (an Arduino's micros() wraps after
+    71.6 min) made monotonic: each fall from near the top of the counter's range to near its
+    start adds 2**bits, said in a warning. Anything else is returned as it is (and a fall is
+    then refused as time going backwards)."""
+    steps = np.diff(t)
+    falls = np.flatnonzero(steps < 0)
+    if not falls.size or not (np.all(t >= 0) and np.all(t == np.round(t))):
+        return t
+    for bits in (16, 32):
+        wrap = 2.0**bits
+        if t.max() < wrap and np.all((steps[falls] + wrap >= 0) & (steps[falls] + wrap < wrap / 2)):
+            lines = ", ".join(str(int(linenos[i + 1])) for i in falls[:3]) + (" ..." if falls.size > 3 else "")
+            warnings.append(
+                f"the time column wraps at 2^{bits} (a {bits}-bit counter) {falls.size} time(s), "
+                f"first on line {lines}: unwrapped"
+            )
+            return t + wrap * np.cumsum(np.r_[0, steps < 0])
+    return t
+
+
+def _time_seconds(path, t, linenos: np.ndarray, factor: float, integer: bool, warnings: list[str]) -> np.ndarray:
+    """Seconds from the first row; t must not go backwards (the line that does is named); a
+    wrapping counter (plain CSV) is unwrapped, with a warning (:func:`_unwrapped`)."""
     if integer:
         t0 = t[0]
         ts = np.array([(v - t0) for v in t], dtype=np.float64) * factor
@@ -294,7 +316,10 @@ def _time_seconds(path, t, linenos: np.ndarray, factor: float, integer: bool) ->
         if np.isnan(t).any():
             i = int(np.flatnonzero(np.isnan(t))[0])
             raise InputError(path, int(linenos[i]), "the time column is empty (every row needs its time)")
+        t = _unwrapped(t, linenos, warnings)
         ts = (t - t[0]) * factor
+    if len(ts) > 1 and ts[-1] == ts[0] and not np.diff(ts).any():  # as the capture reader says it
+        raise InputError(path, int(linenos[0]), f"the time axis does not advance ({len(ts)} rows, all at t = {t[0]:g})")
     back = np.flatnonzero(np.diff(ts) < 0)
     if back.size:
         i = int(back[0]) + 1
@@ -390,7 +415,7 @@ def read_euroc(path, *, kinds=None) -> Imported:
         )
     values, linenos = _rows(path, lines, 2, ",", len(header), cols, int_time="t")
     _check_limits(path, values, linenos, units)
-    t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True)
+    t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=[])
     streams = _streams(path, values, t_s, units, "EuRoC/Kalibr CSV")
     if kinds is not None:
         streams = {k: s for k, s in streams.items() if k in kinds}
@@ -509,6 +534,15 @@ def read_plain(
                 hi,
                 f"--map {target}={source}: no column {source!r} in the header ({', '.join(header)})",
             )
+    taken: dict[int, str] = {}
+    for target, j in cols.items():  # one column's samples as two quantities (gx=a,gy=a; gx=2,temp_c=a)
+        if j in taken:
+            raise InputError(
+                path, hi, f"--map: column {header[j]!r} ({j + 1}) is given for both {taken[j]} and {target}"
+            )
+        taken[j] = target
+    if rate_hz is not None and "t" in cols:
+        raise InputError(None, None, "--rate is for a file without a time column; t is mapped (leave out one of them)")
     kinds_present = {KIND_OF[c] for c in cols if c in KIND_OF}
     for kind in sorted(kinds_present):
         unit = units.get(kind)
@@ -540,7 +574,7 @@ def read_plain(
     values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
     _check_limits(path, values, linenos, units)
     if "t" in values:
-        t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False)
+        t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
     else:
         t_s = np.arange(len(linenos), dtype=np.float64) / rate_hz
     streams = _streams(

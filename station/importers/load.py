@@ -9,7 +9,7 @@ from pathlib import Path
 
 from station.capture import Capture, read_capture, write_capture
 from station.errors import InputError
-from station.fileio import check_input
+from station.fileio import LOG_MAGIC, check_input
 from station.importers._common import NAME, Imported, to_capture
 from station.importers.options import (
     FORMATS,
@@ -30,13 +30,26 @@ _WHAT = {
 _SUFFIX = {".ulg": "px4", ".bin": "ardupilot", ".tlog": "tlog"}
 
 
+def _by_content(path) -> str | None:
+    """The log format ``path``'s first bytes announce, or None (a FIFO or device is never opened here)."""
+    from station.fileio import log_kind, open_input
+
+    try:
+        with open_input(path) as f:
+            kind = log_kind(f.read(8))
+    except (InputError, OSError):
+        return None
+    return kind[0] if kind else None
+
+
 def detect(path) -> str | None:
-    """The format of ``path`` by its name (and, for CSV, its header line); None for a station
-    capture or a file this cannot tell (then it is read as a capture, whose reader explains)."""
+    """The format of ``path`` by its first bytes (a ULog or DataFlash log under any name), else
+    its name (and, for CSV, its header line); None for a station capture or a file this cannot
+    tell (then it is read as a capture, whose reader explains)."""
     from station.importers import csvfiles, ros
 
     p = Path(path)
-    fmt = _SUFFIX.get(p.suffix.lower())
+    fmt = _by_content(path) or _SUFFIX.get(p.suffix.lower())
     if fmt:
         return fmt
     if ros.is_bag(p):
@@ -102,7 +115,7 @@ def infer_procedure(path, imported: Imported, fmt: str) -> str:
     raise InputError(
         path,
         None,
-        f"a {fmt} file with {have} data: say which procedure with --procedure ({', '.join(fits)})",
+        f"{_WHAT[fmt]} with {have} data: say which procedure with --procedure ({', '.join(fits)})",
     )
 
 
@@ -115,6 +128,11 @@ def is_station_capture(path) -> bool:
 
 def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     """``path`` as a capture (not yet written) and the reader's warnings."""
+    device = opts.device
+    if device is not None and (device != device.strip() or not device.isprintable()):  # found before the reading
+        raise InputError(
+            None, None, f"--device {device!r}: a capture's device cannot hold a control character or spaces at its ends"
+        )
     fmt = opts.fmt or detect(path)
     if fmt is None:
         if is_station_capture(path):
@@ -124,7 +142,12 @@ def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
                 "already a station capture: calibrate, diagnose and inspect read it as it is",
             )
         fmt = "csv"
-    return capture_of(path, read(path, opts, fmt), fmt, opts.procedure, opts.device)
+    capture, warnings = capture_of(path, read(path, opts, fmt), fmt, opts.procedure, opts.device)
+    suffix = Path(path).suffix
+    if not opts.fmt and _SUFFIX.get(suffix.lower(), fmt) != fmt:  # a .ulg copied as .bin, ...
+        what = next(w for _, f, w in LOG_MAGIC if f == fmt)
+        warnings.insert(0, f"named {suffix} but {what} by its first bytes: read as one")
+    return capture, warnings
 
 
 def capture_of(
@@ -139,7 +162,26 @@ def capture_of(
         from station.importers import px4
 
         device = px4.default_device(imported, primary(procedure))
-    return to_capture(path, imported, procedure, device=device), list(imported.warnings)
+    capture = to_capture(path, imported, procedure, device=device)
+    _escape_text(capture.meta, imported.warnings)
+    return capture, list(imported.warnings)
+
+
+def _escape_text(meta: dict[str, str], warnings: list[str]) -> None:
+    """Metadata text from a log (a board name, a firmware string) with a control character or
+    spaces at its ends, which no capture can hold, kept with the characters shown escaped and
+    a warning: one flipped byte in a name refused the whole log."""
+    from station.textsafe import safe
+
+    changed = []
+    for key, value in meta.items():
+        if isinstance(value, str) and (value != value.strip() or not value.isprintable()):
+            meta[key] = safe(value.strip()) or "?"
+            changed.append(key)
+    if changed:
+        warnings.append(
+            f"metadata {', '.join(changed)} held a control character (a corrupt log?): kept with it shown escaped"
+        )
 
 
 def checked(path, capture: Capture) -> Capture:
@@ -147,8 +189,11 @@ def checked(path, capture: Capture) -> Capture:
     ``station import`` followed by ``calibrate`` would meet them), named after ``path``."""
     with tempfile.TemporaryDirectory(prefix="station-import-") as tmp:
         tmp_path = os.path.join(tmp, "capture.csv")
-        write_capture(tmp_path, capture)
-        out = read_capture(tmp_path)
+        try:
+            write_capture(tmp_path, capture)
+            out = read_capture(tmp_path)
+        except InputError as exc:  # named after the file the operator gave, not the temporary one
+            raise InputError(path, None, f"{exc.message} (in the capture made from it)") from None
     out.path = os.fspath(path)
     out.meta_lines = {}
     out.header_line = None

@@ -27,7 +27,7 @@ import io
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, iso_utc
+from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, set_date
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
@@ -87,6 +87,13 @@ def _load(path):
         raise InputError(path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})") from None
 
 
+def _readable_param(name, value) -> bool:
+    """A parameter as a firmware writes it: a name (no control characters, no ':') and an int or
+    float. A flipped byte in its definition ('flxat CAL_ACC0_XOFF') leaves pyulog the raw bytes."""
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    return number and isinstance(name, str) and name.isprintable() and ":" not in name and name == name.strip() != ""
+
+
 def _topics(ulog, name: str) -> dict[int, object]:
     return {d.multi_id: d for d in ulog.data_list if d.name == name and len(d.data.get("timestamp", ())) > 0}
 
@@ -130,7 +137,11 @@ def read(
     if source not in SOURCES:
         raise InputError(None, None, f"--source {source!r}: expected one of {', '.join(SOURCES)}")
     ulog = _load(path)
-    params = dict(ulog.initial_parameters)
+    params = {name: v for name, v in ulog.initial_parameters.items() if _readable_param(name, v)}
+    unreadable = sorted(
+        {repr(name) for name, v in ulog.initial_parameters.items() if not _readable_param(name, v)}
+        | {repr(name) for _, name, v in ulog.changed_parameters if not _readable_param(name, v)}
+    )
     info = ulog.msg_info_dict
     raw = {kind: _topics(ulog, topic) for kind, topic in RAW_TOPICS.items()}
     wanted = tuple(kinds or RAW_TOPICS)
@@ -274,7 +285,7 @@ def read(
     # parameters in use at the start of the data; any change while the data run is listed
     late: set[str] = set()
     for ts, name, value in sorted(ulog.changed_parameters, key=lambda c: c[0]):
-        if not name.startswith(PARAM_PREFIXES):
+        if not _readable_param(name, value) or not name.startswith(PARAM_PREFIXES):
             continue
         if ts <= t0_us:
             params[name] = value
@@ -285,6 +296,11 @@ def read(
         warnings.append(
             f"the log is cut short inside a message at byte {cut}: the samples before it are imported, "
             f"{len(next(iter(streams.values())).t_s)} rows up to {max(s.t_s[-1] for s in streams.values()):g} s"
+        )
+    if unreadable:
+        warnings.append(
+            f"{len(unreadable)} parameter(s) with no number in the log (a corrupt definition): "
+            f"{', '.join(unreadable[:5])}{' ...' if len(unreadable) > 5 else ''} left out of param.*"
         )
     if late:
         meta["params_changed"] = ",".join(sorted(late))
@@ -302,7 +318,7 @@ def read(
     frame = FRD if meta["corrected"] == "true" else _board_frame(params, streams)
     if frame:
         meta["frame"] = frame
-    _place_and_date(ulog, t0_us, meta)
+    _place_and_date(ulog, t0_us, meta, warnings)
     for name in sorted(params):
         if name.startswith(PARAM_PREFIXES):
             meta[f"param.{name}"] = fmt_param(params[name])
@@ -345,7 +361,7 @@ def default_device(imported: Imported, kind: str) -> str | None:
     return f"{name}-{kind}{s.device_id}" if s is not None and s.device_id else name
 
 
-def _place_and_date(ulog, t0_us: float, meta: dict[str, str]) -> None:
+def _place_and_date(ulog, t0_us: float, meta: dict[str, str], warnings: list[str]) -> None:
     """``date`` from the GPS's UTC time, ``latitude_deg``… from its 3-D fixes (median)."""
     for name in GPS_TOPICS:
         topics = _topics(ulog, name)
@@ -357,7 +373,7 @@ def _place_and_date(ulog, t0_us: float, meta: dict[str, str]) -> None:
         good = utc > 0
         if good.any():
             i = int(np.flatnonzero(good)[0])
-            meta["date"] = iso_utc((utc[i] - ts[i] + t0_us) * 1e-6)
+            set_date(meta, warnings, (utc[i] - ts[i] + t0_us) * 1e-6, "GPS")
         fix = np.asarray(d.get("fix_type", np.zeros(len(ts))))
         fixed = fix >= 3
         if fixed.any():

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import Imported, Stream, iso_utc
+from station.importers._common import Imported, Stream, set_date
 
 IMU = "sensor_msgs/msg/Imu"
 MAG = "sensor_msgs/msg/MagneticField"
@@ -149,9 +149,10 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
         a = streams["accel"]
         a.temp_c = np.interp(a.t_s, tt[:, 0], tt[:, 1], left=np.nan, right=np.nan)
     meta: dict[str, str] = {}
+    warnings: list[str] = []
     if first_ns and first_ns > 946684800 * 10**9:  # a bag's receive clock is UTC wall time
-        meta["date"] = iso_utc(first_ns * 1e-9)
+        set_date(meta, warnings, first_ns * 1e-9, "bag's receive")
     frames.discard("")
     if len(frames) == 1:
         meta["frame_id"] = frames.pop()
-    return Imported(streams, meta, [])
+    return Imported(streams, meta, warnings)

@@ -19,6 +19,7 @@ labels), ``six-position`` (step 8 only).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -225,6 +226,7 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
                 f"scale factors differ from the nominal {s:g} m/s^2 per {unit} by up to "
                 f"{100 * dev.max():.0f} %: check accel_unit"
             )
+    warnings += mislabelled(capture, positions, res.B, res.M)
     t_known = [p for p in positions if p.direction is not None]
     rows = []
     for k, p in enumerate(positions):
@@ -278,6 +280,31 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
     if gyro is not None:  # the same session's rotations calibrate the gyro triad (docs/tabletop-gyro.md)
         result["gyro"] = gyro
     return result
+
+
+MISLABEL_DEG = 20.0  # beyond any placement error; the P1 set's positions lie 45° or more apart
+
+
+def mislabelled(capture, positions, B, M) -> list[str]:
+    """A warning for each labelled position whose calibrated reading A = B + M V lies more
+    than MISLABEL_DEG from its label's direction: a typo or a step recorded under another
+    name, which the table gauge (fixed by the labels) takes as the truth."""
+    out = []
+    table = "t" not in capture.columns
+    for k, p in enumerate(positions):
+        if p.direction is None:
+            continue
+        a = np.asarray(B, dtype=float) + np.asarray(M, dtype=float) @ np.asarray(p.mean, dtype=float)
+        d = np.asarray(p.direction, dtype=float)
+        cos = float(a @ d / (np.linalg.norm(a) * np.linalg.norm(d)))
+        angle = math.degrees(math.acos(min(1.0, max(-1.0, cos)))) if math.isfinite(cos) else math.nan
+        if angle > MISLABEL_DEG:
+            where = f"row {k + 1}" if table else f"the hold at t = {p.t_start_s:g}..{p.t_stop_s:g} s"
+            out.append(
+                f"position {p.label!r} ({where}) reads {angle:.0f}° from its label's direction: mislabelled? "
+                "(the labels fix the fit's orientation: correct the label, or leave it empty)"
+            )
+    return out
 
 
 def format_text(result: dict) -> str:

@@ -29,7 +29,7 @@ import datetime as _dt
 import json
 import math
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -650,6 +650,7 @@ class P1Guide:
         """Resume: captured steps are kept; the current step restarts from "noise"."""
         if state.get("version") != STATE_VERSION or state.get("procedure") != cls.procedure:
             raise ValueError("not a P1 guide state (version or procedure differ)")
+        _check_state(state)
         steps = [Step(**{**s, "direction": tuple(s["direction"])}) for s in state["steps"]]
         g = cls(
             sample_rate_hz=sample_rate_hz or state["sample_rate_hz"],
@@ -681,6 +682,64 @@ class P1Guide:
         with open(path, encoding="utf-8") as fh:
             state = json.load(fh)
         return cls.from_state(state, state_path=path, **kw)
+
+
+_STEP_KEYS = {f.name for f in fields(Step)}
+_STATUSES = ("pending", "captured", "skipped")
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _check_state(state: dict) -> None:
+    """Refuse a resume state that this code did not write (edited, damaged) before any of it
+    is used: a ValueError ``resume state: <what>`` naming the field. Left unchecked, an index
+    beyond the steps crashed the TUI at its first update and a text mean reached the fit."""
+
+    def bad(what: str):
+        raise ValueError(f"resume state: {what} (start anew; the file is replaced)")
+
+    steps = state.get("steps")
+    if not isinstance(steps, list) or not steps or not all(isinstance(st, dict) for st in steps):
+        bad("steps is not a list of positions")
+    for i, st in enumerate(steps, 1):
+        unknown, missing = set(st) - _STEP_KEYS, {"name", "instruction", "direction"} - set(st)
+        if unknown or missing:
+            bad(f"step {i}: unknown keys {sorted(unknown)}, missing {sorted(missing)}")
+        vec = st["direction"]
+        if not isinstance(st["name"], str) or not (isinstance(vec, list) and len(vec) == 3 and all(map(_finite, vec))):
+            bad(f"step {i}: name or direction")
+        if st.get("status", "pending") not in _STATUSES:
+            bad(f"step {i}: status {st.get('status')!r}")
+        for key in ("mean", "std"):
+            v = st.get(key)
+            needed = key == "mean" and st.get("status") == "captured"
+            if (v is None and needed) or (
+                v is not None and not (isinstance(v, list) and len(v) == 3 and all(map(_finite, v)))
+            ):
+                bad(f"step {i}: {key} {v!r}")
+        if not isinstance(st.get("n", 0), int) or st.get("n", 0) < 0:
+            bad(f"step {i}: n")
+        for key in ("temp_c", "t_s", "t0_s"):
+            if st.get(key) is not None and not _finite(st[key]):
+                bad(f"step {i}: {key}")
+    index = state.get("index", 0)
+    if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(steps):
+        bad(f"index {index!r} (steps 0..{len(steps) - 1})")
+    config = state.get("config")
+    known = {f.name for f in fields(GuideConfig)}
+    if (
+        not isinstance(config, dict)
+        or not set(config) <= known
+        or not all(_finite(v) and v >= 0 for v in config.values())
+    ):
+        bad(f"config {config!r}")
+    rate = state.get("sample_rate_hz")
+    if not (_finite(rate) and rate > 0):
+        bad(f"sample_rate_hz {rate!r}")
+    if not isinstance(state.get("accel_unit"), str) or not isinstance(state.get("device_id"), str):
+        bad("accel_unit or device_id")
 
 
 def position_drawing(direction) -> list[str]:
