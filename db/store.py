@@ -103,6 +103,33 @@ def _refuse_non_sqlite(path: str) -> None:
         raise sqlite3.DatabaseError("file is not a database (not SQLite: left as it is)")
 
 
+def _same_row(a, b) -> bool:
+    """Two schedule rows agree (floats to 1e-9 relative: the drift rate)."""
+    return all(
+        (x == y) or (isinstance(x, float) and isinstance(y, float) and abs(x - y) <= 1e-9 * max(abs(x), abs(y)))
+        for x, y in zip(a, b)
+    )
+
+
+def _drift_note(judged: list[dict], n: int) -> str:
+    """Why no trend moves the due date, for the parameters with a tolerance (one phrase)."""
+    if not judged:
+        return "no tolerance names a parameter of this procedure, so drift does not move it"
+    if n < P.DRIFT_MIN_CALIBRATIONS:
+        return f"drift needs {P.DRIFT_MIN_CALIBRATIONS} accepted calibrations, has {n}"
+    significant = [t for t in judged if t["significant"]]
+    if significant:
+        return f"drift of {significant[0]['param']} ({significant[0]['verdict']}) stays within its tolerance"
+    rated = [t for t in judged if t["significance_sigmas"] is not None]
+    if not rated:
+        return f"no drift rate over {n} calibrations"
+    t = max(rated, key=lambda t: t["significance_sigmas"])
+    return (
+        f"no significant drift over {n} calibrations (steepest {t['param']} "
+        f"{t['rate_per_year']:+.3g} ± {t['rate_sigma_per_year']:.2g}/year, {t['verdict']})"
+    )
+
+
 def _loads(text, default=None):
     if text is None:
         return default
@@ -161,6 +188,23 @@ class Store:
         elif "0004_limits_anchored" in names:  # the limits as found, under the anchors from now on
             for (device_id,) in conn.execute("SELECT id FROM devices ORDER BY id").fetchall():
                 self._append_anchor(conn, device_id, "settings")
+        if "0005_significant_drift" in names:  # due dates by the significant-drift rule
+            self._reschedule_old_rule(conn)
+
+    def _reschedule_old_rule(self, conn) -> None:
+        """Recompute each schedule row that the rule before 0005 (any drift rate moved the due
+        date) gives exactly; any other row (edited by hand) stays for `verify` to report."""
+        stored = conn.execute(
+            """SELECT device_id, procedure, last_calibration_id, last_calibrated, interval_due, drift_due,
+                      drift_param, drift_rate_per_year, due FROM schedule"""
+        ).fetchall()
+        for r in stored:
+            try:
+                old = self._schedule_row(conn, r[0], r[1], significant_only=False)
+            except (ValueError, TypeError, KeyError):  # an edited record the trend cannot read
+                continue
+            if old is not None and _same_row(list(r), old):
+                self._update_schedule(conn, r[0], r[1])
 
     def _append_anchor(self, conn, device_id: str, event: str, capture_id: int | None = None) -> None:
         """Append one anchor: the device's chain head, calibration count and settings hash now."""
@@ -739,8 +783,12 @@ class Store:
     # --- drift and schedule -------------------------------------------------------------
 
     @staticmethod
-    def _trends(rows, tolerances: dict, param: str | None = None) -> list[dict]:
-        """Per (procedure, scalar) trend over accepted calibration rows sorted by time."""
+    def _trends(rows, tolerances: dict, param: str | None = None, significant_only: bool = True) -> list[dict]:
+        """Per (procedure, scalar) trend over accepted calibration rows sorted by time.
+
+        ``leaves_tolerance`` only for a significant trend (`db.params.trend_verdict`);
+        ``significant_only=False`` is the rule before migration 0005 (any rate), kept to
+        tell a schedule it wrote from one edited by hand."""
         series: dict[tuple[str, str], dict] = {}
         for r in rows:
             values = P.flatten(_loads(r["params"]))
@@ -759,9 +807,10 @@ class Store:
             t0 = dts[0]
             t_years = [P.years_between(t0, dt) for dt in dts]
             fit = P.linear_trend(t_years, s["values"], s["sigmas"])
+            verdict = P.trend_verdict(fit)
             tol = P.tolerance_for(name, tolerances)
             leaves = None
-            if tol is not None and fit["rate"]:
+            if tol is not None and fit["rate"] and (verdict["significant"] or not significant_only):
                 years = tol / abs(fit["rate"])
                 if years < MAX_PREDICTION_YEARS:  # beyond that: never, for any practical purpose
                     leaves = P.iso(dts[-1] + timedelta(days=years * P.DAYS_PER_YEAR))
@@ -780,6 +829,10 @@ class Store:
                     "rate_per_year": fit["rate"],
                     "rate_sigma_per_year": fit["rate_sigma"],
                     "chi2_per_dof": fit["chi2_per_dof"],
+                    "significance_sigmas": verdict["sigmas"],
+                    "significance_threshold": verdict["threshold"],
+                    "significant": verdict["significant"],
+                    "verdict": verdict["why"],
                     "value_in_use": s["values"][-1],
                     "trend_value_at_last": fitted_last,
                     "tolerance": tol,
@@ -793,9 +846,11 @@ class Store:
 
         `param` selects one name (`B[0]`) or a block (`B`). Each entry: procedure,
         param, times, values, sigmas, rate_per_year, rate_sigma_per_year (weighted
-        linear regression, see `db.params.linear_trend`), tolerance and
-        leaves_tolerance: when the trend carries the parameter `tolerance` away from
-        its value in use (last calibration time + tolerance / |rate|), or None.
+        linear regression, see `db.params.linear_trend`), significance_sigmas
+        (|rate| / its sigma), significance_threshold, significant and verdict (a short
+        phrase; `db.params.trend_verdict`), tolerance and leaves_tolerance: when a
+        significant trend carries the parameter `tolerance` away from its value in use
+        (last calibration time + tolerance / |rate|), else None.
         """
         device = self.get_device(device_id)
         tolerances = device["tolerances"] if device else {}
@@ -820,11 +875,16 @@ class Store:
             row,
         )
 
-    def _schedule_row(self, conn, device_id: str, procedure: str) -> list | None:
+    def _schedule_row(self, conn, device_id: str, procedure: str, significant_only: bool = True) -> list | None:
         """The schedule row one (device, procedure) should have, from devices and calibrations
         (None: no accepted calibration, no row)."""
+        detail = self._schedule_detail(conn, device_id, procedure, significant_only)
+        return None if detail is None else detail["row"]
+
+    def _schedule_detail(self, conn, device_id: str, procedure: str, significant_only: bool = True) -> dict | None:
+        """The schedule row (``row``), the trend that sets its drift date (``drift``, or None) and
+        ``note``: why drift does not move the date, when it does not (one phrase)."""
         dev = conn.execute("SELECT interval_days, tolerances FROM devices WHERE id = ?", [device_id]).fetchone()
-        tolerances = _loads(dev["tolerances"], {})
         last = conn.execute(
             """SELECT id, time FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1
                ORDER BY time DESC, id DESC LIMIT 1""",
@@ -832,21 +892,39 @@ class Store:
         ).fetchone()
         if last is None or dev is None:
             return None
+        tolerances = _loads(dev["tolerances"], {})
         interval_due = None
         if dev["interval_days"]:
             interval_due = P.iso(P.parse_time(last["time"]) + timedelta(days=dev["interval_days"]))
-        drift_due = drift_param = drift_rate = None
+        drift = None
+        note = "no tolerances set, so drift does not move it"
         if tolerances:
             rows = conn.execute(
                 """SELECT id, procedure, time, params, uncertainty FROM calibrations
                    WHERE device_id = ? AND procedure = ? AND accepted = 1 ORDER BY time, id""",
                 [device_id, procedure],
             ).fetchall()
-            for t in self._trends(rows, tolerances):
-                if t["leaves_tolerance"] and (drift_due is None or t["leaves_tolerance"] < drift_due):
-                    drift_due, drift_param, drift_rate = t["leaves_tolerance"], t["param"], t["rate_per_year"]
+            judged = [t for t in self._trends(rows, tolerances, significant_only=significant_only) if t["tolerance"]]
+            for t in judged:
+                if t["leaves_tolerance"] and (drift is None or t["leaves_tolerance"] < drift["leaves_tolerance"]):
+                    drift = t
+            note = _drift_note(judged, len(rows))
+        drift_due = drift["leaves_tolerance"] if drift else None
         due = min((d for d in (interval_due, drift_due) if d), default=None)
-        return [device_id, procedure, last["id"], last["time"], interval_due, drift_due, drift_param, drift_rate, due]
+        row = [
+            device_id,
+            procedure,
+            last["id"],
+            last["time"],
+            interval_due,
+            drift_due,
+            drift["param"] if drift else None,
+            drift["rate_per_year"] if drift else None,
+            due,
+        ]
+        if drift is not None and interval_due is not None and drift_due >= interval_due:
+            note = f"drift of {drift['param']} ({drift['verdict']}) leaves its tolerance only on {drift_due[:10]}"
+        return {"row": row, "drift": drift, "note": note}
 
     def rebuild_schedule(self) -> int:
         """Recompute every schedule row from devices and calibrations; returns the row count."""
@@ -861,8 +939,10 @@ class Store:
         """Devices due for recalibration by `now + within_days`, soonest first.
 
         A (device, procedure) is due at the end of the device's interval since its
-        last accepted calibration, or earlier when a parameter's drift trend leaves
-        its tolerance first; a device with no accepted calibration is due now.
+        last accepted calibration, or earlier when a parameter's significant drift trend
+        leaves its tolerance first (`db.params.trend_verdict`); a device with no accepted
+        calibration is due now. Each reason's text says which rule set the date and, for
+        the interval, why drift did not move it.
         Each entry: device_id, model, due (time or None for never calibrated),
         days_left (negative = overdue), status (`overdue`, `due`, `never calibrated`),
         reason (one line) and reasons (one dict per procedure).
@@ -887,16 +967,29 @@ class Store:
                 and r["drift_due"] == r["due"]
                 and (r["interval_due"] is None or r["drift_due"] < r["interval_due"])
             )
+            with self._lock:
+                detail = self._schedule_detail(self.conn, r["device_id"], r["procedure"])
             if by_drift:
+                t = detail["drift"] if detail else None
+                if t is not None and t["param"] == r["drift_param"]:
+                    how = (
+                        f"({t['rate_per_year']:+.3g} ± {t['rate_sigma_per_year']:.2g}/year, "
+                        f"{t['significance_sigmas']:.1f}σ over {t['n']} calibrations)"
+                    )
+                    tol = f" {t['tolerance']:g}"
+                else:  # the stored row and the calibrations disagree (`verify` says so)
+                    how, tol = f"({r['drift_rate_per_year']:+.3g}/year)", ""
                 text = (
-                    f"{r['procedure']}: drift of {r['drift_param']} ({r['drift_rate_per_year']:+.3g}/year) "
-                    f"leaves its tolerance on {r['due'][:10]} (last calibrated {r['last_calibrated'][:10]})"
+                    f"{r['procedure']}: drift of {r['drift_param']} {how} leaves its tolerance{tol} on "
+                    f"{r['due'][:10]} (last calibrated {r['last_calibrated'][:10]})"
                 )
             else:
                 text = (
                     f"{r['procedure']}: {r['interval_days']:g}-day interval since {r['last_calibrated'][:10]} "
                     f"ends {r['due'][:10]}"
                 )
+                if detail is not None:
+                    text += f"; {detail['note']}"
             reason = {
                 "procedure": r["procedure"],
                 "kind": "drift" if by_drift else "interval",
@@ -1179,17 +1272,11 @@ class Store:
                 return problems
         expected = {k: v for k, v in expected.items() if v is not None}
 
-        def same(a, b):
-            return all(
-                (x == y) or (isinstance(x, float) and isinstance(y, float) and abs(x - y) <= 1e-9 * max(abs(x), abs(y)))
-                for x, y in zip(a, b)
-            )
-
         for key in sorted(set(stored) | set(expected), key=lambda k: (str(k[0]), str(k[1]))):
             if key[0] in flagged:
                 continue
             have, want = stored.get(key), expected.get(key)
-            if have is not None and want is not None and same(have, want):
+            if have is not None and want is not None and _same_row(have, want):
                 continue
             detail = (
                 f"{key[1]}: stored due {have[8] if have else 'none'}, the calibrations give "
