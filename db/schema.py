@@ -188,11 +188,12 @@ _REVIEW = [
 # found become the anchored state). Anchors written before keep their version-1 hash.
 _LIMITS_ANCHORED: list[str] = []
 
-# A drift trend moves a due date only when it is significant (db.params.trend_verdict):
-# no SQL; the station recomputes each schedule row the earlier rule (any rate) wrote, so
-# the due dates follow the new rule and `verify` agrees. A row that neither rule gives (an
-# edit by hand) is left for `verify` to report.
-_SIGNIFICANT_DRIFT: list[str] = []
+# A drift trend moves a due date only when it is significant (db.params.trend_verdict), and
+# each schedule row says why its date is what it is (schedule.reason, one line). The station
+# then recomputes each row the earlier rule (any rate) wrote, so the due dates follow the new
+# rule and `verify` agrees; a row that neither rule gives (an edit by hand) is left, without
+# a reason, for `verify` to report.
+_SIGNIFICANT_DRIFT = ["ALTER TABLE schedule ADD COLUMN reason TEXT"]
 
 # (name, statements), applied in this order. Append only.
 MIGRATIONS: list[tuple[str, list[str]]] = [

@@ -103,6 +103,21 @@ def _refuse_non_sqlite(path: str) -> None:
         raise sqlite3.DatabaseError("file is not a database (not SQLite: left as it is)")
 
 
+# A schedule row, in the order `_schedule_row` gives it (`reason` since migration 0005).
+SCHEDULE_COLUMNS = (
+    "device_id",
+    "procedure",
+    "last_calibration_id",
+    "last_calibrated",
+    "interval_due",
+    "drift_due",
+    "drift_param",
+    "drift_rate_per_year",
+    "due",
+    "reason",
+)
+
+
 def _same_row(a, b) -> bool:
     """Two schedule rows agree (floats to 1e-9 relative: the drift rate)."""
     return all(
@@ -193,17 +208,15 @@ class Store:
 
     def _reschedule_old_rule(self, conn) -> None:
         """Recompute each schedule row that the rule before 0005 (any drift rate moved the due
-        date) gives exactly; any other row (edited by hand) stays for `verify` to report."""
-        stored = conn.execute(
-            """SELECT device_id, procedure, last_calibration_id, last_calibrated, interval_due, drift_due,
-                      drift_param, drift_rate_per_year, due FROM schedule"""
-        ).fetchall()
+        date) gives exactly, and its new `reason`; any other row (edited by hand) stays, without
+        a reason, for `verify` to report."""
+        stored = conn.execute(f"SELECT {', '.join(SCHEDULE_COLUMNS[:-1])} FROM schedule").fetchall()
         for r in stored:
             try:
                 old = self._schedule_row(conn, r[0], r[1], significant_only=False)
             except (ValueError, TypeError, KeyError):  # an edited record the trend cannot read
                 continue
-            if old is not None and _same_row(list(r), old):
+            if old is not None and _same_row(list(r), old[:-1]):
                 self._update_schedule(conn, r[0], r[1])
 
     def _append_anchor(self, conn, device_id: str, event: str, capture_id: int | None = None) -> None:
@@ -869,21 +882,15 @@ class Store:
             conn.execute("DELETE FROM schedule WHERE device_id = ? AND procedure = ?", [device_id, procedure])
             return
         conn.execute(
-            """INSERT OR REPLACE INTO schedule (device_id, procedure, last_calibration_id, last_calibrated,
-                   interval_due, drift_due, drift_param, drift_rate_per_year, due)
-               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)""",
+            f"INSERT OR REPLACE INTO schedule ({', '.join(SCHEDULE_COLUMNS)}) VALUES ({', '.join('?' * len(row))})",
             row,
         )
 
     def _schedule_row(self, conn, device_id: str, procedure: str, significant_only: bool = True) -> list | None:
-        """The schedule row one (device, procedure) should have, from devices and calibrations
-        (None: no accepted calibration, no row)."""
-        detail = self._schedule_detail(conn, device_id, procedure, significant_only)
-        return None if detail is None else detail["row"]
-
-    def _schedule_detail(self, conn, device_id: str, procedure: str, significant_only: bool = True) -> dict | None:
-        """The schedule row (``row``), the trend that sets its drift date (``drift``, or None) and
-        ``note``: why drift does not move the date, when it does not (one phrase)."""
+        """The schedule row one (device, procedure) should have, from devices and calibrations,
+        in `SCHEDULE_COLUMNS` order (None: no accepted calibration, no row). ``reason`` says why
+        the due date is what it is: the interval and why drift did not move it, or the
+        significant drift that brought it forward."""
         dev = conn.execute("SELECT interval_days, tolerances FROM devices WHERE id = ?", [device_id]).fetchone()
         last = conn.execute(
             """SELECT id, time FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1
@@ -911,7 +918,23 @@ class Store:
             note = _drift_note(judged, len(rows))
         drift_due = drift["leaves_tolerance"] if drift else None
         due = min((d for d in (interval_due, drift_due) if d), default=None)
-        row = [
+        since = last["time"][:10]
+        if drift is not None and (interval_due is None or drift_due < interval_due):
+            how = f"{drift['rate_per_year']:+.3g}"
+            if drift["rate_sigma_per_year"] is not None:
+                how += f" ± {drift['rate_sigma_per_year']:.2g}"
+            if drift["significance_sigmas"] is not None:
+                how += f"/year, {drift['significance_sigmas']:.1f}σ over {drift['n']} calibrations"
+            reason = (
+                f"{procedure}: drift of {drift['param']} ({how}) leaves its tolerance {drift['tolerance']:g} on "
+                f"{drift_due[:10]} (last calibrated {since})"
+            )
+        else:
+            if drift is not None:
+                note = f"drift of {drift['param']} ({drift['verdict']}) leaves its tolerance only on {drift_due[:10]}"
+            head = f"{procedure}: {dev['interval_days']:g}-day interval since {since} ends {due[:10]}" if due else ""
+            reason = f"{head}; {note}" if head else f"{procedure}: no interval set; {note}"
+        return [
             device_id,
             procedure,
             last["id"],
@@ -921,10 +944,8 @@ class Store:
             drift["param"] if drift else None,
             drift["rate_per_year"] if drift else None,
             due,
+            reason,
         ]
-        if drift is not None and interval_due is not None and drift_due >= interval_due:
-            note = f"drift of {drift['param']} ({drift['verdict']}) leaves its tolerance only on {drift_due[:10]}"
-        return {"row": row, "drift": drift, "note": note}
 
     def rebuild_schedule(self) -> int:
         """Recompute every schedule row from devices and calibrations; returns the row count."""
@@ -967,29 +988,9 @@ class Store:
                 and r["drift_due"] == r["due"]
                 and (r["interval_due"] is None or r["drift_due"] < r["interval_due"])
             )
-            with self._lock:
-                detail = self._schedule_detail(self.conn, r["device_id"], r["procedure"])
-            if by_drift:
-                t = detail["drift"] if detail else None
-                if t is not None and t["param"] == r["drift_param"]:
-                    how = (
-                        f"({t['rate_per_year']:+.3g} ± {t['rate_sigma_per_year']:.2g}/year, "
-                        f"{t['significance_sigmas']:.1f}σ over {t['n']} calibrations)"
-                    )
-                    tol = f" {t['tolerance']:g}"
-                else:  # the stored row and the calibrations disagree (`verify` says so)
-                    how, tol = f"({r['drift_rate_per_year']:+.3g}/year)", ""
-                text = (
-                    f"{r['procedure']}: drift of {r['drift_param']} {how} leaves its tolerance{tol} on "
-                    f"{r['due'][:10]} (last calibrated {r['last_calibrated'][:10]})"
-                )
-            else:
-                text = (
-                    f"{r['procedure']}: {r['interval_days']:g}-day interval since {r['last_calibrated'][:10]} "
-                    f"ends {r['due'][:10]}"
-                )
-                if detail is not None:
-                    text += f"; {detail['note']}"
+            text = r["reason"]
+            if not text:  # a row no station wrote (`verify` reports it)
+                text = f"{r['procedure']}: due {r['due'][:10]} (last calibrated {r['last_calibrated'][:10]})"
             reason = {
                 "procedure": r["procedure"],
                 "kind": "drift" if by_drift else "interval",
@@ -1049,17 +1050,7 @@ class Store:
         ),
         "captures": ("id", "device_id", "procedure", "time", "operator", "host", "meta", "sha256"),
         "capture_columns": ("capture_id", "ordinal", "name", "dtype", "length", "encoding", "data"),
-        "schedule": (
-            "device_id",
-            "procedure",
-            "last_calibration_id",
-            "last_calibrated",
-            "interval_due",
-            "drift_due",
-            "drift_param",
-            "drift_rate_per_year",
-            "due",
-        ),
+        "schedule": SCHEDULE_COLUMNS,
         "anchors": ANCHOR_COLUMNS + ("hash",),
     }
 
@@ -1258,10 +1249,7 @@ class Store:
         with self._lock:
             stored = {
                 (r["device_id"], r["procedure"]): list(r)
-                for r in self.conn.execute(
-                    """SELECT device_id, procedure, last_calibration_id, last_calibrated, interval_due, drift_due,
-                          drift_param, drift_rate_per_year, due FROM schedule"""
-                )
+                for r in self.conn.execute(f"SELECT {', '.join(SCHEDULE_COLUMNS)} FROM schedule")
             }
             pairs = self.conn.execute(
                 "SELECT DISTINCT device_id, procedure FROM calibrations WHERE accepted = 1"

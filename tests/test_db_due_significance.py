@@ -198,14 +198,16 @@ def test_a_database_scheduled_by_the_old_rule_is_rescheduled_on_opening(db):
         raw.execute(
             "UPDATE schedule SET interval_due = ?, drift_due = ?, drift_param = ?, drift_rate_per_year = ?, due = ? "
             "WHERE device_id = 'OLD'",
-            old["OLD"][4:],
+            old["OLD"][4:9],
         )
         raw.execute("UPDATE schedule SET due = '2030-01-01T00:00:00Z' WHERE device_id = 'EDITED'")
+        raw.execute("ALTER TABLE schedule DROP COLUMN reason")  # the table as it was before the migration
         raw.execute("DELETE FROM _sqlite_migrations WHERE name = ?", [MIGRATION_NAMES[-1]])
     raw.close()
     with Store(db) as s:
-        due = {r["device_id"]: r["due"] for r in s._query("SELECT device_id, due FROM schedule")}
-        assert due["OLD"] == _iso(last + timedelta(days=INTERVAL_D))
-        assert due["EDITED"] == "2030-01-01T00:00:00Z"
+        rows = {r["device_id"]: r for r in s._query("SELECT device_id, due, reason FROM schedule")}
+        assert rows["OLD"]["due"] == _iso(last + timedelta(days=INTERVAL_D))
+        assert "no significant drift over 4 calibrations" in rows["OLD"]["reason"]
+        assert rows["EDITED"]["due"] == "2030-01-01T00:00:00Z" and rows["EDITED"]["reason"] is None
         problems = s.verify()
         assert [(p["kind"], p["device_id"]) for p in problems] == [("schedule changed", "EDITED")]
