@@ -53,6 +53,36 @@ def filled(db):
 # --- devices ---------------------------------------------------------------------------
 
 
+def test_devices_alone_lists_them(capsys, filled):
+    """`station devices` as the README's command table writes it: the list, not a usage error."""
+    code, out, err = run(capsys, "devices", "--db", filled)
+    assert code == 0 and err == ""
+    assert out == run(capsys, "devices", "list", "--db", filled)[1] and "IMU-1" in out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("export", "IMU-1", "--format", "json"),
+        ("recompute", "IMU-1"),
+        ("report", "IMU-1"),
+        ("export-capture", "--calibration", "IMU-1"),
+    ],
+)
+def test_a_device_id_where_a_calibration_number_goes_is_one_line(capsys, filled, argv):
+    code, out, err = _usage(capsys, *argv, "--db", filled)
+    assert code == 2 and out == "" and len(err.splitlines()) == 1
+    assert "'IMU-1' is not a calibration number (the # that `station history DEVICE` lists)" in err
+
+
+def _usage(capsys, *argv):
+    """A usage error exits through argparse (SystemExit 2) before any handler runs."""
+    with pytest.raises(SystemExit) as exc:
+        main(list(argv))
+    out = capsys.readouterr()
+    return exc.value.code, out.out, out.err
+
+
 def test_devices_add_list_show(capsys, db):
     code, out, _ = run(
         capsys,
