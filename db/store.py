@@ -25,6 +25,7 @@ import os
 import socket
 import sqlite3
 import threading
+import weakref
 from contextlib import contextmanager
 from datetime import timedelta
 
@@ -87,20 +88,64 @@ def default_db_path() -> str:
 SQLITE_MAGIC = b"SQLite format 3\x00"  # the first 16 bytes of every SQLite 3 database file
 
 
-def _refuse_non_sqlite(path: str) -> None:
-    """sqlite3.DatabaseError for an existing non-empty file that is not an SQLite database.
+# The database files this process has open through a Store: (st_dev, st_ino) -> count.
+# Closing any descriptor of a file drops every POSIX lock the process holds on it, SQLite's
+# included (fcntl semantics); with its locks gone, another process closing the database
+# took itself for the last connection and deleted the -wal and -shm files under this one,
+# whose later writes went to the deleted WAL and whose reads came from pages that no longer
+# matched (a device row read back as a migration row). So the header is read only from a
+# file this process does not hold open already.
+_OPEN_FILES: dict[tuple[int, int], int] = {}
+_OPEN_FILES_LOCK = threading.Lock()
+
+
+def _file_key(path: str) -> tuple[int, int] | None:
+    try:
+        st = os.stat(path)  # stat opens nothing: no lock is dropped
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino)
+
+
+def _hold(key: tuple[int, int] | None) -> None:
+    if key is not None:
+        with _OPEN_FILES_LOCK:
+            _OPEN_FILES[key] = _OPEN_FILES.get(key, 0) + 1
+
+
+def _release(key: tuple[int, int] | None) -> None:
+    if key is not None:
+        with _OPEN_FILES_LOCK:
+            n = _OPEN_FILES.get(key, 0) - 1
+            if n > 0:
+                _OPEN_FILES[key] = n
+            else:
+                _OPEN_FILES.pop(key, None)
+
+
+def _refuse_non_sqlite(path: str) -> tuple[int, int] | None:
+    """sqlite3.DatabaseError for an existing non-empty file that is not an SQLite database;
+    else the file's key, now held in `_OPEN_FILES` (None: no file yet).
 
     SQLite itself takes a file shorter than its 100-byte header for an empty database and
-    writes a new one over it: a one-byte text file given as the database was replaced."""
+    writes a new one over it: a one-byte text file given as the database was replaced.
+    A file this process already holds open through a Store is SQLite (checked when it was
+    opened) and is not opened again here (see `_OPEN_FILES`)."""
     if path.startswith("file:") or not os.path.isfile(path):
-        return
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(SQLITE_MAGIC))
-    except OSError:
-        return  # sqlite3.connect says why
-    if head and head != SQLITE_MAGIC:
-        raise sqlite3.DatabaseError("file is not a database (not SQLite: left as it is)")
+        return None
+    with _OPEN_FILES_LOCK:  # checked and held in one step: no other thread's first open in between
+        key = _file_key(path)
+        if key is None or key not in _OPEN_FILES:
+            try:
+                with open(path, "rb") as f:
+                    head = f.read(len(SQLITE_MAGIC))
+            except OSError:
+                return None  # sqlite3.connect says why
+            if head and head != SQLITE_MAGIC:
+                raise sqlite3.DatabaseError("file is not a database (not SQLite: left as it is)")
+        if key is not None:
+            _OPEN_FILES[key] = _OPEN_FILES.get(key, 0) + 1
+        return key
 
 
 # A schedule row, in the order `_schedule_row` gives it (`reason` since migration 0005).
@@ -158,17 +203,23 @@ def _loads(text, default=None):
 
 
 class Store:
-    """The station database. Thread-safe (one lock); open one per process."""
+    """The station database. Thread-safe (one lock). Several in one process (the TUI's screens
+    and saves) keep SQLite's locks: see `_OPEN_FILES`."""
 
     def __init__(self, path: str):
         self.path = os.fspath(path)
         memory = self.path == ":memory:" or self.path.startswith("file::memory:")
+        key = None
         if not memory:
-            _refuse_non_sqlite(self.path)
+            key = _refuse_non_sqlite(self.path)
             parent = os.path.dirname(os.path.abspath(self.path))
             os.makedirs(parent, exist_ok=True)
         self._lock = threading.RLock()
-        self.conn = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
+        try:
+            self.conn = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
+        except BaseException:
+            _release(key)
+            raise
         self.conn.row_factory = sqlite3.Row
         try:
             self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
@@ -181,7 +232,12 @@ class Store:
                 apply(self.conn, post=self._after_migrations)
         except BaseException:
             self.conn.close()
+            _release(key)
             raise
+        if key is None and not memory:  # the file SQLite has just made
+            key = _file_key(self.path)
+            _hold(key)
+        self._unhold = weakref.finalize(self, _release, key)  # on close, or when collected unclosed
 
     # --- plumbing -----------------------------------------------------------------------
 
@@ -281,6 +337,7 @@ class Store:
     def close(self) -> None:
         with self._lock:
             self.conn.close()
+        self._unhold()
 
     def __enter__(self) -> Store:
         return self
