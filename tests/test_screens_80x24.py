@@ -164,6 +164,8 @@ def test_quit_during_a_run_asks_first_and_counters_start_with_the_run(tmp_path):
             readouts = text_of(app, "#readouts")
             await pilot.press("ctrl+q")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            # the footer is the question's (it showed the procedure's s Skip r Redo..., dead under the box)
+            await wait_for(pilot, lambda: screen_lines(app)[-1].split() == ["y", "Yes", "n", "No"])
             await pilot.press("n")
             await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
             running = app.is_running
