@@ -10,6 +10,7 @@ measured by benchmarks/bench_diagnose.py sigma_sizes, docs/benchmarks.md "Diagno
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -306,3 +307,18 @@ def test_a_reference_imu_record_is_diagnosed_as_mode_a(tmp_path, capsys):
     # mode B keeps its own words
     d = _diagnose(_write(tmp_path, simulate("gyro-drift", seed=400778, duration_s=200.0), "b.csv"), capsys)
     assert d["baseline"]["model"] == "y = ω_E + ε (P4 mode B)"
+
+
+def test_the_residual_test_line_says_its_threshold(tmp_path, capsys):
+    """'p = 0.0234 (noise-like)' read as a contradiction at the usual 5 %: the line says the
+    station's threshold (p > 0.01) beside its verdict."""
+    from solvers.diagnose.engine import WHITE_P
+
+    path = _write(tmp_path, simulate("gyro-drift", seed=400779, duration_s=200.0))
+    assert main(["diagnose", path, "--no-plots"]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if "residual test" in line]
+    assert lines
+    for line in lines:
+        p = float(re.search(r"p = ([0-9.e+-]+) \(", line).group(1))
+        want = f"(noise-like: p > {WHITE_P:g})" if p > WHITE_P else f"(NOT noise-like: p ≤ {WHITE_P:g})"
+        assert line.rstrip().endswith(want), line
