@@ -19,6 +19,22 @@ from solvers.jsonable import jsonable
 
 DAYS_PER_YEAR = 365.25
 
+# A drift trend moves a due date only when it is significant: at least
+# DRIFT_MIN_CALIBRATIONS accepted calibrations (a degree of freedom left to check the
+# scatter about the line against the reported sigmas), and |rate| at least
+# DRIFT_SIGNIFICANCE times its sigma: a two-sided 0.27 % chance for a parameter that does
+# not drift and whose sigmas are honest.
+DRIFT_SIGNIFICANCE = 3.0
+DRIFT_MIN_CALIBRATIONS = 3
+# Without reported sigmas the rate's sigma comes from the scatter alone: Student's t with
+# n - 2 degrees of freedom, the same two-sided 0.27 % (dof 1..30; beyond, dof 30's value,
+# slightly stricter than the 3.0 it tends to).
+_T_SIGNIFICANCE = (
+    235.801, 19.207, 9.219, 6.62, 5.507, 4.904, 4.53, 4.277, 4.094, 3.957,
+    3.85, 3.764, 3.694, 3.636, 3.586, 3.544, 3.507, 3.475, 3.447, 3.422,
+    3.4, 3.38, 3.361, 3.345, 3.33, 3.316, 3.303, 3.291, 3.28, 3.27,
+)  # fmt: skip
+
 
 def clean_json(obj):
     """Plain JSON types (``solvers.jsonable``, strict): non-finite numbers become null.
@@ -123,13 +139,14 @@ def linear_trend(t_years: list[float], values: list[float], sigmas: list[float |
     of being ignored; it is never scaled down.
 
     Returns rate (per year), rate_sigma, intercept at t=0, value_at(t) needs both,
-    chi2_per_dof (None without dof). rate is None with fewer than 2 distinct times.
+    chi2_per_dof (None without dof), weighted. rate is None with fewer than 2 distinct times.
     """
     n = len(values)
     out = {"n": n, "rate": None, "rate_sigma": None, "intercept": None, "chi2_per_dof": None, "t_mean": None}
     if n == 0:
         return out
     weighted = all(s is not None and s > 0 and math.isfinite(s) for s in sigmas)
+    out["weighted"] = weighted
     w = [1.0 / (s * s) for s in sigmas] if weighted else [1.0] * n
     sw = sum(w)
     tm = sum(wi * ti for wi, ti in zip(w, t_years)) / sw
@@ -156,4 +173,41 @@ def linear_trend(t_years: list[float], values: list[float], sigmas: list[float |
         intercept=intercept,
         chi2_per_dof=(chi2 / dof) if dof > 0 else None,
     )
+    return out
+
+
+def trend_verdict(fit: dict) -> dict:
+    """Whether a `linear_trend` fit shows a drift: the rate differs from zero beyond its
+    uncertainty, with enough calibrations to say so.
+
+    Significant when n >= DRIFT_MIN_CALIBRATIONS and |rate| / rate_sigma reaches the
+    threshold: DRIFT_SIGNIFICANCE (3) with every sigma reported (rate_sigma already widened
+    by the Birge ratio when the scatter exceeds them), Student's t for the same two-sided
+    0.27 % when the sigma comes from the scatter alone. Returns significant, sigmas
+    (|rate| / rate_sigma, None without a rate), threshold and why (a short phrase).
+    """
+    n = int(fit.get("n") or 0)
+    rate, rate_sigma = fit.get("rate"), fit.get("rate_sigma")
+    out = {"significant": False, "sigmas": None, "threshold": None}
+    if rate is None:
+        out["why"] = f"{n} calibration{'s' if n != 1 else ''} at fewer than two times"
+        return out
+    if rate_sigma is not None and rate_sigma > 0:
+        out["sigmas"] = abs(rate) / rate_sigma
+    elif rate_sigma is not None:  # points exactly on a line with no reported sigma
+        out["sigmas"] = math.inf if rate else 0.0
+    if n < DRIFT_MIN_CALIBRATIONS:
+        out["why"] = f"{n} calibrations ({DRIFT_MIN_CALIBRATIONS} needed)"
+        return out
+    if fit.get("weighted", True):
+        threshold = DRIFT_SIGNIFICANCE
+    else:
+        threshold = _T_SIGNIFICANCE[min(n - 2, len(_T_SIGNIFICANCE)) - 1]
+    out["threshold"] = threshold
+    s = out["sigmas"]
+    if s is None:
+        out["why"] = "no sigma for the rate"
+        return out
+    out["significant"] = s >= threshold
+    out["why"] = f"{s:.1f}σ {'≥' if out['significant'] else '<'} {threshold:g}σ"
     return out

@@ -188,12 +188,20 @@ _REVIEW = [
 # found become the anchored state). Anchors written before keep their version-1 hash.
 _LIMITS_ANCHORED: list[str] = []
 
+# A drift trend moves a due date only when it is significant (db.params.trend_verdict), and
+# each schedule row says why its date is what it is (schedule.reason, one line). The station
+# then recomputes each row the earlier rule (any rate) wrote, so the due dates follow the new
+# rule and `verify` agrees; a row that neither rule gives (an edit by hand) is left, without
+# a reason, for `verify` to report.
+_SIGNIFICANT_DRIFT = ["ALTER TABLE schedule ADD COLUMN reason TEXT"]
+
 # (name, statements), applied in this order. Append only.
 MIGRATIONS: list[tuple[str, list[str]]] = [
     ("0001_initial", _INITIAL),
     ("0002_anchors", _ANCHORS),
     ("0003_review", _REVIEW),
     ("0004_limits_anchored", _LIMITS_ANCHORED),
+    ("0005_significant_drift", _SIGNIFICANT_DRIFT),
 ]
 
 MIGRATION_NAMES = [name for name, _ in MIGRATIONS]

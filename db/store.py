@@ -25,6 +25,7 @@ import os
 import socket
 import sqlite3
 import threading
+import weakref
 from contextlib import contextmanager
 from datetime import timedelta
 
@@ -87,20 +88,106 @@ def default_db_path() -> str:
 SQLITE_MAGIC = b"SQLite format 3\x00"  # the first 16 bytes of every SQLite 3 database file
 
 
-def _refuse_non_sqlite(path: str) -> None:
-    """sqlite3.DatabaseError for an existing non-empty file that is not an SQLite database.
+# The database files this process has open through a Store: (st_dev, st_ino) -> count.
+# Closing any descriptor of a file drops every POSIX lock the process holds on it, SQLite's
+# included (fcntl semantics); with its locks gone, another process closing the database
+# took itself for the last connection and deleted the -wal and -shm files under this one,
+# whose later writes went to the deleted WAL and whose reads came from pages that no longer
+# matched (a device row read back as a migration row). So the header is read only from a
+# file this process does not hold open already.
+_OPEN_FILES: dict[tuple[int, int], int] = {}
+_OPEN_FILES_LOCK = threading.Lock()
+
+
+def _file_key(path: str) -> tuple[int, int] | None:
+    try:
+        st = os.stat(path)  # stat opens nothing: no lock is dropped
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino)
+
+
+def _hold(key: tuple[int, int] | None) -> None:
+    if key is not None:
+        with _OPEN_FILES_LOCK:
+            _OPEN_FILES[key] = _OPEN_FILES.get(key, 0) + 1
+
+
+def _release(key: tuple[int, int] | None) -> None:
+    if key is not None:
+        with _OPEN_FILES_LOCK:
+            n = _OPEN_FILES.get(key, 0) - 1
+            if n > 0:
+                _OPEN_FILES[key] = n
+            else:
+                _OPEN_FILES.pop(key, None)
+
+
+def _refuse_non_sqlite(path: str) -> tuple[int, int] | None:
+    """sqlite3.DatabaseError for an existing non-empty file that is not an SQLite database;
+    else the file's key, now held in `_OPEN_FILES` (None: no file yet).
 
     SQLite itself takes a file shorter than its 100-byte header for an empty database and
-    writes a new one over it: a one-byte text file given as the database was replaced."""
+    writes a new one over it: a one-byte text file given as the database was replaced.
+    A file this process already holds open through a Store is SQLite (checked when it was
+    opened) and is not opened again here (see `_OPEN_FILES`)."""
     if path.startswith("file:") or not os.path.isfile(path):
-        return
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(SQLITE_MAGIC))
-    except OSError:
-        return  # sqlite3.connect says why
-    if head and head != SQLITE_MAGIC:
-        raise sqlite3.DatabaseError("file is not a database (not SQLite: left as it is)")
+        return None
+    with _OPEN_FILES_LOCK:  # checked and held in one step: no other thread's first open in between
+        key = _file_key(path)
+        if key is None or key not in _OPEN_FILES:
+            try:
+                with open(path, "rb") as f:
+                    head = f.read(len(SQLITE_MAGIC))
+            except OSError:
+                return None  # sqlite3.connect says why
+            if head and head != SQLITE_MAGIC:
+                raise sqlite3.DatabaseError("file is not a database (not SQLite: left as it is)")
+        if key is not None:
+            _OPEN_FILES[key] = _OPEN_FILES.get(key, 0) + 1
+        return key
+
+
+# A schedule row, in the order `_schedule_row` gives it (`reason` since migration 0005).
+SCHEDULE_COLUMNS = (
+    "device_id",
+    "procedure",
+    "last_calibration_id",
+    "last_calibrated",
+    "interval_due",
+    "drift_due",
+    "drift_param",
+    "drift_rate_per_year",
+    "due",
+    "reason",
+)
+
+
+def _same_row(a, b) -> bool:
+    """Two schedule rows agree (floats to 1e-9 relative: the drift rate)."""
+    return all(
+        (x == y) or (isinstance(x, float) and isinstance(y, float) and abs(x - y) <= 1e-9 * max(abs(x), abs(y)))
+        for x, y in zip(a, b)
+    )
+
+
+def _drift_note(judged: list[dict], n: int) -> str:
+    """Why no trend moves the due date, for the parameters with a tolerance (one phrase)."""
+    if not judged:
+        return "no tolerance names a parameter of this procedure, so drift does not move it"
+    if n < P.DRIFT_MIN_CALIBRATIONS:
+        return f"drift needs {P.DRIFT_MIN_CALIBRATIONS} accepted calibrations, has {n}"
+    significant = [t for t in judged if t["significant"]]
+    if significant:
+        return f"drift of {significant[0]['param']} ({significant[0]['verdict']}) stays within its tolerance"
+    rated = [t for t in judged if t["significance_sigmas"] is not None]
+    if not rated:
+        return f"no drift rate over {n} calibrations"
+    t = max(rated, key=lambda t: t["significance_sigmas"])
+    return (
+        f"no significant drift over {n} calibrations (steepest {t['param']} "
+        f"{t['rate_per_year']:+.3g} ± {t['rate_sigma_per_year']:.2g}/year, {t['verdict']})"
+    )
 
 
 def _loads(text, default=None):
@@ -116,17 +203,23 @@ def _loads(text, default=None):
 
 
 class Store:
-    """The station database. Thread-safe (one lock); open one per process."""
+    """The station database. Thread-safe (one lock). Several in one process (the TUI's screens
+    and saves) keep SQLite's locks: see `_OPEN_FILES`."""
 
     def __init__(self, path: str):
         self.path = os.fspath(path)
         memory = self.path == ":memory:" or self.path.startswith("file::memory:")
+        key = None
         if not memory:
-            _refuse_non_sqlite(self.path)
+            key = _refuse_non_sqlite(self.path)
             parent = os.path.dirname(os.path.abspath(self.path))
             os.makedirs(parent, exist_ok=True)
         self._lock = threading.RLock()
-        self.conn = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
+        try:
+            self.conn = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
+        except BaseException:
+            _release(key)
+            raise
         self.conn.row_factory = sqlite3.Row
         try:
             self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
@@ -145,7 +238,12 @@ class Store:
                 apply(self.conn, post=self._after_migrations)
         except BaseException:
             self.conn.close()
+            _release(key)
             raise
+        if key is None and not memory:  # the file SQLite has just made
+            key = _file_key(self.path)
+            _hold(key)
+        self._unhold = weakref.finalize(self, _release, key)  # on close, or when collected unclosed
 
     # --- plumbing -----------------------------------------------------------------------
 
@@ -177,6 +275,21 @@ class Store:
         elif "0004_limits_anchored" in names:  # the limits as found, under the anchors from now on
             for (device_id,) in conn.execute("SELECT id FROM devices ORDER BY id").fetchall():
                 self._append_anchor(conn, device_id, "settings")
+        if "0005_significant_drift" in names:  # due dates by the significant-drift rule
+            self._reschedule_old_rule(conn)
+
+    def _reschedule_old_rule(self, conn) -> None:
+        """Recompute each schedule row that the rule before 0005 (any drift rate moved the due
+        date) gives exactly, and its new `reason`; any other row (edited by hand) stays, without
+        a reason, for `verify` to report."""
+        stored = conn.execute(f"SELECT {', '.join(SCHEDULE_COLUMNS[:-1])} FROM schedule").fetchall()
+        for r in stored:
+            try:
+                old = self._schedule_row(conn, r[0], r[1], significant_only=False)
+            except (ValueError, TypeError, KeyError):  # an edited record the trend cannot read
+                continue
+            if old is not None and _same_row(list(r), old[:-1]):
+                self._update_schedule(conn, r[0], r[1])
 
     def _append_anchor(self, conn, device_id: str, event: str, capture_id: int | None = None) -> None:
         """Append one anchor: the device's chain head, calibration count and settings hash now."""
@@ -240,6 +353,7 @@ class Store:
     def close(self) -> None:
         with self._lock:
             self.conn.close()
+        self._unhold()
 
     def __enter__(self) -> Store:
         return self
@@ -755,8 +869,12 @@ class Store:
     # --- drift and schedule -------------------------------------------------------------
 
     @staticmethod
-    def _trends(rows, tolerances: dict, param: str | None = None) -> list[dict]:
-        """Per (procedure, scalar) trend over accepted calibration rows sorted by time."""
+    def _trends(rows, tolerances: dict, param: str | None = None, significant_only: bool = True) -> list[dict]:
+        """Per (procedure, scalar) trend over accepted calibration rows sorted by time.
+
+        ``leaves_tolerance`` only for a significant trend (`db.params.trend_verdict`);
+        ``significant_only=False`` is the rule before migration 0005 (any rate), kept to
+        tell a schedule it wrote from one edited by hand."""
         series: dict[tuple[str, str], dict] = {}
         for r in rows:
             values = P.flatten(_loads(r["params"]))
@@ -775,9 +893,10 @@ class Store:
             t0 = dts[0]
             t_years = [P.years_between(t0, dt) for dt in dts]
             fit = P.linear_trend(t_years, s["values"], s["sigmas"])
+            verdict = P.trend_verdict(fit)
             tol = P.tolerance_for(name, tolerances)
             leaves = None
-            if tol is not None and fit["rate"]:
+            if tol is not None and fit["rate"] and (verdict["significant"] or not significant_only):
                 years = tol / abs(fit["rate"])
                 if years < MAX_PREDICTION_YEARS:  # beyond that: never, for any practical purpose
                     leaves = P.iso(dts[-1] + timedelta(days=years * P.DAYS_PER_YEAR))
@@ -796,6 +915,10 @@ class Store:
                     "rate_per_year": fit["rate"],
                     "rate_sigma_per_year": fit["rate_sigma"],
                     "chi2_per_dof": fit["chi2_per_dof"],
+                    "significance_sigmas": verdict["sigmas"],
+                    "significance_threshold": verdict["threshold"],
+                    "significant": verdict["significant"],
+                    "verdict": verdict["why"],
                     "value_in_use": s["values"][-1],
                     "trend_value_at_last": fitted_last,
                     "tolerance": tol,
@@ -809,9 +932,11 @@ class Store:
 
         `param` selects one name (`B[0]`) or a block (`B`). Each entry: procedure,
         param, times, values, sigmas, rate_per_year, rate_sigma_per_year (weighted
-        linear regression, see `db.params.linear_trend`), tolerance and
-        leaves_tolerance: when the trend carries the parameter `tolerance` away from
-        its value in use (last calibration time + tolerance / |rate|), or None.
+        linear regression, see `db.params.linear_trend`), significance_sigmas
+        (|rate| / its sigma), significance_threshold, significant and verdict (a short
+        phrase; `db.params.trend_verdict`), tolerance and leaves_tolerance: when a
+        significant trend carries the parameter `tolerance` away from its value in use
+        (last calibration time + tolerance / |rate|), else None.
         """
         device = self.get_device(device_id)
         tolerances = device["tolerances"] if device else {}
@@ -830,17 +955,16 @@ class Store:
             conn.execute("DELETE FROM schedule WHERE device_id = ? AND procedure = ?", [device_id, procedure])
             return
         conn.execute(
-            """INSERT OR REPLACE INTO schedule (device_id, procedure, last_calibration_id, last_calibrated,
-                   interval_due, drift_due, drift_param, drift_rate_per_year, due)
-               VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)""",
+            f"INSERT OR REPLACE INTO schedule ({', '.join(SCHEDULE_COLUMNS)}) VALUES ({', '.join('?' * len(row))})",
             row,
         )
 
-    def _schedule_row(self, conn, device_id: str, procedure: str) -> list | None:
-        """The schedule row one (device, procedure) should have, from devices and calibrations
-        (None: no accepted calibration, no row)."""
+    def _schedule_row(self, conn, device_id: str, procedure: str, significant_only: bool = True) -> list | None:
+        """The schedule row one (device, procedure) should have, from devices and calibrations,
+        in `SCHEDULE_COLUMNS` order (None: no accepted calibration, no row). ``reason`` says why
+        the due date is what it is: the interval and why drift did not move it, or the
+        significant drift that brought it forward."""
         dev = conn.execute("SELECT interval_days, tolerances FROM devices WHERE id = ?", [device_id]).fetchone()
-        tolerances = _loads(dev["tolerances"], {})
         last = conn.execute(
             """SELECT id, time FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1
                ORDER BY time DESC, id DESC LIMIT 1""",
@@ -848,21 +972,53 @@ class Store:
         ).fetchone()
         if last is None or dev is None:
             return None
+        tolerances = _loads(dev["tolerances"], {})
         interval_due = None
         if dev["interval_days"]:
             interval_due = P.iso(P.parse_time(last["time"]) + timedelta(days=dev["interval_days"]))
-        drift_due = drift_param = drift_rate = None
+        drift = None
+        note = "no tolerances set, so drift does not move it"
         if tolerances:
             rows = conn.execute(
                 """SELECT id, procedure, time, params, uncertainty FROM calibrations
                    WHERE device_id = ? AND procedure = ? AND accepted = 1 ORDER BY time, id""",
                 [device_id, procedure],
             ).fetchall()
-            for t in self._trends(rows, tolerances):
-                if t["leaves_tolerance"] and (drift_due is None or t["leaves_tolerance"] < drift_due):
-                    drift_due, drift_param, drift_rate = t["leaves_tolerance"], t["param"], t["rate_per_year"]
+            judged = [t for t in self._trends(rows, tolerances, significant_only=significant_only) if t["tolerance"]]
+            for t in judged:
+                if t["leaves_tolerance"] and (drift is None or t["leaves_tolerance"] < drift["leaves_tolerance"]):
+                    drift = t
+            note = _drift_note(judged, len(rows))
+        drift_due = drift["leaves_tolerance"] if drift else None
         due = min((d for d in (interval_due, drift_due) if d), default=None)
-        return [device_id, procedure, last["id"], last["time"], interval_due, drift_due, drift_param, drift_rate, due]
+        since = last["time"][:10]
+        if drift is not None and (interval_due is None or drift_due < interval_due):
+            how = f"{drift['rate_per_year']:+.3g}"
+            if drift["rate_sigma_per_year"] is not None:
+                how += f" ± {drift['rate_sigma_per_year']:.2g}"
+            if drift["significance_sigmas"] is not None:
+                how += f"/year, {drift['significance_sigmas']:.1f}σ over {drift['n']} calibrations"
+            reason = (
+                f"{procedure}: drift of {drift['param']} ({how}) leaves its tolerance {drift['tolerance']:g} on "
+                f"{drift_due[:10]} (last calibrated {since})"
+            )
+        else:
+            if drift is not None:
+                note = f"drift of {drift['param']} ({drift['verdict']}) leaves its tolerance only on {drift_due[:10]}"
+            head = f"{procedure}: {dev['interval_days']:g}-day interval since {since} ends {due[:10]}" if due else ""
+            reason = f"{head}; {note}" if head else f"{procedure}: no interval set; {note}"
+        return [
+            device_id,
+            procedure,
+            last["id"],
+            last["time"],
+            interval_due,
+            drift_due,
+            drift["param"] if drift else None,
+            drift["rate_per_year"] if drift else None,
+            due,
+            reason,
+        ]
 
     def rebuild_schedule(self) -> int:
         """Recompute every schedule row from devices and calibrations; returns the row count."""
@@ -877,8 +1033,10 @@ class Store:
         """Devices due for recalibration by `now + within_days`, soonest first.
 
         A (device, procedure) is due at the end of the device's interval since its
-        last accepted calibration, or earlier when a parameter's drift trend leaves
-        its tolerance first; a device with no accepted calibration is due now.
+        last accepted calibration, or earlier when a parameter's significant drift trend
+        leaves its tolerance first (`db.params.trend_verdict`); a device with no accepted
+        calibration is due now. Each reason's text says which rule set the date and, for
+        the interval, why drift did not move it.
         Each entry: device_id, model, due (time or None for never calibrated),
         days_left (negative = overdue), status (`overdue`, `due`, `never calibrated`),
         reason (one line) and reasons (one dict per procedure).
@@ -903,16 +1061,9 @@ class Store:
                 and r["drift_due"] == r["due"]
                 and (r["interval_due"] is None or r["drift_due"] < r["interval_due"])
             )
-            if by_drift:
-                text = (
-                    f"{r['procedure']}: drift of {r['drift_param']} ({r['drift_rate_per_year']:+.3g}/year) "
-                    f"leaves its tolerance on {r['due'][:10]} (last calibrated {r['last_calibrated'][:10]})"
-                )
-            else:
-                text = (
-                    f"{r['procedure']}: {r['interval_days']:g}-day interval since {r['last_calibrated'][:10]} "
-                    f"ends {r['due'][:10]}"
-                )
+            text = r["reason"]
+            if not text:  # a row no station wrote (`verify` reports it)
+                text = f"{r['procedure']}: due {r['due'][:10]} (last calibrated {r['last_calibrated'][:10]})"
             reason = {
                 "procedure": r["procedure"],
                 "kind": "drift" if by_drift else "interval",
@@ -972,17 +1123,7 @@ class Store:
         ),
         "captures": ("id", "device_id", "procedure", "time", "operator", "host", "meta", "sha256"),
         "capture_columns": ("capture_id", "ordinal", "name", "dtype", "length", "encoding", "data"),
-        "schedule": (
-            "device_id",
-            "procedure",
-            "last_calibration_id",
-            "last_calibrated",
-            "interval_due",
-            "drift_due",
-            "drift_param",
-            "drift_rate_per_year",
-            "due",
-        ),
+        "schedule": SCHEDULE_COLUMNS,
         "anchors": ANCHOR_COLUMNS + ("hash",),
     }
 
@@ -1181,10 +1322,7 @@ class Store:
         with self._lock:
             stored = {
                 (r["device_id"], r["procedure"]): list(r)
-                for r in self.conn.execute(
-                    """SELECT device_id, procedure, last_calibration_id, last_calibrated, interval_due, drift_due,
-                          drift_param, drift_rate_per_year, due FROM schedule"""
-                )
+                for r in self.conn.execute(f"SELECT {', '.join(SCHEDULE_COLUMNS)} FROM schedule")
             }
             pairs = self.conn.execute(
                 "SELECT DISTINCT device_id, procedure FROM calibrations WHERE accepted = 1"
@@ -1195,17 +1333,11 @@ class Store:
                 return problems
         expected = {k: v for k, v in expected.items() if v is not None}
 
-        def same(a, b):
-            return all(
-                (x == y) or (isinstance(x, float) and isinstance(y, float) and abs(x - y) <= 1e-9 * max(abs(x), abs(y)))
-                for x, y in zip(a, b)
-            )
-
         for key in sorted(set(stored) | set(expected), key=lambda k: (str(k[0]), str(k[1]))):
             if key[0] in flagged:
                 continue
             have, want = stored.get(key), expected.get(key)
-            if have is not None and want is not None and same(have, want):
+            if have is not None and want is not None and _same_row(have, want):
                 continue
             detail = (
                 f"{key[1]}: stored due {have[8] if have else 'none'}, the calibrations give "

@@ -2,7 +2,12 @@
 
 
 class SolverError(Exception):
-    """Base class: the data cannot give the answer asked for."""
+    """Base class: the data cannot give the answer asked for. ``alternative``: a method of the
+    same procedure these data do allow (the message says which and why), else None."""
+
+    def __init__(self, *args, alternative: str | None = None) -> None:
+        super().__init__(*args)
+        self.alternative = alternative
 
 
 class TooFewPositions(SolverError):

@@ -455,7 +455,8 @@ def calibrate(
             hint = "; the labelled ±axis positions allow the six-position linear solution (--method six-position)"
         raise TooFewPositions(
             f"{n_distinct} distinct orientations in {len(positions)} static positions; the "
-            f"norm-condition fit needs at least {MIN_DISTINCT}{hint}"
+            f"norm-condition fit needs at least {MIN_DISTINCT}{hint}",
+            alternative="six-position" if hint else None,
         )
     dirs = np.array([p.direction for p in known]) if known else np.zeros((0, 3))
     rank_known = int(np.linalg.matrix_rank(dirs, tol=0.1)) if len(known) else 0

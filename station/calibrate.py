@@ -65,7 +65,7 @@ def guarded(capture, fn, *args, **kwargs):
             f"{where}: the fit failed numerically ({exc}); check the data: constant, all zero or absurdly large values?"
         ) from None
     except SolverError as exc:
-        raise UnsupportedError(f"{where}: {exc}") from None
+        raise UnsupportedError(f"{where}: {exc}", alternative=exc.alternative) from None
     except (OverflowError, FloatingPointError) as exc:
         raise UnsupportedError(
             f"{where}: a number overflowed in the fit ({exc}): the data hold values far beyond the sensor's range"

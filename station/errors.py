@@ -32,7 +32,12 @@ class OutputError(StationError):
 
 
 class UnsupportedError(StationError):
-    """A valid capture that cannot support the procedure (too few positions, ...)."""
+    """A valid capture that cannot support the procedure (too few positions, ...).
+    ``alternative``: a method of the procedure the capture does allow (the TUI offers it)."""
+
+    def __init__(self, *args, alternative: str | None = None) -> None:
+        super().__init__(*args)
+        self.alternative = alternative
 
 
 # Warnings met while reading the input (an importer's "the raw topics hold 6 samples"), held until

@@ -43,12 +43,20 @@ class SourceFailed(Message):
 class CalibrationReady(Message):
     """The fit of the captured positions: ``result`` (calibrate.md dict) or ``error``."""
 
-    def __init__(self, capture, result: dict | None, error: str | None = None, previous: dict | None = None) -> None:
+    def __init__(
+        self,
+        capture,
+        result: dict | None,
+        error: str | None = None,
+        previous: dict | None = None,
+        alternative: str | None = None,
+    ) -> None:
         super().__init__()
         self.capture = capture
         self.result = result
         self.error = error
         self.previous = previous  # the device's last accepted calibration of the procedure
+        self.alternative = alternative  # with an error: a method the capture allows (UnsupportedError)
 
 
 class Saved(Message):

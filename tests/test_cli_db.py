@@ -53,6 +53,36 @@ def filled(db):
 # --- devices ---------------------------------------------------------------------------
 
 
+def test_devices_alone_lists_them(capsys, filled):
+    """`station devices` as the README's command table writes it: the list, not a usage error."""
+    code, out, err = run(capsys, "devices", "--db", filled)
+    assert code == 0 and err == ""
+    assert out == run(capsys, "devices", "list", "--db", filled)[1] and "IMU-1" in out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("export", "IMU-1", "--format", "json"),
+        ("recompute", "IMU-1"),
+        ("report", "IMU-1"),
+        ("export-capture", "--calibration", "IMU-1"),
+    ],
+)
+def test_a_device_id_where_a_calibration_number_goes_is_one_line(capsys, filled, argv):
+    code, out, err = _usage(capsys, *argv, "--db", filled)
+    assert code == 2 and out == "" and len(err.splitlines()) == 1
+    assert "'IMU-1' is not a calibration number (the # that `station history DEVICE` lists)" in err
+
+
+def _usage(capsys, *argv):
+    """A usage error exits through argparse (SystemExit 2) before any handler runs."""
+    with pytest.raises(SystemExit) as exc:
+        main(list(argv))
+    out = capsys.readouterr()
+    return exc.value.code, out.out, out.err
+
+
 def test_devices_add_list_show(capsys, db):
     code, out, _ = run(
         capsys,
@@ -201,7 +231,11 @@ def test_drift_json_and_text_with_plot(capsys, filled):
     ym = sum(years) / 3
     rate = sum((y - ym) * (0.1 + 0.01 * k) for k, y in enumerate(years)) / sum((y - ym) ** 2 for y in years)
     assert t["rate_per_year"] == pytest.approx(rate, rel=1e-9) and t["param"] == "B[0]"
-    assert t["tolerance"] == 0.01 and t["leaves_tolerance"] is not None
+    # 0.02/year against sigmas of 0.01: rate sigma 0.01 / sqrt(sum (y - ym)^2), 1.4 sigma, not a drift to schedule by
+    rate_sigma = 0.01 / sum((y - ym) ** 2 for y in years) ** 0.5
+    assert t["rate_sigma_per_year"] == pytest.approx(rate_sigma, rel=1e-9)
+    assert t["significance_sigmas"] == pytest.approx(rate / rate_sigma, rel=1e-9) and not t["significant"]
+    assert t["tolerance"] == 0.01 and t["leaves_tolerance"] is None
     code, out, _ = run(capsys, "drift", "IMU-1", "--param", "B", "--db", filled)
     assert code == 0
     assert "accel-tabletop  B[0]" in out and "RATE/YEAR" in out
@@ -226,15 +260,20 @@ def test_due_exit_status_for_cron(capsys, filled):
     # IMU-1 last accel calibration 2025-01-01 with a 365-day interval; its compass one 2024-03-01
     code, out, _ = run(capsys, "due", "--now", "2024-02-01", "--db", filled)
     assert code == 0 and out == "nothing due\n"
-    # compass interval ends 2025-03-01; B[0] drifts 0.02/year against a 0.01 tolerance: accel due ~2025-07-02
+    # compass interval ends 2025-03-01; B[0]'s 0.02/year against a 0.01 tolerance is 1.4 sigma, not a
+    # drift: accel due at its interval's end, 2026-01-01
     code, out, _ = run(capsys, "due", "--now", "2025-03-20", "--db", filled)
     assert code == 1 and out.startswith("IMU-1: overdue by 19 d (due 2025-03-01)")
     assert "compass: 365-day interval" in out and "accel-tabletop" not in out
     code, out, _ = run(capsys, "due", "--now", "2025-08-01", "--json", "--db", filled)
     [e] = json.loads(out)
     assert code == 1 and e["device_id"] == "IMU-1" and e["status"] == "overdue"
-    kinds = {r["procedure"]: r["kind"] for r in e["reasons"]}
-    assert kinds == {"compass": "interval", "accel-tabletop": "drift"}
+    assert {r["procedure"]: r["kind"] for r in e["reasons"]} == {"compass": "interval"}
+    code, out, _ = run(capsys, "due", "--now", "2026-01-02", "--json", "--db", filled)
+    [e] = json.loads(out)
+    [accel] = [r for r in e["reasons"] if r["procedure"] == "accel-tabletop"]
+    assert accel["kind"] == "interval" and accel["due"] == "2026-01-01T00:00:00Z"
+    assert "no significant drift over 3 calibrations (steepest B[0] +0.02 ± 0.014/year, 1.4σ < 3σ)" in accel["text"]
     assert run(capsys, "due", "--now", "2025-02-01", "--within", "20", "--db", filled)[0] == 0
     code, out, _ = run(capsys, "due", "--now", "2025-02-01", "--within", "40", "--db", filled)
     assert code == 1 and out.startswith("IMU-1: due in 28 d (2025-03-01)")

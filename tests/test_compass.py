@@ -174,6 +174,20 @@ def test_held_headings_match_simulated_truth(tmp_path):
     assert np.median(np.abs(errs)) < 0.3 and np.max(np.abs(errs)) < 1.5
 
 
+def test_text_says_a_steep_hold_has_no_heading(tmp_path, capsys):
+    """Seed 5 holds one attitude at 74° pitch, beyond the heading's tilt limit: the text says
+    the heading is undefined there (it printed 'nan°'), JSON has null."""
+    path = _write(tmp_path, simulate("compass", seed=5))
+    rows = _run_json(path)["headings"]
+    steep = [r for r in rows if abs(r["pitch_deg"]) > C.HEADING_MAX_TILT_DEG]
+    assert steep and all(r["heading_magnetic_deg"] is None for r in steep)
+    rc, out = _run_cli(path, capsys)
+    held = [line for line in out.out.splitlines() if line.lstrip().startswith("held")]
+    assert rc == 0 and len(held) == len(rows) and "nan" not in out.out.lower()
+    undefined = [line for line in held if "heading undefined (|pitch| > 70°)" in line]
+    assert len(undefined) == len(steep)
+
+
 # ---------------------------------------------------------------- filters and Kalman
 
 

@@ -125,7 +125,8 @@ def test_drift_ignores_rejected_calibrations(store):
 
 def test_tolerance_prediction(store):
     store.add_device("P", interval_days=730, tolerances={"B": 0.01})
-    _save_series(store, "P", [0, 365.25], B0=(0, 0, 0), rates=(0.02, -0.004, 0.0), sigma=0.001)
+    # three calibrations on the lines, rate sigma 0.0005 / sqrt(0.5) = 7e-4: B[0] 28σ, B[1] 5.7σ (significant)
+    _save_series(store, "P", [0, 182.625, 365.25], B0=(0, 0, 0), rates=(0.02, -0.004, 0.0), sigma=0.0005)
     trends = {t["param"]: t for t in store.drift("P", param="B")}
     # B[0]: 0.01 / 0.02 per year = half a year after the last calibration (2023-01-01 + 182.625 d)
     last = T0 + timedelta(days=365.25)
@@ -137,7 +138,9 @@ def test_tolerance_prediction(store):
 
 def test_negligible_drift_predicts_no_exit(store):
     store.add_device("SLOW", tolerances={"B": 0.01})
-    _save_series(store, "SLOW", [0, 365.25], B0=(0, 0, 0), rates=(1e-12, -1e-9, 1e-3), sigma=0.001)
+    # sigmas far below the rates, so each trend is significant and only its slowness says "never"
+    _save_series(store, "SLOW", [0, 182.625, 365.25], B0=(0, 0, 0), rates=(1e-12, -1e-9, 1e-3), sigma=1e-14)
+    assert all(t["significant"] for t in store.drift("SLOW", param="B"))
     leaves = {t["param"]: t["leaves_tolerance"] for t in store.drift("SLOW", param="B")}
     assert leaves["B[0]"] is None and leaves["B[1]"] is None  # 1e7+ years: beyond any date
     last = T0 + timedelta(days=365.25)  # 0.01 / 0.001 per year = 10 years (of 365.25 d) after the last calibration

@@ -84,6 +84,38 @@ def test_a_new_migration_is_applied_once_to_an_existing_database(tmp_path, monke
     assert names == MIGRATION_NAMES + ["9999_test_add_column"]
 
 
+def _other_process(path: str, code: str) -> str:
+    """Run ``code`` with ``s = Store(path)`` in a separate Python process; its stdout."""
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    script = f"from db import Store\ns = Store({path!r})\n{code}\ns.close()\n"
+    out = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+def test_a_second_store_in_the_process_keeps_the_first_ones_locks(tmp_path):
+    """The TUI holds one Store and opens another to save or read, then closes it. Reading the
+    file's header for the second one closed a descriptor of the database, which drops every
+    POSIX lock of the process (SQLite's too): the next command in another process then took
+    itself for the last connection and deleted the -wal and -shm under the TUI, whose later
+    writes went nowhere another process could see, and whose reads came back from the wrong
+    pages (a device read as a migration row: 'not valid JSON')."""
+    path = str(tmp_path / "station.db")
+    with Store(path) as tui:
+        tui.add_device("FIRST")
+        Store(path).close()  # a save or a screen's read, in the same process
+        assert "FIRST" in _other_process(path, "print([d['id'] for d in s.list_devices()])")
+        assert sorted(os.listdir(tmp_path)) == ["station.db", "station.db-shm", "station.db-wal"]
+        tui.add_device("SECOND", model="written after")
+        assert _other_process(path, "print(s.get_device('SECOND')['model'])").strip() == "written after"
+        _other_process(path, "s.add_device('THIRD', model='from elsewhere')")
+        assert tui.get_device("THIRD")["model"] == "from elsewhere"
+        assert [d["id"] for d in tui.list_devices()] == ["FIRST", "SECOND", "THIRD"]
+
+
 def test_default_path_follows_station_db_then_xdg(monkeypatch, tmp_path):
     monkeypatch.delenv("STATION_DB", raising=False)
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))

@@ -10,6 +10,7 @@ measured by benchmarks/bench_diagnose.py sigma_sizes, docs/benchmarks.md "Diagno
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -290,3 +291,34 @@ def test_candidate_with_no_degrees_of_freedom_left_is_unresolvable(tmp_path, cap
     three = [c for c in res["candidates"] if c.get("reason") is None or "degrees of freedom" in c["reason"]]
     assert three and all(c.get("resolvable") is False for c in three), res["candidates"]
     assert all("leave 0 degrees of freedom" in c["reason"] for c in three)
+
+
+def test_a_reference_imu_record_is_diagnosed_as_mode_a(tmp_path, capsys):
+    """P4 with a reference IMU (`gyro_mode: reference`, the TUI's "P4 gyro drift, reference
+    IMU"): the diagnosis subtracts the reference, so its baseline is the drift alone; it was
+    labelled 'y = ω_E + ε (P4 mode B)', with the Earth rate 'removed: the latitude is known'."""
+    sim = simulate("gyro-drift", seed=400777, mode="reference", duration_s=200.0)
+    assert sim.meta.get("gyro_mode") == "reference" and "ref_gx" in sim.columns
+    d = _diagnose(_write(tmp_path, sim), capsys)
+    assert d["baseline"]["model"] == "y = ε (P4 mode A: y = unit − reference)"
+    assert "mode B" not in json.dumps(d)
+    [earth] = [c for c in d["candidates"] if c["name"] == "earth_rate"]
+    assert "reference IMU on the same mount sees it too" in earth["reason"]
+    # mode B keeps its own words
+    d = _diagnose(_write(tmp_path, simulate("gyro-drift", seed=400778, duration_s=200.0), "b.csv"), capsys)
+    assert d["baseline"]["model"] == "y = ω_E + ε (P4 mode B)"
+
+
+def test_the_residual_test_line_says_its_threshold(tmp_path, capsys):
+    """'p = 0.0234 (noise-like)' read as a contradiction at the usual 5 %: the line says the
+    station's threshold (p > 0.01) beside its verdict."""
+    from solvers.diagnose.engine import WHITE_P
+
+    path = _write(tmp_path, simulate("gyro-drift", seed=400779, duration_s=200.0))
+    assert main(["diagnose", path, "--no-plots"]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if "residual test" in line]
+    assert lines
+    for line in lines:
+        p = float(re.search(r"p = ([0-9.e+-]+) \(", line).group(1))
+        want = f"(noise-like: p > {WHITE_P:g})" if p > WHITE_P else f"(NOT noise-like: p ≤ {WHITE_P:g})"
+        assert line.rstrip().endswith(want), line

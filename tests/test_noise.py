@@ -68,3 +68,20 @@ def test_format_duration():
     assert [format_duration(x) for x in (45, 600, 7300, math.inf)] == ["45 s", "10 min", "2.0 h", "never"]
     # issue 15: "needs 13,803 h" where the README promises "never": beyond a day is never
     assert format_duration(13803 * 3600.0) == "never" and format_duration(23.5 * 3600) == "23.5 h"
+
+
+def test_p4_record_verdict_names_the_axes_that_never_get_there():
+    """The noise run's line under its table: one axis that never reaches the accuracy made
+    it say "No still P4 record reaches 1σ ≤ 1 °/h" beside x needing 2.6 h and y 84 min."""
+    from station.procedures.noise import p4_record_verdict
+
+    assert p4_record_verdict([9360.0, 5040.0, 600.0], 1.0) == "For 1σ ≤ 1 °/h a still P4 record needs 2.6 h."
+    line = p4_record_verdict([9360.0, 5040.0, math.inf], 1.0)
+    assert line.startswith("No still P4 record reaches 1σ ≤ 1 °/h on every axis: the fitted noise floor of z ")
+    assert line.endswith("is above it; x alone needs 2.6 h, y alone needs 84 min.")
+    line = p4_record_verdict([math.inf, 30 * 3600.0, 60.0], 0.5)  # y: finite but past a day
+    assert "noise floor of x and y " in line and "or within a hair of it (> 24 h)" in line
+    assert line.endswith("; z alone needs 60 s.")
+    assert p4_record_verdict([math.inf] * 3, 1.0).endswith(
+        "of x and y and z (bias instability, rate random walk) is above it."
+    )

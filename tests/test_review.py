@@ -154,6 +154,50 @@ def test_every_sigma_above_its_value_is_a_failed_fit():
     assert fit_checks(gyro) == []
 
 
+def test_a_documented_null_outside_the_core_parameters_is_not_a_failed_fit():
+    """A compass capture without a place has no IGRF reference (its reference.* null, as the
+    README says) and a P4 record without a latitude no Earth rate: both failed 'the fit
+    returned non-finite values', so a result the station documents could only be saved by
+    override. A null core parameter still fails."""
+    compass = {
+        "procedure": "compass",
+        "params": {
+            "hard_iron": [-0.0065, -0.105, 0.020],
+            "soft_iron": [[0.98, 0.004, 0.059], [0.0, 0.92, -0.093], [0.0, 0.0, 1.10]],
+            "reference": {"total_nT": None, "inclination_deg": None},
+        },
+        "uncertainty": {
+            "hard_iron": [5e-5, 4e-5, 4e-5],
+            "soft_iron": [[1.5e-4] * 3] * 3,
+            "reference": {"total_nT": None, "inclination_deg": None},
+        },
+        "residual_rms": 228.0,
+    }
+    assert fit_checks(compass) == []
+    compass["params"]["hard_iron"][1] = None
+    assert fit_checks(compass) == ["the fit returned non-finite values"]
+    gyro = {
+        "procedure": "gyro-drift",
+        "params": {"drift": [-1.3e-3, 2.8e-3, -2.1e-3], "earth_rate_body": None},
+        "uncertainty": {"drift": [1e-4] * 3, "earth_rate_body": None},
+        "residual_rms": 1e-3,
+    }
+    assert fit_checks(gyro) == []
+
+
+def test_real_captures_without_a_place_save_as_accepted(tmp_path, shared_data):
+    """End to end on the shared data: the sunsided sphere (no place) and PX4's sample.ulg
+    (no latitude) save as accepted, no decision asked."""
+    db = tmp_path / "s.db"
+    for args in (
+        [shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv"],
+        [shared_data / "px4_ulog" / "original" / "sample.ulg", "--procedure", "gyro-drift"],
+    ):
+        res = run_station("calibrate", *args, "--save", "--db", db)
+        assert res.returncode == 0, res.stderr
+        assert "saved calibration" in res.stderr and "as accepted" in res.stderr
+
+
 def test_store_refuses_the_same_samples_twice_whoever_saves_them(tmp_path):
     path = _sim(tmp_path, "gyro-drift", 1)
     cap = read_capture(path)

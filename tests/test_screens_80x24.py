@@ -111,6 +111,39 @@ def test_history_shows_times_of_day_and_a_date_axis(tmp_path):
     assert all(len(line) <= 80 for line in lines)
 
 
+def test_history_plot_gives_a_trend_only_with_enough_calibrations_and_says_how_sure(tmp_path):
+    """Two P4 calibrations minutes apart were plotted under '-9.49e+05 °/h/yr': a rate from two
+    points, which the due date ignores. Under three calibrations the title says a trend needs
+    three; from three on it gives the rate ± σ, the σ count and * when significant (the rule
+    that moves the due date). The calibrations table is set apart from the devices table (its
+    rows read as the highlighted device's own calibrations, not the one on the same line)."""
+    from tests.tui_data import seed_history
+
+    async def title(db, rows):
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await history_shown(pilot, app, rows)
+            await wait_for(pilot, lambda: "B[0] [m/s^2]" in "\n".join(screen_lines(app)))
+            lines = screen_lines(app)
+            return next(line for line in lines if "B[0] [m/s^2]" in line), lines
+
+    two, three = str(tmp_path / "two.db"), str(tmp_path / "three.db")
+    seed_history(two, "IMU-2", n=2)
+    seed_history(three, "IMU-3", n=3)  # B drifts 0.02 m/s² a year, σ 0.001 per calibration
+    line2, _ = asyncio.run(title(two, 2))
+    line3, lines = asyncio.run(title(three, 3))
+    assert line2.rstrip().endswith("B[0] [m/s^2] 1/12  trend: 3+ calibrations")
+    assert "/yr" not in line2
+    [t] = [t for t in Store(three).drift("IMU-3", param="B[0]")]
+    want = f"+{t['rate_per_year']:.2g}±{t['rate_sigma_per_year']:.1g} m/s^2/yr {t['significance_sigmas']:.1f}σ*"
+    assert t["significant"] and line3.rstrip().endswith(want), (line3, want)
+    # a column of its own between the devices and the calibrations, on every table row
+    table_rows = [line for line in lines[2:6] if line.strip()]
+    sep = {line[26] for line in table_rows}
+    assert len(sep) == 1 and sep.pop().strip() != "", table_rows
+    assert all(len(line) <= 80 for line in lines)
+
+
 def test_quit_during_a_run_asks_first_and_counters_start_with_the_run(tmp_path):
     clock = BenchClock()
     src = SimSource(seed=3, clock=clock)
@@ -131,6 +164,8 @@ def test_quit_during_a_run_asks_first_and_counters_start_with_the_run(tmp_path):
             readouts = text_of(app, "#readouts")
             await pilot.press("ctrl+q")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            # the footer is the question's (it showed the procedure's s Skip r Redo..., dead under the box)
+            await wait_for(pilot, lambda: screen_lines(app)[-1].split() == ["y", "Yes", "n", "No"])
             await pilot.press("n")
             await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
             running = app.is_running

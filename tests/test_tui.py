@@ -191,9 +191,20 @@ def test_help_opens_and_closes_with_the_keyboard():
         async with app.run_test(size=SIZE) as pilot:
             await pilot.press("f1")
             await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
+            await wait_for(pilot, lambda: "s skip" in text_of(app, "HelpScreen Static"))
+            # how to close it is on screen (the footer showed Connect's keys, dead under the box)
+            await wait_for(pilot, lambda: screen_lines(app)[-1].split() == ["esc", "Close"])
+            assert "esc or F1 closes this" in text_of(app, "HelpScreen Static")
+            # the simulated device's keys of every procedure (P1 and P2 were missing)
+            assert "simulated: p place the unit" in text_of(app, "HelpScreen Static")
+            assert "simulated: p mount and spin" in text_of(app, "HelpScreen Static")
+            await pilot.press("end")  # the rest by scrolling
             await wait_for(pilot, lambda: "g diagnose" in text_of(app, "HelpScreen Static"))
-            assert "s skip" in text_of(app, "HelpScreen Static")
             await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await pilot.press("f1")
+            await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
+            await pilot.press("f1")
             await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
 
     asyncio.run(story())

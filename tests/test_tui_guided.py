@@ -149,6 +149,13 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
             scr.query_one("#accuracy").value = ""
             await pilot.press(*"5", "enter")
             await wait_for(pilot, lambda: scr.accuracy_deg_h == 5.0 and "1σ ≤ 5 °/h" in text_of(app, "#status"))
+            # the line under the table agrees with its "P4 needs" column: the axes that never
+            # get there are named, the others' times repeated
+            rows = text_of(app, "#table").splitlines()[1:4]
+            never = [row.split()[0] for row in rows if row.rstrip().endswith("never")]
+            status = " ".join(text_of(app, "#status").split())
+            assert status.startswith("No still P4 record" if never else "For 1σ ≤ 5 °/h")
+            assert all(f" {ax} " in status for ax in never)
             await pilot.press("e")
             await wait_for(pilot, lambda: len(scr.exported) == 2)
             return scr.exported, r

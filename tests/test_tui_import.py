@@ -143,3 +143,40 @@ def test_a_dataflash_log_goes_on_to_results_and_to_a_diagnosis(tmp_path):
     # on the log's own axes (x forward, y right, z down); in P4's frame (x forward, y up, z right)
     np.testing.assert_allclose(out["result"]["drift_raw"]["value"], mean, rtol=0, atol=1e-9)
     np.testing.assert_allclose(out["result"]["params"]["drift"], [mean[0], -mean[2], mean[1]], rtol=0, atol=1e-9)
+
+
+def test_a_six_position_capture_offers_the_six_position_fit_on_f8(tmp_path, shared_data):
+    """imucal's labelled Ferraris session (6 ±axis positions): the norm fit refuses it and
+    pointed to '--method six-position', a CLI option the TUI had no way to give. The refusal
+    now offers F8 (in the footer only then), which fits it that way, on to Results."""
+    path = shared_data / "imucal_ferraris" / "imucal_ferraris_labelled.capture.csv"
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f7")
+            await wait_for(pilot, lambda: screen_name(app) == "ImportScreen")
+            assert "f8" not in screen_lines(app)[-1].lower()  # nothing to offer yet
+            app.screen.query_one("#path").value = str(path)
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: "F8" in text_of(app, "#status"), timeout_s=120)
+            status = " ".join(text_of(app, "#status").split())
+            footer = screen_lines(app)[-1]
+            await pilot.press("f8")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=120)
+            await wait_for(pilot, lambda: " RMS " in "\n".join(screen_lines(app)))
+            return status, footer, app.screen.result
+
+    status, footer, result = asyncio.run(story())
+    assert "the norm-condition fit needs at least 9" in status
+    assert status.endswith("F8 calibrates it with the six-position method instead.")
+    assert "f8 Six-position fit" in footer
+    # the same result as the CLI's --method six-position on the same file
+    cli = run_station("calibrate", path, "--method", "six-position", "--json")
+    assert cli.returncode == 0, cli.stderr
+    import json
+
+    want = json.loads(cli.stdout)
+    assert result["method"] == want["method"]
+    np.testing.assert_allclose(np.array(result["params"]["B"]), want["params"]["B"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array(result["params"]["M"]), want["params"]["M"], rtol=0, atol=1e-12)

@@ -53,6 +53,7 @@ CONFUSION_CORR = 0.9  # |corr| of a generic term's signature with a library cand
 RIVAL_CORR = 0.8  # |corr| of two candidates' fitted signatures above this: compared head to head
 MAX_FOLDS = 10
 ALPHA = 0.05  # family-wise level the per-candidate deviance quantiles start from
+WHITE_P = 0.01  # a residual test's p above this: the residuals are noise-like
 MIN_DOF = 3  # an extension must leave this many degrees of freedom
 GROUPS_TOL = 1e-6  # round-off in an effective count of groups (a step between two holds leaves a whole number)
 # a generic term displaces library effects whose columns hold most (> CONFUSION_CORR) of its
@@ -308,14 +309,21 @@ def ljung_box(x: np.ndarray, lags: int = 20) -> dict:
         q += rho * rho / (n - k)
     q *= n * (n + 2)
     p = float(gammaincc(lags / 2.0, q / 2.0))
-    return {"test": "ljung-box", "lags": lags, "n": n, "statistic": q, "p_value": p, "white": bool(p > 0.01)}
+    return {"test": "ljung-box", "lags": lags, "n": n, "statistic": q, "p_value": p, "white": bool(p > WHITE_P)}
 
 
 def chi2_test(rw: np.ndarray, dof: int) -> dict:
     c = float(rw @ rw)
     dof = max(int(dof), 1)
     p = float(gammaincc(dof / 2.0, c / 2.0))
-    return {"test": "chi-square", "chi2": c, "dof": dof, "reduced_chi2": c / dof, "p_value": p, "white": bool(p > 0.01)}
+    return {
+        "test": "chi-square",
+        "chi2": c,
+        "dof": dof,
+        "reduced_chi2": c / dof,
+        "p_value": p,
+        "white": bool(p > WHITE_P),
+    }
 
 
 # ---------------------------------------------------------------- candidates
@@ -1712,7 +1720,7 @@ def _residual_test(problem: Problem, fitres: FitResult) -> dict:
         test = min(tests, key=lambda x: x["p_value"] if x["p_value"] is not None else 1.0)
         if test["p_value"] is not None:
             test = dict(test, p_value=min(1.0, test["p_value"] * ch), channels=ch)
-            test["white"] = bool(test["p_value"] > 0.01)
+            test["white"] = bool(test["p_value"] > WHITE_P)
         return test
     if problem.row_types is not None and problem.series is not None:
         # a time series of primary rows next to auxiliary ones (compass): Ljung–Box on the series

@@ -129,7 +129,16 @@ def _ref(temp_c) -> float:
 
 
 def gyro_problem(
-    t_s, w_rad_s, f_body, temp_c, earth_body_rad_s, positions, *, C_b_n=None, max_rows: int = 400
+    t_s,
+    w_rad_s,
+    f_body,
+    temp_c,
+    earth_body_rad_s,
+    positions,
+    *,
+    C_b_n=None,
+    max_rows: int = 400,
+    reference: bool = False,
 ) -> Problem:
     """Static gyro record(s) (P4 body frame, rad/s) as block means.
 
@@ -137,6 +146,8 @@ def gyro_problem(
     or None when the latitude is unknown: the baseline is then a constant bias and
     ``earth_rate`` a candidate (its north and up components, needs ``C_b_n`` per sample).
     positions: (N,) labels (one static orientation each).
+    reference: ``w_rad_s`` is the unit minus a reference IMU on the same mount (P4 mode A):
+    the Earth rate is in both and cancels (pass zeros); the baseline says so.
     """
     t = np.asarray(t_s, float)
     w = np.asarray(w_rad_s, float)
@@ -194,7 +205,14 @@ def gyro_problem(
         )
     else:
         cands.append(Candidate("g_sensitivity", {"G": np.zeros((3, 3))}))
-    if earth_body_rad_s is not None:
+    if reference:
+        cands.append(
+            Candidate(
+                "earth_rate",
+                reason="cancels here: the reference IMU on the same mount sees it too (mode A, unit − reference)",
+            )
+        )
+    elif earth_body_rad_s is not None:
         cands.append(
             Candidate(
                 "earth_rate",
@@ -219,7 +237,10 @@ def gyro_problem(
         )
     else:
         cands.append(Candidate("earth_rate", {"wE": np.zeros(2)}))
-    base_model = "y = ω_E + ε (P4 mode B)" if earth_body_rad_s is not None else "y = ε"
+    if reference:
+        base_model = "y = ε (P4 mode A: y = unit − reference)"
+    else:
+        base_model = "y = ω_E + ε (P4 mode B)" if earth_body_rad_s is not None else "y = ε"
     prob = Problem(
         "gyro-drift",
         base_model,

@@ -11,6 +11,21 @@ from contextlib import contextmanager
 from station.errors import InputError
 
 
+def record_id(what: str):
+    """An argparse type for a stored record's number (``what``: calibration, capture): a device
+    id given by mistake is told apart in the one-line usage error."""
+
+    def parse(text: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            hint = " (the # that `station history DEVICE` lists)" if what == "calibration" else ""
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {what} number{hint}") from None
+
+    parse.__name__ = f"{what} number"
+    return parse
+
+
 def add_db_option(parser: argparse.ArgumentParser) -> None:
     """`--db` on a nested subcommand too (cli.py adds it to top-level commands only)."""
     parser.add_argument("--db", default=argparse.SUPPRESS, help="station database file")

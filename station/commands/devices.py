@@ -1,4 +1,4 @@
-"""`station devices add|list|show`: the devices the station knows."""
+"""`station devices add|list|show` (alone: list): the devices the station knows."""
 
 from __future__ import annotations
 
@@ -19,8 +19,13 @@ _UNITS_HELP = (
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("devices", help="add, list and show devices")
-    sub = p.add_subparsers(dest="devices_command", metavar="ACTION", required=True)
+    p = subparsers.add_parser(
+        "devices",
+        help="add, list and show devices",
+        description="Add, list and show devices; with no ACTION, list them.",
+    )
+    sub = p.add_subparsers(dest="devices_command", metavar="ACTION")
+    p.set_defaults(func=_list, json=False)  # `station devices` alone: the list
 
     add = sub.add_parser("add", help="add a device, or update the fields given of an existing one")
     add.add_argument("id", metavar="ID", help="device id (serial number), stored verbatim")

@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 
+from db.params import DRIFT_MIN_CALIBRATIONS, DRIFT_SIGNIFICANCE
 from station.commands._dbutil import fmt_num, open_store, print_json, require_device
 from station.errors import InputError
 from station.procedures import registry
@@ -15,7 +16,13 @@ MAX_PLOTS = 4
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("drift", help="trend of each calibration coefficient, rate per year ± sigma")
+    p = subparsers.add_parser(
+        "drift",
+        help="trend of each calibration coefficient, rate per year ± sigma",
+        description="Each coefficient's trend over the device's accepted calibrations: rate per year ± sigma "
+        f"(weighted least squares), its significance, and when a significant trend (≥ {DRIFT_SIGNIFICANCE:g}σ over "
+        f"≥ {DRIFT_MIN_CALIBRATIONS} calibrations) leaves the coefficient's tolerance.",
+    )
     p.add_argument("id", metavar="ID", help="device id")
     p.add_argument("--param", help="one coefficient (B[0], beam1.dK) or a block (B = all of B)")
     p.add_argument("--procedure", choices=registry.names(), help="only this procedure")
@@ -120,9 +127,23 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(f"device {safe(args.id)}: no accepted calibrations yet\n")
         return 0
     out = [f"device {safe(args.id)}: drift per year over its accepted calibrations (weighted linear fit)"]
-    header = ("PROCEDURE", "PARAM", "UNIT", "N", "IN_USE", "RATE/YEAR", "±SIGMA", "TOLERANCE", "LEAVES_TOLERANCE")
+    header = (
+        "PROCEDURE",
+        "PARAM",
+        "UNIT",
+        "N",
+        "IN_USE",
+        "RATE/YEAR",
+        "±SIGMA",
+        "SIGNIF",
+        "TOLERANCE",
+        "LEAVES_TOLERANCE",
+    )
     rows = [header]
     for t in trends:
+        signif = "-" if t["significance_sigmas"] is None else f"{t['significance_sigmas']:.1f}σ"
+        if t["significant"]:
+            signif += " *"
         rows.append(
             (
                 safe(t["procedure"]),
@@ -132,12 +153,18 @@ def run(args: argparse.Namespace) -> int:
                 fmt_num(t["value_in_use"]),
                 fmt_num(t["rate_per_year"], 3),
                 fmt_num(t["rate_sigma_per_year"], 2),
+                signif,
                 fmt_num(t["tolerance"]),
                 safe((t["leaves_tolerance"] or "-")[:10]),
             )
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
     out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    out += [
+        f"SIGNIF: |rate| / its sigma; * = significant (≥ {DRIFT_SIGNIFICANCE:g}σ over ≥ {DRIFT_MIN_CALIBRATIONS} "
+        "calibrations):",
+        "only those get a LEAVES_TOLERANCE date and can bring the due date forward",
+    ]
     sys.stdout.write("\n".join(out) + "\n")
     if not args.no_plot:
         plottable = [t for t in trends if t["n"] >= 2 and len(set(t["values"])) > 1]

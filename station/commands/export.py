@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from station.commands._dbutil import open_store, refuse_database_as_output
+from station.commands._dbutil import open_store, record_id, refuse_database_as_output
 from station.errors import InputError
 from station.fileio import atomic_write_text, cannot_write
 
@@ -27,7 +27,7 @@ def register(subparsers) -> None:
         "corrected by the board, the new absolute parameters are composed with the parameters in use (read from "
         "the capture's param.<NAME> metadata); see station/firmware_export.py.",
     )
-    p.add_argument("calibration_id", metavar="CALIBRATION_ID", type=int)
+    p.add_argument("calibration_id", metavar="CALIBRATION_ID", type=record_id("calibration"))
     p.add_argument("--format", required=True, choices=FORMATS)
     p.add_argument("--instance", type=int, help="firmware sensor slot (ArduPilot 1-3, default 1; PX4 0-3, default 0)")
     p.add_argument(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from station.commands._dbutil import open_store, refuse_database_as_output
+from station.commands._dbutil import open_store, record_id, refuse_database_as_output
 from station.errors import InputError
 
 
@@ -17,8 +17,10 @@ def register(subparsers) -> None:
         "(same metadata, columns and values). Give the capture's id, or --calibration ID for the capture a "
         "calibration was computed from.",
     )
-    p.add_argument("capture_id", metavar="CAPTURE_ID", type=int, nargs="?", help="capture id")
-    p.add_argument("--calibration", metavar="ID", type=int, help="export the capture of this calibration")
+    p.add_argument("capture_id", metavar="CAPTURE_ID", type=record_id("capture"), nargs="?", help="capture id")
+    p.add_argument(
+        "--calibration", metavar="ID", type=record_id("calibration"), help="export the capture of this calibration"
+    )
     p.add_argument("-o", "--output", metavar="FILE", help="write FILE (atomically) instead of stdout (- for stdout)")
     p.set_defaults(func=run)
 

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from station.commands._dbutil import fmt_num, open_store, print_json
+from station.commands._dbutil import fmt_num, open_store, print_json, record_id
 from station.errors import UnsupportedError
 from station.textsafe import safe
 
@@ -15,7 +15,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "recompute", help="re-run a stored calibration's capture with today's models and show the difference"
     )
-    p.add_argument("calibration_id", metavar="CALIBRATION_ID", type=int)
+    p.add_argument("calibration_id", metavar="CALIBRATION_ID", type=record_id("calibration"))
     p.add_argument("--json", action="store_true", help="a JSON object: stored, recomputed, per-parameter differences")
     p.set_defaults(func=run)
 

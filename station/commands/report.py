@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from station.commands._dbutil import open_store, refuse_database_as_output
+from station.commands._dbutil import open_store, record_id, refuse_database_as_output
 from station.fileio import atomic_write_text, cannot_write
 
 
@@ -17,7 +17,7 @@ def register(subparsers) -> None:
         "conditions, reference equipment, each parameter with u and U (k = 2) and units, pass/fail, "
         "the previous calibration and drift, figures, hashes and verify status) as HTML.",
     )
-    p.add_argument("calibration_id", type=int, metavar="CALIBRATION_ID")
+    p.add_argument("calibration_id", type=record_id("calibration"), metavar="CALIBRATION_ID")
     p.add_argument(
         "-o",
         "--out",

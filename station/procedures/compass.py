@@ -356,10 +356,12 @@ def format_text(result: dict) -> str:
         f"RLS − batch ≤ {result['rls_minus_batch_max_sigma']:.3f} σ"
     )
     for h in result.get("headings", [])[:40]:
-        lines.append(
-            f"  held {h['index']:>2}: pitch {h['pitch_deg']:7.2f}°  roll {h['roll_deg']:7.2f}°  "
-            f"heading {h['heading_magnetic_deg']:7.2f}° magnetic, {h['heading_true_deg']:7.2f}° true"
-        )
+        mh, th = h["heading_magnetic_deg"], h["heading_true_deg"]
+        if mh is not None and math.isfinite(mh):
+            heading = f"heading {mh:7.2f}° magnetic, {th:7.2f}° true"
+        else:  # C.heading_deg leaves it undefined beyond its tilt limit (NaN; null in JSON)
+            heading = f"heading undefined (|pitch| > {C.HEADING_MAX_TILT_DEG:g}°)"
+        lines.append(f"  held {h['index']:>2}: pitch {h['pitch_deg']:7.2f}°  roll {h['roll_deg']:7.2f}°  {heading}")
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)

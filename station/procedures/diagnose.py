@@ -14,6 +14,7 @@ import numpy as np
 
 from solvers.diagnose import diagnose
 from solvers.diagnose import quality as Q
+from solvers.diagnose.engine import WHITE_P
 from solvers.errors import SolverError
 from station.capture import strictly_increasing_t
 from station.errors import UnsupportedError
@@ -285,7 +286,7 @@ def format_text(
     if rt.get("p_value") is not None:
         L.append(
             f"            residual test {rt['test']}: p = {rt['p_value']:.3g} "
-            f"({'noise-like' if rt['white'] else 'NOT noise-like'})"
+            f"({f'noise-like: p > {WHITE_P:g}' if rt['white'] else f'NOT noise-like: p ≤ {WHITE_P:g}'})"
         )
     for q in r["quality"]:
         if q.get("screened"):

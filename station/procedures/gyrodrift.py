@@ -598,6 +598,7 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         E[order] if (lat is not None or mode_ref) else None,
         label[order],
         C_b_n=Cbn[order],
+        reference=mode_ref,
     )
     prob.unit = unit
     prob.screened = screened

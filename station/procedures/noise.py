@@ -133,6 +133,25 @@ def format_duration(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
+def p4_record_verdict(need_s, accuracy_deg_h: float) -> str:
+    """One line on how long a still P4 record must be for a 1σ of ``accuracy_deg_h`` on every
+    axis, from `NoiseReport.time_needed_s` (``need_s``, per axis of `AXES`). When some axis
+    never gets there, it names those axes and says what the others need: "no record" alone
+    read as contradicting the table beside it, where another axis needed 2.6 h."""
+    need = [float(t) for t in need_s]
+    bad = [ax for ax, t in zip(AXES, need) if not (math.isfinite(t) and t <= PRACTICAL_RECORD_S)]
+    if not bad:
+        return f"For 1σ ≤ {accuracy_deg_h:g} °/h a still P4 record needs {format_duration(max(need))}."
+    hair = any(math.isfinite(t) for ax, t in zip(AXES, need) if ax in bad)
+    others = [f"{ax} alone needs {format_duration(t)}" for ax, t in zip(AXES, need) if ax not in bad]
+    return (
+        f"No still P4 record reaches 1σ ≤ {accuracy_deg_h:g} °/h on every axis: the fitted noise floor of "
+        f"{' and '.join(bad)} (bias instability, rate random walk) is above it"
+        + (" or within a hair of it (> 24 h)" if hair else "")
+        + (f"; {', '.join(others)}." if others else ".")
+    )
+
+
 # --- station noise: gyro and accelerometer, Kalibr's imu.yaml --------------------------------
 
 SENSORS = {"gyro": (("gx", "gy", "gz"), "gyro_unit"), "accel": (("ax", "ay", "az"), "accel_unit")}

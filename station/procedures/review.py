@@ -19,6 +19,7 @@ by an explicit decision: rejected with a reason, or accepted as an override with
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -376,7 +377,9 @@ def result_unit(result: dict) -> str:
 def fit_checks(result: dict, chi2_limit: float = 100.0) -> list[str]:
     """The fit's own checks, failed ones as one line each ([] when it passes them).
 
-    - non-finite parameters or residual: the fit did not converge;
+    - non-finite parameters (of the procedure's ``CORE_PARAMS`` where it names them: the
+      compass's IGRF reference is null without a place, which is a documented result, not a
+      failed fit) or residual: the fit did not converge;
     - every parameter's σ at least its |value| (two or more): the data determined none;
     - a reduced χ² above ``chi2_limit`` (residual RMS more than √100 = 10 times the
       measured noise), only when the noise was measured rather than taken from the
@@ -385,13 +388,15 @@ def fit_checks(result: dict, chi2_limit: float = 100.0) -> list[str]:
     out = []
     values = flatten(result.get("params", {}))
     sigmas = flatten(result.get("uncertainty", {}))
-    if any(v is None for v in values.values()) or not (
+    module = _procedure_module(result)
+    core = getattr(module, "CORE_PARAMS", None)
+    judged = [v for k, v in values.items() if core is None or re.split(r"[.\[]", k, maxsplit=1)[0] in core]
+    if any(v is None for v in judged) or not (
         result.get("residual_rms") is None or _finite(result.get("residual_rms"))
     ):
         out.append("the fit returned non-finite values")
     pairs = [(v, sigmas[k]) for k, v in values.items() if _finite(v) and _finite(sigmas.get(k))]
     # A gyro drift indistinguishable from zero is a good gyro, not a failed fit.
-    module = _procedure_module(result)
     zero_is_a_result = getattr(module, "ZERO_IS_A_RESULT", False)
     if not zero_is_a_result and len(pairs) >= 2 and all(s >= abs(v) for v, s in pairs):
         out.append(

@@ -216,7 +216,7 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
     try:
         res = T.calibrate(positions, g, method=est, gauge=gauge, noise_known=noise_known)
     except SolverError as exc:
-        raise UnsupportedError(f"{_where(capture)}: accel-tabletop: {exc}") from None
+        raise UnsupportedError(f"{_where(capture)}: accel-tabletop: {exc}", alternative=exc.alternative) from None
     warnings += res.warnings
     if unit in ACCEL_UNITS and est == "norm":
         s = ACCEL_UNITS[unit]

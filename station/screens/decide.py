@@ -15,6 +15,7 @@ from textual.screen import ModalScreen
 from textual.widgets import Input, Static
 
 from station.widgets.field import Field
+from station.widgets.title import footer
 
 
 class DecideScreen(ModalScreen):
@@ -55,6 +56,7 @@ class DecideScreen(ModalScreen):
             keys = "ctrl+r save as rejected · " + ("ctrl+o accept as override · " if self.failed else "")
             yield Static(keys + "esc back (re-do: n new run)")
             yield Static("", id="error")
+        yield footer()
 
     def on_mount(self) -> None:
         self.query_one("#note", Input).focus()
@@ -93,6 +95,7 @@ class ConfirmScreen(ModalScreen):
     def compose(self) -> ComposeResult:
         with Vertical(id="box"):
             yield Static(self.question + "\n\n[b]y[/] yes · [b]n[/] no")
+        yield footer()  # this box's keys: the screen underneath showed its own, dead while it is open
 
     def action_answer(self, yes: bool) -> None:
         self.dismiss(yes)

@@ -8,17 +8,23 @@ from textual.containers import VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Static
 
+from station.widgets.title import footer
+
 HELP = """\
-[b]Calibration station: keys[/]
+[b]Calibration station: keys[/]   (esc or F1 closes this; ↑ ↓ scroll)
 
 [b]Everywhere[/]  F1 help · ctrl+q quit · tab/shift+tab move · enter choose
             F2 history · ctrl+p command palette
 [b]Connect[/]     F5 start · F6 resume a P1 · F7 import a file · F2 history
+[b]Import[/]      enter read the file · F5 calibrate · F6 diagnose · esc back
+            F8 the other method a refusal offers (six-position)
 [b]P1[/]          s skip · r redo (the current average, or the last captured
             position when done) · enter on a step: redo it · a abort
             (captured positions kept for Resume) · f fit now (≥ 9)
+            simulated: p place the unit as asked
 [b]P2[/]          m type a row (ax ay az speed, enter) · esc back · s skip
             r redo · enter on a step: redo it · a abort · f fit (≥ 10)
+            simulated: p mount and spin as asked
 [b]P3, P4[/]      f finish now (P3) · r restart the recording · a abort
             simulated: p sweep, l set level (P3)
             simulated: p rate table (P4 reference IMU)
@@ -48,8 +54,9 @@ class HelpScreen(ModalScreen):
     HelpScreen { align: center middle; }
     HelpScreen #help { width: 78; max-height: 22; border: round $accent; background: $surface; padding: 0 1; }
     """
-    BINDINGS = [Binding("escape", "app.pop_screen", "Close"), Binding("f1", "app.pop_screen", "Close")]
+    BINDINGS = [Binding("escape", "app.pop_screen", "Close"), Binding("f1", "app.pop_screen", "Close", show=False)]
 
     def compose(self) -> ComposeResult:
         with VerticalScroll(id="help"):
             yield Static(HELP)
+        yield footer()  # its own keys: the screen underneath showed its keys here, dead while this is open

@@ -13,6 +13,7 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Static
 from textual_plotext import PlotextPlot
 
+from db.params import DRIFT_MIN_CALIBRATIONS
 from station.procedures import registry
 from station.timeaxis import time_axis
 from station.widgets.title import TitleBar, footer
@@ -30,13 +31,30 @@ STATUS_WIDTH = 7  # the devices table's status column: "overdue"
 SHORT_STATUS = {"never calibrated": "no cal"}  # Store.due's statuses that do not fit STATUS_WIDTH
 
 
+def _rate_text(d: dict, k: float, unit: str) -> str:
+    """The plot title's trend of one parameter (``Store.drift`` entry ``d``, shown = stored * k):
+    rate ± σ per year and how many σ, * when significant (it can move the due date); under
+    three calibrations, no rate (two points, minutes apart, showed -9.49e+05 °/h/yr)."""
+    rate, sigma = d.get("rate_per_year"), d.get("rate_sigma_per_year")
+    if d.get("n", 0) < DRIFT_MIN_CALIBRATIONS or not isinstance(rate, (int, float)):
+        return f"  trend: {DRIFT_MIN_CALIBRATIONS}+ calibrations"
+    text = f"  {rate * k:+.2g}"
+    if isinstance(sigma, (int, float)):
+        text += f"±{abs(sigma * k):.1g}"
+    text += f" {unit}/yr" if unit else "/yr"
+    s = d.get("significance_sigmas")
+    if isinstance(s, (int, float)):
+        text += f" {s:.1f}σ" + ("*" if d.get("significant") else "")
+    return text
+
+
 class HistoryScreen(Screen):
     SUB_TITLE = "devices and calibrations"
     CSS = """
     HistoryScreen #due { height: auto; padding: 0 1; color: $warning; }
     HistoryScreen #devices { width: 26; height: 1fr; }
     HistoryScreen DataTable:focus { border-left: thick $accent; }
-    HistoryScreen #right { width: 1fr; height: 1fr; }
+    HistoryScreen #right { width: 1fr; height: 1fr; border-left: vkey $secondary; }
     HistoryScreen #calibrations { height: 1fr; }
     HistoryScreen #plot { height: 1fr; min-height: 8; }
     """
@@ -202,9 +220,9 @@ class HistoryScreen(Screen):
             plt.plot(x, [v - s * k for v, s in zip(values, d["sigmas"])], color="gray")
         plt.xlim(*axis["xlim"])
         plt.xticks(axis["ticks"], axis["labels"])
-        rate = d.get("rate_per_year")
-        rate_txt = f" {rate * k:+.3g} {unit}/yr" if isinstance(rate, (int, float)) else ""
-        plt.title(f"{safe(d['param'])} [{unit or '1'}] {self.param_index + 1}/{len(self.drift)}{rate_txt}")
+        plt.title(
+            f"{safe(d['param'])} [{unit or '1'}] {self.param_index + 1}/{len(self.drift)}{_rate_text(d, k, unit)}"
+        )
         plt.xlabel(axis["label"])
         w.refresh()
 

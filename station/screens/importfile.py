@@ -143,6 +143,7 @@ class ImportScreen(Screen):
         Binding("escape", "app.pop_screen", "Back"),
         Binding("f5", "calibrate_log", "Calibrate", show=False),
         Binding("f6", "diagnose_log", "Diagnose", show=False),
+        Binding("f8", "alternative", "Six-position fit"),  # shown only when a refusal offers it
     ]
 
     def __init__(self) -> None:
@@ -151,6 +152,12 @@ class ImportScreen(Screen):
         self.fmt: str | None = None
         self.imported = None
         self.source = "auto"
+        self.refused = None  # (capture, method): a capture refused with a method it does allow
+
+    def check_action(self, action: str, parameters) -> bool | None:
+        if action == "alternative":
+            return self.refused is not None  # the key is in the footer only when it can do something
+        return True
 
     def compose(self) -> ComposeResult:
         yield TitleBar("import a log or capture file")
@@ -184,6 +191,8 @@ class ImportScreen(Screen):
         if not path:
             return
         self.imported = None
+        self.refused = None
+        self.refresh_bindings()
         self.query_one("#found", Static).update("")
         self.query_one("#device", Static).update("")
         self.query_one("#choose").remove_class("shown")
@@ -215,11 +224,13 @@ class ImportScreen(Screen):
         except (StationError, OSError, ValueError) as exc:  # one line: file: what is wrong
             self.post_message(LogRead(path, None, None, error=str(exc)))
 
-    def _calibrate_capture(self, path: str, capture=None) -> None:
-        """In the worker: calibrate a capture (read from ``path`` unless given), compare with
-        the device's last accepted calibration, hand the result over."""
+    def _calibrate_capture(self, path: str, capture=None, method: str | None = None) -> None:
+        """In the worker: calibrate a capture (read from ``path`` unless given) with ``method``
+        (None: the procedure's default), compare with the device's last accepted calibration,
+        hand the result over; a refusal that names a method the capture allows offers it."""
         from station.calibrate import calibrate_capture
         from station.capture import read_capture
+        from station.errors import UnsupportedError
 
         try:
             capture = capture if capture is not None else read_capture(path)
@@ -236,9 +247,27 @@ class ImportScreen(Screen):
         except Exception:  # noqa: BLE001 - no comparison then
             previous = None
         try:
-            self.post_message(CalibrationReady(capture, calibrate_capture(capture), previous=previous))
-        except Exception as exc:  # noqa: BLE001 - UnsupportedError: one line
+            self.post_message(CalibrationReady(capture, calibrate_capture(capture, method), previous=previous))
+        except UnsupportedError as exc:  # one line, and perhaps a method the capture allows
+            alternative = exc.alternative if method is None else None
+            self.post_message(CalibrationReady(capture, None, str(exc), previous, alternative=alternative))
+        except Exception as exc:  # noqa: BLE001 - one line
             self.post_message(CalibrationReady(capture, None, error=str(exc), previous=previous))
+
+    def action_alternative(self) -> None:
+        """F8 after a refusal that offers another method (a P1 capture with the six labelled
+        ±axis positions: the six-position solution), the CLI's ``--method``."""
+        if self.refused is None:
+            return
+        capture, method = self.refused
+        self.refused = None
+        self.refresh_bindings()
+        self._status(f"Calibrating {tui_markup(os.path.basename(capture.path or 'the capture'))} ({method})…")
+        self.calibrate_with(capture, method)
+
+    @work(thread=True, exclusive=True, group="import", exit_on_error=False, description="calibrate")
+    def calibrate_with(self, capture, method: str) -> None:
+        self._calibrate_capture(capture.path, capture, method)
 
     def on_log_read(self, message: LogRead) -> None:
         if message.error:
@@ -330,7 +359,12 @@ class ImportScreen(Screen):
 
     def on_calibration_ready(self, message: CalibrationReady) -> None:
         if message.result is None:
-            self._status(f"[b red]{tui_markup(message.error)}[/]")
+            text = f"[b red]{tui_markup(message.error)}[/]"
+            if message.alternative and message.capture is not None:
+                self.refused = (message.capture, message.alternative)
+                text += f"\nF8 calibrates it with the {tui_markup(message.alternative)} method instead."
+            self._status(text)
+            self.refresh_bindings()
             return
         from station.screens.results import ResultsScreen
 

@@ -29,6 +29,7 @@ from textual.widgets import Input, Static
 from station.messages import StoreLoaded
 from station.textsafe import tui_markup
 from station.widgets.field import Field
+from station.widgets.title import footer
 
 _BOX_TEXT_WIDTH = 74  # #box: 78 columns less its border and padding
 
@@ -97,6 +98,7 @@ class LimitsScreen(ModalScreen):
             yield Static("Enter apply · esc back")
             yield Static("", id="said")
             yield Static("", id="error")
+        yield footer()  # this box's keys: the screen underneath showed its own, dead while it is open
 
     def on_mount(self) -> None:
         self.query_one("#edit", Input).focus()

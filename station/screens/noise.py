@@ -5,8 +5,6 @@ typed in (``station.procedures.noise``, numerics in ``solvers.allan``)."""
 
 from __future__ import annotations
 
-import math
-
 from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -17,7 +15,7 @@ from textual.widgets import Input, Label, Static
 from textual_plotext import PlotextPlot
 
 from station.messages import Exported
-from station.procedures.noise import AXES, PRACTICAL_RECORD_S, format_duration
+from station.procedures.noise import AXES, format_duration, p4_record_verdict
 from station.screens.export import export_files, exported_text
 from station.screens.gyrodrift import HoldScreen
 from station.widgets.field import Field
@@ -157,13 +155,7 @@ class AllanScreen(Screen):
         self.accuracy_deg_h = acc
         self.app.session.extra["accuracy_deg_h"] = acc
         self.query_one("#table", Static).update(self._table(need))
-        worst = max(need)
-        self.query_one("#status", Static).update(
-            f"For 1σ ≤ {acc:g} °/h a still P4 record needs {format_duration(worst)}."
-            if math.isfinite(worst) and worst <= PRACTICAL_RECORD_S
-            else f"No still P4 record reaches 1σ ≤ {acc:g} °/h: the fitted noise floor (bias instability, "
-            f"rate random walk) is above it{'' if not math.isfinite(worst) else ' or within a hair of it (> 24 h)'}."
-        )
+        self.query_one("#status", Static).update(p4_record_verdict(need, acc))
 
     @on(Input.Submitted, "#accuracy")
     def _accuracy(self, event: Input.Submitted) -> None:
