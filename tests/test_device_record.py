@@ -97,6 +97,25 @@ def test_sigterm_ends_a_recording_with_a_complete_capture(sim_path, tmp_path):
     assert cap.meta["complete"] == "true" and cap.n_rows > 10 and not partial.exists()
 
 
+def test_an_interrupt_before_the_seconds_asked_keeps_the_rows_marked_incomplete(sim_path, tmp_path):
+    """`--seconds 120` cut short by Ctrl-C: every row is kept, but the capture says it is
+    shorter than asked (`complete: false`, why) and the exit status is 1, as for a device lost;
+    it was kept as complete, with exit 0."""
+    out = tmp_path / "c.csv"
+    rec = station("record", "--port", sim_path, "--seconds", "120", "--out", str(out))
+    partial = Path(str(out) + ".partial")
+    end = time.monotonic() + 30
+    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
+        time.sleep(0.05)  # waiting on the rows, not a pace
+    rec.send_signal(signal.SIGINT)
+    stdout, stderr = rec.communicate(timeout=20)
+    assert rec.returncode == 1, stderr
+    assert "INCOMPLETE: interrupted" in stdout and "of the 120" not in stdout
+    cap = read_capture(out)
+    assert cap.meta["complete"] == "false" and cap.meta["incomplete"].startswith("interrupted ")
+    assert "120 s asked for" in cap.meta["incomplete"] and cap.n_rows > 10 and not partial.exists()
+
+
 def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_path, tmp_path):
     path = sim_path
     out = tmp_path / "k.csv"

@@ -327,7 +327,7 @@ def record(
         board = getattr(reader.parser, "board_meta", dict)()  # MAVLink: firmware, uid, parameters in use
         final.update({k: v for k, v in board.items() if k not in final})
         final.update(_end_meta(stats, events, stream.rows, dts, time.monotonic() - started))
-        incomplete = _ending(at_end, last_rows_at, started, ended_at, dts, stopped)
+        incomplete = _ending(at_end, last_rows_at, started, ended_at, dts, stopped, seconds)
         if incomplete:
             final["complete"] = "false"
             final["incomplete"] = incomplete
@@ -411,11 +411,18 @@ SILENCE_S = 2.0  # no rows for this long (and 20 sample periods) at the end: the
 
 
 def _ending(
-    stats: ReaderStats, last_rows_at: float | None, started: float, ended_at: float, dts: list[float], stopped: str
+    stats: ReaderStats,
+    last_rows_at: float | None,
+    started: float,
+    ended_at: float,
+    dts: list[float],
+    stopped: str,
+    seconds: float | None = None,
 ) -> str:
     """Why a recording that ran to its end is incomplete: the device was lost and never came
-    back, or it is connected but sends nothing (after a reconnection: came back silent). ""
-    when the data ran to the end."""
+    back, or it is connected but sends nothing (after a reconnection: came back silent), or
+    it was interrupted (SIGINT, SIGTERM) before the ``seconds`` asked for. "" when the data ran
+    to the end (without ``seconds`` an interrupt is the end asked for)."""
     if stopped == "device changed":
         return ""
     last = last_rows_at if last_rows_at is not None else started
@@ -428,6 +435,8 @@ def _ending(
         if stats.reconnects:
             return f"device came back silent: no data since {at}"
         return f"device went silent: no data since {at}"
+    if stopped == "stopped" and seconds is not None and ended_at - started < seconds:
+        return f"interrupted {ended_at - started:.2f} s into the {seconds:g} s asked for"
     return ""
 
 
