@@ -317,7 +317,7 @@ def test_a_new_users_walkthrough_at_80x24_in_tmux(tmp_path):
         assert "simulated: p rate table (P4 reference IMU)" in screen
         assert not [line for line in screen.splitlines() if re.match(r"^ │ [a-z(]", line)], screen  # no stray wraps
         _keys(sock, "End")
-        screen = _wait_pane(sock, lambda s: "│ position." in s, 60, "the end of Help")
+        screen = _wait_pane(sock, lambda s: "│ under it says" in s, 60, "the end of Help")
         _keys(sock, "Escape", "F2")
         _wait_pane(sock, lambda s: "No devices yet" in s and "esc Back" in s, 60, "History")
         _keys(sock, "Escape")

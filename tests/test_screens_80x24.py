@@ -618,7 +618,7 @@ def test_help_lines_fit_the_box_at_80x24():
     height, lines = asyncio.run(story())
     assert height == len(HELP.split("\n"))  # one screen row per line (the last one empty): nothing wrapped
     assert any("simulated: p rate table (P4 reference IMU)" in line for line in lines)
-    assert any(line.strip(" │").startswith("position.") for line in lines)  # the last line, reached
+    assert any(line.strip(" │").startswith("under it says") for line in lines)  # the last line, reached
 
 
 def test_diagnose_screen_lines_continue_under_their_text_at_80x24():

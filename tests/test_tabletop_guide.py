@@ -81,11 +81,24 @@ def test_wrong_face_up_is_flagged_and_never_captured():
     sim.set_orientation("x_down")  # the operator turns it the wrong way
     st, events = feed(guide, sim, 8, follow=False)
     assert st.wrong_face and st.angle_deg > 170
-    assert st.phase == "place" and "Wrong face up" in st.message
+    assert st.phase == "place" and st.message == "Upside down: turn the unit over"
     assert not [e for e in events if e[0] == "captured"]
     sim.set_orientation("x_up")
     st, events = feed(guide, sim, 8, follow=False)
     assert ("captured", "x_up") in events
+
+
+def test_a_quarter_turn_is_not_called_upside_down():
+    """A side face up (90° from x_up, give or take the placement) is a quarter turn: the prompt
+    says how far off it is and which face to put up, not 'turn the unit over' (which said so at
+    90.6°)."""
+    sim, guide = make()
+    feed(guide, sim, 1.5, follow=False)
+    sim.set_orientation("y_up")
+    st, events = feed(guide, sim, 8, follow=False)
+    assert 80 < st.angle_deg < 100 and st.phase == "place", st.angle_deg
+    assert "turn the unit over" not in st.message and f"{st.angle_deg:.0f}°" in st.message, st.message
+    assert not [e for e in events if e[0] == "captured"]
 
 
 def test_a_tilted_placement_is_not_in_position():

@@ -366,7 +366,7 @@ def test_wrong_face_up_is_shown_and_blocks_capture():
                 ),
             )
             await wait_for(pilot, lambda: "WRONG FACE UP" in text_of(app, "#orientation"))
-            assert "Wrong face up" in text_of(app, "#message")
+            assert "Upside down: turn the unit over" in text_of(app, "#message")
             assert app.screen.guide.n_captured == 0
 
     asyncio.run(story())

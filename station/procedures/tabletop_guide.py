@@ -390,8 +390,10 @@ class P1Guide:
             self._message = "In position and still: averaging starts shortly"
         else:
             self.phase = "place"
-            if wrong:
-                self._message = "Wrong face up: turn the unit over"
+            if wrong and angle > 135.0:
+                self._message = "Upside down: turn the unit over"
+            elif wrong:
+                self._message = f"Wrong face up: {angle:.0f}° off, a quarter turn; put the face shown up"
             elif st.is_still and known and not ok:
                 self._message = f"Not in position: {angle:.0f}° from the asked direction"
             else:

@@ -41,8 +41,8 @@ HELP = """\
 [b]P1 in short[/]  Put the unit in each of the 12 positions the drawing
 shows and let go. When it is still and in position the station waits a
 moment, then averages for the set time (the source asks 3–5 minutes)
-and moves on. "Wrong face up" means the unit is upside down for this
-position.
+and moves on. "WRONG FACE UP" means another face is up: the message
+under it says whether it is a quarter turn or upside down.
 """
 
 
