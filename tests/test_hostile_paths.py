@@ -209,3 +209,34 @@ def test_sigterm_while_an_output_is_written_leaves_neither_it_nor_its_temporary(
     assert proc.returncode == 143, (proc.returncode, stderr)
     assert stdout == "" and stderr == "station: terminated\n", stderr
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("option", ["--unit", "--topic", "--map"])
+@pytest.mark.parametrize("value", ["", " ", ","])
+def test_an_empty_import_option_is_refused_not_taken_as_left_out(tmp_path, shared_data, option, value):
+    """`--unit "$UNITS"` with the variable unset: an empty value was read as no option at all,
+    and a PX4 log (whose units come from the file, where --unit is refused) was imported as if
+    nothing had been asked. Refused in one line naming the option; nothing written."""
+    log = shared_data / "px4_ulog" / "original" / "sample.ulg"
+    out = tmp_path / "c.csv"
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "station",
+            "import",
+            str(log),
+            "--procedure",
+            "gyro-drift",
+            option,
+            value,
+            "--out",
+            str(out),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert_one_line_refusal(res, option, "empty")
+    assert not out.exists()

@@ -43,6 +43,8 @@ def parse_pairs(items: list[str] | None, what: str) -> dict[str, str]:
     """``["t=time_s,ax=acc_x", "ay=acc_y"]`` → ``{"t": "time_s", "ax": "acc_x", "ay": "acc_y"}``."""
     out: dict[str, str] = {}
     for item in items or []:
+        if not item.replace(",", "").strip():  # "" from an unset shell variable: not the same as leaving it out
+            raise InputError(None, None, f"{what} {item!r} is empty: expected NAME=VALUE")
         for part in item.split(","):
             if not part.strip():
                 continue
