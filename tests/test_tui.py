@@ -320,6 +320,7 @@ def test_gyro_drift_hold_to_a_saved_result(tmp_path):
                 pilot, lambda: "left" in text_of(app, "#countdown") and "still" in text_of(app, "#stability")
             )
             recording = text_of(app, "#readouts")
+            assert text_of(app, "#countdown").startswith("Record ")  # a P4 record, not an average
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=1.0)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
             params = app.screen.query_one("#params")

@@ -67,7 +67,7 @@ class HoldScreen(GuidedScreenMixin, Screen):
             yield Static(self.INSTRUCTION, id="instruction")
             with Vertical(id="indicators"):
                 yield StabilityBar(id="stability")
-                yield CountdownBar(id="countdown")
+                yield CountdownBar(id="countdown", label="Record")
             yield Static("", id="readouts")
             yield Static("", id="message")
         yield footer()
@@ -194,7 +194,7 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
                 id="instruction",
             )
             with Vertical(id="indicators"):
-                yield CountdownBar(id="countdown")
+                yield CountdownBar(id="countdown", label="Record")
             yield Static("", id="readouts")
             yield Static("", id="message")
         yield footer()

@@ -107,12 +107,16 @@ class OrientationIndicator(Static):
 
 
 class CountdownBar(Static):
-    """Averaging progress and time left."""
+    """Averaging (or recording) progress and time left; ``label`` names what runs."""
 
     WIDTH = 14
 
+    def __init__(self, *args, label: str = "Average", **kw) -> None:
+        super().__init__(*args, **kw)
+        self.label = label
+
     def show(self, st, average_s: float) -> None:
-        t = Text("Average     ")
+        t = Text(f"{self.label:<12}")
         if st.phase == "average":
             t.append(bar(st.progress, self.WIDTH), style="cyan")
             t.append(f" {mmss(st.countdown_s)} left")
