@@ -400,47 +400,42 @@ def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.
     """Jacobian columns of ``c`` at ``base_params`` (best grid value when scanned), with the
     columns the baseline already spans removed (fixed at their null values)."""
     grid = [None] if c.scan is None else list(c.scan[1])
-    best = None
+    r_perp = r0 - Q @ (Q.T @ r0)
+    tried: dict = {}  # scanned value -> (rss, blocks, J, perp, names, free): a value on two grids is fitted once
+
+    def evaluate(value):
+        if value not in tried:
+            blocks = as_params(c.blocks)
+            if value is not None:
+                blocks[c.scan[0]] = np.array(float(value))
+            params = {**base_params, **blocks}
+            free = {k: False for k in base_params}
+            free.update(_free_of(c))
+            J, names, _ = jacobian(problem, params, free)
+            perp = J - Q @ (Q.T @ J)
+            tried[value] = (_lstsq_rss(perp, r_perp)[1], blocks, J, perp, names, free)
+        return tried[value]
+
     if c.scan is not None and len(grid) > 2:
         # coarse grid, then finer ones around the best value, each a tenth of the last: a step's
         # time matters only through the samples it falls between, and at 1/400 of the span a
         # large step put a few samples on the wrong side, which a generic step then took
         step = float(grid[1] - grid[0])
-
-        def score(value):
-            blocks = as_params(c.blocks)
-            blocks[c.scan[0]] = np.array(float(value))
-            params = {**base_params, **blocks}
-            free = {k: False for k in base_params}
-            free.update(_free_of(c))
-            J, _, _ = jacobian(problem, params, free)
-            perp = J - Q @ (Q.T @ J)
-            return _lstsq_rss(perp, r0 - Q @ (Q.T @ r0))[1]
-
-        scores = [score(v) for v in grid]
+        scores = [evaluate(float(v))[0] for v in grid]
         v0, best_rss = float(grid[int(np.argmin(scores))]), min(scores)
         for _ in range(SCAN_ZOOMS - 1):
             fine = np.linspace(v0 - step, v0 + step, 21)
-            scores = [score(v) for v in fine]
+            scores = [evaluate(float(v))[0] for v in fine]
             if min(scores) >= best_rss:  # nothing finer to find (the RSS is flat between samples)
                 break
             v0, best_rss = float(fine[int(np.argmin(scores))]), min(scores)
             step /= 10.0
-        grid = list(np.linspace(v0 - step, v0 + step, 21))
+        grid = [float(v) for v in np.linspace(v0 - step, v0 + step, 21)]
+    best = None
     for value in grid:
-        blocks = as_params(c.blocks)
-        if value is not None:
-            blocks[c.scan[0]] = np.array(float(value))
-        params = {**base_params, **blocks}
-        free = {k: False for k in base_params}
-        free.update(_free_of(c))
-        J, names, _ = jacobian(problem, params, free)
-        if J.shape[1] == 0:
-            continue
-        perp = J - Q @ (Q.T @ J)
-        _, rss = _lstsq_rss(perp, r0 - Q @ (Q.T @ r0))
-        if best is None or rss < best[0]:
-            best = (rss, blocks, J, perp, names, free)
+        ev = evaluate(value)
+        if ev[2].shape[1] and (best is None or ev[0] < best[0]):
+            best = ev
     if best is None:
         return _Cand(c, {}, {}, np.zeros((len(r0), 0)), [], "no free parameter")
     _, blocks, J, perp, names, free = best
