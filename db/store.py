@@ -247,24 +247,23 @@ class Store:
 
     # --- plumbing -----------------------------------------------------------------------
 
-    def _unknown_migrations(self) -> list[str]:
-        """Migrations of the station's set that this version does not have (a newer station's)."""
+    def _applied_migrations(self) -> list[str] | None:
+        """Names of the station's migrations the file records, in the order applied; None when it
+        has no migrations table yet."""
         try:
             rows = self.conn.execute(
                 "SELECT name FROM _sqlite_migrations WHERE migration_set = ? ORDER BY id", [MIGRATION_SET]
             ).fetchall()
         except sqlite3.OperationalError:
-            return []
-        return [r[0] for r in rows if r[0] not in MIGRATION_NAMES]
+            return None
+        return [r[0] for r in rows]
+
+    def _unknown_migrations(self) -> list[str]:
+        """Migrations of the station's set that this version does not have (a newer station's)."""
+        return [n for n in self._applied_migrations() or [] if n not in MIGRATION_NAMES]
 
     def _pending_migrations(self) -> list[str]:
-        try:
-            rows = self.conn.execute(
-                "SELECT name FROM _sqlite_migrations WHERE migration_set = ?", [MIGRATION_SET]
-            ).fetchall()
-        except sqlite3.OperationalError:
-            return list(MIGRATION_NAMES)
-        done = {r[0] for r in rows}
+        done = set(self._applied_migrations() or [])
         return [n for n in MIGRATION_NAMES if n not in done]
 
     def _after_migrations(self, conn, names: list[str]) -> None:
