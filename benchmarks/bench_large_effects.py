@@ -50,9 +50,17 @@ def _clean(res: dict, effect: str) -> bool:
     return effect in res["verdict"] and all(v in tied for v in res["verdict"])
 
 
-def _report(label: str, res) -> bool:
+def _check(label: str, effect: str, write) -> bool:
+    """Write a capture with ``write(path)``, diagnose it and say whether it is clean (printed when not)."""
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "c.csv")
+        write(path)
+        res = _diagnose(path)
     if isinstance(res, str):
         print(f"  {label}: {res}", flush=True)
+        return False
+    if not _clean(res, effect):
+        print(f"  {label}: {res['verdict']}", flush=True)
         return False
     return True
 
@@ -69,16 +77,11 @@ def own(mults: list[float], seeds: int) -> None:
             for effect, s1 in effects.items():
                 for seed in range(1, seeds + 1):
                     sim = simulate(proc, seed=seed, effects={effect: s1 * k}, **OPTIONS[proc])
-                    with tempfile.TemporaryDirectory() as d:
-                        path = os.path.join(d, "c.csv")
-                        write_capture(path, Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
-                        res = _diagnose(path)
+                    cap = Capture(meta=dict(sim.meta), columns=dict(sim.columns))
                     tot += 1
-                    label = f"{proc} {effect} {k:g}σ seed {seed}"
-                    if not _report(label, res) or not _clean(res, effect):
-                        bad += 1
-                        if not isinstance(res, str):
-                            print(f"  {label}: {res['verdict']}", flush=True)
+                    bad += not _check(
+                        f"{proc} {effect} {k:g}σ seed {seed}", effect, lambda p, c=cap: write_capture(p, c)
+                    )
         print(f"own simulator at {k:g}σ: {tot - bad} of {tot} clean", flush=True)
 
 
@@ -93,15 +96,8 @@ def realistic(n: int) -> None:
                     seed = 450200 + j
                     sc = G.scenario_for(proc, np.random.default_rng(seed), effect)
                     r = G.RENDER[proc](sc, effect, size)
-                    with tempfile.TemporaryDirectory() as d:
-                        path = os.path.join(d, "c.csv")
-                        G.write_csv(path, r.meta, r.columns)
-                        res = _diagnose(path)
                     label = f"{proc} {effect} {size:g} seed {seed}"
-                    if not _report(label, res) or not _clean(res, effect):
-                        bad += 1
-                        if not isinstance(res, str):
-                            print(f"  {label}: {res['verdict']}", flush=True)
+                    bad += not _check(label, effect, lambda p, r=r: G.write_csv(p, r.meta, r.columns))
                 print(f"independent generator, {proc} {effect} = {size:g}: {n - bad} of {n} clean", flush=True)
 
 
