@@ -20,13 +20,18 @@ from station.capture import Capture, write_capture
 from station.cli import main
 
 
+def _diagnosed(tmp_path, capsys, sim) -> dict:
+    """``station diagnose --json`` of the simulated capture, written to a file as a user has it."""
+    path = tmp_path / "capture.csv"
+    write_capture(str(path), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
+    assert main(["diagnose", str(path), "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_p2_large_misalignment_named_alone_with_all_six_angles(tmp_path, capsys, seed):
     sim = simulate("accel-centrifuge", seed=seed, effects={"misalignment": 5e-3})
-    path = tmp_path / "p2.csv"
-    write_capture(str(path), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
-    assert main(["diagnose", str(path), "--json"]) == 0
-    res = json.loads(capsys.readouterr().out)
+    res = _diagnosed(tmp_path, capsys, sim)
     assert res["verdict"] == ["misalignment"], [(e["name"], e["gain"]) for e in res["effects"]]
     noise_g = sim.truth["noise_g"]
     assert res["extended"]["residual_rms"] < noise_g  # was 4–10 × noise_g at 5e-3 rad
@@ -45,10 +50,7 @@ def test_p2_lever_arm_of_centimetres_named_alone_with_its_sign(tmp_path, capsys,
     temperature bias and a drift were named beside it. Its sign was also reversed: the direction
     was taken away from the axis, where the model's ``c`` points toward it."""
     sim = simulate("accel-centrifuge", seed=seed, effects={"lever_arm": dr_m})
-    path = tmp_path / "p2.csv"
-    write_capture(str(path), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
-    assert main(["diagnose", str(path), "--json"]) == 0
-    res = json.loads(capsys.readouterr().out)
+    res = _diagnosed(tmp_path, capsys, sim)
     assert res["verdict"] == ["lever_arm"], [(e["name"], e["gain"]) for e in res["effects"]]
     assert res["extended"]["residual_rms"] < sim.truth["noise_g"]
     eff = res["effects"][0]
@@ -64,10 +66,7 @@ def test_compass_large_hard_iron_step_timed_to_its_sample_and_named_alone(tmp_pa
     only (1/400 of the span), a few samples sat on the wrong side of the step, and a generic step
     (`residual:time`) split the step with it (both seeds named it before)."""
     sim = simulate("compass", seed=seed, effects={"time_varying_hard_iron": size_uT})
-    path = tmp_path / "compass.csv"
-    write_capture(str(path), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
-    assert main(["diagnose", str(path), "--json"]) == 0
-    res = json.loads(capsys.readouterr().out)
+    res = _diagnosed(tmp_path, capsys, sim)
     assert res["verdict"] == ["time_varying_hard_iron"], [(e["name"], e["gain"]) for e in res["effects"]]
     eff, truth = res["effects"][0], sim.truth["effect_blocks"]
     dh, sig = np.asarray(eff["params"]["dh"]), np.asarray(eff["uncertainty"]["dh"])
@@ -82,10 +81,7 @@ def test_ldv_offset_beside_a_drift_from_its_own_zero_is_tied_with_it(tmp_path, c
     offset is named beside it, the two go in each other's ``confused_with``: the data do not fix
     the effect's zero point. Before, the offset was named as a second effect on every capture."""
     sim = simulate("ldv", seed=1, effects={hidden: size})
-    path = tmp_path / "ldv.csv"
-    write_capture(str(path), Capture(meta=dict(sim.meta), columns=dict(sim.columns)))
-    assert main(["diagnose", str(path), "--json"]) == 0
-    res = json.loads(capsys.readouterr().out)
+    res = _diagnosed(tmp_path, capsys, sim)
     assert hidden in res["verdict"]
     assert len(res["verdict"]) == len(set(res["verdict"]))
     group = {hidden}

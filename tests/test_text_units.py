@@ -174,6 +174,18 @@ def test_bad_limit_or_tolerance_one_line_nothing_written(tmp_path, args, needles
     assert not db.exists()  # refused before the database is made
 
 
+def _device_a1_with_a_p1_calibration(tmp_path, capsys) -> str:
+    """A database whose device A1 has one saved P1 calibration (B, M); its path."""
+    from station.cli import main
+
+    db = str(tmp_path / "s.db")
+    cap = tmp_path / "p1.csv"
+    assert main(["simulate", "--procedure", "accel-tabletop", "--out", str(cap), "--seed", "400003"]) == 0
+    assert main(["calibrate", str(cap), "--save", "--device", "A1", "--db", db]) == 0
+    capsys.readouterr()
+    return db
+
+
 def test_a_limit_that_limits_nothing_of_the_device_is_refused(tmp_path, capsys):
     """`--limit dirft=-10:10` (a typo) or `B[9]=...` on a device whose calibrations say what
     it has was stored and never checked: every later calibration passed it by. Refused in one
@@ -182,11 +194,7 @@ def test_a_limit_that_limits_nothing_of_the_device_is_refused(tmp_path, capsys):
     from db import Store
     from station.cli import main
 
-    db = str(tmp_path / "s.db")
-    cap = tmp_path / "p1.csv"
-    assert main(["simulate", "--procedure", "accel-tabletop", "--out", str(cap), "--seed", "400003"]) == 0
-    assert main(["calibrate", str(cap), "--save", "--device", "A1", "--db", db]) == 0
-    capsys.readouterr()
+    db = _device_a1_with_a_p1_calibration(tmp_path, capsys)
     for item, says in [
         ("dirft=-10:10", "no parameter 'dirft' in this device's calibrations (B, M)"),
         ("B[9]=-1:1", "B of this device is B[0] … B[2]: no B[9]"),
@@ -210,11 +218,7 @@ def test_a_tolerance_that_names_nothing_of_the_device_is_refused_as_a_limit_is(t
     from db import Store
     from station.cli import main
 
-    db = str(tmp_path / "s.db")
-    cap = tmp_path / "p1.csv"
-    assert main(["simulate", "--procedure", "accel-tabletop", "--out", str(cap), "--seed", "400003"]) == 0
-    assert main(["calibrate", str(cap), "--save", "--device", "A1", "--db", db]) == 0
-    capsys.readouterr()
+    db = _device_a1_with_a_p1_calibration(tmp_path, capsys)
     for item, says in [
         ("dirft=10", "no parameter 'dirft' in this device's calibrations (B, M)"),
         ("B[9]=0.1", "B of this device is B[0] … B[2]: no B[9]"),
