@@ -134,3 +134,21 @@ def test_one_missing_temperature_keeps_the_temperature_candidate_ldv(tmp_path):
     path, _ = _write(tmp_path, "ldv", {"duration_s": 200.0, "rate": 10.0}, effect="temperature_bias")
     _blank(path, "temp_c", [30, 500])
     assert "temperature_bias" in station_json("diagnose", path, "--json")["verdict"]
+
+
+def test_compass_magnitude_rows_weighed_by_the_white_noise(tmp_path):
+    """A compass temperature bias of tens of σ that calibrate does not model: calibrate scales
+    its noise up by the misfit it leaves (9 times here), and diagnose took that as the magnitude
+    rows' noise while it measured the dip rows' noise against the model with the bias fitted. The
+    14 dip rows then weighed 80 times too much, bent W and h, and a periodic `residual:time`
+    fitted what that left beside the bias. The magnitude rows' noise is the white noise measured
+    in the samples now: under the extended model they scatter as that noise says."""
+    from station.capture import read_capture
+    from station.procedures.diagnose import analyse
+
+    path, _ = _write(tmp_path, "compass", {}, effect="temperature_bias", seed=7)
+    out, diag, _ = analyse(read_capture(str(path)))
+    assert out["verdict"] == ["temperature_bias"]
+    mag = np.asarray(diag.problem.row_types) == 0
+    rms = float(np.sqrt(np.mean(diag.extended.weighted_residuals[mag] ** 2)))
+    assert 0.7 < rms < 1.4, rms

@@ -386,7 +386,11 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     h0 = np.asarray(base["params"]["hard_iron"], float)
     F = float(base["field_nT"])
     incl = base["params"]["reference"].get("inclination_deg")
-    noise = base.get("noise_raw") or 1.0
+    # the primary rows' noise is the white noise measured in the samples (calibrate's is scaled up
+    # by the misfit an effect not yet modelled leaves, which weighted the dip rows 80 times too much)
+    noise = C.noise_from_second_differences(y[good]) if good.sum() >= 12 else math.nan
+    if not (math.isfinite(noise) and noise > 0):
+        noise = base.get("noise_raw") or 1.0
     temp = fill_missing(capture.columns["temp_c"], t) if "temp_c" in capture.columns else None
     static = {}
     a = _xyz(capture, "a")
