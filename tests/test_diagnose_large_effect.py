@@ -59,12 +59,14 @@ def test_p2_lever_arm_of_centimetres_named_alone_with_its_sign(tmp_path, capsys,
     assert np.all(np.abs(dr - np.asarray(sim.truth["dr"])) < 5 * sig), (dr, sim.truth["dr"], sig)
 
 
-@pytest.mark.parametrize("seed,size_uT", [(1, 5.7), (2, 19.0)])
+@pytest.mark.parametrize("seed,size_uT", [(1, 5.7), (2, 19.0), (4, 19.0)])
 def test_compass_large_hard_iron_step_timed_to_its_sample_and_named_alone(tmp_path, capsys, seed, size_uT):
     """A hard-iron step of 300 and 1000 times what the capture resolves: the step's time is found
     on a grid and then on grids a tenth as fine, down to the samples it falls between. Refined once
     only (1/400 of the span), a few samples sat on the wrong side of the step, and a generic step
-    (`residual:time`) split the step with it (both seeds named it before)."""
+    (`residual:time`) split the step with it (both seeds named it before). Seed 4 steps inside a
+    hold: that hold's dip row, a mean over its samples, sees the step's mean over them (the step
+    at the hold's mean time, all or nothing, left a residual `residual:time` took)."""
     sim = simulate("compass", seed=seed, effects={"time_varying_hard_iron": size_uT})
     res = _diagnosed(tmp_path, capsys, sim)
     assert res["verdict"] == ["time_varying_hard_iron"], [(e["name"], e["gain"]) for e in res["effects"]]

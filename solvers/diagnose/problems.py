@@ -707,6 +707,7 @@ def compass_problem(
     static_t=None,
     static_temp=None,
     static_sigma=None,
+    static_t_samples=None,
     max_rows: int = 4000,
 ) -> Problem:
     """Magnitude rows ``|W(y − h …)| − F``, each the mean over a block of consecutive samples
@@ -716,7 +717,11 @@ def compass_problem(
     The magnitude is evaluated per sample (the forward model at every sample's own time and
     temperature) and then averaged, so a long record keeps all of its information: keeping
     every ``step``-th sample instead threw away ``1 − 1/step`` of it, a slow effect at 10σ of
-    the whole record came out at 10/√step σ (a temperature bias at D 31 where 100 was due)."""
+    the whole record came out at 10/√step σ (a temperature bias at D 31 where 100 was due).
+
+    ``static_t_samples``: each hold's sample times (a list of arrays), so that a dip row, the
+    hold's mean output, sees the hard-iron step as the mean of the step over its samples (a step
+    within a hold is partly in it); without them, the step at the hold's mean time."""
     t = np.asarray(t_s, float)
     y = np.asarray(y_raw, float)
     step = max(1, int(math.ceil(len(y) / max_rows)))
@@ -741,6 +746,12 @@ def compass_problem(
         cond_s = Conditions(t_s=np.asarray(static_t, float), temp_c=Ts, temp_ref_c=cond.temp_ref_c, t_ref_s=tref)
     else:
         cond_s = None
+    hold_t = hold_starts = None
+    if have_dip and static_t_samples is not None and len(static_t_samples) == len(static_t):
+        sizes = [len(x) for x in static_t_samples]
+        if min(sizes) > 0:
+            hold_t = np.concatenate([np.asarray(x, float) for x in static_t_samples])
+            hold_starts = np.r_[0, np.cumsum(sizes)[:-1]]
 
     def gain(W, m_w, bR=None):
         """|∂|m|/∂y| per sample (û = m_w/|m_w|, m_w = W (y − h …)): raw noise → radial misfit,
@@ -769,7 +780,16 @@ def compass_problem(
         mag = block_mean((np.linalg.norm(m_w, axis=1) - F) * (g0 / gain(q["W"], m_w, q.get("bR"))))
         if not have_dip:
             return mag
-        m = mag_model.inverse(ys, q, cond_s)
+        ys_eff = ys
+        if "dh" in q and hold_t is not None:
+            # the step's mean over each hold's samples, in place of the step at the hold's mean time
+            step = {"h": np.zeros(3), "dh": q["dh"], "t_on_s": q["t_on_s"]}
+            mean_step = (
+                np.add.reduceat(mag_model.hard_iron(step, Conditions(t_s=hold_t), len(hold_t)), hold_starts, axis=0)
+                / np.diff(np.r_[hold_starts, len(hold_t)])[:, None]
+            )
+            ys_eff = ys - mean_step + mag_model.hard_iron(step, cond_s, len(ys))
+        m = mag_model.inverse(ys_eff, q, cond_s)
         dip = np.einsum("ij,ij->i", fh, m / np.linalg.norm(m, axis=1, keepdims=True)) - c_dip
         return np.concatenate([mag, dip])
 

@@ -408,6 +408,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
                     "static_f": np.array([iv.accel_mean for iv in ivs]),
                     "static_y": np.array([y[idx[iv.start : iv.stop]].mean(axis=0) for iv in ivs]),
                     "static_t": np.array([t[idx[iv.start : iv.stop]].mean() for iv in ivs]),
+                    "static_t_samples": [t[idx[iv.start : iv.stop]] for iv in ivs],
                     "static_temp": None
                     if temp is None
                     else np.array([np.nanmean(temp[idx[iv.start : iv.stop]]) for iv in ivs]),
