@@ -15,21 +15,11 @@ from db_testdata import accel_result, compass_result, small_capture
 from db import Store
 from station.cli import main
 from station.textsafe import safe
+from tests.station_run import run_main as run
 
 ROOT = Path(__file__).resolve().parents[1]
 NASTY_ID = 'IMU "7"; DROP TABLE devices; -- Ω温\nsecond line'
 NASTY_NOTES = 'it\'s "fine"\n\tSELECT * FROM calibrations;\nüñí 🙂'
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main(list(argv))
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-@pytest.fixture
-def db(tmp_path):
-    return str(tmp_path / "station.db")
 
 
 @pytest.fixture

@@ -18,14 +18,9 @@ import pytest
 from station.capture import Capture, read_capture, write_capture
 from station.cli import main
 from tests.station_run import assert_one_line_refusal, run_station
+from tests.station_run import run_main as run
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def one_line(err: str) -> str:
