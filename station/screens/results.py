@@ -17,7 +17,14 @@ from textual.widgets import DataTable, Static
 from station.formatting import num
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
-from station.procedures.review import assess, param_rows, review_record, shown_residual, shown_rows
+from station.procedures.review import (
+    assess,
+    param_rows,
+    residual_table,
+    review_record,
+    shown_residual,
+    shown_rows,
+)
 from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar, footer
@@ -33,7 +40,9 @@ class ResultsScreen(Screen):
     ResultsScreen #summary { height: auto; padding: 0 1; }
     ResultsScreen #tables { height: 1fr; }
     ResultsScreen DataTable:focus { border-left: thick $accent; }
-    ResultsScreen #params { height: 2fr; }
+    /* the parameters as tall as they are (at most two thirds), the per-position rows below
+       take the rest: P2's 9 parameters left blank lines above 5 of its 60 rows at 80x24 */
+    ResultsScreen #params { height: auto; max-height: 67%; }
     ResultsScreen #residuals { height: 1fr; }
     ResultsScreen #saved { height: auto; padding: 0 1; text-style: bold; }
     """
@@ -168,11 +177,12 @@ class ResultsScreen(Screen):
             lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
             summary.update("\n".join(lines))
         residuals.clear(columns=True)
-        rows_res = getattr(module, "position_residuals", lambda _c, _r: [])(self.capture, r)
+        headers, rows_res = residual_table(self.capture, r)  # in the summary's residual unit
         residuals.display = bool(rows_res)
-        residuals.add_columns("position", "|B+MV| m/s^2", "residual mm/s^2")
-        for name, norm, res in rows_res:
-            residuals.add_row(name, num(norm, ".5f"), num(res * 1000.0, "+.2f"))
+        if rows_res:
+            residuals.add_columns(*headers)
+            for row in rows_res:
+                residuals.add_row(*row)
 
     # ------------------------------------------------------------ actions
 

@@ -1,0 +1,63 @@
+"""What a bench engineer new to the station met at 80x24 on the simulated device (real app
+under its pilot): one unit per Results screen, a P2 result that shows its rows, and the
+averaging time said where the wait is."""
+
+from __future__ import annotations
+
+import asyncio
+
+from solvers.simulate import simulate
+from station.app import make_app
+from station.procedures import centrifuge
+from tests.station_run import capture_of
+from tests.test_tui import SIZE, screen_lines, text_of, wait_for
+from tests.tui_data import p1_result
+
+
+def _results_lines(tmp_path, cap, result, rows_wanted):
+    from station.screens.results import ResultsScreen
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id=str(cap.meta.get("device") or "IMU-8"))
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#residuals").row_count == rows_wanted)
+            return text_of(app, "#summary"), screen_lines(app)
+
+    return asyncio.run(story())
+
+
+def test_p1_results_show_the_residuals_in_the_summarys_unit(tmp_path):
+    """The summary said `residual 0.000112 m/s^2 RMS`, the table beneath `residual mm/s^2`
+    (values 1000x the summary's): now both m/s^2, the table labelled with what it is and
+    given the decimals of the summary's RMS, so its RMS is the summary's."""
+    cap, result = p1_result("IMU-8")
+    summary, lines = _results_lines(tmp_path, cap, result, 12)
+    screen = "\n".join(lines)
+    assert "mm/s" not in screen
+    header = next(line for line in lines if "|B+MV|" in line)
+    assert "|B+MV| m/s^2" in header and "residual |B+MV| − g m/s^2" in header
+    rms_shown = float(summary.split("residual ", 1)[1].split(" m/s^2 RMS")[0])
+    values = [float(line.split()[2]) for line in lines if line.split()[:1] and line.split()[0] in ("x_up", "x_down")]
+    assert len(values) == 2
+    # a table value is a number in m/s^2 of the RMS's size, not 1000x it
+    assert all(abs(v) < 20 * rms_shown for v in values), (values, rms_shown)
+
+
+def test_p2_results_fill_the_screen_with_the_rows_residuals(tmp_path):
+    """P2's Results had its 9 parameters and then 10 blank lines at 80x24: the rows' |f| and
+    |f| − ρ now fill them, in the summary's g, their RMS the summary's."""
+    sim = simulate("accel-centrifuge", seed=1)
+    cap = capture_of(sim)
+    result = centrifuge.calibrate(cap)
+    n = result["n_rows"]
+    summary, lines = _results_lines(tmp_path, cap, result, n)
+    header = next((line for line in lines if "|f| g" in line), "")
+    assert "residual |f| − ρ g" in header, "\n".join(lines)
+    shown = [line for line in lines if " @ " in line]
+    assert len(shown) >= 5, "\n".join(lines)  # rows visible under the parameters, not blank lines
+    blank_run = max(len(run) for run in "".join("b" if not line.strip(" █▁▂▆▇") else "x" for line in lines).split("x"))
+    assert blank_run <= 2, "\n".join(lines)
+    rows = centrifuge.position_residuals(cap, result)
+    rms = (sum(r * r for _n, _f, r in rows) / len(rows)) ** 0.5
+    assert abs(rms - result["residual_rms"]) <= 1e-9 + 1e-6 * result["residual_rms"]
