@@ -125,7 +125,9 @@ def test_connect_screen_starts_p1_on_the_simulator_and_registers_the_device(tmp_
     db = str(tmp_path / "station.db")
 
     async def story():
-        app = make_app(db, device=SimSource(seed=2, speed=10))
+        # 180 s given: the first position is still being averaged when it is looked at (the
+        # simulator's own 10 s pass in 1 s at speed 10)
+        app = make_app(db, device=SimSource(seed=2, speed=10), average_s=180.0)
         async with app.run_test(size=SIZE) as pilot:
             assert screen_name(app) == "ConnectScreen"
             assert "Built-in simulated device" in text_of(app, "#source")

@@ -61,3 +61,72 @@ def test_p2_results_fill_the_screen_with_the_rows_residuals(tmp_path):
     rows = centrifuge.position_residuals(cap, result)
     rms = (sum(r * r for _n, _f, r in rows) / len(rows)) ** 0.5
     assert abs(rms - result["residual_rms"]) <= 1e-9 + 1e-6 * result["residual_rms"]
+
+
+def _connect_average(app) -> tuple[str, str]:
+    return app.screen.query_one("#average").value, text_of(app, "#average-means").strip()
+
+
+def test_connect_offers_a_short_average_on_the_simulated_device_and_keeps_a_typed_one(tmp_path):
+    """On the simulated device "Average (s)" was the source's 180 s per position: a first P1
+    took 12 x 3 min. Now the simulator's default (P1 10 s, P2 5 s, P4 60 s), said beside the
+    field with the source's figure; a serial source gets 180 s back, and a time the operator
+    typed is kept whatever is picked."""
+    from station.procedures import registry
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        seen = {}
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: app.screen.query("#average"))
+            await pilot.pause()
+            seen["p1 sim"] = _connect_average(app)
+            seen["p1 screen"] = "\n".join(screen_lines(app))
+            procedure = app.screen.query_one("#procedure")
+            procedure.value = "accel-centrifuge"
+            await wait_for(pilot, lambda: _connect_average(app)[0] == "5")
+            seen["p2 sim"] = _connect_average(app)
+            procedure.value = "gyro-drift"
+            await wait_for(pilot, lambda: _connect_average(app)[0] == "60")
+            app.screen.query_one("#source").value = "other"
+            await wait_for(pilot, lambda: _connect_average(app)[0] == "180")
+            seen["p4 serial"] = _connect_average(app)
+            app.screen.query_one("#source").value = "sim"
+            procedure.value = "accel-tabletop"
+            await wait_for(pilot, lambda: _connect_average(app)[0] == "10")
+            # typed: kept across picks, and used by the run
+            app.screen.query_one("#average").value = "20"
+            procedure.value = "accel-centrifuge"
+            await wait_for(pilot, lambda: "per row" in _connect_average(app)[1])
+            seen["typed"] = _connect_average(app)[0]
+            procedure.value = "accel-tabletop"
+            await wait_for(pilot, lambda: "per position" in _connect_average(app)[1])
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            seen["run"] = app.screen.guide.config.average_s
+            seen["countdown"] = "\n".join(screen_lines(app))
+        return seen
+
+    seen = asyncio.run(story())
+    assert seen["p1 sim"] == ("10", "per position (source: 180–300 s), sim 10 s")
+    assert "per position (source: 180–300 s), sim 10 s" in seen["p1 screen"]  # whole at 80x24
+    assert seen["p2 sim"] == ("5", "per row (speed held steady), sim 5 s")
+    assert seen["p4 serial"] == ("180", "record length (P4 asks ≥ 180 s)")
+    assert seen["typed"] == "20" and seen["run"] == 20.0
+    assert "0:20" in seen["countdown"]
+    for name in registry.guided():  # every default is one its run accepts
+        assert registry.default_average_s(name, True) >= registry.min_average_s(name)
+
+
+def test_a_given_average_is_not_replaced_by_the_simulators_default(tmp_path):
+    """`station --average-s 200` on the simulated device: 200, not the simulator's 10."""
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), average_s=200.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: app.screen.query("#average"))
+            app.screen.query_one("#procedure").value = "accel-centrifuge"
+            await wait_for(pilot, lambda: "per row" in _connect_average(app)[1])
+            return _connect_average(app)[0]
+
+    assert asyncio.run(story()) == "200"
