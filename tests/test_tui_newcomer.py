@@ -130,3 +130,57 @@ def test_a_given_average_is_not_replaced_by_the_simulators_default(tmp_path):
             return _connect_average(app)[0]
 
     assert asyncio.run(story()) == "200"
+
+
+def test_a_refused_average_puts_the_cursor_where_it_is_fixed():
+    """`Average (s) 5 is too short` left the focus on Start (or the list just used): the next
+    keys typed went elsewhere. The field with the bad value now has the focus."""
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#procedure").value = "gyro-drift"
+            app.screen.query_one("#average").value = "5"
+            app.screen.query_one("#start").focus()
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: "too short" in text_of(app, "#status"))
+            await wait_for(pilot, lambda: app.focused is not None and app.focused.id == "average")
+            await pilot.press("ctrl+u", "6", "0", "enter")  # typed straight into it
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            return app.screen.guide.config.duration_s
+
+    assert asyncio.run(story()) == 60.0
+
+
+def test_the_resume_button_shows_its_count_and_its_key_whole(tmp_path):
+    """`Resume 3/12 [F6]` was drawn as `Resume 3/12`: the button kept the width of
+    `Resume [F6]`, so its key was cut off."""
+    import json
+
+    from station.procedures.state import default_state_path
+
+    steps = [{"status": "captured"}] * 3 + [{"status": "pending"}] * 9
+    path = default_state_path("IMU-5", base=str(tmp_path))
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump({"phase": "guide", "steps": steps}, fh)
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: any("Resume [F6]" in line for line in screen_lines(app)))
+            # the device with an interrupted run is typed after the form is drawn (as on the
+            # return from an aborted run): the label changes on a button already laid out
+            app.screen.query_one("#serial").value = "IMU-5"
+            await wait_for(pilot, lambda: not app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: any("Resume 3/12 [F6]" in line for line in screen_lines(app)))
+            return "\n".join(screen_lines(app))
+
+    screen = asyncio.run(story())
+    assert "History [F2]" in screen and "Import file [F7]" in screen
+
+
+def test_a_p4_result_counts_one_record_not_one_position():
+    from station.procedures import registry
+
+    assert registry.count_text("gyro-drift", 1) == "1 record"
+    assert registry.count_text("accel-tabletop", 12) == "12 positions"

@@ -166,6 +166,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         from_logs=True,
         units_note="rates in rad/s; body axes x forward, y up, z right",
         sim_device="SIM-GYR",
+        counts=("record", "records"),  # one still record (its Results said "1 position")
         average="record length (P4 asks ≥ 180 s)",
         min_average_s=30.0,
         sim_average_s=60.0,

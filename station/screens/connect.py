@@ -283,11 +283,13 @@ class ConnectScreen(Screen):
                 ok = state.get("phase") != "done" and n < len(state["steps"])
                 if ok:
                     button.label = f"Resume {n}/{len(state['steps'])} \\[F6]"
+                    button.refresh(layout=True)  # its width follows the label ("[F6]" was cut off)
             except (OSError, ValueError, KeyError, TypeError):
                 ok = False
         button.disabled = not ok
         if not ok:
             button.label = "Resume \\[F6]"
+            button.refresh(layout=True)
 
     # ------------------------------------------------------------ start
 
@@ -324,12 +326,14 @@ class ConnectScreen(Screen):
                 raise ValueError
         except ValueError:
             self._status("Average (s) must be a positive number of seconds", error=True)
+            self.query_one("#average", Input).focus()  # where the fix is typed
             return
         procedure = self.query_one("#procedure", Select).value
         shortest = registry.min_average_s(procedure)
         if average < shortest:  # refused now, not after the whole record
             what = registry.average_means(procedure)
             self._status(f"Average (s) {average:g} is too short: at least {shortest:g} s, {what}", error=True)
+            self.query_one("#average", Input).focus()
             return
         if s.average_default and self.query_one("#average", Input).value.strip() != self._offered:
             s.average_default = False  # typed: kept for the next run, whatever the source
