@@ -287,3 +287,22 @@ def test_due_real_process_exit_codes(tmp_path):
         s.save_calibration(accel_result(device="OLD"), meta=meta, columns=cols, time=now - timedelta(days=45))
     loud = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
     assert loud.returncode == 1 and loud.stdout.startswith("OLD: overdue by 15 d")
+
+
+def test_due_names_calibrated_devices_that_have_no_interval(capsys, db):
+    """A device the TUI registered and calibrated has no interval: `station due` said only
+    "nothing due", and the bench engineer expected a reminder that can never come. The
+    devices that are never due are named on stderr with the way to set one; stdout, which
+    cron reads, stays "nothing due"."""
+    with Store(db) as s:
+        s.add_device("SIM-ACC-0000")
+        s.add_device("IMU-1", interval_days=365)
+        for dev in ("SIM-ACC-0000", "IMU-1"):
+            meta, cols = small_capture(device=dev)
+            s.save_calibration(accel_result(dev), meta=meta, columns=cols)
+    code, out, err = run(capsys, "due", "--db", db)
+    assert code == 0 and out == "nothing due\n"
+    assert err.count("\n") == 1 and "SIM-ACC-0000" in err and "IMU-1" not in err
+    assert "--interval-days" in err
+    code, out, err = run(capsys, "due", "--json", "--db", db)
+    assert code == 0 and json.loads(out) == [] and err == ""
