@@ -219,6 +219,12 @@ DEFAULT = PROCEDURES[0].name
 # toy procedure) is seen everywhere.
 
 
+def one_of(choices) -> str:
+    """'one of a, b, c': a --procedure option's choices in its help, which argparse wraps at
+    the terminal's width (its own {a,b,c} in the usage line ran past 80 columns)."""
+    return "one of " + ", ".join(choices)
+
+
 def names() -> tuple[str, ...]:
     """The procedures' names (capture ``procedure:`` values), in registry order."""
     return tuple(p.name for p in PROCEDURES)
