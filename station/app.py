@@ -120,12 +120,16 @@ class StationApp(App):
             return
         overdue = [d for d in message.data if d["status"] == "overdue"]
         soon = [d for d in message.data if d["status"] == "due"]
-        if overdue or soon:
+        # as `station due`, which exits 1 for them: a device registered but never calibrated
+        never = [d for d in message.data if d["status"] == "never calibrated"]
+        if overdue or soon or never:
             parts = []
             if overdue:
                 parts.append("overdue: " + ", ".join(tui_markup(d["device_id"]) for d in overdue[:4]))
             if soon:
                 parts.append("due within 7 days: " + ", ".join(tui_markup(d["device_id"]) for d in soon[:4]))
+            if never:
+                parts.append("never calibrated: " + ", ".join(tui_markup(d["device_id"]) for d in never[:4]))
             self.notify("; ".join(parts) + "  (F2 history)", title="Recalibration", severity="warning", timeout=10)
         self.due = message.data
         for screen in self.screen_stack:

@@ -184,3 +184,24 @@ def test_a_p4_result_counts_one_record_not_one_position():
 
     assert registry.count_text("gyro-drift", 1) == "1 record"
     assert registry.count_text("accel-tabletop", 12) == "12 positions"
+
+
+def test_a_device_never_calibrated_is_reminded_of_as_station_due_does(tmp_path):
+    """`station devices add NEW-1 --interval-days 30`: `station due` lists it (exit 1, "never
+    calibrated"), the TUI said nothing at start-up nor on Connect."""
+    from db import Store
+
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        s.add_device("NEW-1", interval_days=30)
+
+    async def story():
+        app = make_app(db)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: "NEW-1" in text_of(app, "#due"))
+            await wait_for(pilot, lambda: any("NEW-1" in n.message for n in app._notifications))
+            return text_of(app, "#due"), [n.message for n in app._notifications]
+
+    due, notes = asyncio.run(story())
+    assert "NEW-1 never calibrated" in due
+    assert any("never calibrated: NEW-1" in n for n in notes)

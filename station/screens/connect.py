@@ -215,7 +215,7 @@ class ConnectScreen(Screen):
             known.set_options([(tui_text(f"{d['id']}  {d.get('model') or ''}".strip()), d["id"]) for d in message.data])
 
     def show_due(self, due) -> None:
-        bad = [d for d in due or [] if d["status"] in ("overdue", "due")]
+        bad = [d for d in due or [] if d["status"] in ("overdue", "due", "never calibrated")]
         text = ""
         if bad:
             text = (
