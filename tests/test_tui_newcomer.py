@@ -205,3 +205,38 @@ def test_a_device_never_calibrated_is_reminded_of_as_station_due_does(tmp_path):
     due, notes = asyncio.run(story())
     assert "NEW-1 never calibrated" in due
     assert any("never calibrated: NEW-1" in n for n in notes)
+
+
+def test_p_on_a_position_already_taken_keeps_the_running_average(tmp_path):
+    """The simulated unit starts on x_up: a newcomer's first `p` (the footer's "Place (sim)")
+    turned it again and threw the running average away ("3:00 left" back to "starts in")."""
+    import math
+
+    from station.sources import SimSource
+    from tests.test_tui_by_hand import Clock, caught_up, streaming
+
+    clock = Clock()
+    src = SimSource(seed=21, clock=clock, max_batch_s=5.0)
+
+    async def advance(pilot, app, until):
+        while not until():
+            assert clock.t < 120.0
+            clock.t += 0.5
+            await wait_for(pilot, lambda: caught_up(app, clock.t) or not streaming(app))
+
+    async def story():
+        app = make_app(None, device=src, start="procedure", average_s=20.0, settle_s=1.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            g = app.screen.guide
+            await advance(pilot, app, lambda: g.status().phase == "average" and g.status().progress > 0.2)
+            before = g.status().progress
+            await pilot.press("p")
+            await wait_for(pilot, lambda: any("already" in n.message for n in app._notifications))
+            await advance(pilot, app, lambda: g.status().progress > before + 0.1 or g.n_captured > 0)
+            st = g.status()
+            return before, st, src.imu._move
+
+    before, st, move = asyncio.run(story())
+    assert move is None  # the unit was not turned
+    assert st.n_captured == 1 or (st.phase == "average" and math.isfinite(st.progress) and st.progress > before)
