@@ -240,3 +240,31 @@ def test_p_on_a_position_already_taken_keeps_the_running_average(tmp_path):
     before, st, move = asyncio.run(story())
     assert move is None  # the unit was not turned
     assert st.n_captured == 1 or (st.phase == "average" and math.isfinite(st.progress) and st.progress > before)
+
+
+def test_the_parameters_pass_or_fail_mark_is_on_screen_at_80x24(tmp_path):
+    """With a calibration in use the parameter table is wider than 80 columns: its last
+    column, ok (✓ / ✗), was off screen, so which parameter failed could not be seen without
+    scrolling sideways. It now stands beside the value's unit."""
+    from db.store import Store
+    from station.screens.results import ResultsScreen
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "station.db")
+    seed_history(db, "IMU-7", n=1, tolerances={"B": 0.1})
+    previous = Store(db).history("IMU-7")[-1]
+    cap, result = p1_result("IMU-7", drift=0.5)  # B moved 0.5 m/s², 5x its tolerance
+
+    async def story():
+        app = make_app(db, device_id="IMU-7")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, previous))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            await wait_for(pilot, lambda: "FAIL" in text_of(app, "#summary"))
+            return screen_lines(app)
+
+    lines = asyncio.run(story())
+    b0 = next(line for line in lines if "B[0]" in line)
+    assert "✗" in b0 and "m/s^2" in b0, "\n".join(lines)
+    # the summary's first line is not broken inside the previous calibration's date and time
+    assert any(line.strip().startswith("previous #1 of 2024-03-01 00:00") for line in lines), "\n".join(lines)

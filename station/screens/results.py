@@ -128,10 +128,14 @@ class ResultsScreen(Screen):
             else "no previous calibration"
         )
         res, unit = shown_residual(r)  # in the unit the parameters below are shown in
-        lines = [
-            f"[{style}] {word.upper()} [/] residual {num(res, '.3g')} {unit} RMS · "
-            f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))} · {prev}"
-        ]
+        rest = (
+            f"residual {num(res, '.3g')} {unit} RMS · "
+            f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))}"
+        )
+        # the previous calibration on the next line when the whole would not fit 80 columns
+        # (it wrapped between its date and its time); 1 + " WORD " + " " + rest, as drawn
+        sep = " · " if 1 + len(word) + 3 + len(rest) + 3 + len(prev) <= 79 else "\n"
+        lines = [f"[{style}] {word.upper()} [/] {rest}{sep}{prev}"]
         lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
         entry = registry.get(r.get("procedure"))
         module = entry.load() if entry is not None else None
@@ -141,7 +145,9 @@ class ResultsScreen(Screen):
             lines.append("[b]s[/] decides: save as rejected (reason) or accept as override (note) · [b]n[/] re-do")
         summary.update("\n".join(lines))
         params.clear(columns=True)
-        params.add_columns("param", "value", "± 1σ", "unit", "in use", "Δ/σ", "tol", "ok")
+        # ok beside the value and its unit: at 80x24 with a calibration in use the table is
+        # wider than the screen, and "ok" as its last column was scrolled off
+        params.add_columns("param", "value", "± 1σ", "unit", "ok", "in use", "Δ/σ", "tol")
         for row in shown_rows(r, rows):
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
             params.add_row(
@@ -149,10 +155,10 @@ class ResultsScreen(Screen):
                 num(row.value, ".7g"),
                 num(row.sigma, ".2g"),
                 row.unit,
+                ok,
                 num(row.previous, ".7g"),
                 num(row.change_sigma, "+.1f"),
                 num(row.tolerance, ".3g"),
-                ok,
             )
         gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
         if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
@@ -163,9 +169,9 @@ class ResultsScreen(Screen):
                     num(row.value, ".7g"),
                     num(row.sigma, ".2g"),
                     row.unit,
+                    "",
                     num(row.previous, ".7g"),
                     num(row.change_sigma, "+.1f"),
-                    "",
                     "",
                 )
             lines.append(
