@@ -268,3 +268,18 @@ def test_the_parameters_pass_or_fail_mark_is_on_screen_at_80x24(tmp_path):
     assert "✗" in b0 and "m/s^2" in b0, "\n".join(lines)
     # the summary's first line is not broken inside the previous calibration's date and time
     assert any(line.strip().startswith("previous #1 of 2024-03-01 00:00") for line in lines), "\n".join(lines)
+
+
+def test_help_says_what_average_is_and_where_it_is_set():
+    """F1 listed Connect's keys but not its Average (s), the setting that decides how long a
+    newcomer waits at each position."""
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f1")
+            await wait_for(pilot, lambda: "Average (s)" in text_of(app, "HelpScreen Static"))
+            return " ".join(text_of(app, "HelpScreen Static").split())
+
+    text = asyncio.run(story())
+    assert "seconds per position or row" in text and "simulator" in text
