@@ -30,7 +30,10 @@ class Session:
     device_id: str = ""
     model: str = ""
     procedure: str = registry.DEFAULT
-    average_s: float = 180.0
+    average_s: float = registry.DEFAULT_AVERAGE_S
+    # no averaging time was given: the Connect screen offers the procedure's default for the
+    # source chosen (registry.default_average_s: shorter on the simulated device)
+    average_default: bool = False
     settle_s: float = 2.0
     scripted: bool = False  # the demo's scripted operator follows the prompts
     autosave: bool = False  # save the result without asking (the demo)
@@ -117,12 +120,16 @@ class StationApp(App):
             return
         overdue = [d for d in message.data if d["status"] == "overdue"]
         soon = [d for d in message.data if d["status"] == "due"]
-        if overdue or soon:
+        # as `station due`, which exits 1 for them: a device registered but never calibrated
+        never = [d for d in message.data if d["status"] == "never calibrated"]
+        if overdue or soon or never:
             parts = []
             if overdue:
                 parts.append("overdue: " + ", ".join(tui_markup(d["device_id"]) for d in overdue[:4]))
             if soon:
                 parts.append("due within 7 days: " + ", ".join(tui_markup(d["device_id"]) for d in soon[:4]))
+            if never:
+                parts.append("never calibrated: " + ", ".join(tui_markup(d["device_id"]) for d in never[:4]))
             self.notify("; ".join(parts) + "  (F2 history)", title="Recalibration", severity="warning", timeout=10)
         self.due = message.data
         for screen in self.screen_stack:
@@ -191,8 +198,8 @@ def make_app(
     device: a started-or-not source (``station.sources.SimSource`` / ``SerialSource``);
         with it the Connect screen is pre-filled (and skipped for the demo).
     demo: the scripted operator follows the prompts and the result is saved unasked.
-    average_s: averaging time per position (default 180 s, the source's 3–5 minutes;
-        the demo uses 3 s).
+    average_s: averaging time per position (default 180 s, the source's 3–5 minutes, which
+        the Connect screen shortens on the simulated device; the demo uses 3 s).
     """
     session = Session(
         db_path=db_path,
@@ -204,7 +211,8 @@ def make_app(
         exit_when_saved=exit_when_saved,
         model=model,
     )
-    session.average_s = float(average_s if average_s is not None else (3.0 if demo else 180.0))
+    session.average_s = float(average_s if average_s is not None else (3.0 if demo else registry.DEFAULT_AVERAGE_S))
+    session.average_default = average_s is None and not demo
     session.settle_s = float(settle_s if settle_s is not None else (1.0 if demo else 2.0))
     if device is not None:
         session.device_id = device_id or getattr(device, "device_id", "") or ""

@@ -15,3 +15,9 @@ def shared_data() -> Path:
     if not path.is_dir():
         pytest.skip("../shared/data is not beside this clone")
     return path
+
+
+@pytest.fixture
+def db(tmp_path) -> str:
+    """A database path in the test's own folder (not created: the command under test does that)."""
+    return str(tmp_path / "station.db")

@@ -36,6 +36,16 @@ def run_station(*args, subprocess_run: bool = False) -> subprocess.CompletedProc
     return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
 
 
+def run_main(capsys, *argv) -> tuple[int, str, str]:
+    """``station ARGS`` through ``station.cli.main`` in this process, its output taken by
+    pytest's ``capsys``: (exit status, stdout, stderr)."""
+    from station.cli import main
+
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
 def station_json(*args) -> dict:
     """``station ARGS`` through ``run_station`` that must succeed (exit 0, stderr shown if not):
     its stdout, one JSON object."""

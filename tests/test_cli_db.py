@@ -15,21 +15,11 @@ from db_testdata import accel_result, compass_result, small_capture
 from db import Store
 from station.cli import main
 from station.textsafe import safe
+from tests.station_run import run_main as run
 
 ROOT = Path(__file__).resolve().parents[1]
 NASTY_ID = 'IMU "7"; DROP TABLE devices; -- Ω温\nsecond line'
 NASTY_NOTES = 'it\'s "fine"\n\tSELECT * FROM calibrations;\nüñí 🙂'
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main(list(argv))
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-@pytest.fixture
-def db(tmp_path):
-    return str(tmp_path / "station.db")
 
 
 @pytest.fixture
@@ -297,3 +287,22 @@ def test_due_real_process_exit_codes(tmp_path):
         s.save_calibration(accel_result(device="OLD"), meta=meta, columns=cols, time=now - timedelta(days=45))
     loud = subprocess.run([sys.executable, "-m", "station", "due"], cwd=ROOT, env=env, capture_output=True, text=True)
     assert loud.returncode == 1 and loud.stdout.startswith("OLD: overdue by 15 d")
+
+
+def test_due_names_calibrated_devices_that_have_no_interval(capsys, db):
+    """A device the TUI registered and calibrated has no interval: `station due` said only
+    "nothing due", and the bench engineer expected a reminder that can never come. The
+    devices that are never due are named on stderr with the way to set one; stdout, which
+    cron reads, stays "nothing due"."""
+    with Store(db) as s:
+        s.add_device("SIM-ACC-0000")
+        s.add_device("IMU-1", interval_days=365)
+        for dev in ("SIM-ACC-0000", "IMU-1"):
+            meta, cols = small_capture(device=dev)
+            s.save_calibration(accel_result(dev), meta=meta, columns=cols)
+    code, out, err = run(capsys, "due", "--db", db)
+    assert code == 0 and out == "nothing due\n"
+    assert err.count("\n") == 1 and "SIM-ACC-0000" in err and "IMU-1" not in err
+    assert "--interval-days" in err
+    code, out, err = run(capsys, "due", "--json", "--db", db)
+    assert code == 0 and json.loads(out) == [] and err == ""

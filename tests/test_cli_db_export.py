@@ -11,15 +11,9 @@ import pytest
 from db_testdata import accel_result, compass_result, gyro_result, ldv_result, small_capture
 
 from db import Store
-from station.cli import main
+from tests.station_run import run_main as run
 
 G0 = 9.80665  # the firmwares' standard gravity (GRAVITY_MSS, CONSTANTS_ONE_G)
-
-
-def run(capsys, *argv):
-    code = main(list(argv))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def _save(db, result, **meta):
@@ -42,11 +36,6 @@ def _params(text: str, fmt: str) -> dict[str, float]:
             _, _, name, value = line.split()
         out[name] = float(value)
     return out
-
-
-@pytest.fixture
-def db(tmp_path):
-    return str(tmp_path / "station.db")
 
 
 M_TRUE = [[1.02, 0.003, -0.002], [0.0, 0.985, 0.004], [0.0, 0.0, 1.01]]

@@ -18,14 +18,9 @@ import pytest
 from station.capture import Capture, read_capture, write_capture
 from station.cli import main
 from tests.station_run import assert_one_line_refusal, run_station
+from tests.station_run import run_main as run
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def one_line(err: str) -> str:
@@ -780,3 +775,37 @@ def test_a_full_standard_output_is_named_not_blamed_on_the_input(tmp_path, ldv_c
         )
     assert res.returncode == 2, res.stderr
     assert res.stderr == "station: cannot write standard output: No space left on device\n", res.stderr
+
+
+def _subparsers(parser):
+    """(name, parser) of every subcommand of ``parser``, nested ones too (`devices add`)."""
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield name, sub
+                for inner, subsub in _subparsers(sub):
+                    yield f"{name} {inner}", subsub
+
+
+def test_every_help_fits_an_80_column_terminal(monkeypatch, capsys):
+    """`station history --help` and five others printed a usage line of 91–105 columns
+    (argparse lists --procedure's choices there unwrapped): at 80x24 over SSH it wrapped into
+    the next line's column. Every command's help is at most 80 columns; the choices are in
+    the option's help, which wraps."""
+    from station.cli import build_parser
+
+    monkeypatch.setenv("COLUMNS", "80")
+    parser = build_parser()
+    wide = {}
+    for name, sub in [("station", parser), *_subparsers(parser)]:
+        lines = [line for line in sub.format_help().splitlines() if len(line) > 80]
+        if lines:
+            wide[name] = lines
+    assert not wide, wide
+    # a wrong name is still answered with the names to choose from
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", "--procedure", "p9", "--out", "x.csv"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "accel-tabletop" in err and "ldv" in err

@@ -20,7 +20,7 @@ from db_testdata import accel_result, small_capture
 
 from db import Store
 from db.params import DAYS_PER_YEAR, DRIFT_MIN_CALIBRATIONS, DRIFT_SIGNIFICANCE, linear_trend, trend_verdict
-from station.cli import main
+from tests.station_run import run_main as run
 
 T0 = datetime(2025, 1, 6, tzinfo=UTC)
 SIGMA_B_MPS2 = 0.01  # each calibration's reported 1-sigma of B
@@ -49,17 +49,6 @@ def _save(store, device, days, rng, rate_B0_per_year=0.0):
             allow_duplicate=True,
             time=_iso(T0 + timedelta(days=d)),
         )
-
-
-def run(capsys, *argv):
-    code = main(list(argv))
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-@pytest.fixture
-def db(tmp_path):
-    return str(tmp_path / "station.db")
 
 
 def test_scatter_within_sigmas_keeps_the_interval(db, capsys):

@@ -30,7 +30,7 @@ from db_testdata import accel_result, compass_result, gyro_result, small_capture
 
 from db import Store
 from station.capture import Capture, write_capture
-from station.cli import main
+from tests.station_run import run_main as run
 
 XYZ = "XYZ"
 ARDUPILOT_NAMES = (
@@ -108,12 +108,6 @@ PX4_SOURCE_NAMES = (
 )
 
 
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
 def names_in(text: str, fmt: str) -> dict[str, float]:
     out = {}
     for line in text.splitlines():
@@ -129,11 +123,6 @@ def names_in(text: str, fmt: str) -> dict[str, float]:
             assert (typ == "6") == name.endswith(("_ID", "_PRIO", "_ROT"))  # INT32 vs REAL32
         out[name] = float(value)
     return out
-
-
-@pytest.fixture
-def db(tmp_path):
-    return str(tmp_path / "station.db")
 
 
 def _save(db, result, **meta):

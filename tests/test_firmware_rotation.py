@@ -25,18 +25,12 @@ import numpy as np
 import pytest
 
 from station.capture import Capture, write_capture
-from station.cli import main
 from station.firmware_export import rotation_matrix
+from tests.station_run import run_main as run
 from tests.test_firmware_export import NOMINAL_V_PER_MPS2, NOMINAL_ZERO_V, names_in
 
 XYZ = "XYZ"
 H = math.sqrt(0.5)
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @pytest.mark.parametrize(

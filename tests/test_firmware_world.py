@@ -58,7 +58,7 @@ from db_testdata import accel_result, compass_result, gyro_result, small_capture
 
 from db import Store
 from station.capture import read_capture
-from station.cli import main
+from tests.station_run import run_main as run
 
 XYZ = "XYZ"
 S = {"accel": "ACC", "gyro": "GYRO", "mag": "MAG"}
@@ -70,12 +70,6 @@ LOGS = (
     "sample_logging_tagged_and_default_params.ulg",
     "sample_px4_events.ulg",
 )
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def ulog(path, topics=()):

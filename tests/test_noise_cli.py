@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from station.capture import Capture, read_capture, write_capture
-from station.cli import main
 from tests.station_run import assert_one_line_refusal, run_station
+from tests.station_run import run_main as run
 
 RATE_HZ = 200.0
 GYRO_N, GYRO_K = (3e-4, 4e-4, 5e-4), (2e-5, 4e-5, 3e-5)  # rad/s/√Hz, rad/s²/√Hz
@@ -51,12 +51,6 @@ def still_capture(path, seed, seconds=600.0):
     }
     write_capture(path, Capture(meta=meta, columns=cols, path=path))
     return path
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def test_recovers_density_and_random_walk_within_stated_sigma_and_writes_kalibr_yaml(capsys, tmp_path):

@@ -125,7 +125,9 @@ def test_connect_screen_starts_p1_on_the_simulator_and_registers_the_device(tmp_
     db = str(tmp_path / "station.db")
 
     async def story():
-        app = make_app(db, device=SimSource(seed=2, speed=10))
+        # 180 s given: the first position is still being averaged when it is looked at (the
+        # simulator's own 10 s pass in 1 s at speed 10)
+        app = make_app(db, device=SimSource(seed=2, speed=10), average_s=180.0)
         async with app.run_test(size=SIZE) as pilot:
             assert screen_name(app) == "ConnectScreen"
             assert "Built-in simulated device" in text_of(app, "#source")
@@ -511,11 +513,11 @@ def test_results_compare_with_the_previous_calibration_and_export(tmp_path):
 
     summary, row, paths, saved = asyncio.run(story())
     assert "FAIL" in summary and f"previous #{previous['id']}" in summary
-    assert row[0] == "B[0]" and row[3] == "m/s^2" and row[7] == "✗"
+    assert row[0] == "B[0]" and row[3] == "m/s^2" and row[4] == "✗"  # ok beside the unit
     b_new, b_old = result["params"]["B"][0], previous["params"]["B"][0]
     s2 = result["uncertainty"]["B"][0] ** 2 + previous["uncertainty"]["B"][0] ** 2
-    assert float(row[5]) == pytest.approx((b_new - b_old) / np.sqrt(s2), abs=0.051)
-    assert row[5] == "+88.4"  # 0.5 / sqrt(2 * 0.004²)
+    assert float(row[6]) == pytest.approx((b_new - b_old) / np.sqrt(s2), abs=0.051)
+    assert row[6] == "+88.4"  # 0.5 / sqrt(2 * 0.004²)
     assert "Discarded" in saved
     back = read_capture(paths[0])
     np.testing.assert_array_equal(back.columns["ax"], cap.columns["ax"])

@@ -23,9 +23,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--procedure",
         choices=registry.demos(),
         default=registry.DEFAULT,
+        metavar="P",
         help="P1 (default), P2 on the centrifuge (60 rows: try --speed 10), the P3 compass sweep, "
         "P4 on a static base or with a reference IMU (180 s: try --speed 6), P5 LDV on a vehicle "
-        "(about 2 min: try --speed 6)",
+        f"(about 2 min: try --speed 6): {registry.one_of(registry.demos())}",
     )
     p.add_argument("--average-s", type=float, default=3.0, help="averaging time per position (default 3 s)")
     p.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second (default 1)")

@@ -25,7 +25,12 @@ def register(subparsers) -> None:
     )
     p.add_argument("id", metavar="ID", help="device id")
     p.add_argument("--param", help="one coefficient (B[0], beam1.dK) or a block (B = all of B)")
-    p.add_argument("--procedure", choices=registry.names(), help="only this procedure")
+    p.add_argument(
+        "--procedure",
+        choices=registry.names(),
+        metavar="P",
+        help=f"only this procedure ({registry.one_of(registry.names())})",
+    )
     p.add_argument("--json", action="store_true", help="a JSON list, one object per coefficient")
     p.add_argument("--no-plot", action="store_true", help="the table without the terminal plot")
     p.set_defaults(func=run)

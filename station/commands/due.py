@@ -39,6 +39,15 @@ def run(args: argparse.Namespace) -> int:
         )
     with open_store(args) as store:
         items = store.due(within_days=args.within, now=args.now)
+        # calibrated but without an interval: never due, which "nothing due" alone hides (the
+        # TUI registers a device with none); said on stderr, stdout stays what cron reads
+        never = [d["id"] for d in store.list_devices() if d.get("last_calibrated") and not d.get("interval_days")]
+    if never and not args.json:
+        shown = ", ".join(safe(d) for d in never[:3]) + (f" and {len(never) - 3} more" if len(never) > 3 else "")
+        sys.stderr.write(
+            f"station: {len(never)} calibrated device{'s' if len(never) > 1 else ''} without a recalibration "
+            f"interval, never due: {shown} (set one: station devices add ID --interval-days N)\n"
+        )
     if args.json:
         print_json(items)
     elif not items:

@@ -13,7 +13,12 @@ from station.textsafe import safe
 def register(subparsers) -> None:
     p = subparsers.add_parser("history", help="a device's calibrations, oldest first")
     p.add_argument("id", metavar="ID", help="device id")
-    p.add_argument("--procedure", choices=registry.names(), help="only this procedure")
+    p.add_argument(
+        "--procedure",
+        choices=registry.names(),
+        metavar="P",
+        help=f"only this procedure ({registry.one_of(registry.names())})",
+    )
     p.add_argument("--json", action="store_true", help="a JSON list of calibration records")
     p.set_defaults(func=run)
 

@@ -31,7 +31,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: until interrupted)"
     )
     p.add_argument("--out", help="capture file to write")
-    p.add_argument("--procedure", choices=registry.names(), help="the procedure this capture is for (metadata)")
+    p.add_argument(
+        "--procedure",
+        choices=registry.names(),
+        metavar="P",
+        help=f"the procedure this capture is for (metadata): {registry.one_of(registry.names())}",
+    )
     p.add_argument("--meta", action="append", metavar="KEY=VALUE", help="extra metadata, e.g. latitude_deg=39.98")
     p.add_argument(
         "--mavlink-message",

@@ -49,8 +49,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--procedure",
         default=registry.DEFAULT,
         choices=benches(),
+        metavar="P",
         help="the bench it simulates, as the TUI's built-in device (a guided run with a reference IMU "
-        "adds its ref_gx..ref_gz; the LDV's vehicle sends its beams and reference velocity)",
+        "adds its ref_gx..ref_gz; the LDV's vehicle sends its beams and reference velocity): "
+        f"{registry.one_of(benches())}",
     )
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
     p.add_argument("--seed", type=int, default=0)

@@ -42,7 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write a realistic simulated capture and its truth",
         description="Simulate a capture of any procedure with the station's forward models.",
     )
-    p.add_argument("--procedure", required=True, choices=registry.names())
+    p.add_argument(
+        "--procedure", required=True, choices=registry.names(), metavar="P", help=registry.one_of(registry.names())
+    )
     p.add_argument("--out", required=True, help="capture file to write")
     p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument(

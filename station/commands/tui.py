@@ -23,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--average-s",
         type=float,
         default=None,
-        help="averaging time per position in seconds (default 180; the source asks 3-5 minutes)",
+        help="averaging time per position in seconds (default 180, the source's 3-5 minutes; on the "
+        "built-in simulated device shorter, e.g. 10 s for P1, so a first run takes minutes)",
     )
     p.add_argument("--device-id", default=None, help="serial number of the device under test")
     p.add_argument("--model", default="", help="model of the device under test")
@@ -76,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
 
         device = SimSource(seed=args.seed, speed=args.speed)
         start = "procedure"
+        if args.average_s is None:  # the simulated device's default, as Connect offers it
+            from station.procedures import registry
+
+            args.average_s = registry.default_average_s(registry.DEFAULT, True)
     app = make_app(
         db_path(args),
         device=device,

@@ -16,7 +16,13 @@ from station.procedures import registry
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("walkthrough", help="simulate a capture, calibrate it and compare with the truth")
-    p.add_argument("--procedure", default=registry.DEFAULT, choices=registry.names())
+    p.add_argument(
+        "--procedure",
+        default=registry.DEFAULT,
+        choices=registry.names(),
+        metavar="P",
+        help=registry.one_of(registry.names()),
+    )
     p.add_argument("--seed", type=seed_arg, default=1)
     p.set_defaults(func=run)
 

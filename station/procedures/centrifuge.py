@@ -24,6 +24,7 @@ import numpy as np
 
 from solvers import centrifuge as C
 from solvers.errors import SolverError
+from solvers.models.accel import inverse as accel_inverse
 from station.capture import fill_missing
 from station.errors import InputError, UnsupportedError
 from station.procedures.contract import DiagnosisInput
@@ -249,6 +250,28 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
             "C4": res.extra["coefficients"][10:13],
         }
     return result
+
+
+# the Results table's columns (review.residual_table adds the residual's unit to the last two)
+RESIDUAL_COLUMNS = ("mounting @ ω rad/s", "|f|", "residual |f| − ρ")
+
+
+def position_residuals(capture, result: dict) -> list[tuple[str, float, float]]:
+    """The TUI's Results table of P2: per row (mounting @ speed, |f| [g], |f| − ρ [g]) with
+    ``f`` the fitted model's inverse of the row's mean output and ρ = sqrt(A² + 1); a row the
+    robust screen left out of the fit is marked so ([] when the result has no S, b, D)."""
+    try:
+        params = {k: np.asarray(v, dtype=float) for k, v in result["params"].items()}
+        prep = prepare(capture)
+        rho = C.norm_target(prep.speed_rad_s, prep.radius_m, prep.g_mps2)
+        f = np.linalg.norm(accel_inverse(prep.N, params), axis=1)
+    except (KeyError, TypeError, ValueError, InputError, UnsupportedError, np.linalg.LinAlgError):
+        return []
+    left_out = {r.get("row") for r in result.get("rejected_rows") or [] if isinstance(r, dict)}
+    return [
+        (f"{lab} @ {w:.2f}" + (" left out" if k + 1 in left_out else ""), float(fk), float(fk - rk))
+        for k, (lab, w, fk, rk) in enumerate(zip(prep.labels, prep.speed_rad_s, f, rho))
+    ]
 
 
 def format_text(result: dict) -> str:

@@ -58,6 +58,9 @@ class Procedure:
     # the shortest "Average (s)" its fit takes [s]: the Connect screen refuses less before
     # anything is recorded (P4: solvers.gyrodrift.MIN_DURATION_S; a test holds them equal)
     min_average_s: float = 0.0
+    # the Connect screen's "Average (s)" on the built-in simulated device [s] (0: the real
+    # device's DEFAULT_AVERAGE_S): a first run shows the whole procedure in minutes, not hours
+    sim_average_s: float = 0.0
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -82,6 +85,7 @@ class GuidedRun:
     demo: bool = False  # `station demo --procedure <name>` offers it
     average: str = "record length"  # what the Connect screen's "Average (s)" is for it
     min_average_s: float = 0.0  # the shortest it takes [s] (Procedure.min_average_s)
+    sim_average_s: float = 0.0  # its default on the simulated device [s] (Procedure.sim_average_s)
 
 
 PROCEDURES: tuple[Procedure, ...] = (
@@ -103,6 +107,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         units_note="V in the capture's accel_unit ({accel_unit}), A in m/s^2; B in m/s^2, M in m/s^2 per {accel_unit}",
         sim_device="SIM-ACC",
         average="per position (source: 180–300 s)",
+        sim_average_s=10.0,
     ),
     Procedure(
         name="accel-centrifuge",
@@ -122,6 +127,7 @@ PROCEDURES: tuple[Procedure, ...] = (
         sim_device="SIM-CFG",
         counts=("row", "rows"),
         average="per row (speed held steady)",
+        sim_average_s=5.0,
     ),
     Procedure(
         name="compass",
@@ -160,8 +166,10 @@ PROCEDURES: tuple[Procedure, ...] = (
         from_logs=True,
         units_note="rates in rad/s; body axes x forward, y up, z right",
         sim_device="SIM-GYR",
+        counts=("record", "records"),  # one still record (its Results said "1 position")
         average="record length (P4 asks ≥ 180 s)",
         min_average_s=30.0,
+        sim_average_s=60.0,
     ),
     Procedure(
         name="ldv",
@@ -193,15 +201,28 @@ GUIDED_RUNS: tuple[GuidedRun, ...] = (
         demo=True,
         average="record length (P4 asks ≥ 180 s)",
         min_average_s=30.0,
+        sim_average_s=60.0,
     ),
     # the gyro noise (Allan) run holds the unit still like P4
-    GuidedRun("gyro-noise", "Gyro noise (Allan) run", "station.screens.noise:NoiseHoldScreen", procedure="gyro-drift"),
+    GuidedRun(
+        "gyro-noise",
+        "Gyro noise (Allan) run",
+        "station.screens.noise:NoiseHoldScreen",
+        procedure="gyro-drift",
+        sim_average_s=120.0,
+    ),
 )
 
 DEFAULT = PROCEDURES[0].name
 
 # Everything below reads PROCEDURES when called, so that an entry added to it (a test's
 # toy procedure) is seen everywhere.
+
+
+def one_of(choices) -> str:
+    """'one of a, b, c': a --procedure option's choices in its help, which argparse wraps at
+    the terminal's width (its own {a,b,c} in the usage line ran past 80 columns)."""
+    return "one of " + ", ".join(choices)
 
 
 def names() -> tuple[str, ...]:
@@ -294,6 +315,30 @@ def min_average_s(name: str | None) -> float:
         return run.min_average_s
     p = get(name)
     return p.min_average_s if p is not None else 0.0
+
+
+# "Average (s)" on a real device when none is given: P1's source asks 3–5 minutes per position
+DEFAULT_AVERAGE_S = 180.0
+
+
+def default_average_s(name: str | None, simulated: bool) -> float:
+    """The "Average (s)" the Connect screen offers for procedure or guided run ``name``: the
+    source's 180 s on a real device, the entry's ``sim_average_s`` on the simulated one."""
+    if not simulated:
+        return DEFAULT_AVERAGE_S
+    entry = guided_run(name) or get(name)
+    sim = getattr(entry, "sim_average_s", 0.0) if entry is not None else 0.0
+    return sim if sim > 0 else DEFAULT_AVERAGE_S
+
+
+def average_text(name: str | None, simulated: bool) -> str:
+    """What the Connect screen says beside "Average (s)": what it is for ``name`` and, on the
+    simulated device when its default is shorter, that default ("…, sim 10 s")."""
+    means = average_means(name)
+    sim = default_average_s(name, True)
+    if simulated and sim != DEFAULT_AVERAGE_S and not means.startswith("not used"):
+        return f"{means}, sim {sim:g} s"
+    return means
 
 
 def screen_for(name: str):

@@ -355,6 +355,32 @@ def shown_residual(result: dict) -> tuple[float | None, str]:
     return (res * disp[0] if _finite(res) else res), disp[1]
 
 
+def residual_table(capture, result: dict) -> tuple[tuple[str, ...], list[tuple[str, str, str]]]:
+    """The Results screen's per-position (per-row) table: its headers and rows as text, in
+    the unit and with the decimals of the summary's residual RMS (``shown_residual``), so the
+    table and the summary read alike (P1: both m/s^2). ``((), [])`` for a procedure without
+    one (its module's ``position_residuals`` and ``RESIDUAL_COLUMNS``)."""
+    module = _procedure_module(result)
+    rows = getattr(module, "position_residuals", lambda _c, _r: [])(capture, result)
+    if not rows:
+        return (), []
+    name, norm, residual = getattr(module, "RESIDUAL_COLUMNS", ("position", "norm", "residual"))
+    rms, unit = shown_residual(result)
+    k = 1.0
+    disp = display_unit(result, "residual_rms")
+    if disp is not None:
+        k = disp[0]
+    # the RMS's three significant digits (as the summary shows it); at least 3 decimals for the norm
+    scale = rms if _finite(rms) and rms > 0 else max((abs(r) for _n, _a, r in rows if _finite(r)), default=1.0)
+    decimals = min(9, max(0, 2 - math.floor(math.log10(scale)))) if scale > 0 else 3
+    out = [(str(n), _fixed(a * k, max(decimals, 3), ""), _fixed(r * k, decimals, "+")) for n, a, r in rows]
+    return (name, f"{norm} {unit}", f"{residual} {unit}"), out
+
+
+def _fixed(x, decimals: int, sign: str) -> str:
+    return format(x, f"{sign}.{decimals}f") if _finite(x) else "—"
+
+
 def _procedure_module(result: dict):
     """The result's procedure module (registry), None for a procedure the station lacks."""
     from station.procedures import registry

@@ -552,6 +552,10 @@ def report_figures(result: dict, meta: dict, columns: dict) -> list[tuple[str, s
     return figs
 
 
+# the Results table's columns (review.residual_table adds the residual's unit to the last two)
+RESIDUAL_COLUMNS = ("position", "|B+MV|", "residual |B+MV| − g")
+
+
 def position_residuals(capture, result: dict) -> list[tuple[str, float, float]]:
     """The TUI's Results table of P1: per position (name, |B + M V| [m/s²], |B + M V| − g [m/s²])."""
     from station.procedures.review import p1_residuals

@@ -113,7 +113,7 @@ class ConnectScreen(Screen):
                 )
             with Horizontal(classes="row"):
                 yield Label("Average (s)")
-                yield Field(value=f"{s.average_s:g}", id="average", type="number", compact=True)
+                yield Field(value=f"{self._average_default():g}", id="average", type="number", compact=True)
                 yield Label(self._average_means(), id="average-means", classes="inner")
             with Horizontal(id="buttons"):
                 yield Button("Start \\[F5]", id="start", variant="primary", compact=True)
@@ -124,15 +124,35 @@ class ConnectScreen(Screen):
         yield Static("", id="notices")
         yield footer()
 
-    def _average_means(self, procedure: str | None = None) -> str:
+    def _picked(self) -> tuple[str, bool]:
+        """The procedure picked and whether the source is the simulated device (before the
+        form exists: the session's)."""
         s = self.app.session
-        if procedure is None:
-            procedure = s.procedure if s.procedure in registry.guided() else registry.DEFAULT
-        return registry.average_means(procedure)
+        if self.query("#procedure") and self.query("#source"):
+            return str(self.query_one("#procedure", Select).value), self.query_one("#source", Select).value == SIM
+        procedure = s.procedure if s.procedure in registry.guided() else registry.DEFAULT
+        return procedure, self._default_source() == SIM
+
+    def _average_default(self) -> float:
+        """What "Average (s)" shows: the time given (--average-s, or typed for an earlier
+        run), else the default for the procedure on this source."""
+        s = self.app.session
+        if not s.average_default:
+            return s.average_s
+        return registry.default_average_s(*self._picked())
+
+    def _average_means(self) -> str:
+        return registry.average_text(*self._picked())
 
     @on(Select.Changed, "#procedure")
-    def _procedure_picked(self, event: Select.Changed) -> None:
-        self.query_one("#average-means", Label).update(self._average_means(str(event.value)))
+    @on(Select.Changed, "#source")
+    def _procedure_picked(self) -> None:
+        """Another procedure or source: what "Average (s)" means, and its default when the
+        operator has not typed one (the value shown is the previous default)."""
+        self.query_one("#average-means", Label).update(self._average_means())
+        box = self.query_one("#average", Input)
+        if self.app.session.average_default and box.value.strip() == getattr(self, "_offered", None):
+            box.value = self._offered = f"{self._average_default():g}"
 
     def _source_options(self):
         opts = [("Built-in simulated device", SIM)]
@@ -152,6 +172,7 @@ class ConnectScreen(Screen):
         return SIM
 
     def on_mount(self) -> None:
+        self._offered = self.query_one("#average", Input).value.strip()  # the default shown, not typed
         src = self.app.session.source
         if src is not None and getattr(src, "kind", "") == "serial":
             self.query_one("#port", Input).value = src.port
@@ -194,7 +215,7 @@ class ConnectScreen(Screen):
             known.set_options([(tui_text(f"{d['id']}  {d.get('model') or ''}".strip()), d["id"]) for d in message.data])
 
     def show_due(self, due) -> None:
-        bad = [d for d in due or [] if d["status"] in ("overdue", "due")]
+        bad = [d for d in due or [] if d["status"] in ("overdue", "due", "never calibrated")]
         text = ""
         if bad:
             text = (
@@ -262,11 +283,13 @@ class ConnectScreen(Screen):
                 ok = state.get("phase") != "done" and n < len(state["steps"])
                 if ok:
                     button.label = f"Resume {n}/{len(state['steps'])} \\[F6]"
+                    button.refresh(layout=True)  # its width follows the label ("[F6]" was cut off)
             except (OSError, ValueError, KeyError, TypeError):
                 ok = False
         button.disabled = not ok
         if not ok:
             button.label = "Resume \\[F6]"
+            button.refresh(layout=True)
 
     # ------------------------------------------------------------ start
 
@@ -303,13 +326,17 @@ class ConnectScreen(Screen):
                 raise ValueError
         except ValueError:
             self._status("Average (s) must be a positive number of seconds", error=True)
+            self.query_one("#average", Input).focus()  # where the fix is typed
             return
         procedure = self.query_one("#procedure", Select).value
         shortest = registry.min_average_s(procedure)
         if average < shortest:  # refused now, not after the whole record
             what = registry.average_means(procedure)
             self._status(f"Average (s) {average:g} is too short: at least {shortest:g} s, {what}", error=True)
+            self.query_one("#average", Input).focus()
             return
+        if s.average_default and self.query_one("#average", Input).value.strip() != self._offered:
+            s.average_default = False  # typed: kept for the next run, whatever the source
         s.average_s = average
         s.resume = resume
         s.procedure = procedure

@@ -16,6 +16,8 @@ HELP = """\
 [b]Everywhere[/]  F1 help · ctrl+q quit · tab/shift+tab move · enter choose
             F2 history · ctrl+p command palette
 [b]Connect[/]     F5 start · F6 resume a P1 · F7 import a file · F2 history
+            Average (s): seconds per position or row, or the record's
+            length (P4, noise run); shorter by default on the simulator
 [b]Import[/]      enter read the file · F5 calibrate · F6 diagnose · esc back
             F8 the other method a refusal offers (six-position)
 [b]P1[/]          s skip · r redo (the current average, or the last captured

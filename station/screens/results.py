@@ -17,7 +17,14 @@ from textual.widgets import DataTable, Static
 from station.formatting import num
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
-from station.procedures.review import assess, param_rows, review_record, shown_residual, shown_rows
+from station.procedures.review import (
+    assess,
+    param_rows,
+    residual_table,
+    review_record,
+    shown_residual,
+    shown_rows,
+)
 from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar, footer
@@ -33,7 +40,9 @@ class ResultsScreen(Screen):
     ResultsScreen #summary { height: auto; padding: 0 1; }
     ResultsScreen #tables { height: 1fr; }
     ResultsScreen DataTable:focus { border-left: thick $accent; }
-    ResultsScreen #params { height: 2fr; }
+    /* the parameters as tall as they are (at most two thirds), the per-position rows below
+       take the rest: P2's 9 parameters left blank lines above 5 of its 60 rows at 80x24 */
+    ResultsScreen #params { height: auto; max-height: 67%; }
     ResultsScreen #residuals { height: 1fr; }
     ResultsScreen #saved { height: auto; padding: 0 1; text-style: bold; }
     """
@@ -119,10 +128,14 @@ class ResultsScreen(Screen):
             else "no previous calibration"
         )
         res, unit = shown_residual(r)  # in the unit the parameters below are shown in
-        lines = [
-            f"[{style}] {word.upper()} [/] residual {num(res, '.3g')} {unit} RMS · "
-            f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))} · {prev}"
-        ]
+        rest = (
+            f"residual {num(res, '.3g')} {unit} RMS · "
+            f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))}"
+        )
+        # the previous calibration on the next line when the whole would not fit 80 columns
+        # (it wrapped between its date and its time); 1 + " WORD " + " " + rest, as drawn
+        sep = " · " if 1 + len(word) + 3 + len(rest) + 3 + len(prev) <= 79 else "\n"
+        lines = [f"[{style}] {word.upper()} [/] {rest}{sep}{prev}"]
         lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
         entry = registry.get(r.get("procedure"))
         module = entry.load() if entry is not None else None
@@ -132,7 +145,9 @@ class ResultsScreen(Screen):
             lines.append("[b]s[/] decides: save as rejected (reason) or accept as override (note) · [b]n[/] re-do")
         summary.update("\n".join(lines))
         params.clear(columns=True)
-        params.add_columns("param", "value", "± 1σ", "unit", "in use", "Δ/σ", "tol", "ok")
+        # ok beside the value and its unit: at 80x24 with a calibration in use the table is
+        # wider than the screen, and "ok" as its last column was scrolled off
+        params.add_columns("param", "value", "± 1σ", "unit", "ok", "in use", "Δ/σ", "tol")
         for row in shown_rows(r, rows):
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
             params.add_row(
@@ -140,10 +155,10 @@ class ResultsScreen(Screen):
                 num(row.value, ".7g"),
                 num(row.sigma, ".2g"),
                 row.unit,
+                ok,
                 num(row.previous, ".7g"),
                 num(row.change_sigma, "+.1f"),
                 num(row.tolerance, ".3g"),
-                ok,
             )
         gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
         if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
@@ -154,9 +169,9 @@ class ResultsScreen(Screen):
                     num(row.value, ".7g"),
                     num(row.sigma, ".2g"),
                     row.unit,
+                    "",
                     num(row.previous, ".7g"),
                     num(row.change_sigma, "+.1f"),
-                    "",
                     "",
                 )
             lines.append(
@@ -168,11 +183,12 @@ class ResultsScreen(Screen):
             lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
             summary.update("\n".join(lines))
         residuals.clear(columns=True)
-        rows_res = getattr(module, "position_residuals", lambda _c, _r: [])(self.capture, r)
+        headers, rows_res = residual_table(self.capture, r)  # in the summary's residual unit
         residuals.display = bool(rows_res)
-        residuals.add_columns("position", "|B+MV| m/s^2", "residual mm/s^2")
-        for name, norm, res in rows_res:
-            residuals.add_row(name, num(norm, ".5f"), num(res * 1000.0, "+.2f"))
+        if rows_res:
+            residuals.add_columns(*headers)
+            for row in rows_res:
+                residuals.add_row(*row)
 
     # ------------------------------------------------------------ actions
 

@@ -214,6 +214,12 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
             return
         with self._lock:
             name = g.step.name
+            st = g.status()
+        if st.in_position and st.phase in ("settle", "average"):
+            # turning it again would restart the average (a first `p` on x_up, where the unit
+            # starts, threw the running average away)
+            self.notify(f"The unit is on {name} already: the average goes on", timeout=3)
+            return
         self._sim_place(name, f"Simulated unit turned to {name}")
 
     def action_finish(self) -> None:
