@@ -276,3 +276,24 @@ def test_a_soft_iron_limit_keeps_its_unit_whatever_the_captures_unit(tmp_path):
     assert (
         "soft_iron[0][0]: its limit is in nT per counts, which does not convert to this result's nT per uT" in r.stderr
     )
+
+
+def test_p1_results_table_gives_the_residuals_calibrate_gives(tmp_path):
+    """The Results screen's P1 table and `station calibrate` show the same per-position
+    residuals, whose RMS is the summary's residual_rms. The table recomputed |B + M V| − g
+    with the returned B, M, which carry the rotation's second-order debiasing: every row was
+    about +1e-4 m/s² off the fit's residual (all positive; RMS 1.2e-4 against 5.5e-5)."""
+    from station.capture import read_capture
+    from station.procedures.review import residual_table
+
+    path = tmp_path / "p1.capture.csv"
+    assert run_station("simulate", "--procedure", "accel-tabletop", "--out", str(path), "--seed", "0").returncode == 0
+    res = run_station("calibrate", str(path), "--json")
+    assert res.returncode == 0, res.stderr
+    result = json.loads(res.stdout)
+    _, rows = residual_table(read_capture(str(path)), result)
+    table = np.array([float(r[2]) for r in rows])
+    fit = np.array([p["residual_mps2"] for p in result["positions"]])
+    assert [r[0] for r in rows] == [p["label"] for p in result["positions"]]
+    np.testing.assert_allclose(table, fit, atol=1e-7)  # the table's 7 decimals
+    assert math.isclose(math.sqrt(np.mean(table**2)), result["residual_rms"], rel_tol=1e-2)

@@ -547,8 +547,13 @@ def p1_residuals(capture, result: dict) -> list[tuple[str, float, float]]:
     rows = result.get("positions")
     if isinstance(rows, list) and rows and all(isinstance(p, dict) and "mean_raw" in p for p in rows):
         # the positions the fit used (a time series has one row per sample, not per position)
-        V = np.array([p["mean_raw"] for p in rows], dtype=float)
         names = [p.get("label") for p in rows]
+        r = [p.get("residual_mps2") for p in rows]
+        if _finite(g) and all(_finite(x) for x in r):
+            # the fit's own residuals, which residual_rms and calibrate's per-position lines give
+            # (the returned B, M carry the rotation's second-order debiasing, ~1e-5 of g)
+            return [(str(n), float(g + x), float(x)) for n, x in zip(names, r)]
+        V = np.array([p["mean_raw"] for p in rows], dtype=float)
     else:
         V = np.column_stack([capture.columns[c] for c in ("ax", "ay", "az")])
         names = capture.columns.get("position", np.array([str(i + 1) for i in range(len(V))], dtype=object))
