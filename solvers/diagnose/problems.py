@@ -98,8 +98,12 @@ def _temp_candidate(temp_c, width=3, block="bT") -> Candidate:
     if _span(temp_c) < MIN_TEMP_SPAN_C:
         return Candidate(
             "temperature_bias",
-            reason=f"temperature constant within {_span(temp_c):.2g} °C: "
-            "a temperature term cannot be told from the bias",
+            reason=(
+                "temperature constant (a single value)"
+                if _span(temp_c) == 0
+                else f"temperature varies by only {_span(temp_c):.2g} °C (5-95 %)"
+            )
+            + f", under the {MIN_TEMP_SPAN_C:g} °C a temperature term needs: it cannot be told from the bias",
         )
     return Candidate("temperature_bias", {block: np.zeros(width)}, folds="time")
 
