@@ -99,11 +99,11 @@ def _temp_candidate(temp_c, width=3, block="bT") -> Candidate:
         return Candidate(
             "temperature_bias",
             reason=(
-                "temperature constant (a single value)"
+                "temperature a single value"
                 if _span(temp_c) == 0
-                else f"temperature varies by only {_span(temp_c):.2g} °C (5-95 %)"
+                else f"temperature spans only {_span(temp_c):.2g} °C (5–95 %)"
             )
-            + f", under the {MIN_TEMP_SPAN_C:g} °C a temperature term needs: it cannot be told from the bias",
+            + f": a temperature term cannot be told from the bias (it needs {MIN_TEMP_SPAN_C:g} °C)",
         )
     return Candidate("temperature_bias", {block: np.zeros(width)}, folds="time")
 
