@@ -284,7 +284,9 @@ def record(
         stream = CaptureStream(out, columns, meta)
         dts: list[float] = []
         stopped = "stopped"
-        last_rows_at: float | None = None  # host time the newest rows arrived
+        # host time the newest rows arrived (the reader's arrival time, not when they were taken
+        # from it: rows that came during the header wait are taken after it)
+        last_rows_at: float | None = None
         while True:
             if stop.wait(0.1):
                 stopped = "stopped"
@@ -295,7 +297,7 @@ def record(
                 b = b.select(b.segment < changes[0][2])
             if b is not None and len(b):
                 stream.write(b)
-                last_rows_at = time.monotonic()
+                last_rows_at = _arrived(reader, last_rows_at)
                 d = _median_dt(b)
                 if d is not None:
                     dts.append(d)
@@ -312,7 +314,7 @@ def record(
             reader.stop()
         b = reader.drain()
         if b is not None and len(b):
-            last_rows_at = ended_at
+            last_rows_at = min(ended_at, _arrived(reader, last_rows_at))
         if b is not None and stopped != "device changed":
             if reader.header_changes:
                 b = b.select(b.segment < reader.header_changes[0][2])
@@ -405,6 +407,12 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
     for k, v in (extra or {}).items():
         meta[k] = v
     return meta
+
+
+def _arrived(reader: Reader, before: float | None) -> float:
+    """Host time the newest sample reached ``reader`` (now, for a reader that does not say)."""
+    at = getattr(reader.stats(), "last_sample_at", math.nan)
+    return time.monotonic() if math.isnan(at) else max(at, before or at)
 
 
 SILENCE_S = 2.0  # no rows for this long (and 20 sample periods) at the end: the device went silent
