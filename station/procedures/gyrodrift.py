@@ -199,7 +199,7 @@ def _need(capture, names):
             capture.header_line,
             f"gyro-drift needs column(s) {', '.join(missing)} (have {', '.join(capture.columns)})",
         )
-    return np.column_stack([capture.columns[c] for c in names]).astype(float)
+    return np.column_stack([capture.columns[c] for c in names]).astype(float, copy=False)
 
 
 def _finite_rows(arrays, warnings, what):
@@ -316,8 +316,9 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
     from solvers.stillness import detect_static_intervals
 
     idx = np.flatnonzero(ok)
+    rows = slice(None) if len(idx) == len(ok) else idx  # every row finite: views, not (N, 3) copies
     try:
-        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"][idx]), f_b[idx], w_b[idx])
+        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"][rows]), f_b[rows], w_b[rows])
     except SolverError as exc:
         warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
         return [(ok, head0, "1")]
@@ -377,6 +378,7 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
                 )
             raw = raw - off
         f_b = (raw * asign) @ C.T
+        del raw  # (N, 3): not needed past here, while the stillness detector runs
         if unit == "counts" and offset is None:
             warnings.append(
                 "accelerometer in counts: only its direction is used for pitch and roll "
