@@ -553,15 +553,37 @@ def _read_head(path: str) -> _Head:
             saw_header = True
             break
     assert saw_header
+    twice = _spelled_twice(head.meta)
+    if twice:  # 'procedure' and 'PROCEDURE': which one holds would be anyone's guess
+        key, first = twice
+        raise InputError(
+            path,
+            head.meta_lines[key],
+            f"duplicate metadata key '{key}': the same key as '{first}' on line {head.meta_lines[first]} "
+            "(the format's keys are read in any letter case)",
+        )
     for key in [k for k in head.meta if k not in SPEC_KEYS and k.lower() in SPEC_KEYS]:
-        if key.lower() not in head.meta:  # 'MAG_UNIT', 'Sample_Rate_Hz': the key it spells
-            head.meta[key.lower()] = head.meta.pop(key)
-            head.meta_lines[key.lower()] = head.meta_lines.pop(key)
+        # 'MAG_UNIT', 'Sample_Rate_Hz': the key it spells
+        head.meta[key.lower()] = head.meta.pop(key)
+        head.meta_lines[key.lower()] = head.meta_lines.pop(key)
     for key, aliases in UNIT_ALIASES.items():
         if head.meta.get(key) in aliases:
             head.meta[key] = aliases[head.meta[key]]
     _check_meta(path, head.meta, head.meta_lines)
     return head
+
+
+def _spelled_twice(meta: dict[str, str]) -> tuple[str, str] | None:
+    """(a key, the earlier key) where two of ``meta``'s keys spell one key of the format in
+    different letter case (``procedure``, ``PROCEDURE``); None when none do."""
+    first_of: dict[str, str] = {}
+    for key in meta:
+        spec = key.lower()
+        if spec in SPEC_KEYS:
+            if spec in first_of:
+                return key, first_of[spec]
+            first_of[spec] = key
+    return None
 
 
 def _first_line(path: str, f, stripped: str) -> None:
@@ -895,6 +917,9 @@ def _meta_for_writing(path, meta: dict[str, str]) -> dict[str, str]:
                 f"metadata '{key}': {_show(value)} cannot be written (spaces at the ends or a control character)",
             )
         out[key] = value
+    twice = _spelled_twice(out)
+    if twice:
+        raise InputError(path, None, f"metadata keys {_show(twice[1])} and {_show(twice[0])} are one key to the reader")
     if len(out) > MAX_META_LINES + 1:  # the reader's limit (station-capture is the first line)
         raise InputError(path, None, f"{len(out) - 1} metadata keys: a capture holds at most {MAX_META_LINES}")
     _check_meta(path, out, {})
