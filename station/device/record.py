@@ -322,7 +322,10 @@ def record(
         if stream.rows == 0:
             stream.abandon()
             stream = None
-            raise RecordError(f"{port}: no samples received in {time.monotonic() - started:.1f} s")
+            raise RecordError(
+                f"{port}: no samples received in {time.monotonic() - started:.1f} s"
+                + _why_no_samples(reader.stats(), protocol, baud)
+            )
         stats = reader.stats()
         events = reader.events()
         final = dict(meta)
@@ -407,6 +410,18 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
     for k, v in (extra or {}).items():
         meta[k] = v
     return meta
+
+
+def _why_no_samples(stats: ReaderStats, protocol: str, baud: int) -> str:
+    """What the port gave instead of samples, for the one line that says there were none."""
+    if not stats.bytes:
+        return ": the device sent nothing (powered, connected, streaming?)"
+    kinds = ", ".join(f"{k} {v}" for k, v in stats.errors.items() if v)
+    return (
+        f": {stats.bytes} bytes came, no {protocol} sample among them"
+        + (f" ({stats.parse_errors} bad: {kinds})" if kinds else "")
+        + f"; a wrong --baud (this read at {baud}) or --protocol?"
+    )
 
 
 def _arrived(reader: Reader, before: float | None) -> float:
