@@ -232,6 +232,22 @@ class Capture:
             raise InputError(self.path, self.meta_lines.get(key), f"metadata '{key}': {_show(value)} is not a number")
         return number
 
+    def float_meta_within(self, key: str, default: float | None, high: float, *, zero: bool = False) -> float | None:
+        """:meth:`float_meta` that must also be positive (or, with ``zero``, zero too) and at most
+        ``high``, else an InputError on its line: a procedure's own key (``heading_sigma_deg``,
+        ``accuracy_deg_h``) whose value no bench could mean (a negative 1-sigma, a zero scale)."""
+        x = self.float_meta(key)
+        if x is None:
+            return default
+        if not ((x > 0 or (zero and x == 0)) and x <= high):
+            sign = "zero or positive" if zero else "positive"
+            raise InputError(
+                self.path,
+                self.meta_lines.get(key),
+                f"metadata '{key}': {_show(self.meta[key])} must be {sign} and at most {high:g}",
+            )
+        return x
+
     def series_rate_hz(self, consequence: str) -> float | None:
         """The sample rate of a time series (Hz): metadata ``sample_rate_hz`` where the ``t``
         column agrees with it, else ``t``'s median step; None when neither gives a rate.
