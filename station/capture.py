@@ -199,6 +199,9 @@ class Capture:
     path: str | None = None
     meta_lines: dict[str, int] = field(default_factory=dict, repr=False)
     header_line: int | None = field(default=None, repr=False)
+    # what the reader noticed but did not refuse (a last line without its line end): said by
+    # the commands as warnings; not part of the capture (equality, writing)
+    notes: list[str] = field(default_factory=list, repr=False)
 
     @property
     def procedure(self) -> str | None:
@@ -836,7 +839,9 @@ def _count_lines(block: bytes) -> int:
     return block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
 
 
-def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[dict[str, np.ndarray]]:
+def _data_chunks(
+    head: _Head, rows: int, force_slow: bool = False, notes: list[str] | None = None
+) -> Iterator[dict[str, np.ndarray]]:
     path = head.path
     parser = _Parser(path, head.header, head.meta)
     with _open(path) as f:
@@ -848,7 +853,9 @@ def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[d
         lineno = head.header_line + 1
         pending_blank: int | None = None
         n_rows = 0
+        ends_line = True
         for block in _blocks(f, rows * max(1, len(sample)), path, lineno):
+            ends_line = block.endswith(b"\n")
             first = lineno
             lineno += _count_lines(block)
             end = len(block.rstrip())
@@ -869,6 +876,11 @@ def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[d
             yield chunk
     if n_rows == 0:
         raise InputError(path, head.header_line + 1, "no data rows after the header")
+    if not ends_line and notes is not None and pending_blank is None:
+        notes.append(
+            f"the last line ({lineno - 1}) has no line end: a file cut short (a copy or a write stopped "
+            "part-way) ends so, and then its last value may be cut too (kept as read)"
+        )
 
 
 def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):
@@ -888,7 +900,8 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
     path = os.fspath(path)
     head = _read_head(path)
     parts: dict[str, list[np.ndarray]] = {name: [] for name in head.header}
-    for chunk in _data_chunks(head, max(1, int(rows)), force_slow=_force_slow):
+    notes: list[str] = []
+    for chunk in _data_chunks(head, max(1, int(rows)), force_slow=_force_slow, notes=notes):
         for name, arr in chunk.items():
             parts[name].append(arr)
     columns: dict[str, np.ndarray] = {}
@@ -896,7 +909,14 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
         pieces = parts[name]
         columns[name] = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
         pieces.clear()
-    return Capture(meta=head.meta, columns=columns, path=path, meta_lines=head.meta_lines, header_line=head.header_line)
+    return Capture(
+        meta=head.meta,
+        columns=columns,
+        path=path,
+        meta_lines=head.meta_lines,
+        header_line=head.header_line,
+        notes=notes,
+    )
 
 
 # ------------------------------------------------------------------------------------ writing

@@ -98,3 +98,27 @@ def test_the_writer_refuses_one_key_spelled_twice_as_the_reader_would(tmp_path):
     with pytest.raises(InputError, match="'MAG_UNIT' and 'mag_unit' are one key to the reader"):
         write_capture(path, cap)
     assert not path.exists()
+
+
+@pytest.mark.parametrize("command", ["inspect", "calibrate", "diagnose"])
+def test_a_last_line_without_its_line_end_is_warned_about(tmp_path, command):
+    """A capture cut short mid-row ('...,26.' of '...,26.125'): the row read as if whole, its
+    last value changed, without a word. A last line with no line end is how a cut file ends
+    (though some editors save a whole file so): the row is kept and a warning says to check it.
+    A file that ends with its line end gets no warning."""
+    made = run_station("simulate", "--procedure", "gyro-drift", "--out", tmp_path / "whole.csv", "--seed", "400016")
+    assert made.returncode == 0, made.stderr
+    data = (tmp_path / "whole.csv").read_bytes()
+    cut = tmp_path / "cut.csv"
+    cut.write_bytes(data[: data.rindex(b".", 0, len(data) // 2) + 2])  # one decimal after a '.': a value cut
+    n_lines = cut.read_bytes().count(b"\n") + 1
+    args = ["--no-plots"] if command == "diagnose" else []
+    res = run_station(command, cut, *args)
+    assert res.returncode == 0, res.stderr
+    warned = [ln for ln in res.stderr.splitlines() if ": warning: " in ln]
+    assert warned == [f"station: {cut}: warning: the last line ({n_lines}) has no line end: a file cut short "
+                      "(a copy or a write stopped part-way) ends so, and then its last value may be cut too "
+                      "(kept as read)"]  # fmt: skip
+    assert "no line end" not in res.stdout
+    whole = run_station(command, tmp_path / "whole.csv", *args)
+    assert whole.returncode == 0 and "no line end" not in whole.stderr
