@@ -24,6 +24,7 @@ import json
 import os
 import socket
 import sqlite3
+import stat
 import threading
 import weakref
 from contextlib import contextmanager
@@ -123,6 +124,14 @@ def _release(key: tuple[int, int] | None) -> None:
                 _OPEN_FILES.pop(key, None)
 
 
+_NOT_FILES = (
+    (stat.S_ISFIFO, "a named pipe (FIFO)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
 def _refuse_non_sqlite(path: str) -> tuple[int, int] | None:
     """sqlite3.DatabaseError for an existing non-empty file that is not an SQLite database;
     else the file's key, now held in `_OPEN_FILES` (None: no file yet).
@@ -131,8 +140,20 @@ def _refuse_non_sqlite(path: str) -> tuple[int, int] | None:
     writes a new one over it: a one-byte text file given as the database was replaced.
     A file this process already holds open through a Store is SQLite (checked when it was
     opened) and is not opened again here (see `_OPEN_FILES`)."""
-    if path.startswith("file:") or not os.path.isfile(path):
+    if path.startswith("file:"):
         return None
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return None  # a new database (or a link to where one will be)
+    except OSError as exc:  # a loop of links, a name too long
+        raise sqlite3.DatabaseError(f"cannot open: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        kind = next((name for test, name in _NOT_FILES if test(mode)), None)
+        if kind is None:  # a folder: sqlite3.connect says why
+            return None
+        # SQLite reads a named pipe until a writer comes (or says 'disk I/O error')
+        raise sqlite3.DatabaseError(f"{kind}, not a database file: refused")
     with _OPEN_FILES_LOCK:  # checked and held in one step: no other thread's first open in between
         key = _file_key(path)
         if key is None or key not in _OPEN_FILES:

@@ -292,8 +292,11 @@ class _RowStore:
         if self.len + m > len(self.buf):
             k = self.len if self.keep is None else min(self.len, self.keep)
             old = self.buf[self.len - k : self.len]
-            if k + m > len(self.buf) // 2:
-                grown = np.empty((max(k + m, 2 * len(self.buf)), self.buf.shape[1]))
+            # a store of the newest `keep` rows grows only when they and the new rows do not fit
+            # (to twice that): doubling whenever half was used kept it at four times a piece
+            if (k + m > len(self.buf) // 2) if self.keep is None else (k + m > len(self.buf)):
+                size = max(k + m, 2 * len(self.buf)) if self.keep is None else 2 * (k + m)
+                grown = np.empty((size, self.buf.shape[1]))
                 grown[:k] = old
                 self.buf = grown
             else:
@@ -381,11 +384,17 @@ class _WindowSums:
         return out
 
 
-def _norm3(v: np.ndarray) -> np.ndarray:
-    """Row norms of an (n, 3) array, written out so every row is summed in one order."""
-    sq = v * v
-    r = sq[:, 0] + sq[:, 1]
-    r += sq[:, 2]
+def _norm3(v: np.ndarray, minus: np.ndarray | None = None) -> np.ndarray:
+    """Row norms of an (n, 3) array (of ``v - minus``), written out so every row is summed in
+    one order: (x² + y²) + z². Column by column, so the temporaries are (n,), not (n, 3)."""
+
+    def square(k: int) -> np.ndarray:
+        c = v[:, k] if minus is None else v[:, k] - minus[k]
+        return np.multiply(c, c, out=c if minus is not None else None)
+
+    r = square(0)
+    r += square(1)
+    r += square(2)
     return np.sqrt(r, out=r)
 
 
@@ -479,7 +488,7 @@ def _levels(stats: _Stats, noise: NoiseFloor, thr: Thresholds) -> tuple[np.ndarr
     level = a_norm / max(thr.accel_var_norm, _TINY)
     g_dev = None
     if thr.gyro_rate is not None and stats.gyro_mean is not None:
-        g_dev = _norm3(stats.gyro_mean - noise.gyro_bias)
+        g_dev = _norm3(stats.gyro_mean, minus=noise.gyro_bias)
         level = np.maximum(level, g_dev / max(thr.gyro_rate, _TINY))
     bad = stats.has_nan
     if bad.any():
@@ -493,6 +502,13 @@ def _levels(stats: _Stats, noise: NoiseFloor, thr: Thresholds) -> tuple[np.ndarr
     return level, a_norm, g_dev
 
 
+def _median_square(d: np.ndarray) -> np.ndarray:
+    """Per column, the median of ``d``'s squares; ``d`` (a scratch array) is overwritten. The
+    same values as ``np.median(d * d, axis=0)`` without its two (N, 3) copies."""
+    np.square(d, out=d)
+    return np.median(d, axis=0, overwrite_input=True)
+
+
 def _valid_diffs(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
     """Differences of consecutive rows that are both valid."""
     d = np.diff(x, axis=0)
@@ -503,8 +519,14 @@ def _valid_diffs(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
 
 def _lsb(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
     """Per axis, the smallest non-zero step between consecutive valid rows (0 if none)."""
-    d = np.abs(_valid_diffs(x, bad))
-    out = np.min(d, axis=0, where=d > 0, initial=np.inf)
+    keep = None if not bad.any() else np.flatnonzero(~(bad[1:] | bad[:-1]))
+    out = np.empty(x.shape[1])
+    for k in range(x.shape[1]):  # column by column: (N,) temporaries, not (N, 3)
+        d = np.diff(x[:, k])
+        if keep is not None:
+            d = d[keep]
+        np.abs(d, out=d)
+        out[k] = np.min(d, where=d > 0, initial=np.inf)
     return np.where(np.isfinite(out), out, 0.0)
 
 
@@ -561,8 +583,8 @@ def _robust_noise(
     lsb_g = None if gyro is None else _lsb(gyro, bad)
     noise = _noise_from_windows(ref, lsb_a, lsb_g, "robust")
 
-    d = _valid_diffs(accel, bad)
-    diff_var_a = np.median(d * d, axis=0) / (2.0 * _CHI2_1_MEDIAN) if len(d) else np.zeros(3)
+    d = _valid_diffs(accel, bad)  # a new array: squared and partitioned in place (two copies of (N, 3) fewer)
+    diff_var_a = _median_square(d) / (2.0 * _CHI2_1_MEDIAN) if len(d) else np.zeros(3)
     floor = float(_norm3(noise.accel_var[None, :])[0])
     diff = float(_norm3(diff_var_a[None, :])[0])
     warnings: list[str] = []
@@ -570,7 +592,7 @@ def _robust_noise(
         gyro_var = gyro_bias = None
         if gyro is not None:
             dg = _valid_diffs(gyro, bad)
-            gyro_var = np.maximum(np.median(dg * dg, axis=0) / (2.0 * _CHI2_1_MEDIAN), lsb_g * lsb_g / 12.0)
+            gyro_var = np.maximum(_median_square(dg) / (2.0 * _CHI2_1_MEDIAN), lsb_g * lsb_g / 12.0)
             gyro_bias = np.median(gyro[~bad], axis=0)
         noise = NoiseFloor(np.maximum(diff_var_a, lsb_a * lsb_a / 12.0), gyro_var, gyro_bias, "first_differences", 0)
         warnings.append(
@@ -707,6 +729,7 @@ def detect_static_intervals(
         sums = engine.push(_channels(a[i:j], None if g is None else g[i:j], bad[i:j], ref_a, ref_g))
         stats.put(k, _Stats.from_sums(sums, w, has_gyro, ref_g))
         k += len(sums)
+    del engine, sums
 
     warnings: list[str] = []
     if init_rest_s:
@@ -730,15 +753,20 @@ def detect_static_intervals(
 
     thr = _thresholds(noise, cfg, has_gyro)
     lev_w, a_norm_w, g_dev_w = _levels(stats, noise, thr)
+    del stats  # nine values per window, no longer needed: freed before the intervals' statistics
 
+    # each per-sample series holds its window values (kept as views: one copy of each, not two)
     level = np.full(n, np.nan)
     level[h : n - h] = lev_w
+    lev_w = level[h : n - h]
     a_norm = np.full(n, np.nan)
     a_norm[h : n - h] = a_norm_w
+    del a_norm_w
     g_dev = None
     if g_dev_w is not None:
         g_dev = np.full(n, np.nan)
         g_dev[h : n - h] = g_dev_w
+        del g_dev_w
 
     # runs of static window centres -> trimmed intervals
     still = lev_w < 1.0

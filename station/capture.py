@@ -199,6 +199,9 @@ class Capture:
     path: str | None = None
     meta_lines: dict[str, int] = field(default_factory=dict, repr=False)
     header_line: int | None = field(default=None, repr=False)
+    # what the reader noticed but did not refuse (a last line without its line end): said by
+    # the commands as warnings; not part of the capture (equality, writing)
+    notes: list[str] = field(default_factory=list, repr=False)
 
     @property
     def procedure(self) -> str | None:
@@ -231,6 +234,22 @@ class Capture:
         if number is None:
             raise InputError(self.path, self.meta_lines.get(key), f"metadata '{key}': {_show(value)} is not a number")
         return number
+
+    def float_meta_within(self, key: str, default: float | None, high: float, *, zero: bool = False) -> float | None:
+        """:meth:`float_meta` that must also be positive (or, with ``zero``, zero too) and at most
+        ``high``, else an InputError on its line: a procedure's own key (``heading_sigma_deg``,
+        ``accuracy_deg_h``) whose value no bench could mean (a negative 1-sigma, a zero scale)."""
+        x = self.float_meta(key)
+        if x is None:
+            return default
+        if not ((x > 0 or (zero and x == 0)) and x <= high):
+            sign = "zero or positive" if zero else "positive"
+            raise InputError(
+                self.path,
+                self.meta_lines.get(key),
+                f"metadata '{key}': {_show(self.meta[key])} must be {sign} and at most {high:g}",
+            )
+        return x
 
     def series_rate_hz(self, consequence: str) -> float | None:
         """The sample rate of a time series (Hz): metadata ``sample_rate_hz`` where the ``t``
@@ -553,15 +572,37 @@ def _read_head(path: str) -> _Head:
             saw_header = True
             break
     assert saw_header
+    twice = _spelled_twice(head.meta)
+    if twice:  # 'procedure' and 'PROCEDURE': which one holds would be anyone's guess
+        key, first = twice
+        raise InputError(
+            path,
+            head.meta_lines[key],
+            f"duplicate metadata key '{key}': the same key as '{first}' on line {head.meta_lines[first]} "
+            "(the format's keys are read in any letter case)",
+        )
     for key in [k for k in head.meta if k not in SPEC_KEYS and k.lower() in SPEC_KEYS]:
-        if key.lower() not in head.meta:  # 'MAG_UNIT', 'Sample_Rate_Hz': the key it spells
-            head.meta[key.lower()] = head.meta.pop(key)
-            head.meta_lines[key.lower()] = head.meta_lines.pop(key)
+        # 'MAG_UNIT', 'Sample_Rate_Hz': the key it spells
+        head.meta[key.lower()] = head.meta.pop(key)
+        head.meta_lines[key.lower()] = head.meta_lines.pop(key)
     for key, aliases in UNIT_ALIASES.items():
         if head.meta.get(key) in aliases:
             head.meta[key] = aliases[head.meta[key]]
     _check_meta(path, head.meta, head.meta_lines)
     return head
+
+
+def _spelled_twice(meta: dict[str, str]) -> tuple[str, str] | None:
+    """(a key, the earlier key) where two of ``meta``'s keys spell one key of the format in
+    different letter case (``procedure``, ``PROCEDURE``); None when none do."""
+    first_of: dict[str, str] = {}
+    for key in meta:
+        spec = key.lower()
+        if spec in SPEC_KEYS:
+            if spec in first_of:
+                return key, first_of[spec]
+            first_of[spec] = key
+    return None
 
 
 def _first_line(path: str, f, stripped: str) -> None:
@@ -798,7 +839,9 @@ def _count_lines(block: bytes) -> int:
     return block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
 
 
-def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[dict[str, np.ndarray]]:
+def _data_chunks(
+    head: _Head, rows: int, force_slow: bool = False, notes: list[str] | None = None
+) -> Iterator[dict[str, np.ndarray]]:
     path = head.path
     parser = _Parser(path, head.header, head.meta)
     with _open(path) as f:
@@ -810,7 +853,9 @@ def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[d
         lineno = head.header_line + 1
         pending_blank: int | None = None
         n_rows = 0
+        ends_line = True
         for block in _blocks(f, rows * max(1, len(sample)), path, lineno):
+            ends_line = block.endswith(b"\n")
             first = lineno
             lineno += _count_lines(block)
             end = len(block.rstrip())
@@ -831,6 +876,11 @@ def _data_chunks(head: _Head, rows: int, force_slow: bool = False) -> Iterator[d
             yield chunk
     if n_rows == 0:
         raise InputError(path, head.header_line + 1, "no data rows after the header")
+    if not ends_line and notes is not None and pending_blank is None:
+        notes.append(
+            f"the last line ({lineno - 1}) has no line end: a file cut short (a copy or a write stopped "
+            "part-way) ends so, and then its last value may be cut too (kept as read)"
+        )
 
 
 def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):
@@ -850,7 +900,8 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
     path = os.fspath(path)
     head = _read_head(path)
     parts: dict[str, list[np.ndarray]] = {name: [] for name in head.header}
-    for chunk in _data_chunks(head, max(1, int(rows)), force_slow=_force_slow):
+    notes: list[str] = []
+    for chunk in _data_chunks(head, max(1, int(rows)), force_slow=_force_slow, notes=notes):
         for name, arr in chunk.items():
             parts[name].append(arr)
     columns: dict[str, np.ndarray] = {}
@@ -858,7 +909,14 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
         pieces = parts[name]
         columns[name] = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
         pieces.clear()
-    return Capture(meta=head.meta, columns=columns, path=path, meta_lines=head.meta_lines, header_line=head.header_line)
+    return Capture(
+        meta=head.meta,
+        columns=columns,
+        path=path,
+        meta_lines=head.meta_lines,
+        header_line=head.header_line,
+        notes=notes,
+    )
 
 
 # ------------------------------------------------------------------------------------ writing
@@ -895,6 +953,9 @@ def _meta_for_writing(path, meta: dict[str, str]) -> dict[str, str]:
                 f"metadata '{key}': {_show(value)} cannot be written (spaces at the ends or a control character)",
             )
         out[key] = value
+    twice = _spelled_twice(out)
+    if twice:
+        raise InputError(path, None, f"metadata keys {_show(twice[1])} and {_show(twice[0])} are one key to the reader")
     if len(out) > MAX_META_LINES + 1:  # the reader's limit (station-capture is the first line)
         raise InputError(path, None, f"{len(out) - 1} metadata keys: a capture holds at most {MAX_META_LINES}")
     _check_meta(path, out, {})

@@ -251,11 +251,48 @@ def test_no_samples_is_an_error_and_leaves_no_file(tmp_path):
     m, s = os.openpty()
     tty.setraw(s)
     try:
-        with pytest.raises(RecordError, match="no samples"):
+        with pytest.raises(RecordError, match="no samples received in .* s: the device sent nothing"):
             record(os.ttyname(s), str(tmp_path / "e.csv"), seconds=0.3, header_timeout_s=0.2)
     finally:
         os.close(m)
         os.close(s)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("protocol", "says"),
+    [("station", "no station sample among them"), ("mavlink", "no mavlink sample among them")],
+)
+def test_bytes_that_hold_no_sample_are_said_with_the_likely_cause(tmp_path, protocol, says):
+    """A device read at the wrong baud rate gives bytes that parse as nothing: the refusal said
+    'no samples received', as for a device that sends nothing at all. Now it says how many
+    bytes came, what the parser made of them and which options to check."""
+    m, s = os.openpty()
+    tty.setraw(s)
+    rng = np.random.default_rng(400015)
+    stop = threading.Event()
+    reader = Reader(os.ttyname(s)).start()
+
+    def noise():  # what 115200-baud text looks like when read at another rate, roughly
+        while not stop.is_set():
+            os.write(m, rng.integers(0, 256, 512, dtype=np.uint8).tobytes())
+            stop.wait(0.01)
+
+    th = threading.Thread(target=noise)
+    try:
+        th.start()
+        with pytest.raises(RecordError) as err:
+            record(os.ttyname(s), str(tmp_path / "e.csv"), seconds=1.0, header_timeout_s=0.2, protocol=protocol,
+                   reader=reader)  # fmt: skip
+    finally:
+        stop.set()
+        th.join(10)
+        reader.stop()
+        os.close(m)
+        os.close(s)
+    text = str(err.value)
+    assert "no samples received" in text and says in text and "bytes came" in text, text
+    assert "--baud (this read at 115200) or --protocol?" in text
     assert list(tmp_path.iterdir()) == []
 
 

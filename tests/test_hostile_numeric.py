@@ -320,3 +320,34 @@ def test_a_short_static_gyro_record_is_diagnosed_not_the_last_resort(sims):
     assert LAST_RESORT not in r.stderr
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["procedure"] == "gyro-drift"
+
+
+# ----------------------------------------------------- a procedure's own metadata keys
+
+
+@pytest.mark.parametrize(
+    ("procedure", "options", "key", "value", "says"),
+    [
+        # a negative or absurd 1-sigma was used as given: a result with null uncertainties (1e300)
+        ("gyro-drift", (), "heading_sigma_deg", "-3", "must be positive and at most 180"),
+        ("gyro-drift", (), "heading_sigma_deg", "1e300", "must be positive and at most 180"),
+        # --accuracy 0 is refused on the command line; the same value in the file gave nulls
+        ("gyro-drift", (), "accuracy_deg_h", "0", "must be positive"),
+        # 'nan' read by float(): every row NaN, refused as '0 samples is too short'
+        ("gyro-drift", (), "accel_offset", "nan,nan,nan", "give three numbers"),
+        ("gyro-drift", ("mode=reference",), "reference_drift_deg_h", "-1", "must be zero or positive"),
+        ("gyro-drift", ("mode=reference",), "reference_drift_deg_h", "1e300", "must be zero or positive"),
+        ("ldv", (), "reference_sigma_mps", "-1", "must be zero or positive"),
+    ],
+)
+def test_a_procedure_key_no_bench_could_mean_is_refused_on_its_line(
+    sims, tmp_path, procedure, options, key, value, says
+):
+    src = sims(procedure, *options)
+    text = src.read_text().split("\n")
+    text.insert(1, f"# {key}: {value}")
+    path = tmp_path / f"{key}.csv"
+    path.write_text("\n".join(text))
+    res = run_station("calibrate", path, "--json")
+    assert res.returncode == 2 and res.stdout == "", res.stdout[:300]
+    assert res.stderr.count("\n") == 1 and f"{path}:2: " in res.stderr and says in res.stderr, res.stderr

@@ -240,3 +240,33 @@ def test_an_empty_import_option_is_refused_not_taken_as_left_out(tmp_path, share
     )
     assert_one_line_refusal(res, option, "empty")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "loop"])
+@pytest.mark.parametrize("command", ["devices", "save"])
+def test_a_database_path_that_is_no_regular_file_is_named_by_what_it_is(tmp_path, kind, command):
+    """--db naming a named pipe or a device was 'disk I/O error' from SQLite, and a loop of
+    symbolic links 'no station database here' (reading) or 'unable to open database file'
+    (saving): none said what the path is."""
+    db = tmp_path / "station.db"
+    if kind == "fifo":
+        os.mkfifo(db)
+        says = "a named pipe (FIFO), not a database file"
+    elif kind == "device":
+        db = os.devnull
+        says = "a character device, not a database file"
+    else:
+        os.symlink(tmp_path / "other.db", tmp_path / "other.db.link")
+        os.symlink(tmp_path / "other.db.link", tmp_path / "other.db")
+        os.symlink(tmp_path / "other.db", db)
+        says = "Too many levels of symbolic links"
+    if command == "devices":
+        res = _station("--db", db, "devices")
+    else:
+        capture = tmp_path / "p1.csv"
+        made = _station("simulate", "--procedure", "accel-tabletop", "--option", "averages=1", "--out", capture)
+        assert made.returncode == 0, made.stderr
+        res = _station("--db", db, "calibrate", capture, "--save")
+    assert_one_line_refusal(res, f"{db}: ", says)
+    if kind == "fifo":
+        assert stat.S_ISFIFO(os.stat(db).st_mode)

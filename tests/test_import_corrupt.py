@@ -126,3 +126,38 @@ def test_a_control_character_in_a_logs_text_is_kept_escaped_not_the_whole_log_re
     if command == "import":
         meta = read_capture(out).meta
         assert meta["board"].startswith("C\\nBEPILOT_CUBEORANGE") and meta["device"].startswith("C\\nBEPILOT")
+
+
+@pytest.mark.parametrize("procedure", ["accel-tabletop", "gyro-drift"])
+def test_a_compass_that_died_early_does_not_cut_the_imu_rows(tmp_path, procedure):
+    """A 5 s DataFlash log whose compass stops after 0.5 s (a sensor lost in flight): rows were
+    kept only where every sensor had data, so 196 of the 2000 IMU samples made the capture, with
+    no word. Now every IMU sample is a row, the magnetometer's cells are empty after it stopped,
+    and a warning says so; a compass that never overlaps the IMU is left out, not a refusal."""
+    from tests.test_import_ardupilot import PARAMS, DataFlashWriter
+
+    rng = np.random.default_rng(400017)
+    for stops, says in ((200, "its cells are empty outside that"), (0, "never overlaps")):
+        log = tmp_path / f"died{stops}.bin"
+        w = DataFlashWriter(log, units=True)
+        for name in PARAMS:
+            w.param(1000, name, PARAMS[name])
+        for k in range(2000):  # IMU at 400 Hz for 5 s
+            t = 500_000 + k * 2500
+            w.imu(t, 0, rng.normal(0, 0.01, 3), np.array([0.1, -0.2, -9.8]) + rng.normal(0, 0.05, 3))
+            if k % 4 == 0 and k < stops:
+                w.mag(t + 100, 0, (200, -150, 420))
+        if not stops:
+            w.mag(500_000 + 2000 * 2500 + 10**6, 0, (200, -150, 420))  # one sample, a second after the IMU
+        w.close()
+        out = tmp_path / f"out{stops}.csv"
+        res = run_station("import", log, "--procedure", procedure, "--out", out)
+        assert res.returncode == 0, res.stderr
+        assert says in res.stderr
+        cap = read_capture(out)
+        assert cap.n_rows == 2000
+        if stops:
+            have = np.isfinite(cap.columns["mx"])
+            assert 45 <= have.sum() <= 200 and not have[-1000:].any()
+        else:
+            assert "mx" not in cap.columns

@@ -179,3 +179,33 @@ def test_record_command_exits_1_when_the_device_is_lost(bench, tmp_path):
     assert "complete: false" in stderr
     cap = read_capture(out)
     assert cap.meta["complete"] == "false" and cap.n_rows > 0
+
+
+@pytest.mark.parametrize("then", ["silent", "unplugged"])
+def test_a_device_that_stops_while_the_header_is_awaited_is_timed_by_its_last_row(bench, tmp_path, then):
+    """A device whose header the recorder missed (sent at power-up only) sends rows, then goes
+    silent or is unplugged while the recorder still waits for a header (3.5 s here). The rows
+    taken after the wait used to count as just arrived: 0.5 s of silence at the end, so a
+    recording silent for 3.5 of its 4 s was `complete: true`, and a lost one 'lost 3.5 s in'."""
+    reader = Reader(bench.link, backoff_s=0.02, backoff_max_s=0.1).start()
+    out = str(tmp_path / f"{then}.csv")
+    result = {}
+
+    def go():
+        result["r"] = record(bench.link, out, seconds=4.0, reader=reader, header_timeout_s=3.5)
+
+    th = threading.Thread(target=go)
+    th.start()
+    _wait(lambda: reader.stats().connected, "the connection")
+    bench.send(_rows(0, 100))  # no header
+    _wait(lambda: reader.stats().samples >= 100, "the samples")
+    if then == "unplugged":
+        bench.unplug()
+    th.join(30)
+    reader.stop()
+    r = result["r"]
+    cap = read_capture(out)
+    assert cap.n_rows == 100
+    assert cap.meta["complete"] == "false", cap.meta
+    assert ("went silent" if then == "silent" else "device lost") in r.incomplete
+    assert float(cap.meta["last_data_s"]) < 3.0  # the rows came before the header wait ended

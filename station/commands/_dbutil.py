@@ -38,6 +38,13 @@ def require_existing(path: str) -> None:
 
     if path == ":memory:" or path.startswith("file:"):
         return
+    if not os.path.exists(path) and os.path.lexists(path):  # a loop of links (a link to nothing: below)
+        try:
+            os.stat(path)
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            raise InputError(path, None, f"cannot open the station database: {exc.strerror or exc}") from None
     if not os.path.exists(path):
         raise InputError(
             path,

@@ -128,7 +128,12 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(out_path, None, "is a folder: give --out a file name")
     if args.format == "kalibr" and same_file(out_path, args.file):  # the yaml would replace the record
         raise InputError(out_path, None, "--out is the input file: choose another name")
-    result = imu_noise(read_capture(args.file))
+    capture = read_capture(args.file)
+    for note in capture.notes:  # said after the result (or inside its one error line)
+        from station.errors import defer_warning
+
+        defer_warning(args.file, note)
+    result = imu_noise(capture)
     if result.get("withheld"):  # a record that moves: the warning, no figures, no imu.yaml; exit 1
         if args.json:
             print(json.dumps(noise_json(result), indent=2))

@@ -142,6 +142,7 @@ class ReaderStats:
     connected: bool = False
     segment: int = 0
     last_error: str = ""
+    last_sample_at: float = math.nan  # host time.monotonic() the newest sample arrived (nan: none yet)
 
 
 def make_parser(protocol: str, mavlink_source: str | None = None, request_hz: float | None = None):
@@ -553,6 +554,7 @@ class Reader:
         batch = Batch(t_s, block.seq, seg, block.values, dict(getattr(block, "extra", {}) or {}))
         with self._lock:
             self._stats.samples += n
+            self._stats.last_sample_at = host_now
             self._rate(host_now, self._stats.samples)
             self._queue.append(batch)
             self._queued += n

@@ -284,7 +284,9 @@ def record(
         stream = CaptureStream(out, columns, meta)
         dts: list[float] = []
         stopped = "stopped"
-        last_rows_at: float | None = None  # host time the newest rows arrived
+        # host time the newest rows arrived (the reader's arrival time, not when they were taken
+        # from it: rows that came during the header wait are taken after it)
+        last_rows_at: float | None = None
         while True:
             if stop.wait(0.1):
                 stopped = "stopped"
@@ -295,7 +297,7 @@ def record(
                 b = b.select(b.segment < changes[0][2])
             if b is not None and len(b):
                 stream.write(b)
-                last_rows_at = time.monotonic()
+                last_rows_at = _arrived(reader, last_rows_at)
                 d = _median_dt(b)
                 if d is not None:
                     dts.append(d)
@@ -312,7 +314,7 @@ def record(
             reader.stop()
         b = reader.drain()
         if b is not None and len(b):
-            last_rows_at = ended_at
+            last_rows_at = min(ended_at, _arrived(reader, last_rows_at))
         if b is not None and stopped != "device changed":
             if reader.header_changes:
                 b = b.select(b.segment < reader.header_changes[0][2])
@@ -320,7 +322,10 @@ def record(
         if stream.rows == 0:
             stream.abandon()
             stream = None
-            raise RecordError(f"{port}: no samples received in {time.monotonic() - started:.1f} s")
+            raise RecordError(
+                f"{port}: no samples received in {time.monotonic() - started:.1f} s"
+                + _why_no_samples(reader.stats(), protocol, baud)
+            )
         stats = reader.stats()
         events = reader.events()
         final = dict(meta)
@@ -405,6 +410,24 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
     for k, v in (extra or {}).items():
         meta[k] = v
     return meta
+
+
+def _why_no_samples(stats: ReaderStats, protocol: str, baud: int) -> str:
+    """What the port gave instead of samples, for the one line that says there were none."""
+    if not stats.bytes:
+        return ": the device sent nothing (powered, connected, streaming?)"
+    kinds = ", ".join(f"{k} {v}" for k, v in stats.errors.items() if v)
+    return (
+        f": {stats.bytes} bytes came, no {protocol} sample among them"
+        + (f" ({stats.parse_errors} bad: {kinds})" if kinds else "")
+        + f"; a wrong --baud (this read at {baud}) or --protocol?"
+    )
+
+
+def _arrived(reader: Reader, before: float | None) -> float:
+    """Host time the newest sample reached ``reader`` (now, for a reader that does not say)."""
+    at = getattr(reader.stats(), "last_sample_at", math.nan)
+    return time.monotonic() if math.isnan(at) else max(at, before or at)
 
 
 SILENCE_S = 2.0  # no rows for this long (and 20 sample periods) at the end: the device went silent

@@ -196,6 +196,10 @@ def align(grid_t: np.ndarray, t: np.ndarray, values: np.ndarray, grid_period: fl
     return out, "linear"
 
 
+TRIM_SHARE = 0.01  # the share of the calibrated sensor's samples the common span may cut off,
+TRIM_S = 2.0  # or the time (sensors of one board start and stop within a second or so)
+
+
 def to_capture(
     path,
     imported: Imported,
@@ -244,13 +248,31 @@ def to_capture(
             None,
             f"only {len(grid.t_s)} {NAME[primary]} sample in the file: nothing to calibrate",
         )
-    # rows inside the span every stream covers
+    # rows inside the span every stream covers, unless that drops more than TRIM_SHARE of the
+    # calibrated sensor's samples and more than TRIM_S: a sensor that starts late or stops early
+    # (a compass that died half way) then keeps its cells empty outside its span, and one that
+    # never overlaps is left out
+    t0, t1 = grid.t_s[0], grid.t_s[-1]
+    for kind, s in list(streams.items()):
+        if kind != primary and (s.t_s[-1] < t0 or s.t_s[0] > t1):
+            imported.warnings.append(
+                f"the {NAME[kind]} ({s.t_s[0]:.3f}–{s.t_s[-1]:.3f} s) never overlaps the {NAME[primary]} "
+                f"({t0:.3f}–{t1:.3f} s): left out"
+            )
+            del streams[kind]
     start = max(s.t_s[0] for s in streams.values())
     end = min(s.t_s[-1] for s in streams.values())
-    if end < start:
-        others = ", ".join(f"{NAME[k]} {s.t_s[0]:.3f}–{s.t_s[-1]:.3f} s" for k, s in streams.items())
-        raise InputError(path, None, f"the sensors' time spans do not overlap ({others})")
     rows = (grid.t_s >= start) & (grid.t_s <= end)
+    cut_s = max(0.0, start - t0) + max(0.0, t1 - end)
+    if len(grid.t_s) - int(rows.sum()) > TRIM_SHARE * len(grid.t_s) and cut_s > TRIM_S:
+        for kind, s in streams.items():
+            if kind != primary and (s.t_s[0] > t0 or s.t_s[-1] < t1):
+                imported.warnings.append(
+                    f"the {NAME[kind]} covers {s.t_s[0] - t0:.6g}–{s.t_s[-1] - t0:.6g} s of the "
+                    f"{NAME[primary]}'s {t1 - t0:.6g} s: its cells are empty outside that (every "
+                    f"{NAME[primary]} sample is kept)"
+                )
+        rows = np.ones(len(grid.t_s), dtype=bool)
     grid_t = grid.t_s[rows]
     grid_period = _median_period(grid_t)
     if len(grid_t) < 2 or not math.isfinite(grid_period):

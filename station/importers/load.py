@@ -219,7 +219,7 @@ def load_capture(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
                 )
             if opts.procedure and not capture.procedure:
                 capture.meta["procedure"] = opts.procedure
-            return capture, []
+            return capture, list(capture.notes)
     capture, warnings = import_file(path, ImportOptions(**{**opts.__dict__, "fmt": fmt}))
     return checked(path, capture), warnings
 

@@ -151,7 +151,7 @@ def _gyro_factor(capture, warnings: list[str]) -> float:
         warnings.append("no gyro_unit: gyro taken as rad/s")
         return 1.0
     if unit == "counts":
-        lsb = capture.float_meta("gyro_counts_per_deg_s")
+        lsb = capture.float_meta_within("gyro_counts_per_deg_s", None, 1e9)
         if lsb is None or lsb <= 0:
             raise UnsupportedError(
                 f"{capture.path or 'capture'}: gyro_unit is 'counts' and no 'gyro_counts_per_deg_s' gives "
@@ -199,7 +199,7 @@ def _need(capture, names):
             capture.header_line,
             f"gyro-drift needs column(s) {', '.join(missing)} (have {', '.join(capture.columns)})",
         )
-    return np.column_stack([capture.columns[c] for c in names]).astype(float)
+    return np.column_stack([capture.columns[c] for c in names]).astype(float, copy=False)
 
 
 def _finite_rows(arrays, warnings, what):
@@ -260,7 +260,7 @@ def calibrate(
     w_b = prep.w_b  # rad/s, P4 body frame
     dt = _dt(capture)
     if accuracy_deg_h is None:
-        accuracy_deg_h = capture.float_meta("accuracy_deg_h")
+        accuracy_deg_h = capture.float_meta_within("accuracy_deg_h", None, 1e6)
     acc_rad_s = None if accuracy_deg_h is None else accuracy_deg_h * gd.DEG_H_RAD_S
     try:
         if mode == "reference":
@@ -280,7 +280,7 @@ def _mode_a(capture, w_b, C, flips, dt, warnings):
     ref = _need(capture, ["ref_gx", "ref_gy", "ref_gz"])
     ref_b = ref @ C.T  # reference in rad/s (capture-format.md), same axes as the gyro columns
     ok = _finite_rows([w_b, ref_b], warnings, "gyro or reference")
-    ref_drift = capture.float_meta("reference_drift_deg_h", 1.0) * gd.DEG_H_RAD_S
+    ref_drift = capture.float_meta_within("reference_drift_deg_h", 1.0, 1e6, zero=True) * gd.DEG_H_RAD_S
     res = gd.drift_reference(w_b[ok], ref_b[ok], dt, ref_drift)
     resid = w_b[ok] - ref_b[ok] - res.drift_rad_s
     return res, res.mean_error, 1, resid
@@ -316,8 +316,9 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
     from solvers.stillness import detect_static_intervals
 
     idx = np.flatnonzero(ok)
+    rows = slice(None) if len(idx) == len(ok) else idx  # every row finite: views, not (N, 3) copies
     try:
-        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"][idx]), f_b[idx], w_b[idx])
+        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"][rows]), f_b[rows], w_b[rows])
     except SolverError as exc:
         warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
         return [(ok, head0, "1")]
@@ -369,7 +370,7 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
                 off = np.array([float(v) for v in offset.replace(",", " ").split()])
             except ValueError:
                 off = np.zeros(0)
-            if off.shape != (3,):
+            if off.shape != (3,) or not np.all(np.isfinite(off)):  # float() reads 'nan' and 'inf' too
                 raise InputError(
                     capture.path,
                     _line(capture, "accel_offset"),
@@ -377,6 +378,7 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
                 )
             raw = raw - off
         f_b = (raw * asign) @ C.T
+        del raw  # (N, 3): not needed past here, while the stillness detector runs
         if unit == "counts" and offset is None:
             warnings.append(
                 "accelerometer in counts: only its direction is used for pitch and roll "
@@ -389,7 +391,7 @@ def _mode_b(capture, w_b, C, asign, dt, warnings):
             "pitch and roll (a dead or unconnected sensor?): check the ax ay az columns"
         )
     lat = capture.float_meta("latitude_deg")
-    hsig = capture.float_meta("heading_sigma_deg", 3.0)
+    hsig = capture.float_meta_within("heading_sigma_deg", 3.0, 180.0)
     segs = _segments(capture, w_b, f_b, dt, ok, warnings)
     if len(segs) == 1:
         m, head, _ = segs[0]

@@ -216,7 +216,7 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
     prep = prepared if prepared is not None else prepare(capture, reference)
     warnings = list(prep.warnings)
     v_b, vl, info = prep.v_body, prep.vl, prep.info
-    ref_sigma = capture.float_meta("reference_sigma_mps")
+    ref_sigma = capture.float_meta_within("reference_sigma_mps", None, 1e5, zero=True)
     try:
         res = ldv_solver.calibrate_ldv(v_b, vl, ref_sigma_mps=ref_sigma, force=force)
     except SolverError as exc:

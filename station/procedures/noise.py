@@ -164,8 +164,8 @@ def _factor(capture, kind: str, unit_key: str) -> tuple[float | None, str]:
     unit = capture.meta.get(unit_key)
     k = si_factor(kind, unit)
     if k is None and kind == "gyro" and unit == "counts":
-        per_rad = capture.float_meta("gyro_counts_per_rad_s")
-        per_deg = capture.float_meta("gyro_counts_per_deg_s")
+        per_rad = capture.float_meta_within("gyro_counts_per_rad_s", None, 1e12)
+        per_deg = capture.float_meta_within("gyro_counts_per_deg_s", None, 1e10)
         if per_rad and per_rad > 0:
             return 1.0 / per_rad, f"gyro in counts: nominal {per_rad:g} counts per rad/s"
         if per_deg and per_deg > 0:

@@ -35,8 +35,8 @@ def _gyro(capture) -> np.ndarray | None:
 def _start_scale(capture, holds, motions, notes: list[str]) -> float:
     unit = capture.meta.get("gyro_unit")
     if unit == "counts":
-        per_rad = capture.float_meta("gyro_counts_per_rad_s")
-        per_deg = capture.float_meta("gyro_counts_per_deg_s")
+        per_rad = capture.float_meta_within("gyro_counts_per_rad_s", None, 1e12)
+        per_deg = capture.float_meta_within("gyro_counts_per_deg_s", None, 1e10)
         if per_rad:
             return per_rad
         if per_deg:
