@@ -1569,9 +1569,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 if ok and margin > 0 and not _single_basis(res0[0].desc):
                     # and it explains what the library effects leave: it passes beside them (one test)
                     ok = _beyond(res0[0].cc.cand, cur_fit, free)
-                    if not ok and tie is None and displaces:
-                        # it fits better than the library effects it would displace and passes
-                        # where they are not fitted, but explains nothing decisive beside them
+                    if (not ok or not displaces) and tie is None and len(picked2) < len(picked) and gain > -margin:
+                        # it passes where the library effects are not fitted, and its model fits
+                        # neither clearly worse than theirs nor clearly better while explaining
+                        # something decisive beside them (DISPLACE_MARGIN either way; its names
+                        # would replace theirs then): neither explanation is decisively better
                         tie = (res0, picked2)
                 if ok and displaces:
                     # not decisively better (the scanned place or period counted as a parameter): the

@@ -160,6 +160,23 @@ def outliers(studentized, row_labels, explain: str) -> list[dict]:
     ]
 
 
+def group_outliers(studentized, groups, flagged, primary=None, threshold: float = OUTLIER_SIGMA) -> list:
+    """Of the groups ``flagged``, those whose rows still lie far from the rest: a group's mean
+    studentized residual times √(its rows) beyond ``threshold`` × the other groups' robust spread
+    (1.4826 × the median of their |z|, at least 1), the calibration's own outlier rule on hold means
+    (solvers.tabletop.find_outliers). ``primary``: the rows that count (others ignored)."""
+    z = np.asarray(studentized, float)
+    g = np.asarray(groups)
+    use = np.ones(len(z), bool) if primary is None else np.asarray(primary, bool)
+    zg = {}
+    for k in np.unique(g[use]):
+        r = z[use & (g == k)]
+        zg[k] = float(r.sum() / np.sqrt(len(r)))
+    others = [abs(v) for k, v in zg.items() if k not in set(flagged)]
+    scale = max(1.0, 1.4826 * float(np.median(others))) if others else 1.0
+    return [k for k in flagged if k not in zg or abs(zg[k]) > threshold * scale]
+
+
 def screen(n: int, t_s=None, columns: dict | None = None, moved=()) -> tuple[np.ndarray, list[dict]]:
     """The data-quality screen run before any effect is sought (one for every procedure):
     ``(bad, findings)`` with ``bad`` (n,) the rows to leave out of the effect search and a

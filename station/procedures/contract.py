@@ -32,6 +32,10 @@ class DiagnosisInput(NamedTuple):
     explain: str  # what an outlier row of this procedure usually means
     group_kind: str = "time block"  # what one cross-validation group is ("position", "mounting")
     quality: tuple = ()  # procedure-specific quality findings, rows as capture row indices
+    # the same capture with the groups the screen left out as outliers kept (a callable returning a
+    # DiagnosisInput), tried when it has some: an effect may be what put them far from the rest
+    kept: Any = None
+    flagged_groups: tuple = ()  # in a kept input: the problem's groups the screen flagged and kept
 
 
 @runtime_checkable

@@ -134,6 +134,13 @@ def _quality(capture, diag, inp) -> list[dict]:
 # ---------------------------------------------------------------- entry point
 
 
+def _explained(diag, flagged) -> bool:
+    """Whether the extended model of ``diag`` leaves none of the ``flagged`` groups an outlier."""
+    prob = diag.problem
+    primary = None if prob.row_types is None else np.asarray(prob.row_types) == 0
+    return not Q.group_outliers(diag.studentized, prob.groups, list(flagged), primary)
+
+
 def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
     """(diagnose.md dict, the engine's Diagnosis, the procedure's diagnosis input)."""
     from station.calibrate import calibrate_capture, guarded, procedure_module
@@ -156,6 +163,17 @@ def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
 
     with quiet_stdout():
         inp, diag = guarded(capture, run)
+        if inp.kept is not None:
+            # groups the screen left out as outliers may be the effect itself (a temperature bias
+            # shows most on the positions along it): searched with them kept, the result stands
+            # when it names effects under which none of them is an outlier any more
+            try:
+                inp2 = inp.kept()
+                diag2 = diagnose(inp2.problem)
+            except SolverError:
+                diag2 = None
+            if diag2 is not None and diag2.verdict and _explained(diag2, inp2.flagged_groups):
+                inp, diag = inp2, diag2
     out = _result(capture, capture.procedure, diag, inp)
     # a second sensor the same session calibrates (P1's gyro: station.procedures.tabletop_gyro)
     subs = getattr(module, "SUB_DIAGNOSES", {})

@@ -355,12 +355,16 @@ SUB_DIAGNOSES = {"gyro": ("gyro-tabletop", _gyro_diagnosis)}
 MIN_SCREENED_POSITIONS = 10  # positions left out by the screen only while this many remain
 
 
-def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dict]]:
+def _screen(
+    capture, positions, base, keep_flagged: bool = False
+) -> tuple[list, np.ndarray | None, list[dict], list[int]]:
     """The data-quality screen (``station.procedures.diagnose.screen``) for P1: the positions
     the effect search uses, the capture rows it leaves out (time series) and the findings.
     Left out: gaps, saturated samples, moved positions, and the positions the calibration
     flags as disagreeing with the rest far beyond the noise (``outlier`` in its result) —
-    while MIN_SCREENED_POSITIONS remain, else they are named and kept."""
+    while MIN_SCREENED_POSITIONS remain, else they are named and kept. ``keep_flagged``: the
+    flagged positions are kept (named, ``"screened": false``), for an effect search that may
+    explain them; the last item lists where the flagged positions kept are in the first."""
     from station.procedures.diagnose import file_line, screen
 
     moved = _moved_positions(capture)
@@ -390,7 +394,12 @@ def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dic
                 "left out of the effect search",
             }
         )
-    drop = set(flagged)
+    drop = set() if keep_flagged else set(flagged)
+    if keep_flagged:
+        for q in found:
+            if q["kind"] == "outlier":
+                q["screened"] = False
+                q["explanation"] = q["explanation"].split("; left out")[0] + "; kept: the effects named explain it"
     for k, (i0, i1) in span.items():  # mostly screened samples (a moved position): the position goes
         if i1 > i0 and bad[i0:i1].mean() > 0.5:
             drop.add(k)
@@ -420,17 +429,24 @@ def _screen(capture, positions, base) -> tuple[list, np.ndarray | None, list[dic
                     se=hold_mean_se(a, t[i0:i1][~bad[i0:i1]]) if len(a) >= 16 else p.se,
                 )
         out.append(p)
-    return out, (bad if capture.is_time_series else None), found
+    kept_flagged = [i for i, k in enumerate(keep) if k in flagged]
+    return out, (bad if capture.is_time_series else None), found, kept_flagged
 
 
-def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
+def diagnosis_input(
+    capture, base: dict, prepared: Prepared | None = None, keep_flagged: bool = False
+) -> DiagnosisInput:
     """The P1 diagnosis problem around the baseline ``base`` (a calibrate result), on what
-    the data-quality screen (``_screen``) leaves."""
+    the data-quality screen (``_screen``) leaves. Where the screen left positions out as
+    outliers, ``kept`` gives the same problem with them in (``keep_flagged``): an effect
+    concentrated on a few orientations (a temperature bias along one axis) puts those
+    positions far from the rest, and screened out, the evidence for it went with them."""
     from solvers.diagnose import problems as DP
 
     prep = prepared if prepared is not None else prepare(capture)
     g, noise_known = prep.g_mps2, prep.noise_known
-    positions, bad, screened = _screen(capture, prep.positions, base)
+    positions, bad, screened, kept_flagged = _screen(capture, prep.positions, base, keep_flagged)
+    any_left_out = any(q["kind"] == "outlier" and q["screened"] for q in screened)
     B, M = np.asarray(base["params"]["B"], float), np.asarray(base["params"]["M"], float)
     dirs = [p.direction for p in positions]
     if sum(d is not None for d in dirs) < 3:
@@ -473,6 +489,8 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         drivers,
         "a position that disagrees with the others: the unit moved, a wrong label, or a knock",
         group_kind="position",
+        kept=(lambda: diagnosis_input(capture, base, prepared, keep_flagged=True)) if any_left_out else None,
+        flagged_groups=tuple(kept_flagged) if keep_flagged else (),
     )
 
 
