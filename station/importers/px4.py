@@ -33,6 +33,7 @@ RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
 UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
 COMBINED = {"accel": "accelerometer_m_s2", "gyro": "gyro_rad", "mag": "magnetometer_ga"}
+RELATIVE_TIMESTAMP_INVALID = 0x7FFFFFFF  # PX4 sensor_combined: "no sample of this sensor yet"
 GPS_TOPICS = ("sensor_gps", "vehicle_gps_position")
 PARAM_PREFIXES = ("CAL_", "SENS_BOARD_")
 SOURCES = ("auto", "raw", "combined")
@@ -244,12 +245,26 @@ def read(
                 continue
             ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
             device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
+            t_k, rows = t_us, slice(None)
+            rel = d.get(f"{field.split('_')[0]}_timestamp_relative")
+            if kind == "mag" and rel is not None:
+                # the magnetometer is slower than the gyro whose time stamps the topic: its newest
+                # sample is repeated in every row until the next one (sample.ulg: 17,070 rows, 6,759
+                # samples). Each is read once, at its own time (timestamp + ..._timestamp_relative)
+                rel = np.asarray(rel, dtype=np.int64)
+                t_k = t_us + rel
+                rows = (rel != RELATIVE_TIMESTAMP_INVALID) & np.r_[True, t_k[1:] != t_k[:-1]]
+                t_k = t_k[rows]
+                if not (rows.sum() < len(rows) and np.all(np.diff(t_k) > 0)):
+                    t_k, rows = t_us, slice(None)
             streams[kind] = Stream(
                 kind,
-                t_us.astype(np.float64),
-                np.column_stack([d[c] for c in cols]),
+                t_k.astype(np.float64),
+                np.column_stack([np.asarray(d[c])[rows] for c in cols]),
                 UNITS[kind],
-                f"sensor_combined ({field})",
+                f"sensor_combined ({field}"
+                + (", each sample once at its own time" if isinstance(rows, np.ndarray) else "")
+                + ")",
                 device_id,
                 _slot(params, kind, device_id),
             )
@@ -295,7 +310,7 @@ def read(
     if cut is not None:  # a power loss or a copy cut short: what was written before it is whole
         warnings.append(
             f"the log is cut short inside a message at byte {cut}: the samples before it are imported, "
-            f"{len(next(iter(streams.values())).t_s)} rows up to {max(s.t_s[-1] for s in streams.values()):g} s"
+            f"{len(next(iter(streams.values())).t_s)} samples up to {max(s.t_s[-1] for s in streams.values()):g} s"
         )
     if unreadable:
         warnings.append(
