@@ -192,6 +192,25 @@ def test_two_clocks_ref_t_column_interleaved_rows_and_separate_file(tmp_path):
     assert json.loads(r2.stdout)["params"] == out1["params"]
 
 
+def test_paired_rows_with_a_reference_time_offset_are_shifted_by_it():
+    """Every row holds both streams on one t, and the reference was paired 0.4 s late
+    (reference_time_offset_s = 0.4): the offset was silently ignored where rows pair as recorded.
+    It now shifts the reference along t: consistent with the truth, as the two-clock layouts are."""
+    sim = simulate("ldv", seed=6, duration_s=300.0, rate_hz=20.0)
+    c = {k: np.asarray(v) for k, v in sim.columns.items()}
+    lag = 8  # samples: 0.4 s at 20 Hz
+    cols = {"t": c["t"][lag:], **{b: c[b][lag:] for b in ("vl1", "vl2", "vl3")}}
+    cols.update({v: c[v][:-lag] for v in ("vx", "vy", "vz")})  # row i holds the reference of t_i − 0.4 s
+    cols.update({k: v[lag:] for k, v in c.items() if k not in cols and k not in ("vx", "vy", "vz")})
+    out = proc.calibrate(Capture(dict(sim.meta, reference_time_offset_s="0.4"), cols))
+    assert out["alignment"].startswith("rows paired, reference shifted by reference_time_offset_s")
+    assert np.max(np.abs(_z(out, sim.truth))) < 4
+    assert out["residual_rms"] < 1.5 * sim.truth["beam_noise_mps"]
+    late = proc.calibrate(Capture(dict(sim.meta), cols))  # the same rows without the offset
+    assert late["alignment"] == "rows paired as recorded"
+    assert late["residual_rms"] > 5 * out["residual_rms"]  # 0.4 s of the manoeuvre: the lag shows
+
+
 @pytest.mark.parametrize("effect, size", [("time_delay", 0.05), ("lever_arm", 0.5)])
 def test_unmodelled_effect_is_named_and_uncertainty_widened(effect, size):
     """A 50 ms delay or a 0.5 m lever arm leaves a slowly varying residual: the station says

@@ -25,7 +25,8 @@ clock; the reference is rotated into the body at its own samples, then its body 
 is linearly interpolated to the LDV times. LDV samples outside the reference span, or
 inside a reference gap longer than 5 reference intervals, are left out (counted in a
 warning). When every row holds both streams and there is no ``ref_t``, rows pair as they
-are.
+are, unless ``reference_time_offset_s`` is set: then the reference is shifted by it along
+``t`` and interpolated as above.
 
 ``method``: ``force`` computes even when the velocity set is ill-conditioned (loud
 warning); otherwise such a capture is refused. Metadata ``reference_sigma_mps``: the
@@ -165,8 +166,13 @@ def aligned_velocities(capture, reference=None, warnings=None):
         if t_ref is None:
             t_ref = None
         both = np.all(np.isfinite(vl), axis=1) & np.all(np.isfinite(v_ref), axis=1)
-        if tcol == "t" and (t_ref is None or both.all()):
+        if tcol == "t" and (t_ref is None or both.all()) and not (offset and t_ref is not None):
             info["alignment"] = "rows paired as recorded"
+            if offset:
+                warnings.append(
+                    f"reference_time_offset_s {offset:g} not applied: rows pair as recorded and there is no "
+                    "'t' column to shift the reference along"
+                )
             ok = np.all(np.isfinite(vl), axis=1) & np.all(np.isfinite(v_ref), axis=1)
             if (~ok).any():
                 warnings.append(f"{int((~ok).sum())} rows with missing values left out")
@@ -176,7 +182,11 @@ def aligned_velocities(capture, reference=None, warnings=None):
                 f"{capture.path or 'capture'}: rows hold either LDV or reference samples but there is no time column to align them"
             )
         info["alignment"] = (
-            "'ref_t' column" if tcol == "ref_t" else "interleaved rows on 't'"
+            "'ref_t' column"
+            if tcol == "ref_t"
+            else (
+                "rows paired, reference shifted by reference_time_offset_s" if both.all() else "interleaved rows on 't'"
+            )
         ) + ", reference interpolated to LDV times"
     if "t" not in capture.columns:
         raise InputError(capture.path, capture.header_line, "aligning two streams needs a 't' column")
