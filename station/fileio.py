@@ -1,10 +1,11 @@
 """One atomic file write for the whole station: a temporary file beside the target, then a rename.
 
 Readers see the old file or the new one, never half of either: the new content goes to a
-hidden temporary file in the target's folder (``.<name>.<random>.tmp``), is flushed and
+hidden temporary file in the target's folder (``.<name>.<pid>-<random>.tmp``), is flushed and
 fsynced, and only then renamed over the target (``os.replace``, atomic on POSIX and on one
 Windows volume). Any exception on the way, ``KeyboardInterrupt`` included, removes the
-temporary file and leaves the target as it was.
+temporary file and leaves the target as it was; a temporary that a killed write left behind
+(SIGKILL, a power cut) is removed by the next write of the same file.
 
 Reading goes through :func:`open_input` (or, for a library that opens the path itself,
 :func:`check_input` first): a path that is not a regular file (a named pipe, a device, a
@@ -221,12 +222,55 @@ def looks_utf16(raw: bytes) -> bool:
     )
 
 
+STALE_TMP_S = 10.0  # a temporary untouched this long, of a process that is gone, is left over
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return pid > 0  # another user's process (or a number no process has: not alive)
+    return True
+
+
+def remove_stale_temporaries(folder: str, name: str) -> list[str]:
+    """Remove the temporaries of ``name`` that a killed write left in ``folder`` (SIGKILL, a
+    power cut: no handler ran): ``.<name>.<pid>-<random>.tmp`` whose process is gone and that
+    nothing has written to for ``STALE_TMP_S``. Returns the paths removed."""
+    import re
+    import time
+
+    pattern = re.compile(r"\." + re.escape(name) + r"\.(\d+)-[0-9a-f]{8}\.tmp")
+    removed = []
+    try:
+        entries = os.listdir(folder)
+    except OSError:
+        return removed
+    for entry in entries:
+        m = pattern.fullmatch(entry)
+        if m is None or _pid_alive(int(m.group(1))):
+            continue
+        path = os.path.join(folder, entry)
+        try:
+            st = os.lstat(path)
+            if stat.S_ISREG(st.st_mode) and time.time() - st.st_mtime > STALE_TMP_S:
+                os.unlink(path)
+                removed.append(path)
+        except OSError:
+            pass
+    return removed
+
+
 def _create_beside(folder: str, name: str) -> tuple[int, str]:
     """A new hidden file in ``folder``, created with mode 0o666 so that the umask applies
-    as it does to ``open()``; returns (descriptor, path)."""
+    as it does to ``open()``; returns (descriptor, path). Its name carries the writer's pid,
+    so that a later write can tell a killed writer's leftover (``remove_stale_temporaries``)."""
+    remove_stale_temporaries(folder, name)
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0) | getattr(os, "O_CLOEXEC", 0)
     for _ in range(100):
-        tmp = os.path.join(folder, f".{name}.{os.urandom(4).hex()}.tmp")
+        tmp = os.path.join(folder, f".{name}.{os.getpid()}-{os.urandom(4).hex()}.tmp")
         try:
             return os.open(tmp, flags, 0o666), tmp
         except FileExistsError:

@@ -14,7 +14,7 @@ import sys
 
 import pytest
 
-from tests.station_run import ROOT, assert_one_line_refusal
+from tests.station_run import ROOT, assert_one_line_refusal, run_station
 
 GYRO_CSV = ("--procedure", "gyro-drift", "--map", "t=time_s,gx=gx,gy=gy,gz=gz", "--unit", "gyro=rad/s,t=s")
 
@@ -270,3 +270,39 @@ def test_a_database_path_that_is_no_regular_file_is_named_by_what_it_is(tmp_path
     assert_one_line_refusal(res, f"{db}: ", says)
     if kind == "fifo":
         assert stat.S_ISFIFO(os.stat(db).st_mode)
+
+
+def test_a_killed_writes_temporary_is_removed_by_the_next_write_of_the_file(tmp_path):
+    """SIGKILL (the OOM killer, a power cut) runs no handler: the atomic write's hidden
+    temporary stayed beside the output for good. Its name carries the writer's pid now, and
+    the next write of the same file removes a temporary whose process is gone; a live writer's
+    is left alone."""
+    import signal
+    import time
+
+    from station import fileio
+
+    out = tmp_path / "s.csv"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station", "simulate", "--procedure", "accel-tabletop", "--option", "hold_s=400",
+         "--out", str(out)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while not any(p.name.endswith(".tmp") for p in tmp_path.iterdir()) and proc.poll() is None:
+        assert time.monotonic() < deadline, "no temporary file appeared"
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=120)
+    if proc.returncode == 0:
+        pytest.skip("the capture was written before the signal arrived")
+    (left,) = [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+    assert left.name.startswith(f".s.csv.{proc.pid}-")
+    live = tmp_path / f".s.csv.{os.getpid()}-0123abcd.tmp"  # a write of this process, under way
+    live.write_text("x")
+    old = time.time() - 2 * fileio.STALE_TMP_S
+    for p in (left, live):
+        os.utime(p, (old, old))
+    res = run_station("simulate", "--procedure", "accel-tabletop", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, "s.csv"])
