@@ -19,10 +19,13 @@ from station.errors import InputError, OutputError, StationError, take_deferred_
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
+    from db.store import default_db_path
+
     parser.add_argument(
         "--db",
         default=argparse.SUPPRESS,
-        help="station database file (default: $STATION_DB or ~/.local/share/station/station.db)",
+        help="station database file (default: $STATION_DB, else ${XDG_DATA_HOME:-~/.local/share}/station/station.db;"
+        f" here {default_db_path()})",
     )
 
 

@@ -809,3 +809,13 @@ def test_every_help_fits_an_80_column_terminal(monkeypatch, capsys):
         main(["simulate", "--procedure", "p9", "--out", "x.csv"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "accel-tabletop" in err and "ldv" in err
+
+
+def test_help_names_the_database_this_machine_uses(tmp_path, monkeypatch):
+    """`--db`'s help said ~/.local/share/station/station.db whatever XDG_DATA_HOME said: it
+    gives the rule and the path it comes to here."""
+    monkeypatch.delenv("STATION_DB", raising=False)
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    res = run_station("--help", subprocess_run=True)
+    assert res.returncode == 0
+    assert str(tmp_path / "data" / "station" / "station.db") in " ".join(res.stdout.split()).replace("- ", "-")
