@@ -629,9 +629,15 @@ def test_import_an_ldv_file_with_its_conditioning_check(tmp_path):
             await wait_for(pilot, lambda: "cond(HᵀH) =" in text_of(app, "#summary"))
             out["title"] = screen_lines(app)[0]
             out["summary"] = " ".join(text_of(app, "#summary").split())
+            table = app.screen.query_one("#params")
+            out["cond"] = next(
+                table.get_row_at(i) for i in range(table.row_count) if table.get_row_at(i)[0] == "condition_number"
+            )
         return out
 
     out = asyncio.run(story())
+    # the condition number is a figure of the run, not an estimate: no "± 0" beside it
+    assert str(out.pop("cond")[2]) == "—"
     squeeze = {k: v.replace(" ", "") for k, v in out.items()}  # long tmp paths wrap on screen
     assert "missing.csv:nosuchfile" in squeeze["missing"]
     assert "ill-conditioned" in squeeze["bad"] and "straight.csv" in squeeze["bad"]
