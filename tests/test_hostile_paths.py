@@ -184,28 +184,36 @@ def test_dash_as_an_output_file_is_refused_not_written_as_a_file_named_dash(tmp_
     assert sorted(os.listdir(tmp_path)) == ["in.csv"]
 
 
-def test_sigterm_while_an_output_is_written_leaves_neither_it_nor_its_temporary(tmp_path):
-    """kill, timeout(1) and systemd stop a command with SIGTERM, which ended Python at once:
-    the atomic write's hidden temporary (tens of MB, .s.csv.<random>.tmp) stayed beside the
-    output for good. SIGTERM now unwinds like Ctrl-C: the temporary is removed, the output
-    is absent, one line says so, exit status 143 (128 + SIGTERM)."""
-    import signal
+def _signal_while_writing(tmp_path, signum):
+    """`station simulate --out tmp_path/s.csv` (a long capture) sent ``signum`` once its
+    hidden temporary is there: (process, stdout, stderr) after it ends; the test is skipped
+    when the write finished before the signal arrived."""
     import time
 
-    out = tmp_path / "s.csv"
     proc = subprocess.Popen(
         [sys.executable, "-m", "station", "simulate", "--procedure", "accel-tabletop", "--option", "hold_s=400",
-         "--out", str(out)],
+         "--out", str(tmp_path / "s.csv")],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     deadline = time.monotonic() + 120
     while not any(p.name.endswith(".tmp") for p in tmp_path.iterdir()) and proc.poll() is None:
         assert time.monotonic() < deadline, "no temporary file appeared"
         time.sleep(0.01)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signum)
     stdout, stderr = proc.communicate(timeout=120)
     if proc.returncode == 0:  # the write finished first: nothing to test on this machine this time
         pytest.skip("the capture was written before the signal arrived")
+    return proc, stdout, stderr
+
+
+def test_sigterm_while_an_output_is_written_leaves_neither_it_nor_its_temporary(tmp_path):
+    """kill, timeout(1) and systemd stop a command with SIGTERM, which ended Python at once:
+    the atomic write's hidden temporary (tens of MB, .s.csv.<random>.tmp) stayed beside the
+    output for good. SIGTERM now unwinds like Ctrl-C: the temporary is removed, the output
+    is absent, one line says so, exit status 143 (128 + SIGTERM)."""
+    import signal
+
+    proc, stdout, stderr = _signal_while_writing(tmp_path, signal.SIGTERM)
     assert proc.returncode == 143, (proc.returncode, stderr)
     assert stdout == "" and stderr == "station: terminated\n", stderr
     assert os.listdir(tmp_path) == []
@@ -283,19 +291,7 @@ def test_a_killed_writes_temporary_is_removed_by_the_next_write_of_the_file(tmp_
     from station import fileio
 
     out = tmp_path / "s.csv"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "station", "simulate", "--procedure", "accel-tabletop", "--option", "hold_s=400",
-         "--out", str(out)],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    deadline = time.monotonic() + 120
-    while not any(p.name.endswith(".tmp") for p in tmp_path.iterdir()) and proc.poll() is None:
-        assert time.monotonic() < deadline, "no temporary file appeared"
-        time.sleep(0.01)
-    proc.send_signal(signal.SIGKILL)
-    proc.communicate(timeout=120)
-    if proc.returncode == 0:
-        pytest.skip("the capture was written before the signal arrived")
+    proc, _, _ = _signal_while_writing(tmp_path, signal.SIGKILL)
     (left,) = [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
     assert left.name.startswith(f".s.csv.{proc.pid}-")
     live = tmp_path / f".s.csv.{os.getpid()}-0123abcd.tmp"  # a write of this process, under way
