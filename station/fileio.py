@@ -22,7 +22,9 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import stat
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -239,9 +241,6 @@ def remove_stale_temporaries(folder: str, name: str) -> list[str]:
     """Remove the temporaries of ``name`` that a killed write left in ``folder`` (SIGKILL, a
     power cut: no handler ran): ``.<name>.<pid>-<random>.tmp`` whose process is gone and that
     nothing has written to for ``STALE_TMP_S``. Returns the paths removed."""
-    import re
-    import time
-
     pattern = re.compile(r"\." + re.escape(name) + r"\.(\d+)-[0-9a-f]{8}\.tmp")
     removed = []
     try:

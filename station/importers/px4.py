@@ -245,26 +245,23 @@ def read(
                 continue
             ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
             device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
-            t_k, rows = t_us, slice(None)
-            rel = d.get(f"{field.split('_')[0]}_timestamp_relative")
-            if kind == "mag" and rel is not None:
+            t_k, rows, how = t_us, slice(None), ""
+            rel = d.get("magnetometer_timestamp_relative") if kind == "mag" else None
+            if rel is not None:
                 # the magnetometer is slower than the gyro whose time stamps the topic: its newest
                 # sample is repeated in every row until the next one (sample.ulg: 17,070 rows, 6,759
                 # samples). Each is read once, at its own time (timestamp + ..._timestamp_relative)
                 rel = np.asarray(rel, dtype=np.int64)
-                t_k = t_us + rel
-                rows = (rel != RELATIVE_TIMESTAMP_INVALID) & np.r_[True, t_k[1:] != t_k[:-1]]
-                t_k = t_k[rows]
-                if not (rows.sum() < len(rows) and np.all(np.diff(t_k) > 0)):
-                    t_k, rows = t_us, slice(None)
+                new = (rel != RELATIVE_TIMESTAMP_INVALID) & np.r_[True, np.diff(t_us + rel) != 0]
+                t_new = (t_us + rel)[new]
+                if new.sum() < len(new) and np.all(np.diff(t_new) > 0):
+                    t_k, rows, how = t_new, new, ", each sample once at its own time"
             streams[kind] = Stream(
                 kind,
                 t_k.astype(np.float64),
                 np.column_stack([np.asarray(d[c])[rows] for c in cols]),
                 UNITS[kind],
-                f"sensor_combined ({field}"
-                + (", each sample once at its own time" if isinstance(rows, np.ndarray) else "")
-                + ")",
+                f"sensor_combined ({field}{how})",
                 device_id,
                 _slot(params, kind, device_id),
             )

@@ -166,7 +166,7 @@ def aligned_velocities(capture, reference=None, warnings=None):
         if t_ref is None:
             t_ref = None
         both = np.all(np.isfinite(vl), axis=1) & np.all(np.isfinite(v_ref), axis=1)
-        if tcol == "t" and (t_ref is None or both.all()) and not (offset and t_ref is not None):
+        if tcol == "t" and (t_ref is None or (both.all() and not offset)):
             info["alignment"] = "rows paired as recorded"
             if offset:
                 warnings.append(
