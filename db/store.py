@@ -26,6 +26,7 @@ import socket
 import sqlite3
 import stat
 import threading
+import time
 import weakref
 from contextlib import contextmanager
 from datetime import timedelta
@@ -252,7 +253,7 @@ class Store:
                     "have): use that version or a later one (left as it is)"
                 )
             if not memory and self.conn.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
-                self.conn.execute("PRAGMA journal_mode = WAL")
+                self._to_wal()
             if self._pending_migrations():
                 from db.migrations import apply
 
@@ -267,6 +268,20 @@ class Store:
         self._unhold = weakref.finalize(self, _release, key)  # on close, or when collected unclosed
 
     # --- plumbing -----------------------------------------------------------------------
+
+    def _to_wal(self) -> None:
+        """Switch the file to WAL. Two processes opening a new database at once race here: the
+        switch needs the file to itself, and SQLite answers 'database is locked' at once rather
+        than through the busy timeout, so it is tried again until that timeout has passed."""
+        deadline = time.monotonic() + BUSY_TIMEOUT_S
+        while True:
+            try:
+                self.conn.execute("PRAGMA journal_mode = WAL")
+                return
+            except sqlite3.OperationalError as exc:
+                if "locked" not in str(exc) or time.monotonic() > deadline:
+                    raise
+                time.sleep(0.02)
 
     def _applied_migrations(self) -> list[str] | None:
         """Names of the station's migrations the file records, in the order applied; None when it
