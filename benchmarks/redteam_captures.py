@@ -278,7 +278,9 @@ def compass(rng, o, effect):
     elif effect == "time_drift":
         params["bt"] = np.array([3000.0, -2500.0, 2000.0]) / (t[-1] - t[0])
     elif effect == "field_anomaly":
-        params["field_scale"] = np.array(1.08)
+        # a bent field: 6 % stronger and 1.5° steeper than IGRF (a magnitude change alone is a
+        # common scale of W that no single capture can see; docs/diagnose.md)
+        m_ned = 1.06 * (frames.rotvec_to_matrix(np.array([0.0, -math.radians(1.5), 0.0])) @ m_ned)
     cond = Conditions(t_s=t - t[0], temp_c=die, temp_ref_c=25.0)
     y = mag_model.forward(C_b_n @ m_ned, params, cond) + rng.normal(scale=o.get("noise", 60.0), size=(n, 3))
     y = y * ku
@@ -628,7 +630,8 @@ def main(argv=None):
                                 txt, bad = f"check failed {e!r}", True
                             line.append(txt)
                             if bad and eff is None:
-                                probs.append("CAL FAR")
+                                # far from the truth, unless the calibration itself warns why
+                                probs.append("CAL FAR" if not res.get("warnings") else "far, as warned")
                         else:
                             line.append(f"cal rc={p.returncode} {p.stderr.strip()[:160]}")
                         p2_, res2, probs2 = run("diagnose", path)
@@ -640,7 +643,14 @@ def main(argv=None):
                             if eff is None and v:
                                 probs.append("FALSE ALARM?")
                             if eff and eff not in (v or []):
-                                probs.append("EFFECT NOT NAMED")
+                                # no temperature column: a temperature bias can show only through
+                                # what temperature follows (time); no time column: a drift only
+                                # through temperature; neither is a miss
+                                proxy = {"temperature_bias": "temp_c", "time_drift": "t"}.get(eff)
+                                if proxy and proxy not in cols and v:
+                                    probs.append(f"named by proxy (no {proxy} column)")
+                                else:
+                                    probs.append("EFFECT NOT NAMED")
                         else:
                             line.append(f"diag rc={p2_.returncode} {p2_.stderr.strip()[:160]}")
                         print(" | ".join(line), "||", ", ".join(probs) or "ok", flush=True)
