@@ -14,7 +14,7 @@ from textual.containers import Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import DataTable, Static
 
-from station.formatting import MISSING, num
+from station.formatting import num, sigma
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
 from station.procedures.review import (
@@ -28,12 +28,6 @@ from station.procedures.review import (
 from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar, footer
-
-
-def _sigma(x) -> str:
-    """A row's 1σ; "—" for 0, a figure that is not estimated (P5's condition number, a value
-    the gauge fixes), which "± 0" read as exact."""
-    return MISSING if isinstance(x, (int, float)) and x == 0 else num(x, ".2g")
 
 
 class ResultsScreen(Screen):
@@ -159,7 +153,7 @@ class ResultsScreen(Screen):
             params.add_row(
                 row.name,
                 num(row.value, ".7g"),
-                _sigma(row.sigma),
+                sigma(row.sigma),
                 row.unit,
                 ok,
                 num(row.previous, ".7g"),
@@ -173,7 +167,7 @@ class ResultsScreen(Screen):
                 params.add_row(
                     "gyro " + row.name,
                     num(row.value, ".7g"),
-                    _sigma(row.sigma),
+                    sigma(row.sigma),
                     row.unit,
                     "",
                     num(row.previous, ".7g"),
