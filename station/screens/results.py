@@ -45,6 +45,10 @@ class ResultsScreen(Screen):
     ResultsScreen #params { height: auto; max-height: 67%; }
     ResultsScreen #residuals { height: 1fr; }
     ResultsScreen #saved { height: auto; padding: 0 1; text-style: bold; }
+    /* notices are lines under the tables here, not toasts over them (80x24: a toast covered
+       the residuals and the last parameters for up to 8 s) */
+    ResultsScreen ToastHolder { display: none; }
+    ResultsScreen #notices { height: auto; max-height: 4; padding: 0 1; }
     """
 
     BINDINGS = [
@@ -81,10 +85,21 @@ class ResultsScreen(Screen):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
             yield DataTable(id="residuals", zebra_stripes=True, cursor_type="row")
         yield Static("", id="saved")
+        yield Static("", id="notices")
         yield footer()
 
     def on_mount(self) -> None:
+        self.show_notices()
         self.load_device()
+
+    def on_screen_resume(self) -> None:
+        self.show_notices()  # back from Diagnose, Limits or History: what is still current
+
+    def show_notices(self) -> None:
+        """The app's current notices as lines under the tables (``station.widgets.notices``)."""
+        from station.widgets.notices import show_notices
+
+        show_notices(self, hide_empty=True)
 
     @work(thread=True, exclusive=True, group="results-db", exit_on_error=False, description="read the device")
     def load_device(self) -> None:
