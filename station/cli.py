@@ -117,7 +117,9 @@ def _require_folder(path: str, source: str) -> None:
     if os.path.isdir(folder):
         return
     what = "is not a folder" if os.path.exists(folder) else "does not exist"
-    raise InputError(path, None, f"the folder {folder} {what} (mistyped {source}?); nothing created")
+    raise InputError(
+        path, None, f"no station database here: the folder {folder} {what} (mistyped {source}?); nothing created"
+    )
 
 
 # Commands that own the terminal (Textual draws it); everything else writes through SafeStream.

@@ -177,7 +177,8 @@ def test_a_given_database_path_in_a_missing_folder_is_refused_and_nothing_made(c
             monkeypatch.setenv("STATION_DB", str(db))
             code, out, err = run(capsys, *argv)
         assert code == 2 and out == "", (how, code, out, err)
-        assert err == f"station: {db}: the folder {missing} does not exist (mistyped {how}?); nothing created\n"
+        said = f"no station database here: the folder {missing} does not exist (mistyped {how}?); nothing created"
+        assert err == f"station: {db}: {said}\n"
         assert sorted(tmp_path.rglob("*")) == before  # no folder, no database, no report
 
 
