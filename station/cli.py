@@ -93,13 +93,33 @@ def _check_text_args(args: argparse.Namespace) -> None:
 
 
 def db_path(args: argparse.Namespace) -> str:
-    """The database path: --db, else ``db.store.default_db_path()`` ($STATION_DB, then XDG)."""
-    explicit = getattr(args, "db", None)
+    """The database path: --db, else ``db.store.default_db_path()`` ($STATION_DB, then XDG).
+
+    A path given (--db, $STATION_DB) in a folder that does not exist is refused (InputError):
+    a mistyped one made that folder and a new empty database in it. Only the built-in default
+    (XDG) gets its folder made, when a command creates the database."""
+    explicit, source = getattr(args, "db", None), "--db"
+    if not explicit:
+        explicit, source = os.environ.get("STATION_DB"), "$STATION_DB"
     if explicit:
+        _require_folder(explicit, source)
         return explicit
     from db.store import default_db_path  # loaded only when the default is needed
 
     return default_db_path()
+
+
+def _require_folder(path: str, source: str) -> None:
+    """InputError when the folder of a database path that was given does not exist (or is no folder)."""
+    if path == ":memory:" or path.startswith("file:"):
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(folder):
+        return
+    what = "is not a folder" if os.path.exists(folder) else "does not exist"
+    raise InputError(
+        path, None, f"no station database here: the folder {folder} {what} (mistyped {source}?); nothing created"
+    )
 
 
 # Commands that own the terminal (Textual draws it); everything else writes through SafeStream.

@@ -20,13 +20,23 @@ def num(x, fmt: str = ".6g", missing: str = MISSING) -> str:
     return missing
 
 
-def value_sigma(value, sigma) -> str:
-    """``value ± sigma`` (6 and 2 significant digits); ``(not identifiable)`` for a non-finite σ."""
+def sigma(x, fmt: str = ".2g", missing: str = MISSING) -> str:
+    """A 1σ (or an expanded uncertainty U = k·σ) as text: ``missing`` for exactly 0 as well as
+    for a non-finite one. A σ of 0 is a figure the fit did not estimate (an entry the gauge
+    fixes, such as P1's M[1][0]; P5's condition number), which "± 0" would read as exact."""
+    if isinstance(x, numbers.Real) and not isinstance(x, bool) and x == 0:
+        return missing
+    return num(x, fmt, missing)
+
+
+def value_sigma(value, s) -> str:
+    """``value ± s`` (6 and 2 significant digits); ``(not identifiable)`` for a non-finite σ,
+    ``± —`` for a σ of 0 (not estimated: :func:`sigma`)."""
     if value is None:
         return MISSING
-    if sigma is None or (isinstance(sigma, float) and not math.isfinite(sigma)):
-        return f"{value:.6g} (not identifiable)" if isinstance(sigma, float) else f"{value:.6g}"
-    return f"{value:.6g} ± {sigma:.2g}"
+    if s is None or (isinstance(s, float) and not math.isfinite(s)):
+        return f"{value:.6g} (not identifiable)" if isinstance(s, float) else f"{value:.6g}"
+    return f"{value:.6g} ± {sigma(s)}"
 
 
 def param_lines(name: str, value, sigma, indent: str = "  ") -> list[str]:

@@ -19,6 +19,7 @@ from html import escape
 import numpy as np
 
 from station import __version__
+from station.formatting import num, sigma
 from station.procedures import registry
 from station.procedures.review import (
     assess,
@@ -120,10 +121,6 @@ def build_report(store, calibration_id: int) -> dict:
 
 
 # ------------------------------------------------------------------------- rendering
-
-
-def _n(x, fmt=".6g") -> str:
-    return format(x, fmt) if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) else "—"
 
 
 def _row(label: str, value) -> str:
@@ -337,15 +334,15 @@ def render_html(rep: dict) -> str:
             lim.append(f"[{'−∞' if lo is None else format(lo, 'g')}, {'∞' if hi is None else format(hi, 'g')}]")
         ok = {True: "<span class='ok'>pass</span>", False: "<span class='bad'>FAIL</span>", None: "—"}[r.ok]
         h.append(
-            f"<tr><td><code>{escape(r.name)}</code></td><td class='num'>{_n(r.value, '.7g')}</td>"
-            f"<td class='num'>{_n(r.sigma, '.2g')}</td><td class='num'>{_n(U, '.2g')}</td>"
-            f"<td>{escape(r.unit)}</td><td class='num'>{_n(r.previous, '.7g')}</td>"
-            f"<td class='num'>{_n(change, '+.3g')}</td><td>{escape(' '.join(lim)) or '—'}</td><td>{ok}</td></tr>"
+            f"<tr><td><code>{escape(r.name)}</code></td><td class='num'>{num(r.value, '.7g')}</td>"
+            f"<td class='num'>{sigma(r.sigma)}</td><td class='num'>{sigma(U)}</td>"
+            f"<td>{escape(r.unit)}</td><td class='num'>{num(r.previous, '.7g')}</td>"
+            f"<td class='num'>{num(change, '+.3g')}</td><td>{escape(' '.join(lim)) or '—'}</td><td>{ok}</td></tr>"
         )
     h.append("</table>")
     res, res_unit = shown_residual(result)
     h.append(
-        f"<p>Residual RMS {_n(res, '.4g')} {escape(res_unit)} · "
+        f"<p>Residual RMS {num(res, '.4g')} {escape(res_unit)} · "
         f"{_e(registry.count_text(result.get('procedure'), result.get('n_positions')))}.</p>"
     )
     if review.get("reasons") or a.reasons:

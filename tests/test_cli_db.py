@@ -144,6 +144,57 @@ def test_bad_input_one_line_exit_2(capsys, db, argv, needle):
     assert err.count("\n") == 1 and needle in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["history", "IMU-1"],
+        ["due"],
+        ["devices", "add", "IMU-1"],  # a command that creates the database
+        ["calibrate", "CAPTURE", "--save"],  # so does a save
+        ["demo", "--headless"],  # and the scripted operator's run
+        ["tui"],  # and the TUI's first save: refused before the screen is drawn
+        ["report", "1", "-o", "OUT"],
+    ],
+)
+def test_a_given_database_path_in_a_missing_folder_is_refused_and_nothing_made(capsys, tmp_path, argv, monkeypatch):
+    """A mistyped --db or $STATION_DB in a folder that does not exist made that folder and a new
+    empty database in it (devices add, calibrate --save, the TUI and the demo): now one line
+    naming the path and its missing folder, exit 2, nothing written. Only the default location
+    (XDG) gets its folder made."""
+    capture = tmp_path / "p1.csv"
+    if "CAPTURE" in argv:
+        made = run(capsys, "simulate", "--procedure", "accel-tabletop", "--option", "averages=1", "--out", capture)
+        assert made[0] == 0, made[2]
+    argv = [str(capture) if a == "CAPTURE" else str(tmp_path / "r.html") if a == "OUT" else a for a in argv]
+    before = sorted(tmp_path.rglob("*"))
+    missing = tmp_path / "nosuchdir"
+    for how in ("--db", "$STATION_DB"):
+        db = missing / f"x{how[-2:]}.db"
+        if how == "--db":
+            monkeypatch.delenv("STATION_DB", raising=False)
+            code, out, err = run(capsys, "--db", db, *argv)
+        else:
+            monkeypatch.setenv("STATION_DB", str(db))
+            code, out, err = run(capsys, *argv)
+        assert code == 2 and out == "", (how, code, out, err)
+        said = f"no station database here: the folder {missing} does not exist (mistyped {how}?); nothing created"
+        assert err == f"station: {db}: {said}\n"
+        assert sorted(tmp_path.rglob("*")) == before  # no folder, no database, no report
+
+
+def test_the_default_database_location_gets_its_folder(capsys, tmp_path, monkeypatch):
+    """The built-in default, ${XDG_DATA_HOME}/station/station.db, is made with its folder by the
+    first command that creates a database (a new machine has no station folder yet)."""
+    monkeypatch.delenv("STATION_DB", raising=False)
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    code, _, err = run(capsys, "devices", "add", "IMU-1")
+    assert code == 0, err
+    assert (tmp_path / "xdg" / "station" / "station.db").is_file()
+    # a path given in a folder that exists is made as before
+    code, _, err = run(capsys, "--db", tmp_path / "bench.db", "devices", "add", "IMU-1")
+    assert code == 0 and (tmp_path / "bench.db").is_file(), err
+
+
 def test_unusable_database_file_is_one_line(capsys, tmp_path):
     bad = tmp_path / "not-a-db"
     bad.write_text("hello, I am a text file, not SQLite\n" * 100)

@@ -25,9 +25,9 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 REQUIRED = "chromium" in os.environ.get("STATION_REQUIRE_TOOLS", "").split()
 
 
-def _sim(tmp_path, procedure, seed, device, date, **meta):
+def _sim(tmp_path, procedure, seed, device, date, options=(), **meta):
     path = tmp_path / f"{procedure}-{seed}.csv"
-    r = run_station("simulate", "--procedure", procedure, "--seed", seed, "--out", path)
+    r = run_station("simulate", "--procedure", procedure, "--seed", seed, "--out", path, *options)
     assert r.returncode == 0, r.stderr
     cap = read_capture(path)
     cap.meta.update(device=device, date=date, **meta)
@@ -37,7 +37,8 @@ def _sim(tmp_path, procedure, seed, device, date, **meta):
 
 @pytest.fixture(scope="module")
 def filled(tmp_path_factory):
-    """Three P1 calibrations of one unit a year apart (drift), a compass and a gyro run."""
+    """Three P1 calibrations of one unit a year apart (drift), one of a unit with unlabelled
+    positions (gauge-fixed entries), a compass and a gyro run."""
     tmp = tmp_path_factory.mktemp("report")
     db = tmp / "station.db"
     ids = {}
@@ -47,6 +48,11 @@ def filled(tmp_path_factory):
         r = run_station("calibrate", path, "--save", "--json", "--db", db, "--operator", "Ann Lee")
         assert r.returncode == 0, r.stderr
         ids[f"p1-{k}"] = json.loads(r.stdout)["calibration_id"]
+    # unlabelled positions: the upper-triangular gauge fixes M[1][0], M[2][0], M[2][1] (σ 0, not estimated)
+    path = _sim(tmp, "accel-tabletop", 4, "IMU-U", "2026-11-20T08:00:00Z", options=("--option", "label_positions=0"))
+    r = run_station("calibrate", path, "--save", "--json", "--db", db)
+    assert r.returncode == 0, r.stderr
+    ids["p1-upper"] = json.loads(r.stdout)["calibration_id"]
     for proc in ("compass", "gyro-drift"):
         path = _sim(tmp, proc, 7, f"{proc}-unit", "2026-11-21T09:15:00Z")
         r = run_station("calibrate", path, "--save", "--json", "--db", db)
@@ -262,6 +268,16 @@ def test_report_renders_in_headless_chromium(filled):
     img = _png_rgb(shot.read_bytes())
     assert (img.max(axis=2) < 100).mean() > 0.01  # text covers more than 1 % of the first screen
     assert img[:60].std() > 10  # the title is there
+    # 4. as the browser builds it, a σ the gauge fixes (not estimated) reads "—" in u and U, as on
+    # the Results screen; it read "0", as if exact
+    out, _ = _report(tmp, db, ids["p1-upper"])
+    r = _chromium(tmp, out.as_uri(), "--dump-dom")
+    assert r.returncode == 0, r.stderr[-2000:]
+    cells = _sigma_cells(r.stdout.replace('id="params"', "id='params'"))
+    zero, estimated = _not_estimated(db, ids["p1-upper"])
+    assert zero and estimated
+    assert {cells[n] for n in zero} == {("—", "—")}, cells
+    assert all(float(cells[n][0]) > 0 for n in estimated), cells
 
 
 @pytest.mark.skipif(CHROMIUM is None and not REQUIRED, reason="chromium is not installed (apt-get install chromium)")
@@ -303,3 +319,35 @@ def test_report_shows_p4_and_the_compass_in_the_units_of_the_screens_in_chromium
             assert res and res.group(2) == "°/h"
             assert float(res.group(1)) == pytest.approx(cal["residual_rms"] / deg_h, rel=1e-3)
             assert not [row for row in rows[1:] if "rad/s" in row[4]]
+
+
+def _sigma_cells(page: str) -> dict[str, tuple[str, str]]:
+    """parameter -> (u, U) as the params table shows them."""
+    return {r[0]: (r[2], r[3]) for r in _table_rows(page, "params")[1:]}
+
+
+def _not_estimated(db, cal_id) -> tuple[set, set]:
+    """(names whose stored σ is exactly 0, names with a σ > 0) of a P1 calibration's M and B."""
+    with Store(str(db)) as s:
+        u = s.calibration(cal_id)["uncertainty"]
+    sig = {f"B[{i}]": u["B"][i] for i in range(3)} | {f"M[{i}][{j}]": u["M"][i][j] for i in range(3) for j in range(3)}
+    return {n for n, v in sig.items() if v == 0}, {n for n, v in sig.items() if v > 0}
+
+
+def test_report_shows_a_sigma_that_is_not_estimated_as_a_dash(filled):
+    """A σ of exactly 0 is an entry the gauge fixes (not estimated): the page printed u "0" and
+    U "0", read as exact; it shows "—" as the Results screen does (one rule, station.formatting)."""
+    from station.formatting import sigma
+
+    tmp, db, ids = filled
+    _, page = _report(tmp, db, ids["p1-upper"])
+    zero, estimated = _not_estimated(db, ids["p1-upper"])
+    assert zero == {"M[1][0]", "M[2][0]", "M[2][1]"}  # the upper-triangular gauge's entries
+    cells = _sigma_cells(page)
+    for name in zero:
+        assert cells[name] == ("—", "—"), (name, cells[name])
+    for name in estimated:
+        u, U = cells[name]
+        assert float(u) > 0 and float(U) == pytest.approx(2 * float(u), rel=0.1), (name, u, U)
+    # the same rule as the Results screen's σ column and the text of `station calibrate`
+    assert sigma(0.0) == sigma(0) == "—" and sigma(2.5e-4) == "0.00025" and sigma(float("nan")) == "—"

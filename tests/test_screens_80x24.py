@@ -731,3 +731,58 @@ def test_history_status_words_fit_their_column(tmp_path):
     assert "no cal" in row and "never c" not in row, row
     for word in ("overdue", "due", "ok", "no cal"):
         assert len(word) <= STATUS_WIDTH
+
+
+def test_notices_never_cover_the_results_tables(tmp_path):
+    """A toast (bottom right, 3 to 5 lines each, two stacked) lay over the per-position
+    residuals and the last parameter rows at 80x24 for up to 8 s (an export's "Exported ... in
+    FOLDER", "Save first (s)"). On Results the notices are lines under the tables: every cell of
+    both tables stays the table's own, and the notice is read in words, gone when it expires."""
+    from station.screens.results import ResultsScreen
+
+    cap, result = p1_result("IMU-8")
+
+    def tables_clear(app) -> bool:
+        """Every cell of each table's region shows that table or its scrollbar (no toast or
+        other widget on it)."""
+        for table in app.screen.query("DataTable"):
+            r = table.region
+            if not table.display or r.area == 0:
+                return False
+            for y in range(r.y, r.bottom):
+                for x in range(r.x, r.right):
+                    if table not in app.screen.get_widget_at(x, y)[0].ancestors_with_self:
+                        return False
+        return True
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id="IMU-8")
+        app.session.extra["export_dir"] = str(tmp_path)
+        frames = []
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#residuals").row_count == 12)
+            await pilot.press("r")  # a report before saving: a warning notice
+            await pilot.press("e")  # an export: where the files went
+
+            def notices() -> str:  # the line under the tables ("" where there is none)
+                return text_of(app, "#notices") if app.screen.query("#notices") else ""
+
+            def both_shown() -> bool:  # as toasts (drawn) or as lines
+                toasts = [t for t in app.screen.query("Toast") if t.region.area]
+                return len(toasts) == 2 or "Exported" in notices()
+
+            await wait_for(pilot, both_shown)
+            frames.append((tables_clear(app), screen_lines(app), notices()))
+            await wait_for(pilot, lambda: "Save first" not in notices(), timeout_s=30.0)
+            frames.append((tables_clear(app), screen_lines(app), notices()))
+        return frames
+
+    frames = asyncio.run(story())
+    for clear, lines, _ in frames:
+        assert clear, "\n".join(lines)
+    lines, notices = frames[0][1], " ".join(frames[0][2].split())
+    assert "Save first (s): the report is of a stored calibration" in notices
+    assert "Exported" in notices and "Exported" in "\n".join(lines)
+    row = next(i for i, line in enumerate(lines) if "Save first" in line)
+    assert row > max(i for i, line in enumerate(lines) if "xz_135" in line or "x_up" in line)  # below the tables

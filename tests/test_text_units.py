@@ -57,9 +57,13 @@ def test_calibrate_text_compass_soft_iron_as_a_ratio(saved):
     lines = text.splitlines()
     i = next(k for k, line in enumerate(lines) if "soft_iron" in line)
     assert lines[i].strip() == "soft_iron [uT/uT]:"
-    rows = [_numbers(line)[0::2] for line in lines[i + 1 : i + 4]]  # value ± sigma pairs
+    # "value ± sigma" entries; below the diagonal "0 ± —": fixed by the triangular form, not estimated
+    entries = [line.strip().strip("[]").split(", ") for line in lines[i + 1 : i + 4]]
+    rows = [[_numbers(e.split(" ± ")[0])[0] for e in row] for row in entries]
     W = np.asarray(js["params"]["soft_iron"]) / 1000.0  # nT per uT → uT per uT
     assert np.allclose(rows, W, rtol=1e-5, atol=1e-9)
+    sigmas = [[e.split(" ± ")[1] for e in row] for row in entries]
+    assert [sigmas[1][0], sigmas[2][0], sigmas[2][1]] == ["—"] * 3 and "—" not in sigmas[0]
     assert 0.8 < W[0][0] < 1.2  # a ratio near one, as the Results screen shows it
     assert "hard_iron [uT]:" in text
     assert text.count("saved ") <= 1  # the compass said 'saved calibration N' twice

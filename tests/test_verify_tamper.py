@@ -270,6 +270,10 @@ def test_reading_commands_refuse_a_missing_database_and_create_nothing(capsys, t
 
 def test_devices_add_creates_the_database_explicitly(capsys, tmp_path):
     db = tmp_path / "new" / "station.db"
+    # a --db in a folder that does not exist is refused (a mistyped path made that folder)
+    code, _, err = _cli(capsys, "devices", "add", "IMU-1", "--db", db)
+    assert code == 2 and "the folder" in err and not (tmp_path / "new").exists()
+    (tmp_path / "new").mkdir()
     assert _cli(capsys, "devices", "add", "IMU-1", "--db", db)[0] == 0
     assert db.exists()
     assert _cli(capsys, "due", "--db", db)[0] == 1  # a device never calibrated is due

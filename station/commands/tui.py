@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from station.cli import db_path
     from station.errors import InputError, require_positive
 
+    path = db_path(args)  # a given --db in a missing folder is refused before the screen is drawn
     require_positive("--speed", args.speed)
     require_positive("--average-s", args.average_s, "seconds")
     site = None
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
 
             args.average_s = registry.default_average_s(registry.DEFAULT, True)
     app = make_app(
-        db_path(args),
+        path,
         device=device,
         average_s=args.average_s,
         device_id=args.device_id,

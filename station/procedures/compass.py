@@ -351,7 +351,7 @@ def format_text(result: dict) -> str:
         f"after {a['mean']:.6g} ± {a['std']:.3g} nT ({a['std_percent']:.3f} %)"
     )
     lines.append(
-        f"residual   {result['residual_rms']:.4g} nT RMS; coverage {100 * result['coverage']:.0f}% "
+        f"residual   {result['residual_rms']:.4g} nT RMS{residual_in_mag_unit(result)}; coverage {100 * result['coverage']:.0f}% "
         f"of the sphere; {result['n_positions']} distinct orientations; "
         f"RLS − batch ≤ {result['rls_minus_batch_max_sigma']:.3f} σ"
     )
@@ -419,7 +419,46 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         t[good], y[good], W0, h0, F, incl, noise_raw=noise, temp_c=None if temp is None else temp[good], **static
     )
     prob.screened = screened
-    return DiagnosisInput(prob, {}, "a sample far off the field sphere: a magnetic disturbance nearby or a glitch")
+    return DiagnosisInput(
+        prob,
+        {},
+        "a sample far off the field sphere: a magnetic disturbance nearby or a glitch",
+        param_units=diagnosis_units(capture.meta.get("mag_unit")),
+    )
+
+
+def diagnosis_units(mag_unit: str | None) -> dict:
+    """The unit of each compass parameter diagnose names, with its factor to nT (the residuals'
+    unit) where the capture's unit has one, and its unit then: the hard-iron terms are in the
+    capture's mag_unit, as calibrate's hard_iron."""
+    u = mag_unit or "raw units"
+    f = si_factor("mag", mag_unit)
+    return {
+        "h": (u, f, "nT"),
+        "dh": (u, f, "nT"),
+        "bT": (f"{u} per °C", f, "nT per °C"),
+        "bt": (f"{u}/s", f, "nT/s"),
+        "W": (f"nT per {u}", None, ""),
+        "t_on_s": ("s", None, ""),
+        "rho": ("rad", None, ""),
+        "field_scale": ("× the IGRF field", None, ""),
+    }
+
+
+def residual_in_mag_unit(result: dict) -> str:
+    """calibrate's residual (nT) in the capture's mag_unit, the hard iron's unit: '' for nT."""
+    unit = result.get("mag_unit")
+    f = si_factor("mag", unit)
+    res = result.get("residual_rms")
+    if unit == "nT" or not isinstance(res, (int, float)) or not math.isfinite(res):
+        return ""
+    if f is not None:
+        return f" = {res / f:.4g} {unit}"
+    W = np.asarray(result["params"].get("soft_iron"), float)
+    gain = abs(float(np.linalg.det(W))) ** (1 / 3) if W.shape == (3, 3) and np.all(np.isfinite(W)) else 0.0
+    if not gain > 0:
+        return ""
+    return f" ≈ {res / gain:.4g} {unit or 'raw units'} (through the soft iron's mean gain {gain:.4g} nT per {unit or 'raw unit'})"
 
 
 def report_figures(result: dict, meta: dict, columns: dict) -> list[tuple[str, str]]:

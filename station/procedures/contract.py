@@ -36,6 +36,9 @@ class DiagnosisInput(NamedTuple):
     # DiagnosisInput), tried when it has some: an effect may be what put them far from the rest
     kept: Any = None
     flagged_groups: tuple = ()  # in a kept input: the problem's groups the screen flagged and kept
+    # the unit of each parameter the text names, where it is not the residuals' (the compass's raw
+    # hard iron): name -> (unit, factor to the residuals' unit or None where none exists, the unit then)
+    param_units: dict = {}  # noqa: RUF012 - read only
 
 
 @runtime_checkable

@@ -216,6 +216,12 @@ def _result(capture, procedure, diag, inp) -> dict:
         },
         "quality": _quality(capture, diag, inp),
         "verdict": diag.verdict,
+        # not in diagnose.md: which unit the numbers are in, where a parameter's is not the residuals'
+        **(
+            {"units": {"residuals": diag.problem.unit} | {k: u[0] for k, u in inp.param_units.items()}}
+            if inp.param_units
+            else {}
+        ),
     }
 
 
@@ -291,10 +297,7 @@ def format_text(
             if k not in e["uncertainty"]:  # a residual effect's description (step place, period, knots)
                 L.append(f"            {k} = {_described(v)}{_driver_unit(e, k)}")
                 continue
-            L.append(
-                f"            {k} = {np.round(np.asarray(v, dtype=float), 8).tolist()} ± "
-                f"{np.round(np.asarray(e['uncertainty'][k], dtype=float), 8).tolist()}"
-            )
+            L.append(f"            {k} = {_value_sigma_unit(v, e['uncertainty'][k], inp.param_units.get(k))}")
     L.append(f"extended    {r['extended']['model']}")
     L.append(
         f"            residual {scale * r['extended']['residual_rms']:.4g} {unit} RMS, "
@@ -330,6 +333,33 @@ def format_text(
             L.append(f"--- {key}: {result[key]['procedure']} (the same session's second sensor)")
             L.append(format_text(result[key], sdiag, sinp, plots=False, plot_width=plot_width, width=width))
     return "\n".join(L)
+
+
+def _value_sigma_unit(v, s, units) -> str:
+    """An effect's parameter ± its 1σ (8 decimals), its unit where the procedure names one
+    (``DiagnosisInput.param_units``), and in the residuals' unit too where a factor exists (the
+    compass's hard-iron step in uT, = nT beside the residuals in nT). A σ of exactly 0 (a place
+    found by a scan, not estimated) is "—" (``station.formatting.sigma``)."""
+    from station.formatting import MISSING
+
+    value = np.asarray(v, dtype=float)
+    sig = np.asarray(s, dtype=float)
+    not_estimated = bool(sig.size) and bool(np.all(sig == 0))
+    text = f"{np.round(value, 8).tolist()} ± {MISSING if not_estimated else np.round(sig, 8).tolist()}"
+    if not units:
+        return text
+    unit, factor, converted = units
+    text += f" {unit}"
+    if factor and factor != 1.0:
+        text += f" (= {_g(value * factor, '.6g')}"
+        text += "" if not_estimated else f" ± {_g(sig * factor, '.2g')}"
+        text += f" {converted})"
+    return text
+
+
+def _g(x: np.ndarray, fmt: str) -> str:
+    """A number or a list of numbers, each as ``format(x, fmt)``."""
+    return format(float(x), fmt) if x.ndim == 0 else "[" + ", ".join(format(float(a), fmt) for a in x.ravel()) + "]"
 
 
 # the unit a residual term's place (a step's "at") or period is measured in, by its driver

@@ -362,21 +362,11 @@ class ConnectScreen(Screen):
         self.open_source(choice, port, self.query_one("#protocol", Select).value)
 
     def show_notices(self) -> None:
-        """The app's notices still current (``StationApp.notices``), newest last, as lines
-        under the buttons: a toast, bottom right, covered them at 80x24."""
-        if not self.query("#notices"):  # not composed yet: on_mount shows them
-            return
-        notices = [n for n in getattr(self.app, "notices", []) if not n.has_expired][-2:]
-        style = {"error": "b red", "warning": "yellow"}
-        lines = []
-        for n in notices:
-            text = " ".join(f"{n.title}: {n.message}".split()) if n.title else " ".join(n.message.split())
-            if not n.markup:
-                text = tui_markup(text)
-            lines.append(f"[{style[n.severity]}]{text}[/]" if n.severity in style else text)
-        self.query_one("#notices", Static).update("\n".join(lines))
-        if notices:  # again when the first goes
-            self.set_timer(max(min(n.time_left for n in notices), 0.0) + 0.05, self.show_notices)
+        """The app's current notices as lines under the buttons: a toast, bottom right, covered
+        them at 80x24 (``station.widgets.notices``)."""
+        from station.widgets.notices import show_notices
+
+        show_notices(self)
 
     def _status(self, text: str, error: bool = False) -> None:
         text = tui_markup(text)  # device ids, ports and errors come from outside

@@ -14,7 +14,7 @@ from textual.containers import Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import DataTable, Static
 
-from station.formatting import MISSING, num
+from station.formatting import num, sigma
 from station.messages import Exported, Saved, StoreLoaded
 from station.procedures import registry
 from station.procedures.review import (
@@ -28,12 +28,6 @@ from station.procedures.review import (
 from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
 from station.widgets.title import TitleBar, footer
-
-
-def _sigma(x) -> str:
-    """A row's 1σ; "—" for 0, a figure that is not estimated (P5's condition number, a value
-    the gauge fixes), which "± 0" read as exact."""
-    return MISSING if isinstance(x, (int, float)) and x == 0 else num(x, ".2g")
 
 
 class ResultsScreen(Screen):
@@ -51,6 +45,10 @@ class ResultsScreen(Screen):
     ResultsScreen #params { height: auto; max-height: 67%; }
     ResultsScreen #residuals { height: 1fr; }
     ResultsScreen #saved { height: auto; padding: 0 1; text-style: bold; }
+    /* notices are lines under the tables here, not toasts over them (80x24: a toast covered
+       the residuals and the last parameters for up to 8 s) */
+    ResultsScreen ToastHolder { display: none; }
+    ResultsScreen #notices { height: auto; max-height: 4; padding: 0 1; }
     """
 
     BINDINGS = [
@@ -87,10 +85,21 @@ class ResultsScreen(Screen):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
             yield DataTable(id="residuals", zebra_stripes=True, cursor_type="row")
         yield Static("", id="saved")
+        yield Static("", id="notices")
         yield footer()
 
     def on_mount(self) -> None:
+        self.show_notices()
         self.load_device()
+
+    def on_screen_resume(self) -> None:
+        self.show_notices()  # back from Diagnose, Limits or History: what is still current
+
+    def show_notices(self) -> None:
+        """The app's current notices as lines under the tables (``station.widgets.notices``)."""
+        from station.widgets.notices import show_notices
+
+        show_notices(self, hide_empty=True)
 
     @work(thread=True, exclusive=True, group="results-db", exit_on_error=False, description="read the device")
     def load_device(self) -> None:
@@ -159,7 +168,7 @@ class ResultsScreen(Screen):
             params.add_row(
                 row.name,
                 num(row.value, ".7g"),
-                _sigma(row.sigma),
+                sigma(row.sigma),
                 row.unit,
                 ok,
                 num(row.previous, ".7g"),
@@ -173,7 +182,7 @@ class ResultsScreen(Screen):
                 params.add_row(
                     "gyro " + row.name,
                     num(row.value, ".7g"),
-                    _sigma(row.sigma),
+                    sigma(row.sigma),
                     row.unit,
                     "",
                     num(row.previous, ".7g"),

@@ -1,0 +1,41 @@
+"""Notices as lines in a screen's own place, not toasts over its content.
+
+At 80x24 a toast (bottom right, 3 to 7 lines, two stacked) covered Connect's buttons and the
+Results tables. A screen that shows its notices itself hides Textual's ``ToastHolder`` in its
+CSS, composes a ``Static`` with id ``notices`` and calls :func:`show_notices` from its
+``show_notices`` method (``StationApp.on_notify`` calls that on every notice) and when it is
+shown again.
+"""
+
+from __future__ import annotations
+
+from textual.widgets import Static
+
+from station.textsafe import tui_markup
+
+SEVERITY_STYLE = {"error": "b red", "warning": "yellow"}
+
+
+def show_notices(screen, limit: int = 2, hide_empty: bool = False) -> None:
+    """The app's notices still current (``StationApp.notices``), newest last, at most
+    ``limit``, each on its own line(s) in ``screen``'s ``#notices``; drawn again when the
+    first of them expires, so the line empties as the toast would have gone. ``hide_empty``:
+    the line takes no room while it is empty (Results: the tables keep every line then)."""
+    if not screen.query("#notices"):  # not composed yet: its on_mount shows them
+        return
+    notices = [n for n in getattr(screen.app, "notices", []) if not n.has_expired][-limit:]
+    lines = []
+    for n in notices:
+        text = " ".join(f"{n.title}: {n.message}".split()) if n.title else " ".join(n.message.split())
+        if not n.markup:
+            text = tui_markup(text)
+        style = SEVERITY_STYLE.get(n.severity)
+        lines.append(f"[{style}]{text}[/]" if style else text)
+    line = screen.query_one("#notices", Static)
+    line.update("\n".join(lines))
+    if hide_empty:  # no blank line taken from the screen while there is nothing to say
+        line.display = bool(lines)
+    if notices:  # again when the first goes
+        screen.set_timer(
+            max(min(n.time_left for n in notices), 0.0) + 0.05, lambda: show_notices(screen, limit, hide_empty)
+        )
