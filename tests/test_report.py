@@ -351,3 +351,22 @@ def test_report_shows_a_sigma_that_is_not_estimated_as_a_dash(filled):
         assert float(u) > 0 and float(U) == pytest.approx(2 * float(u), rel=0.1), (name, u, U)
     # the same rule as the Results screen's σ column and the text of `station calibrate`
     assert sigma(0.0) == sigma(0) == "—" and sigma(2.5e-4) == "0.00025" and sigma(float("nan")) == "—"
+
+
+def test_history_and_recompute_show_a_sigma_that_is_not_estimated_as_a_dash(filled):
+    """`station history` printed the gauge-fixed entries as `0±0` and `station recompute` a ±SIGMA
+    of 0: read as exact. Both now say "—" there, as the report and the Results screen do."""
+    tmp, db, ids = filled
+    r = run_station("history", "IMU-U", "--db", db)
+    assert r.returncode == 0, r.stderr
+    m_line = next(x for x in r.stdout.splitlines() if x.lstrip().startswith("M"))
+    pairs = re.findall(r"(\S+)±(\S+)", m_line)
+    assert len(pairs) == 9, m_line
+    assert [s for _, s in pairs].count("—") == 3, m_line  # M[1][0], M[2][0], M[2][1]
+    assert all(s == "—" or float(s) > 0 for _, s in pairs), m_line
+    r = run_station("recompute", str(ids["p1-upper"]), "--db", db)
+    assert r.returncode == 0, r.stderr
+    rows = {x.split()[0]: x.split() for x in r.stdout.splitlines() if x.startswith("M[")}
+    for name in ("M[1][0]", "M[2][0]", "M[2][1]"):
+        assert rows[name][2] == "-", rows[name]
+    assert float(rows["M[0][0]"][2]) > 0

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from station.commands._dbutil import fmt_num, open_store, print_json, require_device
+from station.formatting import sigma
 from station.procedures import registry
 from station.textsafe import safe
 
@@ -44,7 +45,7 @@ def _param_lines(record: dict) -> list[str]:
             label = name[len(key) :]
             s = sig.get(name)
             text = fmt_num(shown_value(result, name, v)) + (
-                f"±{fmt_num(shown_value(result, name, s), 2)}" if s is not None else ""
+                f"±{sigma(shown_value(result, name, s), '.2g')}" if s is not None else ""
             )
             parts.append(f"{safe(label)}={text}" if label.startswith(".") else text)
         unit = shown_unit(result, key) if not isinstance(value, dict) else ""

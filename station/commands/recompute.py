@@ -8,6 +8,7 @@ import sys
 
 from station.commands._dbutil import fmt_num, open_store, print_json, record_id
 from station.errors import UnsupportedError
+from station.formatting import sigma
 from station.textsafe import safe
 
 
@@ -108,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
         (
             r["param"],
             fmt_num(r["stored"]),
-            fmt_num(r["stored_sigma"], 2),
+            sigma(r["stored_sigma"], ".2g", "-"),
             fmt_num(r["recomputed"]),
             fmt_num(r["delta"], 3),
             "-" if r["delta_in_sigma"] is None else f"{r['delta_in_sigma']:+.2f}",
