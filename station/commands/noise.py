@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "noise",
         help="Allan deviation, noise density, bias instability and random walk of a still IMU record",
         epilog="A record that moves (stillness detection) gets a warning and no figures, exit status 1.",
-        description="Allan deviation of the gyro and accelerometer of a still time-series capture, with 68 %% "
+        description="Allan deviation of the gyro and accelerometer of a still time-series capture, with 68 % "
         "confidence intervals; white-noise density, bias instability and rate random walk per axis, each "
         "with its 1-sigma; a terminal plot. --format kalibr writes Kalibr's imu.yaml (rad/s/sqrt(Hz), "
         "rad/s^2/sqrt(Hz), m/s^2/sqrt(Hz), m/s^3/sqrt(Hz), update_rate).",
