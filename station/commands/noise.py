@@ -146,8 +146,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(noise_json(result), indent=2))
         return 0
     sys.stdout.write(_text(result))
-    if not args.no_plot:
-        sys.stdout.write(_plot(result))
+    if not args.no_plot:  # the station's own figure: its colour codes go out as colour (drift's plot too)
+        getattr(sys.stdout, "write_trusted", sys.stdout.write)(_plot(result))
     if args.format == "kalibr":
         sys.stdout.write(f"wrote {safe(out_path)}\n")
     return 0
