@@ -82,7 +82,7 @@ def rate_warnings(capture) -> list[str]:
     with the rate, or answers ``rate_consequence(capture)``), else a warning naming what refuses
     it (P1 with labelled positions and gyro columns: its gyro block)."""
     from station.errors import InputError
-    from station.procedures import noise, registry, tabletop_gyro
+    from station.procedures import noise, registry
 
     entry = registry.get(capture.procedure)
     module = entry.load() if entry is not None else None
@@ -90,8 +90,9 @@ def rate_warnings(capture) -> list[str]:
     if own is None and hasattr(module, "rate_consequence"):  # P1: only where positions come from t
         own = module.rate_consequence(capture)
     why = f"`station noise` refuses it: {noise.RATE_CONSEQUENCE}"
-    if capture.procedure == "accel-tabletop" and tabletop_gyro.has_gyro(capture):
-        why = f"calibrate leaves the gyro uncalibrated, {tabletop_gyro.RATE_CONSEQUENCE}; {why}"
+    note = module.rate_note(capture) if hasattr(module, "rate_note") else None  # P1: its gyro block
+    if note:
+        why = f"{note}; {why}"
     try:
         capture.series_rate_hz(own or why)
     except InputError as exc:

@@ -69,6 +69,16 @@ def rate_consequence(capture) -> str | None:
     return STILLNESS_RATE_CONSEQUENCE if capture.is_time_series and not _labelled(capture) else None
 
 
+def rate_note(capture) -> str | None:
+    """What calibrate does with such a rate where it does not refuse it (``station inspect``'s
+    warning says so): a gyro time series is left uncalibrated."""
+    from station.procedures import tabletop_gyro
+
+    if not tabletop_gyro.has_gyro(capture):
+        return None
+    return f"calibrate leaves the gyro uncalibrated, {tabletop_gyro.RATE_CONSEQUENCE}"
+
+
 def _where(capture) -> str:
     return capture.path or "capture"
 
