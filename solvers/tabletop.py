@@ -51,6 +51,10 @@ PLACEMENT_SIGMA_TILTED_RAD = math.radians(1.1)
 DISTINCT_ANGLE_DEG = 7.0  # two positions closer than this are one orientation
 MIN_DISTINCT = 9  # the norm fit's 9 identifiable parameters
 CONDITION_WARN = 30.0  # position-set condition above this: warn "too alike"
+# A label whose direction lies further than this from its position's reading (after the one
+# rotation that best matches all labelled readings to their directions) does not describe it;
+# beyond any placement error, and the P1 set's positions lie 45° or more apart
+LABEL_AGREEMENT_DEG = 20.0
 
 # Source numbering (positions 1-6) and the station's order for 7-12; imucal's names.
 _ORDER = list(P1_POSITIONS)
@@ -129,6 +133,7 @@ class P1Result:
     noise_known: bool
     warnings: list[str] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)
+    labels_used: bool = True  # False: the labels contradicted the data and fixed nothing (upper-triangular)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -231,6 +236,37 @@ def to_upper(B, M) -> tuple[np.ndarray, np.ndarray]:
     s[s == 0] = 1.0
     Q, R = Q * s, (R.T * s).T
     return Q.T @ np.asarray(B, dtype=float), R
+
+
+def label_angles_deg(V: np.ndarray, B, M, directions: np.ndarray) -> np.ndarray:
+    """Per labelled position (rows of ``V`` with ``directions``): the angle (°) between its label's
+    direction and its reading ``B + M V`` turned by the rotation that best matches all of them
+    (Kabsch). ``B, M`` in any gauge: the norm fit leaves the rotation free, the labels fix it."""
+    A = accel.p1_apply(V, B, M)
+    a = A / np.maximum(np.linalg.norm(A, axis=1, keepdims=True), 1e-300)
+    d = directions / np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
+    U, _, Wt = np.linalg.svd(d.T @ a)
+    R = U @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Wt))) or 1.0]) @ Wt  # a → d
+    cos = np.clip(np.sum((a @ R.T) * d, axis=1), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
+
+
+def _labels_agree(positions: list[Position], V: np.ndarray, g_mps2: float, B0, M0) -> tuple[int, int] | None:
+    """How many labelled positions the labels describe (within LABEL_AGREEMENT_DEG of their
+    readings in the norm-only fit's frame, best rotated), and how many are labelled; None when
+    the norm-only fit is not possible. Numbered holds in another order than P1's (an
+    independent bench numbering its own orientations 1..N) read 37–160° from 'their' P1
+    directions: taken as the truth they turned the fit into M ≈ 0, |B| = g."""
+    idx = [k for k, p in enumerate(positions) if p.direction is not None]
+    try:
+        res = refine(positions, g_mps2, B0, M0, gauge="upper-triangular", sig_n=np.ones(len(positions)))
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotIdentifiable):
+        return None
+    dirs = np.array([positions[k].direction for k in idx], dtype=float)
+    angles = label_angles_deg(V[idx], res.params["B"], res.params["M"], dirs)
+    if not np.all(np.isfinite(angles)):
+        return None
+    return int(np.sum(angles <= LABEL_AGREEMENT_DEG)), len(idx)
 
 
 def orientation_clusters(A: np.ndarray, max_angle_deg: float = DISTINCT_ANGLE_DEG) -> np.ndarray:
@@ -442,11 +478,23 @@ def calibrate(
         return _step8_result(positions, g_mps2, s8, warnings, noise_known)
 
     # provisional calibration, for clustering and the start
+    init = ellipsoid_initial(V, g_mps2)
+    Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
+    labels_used = True
+    if gauge == "auto" and len(known) >= 3:
+        agree = _labels_agree(positions, V, g_mps2, Bu, Mu)
+        if agree is not None and agree[0] < max(3, (agree[1] + 1) // 2):
+            labels_used, s8, known = False, None, []
+            warnings.append(
+                f"the position labels do not describe these positions: {agree[1] - agree[0]} of {agree[1]} "
+                f"labelled positions read more than {LABEL_AGREEMENT_DEG:g}° from their label's direction "
+                "(holds numbered in another order than P1's positions?); the labels are not used for the "
+                "orientation (upper-triangular gauge)"
+            )
     if s8 is not None:
         B0, M0 = s8["B"], s8["M"]
     else:
-        init = ellipsoid_initial(V, g_mps2)
-        B0, M0 = init if init is not None else minmax_initial(V, g_mps2)
+        B0, M0 = Bu, Mu
     clusters = orientation_clusters(accel.p1_apply(V, B0, M0))
     n_distinct = int(clusters.max() + 1) if len(clusters) else 0
     if n_distinct < MIN_DISTINCT:
@@ -494,6 +542,13 @@ def calibrate(
             f"(condition number {res.condition_number:.3g})"
         )
     B, M = res.params["B"], res.params["M"]
+    n_after = int(orientation_clusters(accel.p1_apply(V, B, M)).max() + 1)
+    if n_after < MIN_DISTINCT:  # M ≈ 0, |B| ≈ g satisfies every norm row: a collapse, not a calibration
+        raise NotIdentifiable(
+            f"the fit collapsed: the {n_distinct} distinct orientations of the data come out as {n_after} "
+            f"after it (M's singular values {', '.join(f'{x:.3g}' for x in np.linalg.svd(M, compute_uv=False))}); "
+            "check the position labels and accel_unit, or leave the labels out"
+        )
     rotation_cov = None
     if gauge == "table":
         rotation_cov = rotation_covariance(positions, B, M, g_mps2, sig_n)
@@ -560,6 +615,7 @@ def calibrate(
         noise_known=noise_known,
         warnings=warnings,
         outliers=outliers,
+        labels_used=labels_used,
     )
 
 

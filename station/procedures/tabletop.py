@@ -254,7 +254,8 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
                 f"scale factors differ from the nominal {s:g} m/s^2 per {unit} by up to "
                 f"{100 * dev.max():.0f} %: check accel_unit"
             )
-    warnings += mislabelled(capture, positions, res.B, res.M)
+    if res.labels_used:  # labels that contradicted the data were set aside, saying so
+        warnings += mislabelled(capture, positions, res.B, res.M)
     t_known = [p for p in positions if p.direction is not None]
     rows = []
     for k, p in enumerate(positions):
@@ -288,6 +289,7 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         "g_mps2": g,
         "positions_found_by": found,
         "n_labelled_positions": len(t_known),
+        "labels_used": bool(res.labels_used and t_known),
         "n_distinct_orientations": res.n_distinct,
         "position_set_condition": res.position_condition,
         "noise": (
