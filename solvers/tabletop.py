@@ -251,17 +251,28 @@ def label_angles_deg(V: np.ndarray, B, M, directions: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(cos))
 
 
-def _labels_agree(positions: list[Position], V: np.ndarray, g_mps2: float, B0, M0) -> tuple[int, int] | None:
+def _labels_agree(positions: list[Position], V: np.ndarray, g_mps2: float, starts) -> tuple[int, int] | None:
     """How many labelled positions the labels describe (within LABEL_AGREEMENT_DEG of their
     readings in the norm-only fit's frame, best rotated), and how many are labelled; None when
-    the norm-only fit is not possible. Numbered holds in another order than P1's (an
-    independent bench numbering its own orientations 1..N) read 37–160° from 'their' P1
-    directions: taken as the truth they turned the fit into M ≈ 0, |B| = g."""
+    no norm-only fit is possible. The fit runs from each of ``starts`` ((B, M) pairs: the
+    ellipsoid's, step 8's) and keeps the lowest misfit that did not collapse. Numbered holds in
+    another order than P1's (an independent bench numbering its own orientations 1..N) read
+    37–160° from 'their' P1 directions: taken as the truth they turned the fit into M ≈ 0."""
     idx = [k for k, p in enumerate(positions) if p.direction is not None]
-    try:
-        res = refine(positions, g_mps2, B0, M0, gauge="upper-triangular", sig_n=np.ones(len(positions)))
-    except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotIdentifiable):
+    best = None
+    for B0, M0 in starts:
+        try:
+            res = refine(positions, g_mps2, B0, M0, gauge="upper-triangular", sig_n=np.ones(len(positions)))
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotIdentifiable):
+            continue
+        A = accel.p1_apply(V, res.params["B"], res.params["M"])
+        cost = float(res.residuals @ res.residuals)
+        if orientation_clusters(A).max() + 1 >= MIN_DISTINCT and math.isfinite(cost):
+            if best is None or cost < best[0]:
+                best = (cost, res)
+    if best is None:
         return None
+    res = best[1]
     dirs = np.array([positions[k].direction for k in idx], dtype=float)
     angles = label_angles_deg(V[idx], res.params["B"], res.params["M"], dirs)
     if not np.all(np.isfinite(angles)):
@@ -482,7 +493,8 @@ def calibrate(
     Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
     labels_used = True
     if gauge == "auto" and len(known) >= 3:
-        agree = _labels_agree(positions, V, g_mps2, Bu, Mu)
+        starts = [(Bu, Mu)] + ([(s8["B"], s8["M"])] if s8 is not None else [])
+        agree = _labels_agree(positions, V, g_mps2, starts)
         if agree is not None and agree[0] < max(3, (agree[1] + 1) // 2):
             labels_used, s8, known = False, None, []
             warnings.append(
