@@ -55,6 +55,7 @@ CONDITION_WARN = 30.0  # position-set condition above this: warn "too alike"
 # rotation that best matches all labelled readings to their directions) does not describe it;
 # beyond any placement error, and the P1 set's positions lie 45° or more apart
 LABEL_AGREEMENT_DEG = 20.0
+LABEL_CHECK_MIN_POSITIONS = 12  # 3 degrees of freedom beyond the norm fit's 9 parameters
 
 # Source numbering (positions 1-6) and the station's order for 7-12; imucal's names.
 _ORDER = list(P1_POSITIONS)
@@ -492,7 +493,9 @@ def calibrate(
     init = ellipsoid_initial(V, g_mps2)
     Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
     labels_used = True
-    if gauge == "auto" and len(known) >= 3:
+    # the norm alone can judge the labels only with redundancy: with 9 positions (no degree of
+    # freedom) it has other exact solutions, which the labels are there to tell apart
+    if gauge == "auto" and len(known) >= 3 and len(positions) >= LABEL_CHECK_MIN_POSITIONS:
         starts = [(Bu, Mu)] + ([(s8["B"], s8["M"])] if s8 is not None else [])
         agree = _labels_agree(positions, V, g_mps2, starts)
         if agree is not None and agree[0] < max(3, (agree[1] + 1) // 2):
