@@ -252,35 +252,6 @@ def label_angles_deg(V: np.ndarray, B, M, directions: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(cos))
 
 
-def _labels_agree(positions: list[Position], V: np.ndarray, g_mps2: float, starts) -> tuple[int, int] | None:
-    """How many labelled positions the labels describe (within LABEL_AGREEMENT_DEG of their
-    readings in the norm-only fit's frame, best rotated), and how many are labelled; None when
-    no norm-only fit is possible. The fit runs from each of ``starts`` ((B, M) pairs: the
-    ellipsoid's, step 8's) and keeps the lowest misfit that did not collapse. Numbered holds in
-    another order than P1's (an independent bench numbering its own orientations 1..N) read
-    37–160° from 'their' P1 directions: taken as the truth they turned the fit into M ≈ 0."""
-    idx = [k for k, p in enumerate(positions) if p.direction is not None]
-    best = None
-    for B0, M0 in starts:
-        try:
-            res = refine(positions, g_mps2, B0, M0, gauge="upper-triangular", sig_n=np.ones(len(positions)))
-        except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotIdentifiable):
-            continue
-        A = accel.p1_apply(V, res.params["B"], res.params["M"])
-        cost = float(res.residuals @ res.residuals)
-        if orientation_clusters(A).max() + 1 >= MIN_DISTINCT and math.isfinite(cost):
-            if best is None or cost < best[0]:
-                best = (cost, res)
-    if best is None:
-        return None
-    res = best[1]
-    dirs = np.array([positions[k].direction for k in idx], dtype=float)
-    angles = label_angles_deg(V[idx], res.params["B"], res.params["M"], dirs)
-    if not np.all(np.isfinite(angles)):
-        return None
-    return int(np.sum(angles <= LABEL_AGREEMENT_DEG)), len(idx)
-
-
 def orientation_clusters(A: np.ndarray, max_angle_deg: float = DISTINCT_ANGLE_DEG) -> np.ndarray:
     """Cluster index per position: directions of ``A`` within ``max_angle_deg`` are one orientation."""
     norm = np.linalg.norm(A, axis=1, keepdims=True)
@@ -490,26 +461,11 @@ def calibrate(
         return _step8_result(positions, g_mps2, s8, warnings, noise_known)
 
     # provisional calibration, for clustering and the start
-    init = ellipsoid_initial(V, g_mps2)
-    Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
-    labels_used = True
-    # the norm alone can judge the labels only with redundancy: with 9 positions (no degree of
-    # freedom) it has other exact solutions, which the labels are there to tell apart
-    if gauge == "auto" and len(known) >= 3 and len(positions) >= LABEL_CHECK_MIN_POSITIONS:
-        starts = [(Bu, Mu)] + ([(s8["B"], s8["M"])] if s8 is not None else [])
-        agree = _labels_agree(positions, V, g_mps2, starts)
-        if agree is not None and agree[0] < max(3, (agree[1] + 1) // 2):
-            labels_used, s8, known = False, None, []
-            warnings.append(
-                f"the position labels do not describe these positions: {agree[1] - agree[0]} of {agree[1]} "
-                f"labelled positions read more than {LABEL_AGREEMENT_DEG:g}° from their label's direction "
-                "(holds numbered in another order than P1's positions?); the labels are not used for the "
-                "orientation (upper-triangular gauge)"
-            )
     if s8 is not None:
         B0, M0 = s8["B"], s8["M"]
     else:
-        B0, M0 = Bu, Mu
+        init = ellipsoid_initial(V, g_mps2)
+        B0, M0 = init if init is not None else minmax_initial(V, g_mps2)
     clusters = orientation_clusters(accel.p1_apply(V, B0, M0))
     n_distinct = int(clusters.max() + 1) if len(clusters) else 0
     if n_distinct < MIN_DISTINCT:
@@ -523,7 +479,8 @@ def calibrate(
         )
     dirs = np.array([p.direction for p in known]) if known else np.zeros((0, 3))
     rank_known = int(np.linalg.matrix_rank(dirs, tol=0.1)) if len(known) else 0
-    if gauge == "auto":
+    auto = gauge == "auto"
+    if auto:
         gauge = "table" if (len(known) >= 3 and rank_known >= 2) else "upper-triangular"
     if gauge == "table" and (len(known) < 2 or rank_known < 2):
         raise NotIdentifiable("the table gauge needs at least two labelled positions with different known directions")
@@ -534,30 +491,60 @@ def calibrate(
             "condition's Jacobian is singular): the orientations are too alike; add positions "
             "spread over all directions"
         )
-    if noise_known:
-        sig_n = norm_sigma(positions, B0, M0, True)
-    else:
-        s_est = estimate_norm_noise(positions, g_mps2, B0, M0)
-        if s_est is None:
-            s_est = 1e-3 * g_mps2
-            warnings.append(
-                "no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
-                f"a norm noise of {s_est:.3g} m/s^2"
-            )
-        sig_n = np.full(len(positions), s_est)
-    res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
-    if noise_known:  # weights at the solution; refit only if they moved (a far start)
-        sig_new = norm_sigma(positions, res.params["B"], res.params["M"], True)
-        if np.max(np.abs(sig_new / sig_n - 1.0)) > 0.05:
-            res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_new)
-        sig_n = sig_new
+
+    def run(gauge: str, B0, M0):
+        notes = []
+        if noise_known:
+            sig_n = norm_sigma(positions, B0, M0, True)
+        else:
+            s_est = estimate_norm_noise(positions, g_mps2, B0, M0)
+            if s_est is None:
+                s_est = 1e-3 * g_mps2
+                notes.append(
+                    "no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
+                    f"a norm noise of {s_est:.3g} m/s^2"
+                )
+            sig_n = np.full(len(positions), s_est)
+        res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
+        if noise_known:  # weights at the solution; refit only if they moved (a far start)
+            sig_new = norm_sigma(positions, res.params["B"], res.params["M"], True)
+            if np.max(np.abs(sig_new / sig_n - 1.0)) > 0.05:
+                res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_new)
+            sig_n = sig_new
+        n_after = int(orientation_clusters(accel.p1_apply(V, res.params["B"], res.params["M"])).max() + 1)
+        return res, sig_n, notes, n_after
+
+    res, sig_n, notes, n_after = run(gauge, B0, M0)
+    labels_used = True
+    if gauge == "table" and auto and len(positions) >= LABEL_CHECK_MIN_POSITIONS:
+        # labels that do not describe the data (holds numbered 1..N in the bench's own order)
+        # pull the fit away or collapse it: then the fit without them, if it holds
+        idx = [k for k, p in enumerate(positions) if p.direction is not None]
+        angles = label_angles_deg(V[idx], res.params["B"], res.params["M"], dirs)
+        agree = int(np.sum(angles <= LABEL_AGREEMENT_DEG))
+        if n_after < MIN_DISTINCT or agree < max(3, (len(idx) + 1) // 2):
+            init = ellipsoid_initial(V, g_mps2)
+            Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
+            try:
+                alt = run("upper-triangular", Bu, Mu)
+            except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotIdentifiable):
+                alt = None
+            if alt is not None and alt[3] >= MIN_DISTINCT and not alt[0].unidentifiable:
+                res, sig_n, notes, n_after = alt
+                gauge, labels_used, s8, known = "upper-triangular", False, None, []
+                warnings.append(
+                    f"the position labels do not describe these positions: {len(idx) - agree} of {len(idx)} "
+                    f"labelled positions read more than {LABEL_AGREEMENT_DEG:g}° from their label's direction "
+                    "(holds numbered in another order than P1's positions?); the labels are not used for the "
+                    "orientation (upper-triangular gauge)"
+                )
+    warnings += notes
     if res.unidentifiable:
         raise NotIdentifiable(
             f"the positions cannot determine {', '.join(res.unidentifiable)} "
             f"(condition number {res.condition_number:.3g})"
         )
     B, M = res.params["B"], res.params["M"]
-    n_after = int(orientation_clusters(accel.p1_apply(V, B, M)).max() + 1)
     if n_after < MIN_DISTINCT:  # M ≈ 0, |B| ≈ g satisfies every norm row: a collapse, not a calibration
         raise NotIdentifiable(
             f"the fit collapsed: the {n_distinct} distinct orientations of the data come out as {n_after} "

@@ -7,7 +7,8 @@ orientations 1..18 got exit 0 with M's singular values 0.055, 0.051, 2.5e-5 and 
 fit collapsed onto the trivial solution of the norm condition (every |A_k| = |B| = g), with a
 residual of 2e-5 m/s² that looked excellent. Now labels that contradict the data are set aside
 (upper-triangular gauge, saying so), and a fit that maps the data's distinct orientations onto
-fewer is refused as a collapse.
+fewer is refused as a collapse. Large effects the model lacks (benchmarks/redteam_captures.py's
+temperature bias and time drift) keep their correct labels.
 
 The capture is written here from calibrate.md's model alone (V = M⁻¹(g u − B) per hold, with
 noise), not with the station's simulator.
@@ -103,8 +104,8 @@ def test_p1s_own_numbering_still_fixes_the_orientation(tmp_path):
 
 def test_nine_labelled_positions_keep_their_labels(tmp_path):
     """With 9 positions the norm condition has no redundancy and other exact solutions: a
-    norm-only fit there cannot judge the labels (it read 8 of 9 correct labels as wrong and
-    the calibration came out 17 % off); the labels pick the right solution."""
+    norm-only fit there cannot judge the labels (a first form of the label check took 8 of 9
+    correct labels for wrong, 17 % off); the labels pick the right solution."""
     from tests.test_capture_variants import _gen, _write
 
     path, truth = _write(tmp_path, "accel-tabletop", {"n_pos": 9})
@@ -112,3 +113,14 @@ def test_nine_labelled_positions_keep_their_labels(tmp_path):
     assert out["gauge"] == "table" and out["labels_used"] is True
     text, far = _gen().p1_check(out, truth)
     assert not far, text
+
+
+@pytest.mark.parametrize("effect", ["temperature_bias", "time_drift"])
+def test_a_large_unmodelled_effect_keeps_correct_labels(tmp_path, effect):
+    """A norm-only fit judged the labels wrongly under a large effect (9–11 of 12 correct labels
+    '> 20° off'); the labels are set aside only when the table fit itself fails with them."""
+    from tests.test_capture_variants import _write
+
+    path, _ = _write(tmp_path, "accel-tabletop", {"noise": 0.0005}, effect=effect, seed=4242)
+    out = json.loads(run_station("calibrate", path, "--json").stdout)
+    assert out["gauge"] == "table" and out["labels_used"] is True
