@@ -51,6 +51,11 @@ PLACEMENT_SIGMA_TILTED_RAD = math.radians(1.1)
 DISTINCT_ANGLE_DEG = 7.0  # two positions closer than this are one orientation
 MIN_DISTINCT = 9  # the norm fit's 9 identifiable parameters
 CONDITION_WARN = 30.0  # position-set condition above this: warn "too alike"
+# A label whose direction lies further than this from its position's reading (after the one
+# rotation that best matches all labelled readings to their directions) does not describe it;
+# beyond any placement error, and the P1 set's positions lie 45° or more apart
+LABEL_AGREEMENT_DEG = 20.0
+LABEL_CHECK_MIN_POSITIONS = 12  # 3 degrees of freedom beyond the norm fit's 9 parameters
 
 # Source numbering (positions 1-6) and the station's order for 7-12; imucal's names.
 _ORDER = list(P1_POSITIONS)
@@ -129,6 +134,7 @@ class P1Result:
     noise_known: bool
     warnings: list[str] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)
+    labels_used: bool = True  # False: the labels contradicted the data and fixed nothing (upper-triangular)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -231,6 +237,19 @@ def to_upper(B, M) -> tuple[np.ndarray, np.ndarray]:
     s[s == 0] = 1.0
     Q, R = Q * s, (R.T * s).T
     return Q.T @ np.asarray(B, dtype=float), R
+
+
+def label_angles_deg(V: np.ndarray, B, M, directions: np.ndarray) -> np.ndarray:
+    """Per labelled position (rows of ``V`` with ``directions``): the angle (°) between its label's
+    direction and its reading ``B + M V`` turned by the rotation that best matches all of them
+    (Kabsch). ``B, M`` in any gauge: the norm fit leaves the rotation free, the labels fix it."""
+    A = accel.p1_apply(V, B, M)
+    a = A / np.maximum(np.linalg.norm(A, axis=1, keepdims=True), 1e-300)
+    d = directions / np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
+    U, _, Wt = np.linalg.svd(d.T @ a)
+    R = U @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Wt))) or 1.0]) @ Wt  # a → d
+    cos = np.clip(np.sum((a @ R.T) * d, axis=1), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
 
 
 def orientation_clusters(A: np.ndarray, max_angle_deg: float = DISTINCT_ANGLE_DEG) -> np.ndarray:
@@ -460,7 +479,8 @@ def calibrate(
         )
     dirs = np.array([p.direction for p in known]) if known else np.zeros((0, 3))
     rank_known = int(np.linalg.matrix_rank(dirs, tol=0.1)) if len(known) else 0
-    if gauge == "auto":
+    auto = gauge == "auto"
+    if auto:
         gauge = "table" if (len(known) >= 3 and rank_known >= 2) else "upper-triangular"
     if gauge == "table" and (len(known) < 2 or rank_known < 2):
         raise NotIdentifiable("the table gauge needs at least two labelled positions with different known directions")
@@ -471,29 +491,66 @@ def calibrate(
             "condition's Jacobian is singular): the orientations are too alike; add positions "
             "spread over all directions"
         )
-    if noise_known:
-        sig_n = norm_sigma(positions, B0, M0, True)
-    else:
-        s_est = estimate_norm_noise(positions, g_mps2, B0, M0)
-        if s_est is None:
-            s_est = 1e-3 * g_mps2
-            warnings.append(
-                "no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
-                f"a norm noise of {s_est:.3g} m/s^2"
-            )
-        sig_n = np.full(len(positions), s_est)
-    res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
-    if noise_known:  # weights at the solution; refit only if they moved (a far start)
-        sig_new = norm_sigma(positions, res.params["B"], res.params["M"], True)
-        if np.max(np.abs(sig_new / sig_n - 1.0)) > 0.05:
-            res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_new)
-        sig_n = sig_new
+
+    def run(gauge: str, B0, M0):
+        notes = []
+        if noise_known:
+            sig_n = norm_sigma(positions, B0, M0, True)
+        else:
+            s_est = estimate_norm_noise(positions, g_mps2, B0, M0)
+            if s_est is None:
+                s_est = 1e-3 * g_mps2
+                notes.append(
+                    "no per-position noise and no redundancy (exactly 9 positions): uncertainties assume "
+                    f"a norm noise of {s_est:.3g} m/s^2"
+                )
+            sig_n = np.full(len(positions), s_est)
+        res = refine(positions, g_mps2, B0, M0, gauge=gauge, sig_n=sig_n)
+        if noise_known:  # weights at the solution; refit only if they moved (a far start)
+            sig_new = norm_sigma(positions, res.params["B"], res.params["M"], True)
+            if np.max(np.abs(sig_new / sig_n - 1.0)) > 0.05:
+                res = refine(positions, g_mps2, res.params["B"], res.params["M"], gauge=gauge, sig_n=sig_new)
+            sig_n = sig_new
+        n_after = int(orientation_clusters(accel.p1_apply(V, res.params["B"], res.params["M"])).max() + 1)
+        return res, sig_n, notes, n_after
+
+    res, sig_n, notes, n_after = run(gauge, B0, M0)
+    labels_used = True
+    if gauge == "table" and auto and len(positions) >= LABEL_CHECK_MIN_POSITIONS:
+        # labels that do not describe the data (holds numbered 1..N in the bench's own order)
+        # pull the fit away or collapse it: then the fit without them, if it holds
+        idx = [k for k, p in enumerate(positions) if p.direction is not None]
+        angles = label_angles_deg(V[idx], res.params["B"], res.params["M"], dirs)
+        agree = int(np.sum(angles <= LABEL_AGREEMENT_DEG))
+        if n_after < MIN_DISTINCT or agree < max(3, (len(idx) + 1) // 2):
+            init = ellipsoid_initial(V, g_mps2)
+            Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
+            try:
+                alt = run("upper-triangular", Bu, Mu)
+            except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotIdentifiable):
+                alt = None
+            if alt is not None and alt[3] >= MIN_DISTINCT and not alt[0].unidentifiable:
+                res, sig_n, notes, n_after = alt
+                gauge, labels_used, s8, known = "upper-triangular", False, None, []
+                warnings.append(
+                    f"the position labels do not describe these positions: {len(idx) - agree} of {len(idx)} "
+                    f"labelled positions read more than {LABEL_AGREEMENT_DEG:g}° from their label's direction "
+                    "(holds numbered in another order than P1's positions?); the labels are not used for the "
+                    "orientation (upper-triangular gauge)"
+                )
+    warnings += notes
     if res.unidentifiable:
         raise NotIdentifiable(
             f"the positions cannot determine {', '.join(res.unidentifiable)} "
             f"(condition number {res.condition_number:.3g})"
         )
     B, M = res.params["B"], res.params["M"]
+    if n_after < MIN_DISTINCT:  # M ≈ 0, |B| ≈ g satisfies every norm row: a collapse, not a calibration
+        raise NotIdentifiable(
+            f"the fit collapsed: the {n_distinct} distinct orientations of the data come out as {n_after} "
+            f"after it (M's singular values {', '.join(f'{x:.3g}' for x in np.linalg.svd(M, compute_uv=False))}); "
+            "check the position labels and accel_unit, or leave the labels out"
+        )
     rotation_cov = None
     if gauge == "table":
         rotation_cov = rotation_covariance(positions, B, M, g_mps2, sig_n)
@@ -560,6 +617,7 @@ def calibrate(
         noise_known=noise_known,
         warnings=warnings,
         outliers=outliers,
+        labels_used=labels_used,
     )
 
 

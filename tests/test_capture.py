@@ -790,14 +790,28 @@ def test_inspect_refuses_a_compass_rate_that_t_contradicts(shared_data, tmp_path
 
 
 def test_inspect_warns_of_a_rate_that_t_contradicts(shared_data, tmp_path):
-    # the real imu_tk record logged at 100 Hz, stated as 400 Hz: P1 does not use the rate, noise does
-    path = tmp_path / "xsens.capture.csv"
-    line = _with_rate(shared_data / "imu_tk_xsens" / "imu_tk_xsens.capture.csv", path, "400")
+    # imucal's labelled session logged at 102.4 Hz, stated as 400 Hz: P1's labelled positions do
+    # not use t (its gyro block does, and is left uncalibrated), noise does
+    real = shared_data / "imucal_ferraris" / "imucal_ferraris_labelled.capture.csv"
+    path = tmp_path / "ferraris.capture.csv"
+    line = _with_rate(real, path, "400")
     out = _station("inspect", str(path), "--json")
     assert out.returncode == 0, out.stderr
     (warning,) = json.loads(out.stdout)["warnings"]
     assert warning.startswith(f"line {line}:") and "400 Hz" in warning and "station noise" in warning
+    assert "gyro uncalibrated" in warning
     text = _station("inspect", str(path)).stdout
     assert re.search(rf"^warning:\s+line {line}: metadata 'sample_rate_hz': 400 Hz", text, re.M)
-    plain = _station("inspect", str(shared_data / "imu_tk_xsens" / "imu_tk_xsens.capture.csv"), "--json")
+    plain = _station("inspect", str(real), "--json")
     assert json.loads(plain.stdout)["warnings"] == []
+
+
+@pytest.mark.parametrize("command", ["inspect", "calibrate"])
+def test_a_rate_that_t_contradicts_is_refused_where_p1_finds_its_positions_over_t(shared_data, tmp_path, command):
+    # the real imu_tk record logged at 100 Hz, stated as 400 Hz, no position column: stillness
+    # detection finds the positions over windows of t, so t or the rate is wrong where it matters
+    path = tmp_path / "xsens.capture.csv"
+    line = _with_rate(shared_data / "imu_tk_xsens" / "imu_tk_xsens.capture.csv", path, "400")
+    out = _station(command, str(path))
+    assert out.returncode == 2 and out.stdout == "" and out.stderr.count("\n") == 1, out.stderr
+    assert f"{path}:{line}: metadata 'sample_rate_hz': 400 Hz" in out.stderr and "windows of t" in out.stderr

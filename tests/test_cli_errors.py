@@ -811,6 +811,18 @@ def test_every_help_fits_an_80_column_terminal(monkeypatch, capsys):
     assert exc.value.code == 2 and "accel-tabletop" in err and "ldv" in err
 
 
+def test_no_help_shows_a_doubled_percent_sign(monkeypatch):
+    """argparse %-formats an option's help but not a description unless it holds '%(prog)':
+    `station noise --help` said '68 %% confidence intervals'."""
+    from station.cli import build_parser
+
+    monkeypatch.setenv("COLUMNS", "80")
+    parser = build_parser()
+    doubled = {name: sub.format_help() for name, sub in [("station", parser), *_subparsers(parser)]}
+    assert not {name: text for name, text in doubled.items() if "%%" in text}
+    assert "68 % confidence" in " ".join(doubled["noise"].split())
+
+
 def test_help_names_the_database_this_machine_uses(tmp_path, monkeypatch):
     """`--db`'s help said ~/.local/share/station/station.db whatever XDG_DATA_HOME said: it
     gives the rule and the path it comes to here."""

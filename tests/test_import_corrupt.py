@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from station.capture import read_capture
-from tests.station_run import run_station
+from tests.station_run import ROOT, run_station
 from tests.test_import_ardupilot import write_bin, write_tlog
 
 
@@ -161,3 +161,34 @@ def test_a_compass_that_died_early_does_not_cut_the_imu_rows(tmp_path, procedure
             assert 45 <= have.sum() <= 200 and not have[-1000:].any()
         else:
             assert "mx" not in cap.columns
+
+
+@pytest.mark.parametrize(
+    ("log", "says"),
+    [
+        ("ardupilot", "4116 bytes of the log in one stretch (the first at byte 30005) hold no readable message"),
+        ("px4", "the log holds a corrupt stretch (pyulog skipped it to the next sync marker)"),
+    ],
+)
+def test_a_stretch_of_zeros_inside_a_real_log_is_warned_about_not_skipped_silently(tmp_path, shared_data, log, says):
+    """A page of an SD card never written (4 KiB of zeros) inside a real log: the readers skip to
+    the next message and the samples there are lost (the pymavlink test log: 37 rows → 36;
+    sample.ulg: 17069 → 17016). The import said nothing of it: a silently shortened dataset."""
+    real, at = (
+        (ROOT / "tests" / "data" / "ardupilot_pymavlink" / "test.BIN", 30000)
+        if log == "ardupilot"
+        else (shared_data / "px4_ulog" / "original" / "sample.ulg", 228231)
+    )
+    data = bytearray(real.read_bytes())
+    data[at : at + 4096] = bytes(4096)
+    bad = tmp_path / f"holed{real.suffix}"
+    bad.write_bytes(bytes(data))
+    rows = {}
+    for name, path in (("clean", real), ("holed", bad)):
+        out = tmp_path / f"{name}.csv"
+        res = run_station("import", path, "--procedure", "gyro-drift", "--out", out, subprocess_run=True)
+        assert res.returncode == 0, res.stderr
+        warned = [line for line in res.stderr.splitlines() if says in line]
+        assert len(warned) == (1 if name == "holed" else 0), res.stderr
+        rows[name] = read_capture(out).n_rows
+    assert rows["holed"] < rows["clean"]

@@ -160,3 +160,25 @@ def test_noise_of_a_binary_log_says_what_it_is_and_how_to_read_it(tmp_path, shar
     log.write_bytes((shared_data / "px4_ulog" / "original" / "sample_log_small.ulg").read_bytes())
     res = run_station("noise", log, "--no-plot")
     assert_one_line_refusal(res, f"{log}: a PX4 ULog file, not a capture", "station import")
+
+
+@pytest.mark.parametrize("no_color", ["", "1"])
+def test_the_plot_on_a_real_terminal_is_coloured_not_escaped_text(tmp_path, no_color):
+    """On a terminal `station noise` printed its coloured plot through the stream that escapes
+    terminal-active characters: 32 rows of '\\x1b[48;5;15m' text around the dots, wrapped
+    across an 80-column screen. The plot is the station's own text (drift's plot already went
+    out as such): colour codes reach the terminal as colour, or none with NO_COLOR."""
+    import os
+
+    from tests.test_terminal_safety import _pty_run
+
+    cap = still_capture(tmp_path / "still.csv", seed=5, seconds=120.0)
+    env = {k: v for k, v in os.environ.items() if k != "NO_COLOR"}
+    env.update({"NO_COLOR": no_color, "COLUMNS": "80", "LINES": "24"})
+    rc, out = _pty_run("noise", cap, env=env)
+    text = out.decode("utf-8")
+    assert rc == 0 and "Allan deviation" in text, text[-400:]
+    assert "\\x1b" not in text
+    assert ("\x1b[" in text) == (not no_color)
+    plot = [re.sub(r"\x1b\[[0-9;]*m", "", line) for line in text.splitlines() if "┤" in line]
+    assert plot and max(len(line) for line in plot) <= 80  # as the screen shows it

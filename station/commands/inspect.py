@@ -79,14 +79,22 @@ def summary(capture) -> dict:
 def rate_warnings(capture) -> list[str]:
     """A stated ``sample_rate_hz`` that the ``t`` column contradicts: an InputError where the
     capture's own procedure would refuse it (its module names a ``RATE_CONSEQUENCE``: what scales
-    with the rate), else a warning naming what refuses it."""
+    with the rate, or answers ``rate_consequence(capture)``), else a warning naming what refuses
+    it (P1 with labelled positions and gyro columns: its gyro block)."""
     from station.errors import InputError
     from station.procedures import noise, registry
 
     entry = registry.get(capture.procedure)
-    own = getattr(entry.load(), "RATE_CONSEQUENCE", None) if entry is not None else None
+    module = entry.load() if entry is not None else None
+    own = getattr(module, "RATE_CONSEQUENCE", None)
+    if own is None and hasattr(module, "rate_consequence"):  # P1: only where positions come from t
+        own = module.rate_consequence(capture)
+    why = f"`station noise` refuses it: {noise.RATE_CONSEQUENCE}"
+    note = module.rate_note(capture) if hasattr(module, "rate_note") else None  # P1: its gyro block
+    if note:
+        why = f"{note}; {why}"
     try:
-        capture.series_rate_hz(own or f"`station noise` refuses it: {noise.RATE_CONSEQUENCE}")
+        capture.series_rate_hz(own or why)
     except InputError as exc:
         if own:
             raise

@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "noise",
         help="Allan deviation, noise density, bias instability and random walk of a still IMU record",
         epilog="A record that moves (stillness detection) gets a warning and no figures, exit status 1.",
-        description="Allan deviation of the gyro and accelerometer of a still time-series capture, with 68 %% "
+        description="Allan deviation of the gyro and accelerometer of a still time-series capture, with 68 % "
         "confidence intervals; white-noise density, bias instability and rate random walk per axis, each "
         "with its 1-sigma; a terminal plot. --format kalibr writes Kalibr's imu.yaml (rad/s/sqrt(Hz), "
         "rad/s^2/sqrt(Hz), m/s^2/sqrt(Hz), m/s^3/sqrt(Hz), update_rate).",
@@ -146,8 +146,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(noise_json(result), indent=2))
         return 0
     sys.stdout.write(_text(result))
-    if not args.no_plot:
-        sys.stdout.write(_plot(result))
+    if not args.no_plot:  # the station's own figure: its colour codes go out as colour (drift's plot too)
+        getattr(sys.stdout, "write_trusted", sys.stdout.write)(_plot(result))
     if args.format == "kalibr":
         sys.stdout.write(f"wrote {safe(out_path)}\n")
     return 0

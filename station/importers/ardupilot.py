@@ -28,6 +28,7 @@ import contextlib
 import io
 import math
 import os
+import re
 import struct
 
 import numpy as np
@@ -96,6 +97,42 @@ def _quiet():
         yield
 
 
+class _SkippedBytes(io.TextIOBase):
+    """pymavlink's DataFlash indexer as it reports a byte where no message starts ("bad header
+    0x00 0x00 at 30005", one line per byte skipped: a corrupt or unwritten stretch, whose
+    messages are lost): counted in stretches, the rest of its chatter dropped, nothing kept."""
+
+    _LINE = re.compile(r"bad header 0x[0-9a-fA-F]{2} 0x[0-9a-fA-F]{2} at (\d+)")
+
+    def __init__(self) -> None:
+        self.bytes = 0
+        self.stretches = 0
+        self.first: int | None = None
+        self._last = -2
+        self._tail = ""
+
+    def write(self, s: str) -> int:
+        *lines, self._tail = (self._tail + s).split("\n")
+        for line in lines:
+            m = self._LINE.match(line)
+            if m:
+                at = int(m.group(1))
+                self.bytes += 1
+                self.stretches += at != self._last + 1
+                self.first = at if self.first is None else self.first
+                self._last = at
+        return len(s)
+
+    def warning(self) -> str | None:
+        if not self.bytes:
+            return None
+        where = "one stretch" if self.stretches == 1 else f"{self.stretches} stretches"
+        return (
+            f"{self.bytes} bytes of the log in {where} (the first at byte {self.first}) hold no readable message "
+            "(corrupt or never written): the messages there are lost, a gap in the samples"
+        )
+
+
 def _open_error(path, exc: Exception, what: str) -> InputError:
     if isinstance(exc, FileNotFoundError):
         return InputError(path, None, "no such file")
@@ -153,8 +190,9 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     # any Python redirection: its pure-Python indexer (same result) prints through sys.stderr.
     fast = os.environ.get("PYMAVLINK_FAST_INDEX")
     os.environ["PYMAVLINK_FAST_INDEX"] = "0"
+    skipped = _SkippedBytes()
     try:
-        with _quiet():
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(skipped):
             log = DFReader.DFReader_binary(str(path), zero_time_base=True)
     except Exception as exc:  # noqa: BLE001 - any reader failure is one line
         raise _open_error(path, exc, "ArduPilot DataFlash log") from None
@@ -268,7 +306,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
-    warnings = []
+    warnings = [w for w in (skipped.warning(),) if w]
     if late:
         meta["params_changed"] = ",".join(sorted(late))
         warnings.append(

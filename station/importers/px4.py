@@ -309,6 +309,11 @@ def read(
             f"the log is cut short inside a message at byte {cut}: the samples before it are imported, "
             f"{len(next(iter(streams.values())).t_s)} samples up to {max(s.t_s[-1] for s in streams.values()):g} s"
         )
+    if getattr(ulog, "file_corruption", False):  # pyulog skipped to the next sync marker: never silently
+        warnings.append(
+            "the log holds a corrupt stretch (pyulog skipped it to the next sync marker): the messages in it "
+            "are lost, a gap in the samples there"
+        )
     if unreadable:
         warnings.append(
             f"{len(unreadable)} parameter(s) with no number in the log (a corrupt definition): "

@@ -53,6 +53,8 @@ PARAM_UNITS = {"drift": "rad/s", "earth_rate_body": "rad/s"}
 # exports and the database keep rad/s
 DISPLAY_UNITS = {k: ("°/h", 1.0 / gd.DEG_H_RAD_S) for k in ("drift", "earth_rate_body", "residual_rms")}
 LIMIT_EXAMPLE = "e.g. drift=-10:10  (°/h)"  # the limits box's example, in the unit shown
+# why a stated sample_rate_hz that the t column contradicts is refused (Capture.series_rate_hz)
+RATE_CONSEQUENCE = "the drift's error (Allan deviation) and the record's length scale with the rate"
 ZERO_IS_A_RESULT = True
 
 # Devices whose captures are known to break the conventions (their SOURCE.md).
@@ -173,6 +175,7 @@ def _dt(capture) -> float:
         )
     coarse_step = None
     if capture.is_time_series:
+        capture.series_rate_hz(RATE_CONSEQUENCE)  # a file that contradicts itself: t in ms, or the wrong rate
         t = capture.columns["t"]
         d = np.diff(t[np.isfinite(t)])
         if len(d) and np.median(d) > 0:

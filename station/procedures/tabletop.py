@@ -52,6 +52,33 @@ METHODS = {
 }
 
 
+# why a stated sample_rate_hz that the t column contradicts is refused when the positions are
+# found by stillness detection (its windows are seconds of t); labelled positions do not need t
+STILLNESS_RATE_CONSEQUENCE = "the static positions are found over windows of t seconds"
+
+
+def _labelled(capture) -> bool:
+    labels = capture.columns.get("position")
+    return labels is not None and any(labels)
+
+
+def rate_consequence(capture) -> str | None:
+    """What a stated ``sample_rate_hz`` that ``t`` contradicts makes wrong where calibrate refuses
+    it (``station inspect`` asks): the positions of a time series without a ``position`` column.
+    None otherwise (labelled positions, a table; a gyro block is then left uncalibrated, saying why)."""
+    return STILLNESS_RATE_CONSEQUENCE if capture.is_time_series and not _labelled(capture) else None
+
+
+def rate_note(capture) -> str | None:
+    """What calibrate does with such a rate where it does not refuse it (``station inspect``'s
+    warning says so): a gyro time series is left uncalibrated."""
+    from station.procedures import tabletop_gyro
+
+    if not tabletop_gyro.has_gyro(capture):
+        return None
+    return f"calibrate leaves the gyro uncalibrated, {tabletop_gyro.RATE_CONSEQUENCE}"
+
+
 def _where(capture) -> str:
     return capture.path or "capture"
 
@@ -112,7 +139,7 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
     missing = int((~np.all(np.isfinite(a), axis=1)).sum())
     if missing:  # never a silently shortened dataset
         warnings.append(f"{missing} of {len(a)} rows with a missing accelerometer value left out")
-    if labels is not None and any(labels):
+    if _labelled(capture):
         out = []
         for start, stop, lab in _runs(labels):
             seg = a[start:stop]
@@ -137,6 +164,7 @@ def static_positions(capture, warnings: list[str]) -> tuple[list[T.Position], st
         return out, "position column", True
     from solvers.stillness import detect_static_intervals
 
+    capture.series_rate_hz(STILLNESS_RATE_CONSEQUENCE)  # t in ms would make every sample a position
     gyro = None
     if all(c in capture.columns for c in ("gx", "gy", "gz")):
         gyro = np.column_stack([np.asarray(capture.columns[c], dtype=float) for c in ("gx", "gy", "gz")])
@@ -226,7 +254,8 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
                 f"scale factors differ from the nominal {s:g} m/s^2 per {unit} by up to "
                 f"{100 * dev.max():.0f} %: check accel_unit"
             )
-    warnings += mislabelled(capture, positions, res.B, res.M)
+    if res.labels_used:  # labels that contradicted the data were set aside, saying so
+        warnings += mislabelled(capture, positions, res.B, res.M)
     t_known = [p for p in positions if p.direction is not None]
     rows = []
     for k, p in enumerate(positions):
@@ -260,6 +289,7 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         "g_mps2": g,
         "positions_found_by": found,
         "n_labelled_positions": len(t_known),
+        "labels_used": bool(res.labels_used and t_known),
         "n_distinct_orientations": res.n_distinct,
         "position_set_condition": res.position_condition,
         "noise": (

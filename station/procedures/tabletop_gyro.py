@@ -22,12 +22,21 @@ from solvers.allan import hold_mean_se
 from solvers.errors import SolverError
 from solvers.models import accel
 from solvers.units import si_factor
+from station.errors import InputError
 
 MODEL = "y = K ω + ε + G f"
+# why a stated sample_rate_hz that the t column contradicts leaves the gyro uncalibrated: the
+# rotations are integrated over t (the accelerometer's holds do not depend on it)
+RATE_CONSEQUENCE = "the rotations between the holds are integrated over t"
+
+
+def has_gyro(capture) -> bool:
+    """Whether the capture holds a gyro time series (the rotations between the holds)."""
+    return capture.is_time_series and all(c in capture.columns for c in ("gx", "gy", "gz", "t"))
 
 
 def _gyro(capture) -> np.ndarray | None:
-    if not capture.is_time_series or not all(c in capture.columns for c in ("gx", "gy", "gz", "t")):
+    if not has_gyro(capture):
         return None
     return np.column_stack([np.asarray(capture.columns[c], dtype=float) for c in ("gx", "gy", "gz")])
 
@@ -132,6 +141,16 @@ def block(capture, positions, B, M, g_mps2: float) -> dict | None:
     if got is None:
         return None
     holds, motions, noise, notes = got
+    try:
+        capture.series_rate_hz(RATE_CONSEQUENCE)
+    except InputError as exc:  # t in ms, or the wrong rate: the turns would come out 1000 times too large
+        where = f"line {exc.line}: " if exc.line else ""
+        return {
+            "procedure": "gyro-tabletop",
+            "error": where + exc.message,
+            "warnings": notes,
+            "n_rotations": len(motions),
+        }
     unit = capture.meta.get("gyro_unit") or "rad/s"
     lat = capture.float_meta("latitude_deg")
     try:
