@@ -322,3 +322,25 @@ def test_the_residual_test_line_says_its_threshold(tmp_path, capsys):
         p = float(re.search(r"p = ([0-9.e+-]+) \(", line).group(1))
         want = f"(noise-like: p > {WHITE_P:g})" if p > WHITE_P else f"(NOT noise-like: p ≤ {WHITE_P:g})"
         assert line.rstrip().endswith(want), line
+
+
+def test_holds_recorded_alone_are_not_moved_positions(tmp_path, capsys):
+    """A bench that records only the holds (no rows while the unit is turned): the stillness
+    detector's windows that straddle each gap see two attitudes. That is no motion within a
+    hold; with 5 s holds every position but the first read 11 % moving and was named `moved`."""
+    sim = simulate("accel-tabletop", seed=4, hold_s=5.0)
+    c = {k: np.array(v, copy=True) for k, v in sim.columns.items()}
+    keep = c["position"] != ""  # the turns between holds are not recorded
+    path = _write(tmp_path, type(sim)(sim.procedure, sim.meta, {k: v[keep] for k, v in c.items()}))
+    res = _diagnose(path, capsys)
+    assert any(q["kind"] == "gap" for q in res["quality"])  # the turns are gaps in t
+    assert not [q for q in res["quality"] if q["kind"] == "moved"], res["quality"]
+    # a hold with handling in it is still named (its samples away from the gaps count)
+    idx = np.flatnonzero(c["position"] == "y_up")
+    mid = idx[len(idx) // 2 - 100 : len(idx) // 2 + 100]
+    wob = np.sin(np.linspace(0, 6 * np.pi, len(mid)))
+    c["ax"][mid] += 0.08 * wob
+    c["gx"][mid] += 0.4 * wob
+    path = _write(tmp_path, type(sim)(sim.procedure, sim.meta, {k: v[keep] for k, v in c.items()}))
+    res = _diagnose(path, capsys)
+    assert [q["position"] for q in res["quality"] if q["kind"] == "moved"] == ["y_up"], res["quality"]

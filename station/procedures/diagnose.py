@@ -54,8 +54,9 @@ def moved_positions(capture) -> list[dict]:
         else None
     )
     try:
-        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"]), a, g, nan_policy="omit")
-        return Q.moved_positions(st.still_mask, capture.columns["position"])
+        t = strictly_increasing_t(capture.columns["t"])
+        st = detect_static_intervals(t, a, g, nan_policy="omit")
+        return Q.moved_positions(st.still_mask, capture.columns["position"], t, st.config.window_n)
     except (SolverError, ValueError):
         return []
 
