@@ -153,7 +153,8 @@ def read(
         raise InputError(
             path,
             None,
-            "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic (try --source combined)",
+            "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic (try the combined source: "
+            "--source combined, or 'combined' on the import screen)",
         )
     if not use_raw and not combined:
         raise InputError(
@@ -220,7 +221,8 @@ def read(
         if n_comb > 4 * n_raw:
             warnings.append(
                 f"the raw sensor topics hold {n_raw} samples, sensor_combined {n_comb}: "
-                "--source combined reads those (already corrected by the board)"
+                "the combined source reads those (already corrected by the board: --source combined, "
+                "or 'combined' on the import screen)"
             )
     else:
         if instance not in (None, 0):  # one stream: the board's selected sensor, whatever was asked
