@@ -370,3 +370,24 @@ def test_history_and_recompute_show_a_sigma_that_is_not_estimated_as_a_dash(fill
     for name in ("M[1][0]", "M[2][0]", "M[2][1]"):
         assert rows[name][2] == "-", rows[name]
     assert float(rows["M[0][0]"][2]) > 0
+
+
+def test_history_on_an_80_column_terminal_wraps_between_pairs(filled):
+    """On an 80-column terminal `station history` printed a P1 M as one 175-column line that the
+    terminal broke mid-number; it wraps between value±σ pairs, indented (into a pipe, one line:
+    the test above reads it so)."""
+    import os
+
+    from tests.test_terminal_safety import _pty_run
+
+    tmp, db, ids = filled
+    env = {**os.environ, "COLUMNS": "80", "LINES": "24"}
+    rc, out = _pty_run("history", "IMU-U", "--db", db, env=env)
+    text = out.decode("utf-8")
+    assert rc == 0, text
+    lines = text.splitlines()
+    assert max(len(x) for x in lines) <= 80, max(lines, key=len)
+    i = next(k for k, x in enumerate(lines) if x.lstrip().startswith("M "))
+    block = [lines[i]] + [x for x in lines[i + 1 : i + 4] if x.startswith("        ")]
+    pairs = re.findall(r"(\S+)±(\S+)", " ".join(block))
+    assert len(pairs) == 9, block  # every pair whole, none split across lines
