@@ -200,3 +200,24 @@ def test_a_database_scheduled_by_the_old_rule_is_rescheduled_on_opening(db):
         assert rows["EDITED"]["due"] == "2030-01-01T00:00:00Z" and rows["EDITED"]["reason"] is None
         problems = s.verify()
         assert [(p["kind"], p["device_id"]) for p in problems] == [("schedule changed", "EDITED")]
+
+
+def test_due_on_an_80_column_terminal_wraps_its_reasons(db):
+    """A drift reason is one sentence of about 150 columns, which an 80-column terminal broke
+    mid-word; on a terminal it wraps between words at its width, indented, and into a pipe it
+    stays one line (the test above reads it so)."""
+    import os
+
+    from tests.test_terminal_safety import _pty_run
+
+    last = T0 + timedelta(days=DAYS[-1])
+    with Store(db) as s:
+        s.add_device("DRIFTY", interval_days=INTERVAL_D, tolerances=TOLERANCES)
+        _save(s, "DRIFTY", DAYS, np.random.default_rng(400102), rate_B0_per_year=0.25)
+    env = {**os.environ, "COLUMNS": "80", "LINES": "24"}
+    rc, out = _pty_run("due", "--within", "400", "--now", _iso(last), "--db", db, env=env)
+    lines = out.decode("utf-8").splitlines()
+    assert rc == 1 and lines[0].startswith("DRIFTY: due in "), lines
+    assert max(len(x) for x in lines) <= 80, max(lines, key=len)
+    reason = " ".join(x.strip() for x in lines[1:])
+    assert "drift of B[0] (+0.2" in reason and "leaves its tolerance 0.02 on" in reason, reason

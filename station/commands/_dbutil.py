@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sqlite3
 import sys
+import textwrap
 from contextlib import contextmanager
 
 from station.errors import InputError
@@ -133,6 +135,20 @@ def require_device(store, device_id: str) -> dict:
 
 def print_json(obj) -> None:
     sys.stdout.write(json.dumps(obj, indent=2, ensure_ascii=False) + "\n")
+
+
+def terminal_width() -> int:
+    """The terminal's width in columns when stdout is one (``COLUMNS`` first), else 0: output
+    into a pipe or a file is not wrapped."""
+    return shutil.get_terminal_size((0, 0)).columns if sys.stdout.isatty() else 0
+
+
+def fit_line(line: str, indent: str, width: int) -> str:
+    """``indent + line``, wrapped between words at ``width`` columns (0: not wrapped), the
+    continuation lines indented four columns further."""
+    if width <= 0 or len(indent) + len(line) <= width:
+        return indent + line
+    return textwrap.fill(line, width, initial_indent=indent, subsequent_indent=indent + "    ", break_long_words=False)
 
 
 def fmt_num(value, digits: int = 6) -> str:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from station.commands._dbutil import open_store, print_json
+from station.commands._dbutil import fit_line, open_store, print_json, terminal_width
 from station.errors import InputError
 from station.textsafe import safe
 
@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
         horizon = f" within {args.within:g} days" if args.within else ""
         sys.stdout.write(f"nothing due{horizon}\n")
     else:
+        width = terminal_width()
         for e in items:
             if e["days_left"] is None:
                 when = "never calibrated"
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
                 when = f"overdue by {-e['days_left']:.0f} d (due {e['due'][:10]})"
             else:
                 when = f"due in {e['days_left']:.0f} d ({e['due'][:10]})"
-            sys.stdout.write(f"{safe(e['device_id'])}: {when}\n")
-            for r in e["reasons"]:
-                sys.stdout.write(f"    {safe(r['text'])}\n")
+            sys.stdout.write(fit_line(f"{safe(e['device_id'])}: {when}", "", width) + "\n")
+            for r in e["reasons"]:  # on a terminal, wrapped at its width (a drift reason: 150 columns)
+                sys.stdout.write(fit_line(safe(r["text"]), "    ", width) + "\n")
     return 1 if items else 0

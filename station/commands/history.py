@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
-import textwrap
 
-from station.commands._dbutil import fmt_num, open_store, print_json, require_device
+from station.commands._dbutil import fit_line, fmt_num, open_store, print_json, require_device, terminal_width
 from station.formatting import sigma
 from station.procedures import registry
 from station.textsafe import safe
@@ -55,14 +53,6 @@ def _param_lines(record: dict) -> list[str]:
     return lines
 
 
-def _fit(line: str, indent: str, width: int) -> str:
-    """``indent + line``, wrapped between words at ``width`` columns (0: not wrapped) with the
-    continuation lines indented further."""
-    if width <= 0 or len(indent) + len(line) <= width:
-        return indent + line
-    return textwrap.fill(line, width, initial_indent=indent, subsequent_indent=indent + "    ", break_long_words=False)
-
-
 def run(args: argparse.Namespace) -> int:
     with open_store(args) as store:
         require_device(store, args.id)
@@ -74,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
     # on a terminal, the parameter lines (a P1 M is nine value±σ pairs, 175 columns) wrap at its
     # width between pairs, indented; into a pipe or a file they stay one line each
-    width = shutil.get_terminal_size((0, 0)).columns if sys.stdout.isatty() else 0
+    width = terminal_width()
     what = f" of {args.procedure}" if args.procedure else ""
     out = [f"device {safe(args.id)}: {len(records)} calibration{'s' if len(records) != 1 else ''}{what}, oldest first"]
     for r in records:
@@ -83,14 +73,14 @@ def run(args: argparse.Namespace) -> int:
             status += f", superseded by #{r['superseded_by']}"
         res, unit = shown_residual(record_result(r))
         out.append(
-            _fit(
+            fit_line(
                 f"#{r['id']}  {safe(r['time'])}  {safe(r['procedure'])}  {status}  residual_rms "
                 f"{fmt_num(res, 4)}{f' {safe(unit)}' if unit else ''}  software {safe(r['software_version'] or '-')}",
                 "",
                 width,
             )
         )
-        out.extend(_fit(line, "    ", width) for line in _param_lines(r))
-        out.extend(_fit(f"warning: {safe(w)}", "    ", width) for w in r["warnings"])
+        out.extend(fit_line(line, "    ", width) for line in _param_lines(r))
+        out.extend(fit_line(f"warning: {safe(w)}", "    ", width) for w in r["warnings"])
     sys.stdout.write("\n".join(out) + "\n")
     return 0
