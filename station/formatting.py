@@ -39,23 +39,23 @@ def value_sigma(value, s) -> str:
     return f"{value:.6g} ± {sigma(s)}"
 
 
-def param_lines(name: str, value, sigma, indent: str = "  ") -> list[str]:
+def param_lines(name: str, value, sig, indent: str = "  ") -> list[str]:
     """A parameter (number, vector, matrix or named block) ± its 1σ as report lines; ``value``
-    and ``sigma`` are plain JSON values (lists, dicts, floats, None)."""
+    and its 1σ ``sig`` are plain JSON values (lists, dicts, floats, None)."""
     if isinstance(value, dict):
         out = [f"{indent}{name}:"]
         for k, v in value.items():
-            out += param_lines(k, v, sigma.get(k) if isinstance(sigma, dict) else None, indent + "  ")
+            out += param_lines(k, v, sig.get(k) if isinstance(sig, dict) else None, indent + "  ")
         return out
     if isinstance(value, list) and value and isinstance(value[0], list):
         out = [f"{indent}{name}:"]
         for i, row in enumerate(value):
-            srow = sigma[i] if isinstance(sigma, list) else [None] * len(row)
+            srow = sig[i] if isinstance(sig, list) else [None] * len(row)
             out.append(indent + "  [" + ", ".join(value_sigma(v, s) for v, s in zip(row, srow)) + "]")
         return out
     if isinstance(value, list):
-        srow = sigma if isinstance(sigma, list) else [None] * len(value)
+        srow = sig if isinstance(sig, list) else [None] * len(value)
         return [f"{indent}{name}: [" + ", ".join(value_sigma(v, s) for v, s in zip(value, srow)) + "]"]
     if isinstance(value, (int, float)):
-        return [f"{indent}{name}: {value_sigma(value, sigma if isinstance(sigma, (int, float)) else None)}"]
+        return [f"{indent}{name}: {value_sigma(value, sig if isinstance(sig, (int, float)) else None)}"]
     return [f"{indent}{name}: {value}"]
