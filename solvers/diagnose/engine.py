@@ -50,6 +50,7 @@ from solvers.params import Packer, as_params
 
 DEAD_RTOL = 1e-2  # a column whose part outside the baseline's span is below this fraction: not identifiable
 CONFUSION_CORR = 0.9  # |corr| of a generic term's signature with a library candidate's span: the same structure
+ALIAS_CORR = 0.99  # a generic term's signature this close to one library candidate's span: that candidate
 RIVAL_CORR = 0.8  # |corr| of two candidates' fitted signatures above this: compared head to head
 MAX_FOLDS = 10
 ALPHA = 0.05  # family-wise level the per-candidate deviance quantiles start from
@@ -94,12 +95,18 @@ class Problem:
     row_labels: list[str] | None = None  # a name per row for quality findings
     extended_model: Callable[[list[str]], str] | None = None
     row_types: np.ndarray | None = None
+    # the row kinds whose σ is measured (the held-out RMS is taken on them; no noise scale fitted):
+    # kind 0, and e.g. P1's changes across a hold (a noise scale of their own in the deviance)
+    measured_kinds: frozenset = frozenset({0})
     drivers: dict = field(default_factory=dict)  # name → per-row value (time, temperature, input …) for plots
     channels: int = 1  # time-ordered rows interleave this many channels (axes, beams)
     series: np.ndarray | None = None  # per row: id of its time-ordered series (−1: none), for serial correlation
     scale_free: dict = field(default_factory=dict)  # blocks freed only to measure auxiliary rows' noise scale
     generic: list = field(default_factory=list)  # [(Conditions, {driver: per-sample values})] for residual:<driver>
     generic_width: int = 3  # outputs per sample the generic extension adds to (axes, beams)
+    # driver → where a step is likeliest (P1: between holds in time, where the unit is handled);
+    # the step scan's grid is moved to the nearest of them and refined over them as well
+    step_places: dict = field(default_factory=dict)
     generic_scale: float = 2.0  # the generic extension's margin over the canonical test (nulls)
     fold_sets: dict = field(default_factory=dict)  # other CV groupings by name (e.g. "time": blocks within holds)
     dead_rtol: float = DEAD_RTOL  # a candidate column less outside the baseline's span than this: dead
@@ -551,7 +558,7 @@ def shared_inflation(problem: Problem, Q: np.ndarray, e: np.ndarray, s: np.ndarr
         return 1.0
     g = np.asarray(problem.shared_noise)
     _, inv, cnt = np.unique(g, return_inverse=True, return_counts=True)
-    multi = cnt[inv] >= 2
+    multi = (cnt[inv] >= 2) & (g >= 0)
     if not multi.any():
         return 1.0
     idx = np.flatnonzero(multi)
@@ -697,15 +704,17 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
                 return make(lambda x, x0=x0: (x >= x0).astype(float)[:, None] - 0.5, 1, {"shape": "step", "at": x0})
 
             dx = float(GENERIC_STEP_GRID[1] - GENERIC_STEP_GRID[0]) * span
-            out.append(
-                (
-                    "scan",
-                    [step(lo + f * span) for f in GENERIC_STEP_GRID],
-                    lambda d, step=step, dx=dx: [
-                        step(x) for x in np.linspace(d["at"] - dx, d["at"] + dx, GENERIC_REFINE)
-                    ],
-                )
-            )
+            grid = lo + GENERIC_STEP_GRID * span
+            places = np.asarray(problem.step_places.get(drv, []), float)
+            places = places[(places > lo) & (places < hi)]
+            if places.size:  # each grid value moved to the nearest place a step is likeliest
+                grid = np.unique(places[np.argmin(np.abs(grid[:, None] - places[None, :]), axis=1)])
+
+            def refine(d, step=step, dx=dx, places=places):
+                near = places[np.abs(places - d["at"]) <= dx]
+                return [step(at) for at in np.union1d(np.linspace(d["at"] - dx, d["at"] + dx, GENERIC_REFINE), near)]
+
+            out.append(("scan", [step(at) for at in grid], refine))
 
             def periodic(c, make=make, span=span):  # c cycles over the span
                 P = span / c
@@ -757,7 +766,7 @@ def _aux_scales(problem: Problem, fit_: FitResult, free: dict, sigma: np.ndarray
         sfit = fit(problem.residual, fit_.params, free={**free, **problem.scale_free}, sigma=sigma)
     rw = sfit.weighted_residuals
     for k in np.unique(problem.row_types):
-        if k == 0:
+        if k in problem.measured_kinds:
             continue
         sel = problem.row_types == k
         s = math.sqrt(float(np.mean(rw[sel] ** 2)))
@@ -798,6 +807,7 @@ class _Eval:
     n_kind: int = 0  # rows of that kind
     dof_kind: float = 0.0  # their residual degrees of freedom with the candidate fitted
     groups_left: float | None = None  # a generic term: degrees of freedom left in independent groups
+    within: float | None = None  # its deviance on the rows within groups alone (where too few groups are left)
     cv_ref: float | None = None  # the current model's held-out RMS over the rows ``cv`` is taken on (None: all)
 
     @property
@@ -922,7 +932,12 @@ def independent_groups(problem: Problem, A: np.ndarray, J: np.ndarray) -> float:
     every other problem (P1 table of averages, P2, compass, P4, LDV), the rows."""
     n = A.shape[0]
     g = np.arange(n) if problem.shared_noise is None else np.asarray(problem.shared_noise)
-    means, ng = group_means(g, np.asarray(problem.sigma, float))
+    use = g >= 0  # −1: a row that carries no group's offset (a change across a hold), not counted
+    grp_means, ng = group_means(g[use], np.asarray(problem.sigma, float)[use])
+
+    def means(x):
+        return grp_means(x[use])
+
     UA = means(A)
     r_A = _gram_rank(UA.T @ UA)
     QA = _orth(A)
@@ -939,11 +954,60 @@ def independent_groups(problem: Problem, A: np.ndarray, J: np.ndarray) -> float:
     return float(ng - r_A - float(np.sum(Ut**2)))
 
 
-def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: bool) -> _Eval:
+WITHIN_RANK_TOL = 1e-3  # a model column keeps less than this fraction of its norm within groups: none there
+
+
+def within_groups_deviance(problem: Problem, A: np.ndarray, J: np.ndarray, r: np.ndarray) -> float:
+    """Deviance of the term ``J`` beside the model ``A`` on the rows within groups alone: every
+    column and the residual ``r`` (weighted rows) taken off the groups' mean directions (``1/σ``
+    per group, what their shared noise moves; rows of group −1 carry none and stay whole), the
+    model's part there removed, in units of the residual variance left there. The shared noise
+    (a P1 hold's bias instability) is then no part of the test, which needs no free group."""
+    g = np.asarray(problem.shared_noise)
+    use = np.flatnonzero(g >= 0)
+    _, inv = np.unique(g[use], return_inverse=True)
+    ng = int(inv.max()) + 1 if use.size else 0
+    w = 1.0 / np.asarray(problem.sigma, float)[use]
+    u = w / np.sqrt(np.bincount(inv, weights=w**2, minlength=ng))[inv]
+
+    def off(X):
+        X = np.array(X, float, copy=True)
+        Xu = X[use]
+        m = np.zeros((ng,) + X.shape[1:])
+        uu = u.reshape((-1,) + (1,) * (X.ndim - 1))
+        np.add.at(m, inv, uu * Xu)
+        X[use] = Xu - uu * m[inv]
+        return X
+
+    # the model's part within groups, measured against its whole columns: K and b move the
+    # parts of a hold together, and what is left of them within it (the data's own deviations
+    # times 1e-4) is no direction the model can fit (orthonormalised alone, it took the effect)
+    d = np.linalg.norm(A, axis=0)
+    U, sv, _ = np.linalg.svd(off(A) / np.where(d > 0, d, 1.0), full_matrices=False)
+    QA = U[:, sv > WITHIN_RANK_TOL]
+    # the term's own part within groups, against its whole columns as well: a function of the
+    # input, constant within a hold but for the noise, keeps ~1e-4 of itself there and fits nothing
+    dj = np.linalg.norm(J, axis=0)
+    Jw, rw = off(J) / np.where(dj > 0, dj, 1.0), off(r)
+    Jw = Jw - QA @ (QA.T @ Jw)
+    rw = rw - QA @ (QA.T @ rw)
+    Uj, sj, _ = np.linalg.svd(Jw, full_matrices=False)
+    Qj = Uj[:, sj > WITHIN_RANK_TOL]
+    ss = float(np.sum((Qj.T @ rw) ** 2))
+    dof = len(r) - ng - QA.shape[1] - Qj.shape[1]
+    if dof < MIN_DOF or Qj.shape[1] == 0:
+        return 0.0
+    return ss / max((float(rw @ rw) - ss) / dof, 1e-300)
+
+
+def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: bool, r: np.ndarray | None = None) -> _Eval:
     """Set a generic term's ``groups_left`` (``independent_groups``, its scanned place or period
-    counted as one more parameter) where the problem says which rows share their noise."""
+    counted as one more parameter) where the problem says which rows share their noise; where
+    too few are left and the residual ``r`` is given, its deviance within groups (``within``)."""
     if problem.shared_noise is not None:
         ev.groups_left = independent_groups(problem, A, ev.cc.J) - int(scanned)
+        if r is not None and ev.groups_left < problem.min_groups - GROUPS_TOL:
+            ev.within = within_groups_deviance(problem, A, ev.cc.J, r)
     return ev
 
 
@@ -1020,7 +1084,8 @@ def _significant(problem, ev: _Eval, m: int, rank_cur: int, n: int, scale: float
     if ev.kind is not None and ev.dof_kind < MIN_DOF:
         return False
     if ev.groups_left is not None and ev.groups_left < problem.min_groups - GROUPS_TOL:
-        return False
+        # too few groups left to test it on their means: tested on the rows within them alone
+        return ev.within is not None and ev.within > _bound(problem, ev, m, n, rank_cur, scale)[0]
     return ev.D_rob > _bound(problem, ev, m, n, rank_cur, scale)[0]
 
 
@@ -1037,6 +1102,26 @@ def _passes(problem, ev: _Eval, m: int, cv_cur: float, rank_cur: int, n: int, sc
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
     den = float(np.linalg.norm(a) * np.linalg.norm(b))
     return float(a @ b) / den if den > 0 else 0.0
+
+
+def _by_evidence(problem: Problem, evs: list, n: int) -> list:
+    """Generic shapes that pass, best first: by BIC (the deviance net of serial correlation, each
+    parameter and a scanned place or period paid ln n), a simpler shape ahead of a more flexible
+    one that beats it by less than the decisive margin (the data cannot tell them apart). A
+    held-out RMS prefers the most flexible: a 5-knot smooth term took a P1 bias step at 10σ and
+    the bias instability beside it, 0.7 better in BIC than the step."""
+    left = sorted(evs, key=lambda ev: ev.k * math.log(n) - ev.D_rob)
+    out = []
+    while left:
+        best = left[0]
+        key = best.k * math.log(n) - best.D_rob
+        simpler = [
+            ev for ev in left if ev.k < best.k and ev.k * math.log(n) - ev.D_rob - key <= decisive_margin(problem)
+        ]
+        best = min(simpler, key=lambda ev: (ev.k, ev.k * math.log(n) - ev.D_rob)) if simpler else best
+        out.append(best)
+        left = [ev for ev in left if ev is not best]
+    return out
 
 
 def decisive_margin(problem: Problem, k: int = 1) -> float:
@@ -1110,7 +1195,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     fold_map = {None: folds, **{k: folds_of(v) for k, v in problem.fold_sets.items()}}
     for k, rows in problem.cv_rows.items():  # a fold set whose held-out RMS is taken on some rows only
         fold_map[k] = (fold_map.get(k, folds), np.asarray(rows, bool))
-    primary = None if problem.row_types is None else (np.asarray(problem.row_types) == 0)
+    primary = None if problem.row_types is None else np.isin(problem.row_types, sorted(problem.measured_kinds))
     if baseline_fit is None:
         baseline_fit = fit(problem.residual, problem.baseline, free=problem.free, sigma=sigma)
     if problem.row_types is not None:
@@ -1388,7 +1473,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 if item[0] == "scan":
                     ev.k += 1  # the scanned location or period
                 if groups:
-                    _count_groups(problem, ev, J0, item[0] == "scan")
+                    _count_groups(problem, ev, J0, item[0] == "scan", r0)
                 if chosen is None:
                     chosen = ev
                 if not _significant(problem, ev, m_gen, rank_cur, n, problem.generic_scale):
@@ -1414,13 +1499,16 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 continue
             lib.append((c.name, _orth(np.hstack([J0, cc.J])), cc))
         out = []
-        for best in sorted(passing, key=lambda ev: ev.cv)[: 3 if ranked else 1]:
+        for best in _by_evidence(problem, passing, n)[: 3 if ranked else 1]:
             corr = {}  # how much of its signature each library candidate's columns hold, at this state
             nb = float(np.linalg.norm(best.sig))
             for name, P, _ in lib:
                 proj = P @ (P.T @ best.sig)
                 corr[name] = float(np.linalg.norm(proj) / nb) if nb > 0 else 0.0
-            rule = {name for name, v in corr.items() if v > CONFUSION_CORR and name not in allow}
+            # (a library effect it may displace still rules it out where it holds all but 1 % of
+            # it: that is the effect itself in other coordinates, an LDV offset as a linear
+            # function of the input, unless it fits decisively better below)
+            rule = {name for name, v in corr.items() if v > CONFUSION_CORR and (name not in allow or v > ALIAS_CORR)}
             if rule and _single_basis(best.desc):
                 # one fixed basis is one test, as a library candidate is: a library candidate that
                 # holds most of its signature but fits decisively worse does not explain it
@@ -1484,7 +1572,13 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         fr = {k: v for k, v in free_.items() if k not in ev_.cc.params}
         Jm, _, _ = jacobian(problem, {k: v for k, v in fit_.params.items() if k not in ev_.cc.params}, fr)
         scanned = _scanned(ev_.desc)
-        return independent_groups(problem, Jm, ev_.cc.J) - int(scanned) >= problem.min_groups - GROUPS_TOL
+        if independent_groups(problem, Jm, ev_.cc.J) - int(scanned) >= problem.min_groups - GROUPS_TOL:
+            return True
+        # too few groups: the term tested within them, beside that model (its own block at zero)
+        wo = {**fit_.params, **{k: np.zeros_like(np.asarray(v, float)) for k, v in ev_.cc.params.items()}}
+        D_w = within_groups_deviance(problem, Jm, ev_.cc.J, _weighted(problem, wo))
+        q = deviance_quantile(problem, ev_.k, m_gen, n, n - _gram_rank(Jm.T @ Jm) - ev_.k)
+        return D_w > problem.generic_scale * candidate_threshold(problem, ev_.cc.cand.name) * q
 
     generic_effect = None
     generic_tied: list[dict] = []  # library effects the generic one displaced by a margin that is not decisive
@@ -1542,7 +1636,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
                     ev.k += int(_scanned(res0[0].desc))
-                    _count_groups(problem, ev, J0, _scanned(res0[0].desc))
+                    _count_groups(problem, ev, J0, _scanned(res0[0].desc), r0)
                     ok = _passes(
                         problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n, problem.generic_scale
                     )

@@ -388,6 +388,50 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
 # ---------------------------------------------------------------- P1 level table
 
 
+def _within_hold_contrasts(Vn, se, pos, b0, Kinv):
+    """The changes of the specific force's direction across each hold, rows ``C @ f.ravel()``
+    with ``f`` (R, 3) the sub-holds' specific force: per hold of P ≥ 2 parts, the P − 1
+    orthonormal (Helmert) contrasts of its parts, each resolved on the two directions
+    perpendicular to the hold's mean force. The norm rows see what changes within a hold only
+    along the force; a bias that drifts, follows temperature or jumps also turns it, whatever
+    the hold's (possibly unknown) orientation, which the contrasts cancel with the hold's
+    common offset. Returns (C, σ, position, contrast·2 + direction) per row; σ from the
+    sub-holds' standard errors through ``K⁻¹``."""
+    from scipy.linalg import helmert
+
+    R = len(Vn)
+    f0 = (np.asarray(Vn, float) - b0) @ Kinv.T
+    cov = np.einsum("ij,rj,kj->rik", Kinv, np.asarray(se, float) ** 2, Kinv)  # (R, 3, 3)
+    rows, sig, pos_c, idx_c = [], [], [], []
+    for k in np.unique(pos):
+        idx = np.flatnonzero(pos == k)
+        if len(idx) < 2:
+            continue
+        H = helmert(len(idx))
+        E = perp_basis(f0[idx].mean(axis=0) / np.linalg.norm(f0[idx].mean(axis=0)))
+        for c in range(len(idx) - 1):
+            for d in range(2):
+                row = np.zeros((R, 3))
+                row[idx] = np.outer(H[c], E[d])
+                rows.append(row.ravel())
+                sig.append(math.sqrt(float(np.einsum("ri,rij,rj->", row, cov, row))))
+                pos_c.append(k)
+                idx_c.append(2 * c + d)
+    if not rows:
+        return np.zeros((0, 3 * R)), np.zeros(0), np.zeros(0, int), np.zeros(0, int)
+    return np.array(rows), np.array(sig), np.array(pos_c, int), np.array(idx_c, int)
+
+
+def _between_holds(t_s, pos):
+    """Times between consecutive holds (midway from one hold's last part to the next one's first):
+    where the unit is handled, and a bias step from a knock or a connector falls."""
+    t = np.asarray(t_s, float)
+    order = np.argsort(t, kind="stable")
+    ts, ps = t[order], np.asarray(pos)[order]
+    change = np.flatnonzero(ps[1:] != ps[:-1])
+    return 0.5 * (ts[change] + ts[change + 1])
+
+
 def tabletop_problem(
     V,
     std,
@@ -443,8 +487,10 @@ def tabletop_problem(
         pos_n = np.asarray(sub["pos"], int)
         part = np.asarray(sub["part"], int)
         parts = int(part.max()) + 1
+        C, s_c, pos_c, part_c = _within_hold_contrasts(Vn, np.asarray(sub["se"], float), pos_n, b0, Kinv)
     else:
         Vn, cond_n, pos_n = V, cond, np.arange(m)
+        C, s_c, pos_c, part_c = np.zeros((0, 3 * m)), np.zeros(0), np.zeros(0, int), np.zeros(0, int)
         if se is not None:
             s_n = norm_sigma(V, np.asarray(se, float))
         elif noise_known and std is not None:
@@ -455,15 +501,17 @@ def tabletop_problem(
     s_v = np.repeat([g_mps2 * placement_sigma_rad[k] for k in known], 2) if table else np.zeros(0)
 
     def residual(p):
-        nrm = np.linalg.norm(accel_model.inverse(Vn, p, cond_n), axis=1) - g_mps2
+        fn = accel_model.inverse(Vn, p, cond_n)
+        nrm = np.linalg.norm(fn, axis=1) - g_mps2
+        within = C @ fn.ravel()
         if not table:
-            return nrm
+            return np.concatenate([nrm, within])
         f = accel_model.inverse(V, p, cond)
         perp = np.concatenate([E[i] @ f[k] for i, k in enumerate(known)])
-        return np.concatenate([nrm, perp])
+        return np.concatenate([nrm, perp, within])
 
-    sigma = np.concatenate([s_n, s_v])
-    groups = np.concatenate([pos_n, np.repeat(known, 2) if table else np.zeros(0, int)])
+    sigma = np.concatenate([s_n, s_v, s_c])
+    groups = np.concatenate([pos_n, np.repeat(known, 2) if table else np.zeros(0, int), pos_c])
     freeK = np.ones((3, 3), bool) if table else np.triu(np.ones((3, 3), bool))
     K0 = np.asarray(K0, float) if table else np.triu(np.asarray(K0, float))
     cands = [
@@ -477,6 +525,10 @@ def tabletop_problem(
     else:
         rows = [f"position {labels[k]} |f|" for k in range(m)]
     rows += [f"position {labels[k]} direction {j + 1}" for k in known for j in range(2)] if table else []
+    rows += [
+        f"position {labels[k]} change {j // 2 + 1} across the hold, direction {j % 2 + 1}"
+        for k, j in zip(pos_c, part_c)
+    ]
     prob = Problem(
         "accel-tabletop",
         "y = K f + b  (P1: A = B + M V, M = K⁻¹, B = −M b)",
@@ -496,15 +548,22 @@ def tabletop_problem(
             + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift"))
         ),
     )
-    nn = len(s_n)
+    nn, nc = len(s_n), len(s_c)
     prob.generic_scale = GENERIC_SCALES["accel-tabletop"]
-    prob.row_types = np.concatenate([np.zeros(nn, int), np.ones(len(s_v), int)])
-    pad = np.full(len(s_v), np.nan)
+    # the changes across holds: measured noise as the norm rows, a noise scale of their own in the
+    # deviance (a model that misfits the norm rows must not borrow their quiet to look significant)
+    prob.row_types = np.concatenate([np.zeros(nn, int), np.ones(len(s_v), int), np.full(nc, 2)])
+    prob.measured_kinds = frozenset({0, 2})
+    pad = np.full(len(s_v) + nc, np.nan)
     prob.drivers = {"position #": np.concatenate([pos_n + 1.0, pad])}
     if sub is not None:
         prob.fold_sets = {
             "time": np.concatenate(
-                [(part + pos_n) % parts, (np.repeat(known, 2) % parts) if table else np.zeros(0, int)]
+                [
+                    (part + pos_n) % parts,
+                    (np.repeat(known, 2) % parts) if table else np.zeros(0, int),
+                    (part_c // 2 + pos_c) % parts,
+                ]
             )
         }
         # input effects are held out on the same parts: with a whole position left out, a model
@@ -514,16 +573,18 @@ def tabletop_problem(
         # a generic smooth function of the input (up to 12 parameters) keeps whole positions out:
         # on parts it also fits each position's bias instability, which the parts of a hold share
         prob.fold_sets["input"] = groups
-        prob.series = np.concatenate([np.zeros(nn, int), np.full(len(s_v), -1)])
+        prob.series = np.concatenate([np.zeros(nn, int), np.full(len(s_v) + nc, -1)])
         # the parts of a hold share its bias instability: a generic term's degrees of freedom are
         # counted in holds (each direction row its own: placement errors are independent)
-        prob.shared_noise = np.concatenate([pos_n, m + np.arange(len(s_v))])
+        # (a change across a hold carries no hold's common offset: −1, in no group, not counted)
+        prob.shared_noise = np.concatenate([pos_n, m + np.arange(len(s_v)), np.full(nc, -1)])
         prob.min_groups = GENERIC_MIN_GROUPS["accel-tabletop"]
         prob.drivers["time [s]"] = np.concatenate([cond_n.t_s, pad])
         if cond_n.temp_c is not None:
             prob.drivers["temperature [°C]"] = np.concatenate([cond_n.temp_c, pad])
         fn = (Vn - b0) @ Kinv.T
         prob.generic = [(cond_n, {"time": cond_n.t_s, "temperature": cond_n.temp_c, "input_axis": fn})]
+        prob.step_places = {"time": _between_holds(cond_n.t_s, pos_n)}
         if table:
             prob.generic.append((cond, {"time": t, "temperature": T, "input_axis": f0}))
     else:
