@@ -67,6 +67,21 @@ class NoiseHoldScreen(HoldScreen):
         self.app.switch_screen(AllanScreen(message.capture, message.report, message.error))
 
 
+class AllanPlot(PlotextPlot):
+    """A log-log plotext figure drawn again before each build: plotext takes the log of a
+    log-scale figure's data in place when it builds, so a second build (the terminal resized,
+    the plot given rows) took the log of the logs, a math domain error for τ < 1 s that stopped
+    the TUI. ``draw(plt)`` sets the figure up."""
+
+    def __init__(self, draw, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self._draw = draw
+
+    def render(self):
+        self._draw(self.plt)
+        return super().render()
+
+
 class AllanScreen(Screen):
     CSS = """
     AllanScreen #plot { height: 12; }
@@ -94,7 +109,7 @@ class AllanScreen(Screen):
     def compose(self) -> ComposeResult:
         yield TitleBar("gyro noise (Allan) result")
         with Vertical():
-            yield PlotextPlot(id="plot")
+            yield AllanPlot(self._draw, id="plot")
             yield Static("", id="table")
             with Horizontal(id="ask"):
                 yield Label("P4 accuracy asked (°/h):")
@@ -112,21 +127,21 @@ class AllanScreen(Screen):
         self._answer(self.query_one("#accuracy", Input).value)
 
     def plot(self) -> None:
-        w = self.query_one("#plot", PlotextPlot)
-        plt = w.plt
+        self.query_one("#plot", PlotextPlot).refresh()
+
+    def _draw(self, plt) -> None:
+        """The figure, set up again before each build (``AllanPlot``)."""
         plt.clear_data()
         plt.clear_figure()
         r = self.report
         if r is None:
             plt.title("no Allan deviation")
-            w.refresh()
             return
         plt.xscale("log")
         plt.yscale("log")
         for k, (ax, color) in enumerate(zip(AXES, ("red", "green", "blue"))):
             plt.plot(r.taus_s.tolist(), r.adev_deg_h[:, k].tolist(), label=ax, color=color, marker="dot")
         plt.title(f"Allan deviation (°/h) vs τ (s), {r.duration_s:.0f} s record")
-        w.refresh()
 
     def _table(self, need=None) -> str:
         r = self.report
