@@ -19,6 +19,7 @@ from station.procedures.noise import AXES, format_duration, p4_record_verdict
 from station.screens.export import export_files, exported_text
 from station.screens.gyrodrift import HoldScreen
 from station.widgets.field import Field
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import TitleBar, footer
 
 
@@ -82,14 +83,17 @@ class AllanPlot(PlotextPlot):
         return super().render()
 
 
-class AllanScreen(Screen):
+class AllanScreen(NoticesMixin, Screen):
     CSS = """
-    AllanScreen #plot { height: 12; }
+    AllanScreen #plot { height: 1fr; min-height: 8; max-height: 12; }
     AllanScreen #table { height: 5; padding: 0 1; }
     AllanScreen #ask { height: 1; padding: 0 1; }
     AllanScreen #ask Label { width: 26; }
     AllanScreen #accuracy { width: 12; }
     AllanScreen #status { height: 2; padding: 0 1; }
+    /* notices under the answer (the plot gives them rows if needed), not a toast over the table */
+    AllanScreen ToastHolder { display: none; }
+    AllanScreen #notices { height: auto; max-height: 4; padding: 0 1; }
     """
     BINDINGS = [
         Binding("t", "accuracy", "Accuracy"),
@@ -116,6 +120,7 @@ class AllanScreen(Screen):
                 yield Field(value=f"{self.app.session.extra.get('accuracy_deg_h', 1.0):g}", id="accuracy", compact=True)
                 yield Label("  (t, type, Enter)")
             yield Static("", id="status")
+            yield Static("", id="notices")
         yield footer()
 
     def on_mount(self) -> None:
