@@ -96,9 +96,18 @@ class StationApp(App):
         self.call_after_refresh(self.load_due)  # after the first paint: start-up stays fast
 
     def on_notify(self, message: Notify) -> None:
-        """Keep the notice for the screens that show notices in their own place (Connect's
-        lines under its buttons); Textual shows the toast on the others."""
+        """Keep the notice for the screens that show notices in their own place (lines under
+        Connect's buttons, Results' tables, ...: ``station.widgets.notices``); Textual shows the
+        toast on the others."""
         self.notices = [n for n in self.notices if not n.has_expired] + [message.notification]
+        for screen in self.screen_stack:
+            if hasattr(screen, "show_notices"):
+                screen.show_notices()
+
+    def clear_notifications(self) -> None:
+        """Every notice goes, the lines that screens show them in too."""
+        super().clear_notifications()
+        self.notices = []
         for screen in self.screen_stack:
             if hasattr(screen, "show_notices"):
                 screen.show_notices()

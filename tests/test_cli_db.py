@@ -9,6 +9,7 @@ import sys
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
+import numpy as np
 import pytest
 from db_testdata import accel_result, compass_result, small_capture
 
@@ -357,3 +358,66 @@ def test_due_names_calibrated_devices_that_have_no_interval(capsys, db):
     assert "--interval-days" in err
     code, out, err = run(capsys, "due", "--json", "--db", db)
     assert code == 0 and json.loads(out) == [] and err == ""
+
+
+def test_drift_on_an_80_column_terminal_fits_with_every_figure_and_unit(db):
+    """On an 80-column terminal (the bench over SSH) `station drift` printed one table 107+
+    columns wide that the terminal wrapped mid-row; there it is one small table per procedure
+    and unit under a heading naming both, every figure of the pipe's table in its row (a row
+    still too wide breaks between cells), and into a pipe one line per coefficient as before."""
+    import re
+
+    from tests.test_terminal_safety import _pty_run
+
+    rng = np.random.default_rng(400117)
+    with Store(db) as s:
+        # B in m/s^2 drifting past its tolerance (a LEAVES date), M per V, a compass whose
+        # reference block has the longest names, one of them with a tolerance too
+        s.add_device("IMU-80", interval_days=365, tolerances={"B": 0.02, "reference.declination_deg": 0.5})
+        meta, cols = small_capture(device="IMU-80")
+        for k, day in enumerate((0, 60, 120, 180)):
+            B = [0.1 + 0.25 * day / 365.25, -0.2, 0.3] + rng.normal(0.0, 0.005, 3)
+            when = (datetime(2025, 1, 6, tzinfo=UTC) + timedelta(days=day)).strftime("%Y-%m-%dT%H:%M:%SZ")
+            s.save_calibration(
+                accel_result(device="IMU-80", B=B), meta=meta, columns=cols, time=when, allow_duplicate=True
+            )
+            s.save_calibration(
+                compass_result(device="IMU-80", hard_iron=(10.0 + k, -5.0, 2.0)),
+                meta=dict(meta, procedure="compass"),
+                columns=cols,
+                time=when,
+                allow_duplicate=True,
+            )
+    pipe = subprocess.run(
+        [sys.executable, "-m", "station", "drift", "IMU-80", "--no-plot", "--db", db],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert pipe.returncode == 0, pipe.stderr
+    rows = [re.split(r"\s{2,}", x.strip()) for x in pipe.stdout.splitlines() if x.startswith(("accel", "compass"))]
+    assert len(rows) == 12 + 9 + 3 + 6 and all(len(r) == 10 for r in rows), pipe.stdout
+    assert max(len(x) for x in pipe.stdout.splitlines()) > 80  # the defect's setting
+    assert any(re.fullmatch(r"\d{4}-\d\d-\d\d", r[9]) for r in rows)  # B[0] leaves its tolerance
+
+    env = {**os.environ, "COLUMNS": "80", "LINES": "24", "NO_COLOR": "1"}
+    rc, out = _pty_run("drift", "IMU-80", "--db", db, env=env)
+    text = out.decode("utf-8")
+    lines = text.splitlines()
+    assert rc == 0, text
+    assert max(len(x) for x in lines) <= 80, max(lines, key=len)
+    table = lines[: next(i for i, x in enumerate(lines) if x.startswith("plot"))]
+    for proc, param, unit, *figures in rows:
+        heading = table.index(
+            f"{proc} [{unit}]"
+            + ("" if any(r[8] != "-" for r in rows if r[:3:2] == [proc, unit]) else ", no tolerances set")
+        )
+        i = next(k for k in range(heading + 2, len(table)) if table[k].split()[:1] == [param])
+        cells = re.split(r"\s{2,}", table[i].strip())
+        for more in table[i + 1 :]:  # figures on the name's next line (or a row broken between cells), indented 6
+            if not more.startswith("      "):
+                break
+            cells += re.split(r"\s{2,}", more.strip())
+        with_tolerance = any("LEAVES" in x for x in table[heading + 1 : i])
+        assert cells == [param, *(figures if with_tolerance else figures[:5])], (param, cells, figures)

@@ -192,3 +192,40 @@ def test_a_stretch_of_zeros_inside_a_real_log_is_warned_about_not_skipped_silent
         assert len(warned) == (1 if name == "holed" else 0), res.stderr
         rows[name] = read_capture(out).n_rows
     assert rows["holed"] < rows["clean"]
+
+
+@pytest.mark.parametrize("damage", ["zeros", "garbage"])
+def test_a_corrupt_stretch_inside_a_tlog_is_warned_about_with_its_bytes_and_place(tmp_path, damage):
+    """pymavlink's tlog reader steps over bytes where no frame starts and drops a frame whose
+    checksum fails, and says nothing: 4 KiB of zeros (or 300 random bytes, with false 0xFE/0xFD
+    starts in them) inside a log lost 98 (8) of its 2000 RAW_IMU samples silently. The import
+    now says how many bytes hold no readable message and where the stretch begins, as for
+    DataFlash and ULog; the rest is imported. The bytes it counts are exactly the records lost."""
+    import re
+
+    clean = tmp_path / "clean.tlog"
+    write_tlog(clean, n=2000)  # pymavlink's own writer: RAW_IMU frames of 42 bytes with their time
+    data = bytearray(clean.read_bytes())
+    at = len(data) // 2
+    size = 4096 if damage == "zeros" else 300
+    rng = np.random.default_rng(400202)
+    data[at : at + size] = bytes(size) if damage == "zeros" else rng.integers(0, 256, size, dtype=np.uint8).tobytes()
+    holed = tmp_path / "holed.tlog"
+    holed.write_bytes(bytes(data))
+    rows, said = {}, {}
+    for name, path in (("clean", clean), ("holed", holed)):
+        out = tmp_path / f"{name}.csv"
+        res = run_station("import", path, "--procedure", "accel-tabletop", "--out", out, subprocess_run=True)
+        assert res.returncode == 0, res.stderr
+        said[name] = [line for line in res.stderr.splitlines() if "hold no readable message" in line]
+        rows[name] = read_capture(out).n_rows
+    assert said["clean"] == [] and rows["clean"] == 2000
+    [line] = said["holed"]
+    m = re.search(r"(\d+) bytes of the log in one stretch \(the first at byte (\d+)\)", line)
+    assert m, line
+    counted, first = int(m.group(1)), int(m.group(2))
+    record = 8 + 6 + 26 + 2  # time, MAVLink 1 header, RAW_IMU payload, checksum
+    assert first <= at < first + record  # the record the damage begins in
+    assert first + counted >= at + size  # to the end of the damage
+    assert 0 < rows["holed"] < rows["clean"]  # the rest is imported
+    assert counted == (rows["clean"] - rows["holed"]) * record  # exactly the records pymavlink lost

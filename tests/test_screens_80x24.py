@@ -607,7 +607,7 @@ def test_help_lines_fit_the_box_at_80x24():
         async with app.run_test(size=SIZE) as pilot:
             await pilot.press("f1")
             await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
-            text = app.screen.query_one(Static)
+            text = app.screen.query_one("#help Static", Static)  # (not the notices line under the box)
             await wait_for(pilot, lambda: text.size.height > 0)
             height = text.size.height
             box = app.screen.query_one("#help")
@@ -786,3 +786,186 @@ def test_notices_never_cover_the_results_tables(tmp_path):
     assert "Exported" in notices and "Exported" in "\n".join(lines)
     row = next(i for i, line in enumerate(lines) if "Save first" in line)
     assert row > max(i for i, line in enumerate(lines) if "xz_135" in line or "x_up" in line)  # below the tables
+
+
+# ---------------------------------------------------------------- notices on the other screens
+
+
+def _covered(app, selectors) -> list[str]:
+    """The widgets of ``selectors`` (on the screen on top) that another widget, such as a toast,
+    lies over somewhere in their region: each cell of each region must show that widget (or a
+    child of it)."""
+    out = []
+    for sel in selectors:
+        w = app.screen.query_one(sel)
+        r = w.region
+        assert w.display and r.area, sel
+        if any(
+            w not in app.screen.get_widget_at(x, y)[0].ancestors_with_self
+            for y in range(r.y, r.bottom)
+            for x in range(r.x, r.right)
+        ):
+            out.append(sel)
+    return out
+
+
+def _notices(app) -> str:
+    """The notices line of the screen on top ("" where there is none), in words."""
+    return " ".join(text_of(app, "#notices").split()) if app.screen.query("#notices") else ""
+
+
+def _shown(app, *words) -> bool:
+    """Each of ``words`` is on screen, as a toast (drawn) or in the notices line."""
+    toasts = " ".join(str(t.render()) for t in app.screen.query("Toast") if t.region.area)
+    return all(w in toasts or w in _notices(app) for w in words)
+
+
+async def _press_until_shown(pilot, app, keys, words, tries=20):
+    """Press ``keys`` until every one of ``words`` is on screen at once (a notice of the simulated
+    bench lasts 2 s: a loaded machine may let it go before the next one is drawn)."""
+    for _ in range(tries):
+        await pilot.press(*keys)
+        try:
+            await wait_for(pilot, lambda: _shown(app, *words), timeout_s=1.5)
+            return
+        except AssertionError:
+            continue
+    raise AssertionError(f"never all on screen: {words}")
+
+
+def test_notices_never_cover_the_p1_and_p2_prompts(tmp_path):
+    """P1: a position captured and the next `p` (or a device error, a warning) stacked two
+    toasts over the right half of the readouts and the prompt under them ("turn the unit over");
+    P2: a spin and a `f` too early lay over the prompt, the progress and the row-entry fields.
+    (Measured here with `f` too early and `p`, 39x4 + 39x3 cells.)
+    Both now say them on the free rows under the progress."""
+    from station.screens.centrifuge import CentrifugeScreen
+
+    async def p1():
+        clock = BenchClock()
+        src = SimSource(seed=2, clock=clock, procedure="accel-tabletop")
+        app = make_app(str(tmp_path / "s.db"), device=src, average_s=2.0, settle_s=0.5, start="procedure")
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen" and app.screen.updates > 2)
+            await run_bench(pilot, src, clock, lambda: _shown(app, "x_up captured"))
+            # fit asked too early (a warning), then the next position asked of the simulated bench
+            await _press_until_shown(pilot, app, ("f", "p"), ("P1 needs at least 9", "Simulated unit turned to"))
+            return _covered(app, ["#readouts", "#message", "#progress"]), _notices(app), screen_lines(app)
+
+    async def p2():
+        app = make_app(None, device=SimSource(seed=2, procedure="accel-centrifuge"), average_s=2.0, start="procedure")
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await wait_for(pilot, lambda: isinstance(app.screen, CentrifugeScreen) and app.screen.guide is not None)
+            # spin (simulated), then fit with no row yet
+            await _press_until_shown(pilot, app, ("p", "f"), ("Simulated centrifuge", "P2 needs at least"))
+            sel = ["#message", "#progress", "#manual", "#readouts"]
+            return _covered(app, sel), _notices(app), screen_lines(app)
+
+    for story in (p1, p2):
+        covered, notices, lines = asyncio.run(story())
+        assert covered == [], (story.__name__, covered, "\n".join(lines))
+        assert notices.count("\n") == 0 and len(notices) > 20, notices  # said in words, on screen
+        assert all(len(line) <= 80 for line in lines)
+
+
+def test_notices_never_cover_the_history_plot_nor_the_allan_table(tmp_path):
+    """History: the start-up reminder says "(F2 history)"; pressed, its toast (10 s, 39x5) lay
+    over the drift plot's last points and date axis. Allan result: an export's toast (8 s, up to
+    39x9) lay over the table's means and "P4 needs" and the answer under it."""
+    import os
+
+    from station.capture import read_capture
+    from station.procedures.noise import noise_report
+    from station.screens.noise import AllanScreen
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    seed_history(db, "IMU-7", n=3, interval_days=365)
+    seed_history(db, "IMU-8", n=1, interval_days=365)  # 2024-03-01: overdue
+
+    async def history():
+        app = make_app(db)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await wait_for(pilot, lambda: any(n.title == "Recalibration" for n in app.notices))
+            await pilot.press("f2")
+            await history_shown(pilot, app, 3)
+            await wait_for(
+                pilot, lambda: _shown(app, "overdue: IMU-8") and "date (UTC)" in "\n".join(screen_lines(app))
+            )
+            return _covered(app, ["#devices", "#calibrations", "#plot"]), _notices(app), screen_lines(app)
+
+    cap_path = tmp_path / "still.csv"
+    from tests.station_run import run_station
+
+    assert run_station("simulate", "--procedure", "gyro-drift", "--seed", 400003, "--out", cap_path).returncode == 0
+    cap = read_capture(cap_path)
+    gyro = np.column_stack([cap.columns[c] for c in ("gx", "gy", "gz")])
+    report = noise_report(gyro, float(cap.meta["sample_rate_hz"]), cap.meta.get("gyro_unit"))
+
+    async def allan():
+        app = make_app(None)
+        app.session.extra["export_dir"] = str(tmp_path / "a folder the bench keeps its exports in")
+        os.makedirs(app.session.extra["export_dir"])
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await app.push_screen(AllanScreen(cap, report))
+            await wait_for(pilot, lambda: "P4 needs" in "\n".join(screen_lines(app)) and app.screen.focused is None)
+            await pilot.press("e")
+            await wait_for(pilot, lambda: _shown(app, "Exported"))
+            return _covered(app, ["#table", "#ask", "#status"]), _notices(app), screen_lines(app)
+
+    for story in (history, allan):
+        covered, notices, lines = asyncio.run(story())
+        assert covered == [], (story.__name__, covered, "\n".join(lines))
+        assert ("Recalibration" in notices) if story is history else ("Exported" in notices), notices
+        assert all(len(line) <= 80 for line in lines)
+
+
+def test_notices_of_results_never_cover_its_boxes_nor_the_diagnose_report(tmp_path):
+    """Results says its notices on lines under its tables; a box opened over it (Decide on a
+    FAIL, Limits, Help) or Diagnose got them back as toasts: an export's (8 s, 39x9) lay over
+    Decide's and Limits' last lines, Help's text, the report's figures. Each says them in its
+    own place."""
+    from station.screens.results import ResultsScreen
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    seed_history(db, "IMU-7", n=1, tolerances={"B": 0.1})
+    with Store(db) as s:
+        previous = s.history("IMU-7")[-1]
+    cap, result = p1_result("IMU-7", drift=0.5)  # B moved 0.5 m/s²: FAIL
+
+    async def story():
+        app = make_app(db, device_id="IMU-7")
+        app.session.extra["export_dir"] = str(tmp_path)
+        seen = {}
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, previous))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            for key, screen, parts in (
+                ("s", "DecideScreen", ["#box"]),
+                ("l", "LimitsScreen", ["#box"]),
+                ("f1", "HelpScreen", ["#help"]),
+                ("g", "DiagnoseScreen", ["VerticalScroll"]),
+            ):
+                for _ in range(5):  # again if a loaded machine let the notice go before the box came
+                    await pilot.press("e")  # an export: where the files went (8 s)
+                    await wait_for(pilot, lambda: "Exported" in _notices(app))
+                    await pilot.press(key)
+                    await wait_for(pilot, lambda screen=screen: screen_name(app) == screen)
+                    try:
+                        await wait_for(pilot, lambda: _shown(app, "Exported"), timeout_s=6.0)
+                        seen[screen] = (_covered(app, parts), _notices(app), screen_lines(app))
+                    except AssertionError:
+                        pass
+                    await pilot.press("escape")
+                    await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
+                    if screen in seen:
+                        break
+        return seen
+
+    seen = asyncio.run(story())
+    assert list(seen) == ["DecideScreen", "LimitsScreen", "HelpScreen", "DiagnoseScreen"]
+    for screen, (covered, notices, lines) in seen.items():
+        assert covered == [], (screen, covered, "\n".join(lines))
+        assert "Exported IMU-7-accel-tabletop-" in notices and ".json in" in notices, (screen, notices)
+        assert all(len(line) <= 80 for line in lines)

@@ -167,3 +167,35 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
     assert cap.meta["run"] == "gyro-noise" and cap.n_rows == pytest.approx(report.duration_s * 100, abs=2)
     js = json.loads(open(paths[1], encoding="utf-8").read())
     assert js["kind"] == "gyro-noise" and js["accuracy_deg_h"] == 5.0
+
+
+def test_the_allan_result_survives_a_resized_terminal(tmp_path):
+    """Resizing the terminal on the Allan result (or giving its plot rows) built the log-log
+    figure again: plotext had taken the log of its data in place, took the log of the logs
+    and the TUI stopped with a math domain error (τ < 1 s)."""
+    from station.capture import read_capture
+    from station.procedures.noise import noise_report
+    from station.screens.noise import AllanScreen
+    from tests.station_run import run_station
+
+    path = tmp_path / "still.csv"
+    assert run_station("simulate", "--procedure", "gyro-drift", "--seed", 400003, "--out", path).returncode == 0
+    cap = read_capture(path)
+    gyro = np.column_stack([cap.columns[c] for c in ("gx", "gy", "gz")])
+    report = noise_report(gyro, float(cap.meta["sample_rate_hz"]), cap.meta.get("gyro_unit"))
+    assert report.taus_s.min() < 1.0  # the logs of the shortest τ are negative
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(AllanScreen(cap, report))
+            await wait_for(pilot, lambda: "Allan deviation" in "\n".join(screen_lines(app)[1:3]))
+            await pilot.resize_terminal(100, 30)
+            await wait_for(pilot, lambda: len(screen_lines(app)) == 30 and len(screen_lines(app)[2].rstrip()) > 80)
+            await pilot.resize_terminal(*SIZE)
+            await wait_for(pilot, lambda: len(screen_lines(app)) == SIZE[1])
+            return screen_lines(app)
+
+    lines = asyncio.run(story())
+    plot = "\n".join(lines[1:13])
+    assert "Allan deviation" in plot and "60.00" in plot and "•" in plot  # the τ axis to 60 s, the points

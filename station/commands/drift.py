@@ -7,7 +7,7 @@ import os
 import sys
 
 from db.params import DRIFT_MIN_CALIBRATIONS, DRIFT_SIGNIFICANCE
-from station.commands._dbutil import fmt_num, open_store, print_json, require_device
+from station.commands._dbutil import fit_line, fmt_num, open_store, print_json, require_device, terminal_width
 from station.errors import InputError
 from station.procedures import registry
 from station.textsafe import safe
@@ -71,6 +71,96 @@ def _significance(t: dict) -> float:
     return abs(t["rate_per_year"]) / t["rate_sigma_per_year"]
 
 
+_HEADER = (
+    "PROCEDURE",
+    "PARAM",
+    "UNIT",
+    "N",
+    "IN_USE",
+    "RATE/YEAR",
+    "±SIGMA",
+    "SIGNIF",
+    "TOLERANCE",
+    "LEAVES_TOLERANCE",
+)
+_LEGEND = (
+    f"SIGNIF: |rate| / its sigma; * = significant (≥ {DRIFT_SIGNIFICANCE:g}σ over ≥ {DRIFT_MIN_CALIBRATIONS} "
+    "calibrations)"
+)
+
+
+def _cells(t: dict) -> tuple[str, ...]:
+    """One trend as the cells of ``_HEADER``."""
+    signif = "-" if t["significance_sigmas"] is None else f"{t['significance_sigmas']:.1f}σ"
+    if t["significant"]:
+        signif += " *"
+    return (
+        safe(t["procedure"]),
+        safe(t["param"]),
+        safe(t["unit"] or "-"),
+        str(t["n"]),
+        fmt_num(t["value_in_use"]),
+        fmt_num(t["rate_per_year"], 3),
+        fmt_num(t["rate_sigma_per_year"], 2),
+        signif,
+        fmt_num(t["tolerance"]),
+        safe((t["leaves_tolerance"] or "-")[:10]),
+    )
+
+
+def _table(rows: list[tuple[str, ...]], indent: str = "") -> list[str]:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return [(indent + "  ".join(c.ljust(w) for c, w in zip(r, widths))).rstrip() for r in rows]
+
+
+def _fit_row(line: str, cells: tuple[str, ...], indent: str, width: int) -> list[str]:
+    """A table row wider than ``width``: broken between its cells (never inside one), the
+    continuation indented."""
+    if len(line) <= width:
+        return [line]
+    out, cur = [], indent + cells[0]
+    for c in cells[1:]:
+        if len(cur) + 2 + len(c) > width:
+            out.append(cur)
+            cur = indent + "    " + c
+        else:
+            cur += "  " + c
+    return out + [cur]
+
+
+def _grouped(rows: list[tuple[str, ...]], width: int) -> list[str]:
+    """The table for a terminal too narrow for one line per coefficient with its procedure
+    and unit: one small table per procedure and unit, under a heading that names both
+    (``accel-tabletop [m/s^2]``); TOLERANCE and LEAVES (the date a significant trend leaves
+    its tolerance) only where a tolerance is set. A group still too wide (long names such as
+    ``reference.declination_deg``) gives each name its own line, its figures on the next."""
+    groups: dict[tuple[str, str], list[tuple[str, ...]]] = {}
+    for r in rows:
+        groups.setdefault((r[0], r[2]), []).append(r)
+    out = []
+    for (proc, unit), members in groups.items():
+        with_tolerance = any(r[8] != "-" for r in members)
+        unit_text = "no unit" if unit == "-" else unit
+        out.append(fit_line(f"{proc} [{unit_text}]" + ("" if with_tolerance else ", no tolerances set"), "", width))
+        figures = [
+            ("N", "IN_USE", "RATE/YEAR", "±SIGMA", "SIGNIF") + (("TOLERANCE", "LEAVES") if with_tolerance else ())
+        ]
+        figures += [r[3:8] + (r[8:10] if with_tolerance else ()) for r in members]
+        names = ["PARAM"] + [r[1] for r in members]
+        lines = _table([(n, *f) for n, f in zip(names, figures)], "  ")
+        if max(map(len, lines)) <= width:
+            out += lines
+            continue
+        for name, line, cells in zip(names, _table(figures, "      "), figures):
+            out.append(fit_line(name, "  ", width))
+            out += _fit_row(line, cells, "      ", width)
+    legend = (
+        _LEGEND + ": only those get a LEAVES date (when the trend leaves its TOLERANCE) and can bring the "
+        "due date forward"
+    )
+    return out + [fit_line(legend, "", width)]
+
+
 def _plot(trends: list[dict]) -> str:
     import plotext as plt
 
@@ -131,45 +221,15 @@ def run(args: argparse.Namespace) -> int:
     if not trends:
         sys.stdout.write(f"device {safe(args.id)}: no accepted calibrations yet\n")
         return 0
-    out = [f"device {safe(args.id)}: drift per year over its accepted calibrations (weighted linear fit)"]
-    header = (
-        "PROCEDURE",
-        "PARAM",
-        "UNIT",
-        "N",
-        "IN_USE",
-        "RATE/YEAR",
-        "±SIGMA",
-        "SIGNIF",
-        "TOLERANCE",
-        "LEAVES_TOLERANCE",
-    )
-    rows = [header]
-    for t in trends:
-        signif = "-" if t["significance_sigmas"] is None else f"{t['significance_sigmas']:.1f}σ"
-        if t["significant"]:
-            signif += " *"
-        rows.append(
-            (
-                safe(t["procedure"]),
-                safe(t["param"]),
-                safe(t["unit"] or "-"),
-                str(t["n"]),
-                fmt_num(t["value_in_use"]),
-                fmt_num(t["rate_per_year"], 3),
-                fmt_num(t["rate_sigma_per_year"], 2),
-                signif,
-                fmt_num(t["tolerance"]),
-                safe((t["leaves_tolerance"] or "-")[:10]),
-            )
-        )
-    widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
-    out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
-    out += [
-        f"SIGNIF: |rate| / its sigma; * = significant (≥ {DRIFT_SIGNIFICANCE:g}σ over ≥ {DRIFT_MIN_CALIBRATIONS} "
-        "calibrations):",
-        "only those get a LEAVES_TOLERANCE date and can bring the due date forward",
-    ]
+    width = terminal_width()
+    title = f"device {safe(args.id)}: drift per year over its accepted calibrations (weighted linear fit)"
+    rows = [_cells(t) for t in trends]
+    wide = _table([_HEADER] + rows)
+    out = [fit_line(title, "", width)]
+    if width and max(map(len, wide)) > width:  # a terminal too narrow for the table: grouped, units in headings
+        out += _grouped(rows, width)
+    else:  # into a pipe (or wide enough): one line per coefficient with its procedure and unit
+        out += wide + [_LEGEND + ":", "only those get a LEAVES_TOLERANCE date and can bring the due date forward"]
     sys.stdout.write("\n".join(out) + "\n")
     if not args.no_plot:
         plottable = [t for t in trends if t["n"] >= 2 and len(set(t["values"])) > 1]
@@ -183,5 +243,5 @@ def run(args: argparse.Namespace) -> int:
             )
             # the plot's own colour codes (a terminal only) pass; its titles were made safe above
             write = getattr(sys.stdout, "write_trusted", sys.stdout.write)
-            write(f"\nplot{note}:\n" + _plot(chosen) + "\n")
+            write("\n" + fit_line(f"plot{note}:", "", width) + "\n" + _plot(chosen) + "\n")
     return 0

@@ -116,12 +116,20 @@ class _SkippedBytes(io.TextIOBase):
         for line in lines:
             m = self._LINE.match(line)
             if m:
-                at = int(m.group(1))
-                self.bytes += 1
-                self.stretches += at != self._last + 1
-                self.first = at if self.first is None else self.first
-                self._last = at
+                self.add(int(m.group(1)))
         return len(s)
+
+    def add(self, at: int, n: int = 1) -> None:
+        """``n`` bytes from byte ``at`` hold no readable message (a stretch goes on when ``at``
+        follows the last byte counted)."""
+        self.bytes += n
+        self.stretches += at != self._last + 1
+        self.first = at if self.first is None else self.first
+        self._last = at + n - 1
+
+    def follows(self, at: int) -> bool:
+        """Whether byte ``at`` comes right after the last byte counted."""
+        return at == self._last + 1
 
     def warning(self) -> str | None:
         if not self.bytes:
@@ -385,6 +393,68 @@ def _place(fixes: list, meta: dict[str, str]) -> None:
 # ---------------------------------------------------------------------------------- MAVLink tlog
 
 
+def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
+    """The bytes of a tlog (``data``: its bytes or mmap) that hold no readable message.
+
+    pymavlink gives no sign of them: ``mavmmaplog`` indexes the records (an 8-byte time, then
+    a frame that starts 0xFE, MAVLink 1, or 0xFD, MAVLink 2, with its payload length) without
+    checking them, steps over any byte where no frame starts one at a time, and drops a frame
+    whose checksum fails when it reads it. The records are walked here by the same rule, and
+    counted: the bytes stepped over, and the records whose frame fails its checksum (CRC-16/
+    MCRF4XX with the message's CRC_EXTRA, as pymavlink checks it) or is cut by the end of the
+    file. A frame of a message the dialect does not know cannot be checked; it is counted only
+    where a stretch counted touches it (a false start in garbage), else taken as sound.
+    """
+    from pymavlink.generator.mavcrc import x25crc
+
+    known = mavlink.mavlink_map
+    signed = mavlink.MAVLINK_IFLAG_SIGNED
+    n = len(data)
+    bad = _SkippedBytes()
+    unknown = None  # (offset, length) of the last record of an unknown message, taken as sound
+
+    def lost(at: int, length: int) -> None:
+        nonlocal unknown
+        if unknown is not None and sum(unknown) == at:  # it began the stretch: a false start too
+            bad.add(*unknown)
+        unknown = None
+        bad.add(at, length)
+
+    ofs = 0
+    while ofs + 8 + 6 < n:  # as mavmmaplog.init_arrays walks the file
+        marker = data[ofs + 8]
+        if marker == 0xFE:
+            header, mtype = 6, data[ofs + 13]
+        elif marker == 0xFD and ofs + 8 + 10 <= n:
+            header, mtype = 10, data[ofs + 15] | data[ofs + 16] << 8 | data[ofs + 17] << 16
+        elif marker == 0xFD:
+            break
+        else:
+            lost(ofs, 1)
+            ofs += 1
+            continue
+        length = data[ofs + 9]
+        frame_end = ofs + 8 + header + length + 2
+        mlen = frame_end - ofs + (13 if marker == 0xFD and data[ofs + 10] & signed else 0)
+        cls = known.get(mtype)
+        if cls is None:
+            sound = not bad.follows(ofs)
+        elif frame_end > n:
+            sound = False
+        else:
+            crc = x25crc(bytes(data[ofs + 9 : frame_end - 2]))
+            crc.accumulate(bytes((cls.crc_extra,)))
+            sound = crc.crc == data[frame_end - 2] | data[frame_end - 1] << 8
+        if not sound:
+            lost(ofs, min(mlen, n - ofs))
+        elif cls is None:
+            unknown = (ofs, mlen)
+        else:
+            unknown = None
+        ofs += mlen
+    return bad
+
+
 def _param_value(msg, firmware: str | None) -> float | int:
     value = msg.param_value
     if msg.param_type in INT_PARAM_TYPES:
@@ -417,6 +487,10 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             log = mavutil.mavmmaplog(str(path))
     except Exception as exc:  # noqa: BLE001
         raise _open_error(path, exc, "MAVLink log") from None
+    try:
+        unreadable = _tlog_unreadable(log.data_map if log.data_map is not None else b"", mavutil.mavlink)
+    except Exception:  # noqa: BLE001 - the check must not stop a log pymavlink reads
+        unreadable = _SkippedBytes()
     wanted = list(IMU_MESSAGES[inst])
     by_type: dict[str, list] = {name: [] for name in wanted}
     arrivals: dict[str, float] = {}
@@ -516,7 +590,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         meta["frame"] = FRD
     if board_uid:
         meta["board_uid"] = str(board_uid)
-    warnings = []
+    warnings = [w for w in (unreadable.warning(),) if w]
     if arrivals[name] > 946684800:  # the ground station's clock (UTC) when the first sample came
         set_date(meta, warnings, arrivals[name], "ground station's")
     _place(fixes, meta)

@@ -29,13 +29,14 @@ from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFai
 from station.screens._common import GuidedScreenMixin, source_rate_hz
 from station.widgets.field import Field
 from station.widgets.live import CountdownBar, SteadyBar
+from station.widgets.notices import NoticesMixin
 from station.widgets.steps import StepList
 from station.widgets.title import TitleBar, footer
 
 FIELDS = ("ax", "ay", "az", "speed")
 
 
-class CentrifugeScreen(GuidedScreenMixin, Screen):
+class CentrifugeScreen(NoticesMixin, GuidedScreenMixin, Screen):
     CSS = """
     CentrifugeScreen #steps { width: 22; height: 1fr; border: round $primary; }
     CentrifugeScreen #right { width: 1fr; height: 1fr; padding: 0 1; }
@@ -53,6 +54,9 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
     CentrifugeScreen #entry-error { height: 1; color: $error; }
     CentrifugeScreen #message { height: 2; text-style: bold; }
     CentrifugeScreen #progress { height: 1; color: $text-muted; }
+    /* notices in the free rows under the progress, not toasts over the entry and the prompt */
+    CentrifugeScreen ToastHolder { display: none; }
+    CentrifugeScreen #notices { height: auto; max-height: 4; }
     """
 
     BINDINGS = [
@@ -98,6 +102,7 @@ class CentrifugeScreen(GuidedScreenMixin, Screen):
                 yield Static("", id="entry-error")
                 yield Static("", id="message")
                 yield Static("", id="progress")
+                yield Static("", id="notices")
         yield footer()
 
     def _bench(self, key: str, default: float) -> float:

@@ -15,10 +15,11 @@ from textual.screen import ModalScreen
 from textual.widgets import Input, Static
 
 from station.widgets.field import Field
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import footer
 
 
-class DecideScreen(ModalScreen):
+class DecideScreen(NoticesMixin, ModalScreen):
     """A failed result: the operator saves it as rejected, or accepts it with a note."""
 
     CSS = """
@@ -27,6 +28,9 @@ class DecideScreen(ModalScreen):
                         padding: 0 1; }
     DecideScreen #why { height: auto; max-height: 10; }
     DecideScreen #error { height: auto; color: $error; }
+    /* the notices of the screen underneath (Results) in the box, not toasts over its field and keys */
+    DecideScreen ToastHolder { display: none; }
+    DecideScreen #notices { height: auto; max-height: 4; }
     DecideScreen Input:focus { border: tall $accent; }
     """
     BINDINGS = [
@@ -56,6 +60,7 @@ class DecideScreen(ModalScreen):
             keys = "ctrl+r save as rejected · " + ("ctrl+o accept as override · " if self.failed else "")
             yield Static(keys + "esc back (re-do: n new run)")
             yield Static("", id="error")
+            yield Static("", id="notices")
         yield footer()
 
     def on_mount(self) -> None:

@@ -12,12 +12,15 @@ from textual.screen import Screen
 from textual.widgets import Static
 
 from station.messages import StoreLoaded
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import TitleBar, footer
 
 
-class DiagnoseScreen(Screen):
+class DiagnoseScreen(NoticesMixin, Screen):
     CSS = """
     DiagnoseScreen #report { padding: 0 1; }
+    DiagnoseScreen ToastHolder { display: none; }
+    DiagnoseScreen #notices { height: auto; max-height: 4; padding: 0 1; }
     """
     BINDINGS = [Binding("escape", "app.pop_screen", "Back")]
 
@@ -32,6 +35,7 @@ class DiagnoseScreen(Screen):
         yield TitleBar(f"diagnose {what}")
         with VerticalScroll():
             yield Static("Diagnosing: fitting the baseline and the candidate effects…", id="report")
+        yield Static("", id="notices")  # under the report, not a toast over its figures
         yield footer()
 
     def on_mount(self) -> None:

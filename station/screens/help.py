@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import VerticalScroll
+from textual.containers import Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Static
 
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import footer
 
 HELP = """\
@@ -48,17 +49,24 @@ under it says whether it is a quarter turn or upside down.
 """
 
 
-class HelpScreen(ModalScreen):
+class HelpScreen(NoticesMixin, ModalScreen):
     """The keys. Every line of HELP fits the box at 80 columns with its scroll bar (72
     columns of text): a wrapped line lost its indent and read as another screen's."""
 
     CSS = """
     HelpScreen { align: center middle; }
     HelpScreen #help { width: 78; max-height: 22; border: round $accent; background: $surface; padding: 0 1; }
+    /* the notices of the run underneath on the rows above the keys (the box gives them room),
+       not toasts over the box */
+    HelpScreen ToastHolder { display: none; }
+    HelpScreen #under { dock: bottom; margin-bottom: 1; height: auto; max-height: 4; }
+    HelpScreen #notices { height: auto; background: $surface; padding: 0 1; }
     """
     BINDINGS = [Binding("escape", "app.pop_screen", "Close"), Binding("f1", "app.pop_screen", "Close", show=False)]
 
     def compose(self) -> ComposeResult:
         with VerticalScroll(id="help"):
             yield Static(HELP)
+        with Vertical(id="under"):  # (a container: "HelpScreen Static" stays the keys)
+            yield Static("", id="notices")
         yield footer()  # its own keys: the screen underneath showed its keys here, dead while this is open

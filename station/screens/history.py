@@ -16,6 +16,7 @@ from textual_plotext import PlotextPlot
 from db.params import DRIFT_MIN_CALIBRATIONS
 from station.procedures import registry
 from station.timeaxis import time_axis
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import TitleBar, footer
 
 
@@ -48,7 +49,7 @@ def _rate_text(d: dict, k: float, unit: str) -> str:
     return text
 
 
-class HistoryScreen(Screen):
+class HistoryScreen(NoticesMixin, Screen):
     SUB_TITLE = "devices and calibrations"
     CSS = """
     HistoryScreen #due { height: auto; padding: 0 1; color: $warning; }
@@ -57,6 +58,10 @@ class HistoryScreen(Screen):
     HistoryScreen #right { width: 1fr; height: 1fr; border-left: vkey $secondary; }
     HistoryScreen #calibrations { height: 1fr; }
     HistoryScreen #plot { height: 1fr; min-height: 8; }
+    /* notices under the plot, not a toast over its last points and date axis (the reminder
+       that brings the operator here says F2) */
+    HistoryScreen ToastHolder { display: none; }
+    HistoryScreen #notices { height: auto; max-height: 4; padding: 0 1; }
     """
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
@@ -82,6 +87,7 @@ class HistoryScreen(Screen):
             with Vertical(id="right"):
                 yield DataTable(id="calibrations", cursor_type="row", zebra_stripes=True)
                 yield PlotextPlot(id="plot")
+        yield Static("", id="notices")
         yield footer()
 
     def on_mount(self) -> None:

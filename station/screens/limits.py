@@ -29,6 +29,7 @@ from textual.widgets import Input, Static
 from station.messages import StoreLoaded
 from station.textsafe import tui_markup
 from station.widgets.field import Field
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import footer
 
 _BOX_TEXT_WIDTH = 74  # #box: 78 columns less its border and padding
@@ -65,7 +66,7 @@ def _scalar(params: dict, name: str):
     return node
 
 
-class LimitsScreen(ModalScreen):
+class LimitsScreen(NoticesMixin, ModalScreen):
     """The limits of ``device_id``; dismisses with True when something was changed."""
 
     CSS = """
@@ -75,6 +76,9 @@ class LimitsScreen(ModalScreen):
     LimitsScreen #current { height: auto; max-height: 12; }
     LimitsScreen #params { height: auto; max-height: 3; color: $text-muted; }
     LimitsScreen #error { height: auto; color: $error; }
+    /* the notices of the screen underneath in the box, not toasts over its field */
+    LimitsScreen ToastHolder { display: none; }
+    LimitsScreen #notices { height: auto; max-height: 4; }
     LimitsScreen Input:focus { border: tall $accent; }
     """
     BINDINGS = [Binding("escape", "close", "Back", priority=True)]
@@ -98,6 +102,7 @@ class LimitsScreen(ModalScreen):
             yield Static("Enter apply · esc back")
             yield Static("", id="said")
             yield Static("", id="error")
+            yield Static("", id="notices")
         yield footer()  # this box's keys: the screen underneath showed its own, dead while it is open
 
     def on_mount(self) -> None:

@@ -19,6 +19,7 @@ from station.procedures.noise import AXES, format_duration, p4_record_verdict
 from station.screens.export import export_files, exported_text
 from station.screens.gyrodrift import HoldScreen
 from station.widgets.field import Field
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import TitleBar, footer
 
 
@@ -67,14 +68,32 @@ class NoiseHoldScreen(HoldScreen):
         self.app.switch_screen(AllanScreen(message.capture, message.report, message.error))
 
 
-class AllanScreen(Screen):
+class AllanPlot(PlotextPlot):
+    """A log-log plotext figure drawn again before each build: plotext takes the log of a
+    log-scale figure's data in place when it builds, so a second build (the terminal resized,
+    the plot given rows) took the log of the logs, a math domain error for τ < 1 s that stopped
+    the TUI. ``draw(plt)`` sets the figure up."""
+
+    def __init__(self, draw, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self._draw = draw
+
+    def render(self):
+        self._draw(self.plt)
+        return super().render()
+
+
+class AllanScreen(NoticesMixin, Screen):
     CSS = """
-    AllanScreen #plot { height: 12; }
+    AllanScreen #plot { height: 1fr; min-height: 8; max-height: 12; }
     AllanScreen #table { height: 5; padding: 0 1; }
     AllanScreen #ask { height: 1; padding: 0 1; }
     AllanScreen #ask Label { width: 26; }
     AllanScreen #accuracy { width: 12; }
     AllanScreen #status { height: 2; padding: 0 1; }
+    /* notices under the answer (the plot gives them rows if needed), not a toast over the table */
+    AllanScreen ToastHolder { display: none; }
+    AllanScreen #notices { height: auto; max-height: 4; padding: 0 1; }
     """
     BINDINGS = [
         Binding("t", "accuracy", "Accuracy"),
@@ -94,13 +113,14 @@ class AllanScreen(Screen):
     def compose(self) -> ComposeResult:
         yield TitleBar("gyro noise (Allan) result")
         with Vertical():
-            yield PlotextPlot(id="plot")
+            yield AllanPlot(self._draw, id="plot")
             yield Static("", id="table")
             with Horizontal(id="ask"):
                 yield Label("P4 accuracy asked (°/h):")
                 yield Field(value=f"{self.app.session.extra.get('accuracy_deg_h', 1.0):g}", id="accuracy", compact=True)
                 yield Label("  (t, type, Enter)")
             yield Static("", id="status")
+            yield Static("", id="notices")
         yield footer()
 
     def on_mount(self) -> None:
@@ -112,21 +132,21 @@ class AllanScreen(Screen):
         self._answer(self.query_one("#accuracy", Input).value)
 
     def plot(self) -> None:
-        w = self.query_one("#plot", PlotextPlot)
-        plt = w.plt
+        self.query_one("#plot", PlotextPlot).refresh()
+
+    def _draw(self, plt) -> None:
+        """The figure, set up again before each build (``AllanPlot``)."""
         plt.clear_data()
         plt.clear_figure()
         r = self.report
         if r is None:
             plt.title("no Allan deviation")
-            w.refresh()
             return
         plt.xscale("log")
         plt.yscale("log")
         for k, (ax, color) in enumerate(zip(AXES, ("red", "green", "blue"))):
             plt.plot(r.taus_s.tolist(), r.adev_deg_h[:, k].tolist(), label=ax, color=color, marker="dot")
         plt.title(f"Allan deviation (°/h) vs τ (s), {r.duration_s:.0f} s record")
-        w.refresh()
 
     def _table(self, need=None) -> str:
         r = self.report

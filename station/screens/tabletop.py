@@ -23,11 +23,12 @@ from textual.worker import get_current_worker
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz, start_source
 from station.widgets.live import CountdownBar, OrientationIndicator, PlacementView, Readouts, StabilityBar
+from station.widgets.notices import NoticesMixin
 from station.widgets.steps import StepList
 from station.widgets.title import TitleBar, footer
 
 
-class ProcedureScreen(GuidedScreenMixin, Screen):
+class ProcedureScreen(NoticesMixin, GuidedScreenMixin, Screen):
     SUB_TITLE = "P1 accelerometer, level table"
     CSS = """
     ProcedureScreen #steps { width: 22; height: 1fr; border: round $primary; }
@@ -37,6 +38,9 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
     ProcedureScreen #readouts { height: 4; margin-top: 1; }
     ProcedureScreen #message { height: 1; text-style: bold; }
     ProcedureScreen #progress { height: 1; color: $text-muted; }
+    /* notices in the free rows under the progress, not toasts over the readouts and the prompt */
+    ProcedureScreen ToastHolder { display: none; }
+    ProcedureScreen #notices { height: auto; max-height: 3; }
     """
 
     BINDINGS = [
@@ -68,6 +72,7 @@ class ProcedureScreen(GuidedScreenMixin, Screen):
                 yield Readouts(id="readouts")
                 yield Static("", id="message")
                 yield Static("", id="progress")
+                yield Static("", id="notices")
         yield footer()
 
     def on_mount(self) -> None:

@@ -1,10 +1,12 @@
 """Notices as lines in a screen's own place, not toasts over its content.
 
-At 80x24 a toast (bottom right, 3 to 7 lines, two stacked) covered Connect's buttons and the
-Results tables. A screen that shows its notices itself hides Textual's ``ToastHolder`` in its
-CSS, composes a ``Static`` with id ``notices`` and calls :func:`show_notices` from its
-``show_notices`` method (``StationApp.on_notify`` calls that on every notice) and when it is
-shown again.
+At 80x24 a toast (bottom right, 3 to 9 lines, two stacked) covered Connect's buttons, the Results
+tables, the P1 and P2 prompts, the History plot, the Allan table, the Diagnose report and the
+boxes of Decide, Limits and Help (over which the screen underneath had its notices).
+A screen that shows its notices itself hides Textual's ``ToastHolder`` in its CSS, composes a
+``Static`` with id ``notices`` and calls :func:`show_notices` from its ``show_notices`` method
+(``StationApp.on_notify`` calls that on every notice) and when it is shown again:
+:class:`NoticesMixin` does the calling.
 """
 
 from __future__ import annotations
@@ -39,3 +41,22 @@ def show_notices(screen, limit: int = 2, hide_empty: bool = False) -> None:
         screen.set_timer(
             max(min(n.time_left for n in notices), 0.0) + 0.05, lambda: show_notices(screen, limit, hide_empty)
         )
+
+
+class NoticesMixin:
+    """For a Screen (or a ModalScreen) that shows notices in its own place: it composes
+    ``Static("", id="notices")`` where a line covers nothing the operator needs and hides
+    ``ToastHolder`` in its CSS; this keeps that line current when the screen is mounted, on
+    every notice (``StationApp.on_notify``) and when the screen is shown again. The line takes
+    no room while it is empty (the screen's layout is then as without it)."""
+
+    NOTICE_LIMIT = 2
+
+    def show_notices(self) -> None:
+        show_notices(self, self.NOTICE_LIMIT, hide_empty=True)
+
+    def on_mount(self) -> None:
+        self.show_notices()
+
+    def on_screen_resume(self) -> None:
+        self.show_notices()
