@@ -525,20 +525,34 @@ def serial_inflation(e: np.ndarray, s: np.ndarray, series: np.ndarray | None) ->
     return max(1.0, num / den) if den > 0 else 1.0
 
 
-def group_means(groups: np.ndarray, sigma: np.ndarray):
-    """(means, ng): ``means(x)`` gives a row vector's or matrix's coordinates on the ``ng`` groups'
-    mean directions in the weighted rows, orthonormal (row i of group g has ``w_i / |w_g|``,
-    ``w = 1/σ``: a common offset of the group in the data)."""
+def _group_directions(groups: np.ndarray, sigma: np.ndarray):
+    """(means, spread, ng): the ``ng`` groups' mean directions in the weighted rows, orthonormal
+    (row i of group g has ``w_i / |w_g|``, ``w = 1/σ``: a common offset of the group in the
+    data). ``means(x)`` gives a row vector's or matrix's coordinates on them, ``spread(U)`` puts
+    such coordinates back on the rows."""
     _, inv = np.unique(groups, return_inverse=True)
-    ng = int(inv.max()) + 1
+    ng = int(inv.max()) + 1 if inv.size else 0
     w = 1.0 / sigma
     u = w / np.sqrt(np.bincount(inv, weights=w**2, minlength=ng))[inv]
 
+    def col(x: np.ndarray) -> np.ndarray:
+        return u.reshape((-1,) + (1,) * (x.ndim - 1))
+
     def means(x: np.ndarray) -> np.ndarray:
         U = np.zeros((ng,) + x.shape[1:])
-        np.add.at(U, inv, u.reshape((-1,) + (1,) * (x.ndim - 1)) * x)
+        np.add.at(U, inv, col(x) * x)
         return U
 
+    def spread(U: np.ndarray) -> np.ndarray:
+        return col(U) * U[inv]
+
+    return means, spread, ng
+
+
+def group_means(groups: np.ndarray, sigma: np.ndarray):
+    """(means, ng): ``means(x)`` gives a row vector's or matrix's coordinates on the ``ng`` groups'
+    mean directions in the weighted rows (``_group_directions``)."""
+    means, _, ng = _group_directions(groups, sigma)
     return means, ng
 
 
@@ -965,18 +979,11 @@ def within_groups_deviance(problem: Problem, A: np.ndarray, J: np.ndarray, r: np
     (a P1 hold's bias instability) is then no part of the test, which needs no free group."""
     g = np.asarray(problem.shared_noise)
     use = np.flatnonzero(g >= 0)
-    _, inv = np.unique(g[use], return_inverse=True)
-    ng = int(inv.max()) + 1 if use.size else 0
-    w = 1.0 / np.asarray(problem.sigma, float)[use]
-    u = w / np.sqrt(np.bincount(inv, weights=w**2, minlength=ng))[inv]
+    means, spread, ng = _group_directions(g[use], np.asarray(problem.sigma, float)[use])
 
     def off(X):
         X = np.array(X, float, copy=True)
-        Xu = X[use]
-        m = np.zeros((ng,) + X.shape[1:])
-        uu = u.reshape((-1,) + (1,) * (X.ndim - 1))
-        np.add.at(m, inv, uu * Xu)
-        X[use] = Xu - uu * m[inv]
+        X[use] -= spread(means(X[use]))
         return X
 
     # the model's part within groups, measured against its whole columns: K and b move the
@@ -1110,15 +1117,17 @@ def _by_evidence(problem: Problem, evs: list, n: int) -> list:
     one that beats it by less than the decisive margin (the data cannot tell them apart). A
     held-out RMS prefers the most flexible: a 5-knot smooth term took a P1 bias step at 10σ and
     the bias instability beside it, 0.7 better in BIC than the step."""
-    left = sorted(evs, key=lambda ev: ev.k * math.log(n) - ev.D_rob)
+
+    def bic(ev: _Eval) -> float:
+        return ev.k * math.log(n) - ev.D_rob
+
+    margin = decisive_margin(problem)
+    left = sorted(evs, key=bic)
     out = []
     while left:
         best = left[0]
-        key = best.k * math.log(n) - best.D_rob
-        simpler = [
-            ev for ev in left if ev.k < best.k and ev.k * math.log(n) - ev.D_rob - key <= decisive_margin(problem)
-        ]
-        best = min(simpler, key=lambda ev: (ev.k, ev.k * math.log(n) - ev.D_rob)) if simpler else best
+        simpler = [ev for ev in left if ev.k < best.k and bic(ev) - bic(best) <= margin]
+        best = min(simpler, key=lambda ev: (ev.k, bic(ev))) if simpler else best
         out.append(best)
         left = [ev for ev in left if ev is not best]
     return out
@@ -1577,8 +1586,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         # too few groups: the term tested within them, beside that model (its own block at zero)
         wo = {**fit_.params, **{k: np.zeros_like(np.asarray(v, float)) for k, v in ev_.cc.params.items()}}
         D_w = within_groups_deviance(problem, Jm, ev_.cc.J, _weighted(problem, wo))
-        q = deviance_quantile(problem, ev_.k, m_gen, n, n - _gram_rank(Jm.T @ Jm) - ev_.k)
-        return D_w > problem.generic_scale * candidate_threshold(problem, ev_.cc.cand.name) * q
+        return D_w > _bound(problem, ev_, m_gen, n, _gram_rank(Jm.T @ Jm), problem.generic_scale)[0]
 
     generic_effect = None
     generic_tied: list[dict] = []  # library effects the generic one displaced by a margin that is not decisive
