@@ -100,14 +100,15 @@ class StationApp(App):
         Connect's buttons, Results' tables, ...: ``station.widgets.notices``); Textual shows the
         toast on the others."""
         self.notices = [n for n in self.notices if not n.has_expired] + [message.notification]
-        for screen in self.screen_stack:
-            if hasattr(screen, "show_notices"):
-                screen.show_notices()
+        self._show_notices()
 
     def clear_notifications(self) -> None:
         """Every notice goes, the lines that screens show them in too."""
         super().clear_notifications()
         self.notices = []
+        self._show_notices()
+
+    def _show_notices(self) -> None:
         for screen in self.screen_stack:
             if hasattr(screen, "show_notices"):
                 screen.show_notices()

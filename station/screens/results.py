@@ -27,10 +27,11 @@ from station.procedures.review import (
 )
 from station.screens.export import export_files, exported_text
 from station.textsafe import tui_markup
+from station.widgets.notices import NoticesMixin
 from station.widgets.title import TitleBar, footer
 
 
-class ResultsScreen(Screen):
+class ResultsScreen(NoticesMixin, Screen):
     SUB_TITLE = "P1 result"
     # the parameters have the focus (its bar shows it; arrows and PgDn scroll them at once),
     # not the summary's scroll container, which nothing showed as focused
@@ -89,17 +90,7 @@ class ResultsScreen(Screen):
         yield footer()
 
     def on_mount(self) -> None:
-        self.show_notices()
         self.load_device()
-
-    def on_screen_resume(self) -> None:
-        self.show_notices()  # back from Diagnose, Limits or History: what is still current
-
-    def show_notices(self) -> None:
-        """The app's current notices as lines under the tables (``station.widgets.notices``)."""
-        from station.widgets.notices import show_notices
-
-        show_notices(self, hide_empty=True)
 
     @work(thread=True, exclusive=True, group="results-db", exit_on_error=False, description="read the device")
     def load_device(self) -> None:
