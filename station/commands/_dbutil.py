@@ -151,6 +151,13 @@ def fit_line(line: str, indent: str, width: int) -> str:
     return textwrap.fill(line, width, initial_indent=indent, subsequent_indent=indent + "    ", break_long_words=False)
 
 
+def aligned(rows: list[tuple[str, ...]], indent: str = "") -> list[str]:
+    """``rows`` of cells as lines, each column padded to its widest cell, two spaces between
+    columns, trailing spaces dropped."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return [(indent + "  ".join(c.ljust(w) for c, w in zip(r, widths))).rstrip() for r in rows]
+
+
 def fmt_num(value, digits: int = 6) -> str:
     if value is None:
         return "-"

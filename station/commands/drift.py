@@ -7,7 +7,7 @@ import os
 import sys
 
 from db.params import DRIFT_MIN_CALIBRATIONS, DRIFT_SIGNIFICANCE
-from station.commands._dbutil import fit_line, fmt_num, open_store, print_json, require_device, terminal_width
+from station.commands._dbutil import aligned, fit_line, fmt_num, open_store, print_json, require_device, terminal_width
 from station.errors import InputError
 from station.procedures import registry
 from station.textsafe import safe
@@ -108,11 +108,6 @@ def _cells(t: dict) -> tuple[str, ...]:
     )
 
 
-def _table(rows: list[tuple[str, ...]], indent: str = "") -> list[str]:
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return [(indent + "  ".join(c.ljust(w) for c, w in zip(r, widths))).rstrip() for r in rows]
-
-
 def _fit_row(line: str, cells: tuple[str, ...], indent: str, width: int) -> list[str]:
     """A table row wider than ``width``: broken between its cells (never inside one), the
     continuation indented."""
@@ -147,11 +142,11 @@ def _grouped(rows: list[tuple[str, ...]], width: int) -> list[str]:
         ]
         figures += [r[3:8] + (r[8:10] if with_tolerance else ()) for r in members]
         names = ["PARAM"] + [r[1] for r in members]
-        lines = _table([(n, *f) for n, f in zip(names, figures)], "  ")
+        lines = aligned([(n, *f) for n, f in zip(names, figures)], "  ")
         if max(map(len, lines)) <= width:
             out += lines
             continue
-        for name, line, cells in zip(names, _table(figures, "      "), figures):
+        for name, line, cells in zip(names, aligned(figures, "      "), figures):
             out.append(fit_line(name, "  ", width))
             out += _fit_row(line, cells, "      ", width)
     legend = (
@@ -224,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     width = terminal_width()
     title = f"device {safe(args.id)}: drift per year over its accepted calibrations (weighted linear fit)"
     rows = [_cells(t) for t in trends]
-    wide = _table([_HEADER] + rows)
+    wide = aligned([_HEADER] + rows)
     out = [fit_line(title, "", width)]
     if width and max(map(len, wide)) > width:  # a terminal too narrow for the table: grouped, units in headings
         out += _grouped(rows, width)

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from station.commands._dbutil import fmt_num, open_store, print_json, record_id
+from station.commands._dbutil import aligned, fmt_num, open_store, print_json, record_id
 from station.errors import UnsupportedError
 from station.formatting import sigma
 from station.textsafe import safe
@@ -116,8 +116,7 @@ def run(args: argparse.Namespace) -> int:
         )
         for r in rows
     ]
-    widths = [max(len(t[i]) for t in table) for i in range(len(header))]
-    out += ["  ".join(c.ljust(w) for c, w in zip(t, widths)).rstrip() for t in table]
+    out += aligned(table)
     if worst is not None:
         out.append(f"largest change: {worst:.2f} sigma" + (" (within 1 sigma)" if worst <= 1 else ""))
     old_w, new_w = list(cal["warnings"]), [str(w) for w in new.get("warnings") or []]
