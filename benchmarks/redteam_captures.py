@@ -287,6 +287,11 @@ def compass(rng, o, effect):
     if unit == "counts":
         y = np.round(y)
     acc = f_b + rng.normal(scale=0.02, size=(n, 3))
+    if o.get("lin_acc"):
+        # a hand's own acceleration: smooth (about 1 s), of RMS lin_acc per axis
+        k = max(1, int(rate))
+        w = np.array([np.convolve(rng.normal(size=n + k), np.ones(k) / math.sqrt(k), "valid")[:n] for _ in range(3)]).T
+        acc = acc + o["lin_acc"] * w
     meta = {
         "procedure": "compass",
         "accel_unit": "m/s^2",
@@ -477,6 +482,8 @@ CASES = {
         "epoch_whole_seconds": {"t0": 1.7e9, "t_res": 1.0},
         "whole_seconds_labels": {"t_res": 1.0, "labels": True},
         "short": {"n_h": 9, "hold_s": 1.5, "rate": 25.0},
+        "tumbling": {"n_h": 40, "hold_s": 0.0, "move_s": 1.5},
+        "tumbling_hand": {"n_h": 40, "hold_s": 0.0, "move_s": 1.5, "lin_acc": 0.2},
         "noisy": {"noise": 400.0},
         "counts_quiet": {"unit": "counts", "noise": 20.0},
     },

@@ -767,26 +767,26 @@ def compass_problem(
     *,
     noise_raw,
     temp_c=None,
-    static_f=None,
-    static_y=None,
-    static_t=None,
-    static_temp=None,
-    static_sigma=None,
-    static_t_samples=None,
+    dip_blocks=None,
     max_rows: int = 4000,
 ) -> Problem:
     """Magnitude rows ``|W(y − h …)| − F``, each the mean over a block of consecutive samples
-    (at most ``max_rows`` rows), plus dip rows on static holds: ``f̂ · m̂ − c`` (``c`` free,
-    −sin I nominally), which ``mag_accel_misalignment`` changes with orientation.
+    (at most ``max_rows`` rows), plus dip rows: ``f̂ · m̂ − c`` (``c`` free, −sin I nominally),
+    which ``mag_accel_misalignment`` changes with orientation.
 
     The magnitude is evaluated per sample (the forward model at every sample's own time and
     temperature) and then averaged, so a long record keeps all of its information: keeping
     every ``step``-th sample instead threw away ``1 − 1/step`` of it, a slow effect at 10σ of
     the whole record came out at 10/√step σ (a temperature bias at D 31 where 100 was due).
 
-    ``static_t_samples``: each hold's sample times (a list of arrays), so that a dip row, the
-    hold's mean output, sees the hard-iron step as the mean of the step over its samples (a step
-    within a hold is partly in it); without them, the step at the hold's mean time."""
+    ``dip_blocks``: {"f", "y", "t", "temp", "starts", "rel_var", "kind"}, the samples where the
+    accelerometer reads gravity alone (static holds, or runs of a record turned by hand), in
+    blocks of consecutive samples starting at ``starts``. Each dip row is the mean of the
+    per-sample ``f̂ᵢ · m̂ᵢ`` over a block: a dip taken sample by sample holds while the device
+    turns (both vectors turn together), where a block's mean vectors would not, and it sees a
+    hard-iron step at each sample's own time. ``rel_var`` (σ_f²/|f|² + σ_m²/|m|², white noise)
+    divides out the shrinkage of a normalised noisy vector, E v̂ ≈ v̂ (1 − σ²/|v|²). Motion's own
+    acceleration bends the rows: their noise scale is measured."""
     t = np.asarray(t_s, float)
     y = np.asarray(y_raw, float)
     step = max(1, int(math.ceil(len(y) / max_rows)))
@@ -802,21 +802,23 @@ def compass_problem(
 
     t, y = block_mean(t_all), block_mean(y_all)  # per row: the block's mean time and raw output
     T = block_mean(T_all) if T_all is not None else None
-    have_dip = static_f is not None and len(static_f) >= 4
+    have_dip = dip_blocks is not None and len(dip_blocks["starts"]) >= 4
+    dip_kind = dip_blocks.get("kind", "hold") if have_dip else "hold"
     if have_dip:
-        fh = np.asarray(static_f, float)
-        fh = fh / np.linalg.norm(fh, axis=1, keepdims=True)
-        ys = np.asarray(static_y, float)
-        Ts = np.asarray(static_temp, float) if static_temp is not None else None
-        cond_s = Conditions(t_s=np.asarray(static_t, float), temp_c=Ts, temp_ref_c=cond.temp_ref_c, t_ref_s=tref)
-    else:
-        cond_s = None
-    hold_t = hold_starts = None
-    if have_dip and static_t_samples is not None and len(static_t_samples) == len(static_t):
-        sizes = [len(x) for x in static_t_samples]
-        if min(sizes) > 0:
-            hold_t = np.concatenate([np.asarray(x, float) for x in static_t_samples])
-            hold_starts = np.r_[0, np.cumsum(sizes)[:-1]]
+        fq = np.asarray(dip_blocks["f"], float)
+        fq = fq / np.linalg.norm(fq, axis=1, keepdims=True)
+        yq = np.asarray(dip_blocks["y"], float)
+        tq = np.asarray(dip_blocks["t"], float)
+        Tq = np.asarray(dip_blocks["temp"], float) if dip_blocks.get("temp") is not None else None
+        q_starts = np.asarray(dip_blocks["starts"], int)
+        q_count = np.diff(np.r_[q_starts, len(tq)]).astype(float)
+        cond_q = Conditions(t_s=tq, temp_c=Tq, temp_ref_c=cond.temp_ref_c, t_ref_s=tref)
+        shrink = 1.0 - min(float(dip_blocks.get("rel_var", 0.0)), 0.5)
+
+        def run_mean(x):
+            return np.add.reduceat(x, q_starts, axis=0) / (q_count if x.ndim == 1 else q_count[:, None])
+
+        static_t = run_mean(tq)  # per dip row: its block's mean time (labels, folds)
 
     def gain(W, m_w, bR=None):
         """|∂|m|/∂y| per sample (û = m_w/|m_w|, m_w = W (y − h …)): raw noise → radial misfit,
@@ -845,18 +847,9 @@ def compass_problem(
         mag = block_mean((np.linalg.norm(m_w, axis=1) - F) * (g0 / gain(q["W"], m_w, q.get("bR"))))
         if not have_dip:
             return mag
-        ys_eff = ys
-        if "dh" in q and hold_t is not None:
-            # the step's mean over each hold's samples, in place of the step at the hold's mean time
-            step = {"h": np.zeros(3), "dh": q["dh"], "t_on_s": q["t_on_s"]}
-            mean_step = (
-                np.add.reduceat(mag_model.hard_iron(step, Conditions(t_s=hold_t), len(hold_t)), hold_starts, axis=0)
-                / np.diff(np.r_[hold_starts, len(hold_t)])[:, None]
-            )
-            ys_eff = ys - mean_step + mag_model.hard_iron(step, cond_s, len(ys))
-        m = mag_model.inverse(ys_eff, q, cond_s)
-        dip = np.einsum("ij,ij->i", fh, m / np.linalg.norm(m, axis=1, keepdims=True)) - c_dip
-        return np.concatenate([mag, dip])
+        m = mag_model.inverse(yq, q, cond_q)
+        d = np.einsum("ij,ij->i", fq, m / np.linalg.norm(m, axis=1, keepdims=True)) / shrink
+        return np.concatenate([mag, run_mean(d) - c_dip])
 
     base = {"W": W0, "h": np.asarray(h0, float)}
     free = {"W": np.triu(np.ones((3, 3), bool)), "h": True}
@@ -867,11 +860,7 @@ def compass_problem(
         free["c_dip"] = not dip_known
     # c_dip's start: the measured mean
     s_mag = max(noise_raw, 1e-12) * np.sqrt(block_mean(g0**2)) / np.sqrt(count)
-    s_dip = (
-        np.asarray(static_sigma, float)
-        if (have_dip and static_sigma is not None)
-        else np.full(len(static_f) if have_dip else 0, 1e-3)
-    )
+    s_dip = np.full(len(q_starts) if have_dip else 0, 1e-3)  # a scale: the dip rows' noise is measured
     sigma = np.concatenate([s_mag, s_dip])
     g_mag = time_blocks(t)
     g_dip = time_blocks(np.concatenate([t, np.asarray(static_t, float)]))[len(t) :] if have_dip else np.zeros(0, int)
@@ -911,7 +900,8 @@ def compass_problem(
         THRESHOLDS["compass"],
         unit="nT",
         time_ordered=False,
-        row_labels=[f"t={x:.2f} s |m|" for x in t] + [f"hold t={x:.1f} s dip" for x in (static_t if have_dip else [])],
+        row_labels=[f"t={x:.2f} s |m|" for x in t]
+        + [f"{dip_kind} t={x:.1f} s dip" for x in (static_t if have_dip else [])],
         extended_model=lambda names: "m = W R(ρ)ᵀ (y − h − Δh[t ≥ t_on] − …)" if names else "m = W (y − h)",
     )
     prob.row_types = np.concatenate([np.zeros(len(y), int), np.ones(len(s_dip), int)])
@@ -920,7 +910,9 @@ def compass_problem(
     prob.drivers = {"time [s]": np.concatenate([t, pad])}
     if T is not None:
         prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
-    prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), -1)])
+    # runs of a turned record are a time series of their own: the hand's acceleration, smooth over
+    # a second or so, bends neighbouring runs alike (holds are apart in time: none)
+    prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), 1 if dip_kind == "run" else -1)])
     # F is already raised for the wandering hard iron, which a smooth function of time fits as
     # well as a drift does: the generic extension's margin is 0.75 of it (3.6·q at F = 4.8)
     prob.generic_scale = GENERIC_SCALES["compass"]
@@ -936,7 +928,6 @@ def compass_problem(
     m0 = (y_all - h0) @ W0.T  # the generic terms act per sample, as the forward model does
     prob.generic = [(cond, {"time": t_all, "temperature": T_all, "input_axis": m0})]
     if have_dip:
-        ms = (np.asarray(static_y, float) - h0) @ W0.T
-        prob.generic.append((cond_s, {"time": np.asarray(static_t, float), "temperature": Ts, "input_axis": ms}))
+        prob.generic.append((cond_q, {"time": tq, "temperature": Tq, "input_axis": (yq - h0) @ W0.T}))
     prob.cand_thresholds = dict(CAND_THRESHOLDS.get("compass", {}))
     return prob

@@ -370,7 +370,6 @@ def format_text(result: dict) -> str:
 def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
     """The P3 diagnosis problem around the baseline ``base`` (a calibrate result)."""
     from solvers.diagnose import problems as DP
-    from solvers.stillness import detect_static_intervals
     from station.procedures.diagnose import screen
 
     prep = prepared if prepared is not None else prepare(capture)
@@ -398,20 +397,30 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         gyro = _xyz(capture, "g")
         ok = good & np.all(np.isfinite(a), axis=1)
         try:
-            st = detect_static_intervals(
-                strictly_increasing_t(t[ok]), a[ok], None if gyro is None else gyro[ok], nan_policy="omit"
-            )
             idx = np.flatnonzero(ok)
-            ivs = [iv for iv in st.intervals if iv.n >= 5]
-            if len(ivs) >= 4:
+            blocks = _dip_holds(strictly_increasing_t(t[ok]), a[ok], None if gyro is None else gyro[ok])
+            kind = "hold"
+            if blocks is None:
+                blocks, kind = _gravity_runs(t[ok], a[ok]), "run"
+            if blocks is not None:
+                sel, starts = blocks
+                k = idx[sel]
+                gain = abs(float(np.linalg.det(W0))) ** (1 / 3)
+                # the accelerometer's white noise where the dip is taken (the moves between holds
+                # carry the hand's own acceleration: over the whole record it read 5 times too much)
+                s_a = C.noise_from_second_differences(a[k])
+                g_ref = float(np.median(np.linalg.norm(a[k], axis=1)))
+                rel_var = (noise * gain / F) ** 2 + ((s_a / g_ref) ** 2 if math.isfinite(s_a) else 0.0)
                 static = {
-                    "static_f": np.array([iv.accel_mean for iv in ivs]),
-                    "static_y": np.array([y[idx[iv.start : iv.stop]].mean(axis=0) for iv in ivs]),
-                    "static_t": np.array([t[idx[iv.start : iv.stop]].mean() for iv in ivs]),
-                    "static_t_samples": [t[idx[iv.start : iv.stop]] for iv in ivs],
-                    "static_temp": None
-                    if temp is None
-                    else np.array([np.nanmean(temp[idx[iv.start : iv.stop]]) for iv in ivs]),
+                    "dip_blocks": {
+                        "f": a[k],
+                        "y": y[k],
+                        "t": t[k],
+                        "temp": None if temp is None else temp[k],
+                        "starts": starts,
+                        "rel_var": rel_var if math.isfinite(rel_var) else 0.0,
+                        "kind": kind,
+                    }
                 }
         except (SolverError, ValueError):
             static = {}
@@ -425,6 +434,55 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         "a sample far off the field sphere: a magnetic disturbance nearby or a glitch",
         param_units=diagnosis_units(capture.meta.get("mag_unit")),
     )
+
+
+def _dip_holds(t, a, gyro):
+    """(sample indices, start of each hold within them) of the static holds calibrate's detector
+    finds, at least 5 samples each; None where there are fewer than 4."""
+    from solvers.stillness import detect_static_intervals
+
+    st = detect_static_intervals(t, a, gyro, nan_policy="omit")
+    ivs = [iv for iv in st.intervals if iv.n >= 5]
+    if len(ivs) < 4:
+        return None
+    sizes = [iv.stop - iv.start for iv in ivs]
+    return np.concatenate([np.arange(iv.start, iv.stop) for iv in ivs]), np.r_[0, np.cumsum(sizes)[:-1]].astype(int)
+
+
+# a device turned by hand with no holds: runs of this long where the accelerometer reads gravity
+# alone (its magnitude within 2 % of the record's median or 5 times its noise), at most
+# GRAVITY_RUNS_MAX runs (longer ones on a long record)
+GRAVITY_RUN_S = 0.5
+GRAVITY_RUNS_MAX = 400
+GRAVITY_TOL = 0.02
+
+
+def _gravity_runs(t, a):
+    """(selected sample indices, start of each run within them) or None: the dip rows of a
+    record without holds (``compass_problem``'s ``dip_blocks``)."""
+    n = len(t)
+    if n < 20:
+        return None
+    norm = np.linalg.norm(a, axis=1)
+    ref = float(np.median(norm))
+    sd = C.noise_from_second_differences(norm[:, None]) if n >= 12 else 0.0
+    tol = max(GRAVITY_TOL * ref, 5.0 * (sd if math.isfinite(sd) else 0.0))
+    ok = np.abs(norm - ref) < tol
+    dt = float(np.median(np.diff(t)))
+    if not (dt > 0 and ref > 0):
+        return None
+    length = max(5, int(round(GRAVITY_RUN_S / dt)), int(math.ceil(ok.sum() / GRAVITY_RUNS_MAX)))
+    sel, starts = [], []
+    # consecutive accepted samples (no gap in time), cut into runs of `length`; a shorter tail is dropped
+    brk = np.flatnonzero(~ok[:-1] | ~ok[1:] | (np.diff(t) > 3 * dt)) + 1
+    for seg in np.split(np.arange(n), brk):
+        seg = seg[ok[seg]]
+        for j in range(len(seg) // length):
+            starts.append(len(sel))
+            sel.extend(seg[j * length : (j + 1) * length])
+    if len(starts) < 4:
+        return None
+    return np.array(sel, int), np.array(starts, int)
 
 
 def diagnosis_units(mag_unit: str | None) -> dict:
