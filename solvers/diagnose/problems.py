@@ -871,13 +871,15 @@ def compass_problem(
         Candidate("mag_accel_misalignment", {"rho": np.zeros(3)}, folds="dip")
         if have_dip
         else Candidate(
-            "mag_accel_misalignment", reason="no static accelerometer holds: the dip angle cannot be checked"
+            "mag_accel_misalignment",
+            reason="no accelerometer reading of gravity (no accelerometer, or fewer than 4 holds and "
+            "4 runs where it reads gravity alone): the dip angle cannot be checked",
         ),
         Candidate("field_anomaly", {"field_scale": np.array(1.0), "dc_dip": np.array(0.0)}, folds="dip")
         if dip_known
         else Candidate(
             "field_anomaly",
-            reason="no static accelerometer holds or no site (latitude, longitude, date): "
+            reason="no accelerometer reading of gravity or no site (latitude, longitude, date): "
             "the dip angle cannot be compared with IGRF's inclination, and a field magnitude that "
             "differs from IGRF is a common scale of W",
         ),
