@@ -277,6 +277,8 @@ def compass(rng, o, effect):
         params["bT"] = np.array([300.0, -250.0, 280.0])  # nT/°C
     elif effect == "time_drift":
         params["bt"] = np.array([3000.0, -2500.0, 2000.0]) / (t[-1] - t[0])
+    elif effect == "mag_accel_misalignment":
+        params["rho"] = np.radians([0.8, -0.6, 0.5])  # the magnetometer turned about 1.1° against the accelerometer
     elif effect == "field_anomaly":
         # a bent field: 6 % stronger and 1.5° steeper than IGRF (a magnitude change alone is a
         # common scale of W that no single capture can see; docs/diagnose.md)

@@ -54,6 +54,14 @@ def test_bent_field_named_without_long_holds(tmp_path, case):
     assert fa.get("resolvable", True), fa
 
 
+def test_rotation_between_the_sensors_named_without_holds(tmp_path):
+    """The magnetometer turned 1.1° against the accelerometer, the record turned with no hold:
+    the rotation is named from the per-sample dips of the runs."""
+    path = _capture(tmp_path, "tumbling", "mag_accel_misalignment", 9181)
+    res = _diagnose(path)
+    assert "mag_accel_misalignment" in res["verdict"], (res["verdict"], res["candidates"])
+
+
 @pytest.mark.parametrize("case", ["tumbling", "short"])
 def test_turned_record_with_the_igrf_field_names_nothing(tmp_path, case):
     """The same motion with IGRF's field: nothing named, and the dip is checked on runs of the
