@@ -95,3 +95,23 @@ def test_real_hand_held_holds_give_consistent_dips(shared_data):
     dips = prob.residual(prob.baseline)[prob.row_types == 1]
     assert len(dips) >= 8
     assert float(np.std(dips)) < 0.015, dips
+
+
+@pytest.mark.parametrize("case", ["plain", "tumbling"])
+def test_accelerometer_that_does_not_turn_with_the_magnetometer_is_said(tmp_path, case):
+    """The accelerometer's x and y columns swapped (a board whose two chips were mapped apart):
+    the dip then changes with the attitude by far more than noise, mounting or a hand's
+    acceleration can make it. Before, a bent field was named on it; now the report says under
+    ``quality`` that the two sensors do not turn together, and leaves the dip unchecked."""
+    meta, cols, _ = R.compass(np.random.default_rng(11), R.CASES["compass"][case], None)
+    cols["ax"], cols["ay"] = cols["ay"].copy(), cols["ax"].copy()
+    path = tmp_path / "swapped.capture.csv"
+    R.write(path, meta, cols, {}, np.random.default_rng(12))
+    res = _diagnose(path)
+    assert "field_anomaly" not in res["verdict"] and "mag_accel_misalignment" not in res["verdict"], res["verdict"]
+    q = [x for x in res["quality"] if x["kind"] == "dip_inconsistent"]
+    assert len(q) == 1 and q[0]["dip_scatter"] > 0.2, res["quality"]
+    fa = next(c for c in res["candidates"] if c["name"] == "field_anomaly")
+    assert fa.get("resolvable") is False and "do not turn together" in fa["reason"], fa
+    text = run_station("diagnose", path, "--no-plots").stdout
+    assert "quality     dip_inconsistent" in text, text

@@ -113,6 +113,7 @@ class Problem:
     cv_rows: dict = field(default_factory=dict)  # fold set name → rows its held-out RMS is taken on
     cv_groups: np.ndarray | None = None  # the default CV folds when they are not ``groups`` (P2: rows across mountings)
     screened: list = field(default_factory=list)  # quality findings of rows left out before the effect search
+    findings: list = field(default_factory=list)  # other quality findings the problem's rows gave (compass dip)
     # a constant the baseline lacks → {time-like candidate: its driver}: the constant is that candidate's
     # value at its own zero, which the data do not fix (a drift from power-up has a mean); both named: tied
     intercept_of: dict = field(default_factory=dict)

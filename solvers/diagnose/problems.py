@@ -75,6 +75,10 @@ CAND_THRESHOLDS: dict = {
 # P2: a row fitted with a leverage above this is left out of the held-out comparison of two models
 # (engine.Problem.cv_max_leverage)
 CV_MAX_LEVERAGE = 0.95
+# the compass dip rows' largest RMS scatter about their mean (f̂·m̂, one field, one rigid unit: a
+# constant but for noise, mounting and the hand's acceleration: 0.009 on a real hand-held record,
+# about 0.05 under 1 m/s² of hand acceleration); beyond it the two sensors do not turn together
+DIP_MAX_SCATTER = 0.2
 # LDV: the measured reference velocity is delayed by an all-pass Fourier shift of its content
 # below this fraction of the sample rate (models.Conditions.delay_band_hz), not by linear
 # interpolation, which averages neighbouring samples' noise at any delay off the sample grid and
@@ -837,6 +841,21 @@ def compass_problem(
     # keep their means on the sphere (8 holds, 200 nT noise: h 1000 nT = 8σ off, W 2 % small),
     # which bent the dip rows by 10–50 times their noise
     g0 = gain(W0, mag_model.inverse(y_all, {"W": W0, "h": np.asarray(h0, float)}, cond))
+    dip_reason = None
+    dip_scatter = None
+    if have_dip:
+        m_q = mag_model.inverse(yq, {"W": W0, "h": np.asarray(h0, float)}, cond_q)
+        d0 = run_mean(np.einsum("ij,ij->i", fq, m_q / np.linalg.norm(m_q, axis=1, keepdims=True)))
+        dip_scatter = float(np.std(d0))
+        if not dip_scatter <= DIP_MAX_SCATTER:
+            n_rows = len(q_starts)
+            dip_reason = (
+                f"the angle between gravity and the field scatters by {dip_scatter:.2f} (RMS of f̂·m̂) across "
+                f"the {n_rows} {dip_kind}s, where one field and one rigid unit keep it constant: the "
+                "accelerometer and the magnetometer do not turn together (axes swapped or of another "
+                "sign, or another unit's columns), and the dip angle cannot be checked"
+            )
+            have_dip = False
 
     def residual(p):
         q = {k: v for k, v in p.items() if k not in ("c_dip", "field_scale", "dc_dip")}
@@ -872,14 +891,16 @@ def compass_problem(
         if have_dip
         else Candidate(
             "mag_accel_misalignment",
-            reason="no accelerometer reading of gravity (no accelerometer, or fewer than 4 holds and "
+            reason=dip_reason
+            or "no accelerometer reading of gravity (no accelerometer, or fewer than 4 holds and "
             "4 runs where it reads gravity alone): the dip angle cannot be checked",
         ),
         Candidate("field_anomaly", {"field_scale": np.array(1.0), "dc_dip": np.array(0.0)}, folds="dip")
         if dip_known
         else Candidate(
             "field_anomaly",
-            reason="no accelerometer reading of gravity or no site (latitude, longitude, date): "
+            reason=dip_reason
+            or "no accelerometer reading of gravity or no site (latitude, longitude, date): "
             "the dip angle cannot be compared with IGRF's inclination, and a field magnitude that "
             "differs from IGRF is a common scale of W",
         ),
@@ -908,6 +929,11 @@ def compass_problem(
     )
     prob.row_types = np.concatenate([np.zeros(len(y), int), np.ones(len(s_dip), int)])
     prob.kind_thresholds = dict(KIND_THRESHOLDS["compass"])
+    if dip_reason is not None:
+        prob.findings.append(
+            {"kind": "dip_inconsistent", "where": f"{len(q_starts)} {dip_kind}s", "dip_scatter": dip_scatter}
+            | {"explanation": dip_reason}
+        )
     pad = np.full(len(s_dip), np.nan)
     prob.drivers = {"time [s]": np.concatenate([t, pad])}
     if T is not None:

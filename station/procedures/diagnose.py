@@ -81,6 +81,7 @@ def screen(capture, moved=()) -> tuple[np.ndarray, list[dict]]:
 
 def _quality(capture, diag, inp) -> list[dict]:
     out: list[dict] = list(diag.problem.screened)  # rows the data-quality screen left out, by line
+    out += [dict(q) for q in diag.problem.findings]
     seen = {(q.get("kind"), q.get("line"), q.get("column")) for q in out}
     if capture.is_time_series and "t" in capture.columns:
         for q in Q.gaps(capture.columns["t"]):
