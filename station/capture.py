@@ -486,6 +486,12 @@ class _Head:
         self.header: list[str] = []
         self.header_line = 0
         self.data_offset = 0
+        self.trailing_comma = False  # every line ends in a comma: an unnamed last column, read and dropped
+
+
+# the unnamed last column of a file whose lines all end in a comma (a spreadsheet's export): it must
+# hold nothing, and is not part of the capture
+_TRAILING = "(the unnamed column after the last comma)"
 
 
 def _open(path) -> io.BufferedReader:
@@ -563,6 +569,8 @@ def _read_head(path: str) -> _Head:
                 head.meta_lines[key] = lineno
                 continue
             names = [c.strip() for c in text.split(",")]
+            if len(names) > 1 and names[-1] == "" and all(names[:-1]):
+                names, head.trailing_comma = names[:-1], True
             problem = _header_problem(names)
             if problem:
                 raise InputError(path, lineno, problem)
@@ -843,7 +851,7 @@ def _data_chunks(
     head: _Head, rows: int, force_slow: bool = False, notes: list[str] | None = None
 ) -> Iterator[dict[str, np.ndarray]]:
     path = head.path
-    parser = _Parser(path, head.header, head.meta)
+    parser = _Parser(path, head.header + ([_TRAILING] if head.trailing_comma else []), head.meta)
     with _open(path) as f:
         f.seek(head.data_offset)
         sample = f.readline(_MAX_DATA_LINE + 1)
@@ -872,6 +880,15 @@ def _data_chunks(
                 pending_blank = first + _count_lines(block)
             n_lines = _count_lines(block)
             chunk = parser.parse(block, n_lines, first, force_slow=force_slow)
+            if head.trailing_comma:
+                extra = chunk.pop(_TRAILING)
+                filled = np.flatnonzero(~np.isnan(extra))
+                if filled.size:
+                    raise InputError(
+                        path,
+                        first + int(filled[0]),
+                        f"a value after the last column (column {len(head.header) + 1} has no name in the header)",
+                    )
             n_rows += n_lines
             yield chunk
     if n_rows == 0:

@@ -76,7 +76,14 @@ BAD = [
     ("header-only-trailing-blanks", HEAD + HDR + "\n\n", 6, "no data rows after the header"),
     ("duplicate-column", HEAD + "t,ax,ay,ax\n0,1,2,3\n", 5, "duplicate column 'ax' (columns 2 and 4)"),
     ("empty-column-name", HEAD + "t,,ay\n0,1,2\n", 5, "empty column name (column 2 of the header)"),
-    ("trailing-comma-header", HEAD + "t,ax,\n0,1,\n", 5, "empty column name (column 3 of the header)"),
+    # every line ending in a comma is read (tests below); a value in that unnamed column is not
+    (
+        "trailing-comma-value",
+        HEAD + "t,ax,\n0,1,\n1,2,7\n",
+        7,
+        "a value after the last column (column 3 has no name in the header)",
+    ),
+    ("empty-column-name-last-of-many", HEAD + "t,ax,,\n0,1,,\n", 5, "empty column name (column 3 of the header)"),
     (
         "quoted-column-name",
         HEAD + 't,"ax"\n0,1\n',
@@ -320,6 +327,21 @@ def test_crlf_bom_trailing_blanks_whitespace_and_missing_values(tmp_path):
     ax = c.columns["ax"]
     assert ax[0] == 1.5 and math.isnan(ax[1]) and ax[2] == -300.0
     assert c.procedure is None  # a missing procedure is fine for reading
+
+
+def test_every_line_ending_in_a_comma_is_read(tmp_path):
+    """A spreadsheet's or logger's export that ends every line, header included, with a comma:
+    the unnamed empty column after it is not part of the capture; the fast path (blocks) and the
+    per-cell path read it alike, CRLF and missing values included."""
+    lines = [f"{i * 0.01!r},{'' if i % 7 == 3 else repr(0.5 * i)},{'x_p' if i < 60 else 'y_p'}," for i in range(120)]
+    text = HEAD + "t,ax,position,\r\n" + "\r\n".join(lines) + "\r\n"
+    path = _write(tmp_path, text)
+    fast = read_capture(path, rows=16)
+    slow = read_capture(path, _force_slow=True)
+    assert fast == slow
+    assert list(fast.columns) == ["t", "ax", "position"]
+    assert np.isnan(fast.columns["ax"]).sum() == sum(i % 7 == 3 for i in range(120))
+    assert fast.columns["position"].tolist()[58:62] == ["x_p", "x_p", "y_p", "y_p"]
 
 
 def test_fast_and_per_cell_paths_agree_on_missing_values_and_labels(tmp_path):
