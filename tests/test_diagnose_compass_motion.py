@@ -54,6 +54,17 @@ def test_bent_field_named_without_long_holds(tmp_path, case):
     assert fa.get("resolvable", True), fa
 
 
+def test_runs_hold_across_single_bad_accelerometer_samples(tmp_path):
+    """Every 7th accelerometer sample knocked by 50 m/s² (a loose connector): those samples are
+    left out, the runs go on across them, and the bent field is still named."""
+    meta, cols, _ = R.compass(np.random.default_rng(11), R.CASES["compass"]["tumbling"], "field_anomaly")
+    cols["az"] = cols["az"].copy()
+    cols["az"][::7] += 50.0
+    path = tmp_path / "spiked.capture.csv"
+    R.write(path, meta, cols, {}, np.random.default_rng(12))
+    assert "field_anomaly" in _diagnose(path)["verdict"]
+
+
 def test_rotation_between_the_sensors_named_without_holds(tmp_path):
     """The magnetometer turned 1.1° against the accelerometer, the record turned with no hold:
     the rotation is named from the per-sample dips of the runs."""

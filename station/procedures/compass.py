@@ -468,18 +468,20 @@ def _gravity_runs(t, a):
         return None
     norm = np.linalg.norm(a, axis=1)
     ref = float(np.median(norm))
-    sd = C.noise_from_second_differences(norm[:, None]) if n >= 12 else 0.0
+    sd = C.noise_from_second_differences(norm[:, None])
     tol = max(GRAVITY_TOL * ref, 5.0 * (sd if math.isfinite(sd) else 0.0))
     ok = np.abs(norm - ref) < tol
-    dt = float(np.median(np.diff(t)))
-    if not (dt > 0 and ref > 0):
+    dt_s = float(np.median(np.diff(t)))
+    if not (dt_s > 0 and ref > 0):
         return None
-    length = max(5, int(round(GRAVITY_RUN_S / dt)), int(math.ceil(ok.sum() / GRAVITY_RUNS_MAX)))
+    length = max(5, int(round(GRAVITY_RUN_S / dt_s)), int(math.ceil(ok.sum() / GRAVITY_RUNS_MAX)))
     sel, starts = [], []
-    # consecutive accepted samples (no gap in time), cut into runs of `length`; a shorter tail is dropped
-    brk = np.flatnonzero(~ok[:-1] | ~ok[1:] | (np.diff(t) > 3 * dt)) + 1
-    for seg in np.split(np.arange(n), brk):
-        seg = seg[ok[seg]]
+    # the accepted samples, cut where a quarter of a run or more is missing (a gap in time, or
+    # the hand's jerk), into runs of `length`; a shorter tail is dropped. A sample left out here
+    # and there (a spike) does not cut a run: the dip is taken sample by sample.
+    acc = np.flatnonzero(ok)
+    brk = np.flatnonzero(np.diff(t[acc]) > max(3 * dt_s, 0.25 * GRAVITY_RUN_S)) + 1
+    for seg in np.split(acc, brk):
         for j in range(len(seg) // length):
             starts.append(len(sel))
             sel.extend(seg[j * length : (j + 1) * length])
