@@ -819,10 +819,13 @@ def compass_problem(
         cond_q = Conditions(t_s=tq, temp_c=Tq, temp_ref_c=cond.temp_ref_c, t_ref_s=tref)
         shrink = 1.0 - min(float(dip_blocks.get("rel_var", 0.0)), 0.5)
 
-        def run_mean(x):
-            return np.add.reduceat(x, q_starts, axis=0) / (q_count if x.ndim == 1 else q_count[:, None])
+        def dips(p):
+            """Per block, the mean of the per-sample ``f̂ᵢ · m̂ᵢ`` with ``m`` from the model at ``p``."""
+            m = mag_model.inverse(yq, p, cond_q)
+            d = np.einsum("ij,ij->i", fq, m / np.linalg.norm(m, axis=1, keepdims=True))
+            return np.add.reduceat(d, q_starts) / q_count
 
-        static_t = run_mean(tq)  # per dip row: its block's mean time (labels, folds)
+        dip_t = np.add.reduceat(tq, q_starts) / q_count  # per dip row: its block's mean time (labels, folds)
 
     def gain(W, m_w, bR=None):
         """|∂|m|/∂y| per sample (û = m_w/|m_w|, m_w = W (y − h …)): raw noise → radial misfit,
@@ -844,9 +847,7 @@ def compass_problem(
     dip_reason = None
     dip_scatter = None
     if have_dip:
-        m_q = mag_model.inverse(yq, {"W": W0, "h": np.asarray(h0, float)}, cond_q)
-        d0 = run_mean(np.einsum("ij,ij->i", fq, m_q / np.linalg.norm(m_q, axis=1, keepdims=True)))
-        dip_scatter = float(np.std(d0))
+        dip_scatter = float(np.std(dips({"W": W0, "h": np.asarray(h0, float)})))
         if not dip_scatter <= DIP_MAX_SCATTER:
             n_rows = len(q_starts)
             dip_reason = (
@@ -866,9 +867,7 @@ def compass_problem(
         mag = block_mean((np.linalg.norm(m_w, axis=1) - F) * (g0 / gain(q["W"], m_w, q.get("bR"))))
         if not have_dip:
             return mag
-        m = mag_model.inverse(yq, q, cond_q)
-        d = np.einsum("ij,ij->i", fq, m / np.linalg.norm(m, axis=1, keepdims=True)) / shrink
-        return np.concatenate([mag, run_mean(d) - c_dip])
+        return np.concatenate([mag, dips(q) / shrink - c_dip])
 
     base = {"W": W0, "h": np.asarray(h0, float)}
     free = {"W": np.triu(np.ones((3, 3), bool)), "h": True}
@@ -882,7 +881,7 @@ def compass_problem(
     s_dip = np.full(len(q_starts) if have_dip else 0, 1e-3)  # a scale: the dip rows' noise is measured
     sigma = np.concatenate([s_mag, s_dip])
     g_mag = time_blocks(t)
-    g_dip = time_blocks(np.concatenate([t, np.asarray(static_t, float)]))[len(t) :] if have_dip else np.zeros(0, int)
+    g_dip = time_blocks(np.concatenate([t, dip_t]))[len(t) :] if have_dip else np.zeros(0, int)
     dur = float(t.max() - t.min())
     cands = [
         _temp_candidate(T),
@@ -924,7 +923,7 @@ def compass_problem(
         unit="nT",
         time_ordered=False,
         row_labels=[f"t={x:.2f} s |m|" for x in t]
-        + [f"{dip_kind} t={x:.1f} s dip" for x in (static_t if have_dip else [])],
+        + [f"{dip_kind} t={x:.1f} s dip" for x in (dip_t if have_dip else [])],
         extended_model=lambda names: "m = W R(ρ)ᵀ (y − h − Δh[t ≥ t_on] − …)" if names else "m = W (y − h)",
     )
     prob.row_types = np.concatenate([np.zeros(len(y), int), np.ones(len(s_dip), int)])
