@@ -54,6 +54,17 @@ def test_bent_field_named_without_long_holds(tmp_path, case):
     assert fa.get("resolvable", True), fa
 
 
+def test_hand_acceleration_does_not_cut_the_record_into_pieces(tmp_path):
+    """0.3 m/s² per axis of the hand's own acceleration, smooth over a second: along gravity it
+    leaves the dip alone, so the runs take every sample within 10 % of g. A 2 % window with
+    0.5 s runs named this bent field on 6 of 12 such records (seed 3002 among the misses)."""
+    options = {"n_h": 40, "hold_s": 0.0, "move_s": 1.5, "lin_acc": 0.3}
+    meta, cols, _ = R.compass(np.random.default_rng(3002), options, "field_anomaly")
+    path = tmp_path / "hand.capture.csv"
+    R.write(path, meta, cols, {}, np.random.default_rng(3003))
+    assert "field_anomaly" in _diagnose(path)["verdict"]
+
+
 def test_runs_hold_across_single_bad_accelerometer_samples(tmp_path):
     """Every 7th accelerometer sample knocked by 50 m/s² (a loose connector): those samples are
     left out, the runs go on across them, and the bent field is still named."""
