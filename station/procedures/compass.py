@@ -405,7 +405,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
             if blocks is not None:
                 sel, starts = blocks
                 k = idx[sel]
-                gain = abs(float(np.linalg.det(W0))) ** (1 / 3)
+                gain = _mean_gain(W0)
                 # the accelerometer's white noise where the dip is taken (the moves between holds
                 # carry the hand's own acceleration: over the whole record it read 5 times too much)
                 s_a = C.noise_from_second_differences(a[k])
@@ -508,6 +508,12 @@ def diagnosis_units(mag_unit: str | None) -> dict:
     }
 
 
+def _mean_gain(W) -> float:
+    """The soft iron's mean gain, |det W|^(1/3) (nT per raw unit); 0 for what is not a finite 3×3."""
+    W = np.asarray(W, float)
+    return abs(float(np.linalg.det(W))) ** (1 / 3) if W.shape == (3, 3) and np.all(np.isfinite(W)) else 0.0
+
+
 def residual_in_mag_unit(result: dict) -> str:
     """calibrate's residual (nT) in the capture's mag_unit, the hard iron's unit: '' for nT."""
     unit = result.get("mag_unit")
@@ -517,8 +523,7 @@ def residual_in_mag_unit(result: dict) -> str:
         return ""
     if f is not None:
         return f" = {res / f:.4g} {unit}"
-    W = np.asarray(result["params"].get("soft_iron"), float)
-    gain = abs(float(np.linalg.det(W))) ** (1 / 3) if W.shape == (3, 3) and np.all(np.isfinite(W)) else 0.0
+    gain = _mean_gain(result["params"].get("soft_iron"))
     if not gain > 0:
         return ""
     return f" ≈ {res / gain:.4g} {unit or 'raw units'} (through the soft iron's mean gain {gain:.4g} nT per {unit or 'raw unit'})"
