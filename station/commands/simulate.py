@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 from station.errors import InputError
-from station.fileio import atomic_write_json, cannot_write, check_output, same_file
+from station.fileio import atomic_open, cannot_write, check_output, same_file
 from station.procedures import registry
 from station.textsafe import safe
 
@@ -117,12 +118,6 @@ def _option_value(name: str, value):
     return value
 
 
-def _write_json(path: str, obj) -> None:
-    """Atomically (station.fileio); OSError -> one line."""
-    with cannot_write(path):
-        atomic_write_json(path, obj, indent=2)
-
-
 def run(args: argparse.Namespace) -> int:
     import math
 
@@ -156,9 +151,14 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, "simulate: the options ask for more samples than fit in memory") from None
     except (ValueError, IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
         raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
-    write_capture(args.out, Capture(meta=sim.meta, columns=sim.columns, path=args.out))
-    if args.truth:
-        _write_json(args.truth, sim.truth)
+    capture = Capture(meta=sim.meta, columns=sim.columns, path=args.out)
+    if args.truth:  # both or neither: the truth's temporary is made first, renamed after the capture
+        text = json.dumps(sim.truth, indent=2)
+        with cannot_write(args.truth), atomic_open(args.truth) as f:
+            f.write(text)
+            write_capture(args.out, capture)
+    else:
+        write_capture(args.out, capture)
     n = len(next(iter(sim.columns.values())))
     print(
         f"wrote {safe(args.out)}: {args.procedure}, {n} rows, device {sim.meta.get('device')}"
