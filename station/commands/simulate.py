@@ -118,6 +118,25 @@ def _option_value(name: str, value):
     return value
 
 
+def _refuse_implausible(sim) -> None:
+    """Options that make numbers no instrument reports (``mag_noise_uT=1e300``) would write a
+    capture the station's own reader refuses: refused here, nothing written."""
+    import numpy as np
+
+    from station.capture import column_limit
+
+    for name, values in sim.columns.items():
+        values = np.asarray(values)
+        if values.dtype.kind != "f" or not values.size:
+            continue
+        largest = float(np.nanmax(np.abs(values))) if not np.all(np.isnan(values)) else 0.0
+        bound, reason = column_limit(name, sim.meta)
+        if largest > bound:
+            raise InputError(
+                None, None, f"simulate: these options make column '{name}' reach {largest:.3g}, beyond {reason}"
+            )
+
+
 def run(args: argparse.Namespace) -> int:
     import math
 
@@ -151,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, "simulate: the options ask for more samples than fit in memory") from None
     except (ValueError, IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
         raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
+    _refuse_implausible(sim)
     capture = Capture(meta=sim.meta, columns=sim.columns, path=args.out)
     if args.truth:  # both or neither: the truth's temporary is made first, renamed after the capture
         text = json.dumps(sim.truth, indent=2)
