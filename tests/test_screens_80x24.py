@@ -1000,3 +1000,26 @@ def test_export_of_a_device_whose_id_holds_a_slash_stays_in_the_export_folder(tm
     assert [n.rsplit(".", 1)[1] for n in names] == ["csv", "json"], names
     assert all(n.startswith(device.replace("/", "_") + "-accel-tabletop-") for n in names), names
     assert not [p.name for p in tmp_path.iterdir() if p.suffix in (".csv", ".json")]  # none beside the folder
+
+
+def test_history_shows_the_status_of_a_device_with_a_long_id(tmp_path):
+    """History's devices table is 26 columns wide: an id of 44 characters took them all, and
+    `n` and `status` (overdue, due) were off to the right, out of sight at 80x24. A long id is
+    shown by its start and end, so the status stays on screen beside it."""
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    long_id = "BENCH-IMU-LONG-SERIAL-0123456789-ABCDEFGHIJ"
+    seed_history(db, long_id, n=1, interval_days=30, start_year=2024)  # years ago: overdue
+
+    async def story():
+        app = make_app(db)
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f2")
+            await history_shown(pilot, app, 1)
+            return screen_lines(app)
+
+    lines = asyncio.run(story())
+    row = next(line for line in lines if "BENCH" in line and "▏" in line)  # not the overdue notice above
+    left = row.split("▏")[0]  # the devices table, left of the divider
+    assert "overdue" in left and "EFGHIJ" in left, "\n".join(lines)
