@@ -279,6 +279,11 @@ def compass(rng, o, effect):
         params["bt"] = np.array([3000.0, -2500.0, 2000.0]) / (t[-1] - t[0])
     elif effect == "mag_accel_misalignment":
         params["rho"] = np.radians([0.8, -0.6, 0.5])  # the magnetometer turned about 1.1° against the accelerometer
+    elif effect == "time_varying_hard_iron":
+        # a hard iron that steps by about 850 nT part-way (a part near the sensor magnetised, a
+        # battery swapped): 5.7 counts of 150 nT
+        params["dh"] = o.get("dh_scale", 1.0) * np.array([600.0, -450.0, 400.0])
+        params["t_on_s"] = np.array(0.45 * (t[-1] - t[0]))
     elif effect == "field_anomaly":
         # a bent field: 6 % stronger and 1.5° steeper than IGRF (a magnitude change alone is a
         # common scale of W that no single capture can see; docs/diagnose.md)
