@@ -545,9 +545,9 @@ def quantised_noise(y, stretches, q) -> tuple[np.ndarray, np.ndarray]:
     """(σ, τ²) per axis of a magnetometer on a quantiser of step ``q`` (:func:`quantum`): σ the
     white noise before the quantiser, from the readings' scatter within the still stretches
     ``[(start, stop), …]`` (half the mean square of successive differences, pooled; a jump of
-    more than 3 steps is left out: the field moved, a hard-iron step in a hold, not noise),
-    which is ``σ² + q²/12 − τ²(σ)``
-    (:func:`rounding_shared_var`; increasing in σ, solved by bisection); τ² the variance of
+    more than 3 steps is left out: the field moved, a hard-iron step in a hold, not noise), which
+    is ``σ² + q²/12 − τ²(σ)`` (:func:`rounding_shared_var`; increasing in σ, solved by
+    bisection); τ² the variance of
     the rounding error a stretch shares, 0 where the quantiser is dithered (σ ≥ q/2) or there
     is none. Axes on one step share one σ (one chip's noise, axes averaged in variance as
     :func:`noise_from_second_differences` does): the scatter of a still, undithered axis is a
@@ -558,7 +558,10 @@ def quantised_noise(y, stretches, q) -> tuple[np.ndarray, np.ndarray]:
     q = np.asarray(q, float)
     d = [np.diff(y[i:j], axis=0) for i, j in stretches if j - i >= 2]
     d = np.concatenate(d) if d else np.zeros((0, y.shape[1]))
-    d = d[np.all(np.isfinite(d), axis=1) & np.all(~(np.abs(d) > 3 * q), axis=1)]
+    d = d[np.all(np.isfinite(d), axis=1)]
+    jump = np.any(np.abs(d) > np.where(q > 0, 3 * q, np.inf), axis=1)
+    if len(d) and jump.mean() < 0.5:  # else the noise spans many steps (dithered: no jump to tell)
+        d = d[~jump]
     if len(d) < 10:
         return np.full(y.shape[1], math.nan), np.zeros(y.shape[1])
     within = np.mean(d**2, axis=0) / 2.0

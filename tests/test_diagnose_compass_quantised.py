@@ -89,10 +89,11 @@ def test_quantum_of_counts_and_of_scaled_counts_only():
 
 def test_quantised_noise_recovers_the_noise_before_the_quantiser():
     """σ before the quantiser from the flips of 20 still stretches of 200 samples, and the
-    undithered (σ < q/2) from the dithered case: τ² 0 there, σ by Sheppard's correction."""
+    undithered (σ < q/2) from the dithered case: τ² 0 there, σ by Sheppard's correction (also
+    where the noise spans many steps: whole nT with 20 nT of noise)."""
     rng = np.random.default_rng(7)
     q, n_s, n = 1.0, 20, 200
-    for sigma, undithered in ((0.15, True), (0.3, True), (0.8, False)):
+    for sigma, undithered in ((0.15, True), (0.3, True), (0.8, False), (20.0, False)):
         x = rng.uniform(-50, 50, size=(n_s, 1, 3))
         y = np.round(x + rng.normal(scale=sigma, size=(n_s, n, 3))).reshape(-1, 3)
         stretches = [(k * n, (k + 1) * n) for k in range(n_s)]
