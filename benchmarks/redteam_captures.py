@@ -12,6 +12,11 @@ hidden effect (a null) and once with a large canonical one, then run through the
 ``station calibrate`` and ``station diagnose`` and compared with the simulated truth.
 
     python benchmarks/redteam_captures.py [--procedure P] [--case NAME] [--keep DIR] [--seed S]
+        [--effects null,big,NAME]
+
+``--effects``: ``null`` (no effect), ``big`` (the procedure's large effects below), or an
+effect the generator draws by name (compass: ``time_varying_hard_iron``, ``time_drift``,
+``mag_accel_misalignment`` besides the two run by default).
 
 Prints one line per run: exit status, what is wrong (traceback, refusal, NaN, stray stdout,
 calibration far from truth, a verdict on a null, a large effect not named).
@@ -631,7 +636,8 @@ def main(argv=None):
                 if fname != "plain" and case not in ("plain", "plain_B", "A", "nav", "averages"):
                     continue
                 for which in a.effects.split(","):
-                    for eff in (None,) if which == "null" else effects[:1] if fname != "plain" else effects:
+                    named = (which,) if which not in ("null", "big") else effects
+                    for eff in (None,) if which == "null" else named[:1] if fname != "plain" else named:
                         rng = np.random.default_rng(a.seed)
                         meta, cols, truth = gen(rng, opts, eff)
                         if "t" in cols:
