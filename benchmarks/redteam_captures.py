@@ -12,6 +12,11 @@ hidden effect (a null) and once with a large canonical one, then run through the
 ``station calibrate`` and ``station diagnose`` and compared with the simulated truth.
 
     python benchmarks/redteam_captures.py [--procedure P] [--case NAME] [--keep DIR] [--seed S]
+        [--effects null,big,NAME]
+
+``--effects``: ``null`` (no effect), ``big`` (the procedure's large effects below), or an
+effect the generator draws by name (compass: ``time_varying_hard_iron``, ``time_drift``,
+``mag_accel_misalignment`` besides the two run by default).
 
 Prints one line per run: exit status, what is wrong (traceback, refusal, NaN, stray stdout,
 calibration far from truth, a verdict on a null, a large effect not named).
@@ -279,6 +284,11 @@ def compass(rng, o, effect):
         params["bt"] = np.array([3000.0, -2500.0, 2000.0]) / (t[-1] - t[0])
     elif effect == "mag_accel_misalignment":
         params["rho"] = np.radians([0.8, -0.6, 0.5])  # the magnetometer turned about 1.1° against the accelerometer
+    elif effect == "time_varying_hard_iron":
+        # a hard iron that steps by about 850 nT part-way (a part near the sensor magnetised, a
+        # battery swapped): 5.7 counts of 150 nT
+        params["dh"] = o.get("dh_scale", 1.0) * np.array([600.0, -450.0, 400.0])
+        params["t_on_s"] = np.array(0.45 * (t[-1] - t[0]))
     elif effect == "field_anomaly":
         # a bent field: 6 % stronger and 1.5° steeper than IGRF (a magnitude change alone is a
         # common scale of W that no single capture can see; docs/diagnose.md)
@@ -626,7 +636,8 @@ def main(argv=None):
                 if fname != "plain" and case not in ("plain", "plain_B", "A", "nav", "averages"):
                     continue
                 for which in a.effects.split(","):
-                    for eff in (None,) if which == "null" else effects[:1] if fname != "plain" else effects:
+                    named = (which,) if which not in ("null", "big") else effects
+                    for eff in (None,) if which == "null" else named[:1] if fname != "plain" else named:
                         rng = np.random.default_rng(a.seed)
                         meta, cols, truth = gen(rng, opts, eff)
                         if "t" in cols:

@@ -45,6 +45,7 @@ from db.integrity import (
 from db.schema import MIGRATION_NAMES, MIGRATION_SET, RECORD_VERSION
 
 BUSY_TIMEOUT_S = 30.0
+FUTURE_MARGIN = timedelta(days=1)  # a date-only capture east of UTC, a clock a little ahead
 MAX_PREDICTION_YEARS = 1000.0  # a drift slower than tolerance per millennium predicts no exit
 # the longest recalibration interval [days]: 100 years (a due date must stay a date)
 MAX_INTERVAL_DAYS = 36525.0
@@ -712,6 +713,11 @@ class Store:
         if not isinstance(result.get("params"), dict):
             raise ValueError("the result has no 'params' object")
         when = P.normalize_time(time if time is not None else (meta.get("date") or P.now_utc()))
+        if P.parse_time(when) > P.now_utc() + FUTURE_MARGIN:  # a typo (2062 for 2026) hid the device from `due`
+            raise ValueError(
+                f"the calibration's time {when} (the capture's 'date') is in the future (now "
+                f"{P.iso(P.now_utc())}): it is when the data were measured; correct the date"
+            )
         operator = operator if operator is not None else meta.get("operator")
         host = host if host is not None else socket.gethostname()
         params = P.clean_json(result["params"])

@@ -493,6 +493,100 @@ def noise_from_second_differences(y) -> float:
     return float(np.sqrt(np.mean(s**2)))
 
 
+# a magnetometer read through a quantiser of step q whose white noise σ is below q/2 is not
+# dithered: the rounding error of a still unit is a constant per still stretch (see
+# rounding_shared_var); at σ = q/2 that constant's variance is e^(−π²) ≈ 5e-5 of q²/12
+UNDITHERED_SIGMA_Q = 0.5
+
+
+def quantum(y) -> np.ndarray:
+    """Per axis, the step of the grid the readings lie on (the smallest nonzero difference
+    between distinct values, when every value is a whole number of it from the smallest to
+    1e-3 of it), else 0: readings in counts, or counts converted with a fixed factor."""
+    y = np.asarray(y, float)
+    out = np.zeros(y.shape[1])
+    for a in range(y.shape[1]):
+        v = np.unique(y[np.isfinite(y[:, a]), a])
+        if len(v) < 2:
+            continue
+        q = float(np.min(np.diff(v)))
+        r = (v - v[0]) / q
+        if q > 0 and np.max(np.abs(r - np.round(r))) < 1e-3:
+            out[a] = q
+    return out
+
+
+def rounding_shared_var(sigma, q) -> np.ndarray:
+    """Variance of the part of the rounding error that a still stretch's samples share, per axis.
+
+    A reading ``Q(x + n)`` (round to the grid of step ``q``, white noise ``n`` of σ) of a
+    constant ``x``: the error ``Q(x + n) − x`` has variance ``σ² + q²/12`` (the rounding error
+    is uniform and independent of ``n``), of which its mean over the stretch,
+    ``E_n[Q(x + n)] − x``, the sawtooth smoothed by the noise, keeps
+    ``τ² = Σ_k q²/(2π²k²) exp(−4π²k²σ²/q²)`` (its Fourier series, x uniform on the grid):
+    q²/12 at σ = 0, no row averages it down; negligible from σ = q/2 (dithered). The rest,
+    ``σ² + q²/12 − τ²``, is white within the stretch. 0 where ``q`` is 0."""
+    s = np.asarray(sigma, float)
+    q = np.asarray(q, float)
+    out = np.zeros(np.broadcast(s, q).shape)
+    ok = np.broadcast_to(q > 0, out.shape)
+    qq = np.broadcast_to(q, out.shape)[ok]
+    ss = np.broadcast_to(s, out.shape)[ok]
+    K = 40
+    k = np.arange(1, K + 1)[:, None]
+    a = 4 * math.pi**2 * (ss / qq) ** 2
+    # the terms beyond K as Σ_{k>K} 1/k² ≈ 1/(K + ½) times their first factor (σ → 0: to 1e-5)
+    terms = np.sum(np.exp(-a * k**2) / k**2, axis=0) + np.exp(-a * (K + 1) ** 2) / (K + 0.5)
+    out[ok] = qq**2 / (2 * math.pi**2) * terms
+    return out
+
+
+def quantised_noise(y, stretches, q) -> tuple[np.ndarray, np.ndarray]:
+    """(σ, τ²) per axis of a magnetometer on a quantiser of step ``q`` (:func:`quantum`): σ the
+    white noise before the quantiser, from the readings' scatter within the still stretches
+    ``[(start, stop), …]`` (half the mean square of successive differences, pooled; a jump of
+    more than 3 steps is left out: the field moved, a hard-iron step in a hold, not noise), which
+    is ``σ² + q²/12 − τ²(σ)`` (:func:`rounding_shared_var`; increasing in σ, solved by
+    bisection); τ² the variance of
+    the rounding error a stretch shares, 0 where the quantiser is dithered (σ ≥ q/2) or there
+    is none. Axes on one step share one σ (one chip's noise, axes averaged in variance as
+    :func:`noise_from_second_differences` does): the scatter of a still, undithered axis is a
+    few flips between two counts, in the stretches whose value lies near a step, and one axis
+    alone put σ anywhere from 0.6 to 1.25 times its value. NaN σ where the stretches hold too
+    few samples."""
+    y = np.asarray(y, float)
+    q = np.asarray(q, float)
+    d = [np.diff(y[i:j], axis=0) for i, j in stretches if j - i >= 2]
+    d = np.concatenate(d) if d else np.zeros((0, y.shape[1]))
+    d = d[np.all(np.isfinite(d), axis=1)]
+    jump = np.any(np.abs(d) > np.where(q > 0, 3 * q, np.inf), axis=1)
+    if len(d) and jump.mean() < 0.5:  # else the noise spans many steps (dithered: no jump to tell)
+        d = d[~jump]
+    if len(d) < 10:
+        return np.full(y.shape[1], math.nan), np.zeros(y.shape[1])
+    within = np.mean(d**2, axis=0) / 2.0
+    sigma = np.sqrt(within)  # no quantiser: the scatter is the noise
+    tau2 = np.zeros(y.shape[1])
+    for qa in np.unique(q[q > 0]):
+        axes = q == qa
+        v = float(np.mean(within[axes]))
+
+        def f(s, qa=qa):
+            return s**2 + qa**2 / 12.0 - float(rounding_shared_var(s, qa))
+
+        hi = UNDITHERED_SIGMA_Q * qa
+        if v >= f(hi):
+            sigma[axes] = math.sqrt(max(v - qa**2 / 12.0, 0.0))  # dithered: Sheppard's correction
+            continue
+        lo = 0.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if f(mid) < v else (lo, mid)
+        sigma[axes] = 0.5 * (lo + hi)
+        tau2[axes] = float(rounding_shared_var(sigma[axes][0], qa))
+    return sigma, tau2
+
+
 def noise_bias_nT(y, W, h, noise_raw: float) -> np.ndarray:
     """Per-row ``E|W(y − h)| − |W(y_true − h)|`` for white raw noise: the noise across the
     ellipsoid's normal lengthens the vector by ``σ² (‖W‖²_F − |Wᵀû|²) / (2 |m|)`` (second

@@ -12,6 +12,9 @@ Reading goes through :func:`open_input` (or, for a library that opens the path i
 socket) is refused before anything opens it, since reading one can block for ever or never
 end.
 
+A symbolic link is written through: its target gets the new content and the link stays (the
+rename had replaced the link by a file, ``/dev/stdout`` included, where the folder allowed it).
+
 Permissions: a file that already exists keeps its mode; a new one gets what ``open()`` would
 give it (0o666 less the umask), not ``tempfile.mkstemp``'s 0o600. Newlines: as ``open()``
 with the same ``newline`` argument (binary modes write the bytes as given).
@@ -44,8 +47,10 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_open: mode {mode!r} (use 'w' or 'wb')")
     path = os.fspath(path)
+    st = check_output(path)  # through a link: a pipe or terminal behind /dev/stdout is refused here
+    if os.path.islink(path):  # write the file it names: the rename replaced the link itself (/dev/stdout too)
+        path = os.path.realpath(path)
     folder = os.path.dirname(os.path.abspath(path))
-    st = check_output(path)
     old_mode = stat.S_IMODE(st.st_mode) if st is not None and stat.S_ISREG(st.st_mode) else None
     fd, tmp = _create_beside(folder, os.path.basename(path))
     try:

@@ -32,6 +32,7 @@ def save_result(
     judged and decided). A capture already stored raises ``db.store.DuplicateCapture``.
     """
     store = open_store(path)
+    operator = operator or str(capture.meta.get("operator") or "") or None  # who recorded it, as the report says
     try:
         operator = operator or getpass.getuser()
     except Exception:

@@ -421,3 +421,28 @@ def test_drift_on_an_80_column_terminal_fits_with_every_figure_and_unit(db):
             cells += re.split(r"\s{2,}", more.strip())
         with_tolerance = any("LEAVES" in x for x in table[heading + 1 : i])
         assert cells == [param, *(figures if with_tolerance else figures[:5])], (param, cells, figures)
+
+
+def test_a_capture_dated_in_the_future_is_not_saved(tmp_path):
+    """A capture dated 2062 (a typo for 2026) was saved as accepted and its device was not due
+    until 2062: `station due --within 365` said "nothing due". A calibration's time is when the
+    data were measured: more than a day ahead of now is refused in one line, exit 2, nothing
+    stored; a date-only capture of today east of UTC (tomorrow's date in UTC+14) still saves."""
+    from station.capture import read_capture, write_capture
+    from tests.station_run import run_station
+
+    db = tmp_path / "s.db"
+    path = tmp_path / "p1.csv"
+    assert run_station("simulate", "--procedure", "accel-tabletop", "--seed", "400321", "--out", path).returncode == 0
+    assert run_station("devices", "add", "SIM-ACC-400321", "--interval-days", "30", "--db", db).returncode == 0
+    cap = read_capture(path)
+    cap.meta["date"] = "2062-11-21"
+    write_capture(path, cap)
+    res = run_station("calibrate", path, "--save", "--db", db)
+    assert res.returncode == 2 and res.stdout == "" and res.stderr.count("\n") == 1, res.stderr
+    assert "2062-11-21" in res.stderr and "in the future" in res.stderr
+    assert json.loads(run_station("history", "SIM-ACC-400321", "--json", "--db", db).stdout) == []
+    cap.meta["date"] = (datetime.now(UTC) + timedelta(hours=14)).strftime("%Y-%m-%d")
+    write_capture(path, cap)
+    res = run_station("calibrate", path, "--save", "--db", db)
+    assert res.returncode == 0, res.stderr

@@ -517,6 +517,10 @@ def test_calibrate_accuracy_must_be_positive(tmp_path, capsys, value):
         ("simulate", "--procedure", "ldv", "--out", "{tmp}/x.csv", "--seed", "-1"),  # was: ValueError traceback
         ("walkthrough", "--procedure", "ldv", "--seed", "-1"),  # was: ValueError traceback
         ("devices", "add", "Y", "--kind", "bogus"),  # was: stored silently
+        # was: "cannot process this input (ValueError: expected non-negative integer)", the catch-all
+        ("demo", "--headless", "--no-save", "--seed", "-1"),
+        ("sim-device", "--seed", "-1", "--seconds", "1"),
+        ("tui", "--sim", "--seed", "-1"),
     ],
 )
 def test_argument_errors_exit_2(tmp_path, capsys, argv):

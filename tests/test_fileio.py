@@ -131,3 +131,46 @@ def test_only_whole_file_modes():
     with pytest.raises(ValueError):
         with atomic_open("x", "a"):
             pass
+
+
+def test_a_symbolic_link_is_written_through_not_replaced(tmp_path):
+    """The rename put the new file in place of a link: `export -o /dev/stdout` run as root
+    replaced the /dev/stdout link by a regular file (every later `> /dev/stdout` of the machine
+    wrote there), and `-o current.param` (a link to the board's file) left the board's file
+    old and the link gone. The link's target gets the content; the link stays; a dangling
+    link makes its target."""
+    target = tmp_path / "real.param"
+    target.write_text("old\n")
+    link = tmp_path / "current.param"
+    link.symlink_to(target.name)
+    atomic_write_text(link, "new\n")
+    assert link.is_symlink() and os.readlink(link) == target.name
+    assert target.read_text() == "new\n"
+    dangling = tmp_path / "next.param"
+    dangling.symlink_to("made.param")
+    atomic_write_text(dangling, "made\n")
+    assert dangling.is_symlink() and (tmp_path / "made.param").read_text() == "made\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["current.param", "made.param", "next.param", "real.param"]
+
+
+def test_cli_output_through_a_link_to_a_pipe_is_refused_as_the_pipe(tmp_path):
+    """`-o /dev/stdout` with stdout a pipe: writing through links must not lose the check of
+    what the link names; the pipe behind it is refused as one, before anything is written."""
+    import subprocess
+    import sys
+
+    from tests.station_run import ROOT
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    link = tmp_path / "out.csv"
+    link.symlink_to(fifo)
+    res = subprocess.run(
+        [sys.executable, "-m", "station", "simulate", "--procedure", "accel-centrifuge", "--out", str(link)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "named pipe" in res.stderr, res.stderr
+    assert link.is_symlink() and fifo.exists() and not fifo.is_file()

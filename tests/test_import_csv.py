@@ -406,3 +406,26 @@ def test_calibrate_of_a_log_with_a_device_id_no_capture_can_hold_names_the_optio
     res = run_station("calibrate", log, "--procedure", "gyro-drift", "--device", "a\nb")
     assert_one_line_refusal(res, "--device 'a\\nb'", "control character")
     assert "station-import" not in res.stderr
+
+
+@pytest.mark.parametrize(
+    "rate, needle",
+    [
+        ("1e300", "--rate must be a positive number of Hz, at most 1e+09, got 1e+300"),
+        ("1e-300", "--rate 1e-300: 3 rows"),
+    ],
+)
+@pytest.mark.parametrize("command", ["import", "calibrate"])
+def test_a_rate_no_capture_can_hold_is_refused_as_the_option(tmp_path, rate, needle, command):
+    """`--rate 1e300` was refused as "o.csv: metadata 'sample_rate_hz': '1e+300' must be ... at
+    most 1e9", naming the output (or 'the capture made from it') and a metadata key the operator
+    never wrote; `--rate 1e-300` as "o.csv: column 't', row 2: inf cannot be written", and
+    `--rate 1e-30` wrote a capture whose t (2e30 s) the station's own reader refuses. Now the
+    option is named, nothing written."""
+    src = tmp_path / "plain.csv"
+    src.write_text("ax,ay,az\n0,0,9.8\n0,0,9.81\n0,0,9.79\n")
+    out = tmp_path / "o.csv"
+    args = ["--out", out] if command == "import" else ["--format", "csv"]
+    res = run_station(command, src, "--procedure", "accel-tabletop", "--unit", "accel=m/s^2", "--rate", rate, *args)
+    assert_one_line_refusal(res, needle)
+    assert "o.csv" not in res.stderr and "metadata" not in res.stderr and not out.exists()

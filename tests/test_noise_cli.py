@@ -182,3 +182,23 @@ def test_the_plot_on_a_real_terminal_is_coloured_not_escaped_text(tmp_path, no_c
     assert ("\x1b[" in text) == (not no_color)
     plot = [re.sub(r"\x1b\[[0-9;]*m", "", line) for line in text.splitlines() if "┤" in line]
     assert plot and max(len(line) for line in plot) <= 80  # as the screen shows it
+
+
+@pytest.mark.parametrize("topic", ["/imu0\nupdate_rate: 1", "a: b", "/imu0 # x", ""])
+def test_a_rostopic_that_is_no_ros_name_is_refused_not_written_into_imu_yaml(tmp_path, topic):
+    """`--rostopic` went unquoted into imu.yaml: a newline added a second `update_rate` (the
+    one a YAML loader keeps is the last, 1 Hz), ': ' made a file no YAML loader reads. A ROS
+    name has letters, digits, _ and / only (wiki.ros.org/Names); anything else is one line,
+    exit 2, no imu.yaml."""
+    cap = still_capture(tmp_path / "still.csv", seed=6, seconds=60.0)
+    out = tmp_path / "imu.yaml"
+    res = run_station(
+        "noise", cap, "--no-plot", "--format", "kalibr", "--out", out, "--rostopic", topic, subprocess_run=True
+    )
+    assert res.returncode == 2 and res.stdout == "", (res.returncode, res.stdout, res.stderr)
+    assert res.stderr.count("\n") == 1 and "--rostopic" in res.stderr and "ROS topic name" in res.stderr
+    assert "Traceback" not in res.stderr and not out.exists()
+    res = run_station("noise", cap, "--no-plot", "--format", "kalibr", "--out", out, "--rostopic", "/cam0/imu_raw")
+    assert res.returncode == 0, res.stderr
+    keys = [line.split(":")[0] for line in out.read_text().splitlines() if line and not line.startswith("#")]
+    assert sorted(keys) == sorted(set(keys)) and "rostopic: /cam0/imu_raw" in out.read_text().splitlines()

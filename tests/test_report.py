@@ -391,3 +391,28 @@ def test_history_on_an_80_column_terminal_wraps_between_pairs(filled):
     block = [lines[i]] + [x for x in lines[i + 1 : i + 4] if x.startswith("        ")]
     pairs = re.findall(r"(\S+)±(\S+)", " ".join(block))
     assert len(pairs) == 9, block  # every pair whole, none split across lines
+
+
+def test_the_captures_operator_is_the_reports_operator_unless_another_is_given(tmp_path):
+    """README: the report's operator comes from the capture's `operator` (the TUI's Connect
+    screen, `record --meta operator=...` write it). `calibrate FILE --save` without --operator
+    stored the login name instead (save_result put getpass.getuser() before the capture's
+    value), so a bench PC's shared login signed every CLI-saved report. --operator still wins;
+    the login is the fallback only where the capture names nobody."""
+    import getpass
+
+    db = tmp_path / "station.db"
+    path = _sim(tmp_path, "compass", 7, "MAG-OP", "2026-11-21T09:15:00Z", operator="Ann Lee")
+    r = run_station("calibrate", path, "--save", "--json", "--db", db)
+    assert r.returncode == 0, r.stderr
+    cal_id = json.loads(r.stdout)["calibration_id"]
+    history = json.loads(run_station("history", "MAG-OP", "--json", "--db", db).stdout)
+    assert history[-1]["operator"] == "Ann Lee", history[-1].get("operator")
+    _, page = _report(tmp_path, db, cal_id)
+    assert "Ann Lee" in page
+    if getpass.getuser() != "Ann Lee":
+        assert f"<td>{getpass.getuser()}</td>" not in page
+    other = _sim(tmp_path, "compass", 8, "MAG-OP", "2026-11-22T09:15:00Z", operator="Ann Lee")
+    r = run_station("calibrate", other, "--save", "--json", "--db", db, "--operator", "Bo Chen")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(run_station("history", "MAG-OP", "--json", "--db", db).stdout)[-1]["operator"] == "Bo Chen"

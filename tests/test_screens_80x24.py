@@ -11,6 +11,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from db import Store
 from station.app import make_app
@@ -969,3 +970,56 @@ def test_notices_of_results_never_cover_its_boxes_nor_the_diagnose_report(tmp_pa
         assert covered == [], (screen, covered, "\n".join(lines))
         assert "Exported IMU-7-accel-tabletop-" in notices and ".json in" in notices, (screen, notices)
         assert all(len(line) <= 80 for line in lines)
+
+
+@pytest.mark.parametrize("device", ["lab/unit7", "../unit7"])
+def test_export_of_a_device_whose_id_holds_a_slash_stays_in_the_export_folder(tmp_path, device):
+    """`e` on Results named its files `<device>-<what>-<stamp>.*` with the id as it is: a device
+    'lab/unit7' said "Export failed: ... cannot write: no folder .../lab", and '../unit7' wrote
+    beside the export folder, not in it. The id goes into the name as the resume file's does
+    (letters, digits, - _ . kept; anything else _)."""
+    from station.screens.results import ResultsScreen
+
+    cap, result = p1_result(device)
+    folder = tmp_path / "exports"
+    folder.mkdir()
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id=device)
+        app.session.extra["export_dir"] = str(folder)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#residuals").row_count == 12)
+            await pilot.press("e")
+            await wait_for(pilot, lambda: _shown(app, "Export"))
+            return _notices(app) + " ".join(str(t.render()) for t in app.screen.query("Toast"))
+
+    shown = asyncio.run(story())
+    assert "failed" not in shown, shown
+    names = sorted(p.name for p in folder.iterdir())
+    assert [n.rsplit(".", 1)[1] for n in names] == ["csv", "json"], names
+    assert all(n.startswith(device.replace("/", "_") + "-accel-tabletop-") for n in names), names
+    assert not [p.name for p in tmp_path.iterdir() if p.suffix in (".csv", ".json")]  # none beside the folder
+
+
+def test_history_shows_the_status_of_a_device_with_a_long_id(tmp_path):
+    """History's devices table is 26 columns wide: an id of 44 characters took them all, and
+    `n` and `status` (overdue, due) were off to the right, out of sight at 80x24. A long id is
+    shown by its start and end, so the status stays on screen beside it."""
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    long_id = "BENCH-IMU-LONG-SERIAL-0123456789-ABCDEFGHIJ"
+    seed_history(db, long_id, n=1, interval_days=30, start_year=2024)  # years ago: overdue
+
+    async def story():
+        app = make_app(db)
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f2")
+            await history_shown(pilot, app, 1)
+            return screen_lines(app)
+
+    lines = asyncio.run(story())
+    row = next(line for line in lines if "BENCH" in line and "▏" in line)  # not the overdue notice above
+    left = row.split("▏")[0]  # the devices table, left of the divider
+    assert "overdue" in left and "EFGHIJ" in left, "\n".join(lines)

@@ -151,3 +151,38 @@ def test_cli_simulate_bad_arguments_one_line_exit_2(tmp_path, args, needle):
     assert r.returncode == 2
     assert needle in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize("too_long", ["truth", "out"])
+def test_cli_simulate_writes_the_capture_and_its_truth_or_neither(tmp_path, too_long):
+    """`simulate --out cap.csv --truth T` where T cannot be written (a read-only folder, a full
+    disk; here a name whose temporary the file system refuses as too long) said so with exit 2
+    but left cap.csv written without its truth. Both files or neither."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    long_name = "t" * 240  # the file itself fits in 255 bytes, its hidden temporary beside it does not
+    out = tmp_path / (long_name + ".csv" if too_long == "out" else "cap.csv")
+    truth = tmp_path / (long_name + ".json" if too_long == "truth" else "truth.json")
+    res = run_station("simulate", "--procedure", "accel-centrifuge", "--out", out, "--truth", truth)
+    assert_one_line_refusal(res, "cannot write", "File name too long")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "procedure, option, column",
+    [("compass", "mag_noise_uT=1e300", "mx"), ("accel-centrifuge", "noise_g=1e300", "ax")],
+)
+def test_cli_simulate_refuses_options_that_make_a_capture_the_reader_refuses(tmp_path, procedure, option, column):
+    """`simulate --option mag_noise_uT=1e300` wrote a capture with exit 0 that `calibrate`,
+    `inspect` and `diagnose` then refused (6.6e299 uT "is beyond what any magnetometer
+    reports"). The options are input: one line naming the column and the bound, nothing
+    written; an ordinary noise still simulates and reads back."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    out = tmp_path / "sim.csv"
+    res = run_station("simulate", "--procedure", procedure, "--out", out, "--option", option)
+    assert_one_line_refusal(res, f"column '{column}'", "beyond what any")
+    assert not out.exists()
+    res = run_station("simulate", "--procedure", procedure, "--out", out, "--option", option.replace("1e300", "0.01"))
+    assert res.returncode == 0, res.stderr
+    assert run_station("inspect", out).returncode == 0

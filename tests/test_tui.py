@@ -863,3 +863,36 @@ def test_a_port_typed_while_source_is_simulated_is_the_port_used(tmp_path):
         refused, kind, port = asyncio.run(story())
     assert kind == "serial" and port == path
     assert path in refused and "simulated" in refused
+
+
+def test_a_device_that_sends_nothing_is_said_on_the_procedure_screen():
+    """A port where nothing answers (wrong port, baud rate or protocol; the unit unpowered):
+    P1 showed dashes, "Hold the unit still: measuring the sensor noise" and "t=nan s" for ever,
+    nothing saying the device was silent. Now a notice names the port within 5 s and says
+    what to check, and the time reads "t=— s" until a sample comes."""
+    import os
+
+    from station.sources import SerialSource
+
+    master, slave = os.openpty()  # a real pty whose other end never writes
+    try:
+        path = os.ttyname(slave)
+
+        async def story():
+            app = make_app(None, device=SerialSource(path, header_timeout_s=0.5))
+            async with app.run_test(size=SIZE, notifications=True) as pilot:
+                await pilot.press("f5")
+                await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen" and app.screen.updates > 2)
+                progress = text_of(app, "#progress")
+                await wait_for(pilot, lambda: "no data from" in "\n".join(screen_lines(app)), timeout_s=20.0)
+                lines = "\n".join(screen_lines(app))
+            app.session.source.stop()
+            return progress, lines
+
+        progress, lines = asyncio.run(story())
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert "t=— s" in progress and "nan" not in progress, progress
+    flat = " ".join(lines.split())
+    assert f"no data from {path}" in flat and "baud rate" in flat, lines

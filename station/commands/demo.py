@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from station.commands.simulate import seed_arg
 from station.procedures import registry
 
 
@@ -18,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="The TUI on the simulated device with a scripted operator who follows "
         "the prompts; short averaging times; the result is saved to the database.",
     )
-    p.add_argument("--seed", type=int, default=0, help="simulated device's seed")
+    p.add_argument("--seed", type=seed_arg, default=0, help="simulated device's seed")
     p.add_argument(
         "--procedure",
         choices=registry.demos(),

@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 
 from station.errors import InputError
@@ -34,11 +35,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--rostopic",
         default="/imu0",
-        help="the rostopic line of imu.yaml (default /imu0)",
+        type=_ros_name,
+        help="the rostopic line of imu.yaml (default /imu0): a ROS name (letters, digits, _ and /)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the text")
     p.add_argument("--no-plot", action="store_true", help="no terminal plot")
     p.set_defaults(func=run)
+
+
+def _ros_name(text: str) -> str:
+    """A ROS graph resource name (wiki.ros.org/Names: a letter, / or ~ first, then letters, digits,
+    _ and /): written unquoted into imu.yaml, anything else (a newline, ': ', '#') would change or
+    break the YAML Kalibr reads."""
+    if not re.fullmatch(r"[A-Za-z/~][A-Za-z0-9_/]*", text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a ROS topic name (a letter, / or ~ first, then letters, digits, _ and /)"
+        )
+    return text
 
 
 def _write_atomic(path: str, text: str) -> None:

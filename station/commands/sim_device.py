@@ -11,6 +11,7 @@ import signal
 import sys
 import threading
 
+from station.commands.simulate import seed_arg
 from station.errors import InputError, require_positive
 from station.procedures import registry
 
@@ -55,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         f"{registry.one_of(benches())}",
     )
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--effect", action="append", metavar="NAME=VALUE", help="an effect of diagnose.md and its size")
     p.add_argument("--hold", type=float, default=8.0, metavar="S", help="scripted operator's hold per position (s)")
     p.add_argument("--auto", action="store_true", help="start with the scripted operator on")

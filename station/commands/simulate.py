@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 from station.errors import InputError
-from station.fileio import atomic_write_json, cannot_write, check_output, same_file
+from station.fileio import atomic_open, cannot_write, check_output, same_file
 from station.procedures import registry
 from station.textsafe import safe
 
@@ -117,10 +118,23 @@ def _option_value(name: str, value):
     return value
 
 
-def _write_json(path: str, obj) -> None:
-    """Atomically (station.fileio); OSError -> one line."""
-    with cannot_write(path):
-        atomic_write_json(path, obj, indent=2)
+def _refuse_implausible(sim) -> None:
+    """Options that make numbers no instrument reports (``mag_noise_uT=1e300``) would write a
+    capture the station's own reader refuses: refused here, nothing written."""
+    import numpy as np
+
+    from station.capture import column_limit
+
+    for name, values in sim.columns.items():
+        values = np.asarray(values)
+        if values.dtype.kind != "f" or not values.size:
+            continue
+        largest = float(np.nanmax(np.abs(values))) if not np.all(np.isnan(values)) else 0.0
+        bound, reason = column_limit(name, sim.meta)
+        if largest > bound:
+            raise InputError(
+                None, None, f"simulate: these options make column '{name}' reach {largest:.3g}, beyond {reason}"
+            )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,9 +170,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, "simulate: the options ask for more samples than fit in memory") from None
     except (ValueError, IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
         raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
-    write_capture(args.out, Capture(meta=sim.meta, columns=sim.columns, path=args.out))
-    if args.truth:
-        _write_json(args.truth, sim.truth)
+    _refuse_implausible(sim)
+    capture = Capture(meta=sim.meta, columns=sim.columns, path=args.out)
+    if args.truth:  # both or neither: the truth's temporary is made first, renamed after the capture
+        text = json.dumps(sim.truth, indent=2)
+        with cannot_write(args.truth), atomic_open(args.truth) as f:
+            f.write(text)
+            write_capture(args.out, capture)
+    else:
+        write_capture(args.out, capture)
     n = len(next(iter(sim.columns.values())))
     print(
         f"wrote {safe(args.out)}: {args.procedure}, {n} rows, device {sim.meta.get('device')}"

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from station.commands.simulate import seed_arg
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -15,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", default=None, help="serial port or pyserial URL of the device")
     p.add_argument("--protocol", choices=("station", "mavlink"), default="station", help="wire protocol of --port")
     p.add_argument("--sim", action="store_true", help="connect to the built-in simulated device and start P1 at once")
-    p.add_argument("--seed", type=int, default=0, help="simulated device's seed (with --sim)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="simulated device's seed (with --sim)")
     p.add_argument(
         "--speed", type=float, default=1.0, help="the built-in simulated device's seconds per wall second (default 1)"
     )

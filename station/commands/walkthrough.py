@@ -48,7 +48,10 @@ def run(args: argparse.Namespace) -> int:
         path = os.path.join(tmp, f"{args.procedure}.capture.csv")
         write_capture(path, Capture(meta=sim.meta, columns=sim.columns, path=path))
         capture = read_capture(path)
-        print(f"1. simulated {args.procedure} (seed {args.seed}): {capture.n_rows} rows → {os.path.basename(path)}")
+        print(
+            f"1. simulated {args.procedure} (seed {args.seed}): {capture.n_rows} rows in a temporary capture "
+            f"(station simulate --procedure {args.procedure} --seed {args.seed} --out FILE keeps one)"
+        )
         result = calibrate_capture(capture)
     print("2. calibrated:\n")
     print(format_text(result))

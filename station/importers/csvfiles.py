@@ -21,7 +21,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from station.capture import UNIT_KEYS, plausible_limit
+from station.capture import MAX_ABS, UNIT_KEYS, plausible_limit
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
 from station.importers._common import COLUMNS, Imported, Stream
@@ -29,6 +29,7 @@ from station.importers.options import TARGETS
 
 KIND_OF = {c: k for k, cols in COLUMNS.items() for c in cols}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+MAX_RATE_HZ = 1e9  # the capture format's largest sample_rate_hz
 EUROC_COLUMNS = {
     "w_RS_S_x": "gx",
     "w_RS_S_y": "gy",
@@ -569,14 +570,20 @@ def read_plain(
             None,
             "no time column: map one (--map t=COLUMN) or give the sample rate (--rate HZ)",
         )
-    if rate_hz is not None and not (0 < rate_hz < math.inf):
-        raise InputError(None, None, f"--rate must be a positive number of Hz, got {rate_hz:g}")
+    if rate_hz is not None and not (0 < rate_hz <= MAX_RATE_HZ):  # the capture's sample_rate_hz takes no more
+        raise InputError(
+            None, None, f"--rate must be a positive number of Hz, at most {MAX_RATE_HZ:g}, got {rate_hz:g}"
+        )
     values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
     _check_limits(path, values, linenos, units)
     if "t" in values:
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
     else:
         t_s = np.arange(len(linenos), dtype=np.float64) / rate_hz
+        if len(t_s) and not t_s[-1] <= MAX_ABS:  # the time a capture can hold (station.capture.MAX_ABS)
+            raise InputError(
+                None, None, f"--rate {rate_hz:g}: {len(t_s)} rows would span {t_s[-1]:g} s, beyond {MAX_ABS:g} s"
+            )
     streams = _streams(
         path,
         values,

@@ -393,8 +393,13 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     temp = fill_missing(capture.columns["temp_c"], t) if "temp_c" in capture.columns else None
     static = {}
     a = _xyz(capture, "a")
+    gyro = _xyz(capture, "g")
+    quant = None if a is None else _undithered(t[good], y[good], a[good], None if gyro is None else gyro[good])
+    if quant is not None:
+        # the MAD of second differences reads 0 there (a still stretch reads one count)
+        static.update(still=quant["still"], shared_raw=quant["shared_raw"])
+        noise = quant["noise_raw"]
     if a is not None:
-        gyro = _xyz(capture, "g")
         ok = good & np.all(np.isfinite(a), axis=1)
         try:
             idx = np.flatnonzero(ok)
@@ -411,19 +416,17 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
                 s_a = C.noise_from_second_differences(a[k])
                 g_ref = float(np.median(np.linalg.norm(a[k], axis=1)))
                 rel_var = (noise * gain / F) ** 2 + ((s_a / g_ref) ** 2 if math.isfinite(s_a) else 0.0)
-                static = {
-                    "dip_blocks": {
-                        "f": a[k],
-                        "y": y[k],
-                        "t": t[k],
-                        "temp": None if temp is None else temp[k],
-                        "starts": starts,
-                        "rel_var": rel_var if math.isfinite(rel_var) else 0.0,
-                        "kind": kind,
-                    }
+                static["dip_blocks"] = {
+                    "f": a[k],
+                    "y": y[k],
+                    "t": t[k],
+                    "temp": None if temp is None else temp[k],
+                    "starts": starts,
+                    "rel_var": rel_var if math.isfinite(rel_var) else 0.0,
+                    "kind": kind,
                 }
         except (SolverError, ValueError):
-            static = {}
+            static.pop("dip_blocks", None)
     prob = DP.compass_problem(
         t[good], y[good], W0, h0, F, incl, noise_raw=noise, temp_c=None if temp is None else temp[good], **static
     )
@@ -434,6 +437,53 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         "a sample far off the field sphere: a magnetic disturbance nearby or a glitch",
         param_units=diagnosis_units(capture.meta.get("mag_unit")),
     )
+
+
+def _undithered(t, y, a, gyro) -> dict | None:
+    """A magnetometer read through a quantiser its noise does not dither (counts of 150 nT
+    with 20 nT of noise, as an AK8963 gives), or None: the rounding error of a still unit is a
+    constant per still stretch (``solvers.compass.quantised_noise``). ``{"still": the stretches
+    (the accelerometer's and gyro's static intervals, indices into t), "shared_raw": its
+    variance per axis, "noise_raw": a moving sample's white noise}``."""
+    from solvers.stillness import detect_static_intervals
+
+    q = C.quantum(y)
+    if not np.any(q > 0):
+        return None
+    try:
+        st = detect_static_intervals(strictly_increasing_t(t), a, gyro, nan_policy="omit")
+    except (SolverError, ValueError):
+        return None
+    still = _grown([(iv.start, iv.stop) for iv in st.intervals], y)
+    sigma, tau2 = C.quantised_noise(y, still, q)
+    if not np.all(np.isfinite(sigma)):
+        return None
+    noise2 = float(np.mean(sigma**2 + q**2 / 12.0))
+    # a stretch is one row where the error it shares outweighs the white noise of its mean,
+    # n τ² > σ² + q²/12 − τ² (below that, rows with the white noise alone understate its
+    # variance less than 2 times): at 60 nT of noise on counts of 150 nT (τ 1.3 nT) none is
+    t2 = float(np.mean(tau2))
+    still = [(i, j) for i, j in still if t2 > 0 and (j - i) * t2 > noise2 - t2]
+    if not still:
+        return None
+    return {"still": still, "shared_raw": tau2, "noise_raw": math.sqrt(noise2)}
+
+
+def _grown(stretches, y) -> list[tuple[int, int]]:
+    """Each still stretch grown, either way, over the samples that read within its own range on
+    every axis (the detector's windows leave out half a second at each end of a hold, whose
+    samples carry the same rounding error); never into a neighbour."""
+    out = []
+    for k, (i, j) in enumerate(stretches):
+        lo, hi = np.min(y[i:j], axis=0), np.max(y[i:j], axis=0)
+        first = out[-1][1] if out else 0
+        last = stretches[k + 1][0] if k + 1 < len(stretches) else len(y)
+        while i > first and np.all((y[i - 1] >= lo) & (y[i - 1] <= hi)):
+            i -= 1
+        while j < last and np.all((y[j] >= lo) & (y[j] <= hi)):
+            j += 1
+        out.append((i, j))
+    return out
 
 
 def _dip_holds(t, a, gyro):

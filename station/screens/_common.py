@@ -44,6 +44,19 @@ def is_simulated(src) -> bool:
     return getattr(src, "kind", "") == "sim" or str(getattr(src, "device_id", "")).startswith("SIM-")
 
 
+NO_DATA_S = 5.0  # a procedure screen says a device silent this long, and again every as long
+
+
+def no_data_text(src, silent_s: float) -> str:
+    """What the operator is told while a started device sends no sample (wrong port, baud rate or
+    protocol, unpowered): the screen's dashes and "t=— s" alone say nothing is wrong."""
+    where = getattr(src, "label", "") or "the device"
+    return (
+        f"no data from {where} for {silent_s:.0f} s: check the cable, the port, the baud rate and the "
+        "protocol (a abort, then Connect)"
+    )
+
+
 class GuidedScreenMixin:
     """For a Screen with ``_lock``, ``guide`` and ``_fitting`` (see ``__init__`` of the screens).
 
@@ -126,8 +139,17 @@ class GuidedScreenMixin:
         next_post = 0.0
         posts = 0
         t_posts = time.monotonic()
+        # a device on a port that sends nothing is said every NO_DATA_S (the built-in one never is
+        # silent; a test's bench clock may hold it still)
+        got_data, said_silent = getattr(src, "kind", "") != "serial", t_posts
         while not worker.is_cancelled:
             b, pending = (pending if pending is not None else src.drain()), None
+            got_data = got_data or (b is not None and len(b) > 0)
+            if not got_data and time.monotonic() - said_silent >= NO_DATA_S:
+                said_silent = time.monotonic()
+                self.app.call_from_thread(
+                    self.notify, no_data_text(src, said_silent - t_posts), severity="warning", timeout=NO_DATA_S
+                )
             if b is not None and len(b) and (accept is None or accept(b)):
                 with self._lock:
                     st = update(b)

@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from station.fileio import atomic_write_json
 from station.messages import Exported
+from station.procedures.state import file_name_part
 from station.textsafe import tui_markup
 
 
@@ -17,7 +18,7 @@ def export_files(screen, capture, what: str, payload: Callable) -> None:
     s = screen.app.session
     folder = s.extra.get("export_dir") or os.getcwd()
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    base = os.path.join(folder, f"{s.device_id or 'device'}-{what}-{stamp}")
+    base = os.path.join(folder, f"{file_name_part(s.device_id)}-{what}-{stamp}")  # 'lab/unit7': no folder
     try:
         from station.capture import write_capture
 

@@ -29,6 +29,18 @@ from station.messages import StoreLoaded  # noqa: E402
 from station.textsafe import safe, tui_markup  # noqa: E402
 
 STATUS_WIDTH = 7  # the devices table's status column: "overdue"
+DEVICE_WIDTH = 12  # the devices table's id column: a longer id pushed n and status out of the 26 columns
+
+
+def short_id(device_id: str, width: int = DEVICE_WIDTH) -> str:
+    """``device_id`` in ``width`` characters: its start and its end (serial numbers of one model
+    differ at the end), an ellipsis between."""
+    if len(device_id) <= width:
+        return device_id
+    head = (width - 1) // 2
+    return device_id[:head] + "…" + device_id[-(width - 1 - head) :]
+
+
 SHORT_STATUS = {"never calibrated": "no cal"}  # Store.due's statuses that do not fit STATUS_WIDTH
 
 
@@ -136,7 +148,7 @@ class HistoryScreen(NoticesMixin, Screen):
                 st = status.get(d["id"])
                 word = st["status"] if st else "ok"
                 word = SHORT_STATUS.get(word, word)
-                t.add_row(tui_markup(d["id"]), str(d["n_calibrations"]), word, key=d["id"])
+                t.add_row(tui_markup(short_id(d["id"])), str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
             text = "\n".join(tui_markup(f"{d['device_id']}: {d['status']} — {d['reason']}"[:200]) for d in bad[:3])
             if not self.devices:

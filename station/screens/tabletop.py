@@ -20,6 +20,7 @@ from textual.screen import Screen
 from textual.widgets import OptionList, Static
 from textual.worker import get_current_worker
 
+from station.formatting import num
 from station.messages import CalibrationReady, GuideEvent, LiveUpdate, SourceFailed
 from station.screens._common import GuidedScreenMixin, source_rate_hz, start_source
 from station.widgets.live import CountdownBar, OrientationIndicator, PlacementView, Readouts, StabilityBar
@@ -156,7 +157,7 @@ class ProcedureScreen(NoticesMixin, GuidedScreenMixin, Screen):
         self.query_one(CountdownBar).show(st, g.config.average_s)
         self.query_one(Readouts).show(st, message.stats, s.source.units)
         self.query_one("#message", Static).update(st.message)
-        self.query_one("#progress", Static).update(f"{st.n_captured}/{st.n_steps} captured · t={st.t_s:.0f} s")
+        self.query_one("#progress", Static).update(f"{st.n_captured}/{st.n_steps} captured · t={num(st.t_s, '.0f')} s")
 
     def on_guide_event(self, message: GuideEvent) -> None:
         g = self.guide
