@@ -152,3 +152,21 @@ def test_compass_magnitude_rows_weighed_by_the_white_noise(tmp_path):
     mag = np.asarray(diag.problem.row_types) == 0
     rms = float(np.sqrt(np.mean(diag.extended.weighted_residuals[mag] ** 2)))
     assert 0.7 < rms < 1.4, rms
+
+
+def test_a_quiet_reading_at_a_power_of_two_inside_the_columns_range_is_not_clipping():
+    """A magnetometer in counts (150 nT, noise below a count) that reads exactly −256 through a
+    hold is the column's smallest reading, and −2⁸ is a two's-complement limit; but the same
+    column reads +400 elsewhere, beyond the +255 such a converter gives, so it is not clipped
+    there. It was called saturation and the hold left out of the effect search (red-team
+    compass ``counts_quiet``, seed 9202)."""
+    from solvers.diagnose.quality import saturation
+
+    rng = np.random.default_rng(9202)
+    holds = [-256.0, -120.0, 37.0, 215.0, 400.0, -3.0]
+    x = np.concatenate([np.full(200, h) + (rng.random(200) < 0.02) * rng.choice([-1.0, 1.0], 200) for h in holds])
+    x[:200] = -256.0  # the quiet hold at the column's extreme reads one value throughout
+    assert saturation({"mz": x}) == []
+    clipped = np.clip(x * 200.0, -32768.0, 32767.0)  # a 16-bit converter driven beyond its range
+    found = saturation({"mz": clipped})
+    assert [(q["column"], q["value"]) for q in found] == [("mz", 32767.0), ("mz", -32768.0)], found

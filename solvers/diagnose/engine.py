@@ -243,17 +243,23 @@ def chi2_isf(p: float, k: int) -> float:
     return 2.0 * float(gammainccinv(k / 2.0, p))
 
 
-def deviance_quantile(problem: Problem, k: int, m: int, n: int, dof: int) -> float:
-    """Level-α/m quantile of the deviance ``n ln(RSS₀/RSS₁)`` of k added parameters with an
-    unknown noise scale and ``dof`` residual degrees of freedom left: the exact F test,
-    ``n ln(1 + k F_k,dof(1 − α/m) / dof)``, which tends to ``χ²_k(1 − α/m)`` for many rows.
+def deviance_quantile(problem: Problem, k: int, m: int, n: int, dof: int, scale: float = 1.0) -> float:
+    """Level-α/m bound, at noise scale ``scale``, on the deviance ``n ln(RSS₀/RSS₁)`` of k added
+    parameters with an unknown noise scale and ``dof`` residual degrees of freedom left: the exact
+    F test, ``n ln(1 + k F_k,dof(1 − α/m) / dof)``, which tends to ``χ²_k(1 − α/m)`` for many rows.
     A table of a few dozen rows (P2) would otherwise pass a candidate on noise far more often
-    than α says. Problems with several row kinds (one noise scale each) keep the χ² quantile."""
+    than α says. One kind of rows: ``scale`` times that bound. Several kinds (one noise scale
+    each, the deviance summed over them): ``scale`` holds the F statistic, as ``kind_quantile``
+    does, ``n ln(1 + k·scale·F / dof)``; with hundreds of rows both are ``scale·χ²_k``, and with a
+    table of averages of 10–30 positions the χ² bound passed a second candidate on the few
+    degrees of freedom the first one left (P1: ``residual:temperature`` beside a quadratic)."""
     k = max(k, 1)
     p = ALPHA / max(m, 1)
-    if problem.row_types is not None or dof <= 0:
-        return chi2_isf(p, k)
-    return n * math.log1p(k * float(fdtri(k, dof, 1.0 - p)) / dof)
+    if dof <= 0:
+        return scale * chi2_isf(p, k)
+    if problem.row_types is not None:
+        return n * math.log1p(k * scale * float(fdtri(k, dof, 1.0 - p)) / dof)
+    return scale * n * math.log1p(k * float(fdtri(k, dof, 1.0 - p)) / dof)
 
 
 def kind_quantile(k: int, m: int, n_kind: int, dof_kind: float, scale: float = 1.0) -> float:
@@ -1073,8 +1079,13 @@ def _bound(problem, ev: _Eval, m: int, n: int, rank_cur: int, scale: float = 1.0
         fstat = math.expm1(ev.D_rob / ev.n_kind) * ev.dof_kind / max(ev.k, 1) if ev.dof_kind > 0 else 0.0
         crit = float(fdtri(max(ev.k, 1), ev.dof_kind, 1.0 - ALPHA / max(m, 1))) if ev.dof_kind > 0 else math.inf
         return kind_quantile(ev.k, m, ev.n_kind, ev.dof_kind, F), fstat / crit
-    q = deviance_quantile(problem, ev.k, m, n, n - rank_cur - ev.k)
-    return scale * candidate_threshold(problem, ev.cc.cand.name) * q, ev.D_rob / q
+    dof = n - rank_cur - ev.k
+    F = scale * candidate_threshold(problem, ev.cc.cand.name)
+    if problem.row_types is not None and dof > 0:
+        crit = float(fdtri(max(ev.k, 1), dof, 1.0 - ALPHA / max(m, 1)))
+        return deviance_quantile(problem, ev.k, m, n, dof, F), math.expm1(ev.D_rob / n) * dof / (max(ev.k, 1) * crit)
+    q = deviance_quantile(problem, ev.k, m, n, dof)
+    return F * q, ev.D_rob / q
 
 
 def candidate_threshold(problem: Problem, name: str, kind: int | None = None) -> float:

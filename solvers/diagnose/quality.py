@@ -63,12 +63,21 @@ def _ordinary_repeats(x: np.ndarray, ok: np.ndarray) -> bool:
     return float(lengths[lengths >= SATURATION_RUN].sum()) > ORDINARY_REPEAT * len(xi)
 
 
-def _adc_limit(value: float) -> bool:
-    """An integer reading at a two's-complement or unsigned ADC limit (±2^k or 2^k − 1, k ≥ 7)."""
+def _adc_limit(value: float, lo: float, hi: float) -> bool:
+    """An integer reading at a two's-complement or unsigned ADC limit (±2^k or 2^k − 1, k ≥ 7)
+    whose range holds the column's other readings (``lo`` … ``hi``): a 16-bit magnetometer that
+    reads −256 in one hold and +400 in another is not clipped at −256."""
     v = abs(value)
     if v != round(v) or v < 127:
         return False
-    return any(v == 2**k or v == 2**k - 1 for k in range(7, 33))
+    for k in range(7, 33):
+        if v not in (2**k, 2**k - 1):
+            continue
+        signed = -(2**k) <= lo and hi <= 2**k  # ±2^k, give or take the one count of the sign
+        unsigned = value > 0 and lo >= 0 and hi <= 2**k
+        if signed or unsigned:
+            return True
+    return False
 
 
 def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
@@ -84,7 +93,7 @@ def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
             continue
         ordinary = _ordinary_repeats(x, ok)
         for extreme in (np.nanmax(x), np.nanmin(x)):
-            if ordinary and not _adc_limit(float(extreme)):
+            if ordinary and not _adc_limit(float(extreme), float(np.nanmin(x)), float(np.nanmax(x))):
                 continue
             at = ok & (x == extreme)
             if at.sum() < SATURATION_RUN:
