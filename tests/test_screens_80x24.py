@@ -1023,3 +1023,47 @@ def test_history_shows_the_status_of_a_device_with_a_long_id(tmp_path):
     row = next(line for line in lines if "BENCH" in line and "▏" in line)  # not the overdue notice above
     left = row.split("▏")[0]  # the devices table, left of the divider
     assert "overdue" in left and "EFGHIJ" in left, "\n".join(lines)
+
+
+def test_compass_results_show_the_tol_column_and_use_the_screen_height(tmp_path):
+    """The compass's parameter table was 86 columns wide at 80x24 (its reference names,
+    `reference.declination_deg`, are 25 characters): `tol` was cut off behind a horizontal
+    scrollbar while 7 blank lines lay under the table (the compass has no per-position table,
+    yet the parameters kept to two thirds of the height). A device with tolerances and a
+    calibration in use (another simulated unit's, so every Δ/σ is a real number)."""
+    from station.screens.results import ResultsScreen
+
+    db = str(tmp_path / "s.db")
+    cap, result = _simulated_result("compass", 401001)
+    _, other = _simulated_result("compass", 401002)
+    assert result["mag_unit"] == "uT"
+    Store(db).add_device("M1", tolerances={"hard_iron": 0.5, "soft_iron": 20.0})  # 0.5 uT, 0.02 as a ratio
+    previous = {"id": 1, "time": "2026-01-01T00:00:00Z", "params": other["params"]}
+
+    async def story():
+        app = make_app(db, device_id="M1")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, previous))
+            await wait_for(pilot, lambda: "hard_iron[0]" in "\n".join(screen_lines(app)))
+            params, tables = app.screen.query_one("#params"), app.screen.query_one("#tables")
+            fits = params.virtual_size.width <= params.scrollable_content_region.width
+            first = screen_lines(app)
+            gap = tables.region.bottom - params.region.bottom
+            for _ in range(params.row_count):  # to the last row: every parameter is reachable
+                await pilot.press("down")
+            await wait_for(pilot, lambda: "declination_deg" in "\n".join(screen_lines(app)))
+            return fits, gap, first, screen_lines(app)
+
+    fits, gap, first, last = asyncio.run(story())
+    shown = "\n".join(first)
+    assert fits and all(len(line) <= 80 for line in first + last), shown
+    at = next(i for i, line in enumerate(first) if " param " in line)
+    table = first[at:]  # the FAIL reasons above name the same parameters
+    assert table[0].split()[-1] == "tol", shown
+    for name, tol in (("hard_iron[0]", "0.5"), ("soft_iron[0][0]", "0.02"), ("soft_iron[2][2]", "0.02")):
+        row = next(line for line in table if f" {name} " in line)
+        assert row.split()[-1] == tol, shown  # the row's tolerance, on screen
+    assert gap == 0, shown  # no blank lines under the parameters
+    assert sum(" soft_iron[" in line for line in table) == 9, shown  # all of the soft iron at once
+    end = "\n".join(last)
+    assert "reference." in end and "inclination_deg" in end and "declination_deg" in end, end
