@@ -446,3 +446,53 @@ def test_a_capture_dated_in_the_future_is_not_saved(tmp_path):
     write_capture(path, cap)
     res = run_station("calibrate", path, "--save", "--db", db)
     assert res.returncode == 0, res.stderr
+
+
+def test_a_calibration_saved_to_a_device_registered_for_another_sensor_is_said(tmp_path):
+    """`calibrate --save --device ACC-1` of a compass capture, ACC-1 registered as an
+    accelerometer (`devices add --kind accel`), added mag to its kinds without a word: a
+    mistyped --device put the compass into another unit's history unnoticed. It is still saved
+    (a unit may carry several sensors: the README says so), with a warning on stderr naming the
+    device, its kinds and the one added; stdout stays the result. A device registered with that
+    kind, or with none (the TUI registers devices so), gets no warning."""
+    from tests.station_run import run_station
+
+    db, path = tmp_path / "s.db", tmp_path / "mag.csv"
+    assert run_station("simulate", "--procedure", "compass", "--seed", "400322", "--out", path).returncode == 0
+    for device, kinds in (("ACC-1", ["accel"]), ("MAG-1", ["mag", "accel"]), ("NEW-1", [])):
+        args = [a for k in kinds for a in ("--kind", k)]
+        assert run_station("devices", "add", device, *args, "--db", db).returncode == 0
+    res = run_station("calibrate", path, "--save", "--device", "ACC-1", "--json", "--db", db)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["calibration_id"] == 1  # stdout: the result alone
+    warning = [line for line in res.stderr.splitlines() if "warning" in line]
+    assert len(warning) == 1, res.stderr
+    assert "device ACC-1 was registered for accel, not mag" in warning[0] and "--device" in warning[0]
+    shown = json.loads(run_station("devices", "show", "ACC-1", "--json", "--db", db).stdout)
+    assert shown["sensor_kinds"] == ["accel", "mag"]
+    for i, device in enumerate(("MAG-1", "NEW-1")):
+        cap = tmp_path / f"mag{i}.csv"
+        assert (
+            run_station("simulate", "--procedure", "compass", "--seed", str(400323 + i), "--out", cap).returncode == 0
+        )
+        res = run_station("calibrate", cap, "--save", "--device", device, "--db", db)
+        assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
+
+
+def test_devices_add_kind_that_drops_a_kind_says_so(capsys, db):
+    """`devices add ID --kind K` gives the whole list (README): `--kind mag` on a device
+    registered as an accelerometer replaced accel by mag without a word. It still does (what
+    the command table documents), and says which kinds are gone and how to keep them."""
+    assert run(capsys, "devices", "add", "ACC-1", "--kind", "accel", "--db", db)[0] == 0
+    code, out, err = run(capsys, "devices", "add", "ACC-1", "--kind", "mag", "--db", db)
+    assert code == 0 and out == "updated device ACC-1\n"
+    assert err.count("\n") == 1 and "sensor kinds are now mag, no longer accel" in err, err
+    assert "--kind mag --kind accel" in err
+    code, out, err = run(capsys, "devices", "add", "ACC-1", "--kind", "mag", "--kind", "accel", "--db", db)
+    assert code == 0 and err == ""  # adding one drops none: nothing to say
+    code, out, err = run(capsys, "devices", "add", "ACC-1", "--model", "ICM-20948", "--db", db)
+    assert code == 0 and err == ""  # no --kind: the kinds stay
+    assert json.loads(run(capsys, "devices", "show", "ACC-1", "--json", "--db", db)[1])["sensor_kinds"] == [
+        "mag",
+        "accel",
+    ]

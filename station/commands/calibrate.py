@@ -151,7 +151,7 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
 
     path = db_path(args)
     try:
-        assessment, _, previous = judge(path, result, args.device)
+        assessment, device, previous = judge(path, result, args.device)
     except (sqlite3.Error, OSError, ValueError) as exc:
         raise InputError(path, None, f"cannot read the station database: {exc}") from None
     if args.override is not None:
@@ -196,4 +196,30 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
         raise InputError(None, None, str(exc)) from None
     # stdout holds only the result (calibrate.md: with --json, one JSON object): the id on stderr
     print(f"station: saved calibration {result['calibration_id']} as {decision}", file=sys.stderr)
+    added = _kind_added(device, result)
+    if added:
+        from station.textsafe import safe
+
+        named = "--device" if args.device else "the capture's device"
+        print(
+            f"station: warning: device {safe(device['id'])} was registered for "
+            f"{safe(', '.join(device['sensor_kinds']))}, not {added}: {added} is now among its sensor kinds "
+            f"(if this capture is of another unit, {named} names the wrong one)",
+            file=sys.stderr,
+        )
     return 3 if decision == "rejected" else 0
+
+
+def _kind_added(device: dict | None, result: dict) -> str | None:
+    """The sensor kind a save adds to an existing device registered for other kinds (a compass
+    result saved to a unit registered as an accelerometer); None when it has that kind, has
+    none registered (the TUI registers devices without), or is new. The store adds the kind:
+    a device may carry several sensors (an IMU's gyro, a compass module's magnetometer); the
+    warning catches a --device that names another unit."""
+    from station.procedures import registry
+
+    entry = registry.get(result.get("procedure"))
+    kinds = (device or {}).get("sensor_kinds") or []
+    if entry is None or not kinds or entry.sensor_kind in kinds:
+        return None
+    return entry.sensor_kind
