@@ -496,3 +496,67 @@ def test_devices_add_kind_that_drops_a_kind_says_so(capsys, db):
         "mag",
         "accel",
     ]
+
+
+NOBODY = 65534
+
+
+def _as_nobody(*argv, cwd):
+    """``python -m station ARGV`` as user nobody (a root test run sees permissions only so)."""
+
+    def drop():
+        os.setgroups([])
+        os.setgid(NOBODY)
+        os.setuid(NOBODY)
+
+    env = {k: v for k, v in os.environ.items() if k != "STATION_DB"}
+    return subprocess.run(
+        [sys.executable, *argv], cwd=cwd, env=env, preexec_fn=drop, capture_output=True, text=True, timeout=120
+    )
+
+
+def test_a_database_in_a_folder_this_user_cannot_write_says_so(tmp_path, capsys):
+    """Every database command failed with "cannot open the station database: unable to open
+    database file" (or "attempt to write a readonly database") on a database whose folder is
+    read-only: SQLite makes the -wal and -shm files beside it, to read it too. The line now says
+    the folder is not writable. Permissions bind a user other than root: run as root (a
+    container's CI), the commands run as user nobody on a folder root owns (mode 755)."""
+    import shutil
+    import stat
+    import tempfile
+
+    if os.geteuid() != 0:
+        folder = tmp_path / "ro"
+        folder.mkdir()
+        db = folder / "s.db"
+        assert run(capsys, "devices", "add", "IMU-1", "--kind", "accel", "--db", str(db))[0] == 0
+        folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+        try:
+            results = [run(capsys, *argv, "--db", str(db)) for argv in (("devices", "list"), ("due",))]
+            results.append(run(capsys, "devices", "add", "X", "--db", str(folder / "new.db")))
+        finally:
+            folder.chmod(stat.S_IRWXU)
+    else:
+        folder = Path(tempfile.mkdtemp(prefix="station-ro-"))  # under the system's temporary folder: nobody reaches it
+        try:
+            folder.chmod(0o755)
+            db = folder / "s.db"
+            with Store(str(db)) as s:
+                s.add_device("IMU-1", sensor_kinds=["accel"])
+            db.chmod(0o666)  # the file is writable: only the folder is not
+            probe = _as_nobody("-c", "import station.cli", cwd=folder)
+            if probe.returncode != 0:
+                pytest.skip(f"run as root, and user nobody cannot load the station here: {probe.stderr.strip()[-200:]}")
+            results = [
+                (r.returncode, r.stdout, r.stderr)
+                for r in (
+                    _as_nobody("-m", "station", "devices", "list", "--db", str(db), cwd=folder),
+                    _as_nobody("-m", "station", "due", "--db", str(db), cwd=folder),
+                    _as_nobody("-m", "station", "devices", "add", "X", "--db", str(folder / "new.db"), cwd=folder),
+                )
+            ]
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+    for code, out, err in results:
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"the folder {folder} is not writable" in err and "-wal and -shm" in err, err
