@@ -1067,3 +1067,37 @@ def test_compass_results_show_the_tol_column_and_use_the_screen_height(tmp_path)
     assert sum(" soft_iron[" in line for line in table) == 9, shown  # all of the soft iron at once
     end = "\n".join(last)
     assert "reference." in end and "inclination_deg" in end and "declination_deg" in end, end
+
+
+def test_saving_a_compass_to_a_unit_registered_as_an_accelerometer_is_said(tmp_path):
+    """As `calibrate --save` says it: a compass result saved on Results to a device registered
+    for accel only is saved (a unit may carry several sensors) and a notice says mag is now
+    among its kinds (the device id may name another unit). A device registered for mag saves
+    without it."""
+    from station.screens.results import ResultsScreen
+
+    db = str(tmp_path / "s.db")
+    cap, result = _simulated_result("compass", 401001)
+    cap2, result2 = _simulated_result("compass", 401004)
+    Store(db).add_device("ACC-1", sensor_kinds=["accel"])
+    Store(db).add_device("MAG-1", sensor_kinds=["mag", "accel"])
+
+    async def story():
+        said = []
+        app = make_app(db, device_id="ACC-1")
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            for device, c, r in (("ACC-1", cap, result), ("MAG-1", cap2, result2)):
+                app.session.device_id = device
+                await app.push_screen(ResultsScreen(c, r, None, None))
+                # the device's record is read (a worker) before the table is drawn: then s saves
+                await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+                await pilot.press("s")
+                await wait_for(pilot, lambda: "Saved as calibration" in text_of(app, "#saved"))
+                await pilot.pause(0.2)
+                said.append(" ".join(text_of(app, "#notices").split()) if app.screen.query("#notices") else "")
+        return said
+
+    acc, mag = asyncio.run(story())
+    assert "ACC-1 was registered for accel, not mag: mag is now among its sensor kinds" in acc, acc
+    assert "MAG-1 was registered" not in mag, mag  # (the first one's notice may still be up)
+    assert Store(db).get_device("ACC-1")["sensor_kinds"] == ["accel", "mag"]

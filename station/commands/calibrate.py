@@ -147,7 +147,7 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
     from station.commands._dbutil import db_error_text
     from station.errors import InputError
     from station.procedures.review import review_record
-    from station.store import judge, save_result
+    from station.store import judge, kind_added, save_result
 
     path = db_path(args)
     try:
@@ -196,7 +196,7 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
         raise InputError(None, None, str(exc)) from None
     # stdout holds only the result (calibrate.md: with --json, one JSON object): the id on stderr
     print(f"station: saved calibration {result['calibration_id']} as {decision}", file=sys.stderr)
-    added = _kind_added(device, result)
+    added = kind_added(device, result)
     if added:
         from station.textsafe import safe
 
@@ -208,18 +208,3 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
             file=sys.stderr,
         )
     return 3 if decision == "rejected" else 0
-
-
-def _kind_added(device: dict | None, result: dict) -> str | None:
-    """The sensor kind a save adds to an existing device registered for other kinds (a compass
-    result saved to a unit registered as an accelerometer); None when it has that kind, has
-    none registered (the TUI registers devices without), or is new. The store adds the kind:
-    a device may carry several sensors (an IMU's gyro, a compass module's magnetometer); the
-    warning catches a --device that names another unit."""
-    from station.procedures import registry
-
-    entry = registry.get(result.get("procedure"))
-    kinds = (device or {}).get("sensor_kinds") or []
-    if entry is None or not kinds or entry.sensor_kind in kinds:
-        return None
-    return entry.sensor_kind

@@ -27,6 +27,7 @@ from station.procedures.review import (
     shown_rows,
 )
 from station.screens.export import export_files, exported_text
+from station.store import kind_added
 from station.textsafe import tui_markup
 from station.widgets.notices import NoticesMixin
 from station.widgets.title import TitleBar, footer
@@ -306,6 +307,15 @@ class ResultsScreen(NoticesMixin, Screen):
             "override": "[b yellow]Saved (override) as calibration",
         }.get(self.decision, "[b green]Saved as calibration")
         label.update(f"{how} #{message.calibration_id} for {tui_markup(self.app.session.device_id)}[/]")
+        added = kind_added(self.device, self.result or {})
+        if added:  # as calibrate --save says it: the device id may name another unit
+            self.notify(
+                f"{self.device['id']} was registered for {', '.join(self.device['sensor_kinds'])}, not {added}: "
+                f"{added} is now among its sensor kinds (another unit's id?)",
+                severity="warning",
+                timeout=10,
+                markup=False,
+            )
         if self.app.session.exit_when_saved:
             self.set_timer(1.0, self.app.exit)
 
