@@ -88,6 +88,26 @@ def default_db_path() -> str:
     return os.path.join(base, "station", "station.db")
 
 
+def _why_not_writable(path: str, exc: BaseException, memory: bool) -> None:
+    """Raise SQLite's failure to open ``path`` with its cause when that is a permission: SQLite
+    makes the -wal and -shm files beside a WAL database, to read it too, so a folder this user
+    cannot write fails every command with "unable to open database file" (or "attempt to write
+    a readonly database"), which did not say why. Returns when the cause is something else."""
+    if memory or not isinstance(exc, sqlite3.OperationalError):
+        return
+    text = str(exc)
+    if "unable to open database file" not in text and "readonly database" not in text:
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(folder) and not os.access(folder, os.W_OK | os.X_OK):
+        raise sqlite3.OperationalError(
+            f"{text}: the folder {folder} is not writable by this user, and SQLite makes the database's "
+            "-wal and -shm files beside it (to read it too)"
+        ) from None
+    if os.path.isfile(path) and not os.access(path, os.R_OK | os.W_OK):
+        raise sqlite3.OperationalError(f"{text}: the file is not readable and writable by this user") from None
+
+
 SQLITE_MAGIC = b"SQLite format 3\x00"  # the first 16 bytes of every SQLite 3 database file
 
 
@@ -240,8 +260,9 @@ class Store:
         self._lock = threading.RLock()
         try:
             self.conn = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
-        except BaseException:
+        except BaseException as exc:
             _release(key)
+            _why_not_writable(self.path, exc, memory)
             raise
         self.conn.row_factory = sqlite3.Row
         try:
@@ -259,9 +280,10 @@ class Store:
                 from db.migrations import apply
 
                 apply(self.conn, post=self._after_migrations)
-        except BaseException:
+        except BaseException as exc:
             self.conn.close()
             _release(key)
+            _why_not_writable(self.path, exc, memory)
             raise
         if key is None and not memory:  # the file SQLite has just made
             key = _file_key(self.path)

@@ -73,3 +73,16 @@ def judge(path: str | None, result: dict, device_id: str | None = None):
         finally:
             store.close()
     return assess(result, previous, dev), dev, previous
+
+
+def kind_added(device: dict | None, result: dict) -> str | None:
+    """The sensor kind a save adds to an existing device registered for other kinds (a compass
+    result saved to a unit registered as an accelerometer); None when it has that kind, has
+    none registered (the TUI registers devices without), or is new. The store adds the kind:
+    a device may carry several sensors (an IMU's gyro, a compass module's magnetometer); the
+    warning (calibrate --save, the Results screen) catches a device id that names another unit."""
+    entry = registry.get(result.get("procedure"))
+    kinds = (device or {}).get("sensor_kinds") or []
+    if entry is None or not kinds or entry.sensor_kind in kinds:
+        return None
+    return entry.sensor_kind

@@ -446,3 +446,117 @@ def test_a_capture_dated_in_the_future_is_not_saved(tmp_path):
     write_capture(path, cap)
     res = run_station("calibrate", path, "--save", "--db", db)
     assert res.returncode == 0, res.stderr
+
+
+def test_a_calibration_saved_to_a_device_registered_for_another_sensor_is_said(tmp_path):
+    """`calibrate --save --device ACC-1` of a compass capture, ACC-1 registered as an
+    accelerometer (`devices add --kind accel`), added mag to its kinds without a word: a
+    mistyped --device put the compass into another unit's history unnoticed. It is still saved
+    (a unit may carry several sensors: the README says so), with a warning on stderr naming the
+    device, its kinds and the one added; stdout stays the result. A device registered with that
+    kind, or with none (the TUI registers devices so), gets no warning."""
+    from tests.station_run import run_station
+
+    db, path = tmp_path / "s.db", tmp_path / "mag.csv"
+    assert run_station("simulate", "--procedure", "compass", "--seed", "400322", "--out", path).returncode == 0
+    for device, kinds in (("ACC-1", ["accel"]), ("MAG-1", ["mag", "accel"]), ("NEW-1", [])):
+        args = [a for k in kinds for a in ("--kind", k)]
+        assert run_station("devices", "add", device, *args, "--db", db).returncode == 0
+    res = run_station("calibrate", path, "--save", "--device", "ACC-1", "--json", "--db", db)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["calibration_id"] == 1  # stdout: the result alone
+    warning = [line for line in res.stderr.splitlines() if "warning" in line]
+    assert len(warning) == 1, res.stderr
+    assert "device ACC-1 was registered for accel, not mag" in warning[0] and "--device" in warning[0]
+    shown = json.loads(run_station("devices", "show", "ACC-1", "--json", "--db", db).stdout)
+    assert shown["sensor_kinds"] == ["accel", "mag"]
+    for i, device in enumerate(("MAG-1", "NEW-1")):
+        cap = tmp_path / f"mag{i}.csv"
+        assert (
+            run_station("simulate", "--procedure", "compass", "--seed", str(400323 + i), "--out", cap).returncode == 0
+        )
+        res = run_station("calibrate", cap, "--save", "--device", device, "--db", db)
+        assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
+
+
+def test_devices_add_kind_that_drops_a_kind_says_so(capsys, db):
+    """`devices add ID --kind K` gives the whole list (README): `--kind mag` on a device
+    registered as an accelerometer replaced accel by mag without a word. It still does (what
+    the command table documents), and says which kinds are gone and how to keep them."""
+    assert run(capsys, "devices", "add", "ACC-1", "--kind", "accel", "--db", db)[0] == 0
+    code, out, err = run(capsys, "devices", "add", "ACC-1", "--kind", "mag", "--db", db)
+    assert code == 0 and out == "updated device ACC-1\n"
+    assert err.count("\n") == 1 and "sensor kinds are now mag, no longer accel" in err, err
+    assert "--kind mag --kind accel" in err
+    code, out, err = run(capsys, "devices", "add", "ACC-1", "--kind", "mag", "--kind", "accel", "--db", db)
+    assert code == 0 and err == ""  # adding one drops none: nothing to say
+    code, out, err = run(capsys, "devices", "add", "ACC-1", "--model", "ICM-20948", "--db", db)
+    assert code == 0 and err == ""  # no --kind: the kinds stay
+    assert json.loads(run(capsys, "devices", "show", "ACC-1", "--json", "--db", db)[1])["sensor_kinds"] == [
+        "mag",
+        "accel",
+    ]
+
+
+NOBODY = 65534
+
+
+def _as_nobody(*argv, cwd):
+    """``python -m station ARGV`` as user nobody (a root test run sees permissions only so)."""
+
+    def drop():
+        os.setgroups([])
+        os.setgid(NOBODY)
+        os.setuid(NOBODY)
+
+    env = {k: v for k, v in os.environ.items() if k != "STATION_DB"}
+    return subprocess.run(
+        [sys.executable, *argv], cwd=cwd, env=env, preexec_fn=drop, capture_output=True, text=True, timeout=120
+    )
+
+
+def test_a_database_in_a_folder_this_user_cannot_write_says_so(tmp_path, capsys):
+    """Every database command failed with "cannot open the station database: unable to open
+    database file" (or "attempt to write a readonly database") on a database whose folder is
+    read-only: SQLite makes the -wal and -shm files beside it, to read it too. The line now says
+    the folder is not writable. Permissions bind a user other than root: run as root (a
+    container's CI), the commands run as user nobody on a folder root owns (mode 755)."""
+    import shutil
+    import stat
+    import tempfile
+
+    if os.geteuid() != 0:
+        folder = tmp_path / "ro"
+        folder.mkdir()
+        db = folder / "s.db"
+        assert run(capsys, "devices", "add", "IMU-1", "--kind", "accel", "--db", str(db))[0] == 0
+        folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+        try:
+            results = [run(capsys, *argv, "--db", str(db)) for argv in (("devices", "list"), ("due",))]
+            results.append(run(capsys, "devices", "add", "X", "--db", str(folder / "new.db")))
+        finally:
+            folder.chmod(stat.S_IRWXU)
+    else:
+        folder = Path(tempfile.mkdtemp(prefix="station-ro-"))  # under the system's temporary folder: nobody reaches it
+        try:
+            folder.chmod(0o755)
+            db = folder / "s.db"
+            with Store(str(db)) as s:
+                s.add_device("IMU-1", sensor_kinds=["accel"])
+            db.chmod(0o666)  # the file is writable: only the folder is not
+            probe = _as_nobody("-c", "import station.cli", cwd=folder)
+            if probe.returncode != 0:
+                pytest.skip(f"run as root, and user nobody cannot load the station here: {probe.stderr.strip()[-200:]}")
+            results = [
+                (r.returncode, r.stdout, r.stderr)
+                for r in (
+                    _as_nobody("-m", "station", "devices", "list", "--db", str(db), cwd=folder),
+                    _as_nobody("-m", "station", "due", "--db", str(db), cwd=folder),
+                    _as_nobody("-m", "station", "devices", "add", "X", "--db", str(folder / "new.db"), cwd=folder),
+                )
+            ]
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+    for code, out, err in results:
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"the folder {folder} is not writable" in err and "-wal and -shm" in err, err

@@ -476,3 +476,45 @@ def test_meta_cannot_set_what_the_recording_says_about_itself(tmp_path, key):
     )
     assert_one_line_refusal(res, f"--meta {key}", "the recording writes it")
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("baud", ["99999999999999", "2147483648", "12000001", "0", "-5", "49", "fast", "1e6"])
+def test_an_absurd_baud_rate_is_refused_with_the_range_before_anything_opens(baud, tmp_path, capsys):
+    """`--baud 99999999999999` reached the serial driver and came back as "cannot open: signed
+    integer is greater than maximum"; 0 and negatives said only "must be positive". Now refused
+    where the arguments are read, on a real pseudo-terminal: one line naming --baud and the
+    range (50, the lowest standard rate, to 12000000, what high-speed USB adapters reach),
+    exit status 2, nothing written."""
+    from station.cli import main
+
+    m, s = os.openpty()
+    tty.setraw(s)
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            main(
+                [
+                    "record",
+                    "--port",
+                    os.ttyname(s),
+                    "--seconds",
+                    "1",
+                    "--out",
+                    str(tmp_path / "b.csv"),
+                    f"--baud={baud}",
+                ]
+            )
+    finally:
+        os.close(m)
+        os.close(s)
+    out, err = capsys.readouterr()
+    assert exit_.value.code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1, err
+    assert "--baud" in err and "from 50" in err and "to 12000000" in err and "signed integer" not in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("baud", ["50", "115200", "4000000", "12000000"])
+def test_baud_rates_in_the_range_are_taken(baud):
+    from station.commands.record import baud_arg
+
+    assert baud_arg(baud) == int(baud)

@@ -1023,3 +1023,81 @@ def test_history_shows_the_status_of_a_device_with_a_long_id(tmp_path):
     row = next(line for line in lines if "BENCH" in line and "▏" in line)  # not the overdue notice above
     left = row.split("▏")[0]  # the devices table, left of the divider
     assert "overdue" in left and "EFGHIJ" in left, "\n".join(lines)
+
+
+def test_compass_results_show_the_tol_column_and_use_the_screen_height(tmp_path):
+    """The compass's parameter table was 86 columns wide at 80x24 (its reference names,
+    `reference.declination_deg`, are 25 characters): `tol` was cut off behind a horizontal
+    scrollbar while 7 blank lines lay under the table (the compass has no per-position table,
+    yet the parameters kept to two thirds of the height). A device with tolerances and a
+    calibration in use (another simulated unit's, so every Δ/σ is a real number)."""
+    from station.screens.results import ResultsScreen
+
+    db = str(tmp_path / "s.db")
+    cap, result = _simulated_result("compass", 401001)
+    _, other = _simulated_result("compass", 401002)
+    assert result["mag_unit"] == "uT"
+    Store(db).add_device("M1", tolerances={"hard_iron": 0.5, "soft_iron": 20.0})  # 0.5 uT, 0.02 as a ratio
+    previous = {"id": 1, "time": "2026-01-01T00:00:00Z", "params": other["params"]}
+
+    async def story():
+        app = make_app(db, device_id="M1")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, previous))
+            await wait_for(pilot, lambda: "hard_iron[0]" in "\n".join(screen_lines(app)))
+            params, tables = app.screen.query_one("#params"), app.screen.query_one("#tables")
+            fits = params.virtual_size.width <= params.scrollable_content_region.width
+            first = screen_lines(app)
+            gap = tables.region.bottom - params.region.bottom
+            for _ in range(params.row_count):  # to the last row: every parameter is reachable
+                await pilot.press("down")
+            await wait_for(pilot, lambda: "declination_deg" in "\n".join(screen_lines(app)))
+            return fits, gap, first, screen_lines(app)
+
+    fits, gap, first, last = asyncio.run(story())
+    shown = "\n".join(first)
+    assert fits and all(len(line) <= 80 for line in first + last), shown
+    at = next(i for i, line in enumerate(first) if " param " in line)
+    table = first[at:]  # the FAIL reasons above name the same parameters
+    assert table[0].split()[-1] == "tol", shown
+    for name, tol in (("hard_iron[0]", "0.5"), ("soft_iron[0][0]", "0.02"), ("soft_iron[2][2]", "0.02")):
+        row = next(line for line in table if f" {name} " in line)
+        assert row.split()[-1] == tol, shown  # the row's tolerance, on screen
+    assert gap == 0, shown  # no blank lines under the parameters
+    assert sum(" soft_iron[" in line for line in table) == 9, shown  # all of the soft iron at once
+    end = "\n".join(last)
+    assert "reference." in end and "inclination_deg" in end and "declination_deg" in end, end
+
+
+def test_saving_a_compass_to_a_unit_registered_as_an_accelerometer_is_said(tmp_path):
+    """As `calibrate --save` says it: a compass result saved on Results to a device registered
+    for accel only is saved (a unit may carry several sensors) and a notice says mag is now
+    among its kinds (the device id may name another unit). A device registered for mag saves
+    without it."""
+    from station.screens.results import ResultsScreen
+
+    db = str(tmp_path / "s.db")
+    cap, result = _simulated_result("compass", 401001)
+    cap2, result2 = _simulated_result("compass", 401004)
+    Store(db).add_device("ACC-1", sensor_kinds=["accel"])
+    Store(db).add_device("MAG-1", sensor_kinds=["mag", "accel"])
+
+    async def story():
+        said = []
+        app = make_app(db, device_id="ACC-1")
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            for device, c, r in (("ACC-1", cap, result), ("MAG-1", cap2, result2)):
+                app.session.device_id = device
+                await app.push_screen(ResultsScreen(c, r, None, None))
+                # the device's record is read (a worker) before the table is drawn: then s saves
+                await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+                await pilot.press("s")
+                await wait_for(pilot, lambda: "Saved as calibration" in text_of(app, "#saved"))
+                await pilot.pause(0.2)
+                said.append(" ".join(text_of(app, "#notices").split()) if app.screen.query("#notices") else "")
+        return said
+
+    acc, mag = asyncio.run(story())
+    assert "ACC-1 was registered for accel, not mag: mag is now among its sensor kinds" in acc, acc
+    assert "MAG-1 was registered" not in mag, mag  # (the first one's notice may still be up)
+    assert Store(db).get_device("ACC-1")["sensor_kinds"] == ["accel", "mag"]

@@ -147,11 +147,11 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
     from station.commands._dbutil import db_error_text
     from station.errors import InputError
     from station.procedures.review import review_record
-    from station.store import judge, save_result
+    from station.store import judge, kind_added, save_result
 
     path = db_path(args)
     try:
-        assessment, _, previous = judge(path, result, args.device)
+        assessment, device, previous = judge(path, result, args.device)
     except (sqlite3.Error, OSError, ValueError) as exc:
         raise InputError(path, None, f"cannot read the station database: {exc}") from None
     if args.override is not None:
@@ -196,4 +196,15 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
         raise InputError(None, None, str(exc)) from None
     # stdout holds only the result (calibrate.md: with --json, one JSON object): the id on stderr
     print(f"station: saved calibration {result['calibration_id']} as {decision}", file=sys.stderr)
+    added = kind_added(device, result)
+    if added:
+        from station.textsafe import safe
+
+        named = "--device" if args.device else "the capture's device"
+        print(
+            f"station: warning: device {safe(device['id'])} was registered for "
+            f"{safe(', '.join(device['sensor_kinds']))}, not {added}: {added} is now among its sensor kinds "
+            f"(if this capture is of another unit, {named} names the wrong one)",
+            file=sys.stderr,
+        )
     return 3 if decision == "rejected" else 0

@@ -279,7 +279,8 @@ def _add(args: argparse.Namespace) -> int:
     tolerances = _tolerances(args.tolerance, contexts)
     limits = _limits(args.limit, contexts)
     with open_store(args, create=True) as store:  # adding a device is how a database is made
-        existed = store.get_device(args.id) is not None
+        before = store.get_device(args.id)
+        existed = before is not None
         device = store.add_device(
             args.id,
             model=args.model,
@@ -290,6 +291,16 @@ def _add(args: argparse.Namespace) -> int:
             limits=limits,
         )
     sys.stdout.write(f"{'updated' if existed else 'added'} device {safe(device['id'])}\n")
+    gone = [k for k in ((before or {}).get("sensor_kinds") or []) if k not in device["sensor_kinds"]]
+    if gone:  # --kind gives the whole list: `--kind mag` on an accelerometer replaced accel without a word
+        keep = " ".join(f"--kind {k}" for k in device["sensor_kinds"] + gone)
+        sys.stderr.write(
+            safe(
+                f"station: warning: device {device['id']}'s sensor kinds are now {', '.join(device['sensor_kinds'])}, "
+                f"no longer {', '.join(gone)} (--kind gives the whole list: {keep} keeps every one)"
+            )
+            + "\n"
+        )
     return 0
 
 

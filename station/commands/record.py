@@ -13,6 +13,27 @@ from station.fileio import check_output
 from station.procedures import registry
 from station.textsafe import safe
 
+# The baud rates --baud takes. termios's standard rates run from 50 (B50) to 4000000 (Linux's
+# B4000000); pyserial sets others through the driver (BOTHER), which high-speed USB adapters
+# (FTDI's FT232H, FT2232H) take up to 12 Mbaud. Beyond that no serial device runs: 1e14 reached
+# the driver's call and failed there ("signed integer is greater than maximum").
+BAUD_MIN, BAUD_MAX = 50, 12_000_000
+
+
+def baud_arg(text: str) -> int:
+    """argparse type of --baud: a whole number from BAUD_MIN to BAUD_MAX."""
+    span = (
+        f"a baud rate is a whole number from {BAUD_MIN} (the lowest standard rate) to {BAUD_MAX} "
+        "(high-speed USB adapters; the standard rates end at 4000000)"
+    )
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: {span}") from None
+    if not BAUD_MIN <= value <= BAUD_MAX:
+        raise argparse.ArgumentTypeError(f"{value} is out of range: {span}")
+    return value
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -25,7 +46,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "endpoint through pymavlink: udp:127.0.0.1:14550 (listen), udpout:HOST:PORT, tcp:HOST:5760, tcpin:HOST:PORT.",
     )
     p.add_argument("--port", help="device path or pyserial URL")
-    p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200; ignored by ptys and sockets)")
+    p.add_argument(
+        "--baud",
+        type=baud_arg,
+        default=115200,
+        help=f"baud rate, {BAUD_MIN} to {BAUD_MAX} (default 115200; ignored by ptys and sockets)",
+    )
     p.add_argument("--protocol", default="station", choices=("station", "mavlink"))
     p.add_argument(
         "--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: until interrupted)"
@@ -91,8 +117,6 @@ def run(args: argparse.Namespace) -> int:
     require_positive("--seconds", args.seconds, "seconds")
     if args.mavlink_rate != 0:  # 0: ask the flight controller for nothing
         require_positive("--mavlink-rate", args.mavlink_rate, "Hz")
-    if args.baud <= 0:
-        raise InputError(None, None, "--baud must be positive")
     try:
         parse_source(args.mavlink_message)
     except ValueError as exc:

@@ -5,6 +5,7 @@ with a note), reject, discard, export, report."""
 
 from __future__ import annotations
 
+import math
 import os
 
 from textual import work
@@ -26,9 +27,29 @@ from station.procedures.review import (
     shown_rows,
 )
 from station.screens.export import export_files, exported_text
+from station.store import kind_added
 from station.textsafe import tui_markup
 from station.widgets.notices import NoticesMixin
 from station.widgets.title import TitleBar, footer
+
+# a longer parameter name is shown on two lines, split after its block ("reference." over
+# "declination_deg"): the compass's 25-character reference names made its table 86 columns wide
+# at 80x24, the tol column cut off behind a horizontal scrollbar
+NAME_WIDTH = 16
+
+
+def _two_lines(name: str) -> str:
+    """``name`` as the parameter table shows it: on two lines, split after its first ".", when it
+    is longer than NAME_WIDTH and has one; as it is otherwise."""
+    block, dot, field = name.partition(".")
+    return f"{block}.\n{field}" if len(name) > NAME_WIDTH and dot and block and field else name
+
+
+def _change(x) -> str:
+    """Δ/σ as the table shows it: one decimal, none from 100 on (-3107 rather than -3107.0: a
+    unit against another's calibration; the column stays narrow enough for tol at 80 columns)."""
+    big = isinstance(x, (int, float)) and math.isfinite(x) and abs(x) >= 100
+    return num(x, "+.0f" if big else "+.1f")
 
 
 class ResultsScreen(NoticesMixin, Screen):
@@ -43,7 +64,8 @@ class ResultsScreen(NoticesMixin, Screen):
     ResultsScreen DataTable:focus { border-left: thick $accent; }
     /* the parameters as tall as they are (at most two thirds), the per-position rows below
        take the rest: P2's 9 parameters left blank lines above 5 of its 60 rows at 80x24 */
-    ResultsScreen #params { height: auto; max-height: 67%; }
+    ResultsScreen #params { height: auto; max-height: 67%; scrollbar-size-vertical: 1; }
+    ResultsScreen.-no-residuals #params { height: 1fr; max-height: 100%; }
     ResultsScreen #residuals { height: 1fr; }
     ResultsScreen #saved { height: auto; padding: 0 1; text-style: bold; }
     /* notices are lines under the tables here, not toasts over them (80x24: a toast covered
@@ -157,14 +179,15 @@ class ResultsScreen(NoticesMixin, Screen):
         for row in shown_rows(r, rows):
             ok = {True: "✓", False: "✗", None: ""}[row.ok]
             params.add_row(
-                row.name,
+                _two_lines(row.name),
                 num(row.value, ".7g"),
                 sigma(row.sigma),
                 row.unit,
                 ok,
                 num(row.previous, ".7g"),
-                num(row.change_sigma, "+.1f"),
+                _change(row.change_sigma),
                 num(row.tolerance, ".3g"),
+                height=None,  # a name on two lines (_two_lines) is a row of two
             )
         gyro = r.get("gyro")  # a P1 session's second triad (docs/tabletop-gyro.md)
         if isinstance(gyro, dict) and isinstance(gyro.get("params"), dict):
@@ -177,7 +200,7 @@ class ResultsScreen(NoticesMixin, Screen):
                     row.unit,
                     "",
                     num(row.previous, ".7g"),
-                    num(row.change_sigma, "+.1f"),
+                    _change(row.change_sigma),
                     "",
                 )
             lines.append(
@@ -191,6 +214,9 @@ class ResultsScreen(NoticesMixin, Screen):
         residuals.clear(columns=True)
         headers, rows_res = residual_table(self.capture, r)  # in the summary's residual unit
         residuals.display = bool(rows_res)
+        # without per-position rows (P3, P4, P5) the parameters take the whole height: at 80x24
+        # the compass's 19 rows scrolled in 11 lines above 7 blank ones
+        self.set_class(not rows_res, "-no-residuals")
         if rows_res:
             residuals.add_columns(*headers)
             for row in rows_res:
@@ -281,6 +307,15 @@ class ResultsScreen(NoticesMixin, Screen):
             "override": "[b yellow]Saved (override) as calibration",
         }.get(self.decision, "[b green]Saved as calibration")
         label.update(f"{how} #{message.calibration_id} for {tui_markup(self.app.session.device_id)}[/]")
+        added = kind_added(self.device, self.result or {})
+        if added:  # as calibrate --save says it: the device id may name another unit
+            self.notify(
+                f"{self.device['id']} was registered for {', '.join(self.device['sensor_kinds'])}, not {added}: "
+                f"{added} is now among its sensor kinds (another unit's id?)",
+                severity="warning",
+                timeout=10,
+                markup=False,
+            )
         if self.app.session.exit_when_saved:
             self.set_timer(1.0, self.app.exit)
 
