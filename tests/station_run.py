@@ -74,6 +74,33 @@ def _generator():
     return diag_generator
 
 
+def redteam():
+    """benchmarks/redteam_captures.py, the captures of shapes the diagnose generator never writes."""
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    import redteam_captures
+
+    return redteam_captures
+
+
+def redteam_capture(tmp_path, procedure, opts, effect=None, seed=4242, fmt=None):
+    """(path, truth) of the capture the red-team generator writes for ``procedure`` with the case
+    options ``opts`` and ``effect`` hidden (its name goes to the generator only), in the format
+    ``fmt`` (plain when None); ``t`` written at the coarse tick ``opts["t_res"]`` where given."""
+    R = redteam()
+    meta, cols, truth = R.PROCS[procedure][0](np.random.default_rng(seed), opts, effect)
+    if "t" in cols:
+        cols["t"] = R.coarse(cols["t"], opts.get("t_res", 0.0))
+    path = tmp_path / f"{procedure}.{effect or 'null'}.{seed}.capture.csv"
+    R.write(path, meta, cols, fmt or {}, np.random.default_rng(seed + 1))
+    return path, truth
+
+
+def redteam_case(tmp_path, procedure, case, effect=None, seed=4242) -> Path:
+    """The path of the capture :func:`redteam_capture` writes for the red-team case named ``case``."""
+    return redteam_capture(tmp_path, procedure, redteam().CASES[procedure][case], effect, seed)[0]
+
+
 def diagnose_rendered(tmp_path, capsys, rendered, meta_drop=()) -> dict:
     """``station diagnose FILE --json`` through the real CLI on a capture the generator rendered
     (written as its CSV, without the metadata keys ``meta_drop``); exit 0 is asserted."""

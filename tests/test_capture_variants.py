@@ -3,30 +3,13 @@ the real ``station diagnose`` / ``station calibrate`` commands."""
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 
-from tests.station_run import ROOT, station_json
-
-
-def _gen():
-    if str(ROOT / "benchmarks") not in sys.path:
-        sys.path.insert(0, str(ROOT / "benchmarks"))
-    import redteam_captures
-
-    return redteam_captures
+from tests.station_run import redteam_capture, station_json
 
 
 def _write(tmp_path, proc, opts, effect=None, fmt=None, seed=4242):
-    G = _gen()
-    gen = G.PROCS[proc][0]
-    meta, cols, truth = gen(np.random.default_rng(seed), opts, effect)
-    if "t" in cols:  # time stamps written at a coarse tick (whole seconds) where asked
-        cols["t"] = G.coarse(cols["t"], opts.get("t_res", 0.0))
-    path = tmp_path / f"{proc}.capture.csv"
-    G.write(path, meta, cols, fmt or {}, np.random.default_rng(seed + 1))
-    return path, truth
+    return redteam_capture(tmp_path, proc, opts, effect, seed, fmt)
 
 
 def test_quiet_quantised_magnetometer_is_not_called_saturated(tmp_path):

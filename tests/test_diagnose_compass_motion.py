@@ -7,29 +7,15 @@ generator only, and the verdict comes from ``station diagnose``."""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from station_run import run_station
+from station_run import redteam_capture, redteam_case, run_station, station_json
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import redteam_captures as R  # noqa: E402
-
-
-def _capture(tmp_path, case: str, effect: str | None, seed: int) -> Path:
-    meta, cols, _ = R.compass(np.random.default_rng(seed), R.CASES["compass"][case], effect)
-    path = tmp_path / f"{case}.{effect or 'null'}.capture.csv"
-    R.write(path, meta, cols, {}, np.random.default_rng(seed + 1))
-    return path
-
-
-def _diagnose(path) -> dict:
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    return json.loads(res.stdout)
 
 
 def _dip_rows(path) -> list[str]:
@@ -47,8 +33,8 @@ def test_bent_field_named_without_long_holds(tmp_path, case):
     times at 25 Hz (calibrate's 1 s detector keeps two holds): the dip is taken sample by sample
     where the accelerometer reads gravity, and the field anomaly is named. Before, the dip rows
     were refused ("no static accelerometer holds") or taken on windows that turned."""
-    path = _capture(tmp_path, case, "field_anomaly", 9181)
-    res = _diagnose(path)
+    path = redteam_case(tmp_path, "compass", case, "field_anomaly", 9181)
+    res = station_json("diagnose", path, "--json")
     assert "field_anomaly" in res["verdict"], (res["verdict"], res["candidates"])
     fa = next(c for c in res["candidates"] if c["name"] == "field_anomaly")
     assert fa.get("resolvable", True), fa
@@ -59,10 +45,8 @@ def test_hand_acceleration_does_not_cut_the_record_into_pieces(tmp_path):
     leaves the dip alone, so the runs take every sample within 10 % of g. A 2 % window with
     0.5 s runs named this bent field on 6 of 12 such records (seed 3002 among the misses)."""
     options = {"n_h": 40, "hold_s": 0.0, "move_s": 1.5, "lin_acc": 0.3}
-    meta, cols, _ = R.compass(np.random.default_rng(3002), options, "field_anomaly")
-    path = tmp_path / "hand.capture.csv"
-    R.write(path, meta, cols, {}, np.random.default_rng(3003))
-    assert "field_anomaly" in _diagnose(path)["verdict"]
+    path, _ = redteam_capture(tmp_path, "compass", options, "field_anomaly", 3002)
+    assert "field_anomaly" in station_json("diagnose", path, "--json")["verdict"]
 
 
 def test_runs_hold_across_single_bad_accelerometer_samples(tmp_path):
@@ -73,14 +57,14 @@ def test_runs_hold_across_single_bad_accelerometer_samples(tmp_path):
     cols["az"][::7] += 50.0
     path = tmp_path / "spiked.capture.csv"
     R.write(path, meta, cols, {}, np.random.default_rng(12))
-    assert "field_anomaly" in _diagnose(path)["verdict"]
+    assert "field_anomaly" in station_json("diagnose", path, "--json")["verdict"]
 
 
 def test_rotation_between_the_sensors_named_without_holds(tmp_path):
     """The magnetometer turned 1.1° against the accelerometer, the record turned with no hold:
     the rotation is named from the per-sample dips of the runs."""
-    path = _capture(tmp_path, "tumbling", "mag_accel_misalignment", 9181)
-    res = _diagnose(path)
+    path = redteam_case(tmp_path, "compass", "tumbling", "mag_accel_misalignment", 9181)
+    res = station_json("diagnose", path, "--json")
     assert "mag_accel_misalignment" in res["verdict"], (res["verdict"], res["candidates"])
 
 
@@ -88,8 +72,8 @@ def test_rotation_between_the_sensors_named_without_holds(tmp_path):
 def test_turned_record_with_the_igrf_field_names_nothing(tmp_path, case):
     """The same motion with IGRF's field: nothing named, and the dip is checked on runs of the
     record (not refused)."""
-    path = _capture(tmp_path, case, None, 9181)
-    res = _diagnose(path)
+    path = redteam_case(tmp_path, "compass", case, None, 9181)
+    res = station_json("diagnose", path, "--json")
     assert res["verdict"] == [], res["verdict"]
     fa = next(c for c in res["candidates"] if c["name"] == "field_anomaly")
     assert fa.get("resolvable", True), fa
@@ -99,7 +83,7 @@ def test_turned_record_with_the_igrf_field_names_nothing(tmp_path, case):
 
 def test_holds_stay_the_dip_rows_where_there_are_holds(tmp_path):
     """A record with 14 holds of 4 s: one dip row per hold, as before."""
-    path = _capture(tmp_path, "plain", None, 9181)
+    path = redteam_case(tmp_path, "compass", "plain", None, 9181)
     rows = _dip_rows(path)
     assert len(rows) == 14 and all(x.startswith("hold t=") for x in rows), rows
 
@@ -129,7 +113,7 @@ def test_accelerometer_that_does_not_turn_with_the_magnetometer_is_said(tmp_path
     cols["ax"], cols["ay"] = cols["ay"].copy(), cols["ax"].copy()
     path = tmp_path / "swapped.capture.csv"
     R.write(path, meta, cols, {}, np.random.default_rng(12))
-    res = _diagnose(path)
+    res = station_json("diagnose", path, "--json")
     assert "field_anomaly" not in res["verdict"] and "mag_accel_misalignment" not in res["verdict"], res["verdict"]
     q = [x for x in res["quality"] if x["kind"] == "dip_inconsistent"]
     assert len(q) == 1 and q[0]["dip_scatter"] > 0.2, res["quality"]

@@ -8,32 +8,17 @@ the generator only, and the verdict comes from ``station diagnose``."""
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from station_run import run_station
+from station_run import redteam_case, station_json
 
 from solvers import compass as C
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import redteam_captures as R  # noqa: E402
-
-
-def _capture(tmp_path, case: str, effect: str | None, seed: int) -> Path:
-    meta, cols, _ = R.compass(np.random.default_rng(seed), R.CASES["compass"][case], effect)
-    path = tmp_path / f"{case}.{effect or 'null'}.{seed}.capture.csv"
-    R.write(path, meta, cols, {}, np.random.default_rng(seed + 1))
-    return path
-
-
-def _diagnose(path) -> dict:
-    res = run_station("diagnose", path, "--json")
-    assert res.returncode == 0, res.stderr
-    return json.loads(res.stdout)
 
 
 @pytest.mark.parametrize("seed", [9194, 9197])
@@ -43,7 +28,7 @@ def test_undithered_counts_null_names_nothing(tmp_path, seed):
     and a hard-iron step fitted some of the holds' rounding constants: seed 9194 named
     `time_varying_hard_iron` with `residual:time` (D 96 against a bar of 64), 9197
     `residual:time`."""
-    res = _diagnose(_capture(tmp_path, "counts_quiet", None, seed))
+    res = station_json("diagnose", redteam_case(tmp_path, "compass", "counts_quiet", None, seed), "--json")
     assert res["verdict"] == [], (res["verdict"], res["candidates"])
 
 
@@ -51,7 +36,9 @@ def test_hard_iron_step_on_undithered_counts_still_named(tmp_path):
     """The same capture with a hard-iron step of about 850 nT (5.7 counts) part-way: named, and
     nothing the report does not tie to it (before, `residual:time` was named beside it: what
     the step left of the holds' rounding constants)."""
-    res = _diagnose(_capture(tmp_path, "counts_quiet", "time_varying_hard_iron", 9194))
+    res = station_json(
+        "diagnose", redteam_case(tmp_path, "compass", "counts_quiet", "time_varying_hard_iron", 9194), "--json"
+    )
     assert "time_varying_hard_iron" in res["verdict"], (res["verdict"], res["candidates"])
     step = next(e for e in res["effects"] if e["name"] == "time_varying_hard_iron")
     tied = {"time_varying_hard_iron"} | {c["name"] for c in step.get("confused_with", [])}
@@ -111,7 +98,7 @@ def test_a_capture_off_any_grid_builds_the_problem_it_built_before(tmp_path):
     from station.capture import read_capture
     from station.procedures.diagnose import analyse
 
-    path = _capture(tmp_path, "plain", None, 9194)
+    path = redteam_case(tmp_path, "compass", "plain", None, 9194)
     _, _, inp = analyse(read_capture(str(path)))
     n = read_capture(str(path)).n_rows
     rows = int(np.sum(inp.problem.row_types == 0))
