@@ -3,6 +3,7 @@ reads back, gaps are marked, a stopped or killed recording leaves nothing silent
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -21,6 +22,18 @@ from station.device.reader import Batch, Reader
 from station.device.record import RecordError, record
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+@contextlib.contextmanager
+def raw_pty():
+    """(master fd, slave's path) of a fresh pseudo-terminal in raw mode, both ends closed after."""
+    m, s = os.openpty()
+    tty.setraw(s)
+    try:
+        yield m, os.ttyname(s)
+    finally:
+        os.close(m)
+        os.close(s)
 
 
 def station(*args: str, **kw) -> subprocess.Popen:
@@ -248,14 +261,11 @@ def test_recording_across_an_unplug_marks_the_gap_in_the_capture(tmp_path):
 
 
 def test_no_samples_is_an_error_and_leaves_no_file(tmp_path):
-    m, s = os.openpty()
-    tty.setraw(s)
-    try:
-        with pytest.raises(RecordError, match="no samples received in .* s: the device sent nothing"):
-            record(os.ttyname(s), str(tmp_path / "e.csv"), seconds=0.3, header_timeout_s=0.2)
-    finally:
-        os.close(m)
-        os.close(s)
+    with (
+        raw_pty() as (_, port),
+        pytest.raises(RecordError, match="no samples received in .* s: the device sent nothing"),
+    ):
+        record(port, str(tmp_path / "e.csv"), seconds=0.3, header_timeout_s=0.2)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -323,14 +333,12 @@ def test_bad_arguments_get_one_line_and_exit_2(args, message, tmp_path, monkeypa
 def test_bad_metadata_is_refused_before_recording(tmp_path, capsys):
     from station.cli import main
 
-    m, s = os.openpty()
-    tty.setraw(s)
-    try:
+    with raw_pty() as (_, port):
         rc = main(
             [
                 "record",
                 "--port",
-                os.ttyname(s),
+                port,
                 "--seconds",
                 "1",
                 "--out",
@@ -339,9 +347,6 @@ def test_bad_metadata_is_refused_before_recording(tmp_path, capsys):
                 "latitude_deg=north",
             ]
         )
-    finally:
-        os.close(m)
-        os.close(s)
     err = capsys.readouterr().err
     assert rc == 2 and "latitude_deg" in err and "'north' is not a number" in err and len(err.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []
@@ -357,22 +362,17 @@ def test_ports_lists_or_says_no_ports():
 
 
 def test_a_different_device_on_the_port_ends_the_recording_keeping_what_came_before(tmp_path):
-    m, s = os.openpty()
-    tty.setraw(s)
     warnings = []
-    try:
-        reader = Reader(os.ttyname(s)).start()
+    with raw_pty() as (m, port):
+        reader = Reader(port).start()
         a, b = Header("UNIT-A", "g", "", "", 100.0), Header("UNIT-B", "g", "", "", 100.0)
         rows = b"".join(data_sentence(k, 10_000 * k, [k, 0, 1] + [np.nan] * 6 + [20]) for k in range(50))
         timer = threading.Timer(0.3, lambda: os.write(m, header_sentence(a) + rows))
         timer2 = threading.Timer(0.8, lambda: os.write(m, header_sentence(b) + data_sentence(0, 0, [9] * 10)))
         timer.start()
         timer2.start()
-        res = record(os.ttyname(s), str(tmp_path / "d.csv"), reader=reader, seconds=10, warn=warnings.append)
+        res = record(port, str(tmp_path / "d.csv"), reader=reader, seconds=10, warn=warnings.append)
         reader.stop()
-    finally:
-        os.close(m)
-        os.close(s)
     cap = read_capture(tmp_path / "d.csv")
     assert res.stopped_because == "device changed" and "UNIT-A" in warnings[0] and "UNIT-B" in warnings[0]
     assert (
@@ -487,25 +487,8 @@ def test_an_absurd_baud_rate_is_refused_with_the_range_before_anything_opens(bau
     exit status 2, nothing written."""
     from station.cli import main
 
-    m, s = os.openpty()
-    tty.setraw(s)
-    try:
-        with pytest.raises(SystemExit) as exit_:
-            main(
-                [
-                    "record",
-                    "--port",
-                    os.ttyname(s),
-                    "--seconds",
-                    "1",
-                    "--out",
-                    str(tmp_path / "b.csv"),
-                    f"--baud={baud}",
-                ]
-            )
-    finally:
-        os.close(m)
-        os.close(s)
+    with raw_pty() as (_, port), pytest.raises(SystemExit) as exit_:
+        main(["record", "--port", port, "--seconds", "1", "--out", str(tmp_path / "b.csv"), f"--baud={baud}"])
     out, err = capsys.readouterr()
     assert exit_.value.code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1, err

@@ -156,21 +156,12 @@ def test_a_symbolic_link_is_written_through_not_replaced(tmp_path):
 def test_cli_output_through_a_link_to_a_pipe_is_refused_as_the_pipe(tmp_path):
     """`-o /dev/stdout` with stdout a pipe: writing through links must not lose the check of
     what the link names; the pipe behind it is refused as one, before anything is written."""
-    import subprocess
-    import sys
-
-    from tests.station_run import ROOT
+    from tests.station_run import assert_one_line_refusal, run_station
 
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
     link = tmp_path / "out.csv"
     link.symlink_to(fifo)
-    res = subprocess.run(
-        [sys.executable, "-m", "station", "simulate", "--procedure", "accel-centrifuge", "--out", str(link)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "named pipe" in res.stderr, res.stderr
+    res = run_station("simulate", "--procedure", "accel-centrifuge", "--out", link, subprocess_run=True)
+    assert_one_line_refusal(res, "named pipe")
     assert link.is_symlink() and fifo.exists() and not fifo.is_file()
