@@ -866,7 +866,8 @@ def compass_problem(
     # the directions a few holds visit shrinks the noise it is measured against, and h moves to
     # keep their means on the sphere (8 holds, 200 nT noise: h 1000 nT = 8σ off, W 2 % small),
     # which bent the dip rows by 10–50 times their noise
-    g0 = gain(W0, mag_model.inverse(y_all, {"W": W0, "h": np.asarray(h0, float)}, cond))
+    m0 = mag_model.inverse(y_all, {"W": W0, "h": np.asarray(h0, float)}, cond)  # the baseline's field
+    g0 = gain(W0, m0)
     dip_reason = None
     dip_scatter = None
     if have_dip:
@@ -904,7 +905,6 @@ def compass_problem(
     if is_still.any():
         # a still stretch's row: its shared rounding error along the normal (n̂ = Wᵀû/|Wᵀû| per
         # sample, raw) plus the white rest of each sample, σ² + q²/12 − τ², over its count
-        m0 = mag_model.inverse(y_all, {"W": W0, "h": np.asarray(h0, float)}, cond)
         v = (m0 / np.linalg.norm(m0, axis=1, keepdims=True)) @ W0
         shared = block_mean(((v / np.linalg.norm(v, axis=1, keepdims=True)) ** 2) @ tau2)
         white = np.maximum(max(noise_raw, 1e-12) ** 2 - shared, 0.0) / count
@@ -986,7 +986,7 @@ def compass_problem(
     # the dip rows' noise scale is measured on the baseline, where a rotation between the sensors
     # not yet modelled inflates it (4× on seed 547033): after each selection it is measured again
     prob.aux_scale_refit = True
-    m0 = (y_all - h0) @ W0.T  # the generic terms act per sample, as the forward model does
+    # the generic terms act per sample on the baseline's field m0, as the forward model does
     prob.generic = [(cond, {"time": t_all, "temperature": T_all, "input_axis": m0})]
     if have_dip:
         prob.generic.append((cond_q, {"time": tq, "temperature": Tq, "input_axis": (yq - h0) @ W0.T}))
