@@ -106,12 +106,12 @@ def test_nine_labelled_positions_keep_their_labels(tmp_path):
     """With 9 positions the norm condition has no redundancy and other exact solutions: a
     norm-only fit there cannot judge the labels (a first form of the label check took 8 of 9
     correct labels for wrong, 17 % off); the labels pick the right solution."""
-    from tests.test_capture_variants import _gen, _write
+    from tests.station_run import redteam, redteam_capture
 
-    path, truth = _write(tmp_path, "accel-tabletop", {"n_pos": 9})
+    path, truth = redteam_capture(tmp_path, "accel-tabletop", {"n_pos": 9})
     out = json.loads(run_station("calibrate", path, "--json").stdout)
     assert out["gauge"] == "table" and out["labels_used"] is True
-    text, far = _gen().p1_check(out, truth)
+    text, far = redteam().p1_check(out, truth)
     assert not far, text
 
 
@@ -119,8 +119,8 @@ def test_nine_labelled_positions_keep_their_labels(tmp_path):
 def test_a_large_unmodelled_effect_keeps_correct_labels(tmp_path, effect):
     """A norm-only fit judged the labels wrongly under a large effect (9–11 of 12 correct labels
     '> 20° off'); the labels are set aside only when the table fit itself fails with them."""
-    from tests.test_capture_variants import _write
+    from tests.station_run import redteam_capture
 
-    path, _ = _write(tmp_path, "accel-tabletop", {"noise": 0.0005}, effect=effect, seed=4242)
+    path, _ = redteam_capture(tmp_path, "accel-tabletop", {"noise": 0.0005}, effect=effect, seed=4242)
     out = json.loads(run_station("calibrate", path, "--json").stdout)
     assert out["gauge"] == "table" and out["labels_used"] is True
