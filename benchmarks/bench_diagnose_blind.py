@@ -68,9 +68,9 @@ def summarise_json(d):
     }
 
 
-def run_one(proc, effect, seed, tmp, timeout):
+def run_one(proc, effect, seed, tmp, timeout, opts=None):
     path = Path(tmp) / f"{proc}_{effect or 'none'}_{seed}.csv"
-    sc = bg.generate(proc, effect, seed, str(path))
+    sc = bg.generate(proc, effect, seed, str(path), **(opts or {}))
     t0 = time.time()
     try:
         r = subprocess.run(
@@ -126,10 +126,23 @@ def scenario_line(sc):
         "hand_accel_mps2",
         "gyro",
         "duration_s",
+        "n_mountings",
+        "n_speeds",
+        "a_max_g",
+        "radius_m",
+        "g_metadata",
+        "vibration",
+        "rig",
+        "frame",
+        "rate_columns",
+        "cond_HtH",
+        "soft_iron",
     ]
     s = ", ".join(f"{k}={sc[k]}" for k in keys if k in sc)
     t = sc.get("temperature", {})
     s += f", temp={t.get('kind')}" + (f" lag {t['sensor_lag_s']} s" if t.get("sensor_lag_s") else "")
+    if t.get("speed_heating_c"):
+        s += f" + {t['speed_heating_c']} C heating at top speed"
     nz = sc.get("noise") or sc.get("noise_deg_h") or []
     if nz:
         unit = " deg/h" if "noise_deg_h" in sc else ""
@@ -206,7 +219,21 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=900)
     ap.add_argument("--jsonl", default="")
     ap.add_argument("--keep", default="", help="keep the captures in this folder")
+    ap.add_argument(
+        "--gen-opt",
+        action="append",
+        default=[],
+        help="generator option NAME=VALUE (e.g. averages=1, "
+        "soft_iron=symmetric); given, it applies to every procedure listed",
+    )
     a = ap.parse_args(argv)
+    opts = {}
+    for kv in a.gen_opt:
+        k, v = kv.split("=", 1)
+        try:
+            opts[k] = float(v)
+        except ValueError:
+            opts[k] = v
     results = []
     tmp_ctx = tempfile.TemporaryDirectory() if not a.keep else None
     tmp = a.keep or tmp_ctx.name
@@ -223,7 +250,7 @@ def main(argv=None):
             n = a.nulls if eff is None else a.effects_n
             for i in range(n):
                 seed = a.seed0 + 10000 * pi + 100 * ei + i
-                r = run_one(proc, eff, seed, tmp, a.timeout)
+                r = run_one(proc, eff, seed, tmp, a.timeout, opts)
                 results.append(r)
                 if out:
                     out.write(json.dumps(r, default=float) + "\n")

@@ -103,6 +103,14 @@ def temperature(rng, t, kind):
     return true, rec, info
 
 
+def slow(noise, scale):
+    """Scale the slow parts (Gauss-Markov and random walk) of a noise list: 0 leaves white noise only."""
+    for nzd in noise:
+        nzd["gm_sigma"] *= scale
+        nzd["rw_k"] *= scale
+    return noise
+
+
 # ---------------------------------------------------------------- least-squares SNR
 
 
@@ -251,14 +259,15 @@ def _face_rotation(rng, axis, sign, err_deg):
     return err * yaw * r_align
 
 
-def gen_tabletop(seed, effect, out, snr=10.0):
+def gen_tabletop(seed, effect, out, snr=10.0, averages=None, slow_noise=1.0):
     rng = np.random.default_rng(seed)
     sc = {"procedure": "accel-tabletop", "seed": seed, "effect": effect}
     fs = float(rng.choice([50, 100, 200, 400, 1000]))
     n_pos = int(rng.integers(12, 31))
     order = rng.choice(["faces_first", "faces_shuffled", "random_tilts"])
     labels_mode = rng.choice(["source_faces", "strings", "none", "holds_only"], p=[0.3, 0.25, 0.25, 0.2])
-    averages = effect != "time_drift" and rng.random() < 0.15
+    draw = effect != "time_drift" and rng.random() < 0.15  # (short-circuit kept: seeds stay reproducible)
+    averages = draw if averages is None else bool(averages)
     if averages:
         labels_mode = "strings"
     max_rows = 160_000
@@ -338,6 +347,7 @@ def gen_tabletop(seed, effect, out, snr=10.0):
                 "rw_k": rng.uniform(2e-6, 2e-5),
             }
         )
+    slow(noise, slow_noise)
     # SNR design: norm rows of 4 parts per hold (1 for a table of averages), projected on u_k
     parts = 1 if averages else 4
     ra, rb, proj, kk = [], [], [], []
@@ -493,7 +503,7 @@ def igrf_enu(lat, lon, alt_m, date):
     return np.array([float(np.ravel(be)[0]), float(np.ravel(bn)[0]), float(np.ravel(bu)[0])])
 
 
-def gen_compass(seed, effect, out, snr=10.0, soft_iron="upper"):
+def gen_compass(seed, effect, out, snr=10.0, soft_iron="upper", slow_noise=1.0):
     rng = np.random.default_rng(seed)
     sc = {"procedure": "compass", "seed": seed, "effect": effect}
     fs = float(rng.choice([50, 100, 200]))
@@ -562,6 +572,7 @@ def gen_compass(seed, effect, out, snr=10.0, soft_iron="upper"):
         }
         for _ in range(3)
     ]
+    slow(noise, slow_noise)
     acc_white = rng.uniform(0.005, 0.03)
     # dip-row noise per hold: per-sample dip noise from both sensors, plus the hand
     holds = [(a, b, k) for kind, a, b, k in segs if kind == "hold" and b - a >= 1.0]
@@ -721,7 +732,7 @@ def _level_rot(heading_deg, pitch_deg, roll_deg):
     return R0 * Rotation.from_euler("z", pitch_deg, degrees=True) * Rotation.from_euler("x", roll_deg, degrees=True)
 
 
-def gen_gyrodrift(seed, effect, out, snr=10.0):
+def gen_gyrodrift(seed, effect, out, snr=10.0, slow_noise=1.0):
     rng = np.random.default_rng(seed)
     sc = {"procedure": "gyro-drift", "seed": seed, "effect": effect}
     fs = float(rng.choice([50, 100, 200, 400]))
@@ -787,6 +798,7 @@ def gen_gyrodrift(seed, effect, out, snr=10.0):
         }
         for _ in range(3)
     ]
+    slow(noise, slow_noise)
     # rows: 5 s block means within holds, per axis (the axes' noises are independent)
     blk_s = 5.0
     ra, rb = [], []
@@ -917,13 +929,17 @@ def gen_gyrodrift(seed, effect, out, snr=10.0):
 # ---------------------------------------------------------------- P2
 
 
-def gen_centrifuge(seed, effect, out, snr=10.0):
+def gen_centrifuge(seed, effect, out, snr=10.0, slow_noise=1.0, vibration=1.0):
     """A table of averages: one row per mounting and speed (time-ordered rows, no t column)."""
     rng = np.random.default_rng(seed)
     sc = {"procedure": "accel-centrifuge", "seed": seed, "effect": effect}
-    R_m = float(rng.uniform(0.25, 1.5))
+    R_m = round(float(rng.uniform(0.25, 1.5)), 4)  # the physics uses the radius the metadata states
+    # f is in units of the rig's own g (gravity reads 1): the metadata gives it as g_mps2 or as the site
+    lat, lon, alt = site(rng)
+    g_loc = round(float(normal_gravity(lat, alt)), 6)
+    g_meta = str(rng.choice(["g_mps2", "site", "both"]))
     a_max = float(rng.uniform(8, 40))  # g at the top speed
-    w_max = np.sqrt(a_max * G0_MPS2 / R_m)
+    w_max = np.sqrt(a_max * g_loc / R_m)
     n_mount = int(rng.integers(6, 21))
     n_speed = int(rng.integers(2, 6))
     zero_speed = rng.random() < 0.3
@@ -945,7 +961,7 @@ def gen_centrifuge(seed, effect, out, snr=10.0):
     w = np.array([r[1] for r in rows])
     ta = np.array([r[2] for r in rows])
     tb = ta + np.array([r[3] for r in rows])
-    A = w**2 * R_m / G0_MPS2
+    A = w**2 * R_m / g_loc
     e_out = np.array([1.0, 0, 0])
     e_up = np.array([0, 0, 1.0])
     c_body = np.array([mounts[k].inv().apply(-e_out) for k in k_of])  # centripetal direction, body
@@ -964,7 +980,7 @@ def gen_centrifuge(seed, effect, out, snr=10.0):
     T_rec = np.round(T_row + 0.02 * rng.standard_normal(T_row.size), 2)
     # noise, input referred (g): white per row growing with vibration at speed, GM over the run
     white = rng.uniform(3e-6, 3e-5)
-    vib = rng.uniform(0, 2)
+    vib = rng.uniform(0, 2) * vibration  # white noise grows with speed: 1 + vib * A / a_max
     noise = [
         {
             "white": white,
@@ -974,6 +990,7 @@ def gen_centrifuge(seed, effect, out, snr=10.0):
         }
         for _ in range(3)
     ]
+    slow(noise, slow_noise)
     wscale = 1 + vib * A / a_max
     C = rows_cov(ta, tb, fhat, np.ones(ta.size), noise)
     C += np.diag(white**2 * (wscale**2 - 1))
@@ -986,7 +1003,7 @@ def gen_centrifuge(seed, effect, out, snr=10.0):
         unit_d = c * f**3
     elif effect == "lever_arm":
         c = random_unit(rng)  # dr per axis, m
-        unit_d = (w**2 / G0_MPS2)[:, None] * c[None, :] * c_body
+        unit_d = (w**2 / g_loc)[:, None] * c[None, :] * c_body
     elif effect == "misalignment":
         gam = rng.standard_normal(6)
         gam /= np.linalg.norm(gam)
@@ -1035,12 +1052,10 @@ def gen_centrifuge(seed, effect, out, snr=10.0):
         "accel_unit": str(unit),
         "radius_m": round(R_m, 4),
     }
-    lat, lon, alt = site(rng)
-    if rng.random() < 0.6:
+    if g_meta in ("site", "both"):
         meta.update(latitude_deg=lat, longitude_deg=lon, altitude_m=alt)
-    if rng.random() < 0.5:
-        meta["g_mps2"] = G0_MPS2
-        # the rig's g: the table's f is in g of this value
+    if g_meta in ("g_mps2", "both"):
+        meta["g_mps2"] = g_loc
     _, dstr = date_str(rng, False)
     meta["date"] = dstr
     if rng.random() < 0.5:
@@ -1055,6 +1070,8 @@ def gen_centrifuge(seed, effect, out, snr=10.0):
         cols.append(("n", np.array([str(int(x * 100)) for x in (tb - ta)]), 0))
     write_capture(out, meta, cols, rng)
     sc.update(
+        g_mps2=round(g_loc, 5),
+        g_metadata=g_meta,
         radius_m=round(R_m, 3),
         a_max_g=round(a_max, 1),
         n_mountings=n_mount,
@@ -1074,7 +1091,7 @@ def gen_centrifuge(seed, effect, out, snr=10.0):
 # ---------------------------------------------------------------- P5
 
 
-def gen_ldv(seed, effect, out, snr=10.0):
+def gen_ldv(seed, effect, out, snr=10.0, slow_noise=1.0):
     """A land-vehicle drive with turns, skids, reversing and bumps; body frame x fwd, y right, z down."""
     rng = np.random.default_rng(seed)
     sc = {"procedure": "ldv", "seed": seed, "effect": effect}
@@ -1129,6 +1146,7 @@ def gen_ldv(seed, effect, out, snr=10.0):
         }
         for _ in range(3)
     ]
+    slow(noise, slow_noise)
     ref_white = rng.uniform(0.003, 0.02)
     # SNR rows: 1 s block means per beam, baseline X v per beam (3 columns)
     blk = max(int(fs), 1)
@@ -1196,7 +1214,7 @@ def gen_ldv(seed, effect, out, snr=10.0):
     ref = (
         v_b
         + ref_white * rng.standard_normal((n, 3))
-        + np.column_stack([gauss_markov(rng, n, dt_s, 0.003, 60) for _ in range(3)])
+        + np.column_stack([gauss_markov(rng, n, dt_s, 0.003 * slow_noise, 60) for _ in range(3)])
     )
     lat, lon, alt = site(rng)
     _, dstr = date_str(rng, rng.random() < 0.5)
@@ -1281,8 +1299,14 @@ def main(argv=None):
     ap.add_argument("--snr", type=float, default=10.0)
     ap.add_argument("--out", required=True)
     ap.add_argument("--soft-iron", default="upper", choices=["upper", "symmetric"], help="compass only")
+    ap.add_argument("--slow-noise", type=float, default=1.0, help="scale of the Gauss-Markov and random-walk noise")
+    ap.add_argument("--averages", type=int, choices=[0, 1], default=None, help="P1: force a table of averages or not")
     a = ap.parse_args(argv)
     opts = {"soft_iron": a.soft_iron} if a.procedure == "compass" else {}
+    if a.procedure == "accel-tabletop" and a.averages is not None:
+        opts["averages"] = bool(a.averages)
+    if a.slow_noise != 1.0:
+        opts["slow_noise"] = a.slow_noise
     sc = generate(a.procedure, a.effect, a.seed, a.out, a.snr, **opts)
     json.dump(sc, sys.stdout, indent=1, default=float)
     print()
