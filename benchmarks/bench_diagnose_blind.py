@@ -29,12 +29,20 @@ STATION = Path(sys.executable).with_name("station")
 
 
 def tied(eff_entries, a, b):
-    """True when effects a and b are tied by `confused_with` (either way)."""
+    """True when effects a and b are tied by `confused_with`, directly or through other tied names."""
+    edges = {}
     for e in eff_entries:
-        names = [c.get("name") if isinstance(c, dict) else c for c in e.get("confused_with", [])]
-        if (e.get("name") == a and b in names) or (e.get("name") == b and a in names):
-            return True
-    return False
+        for c in e.get("confused_with", []):
+            n = c.get("name") if isinstance(c, dict) else c
+            edges.setdefault(e.get("name"), set()).add(n)
+            edges.setdefault(n, set()).add(e.get("name"))
+    seen, todo = {a}, [a]
+    while todo:
+        for n in edges.get(todo.pop(), ()):
+            if n not in seen:
+                seen.add(n)
+                todo.append(n)
+    return b in seen
 
 
 def summarise_json(d):
@@ -163,6 +171,10 @@ def scenario_line(sc):
 
 
 def report(results):
+    for r in results:  # ties recomputed from the stored effects (transitively)
+        if r["rc"] == 0 and r["effect"] != "none":
+            extras = [x for x in r["verdict"] if x != r["effect"]]
+            r["wrong_extras"] = [x for x in extras if not (r["named"] and tied(r["effects"], r["effect"], x))]
     by = {}
     for r in results:
         by.setdefault((r["procedure"], r["effect"]), []).append(r)
@@ -218,6 +230,7 @@ def main(argv=None):
     ap.add_argument("--seed0", type=int, default=540000)
     ap.add_argument("--timeout", type=float, default=900)
     ap.add_argument("--jsonl", default="")
+    ap.add_argument("--report-only", default="", help="comma list of JSONL files of earlier runs: print their report")
     ap.add_argument("--keep", default="", help="keep the captures in this folder")
     ap.add_argument(
         "--gen-opt",
@@ -227,6 +240,10 @@ def main(argv=None):
         "soft_iron=symmetric); given, it applies to every procedure listed",
     )
     a = ap.parse_args(argv)
+    if a.report_only:
+        rs = [json.loads(line) for f in a.report_only.split(",") for line in open(f) if line.strip()]
+        report(rs)
+        return
     opts = {}
     for kv in a.gen_opt:
         k, v = kv.split("=", 1)
