@@ -523,6 +523,7 @@ def _read_head(path: str) -> _Head:
     with _open(path) as f:
         lineno = 0
         saw_header = False
+        padded = False
         while True:
             raw = f.readline(_MAX_HEAD_LINE)
             lineno += 1
@@ -547,6 +548,12 @@ def _read_head(path: str) -> _Head:
                     raise InputError(path, 1, "UTF-16 text; capture files are UTF-8")
             text = _decode(path, raw, lineno)
             stripped = text.strip()
+            if lineno == 1:
+                # a spreadsheet's save pads every row to the table's width: '# station-capture: 1,,,,,,'
+                # says so; then '# device: X,,,,,,' (and a blank line as ',,,,,,') are padded too
+                padded = stripped.startswith("#") and stripped.endswith(",")
+            if padded and (stripped.startswith("#") or not stripped.strip(",")):
+                stripped = stripped.rstrip(", \t")
             if lineno == 1:
                 _first_line(path, f, stripped)
                 head.meta["station-capture"] = FORMAT_VERSION
