@@ -901,10 +901,15 @@ def _data_chunks(
     if n_rows == 0:
         raise InputError(path, head.header_line + 1, "no data rows after the header")
     if not ends_line and notes is not None and pending_blank is None:
-        notes.append(
-            f"the last line ({lineno - 1}) has no line end: a file cut short (a copy or a write stopped "
-            "part-way) ends so, and then its last value may be cut too (kept as read)"
-        )
+        notes.append(no_line_end_note(lineno - 1))
+
+
+def no_line_end_note(lineno: int) -> str:
+    """The warning for a file whose last line, ``lineno``, has no line end (as a file cut short ends)."""
+    return (
+        f"the last line ({lineno}) has no line end: a file cut short (a copy or a write stopped "
+        "part-way) ends so, and then its last value may be cut too (kept as read)"
+    )
 
 
 def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):

@@ -50,3 +50,65 @@ def test_a_capture_saved_again_by_a_spreadsheet_reads_as_the_capture(tmp_path, g
     again = json.loads(res.stdout)
     assert again["params"] == result["params"]
     assert again["device"] == result["device"]
+
+
+def _bench_csv(n: int = 400) -> str:
+    """A bench logger's CSV as pandas writes it (DataFrame.to_csv)."""
+    import numpy as np
+    import pandas as pd
+
+    rng = np.random.default_rng(400418)
+    frame = pd.DataFrame(
+        {
+            "time_s": np.arange(n) * 0.01,
+            "acc_x": rng.normal(0, 0.01, n),
+            "acc_y": rng.normal(0, 0.01, n),
+            "acc_z": 9.81 + rng.normal(0, 0.01, n),
+        }
+    )
+    return frame.to_csv(index=False)
+
+
+BENCH_MAP = ["--map", "t=time_s,ax=acc_x,ay=acc_y,az=acc_z", "--unit", "accel=m/s^2"]
+
+
+@pytest.mark.parametrize("cut", [0, 3], ids=["whole", "cut-mid-value"])
+def test_import_of_a_csv_whose_last_line_has_no_line_end_warns_that_it_may_be_cut(tmp_path, cut):
+    """A bench CSV copied while its logger still wrote it, or the logger killed: the last value
+    is cut ('9.8123' read as '9.8'). The capture reader warns of a last line without its line
+    end; the importer read it as whole, without a word (before: exit 0, stderr empty)."""
+    text = _bench_csv()
+    cut_text = text[: len(text) - 1 - cut]  # without the final line end, and `cut` characters more
+    src = tmp_path / "bench.csv"
+    src.write_text(cut_text, newline="")
+    out = tmp_path / "bench.capture.csv"
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *BENCH_MAP)
+    assert res.returncode == 0, res.stderr
+    n_lines = cut_text.count("\n") + 1
+    assert f"warning: the last line ({n_lines}) has no line end" in res.stderr, res.stderr
+    assert res.stderr.count("\n") == 1
+    whole = tmp_path / "whole.csv"
+    whole.write_text(text, newline="")
+    again = run_station(
+        "import", whole, "--procedure", "accel-tabletop", "--out", tmp_path / "w.capture.csv", *BENCH_MAP
+    )
+    assert again.returncode == 0 and "line end" not in again.stderr, again.stderr
+
+
+def test_import_of_an_euroc_file_cut_mid_line_warns_too(tmp_path):
+    """The same for an EuRoC IMU file (mav0/imu0/data.csv), which calibrate also reads directly."""
+    import numpy as np
+
+    rng = np.random.default_rng(400419)
+    head = "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    head += "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n"
+    rows = [
+        f"{1403636579758555392 + 5_000_000 * i},{','.join(repr(float(x)) for x in rng.normal(0, 1e-3, 3))},"
+        f"{','.join(repr(float(x)) for x in rng.normal((0.0, 0.0, 9.81), 0.01))}"
+        for i in range(300)
+    ]
+    src = tmp_path / "data.csv"
+    src.write_text(head + "\n".join(rows)[:-3], newline="")  # no final line end, the last value cut
+    res = run_station("import", src, "--procedure", "gyro-drift", "--out", tmp_path / "e.capture.csv")
+    assert res.returncode == 0, res.stderr
+    assert f"warning: the last line ({len(rows) + 1}) has no line end" in res.stderr, res.stderr

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from station.capture import MAX_ABS, UNIT_KEYS, plausible_limit
+from station.capture import MAX_ABS, UNIT_KEYS, no_line_end_note, plausible_limit
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
 from station.importers._common import COLUMNS, Imported, Stream
@@ -118,6 +118,24 @@ def _check_text(path) -> None:
             bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
     if bad is not None:
         raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x}")
+
+
+def _cut_last_row(path, linenos: np.ndarray, warnings: list[str]) -> None:
+    """Warn, as the capture reader does, when the file's last line is a data row with no line end:
+    a file cut short (a copy of a log still being written, a logger killed) ends so, and its
+    last value may be cut ('9.8123' read as '9.8')."""
+    try:
+        with open_input(path, "a CSV file") as f:
+            size = f.seek(0, 2)
+            f.seek(max(0, size - _MAX_LINE_BYTES - 2))
+            tail = f.read()
+    except (InputError, OSError):
+        return
+    if not tail or tail.endswith((b"\n", b"\r")):
+        return
+    last = tail[tail.rfind(b"\n") + 1 :].strip()
+    if last and not last.startswith(b"#") and len(linenos):
+        warnings.append(no_line_end_note(int(linenos[-1])))
 
 
 def _strip_end(line: str) -> str:
@@ -416,11 +434,13 @@ def read_euroc(path, *, kinds=None) -> Imported:
         )
     values, linenos = _rows(path, lines, 2, ",", len(header), cols, int_time="t")
     _check_limits(path, values, linenos, units)
-    t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=[])
+    warnings: list[str] = []
+    _cut_last_row(path, linenos, warnings)
+    t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=warnings)
     streams = _streams(path, values, t_s, units, "EuRoC/Kalibr CSV")
     if kinds is not None:
         streams = {k: s for k, s in streams.items() if k in kinds}
-    return Imported(streams, {}, [])
+    return Imported(streams, {}, warnings)
 
 
 # ------------------------------------------------------------------------------------- plain CSV
@@ -576,6 +596,7 @@ def read_plain(
         )
     values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
     _check_limits(path, values, linenos, units)
+    _cut_last_row(path, linenos, warnings)
     if "t" in values:
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
     else:
