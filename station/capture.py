@@ -451,6 +451,13 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
 
 def _header_problem(names: list[str]) -> str | None:
     """What is wrong with a header row (already split and stripped), or None."""
+    if len(names) == 1:  # one name: the columns may be separated by something else than commas
+        for sep, said in ((";", "';' (semicolons)"), ("\t", "tabs")):
+            if len([n for n in names[0].split(sep) if n.strip()]) > 1:
+                return (
+                    f"the header's columns are separated by {said}: a capture's are separated by commas, "
+                    "with '.' as the decimal mark"
+                )
     seen: dict[str, int] = {}
     for j, name in enumerate(names, 1):
         if not name:

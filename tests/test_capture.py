@@ -135,7 +135,13 @@ BAD = [
         "unknown gyro_mode 'spinning' (expected one of reference, static)",
     ),
     ("not-a-number", _good("1.5,2,2.4,abc,1.6\n"), 9, "column 'ay': 'abc' is not a number"),
-    ("decimal-comma", HEAD + "t;ax\n0;1,5\n", 6, "too many fields: 2 where the header has 1 columns"),
+    (
+        "decimal-comma",
+        HEAD + "t;ax\n0;1,5\n",
+        5,
+        "the header's columns are separated by ';' (semicolons): a capture's are separated by commas, "
+        "with '.' as the decimal mark",
+    ),
     (
         "literal-nan",
         _good("1.5,2,nan,1.5,1.6\n"),

@@ -13,7 +13,7 @@ import json
 
 import pytest
 
-from tests.station_run import run_station
+from tests.station_run import assert_one_line_refusal, run_station
 
 
 @pytest.fixture(scope="module")
@@ -112,3 +112,29 @@ def test_import_of_an_euroc_file_cut_mid_line_warns_too(tmp_path):
     res = run_station("import", src, "--procedure", "gyro-drift", "--out", tmp_path / "e.capture.csv")
     assert res.returncode == 0, res.stderr
     assert f"warning: the last line ({len(rows) + 1}) has no line end" in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize(
+    "sep, decimal, said",
+    [(";", ".", "';'"), (";", ",", "';'"), ("\t", ".", "tabs")],
+    ids=["semicolon", "semicolon-decimal-comma", "tab"],
+)
+def test_a_capture_written_with_another_separator_is_refused_at_its_header_saying_so(
+    tmp_path, gyro_capture, sep, decimal, said
+):
+    """pandas' to_csv(sep=';', decimal=',') as a spreadsheet of a decimal-comma locale writes it,
+    or sep='\\t', under the capture's metadata lines. Before: 'line 16: too many fields: 8 where
+    the header has 1 columns' (the first data row, split at its decimal commas), or the whole
+    header called one column name that "is not plain text"."""
+    import pandas as pd
+
+    path, _ = gyro_capture
+    text = path.read_text()
+    meta = "".join(ln for ln in text.splitlines(keepends=True) if ln.startswith("#"))
+    header_line = meta.count("\n") + 1
+    frame = pd.read_csv(path, comment="#")
+    out = tmp_path / "other.csv"
+    out.write_text(meta + frame.to_csv(index=False, sep=sep, decimal=decimal))
+    for command in ("calibrate", "diagnose", "inspect"):
+        res = run_station(command, out)
+        assert_one_line_refusal(res, f"{out}:{header_line}:", said, "comma")
