@@ -691,7 +691,7 @@ class _Parser:
             lines = block.split(b"\n")
             if block.endswith(b"\n"):
                 lines.pop()
-            out = self._slow(lines, first_line)
+            out = self._slow(lines, first_line, last_cut=not block.endswith(b"\n"))
         elif self.t_index is not None:
             stop = len(block) - 1 if block.endswith(b"\n") else len(block)
             last = block[block.rfind(b"\n", 0, stop) + 1 : stop]
@@ -768,7 +768,8 @@ class _Parser:
 
     # -- the per-cell path: every rule checked in file order, so the first bad line is named
 
-    def _slow(self, raw_lines: list[bytes], first_line: int) -> dict[str, np.ndarray]:
+    def _slow(self, raw_lines: list[bytes], first_line: int, last_cut: bool = False) -> dict[str, np.ndarray]:
+        """``last_cut``: the last of ``raw_lines`` is the file's last line and has no line end."""
         path, names, ncols = self.path, self.names, self.ncols
         values: list[list] = [[] for _ in names]
         for k, raw in enumerate(raw_lines):
@@ -782,7 +783,10 @@ class _Parser:
             fields = text.split(",")
             if len(fields) != ncols:
                 few = "too few" if len(fields) < ncols else "too many"
-                raise InputError(path, lineno, f"{few} fields: {len(fields)} where the header has {ncols} columns")
+                message = f"{few} fields: {len(fields)} where the header has {ncols} columns"
+                if last_cut and k == len(raw_lines) - 1 and len(fields) < ncols:
+                    message += f", on the last line, which has no line end: {CUT_SHORT}"
+                raise InputError(path, lineno, message)
             for j, value in enumerate(fields):
                 if j in self.text:
                     label = value.strip()
@@ -909,6 +913,9 @@ def _data_chunks(
         raise InputError(path, head.header_line + 1, "no data rows after the header")
     if not ends_line and notes is not None and pending_blank is None:
         notes.append(no_line_end_note(lineno - 1))
+
+
+CUT_SHORT = "the file was cut short (a write stopped part-way, or one still going on)"
 
 
 def no_line_end_note(lineno: int) -> str:

@@ -138,3 +138,38 @@ def test_a_capture_written_with_another_separator_is_refused_at_its_header_sayin
     for command in ("calibrate", "diagnose", "inspect"):
         res = run_station(command, out)
         assert_one_line_refusal(res, f"{out}:{header_line}:", said, "comma")
+
+
+def _cut_mid_row(text: str) -> str:
+    """``text`` as a writer killed mid-row leaves it: the last row's first two fields only."""
+    last = text.rstrip("\n").rsplit("\n", 1)[1]
+    cut = len(text.rstrip("\n")) - len(last) + len(",".join(last.split(",")[:2]))
+    return text[:cut]
+
+
+def test_a_capture_cut_mid_row_is_refused_saying_the_file_is_cut(tmp_path, gyro_capture):
+    """A capture whose writer was killed mid-row (or one still being appended to): the last line
+    holds 2 of 8 fields and no line end. Before: 'too few fields: 2 where the header has 8
+    columns', as for a row short in the middle of a file; the line now says the file is cut."""
+    path, _ = gyro_capture
+    cut = tmp_path / "cut.csv"
+    cut.write_text(_cut_mid_row(path.read_text()))
+    n_lines = cut.read_text().count("\n") + 1
+    for command in ("calibrate", "diagnose", "inspect"):
+        res = run_station(command, cut)
+        assert_one_line_refusal(res, f"{cut}:{n_lines}: too few fields: 2 where the header has 8", "no line end")
+    whole_but_short = tmp_path / "short.csv"  # the same short row with its line end: no word of a cut
+    whole_but_short.write_text(cut.read_text() + "\n")
+    res = run_station("inspect", whole_but_short)
+    assert_one_line_refusal(res, f"{whole_but_short}:{n_lines}: too few fields")
+    assert "line end" not in res.stderr
+
+
+def test_import_of_a_csv_cut_mid_row_is_refused_saying_the_file_is_cut(tmp_path):
+    src = tmp_path / "bench.csv"
+    src.write_text(_cut_mid_row(_bench_csv()), newline="")
+    n_lines = src.read_text().count("\n") + 1
+    out = tmp_path / "bench.capture.csv"
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *BENCH_MAP)
+    assert_one_line_refusal(res, f"{src}:{n_lines}: 2 fields where the header has 4", "no line end")
+    assert not out.exists()

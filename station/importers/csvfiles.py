@@ -21,7 +21,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from station.capture import MAX_ABS, UNIT_KEYS, no_line_end_note, plausible_limit
+from station.capture import CUT_SHORT, MAX_ABS, UNIT_KEYS, no_line_end_note, plausible_limit
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
 from station.importers._common import COLUMNS, Imported, Stream
@@ -118,6 +118,16 @@ def _check_text(path) -> None:
             bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
     if bad is not None:
         raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x}")
+
+
+def _ends_without_line_end(path) -> bool:
+    try:
+        with open_input(path, "a CSV file") as f:
+            size = f.seek(0, 2)
+            f.seek(max(0, size - 1))
+            return f.read(1) not in (b"", b"\n", b"\r")
+    except (InputError, OSError):
+        return False
 
 
 def _cut_last_row(path, linenos: np.ndarray, warnings: list[str]) -> None:
@@ -260,7 +270,10 @@ def _rows(
             continue
         cells = _cells(path, lineno, text, delimiter)
         if len(cells) != ncols:
-            raise InputError(path, lineno, f"{len(cells)} fields where the header has {ncols}")
+            message = f"{len(cells)} fields where the header has {ncols}"
+            if len(cells) < ncols and next(lines, None) is None and _ends_without_line_end(path):
+                message += f", on the last line, which has no line end: {CUT_SHORT}"
+            raise InputError(path, lineno, message)
         for target, j in cols.items():
             if target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
                 cell = cells[j].strip()
