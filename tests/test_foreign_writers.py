@@ -173,3 +173,36 @@ def test_import_of_a_csv_cut_mid_row_is_refused_saying_the_file_is_cut(tmp_path)
     res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *BENCH_MAP)
     assert_one_line_refusal(res, f"{src}:{n_lines}: 2 fields where the header has 4", "no line end")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("sep", [";", "\t"], ids=["semicolon", "tab"])
+def test_import_reads_decimal_commas_where_the_separator_is_not_a_comma(tmp_path, sep):
+    """A bench CSV from a decimal-comma locale (pandas to_csv(sep=';', decimal=','), a German
+    spreadsheet's save): '0,01;-0,0123;9,81'. Before: refused, "column 't': '0,0' is not a
+    number". Now read as the same numbers as the '.' file."""
+    import io
+
+    import pandas as pd
+
+    frame = pd.read_csv(io.StringIO(_bench_csv()))
+    plain, local = tmp_path / "plain.csv", tmp_path / "local.csv"
+    plain.write_text(frame.to_csv(index=False))
+    local.write_text(frame.to_csv(index=False, sep=sep, decimal=","))
+    outs = []
+    for src in (plain, local):
+        out = tmp_path / f"{src.stem}.capture.csv"
+        res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *BENCH_MAP)
+        assert res.returncode == 0, res.stderr
+        outs.append([ln for ln in out.read_text().splitlines() if not ln.startswith("# source")])
+    assert outs[0] == outs[1]
+
+
+def test_import_refuses_a_file_that_mixes_decimal_commas_and_points(tmp_path):
+    """'1,5' on one line and '1.234' on another: a thousands separator or a decimal point, no way
+    to tell; one line names where the second mark appears."""
+    src = tmp_path / "mixed.csv"
+    src.write_text("time_s;acc_x;acc_y;acc_z\n0;0,01;0,02;9,81\n0,01;0.011;0,02;9,81\n")
+    out = tmp_path / "mixed.capture.csv"
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *BENCH_MAP)
+    assert_one_line_refusal(res, f"{src}:3:", "'0.011'", "decimal comma", "line 2")
+    assert not out.exists()

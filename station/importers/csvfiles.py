@@ -52,6 +52,8 @@ KALIBR_UNITS = {
     "gyro": "rad/s",
 }  # kalibr_bagcreater's documented units
 _NUMBER = re.compile(r"\s*[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\s*")
+# a decimal comma ('0,01'), as a decimal-comma locale writes numbers where ',' is not the separator
+_DECIMAL_COMMA = re.compile(r"\s*[+-]?[0-9]+,[0-9]+(?:[eE][+-]?[0-9]+)?\s*")
 
 
 _MAX_LINE_BYTES = 1 << 20  # a line longer than this is no CSV row (the capture reader's limit)
@@ -226,6 +228,27 @@ def _number(path, lineno: int, name: str, cell: str) -> float:
     return x
 
 
+def _one_decimal_mark(path, lineno: int, name: str, cell: str, marks: dict[str, int]) -> str:
+    """``cell`` with a decimal comma as a decimal point; a file that writes both marks is refused
+    ('1.234' beside '1,5' may be a thousands separator: no way to tell)."""
+    if _DECIMAL_COMMA.fullmatch(cell):
+        mark, number = ",", cell.replace(",", ".")
+    elif "." in cell and _NUMBER.fullmatch(cell):
+        mark, number = ".", cell
+    else:
+        return cell
+    marks.setdefault(mark, lineno)
+    if len(marks) > 1:
+        other = "," if mark == "." else "."
+        raise InputError(
+            path,
+            lineno,
+            f"column '{name}': {cell.strip()!r} has a decimal {'point' if mark == '.' else 'comma'} where line "
+            f"{marks[other]} has a decimal {'comma' if other == ',' else 'point'}: one decimal mark per file",
+        )
+    return number
+
+
 def _join(chunks: list[np.ndarray], dtype) -> np.ndarray:
     """``np.concatenate(chunks)`` emptying ``chunks`` as it copies: each chunk is freed once
     copied, so the column is held about once, not twice (chunks and result) at the end."""
@@ -257,6 +280,8 @@ def _rows(
     ints: list[int] = out[int_time] if int_time else []
     line_chunks: list[np.ndarray] = []
     linenos: list[int] = []
+    marks: dict[str, int] = {}  # decimal mark ('.' or ',') → the first line that uses it
+    commas = delimiter != ","  # decimal commas are possible
 
     def flush() -> None:
         for t in done:
@@ -285,7 +310,10 @@ def _rows(
                     )
                 ints.append(int(cell))
             else:
-                out[target].append(_number(path, lineno, target, cells[j]))
+                cell = cells[j]
+                if commas:
+                    cell = _one_decimal_mark(path, lineno, target, cell, marks)
+                out[target].append(_number(path, lineno, target, cell))
         linenos.append(lineno)
         if len(linenos) >= _FLUSH_ROWS:
             flush()
