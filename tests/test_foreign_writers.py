@@ -206,3 +206,40 @@ def test_import_refuses_a_file_that_mixes_decimal_commas_and_points(tmp_path):
     res = run_station("import", src, "--procedure", "accel-tabletop", "--out", out, *BENCH_MAP)
     assert_one_line_refusal(res, f"{src}:3:", "'0.011'", "decimal comma", "line 2")
     assert not out.exists()
+
+
+def test_p1_holds_numbered_as_pandas_writes_integers_with_gaps_keep_their_positions(tmp_path):
+    """A P1 capture whose `position` numbers the holds 1..12 in the source's order, the rows
+    between holds left empty: pandas holds such a column as float and writes '1.0', '2.0', ...
+    Before: '1.0' was no position P1 knows, the labels were silently unused (gauge
+    upper-triangular, n_labelled_positions 0, B off by 0.11 m/s² from the '1' file's) and no
+    warning said so. capture-format.md: position is an integer or a label."""
+    import pandas as pd
+
+    from solvers.tabletop import P1_POSITIONS
+
+    made = tmp_path / "p1.csv"
+    res = run_station(
+        "simulate", "--procedure", "accel-tabletop", "--out", made, "--seed", "400420", "--option", "hold_s=5"
+    )
+    assert res.returncode == 0, res.stderr
+    text = made.read_text()
+    meta = "".join(ln for ln in text.splitlines(keepends=True) if ln.startswith("#"))
+    frame = pd.read_csv(made, comment="#", keep_default_na=False)
+    number = {label: k for k, label in enumerate(P1_POSITIONS, 1)}  # 1 = X up, ... (the source's order)
+    frame["position"] = [number.get(p) for p in frame["position"]]  # moves between holds: None
+    floats = tmp_path / "floats.csv"
+    floats.write_text(meta + frame.to_csv(index=False))
+    assert "\n0.0,1.0," in floats.read_text()
+    ints = tmp_path / "ints.csv"
+    frame["position"] = frame["position"].astype("Int64")
+    ints.write_text(meta + frame.to_csv(index=False))
+    assert "\n0.0,1," in ints.read_text()
+    results = []
+    for path in (ints, floats):
+        res = run_station("calibrate", path, "--json")
+        assert res.returncode == 0, res.stderr
+        results.append(json.loads(res.stdout))
+    assert results[0]["gauge"] == "table" and results[0]["n_labelled_positions"] == 12
+    for key in ("gauge", "n_labelled_positions", "params", "uncertainty"):
+        assert results[1][key] == results[0][key], key
