@@ -243,3 +243,65 @@ def test_p1_holds_numbered_as_pandas_writes_integers_with_gaps_keep_their_positi
     assert results[0]["gauge"] == "table" and results[0]["n_labelled_positions"] == 12
     for key in ("gauge", "n_labelled_positions", "params", "uncertainty"):
         assert results[1][key] == results[0][key], key
+
+
+def _ros1_bag(tmp_path, change):
+    """A ROS 1 bag written by rosbags' own writer (the IMU and magnetometer messages of the ROS
+    import tests), its message list passed through ``change`` first; and the untouched list."""
+    import numpy as np
+    from rosbags.typesys import Stores, get_typestore
+
+    from tests.test_import_ros import _messages, write_ros1
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    msgs, _ = _messages(ts, np.random.default_rng(400421), n_imu=1000)
+    path = tmp_path / "run.bag"
+    write_ros1(path, change(ts, msgs))
+    return path, msgs
+
+
+def _import_bag(tmp_path, path):
+    out = tmp_path / "bag.capture.csv"
+    res = run_station("import", path, "--procedure", "gyro-drift", "--out", out, "--topic", "imu=/imu/data")
+    assert res.returncode == 0, res.stderr
+    return res, [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
+
+
+def test_a_bag_that_recorded_every_imu_message_twice_keeps_each_sample_once(tmp_path):
+    """Two recorders (or a topic bridged twice) into one bag: every Imu message twice, same
+    stamp, same values. Before: imported with 2 rows per sample, without a word (the mean kept,
+    its σ from twice the samples: √2 too small). The MAVLink telemetry reader already kept
+    such repeats once; now every log reader does."""
+    twice, msgs = _ros1_bag(
+        tmp_path, lambda ts, m: sorted(m + [x for x in m if x[0] == "/imu/data"], key=lambda x: x[2])
+    )
+    res, rows = _import_bag(tmp_path, twice)
+    (tmp_path / "once").mkdir()
+    once, _ = _ros1_bag(tmp_path / "once", lambda ts, m: m)
+    _, rows_once = _import_bag(tmp_path / "once", once)
+    assert rows == rows_once
+    assert "1000 repeated gyro samples (same time and values) read once" in res.stderr, res.stderr
+
+
+def test_imu_messages_stamped_out_of_time_order_are_said(tmp_path):
+    """A driver whose stamps jump back (a clock reset, two publishers): every 10th Imu message
+    stamped 0.5 s early. The rows are put in time order, as before, but no longer silently."""
+
+    def early(ts, msgs):
+        import copy
+
+        Time = ts.types["builtin_interfaces/msg/Time"]
+        out = []
+        for i, (topic, typ, ns, msg) in enumerate(msgs):
+            if topic == "/imu/data" and i % 10 == 0 and i > 200:
+                msg = copy.deepcopy(msg)
+                t = ns - 500_000_000
+                msg.header.stamp = Time(sec=t // 10**9, nanosec=t % 10**9)
+            out.append((topic, typ, ns, msg))
+        return out
+
+    path, _ = _ros1_bag(tmp_path, early)
+    res, _ = _import_bag(tmp_path, path)
+    said = [ln for ln in res.stderr.splitlines() if "earlier than the sample before" in ln]
+    assert len(said) == 2, res.stderr  # the gyro and the accelerometer of the same messages
+    assert "by up to 0.495 s" in said[0], said  # 0.5 s early, less the 5 ms step to the sample before

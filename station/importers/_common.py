@@ -122,16 +122,36 @@ def set_date(meta: dict[str, str], warnings: list[str], unix_s: float, clock: st
         meta["date"] = text
 
 
-def clean_stream(path, stream: Stream) -> Stream | None:
-    """Rows with a finite time, sorted by time (stable); None when nothing is left."""
+def clean_stream(path, stream: Stream, warnings: list[str] | None = None) -> Stream | None:
+    """Rows with a finite time, sorted by time (stable), a sample repeated (same time, same
+    values: a log fed twice) kept once; None when nothing is left. What was put in order or
+    read once is said in ``warnings``."""
     t = np.asarray(stream.t_s, dtype=np.float64)
     xyz = np.asarray(stream.xyz, dtype=np.float64).reshape(len(t), 3)
     keep = np.isfinite(t)
+    back = np.flatnonzero(np.diff(t[keep]) < 0)
+    if back.size and warnings is not None:
+        tk = t[keep]
+        late = float(np.max(np.maximum.accumulate(tk)[back] - tk[back + 1]))
+        warnings.append(
+            f"{back.size} {NAME[stream.kind]} samples are stamped earlier than the sample before them "
+            f"(by up to {late:.3g} s; the first {tk[back[0] + 1] - tk.min():.3f} s into the log): put in time order"
+        )
     order = np.argsort(t[keep], kind="stable")
     t, xyz = t[keep][order], xyz[keep][order]
     temp = None if stream.temp_c is None else np.asarray(stream.temp_c, dtype=np.float64)[keep][order]
     if len(t) == 0:
         return None
+    same = np.r_[
+        False, (t[1:] == t[:-1]) & np.all((xyz[1:] == xyz[:-1]) | (np.isnan(xyz[1:]) & np.isnan(xyz[:-1])), axis=1)
+    ]
+    if temp is not None:
+        same[1:] &= (temp[1:] == temp[:-1]) | (np.isnan(temp[1:]) & np.isnan(temp[:-1]))
+    if same.any():
+        t, xyz = t[~same], xyz[~same]
+        temp = None if temp is None else temp[~same]
+        if warnings is not None:
+            warnings.append(f"{int(same.sum())} repeated {NAME[stream.kind]} samples (same time and values) read once")
     return Stream(
         stream.kind,
         t,
@@ -221,7 +241,7 @@ def to_capture(
     for kind in KINDS:
         s = imported.streams.get(kind)
         if s is not None and (kinds is None or kind in kinds):
-            s = clean_stream(path, s)
+            s = clean_stream(path, s, imported.warnings)
             if s is not None:
                 bad = np.isinf(s.xyz)  # a corrupt sample: an empty cell, said once
                 if bad.any():
