@@ -449,6 +449,14 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
         raise InputError(path, lines.get(key), message)
 
 
+def _unquoted(field: str) -> str:
+    """A field without CSV's quotes around it ('"x_up"' → 'x_up', as csv.writer's QUOTE_NONNUMERIC or
+    R's write.table write text); a field with a quote inside is left as it is (and refused)."""
+    if len(field) >= 2 and field[0] == '"' == field[-1] and '"' not in field[1:-1]:
+        return field[1:-1].strip()
+    return field
+
+
 def _header_problem(names: list[str]) -> str | None:
     """What is wrong with a header row (already split and stripped), or None."""
     if len(names) == 1:  # one name: the columns may be separated by something else than commas
@@ -582,7 +590,7 @@ def _read_head(path: str) -> _Head:
                 head.meta[key] = value
                 head.meta_lines[key] = lineno
                 continue
-            names = [c.strip() for c in text.split(",")]
+            names = [_unquoted(c.strip()) for c in text.split(",")]
             if len(names) > 1 and names[-1] == "" and all(names[:-1]):
                 names, head.trailing_comma = names[:-1], True
             problem = _header_problem(names)
@@ -789,7 +797,7 @@ class _Parser:
                 raise InputError(path, lineno, message)
             for j, value in enumerate(fields):
                 if j in self.text:
-                    label = value.strip()
+                    label = _unquoted(value.strip())
                     problem = _label_problem(label)
                     if problem:
                         raise InputError(path, lineno, problem)
@@ -807,7 +815,7 @@ class _Parser:
         return cols
 
     def _number(self, name: str, value: str, j: int, lineno: int) -> float:
-        v = value.strip(" \t")
+        v = _unquoted(value.strip(" \t")).strip(" \t")
         if not v:
             if j == self.t_index:
                 raise InputError(self.path, lineno, "column 't': empty (every row of a time series needs its time)")

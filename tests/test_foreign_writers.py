@@ -305,3 +305,38 @@ def test_imu_messages_stamped_out_of_time_order_are_said(tmp_path):
     said = [ln for ln in res.stderr.splitlines() if "earlier than the sample before" in ln]
     assert len(said) == 2, res.stderr  # the gyro and the accelerometer of the same messages
     assert "by up to 0.495 s" in said[0], said  # 0.5 s early, less the 5 ms step to the sample before
+
+
+def _rewrite_with_csv_module(path, out, quoting):
+    """The capture at ``path`` written again by Python's csv module with ``quoting`` (R's
+    write.table(quote=TRUE) writes as QUOTE_NONNUMERIC does): the metadata lines as they were,
+    the header and every row through csv.writer, numbers as floats, labels as text."""
+    text = path.read_text()
+    meta = [ln for ln in text.splitlines() if ln.startswith("#")]
+    rows = list(csv.reader(io.StringIO("\n".join(ln for ln in text.splitlines() if not ln.startswith("#")))))
+    header = rows[0]
+    buf = io.StringIO()
+    w = csv.writer(buf, quoting=quoting, lineterminator="\n")
+    w.writerow(header)
+    for r in rows[1:]:
+        w.writerow([c if name == "position" else (float(c) if c else "") for name, c in zip(header, r)])
+    out.write_text("\n".join(meta) + "\n" + buf.getvalue())
+
+
+@pytest.mark.parametrize("quoting", [csv.QUOTE_NONNUMERIC, csv.QUOTE_ALL], ids=["quote-nonnumeric", "quote-all"])
+def test_a_capture_whose_fields_are_quoted_as_csv_writers_quote_them_reads_as_the_capture(tmp_path, quoting):
+    """CSV's quotes around a field ('"t","position","ax"', '"x_up"', with QUOTE_ALL '"0.01"') are
+    no part of it. Before: refused, column name '"position"' is not plain text."""
+    made = tmp_path / "p2.csv"
+    res = run_station("simulate", "--procedure", "accel-centrifuge", "--out", made, "--seed", "400422")
+    assert res.returncode == 0, res.stderr
+    quoted = tmp_path / "quoted.csv"
+    _rewrite_with_csv_module(made, quoted, quoting)
+    assert '"position"' in quoted.read_text() and ',"1",' not in quoted.read_text()
+    results = []
+    for path in (made, quoted):
+        res = run_station("calibrate", path, "--json")
+        assert res.returncode == 0, res.stderr
+        results.append(json.loads(res.stdout))
+    assert results[1]["params"] == results[0]["params"]
+    assert results[1]["n_positions"] == results[0]["n_positions"]
