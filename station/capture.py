@@ -167,6 +167,8 @@ def column_limit(name: str, meta: dict[str, str]) -> tuple[float, str]:
 # A number as the format writes it: no nan/inf words, no underscores, no hex.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NONFINITE_WORDS = {"nan", "inf", "infinity"}
+# how other tools write a missing value (R's NA, a spreadsheet's #N/A, null/None): refused as 'nan' is
+_MISSING_WORDS = {"na", "n/a", "#n/a", "null", "none"}
 # Bytes the numpy fast path may see: printable ASCII, tab, LF. Anything else takes the per-cell path.
 _FAST_BYTES = bytes(range(0x20, 0x7F)) + b"\t\n"
 _LABEL_WIDTH = 32  # fixed width of the text field in the fast path; longer labels take the slow path
@@ -821,7 +823,7 @@ class _Parser:
                 raise InputError(self.path, lineno, "column 't': empty (every row of a time series needs its time)")
             return math.nan
         if not _NUMBER.fullmatch(v):
-            if v.lower().lstrip("+-") in _NONFINITE_WORDS:
+            if v.lower().lstrip("+-") in _NONFINITE_WORDS or v.lower() in _MISSING_WORDS:
                 raise InputError(
                     self.path,
                     lineno,

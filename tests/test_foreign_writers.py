@@ -340,3 +340,22 @@ def test_a_capture_whose_fields_are_quoted_as_csv_writers_quote_them_reads_as_th
         results.append(json.loads(res.stdout))
     assert results[1]["params"] == results[0]["params"]
     assert results[1]["n_positions"] == results[0]["n_positions"]
+
+
+@pytest.mark.parametrize("missing", ["NA", "N/A", "#N/A", "null", "None"])
+def test_a_missing_value_as_other_tools_spell_it_is_refused_with_the_way_to_write_it(tmp_path, gyro_capture, missing):
+    """R's write.table writes a missing value as NA, a spreadsheet as #N/A, JSON-minded tools
+    null or None. Each is refused as 'nan' is, saying to leave the field empty (capture-format.md:
+    empty field = missing value); before, 'NA' was only 'not a number'."""
+    path, _ = gyro_capture
+    lines = path.read_text().splitlines(keepends=True)
+    first_row = next(i for i, ln in enumerate(lines) if not ln.startswith("#")) + 1
+    fields = lines[first_row + 5].split(",")
+    fields[-1] = missing + "\n"  # temp_c
+    lines[first_row + 5] = ",".join(fields)
+    bad = tmp_path / "missing.csv"
+    bad.write_text("".join(lines))
+    res = run_station("calibrate", bad)
+    assert_one_line_refusal(
+        res, f"{bad}:{first_row + 6}: column 'temp_c': '{missing}' is not allowed", "leave the field empty"
+    )
