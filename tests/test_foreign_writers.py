@@ -359,3 +359,47 @@ def test_a_missing_value_as_other_tools_spell_it_is_refused_with_the_way_to_writ
     assert_one_line_refusal(
         res, f"{bad}:{first_row + 6}: column 'temp_c': '{missing}' is not allowed", "leave the field empty"
     )
+
+
+def test_a_telemetry_log_of_two_vehicles_reads_one_vehicles_imu_and_says_so(tmp_path):
+    """A ground station's .tlog with two vehicles on the link (MAVLink system ids 1 and 2, both
+    sending RAW_IMU), written by pymavlink's own log writer. Before: the two IMUs interleaved
+    into one capture row by row (ax 10, 990, 10, 990, ... mG), without a word. Now the vehicle
+    with the most IMU messages (the first on a tie) is read, and a warning names the other."""
+    import struct
+
+    from pymavlink import mavutil
+
+    from tests.test_import_ardupilot import PARAMS
+
+    path = tmp_path / "two.tlog"
+    log = mavutil.mavlogfile(str(path), write=True, source_system=1, source_component=1)
+    mav = log.mav
+    t0 = 1_700_000_000.0
+
+    def at(t):
+        log.write(struct.pack(">Q", int(t * 1e6)))
+
+    for sysid in (1, 2):
+        mav.srcSystem = sysid
+        at(t0)
+        mav.heartbeat_send(2, 3, 0, 0, 4)  # a quadrotor running ArduPilot
+        for i, (name, value) in enumerate(PARAMS.items()):
+            at(t0)
+            mav.param_value_send(name.encode(), float(value) + sysid - 1, 9, len(PARAMS), i)
+    for k in range(200):
+        for sysid, acc in ((1, (10, -20, -1000)), (2, (990, 5, 30))):  # vehicle 2 lies on its side
+            mav.srcSystem = sysid
+            at(t0 + 0.1 + k * 0.02)
+            mav.raw_imu_send(1_000_000 + k * 20_000 + 7_000 * (sysid - 1), *acc, 5, -6, 7, 200, -100, 400)
+    log.close()
+    out = tmp_path / "two.capture.csv"
+    res = run_station("import", path, "--procedure", "gyro-drift", "--out", out)
+    assert res.returncode == 0, res.stderr
+    rows = [ln.split(",") for ln in out.read_text().splitlines() if not ln.startswith("#")]
+    ax = {float(r[rows[0].index("ax")]) for r in rows[1:]}
+    assert len(rows) - 1 == 200 and ax == {10.0}, (len(rows), ax)
+    assert "system 2" in res.stderr and "left out" in res.stderr, res.stderr
+    meta = dict(ln[2:].split(": ", 1) for ln in out.read_text().splitlines() if ln.startswith("# "))
+    first = next(iter(PARAMS))
+    assert float(meta[f"param.{first}"]) == pytest.approx(float(PARAMS[first]))  # vehicle 1's, not 2's
