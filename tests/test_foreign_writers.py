@@ -403,3 +403,33 @@ def test_a_telemetry_log_of_two_vehicles_reads_one_vehicles_imu_and_says_so(tmp_
     meta = dict(ln[2:].split(": ", 1) for ln in out.read_text().splitlines() if ln.startswith("# "))
     first = next(iter(PARAMS))
     assert float(meta[f"param.{first}"]) == pytest.approx(float(PARAMS[first]))  # vehicle 1's, not 2's
+
+
+def test_an_imu_topic_carrying_two_sensors_frames_reads_one_and_says_so(tmp_path):
+    """Two IMUs published on one topic (a relay, a mux), told apart only by header.frame_id.
+    Before: their samples interleaved into one capture (az 9.8, -0.02, 9.8, ... m/s²), silently.
+    Now the frame with the most messages (the first on a tie) is read and a warning names the
+    other; the capture's frame_id is the one read."""
+
+    def second_imu(ts, msgs):
+        import copy
+
+        Time = ts.types["builtin_interfaces/msg/Time"]
+        extra = []
+        for topic, typ, ns, msg in msgs:
+            if topic == "/imu/data":
+                other = copy.deepcopy(msg)
+                other.header.frame_id = "imu2_link"
+                other.linear_acceleration.x, other.linear_acceleration.z = 9.81, 0.0  # mounted on its side
+                t = ns + 1_000_000
+                other.header.stamp = Time(sec=t // 10**9, nanosec=t % 10**9)
+                extra.append((topic, typ, t, other))
+        return sorted(msgs + extra, key=lambda m: m[2])
+
+    path, _ = _ros1_bag(tmp_path, second_imu)
+    res, rows = _import_bag(tmp_path, path)
+    az = [float(r.split(",")[3]) for r in rows[1:]]
+    assert min(az) > 9.0, "the second IMU's rows are in the capture"
+    assert "imu2_link" in res.stderr and "left out" in res.stderr, res.stderr
+    out = (tmp_path / "bag.capture.csv").read_text()
+    assert "# frame_id: imu_link\n" in out
