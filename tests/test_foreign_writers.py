@@ -433,3 +433,43 @@ def test_an_imu_topic_carrying_two_sensors_frames_reads_one_and_says_so(tmp_path
     assert "imu2_link" in res.stderr and "left out" in res.stderr, res.stderr
     out = (tmp_path / "bag.capture.csv").read_text()
     assert "# frame_id: imu_link\n" in out
+
+
+@pytest.mark.parametrize("writer", ["numpy-savetxt", "pandas-na_rep-NaN", "R-NA"])
+def test_import_reads_a_missing_value_as_the_writer_spells_it(tmp_path, writer):
+    """numpy.savetxt writes a missing value as 'nan', pandas with na_rep='NaN' as 'NaN', R's
+    write.csv as 'NA'. Before: refused, "column 'temp_c': 'nan' is not a number". Now read as
+    the empty cell a pandas default export has there."""
+    import io
+
+    import numpy as np
+    import pandas as pd
+
+    frame = pd.read_csv(io.StringIO(_bench_csv()))
+    frame["temp"] = 25.0
+    frame.loc[7, "temp"] = np.nan
+    empty, spelled = tmp_path / "empty.csv", tmp_path / "spelled.csv"
+    empty.write_text(frame.to_csv(index=False))
+    if writer == "numpy-savetxt":
+        np.savetxt(spelled, frame.to_numpy(), delimiter=",", header=",".join(frame.columns), comments="")
+    else:
+        spelled.write_text(frame.to_csv(index=False, na_rep="NaN" if writer == "pandas-na_rep-NaN" else "NA"))
+    assert "nan" in spelled.read_text().lower() or ",NA" in spelled.read_text()
+    outs = []
+    for src in (empty, spelled):
+        out = tmp_path / f"{src.stem}.capture.csv"
+        res = run_station(
+            "import",
+            src,
+            "--procedure",
+            "accel-tabletop",
+            "--out",
+            out,
+            *BENCH_MAP[:1],
+            BENCH_MAP[1] + ",temp_c=temp",
+            *BENCH_MAP[2:],
+        )
+        assert res.returncode == 0, res.stderr
+        rows = [ln.split(",") for ln in out.read_text().splitlines() if not ln.startswith("#")]
+        outs.append([[float(c) if c else None for c in r] for r in rows[1:]])
+    assert outs[0] == outs[1]

@@ -217,9 +217,14 @@ def is_euroc(path) -> bool:
     )
 
 
+# a missing value as other tools write it: numpy.savetxt 'nan', pandas na_rep 'NaN', R 'NA', a
+# spreadsheet '#N/A', null/None; read as the empty cell it stands for
+_MISSING = {"", "nan", "na", "n/a", "#n/a", "null", "none"}
+
+
 def _number(path, lineno: int, name: str, cell: str) -> float:
     if not _NUMBER.fullmatch(cell):
-        if cell.strip() == "":
+        if cell.strip().lower() in _MISSING:
             return math.nan
         raise InputError(path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number")
     x = float(cell)
