@@ -152,3 +152,40 @@ def test_a_real_log_read_directly_keeps_the_contracts(path):
     assert contract_of_run(cal, S.check_calibrate, "gyro-drift") == []
     diag = station("diagnose", path, "--procedure", "gyro-drift", "--json", "--no-plots", in_process=True)
     assert contract_of_run(diag, S.check_diagnose, "gyro-drift") == []
+
+
+@pytest.mark.parametrize(
+    "name, key, columns, unit, factor",
+    [
+        ("compass", "mag_unit", ("mx", "my", "mz"), "gauss", 0.01),
+        ("compass", "mag_unit", ("mx", "my", "mz"), "nT", 1000.0),
+        ("gyro-drift", "gyro_unit", ("gx", "gy", "gz"), "deg/s", 180 / 3.141592653589793),
+    ],
+    ids=["compass-gauss", "compass-nT", "gyro-deg-s"],
+)
+def test_the_parameters_units_follow_the_captures_declared_unit(simulated, tmp_path, name, key, columns, unit, factor):
+    """calibrate.md: compass `hard_iron` in the capture's `mag_unit` and `soft_iron` from it to nT;
+    gyro-drift's `drift` in rad/s whatever `gyro_unit` says. The simulated capture's raw columns
+    rescaled into another unit the spec names, its unit key changed to say so: the equations must
+    still hold on the rows, and the result be the same quantity."""
+    meta, cols = S.columns(simulated[name].read_bytes())
+    old_unit = meta[key]
+    lines = simulated[name].read_text().splitlines()
+    header_at = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    header = lines[header_at].split(",")
+    out = [ln.replace(f"# {key}: {old_unit}", f"# {key}: {unit}") for ln in lines[:header_at]] + [lines[header_at]]
+    for ln in lines[header_at + 1 :]:
+        cells = ln.split(",")
+        for j, c in enumerate(header):
+            if c in columns:
+                cells[j] = repr(float(cells[j]) * factor)
+        out.append(",".join(cells))
+    path = tmp_path / f"{unit.replace('/', '_')}.csv"
+    path.write_text("\n".join(out) + "\n")
+    raw = path.read_bytes()
+    res = station("calibrate", path, "--json", in_process=True)
+    assert contract_of_run(res, S.check_calibrate, meta["procedure"], raw) == []
+    d = S.one_json_object(res.stdout)[0]
+    if name == "gyro-drift":
+        base = S.one_json_object(station("calibrate", simulated[name], "--json", in_process=True).stdout)[0]
+        assert d["params"]["drift"] == pytest.approx(base["params"]["drift"], rel=1e-9, abs=1e-15)
