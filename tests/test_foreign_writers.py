@@ -473,3 +473,22 @@ def test_import_reads_a_missing_value_as_the_writer_spells_it(tmp_path, writer):
         rows = [ln.split(",") for ln in out.read_text().splitlines() if not ln.startswith("#")]
         outs.append([[float(c) if c else None for c in r] for r in rows[1:]])
     assert outs[0] == outs[1]
+
+
+def test_a_csv_on_a_coarse_clock_keeps_repeated_quiet_samples(tmp_path):
+    """t in whole milliseconds at 2 kHz: two samples share each stamp, and a quiet gyro in counts
+    often reads the same three values twice. Those are samples, not a log fed twice: kept, and
+    no 'repeated' warning."""
+    lines = ["t_ms,gx,gy,gz"]
+    for k in range(4000):
+        lines.append(f"{k // 2},{k % 3 // 2},0,{(k // 7) % 2}")
+    src = tmp_path / "coarse.csv"
+    src.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "coarse.capture.csv"
+    res = run_station(
+        "import", src, "--procedure", "gyro-drift", "--out", out,
+        "--map", "t=t_ms,gx=gx,gy=gy,gz=gz", "--unit", "gyro=counts,t=ms",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "repeated" not in res.stderr, res.stderr
+    assert sum(1 for ln in out.read_text().splitlines() if not ln.startswith("#")) - 1 == 4000

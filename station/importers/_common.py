@@ -147,7 +147,10 @@ def clean_stream(path, stream: Stream, warnings: list[str] | None = None) -> Str
     ]
     if temp is not None:
         same[1:] &= (temp[1:] == temp[:-1]) | (np.isnan(temp[1:]) & np.isnan(temp[:-1]))
-    if same.any():
+    # only where the clock tells samples apart: a coarse one (a CSV's t in ms at 2 kHz) stamps
+    # different samples alike, and a quiet sensor in counts may then repeat its values honestly
+    coarse = bool(np.any((t[1:] == t[:-1]) & ~same[1:]))
+    if same.any() and not coarse:
         t, xyz = t[~same], xyz[~same]
         temp = None if temp is None else temp[~same]
         if warnings is not None:
