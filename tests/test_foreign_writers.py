@@ -492,3 +492,26 @@ def test_a_csv_on_a_coarse_clock_keeps_repeated_quiet_samples(tmp_path):
     assert res.returncode == 0, res.stderr
     assert "repeated" not in res.stderr, res.stderr
     assert sum(1 for ln in out.read_text().splitlines() if not ln.startswith("#")) - 1 == 4000
+
+
+def test_imu_messages_that_all_carry_one_stamp_are_refused_as_having_no_time_axis(tmp_path):
+    """A driver that stamps every Imu message with one time (set once at start-up). Before: 'fewer
+    than 2 gyro samples where all sensors overlap', which sent one looking at the magnetometer."""
+
+    def one_stamp(ts, msgs):
+        import copy
+
+        Time = ts.types["builtin_interfaces/msg/Time"]
+        out = []
+        for topic, typ, ns, msg in msgs:
+            if topic == "/imu/data":
+                msg = copy.deepcopy(msg)
+                msg.header.stamp = Time(sec=1_700_000_000, nanosec=0)
+            out.append((topic, typ, ns, msg))
+        return out
+
+    path, _ = _ros1_bag(tmp_path, one_stamp)
+    out = tmp_path / "bag.capture.csv"
+    res = run_station("import", path, "--procedure", "gyro-drift", "--out", out, "--topic", "imu=/imu/data")
+    assert_one_line_refusal(res, str(path), "1000 gyro samples", "one time")
+    assert not out.exists()

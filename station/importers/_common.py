@@ -271,6 +271,13 @@ def to_capture(
             None,
             f"only {len(grid.t_s)} {NAME[primary]} sample in the file: nothing to calibrate",
         )
+    if grid.t_s[0] == grid.t_s[-1]:  # a driver that stamped every sample with one time
+        raise InputError(
+            path,
+            None,
+            f"{procedure}: the {len(grid.t_s)} {NAME[primary]} samples all carry one time "
+            f"({grid.t_s[0]:.6g} s): the file gives them no time axis",
+        )
     # rows inside the span every stream covers, unless that drops more than TRIM_SHARE of the
     # calibrated sensor's samples and more than TRIM_S: a sensor that starts late or stops early
     # (a compass that died half way) then keeps its cells empty outside its span, and one that
