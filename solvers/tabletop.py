@@ -34,6 +34,7 @@ Everything here is pure numerics; :mod:`station.procedures.tabletop` reads captu
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,11 +86,15 @@ def known_direction(label: str | None) -> tuple[np.ndarray | None, float]:
     """Unit specific-force direction and placement σ (rad) for a position label, or (None, nan).
 
     Labels: the names of ``P1_POSITIONS``, integers 1-12 in that order (1-6 are the
-    source's X up, X down, Y up, Y down, Z up, Z down), and imucal's ``x_p``/``x_a``/….
+    source's X up, X down, Y up, Y down, Z up, Z down; '3.0' is 3, as pandas writes an integer
+    column with gaps), and imucal's ``x_p``/``x_a``/….
     """
     if not label:
         return None, math.nan
     key = str(label).strip().lower()
+    whole = re.fullmatch(r"([0-9]+)\.0*", key)  # '3.0': an integer as a float column writes it
+    if whole:
+        key = whole.group(1)
     if key.isdigit() and 1 <= int(key) <= len(_ORDER):
         key = _ORDER[int(key) - 1]
     key = _ALIASES.get(key, key)

@@ -167,6 +167,8 @@ def column_limit(name: str, meta: dict[str, str]) -> tuple[float, str]:
 # A number as the format writes it: no nan/inf words, no underscores, no hex.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NONFINITE_WORDS = {"nan", "inf", "infinity"}
+# how other tools write a missing value (R's NA, a spreadsheet's #N/A, null/None): refused as 'nan' is
+_MISSING_WORDS = {"na", "n/a", "#n/a", "null", "none"}
 # Bytes the numpy fast path may see: printable ASCII, tab, LF. Anything else takes the per-cell path.
 _FAST_BYTES = bytes(range(0x20, 0x7F)) + b"\t\n"
 _LABEL_WIDTH = 32  # fixed width of the text field in the fast path; longer labels take the slow path
@@ -449,8 +451,23 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
         raise InputError(path, lines.get(key), message)
 
 
+def _unquoted(field: str) -> str:
+    """A field without CSV's quotes around it ('"x_up"' → 'x_up', as csv.writer's QUOTE_NONNUMERIC or
+    R's write.table write text); a field with a quote inside is left as it is (and refused)."""
+    if len(field) >= 2 and field[0] == '"' == field[-1] and '"' not in field[1:-1]:
+        return field[1:-1].strip()
+    return field
+
+
 def _header_problem(names: list[str]) -> str | None:
     """What is wrong with a header row (already split and stripped), or None."""
+    if len(names) == 1:  # one name: the columns may be separated by something else than commas
+        for sep, said in ((";", "';' (semicolons)"), ("\t", "tabs")):
+            if len([n for n in names[0].split(sep) if n.strip()]) > 1:
+                return (
+                    f"the header's columns are separated by {said}: a capture's are separated by commas, "
+                    "with '.' as the decimal mark"
+                )
     seen: dict[str, int] = {}
     for j, name in enumerate(names, 1):
         if not name:
@@ -523,6 +540,7 @@ def _read_head(path: str) -> _Head:
     with _open(path) as f:
         lineno = 0
         saw_header = False
+        padded = False
         while True:
             raw = f.readline(_MAX_HEAD_LINE)
             lineno += 1
@@ -548,6 +566,12 @@ def _read_head(path: str) -> _Head:
             text = _decode(path, raw, lineno)
             stripped = text.strip()
             if lineno == 1:
+                # a spreadsheet's save pads every row to the table's width: '# station-capture: 1,,,,,,'
+                # says so; then '# device: X,,,,,,' (and a blank line as ',,,,,,') are padded too
+                padded = stripped.startswith("#") and stripped.endswith(",")
+            if padded and (stripped.startswith("#") or not stripped.strip(",")):
+                stripped = stripped.rstrip(", \t")
+            if lineno == 1:
                 _first_line(path, f, stripped)
                 head.meta["station-capture"] = FORMAT_VERSION
                 head.meta_lines["station-capture"] = 1
@@ -568,7 +592,7 @@ def _read_head(path: str) -> _Head:
                 head.meta[key] = value
                 head.meta_lines[key] = lineno
                 continue
-            names = [c.strip() for c in text.split(",")]
+            names = [_unquoted(c.strip()) for c in text.split(",")]
             if len(names) > 1 and names[-1] == "" and all(names[:-1]):
                 names, head.trailing_comma = names[:-1], True
             problem = _header_problem(names)
@@ -677,7 +701,7 @@ class _Parser:
             lines = block.split(b"\n")
             if block.endswith(b"\n"):
                 lines.pop()
-            out = self._slow(lines, first_line)
+            out = self._slow(lines, first_line, last_cut=not block.endswith(b"\n"))
         elif self.t_index is not None:
             stop = len(block) - 1 if block.endswith(b"\n") else len(block)
             last = block[block.rfind(b"\n", 0, stop) + 1 : stop]
@@ -754,7 +778,8 @@ class _Parser:
 
     # -- the per-cell path: every rule checked in file order, so the first bad line is named
 
-    def _slow(self, raw_lines: list[bytes], first_line: int) -> dict[str, np.ndarray]:
+    def _slow(self, raw_lines: list[bytes], first_line: int, last_cut: bool = False) -> dict[str, np.ndarray]:
+        """``last_cut``: the last of ``raw_lines`` is the file's last line and has no line end."""
         path, names, ncols = self.path, self.names, self.ncols
         values: list[list] = [[] for _ in names]
         for k, raw in enumerate(raw_lines):
@@ -768,10 +793,13 @@ class _Parser:
             fields = text.split(",")
             if len(fields) != ncols:
                 few = "too few" if len(fields) < ncols else "too many"
-                raise InputError(path, lineno, f"{few} fields: {len(fields)} where the header has {ncols} columns")
+                message = f"{few} fields: {len(fields)} where the header has {ncols} columns"
+                if last_cut and k == len(raw_lines) - 1 and len(fields) < ncols:
+                    message += f", on the last line, which has no line end: {CUT_SHORT}"
+                raise InputError(path, lineno, message)
             for j, value in enumerate(fields):
                 if j in self.text:
-                    label = value.strip()
+                    label = _unquoted(value.strip())
                     problem = _label_problem(label)
                     if problem:
                         raise InputError(path, lineno, problem)
@@ -789,13 +817,13 @@ class _Parser:
         return cols
 
     def _number(self, name: str, value: str, j: int, lineno: int) -> float:
-        v = value.strip(" \t")
+        v = _unquoted(value.strip(" \t")).strip(" \t")
         if not v:
             if j == self.t_index:
                 raise InputError(self.path, lineno, "column 't': empty (every row of a time series needs its time)")
             return math.nan
         if not _NUMBER.fullmatch(v):
-            if v.lower().lstrip("+-") in _NONFINITE_WORDS:
+            if v.lower().lstrip("+-") in _NONFINITE_WORDS or v.lower() in _MISSING_WORDS:
                 raise InputError(
                     self.path,
                     lineno,
@@ -894,10 +922,18 @@ def _data_chunks(
     if n_rows == 0:
         raise InputError(path, head.header_line + 1, "no data rows after the header")
     if not ends_line and notes is not None and pending_blank is None:
-        notes.append(
-            f"the last line ({lineno - 1}) has no line end: a file cut short (a copy or a write stopped "
-            "part-way) ends so, and then its last value may be cut too (kept as read)"
-        )
+        notes.append(no_line_end_note(lineno - 1))
+
+
+CUT_SHORT = "the file was cut short (a write stopped part-way, or one still going on)"
+
+
+def no_line_end_note(lineno: int) -> str:
+    """The warning for a file whose last line, ``lineno``, has no line end (as a file cut short ends)."""
+    return (
+        f"the last line ({lineno}) has no line end: a file cut short (a copy or a write stopped "
+        "part-way) ends so, and then its last value may be cut too (kept as read)"
+    )
 
 
 def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):

@@ -122,16 +122,39 @@ def set_date(meta: dict[str, str], warnings: list[str], unix_s: float, clock: st
         meta["date"] = text
 
 
-def clean_stream(path, stream: Stream) -> Stream | None:
-    """Rows with a finite time, sorted by time (stable); None when nothing is left."""
+def clean_stream(path, stream: Stream, warnings: list[str] | None = None) -> Stream | None:
+    """Rows with a finite time, sorted by time (stable), a sample repeated (same time, same
+    values: a log fed twice) kept once; None when nothing is left. What was put in order or
+    read once is said in ``warnings``."""
     t = np.asarray(stream.t_s, dtype=np.float64)
     xyz = np.asarray(stream.xyz, dtype=np.float64).reshape(len(t), 3)
     keep = np.isfinite(t)
+    back = np.flatnonzero(np.diff(t[keep]) < 0)
+    if back.size and warnings is not None:
+        tk = t[keep]
+        late = float(np.max(np.maximum.accumulate(tk)[back] - tk[back + 1]))
+        warnings.append(
+            f"{back.size} {NAME[stream.kind]} samples are stamped earlier than the sample before them "
+            f"(by up to {late:.3g} s; the first {tk[back[0] + 1] - tk.min():.3f} s into the log): put in time order"
+        )
     order = np.argsort(t[keep], kind="stable")
     t, xyz = t[keep][order], xyz[keep][order]
     temp = None if stream.temp_c is None else np.asarray(stream.temp_c, dtype=np.float64)[keep][order]
     if len(t) == 0:
         return None
+    same = np.r_[
+        False, (t[1:] == t[:-1]) & np.all((xyz[1:] == xyz[:-1]) | (np.isnan(xyz[1:]) & np.isnan(xyz[:-1])), axis=1)
+    ]
+    if temp is not None:
+        same[1:] &= (temp[1:] == temp[:-1]) | (np.isnan(temp[1:]) & np.isnan(temp[:-1]))
+    # only where the clock tells samples apart: a coarse one (a CSV's t in ms at 2 kHz) stamps
+    # different samples alike, and a quiet sensor in counts may then repeat its values honestly
+    coarse = bool(np.any((t[1:] == t[:-1]) & ~same[1:]))
+    if same.any() and not coarse:
+        t, xyz = t[~same], xyz[~same]
+        temp = None if temp is None else temp[~same]
+        if warnings is not None:
+            warnings.append(f"{int(same.sum())} repeated {NAME[stream.kind]} samples (same time and values) read once")
     return Stream(
         stream.kind,
         t,
@@ -221,7 +244,7 @@ def to_capture(
     for kind in KINDS:
         s = imported.streams.get(kind)
         if s is not None and (kinds is None or kind in kinds):
-            s = clean_stream(path, s)
+            s = clean_stream(path, s, imported.warnings)
             if s is not None:
                 bad = np.isinf(s.xyz)  # a corrupt sample: an empty cell, said once
                 if bad.any():
@@ -247,6 +270,13 @@ def to_capture(
             path,
             None,
             f"only {len(grid.t_s)} {NAME[primary]} sample in the file: nothing to calibrate",
+        )
+    if grid.t_s[0] == grid.t_s[-1]:  # a driver that stamped every sample with one time
+        raise InputError(
+            path,
+            None,
+            f"{procedure}: the {len(grid.t_s)} {NAME[primary]} samples all carry one time "
+            f"({grid.t_s[0]:.6g} s): the file gives them no time axis",
         )
     # rows inside the span every stream covers, unless that drops more than TRIM_SHARE of the
     # calibrated sensor's samples and more than TRIM_S: a sensor that starts late or stops early

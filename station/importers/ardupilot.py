@@ -30,6 +30,7 @@ import math
 import os
 import re
 import struct
+from collections import Counter
 
 import numpy as np
 
@@ -493,7 +494,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         unreadable = _SkippedBytes()
     wanted = list(IMU_MESSAGES[inst])
     by_type: dict[str, list] = {name: [] for name in wanted}
-    arrivals: dict[str, float] = {}
+    arrivals: dict[tuple[str, int, int], float] = {}  # (message, system, component) → first arrival
     params: dict[str, object] = {}
     param_msgs = []
     firmware = None
@@ -528,7 +529,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
                         continue
                     seen.add(key)
                     by_type[name].append((t, m))
-                    arrivals.setdefault(name, m._timestamp)
+                    arrivals.setdefault((name, m.get_srcSystem(), m.get_srcComponent()), m._timestamp)
                     msg_class[name] = type(m)
                     first_t = t if first_t is None else first_t
     except Exception as exc:  # noqa: BLE001
@@ -542,6 +543,20 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             path,
             None,
             f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})",
+        )
+    # a link with several vehicles (or autopilots) on it: one source's IMU, not theirs interleaved
+    sources = Counter((m.get_srcSystem(), m.get_srcComponent()) for _, m in by_type[name])
+    source = max(sources, key=lambda k: (sources[k], -list(sources).index(k)))
+    skipped = []
+    if len(sources) > 1:
+        by_type[name] = [(t, m) for t, m in by_type[name] if (m.get_srcSystem(), m.get_srcComponent()) == source]
+        param_msgs = [(a, m) for a, m in param_msgs if m.get_srcSystem() == source[0]] or param_msgs
+        others = ", ".join(
+            f"system {s_}, component {c_} ({sources[(s_, c_)]})" for s_, c_ in sources if (s_, c_) != source
+        )
+        skipped.append(
+            f"{name} from {len(sources)} MAVLink sources: read system {source[0]}, component {source[1]} "
+            f"({sources[source]} messages, its parameters); {others} left out"
         )
     late = set()
     for after_start, m in param_msgs:
@@ -591,8 +606,10 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     if board_uid:
         meta["board_uid"] = str(board_uid)
     warnings = [w for w in (unreadable.warning(),) if w]
-    if arrivals[name] > 946684800:  # the ground station's clock (UTC) when the first sample came
-        set_date(meta, warnings, arrivals[name], "ground station's")
+    warnings += skipped
+    arrival = arrivals[(name, *source)]
+    if arrival > 946684800:  # the ground station's clock (UTC) when the first sample came
+        set_date(meta, warnings, arrival, "ground station's")
     _place(fixes, meta)
     if late:
         meta["params_changed"] = ",".join(sorted(late))

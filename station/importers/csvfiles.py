@@ -21,7 +21,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from station.capture import MAX_ABS, UNIT_KEYS, plausible_limit
+from station.capture import CUT_SHORT, MAX_ABS, UNIT_KEYS, no_line_end_note, plausible_limit
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
 from station.importers._common import COLUMNS, Imported, Stream
@@ -52,6 +52,8 @@ KALIBR_UNITS = {
     "gyro": "rad/s",
 }  # kalibr_bagcreater's documented units
 _NUMBER = re.compile(r"\s*[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\s*")
+# a decimal comma ('0,01'), as a decimal-comma locale writes numbers where ',' is not the separator
+_DECIMAL_COMMA = re.compile(r"\s*[+-]?[0-9]+,[0-9]+(?:[eE][+-]?[0-9]+)?\s*")
 
 
 _MAX_LINE_BYTES = 1 << 20  # a line longer than this is no CSV row (the capture reader's limit)
@@ -118,6 +120,34 @@ def _check_text(path) -> None:
             bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
     if bad is not None:
         raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x}")
+
+
+def _ends_without_line_end(path) -> bool:
+    try:
+        with open_input(path, "a CSV file") as f:
+            size = f.seek(0, 2)
+            f.seek(max(0, size - 1))
+            return f.read(1) not in (b"", b"\n", b"\r")
+    except (InputError, OSError):
+        return False
+
+
+def _cut_last_row(path, linenos: np.ndarray, warnings: list[str]) -> None:
+    """Warn, as the capture reader does, when the file's last line is a data row with no line end:
+    a file cut short (a copy of a log still being written, a logger killed) ends so, and its
+    last value may be cut ('9.8123' read as '9.8')."""
+    try:
+        with open_input(path, "a CSV file") as f:
+            size = f.seek(0, 2)
+            f.seek(max(0, size - _MAX_LINE_BYTES - 2))
+            tail = f.read()
+    except (InputError, OSError):
+        return
+    if not tail or tail.endswith((b"\n", b"\r")):
+        return
+    last = tail[tail.rfind(b"\n") + 1 :].strip()
+    if last and not last.startswith(b"#") and len(linenos):
+        warnings.append(no_line_end_note(int(linenos[-1])))
 
 
 def _strip_end(line: str) -> str:
@@ -187,15 +217,41 @@ def is_euroc(path) -> bool:
     )
 
 
+# a missing value as other tools write it: numpy.savetxt 'nan', pandas na_rep 'NaN', R 'NA', a
+# spreadsheet '#N/A', null/None; read as the empty cell it stands for
+_MISSING = {"", "nan", "na", "n/a", "#n/a", "null", "none"}
+
+
 def _number(path, lineno: int, name: str, cell: str) -> float:
     if not _NUMBER.fullmatch(cell):
-        if cell.strip() == "":
+        if cell.strip().lower() in _MISSING:
             return math.nan
         raise InputError(path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number")
     x = float(cell)
     if not math.isfinite(x):
         raise InputError(path, lineno, f"column '{name}': {cell.strip()!r} is out of range")
     return x
+
+
+def _one_decimal_mark(path, lineno: int, name: str, cell: str, marks: dict[str, int]) -> str:
+    """``cell`` with a decimal comma as a decimal point; a file that writes both marks is refused
+    ('1.234' beside '1,5' may be a thousands separator: no way to tell)."""
+    if _DECIMAL_COMMA.fullmatch(cell):
+        mark, number = ",", cell.replace(",", ".")
+    elif "." in cell and _NUMBER.fullmatch(cell):
+        mark, number = ".", cell
+    else:
+        return cell
+    marks.setdefault(mark, lineno)
+    if len(marks) > 1:
+        other = "," if mark == "." else "."
+        raise InputError(
+            path,
+            lineno,
+            f"column '{name}': {cell.strip()!r} has a decimal {'point' if mark == '.' else 'comma'} where line "
+            f"{marks[other]} has a decimal {'comma' if other == ',' else 'point'}: one decimal mark per file",
+        )
+    return number
 
 
 def _join(chunks: list[np.ndarray], dtype) -> np.ndarray:
@@ -229,6 +285,8 @@ def _rows(
     ints: list[int] = out[int_time] if int_time else []
     line_chunks: list[np.ndarray] = []
     linenos: list[int] = []
+    marks: dict[str, int] = {}  # decimal mark ('.' or ',') → the first line that uses it
+    commas = delimiter != ","  # decimal commas are possible
 
     def flush() -> None:
         for t in done:
@@ -242,7 +300,10 @@ def _rows(
             continue
         cells = _cells(path, lineno, text, delimiter)
         if len(cells) != ncols:
-            raise InputError(path, lineno, f"{len(cells)} fields where the header has {ncols}")
+            message = f"{len(cells)} fields where the header has {ncols}"
+            if len(cells) < ncols and next(lines, None) is None and _ends_without_line_end(path):
+                message += f", on the last line, which has no line end: {CUT_SHORT}"
+            raise InputError(path, lineno, message)
         for target, j in cols.items():
             if target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
                 cell = cells[j].strip()
@@ -254,7 +315,10 @@ def _rows(
                     )
                 ints.append(int(cell))
             else:
-                out[target].append(_number(path, lineno, target, cells[j]))
+                cell = cells[j]
+                if commas:
+                    cell = _one_decimal_mark(path, lineno, target, cell, marks)
+                out[target].append(_number(path, lineno, target, cell))
         linenos.append(lineno)
         if len(linenos) >= _FLUSH_ROWS:
             flush()
@@ -416,11 +480,13 @@ def read_euroc(path, *, kinds=None) -> Imported:
         )
     values, linenos = _rows(path, lines, 2, ",", len(header), cols, int_time="t")
     _check_limits(path, values, linenos, units)
-    t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=[])
+    warnings: list[str] = []
+    _cut_last_row(path, linenos, warnings)
+    t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=warnings)
     streams = _streams(path, values, t_s, units, "EuRoC/Kalibr CSV")
     if kinds is not None:
         streams = {k: s for k, s in streams.items() if k in kinds}
-    return Imported(streams, {}, [])
+    return Imported(streams, {}, warnings)
 
 
 # ------------------------------------------------------------------------------------- plain CSV
@@ -576,6 +642,7 @@ def read_plain(
         )
     values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
     _check_limits(path, values, linenos, units)
+    _cut_last_row(path, linenos, warnings)
     if "t" in values:
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
     else:

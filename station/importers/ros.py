@@ -12,6 +12,7 @@ Whether a driver calibrated its output is not recorded in a bag, so no ``correct
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,26 @@ ROS1_MAGIC = b"#ROSBAG V2.0\n"  # the first line of every ROS 1 bag (format 2.0,
 def is_bag(path) -> bool:
     p = Path(path)
     return p.suffix.lower() in SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
+
+
+def _one_frame(rows: list, more: list, topic, warnings: list[str]) -> tuple[list, list, str | None]:
+    """``rows`` and ``more`` ((t, x, y, z, frame_id) of one topic) as (t, x, y, z) of the frame_id
+    with the most samples (the first on a tie), and that frame_id when the topic carried several
+    (said in ``warnings``), else None."""
+    counts = Counter(r[-1] for r in (rows or more))  # messages per frame_id
+    keep = None
+    if len(counts) > 1:
+        keep = max(counts, key=lambda f: (counts[f], -list(counts).index(f)))
+        others = ", ".join(f"{f or '(empty)'} ({n})" for f, n in counts.items() if f != keep)
+        warnings.append(
+            f"{topic} carries {len(counts)} sensors (frame_id): read {keep or '(empty)'}'s {counts[keep]} samples; "
+            f"{others} left out"
+        )
+    return (
+        [r[:-1] for r in rows if keep is None or r[-1] == keep],
+        [r[:-1] for r in more if keep is None or r[-1] == keep],
+        keep,
+    )
 
 
 def _stamp(msg, fallback_ns: int) -> int:
@@ -114,16 +135,17 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
             first_ns = t_ns if first_ns is None else min(first_ns, t_ns)
             t = _stamp(msg, t_ns)
             if conn.topic == imu_topic:
-                frames.add(msg.header.frame_id)
+                frame = msg.header.frame_id
+                frames.add(frame)
                 if msg.linear_acceleration_covariance[0] != -1:
                     a = msg.linear_acceleration
-                    acc.append((t, a.x, a.y, a.z))
+                    acc.append((t, a.x, a.y, a.z, frame))
                 if msg.angular_velocity_covariance[0] != -1:
                     w = msg.angular_velocity
-                    gyr.append((t, w.x, w.y, w.z))
+                    gyr.append((t, w.x, w.y, w.z, frame))
             elif conn.topic == mag_topic:
                 f = msg.magnetic_field
-                mag.append((t, f.x * 1e9, f.y * 1e9, f.z * 1e9))  # T → nT
+                mag.append((t, f.x * 1e9, f.y * 1e9, f.z * 1e9, msg.header.frame_id))  # T → nT
             else:
                 temp.append((t, msg.temperature))
     except InputError:
@@ -132,6 +154,13 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
         raise InputError(path, None, f"cannot read the bag ({type(exc).__name__}: {exc})") from None
     finally:
         reader.close()
+    warnings: list[str] = []
+    # one topic carrying several sensors (a relay, a mux), told apart by frame_id: one sensor's
+    # samples, not theirs interleaved
+    acc, gyr, imu_frame = _one_frame(acc, gyr, imu_topic, warnings)
+    mag, _, _ = _one_frame(mag, [], mag_topic, warnings)
+    if imu_frame is not None:
+        frames = {imu_frame}
     # seconds from the earliest stamp, subtracted in integer ns (Unix ns in a float lose 0.2 µs)
     origin = min((r[0] for rows in (acc, gyr, mag, temp) for r in rows[:1]), default=0)
     acc, gyr, mag, temp = ([((r[0] - origin) * 1e-9, *r[1:]) for r in rows] for rows in (acc, gyr, mag, temp))
@@ -149,7 +178,6 @@ def read(path, *, topics: dict[str, str] | None = None, kinds=None) -> Imported:
         a = streams["accel"]
         a.temp_c = np.interp(a.t_s, tt[:, 0], tt[:, 1], left=np.nan, right=np.nan)
     meta: dict[str, str] = {}
-    warnings: list[str] = []
     if first_ns and first_ns > 946684800 * 10**9:  # a bag's receive clock is UTC wall time
         set_date(meta, warnings, first_ns * 1e-9, "bag's receive")
     frames.discard("")
