@@ -28,3 +28,32 @@ def test_p1_quarter_turn_prompt_is_shown_whole_at_80x24():
             assert shown == message, (shown, message)
 
     asyncio.run(story())
+
+
+def test_rejecting_a_passing_result_offers_no_override_key(tmp_path):
+    """`x` on a result that passed opened the decision box with `^o Accept (override)` in the
+    footer: the key did nothing there (only a FAIL can be accepted as an override), and the
+    box asked for "a note saying why it is accepted anyway". Now the footer and the box show
+    only what the keys do: a reason, ctrl+r, esc."""
+    from station.screens.results import ResultsScreen
+    from tests.test_tui import screen_lines, screen_name
+    from tests.tui_data import p1_result
+
+    cap, result = p1_result("IMU-9")
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id="IMU-9")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            assert "FAIL" not in text_of(app, "#summary")
+            await pilot.press("x")
+            await wait_for(pilot, lambda: screen_name(app) == "DecideScreen")
+            await pilot.pause(0.2)
+            return screen_lines(app)
+
+    lines = asyncio.run(story())
+    screen = "\n".join(lines)
+    assert "override" not in lines[-1].lower(), lines[-1]  # the footer
+    assert "accepted anyway" not in screen and "override" not in screen.lower(), screen
+    assert "ctrl+r" in screen and "^r" in lines[-1]
