@@ -17,3 +17,46 @@ def test_simulate_names_the_options_of_the_procedure_for_a_mistyped_one(tmp_path
     assert not out.exists()
     # the options not settable from the command line are not offered
     assert "site" not in res.stderr.split("mag_noise_uT", 1)[1]
+
+
+def test_import_takes_the_unit_spellings_a_capture_takes(tmp_path):
+    """`--unit gyro=dps` was refused ("not a gyro unit") though a capture declaring
+    `gyro_unit: dps` is read as deg/s (README: units are read as other tools spell them);
+    `t=sec` likewise. Now `--unit` reads the same spellings and writes the spec's names."""
+    from station.capture import read_capture
+
+    src = tmp_path / "bench.csv"
+    rows = ["time_ms,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z"]
+    rows += [f"{10 * i},0.01,0.02,9.81,0.5,-0.25,0.125" for i in range(300)]
+    src.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "imu.csv"
+    res = run_station(
+        "import",
+        src,
+        "--procedure",
+        "gyro-drift",
+        "--map",
+        "t=time_ms,ax=acc_x,ay=acc_y,az=acc_z,gx=gyr_x,gy=gyr_y,gz=gyr_z",
+        "--unit",
+        "accel=m/s2,gyro=dps,t=msec",
+        "--out",
+        out,
+    )
+    assert res.returncode == 0, res.stderr
+    cap = read_capture(str(out))
+    assert cap.meta["gyro_unit"] == "deg/s" and cap.meta["accel_unit"] == "m/s^2"
+    assert abs(float(cap.columns["t"][-1]) - 2.99) < 1e-9  # milliseconds read as such
+    # a unit that is none of them is still refused, naming what is allowed
+    res = run_station(
+        "import",
+        src,
+        "--procedure",
+        "gyro-drift",
+        "--map",
+        "t=time_ms,gx=gyr_x,gy=gyr_y,gz=gyr_z",
+        "--unit",
+        "gyro=rpm,t=ms",
+        "--out",
+        tmp_path / "x.csv",
+    )
+    assert_one_line_refusal(res, "--unit gyro=rpm", "deg/s")
