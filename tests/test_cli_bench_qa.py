@@ -60,3 +60,39 @@ def test_import_takes_the_unit_spellings_a_capture_takes(tmp_path):
         tmp_path / "x.csv",
     )
     assert_one_line_refusal(res, "--unit gyro=rpm", "deg/s")
+
+
+def _capture_without_device(tmp_path):
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of
+
+    cap = capture_of(simulate("gyro-drift", seed=5))
+    del cap.meta["device"]
+    path = tmp_path / "still.csv"
+    write_capture(str(path), cap)
+    return path
+
+
+def test_calibrate_text_of_a_capture_without_a_device_says_none(tmp_path):
+    """An imported CSV without --device has no device: `calibrate` printed "device     None"
+    (Python's word), where `inspect` says "(none)"."""
+    path = _capture_without_device(tmp_path)
+    res = run_station("calibrate", path)
+    assert res.returncode == 0, res.stderr
+    line = next(x for x in res.stdout.splitlines() if x.startswith("device"))
+    assert "None" not in line and "(none" in line, line
+
+
+def test_saving_a_capture_without_a_device_names_the_option(tmp_path):
+    """`calibrate FILE --save` of a capture without a device said "no device: pass device_id,
+    or give 'device' in the result or the capture" (the library's argument, not the command's
+    option). Now it names the file and --device; nothing is created."""
+    path = _capture_without_device(tmp_path)
+    db = tmp_path / "s.db"
+    res = run_station("--db", db, "calibrate", path, "--save")
+    assert_one_line_refusal(res, "still.csv", "--device ID")
+    assert "device_id" not in res.stderr
+    assert not db.exists()
+    res = run_station("--db", db, "calibrate", path, "--save", "--device", "BENCH-1")
+    assert res.returncode == 0, res.stderr

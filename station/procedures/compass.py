@@ -319,11 +319,11 @@ def _circ_rad(a) -> float:
 
 def format_text(result: dict) -> str:
     from station.calibrate import jsonable
-    from station.formatting import param_lines
+    from station.formatting import device_text, param_lines
 
     lines = [
         f"procedure  compass ({result.get('method')})",
-        f"device     {result.get('device')}",
+        f"device     {device_text(result)}",
         f"model      {result.get('model')}",
     ]
     from station.procedures.review import shown_unit, shown_value

@@ -274,10 +274,12 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
 
 
 def format_text(result: dict) -> str:
+    from station.formatting import device_text
+
     p, u = result["params"], result["uncertainty"]
     lines = [
         "procedure  ldv",
-        f"device     {result.get('device')}",
+        f"device     {device_text(result)}",
         f"model      {result['model']}",
         f"reference  {result.get('reference')} ({result.get('alignment')}); {result.get('estimator')}",
         f"cond(HᵀH)  {p['condition_number']:.3g}  ({result['n_positions']} epochs)",
