@@ -82,3 +82,40 @@ def test_importing_a_plain_csv_says_how_from_the_screen(tmp_path):
     assert "bench.csv" in "".join(status.split()), status  # the path may wrap anywhere
     assert "station import" in status and "--out" in status, status
     assert "then import" in status, status
+
+
+def test_a_capture_that_names_no_device_is_not_saved_under_the_last_device(tmp_path):
+    """A station capture without a `# device:` line (a CSV imported without --device), opened
+    with F7 after a run on another unit: `s` saved it under that unit (the session's last
+    device, here a P5 LDV), judged against that unit's limits, with only a warning afterwards
+    that the kinds differ. Now Results say the capture names no device and nothing is saved."""
+    from db.store import Store
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of, run_station
+    from tests.test_tui import screen_name
+
+    db = tmp_path / "s.db"
+    assert run_station("--db", db, "devices", "add", "LDV-7", "--kind", "ldv").returncode == 0
+    cap = capture_of(simulate("gyro-drift", seed=5))
+    del cap.meta["device"]
+    path = tmp_path / "still.csv"
+    write_capture(str(path), cap)
+
+    async def story():
+        app = make_app(str(db), device_id="LDV-7")
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f7")
+            await wait_for(pilot, lambda: screen_name(app) == "ImportScreen")
+            app.screen.query_one("#path").value = str(path)
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=60)
+            await wait_for(pilot, lambda: app.screen.device is not None)
+            await pilot.press("s")
+            await wait_for(pilot, lambda: "no device" in " ".join(text_of(app, "#saved").split()), timeout_s=20)
+            return " ".join(text_of(app, "#saved").split()), app.screen.calibration_id
+
+    saved, cal_id = asyncio.run(story())
+    assert cal_id is None and "--device" in saved, saved
+    with Store(str(db)) as s:
+        assert s.history("LDV-7") == []
