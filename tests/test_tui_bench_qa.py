@@ -119,3 +119,42 @@ def test_a_capture_that_names_no_device_is_not_saved_under_the_last_device(tmp_p
     assert cal_id is None and "--device" in saved, saved
     with Store(str(db)) as s:
         assert s.history("LDV-7") == []
+
+
+def test_resume_follows_the_procedure_picked_and_f6_is_shown_only_when_it_resumes(tmp_path):
+    """Resume continues an interrupted P1. With P2 picked the button still said `Resume 3/12`
+    (P1's run) and F6 started a new P2; with nothing to resume `f6 Resume` stayed in the
+    footer and the key did nothing. Now the button and the key follow the procedure picked."""
+    import json
+
+    from station.procedures.state import default_state_path
+    from tests.test_tui import screen_lines, screen_name
+
+    steps = [{"status": "captured"}] * 3 + [{"status": "pending"}] * 9
+    with open(default_state_path("IMU-5", base=str(tmp_path)), "w", encoding="utf-8") as fh:
+        json.dump({"phase": "guide", "steps": steps}, fh)
+
+    def footer(app) -> str:
+        return screen_lines(app)[-1]
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await wait_for(pilot, lambda: "f5" in footer(app))
+            assert "f6" not in footer(app), footer(app)  # nothing to resume for the simulator's unit
+            app.screen.query_one("#serial").value = "IMU-5"
+            await wait_for(pilot, lambda: not app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: "f6" in footer(app))
+            app.screen.query_one("#procedure").value = "accel-centrifuge"
+            await wait_for(pilot, lambda: app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: "f6" not in footer(app))
+            assert not any("3/12" in line for line in screen_lines(app))
+            await pilot.press("f6")
+            await pilot.pause(0.3)
+            assert screen_name(app) == "ConnectScreen"
+            app.screen.query_one("#procedure").value = "accel-tabletop"
+            await wait_for(pilot, lambda: not app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: any("Resume 3/12 [F6]" in line for line in screen_lines(app)))
+
+    asyncio.run(story())
