@@ -96,3 +96,23 @@ def test_saving_a_capture_without_a_device_names_the_option(tmp_path):
     assert not db.exists()
     res = run_station("--db", db, "calibrate", path, "--save", "--device", "BENCH-1")
     assert res.returncode == 0, res.stderr
+
+
+def test_drift_of_a_procedure_the_device_has_none_of_names_it(tmp_path):
+    """`drift ID --procedure compass` of a unit with accepted P1 calibrations said "no accepted
+    calibrations yet", as if it had none at all."""
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of
+
+    path = tmp_path / "p1.csv"
+    write_capture(str(path), capture_of(simulate("accel-tabletop", seed=3)))
+    db = tmp_path / "s.db"
+    res = run_station("--db", db, "calibrate", path, "--save", "--device", "IMU-3")
+    assert res.returncode == 0, res.stderr
+    res = run_station("--db", db, "drift", "IMU-3", "--procedure", "compass", "--no-plot")
+    assert res.returncode == 0 and "no accepted compass calibrations" in res.stdout, res.stdout
+    res = run_station("--db", db, "drift", "IMU-3", "--procedure", "compass", "--param", "B[0]")
+    assert_one_line_refusal(res, "accepted compass calibrations")
+    res = run_station("--db", db, "drift", "IMU-3", "--no-plot")
+    assert "B[0]" in res.stdout
