@@ -158,3 +158,47 @@ def test_resume_follows_the_procedure_picked_and_f6_is_shown_only_when_it_resume
             await wait_for(pilot, lambda: any("Resume 3/12 [F6]" in line for line in screen_lines(app)))
 
     asyncio.run(story())
+
+
+def test_a_device_lost_mid_run_is_said_on_the_procedure_screen():
+    """The device on a port stops mid-run (unplugged; here its pty closed): P4 kept saying
+    "Recording: keep the unit still" over a countdown stopped at 2:55, with only DISCONNECTED
+    at the end of a readout line. The notice a silent port gets ("no data from PORT ...")
+    was said only for a port silent from the start. Now also once the data stop."""
+    import threading
+
+    from solvers.simulate import LiveImu
+    from station.device.simdevice import SimDevice
+    from station.sources import SerialSource
+    from tests.test_tui import screen_lines, screen_name
+
+    dev = SimDevice(LiveImu(seed=7, rate_hz=100, hold_s=1e9))
+    path = dev.open()
+    stop = threading.Event()
+    thread = threading.Thread(target=dev.run, args=(stop,), daemon=True)
+    thread.start()
+    try:
+
+        async def story():
+            app = make_app(None, device=SerialSource(path), average_s=180.0)
+            app.session.procedure = "gyro-drift"  # P4 on a static base, as picked on Connect
+            async with app.run_test(size=SIZE, notifications=True) as pilot:
+                await pilot.press("f5")
+                await wait_for(pilot, lambda: screen_name(app) == "HoldScreen" and app.screen.updates > 5)
+                await wait_for(pilot, lambda: app.session.source.stats().samples > 50)
+                assert "no data from" not in "\n".join(screen_lines(app))
+                stop.set()  # the device goes away
+                thread.join(10)
+                dev.close()
+                await wait_for(pilot, lambda: "no data from" in "\n".join(screen_lines(app)), timeout_s=30.0)
+                lines = "\n".join(screen_lines(app))
+            app.session.source.stop()
+            return lines
+
+        lines = asyncio.run(story())
+    finally:
+        stop.set()
+        thread.join(10)
+        dev.close()
+    flat = " ".join(lines.replace("▌", " ").split())  # a toast's edge on each of its lines
+    assert f"no data from {path}" in flat and "since its last sample" in flat and "check the cable" in flat, lines
