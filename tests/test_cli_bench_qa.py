@@ -116,3 +116,27 @@ def test_drift_of_a_procedure_the_device_has_none_of_names_it(tmp_path):
     assert_one_line_refusal(res, "accepted compass calibrations")
     res = run_station("--db", db, "drift", "IMU-3", "--no-plot")
     assert "B[0]" in res.stdout
+
+
+def test_a_compass_capture_in_the_wrong_field_unit_is_warned_about(tmp_path):
+    """A compass capture in µT declared `mag_unit: nT` (a field of 54 "nT" where IGRF gives
+    54,989 nT) calibrated with no word: a soft iron of 1000 nT/nT, saved as accepted. Now the
+    text warns that the raw field is 0.001x IGRF's and names the unit that would fit (uT);
+    the same capture declared in µT gets no such warning."""
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of
+
+    cap = capture_of(simulate("compass", seed=4))
+    assert cap.meta["mag_unit"] == "uT"
+    right = tmp_path / "right.csv"
+    write_capture(str(right), cap)
+    cap.meta["mag_unit"] = "nT"
+    wrong = tmp_path / "wrong.csv"
+    write_capture(str(wrong), cap)
+    res = run_station("calibrate", wrong)
+    assert res.returncode == 0, res.stderr
+    line = next((x for x in res.stdout.splitlines() if "mag_unit right" in x), "")
+    assert "as uT" in line and "IGRF" in line, res.stdout
+    res = run_station("calibrate", right)
+    assert res.returncode == 0 and "mag_unit right" not in res.stdout, res.stdout
