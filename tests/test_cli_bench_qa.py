@@ -140,3 +140,14 @@ def test_a_compass_capture_in_the_wrong_field_unit_is_warned_about(tmp_path):
     assert "as uT" in line and "IGRF" in line, res.stdout
     res = run_station("calibrate", right)
     assert res.returncode == 0 and "mag_unit right" not in res.stdout, res.stdout
+
+
+def test_headless_compass_demo_tilts_with_the_front_end_the_tui_uses():
+    """`station demo --headless --procedure compass` wrote its capture without the simulated
+    accelerometer's front end (the data sheet's zero and sensitivity, which the TUI's compass
+    screen writes): the result said "accel_unit 'V' has no physical factor: no tilt, no
+    heading". Now it carries the same front end, and the result its tilts and headings."""
+    res = run_station("demo", "--headless", "--procedure", "compass", "--speed", "20", "--no-save")
+    assert res.returncode == 0, res.stderr
+    assert "no tilt, no heading" not in res.stdout, res.stdout
+    assert "heading" in res.stdout and "pitch" in res.stdout, res.stdout
