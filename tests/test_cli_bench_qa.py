@@ -151,3 +151,21 @@ def test_headless_compass_demo_tilts_with_the_front_end_the_tui_uses():
     assert res.returncode == 0, res.stderr
     assert "no tilt, no heading" not in res.stdout, res.stdout
     assert "heading" in res.stdout and "pitch" in res.stdout, res.stdout
+
+
+def test_diagnose_says_the_bound_it_uses(tmp_path):
+    """`station diagnose` (and the TUI's Diagnose screen) said candidates are selected when
+    "deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m)"; the bound is the exact F
+    test's on the degrees of freedom left (docs/diagnose.md, engine.deviance_quantile), which
+    on a 60-row P2 table is not the χ² quantile."""
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of
+
+    path = tmp_path / "p2.csv"
+    write_capture(str(path), capture_of(simulate("accel-centrifuge", seed=2)))
+    res = run_station("diagnose", path, "--no-plots")
+    assert res.returncode == 0, res.stderr
+    line = " ".join(next(x for x in res.stdout.split("\ncandidates")[1:2]).split("\n  ")[0].split())
+    assert "F test" in line and "degrees of freedom" in line, line
+    assert "inflation > F·χ²_k" not in line, line
