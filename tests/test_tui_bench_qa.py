@@ -202,3 +202,25 @@ def test_a_device_lost_mid_run_is_said_on_the_procedure_screen():
         dev.close()
     flat = " ".join(lines.replace("▌", " ").split())  # a toast's edge on each of its lines
     assert f"no data from {path}" in flat and "since its last sample" in flat and "check the cable" in flat, lines
+
+
+def test_the_noise_run_has_the_p4_hold_layout_when_it_is_the_first_run(tmp_path):
+    """The gyro noise run, picked first after start-up: its screen (a P4 hold screen with its
+    own words) had none of the hold screen's layout (no margins, the readouts at the bottom
+    rows), so the start-up reminder's toast lay over the live rates ("z +98▌ never
+    calibrated"). The layout came only once a P4 hold screen had been shown in the session."""
+    from tests.test_tui import screen_name
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        app.session.procedure = "gyro-noise"
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) == "NoiseHoldScreen" and app.screen.updates > 2)
+            await pilot.pause(0.3)
+            return app.screen.query_one("#readouts").region, app.screen.query_one("#body").region
+
+    readouts, body = asyncio.run(story())
+    assert readouts.x == 1, readouts  # the hold screen's margin
+    assert readouts.bottom <= 14, readouts  # under the instruction and the bars, not at the foot
