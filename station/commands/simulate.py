@@ -80,15 +80,9 @@ def settable_options(procedure: str) -> list[str]:
     less those the command line cannot set)."""
     import inspect
 
-    from solvers import simulate as sim
+    from solvers.simulate import _SIMULATORS  # the simulator's own table (solvers keep their list)
 
-    function = {
-        "accel-tabletop": sim.simulate_tabletop,
-        "accel-centrifuge": sim.simulate_centrifuge,
-        "compass": sim.simulate_compass,
-        "gyro-drift": sim.simulate_gyro_drift,
-        "ldv": sim.simulate_ldv,
-    }[procedure]
+    function = _SIMULATORS[procedure]
     kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
     return [
         name

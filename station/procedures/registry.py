@@ -61,6 +61,8 @@ class Procedure:
     # the Connect screen's "Average (s)" on the built-in simulated device [s] (0: the real
     # device's DEFAULT_AVERAGE_S): a first run shows the whole procedure in minutes, not hours
     sim_average_s: float = 0.0
+    # an interrupted guided run continues from its resume file (Connect's Resume, F6)
+    resumes: bool = False
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -92,6 +94,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     Procedure(
         name="accel-tabletop",
         code="P1",
+        resumes=True,
         stem="tabletop",
         title="accelerometer, level table",
         short="",
@@ -238,6 +241,12 @@ def sensor_kinds() -> tuple[str, ...]:
 def get(name: str | None) -> Procedure | None:
     """The procedure called ``name``, None when there is none."""
     return next((p for p in PROCEDURES if p.name == name), None)
+
+
+def resumes(name: str | None) -> bool:
+    """Whether an interrupted guided run of ``name`` continues from a resume file."""
+    p = get(name)
+    return p is not None and p.resumes
 
 
 def firmware_kind(name: str | None) -> str | None:

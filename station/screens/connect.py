@@ -258,7 +258,7 @@ class ConnectScreen(Screen):
         from station.procedures.state import default_state_path
 
         s = self.app.session
-        if not s.resume_dir() or self.query_one("#procedure", Select).value != "accel-tabletop":
+        if not s.resume_dir() or not registry.resumes(str(self.query_one("#procedure", Select).value)):
             return None  # resume files are P1's (Resume continues an interrupted P1)
         serial = self.query_one("#serial", Input).value.strip() or (
             getattr(s.source, "device_id", "") if s.source is not None else ""
