@@ -169,3 +169,28 @@ def test_diagnose_says_the_bound_it_uses(tmp_path):
     line = " ".join(next(x for x in res.stdout.split("\ncandidates")[1:2]).split("\n  ")[0].split())
     assert "F test" in line and "degrees of freedom" in line, line
     assert "inflation > F·χ²_k" not in line, line
+
+
+def test_an_ldv_record_of_a_parked_vehicle_is_refused(tmp_path):
+    """P5 `f` (finish now) two seconds after the start, the vehicle still parked: the beams'
+    and the reference's noise, in random directions, made a "well enough conditioned" set
+    (cond 2.4) and a result of δK = -0.73 ± 0.65, NO TOLERANCE, savable as accepted. The same
+    capture through `calibrate`. Now refused with the reason: the vehicle did not move."""
+    import numpy as np
+
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of
+
+    cap = capture_of(simulate("ldv", seed=3))
+    rng = np.random.default_rng(3)
+    n = len(cap.columns["vl1"])
+    for c in [c for c in cap.columns if c in ("vx", "vy", "vz", "vn", "ve", "vd", "vl1", "vl2", "vl3")]:
+        cap.columns[c] = 0.01 * rng.standard_normal(n)  # parked: noise only
+    path = tmp_path / "parked.csv"
+    write_capture(str(path), cap)
+    res = run_station("calibrate", path)
+    assert_one_line_refusal(res, "parked.csv", "hardly moved", "0 of")
+    # a drive is calibrated as before
+    write_capture(str(tmp_path / "drive.csv"), capture_of(simulate("ldv", seed=3)))
+    assert run_station("calibrate", tmp_path / "drive.csv").returncode == 0
