@@ -194,3 +194,14 @@ def test_an_ldv_record_of_a_parked_vehicle_is_refused(tmp_path):
     # a drive is calibrated as before
     write_capture(str(tmp_path / "drive.csv"), capture_of(simulate("ldv", seed=3)))
     assert run_station("calibrate", tmp_path / "drive.csv").returncode == 0
+
+
+def test_every_procedure_names_its_simulator():
+    """`station simulate` lists a procedure's options from the simulator the registry names:
+    each is the function solvers.simulate dispatches that procedure to."""
+    import solvers.simulate
+    from station.procedures import registry
+
+    for p in registry.PROCEDURES:
+        function = getattr(solvers.simulate, p.simulator)
+        assert solvers.simulate._SIMULATORS[p.name] is function, p.name

@@ -80,9 +80,9 @@ def settable_options(procedure: str) -> list[str]:
     less those the command line cannot set)."""
     import inspect
 
-    from solvers.simulate import _SIMULATORS  # the simulator's own table (solvers keep their list)
+    import solvers.simulate
 
-    function = _SIMULATORS[procedure]
+    function = getattr(solvers.simulate, registry.get(procedure).simulator)
     kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
     return [
         name

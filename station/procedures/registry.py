@@ -63,6 +63,8 @@ class Procedure:
     sim_average_s: float = 0.0
     # an interrupted guided run continues from its resume file (Connect's Resume, F6)
     resumes: bool = False
+    # its simulator in solvers/simulate.py (station simulate names its --option choices from it)
+    simulator: str = ""
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -93,6 +95,7 @@ class GuidedRun:
 PROCEDURES: tuple[Procedure, ...] = (
     Procedure(
         name="accel-tabletop",
+        simulator="simulate_tabletop",
         code="P1",
         resumes=True,
         stem="tabletop",
@@ -114,6 +117,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="accel-centrifuge",
+        simulator="simulate_centrifuge",
         code="P2",
         stem="centrifuge",
         title="accelerometer, centrifuge",
@@ -134,6 +138,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="compass",
+        simulator="simulate_compass",
         code="P3",
         stem="compass",
         title="compass sweep",
@@ -154,6 +159,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="gyro-drift",
+        simulator="simulate_gyro_drift",
         code="P4",
         stem="gyrodrift",
         title="gyro drift, static base",
@@ -176,6 +182,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="ldv",
+        simulator="simulate_ldv",
         code="P5",
         stem="ldv",
         title="laser velocimeter",
