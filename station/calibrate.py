@@ -14,7 +14,7 @@ import numpy as np
 from solvers.errors import SolverError
 from solvers.jsonable import jsonable
 from station.errors import InputError, UnsupportedError
-from station.formatting import MISSING, num, param_lines
+from station.formatting import MISSING, device_text, num, param_lines
 from station.guard import check_extremes, check_result, printed_warnings, quiet_stdout
 from station.procedures import registry
 
@@ -87,7 +87,7 @@ def format_text(result: dict) -> str:
         return module.format_text(result)
     lines = [
         f"procedure  {result.get('procedure')}",
-        f"device     {result.get('device')}",
+        f"device     {device_text(result)}",
         f"model      {result.get('model')}",
     ]
     params, unc = result.get("params", {}), result.get("uncertainty", {})

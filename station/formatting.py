@@ -13,6 +13,13 @@ import numbers
 MISSING = "—"
 
 
+def device_text(result: dict) -> str:
+    """A result's device for its text report: ``(none)`` when the capture names none (as
+    ``station inspect`` says), not Python's ``None``."""
+    device = result.get("device")
+    return "(none)" if device is None or device == "" else str(device)
+
+
 def num(x, fmt: str = ".6g", missing: str = MISSING) -> str:
     """``format(x, fmt)`` when ``x`` is a finite real number (not a bool), else ``missing``."""
     if isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x):

@@ -138,7 +138,7 @@ def test_cli_simulate_writes_capture_and_truth(tmp_path):
         (["--effect", "warp=1"], "does not apply"),
         (["--effect", "temperature_bias=abc"], "not a number"),
         (["--effect", "temperature_bias"], "NAME=VALUE"),
-        (["--option", "no_such_option=3"], "simulate:"),
+        (["--option", "no_such_option=3"], "not an option of ldv"),
     ],
 )
 def test_cli_simulate_bad_arguments_one_line_exit_2(tmp_path, args, needle):

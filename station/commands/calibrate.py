@@ -149,6 +149,11 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
     from station.procedures.review import review_record
     from station.store import judge, kind_added, save_result
 
+    if not (args.device or "").strip() and not str(result.get("device") or "").strip():
+        # before the database is opened (or made): the store's own refusal names its argument
+        raise InputError(
+            args.file, None, "the capture names no device (no '# device:' line): give --device ID to save it"
+        )
     path = db_path(args)
     try:
         assessment, device, previous = judge(path, result, args.device)

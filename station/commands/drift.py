@@ -208,13 +208,14 @@ def run(args: argparse.Namespace) -> int:
         trends = store.drift(args.id, procedure=args.procedure, param=args.param)
         if not args.json:
             trends = _shown(store, args.id, trends)
+    of = f" {args.procedure}" if args.procedure else ""  # the procedure asked for, when one is
     if args.param is not None and not trends:
-        raise InputError(None, None, f"no coefficient named {args.param!r} in this device's accepted calibrations")
+        raise InputError(None, None, f"no coefficient named {args.param!r} in this device's accepted{of} calibrations")
     if args.json:
         print_json(trends)
         return 0
     if not trends:
-        sys.stdout.write(f"device {safe(args.id)}: no accepted calibrations yet\n")
+        sys.stdout.write(f"device {safe(args.id)}: no accepted{of} calibrations yet\n")
         return 0
     width = terminal_width()
     title = f"device {safe(args.id)}: drift per year over its accepted calibrations (weighted linear fit)"

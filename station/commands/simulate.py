@@ -75,6 +75,22 @@ _SIGNED = {"latitude_deg", "pitch_deg", "roll_deg", "table_tilt_deg"}  # any fin
 _NOT_SETTABLE = {"seed", "effects", "site", "positions", "speeds_rad_s", "headings_deg", "truth_params"}
 
 
+def settable_options(procedure: str) -> list[str]:
+    """The ``--option`` names the procedure's simulator takes (its keyword-only parameters,
+    less those the command line cannot set)."""
+    import inspect
+
+    import solvers.simulate
+
+    function = getattr(solvers.simulate, registry.get(procedure).simulator)
+    kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return [
+        name
+        for name, p in inspect.signature(function).parameters.items()
+        if p.kind in kinds and name not in _NOT_SETTABLE
+    ]
+
+
 def _option_value(name: str, value):
     import math
 
@@ -154,7 +170,14 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(None, None, f"--effect {name}: {size!r} is not a number")
         if not math.isfinite(size):
             raise InputError(None, None, f"--effect {name}: {size} is not a finite number")
-    options = {k: _option_value(k, v) for k, v in parse_assignments(args.option, "--option").items()}
+    options = parse_assignments(args.option, "--option")
+    allowed = settable_options(args.procedure)
+    for name in options:  # a mistyped name: which there are, not Python's "unexpected keyword argument"
+        if name not in allowed and name not in _NOT_SETTABLE:
+            raise InputError(
+                None, None, f"--option {name}: not an option of {args.procedure} (its options: {', '.join(allowed)})"
+            )
+    options = {k: _option_value(k, v) for k, v in options.items()}
     if options.get("averages") and options.get("label_positions") is False:
         raise InputError(
             None,

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from station.capture import CUT_SHORT, MAX_ABS, UNIT_KEYS, no_line_end_note, plausible_limit
+from station.capture import CUT_SHORT, MAX_ABS, UNIT_ALIASES, UNIT_KEYS, no_line_end_note, plausible_limit
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
 from station.importers._common import COLUMNS, Imported, Stream
@@ -29,6 +29,8 @@ from station.importers.options import TARGETS
 
 KIND_OF = {c: k for k, cols in COLUMNS.items() for c in cols}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+# --unit t= spelled as people write it: read as the unit it names
+TIME_ALIASES = {"sec": "s", "msec": "ms", "µs": "us", "μs": "us", "usec": "us", "nsec": "ns"}
 MAX_RATE_HZ = 1e9  # the capture format's largest sample_rate_hz
 EUROC_COLUMNS = {
     "w_RS_S_x": "gx",
@@ -544,6 +546,8 @@ def read_plain(
     for key in units:
         if key not in ("t", "accel", "gyro", "mag"):
             raise InputError(None, None, f"--unit {key}=…: expected t, accel, gyro or mag")
+    # the spellings a capture's own unit keys take (dps, m/s2, µT ...) name the same units here
+    units = {k: (TIME_ALIASES if k == "t" else UNIT_ALIASES.get(f"{k}_unit", {})).get(v, v) for k, v in units.items()}
     lines = _open_text(path)
     hi, head = next(((n, s) for n, s in lines if s.strip() and not s.lstrip().startswith("#")), (None, ""))
     if hi is None:

@@ -276,13 +276,13 @@ def position_residuals(capture, result: dict) -> list[tuple[str, float, float]]:
 
 def format_text(result: dict) -> str:
     from station.calibrate import jsonable
-    from station.formatting import param_lines
+    from station.formatting import device_text, param_lines
 
     r = jsonable(result)
     u = r["units"]
     lines = [
         f"procedure  accel-centrifuge (P2, {r['method']})",
-        f"device     {r.get('device')}",
+        f"device     {device_text(r)}",
         f"model      {r['model']}   (f in g, N in {u['N']})",
     ]
     for k in ("S", "b", "D", "gamma"):

@@ -109,6 +109,31 @@ def prepare(capture) -> Prepared:
     return Prepared(y, np.all(np.isfinite(y), axis=1), t)
 
 
+# The raw field of a compass in physical units is the Earth's within hard and soft iron: a
+# factor beyond this from IGRF's total is a unit said wrongly (uT data declared nT reads 1000x low)
+UNIT_MISTAKE_FACTOR = 3.0
+
+
+def _unit_mistake(mag_unit, mag_factor, before: dict, ref) -> str | None:
+    """A warning when the raw field's mean magnitude, in the unit the capture declares, is more
+    than UNIT_MISTAKE_FACTOR from IGRF's total at its place and date; it names the unit that
+    would read closest to IGRF."""
+    from solvers.units import MAG_UNITS
+
+    mean = before.get("mean") if isinstance(before, dict) else None
+    if not mag_factor or ref is None or not isinstance(mean, (int, float)) or not mean > 0:
+        return None
+    ratio = mean / ref["total_nT"]
+    if 1 / UNIT_MISTAKE_FACTOR <= ratio <= UNIT_MISTAKE_FACTOR:
+        return None
+    best = min(MAG_UNITS, key=lambda u: abs(math.log(ratio * MAG_UNITS[u] / mag_factor)))
+    as_best = mean * MAG_UNITS[best] / mag_factor
+    return (
+        f"the raw field reads {mean:.4g} nT as mag_unit {mag_unit}, {ratio:.3g}x the {ref['total_nT']:.0f} nT "
+        f"IGRF gives at this place and date: is mag_unit right? (as {best} it would read {as_best:.4g} nT)"
+    )
+
+
 def calibrate(capture, method: str | None = None, *, prepared: Prepared | None = None) -> dict:
     method = method or "rls"
     if method not in METHODS:
@@ -151,6 +176,9 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
         )
     if cal.rls_minus_batch_sigma > 0.1:
         warnings.append(f"the RLS differs from the batch solution by {cal.rls_minus_batch_sigma:.2f} sigma")
+    unit_hint = _unit_mistake(mag_unit, mag_factor, cal.magnitude_before, ref)
+    if unit_hint:
+        warnings.append(unit_hint)
     if ref is None:
         reference = {k: None for k in REF_KEYS}
     else:
@@ -319,11 +347,11 @@ def _circ_rad(a) -> float:
 
 def format_text(result: dict) -> str:
     from station.calibrate import jsonable
-    from station.formatting import param_lines
+    from station.formatting import device_text, param_lines
 
     lines = [
         f"procedure  compass ({result.get('method')})",
-        f"device     {result.get('device')}",
+        f"device     {device_text(result)}",
         f"model      {result.get('model')}",
     ]
     from station.procedures.review import shown_unit, shown_value

@@ -318,12 +318,16 @@ def headless_demo(src, now: list, *, average_s: float, out, max_device_s: float 
     """``station demo --headless --procedure compass``: the scripted operator visits the
     sphere positions on the started simulated device ``src`` (clock ``now[0]``, advanced
     here); coverage lines go to ``out``. Returns the guide when the sweep is over."""
+    from station.procedures.accel_frontend import for_device
+
     guide = CompassGuide(
         sample_rate_hz=src.rate_hz,
         units=src.units,
         device_id=src.device_id,
         site=src.site,
         config=CompassConfig(min_s=30.0),
+        # the TUI's compass screen's front end: the simulated unit's data-sheet zero and sensitivity
+        accel_frontend=for_device([], src.units.get("accel_unit"), getattr(src, "nominal", None)),
     )
     operator = SweepOperator(src.place, sweep_positions(src.positions), hold_s=1.0)
     shown = -1

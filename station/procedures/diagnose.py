@@ -270,7 +270,10 @@ def format_text(
         f"baseline    {r['baseline']['model']}",
         f"            residual {scale * r['baseline']['residual_rms']:.4g} {unit} RMS, "
         f"held-out {scale * r['baseline']['cv_rms']:.4g} {unit} RMS",
-        f"candidates  (selected: deviance / serial-correlation inflation > F·χ²_k(1 − 0.05/m), F = {_f_text(diag.problem)}, "
+        # the bound is the exact F test's on the degrees of freedom left (engine.deviance_quantile),
+        # which is F·χ²_k only for many rows
+        "candidates  (selected: deviance / serial-correlation inflation > the F test's level-0.05/m bound "
+        f"on the degrees of freedom left, scaled by F = {_f_text(diag.problem)} (F·χ²_k(1 − 0.05/m) for many rows), "
         "and a lower held-out RMS; refitted and re-tested after each pick)",
     ]
     for c in r["candidates"]:

@@ -482,6 +482,7 @@ def _result(capture, res: gd.DriftResult, mode, n_pos, resid, acc, me, C, flips,
 def format_text(result: dict) -> str:
     """The result for a person, in the units the screens show (drift and rates in °/h,
     ``DISPLAY_UNITS``); ``--json`` keeps rad/s."""
+    from station.formatting import device_text
     from station.procedures.review import shown_residual, shown_unit, shown_value
 
     p, u = result["params"], result["uncertainty"]
@@ -490,7 +491,7 @@ def format_text(result: dict) -> str:
     s = [shown_value(result, "drift", float(v)) for v in u["drift"]]
     lines = [
         f"procedure  gyro-drift ({p['mode']})",
-        f"device     {result.get('device')}",
+        f"device     {device_text(result)}",
         f"model      {result['model']}",
         "drift      " + "  ".join(f"{a} {v:+.2f} ± {e:.2g}" for a, v, e in zip("xyz", d, s)) + f" {unit}",
         f"           body axes {BODY_AXES}",

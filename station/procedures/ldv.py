@@ -219,6 +219,24 @@ def prepare(capture, reference=None) -> Prepared:
     return Prepared(v_b, vl, info, warnings)
 
 
+# A vehicle at rest: the reference speed the guide calls parked, and the fewest moving epochs a
+# fit is tried on. At rest the beams and the reference read their noise, whose directions are
+# random: a well-conditioned set of nothing (a 2 s parked record gave δK = -0.73 ± 0.65, cond 2.4).
+PARKED_MPS = 0.5
+MIN_MOVING_EPOCHS = 10
+
+
+def _refuse_parked(capture, v_body: np.ndarray, force: bool) -> None:
+    speed = np.linalg.norm(v_body, axis=1)
+    moving = int(np.count_nonzero(speed >= PARKED_MPS))
+    if moving < MIN_MOVING_EPOCHS and not force:
+        raise UnsupportedError(
+            f"{capture.path or 'capture'}: ldv: the vehicle hardly moved: {moving} of {len(speed)} epochs at a "
+            f"reference speed of {PARKED_MPS:g} m/s or more (at rest the beams see only their noise); drive, with "
+            "turns, slopes and braking"
+        )
+
+
 def calibrate(capture, method: str | None = None, *, reference=None, prepared: Prepared | None = None) -> dict:
     force = (method or "").strip().lower() == "force"
     if method and not force:
@@ -226,6 +244,7 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
     prep = prepared if prepared is not None else prepare(capture, reference)
     warnings = list(prep.warnings)
     v_b, vl, info = prep.v_body, prep.vl, prep.info
+    _refuse_parked(capture, v_b, force)
     ref_sigma = capture.float_meta_within("reference_sigma_mps", None, 1e5, zero=True)
     try:
         res = ldv_solver.calibrate_ldv(v_b, vl, ref_sigma_mps=ref_sigma, force=force)
@@ -274,10 +293,12 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
 
 
 def format_text(result: dict) -> str:
+    from station.formatting import device_text
+
     p, u = result["params"], result["uncertainty"]
     lines = [
         "procedure  ldv",
-        f"device     {result.get('device')}",
+        f"device     {device_text(result)}",
         f"model      {result['model']}",
         f"reference  {result.get('reference')} ({result.get('alignment')}); {result.get('estimator')}",
         f"cond(HᵀH)  {p['condition_number']:.3g}  ({result['n_positions']} epochs)",

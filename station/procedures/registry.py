@@ -61,6 +61,10 @@ class Procedure:
     # the Connect screen's "Average (s)" on the built-in simulated device [s] (0: the real
     # device's DEFAULT_AVERAGE_S): a first run shows the whole procedure in minutes, not hours
     sim_average_s: float = 0.0
+    # an interrupted guided run continues from its resume file (Connect's Resume, F6)
+    resumes: bool = False
+    # its simulator in solvers/simulate.py (station simulate names its --option choices from it)
+    simulator: str = ""
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -91,7 +95,9 @@ class GuidedRun:
 PROCEDURES: tuple[Procedure, ...] = (
     Procedure(
         name="accel-tabletop",
+        simulator="simulate_tabletop",
         code="P1",
+        resumes=True,
         stem="tabletop",
         title="accelerometer, level table",
         short="",
@@ -111,6 +117,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="accel-centrifuge",
+        simulator="simulate_centrifuge",
         code="P2",
         stem="centrifuge",
         title="accelerometer, centrifuge",
@@ -131,6 +138,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="compass",
+        simulator="simulate_compass",
         code="P3",
         stem="compass",
         title="compass sweep",
@@ -151,6 +159,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="gyro-drift",
+        simulator="simulate_gyro_drift",
         code="P4",
         stem="gyrodrift",
         title="gyro drift, static base",
@@ -173,6 +182,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     ),
     Procedure(
         name="ldv",
+        simulator="simulate_ldv",
         code="P5",
         stem="ldv",
         title="laser velocimeter",
@@ -238,6 +248,12 @@ def sensor_kinds() -> tuple[str, ...]:
 def get(name: str | None) -> Procedure | None:
     """The procedure called ``name``, None when there is none."""
     return next((p for p in PROCEDURES if p.name == name), None)
+
+
+def resumes(name: str | None) -> bool:
+    """Whether an interrupted guided run of ``name`` continues from a resume file."""
+    p = get(name)
+    return p is not None and p.resumes
 
 
 def firmware_kind(name: str | None) -> str | None:

@@ -339,13 +339,13 @@ def mislabelled(capture, positions, B, M) -> list[str]:
 
 def format_text(result: dict) -> str:
     from station.calibrate import jsonable
-    from station.formatting import num, param_lines
+    from station.formatting import device_text, num, param_lines
 
     r = jsonable(result)
     unit = r["units"]["V"]
     lines = [
         f"procedure  accel-tabletop (P1, {r['method']})",
-        f"device     {r.get('device')}",
+        f"device     {device_text(r)}",
         f"model      {r['model']}   (V in {unit}, A in m/s^2)",
         f"gauge      {r['gauge_description']}",
     ]

@@ -47,12 +47,14 @@ def is_simulated(src) -> bool:
 NO_DATA_S = 5.0  # a procedure screen says a device silent this long, and again every as long
 
 
-def no_data_text(src, silent_s: float) -> str:
+def no_data_text(src, silent_s: float, since_data: bool = False) -> str:
     """What the operator is told while a started device sends no sample (wrong port, baud rate or
-    protocol, unpowered): the screen's dashes and "t=— s" alone say nothing is wrong."""
+    protocol, unpowered), or has stopped sending (unplugged mid-run): the screen's dashes and
+    "t=— s", or a prompt and a countdown that stand still, alone say nothing is wrong."""
     where = getattr(src, "label", "") or "the device"
+    since = " since its last sample" if since_data else ""
     return (
-        f"no data from {where} for {silent_s:.0f} s: check the cable, the port, the baud rate and the "
+        f"no data from {where} for {silent_s:.0f} s{since}: check the cable, the port, the baud rate and the "
         "protocol (a abort, then Connect)"
     )
 
@@ -139,16 +141,19 @@ class GuidedScreenMixin:
         next_post = 0.0
         posts = 0
         t_posts = time.monotonic()
-        # a device on a port that sends nothing is said every NO_DATA_S (the built-in one never is
-        # silent; a test's bench clock may hold it still)
-        got_data, said_silent = getattr(src, "kind", "") != "serial", t_posts
+        # a device on a port that sends nothing, from the start or since some time (unplugged), is
+        # said every NO_DATA_S (the built-in one never is silent; a test's bench clock may hold it still)
+        watched = getattr(src, "kind", "") == "serial"
+        got_data, last_data, said_silent = False, t_posts, t_posts
         while not worker.is_cancelled:
             b, pending = (pending if pending is not None else src.drain()), None
-            got_data = got_data or (b is not None and len(b) > 0)
-            if not got_data and time.monotonic() - said_silent >= NO_DATA_S:
+            if b is not None and len(b) > 0:
+                got_data, last_data = True, time.monotonic()
+            silent = time.monotonic() - last_data
+            if watched and silent >= NO_DATA_S and time.monotonic() - said_silent >= NO_DATA_S:
                 said_silent = time.monotonic()
                 self.app.call_from_thread(
-                    self.notify, no_data_text(src, said_silent - t_posts), severity="warning", timeout=NO_DATA_S
+                    self.notify, no_data_text(src, silent, since_data=got_data), severity="warning", timeout=NO_DATA_S
                 )
             if b is not None and len(b) and (accept is None or accept(b)):
                 with self._lock:

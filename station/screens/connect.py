@@ -153,6 +153,8 @@ class ConnectScreen(Screen):
         box = self.query_one("#average", Input)
         if self.app.session.average_default and box.value.strip() == getattr(self, "_offered", None):
             box.value = self._offered = f"{self._average_default():g}"
+        if self.query("#resume"):  # (a Select's first Changed can come before the buttons are mounted)
+            self._check_resume()  # only P1 resumes: the button and F6 follow the procedure picked
 
     def _source_options(self):
         opts = [("Built-in simulated device", SIM)]
@@ -256,8 +258,8 @@ class ConnectScreen(Screen):
         from station.procedures.state import default_state_path
 
         s = self.app.session
-        if not s.resume_dir():
-            return None
+        if not s.resume_dir() or not registry.resumes(str(self.query_one("#procedure", Select).value)):
+            return None  # resume files are P1's (Resume continues an interrupted P1)
         serial = self.query_one("#serial", Input).value.strip() or (
             getattr(s.source, "device_id", "") if s.source is not None else ""
         )
@@ -286,10 +288,19 @@ class ConnectScreen(Screen):
                     button.refresh(layout=True)  # its width follows the label ("[F6]" was cut off)
             except (OSError, ValueError, KeyError, TypeError):
                 ok = False
+        changed = button.disabled == ok
         button.disabled = not ok
         if not ok:
             button.label = "Resume \\[F6]"
             button.refresh(layout=True)
+        if changed:
+            self.refresh_bindings()  # F6 in the footer only when there is a run to resume
+
+    def check_action(self, action: str, parameters) -> bool | None:
+        if action == "resume":
+            buttons = self.query("#resume")
+            return bool(buttons) and not buttons.first(Button).disabled
+        return True
 
     # ------------------------------------------------------------ start
 

@@ -55,8 +55,12 @@ class DecideScreen(NoticesMixin, ModalScreen):
             if len(self.reasons) > 6:
                 lines.append(f"… and {len(self.reasons) - 6} more")
             yield Static("\n".join(lines), id="why")
-            yield Static("A reason (rejected) or a note saying why it is accepted anyway:")
-            yield Field(placeholder="reason / note (required)", id="note")
+            yield Static(
+                "A reason (rejected) or a note saying why it is accepted anyway:"
+                if self.failed
+                else "Why it is rejected (stored with the result):"
+            )
+            yield Field(placeholder="reason / note (required)" if self.failed else "reason (required)", id="note")
             keys = "ctrl+r save as rejected · " + ("ctrl+o accept as override · " if self.failed else "")
             yield Static(keys + "esc back (re-do: n new run)")
             yield Static("", id="error")
@@ -65,6 +69,12 @@ class DecideScreen(NoticesMixin, ModalScreen):
 
     def on_mount(self) -> None:
         self.query_one("#note", Input).focus()
+
+    def check_action(self, action: str, parameters) -> bool | None:
+        # only a FAIL can be accepted as an override: no ctrl+o in the footer of a passing result's box
+        if action == "decide" and parameters and parameters[0] == "override" and not self.failed:
+            return False
+        return True
 
     def action_decide(self, decision: str) -> None:
         if decision == "override" and not self.failed:

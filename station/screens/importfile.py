@@ -44,12 +44,22 @@ def procedure_options(kinds=None) -> list[tuple[str, str]]:
     return [(procedure_label(n), n) for n in registry.importable() if kinds is None or primary(n) in kinds]
 
 
+# A CSV whose columns the reader cannot name needs a column map, given on the command line
+PLAIN_CSV_ROUTE = (
+    "A plain CSV needs its columns named: in a shell, station import FILE --procedure P "
+    "--map t=COL,ax=COL,... --unit accel=UNIT,... --out CAPTURE, then import that capture here."
+)
+
+
 class LogRead(Message):
     """A worker read a log: its format and the importer's :class:`Imported` (or an error)."""
 
-    def __init__(self, path: str, fmt: str | None, imported, error: str | None = None, source: str = "auto") -> None:
+    def __init__(
+        self, path: str, fmt: str | None, imported, error: str | None = None, source: str = "auto", hint: str = ""
+    ) -> None:
         super().__init__()
         self.source = source
+        self.hint = hint  # a line under the error: what to do instead
         self.path = path
         self.fmt = fmt
         self.imported = imported
@@ -219,8 +229,17 @@ class ImportScreen(Screen):
             if fmt is None and os.path.isfile(path) and load.is_station_capture(path):
                 self._calibrate_capture(path)
                 return
+            plain = fmt is None  # no log format, no station capture: a CSV read by its column names
             fmt = fmt or "csv"
-            self.post_message(LogRead(path, fmt, load.read(path, ImportOptions(source=source), fmt), source=source))
+            try:
+                imported = load.read(path, ImportOptions(source=source), fmt)
+            except StationError as exc:
+                if not plain:
+                    raise
+                # the reader's hint names --map, which this screen has nowhere to type
+                self.post_message(LogRead(path, None, None, error=str(exc), hint=PLAIN_CSV_ROUTE))
+                return
+            self.post_message(LogRead(path, fmt, imported, source=source))
         except (StationError, OSError, ValueError) as exc:  # one line: file: what is wrong
             self.post_message(LogRead(path, None, None, error=str(exc)))
 
@@ -271,7 +290,8 @@ class ImportScreen(Screen):
 
     def on_log_read(self, message: LogRead) -> None:
         if message.error:
-            self._status(f"[b red]{tui_markup(message.error)}[/]")
+            hint = f"\n{tui_markup(message.hint)}" if message.hint else ""
+            self._status(f"[b red]{tui_markup(message.error)}[/]{hint}")
             return
         from station.importers.options import primary
 

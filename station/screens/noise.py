@@ -36,6 +36,9 @@ class NoiseReady(Message):
 class NoiseHoldScreen(HoldScreen):
     """The still recording of the noise run (HoldScreen with its own words and ending)."""
 
+    # the hold screen's layout under this screen's own name: a screen's CSS is loaded with its
+    # class, so the inherited rules applied only once a P4 hold screen had been shown
+    CSS = HoldScreen.CSS.replace("HoldScreen ", "NoiseHoldScreen ")
     SUBJECT = "gyro noise (Allan) run"
     INSTRUCTION = (
         "Put the unit on a steady surface away from fans and footsteps and do not\n"

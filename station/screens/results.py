@@ -118,7 +118,8 @@ class ResultsScreen(NoticesMixin, Screen):
     def load_device(self) -> None:
         try:
             store = self.app.session.open_store()
-            dev = store.get_device(self.app.session.device_id) if store is not None else None
+            # a capture that names no device is judged against no device's tolerances and limits
+            dev = store.get_device(self.app.session.device_id) if store is not None and self._named() else None
             self.post_message(StoreLoaded("device", dev))
         except Exception as exc:  # noqa: BLE001
             self.post_message(StoreLoaded("device", None, error=str(exc)))
@@ -234,7 +235,18 @@ class ResultsScreen(NoticesMixin, Screen):
         if not self.app.session.db_path:
             self.notify("No database: start with --db PATH to save", severity="error")
             return False
+        if not self._named():
+            self.query_one("#saved", Static).update(
+                "[b red]Not saved: the capture names no device (no '# device:' line); make it with "
+                "station import ... --device ID, or add the line[/]"
+            )
+            return False
         return True
+
+    def _named(self) -> bool:
+        """Whether the capture names its device: one that does not (a CSV imported without
+        --device, opened with F7) is not saved under the device the session last used."""
+        return self.capture is None or bool(str(self.capture.meta.get("device") or "").strip())
 
     def action_save(self) -> None:
         if not self._can_save():
@@ -380,8 +392,9 @@ class ResultsScreen(NoticesMixin, Screen):
         again with them while the result is not saved yet."""
         from station.screens.limits import LimitsScreen
 
-        if not self.app.session.device_id:
-            self.notify("No device to set limits for", severity="warning")
+        if not self.app.session.device_id or not self._named():
+            why = "" if self._named() else ": the capture names none"
+            self.notify(f"No device to set limits for{why}", severity="warning")
             return
         self.app.push_screen(LimitsScreen(self.app.session.device_id, self.result), self._limits_closed)
 

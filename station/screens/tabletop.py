@@ -37,7 +37,8 @@ class ProcedureScreen(NoticesMixin, GuidedScreenMixin, Screen):
     ProcedureScreen #placement { height: 9; }
     ProcedureScreen #indicators { height: 3; }
     ProcedureScreen #readouts { height: 4; margin-top: 1; }
-    ProcedureScreen #message { height: 1; text-style: bold; }
+    /* two lines: a prompt wider than the panel at 80x24 wraps instead of losing its end */
+    ProcedureScreen #message { height: auto; max-height: 2; text-style: bold; }
     ProcedureScreen #progress { height: 1; color: $text-muted; }
     /* notices in the free rows under the progress, not toasts over the readouts and the prompt */
     ProcedureScreen ToastHolder { display: none; }

@@ -1,0 +1,226 @@
+"""What a bench engineer new to the station met on the TUI at 80x24 (real app under its
+pilot, the built-in simulated device on a clock the test advances)."""
+
+from __future__ import annotations
+
+import asyncio
+
+from station.app import make_app
+from station.sources import SimSource
+from tests.test_tui import SIZE, BenchClock, run_bench, text_of, wait_for
+
+
+def test_p1_quarter_turn_prompt_is_shown_whole_at_80x24():
+    """Asked for x_up with the unit on y_up, the prompt was cut at the panel's edge:
+    "Wrong face up: 90° off, a quarter turn; put the face" (the rest, "shown up", lost)."""
+
+    async def story():
+        clock = BenchClock()
+        src = SimSource(seed=1, clock=clock)
+        app = make_app(None, device=src, start="procedure", average_s=60.0)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            src.place("y_up")  # asked for x_up: a quarter turn off
+            await run_bench(pilot, src, clock, lambda: "quarter turn" in app.screen.guide.status().message)
+            await wait_for(pilot, lambda: "quarter turn" in text_of(app, "#message"))
+            # the clock is stopped: the prompt settles; what is drawn must be all of it
+            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            try:
+                await wait_for(pilot, lambda: shown() == app.screen.guide.status().message, timeout_s=10)
+            except AssertionError:
+                raise AssertionError((shown(), app.screen.guide.status().message)) from None
+
+    asyncio.run(story())
+
+
+def test_rejecting_a_passing_result_offers_no_override_key(tmp_path):
+    """`x` on a result that passed opened the decision box with `^o Accept (override)` in the
+    footer: the key did nothing there (only a FAIL can be accepted as an override), and the
+    box asked for "a note saying why it is accepted anyway". Now the footer and the box show
+    only what the keys do: a reason, ctrl+r, esc."""
+    from station.screens.results import ResultsScreen
+    from tests.test_tui import screen_lines, screen_name
+    from tests.tui_data import p1_result
+
+    cap, result = p1_result("IMU-9")
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"), device_id="IMU-9")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            assert "FAIL" not in text_of(app, "#summary")
+            await pilot.press("x")
+            await wait_for(pilot, lambda: screen_name(app) == "DecideScreen")
+            await pilot.pause(0.2)
+            return screen_lines(app)
+
+    lines = asyncio.run(story())
+    screen = "\n".join(lines)
+    assert "override" not in lines[-1].lower(), lines[-1]  # the footer
+    assert "accepted anyway" not in screen and "override" not in screen.lower(), screen
+    assert "ctrl+r" in screen and "^r" in lines[-1]
+
+
+def test_importing_a_plain_csv_says_how_from_the_screen(tmp_path):
+    """A bench CSV (columns time_ms, acc_x, ...) typed on the import screen (F7) was refused
+    with the command line's hint "say which is which with --map, e.g. --map t=time,...": an
+    option the screen has nowhere to type. Now the screen says the route that works: make a
+    capture with `station import ... --map ... --out CAPTURE`, then import that capture."""
+    from tests.test_tui_import import _open
+
+    src = tmp_path / "bench.csv"
+    src.write_text("time_ms,acc_x,acc_y,acc_z\n" + "".join(f"{10 * i},0.0,0.0,9.81\n" for i in range(50)))
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        async with app.run_test(size=SIZE) as pilot:
+            await _open(pilot, app, src)
+            return text_of(app, "#status")
+
+    status = " ".join(asyncio.run(story()).split())
+    assert "bench.csv" in "".join(status.split()), status  # the path may wrap anywhere
+    assert "station import" in status and "--out" in status, status
+    assert "then import" in status, status
+
+
+def test_a_capture_that_names_no_device_is_not_saved_under_the_last_device(tmp_path):
+    """A station capture without a `# device:` line (a CSV imported without --device), opened
+    with F7 after a run on another unit: `s` saved it under that unit (the session's last
+    device, here a P5 LDV), judged against that unit's limits, with only a warning afterwards
+    that the kinds differ. Now Results say the capture names no device and nothing is saved."""
+    from db.store import Store
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of, run_station
+    from tests.test_tui import screen_name
+
+    db = tmp_path / "s.db"
+    assert run_station("--db", db, "devices", "add", "LDV-7", "--kind", "ldv").returncode == 0
+    cap = capture_of(simulate("gyro-drift", seed=5))
+    del cap.meta["device"]
+    path = tmp_path / "still.csv"
+    write_capture(str(path), cap)
+
+    async def story():
+        app = make_app(str(db), device_id="LDV-7")
+        async with app.run_test(size=SIZE) as pilot:
+            await pilot.press("f7")
+            await wait_for(pilot, lambda: screen_name(app) == "ImportScreen")
+            app.screen.query_one("#path").value = str(path)
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=60)
+            await wait_for(pilot, lambda: app.screen.device is not None)
+            await pilot.press("s")
+            await wait_for(pilot, lambda: "no device" in " ".join(text_of(app, "#saved").split()), timeout_s=20)
+            return " ".join(text_of(app, "#saved").split()), app.screen.calibration_id
+
+    saved, cal_id = asyncio.run(story())
+    assert cal_id is None and "--device" in saved, saved
+    with Store(str(db)) as s:
+        assert s.history("LDV-7") == []
+
+
+def test_resume_follows_the_procedure_picked_and_f6_is_shown_only_when_it_resumes(tmp_path):
+    """Resume continues an interrupted P1. With P2 picked the button still said `Resume 3/12`
+    (P1's run) and F6 started a new P2; with nothing to resume `f6 Resume` stayed in the
+    footer and the key did nothing. Now the button and the key follow the procedure picked."""
+    import json
+
+    from station.procedures.state import default_state_path
+    from tests.test_tui import screen_lines, screen_name
+
+    steps = [{"status": "captured"}] * 3 + [{"status": "pending"}] * 9
+    with open(default_state_path("IMU-5", base=str(tmp_path)), "w", encoding="utf-8") as fh:
+        json.dump({"phase": "guide", "steps": steps}, fh)
+
+    def footer(app) -> str:
+        return screen_lines(app)[-1]
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await wait_for(pilot, lambda: "f5" in footer(app))
+            assert "f6" not in footer(app), footer(app)  # nothing to resume for the simulator's unit
+            app.screen.query_one("#serial").value = "IMU-5"
+            await wait_for(pilot, lambda: not app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: "f6" in footer(app))
+            app.screen.query_one("#procedure").value = "accel-centrifuge"
+            await wait_for(pilot, lambda: app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: "f6" not in footer(app))
+            assert not any("3/12" in line for line in screen_lines(app))
+            await pilot.press("f6")
+            await pilot.pause(0.3)
+            assert screen_name(app) == "ConnectScreen"
+            app.screen.query_one("#procedure").value = "accel-tabletop"
+            await wait_for(pilot, lambda: not app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: any("Resume 3/12 [F6]" in line for line in screen_lines(app)))
+
+    asyncio.run(story())
+
+
+def test_a_device_lost_mid_run_is_said_on_the_procedure_screen():
+    """The device on a port stops mid-run (unplugged; here its pty closed): P4 kept saying
+    "Recording: keep the unit still" over a countdown stopped at 2:55, with only DISCONNECTED
+    at the end of a readout line. The notice a silent port gets ("no data from PORT ...")
+    was said only for a port silent from the start. Now also once the data stop."""
+    import threading
+
+    from solvers.simulate import LiveImu
+    from station.device.simdevice import SimDevice
+    from station.sources import SerialSource
+    from tests.test_tui import screen_lines, screen_name
+
+    dev = SimDevice(LiveImu(seed=7, rate_hz=100, hold_s=1e9))
+    path = dev.open()
+    stop = threading.Event()
+    thread = threading.Thread(target=dev.run, args=(stop,), daemon=True)
+    thread.start()
+    try:
+
+        async def story():
+            app = make_app(None, device=SerialSource(path), average_s=180.0)
+            app.session.procedure = "gyro-drift"  # P4 on a static base, as picked on Connect
+            async with app.run_test(size=SIZE, notifications=True) as pilot:
+                await pilot.press("f5")
+                await wait_for(pilot, lambda: screen_name(app) == "HoldScreen" and app.screen.updates > 5)
+                await wait_for(pilot, lambda: app.session.source.stats().samples > 50)
+                assert "no data from" not in "\n".join(screen_lines(app))
+                stop.set()  # the device goes away
+                thread.join(10)
+                dev.close()
+                await wait_for(pilot, lambda: "no data from" in "\n".join(screen_lines(app)), timeout_s=30.0)
+                lines = "\n".join(screen_lines(app))
+            app.session.source.stop()
+            return lines
+
+        lines = asyncio.run(story())
+    finally:
+        stop.set()
+        thread.join(10)
+        dev.close()
+    flat = " ".join(lines.replace("▌", " ").split())  # a toast's edge on each of its lines
+    assert f"no data from {path}" in flat and "since its last sample" in flat and "check the cable" in flat, lines
+
+
+def test_the_noise_run_has_the_p4_hold_layout_when_it_is_the_first_run(tmp_path):
+    """The gyro noise run, picked first after start-up: its screen (a P4 hold screen with its
+    own words) had none of the hold screen's layout (no margins, the readouts at the bottom
+    rows), so the start-up reminder's toast lay over the live rates ("z +98▌ never
+    calibrated"). The layout came only once a P4 hold screen had been shown in the session."""
+    from tests.test_tui import screen_name
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        app.session.procedure = "gyro-noise"
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: screen_name(app) == "NoiseHoldScreen" and app.screen.updates > 2)
+            await pilot.pause(0.3)
+            return app.screen.query_one("#readouts").region, app.screen.query_one("#body").region
+
+    readouts, body = asyncio.run(story())
+    assert readouts.x == 1, readouts  # the hold screen's margin
+    assert readouts.bottom <= 14, readouts  # under the instruction and the bars, not at the foot
