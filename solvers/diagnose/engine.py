@@ -1733,8 +1733,15 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     effects: list[dict] = []
     for cc, e in picked:
         e = dict(e)
-        e["params"] = {k: ext.params[k] for k in cc.params}
-        e["uncertainty"] = {k: ext.sigma[k] for k in cc.params}
+        # a block freed only in the refits (a temperature column's lag) is reported where it earned it
+        earned = _free_in_model(cc)
+        shown = [
+            k
+            for k in cc.params
+            if k not in (cc.cand.refit_free or {}) or np.any(cc.free.get(k, False)) or np.any(earned.get(k, False))
+        ]
+        e["params"] = {k: ext.params[k] for k in shown}
+        e["uncertainty"] = {k: ext.sigma[k] for k in shown}
         effects.append(e)
         verdict.append(e["name"])
         verdict += [c["name"] for c in e["confused_with"]]
