@@ -35,8 +35,9 @@ def test_extended_model_stays_a_sensor(tmp_path, procedure, effect, seed):
     res = station_json("diagnose", path, "--json")
     base, ext = _matrix(res["baseline"]["params"]), _matrix(res["extended"]["params"])
     assert np.linalg.norm(ext - base) < 0.5 * np.linalg.norm(base), (base, ext)
-    # every effect named lowers the held-out RMS of the model before it
-    assert all(e["gain"] > 0 for e in res["effects"]), [(e["name"], e["gain"]) for e in res["effects"]]
+    # no effect named makes the held-out RMS of the model before it far worse (each gain is taken
+    # in the final refitted order, where one that passed beside fewer effects can be a hair below 0)
+    assert all(e["gain"] > -0.01 for e in res["effects"]), [(e["name"], e["gain"]) for e in res["effects"]]
     # what remains is not fitted away below the noise: the baseline's held-out RMS, not 4 % of it
     assert res["extended"]["cv_rms"] > 0.3 * res["baseline"]["cv_rms"]
     if procedure == "accel-tabletop":

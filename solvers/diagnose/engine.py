@@ -809,7 +809,7 @@ def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> Fit
     Jx, _, packer = jacobian(problem, params, free)
     d, _ = _lstsq_rss(Jx, _weighted(problem, params))
     start = packer.unpack(packer.pack(packer.template) + d)
-    off = _ran_off(params, start, free)
+    off = _ran_off(params, start, free, problem.baseline)
     if not off:
         try:
             res = fit(problem.residual, start, free=free, sigma=sigma)
@@ -817,15 +817,15 @@ def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> Fit
                 raise ValueError("refit worse than its start")
         except Exception:
             res = fit(problem.residual, start, free=free, sigma=sigma, max_nfev=1)
-        off = _ran_off(params, res.params, free)
+        off = _ran_off(params, res.params, free, problem.baseline)
     if off:
         return _refit(problem, params, {**free, **{k: False for k in off}}, sigma)
     return res
 
 
-def _ran_off(before: dict, after: dict, free: dict) -> list[str]:
-    """The free matrix blocks of the model (a scale and mounting: P1's K, the LDV's X, the
-    compass's W) that changed by more than ``REFIT_MAX_MATRIX_CHANGE`` of their norm from
+def _ran_off(before: dict, after: dict, free: dict, baseline: dict) -> list[str]:
+    """The free matrix blocks of the baseline model (a scale and mounting: P1's K, the LDV's X,
+    the compass's W; not an effect's blocks) that changed by more than ``REFIT_MAX_MATRIX_CHANGE`` of their norm from
     ``before`` to ``after``. No effect changes a sensor's scale by half; a refit does that only
     where an added term and the model share a direction the data hardly fix: an unlabelled P1
     table with a step in time went to K 25000 times its size, every position read as one
@@ -835,7 +835,7 @@ def _ran_off(before: dict, after: dict, free: dict) -> list[str]:
     out = []
     for k, v in before.items():
         a, b = np.asarray(v, float), np.asarray(after.get(k, v), float)
-        if a.ndim != 2 or not np.any(free.get(k, False)) or a.shape != b.shape:
+        if k not in baseline or a.ndim != 2 or not np.any(free.get(k, False)) or a.shape != b.shape:
             continue
         size = float(np.linalg.norm(a))
         if size > 0 and float(np.linalg.norm(b - a)) > REFIT_MAX_MATRIX_CHANGE * size:
