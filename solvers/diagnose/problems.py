@@ -26,7 +26,7 @@ from solvers import linalg
 from solvers.centrifuge import norm_target
 from solvers.diagnose.engine import Candidate, Problem
 from solvers.errors import TooFewPositions
-from solvers.models import Conditions
+from solvers.models import Conditions, temperature_rate
 from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
@@ -96,7 +96,7 @@ def _span(x) -> float:
     return float(np.percentile(x, 95) - np.percentile(x, 5)) if x.size else 0.0
 
 
-def _temp_candidate(temp_c, width=3, block="bT") -> Candidate:
+def _temp_candidate(temp_c, width=3, block="bT", rate=None) -> Candidate:
     if temp_c is None or not np.all(np.isfinite(temp_c)):
         return Candidate("temperature_bias", reason="no temperature in the capture (temp_c column)")
     if _span(temp_c) < MIN_TEMP_SPAN_C:
@@ -108,6 +108,16 @@ def _temp_candidate(temp_c, width=3, block="bT") -> Candidate:
                 else f"temperature spans only {_span(temp_c):.2g} °C (5–95 %)"
             )
             + f": a temperature term cannot be told from the bias (it needs {MIN_TEMP_SPAN_C:g} °C)",
+        )
+    if block == "bT" and rate is not None and np.all(np.isfinite(rate)) and np.any(np.asarray(rate) != 0):
+        # the lag of the temperature column (``bT_lag_s``) is freed once the bias is in the model,
+        # where it lowers χ² decisively: it counts only beside a large temperature bias
+        return Candidate(
+            "temperature_bias",
+            {block: np.zeros(width), "bT_lag_s": np.array(0.0)},
+            free={block: True},
+            folds="time",
+            refit_free={block: True, "bT_lag_s": True},
         )
     return Candidate("temperature_bias", {block: np.zeros(width)}, folds="time")
 
@@ -127,6 +137,13 @@ def time_blocks(t_s: np.ndarray, n_blocks: int = 10) -> np.ndarray:
     if span <= 0:
         return np.zeros(len(t), int)
     return np.minimum(((t - t.min()) / span * n_blocks).astype(int), n_blocks - 1)
+
+
+def _rate(t_s, temp_c):
+    """The temperature's rate of change on time-ordered rows (``temperature_rate``), or None."""
+    if t_s is None or temp_c is None or len(t_s) < 3 or not np.all(np.isfinite(temp_c)):
+        return None
+    return temperature_rate(t_s, temp_c)
 
 
 def _ref(temp_c) -> float:
@@ -191,7 +208,9 @@ def gyro_problem(
     uniq = list(dict.fromkeys(pb))
     multi = len(uniq) > 1
     groups = time_blocks(tb)  # held-out time blocks: a position out would leave G unidentified
-    cond = Conditions(t_s=tb, temp_c=Tb, temp_ref_c=_ref(Tb), t_ref_s=float(tb.mean()), f_mps2=fb)
+    cond = Conditions(
+        t_s=tb, temp_c=Tb, temp_rate_c_s=_rate(tb, Tb), temp_ref_c=_ref(Tb), t_ref_s=float(tb.mean()), f_mps2=fb
+    )
 
     def residual(p):
         omega = Eb
@@ -200,7 +219,7 @@ def gyro_problem(
         q = {k: v for k, v in p.items() if k != "wE"}
         return (gyro_model.forward(omega, q, cond) - wb).ravel()
 
-    cands = [_temp_candidate(Tb), _time_candidate(tb)]
+    cands = [_temp_candidate(Tb, rate=cond.temp_rate_c_s), _time_candidate(tb)]
     if fb is None:
         cands.append(Candidate("g_sensitivity", reason="no accelerometer: the specific force is unknown"))
     elif not multi:
@@ -325,6 +344,7 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     cond = Conditions(
         t_s=t,
         temp_c=T,
+        temp_rate_c_s=_rate(t, T),
         temp_ref_c=_ref(T),
         t_ref_s=float(np.mean(t)) if t is not None else 0.0,
         omega_body_rad_s=W,
@@ -336,7 +356,7 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     def residual(p):
         return (ldv_model.forward(v, p, cond) - y).ravel()
 
-    cands = [_temp_candidate(T), _time_candidate(t)]
+    cands = [_temp_candidate(T, rate=cond.temp_rate_c_s), _time_candidate(t)]
     if t is None:
         cands.append(Candidate("time_delay", reason="no time column: a delay cannot be measured"))
     else:
@@ -449,6 +469,7 @@ def tabletop_problem(
     placement_sigma_rad,
     t_s=None,
     temp_c=None,
+    temp_rate_c_s=None,
     noise_known=True,
     se=None,
     sub=None,
@@ -475,7 +496,13 @@ def tabletop_problem(
     E = [perp_basis(np.asarray(directions[k], float)) for k in known]
     T = np.asarray(temp_c, float) if temp_c is not None else None
     t = np.asarray(t_s, float) if t_s is not None else None
-    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=float(np.mean(t)) if t is not None else 0.0)
+    cond = Conditions(
+        t_s=t,
+        temp_c=T,
+        temp_rate_c_s=None if T is None or temp_rate_c_s is None else np.nan_to_num(np.asarray(temp_rate_c_s, float)),
+        temp_ref_c=_ref(T),
+        t_ref_s=float(np.mean(t)) if t is not None else 0.0,
+    )
     Kinv = np.linalg.inv(K0)
     B0, M0 = accel_model.forward_to_p1({"K": K0, "b": b0})
 
@@ -487,7 +514,14 @@ def tabletop_problem(
         s_n = norm_sigma(Vn, np.asarray(sub["se"], float))
         Tn = np.asarray(sub["temp"], float) if sub.get("temp") is not None and T is not None else None
         tn = np.asarray(sub["t"], float)
-        cond_n = Conditions(t_s=tn, temp_c=Tn, temp_ref_c=cond.temp_ref_c, t_ref_s=cond.t_ref_s)
+        Rn = sub.get("temp_rate") if Tn is not None else None
+        cond_n = Conditions(
+            t_s=tn,
+            temp_c=Tn,
+            temp_rate_c_s=None if Rn is None else np.nan_to_num(np.asarray(Rn, float)),
+            temp_ref_c=cond.temp_ref_c,
+            t_ref_s=cond.t_ref_s,
+        )
         pos_n = np.asarray(sub["pos"], int)
         part = np.asarray(sub["part"], int)
         parts = int(part.max()) + 1
@@ -519,7 +553,7 @@ def tabletop_problem(
     freeK = np.ones((3, 3), bool) if table else np.triu(np.ones((3, 3), bool))
     K0 = np.asarray(K0, float) if table else np.triu(np.asarray(K0, float))
     cands = [
-        _temp_candidate(T),
+        _temp_candidate(T, rate=cond_n.temp_rate_c_s if cond_n.temp_rate_c_s is not None else cond.temp_rate_c_s),
         _time_candidate(t),
         Candidate("quadratic", {"D": np.zeros(3)}),
         Candidate("scale_asymmetry", {"A": np.zeros(3)}),
@@ -821,7 +855,7 @@ def compass_problem(
     is_still = np.isin(starts, [i for i, _ in still]) & np.isin(starts + count.astype(int), [j for _, j in still])
     T = np.asarray(temp_c, float) if temp_c is not None else None
     tref = float(np.mean(t))
-    cond = Conditions(t_s=t, temp_c=T, temp_ref_c=_ref(T), t_ref_s=tref)
+    cond = Conditions(t_s=t, temp_c=T, temp_rate_c_s=_rate(t, T), temp_ref_c=_ref(T), t_ref_s=tref)
     t_all, y_all, T_all = t, y, T
 
     def block_mean(x):
@@ -839,7 +873,7 @@ def compass_problem(
         Tq = np.asarray(dip_blocks["temp"], float) if dip_blocks.get("temp") is not None else None
         q_starts = np.asarray(dip_blocks["starts"], int)
         q_count = np.diff(np.r_[q_starts, len(tq)]).astype(float)
-        cond_q = Conditions(t_s=tq, temp_c=Tq, temp_ref_c=cond.temp_ref_c, t_ref_s=tref)
+        cond_q = Conditions(t_s=tq, temp_c=Tq, temp_rate_c_s=_rate(tq, Tq), temp_ref_c=cond.temp_ref_c, t_ref_s=tref)
         shrink = 1.0 - min(float(dip_blocks.get("rel_var", 0.0)), 0.5)
 
         def dips(p):
@@ -915,7 +949,7 @@ def compass_problem(
     g_dip = time_blocks(np.concatenate([t, dip_t]))[len(t) :] if have_dip else np.zeros(0, int)
     dur = float(t.max() - t.min())
     cands = [
-        _temp_candidate(T),
+        _temp_candidate(T, rate=cond.temp_rate_c_s),
         _time_candidate(t),
         Candidate("mag_accel_misalignment", {"rho": np.zeros(3)}, folds="dip")
         if have_dip

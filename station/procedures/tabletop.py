@@ -482,13 +482,16 @@ def diagnosis_input(
     if sum(d is not None for d in dirs) < 3:
         B, M = T.to_upper(B, M)
     fw = accel_model.p1_to_forward(B, M)
-    t_mean, temp_mean = None, None
+    t_mean, temp_mean, rate_mean = None, None, None
     temp = _col(capture, "temp_c")
     if capture.is_time_series:
         t = _col(capture, "t")
         t_mean = np.array([0.5 * (p.t_start_s + p.t_stop_s) for p in positions])
         if temp is not None:
-            temp_mean = np.array([np.nanmean(temp[(t >= p.t_start_s) & (t <= p.t_stop_s)]) for p in positions])
+            inside = [(t >= p.t_start_s) & (t <= p.t_stop_s) for p in positions]
+            temp_mean = np.array([np.nanmean(temp[i]) for i in inside])
+            rate = _temp_rate(capture)
+            rate_mean = None if rate is None else np.array([np.nanmean(rate[i]) for i in inside])
     else:
         keep = [k for k, p in enumerate(prep.positions) if any(p is q for q in positions)]
         temp_mean = fill_missing(temp, _col(capture, "t"))[keep] if temp is not None else None
@@ -508,6 +511,7 @@ def diagnosis_input(
         placement_sigma_rad=[p.placement_sigma_rad for p in positions],
         t_s=t_mean,
         temp_c=temp_mean,
+        temp_rate_c_s=rate_mean,
         noise_known=noise_known,
         se=se,
         sub=_sub_holds(capture, positions, bad) if capture.is_time_series else None,
@@ -536,7 +540,8 @@ def _sub_holds(capture, positions, bad=None) -> dict | None:
     t = _col(capture, "t")
     a = _accel(capture)
     temp = _col(capture, "temp_c")
-    out: dict[str, list] = {"V": [], "se": [], "pos": [], "part": [], "t": [], "temp": []}
+    rate = _temp_rate(capture)
+    out: dict[str, list] = {"V": [], "se": [], "pos": [], "part": [], "t": [], "temp": [], "temp_rate": []}
     # coarse stamps (whole seconds): a chunk's median step is 0; the rows over the capture's span give it
     step_all = span_step_s(t) or 1.0
     for k, p in enumerate(positions):
@@ -557,10 +562,29 @@ def _sub_holds(capture, positions, bad=None) -> dict | None:
             out["part"].append(j)
             out["t"].append(float(np.mean(t[chunk])))
             out["temp"].append(float(np.nanmean(temp[chunk])) if temp is not None else np.nan)
+            out["temp_rate"].append(float(np.nanmean(rate[chunk])) if rate is not None else np.nan)
     res = {k: np.array(v) for k, v in out.items()}
     if temp is None:
         res["temp"] = None
+    if rate is None:
+        res["temp_rate"] = None
     return res
+
+
+def _temp_rate(capture) -> np.ndarray | None:
+    """dT/dt per row of a time series (``solvers.models.temperature_rate`` over the rows with a
+    temperature; NaN on the others), None without a temperature."""
+    from solvers.models import temperature_rate
+
+    temp, t = _col(capture, "temp_c"), _col(capture, "t")
+    if temp is None or t is None:
+        return None
+    ok = np.isfinite(temp) & np.isfinite(t)
+    if ok.sum() < 3:
+        return None
+    out = np.full(len(temp), np.nan)
+    out[ok] = temperature_rate(t[ok], temp[ok])
+    return out
 
 
 def _moved_positions(capture) -> list[dict]:
