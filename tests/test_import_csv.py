@@ -429,3 +429,56 @@ def test_a_rate_no_capture_can_hold_is_refused_as_the_option(tmp_path, rate, nee
     res = run_station(command, src, "--procedure", "accel-tabletop", "--unit", "accel=m/s^2", "--rate", rate, *args)
     assert_one_line_refusal(res, needle)
     assert "o.csv" not in res.stderr and "metadata" not in res.stderr and not out.exists()
+
+
+@pytest.mark.parametrize("column, t_values", [("time_ms", np.arange(200) * 10.0), ("stamp", np.arange(200) * 10.0)])
+def test_a_time_column_in_ms_read_as_seconds_is_warned_about(tmp_path, column, t_values):
+    """A bench logger's time in ms at 100 Hz, imported without ``--unit t=ms``: read as seconds it
+    is a 0.1 Hz record of 33 minutes, which P4 then calibrated without a word. The import still
+    writes what it was told, and says on stderr which unit the column looks like."""
+    rng = np.random.default_rng(4)
+    src = tmp_path / "logger.csv"
+    rows = [f"{column},gx,gy,gz,ax,ay,az"]
+    rows += [",".join(repr(float(x)) for x in [t, *rng.normal(0, 1e-3, 3), 0.0, 0.0, 9.81]) for t in t_values]
+    src.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "o.csv"
+    res = run_station(
+        "import",
+        src,
+        "--procedure",
+        "gyro-drift",
+        "--out",
+        out,
+        "--map",
+        f"t={column},gx=gx,gy=gy,gz=gz,ax=ax,ay=ay,az=az",
+        "--unit",
+        "gyro=rad/s,accel=m/s^2",
+    )
+    assert res.returncode == 0, res.stderr
+    assert "--unit t=ms" in res.stderr and repr(column) in res.stderr, res.stderr
+    assert read_capture(out).columns["t"][-1] == pytest.approx(1990.0)  # what it was told: seconds
+
+
+def test_a_time_column_in_seconds_or_with_its_unit_given_is_not_warned_about(tmp_path):
+    rng = np.random.default_rng(5)
+    src = tmp_path / "logger.csv"
+    rows = ["time_ms,t_s,gx,gy,gz,ax,ay,az"]
+    rows += [
+        ",".join(repr(float(x)) for x in [10.0 * i, 0.01 * i, *rng.normal(0, 1e-3, 3), 0.0, 0.0, 9.81])
+        for i in range(200)
+    ]
+    src.write_text("\n".join(rows) + "\n")
+    common = ("--procedure", "gyro-drift", "--unit")
+    for t_map, units in (("t=t_s", "gyro=rad/s,accel=m/s^2"), ("t=time_ms", "gyro=rad/s,accel=m/s^2,t=ms")):
+        res = run_station(
+            "import",
+            src,
+            *common,
+            units,
+            "--out",
+            tmp_path / "o.csv",
+            "--map",
+            f"{t_map},gx=gx,gy=gy,gz=gz,ax=ax,ay=ay,az=az",
+        )
+        assert res.returncode == 0, res.stderr
+        assert "--unit t=" not in res.stderr, res.stderr

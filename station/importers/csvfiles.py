@@ -373,6 +373,25 @@ def _unwrapped(t: np.ndarray, linenos: np.ndarray, warnings: list[str]) -> np.nd
     return t
 
 
+# a time column's name that says its unit (time_ms, t_us, timestamp_ns, millis …)
+_NAMED_TIME_UNIT = re.compile(r"(?:^|[^a-z])(ms|msec|millis|us|usec|micros|ns|nsec|nanos)(?:$|[^a-z])", re.IGNORECASE)
+
+
+def _seconds_said(column: str, t_s: np.ndarray, warnings: list[str]) -> None:
+    """A warning where a time column read in seconds (no ``--unit t=``) looks like another unit:
+    its name says one (``time_ms``), or its median step is over a second (a bench logger in ms at
+    100 Hz read as 0.1 Hz, which a calibration would take as a 3-hour record)."""
+    step = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 0.0
+    named = _NAMED_TIME_UNIT.search(column)
+    if not named and not (len(t_s) >= 20 and step > 1.0):
+        return
+    why = f"its name says {named.group(1)}" if named else f"a median step of {step:g} s ({1 / step:.3g} Hz)"
+    warnings.append(
+        f"the time column {column!r} is read in seconds, but {why}: if it is in ms, us or ns, "
+        "give --unit t=ms (or t=us, t=ns)"
+    )
+
+
 def _time_seconds(path, t, linenos: np.ndarray, factor: float, integer: bool, warnings: list[str]) -> np.ndarray:
     """Seconds from the first row; t must not go backwards (the line that does is named); a
     wrapping counter (plain CSV) is unwrapped, with a warning (:func:`_unwrapped`)."""
@@ -649,6 +668,8 @@ def read_plain(
     _cut_last_row(path, linenos, warnings)
     if "t" in values:
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
+        if "t" not in units:
+            _seconds_said(str(mapping.get("t", "t")), t_s, warnings)
     else:
         t_s = np.arange(len(linenos), dtype=np.float64) / rate_hz
         if len(t_s) and not t_s[-1] <= MAX_ABS:  # the time a capture can hold (station.capture.MAX_ABS)
