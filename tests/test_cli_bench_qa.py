@@ -205,3 +205,27 @@ def test_every_procedure_names_its_simulator():
     for p in registry.PROCEDURES:
         function = getattr(solvers.simulate, p.simulator)
         assert solvers.simulate._SIMULATORS[p.name] is function, p.name
+
+
+def test_a_centrifuge_table_in_the_wrong_accel_unit_is_warned_about(tmp_path):
+    """A P2 table in g declared `accel_unit: m/s^2` (or mg) calibrated with no word: scale factors
+    of 1.25 "m/s² per g" where an accelerometer in m/s² reads 9.8 per g. Now the text warns and
+    names the unit the outputs look like; the same table declared in g gets no such warning."""
+    from solvers.simulate import simulate
+    from station.capture import write_capture
+    from tests.station_run import capture_of
+
+    cap = capture_of(simulate("accel-centrifuge", seed=3))
+    assert cap.meta["accel_unit"] == "g"
+    right = tmp_path / "right.csv"
+    write_capture(str(right), cap)
+    for unit in ("m/s^2", "mg"):
+        cap.meta["accel_unit"] = unit
+        wrong = tmp_path / "wrong.csv"
+        write_capture(str(wrong), cap)
+        res = run_station("calibrate", wrong)
+        assert res.returncode == 0, res.stderr
+        line = next((x for x in res.stdout.splitlines() if "accel_unit right" in x), "")
+        assert "look like g" in line, (unit, res.stdout)
+    res = run_station("calibrate", right)
+    assert res.returncode == 0 and "accel_unit right" not in res.stdout, res.stdout

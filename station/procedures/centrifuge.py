@@ -120,6 +120,31 @@ def prepare(capture) -> Prepared:
     return Prepared(N, w, labels, sigma_N, lines, R, g, warnings)
 
 
+# An accelerometer's scale in a physical unit is 1 per that unit within a few per cent: beyond this
+# factor the unit is said wrongly (g data declared m/s² gives S of 0.1 m/s² per g)
+UNIT_MISTAKE_FACTOR = 3.0
+
+
+def _unit_mistake(accel_unit, S, g_mps2: float) -> str | None:
+    """A warning when the fitted scale factors ``S`` (unit per g), in the physical ``accel_unit``
+    the capture declares, are more than UNIT_MISTAKE_FACTOR from what that unit reads per g; it
+    names the unit that would read closest."""
+    from solvers.units import ACCEL_UNITS
+
+    factor = ACCEL_UNITS.get(accel_unit) if accel_unit else None
+    if not factor or S is None:
+        return None
+    size = float(np.mean(np.abs(np.asarray(S, float))))
+    ratio = size / (g_mps2 / factor)
+    if not size > 0 or 1 / UNIT_MISTAKE_FACTOR <= ratio <= UNIT_MISTAKE_FACTOR:
+        return None
+    best = min(("g", "m/s^2", "mg"), key=lambda u: abs(math.log(size * ACCEL_UNITS[u] / g_mps2)))
+    return (
+        f"the scale factors read {size:.4g} {accel_unit} per g, {ratio:.3g}x the {g_mps2 / factor:.4g} an "
+        f"accelerometer in {accel_unit} reads: is accel_unit right? (the outputs look like {best})"
+    )
+
+
 def calibrate(capture, method: str | None = None, *, prepared: Prepared | None = None) -> dict:
     """The calibrate.md result for an ``accel-centrifuge`` capture."""
     key = method or "exact"
@@ -196,6 +221,9 @@ def calibrate(capture, method: str | None = None, *, prepared: Prepared | None =
             "coefficients without weights; its uncertainties are propagated from that fit"
         )
     params = {k: v for k, v in res.params.items()}
+    mistake = _unit_mistake(capture.meta.get("accel_unit"), params.get("S"), g)
+    if mistake:
+        warnings.append(mistake)
     result = {
         "procedure": "accel-centrifuge",
         "device": capture.meta.get("device"),
