@@ -168,7 +168,8 @@ def test_quit_during_a_run_asks_first_and_counters_start_with_the_run(tmp_path):
             # the footer is the question's (it showed the procedure's s Skip r Redo..., dead under the box)
             await wait_for(pilot, lambda: screen_lines(app)[-1].split() == ["y", "Yes", "n", "No"])
             await pilot.press("n")
-            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+            # mounted: its on_mount has run (leaving the app before then tears it down mid-mount)
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen" and app.screen.is_mounted)
             running = app.is_running
             await pilot.press("ctrl+q")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
@@ -194,7 +195,8 @@ def test_connect_remembers_the_lab_and_writes_it_into_the_capture(tmp_path):
             scr.query_one("#serial").value = "IMU-3"
             app.session.source = SimSource(seed=1, speed=1.0)
             await pilot.press("f5")
-            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
+            # mounted: its on_mount has run (leaving the app before then tears it down mid-mount)
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen" and app.screen.is_mounted)
             return app.session.extra
 
     extra = asyncio.run(first())
