@@ -59,6 +59,7 @@ THRESHOLDS = {
 # GENERIC_MIN_GROUPS[procedure]: the independent groups of rows (P1 time series: holds) a generic
 # term must leave free beside its model (engine.independent_groups); elsewhere engine.MIN_DOF
 GENERIC_MIN_GROUPS = {"accel-tabletop": 1.0}  # P1 nulls 460000+: docs/benchmarks.md, "P1 generic terms on few holds"
+GYRO_SHARED_BLOCKS = 20  # P4: stretches of time whose block means share the bias instability
 GENERIC_SCALES = {"accel-tabletop": 1.0, "gyro-drift": 1.1, "accel-centrifuge": 1.5, "compass": 0.75, "ldv": 1.5}
 # KIND_THRESHOLDS[procedure][row kind]: F of the exact F test on that kind's rows alone, for a
 # candidate that moves only them (engine.kind_quantile), measured on the independent
@@ -291,6 +292,10 @@ def gyro_problem(
     prob.generic = [(cond, {"time": tb, "temperature": Tb})]
     prob.generic_scale = GENERIC_SCALES["gyro-drift"]
     prob.cand_thresholds = dict(CAND_THRESHOLDS.get("gyro-drift", {}))
+    # the block means of one stretch of time share its bias instability: time-like candidates are
+    # tested against the scatter of those stretches' means about the model, not the blocks' white noise
+    prob.shared_noise = np.repeat(time_blocks(tb, GYRO_SHARED_BLOCKS) * 3, 3) + np.tile(np.arange(3), len(idx))
+    prob.shared_first = True
     return prob
 
 
