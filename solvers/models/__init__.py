@@ -105,7 +105,7 @@ def temperature_rate(t_s, temp_c, half_window_s: float | None = None) -> np.ndar
     window holds one time. ``None``: a window per row, the shortest that holds the slope's noise
     (from the column's noise in successive differences, or its rounding) to 2 % of the typical
     rate and, in a column rounded to steps of q, spans 3 q of change either side at the local
-    rate, within 60 s: a lag of tens of seconds needs the rate on a few seconds where the
+    rate, but at most RATE_CHANGE_FRACTION of the time that rate takes to change, within 60 s: a lag of tens of seconds needs the rate on a few seconds where the
     temperature moves fast, and a quantised column moves one step in 10 s where it is slow."""
     t = np.asarray(t_s, dtype=float)
     T = np.asarray(temp_c, dtype=float)
@@ -124,7 +124,8 @@ def temperature_rate(t_s, temp_c, half_window_s: float | None = None) -> np.ndar
     steps = dT[dT > 0]
     q = float(steps.min()) if steps.size else 0.0
     res = max(float(np.median(dT)) / 0.6745 / math.sqrt(2.0), q / math.sqrt(12.0))  # noise or rounding
-    coarse = np.abs(_slopes(t, T, np.full(t.size, 30.0)))
+    slope_30s = _slopes(t, T, np.full(t.size, 30.0))
+    coarse = np.abs(slope_30s)
     typical = float(np.percentile(coarse, 75))
     if not (res > 0 and typical > 0 and dt > 0):
         return _slopes(t, T, np.full(t.size, 2.0 * dt))
@@ -134,7 +135,7 @@ def temperature_rate(t_s, temp_c, half_window_s: float | None = None) -> np.ndar
     # and short beside the time the rate takes to change (a lag's transient): a window's slope
     # is exact for a quadratic only where the window is whole, and a rate that doubles within
     # the window is not one
-    change = np.abs(_slopes(t, _slopes(t, T, np.full(t.size, 30.0)), np.full(t.size, 30.0)))
+    change = np.abs(_slopes(t, slope_30s, np.full(t.size, 30.0)))
     w = np.minimum(w, RATE_CHANGE_FRACTION * coarse / np.maximum(change, 1e-300))
     return _slopes(t, T, np.clip(w, 2.0 * dt, RATE_MAX_HALF_WINDOW_S))
 

@@ -484,13 +484,13 @@ def diagnosis_input(
     fw = accel_model.p1_to_forward(B, M)
     t_mean, temp_mean, rate_mean = None, None, None
     temp = _col(capture, "temp_c")
+    rate = _temp_rate(capture) if capture.is_time_series else None
     if capture.is_time_series:
         t = _col(capture, "t")
         t_mean = np.array([0.5 * (p.t_start_s + p.t_stop_s) for p in positions])
         if temp is not None:
             inside = [(t >= p.t_start_s) & (t <= p.t_stop_s) for p in positions]
             temp_mean = np.array([np.nanmean(temp[i]) for i in inside])
-            rate = _temp_rate(capture)
             rate_mean = None if rate is None else np.array([np.nanmean(rate[i]) for i in inside])
     else:
         keep = [k for k, p in enumerate(prep.positions) if any(p is q for q in positions)]
@@ -514,7 +514,7 @@ def diagnosis_input(
         temp_rate_c_s=rate_mean,
         noise_known=noise_known,
         se=se,
-        sub=_sub_holds(capture, positions, bad) if capture.is_time_series else None,
+        sub=_sub_holds(capture, positions, bad, rate) if capture.is_time_series else None,
     )
     prob.screened = screened
     drivers = {"position": [p.label for p in positions], "time_s": t_mean, "temp_c": temp_mean}
@@ -532,15 +532,15 @@ SUB_HOLDS = 4  # parts a hold is cut into for diagnosis (time-resolved evidence)
 MIN_SUB_SAMPLES = 25  # a hold shorter than SUB_HOLDS × this stays one row
 
 
-def _sub_holds(capture, positions, bad=None) -> dict | None:
+def _sub_holds(capture, positions, bad=None, rate=None) -> dict | None:
     """Each position's samples cut into SUB_HOLDS consecutive parts: their means and standard
-    errors from the same Allan model the calibration uses (solvers.allan.mean_standard_error)."""
+    errors from the same Allan model the calibration uses (solvers.allan.mean_standard_error);
+    ``rate`` (:func:`_temp_rate`, per capture row) is averaged over each part as the temperature is."""
     from solvers.allan import mean_standard_error
 
     t = _col(capture, "t")
     a = _accel(capture)
     temp = _col(capture, "temp_c")
-    rate = _temp_rate(capture)
     out: dict[str, list] = {"V": [], "se": [], "pos": [], "part": [], "t": [], "temp": [], "temp_rate": []}
     # coarse stamps (whole seconds): a chunk's median step is 0; the rows over the capture's span give it
     step_all = span_step_s(t) or 1.0
