@@ -146,6 +146,11 @@ class Problem:
     # the auxiliary rows' noise scale (variance components) measured again after each selection,
     # against the refitted extended model, instead of once on the baseline (compass: measured there)
     aux_scale_refit: bool = False
+    # per row: its time (s) where the rows of each ``series`` share a slow wander (bias instability):
+    # a candidate's deviance is then taken net of a white + Gauss–Markov noise fitted by REML on
+    # the residual its own model leaves (``wander.WanderModel``); None: no such model
+    wander_t_s: np.ndarray | None = None
+    _wander: object = None
 
 
 @dataclass
@@ -883,6 +888,7 @@ class _Round:
         self.GAf = [A[i].T @ A[i] for i in self.fold_ids]
         self.bAf = [A[i].T @ r0[i] for i in self.fold_ids]
         self.QA = _orth(A)
+        self.wander0: dict = {}  # what the slow-noise test keeps of this model (``WanderModel.lr``)
 
     def _held_out(self, J):
         """Full-fit step δ, residual e and held-out residuals (weighted) of ``r0 + [A J] δ``."""
@@ -1075,6 +1081,11 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
     infl = serial_inflation(e, sig, problem.series)
     if shared and problem.shared_noise is not None:
         infl = max(infl, shared_inflation(problem, _orth(np.hstack([A, cc.J])), e, sig))
+    wm = wander_model(problem)
+    if wm is not None and k > 0 and D > 0:
+        T = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0)
+        if T is not None:
+            infl = max(infl, D / max(T, 1e-9))
     ev = _Eval(cc, db, cvc, sig, int(k), D, infl, cv_ref=cv_ref)
     t = _only_kind(problem, cc.J, types)
     if t is not None and k > 0:
@@ -1088,6 +1099,17 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
         ev.D = ev.n_kind * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
         ev.infl = serial_inflation(np.where(sel, e, 0.0), np.where(sel, sig, 0.0), problem.series)
     return ev
+
+
+def wander_model(problem: Problem):
+    """The problem's slow-noise model (made once), or None."""
+    if problem.wander_t_s is None or problem.series is None:
+        return None
+    if problem._wander is None:
+        from solvers.diagnose.wander import WanderModel
+
+        problem._wander = WanderModel(problem.wander_t_s, problem.series, 1.0 / np.asarray(problem.sigma, float))
+    return problem._wander
 
 
 def _only_kind(problem, J: np.ndarray, types) -> int | None:

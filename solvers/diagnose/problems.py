@@ -296,6 +296,7 @@ def gyro_problem(
     # tested against the scatter of those stretches' means about the model, not the blocks' white noise
     prob.shared_noise = np.repeat(time_blocks(tb, GYRO_SHARED_BLOCKS) * 3, 3) + np.tile(np.arange(3), len(idx))
     prob.shared_first = True
+    prob.wander_t_s = np.repeat(tb, 3)  # at most max_rows blocks per axis
     return prob
 
 

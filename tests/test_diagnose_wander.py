@@ -1,0 +1,87 @@
+"""The slow-noise model of time-ordered rows (``solvers.diagnose.wander``): white noise plus a
+first-order Gauss–Markov wander, fitted by REML, and the likelihood ratio of a candidate with
+the wander profiled out.
+
+Data: unit white noise on 300 rows 2 s apart (a 600 s record), plus a Gauss–Markov series of
+variance λ and correlation time τ drawn here by its exact discretisation; a line in time is the
+candidate. Known answers: the generalised-least-squares variance of the line's slope under the
+true covariance (computed here from it), so a line sized at 10σ of that variance must be found,
+and a wander alone must not be read as a line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from solvers.diagnose.wander import EVIDENT_LR, WanderModel
+
+N = 300
+T_S = np.arange(N) * 2.0
+ONE = np.ones((N, 1))
+LINE = ((T_S - T_S.mean()) / T_S.std())[:, None]
+SEEDS = range(8)
+
+
+def gauss_markov(rng, tau_s):
+    x = np.empty(N)
+    x[0] = rng.standard_normal()
+    a = np.exp(-np.diff(T_S) / tau_s)
+    for i in range(1, N):
+        x[i] = a[i - 1] * x[i - 1] + np.sqrt(1 - a[i - 1] ** 2) * rng.standard_normal()
+    return x
+
+
+def record(seed, lam, tau_s, slope=0.0):
+    rng = np.random.default_rng(seed)
+    y = rng.standard_normal(N) + slope * LINE[:, 0]
+    return y + np.sqrt(lam) * gauss_markov(rng, tau_s) if lam > 0 else y
+
+
+def residual(X, y):
+    return y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+
+
+def line_tests(y, wm):
+    """(white-noise deviance, profiled likelihood ratio or None) of the line beside a constant."""
+    e0, e1 = residual(ONE, y), residual(np.hstack([ONE, LINE]), y)
+    return N * np.log((e0 @ e0) / (e1 @ e1)), wm.lr(ONE, LINE, e0, e1, {})
+
+
+def gls_slope_sd(lam, tau_s):
+    C = np.eye(N) + lam * np.exp(-np.abs(T_S[:, None] - T_S[None, :]) / tau_s)
+    Z = np.hstack([ONE, LINE])
+    return float(np.sqrt(np.linalg.inv(Z.T @ np.linalg.solve(C, Z))[1, 1]))
+
+
+@pytest.fixture(scope="module")
+def wm():
+    return WanderModel(T_S, np.zeros(N, int), np.ones(N))
+
+
+def test_white_noise_shows_no_wander_and_keeps_the_white_deviance(wm):
+    for seed in SEEDS:
+        y = record(seed, 0.0, 1.0, slope=0.3)
+        both = np.hstack([ONE, LINE])
+        assert wm.fit(both, residual(both, y))[0][3] < EVIDENT_LR  # the line's own residual is white
+        D, T = line_tests(y, wm)
+        assert D > 5 and T is None  # the line is tested as before, against white noise
+
+
+def test_a_wander_is_seen_and_its_correlation_time_measured(wm):
+    fits = [wm.fit(ONE, residual(ONE, record(seed, 1.0, 60.0)))[0] for seed in SEEDS]
+    assert all(f[3] > EVIDENT_LR for f in fits)
+    assert 20 < np.median([f[1] for f in fits]) < 200
+    assert 0.3 < np.median([f[0] for f in fits]) < 3.0
+
+
+def test_a_wander_alone_is_not_a_line(wm):
+    D, T = zip(*(line_tests(record(seed, 1.0, 60.0), wm) for seed in SEEDS))
+    assert np.mean(D) > 20  # against white noise, the wander looks like a drift
+    assert all(t is not None for t in T)
+    assert np.mean(T) < 4 and max(T) < 10.8  # χ²₁: mean 1, 0.1 % above 10.8
+
+
+def test_a_line_at_ten_sigma_of_the_true_covariance_is_found(wm):
+    slope = 10 * gls_slope_sd(1.0, 60.0)
+    T = [line_tests(record(100 + seed, 1.0, 60.0, slope), wm)[1] for seed in SEEDS]
+    assert sum(t is not None and t > 10.8 for t in T) >= 7, T
