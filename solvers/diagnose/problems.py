@@ -395,6 +395,8 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     if T is not None:
         prob.drivers["temperature [°C]"] = np.repeat(T, 3)
     prob.series = np.tile(np.arange(3), len(v))
+    if t is not None:
+        prob.wander_t_s = np.repeat(t, 3)
     # the baseline has no constant: a drift or a temperature bias from a zero outside the capture
     # (power-up, 25 °C) brings its mean with it, which the offset takes; both named, they are tied
     prob.intercept_of = {"offset": {"time_drift": t, "temperature_bias": T}}

@@ -17,13 +17,15 @@ wander can.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 TAU_PER_SPAN = (0.02, 3.0)  # correlation times scanned, as fractions of the series' span
 TAU_STEPS = 10
 LAMBDA_GRID = np.concatenate([[0.0], np.logspace(-4, 3, 36)])  # wander variance / white variance per row
 MIN_ROWS = 16  # a shorter series is left white
-MAX_ROWS = 800  # a longer one too (dense eigenvectors: memory and time go as rows² and rows³)
+MAX_BINS = 400  # a longer series is taken in this many bins (dense eigenvectors: memory rows², time rows³)
 # twice the REML log-likelihood ratio of the wander over white noise (λ, τ: two parameters, τ
 # undefined under white) above which a series is taken to wander: white nulls of the independent
 # generator stay below 2.5, its 3.5σ effects below 14; the blind generator's bias instability 20-580
@@ -32,7 +34,9 @@ EVIDENT_LR = 16.0
 
 class WanderModel:
     """Per series (``series`` ids ≥ 0, time ``t_s`` per row, weights ``w``): the eigenvectors of
-    ``K_τ`` on a grid of ``τ``, computed once."""
+    ``K_τ`` on a grid of ``τ``, computed once. A series of more than ``MAX_BINS`` rows is taken in
+    ``MAX_BINS`` bins of consecutive rows, the wander constant within each: its likelihood is then
+    the white noise's within the bins times the wander's on the bins' means (``_part_loglik``)."""
 
     def __init__(self, t_s: np.ndarray, series: np.ndarray, w: np.ndarray):
         t_s, series, w = np.asarray(t_s, float), np.asarray(series), np.asarray(w, float)
@@ -41,52 +45,37 @@ class WanderModel:
             if sid < 0:
                 continue
             idx = np.flatnonzero(series == sid)
-            if not MIN_ROWS <= idx.size <= MAX_ROWS:
+            if idx.size < MIN_ROWS:
                 continue
+            idx = idx[np.argsort(t_s[idx], kind="stable")]
             t = t_s[idx]
             span = float(t.max() - t.min())
             if span <= 0:
                 continue
+            nb = min(idx.size, MAX_BINS)
+            bins = (np.arange(idx.size) * nb) // idx.size
+            cnt = np.bincount(bins, minlength=nb).astype(float)
             ww = w[idx] / float(np.mean(w[idx]))
-            dt = np.abs(t[:, None] - t[None, :])
+            a = np.bincount(bins, weights=ww, minlength=nb) / np.sqrt(cnt)  # a bin's coordinate of a constant
+            tb = np.bincount(bins, weights=t, minlength=nb) / cnt
+            dt = np.abs(tb[:, None] - tb[None, :])
             eig = []
             for tau in span * np.geomspace(*TAU_PER_SPAN, TAU_STEPS):
-                lam, V = np.linalg.eigh(ww[:, None] * np.exp(-dt / tau) * ww[None, :])
+                lam, V = np.linalg.eigh(a[:, None] * np.exp(-dt / tau) * a[None, :])
                 eig.append((float(tau), np.maximum(lam, 0.0), V))
-            self.parts.append((idx, eig))
+            self.parts.append(_Part(idx, bins, np.sqrt(cnt), eig))
 
     def fit(self, X: np.ndarray, e: np.ndarray) -> list[tuple[float, float, float, float]]:
         """Per series: (λ, τ_s, s², LR) maximising the REML likelihood of residual ``e`` (weighted
         rows) of a model with columns ``X``; LR: twice its log-likelihood over white noise's (λ = 0)."""
         out = []
-        for idx, eig in self.parts:
-            Xm, em = _cols(X[idx]), e[idx]
-            n, p = Xm.shape
-            best = (-np.inf, 0.0, eig[0][0], 1.0)
-            white = None
-            for tau, lam, V in eig:
-                Xt, et = V.T @ Xm, V.T @ em
-                W = 1.0 / (1.0 + LAMBDA_GRID[:, None] * lam[None, :])  # (L, n)
-                M = np.einsum("ln,np,nq->lpq", W, Xt, Xt)
-                b = np.einsum("ln,np,n->lp", W, Xt, et)
-                q = W @ (et * et)
-                if p:
-                    sol = np.linalg.solve(M + 1e-12 * np.eye(p), b[..., None])[..., 0]
-                    rss = q - np.einsum("lp,lp->l", b, sol)
-                    logdet_m = np.linalg.slogdet(M)[1]
-                else:
-                    rss, logdet_m = q, np.zeros(len(LAMBDA_GRID))
-                rss = np.maximum(rss, 1e-300)
-                ll = -0.5 * (
-                    np.sum(np.log1p(LAMBDA_GRID[:, None] * lam[None, :]), axis=1)
-                    + logdet_m
-                    + (n - p) * np.log(rss / (n - p))
-                )
-                i = int(np.argmax(ll))
-                white = float(ll[0])  # λ = 0: the same at every τ
-                if ll[i] > best[0]:
-                    best = (float(ll[i]), float(LAMBDA_GRID[i]), tau, float(rss[i] / (n - p)))
-            out.append(best[1:] + (2.0 * (best[0] - white),))
+        for part in self.parts:
+            ll, rss, dof = _part_loglik(part, X, e[:, None], reml=True)  # (τ, λ, 1)
+            i, j = np.unravel_index(int(np.argmax(ll[..., 0])), ll.shape[:2])
+            best = float(ll[i, j, 0])
+            out.append(
+                (float(LAMBDA_GRID[j]), part.eig[i][0], float(rss[i, j, 0] / dof), 2.0 * (best - float(ll[0, 0, 0])))
+            )
         return out
 
     def profile(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
@@ -94,24 +83,7 @@ class WanderModel:
         coefficients (GLS), of residual(s) ``E`` (weighted rows; one column per draw) of a model
         with columns ``X``: shape (series, draws)."""
         E = E.reshape(len(E), -1)
-        out = []
-        for idx, eig in self.parts:
-            Xm, Em = _cols(X[idx]), E[idx]
-            n, p = Xm.shape
-            best = np.full(Em.shape[1], -np.inf)
-            for _, lam, V in eig:
-                Xt, Et = V.T @ Xm, V.T @ Em
-                W = 1.0 / (1.0 + LAMBDA_GRID[:, None] * lam[None, :])  # (L, n)
-                rss = W @ (Et * Et)  # (L, B)
-                if p:
-                    M = np.einsum("ln,np,nq->lpq", W, Xt, Xt)
-                    b = np.einsum("ln,np,nb->lpb", W, Xt, Et)
-                    rss = rss - np.einsum("lpb,lpb->lb", b, np.linalg.solve(M + 1e-12 * np.eye(p), b))
-                logdet = np.sum(np.log1p(LAMBDA_GRID[:, None] * lam[None, :]), axis=1)
-                ll = -0.5 * (logdet[:, None] + n * np.log(np.maximum(rss, 1e-300) / n))
-                best = np.maximum(best, ll.max(axis=0))
-            out.append(best)
-        return np.asarray(out)
+        return np.asarray([_part_loglik(part, X, E, reml=False)[0].max(axis=(0, 1)) for part in self.parts])
 
     def lr(self, A: np.ndarray, J: np.ndarray, e0: np.ndarray, e1: np.ndarray, cache: dict) -> float | None:
         """The likelihood-ratio statistic of columns ``J`` beside ``A`` with the slow noise profiled
@@ -135,3 +107,50 @@ def _cols(X: np.ndarray) -> np.ndarray:
         return X
     U, s, _ = np.linalg.svd(X, full_matrices=False)
     return U[:, s > s[0] * 1e-9]
+
+
+@dataclass
+class _Part:
+    idx: np.ndarray  # the series' rows, in time order
+    bins: np.ndarray  # per row: its bin
+    root_cnt: np.ndarray  # per bin: √rows
+    eig: list  # per τ: (τ, eigenvalues, eigenvectors) of the bins' kernel
+
+
+def _part_loglik(part: _Part, X: np.ndarray, E: np.ndarray, reml: bool):
+    """(log-likelihood, weighted RSS, degrees of freedom) of residuals ``E`` (rows × draws) of a
+    model with columns ``X`` on one series, per τ and λ of the grid: shapes (τ, λ, draws). The
+    rows split into the bins' mean directions, where the wander lives, and what is within the
+    bins (white); the model's coefficients are fitted by GLS over both."""
+    Xm, Em = _cols(X[part.idx]), E[part.idx]
+    n, p = Xm.shape
+    nb = len(part.root_cnt)
+
+    def binned(Y):
+        out = np.zeros((nb, Y.shape[1]))
+        np.add.at(out, part.bins, Y)
+        return out / part.root_cnt[:, None]
+
+    Xb, Eb = binned(Xm), binned(Em)
+    Gw, gw = Xm.T @ Xm - Xb.T @ Xb, Xm.T @ Em - Xb.T @ Eb  # within the bins
+    qw = np.sum(Em * Em, axis=0) - np.sum(Eb * Eb, axis=0)
+    L = len(LAMBDA_GRID)
+    ll = np.empty((len(part.eig), L, Em.shape[1]))
+    rss_all = np.empty_like(ll)
+    for i, (_, lam, V) in enumerate(part.eig):
+        Xt, Et = V.T @ Xb, V.T @ Eb
+        W = 1.0 / (1.0 + LAMBDA_GRID[:, None] * lam[None, :])  # (λ, bins)
+        rss = qw[None, :] + W @ (Et * Et)
+        logdet = np.sum(np.log1p(LAMBDA_GRID[:, None] * lam[None, :]), axis=1)
+        logdet_m = np.zeros(L)
+        if p:
+            M = Gw[None] + np.einsum("ln,np,nq->lpq", W, Xt, Xt)
+            b = gw[None] + np.einsum("ln,np,nb->lpb", W, Xt, Et)
+            rss = rss - np.einsum("lpb,lpb->lb", b, np.linalg.solve(M + 1e-12 * np.eye(p), b))
+            if reml:
+                logdet_m = np.linalg.slogdet(M)[1]
+        rss = np.maximum(rss, 1e-300)
+        dof = n - p if reml else n
+        ll[i] = -0.5 * (logdet[:, None] + logdet_m[:, None] + dof * np.log(rss / dof))
+        rss_all[i] = rss
+    return ll, rss_all, (n - p if reml else n)
