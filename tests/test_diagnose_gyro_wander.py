@@ -17,6 +17,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from station_run import station_json
 
@@ -59,3 +60,22 @@ def test_an_effect_beside_the_wander_is_still_named(tmp_path, procedure, effect,
     blind_generator.generate(procedure, effect, seed, str(path))
     res = station_json("diagnose", path, "--json")
     assert effect in res["verdict"], res["verdict"]
+
+
+@pytest.mark.parametrize("procedure,seed,unit", [("gyro-drift", 560002, "deg_h"), ("ldv", 580002, "m/s")])
+def test_the_report_says_the_wander_it_sees(tmp_path, procedure, seed, unit):
+    """Residuals that stay structured name a bias instability with its size and correlation time,
+    each series within the factor a single record allows of the generator's own."""
+    import blind_generator
+
+    path = tmp_path / "capture.csv"
+    sc = blind_generator.generate(procedure, None, seed, str(path))
+    truth = sc["noise_deg_h"] if unit == "deg_h" else sc["noise"]
+    to_si = np.radians(1) / 3600 if unit == "deg_h" else 1.0
+    res = station_json("diagnose", path, "--json")
+    (q,) = [q for q in res["quality"] if q["kind"] == "residuals_not_white"]
+    assert "bias instability" in q["explanation"]
+    assert len(q["wander"]) == 3
+    for w, tr in zip(q["wander"], truth):
+        assert 1 / 3 < w["sigma"] / (tr["gm_sigma"] * to_si) < 3, (w, tr)
+        assert 1 / 4 < w["tau_s"] / tr["gm_tau"] < 4, (w, tr)

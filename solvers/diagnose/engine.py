@@ -1863,6 +1863,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     stud = rw / max(scale, 1e-300)
     test = _residual_test(problem, ext)
     test["drivers"] = _driver_correlations(problem, ext.residuals)
+    wm = wander_model(problem)
+    if wm is not None and test.get("white") is False:
+        # what a slow wander (bias instability) fitted to the extended model's residual says of it
+        test["wander"] = wm.evident(Je, ext.weighted_residuals, np.asarray(problem.sigma, float))
     cand_list = [entries[c.name] for c in problem.candidates]
     names = [e["name"] for e in effects]
     canon = [x for x in names if not x.startswith("residual:")]

@@ -63,7 +63,7 @@ class WanderModel:
             for tau in span * np.geomspace(*TAU_PER_SPAN, TAU_STEPS):
                 lam, V = np.linalg.eigh(a[:, None] * np.exp(-dt / tau) * a[None, :])
                 eig.append((float(tau), np.maximum(lam, 0.0), V))
-            self.parts.append(_Part(idx, bins, np.sqrt(cnt), eig))
+            self.parts.append(_Part(int(sid), idx, bins, np.sqrt(cnt), eig))
 
     def fit(self, X: np.ndarray, e: np.ndarray) -> list[tuple[float, float, float, float]]:
         """Per series: (λ, τ_s, s², LR) maximising the REML likelihood of residual ``e`` (weighted
@@ -76,6 +76,18 @@ class WanderModel:
             out.append(
                 (float(LAMBDA_GRID[j]), part.eig[i][0], float(rss[i, j, 0] / dof), 2.0 * (best - float(ll[0, 0, 0])))
             )
+        return out
+
+    def evident(self, X: np.ndarray, e: np.ndarray, sigma: np.ndarray) -> list[dict]:
+        """The series whose residual ``e`` (weighted rows) of a model with columns ``X`` wanders
+        (REML's ratio over white noise ≥ ``EVIDENT_LR``): their series id, the
+        wander's standard deviation in the rows' unit (``sigma``: the rows' white σ) and its
+        correlation time."""
+        out = []
+        for part, (lam, tau, s2, lr) in zip(self.parts, self.fit(X, e)):
+            if lr >= EVIDENT_LR:
+                sig = float(np.sqrt(lam * s2) * np.mean(sigma[part.idx]))
+                out.append({"series": part.sid, "sigma": sig, "tau_s": float(tau), "lr": float(lr)})
         return out
 
     def profile(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
@@ -111,6 +123,7 @@ def _cols(X: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Part:
+    sid: int  # the series' id
     idx: np.ndarray  # the series' rows, in time order
     bins: np.ndarray  # per row: its bin
     root_cnt: np.ndarray  # per bin: √rows

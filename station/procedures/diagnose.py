@@ -120,20 +120,48 @@ def _quality(capture, diag, inp) -> list[dict]:
             )
             or "no driver of this capture"
         )
-        out.append(
-            {
-                "kind": "residuals_not_white",
-                "test": rt["test"],
-                "p_value": rt.get("p_value"),
-                "drivers": drivers,
-                "explanation": "the extended model's residuals are not noise-like: something remains that no "
-                f"candidate explains (or the noise is correlated); they follow most: {top}",
-            }
-        )
+        finding = {
+            "kind": "residuals_not_white",
+            "test": rt["test"],
+            "p_value": rt.get("p_value"),
+            "drivers": drivers,
+            "explanation": "the extended model's residuals are not noise-like: something remains that no "
+            f"candidate explains (or the noise is correlated); they follow most: {top}",
+        }
+        if rt.get("wander"):
+            unit = diag.problem.unit
+            names = _series_names(diag.problem.procedure)
+            finding["wander"] = [
+                {
+                    "series": names.get(w["series"], str(w["series"])),
+                    "sigma": w["sigma"],
+                    "tau_s": w["tau_s"],
+                    "unit": unit,
+                }
+                for w in rt["wander"]
+            ]
+            scale, shown = _said_in(diag.problem.procedure, unit)
+            finding["explanation"] += (
+                "; a slow wander (bias instability, first-order Gauss–Markov) fits them: "
+                + ", ".join(
+                    f"{w['series']} σ {scale * w['sigma']:.3g} {shown} over τ ≈ {w['tau_s']:.0f} s"
+                    for w in finding["wander"]
+                )
+            )
+        out.append(finding)
     return out
 
 
 # ---------------------------------------------------------------- entry point
+
+
+def _series_names(procedure: str) -> dict:
+    """A time-ordered series' name by its id (``Problem.series``): P4's axes, the LDV's beams."""
+    if procedure == "gyro-drift":
+        return {0: "x", 1: "y", 2: "z"}
+    if procedure == "ldv":
+        return {0: "beam 1", 1: "beam 2", 2: "beam 3"}
+    return {}
 
 
 def _explained(diag, flagged) -> bool:
