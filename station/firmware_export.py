@@ -93,6 +93,9 @@ PX4_DEFAULT_PRIORITY, PX4_DEFAULT_EXTERNAL_PRIORITY, PX4_PRIORITY_UNSET = 50, 75
 # calibration::DeviceExternal (Utilities.cpp): UAVCAN, SERIAL, MAVLINK external, SIMULATION
 # internal, I2C/SPI as the board's bus configuration says (not known here)
 PX4_BUS_EXTERNAL = {3: True, 4: False, 5: True, 6: True}
+# DeviceStructure {bus_type: 3, bus: 5, address: 8, devtype: 8} in a uint32 union: ids fit in 24 bits
+# ("small enough to fit in a float accurately", Device.hpp), so a negative id or one above 2^24 - 1 is no sensor's
+PX4_DEVICE_ID_MAX = (1 << 24) - 1
 QGC_REAL32, QGC_INT32 = 9, 6  # MAV_PARAM_TYPE
 
 
@@ -686,7 +689,14 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         # internal one (ROT = -1)
         rot_name = names["rot"] if external else "SENS_BOARD_ROT"
         R = use.rotation(rot_name, ex, ("SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"))
-    ex.set_int(names["id"], dev)
+    ex.set_int(names["id"], dev)  # an int32 parameter first
+    if not 1 <= dev <= PX4_DEVICE_ID_MAX:
+        # DeviceStructure packs bus type, bus, address and devtype in its low 24 bits: no sensor has another id
+        raise UnsupportedError(
+            f"px4: {names['id']} = {dev} is no PX4 sensor's device id (bus type, bus, address and device type make "
+            f"one of 1..{PX4_DEVICE_ID_MAX}): the slot would match no sensor; give the device_id of the board's "
+            f"sensor_{kind}"
+        )
     _px4_priority_rotation(use, names, external, ex)
     if not (use.source_firmware == "px4" and names["off"][0] in use.params):
         # v1.11 (the CubeOrange log) has CAL_*n_EN, no _PRIO, no CAL_MAGn_*ODIAG; v1.12 brought both

@@ -375,6 +375,22 @@ def test_px4_device_id_beyond_an_int32_parameter_is_refused(capsys, db, fmt, dev
     assert f"CAL_GYRO0_ID = {device_id}" in err and "int32" in err
 
 
+@pytest.mark.parametrize("fmt", ["px4", "qgc"])
+@pytest.mark.parametrize("device_id", ["-5", "-2147483648", "16777216", "2147483647"])
+def test_px4_device_id_no_sensor_can_have_is_refused(capsys, db, fmt, device_id):
+    """A PX4 device id is DeviceStructure {bus_type: 3, bus: 5, address: 8, devtype: 8} in a
+    uint32 union (src/lib/drivers/device/Device.hpp: "small enough to fit in a float"): 1..2^24-1.
+    `--device-id -5` wrote `CAL_GYRO0_ID -5` (and a priority for a UAVCAN sensor from its low
+    bits), exit 0: a slot PX4 applies to no sensor, as with the id 0 refused above. A real id
+    at the top of the range is written."""
+    cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
+    code, out, err = run(capsys, "export", cid, "--format", fmt, "--device-id", device_id, "--db", db)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"CAL_GYRO0_ID = {device_id}" in err and "no PX4 sensor" in err and "16777215" in err
+    code, out, err = run(capsys, "export", cid, "--format", fmt, "--device-id", str((0x88 << 16) | 3), "--db", db)
+    assert code == 0 and str((0x88 << 16) | 3) in out, err  # a UAVCAN magnetometer's devtype 0x88, bus type 3
+
+
 def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     """Simulated P3 raw field r [uT] -> ArduPilot's correction in use d = P_old (r + o_old)
     (mGauss, AP_Compass_Backend::correct_field) -> capture of d (gauss) marked corrected ->
