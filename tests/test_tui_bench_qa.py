@@ -224,3 +224,39 @@ def test_the_noise_run_has_the_p4_hold_layout_when_it_is_the_first_run(tmp_path)
     readouts, body = asyncio.run(story())
     assert readouts.x == 1, readouts  # the hold screen's margin
     assert readouts.bottom <= 14, readouts  # under the instruction and the bars, not at the foot
+
+
+def test_quitting_p1_with_captured_positions_says_they_are_kept_for_resume(tmp_path):
+    """ctrl+q on P1 with positions captured asked "Quit? The run in progress is lost.", while
+    the captured positions were kept in the resume file and F6 continued them after a restart:
+    an operator told hours of holds are lost answers no, or re-does them. Now it says what is
+    lost (the position being averaged) and what is kept; with none captured it is unchanged."""
+    import os
+
+    from tests.test_tui import screen_name
+
+    async def story():
+        clock = BenchClock()
+        src = SimSource(seed=3, clock=clock)
+        app = make_app(str(tmp_path / "s.db"), device=src, start="procedure", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            guide = app.screen.guide
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            before = app.screen.question
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) != "ConfirmScreen")
+            await run_bench(pilot, src, clock, lambda: guide.n_captured == 1)  # x_up: the unit starts there
+            await wait_for(pilot, lambda: os.path.exists(guide.state_path))
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            after = app.screen.question
+            await pilot.press("n")
+            return before, after, guide.state_path, guide.n_captured
+
+    before, after, state_path, kept = asyncio.run(story())
+    assert "The run in progress is lost" in before and "kept" not in before, before
+    assert os.path.exists(state_path)
+    assert "The run in progress is lost" not in after, after
+    assert f"The {kept} captured position" in after and "kept" in after and "F6" in after, after
