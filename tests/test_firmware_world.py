@@ -219,6 +219,53 @@ def test_an_external_compass_keeps_its_slot_rotation_and_the_firmware_it_runs(ca
     assert got["CAL_MAG1_YOFF"] == pytest.approx(0.5)
 
 
+def test_a_v1_11_combined_compass_is_the_selected_one_and_composes_in_its_own_slot(capsys, tmp_path, shared_data):
+    """PX4 1.11's vehicle_magnetometer has no device_id: it carries the selected compass, which
+    sensor_selection.mag_device_id names (592905 in the CubeOrange log, the external one,
+    CAL_MAG1, ROT 0). The import read no id, and the export fell back to slot 0 (the internal
+    compass, disabled) with the board rotation SENS_BOARD_ROT = 4 (yaw 180): a hard-iron fit on
+    data the external compass measured went, with x and y flipped, to another sensor. Now the
+    capture names the selected compass and the export composes PX4's own model in its slot:
+    m = R S (raw - OFF), R = Dcm(SENS_BOARD_{X,Y,Z}_OFF) for an external compass with ROT 0,
+    so a fitted h (corrected data, gauss) gives OFF = OFF_in_use + S^-1 R^T h."""
+    log = shared_data / "px4_ulog" / "original" / "sample_log_small.ulg"
+    u = ulog(log, ["sensor_selection"])
+    params = u.initial_parameters
+    selected = int(_topic_values(u, "sensor_selection", "mag_device_id"))
+    assert selected == params["CAL_MAG1_ID"] == 592905 and params["CAL_MAG1_ROT"] == 0  # the log as it is
+    out = tmp_path / "mag.csv"
+    code, _, err = run(capsys, "import", log, "--procedure", "compass", "--source", "combined", "--out", out)
+    assert code == 0, err
+    meta = read_capture(out).meta
+    assert meta["mag_device_id"] == str(selected) and meta["corrected"] == "true"
+    h_G = np.array([0.03, 0.05, -0.04])
+    m, cols = small_capture(procedure="compass")
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        cid = s.save_calibration(compass_result(device=meta["device"], hard_iron=tuple(h_G),
+                                                soft_iron=(1e5 * np.eye(3)).tolist()), meta=meta, columns=cols)  # fmt: skip
+    code, text, err = run(capsys, "export", cid, "--format", "qgc", "--db", db)
+    assert code == 0, err
+    got = qgc_load(text, params)
+    assert got["CAL_MAG1_ID"] == selected and not any(k.startswith("CAL_MAG0") for k in got), got
+    x, y, z = (np.radians(params[f"SENS_BOARD_{a}_OFF"]) for a in XYZ)
+    Rx = np.array([[1, 0, 0], [0, np.cos(x), -np.sin(x)], [0, np.sin(x), np.cos(x)]])
+    Ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    Rz = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
+    R = Rz @ Ry @ Rx  # matrix::Dcm(Euler(roll, pitch, yaw)): 3-2-1
+    S_old = np.diag([params[f"CAL_MAG1_{a}SCALE"] for a in XYZ])
+    o_old = np.array([params[f"CAL_MAG1_{a}OFF"] for a in XYZ])
+    want = o_old + np.linalg.solve(S_old, R.T @ h_G)
+    assert np.allclose([got[f"CAL_MAG1_{a}OFF"] for a in XYZ], want, atol=2e-7), (got, want)
+
+
+def _topic_values(u, name, field):
+    """The one value ``field`` of topic ``name`` holds over the log (asserted unique)."""
+    values = {v for d in u.data_list if d.name == name for v in d.data[field].tolist()}
+    assert len(values) == 1, values
+    return values.pop()
+
+
 def _px4_export(capsys, db, kind, device_id, **meta):
     result = {"accel": accel_result, "gyro": gyro_result, "mag": compass_result}[kind](device=f"{kind}{len(meta)}")
     m, cols = small_capture(procedure=PROCEDURE[kind], **{f"{kind}_unit": {"accel": "m/s^2", "gyro": "rad/s",
