@@ -81,6 +81,9 @@ AP_ACC_SCALE_RANGE = (0.8, 1.2)
 AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS = 1800.0
 AP_COMPASS_DIA_RANGE = (0.2, 5.0)
 AP_COMPASS_ODI_MAX = 1.0
+# COMPASS_SCALE is applied only from COMPASS_MIN_SCALE_FACTOR to COMPASS_MAX_SCALE_FACTOR
+# (AP_Compass.cpp Compass::have_scale_factor; CompassCalibrator.h 0.85, 1.4)
+AP_COMPASS_SCALE_APPLIED = (0.85, 1.4)
 # CAL_ACCn_{X,Y,Z}SCALE and CAL_MAGn_{X,Y,Z}SCALE: min 0.1, max 3.0 (PX4's parameter
 # definitions, src/modules/sensors/module.yaml); the offsets and ODIAG have no documented range.
 PX4_SCALE_RANGE = (0.1, 3.0)
@@ -613,7 +616,15 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             P_old = np.diag(dia)
             for v, (i, j) in zip(odi, ODIAG_PAIRS):
                 P_old[i, j] = P_old[j, i] = v
-            sf = use.get(names["scale"]) or 1.0  # 0 = no scaling (COMPASS_SCALE @Description)
+            sf = use.get(names["scale"]) or 0.0
+            if not AP_COMPASS_SCALE_APPLIED[0] <= sf <= AP_COMPASS_SCALE_APPLIED[1]:
+                # Compass::have_scale_factor: 0 (no scaling, its default) or any value outside is not applied
+                if sf != 0:
+                    ex.note(
+                        f"{names['scale']} = {sf:g} in use is outside {AP_COMPASS_SCALE_APPLIED[0]:g}.."
+                        f"{AP_COMPASS_SCALE_APPLIED[1]:g}: ArduPilot does not apply it (Compass::have_scale_factor)"
+                    )
+                sf = 1.0
             P_eff = sf * P_old
             # m = A (P_eff (r + o_old) − c h) = A P_eff (r + o_old − P_eff⁻¹ c h)
             ofs = o_old - np.linalg.solve(P_eff, ch)

@@ -453,6 +453,48 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     assert "composed with the parameters in use" in text
 
 
+@pytest.mark.parametrize("scale", [1.2, 2.0, 0.5])
+def test_composed_compass_offsets_follow_whether_ardupilot_applies_compass_scale(capsys, tmp_path, scale):
+    """ArduPilot multiplies by COMPASS_SCALE only when Compass::have_scale_factor holds it valid,
+    COMPASS_MIN_SCALE_FACTOR 0.85 to COMPASS_MAX_SCALE_FACTOR 1.4 (AP_Compass.cpp,
+    CompassCalibrator.h); 0 (its default) and anything else outside is no scaling. The
+    composition divided the hard iron by any non-zero COMPASS_SCALE in use: with 2.0 in use (not
+    applied) the new offsets missed the truth by half the fitted hard iron. Simulated as
+    correct_field does: d = P_old (s (r + o_old)), s = COMPASS_SCALE where valid, else 1."""
+    from solvers.simulate import simulate
+
+    sim = simulate("compass", seed=2)
+    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
+    o_old = np.array([-35.0, 52.0, 18.0])
+    P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
+    applied = scale if 0.85 <= scale <= 1.4 else 1.0  # Compass::have_scale_factor
+    d_gauss = applied * (r_mG + o_old) @ P_old.T / 1000.0
+    meta = dict(
+        sim.meta,
+        mag_unit="gauss",
+        corrected="true",
+        firmware="ardupilot",
+        **{"param.AHRS_ORIENTATION": "0", "param.COMPASS_SCALE": repr(scale)},
+        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
+    )
+    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
+    path = tmp_path / "mag.csv"
+    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
+    assert code == 0, err
+    res = json.loads(out)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 0, err
+    p = names_in(text, "ardupilot")
+    ofs = np.array([p[f"COMPASS_OFS_{a}"] for a in XYZ])
+    h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
+    sigma_ofs = np.abs(np.linalg.inv(applied * P_old)) @ (np.asarray(res["uncertainty"]["hard_iron"]) * 1000.0)
+    assert np.all(np.abs(ofs + h_true_mG) < 4 * sigma_ofs + 0.05), (ofs + h_true_mG, sigma_ofs)
+
+
 def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_path):
     """The same for PX4: d = S_old (r - o_old) in gauss (calibration::Magnetometer::Correct,
     offsets subtracted), slot found by CAL_MAG1_ID; truth: OFF = h, SCALE/ODIAG = sym(W)."""
