@@ -504,6 +504,21 @@ def _slot(in_use: InUse, device_id: int | None, names, slots) -> int | None:
     return None
 
 
+def _check_instance(asked: int | None, slot: int | None, dev: int | None, fmt: str, id_name) -> None:
+    """Refuse an --instance other than the slot whose id in use is the sensor's, ``slot``: the
+    firmware applies that slot to the sensor, and the one asked for holds another sensor's
+    values (a composition with them is wrong, and writing the sensor's id there too leaves two
+    slots claiming it, the other sensor uncalibrated)."""
+    if asked is None:
+        return
+    if slot is not None and slot != asked:
+        raise UnsupportedError(
+            f"{fmt}: --instance {asked}, but the sensor (device id {dev}) is in slot {slot} ({id_name(slot)} in use): "
+            f"the firmware applies that slot, and {id_name(asked)}'s values belong to another sensor; leave out "
+            f"--instance (or give {slot})"
+        )
+
+
 def _sym(m) -> list[list[float]]:
     return [[float(x) for x in row] for row in m]
 
@@ -568,7 +583,10 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
     fmt = "ardupilot"
     kind = _kind(cal, fmt, "ArduPilot")
     use = InUse(meta, fmt, "ardupilot")
-    n = instance or _slot(use, _device_id(meta, kind), lambda k: _ap_names(kind, k), (1, 2, 3))
+    dev = _device_id(meta, kind)
+    slot = _slot(use, dev, lambda k: _ap_names(kind, k), (1, 2, 3))
+    _check_instance(instance, slot, dev, fmt, lambda k: _ap_names(kind, k)["id"])
+    n = instance or slot
     if n is None:
         si = (meta or {}).get("sensor_instance")
         n = int(si) + 1 if si not in (None, "") and use.source_firmware == "ardupilot" and 0 <= int(si) <= 2 else 1
@@ -678,6 +696,7 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         )
     dev = device_id if device_id is not None else _device_id(meta, kind)
     slot = _slot(use, dev, lambda k: _px4_names(kind, k), (0, 1, 2, 3))
+    _check_instance(instance, slot, dev, fmt, lambda k: _px4_names(kind, k)["id"])
     i = instance if instance is not None else slot
     if i is None:
         si = (meta or {}).get("sensor_instance")

@@ -259,6 +259,37 @@ def test_a_v1_11_combined_compass_is_the_selected_one_and_composes_in_its_own_sl
     assert np.allclose([got[f"CAL_MAG1_{a}OFF"] for a in XYZ], want, atol=2e-7), (got, want)
 
 
+@pytest.mark.parametrize("fmt", ["px4", "qgc"])
+def test_an_instance_that_is_another_sensors_slot_is_refused(capsys, tmp_path, shared_data, fmt):
+    """The SITL log's selected accelerometer (1310988) is CAL_ACC0; `--instance 1` wrote
+    CAL_ACC1_ID 1310988 over the slot of the sensor 1310996 (two slots then claim one sensor,
+    the other is left uncalibrated), and composed the corrected data's fit with CAL_ACC1's
+    offsets, another sensor's: XOFF 0.0097 - 0.1 instead of -0.039 - 0.1. Now refused in one
+    line naming the slot the firmware applies; without --instance (or with 0) it is written."""
+    log = shared_data / "px4_ulog" / "original" / "sample_px4_events.ulg"
+    params = ulog(log, ["sensor_combined"]).initial_parameters
+    assert params["CAL_ACC0_ID"] == 1310988 and params["CAL_ACC1_ID"] == 1310996  # the log as it is
+    out = tmp_path / "acc.csv"
+    code, _, err = run(capsys, "import", log, "--procedure", "accel-tabletop", "--source", "combined", "--out", out)
+    assert code == 0, err
+    meta = read_capture(out).meta
+    assert meta["accel_device_id"] == "1310988" and meta["corrected"] == "true"
+    m, cols = small_capture(procedure="accel-tabletop")
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        cid = s.save_calibration(accel_result(device=meta["device"], B=(0.1, 0.0, 0.0), M=np.eye(3)), meta=meta,
+                                 columns=cols)  # fmt: skip
+    code, text, err = run(capsys, "export", cid, "--format", fmt, "--instance", "1", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (text, err)
+    assert "slot 0" in err and "CAL_ACC0_ID" in err, err
+    for extra in ([], ["--instance", "0"]):
+        code, text, err = run(capsys, "export", cid, "--format", fmt, *extra, "--db", db)
+        assert code == 0, err
+        got = qgc_load(text, params) if fmt == "qgc" else px4_shell_load(text, params)
+        assert got["CAL_ACC0_ID"] == 1310988 and "CAL_ACC1_ID" not in got
+        assert got["CAL_ACC0_XOFF"] == pytest.approx(params["CAL_ACC0_XOFF"] - 0.1, abs=1e-7)
+
+
 def _topic_values(u, name, field):
     """The one value ``field`` of topic ``name`` holds over the log (asserted unique)."""
     values = {v for d in u.data_list if d.name == name for v in d.data[field].tolist()}
@@ -443,6 +474,26 @@ def test_a_calibration_that_changes_nothing_exports_an_ardupilot_logs_own_parame
     assert logs
     for log in logs:
         assert ardupilot_round_trip(capsys, tmp_path, log), log
+
+
+def test_an_ardupilot_instance_that_is_another_imus_is_refused(capsys, tmp_path):
+    """pymavlink's ArduPlane log: IMU[0] is INS_ACC_ID (1246730), IMU[1] INS_ACC2_ID. A fit on
+    IMU[0]'s corrected data exported with `--instance 2` composed with INS_ACC2OFFS, the other
+    IMU's offsets, and wrote them as that IMU's. Refused now; the sensor's own slot is written."""
+    log = Path(__file__).resolve().parent / "data" / "ardupilot_pymavlink" / "test.BIN"
+    out = tmp_path / "imu0.csv"
+    code, _, err = run(capsys, "import", log, "--procedure", "accel-tabletop", "--instance", "0", "--out", out)
+    assert code == 0, err
+    meta = read_capture(out).meta
+    assert meta["accel_device_id"] == meta["param.INS_ACC_ID"] != meta["param.INS_ACC2_ID"]
+    m, cols = small_capture(procedure="accel-tabletop")
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        cid = s.save_calibration(accel_result(device="AP", B=(0.1, 0.0, 0.0), M=np.eye(3)), meta=meta, columns=cols)
+    code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--instance", "2", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1 and "INS_ACC_ID" in err, (text, err)
+    code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--instance", "1", "--db", db)
+    assert code == 0 and "INS_ACCOFFS_X," in text and "INS_ACC2OFFS" not in text, err
 
 
 def test_older_px4_gyro_scales_in_use_divide_the_composed_drift(capsys, tmp_path, shared_data):
