@@ -973,6 +973,10 @@ def export(
         raise UnsupportedError(f"unknown export format '{fmt}' (one of {', '.join(FORMATS)})")
     head = [f"# {_c_comment(line)}" for line in _header(cal)]
     head += [f"# converted: {_c_comment(n)}" for n in ex.notes]
-    head += ["# offsets and scales apply in the sensor frame, before the board rotation"]
+    if fmt == "ardupilot" and registry.firmware_kind(cal["procedure"]) == "mag":
+        # AP_Compass_Backend::accumulate_sample: rotate_field (to the body frame), then correct_field
+        head += ["# offsets and matrix apply in the body frame, after the compass's rotation (ArduPilot compass)"]
+    else:
+        head += ["# offsets and scales apply in the sensor frame, before the board rotation"]
     head += [f"# calibration warning: {_c_comment(str(w))}" for w in cal.get("warnings") or []]
     return "\n".join(head + body) + "\n"
