@@ -111,7 +111,8 @@ def parse_time(value) -> datetime:
 
 def iso(dt: datetime) -> str:
     """The stored form: `YYYY-MM-DDTHH:MM:SSZ` (UTC, whole seconds, sorts as text)."""
-    return dt.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    d = dt.astimezone(UTC)  # not strftime: its %Y gives '999' for the year 999 on glibc, no ISO date
+    return f"{d.year:04d}-{d.month:02d}-{d.day:02d}T{d.hour:02d}:{d.minute:02d}:{d.second:02d}Z"
 
 
 def normalize_time(value) -> str:

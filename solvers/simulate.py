@@ -932,9 +932,8 @@ class LiveImu:
                 self._move = (self.C, self.C, self.t_s, 0.0, self._wobble())
             return
         if name not in self._targets:
-            raise SimulationError(
-                f"unknown position {name!r}; known: {', '.join(self._targets)}, {', '.join(DRIVES)}, still"
-            )
+            shown = name if len(name) <= 24 else name[:21] + "..."
+            raise SimulationError(f"unknown position {shown!r}; known: {self._known_positions()}")
         self._settle_now()
         if name in self._bases:  # a fresh placement each time: any heading, a small error
             d, tilted = self._bases[name]
@@ -942,6 +941,14 @@ class LiveImu:
             err = PLACEMENT_TILTED_DEG if tilted else PLACEMENT_FLAT_DEG
             self._targets[name] = C_n_b_for(d, heading) @ placement_error(self.rng, err)
         self._move = (self.C, self._targets[name], self.t_s, self.MOVE_S, self._wobble())
+
+    def _known_positions(self) -> str:
+        """The names set_orientation takes, this procedure's own first (an answer fits one sentence)."""
+        own = "s1..s12" if self.positions[0] == "s1" else " ".join(self.positions)
+        others = [
+            n for n in ("x_up..xz_135", "s1..s12", "level") if n != own and n.split("..")[0] not in self.positions
+        ]
+        return f"{own}; also {' '.join(others)} {' '.join(DRIVES)} still"
 
     def _settle_now(self) -> None:
         """Freeze the attitude where it is now (ends a drive or a move half-way)."""

@@ -146,11 +146,14 @@ class StationApp(App):
             if hasattr(screen, "show_due"):
                 screen.show_due(message.data)
 
-    def unsaved_work(self) -> str | None:
-        """What quitting now would lose, or None."""
+    def unsaved_work(self, kept: int | None = None) -> str | None:
+        """What quitting now would lose, or None (``kept``: ``kept_for_resume()``, if known)."""
+        kept = self.kept_for_resume() if kept is None else kept
         for screen in self.screen_stack:
             guide = getattr(screen, "guide", None)
             if guide is not None and getattr(guide, "phase", "") not in ("done", "fitted", "aborted"):
+                if kept:
+                    return "the position being averaged"
                 return "the run in progress"
             if (
                 type(screen).__name__ == "ResultsScreen"
@@ -161,19 +164,33 @@ class StationApp(App):
                 return "the unsaved result"
         return None
 
+    def kept_for_resume(self) -> int:
+        """How many captured positions the running guide has saved for Resume (P1 writes its
+        resume file at each capture), 0 when none or the guide keeps none."""
+        for screen in self.screen_stack:
+            guide = getattr(screen, "guide", None)
+            path = getattr(guide, "state_path", None)
+            if guide is not None and path and os.path.exists(path):
+                return int(getattr(guide, "n_captured", 0) or 0)
+        return 0
+
     async def action_quit(self) -> None:
         """ctrl+q: quit, after a confirmation when a run or an unsaved result would be lost."""
         from station.screens.decide import ConfirmScreen
 
-        lost = self.unsaved_work()
+        kept = self.kept_for_resume()
+        lost = self.unsaved_work(kept)
         if lost is None or self.session.scripted:
             self.exit()
             return
         if isinstance(self.screen, ConfirmScreen):
             return
-        self.push_screen(
-            ConfirmScreen(f"Quit? {lost[0].upper() + lost[1:]} is lost."), lambda yes: self.exit() if yes else None
-        )
+        text = f"Quit? {lost[0].upper() + lost[1:]} is lost."
+        if kept:
+            text += (
+                f" The {kept} captured position{'s are' if kept > 1 else ' is'} kept: F6 on the Connect screen resumes."
+            )
+        self.push_screen(ConfirmScreen(text), lambda yes: self.exit() if yes else None)
 
     def action_history(self) -> None:
         from station.screens.history import HistoryScreen

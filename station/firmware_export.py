@@ -81,6 +81,9 @@ AP_ACC_SCALE_RANGE = (0.8, 1.2)
 AP_COMPASS_OFFS_MAX_DEFAULT_MGAUSS = 1800.0
 AP_COMPASS_DIA_RANGE = (0.2, 5.0)
 AP_COMPASS_ODI_MAX = 1.0
+# COMPASS_SCALE is applied only from COMPASS_MIN_SCALE_FACTOR to COMPASS_MAX_SCALE_FACTOR
+# (AP_Compass.cpp Compass::have_scale_factor; CompassCalibrator.h 0.85, 1.4)
+AP_COMPASS_SCALE_APPLIED = (0.85, 1.4)
 # CAL_ACCn_{X,Y,Z}SCALE and CAL_MAGn_{X,Y,Z}SCALE: min 0.1, max 3.0 (PX4's parameter
 # definitions, src/modules/sensors/module.yaml); the offsets and ODIAG have no documented range.
 PX4_SCALE_RANGE = (0.1, 3.0)
@@ -93,6 +96,9 @@ PX4_DEFAULT_PRIORITY, PX4_DEFAULT_EXTERNAL_PRIORITY, PX4_PRIORITY_UNSET = 50, 75
 # calibration::DeviceExternal (Utilities.cpp): UAVCAN, SERIAL, MAVLINK external, SIMULATION
 # internal, I2C/SPI as the board's bus configuration says (not known here)
 PX4_BUS_EXTERNAL = {3: True, 4: False, 5: True, 6: True}
+# DeviceStructure {bus_type: 3, bus: 5, address: 8, devtype: 8} in a uint32 union: ids fit in 24 bits
+# ("small enough to fit in a float accurately", Device.hpp), so a negative id or one above 2^24 - 1 is no sensor's
+PX4_DEVICE_ID_MAX = (1 << 24) - 1
 QGC_REAL32, QGC_INT32 = 9, 6  # MAV_PARAM_TYPE
 
 
@@ -498,6 +504,21 @@ def _slot(in_use: InUse, device_id: int | None, names, slots) -> int | None:
     return None
 
 
+def _check_instance(asked: int | None, slot: int | None, dev: int | None, fmt: str, id_name) -> None:
+    """Refuse an --instance other than the slot whose id in use is the sensor's, ``slot``: the
+    firmware applies that slot to the sensor, and the one asked for holds another sensor's
+    values (a composition with them is wrong, and writing the sensor's id there too leaves two
+    slots claiming it, the other sensor uncalibrated)."""
+    if asked is None:
+        return
+    if slot is not None and slot != asked:
+        raise UnsupportedError(
+            f"{fmt}: --instance {asked}, but the sensor (device id {dev}) is in slot {slot} ({id_name(slot)} in use): "
+            f"the firmware applies that slot, and {id_name(asked)}'s values belong to another sensor; leave out "
+            f"--instance (or give {slot})"
+        )
+
+
 def _sym(m) -> list[list[float]]:
     return [[float(x) for x in row] for row in m]
 
@@ -562,7 +583,10 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
     fmt = "ardupilot"
     kind = _kind(cal, fmt, "ArduPilot")
     use = InUse(meta, fmt, "ardupilot")
-    n = instance or _slot(use, _device_id(meta, kind), lambda k: _ap_names(kind, k), (1, 2, 3))
+    dev = _device_id(meta, kind)
+    slot = _slot(use, dev, lambda k: _ap_names(kind, k), (1, 2, 3))
+    _check_instance(instance, slot, dev, fmt, lambda k: _ap_names(kind, k)["id"])
+    n = instance or slot
     if n is None:
         si = (meta or {}).get("sensor_instance")
         n = int(si) + 1 if si not in (None, "") and use.source_firmware == "ardupilot" and 0 <= int(si) <= 2 else 1
@@ -610,7 +634,15 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             P_old = np.diag(dia)
             for v, (i, j) in zip(odi, ODIAG_PAIRS):
                 P_old[i, j] = P_old[j, i] = v
-            sf = use.get(names["scale"]) or 1.0  # 0 = no scaling (COMPASS_SCALE @Description)
+            sf = use.get(names["scale"]) or 0.0
+            if not AP_COMPASS_SCALE_APPLIED[0] <= sf <= AP_COMPASS_SCALE_APPLIED[1]:
+                # Compass::have_scale_factor: 0 (no scaling, its default) or any value outside is not applied
+                if sf != 0:
+                    ex.note(
+                        f"{names['scale']} = {sf:g} in use is outside {AP_COMPASS_SCALE_APPLIED[0]:g}.."
+                        f"{AP_COMPASS_SCALE_APPLIED[1]:g}: ArduPilot does not apply it (Compass::have_scale_factor)"
+                    )
+                sf = 1.0
             P_eff = sf * P_old
             # m = A (P_eff (r + o_old) − c h) = A P_eff (r + o_old − P_eff⁻¹ c h)
             ofs = o_old - np.linalg.solve(P_eff, ch)
@@ -664,6 +696,7 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         )
     dev = device_id if device_id is not None else _device_id(meta, kind)
     slot = _slot(use, dev, lambda k: _px4_names(kind, k), (0, 1, 2, 3))
+    _check_instance(instance, slot, dev, fmt, lambda k: _px4_names(kind, k)["id"])
     i = instance if instance is not None else slot
     if i is None:
         si = (meta or {}).get("sensor_instance")
@@ -686,7 +719,14 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
         # internal one (ROT = -1)
         rot_name = names["rot"] if external else "SENS_BOARD_ROT"
         R = use.rotation(rot_name, ex, ("SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"))
-    ex.set_int(names["id"], dev)
+    ex.set_int(names["id"], dev)  # an int32 parameter first
+    if not 1 <= dev <= PX4_DEVICE_ID_MAX:
+        # DeviceStructure packs bus type, bus, address and devtype in its low 24 bits: no sensor has another id
+        raise UnsupportedError(
+            f"px4: {names['id']} = {dev} is no PX4 sensor's device id (bus type, bus, address and device type make "
+            f"one of 1..{PX4_DEVICE_ID_MAX}): the slot would match no sensor; give the device_id of the board's "
+            f"sensor_{kind}"
+        )
     _px4_priority_rotation(use, names, external, ex)
     if not (use.source_firmware == "px4" and names["off"][0] in use.params):
         # v1.11 (the CubeOrange log) has CAL_*n_EN, no _PRIO, no CAL_MAGn_*ODIAG; v1.12 brought both
@@ -933,6 +973,10 @@ def export(
         raise UnsupportedError(f"unknown export format '{fmt}' (one of {', '.join(FORMATS)})")
     head = [f"# {_c_comment(line)}" for line in _header(cal)]
     head += [f"# converted: {_c_comment(n)}" for n in ex.notes]
-    head += ["# offsets and scales apply in the sensor frame, before the board rotation"]
+    if fmt == "ardupilot" and registry.firmware_kind(cal["procedure"]) == "mag":
+        # AP_Compass_Backend::accumulate_sample: rotate_field (to the body frame), then correct_field
+        head += ["# offsets and matrix apply in the body frame, after the compass's rotation (ArduPilot compass)"]
+    else:
+        head += ["# offsets and scales apply in the sensor frame, before the board rotation"]
     head += [f"# calibration warning: {_c_comment(str(w))}" for w in cal.get("warnings") or []]
     return "\n".join(head + body) + "\n"

@@ -66,3 +66,25 @@ def param_lines(name: str, value, sig, indent: str = "  ") -> list[str]:
     if isinstance(value, (int, float)):
         return [f"{indent}{name}: {value_sigma(value, sig if isinstance(sig, (int, float)) else None)}"]
     return [f"{indent}{name}: {value}"]
+
+
+def due_when(entry: dict) -> str:
+    """When a ``Store.due`` entry falls due, as ``station due`` says it: ``never calibrated``,
+    ``overdue by N d (due DATE)`` or ``due in N d (DATE)`` (the TUI says a date ahead alike)."""
+    days = entry.get("days_left")
+    if days is None:
+        return "never calibrated"
+    if days < 0:
+        return f"overdue by {-days:.0f} d (due {entry['due'][:10]})"
+    return f"due in {days:.0f} d ({entry['due'][:10]})"
+
+
+def due_status(entry: dict) -> str:
+    """The word for a devices table's status column (7 characters): ``overdue``, ``due`` (now),
+    ``in N d`` (a date within the window asked for, not yet due), ``no cal``."""
+    days = entry.get("days_left")
+    if days is None:
+        return "no cal"
+    if days < 0:
+        return "overdue"
+    return "due" if round(days) == 0 else f"in {days:.0f} d"

@@ -229,3 +229,24 @@ def test_a_centrifuge_table_in_the_wrong_accel_unit_is_warned_about(tmp_path):
         assert "look like g" in line, (unit, res.stdout)
     res = run_station("calibrate", right)
     assert res.returncode == 0 and "accel_unit right" not in res.stdout, res.stdout
+
+
+def test_a_capture_dated_before_the_year_1000_is_stored_with_an_iso_date(tmp_path):
+    """The stored time is `YYYY-MM-DDTHH:MM:SSZ`; a capture dated 0999-06-01 (a typo for 1999,
+    read as the ISO date it is) was formatted '999-06-01T00:00:00Z' by strftime and the save
+    failed with "station: date '999-06-01T00:00:00Z' is not an ISO 8601 date", a date the
+    capture does not hold and no line. It is stored as written, with four digits."""
+    from db.params import iso, parse_time
+
+    assert iso(parse_time("0999-06-01")) == "0999-06-01T00:00:00Z"
+    cap = tmp_path / "g.csv"
+    assert run_station("simulate", "--procedure", "gyro-drift", "--out", cap, "--seed", "400901").returncode == 0
+    text = cap.read_text(encoding="utf-8")
+    cap.write_text(
+        "\n".join("# date: 0999-06-01" if ln.startswith("# date:") else ln for ln in text.splitlines()) + "\n"
+    )
+    db = tmp_path / "s.db"
+    res = run_station("calibrate", cap, "--save", "--device", "OLD-1", "--db", db)
+    assert res.returncode == 0, res.stderr
+    hist = run_station("history", "OLD-1", "--json", "--db", db)
+    assert hist.returncode == 0 and '"0999-06-01T00:00:00Z"' in hist.stdout, hist.stdout[:300]

@@ -151,6 +151,29 @@ def test_gyro_offsets_and_instances(capsys, db):
     assert code == 2 and "1, 2 or 3" in err
 
 
+@pytest.mark.parametrize(
+    "fmt, option, value",
+    [
+        ("ardupilot", "--device-id", "2424842"),
+        ("json", "--device-id", "2424842"),
+        ("c-header", "--instance", "1"),
+        ("json", "--instance", "2"),
+        ("px4", "--vehicle", "2,1"),
+        ("ardupilot", "--vehicle", "1,1"),
+    ],
+)
+def test_an_option_the_format_has_no_use_for_is_refused(capsys, db, fmt, option, value):
+    """`--device-id` with `--format ardupilot` (ArduPilot has no such parameter: its slot is its
+    instance), `--instance` with json or a C header, `--vehicle` with anything but a QGroundControl
+    file were ignored without a word, exit 0: the file said nothing of what was asked. Refused in
+    one line naming the formats that take it, as `import` refuses its options for other formats."""
+    cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
+    code, out, err = run(capsys, "export", str(cid), "--format", fmt, option, value, "--db", db)
+    assert code == 2 and out == "" and err.count("\n") == 1 and option in err and "applies to" in err, err
+    code, out, err = run(capsys, "export", str(cid), "--format", fmt, "--db", db)
+    assert code == 0 and out, err
+
+
 @pytest.mark.parametrize("fmt", ["ardupilot", "px4"])
 def test_refusals_are_one_line_exit_2(capsys, db, fmt):
     ldv = _save(db, ldv_result())

@@ -375,6 +375,22 @@ def test_px4_device_id_beyond_an_int32_parameter_is_refused(capsys, db, fmt, dev
     assert f"CAL_GYRO0_ID = {device_id}" in err and "int32" in err
 
 
+@pytest.mark.parametrize("fmt", ["px4", "qgc"])
+@pytest.mark.parametrize("device_id", ["-5", "-2147483648", "16777216", "2147483647"])
+def test_px4_device_id_no_sensor_can_have_is_refused(capsys, db, fmt, device_id):
+    """A PX4 device id is DeviceStructure {bus_type: 3, bus: 5, address: 8, devtype: 8} in a
+    uint32 union (src/lib/drivers/device/Device.hpp: "small enough to fit in a float"): 1..2^24-1.
+    `--device-id -5` wrote `CAL_GYRO0_ID -5` (and a priority for a UAVCAN sensor from its low
+    bits), exit 0: a slot PX4 applies to no sensor, as with the id 0 refused above. A real id
+    at the top of the range is written."""
+    cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
+    code, out, err = run(capsys, "export", cid, "--format", fmt, "--device-id", device_id, "--db", db)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"CAL_GYRO0_ID = {device_id}" in err and "no PX4 sensor" in err and "16777215" in err
+    code, out, err = run(capsys, "export", cid, "--format", fmt, "--device-id", str((0x88 << 16) | 3), "--db", db)
+    assert code == 0 and str((0x88 << 16) | 3) in out, err  # a UAVCAN magnetometer's devtype 0x88, bus type 3
+
+
 def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     """Simulated P3 raw field r [uT] -> ArduPilot's correction in use d = P_old (r + o_old)
     (mGauss, AP_Compass_Backend::correct_field) -> capture of d (gauss) marked corrected ->
@@ -435,6 +451,48 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     assert np.abs(P_alone - P_true).max() > 4 * 5e-3
     assert np.all(np.abs(-np.asarray(res["params"]["hard_iron"]) * 1000.0 + h_true_mG) > 4 * sigma_ofs + 0.05)
     assert "composed with the parameters in use" in text
+
+
+@pytest.mark.parametrize("scale", [1.2, 2.0, 0.5])
+def test_composed_compass_offsets_follow_whether_ardupilot_applies_compass_scale(capsys, tmp_path, scale):
+    """ArduPilot multiplies by COMPASS_SCALE only when Compass::have_scale_factor holds it valid,
+    COMPASS_MIN_SCALE_FACTOR 0.85 to COMPASS_MAX_SCALE_FACTOR 1.4 (AP_Compass.cpp,
+    CompassCalibrator.h); 0 (its default) and anything else outside is no scaling. The
+    composition divided the hard iron by any non-zero COMPASS_SCALE in use: with 2.0 in use (not
+    applied) the new offsets missed the truth by half the fitted hard iron. Simulated as
+    correct_field does: d = P_old (s (r + o_old)), s = COMPASS_SCALE where valid, else 1."""
+    from solvers.simulate import simulate
+
+    sim = simulate("compass", seed=2)
+    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
+    o_old = np.array([-35.0, 52.0, 18.0])
+    P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
+    applied = scale if 0.85 <= scale <= 1.4 else 1.0  # Compass::have_scale_factor
+    d_gauss = applied * (r_mG + o_old) @ P_old.T / 1000.0
+    meta = dict(
+        sim.meta,
+        mag_unit="gauss",
+        corrected="true",
+        firmware="ardupilot",
+        **{"param.AHRS_ORIENTATION": "0", "param.COMPASS_SCALE": repr(scale)},
+        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
+    )
+    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
+    path = tmp_path / "mag.csv"
+    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
+    assert code == 0, err
+    res = json.loads(out)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 0, err
+    p = names_in(text, "ardupilot")
+    ofs = np.array([p[f"COMPASS_OFS_{a}"] for a in XYZ])
+    h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
+    sigma_ofs = np.abs(np.linalg.inv(applied * P_old)) @ (np.asarray(res["uncertainty"]["hard_iron"]) * 1000.0)
+    assert np.all(np.abs(ofs + h_true_mG) < 4 * sigma_ofs + 0.05), (ofs + h_true_mG, sigma_ofs)
 
 
 def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_path):

@@ -271,3 +271,6 @@ def test_ardupilot_compass_composes_in_the_body_frame_whatever_the_orientation(c
     P_true = _sym_part(R @ (W / 1000.0) @ R.T)
     assert np.abs(P - P_true).max() < 5e-3, P - P_true
     assert "assumed no board rotation" not in text
+    # and the file says where they act: the body frame (it said "in the sensor frame, before the board
+    # rotation", as the INS parameters do; AP_Compass_Backend::accumulate_sample rotates first)
+    assert "body frame, after the compass's rotation" in text and "before the board rotation" not in text

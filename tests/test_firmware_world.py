@@ -219,6 +219,84 @@ def test_an_external_compass_keeps_its_slot_rotation_and_the_firmware_it_runs(ca
     assert got["CAL_MAG1_YOFF"] == pytest.approx(0.5)
 
 
+def test_a_v1_11_combined_compass_is_the_selected_one_and_composes_in_its_own_slot(capsys, tmp_path, shared_data):
+    """PX4 1.11's vehicle_magnetometer has no device_id: it carries the selected compass, which
+    sensor_selection.mag_device_id names (592905 in the CubeOrange log, the external one,
+    CAL_MAG1, ROT 0). The import read no id, and the export fell back to slot 0 (the internal
+    compass, disabled) with the board rotation SENS_BOARD_ROT = 4 (yaw 180): a hard-iron fit on
+    data the external compass measured went, with x and y flipped, to another sensor. Now the
+    capture names the selected compass and the export composes PX4's own model in its slot:
+    m = R S (raw - OFF), R = Dcm(SENS_BOARD_{X,Y,Z}_OFF) for an external compass with ROT 0,
+    so a fitted h (corrected data, gauss) gives OFF = OFF_in_use + S^-1 R^T h."""
+    log = shared_data / "px4_ulog" / "original" / "sample_log_small.ulg"
+    u = ulog(log, ["sensor_selection"])
+    params = u.initial_parameters
+    selected = int(_topic_values(u, "sensor_selection", "mag_device_id"))
+    assert selected == params["CAL_MAG1_ID"] == 592905 and params["CAL_MAG1_ROT"] == 0  # the log as it is
+    out = tmp_path / "mag.csv"
+    code, _, err = run(capsys, "import", log, "--procedure", "compass", "--source", "combined", "--out", out)
+    assert code == 0, err
+    meta = read_capture(out).meta
+    assert meta["mag_device_id"] == str(selected) and meta["corrected"] == "true"
+    h_G = np.array([0.03, 0.05, -0.04])
+    m, cols = small_capture(procedure="compass")
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        cid = s.save_calibration(compass_result(device=meta["device"], hard_iron=tuple(h_G),
+                                                soft_iron=(1e5 * np.eye(3)).tolist()), meta=meta, columns=cols)  # fmt: skip
+    code, text, err = run(capsys, "export", cid, "--format", "qgc", "--db", db)
+    assert code == 0, err
+    got = qgc_load(text, params)
+    assert got["CAL_MAG1_ID"] == selected and not any(k.startswith("CAL_MAG0") for k in got), got
+    x, y, z = (np.radians(params[f"SENS_BOARD_{a}_OFF"]) for a in XYZ)
+    Rx = np.array([[1, 0, 0], [0, np.cos(x), -np.sin(x)], [0, np.sin(x), np.cos(x)]])
+    Ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    Rz = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
+    R = Rz @ Ry @ Rx  # matrix::Dcm(Euler(roll, pitch, yaw)): 3-2-1
+    S_old = np.diag([params[f"CAL_MAG1_{a}SCALE"] for a in XYZ])
+    o_old = np.array([params[f"CAL_MAG1_{a}OFF"] for a in XYZ])
+    want = o_old + np.linalg.solve(S_old, R.T @ h_G)
+    assert np.allclose([got[f"CAL_MAG1_{a}OFF"] for a in XYZ], want, atol=2e-7), (got, want)
+
+
+@pytest.mark.parametrize("fmt", ["px4", "qgc"])
+def test_an_instance_that_is_another_sensors_slot_is_refused(capsys, tmp_path, shared_data, fmt):
+    """The SITL log's selected accelerometer (1310988) is CAL_ACC0; `--instance 1` wrote
+    CAL_ACC1_ID 1310988 over the slot of the sensor 1310996 (two slots then claim one sensor,
+    the other is left uncalibrated), and composed the corrected data's fit with CAL_ACC1's
+    offsets, another sensor's: XOFF 0.0097 - 0.1 instead of -0.039 - 0.1. Now refused in one
+    line naming the slot the firmware applies; without --instance (or with 0) it is written."""
+    log = shared_data / "px4_ulog" / "original" / "sample_px4_events.ulg"
+    params = ulog(log, ["sensor_combined"]).initial_parameters
+    assert params["CAL_ACC0_ID"] == 1310988 and params["CAL_ACC1_ID"] == 1310996  # the log as it is
+    out = tmp_path / "acc.csv"
+    code, _, err = run(capsys, "import", log, "--procedure", "accel-tabletop", "--source", "combined", "--out", out)
+    assert code == 0, err
+    meta = read_capture(out).meta
+    assert meta["accel_device_id"] == "1310988" and meta["corrected"] == "true"
+    m, cols = small_capture(procedure="accel-tabletop")
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        cid = s.save_calibration(accel_result(device=meta["device"], B=(0.1, 0.0, 0.0), M=np.eye(3)), meta=meta,
+                                 columns=cols)  # fmt: skip
+    code, text, err = run(capsys, "export", cid, "--format", fmt, "--instance", "1", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (text, err)
+    assert "slot 0" in err and "CAL_ACC0_ID" in err, err
+    for extra in ([], ["--instance", "0"]):
+        code, text, err = run(capsys, "export", cid, "--format", fmt, *extra, "--db", db)
+        assert code == 0, err
+        got = qgc_load(text, params) if fmt == "qgc" else px4_shell_load(text, params)
+        assert got["CAL_ACC0_ID"] == 1310988 and "CAL_ACC1_ID" not in got
+        assert got["CAL_ACC0_XOFF"] == pytest.approx(params["CAL_ACC0_XOFF"] - 0.1, abs=1e-7)
+
+
+def _topic_values(u, name, field):
+    """The one value ``field`` of topic ``name`` holds over the log (asserted unique)."""
+    values = {v for d in u.data_list if d.name == name for v in d.data[field].tolist()}
+    assert len(values) == 1, values
+    return values.pop()
+
+
 def _px4_export(capsys, db, kind, device_id, **meta):
     result = {"accel": accel_result, "gyro": gyro_result, "mag": compass_result}[kind](device=f"{kind}{len(meta)}")
     m, cols = small_capture(procedure=PROCEDURE[kind], **{f"{kind}_unit": {"accel": "m/s^2", "gyro": "rad/s",
@@ -396,6 +474,26 @@ def test_a_calibration_that_changes_nothing_exports_an_ardupilot_logs_own_parame
     assert logs
     for log in logs:
         assert ardupilot_round_trip(capsys, tmp_path, log), log
+
+
+def test_an_ardupilot_instance_that_is_another_imus_is_refused(capsys, tmp_path):
+    """pymavlink's ArduPlane log: IMU[0] is INS_ACC_ID (1246730), IMU[1] INS_ACC2_ID. A fit on
+    IMU[0]'s corrected data exported with `--instance 2` composed with INS_ACC2OFFS, the other
+    IMU's offsets, and wrote them as that IMU's. Refused now; the sensor's own slot is written."""
+    log = Path(__file__).resolve().parent / "data" / "ardupilot_pymavlink" / "test.BIN"
+    out = tmp_path / "imu0.csv"
+    code, _, err = run(capsys, "import", log, "--procedure", "accel-tabletop", "--instance", "0", "--out", out)
+    assert code == 0, err
+    meta = read_capture(out).meta
+    assert meta["accel_device_id"] == meta["param.INS_ACC_ID"] != meta["param.INS_ACC2_ID"]
+    m, cols = small_capture(procedure="accel-tabletop")
+    db = str(tmp_path / "s.db")
+    with Store(db) as s:
+        cid = s.save_calibration(accel_result(device="AP", B=(0.1, 0.0, 0.0), M=np.eye(3)), meta=meta, columns=cols)
+    code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--instance", "2", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1 and "INS_ACC_ID" in err, (text, err)
+    code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--instance", "1", "--db", db)
+    assert code == 0 and "INS_ACCOFFS_X," in text and "INS_ACC2OFFS" not in text, err
 
 
 def test_older_px4_gyro_scales_in_use_divide_the_composed_drift(capsys, tmp_path, shared_data):

@@ -100,6 +100,13 @@ def test_simulate_calibrate_diagnose_round_trip(entry, monkeypatch):
     result = calibrate_capture(cap)
     assert result["procedure"] == entry.name and np.isfinite(result["residual_rms"])
     assert module.format_text(result).strip()
+    # every parameter the result holds is one PARAM_SHAPES declares (limits and tolerances of a
+    # device with no calibration yet are checked against those names)
+    from station.commands.devices import _every_procedures_names
+    from station.procedures.review import block_of, flatten
+
+    declared = _every_procedures_names()
+    assert all(k in declared.get(block_of(k), ()) for k in flatten(result["params"])), flatten(result["params"])
 
     calls = []
     real = module.prepare

@@ -194,7 +194,9 @@ def test_a_limit_that_limits_nothing_of_the_device_is_refused(tmp_path, capsys):
     """`--limit dirft=-10:10` (a typo) or `B[9]=...` on a device whose calibrations say what
     it has was stored and never checked: every later calibration passed it by. Refused in one
     line naming what the device has; nothing stored. A limit for another procedure's first
-    calibration, and any limit on a device with no calibration yet, are still taken."""
+    calibration is still taken; on a device with no calibration yet, any procedure's parameter
+    is (a name no procedure's result holds is refused there too: see
+    test_a_typo_on_a_device_with_no_calibration_yet_is_refused)."""
     from db import Store
     from station.cli import main
 
@@ -212,7 +214,42 @@ def test_a_limit_that_limits_nothing_of_the_device_is_refused(tmp_path, capsys):
     for item in ("B[2]=-25:25", "M=-20:20", "residual_rms=:0.01", "drift=-10:10"):  # drift: P4's, not yet run
         assert main(["devices", "add", "A1", "--limit", item, "--db", db]) == 0, capsys.readouterr().err
     assert sorted(Store(db).get_device("A1")["limits"]) == ["B[2]", "M", "drift", "residual_rms"]
-    assert main(["devices", "add", "NEW", "--limit", "anything=0:1", "--db", db]) == 0
+    assert main(["devices", "add", "NEW", "--limit", "drift=-10:10", "--db", db]) == 0
+
+
+@pytest.mark.parametrize("option", ["--limit", "--tolerance"])
+def test_a_typo_on_a_device_with_no_calibration_yet_is_refused(tmp_path, capsys, option):
+    """A device is registered with its limits and tolerances before its first calibration (the
+    README's example), and there `--tolerance dirft=10`, `--limit nope=0:1` or `--limit
+    'M[0][3]=0.9:1.1'` were stored and never checked: the first calibrations passed them by, the
+    engineer believing the unit judged. Every procedure's result holds a known set of names
+    (calibrate.md; the modules' PARAM_SHAPES): a name none holds is refused in one line, as on
+    a calibrated device; every name some procedure holds is still taken."""
+    from db import Store
+    from station.cli import main
+
+    db = str(tmp_path / "s.db")
+    assert main(["devices", "add", "NEW", "--db", db]) == 0
+    capsys.readouterr()
+    value = "=0.1" if option == "--tolerance" else "=0:1"
+    for name, says in [
+        ("dirft", "no parameter 'dirft' in any procedure's results"),
+        ("M[0][3]", "M is M[0][0] … M[2][2]: no M[0][3]"),
+        ("gamma[6]", "gamma is gamma[0] … gamma[5]: no gamma[6]"),
+        ("beam4.dK", "no parameter 'beam4.dK'"),
+    ]:
+        code = main(["devices", "add", "NEW", option, name + value, "--db", db])
+        out, err = capsys.readouterr()
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert says in err, err
+    dev = Store(db).get_device("NEW")
+    assert dev["limits"] == {} and dev["tolerances"] in ({}, None), dev
+    good = ["B[2]", "M", "S[0]", "gamma[5]", "drift", "earth_rate_body[1]", "pitch_deg", "hard_iron", "beam2.dK",
+            "reference.total_nT", "condition_number"]  # fmt: skip
+    for name in good:
+        assert main(["devices", "add", "NEW", option, name + value, "--db", db]) == 0, capsys.readouterr().err
+    key = "limits" if option == "--limit" else "tolerances"
+    assert sorted(Store(db).get_device("NEW")[key]) == sorted(good)
 
 
 def test_a_tolerance_that_names_nothing_of_the_device_is_refused_as_a_limit_is(tmp_path, capsys):

@@ -224,3 +224,84 @@ def test_the_noise_run_has_the_p4_hold_layout_when_it_is_the_first_run(tmp_path)
     readouts, body = asyncio.run(story())
     assert readouts.x == 1, readouts  # the hold screen's margin
     assert readouts.bottom <= 14, readouts  # under the instruction and the bars, not at the foot
+
+
+def test_quitting_p1_with_captured_positions_says_they_are_kept_for_resume(tmp_path):
+    """ctrl+q on P1 with positions captured asked "Quit? The run in progress is lost.", while
+    the captured positions were kept in the resume file and F6 continued them after a restart:
+    an operator told hours of holds are lost answers no, or re-does them. Now it says what is
+    lost (the position being averaged) and what is kept; with none captured it is unchanged."""
+    import os
+
+    from tests.test_tui import screen_name
+
+    async def story():
+        clock = BenchClock()
+        src = SimSource(seed=3, clock=clock)
+        app = make_app(str(tmp_path / "s.db"), device=src, start="procedure", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            guide = app.screen.guide
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            before = app.screen.question
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) != "ConfirmScreen")
+            await run_bench(pilot, src, clock, lambda: guide.n_captured == 1)  # x_up: the unit starts there
+            await wait_for(pilot, lambda: os.path.exists(guide.state_path))
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            after = app.screen.question
+            await pilot.press("n")
+            return before, after, guide.state_path, guide.n_captured
+
+    before, after, state_path, kept = asyncio.run(story())
+    assert "The run in progress is lost" in before and "kept" not in before, before
+    assert os.path.exists(state_path)
+    assert "The run in progress is lost" not in after, after
+    assert f"The {kept} captured position" in after and "kept" in after and "F6" in after, after
+
+
+def test_a_device_due_later_is_not_called_due_on_history_or_connect(tmp_path):
+    """History lists what falls due within 30 days, the Connect screen within 7, and both said
+    "due" of a device whose interval ends weeks ahead ("IMU-8: due — ... ends 2026-12-21")
+    while `station due` said "nothing due" of the same database, exit 0. They now say when, as
+    `station due --within` does ("due in 20 d (DATE)"; the 7-wide status column "in 20 d");
+    "due" alone is left for a device due today."""
+    import datetime as dt
+
+    from db.store import Store
+    from station.store import save_result
+    from tests.station_run import run_station
+    from tests.test_tui import screen_name
+    from tests.tui_data import p1_result
+
+    db = str(tmp_path / "s.db")
+    ten_days_ago = (dt.datetime.now(dt.UTC) - dt.timedelta(days=10)).strftime("%Y-%m-%d")
+    for device, interval in (("IMU-8", 30), ("IMU-9", 15)):
+        cap, result = p1_result(device, date=ten_days_ago)
+        save_result(db, cap, result, device_id=device, operator="test")
+        Store(db).add_device(device, interval_days=interval)
+    res = run_station("due", "--db", db)
+    assert res.returncode == 0 and "nothing due" in res.stdout, res.stdout  # the command line's word
+    left = {d["device_id"]: round(d["days_left"]) for d in Store(db).due(within_days=30)}
+    assert left == {"IMU-8": 20, "IMU-9": 5}, left
+
+    async def story():
+        app = make_app(db)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen" and "IMU-9" in text_of(app, "#due"))
+            connect = text_of(app, "#due")
+            await pilot.press("f2")
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-8" in text_of(app, "#due"))
+            await wait_for(pilot, lambda: "IMU-9" in text_of(app, "#devices"))
+            return connect, text_of(app, "#due"), text_of(app, "#devices")
+
+    connect, header, devices = asyncio.run(story())
+    assert "IMU-9 due in 5 d" in " ".join(connect.split()), connect
+    header = " ".join(header.split())
+    assert "IMU-8: due in 20 d" in header and "IMU-9: due in 5 d" in header and ": due —" not in header, header
+    rows = {d: line for line in devices.splitlines() for d in ("IMU-8", "IMU-9") if d in line}
+    assert len(rows) == 2, devices
+    assert "in 20 d" in rows["IMU-8"] and "in 5 d" in rows["IMU-9"], rows
+    assert not any(" due" in row for row in rows.values()), rows

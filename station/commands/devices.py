@@ -196,7 +196,9 @@ def _check_limit_name(item: str, name: str, contexts: list[dict]) -> None:
     """ValueError when the device's calibrations show ``name`` limits nothing: an element
     beyond its block (``B[9]``), or a name no calibrated procedure has and no other
     procedure's parameter list claims (a typo: ``dirft``). A limit was stored and never
-    checked. Without a calibration nothing is known and nothing is refused."""
+    checked. Without a calibration, the names every procedure's result can hold
+    (``PARAM_SHAPES``) are those known: a typo was stored there too, for the first
+    calibration to ignore."""
     from station.procedures.review import block_of, flatten, unit_context
 
     names: dict[str, set[str]] = {}  # block -> its scalar names, over the device's calibrations
@@ -208,18 +210,38 @@ def _check_limit_name(item: str, name: str, contexts: list[dict]) -> None:
         procedures.add(ctx.get("procedure"))
         for key in flatten(params):
             names.setdefault(block_of(key), set()).add(key)
-    if not names or name == "residual_rms" or name in names or any(name in keys for keys in names.values()):
+    if not names:  # no calibration yet: any procedure's parameters
+        names, procedures = _every_procedures_names(), None
+    if name == "residual_rms" or name in names or any(name in keys for keys in names.values()):
         return
     block = block_of(name)
     if block in names:
         keys = sorted(names[block])
         span = keys[0] if len(keys) == 1 else f"{keys[0]} … {keys[-1]}"
-        raise ValueError(f"{item!r}: {block} of this device is {span}: no {name}")
+        owner = "of this device " if procedures is not None else ""
+        raise ValueError(f"{item!r}: {block} {owner}is {span}: no {name}")
     owner = unit_context(name, []).get("procedure")
-    if owner is not None and owner not in procedures:
+    if procedures is not None and owner is not None and owner not in procedures:
         return  # another procedure's parameter: a limit for its first calibration
-    shown = ", ".join(sorted(names))
-    raise ValueError(f"{item!r}: no parameter {name!r} in this device's calibrations ({shown})")
+    shown = ", ".join(sorted({n.split(".")[0] + (".…" if "." in n else "") for n in names}))
+    where = "this device's calibrations" if procedures is not None else "any procedure's results"
+    raise ValueError(f"{item!r}: no parameter {name!r} in {where} ({shown})")
+
+
+def _every_procedures_names() -> dict[str, set[str]]:
+    """Block -> its scalar names, over every procedure's ``PARAM_SHAPES``."""
+    import numpy as np
+
+    from station.procedures import registry
+    from station.procedures.review import block_of
+
+    names: dict[str, set[str]] = {}
+    for entry in registry.PROCEDURES:
+        for block, shape in getattr(entry.load(), "PARAM_SHAPES", {}).items():
+            for index in np.ndindex(*shape):
+                key = block + "".join(f"[{i}]" for i in index)
+                names.setdefault(block_of(key), set()).add(key)
+    return names
 
 
 def _limits(items: list[str], contexts: list[dict]) -> dict | None:

@@ -11,6 +11,7 @@ import sys
 
 from station.commands._dbutil import fit_line, open_store, print_json, terminal_width
 from station.errors import InputError
+from station.formatting import due_when
 from station.textsafe import safe
 
 MAX_WITHIN_DAYS = 36525.0  # the longest recalibration interval a device may have (db.store.MAX_INTERVAL_DAYS)
@@ -56,12 +57,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         width = terminal_width()
         for e in items:
-            if e["days_left"] is None:
-                when = "never calibrated"
-            elif e["days_left"] < 0:
-                when = f"overdue by {-e['days_left']:.0f} d (due {e['due'][:10]})"
-            else:
-                when = f"due in {e['days_left']:.0f} d ({e['due'][:10]})"
+            when = due_when(e)
             sys.stdout.write(fit_line(f"{safe(e['device_id'])}: {when}", "", width) + "\n")
             for r in e["reasons"]:  # on a terminal, wrapped at its width (a drift reason: 150 columns)
                 sys.stdout.write(fit_line(safe(r["text"]), "    ", width) + "\n")

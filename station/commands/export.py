@@ -38,7 +38,7 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--vehicle",
-        default="1,1",
+        default=None,
         metavar="SYSID,COMPID",
         help="qgc: the vehicle and component id columns (default 1,1)",
     )
@@ -50,6 +50,16 @@ def run(args: argparse.Namespace) -> int:
     from station.firmware_export import export
 
     refuse_database_as_output(args, args.output, "-o")
+    # an option the format has no use for was ignored without a word (--device-id with ardupilot)
+    for option, value, formats in (
+        ("--instance", args.instance, ("ardupilot", "px4", "qgc")),
+        ("--device-id", args.device_id, ("px4", "qgc")),
+        ("--vehicle", args.vehicle, ("qgc",)),
+    ):
+        if value is not None and args.format not in formats:
+            raise InputError(None, None, f"{option} applies to --format {' or '.join(formats)} only")
+    if args.vehicle is None:
+        args.vehicle = "1,1"
     with open_store(args) as store:
         cal = store.calibration(args.calibration_id)
         meta = store.capture_info(cal["capture_id"])["meta"] if cal["capture_id"] is not None else {}

@@ -55,6 +55,10 @@ from station.device.protocol import (
     header_sentence,
 )
 
+# $STC,TEMP set points [degC]: above absolute zero, within a thermal chamber's reach (-70..180 degC
+# for common test chambers, with room to spare)
+TEMP_MIN_C, TEMP_MAX_C = -100.0, 300.0
+
 
 @dataclass
 class SimStats:
@@ -235,9 +239,14 @@ class SimDevice:
             if v in ("TEMP", "AUTO") and not hasattr(imu, "set_auto"):
                 return False, f"this device ({imu.device_id}) has no {v.lower()} control"
             if v == "TEMP" and a:
-                t = float(a[0])
-                if not math.isfinite(t):
-                    return False, "temperature must be a number"
+                try:
+                    t = float(a[0])
+                except ValueError:
+                    t = math.nan
+                # above absolute zero, within what a thermal chamber reaches: beyond, the unit would stream
+                # temperatures (1e308) the station's own readers refuse
+                if not (TEMP_MIN_C <= t <= TEMP_MAX_C):
+                    return False, f"temperature must be a number of degC from {TEMP_MIN_C:g} to {TEMP_MAX_C:g}"
                 imu.set_temperature(t)
                 return True, a[0]
             if v == "AUTO" and a:
@@ -256,7 +265,7 @@ class SimDevice:
                 self._rebase_rate(hz)
                 return True, a[0]
         except (ValueError, KeyError) as exc:  # SimulationError is a ValueError
-            return False, str(exc).splitlines()[0][:120]
+            return False, str(exc).splitlines()[0][:200]  # the answer stays within a sentence's 256 bytes
         return False, f"unknown command {v}"
 
     def _header_bytes(self) -> bytes:

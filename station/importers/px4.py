@@ -280,6 +280,11 @@ def read(
             cols = [f"magnetometer_ga[{j}]" for j in range(3)]
             ids = np.unique(np.asarray(d.get("device_id", [0])))
             device_id = int(ids[0]) if len(ids) == 1 and ids[0] else None
+            if device_id is None and inst == 0 and "device_id" not in d:
+                # PX4 1.11: vehicle_magnetometer has no device_id; it carries the selected compass,
+                # which sensor_selection names (1.12 moved the id into vehicle_magnetometer)
+                ids = np.unique(np.asarray(sel.get("mag_device_id", [0])))
+                device_id = int(ids[0]) if len(ids) == 1 and ids[0] else None
             streams["mag"] = Stream(
                 "mag",
                 _time_us(d).astype(np.float64),

@@ -38,6 +38,7 @@ CORE_PARAMS = ("S", "b", "D")
 # station.procedures.review: each parameter block's unit; the residual above which the model
 # does not describe the data at all (5 % of g, in the result's g)
 PARAM_UNITS = {"S": "g per g", "b": "g", "D": "g/g^2", "gamma": "rad"}
+PARAM_SHAPES = {"S": (3,), "b": (3,), "D": (3,), "gamma": (6,)}  # every parameter the result can hold
 LIMIT_EXAMPLE = "e.g. b[0]=-0.05:0.05  S[0]=0.9:1.1  D[0]=:0.001"  # the limits box's example (screens/limits.py)
 RESIDUAL_LIMIT = 0.05
 BASES = ("exact", "exact-gamma", "paper", "paper-3rd")

@@ -678,9 +678,16 @@ class CentrifugeImu:
 
     def set_orientation(self, name: str) -> None:
         k_s, _, w_s = str(name).partition("@")
-        k, w = int(k_s), float(w_s or 0.0)
+        try:
+            k, w = int(k_s), float(w_s or 0.0)
+        except ValueError:
+            k, w = 0, math.nan  # said below, as any setting out of range
         if not 1 <= k <= len(self.orients) or not (math.isfinite(w) and w >= 0):
-            raise ValueError(f"unknown centrifuge setting {name!r}: 'k@omega', k in 1..{len(self.orients)}")
+            shown = str(name) if len(str(name)) <= 24 else str(name)[:21] + "..."
+            raise ValueError(
+                f"unknown centrifuge setting {shown!r}: 'k@omega', mounting k in 1..{len(self.orients)} at omega rad/s "
+                "(e.g. 3@12.5; 3 alone stands still)"
+            )
         t = self._i / self.rate_hz
         k0, w0 = (float(x[0]) for x in self._state(t)[:2])
         k0 = int(k0)

@@ -37,6 +37,14 @@ MEASURED = ("mx", "my", "mz", "ax", "ay", "az", "gx", "gy", "gz")
 CORE_PARAMS = ("hard_iron", "soft_iron")
 # station.procedures.review: each parameter block's unit ({mag_unit}: the result's, else raw)
 PARAM_UNITS = {"hard_iron": "{mag_unit}", "soft_iron": "nT per {mag_unit}"}
+PARAM_SHAPES = {  # every parameter the result can hold (calibrate.md)
+    "hard_iron": (3,),
+    "soft_iron": (3, 3),
+    **{
+        f"reference.{k}": ()
+        for k in ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
+    },
+}
 
 
 def _soft_iron_ratio(result: dict) -> float | None:

@@ -11,7 +11,8 @@ the registry.
 Optional constants the station's checks read where a module has them: ``MEASURED`` (columns
 read as measurements) and ``CORE_PARAMS`` (parameters it exists to deliver) for
 ``station.guard``; ``DEAD_IF_CONSTANT``/``DEAD_IF_CONSTANT_SAYS`` (columns that must change);
-``PARAM_UNITS`` (a unit per parameter block, or per ``.<leaf>``), ``RESIDUAL_LIMIT`` (in the
+``PARAM_SHAPES`` (every parameter block the result can hold and its shape: the names a limit or
+tolerance may give, ``station devices add``), ``PARAM_UNITS`` (a unit per parameter block, or per ``.<leaf>``), ``RESIDUAL_LIMIT`` (in the
 result unit), ``ZERO_IS_A_RESULT`` and ``DISPLAY_UNITS`` (the unit a screen shows a block
 or ``residual_rms`` in, when not the stored one) for ``station.procedures.review``. Optional functions:
 ``report_figures(result, meta, columns)`` (``station.report``), ``results_lines(result)`` and

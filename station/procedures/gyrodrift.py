@@ -49,6 +49,7 @@ CORE_PARAMS = ("drift",)
 # station.procedures.review: each parameter block's unit; a drift indistinguishable from zero
 # is a good gyro, not a failed fit
 PARAM_UNITS = {"drift": "rad/s", "earth_rate_body": "rad/s"}
+PARAM_SHAPES = {"drift": (3,), "earth_rate_body": (3,), "pitch_deg": (), "roll_deg": ()}  # every parameter
 # what the screens show them in (a bench engineer reads gyro drift in °/h); the result, its
 # exports and the database keep rad/s
 DISPLAY_UNITS = {k: ("°/h", 1.0 / gd.DEG_H_RAD_S) for k in ("drift", "earth_rate_body", "residual_rms")}

@@ -72,6 +72,10 @@ CORE_PARAMS = ("beam1", "beam2", "beam3")
 # station.guard: a beam reading one value in every row is dead or saturated (refused)
 # station.procedures.review: a unit by parameter name (".dK": the dK of any beam)
 PARAM_UNITS = {".dK": "1"}
+PARAM_SHAPES = {  # every parameter the result can hold (calibrate.md)
+    **{f"beam{b}.{k}": () for b in (1, 2, 3) for k in ("dK", "alpha_deg", "beta_deg", "gamma_deg", "sigma_mps")},
+    "condition_number": (),
+}
 LIMIT_EXAMPLE = "e.g. beam1.dK=-0.02:0.02  beam1.alpha_deg=58:62"  # the limits box's example (screens/limits.py)
 DEAD_IF_CONSTANT = ("vl1", "vl2", "vl3")
 DEAD_IF_CONSTANT_SAYS = (

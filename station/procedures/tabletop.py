@@ -42,6 +42,7 @@ CORE_PARAMS = ("B", "M")
 # station.procedures.review: each parameter block's unit; the residual above which the model
 # does not describe the data at all (5 % of g, in the result's m/s²)
 PARAM_UNITS = {"B": "m/s^2", "M": "m/s^2 per raw unit"}
+PARAM_SHAPES = {"B": (3,), "M": (3, 3)}  # every parameter the result can hold (calibrate.md)
 LIMIT_EXAMPLE = "e.g. B[0]=-0.5:0.5  M[0][0]=0.98:1.02"  # the limits box's example (screens/limits.py)
 RESIDUAL_LIMIT = 0.05 * 9.80665
 METHODS = {

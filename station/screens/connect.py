@@ -13,6 +13,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import Button, Input, Label, Select, Static
 
+from station.formatting import due_when
 from station.messages import Connected, SourceFailed, StoreLoaded
 from station.procedures import registry
 from station.textsafe import tui_markup, tui_text
@@ -223,7 +224,7 @@ class ConnectScreen(Screen):
             text = (
                 "Recalibration "
                 + "; ".join(
-                    f"{tui_markup(d['device_id'])} {d['status']}"
+                    f"{tui_markup(d['device_id'])} {due_when(d) if d['status'] == 'due' else d['status']}"
                     + (f" ({-d['days_left']:.0f} d)" if d["status"] == "overdue" else "")
                     for d in bad[:3]
                 )

@@ -25,6 +25,7 @@ def _short(procedure: str) -> str:
     return registry.short_code(procedure)
 
 
+from station.formatting import due_status, due_when  # noqa: E402
 from station.messages import StoreLoaded  # noqa: E402
 from station.textsafe import safe, tui_markup  # noqa: E402
 
@@ -39,9 +40,6 @@ def short_id(device_id: str, width: int = DEVICE_WIDTH) -> str:
         return device_id
     head = (width - 1) // 2
     return device_id[:head] + "…" + device_id[-(width - 1 - head) :]
-
-
-SHORT_STATUS = {"never calibrated": "no cal"}  # Store.due's statuses that do not fit STATUS_WIDTH
 
 
 def _rate_text(d: dict, k: float, unit: str) -> str:
@@ -106,7 +104,7 @@ class HistoryScreen(NoticesMixin, Screen):
         t = self.query_one("#devices", DataTable)
         t.add_columns("device", "n")
         # fixed width: "overdue" fits whatever render sees the rows first (the snapshot raced on it);
-        # the longer words are said shorter (SHORT_STATUS): "never calibrated" read "never c"
+        # the longer words are said shorter (formatting.due_status): "never calibrated" read "never c"
         t.add_column("status", width=STATUS_WIDTH)
         c = self.query_one("#calibrations", DataTable)
         c.add_columns("#", "time (UTC)", "proc", "residual", "state")
@@ -146,11 +144,16 @@ class HistoryScreen(NoticesMixin, Screen):
             t.clear()
             for d in self.devices:
                 st = status.get(d["id"])
-                word = st["status"] if st else "ok"
-                word = SHORT_STATUS.get(word, word)
+                word = due_status(st) if st else "ok"
                 t.add_row(tui_markup(short_id(d["id"])), str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
-            text = "\n".join(tui_markup(f"{d['device_id']}: {d['status']} — {d['reason']}"[:200]) for d in bad[:3])
+            # a date ahead (within the 30 days asked for) says when, as `station due --within` does
+            text = "\n".join(
+                tui_markup(
+                    f"{d['device_id']}: {due_when(d) if d['status'] == 'due' else d['status']} — {d['reason']}"[:200]
+                )
+                for d in bad[:3]
+            )
             if not self.devices:
                 text = "No devices yet: calibrate one (Connect → Start P1) or run `station demo`."
             self.query_one("#due", Static).update(text)

@@ -1,0 +1,92 @@
+"""The simulated device's answers to an operator's commands typed wrong, over a real
+pseudo-terminal with pyserial (docs/protocol.md section 5): each wrong command is answered
+`$STA,<verb>,ERR,<why>` in one sentence the station's own parser reads, saying what the
+device takes; a set point it would turn into readings the station refuses is refused.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from solvers.simulate import LiveImu
+from station.device.protocol import Ack, StationParser, sentence
+from station.procedures.centrifuge_guide import CentrifugeImu
+
+serial = pytest.importorskip("serial")
+
+
+class Served:
+    """A SimDevice on a real pty, streaming in a thread, and pyserial on its other end."""
+
+    def __init__(self, imu) -> None:
+        from station.device.simdevice import SimDevice
+
+        self.dev = SimDevice(imu)
+        self.path = self.dev.open()
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self.dev.run, args=(self.stop,), daemon=True)
+        self.parser = StationParser()
+
+    def __enter__(self):
+        self.thread.start()
+        self.port = serial.Serial(self.path, 115200, timeout=0.05)
+        return self
+
+    def __exit__(self, *exc):
+        self.port.close()
+        self.stop.set()
+        self.thread.join(5)
+        self.dev.close()
+
+    def ask(self, *fields: str, timeout_s: float = 10.0) -> Ack:
+        """Send `$STC,<fields>` and wait for the device's answer to that verb."""
+        self.port.write(sentence("STC", *fields))
+        t_end = time.monotonic() + timeout_s
+        while time.monotonic() < t_end:
+            for ev in self.parser.feed(self.port.read(4096)):
+                if isinstance(ev, Ack) and ev.verb == fields[0]:
+                    return ev
+        raise AssertionError(f"no answer to {fields} within {timeout_s} s (errors {self.parser.stats.errors})")
+
+
+def test_a_centrifuge_setting_typed_wrong_is_answered_with_the_form_it_takes():
+    """`$STC,ORIENT,x_up` to the P2 bench answered "invalid literal for int() with base 10:
+    'x_up'": Python's words, not the 'k@omega' form the bench takes (nor did any document
+    say it)."""
+    with Served(CentrifugeImu(seed=1, rate_hz=50.0)) as dev:
+        for wrong in ("x_up", "3@fast", "@", "99@1"):
+            ack = dev.ask("ORIENT", wrong)
+            assert not ack.ok and "k@omega" in ack.text and "1..20" in ack.text, ack
+            assert "literal" not in ack.text and "convert" not in ack.text, ack
+        assert dev.ask("ORIENT", "3@12.5").ok
+
+
+@pytest.mark.parametrize(
+    "procedure, own",
+    [("compass", ["s1..s12"]), ("accel-tabletop", ["x_up", "yz_135", "xz_135"]), ("gyro-drift", ["level"])],
+)
+def test_an_unknown_position_is_answered_with_the_devices_own_positions(procedure, own):
+    """The compass device answered an unknown position with the P1 faces only (its list, P1
+    first, was cut at 120 characters before s1..s12); the P1 device's list lost its last
+    positions. The answer names the device's own positions whole, in one sentence of at most
+    256 bytes (the parser counts a longer one `too_long` and drops it), a long name cut short."""
+    with Served(LiveImu(procedure=procedure, seed=1, rate_hz=50.0)) as dev:
+        for wrong in ("sideways", "y" * 200):
+            ack = dev.ask("ORIENT", wrong)
+            assert not ack.ok and all(name in ack.text for name in own), ack
+        assert dev.parser.stats.errors.get("too_long", 0) == 0
+
+
+@pytest.mark.parametrize("set_point", ["1e308", "-300", "abc", "nan"])
+def test_a_temperature_set_point_no_chamber_reaches_is_refused(set_point):
+    """`$STC,TEMP,1e308` was taken: the device then streamed temp_c of 1e307, which `station
+    record` wrote and `station inspect` refused ("beyond what any instrument reports");
+    -300 degC (below absolute zero) was taken too; 'abc' was answered with Python's "could not
+    convert string to float". A set point in range still works."""
+    with Served(LiveImu(procedure="accel-tabletop", seed=1, rate_hz=50.0)) as dev:
+        ack = dev.ask("TEMP", set_point)
+        assert not ack.ok and "degC" in ack.text and "convert" not in ack.text, ack
+        assert dev.ask("TEMP", "35").ok
