@@ -277,7 +277,8 @@ def test_a_device_due_later_is_not_called_due_on_history_or_connect(tmp_path):
     from tests.tui_data import p1_result
 
     db = str(tmp_path / "s.db")
-    ten_days_ago = (dt.datetime.now(dt.UTC) - dt.timedelta(days=10)).strftime("%Y-%m-%d")
+    # to the second: a calibration dated at midnight leaves 19.5 days at noon, which rounds to 19
+    ten_days_ago = (dt.datetime.now(dt.UTC) - dt.timedelta(days=10)).strftime("%Y-%m-%dT%H:%M:%SZ")
     for device, interval in (("IMU-8", 30), ("IMU-9", 15)):
         cap, result = p1_result(device, date=ten_days_ago)
         save_result(db, cap, result, device_id=device, operator="test")

@@ -150,6 +150,7 @@ class Problem:
     # a candidate's deviance is then taken net of a white + Gauss–Markov noise fitted by REML on
     # the residual its own model leaves (``wander.WanderModel``); None: no such model
     wander_t_s: np.ndarray | None = None
+    series_names: dict = field(default_factory=dict)  # a series id's name for a person (P4's axes, the LDV's beams)
     _wander: object = None
 
 
@@ -868,6 +869,8 @@ class _Eval:
     groups_left: float | None = None  # a generic term: degrees of freedom left in independent groups
     within: float | None = None  # its deviance on the rows within groups alone (where too few groups are left)
     cv_ref: float | None = None  # the current model's held-out RMS over the rows ``cv`` is taken on (None: all)
+    wander_T: float | None = None  # its likelihood ratio with a slow wander profiled out (``WanderModel.lr``)
+    wanders: bool = False  # whether the residual with it still wanders (then ``infl`` holds ``D / wander_T``)
 
     @property
     def D_rob(self) -> float:
@@ -1083,10 +1086,12 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
         infl = max(infl, shared_inflation(problem, _orth(np.hstack([A, cc.J])), e, sig))
     wm = wander_model(problem)
     if wm is not None and k > 0 and D > 0:
-        T = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0)
-        if T is not None:
-            infl = max(infl, D / max(T, 1e-9))
+        T_w, wanders = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0)
+        if wanders:
+            infl = max(infl, D / max(T_w, 1e-9))
     ev = _Eval(cc, db, cvc, sig, int(k), D, infl, cv_ref=cv_ref)
+    if wm is not None and k > 0 and D > 0:
+        ev.wander_T, ev.wanders = T_w, wanders
     t = _only_kind(problem, cc.J, types)
     if t is not None and k > 0:
         # tested on its own rows: their deviance, against the residual degrees of freedom they
@@ -1214,10 +1219,16 @@ def decisive_margin(problem: Problem, k: int = 1) -> float:
 
 def _rival_margin(a: _Eval, b: _Eval, n: int) -> float:
     """``score(a) − score(b)`` (> 0: ``b`` explains the data better) with both deviances taken
-    net of the larger of their two serial-correlation inflations: two candidates that explain
+    net of the larger of their two serial-correlation inflations, or, where a slow-noise model
+    sees a wander beside either, both likelihood ratios with it profiled out: two candidates that explain
     the same structure are compared on one noise scale, so the comparison is decided by the fit
     and not by the two inflation estimates (a slow signature's inflation against 1 for one that
     changes with each position)."""
+    if a.wander_T is not None and b.wander_T is not None and (a.wanders or b.wanders):
+        # a slow wander in either's residual: both on the likelihood with it profiled out (the
+        # wander one of them leaves unexplained, e.g. a line beside a temperature warm-up, is not
+        # an inflation of the other's deviance)
+        return (a.k - b.k) * math.log(n) - (a.wander_T - b.wander_T)
     infl = max(a.infl, b.infl)
     return (a.k - b.k) * math.log(n) - (a.D - b.D) / infl
 

@@ -297,6 +297,7 @@ def gyro_problem(
     prob.shared_noise = np.repeat(time_blocks(tb, GYRO_SHARED_BLOCKS) * 3, 3) + np.tile(np.arange(3), len(idx))
     prob.shared_first = True
     prob.wander_t_s = np.repeat(tb, 3)  # at most max_rows blocks per axis
+    prob.series_names = {0: "x", 1: "y", 2: "z"}
     return prob
 
 
@@ -397,6 +398,7 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     prob.series = np.tile(np.arange(3), len(v))
     if t is not None:
         prob.wander_t_s = np.repeat(t, 3)
+    prob.series_names = {0: "beam 1", 1: "beam 2", 2: "beam 3"}
     # the baseline has no constant: a drift or a temperature bias from a zero outside the capture
     # (power-up, 25 °C) brings its mean with it, which the offset takes; both named, they are tied
     prob.intercept_of = {"offset": {"time_drift": t, "temperature_bias": T}}

@@ -97,17 +97,17 @@ class WanderModel:
         E = E.reshape(len(E), -1)
         return np.asarray([_part_loglik(part, X, E, reml=False)[0].max(axis=(0, 1)) for part in self.parts])
 
-    def lr(self, A: np.ndarray, J: np.ndarray, e0: np.ndarray, e1: np.ndarray, cache: dict) -> float | None:
-        """The likelihood-ratio statistic of columns ``J`` beside ``A`` with the slow noise profiled
-        out under both (``e0``, ``e1``: the residuals of ``A`` and of ``[A J]``), or None when the
-        residual of ``[A J]`` shows no wander (REML's ratio over white noise below ``EVIDENT_LR`` in
-        every series: the white-noise deviance stands). ``cache`` holds what depends on ``A`` only."""
+    def lr(self, A: np.ndarray, J: np.ndarray, e0: np.ndarray, e1: np.ndarray, cache: dict) -> tuple[float, bool]:
+        """(the likelihood-ratio statistic of columns ``J`` beside ``A`` with the slow noise profiled
+        out under both, whether the residual of ``[A J]`` wanders): ``e0``, ``e1`` the residuals of
+        ``A`` and of ``[A J]``; it wanders where REML's ratio over white noise is at least
+        ``EVIDENT_LR`` in some series (else the white-noise deviance stands). ``cache`` holds what
+        depends on ``A`` only."""
         AJ = np.hstack([A, J])
-        if max((f[3] for f in self.fit(AJ, e1)), default=0.0) < EVIDENT_LR:
-            return None
+        evident = max((f[3] for f in self.fit(AJ, e1)), default=0.0) >= EVIDENT_LR
         if "ll0" not in cache:
             cache["ll0"] = float(np.sum(self.profile(A, e0)))
-        return max(0.0, 2.0 * (float(np.sum(self.profile(AJ, e1))) - cache["ll0"]))
+        return max(0.0, 2.0 * (float(np.sum(self.profile(AJ, e1))) - cache["ll0"])), evident
 
 
 def _cols(X: np.ndarray) -> np.ndarray:

@@ -130,7 +130,7 @@ def _quality(capture, diag, inp) -> list[dict]:
         }
         if rt.get("wander"):
             unit = diag.problem.unit
-            names = _series_names(diag.problem.procedure)
+            names = diag.problem.series_names
             finding["wander"] = [
                 {
                     "series": names.get(w["series"], str(w["series"])),
@@ -153,15 +153,6 @@ def _quality(capture, diag, inp) -> list[dict]:
 
 
 # ---------------------------------------------------------------- entry point
-
-
-def _series_names(procedure: str) -> dict:
-    """A time-ordered series' name by its id (``Problem.series``): P4's axes, the LDV's beams."""
-    if procedure == "gyro-drift":
-        return {0: "x", 1: "y", 2: "z"}
-    if procedure == "ldv":
-        return {0: "beam 1", 1: "beam 2", 2: "beam 3"}
-    return {}
 
 
 def _explained(diag, flagged) -> bool:
