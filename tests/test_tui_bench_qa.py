@@ -306,3 +306,52 @@ def test_a_device_due_later_is_not_called_due_on_history_or_connect(tmp_path):
     assert len(rows) == 2, devices
     assert "in 20 d" in rows["IMU-8"] and "in 5 d" in rows["IMU-9"], rows
     assert not any(" due" in row for row in rows.values()), rows
+
+
+def test_history_says_when_the_device_falls_due_and_i_sets_its_interval(tmp_path):
+    """A new unit calibrated on the TUI is registered without an interval, so it is never due;
+    History called it "ok" and showed no due date anywhere (`station due` says "nothing due"
+    and names it on stderr only), and no screen could set the interval. History now says the
+    highlighted device's due date or that it is never due, and ``i`` sets the interval, stored
+    as ``devices add --interval-days`` does (the CLI sees the same date)."""
+    import datetime as dt
+
+    from db.store import Store
+    from station.store import save_result
+    from tests.station_run import run_station
+    from tests.test_tui import screen_lines, screen_name
+    from tests.tui_data import p1_result
+
+    db = str(tmp_path / "s.db")
+    ten_days_ago = (dt.datetime.now(dt.UTC) - dt.timedelta(days=10)).strftime("%Y-%m-%dT%H:%M:%SZ")
+    cap, result = p1_result("IMU-5", date=ten_days_ago)
+    save_result(db, cap, result, device_id="IMU-5", operator="test")
+    assert Store(db).get_device("IMU-5")["interval_days"] is None
+
+    def shown(app) -> str:
+        return " ".join(" ".join(screen_lines(app)).split())
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-5" in text_of(app, "#devices"))
+            await wait_for(pilot, lambda: "never due: no recalibration interval (i sets one)" in shown(app), 30)
+            before = text_of(app, "#devices")
+            await pilot.press("i")
+            await wait_for(pilot, lambda: screen_name(app) == "IntervalScreen" and "never due" in shown(app))
+            for key in "abc":
+                await pilot.press(key)
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: "not a number of days" in shown(app))
+            assert Store(db).get_device("IMU-5")["interval_days"] is None
+            await pilot.press("backspace", "backspace", "backspace", "3", "0", "enter")
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "interval 30 d" in shown(app))
+            return before, shown(app), text_of(app, "#devices")
+
+    before, after, devices = asyncio.run(story())
+    assert "no int" in before and " ok" not in before, before
+    assert Store(db).get_device("IMU-5")["interval_days"] == 30
+    assert "due in 20 d" in after and "interval 30 d" in after, after
+    assert "in 20 d" in devices, devices
+    res = run_station("due", "--within", "30", "--db", db)  # the command line gives the same date
+    assert res.returncode == 1 and "IMU-5" in res.stdout, (res.stdout, res.stderr)

@@ -42,6 +42,20 @@ def short_id(device_id: str, width: int = DEVICE_WIDTH) -> str:
     return device_id[:head] + "…" + device_id[-(width - 1 - head) :]
 
 
+def next_due_text(device: dict | None, due: dict | None) -> str:
+    """One line over a device's calibrations: when it falls due (``formatting.due_when``), or
+    that it never does, having no recalibration interval (the TUI registers devices without
+    one, so a new unit's first calibration leaves it so: ``station due`` would never name it).
+    Says the key that sets the interval (``i``)."""
+    interval = (device or {}).get("interval_days")
+    if due is None:
+        if not interval:
+            return "never due: no recalibration interval (i sets one)"
+        return f"not scheduled yet, interval {interval:g} d"
+    when = due_when(due)
+    return f"{when}, interval {interval:g} d" if interval else f"{when}, no interval (i sets one)"
+
+
 def _rate_text(d: dict, k: float, unit: str) -> str:
     """The plot title's trend of one parameter (``Store.drift`` entry ``d``, shown = stored * k):
     rate ± σ per year and how many σ, * when significant (it can move the due date); under
@@ -66,6 +80,7 @@ class HistoryScreen(NoticesMixin, Screen):
     HistoryScreen #devices { width: 26; height: 1fr; }
     HistoryScreen DataTable:focus { border-left: thick $accent; }
     HistoryScreen #right { width: 1fr; height: 1fr; border-left: vkey $secondary; }
+    HistoryScreen #next { height: auto; padding: 0 1; }
     HistoryScreen #calibrations { height: 1fr; }
     HistoryScreen #plot { height: 1fr; min-height: 8; }
     /* notices under the plot, not a toast over its last points and date axis (the reminder
@@ -78,6 +93,7 @@ class HistoryScreen(NoticesMixin, Screen):
         Binding("p", "next_param", "Next parameter"),
         Binding("g", "diagnose", "Diagnose"),
         Binding("l", "limits", "Limits"),
+        Binding("i", "interval", "Interval"),
     ]
 
     def __init__(self) -> None:
@@ -95,6 +111,7 @@ class HistoryScreen(NoticesMixin, Screen):
         with Horizontal():
             yield DataTable(id="devices", cursor_type="row", zebra_stripes=True)
             with Vertical(id="right"):
+                yield Static("", id="next")
                 yield DataTable(id="calibrations", cursor_type="row", zebra_stripes=True)
                 yield PlotextPlot(id="plot")
         yield Static("", id="notices")
@@ -127,7 +144,17 @@ class HistoryScreen(NoticesMixin, Screen):
     def load_device(self, device_id: str) -> None:
         try:
             store = self.app.session.open_store()
-            data = {"id": device_id, "history": store.history(device_id), "drift": store.drift(device_id)}
+            from db.store import MAX_INTERVAL_DAYS
+
+            # every date ahead, not only the 30 days the header lists: the device's next due date
+            due = [d for d in store.due(within_days=2 * MAX_INTERVAL_DAYS) if d["device_id"] == device_id]
+            data = {
+                "id": device_id,
+                "history": store.history(device_id),
+                "drift": store.drift(device_id),
+                "device": store.get_device(device_id),
+                "due": due[0] if due else None,
+            }
             self.post_message(StoreLoaded("device-history", data))
         except Exception as exc:  # noqa: BLE001
             self.post_message(StoreLoaded("device-history", None, error=str(exc)))
@@ -144,7 +171,8 @@ class HistoryScreen(NoticesMixin, Screen):
             t.clear()
             for d in self.devices:
                 st = status.get(d["id"])
-                word = due_status(st) if st else "ok"
+                # calibrated without an interval: never due, not "ok" (`station due` never names it)
+                word = due_status(st) if st else ("ok" if d.get("interval_days") else "no int")
                 t.add_row(tui_markup(short_id(d["id"])), str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
             # a date ahead (within the 30 days asked for) says when, as `station due --within` does
@@ -164,6 +192,9 @@ class HistoryScreen(NoticesMixin, Screen):
             self.device_id = message.data["id"]
             self.history = message.data["history"]
             self.drift = [d for d in message.data["drift"] if d["n"] >= 1]
+            self.query_one("#next", Static).update(
+                tui_markup(next_due_text(message.data.get("device"), message.data.get("due")))
+            )
             from station.procedures.review import shown_residual
 
             c = self.query_one("#calibrations", DataTable)
@@ -215,6 +246,21 @@ class HistoryScreen(NoticesMixin, Screen):
             self.notify("No device to set limits for", severity="warning")
             return
         self.app.push_screen(LimitsScreen(self.device_id))
+
+    def action_interval(self) -> None:
+        """Set the highlighted device's recalibration interval (station.screens.interval)."""
+        from station.screens.interval import IntervalScreen
+
+        if not self.device_id:
+            self.notify("No device to set an interval for", severity="warning")
+            return
+
+        def changed(done: bool | None) -> None:
+            if done:  # the due dates moved: read the devices (and this device) again, and the reminder
+                self.load()
+                self.app.load_due()
+
+        self.app.push_screen(IntervalScreen(self.device_id), changed)
 
     def action_next_param(self) -> None:
         if self.drift:
