@@ -355,3 +355,41 @@ def test_history_says_when_the_device_falls_due_and_i_sets_its_interval(tmp_path
     assert "in 20 d" in devices, devices
     res = run_station("due", "--within", "30", "--db", db)  # the command line gives the same date
     assert res.returncode == 1 and "IMU-5" in res.stdout, (res.stdout, res.stderr)
+
+
+def test_the_noise_runs_p4_verdict_is_shown_whole_at_80x24(tmp_path):
+    """The Allan result's verdict had two rows: "No still P4 record reaches 1σ ≤ 1 °/h on every
+    axis: the fitted noise floor of x (bias instability, rate random walk) is above it; y alone
+    needs 70 min, z" was all a noise run on the simulator showed, the rest ("alone needs 70
+    min.") cut off. It now takes the rows it needs, the plot giving them."""
+    import numpy as np
+
+    from station.capture import read_capture
+    from station.procedures.noise import noise_report, p4_record_verdict
+    from station.screens.noise import AllanScreen
+    from tests.station_run import run_station
+    from tests.test_tui import screen_name
+
+    cap_path = tmp_path / "still.csv"
+    assert run_station("simulate", "--procedure", "gyro-drift", "--seed", 400003, "--out", cap_path).returncode == 0
+    cap = read_capture(cap_path)
+    gyro = np.column_stack([cap.columns[c] for c in ("gx", "gy", "gz")])
+    report = noise_report(gyro, float(cap.meta["sample_rate_hz"]), cap.meta.get("gyro_unit"))
+    accuracy = "4.6"  # on this record: x reaches it, y never does, z in 73 min
+    verdict = p4_record_verdict(report.time_needed_s(float(accuracy)), float(accuracy))
+    assert len(verdict) > 2 * 78, verdict  # more than two rows of the screen's 78 columns
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(AllanScreen(cap, report))
+            await wait_for(pilot, lambda: screen_name(app) == "AllanScreen")
+            # the screen takes the focus off the field once drawn: the keys are the footer's
+            await wait_for(pilot, lambda: "P4 needs" in text_of(app, "#table") and app.screen.focused is None)
+            await pilot.press("t")
+            await wait_for(pilot, lambda: app.screen.focused is not None and app.screen.focused.id == "accuracy")
+            await pilot.press(*["backspace"] * 6, *accuracy, "enter")
+            await wait_for(pilot, lambda: f"≤ {accuracy} °/h" in text_of(app, "#status"))
+            return " ".join(text_of(app, "#status").split())
+
+    assert asyncio.run(story()) == verdict

@@ -93,7 +93,9 @@ class AllanScreen(NoticesMixin, Screen):
     AllanScreen #ask { height: 1; padding: 0 1; }
     AllanScreen #ask Label { width: 26; }
     AllanScreen #accuracy { width: 12; }
-    AllanScreen #status { height: 2; padding: 0 1; }
+    /* the verdict takes the rows it needs (three at 80 columns when one axis never gets there
+       and the others are named): two cut "...; x alone needs 3 min, z" off; the plot gives them */
+    AllanScreen #status { height: auto; min-height: 2; padding: 0 1; }
     /* notices under the answer (the plot gives them rows if needed), not a toast over the table */
     AllanScreen ToastHolder { display: none; }
     AllanScreen #notices { height: auto; max-height: 4; padding: 0 1; }
