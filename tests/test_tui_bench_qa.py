@@ -393,3 +393,27 @@ def test_the_noise_runs_p4_verdict_is_shown_whole_at_80x24(tmp_path):
             return " ".join(text_of(app, "#status").split())
 
     assert asyncio.run(story()) == verdict
+
+
+def test_the_compass_prompt_is_shown_whole_at_80x24():
+    """P3's prompt line was one row of the 48 columns beside the coverage map: "Turn the unit
+    slowly through every orientation" was all it showed of "... (all faces up, all headings)"."""
+    from tests.test_tui import screen_name
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#procedure").value = "compass"
+            clock = BenchClock()
+            src = app.session.source = SimSource(seed=3, procedure="compass", clock=clock)
+            await pilot.press("f5")
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2)
+            asked = app.screen.last_status.message
+            assert "all faces up" in asked, asked
+            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            try:  # the clock is stopped: the prompt settles; what is drawn must be all of it
+                await wait_for(pilot, lambda: shown() == asked, timeout_s=10)
+            except AssertionError:
+                raise AssertionError((shown(), asked)) from None
+
+    asyncio.run(story())
