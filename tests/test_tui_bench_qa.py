@@ -417,3 +417,42 @@ def test_the_compass_prompt_is_shown_whole_at_80x24():
                 raise AssertionError((shown(), asked)) from None
 
     asyncio.run(story())
+
+
+def test_a_disagreeing_centrifuge_row_is_said_whole_at_80x24():
+    """P2's message had two rows of 56 columns: a row that disagrees (here typed at another speed
+    than asked) read "Entered 1 @ 6.28: DISAGREES (speed 9 rad/s, asked 6.283); r redoes it.
+    Next: Mount in orientation 1, spin at" and lost where to spin next. It takes the rows it needs.
+    With no table rate measured, the readout's second row "table rate (gyro) — rad/s  (no rate
+    measured: asked 12.57)" was two columns too long and lost "12.57)"."""
+    from tests.test_tui import screen_lines, screen_name
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#procedure").value = "accel-centrifuge"
+            clock = BenchClock()
+            src = app.session.source = SimSource(seed=3, procedure="accel-centrifuge", clock=clock)
+            await pilot.press("f5")
+            await run_bench(
+                pilot, src, clock, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.guide is not None
+            )
+            await pilot.press("m")
+            await wait_for(pilot, lambda: app.screen.focused is not None and app.screen.focused.id == "in-ax")
+            for name, value in (("ax", "1.1"), ("ay", "0.3"), ("az", "0.9"), ("speed", "9")):
+                app.screen.query_one(f"#in-{name}").value = value
+            app.screen.query_one("#in-speed").focus()
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: "DISAGREES" in app.screen.guide.status().message)
+            asked = " ".join(app.screen.guide.status().message.split())
+            assert "r redoes it" in asked and "Next: Mount" in asked, asked
+            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            try:  # the clock is stopped: the message settles; what is drawn must be all of it
+                await wait_for(pilot, lambda: shown() == asked, timeout_s=10)
+            except AssertionError:
+                raise AssertionError((shown(), asked, "\n".join(screen_lines(app)))) from None
+            # no table rate yet (a triad without a gyro never has one): its line is whole too
+            return text_of(app, "#readouts")
+
+    readouts = asyncio.run(story())
+    assert "table rate (gyro) — rad/s (not measured, asked 12.57)" in readouts, readouts
