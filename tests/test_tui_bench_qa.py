@@ -456,3 +456,40 @@ def test_a_disagreeing_centrifuge_row_is_said_whole_at_80x24():
 
     readouts = asyncio.run(story())
     assert "table rate (gyro) — rad/s (not measured, asked 12.57)" in readouts, readouts
+
+
+def test_why_p1_left_its_gyro_uncalibrated_is_said_whole(tmp_path):
+    """A P1 capture whose t column contradicts its sample_rate_hz keeps its accelerometer
+    result and leaves the gyro uncalibrated, saying why. Results cut the why at 60 characters:
+    "gyro not calibrated: line 10: metadata 'sample_rate_hz': 100 Hz, but the t column", what
+    to correct lost. Now the whole reason, as `station calibrate` says it."""
+    from station.calibrate import calibrate_capture
+    from station.capture import read_capture
+    from station.screens.results import ResultsScreen
+    from tests.station_run import run_station
+    from tests.test_tui import screen_name
+
+    path = tmp_path / "p1.csv"
+    assert run_station("simulate", "--procedure", "accel-tabletop", "--seed", 1, "--out", path).returncode == 0
+    lines = path.read_text().splitlines(keepends=True)
+    head = next(i for i, line in enumerate(lines) if line.startswith("t,"))
+    for i in range(head + 1, len(lines)):  # t in ms, sample_rate_hz still 100
+        t, rest = lines[i].split(",", 1)
+        lines[i] = f"{float(t) * 1000:g},{rest}"
+    path.write_text("".join(lines))
+    cap = read_capture(path)
+    result = calibrate_capture(cap)
+    why = result["gyro"]["error"]
+    assert "correct sample_rate_hz or t" in why, why
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "ResultsScreen" and "gyro not" in text_of(app, "#summary")
+            )
+            return " ".join(text_of(app, "#summary").split())
+
+    shown = asyncio.run(story())
+    assert f"gyro not calibrated: {' '.join(why.split())}" in shown, shown

@@ -210,7 +210,8 @@ class ResultsScreen(NoticesMixin, Screen):
             )
             summary.update("\n".join(lines))
         elif isinstance(gyro, dict) and gyro.get("error"):
-            lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
+            # the whole reason, escaped: cut at 60 characters it lost what to correct
+            lines.append(f"[yellow]gyro not calibrated: {tui_markup(str(gyro['error']))}[/]")
             summary.update("\n".join(lines))
         residuals.clear(columns=True)
         headers, rows_res = residual_table(self.capture, r)  # in the summary's residual unit
