@@ -493,3 +493,32 @@ def test_why_p1_left_its_gyro_uncalibrated_is_said_whole(tmp_path):
 
     shown = asyncio.run(story())
     assert f"gyro not calibrated: {' '.join(why.split())}" in shown, shown
+
+
+def test_history_says_when_devices_fall_due_in_a_row_each_and_why_beside_the_device(tmp_path):
+    """Four devices overdue: History's header gave three of them two rows each (when, and why:
+    "IMU-1: overdue — accel-tabletop: 365-day interval since 2024-03-01 ends / 2025-03-01; drift
+    of B[0] ..."), the fourth not at all, and left the drift plot three rows at 80x24. Now one
+    row each, the rest counted, and why over the highlighted device's calibrations."""
+    from tests.test_tui import screen_name
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    for device in ("IMU-1", "IMU-2", "IMU-3", "IMU-4"):
+        seed_history(db, device, n=4, interval_days=365, tolerances={"B": 0.5}, start_year=2021)
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-1:" in text_of(app, "#due"))
+            await wait_for(pilot, lambda: "365-day interval" in text_of(app, "#next"))
+            plot = app.screen.query_one("#plot").region.height
+            return text_of(app, "#due"), " ".join(text_of(app, "#next").split()), plot
+
+    header, beside, plot_rows = asyncio.run(story())
+    rows = [r.strip() for r in header.splitlines() if r.strip()]
+    assert rows[:3] == [f"IMU-{k}: overdue by {rows[0].split('by ')[1]}" for k in (1, 2, 3)], rows
+    assert rows[3].startswith("… and 1 more"), rows
+    assert len(rows) == 4, rows
+    assert beside.startswith("overdue by ") and "accel-tabletop: 365-day interval since 2024-03-01" in beside, beside
+    assert plot_rows >= 8, plot_rows  # its minimum: the header no longer squeezes it

@@ -53,7 +53,10 @@ def next_due_text(device: dict | None, due: dict | None) -> str:
             return "never due: no recalibration interval (i sets one)"
         return f"not scheduled yet, interval {interval:g} d"
     when = due_when(due)
-    return f"{when}, interval {interval:g} d" if interval else f"{when}, no interval (i sets one)"
+    line = f"{when}, interval {interval:g} d" if interval else f"{when}, no interval (i sets one)"
+    # why, for a date within the 30 days the header lists (its rows say only when)
+    soon = due.get("days_left") is not None and due["days_left"] <= 30
+    return f"{line}\n{due['reason']}" if soon and due.get("reason") else line
 
 
 def _rate_text(d: dict, k: float, unit: str) -> str:
@@ -175,13 +178,13 @@ class HistoryScreen(NoticesMixin, Screen):
                 word = due_status(st) if st else ("ok" if d.get("interval_days") else "no int")
                 t.add_row(tui_markup(short_id(d["id"])), str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
-            # a date ahead (within the 30 days asked for) says when, as `station due --within` does
-            text = "\n".join(
-                tui_markup(
-                    f"{d['device_id']}: {due_when(d) if d['status'] == 'due' else d['status']} — {d['reason']}"[:200]
-                )
-                for d in bad[:3]
-            )
+            # one row per device, when (as `station due --within` says it); why is said over the
+            # highlighted device's calibrations (#next): three reasons of two rows each here left
+            # the drift plot three rows at 80x24
+            rows = [f"{short_id(d['device_id'], 40)}: {due_when(d)}" for d in bad[:3]]
+            if len(bad) > 3:
+                rows.append(f"… and {len(bad) - 3} more (status column)")
+            text = "\n".join(tui_markup(r) for r in rows)
             if not self.devices:
                 text = "No devices yet: calibrate one (Connect → Start P1) or run `station demo`."
             self.query_one("#due", Static).update(text)
@@ -192,9 +195,8 @@ class HistoryScreen(NoticesMixin, Screen):
             self.device_id = message.data["id"]
             self.history = message.data["history"]
             self.drift = [d for d in message.data["drift"] if d["n"] >= 1]
-            self.query_one("#next", Static).update(
-                tui_markup(next_due_text(message.data.get("device"), message.data.get("due")))
-            )
+            said = next_due_text(message.data.get("device"), message.data.get("due"))
+            self.query_one("#next", Static).update("\n".join(tui_markup(x) for x in said.split("\n")))
             from station.procedures.review import shown_residual
 
             c = self.query_one("#calibrations", DataTable)
