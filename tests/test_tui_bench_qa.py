@@ -522,3 +522,44 @@ def test_history_says_when_devices_fall_due_in_a_row_each_and_why_beside_the_dev
     assert len(rows) == 4, rows
     assert beside.startswith("overdue by ") and "accel-tabletop: 365-day interval since 2024-03-01" in beside, beside
     assert plot_rows >= 8, plot_rows  # its minimum: the header no longer squeezes it
+
+
+def test_new_run_asks_before_it_drops_an_unsaved_result(tmp_path):
+    """`n` on Results went back to Connect at once, the result of the run gone unsaved (a
+    quarter hour of P1), where ctrl+q asks first. It asks now; n keeps the result, y drops it;
+    a saved result goes without a question."""
+    from station.screens.results import ResultsScreen
+    from tests.test_tui import screen_name
+    from tests.tui_data import p1_result
+
+    db = str(tmp_path / "s.db")
+    cap, result = p1_result("IMU-3")
+
+    async def story():
+        app = make_app(db, device_id="IMU-3")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "ResultsScreen" and app.screen.query_one("#params").row_count
+            )
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            question = " ".join(text_of(app, "#box").split())
+            await pilot.press("n")  # no: the result stays
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
+            await pilot.press("s")
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            await pilot.press("n")  # saved: no question
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "ResultsScreen" and app.screen.query_one("#params").row_count
+            )
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")  # yes: dropped
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            return question
+
+    question = asyncio.run(story())
+    assert "not saved" in question and "lost" in question, question
