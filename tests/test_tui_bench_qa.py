@@ -563,3 +563,48 @@ def test_new_run_asks_before_it_drops_an_unsaved_result(tmp_path):
 
     question = asyncio.run(story())
     assert "not saved" in question and "lost" in question, question
+
+
+def test_new_run_asks_before_it_drops_an_unexported_noise_record(tmp_path):
+    """The Allan result's `n` dropped the record at once: nothing stores a noise run, so a
+    record of hours was gone on one key. It asks unless the record was exported (`e`). Back from
+    a question (or Help) the accuracy field had the focus, so `e` was typed into it."""
+    import os
+
+    import numpy as np
+
+    from station.capture import read_capture
+    from station.procedures.noise import noise_report
+    from station.screens.noise import AllanScreen
+    from tests.station_run import run_station
+    from tests.test_tui import screen_name
+
+    cap_path = tmp_path / "still.csv"
+    assert run_station("simulate", "--procedure", "gyro-drift", "--seed", 400003, "--out", cap_path).returncode == 0
+    cap = read_capture(cap_path)
+    gyro = np.column_stack([cap.columns[c] for c in ("gx", "gy", "gz")])
+    report = noise_report(gyro, float(cap.meta["sample_rate_hz"]), cap.meta.get("gyro_unit"))
+    out = tmp_path / "exports"
+    os.makedirs(out)
+
+    async def story():
+        app = make_app(None)
+        app.session.extra["export_dir"] = str(out)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(AllanScreen(cap, report))
+            await wait_for(pilot, lambda: "P4 needs" in text_of(app, "#table") and app.screen.focused is None)
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            question = " ".join(text_of(app, "#box").split())
+            await pilot.press("n")  # no: the record stays
+            await wait_for(pilot, lambda: screen_name(app) == "AllanScreen")
+            await pilot.press("e")
+            # the footer's keys work again (the field took the focus back and the e was typed in it)
+            await wait_for(pilot, lambda: bool(app.screen.exported))
+            await pilot.press("n")  # exported: no question
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            return question
+
+    question = asyncio.run(story())
+    assert "not exported" in question and "lost" in question, question
+    assert os.listdir(out)
