@@ -330,7 +330,8 @@ def record(
         events = reader.events()
         final = dict(meta)
         board = getattr(reader.parser, "board_meta", dict)()  # MAVLink: firmware, uid, parameters in use
-        final.update({k: v for k, v in board.items() if k not in final})
+        have = {k.lower() for k in final}
+        final.update({k: v for k, v in board.items() if k.lower() not in have})
         final.update(_end_meta(stats, events, stream.rows, dts, time.monotonic() - started))
         incomplete = _ending(at_end, last_rows_at, started, ended_at, dts, stopped, seconds)
         if incomplete:
@@ -355,6 +356,9 @@ _OWN_KEYS = frozenset(
     {"station-capture", "recorded_at", "source", "protocol", "baud", "nominal_rate_hz", "samples", "gaps"}
     | {"parse_errors", "parse_errors_by_kind", "dropped", "reconnects", "restarts", "segments", "duration_s"}
     | {"complete", "incomplete", "last_data_s", "recovered"}
+    # measured from the samples' times (_end_meta): a --meta value was replaced silently, and one
+    # spelled in other letter case (Sample_Rate_Hz) stayed beside it: a capture the reader refuses
+    | {"sample_rate_hz"}
 )
 
 
@@ -408,7 +412,17 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
     if not port.split(":", 1)[0].endswith(("socket", "loop", "rfc2217", "udp", "udpin", "udpout", "tcp", "tcpin")):
         meta["baud"] = str(baud)
     for k, v in (extra or {}).items():
-        meta[k] = v
+        # the reader takes a key in any letter case: --meta Device=X replaces 'device', never
+        # stands beside it (a head with both is refused as one key spelled twice)
+        same = next((have for have in meta if have.lower() == k.lower()), k)
+        if same in SENSOR_GROUPS and same in meta and meta[same] != v:
+            raise InputError(
+                None,
+                None,
+                f"--meta {k}={v}: the device says {same} {meta[same]} (its header); "
+                "--meta sets a unit only for a device that does not say it",
+            )
+        meta[same] = v
     return meta
 
 
