@@ -536,3 +536,23 @@ def test_meta_cannot_relabel_the_unit_the_device_says(sim_path, tmp_path):
     res = run_station("record", "--port", sim_path, "--seconds", "0.5", "--out", out, "--meta", "accel_unit=g")
     assert_one_line_refusal(res, "--meta accel_unit=g", "the device says accel_unit V")
     assert os.listdir(tmp_path) == []
+
+
+def test_a_slow_device_gets_its_sample_rate_measured(tmp_path):
+    """A 10 Hz device (the LDV bench's rate) sends one sample per 0.1 s poll; the rate was
+    measured only inside batches of 3 or more, so the capture had no sample_rate_hz and
+    `station record` said '? Hz'. The steps between batches count."""
+    from tests.station_run import run_station
+
+    sim = station("sim-device", "--rate", "10", "--seed", "3")
+    try:
+        port = sim.stdout.readline().strip()
+        assert port.startswith("/dev/pts/"), port
+        out = tmp_path / "slow.csv"
+        res = run_station("record", "--port", port, "--seconds", "1.5", "--out", out)
+        assert res.returncode == 0, res.stderr
+        assert "? Hz" not in res.stdout and ", 10 Hz)" in res.stdout, res.stdout
+        assert read_capture(out).meta["sample_rate_hz"] == "10"
+    finally:
+        sim.send_signal(signal.SIGINT)
+        sim.communicate(timeout=20)

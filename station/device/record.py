@@ -223,11 +223,17 @@ def recover_partial(partial: str, out: str | None = None) -> str:
     return out
 
 
-def _median_dt(batch: Batch) -> float | None:
-    if len(batch) < 3:
+def _median_dt(batch: Batch, before: tuple[float, int] | None = None) -> float | None:
+    """Median step between the batch's samples of one segment, the step from ``before`` (the
+    previous batch's last t and segment) included: a device at 10 Hz gives a batch of one
+    sample per 0.1 s poll, whose rate was never measured (no sample_rate_hz)."""
+    t, seg = batch.t_s, batch.segment
+    if before is not None:
+        t, seg = np.concatenate(([before[0]], t)), np.concatenate(([before[1]], seg))
+    if len(t) < 2:
         return None
-    same = batch.segment[1:] == batch.segment[:-1]
-    d = np.diff(batch.t_s)[same]
+    same = seg[1:] == seg[:-1]
+    d = np.diff(t)[same]
     d = d[d > 0]
     return float(np.median(d)) if len(d) else None
 
@@ -283,6 +289,7 @@ def record(
         meta = _start_meta(header, procedure, recorded_at, port, protocol, baud, extra_meta, warn)
         stream = CaptureStream(out, columns, meta)
         dts: list[float] = []
+        last_t: tuple[float, int] | None = None  # the last row's (t, segment): steps across batches count
         stopped = "stopped"
         # host time the newest rows arrived (the reader's arrival time, not when they were taken
         # from it: rows that came during the header wait are taken after it)
@@ -298,9 +305,10 @@ def record(
             if b is not None and len(b):
                 stream.write(b)
                 last_rows_at = _arrived(reader, last_rows_at)
-                d = _median_dt(b)
+                d = _median_dt(b, last_t)
                 if d is not None:
                     dts.append(d)
+                last_t = (float(b.t_s[-1]), int(b.segment[-1]))
             if changes:
                 old, new, _ = changes[0]
                 warn(f"device changed ({old.device_id} {old.units} -> {new.device_id} {new.units}): recording stopped")
