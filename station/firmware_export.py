@@ -577,6 +577,25 @@ def _compose_accel(off, scale, o_old, s_old, R, fmt, rot_name, use, ex):
     )
 
 
+def _ap_diagonal_in_use(names: list[str], values: list[float], what: str, where: str, fmt: str) -> list[float]:
+    """ArduPilot's reading of a diagonal in use (INS_ACCSCAL_*, COMPASS_DIA_*): all three zero
+    (never set: AP_Param has no non-zero vector default) are taken as 1, 1, 1
+    (`if (....is_zero()) set(Vector3f(1,1,1))` in AP_InertialSensor::init and
+    AP_Compass_Backend::correct_field); a partly zero one is used as it is, so the board's data
+    were multiplied by 0 on that axis: a broken calibration, refused in one line, never read as 1."""
+    if all(v == 0 for v in values):
+        return [1.0, 1.0, 1.0]
+    zero = [n for n, v in zip(names, values) if v == 0]
+    if zero:
+        rest = ", ".join(f"{n} = {v:g}" for n, v in zip(names, values) if v != 0)
+        raise UnsupportedError(
+            f"{fmt}: {' and '.join(zero)} = 0 in use beside {rest}: ArduPilot takes the {what} as 1 only when "
+            f"all three are 0 ({where}), so the board multiplied that axis by 0, a broken calibration in use; "
+            "nothing can be composed on it (calibrate data the board has not corrected)"
+        )
+    return list(values)
+
+
 def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
     import numpy as np
 
@@ -600,7 +619,7 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         if use.corrected:
             o_old = use.need(names["off"], "accelerometer offsets")
             s_old = use.need(names["scale"], "accelerometer scales")
-            s_old = [s if s != 0 else 1.0 for s in s_old]  # 0 = never calibrated: AP_InertialSensor::init sets 1
+            s_old = _ap_diagonal_in_use(names["scale"], s_old, "accelerometer scales", "AP_InertialSensor::init", fmt)
             off, scale = _compose_accel(off, scale, o_old, s_old, R, fmt, "AHRS_ORIENTATION", use, ex)
             ex.note(
                 "composed with the parameters in use: OFFS = OFFS_in_use + OFFS_fit / SCAL_in_use, "
@@ -630,7 +649,9 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             o_old = np.asarray(use.need(names["off"], "compass offsets"))
             dia = use.need(names["dia"], "compass soft-iron diagonal")
             odi = use.need(names["odi"], "compass soft-iron off-diagonal")
-            dia = [d if d != 0 else 1.0 for d in dia]  # all zero = never set: correct_field uses 1
+            dia = _ap_diagonal_in_use(
+                names["dia"], dia, "compass soft-iron diagonal", "AP_Compass_Backend::correct_field", fmt
+            )
             P_old = np.diag(dia)
             for v, (i, j) in zip(odi, ODIAG_PAIRS):
                 P_old[i, j] = P_old[j, i] = v

@@ -639,3 +639,80 @@ def test_qgc_vehicle_ids_outside_mavlinks_byte_are_refused(capsys, db, vehicle):
         capsys, "export", cid, "--format", "qgc", "--device-id", "2424842", "--vehicle=255,0", "--db", db
     )
     assert code == 0 and "255\t0\tCAL_GYRO0_ID" in out, err
+
+
+def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None):
+    """Simulated P3 raw field -> ArduPilot's correction d = P_old (r + o_old) (mGauss,
+    AP_Compass_Backend::correct_field) -> capture of d marked corrected, with the parameters in
+    use (DIA as ``dia_in_use`` when given: the parameter values, P_old the matrix they give)."""
+    from solvers.simulate import simulate
+
+    sim = simulate("compass", seed=2)
+    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
+    o_old = np.array([-35.0, 52.0, 18.0])
+    d_gauss = (r_mG + o_old) @ P_old.T / 1000.0
+    dia = np.diag(P_old) if dia_in_use is None else dia_in_use
+    meta = dict(
+        sim.meta,
+        mag_unit="gauss",
+        corrected="true",
+        firmware="ardupilot",
+        **{"param.AHRS_ORIENTATION": "0"},
+        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_DIA_{a}": repr(float(dia[i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
+    )
+    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
+    path = tmp_path / "mag.csv"
+    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    return path, sim
+
+
+def test_a_partly_zero_compass_diagonal_in_use_is_a_broken_calibration_not_identity(capsys, tmp_path):
+    """AP_Compass_Backend::correct_field: `if (state.diagonals.get().is_zero()) diagonals = (1,1,1)`,
+    all three or nothing (read in ArduPilot/ardupilot libraries/AP_Compass/AP_Compass_Backend.cpp).
+    The export read COMPASS_DIA element by element: DIA_Y = 0 beside DIA_X, DIA_Z was taken as 1
+    and new parameters were composed on a matrix the firmware never used. The board really
+    multiplied its y axis by 0 (only the off-diagonal terms carry it): refused in one line."""
+    P_used = np.array([[1.03, 0.3, -0.01], [0.3, 0.0, 0.3], [-0.01, 0.3, 1.01]])  # what the firmware applied
+    path, _ = _ardupilot_compass_capture(tmp_path, P_used)
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db, "--override", "test")
+    assert code == 0, err
+    cid = json.loads(out)["calibration_id"]
+    code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert "COMPASS_DIA_Y = 0 in use" in err and "only when all three are 0" in err and "broken calibration" in err
+
+
+def test_an_all_zero_compass_diagonal_in_use_is_the_identity_with_the_off_diagonal_kept(capsys, tmp_path):
+    """All three DIA zero (never set): correct_field uses 1, 1, 1 and still applies ODI."""
+    P_used = np.array([[1.0, 0.02, -0.01], [0.02, 1.0, 0.015], [-0.01, 0.015, 1.0]])
+    path, sim = _ardupilot_compass_capture(tmp_path, P_used, dia_in_use=np.zeros(3))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
+    assert code == 0, err
+    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 0, err
+    p = names_in(text, "ardupilot")
+    h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
+    # offsets within 1 mGauss of the truth (the fit's sigma is ~0.1 mGauss here)
+    np.testing.assert_allclose([p[f"COMPASS_OFS_{a}"] for a in XYZ], -h_true_mG, atol=1.0)
+
+
+def test_a_partly_zero_accelerometer_scale_in_use_is_refused_not_read_as_one(capsys, tmp_path):
+    """AP_InertialSensor::init sets INS_ACCSCAL to (1,1,1) only when all three are zero
+    (`_accel_scale[i].get().is_zero()`); _rotate_and_correct_accel multiplies by each as it is.
+    INS_ACCSCAL_Z = 0 beside 1.012, 0.985 was read as 1 and composed on."""
+    path, *_ = _board_corrected_capture(tmp_path, "ardupilot", 3)
+    from station.capture import read_capture
+
+    cap = read_capture(path)
+    p = tmp_path / "z.csv"
+    write_capture(p, Capture(meta=dict(cap.meta, **{"param.INS_ACCSCAL_Z": "0"}), columns=cap.columns, path=p))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
+    assert code == 0, err
+    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert "INS_ACCSCAL_Z = 0 in use" in err and "AP_InertialSensor::init" in err
