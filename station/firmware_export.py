@@ -702,6 +702,22 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         )
 
 
+def _px4_only_slot(use: InUse, kind: str, dev: int | None) -> int:
+    """The slot for a sensor the capture does not name: the one CAL_*n_ID in use, else 0 (a board
+    without the parameters). Two or more in use and no device id (a PX4 log before
+    sensor_selection, whose sensor_combined carries the sensor the voter chose): refused in one
+    line, never slot 0 by default."""
+    ids = {n: use.get(_px4_names(kind, n)["id"]) for n in range(4)}
+    ids = {n: int(v) for n, v in ids.items() if v}
+    if dev is None and len(ids) > 1:
+        listed = " and ".join(f"{_px4_names(kind, n)['id']} = {v}" for n, v in ids.items())
+        raise UnsupportedError(
+            f"px4: which {kind} the data came from is unknown ({listed} in use, the capture names neither): "
+            "give --instance N (the slot) or --device-id"
+        )
+    return next(iter(ids)) if len(ids) == 1 and dev is None else 0
+
+
 def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex: Export) -> None:
     import numpy as np
 
@@ -721,7 +737,9 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
     i = instance if instance is not None else slot
     if i is None:
         si = (meta or {}).get("sensor_instance")
-        i = int(si) if si not in (None, "") and use.source_firmware == "px4" and 0 <= int(si) <= 3 else 0
+        i = int(si) if si not in (None, "") and use.source_firmware == "px4" and 0 <= int(si) <= 3 else None
+    if i is None:
+        i = _px4_only_slot(use, kind, dev)
     names = _px4_names(kind, i)
     if dev is None:
         dev_in_use = use.get(names["id"])

@@ -582,7 +582,10 @@ def test_px4_export_of_an_older_px4_log_writes_only_names_that_firmware_has(caps
         )
     cid = json.loads(out)["calibration_id"]
     for fmt in ("px4", "qgc"):
+        # two gyro slots in use and no sensor_selection in the log: which one is the operator's word
         code, out, err = run(capsys, "export", cid, "--format", fmt, "--db", db)
+        assert code == 2 and "CAL_GYRO0_ID = 2162688 and CAL_GYRO1_ID = 2359296 in use" in err, err
+        code, out, err = run(capsys, "export", cid, "--format", fmt, "--db", db, "--instance", "0")
         assert code == 0, err
         written = set(names_in(out, fmt))
         assert {"CAL_GYRO0_ID", "CAL_GYRO0_XOFF"} <= written and written <= in_log, written - in_log
@@ -716,3 +719,28 @@ def test_a_partly_zero_accelerometer_scale_in_use_is_refused_not_read_as_one(cap
     code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert "INS_ACCSCAL_Z = 0 in use" in err and "AP_InertialSensor::init" in err
+
+
+def test_px4_with_two_sensors_in_use_and_none_named_is_refused_not_slot_0(capsys, tmp_path):
+    """A corrected PX4 capture that names no sensor (sensor_combined of a log before
+    sensor_selection) with CAL_ACC0_ID and CAL_ACC1_ID both in use: the export composed with
+    slot 0's parameters and wrote slot 0 without a word. Refused in one line; --instance picks."""
+    path, *_ = _board_corrected_capture(tmp_path, "px4", 4)
+    from station.capture import read_capture
+
+    cap = read_capture(path)
+    meta = {k: v for k, v in cap.meta.items() if k != "sensor_device_id"}
+    meta.update({"param.CAL_ACC1_ID": "1441792", **{f"param.CAL_ACC1_{a}OFF": "0" for a in XYZ}})
+    meta.update({f"param.CAL_ACC1_{a}SCALE": "1" for a in XYZ})
+    p = tmp_path / "two.csv"
+    write_capture(p, Capture(meta=meta, columns=cap.columns, path=p))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
+    assert code == 0, err
+    cid = json.loads(out)["calibration_id"]
+    code, text, err = run(capsys, "export", cid, "--format", "px4", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert "CAL_ACC0_ID = 1310988 and CAL_ACC1_ID = 1441792 in use" in err and "--instance N" in err
+    code, text, err = run(capsys, "export", cid, "--format", "px4", "--db", db, "--instance", "0")
+    assert code == 0, err
+    assert names_in(text, "px4")["CAL_ACC0_ID"] == 1310988
