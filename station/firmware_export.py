@@ -226,6 +226,10 @@ class InUse:
         self.corrected = str(meta.get("corrected", "")).strip().lower() in ("true", "1", "yes")
         self.source_firmware = str(meta.get("firmware", "")).strip().lower() or None
         self.params: dict[str, float] = {}
+        # parameters the log saw change while its data ran (the importers' params_changed): the
+        # data before and after were corrected with different values (ArduPilot's in-flight
+        # compass learning, COMPASS_LEARN, changes COMPASS_OFS* mid-flight)
+        self.changed = {n.strip() for n in str(meta.get("params_changed", "")).split(",") if n.strip()}
         for key, value in meta.items():
             if key.startswith("param."):
                 try:
@@ -242,8 +246,21 @@ class InUse:
     def get(self, name: str) -> float | None:
         return self.params.get(name)
 
+    def unchanged(self, names, what: str) -> None:
+        """A one-line refusal when one of `names` changed while the capture's data were logged:
+        no one value of it corrected them all, so nothing can be composed on it."""
+        changed = [n for n in names if n in self.changed]
+        if changed:
+            raise UnsupportedError(
+                f"{self.fmt}: {', '.join(changed)} changed while the capture's data were logged (params_changed; "
+                f"e.g. in-flight compass learning): the data before and after were corrected with different "
+                f"{what}, so no absolute parameters can be composed (import a log recorded with them unchanged)"
+            )
+
     def need(self, names: list[str], what: str) -> list[float]:
-        """The values of `names`, or a one-line refusal naming the first one missing."""
+        """The values of `names`, or a one-line refusal naming the first one missing (or changed
+        during the data)."""
+        self.unchanged(names, what)
         missing = [n for n in names if n not in self.params]
         if missing:
             raise UnsupportedError(
@@ -260,6 +277,7 @@ class InUse:
         import numpy as np
 
         names = (enum_name, *level_names)
+        self.unchanged(names, "board rotations")
         missing = [n for n in names if n not in self.params]
         if missing:
             ex.note(f"assumed no board rotation ({', '.join(missing)} not in the capture)")
@@ -655,6 +673,7 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             P_old = np.diag(dia)
             for v, (i, j) in zip(odi, ODIAG_PAIRS):
                 P_old[i, j] = P_old[j, i] = v
+            use.unchanged([names["scale"]], "compass scale factors")
             sf = use.get(names["scale"]) or 0.0
             if not AP_COMPASS_SCALE_APPLIED[0] <= sf <= AP_COMPASS_SCALE_APPLIED[1]:
                 # Compass::have_scale_factor: 0 (no scaling, its default) or any value outside is not applied

@@ -744,3 +744,30 @@ def test_px4_with_two_sensors_in_use_and_none_named_is_refused_not_slot_0(capsys
     code, text, err = run(capsys, "export", cid, "--format", "px4", "--db", db, "--instance", "0")
     assert code == 0, err
     assert names_in(text, "px4")["CAL_ACC0_ID"] == 1310988
+
+
+@pytest.mark.parametrize(
+    "changed,says",
+    [
+        ("COMPASS_OFS_X,COMPASS_OFS_Y,COMPASS_OFS_Z", "COMPASS_OFS_X, COMPASS_OFS_Y, COMPASS_OFS_Z changed"),
+        ("COMPASS_DIA_Y", "COMPASS_DIA_Y changed"),
+        ("COMPASS_SCALE", "COMPASS_SCALE changed"),
+    ],
+)
+def test_parameters_changed_during_the_log_are_not_composed_with(capsys, tmp_path, changed, says):
+    """A log whose COMPASS_OFS changed mid-flight (COMPASS_LEARN) carries params_changed; the export
+    composed the new parameters with the values at the start as if they had corrected every sample.
+    Refused in one line naming the parameters."""
+    P_used = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
+    path, _ = _ardupilot_compass_capture(tmp_path, P_used)
+    from station.capture import read_capture
+
+    cap = read_capture(path)
+    p = tmp_path / "changed.csv"
+    write_capture(p, Capture(meta=dict(cap.meta, params_changed=changed), columns=cap.columns, path=p))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
+    assert code == 0, err
+    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert says in err and "while the capture's data were logged" in err
