@@ -100,3 +100,67 @@ def test_the_store_refuses_a_save_judged_against_a_reference_no_longer_in_use(tm
             s.save_calibration(accel_result(device="D"), meta=meta2, columns=cols2, judged_reference=None)
         assert len(s.history("D")) == 1
         assert s.save_calibration(accel_result(device="D"), meta=meta2, columns=cols2, judged_reference=first) > first
+
+
+def test_the_results_screen_judges_again_when_another_process_saved_meanwhile(tmp_path):
+    """The Results screen (real app, pilot) shows a result judged against calibration #1; while
+    it is open, another process (`station calibrate --save`) saves #2 of the same device. `s`
+    then saved 'previous #1' over #2; now nothing is saved, the screen says why, shows the
+    result judged against #2, and the next `s` saves it with previous_calibration_id #2."""
+    import asyncio
+
+    from station.app import make_app
+    from station.screens.results import ResultsScreen
+    from tests.test_tui import SIZE, text_of, wait_for
+    from tests.tui_data import p1_result, seed_history
+
+    db = tmp_path / "station.db"
+    seed_history(str(db), "IMU-7", n=1)
+    with Store(str(db)) as s:
+        previous = s.history("IMU-7")[-1]
+    cap, result = p1_result("IMU-7", drift=0.02, date="2026-03-01")
+    other = tmp_path / "other.csv"
+    assert run_station("simulate", "--procedure", "accel-tabletop", "--seed", 4, "--out", other).returncode == 0
+
+    async def story():
+        app = make_app(str(db), device_id="IMU-7")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, previous))
+            await wait_for(pilot, lambda: app.screen.query_one("#params").row_count > 0)
+            assert f"previous #{previous['id']}" in text_of(app, "#summary")
+            # another station saves meanwhile: a real process on the same file
+            res = subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "station",
+                    "--db",
+                    str(db),
+                    "calibrate",
+                    str(other),
+                    "--save",
+                    "--device",
+                    "IMU-7",
+                ],
+                cwd=ROOT,
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )
+            assert res.returncode == 0, res.stderr
+            with Store(str(db)) as s:
+                second = s.reference("IMU-7", "accel-tabletop")["id"]
+            await pilot.press("s")
+            await wait_for(pilot, lambda: "Not saved" in text_of(app, "#saved"))
+            said = text_of(app, "#saved")
+            assert f"now calibration #{second}" in said and "judged again" in said
+            assert f"previous #{second}" in text_of(app, "#summary")
+            assert app.screen.calibration_id is None
+            await pilot.press("s")
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            return app.screen.calibration_id, second
+
+    cal_id, second = asyncio.run(story())
+    with Store(str(db)) as s:
+        assert s.calibration(cal_id)["review"]["previous_calibration_id"] == second
+        assert len(s.history("IMU-7")) == 3
