@@ -60,7 +60,8 @@ def save_result(
             sensor_kind=entry.sensor_kind if entry else None,
             **(
                 {}
-                if judged_reference is NOT_JUDGED
+                # judge() reads the reference of result["procedure"]: without one, nothing to keep current
+                if judged_reference is NOT_JUDGED or not result.get("procedure")
                 else {"judged_reference": judged_reference["id"] if judged_reference else None}
             ),
         )
