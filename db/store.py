@@ -75,6 +75,23 @@ class DuplicateCapture(ValueError):
         )
 
 
+class ReferenceChanged(ValueError):
+    """Another calibration became the device's reference (its latest accepted one of the
+    procedure) after the result being saved was judged against ``judged_id``: the judgement
+    (the change from the reference, the previous_calibration_id it records) is out of date."""
+
+    def __init__(self, device_id: str, procedure: str, judged_id: int | None, now_id: int | None):
+        self.device_id, self.procedure, self.judged_id, self.now_id = device_id, procedure, judged_id, now_id
+        judged = f"calibration #{judged_id}" if judged_id is not None else "no previous calibration"
+        now = f"calibration #{now_id}" if now_id is not None else "none"
+        super().__init__(
+            f"the reference of {device_id} ({procedure}) changed while this result was judged against {judged}: "
+            f"it is now {now} (saved meanwhile by another process)"
+        )
+
+
+_UNSET = object()
+
 # Review decisions stored in calibrations.review (see db/schema.py, migration 0002_review).
 DECISIONS = ("accepted", "rejected", "override")
 
@@ -709,6 +726,7 @@ class Store:
         sensor_kind: str | None = None,
         review: dict | None = None,
         allow_duplicate: bool = False,
+        judged_reference=_UNSET,
     ) -> int:
         """Store a capture and its calibration result (calibrate.md shape) in one transaction.
 
@@ -723,6 +741,12 @@ class Store:
         `accepted` (override = accepted despite a failed verdict, and needs a note).
         A capture whose samples and metadata are already stored raises
         `DuplicateCapture` unless `allow_duplicate`.
+
+        ``judged_reference``: the id of the reference (`reference(device, procedure)`, None for
+        none) the result was judged against. It is read again inside the write transaction
+        (BEGIN IMMEDIATE: no other save can come between), and a different one raises
+        `ReferenceChanged` with nothing saved: two processes saving at once were both judged
+        against the same reference, and the second stored a judgement the first had made stale.
         """
         meta = dict(meta or {})
         device = device_id or result.get("device") or meta.get("device")
@@ -767,6 +791,15 @@ class Store:
                 )
                 if dup is not None:
                     raise DuplicateCapture(dup["capture_id"], dup["calibration_id"], dup["device_id"])
+            if judged_reference is not _UNSET:
+                ref = conn.execute(
+                    """SELECT id FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1
+                       ORDER BY time DESC, id DESC LIMIT 1""",
+                    [device, procedure],
+                ).fetchone()
+                now_id = ref["id"] if ref else None
+                if now_id != judged_reference:
+                    raise ReferenceChanged(device, procedure, judged_reference, now_id)
             self._ensure_device(conn, device, sensor_kind)
             capture_id, capture_sha = self._insert_capture(
                 conn, device_id=device, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host

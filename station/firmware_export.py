@@ -226,6 +226,10 @@ class InUse:
         self.corrected = str(meta.get("corrected", "")).strip().lower() in ("true", "1", "yes")
         self.source_firmware = str(meta.get("firmware", "")).strip().lower() or None
         self.params: dict[str, float] = {}
+        # parameters the log saw change while its data ran (the importers' params_changed): the
+        # data before and after were corrected with different values (ArduPilot's in-flight
+        # compass learning, COMPASS_LEARN, changes COMPASS_OFS* mid-flight)
+        self.changed = {n.strip() for n in str(meta.get("params_changed", "")).split(",") if n.strip()}
         for key, value in meta.items():
             if key.startswith("param."):
                 try:
@@ -242,8 +246,21 @@ class InUse:
     def get(self, name: str) -> float | None:
         return self.params.get(name)
 
+    def unchanged(self, names, what: str) -> None:
+        """A one-line refusal when one of `names` changed while the capture's data were logged:
+        no one value of it corrected them all, so nothing can be composed on it."""
+        changed = [n for n in names if n in self.changed]
+        if changed:
+            raise UnsupportedError(
+                f"{self.fmt}: {', '.join(changed)} changed while the capture's data were logged (params_changed; "
+                f"e.g. in-flight compass learning): the data before and after were corrected with different "
+                f"{what}, so no absolute parameters can be composed (import a log recorded with them unchanged)"
+            )
+
     def need(self, names: list[str], what: str) -> list[float]:
-        """The values of `names`, or a one-line refusal naming the first one missing."""
+        """The values of `names`, or a one-line refusal naming the first one missing (or changed
+        during the data)."""
+        self.unchanged(names, what)
         missing = [n for n in names if n not in self.params]
         if missing:
             raise UnsupportedError(
@@ -260,6 +277,7 @@ class InUse:
         import numpy as np
 
         names = (enum_name, *level_names)
+        self.unchanged(names, "board rotations")
         missing = [n for n in names if n not in self.params]
         if missing:
             ex.note(f"assumed no board rotation ({', '.join(missing)} not in the capture)")
@@ -577,6 +595,25 @@ def _compose_accel(off, scale, o_old, s_old, R, fmt, rot_name, use, ex):
     )
 
 
+def _ap_diagonal_in_use(names: list[str], values: list[float], what: str, where: str, fmt: str) -> list[float]:
+    """ArduPilot's reading of a diagonal in use (INS_ACCSCAL_*, COMPASS_DIA_*): all three zero
+    (never set: AP_Param has no non-zero vector default) are taken as 1, 1, 1
+    (`if (....is_zero()) set(Vector3f(1,1,1))` in AP_InertialSensor::init and
+    AP_Compass_Backend::correct_field); a partly zero one is used as it is, so the board's data
+    were multiplied by 0 on that axis: a broken calibration, refused in one line, never read as 1."""
+    if all(v == 0 for v in values):
+        return [1.0, 1.0, 1.0]
+    zero = [n for n, v in zip(names, values) if v == 0]
+    if zero:
+        rest = ", ".join(f"{n} = {v:g}" for n, v in zip(names, values) if v != 0)
+        raise UnsupportedError(
+            f"{fmt}: {' and '.join(zero)} = 0 in use beside {rest}: ArduPilot takes the {what} as 1 only when "
+            f"all three are 0 ({where}), so the board multiplied that axis by 0, a broken calibration in use; "
+            "nothing can be composed on it (calibrate data the board has not corrected)"
+        )
+    return list(values)
+
+
 def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
     import numpy as np
 
@@ -600,7 +637,7 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         if use.corrected:
             o_old = use.need(names["off"], "accelerometer offsets")
             s_old = use.need(names["scale"], "accelerometer scales")
-            s_old = [s if s != 0 else 1.0 for s in s_old]  # 0 = never calibrated: AP_InertialSensor::init sets 1
+            s_old = _ap_diagonal_in_use(names["scale"], s_old, "accelerometer scales", "AP_InertialSensor::init", fmt)
             off, scale = _compose_accel(off, scale, o_old, s_old, R, fmt, "AHRS_ORIENTATION", use, ex)
             ex.note(
                 "composed with the parameters in use: OFFS = OFFS_in_use + OFFS_fit / SCAL_in_use, "
@@ -630,10 +667,13 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
             o_old = np.asarray(use.need(names["off"], "compass offsets"))
             dia = use.need(names["dia"], "compass soft-iron diagonal")
             odi = use.need(names["odi"], "compass soft-iron off-diagonal")
-            dia = [d if d != 0 else 1.0 for d in dia]  # all zero = never set: correct_field uses 1
+            dia = _ap_diagonal_in_use(
+                names["dia"], dia, "compass soft-iron diagonal", "AP_Compass_Backend::correct_field", fmt
+            )
             P_old = np.diag(dia)
             for v, (i, j) in zip(odi, ODIAG_PAIRS):
                 P_old[i, j] = P_old[j, i] = v
+            use.unchanged([names["scale"]], "compass scale factors")
             sf = use.get(names["scale"]) or 0.0
             if not AP_COMPASS_SCALE_APPLIED[0] <= sf <= AP_COMPASS_SCALE_APPLIED[1]:
                 # Compass::have_scale_factor: 0 (no scaling, its default) or any value outside is not applied
@@ -681,6 +721,22 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         )
 
 
+def _px4_only_slot(use: InUse, kind: str, dev: int | None) -> int:
+    """The slot for a sensor the capture does not name: the one CAL_*n_ID in use, else 0 (a board
+    without the parameters). Two or more in use and no device id (a PX4 log before
+    sensor_selection, whose sensor_combined carries the sensor the voter chose): refused in one
+    line, never slot 0 by default."""
+    ids = {n: use.get(_px4_names(kind, n)["id"]) for n in range(4)}
+    ids = {n: int(v) for n, v in ids.items() if v}
+    if dev is None and len(ids) > 1:
+        listed = " and ".join(f"{_px4_names(kind, n)['id']} = {v}" for n, v in ids.items())
+        raise UnsupportedError(
+            f"px4: which {kind} the data came from is unknown ({listed} in use, the capture names neither): "
+            "give --instance N (the slot) or --device-id"
+        )
+    return next(iter(ids)) if len(ids) == 1 and dev is None else 0
+
+
 def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex: Export) -> None:
     import numpy as np
 
@@ -700,7 +756,9 @@ def _px4(cal: dict, meta: dict, instance: int | None, device_id: int | None, ex:
     i = instance if instance is not None else slot
     if i is None:
         si = (meta or {}).get("sensor_instance")
-        i = int(si) if si not in (None, "") and use.source_firmware == "px4" and 0 <= int(si) <= 3 else 0
+        i = int(si) if si not in (None, "") and use.source_firmware == "px4" and 0 <= int(si) <= 3 else None
+    if i is None:
+        i = _px4_only_slot(use, kind, dev)
     names = _px4_names(kind, i)
     if dev is None:
         dev_in_use = use.get(names["id"])

@@ -15,6 +15,9 @@ def open_store(path: str):
     return Store(path)
 
 
+NOT_JUDGED = object()  # save_result without a judgement to keep current (imports, tools)
+
+
 def save_result(
     path: str,
     capture,
@@ -25,11 +28,15 @@ def save_result(
     accepted: bool = True,
     review: dict | None = None,
     time=None,
+    judged_reference=NOT_JUDGED,
 ) -> int:
     """Store ``capture`` and ``result`` in one transaction; returns the calibration id.
 
     ``review`` is ``station.procedures.review.review_record(...)`` (how the result was
     judged and decided). A capture already stored raises ``db.store.DuplicateCapture``.
+    ``judged_reference``: the previous calibration ``judge`` compared the result with (its
+    dict, or None for none); when another became the reference since, nothing is saved and
+    ``db.store.ReferenceChanged`` says so (the check and the save are one transaction).
     """
     store = open_store(path)
     operator = operator or str(capture.meta.get("operator") or "") or None  # who recorded it, as the report says
@@ -51,6 +58,12 @@ def save_result(
             review=review,
             time=time,
             sensor_kind=entry.sensor_kind if entry else None,
+            **(
+                {}
+                # judge() reads the reference of result["procedure"]: without one, nothing to keep current
+                if judged_reference is NOT_JUDGED or not result.get("procedure")
+                else {"judged_reference": judged_reference["id"] if judged_reference else None}
+            ),
         )
     finally:
         store.close()

@@ -1,11 +1,13 @@
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared"
+# ../shared beside the clone; a git worktree elsewhere names it in $STATION_SHARED
+SHARED = Path(os.environ.get("STATION_SHARED") or ROOT.parent / "shared")
 
 
 @pytest.fixture(scope="session")

@@ -463,7 +463,11 @@ def test_a_new_recording_does_not_replace_a_partial_not_yet_recovered(tmp_path):
     assert partial.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["k.csv.partial"]
 
 
-@pytest.mark.parametrize("key", ["complete", "incomplete", "recovered", "gaps", "gap_1", "samples", "station-capture"])
+@pytest.mark.parametrize(
+    "key",
+    ["complete", "incomplete", "recovered", "gaps", "gap_1", "samples", "station-capture"]
+    + ["sample_rate_hz", "Sample_Rate_Hz"],  # measured; Sample_Rate_Hz=50 gave a capture inspect refused
+)
 def test_meta_cannot_set_what_the_recording_says_about_itself(tmp_path, key):
     """--meta incomplete=... on a recording that ran to its end gave 'complete: true' beside
     'incomplete: ...'; --meta recovered=true marked a live recording as recovered. The keys
@@ -501,3 +505,54 @@ def test_baud_rates_in_the_range_are_taken(baud):
     from station.commands.record import baud_arg
 
     assert baud_arg(baud) == int(baud)
+
+
+def test_meta_in_other_letter_case_replaces_the_key_and_the_capture_reads_back(sim_path, tmp_path):
+    """`--meta Device=bench-7` (or DATE=...) wrote 'Device' beside the header's 'device': the reader
+    takes keys in any letter case and refused the head as one key spelled twice, so the recording
+    stopped on its own .partial file; `--meta Sample_Rate_Hz=50` was not even caught and the
+    finished capture was refused by `station inspect`. A --meta key replaces the one it names."""
+    from tests.station_run import run_station
+
+    out = tmp_path / "c.csv"
+    res = run_station(
+        "record", "--port", sim_path, "--seconds", "0.5", "--out", out,
+        "--meta", "Device=bench-7", "--meta", "DATE=2026-01-02", "--meta", "Latitude_Deg=39.98",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    cap = read_capture(out)
+    assert cap.meta["device"] == "bench-7" and cap.meta["date"] == "2026-01-02"
+    assert "Device" not in cap.meta and "DATE" not in cap.meta
+    res = run_station("inspect", out)  # the station's own command reads it
+    assert res.returncode == 0 and "device:     bench-7" in res.stdout, res.stderr
+
+
+def test_meta_cannot_relabel_the_unit_the_device_says(sim_path, tmp_path):
+    """`--meta accel_unit=g` on a device whose header says V wrote 'accel_unit: g' over the
+    device's own unit: volts calibrated as g. Refused in one line, no file left."""
+    from tests.station_run import assert_one_line_refusal, run_station
+
+    out = tmp_path / "u.csv"
+    res = run_station("record", "--port", sim_path, "--seconds", "0.5", "--out", out, "--meta", "accel_unit=g")
+    assert_one_line_refusal(res, "--meta accel_unit=g", "the device says accel_unit V")
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_slow_device_gets_its_sample_rate_measured(tmp_path):
+    """A 10 Hz device (the LDV bench's rate) sends one sample per 0.1 s poll; the rate was
+    measured only inside batches of 3 or more, so the capture had no sample_rate_hz and
+    `station record` said '? Hz'. The steps between batches count."""
+    from tests.station_run import run_station
+
+    sim = station("sim-device", "--rate", "10", "--seed", "3")
+    try:
+        port = sim.stdout.readline().strip()
+        assert port.startswith("/dev/pts/"), port
+        out = tmp_path / "slow.csv"
+        res = run_station("record", "--port", port, "--seconds", "1.5", "--out", out)
+        assert res.returncode == 0, res.stderr
+        assert "? Hz" not in res.stdout and ", 10 Hz)" in res.stdout, res.stdout
+        assert read_capture(out).meta["sample_rate_hz"] == "10"
+    finally:
+        sim.send_signal(signal.SIGINT)
+        sim.communicate(timeout=20)

@@ -8,9 +8,11 @@ something. Time-like candidates are now tested against the scatter of the means 
 of time about the model (``engine.shared_inflation``) from the first round on: these four name
 nothing. Since a candidate is also tested against a Gauss–Markov wander fitted to the residual its own
 model leaves (``solvers.diagnose.wander``), the three below it name nothing either; main before named
-`residual:temperature`, three names, and `residual:time`. Six of the twenty still name a wander that a
-line or a step takes whole (docs/benchmarks.md). The LDV's beams share the same kind of wander: two blind
-LDV nulls that named one to four effects name nothing."""
+`residual:temperature`, three names, and `residual:time`. The LDV's beams share the same kind of wander: two blind
+LDV nulls that named one to four effects name nothing. A wander of a tenth to a half of the record that a
+line or a step takes whole, leaving a white residual, is now tested against the wander too, calibrated on
+draws of it (``Problem.wander_calibrated``): the four of the last group named `time_drift` and a step,
+`residual:time` periodic, `time_drift` with a periodic term, and a smooth `residual:time`."""
 
 from __future__ import annotations
 
@@ -43,6 +45,16 @@ def test_a_wander_the_candidate_leaves_is_not_named(tmp_path, procedure, seed):
 
     path = tmp_path / "capture.csv"
     blind_generator.generate(procedure, None, seed, str(path))
+    res = station_json("diagnose", path, "--json")
+    assert res["verdict"] == [], res["verdict"]
+
+
+@pytest.mark.parametrize("seed", [560000, 560016, 560017, 560019])
+def test_a_wander_a_line_or_a_step_takes_whole_is_not_named(tmp_path, seed):
+    import blind_generator
+
+    path = tmp_path / "capture.csv"
+    blind_generator.generate("gyro-drift", None, seed, str(path))
     res = station_json("diagnose", path, "--json")
     assert res["verdict"] == [], res["verdict"]
 

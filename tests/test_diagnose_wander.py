@@ -86,3 +86,54 @@ def test_a_line_at_ten_sigma_of_the_true_covariance_is_found(wm):
     slope = 10 * gls_slope_sd(1.0, 60.0)
     T = [line_tests(record(100 + seed, 1.0, 60.0, slope), wm)[1:] for seed in SEEDS]
     assert sum(wanders and t > 10.8 for t, wanders in T) >= 7, T
+
+
+def test_a_drawn_wander_has_the_model_s_variance_and_correlation(wm):
+    (part,) = wm.parts
+    x = part.draw(60.0, np.random.default_rng(0), 4000)  # rows × draws
+    assert abs(np.var(x) - 1.0) < 0.05
+    lag1 = np.mean(x[1:] * x[:-1]) / np.mean(x * x)
+    assert abs(lag1 - np.exp(-2.0 / 60.0)) < 0.01  # rows 2 s apart
+
+
+def test_on_white_noise_the_calibration_leaves_the_ratio_as_it_is(wm):
+    """White noise fitted beside the line: the draws give the χ²₁ of the white-noise test, and a
+    statistic keeps its own tail probability."""
+    from solvers.diagnose.engine import _null_equivalent, chi2_isf
+
+    y = record(7, 0.0, 1.0)
+    null = wm.null_lr(ONE, LINE, residual(np.hstack([ONE, LINE]), y), 400)
+    assert 0.7 < np.mean(null) < 1.4
+    for p in (0.05, 0.01, 0.001):
+        T = chi2_isf(p, 1)
+        assert 0.6 * T < _null_equivalent(T, null, 1) < 1.6 * T
+
+
+def calibrated(y, wm):
+    from solvers.diagnose.engine import _null_equivalent
+
+    e0, e1 = residual(ONE, y), residual(np.hstack([ONE, LINE]), y)
+    T, _ = wm.lr(ONE, LINE, e0, e1, {}, baseline=True)
+    return T, min(T, _null_equivalent(T, wm.null_lr(ONE, LINE, e1, 100), 1))
+
+
+def test_a_wander_of_half_the_record_is_calibrated_and_a_line_at_ten_sigma_still_found(wm):
+    """τ = 300 s in a 600 s record: the profiled ratio of a line on the wander alone is larger
+    than χ²₁'s (the wander's few independent stretches), the draws bring it back; a line at 10σ
+    of the true covariance stays far above the tail."""
+    nulls = [calibrated(record(300 + seed, 1.0, 300.0), wm) for seed in range(12)]
+    assert max(c for _, c in nulls) < 10.8  # χ²₁ above 10.8: 0.1 %
+    assert all(c <= T for T, c in nulls)
+    slope = 10 * gls_slope_sd(1.0, 300.0)
+    found = [calibrated(record(400 + seed, 1.0, 300.0, slope), wm)[1] > 10.8 for seed in range(12)]
+    assert sum(found) >= 8, found
+
+
+def test_a_wander_longer_than_the_record_is_drawn_white(wm):
+    """Correlated over more than the record, the wander left beside a line is a drift over it: the
+    draws are white noise's, and the line keeps its white-noise tail."""
+    y = record(11, 25.0, 20000.0) + 0.5 * (LINE[:, 0] ** 2)  # a curve in time the line leaves
+    e1 = residual(np.hstack([ONE, LINE]), y)
+    (fit,) = wm.fit(np.hstack([ONE, LINE]), e1)
+    assert fit[1] >= T_S[-1] - T_S[0] and fit[3] > EVIDENT_LR
+    assert np.mean(wm.null_lr(ONE, LINE, e1, 200)) < 1.5

@@ -582,7 +582,10 @@ def test_px4_export_of_an_older_px4_log_writes_only_names_that_firmware_has(caps
         )
     cid = json.loads(out)["calibration_id"]
     for fmt in ("px4", "qgc"):
+        # two gyro slots in use and no sensor_selection in the log: which one is the operator's word
         code, out, err = run(capsys, "export", cid, "--format", fmt, "--db", db)
+        assert code == 2 and "CAL_GYRO0_ID = 2162688 and CAL_GYRO1_ID = 2359296 in use" in err, err
+        code, out, err = run(capsys, "export", cid, "--format", fmt, "--db", db, "--instance", "0")
         assert code == 0, err
         written = set(names_in(out, fmt))
         assert {"CAL_GYRO0_ID", "CAL_GYRO0_XOFF"} <= written and written <= in_log, written - in_log
@@ -639,3 +642,132 @@ def test_qgc_vehicle_ids_outside_mavlinks_byte_are_refused(capsys, db, vehicle):
         capsys, "export", cid, "--format", "qgc", "--device-id", "2424842", "--vehicle=255,0", "--db", db
     )
     assert code == 0 and "255\t0\tCAL_GYRO0_ID" in out, err
+
+
+def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None):
+    """Simulated P3 raw field -> ArduPilot's correction d = P_old (r + o_old) (mGauss,
+    AP_Compass_Backend::correct_field) -> capture of d marked corrected, with the parameters in
+    use (DIA as ``dia_in_use`` when given: the parameter values, P_old the matrix they give)."""
+    from solvers.simulate import simulate
+
+    sim = simulate("compass", seed=2)
+    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
+    o_old = np.array([-35.0, 52.0, 18.0])
+    d_gauss = (r_mG + o_old) @ P_old.T / 1000.0
+    dia = np.diag(P_old) if dia_in_use is None else dia_in_use
+    meta = dict(
+        sim.meta,
+        mag_unit="gauss",
+        corrected="true",
+        firmware="ardupilot",
+        **{"param.AHRS_ORIENTATION": "0"},
+        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_DIA_{a}": repr(float(dia[i])) for i, a in enumerate(XYZ)},
+        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
+    )
+    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
+    path = tmp_path / "mag.csv"
+    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    return path, sim
+
+
+def test_a_partly_zero_compass_diagonal_in_use_is_a_broken_calibration_not_identity(capsys, tmp_path):
+    """AP_Compass_Backend::correct_field: `if (state.diagonals.get().is_zero()) diagonals = (1,1,1)`,
+    all three or nothing (read in ArduPilot/ardupilot libraries/AP_Compass/AP_Compass_Backend.cpp).
+    The export read COMPASS_DIA element by element: DIA_Y = 0 beside DIA_X, DIA_Z was taken as 1
+    and new parameters were composed on a matrix the firmware never used. The board really
+    multiplied its y axis by 0 (only the off-diagonal terms carry it): refused in one line."""
+    P_used = np.array([[1.03, 0.3, -0.01], [0.3, 0.0, 0.3], [-0.01, 0.3, 1.01]])  # what the firmware applied
+    path, _ = _ardupilot_compass_capture(tmp_path, P_used)
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db, "--override", "test")
+    assert code == 0, err
+    cid = json.loads(out)["calibration_id"]
+    code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert "COMPASS_DIA_Y = 0 in use" in err and "only when all three are 0" in err and "broken calibration" in err
+
+
+def test_an_all_zero_compass_diagonal_in_use_is_the_identity_with_the_off_diagonal_kept(capsys, tmp_path):
+    """All three DIA zero (never set): correct_field uses 1, 1, 1 and still applies ODI."""
+    P_used = np.array([[1.0, 0.02, -0.01], [0.02, 1.0, 0.015], [-0.01, 0.015, 1.0]])
+    path, sim = _ardupilot_compass_capture(tmp_path, P_used, dia_in_use=np.zeros(3))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
+    assert code == 0, err
+    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 0, err
+    p = names_in(text, "ardupilot")
+    h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
+    # offsets within 1 mGauss of the truth (the fit's sigma is ~0.1 mGauss here)
+    np.testing.assert_allclose([p[f"COMPASS_OFS_{a}"] for a in XYZ], -h_true_mG, atol=1.0)
+
+
+def test_a_partly_zero_accelerometer_scale_in_use_is_refused_not_read_as_one(capsys, tmp_path):
+    """AP_InertialSensor::init sets INS_ACCSCAL to (1,1,1) only when all three are zero
+    (`_accel_scale[i].get().is_zero()`); _rotate_and_correct_accel multiplies by each as it is.
+    INS_ACCSCAL_Z = 0 beside 1.012, 0.985 was read as 1 and composed on."""
+    path, *_ = _board_corrected_capture(tmp_path, "ardupilot", 3)
+    from station.capture import read_capture
+
+    cap = read_capture(path)
+    p = tmp_path / "z.csv"
+    write_capture(p, Capture(meta=dict(cap.meta, **{"param.INS_ACCSCAL_Z": "0"}), columns=cap.columns, path=p))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
+    assert code == 0, err
+    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert "INS_ACCSCAL_Z = 0 in use" in err and "AP_InertialSensor::init" in err
+
+
+def test_px4_with_two_sensors_in_use_and_none_named_is_refused_not_slot_0(capsys, tmp_path):
+    """A corrected PX4 capture that names no sensor (sensor_combined of a log before
+    sensor_selection) with CAL_ACC0_ID and CAL_ACC1_ID both in use: the export composed with
+    slot 0's parameters and wrote slot 0 without a word. Refused in one line; --instance picks."""
+    path, *_ = _board_corrected_capture(tmp_path, "px4", 4)
+    from station.capture import read_capture
+
+    cap = read_capture(path)
+    meta = {k: v for k, v in cap.meta.items() if k != "sensor_device_id"}
+    meta.update({"param.CAL_ACC1_ID": "1441792", **{f"param.CAL_ACC1_{a}OFF": "0" for a in XYZ}})
+    meta.update({f"param.CAL_ACC1_{a}SCALE": "1" for a in XYZ})
+    p = tmp_path / "two.csv"
+    write_capture(p, Capture(meta=meta, columns=cap.columns, path=p))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
+    assert code == 0, err
+    cid = json.loads(out)["calibration_id"]
+    code, text, err = run(capsys, "export", cid, "--format", "px4", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert "CAL_ACC0_ID = 1310988 and CAL_ACC1_ID = 1441792 in use" in err and "--instance N" in err
+    code, text, err = run(capsys, "export", cid, "--format", "px4", "--db", db, "--instance", "0")
+    assert code == 0, err
+    assert names_in(text, "px4")["CAL_ACC0_ID"] == 1310988
+
+
+@pytest.mark.parametrize(
+    "changed,says",
+    [
+        ("COMPASS_OFS_X,COMPASS_OFS_Y,COMPASS_OFS_Z", "COMPASS_OFS_X, COMPASS_OFS_Y, COMPASS_OFS_Z changed"),
+        ("COMPASS_DIA_Y", "COMPASS_DIA_Y changed"),
+        ("COMPASS_SCALE", "COMPASS_SCALE changed"),
+    ],
+)
+def test_parameters_changed_during_the_log_are_not_composed_with(capsys, tmp_path, changed, says):
+    """A log whose COMPASS_OFS changed mid-flight (COMPASS_LEARN) carries params_changed; the export
+    composed the new parameters with the values at the start as if they had corrected every sample.
+    Refused in one line naming the parameters."""
+    P_used = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
+    path, _ = _ardupilot_compass_capture(tmp_path, P_used)
+    from station.capture import read_capture
+
+    cap = read_capture(path)
+    p = tmp_path / "changed.csv"
+    write_capture(p, Capture(meta=dict(cap.meta, params_changed=changed), columns=cap.columns, path=p))
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
+    assert code == 0, err
+    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
+    assert says in err and "while the capture's data were logged" in err

@@ -82,8 +82,8 @@ class DataFlashWriter:
     def imu(self, t_us, inst, gyro, acc, temp=35.0):
         self.write("IMU", t_us, inst, *gyro, *acc, 0, 0, temp, 1, 1, 1000, 1000)
 
-    def mag(self, t_us, inst, m_mgauss):
-        self.write("MAG", t_us, inst, *m_mgauss, 10, -20, 30, 0, 0, 0, 1, t_us)
+    def mag(self, t_us, inst, m_mgauss, ofs_mgauss=(10, -20, 30)):
+        self.write("MAG", t_us, inst, *m_mgauss, *ofs_mgauss, 0, 0, 0, 1, t_us)
 
     def gps(self, t_us, lat_deg, lon_deg, alt_m):
         """GPS week 2300, 3000 ms into it, 3-D fix; scaled fields as stored: 'c' ×100, 'L' ×1e7, 'e' ×100."""
@@ -516,3 +516,48 @@ def test_tlog_with_every_message_twice_keeps_each_sample_once(tmp_path):
     assert res.returncode == 0 and "100 repeated IMU messages" in res.stderr
     assert read_capture(a) == read_capture(b)  # metadata and every column
     np.testing.assert_array_equal(read_capture(a).columns["gx"], read_capture(b).columns["gx"])
+
+
+@pytest.mark.parametrize("saved", [True, False], ids=["in-flight, PARM logged", "internal, no PARM"])
+def test_bin_compass_offsets_learnt_during_the_data_are_flagged(tmp_path, saved):
+    """ArduPilot's compass learning changes the offsets while the data run: COMPASS_LEARN = 3
+    (Compass_learn.cpp: mag_cal_fixed_yaw once the GSF yaw converges, saved, logged as PARM by
+    GCS::send_parameter_value, then COMPASS_LEARN set to 0), or the older internal learning (1),
+    which changes them with no PARM until disarm. Every MAG record carries the offsets its sample
+    was corrected with (OfsX..OfsZ, compass.get_offsets). A log whose offsets change only in MAG
+    imported as if one set of COMPASS_OFS corrected it all, and nothing said so. Now both are
+    params_changed, in one warning line with the change, its time and COMPASS_LEARN."""
+    log = tmp_path / "learn.bin"
+    w = DataFlashWriter(log)
+    params = dict(PARAMS, COMPASS_OFS_Y=-20.0, COMPASS_OFS_Z=30.0, COMPASS_LEARN=3 if saved else 1)
+    params["COMPASS_OFS_X"] = 10.0
+    for name, value in params.items():
+        w.param(1000, name, value)
+    for k in range(400):
+        t = 500_000 + k * 10_000  # 100 Hz, 4 s
+        ofs = (10, -20, 30) if k < 250 else (-35, 12, 30)  # learnt at 2.5 s
+        if saved and k == 250:
+            for a, v in zip("XYZ", ofs):
+                w.param(t, f"COMPASS_OFS_{a}", float(v))
+            w.param(t, "COMPASS_LEARN", 0.0)
+        w.imu(t, 0, (0.0, 0.0, 0.0), (0.0, 0.0, -9.8))
+        w.mag(t + 100, 0, (200, -150, 420), ofs)
+    w.close()
+    out = tmp_path / "learn.csv"
+    res = run_station("import", log, "--procedure", "compass", "--out", out)
+    assert res.returncode == 0, res.stderr
+    meta = read_capture(out).meta
+    changed = set(meta["params_changed"].split(","))
+    assert {"COMPASS_OFS_X", "COMPASS_OFS_Y", "COMPASS_OFS_Z"} <= changed
+    assert float(meta["param.COMPASS_OFS_X"]) == 10.0  # the value at the start
+    lines = [x for x in res.stderr.splitlines() if "changed while the data were logged" in x]
+    assert len(lines) == 1, res.stderr
+    assert "MAG[0] offsets 10,-20,30 -> -35,12,30 mGauss from 2.5 s" in lines[0]
+    assert ("COMPASS_LEARN = 3: in-flight learning" if saved else "COMPASS_LEARN = 1: internal learning") in lines[0]
+
+
+def test_bin_compass_offsets_unchanged_say_nothing(tmp_path):
+    log = tmp_path / "steady.bin"
+    write_bin(log)
+    res = run_station("import", log, "--procedure", "compass", "--out", tmp_path / "s.csv")
+    assert res.returncode == 0 and "changed" not in res.stderr, res.stderr

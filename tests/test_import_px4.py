@@ -187,13 +187,14 @@ def test_a_log_cut_inside_a_message_is_imported_with_a_warning_saying_so(tmp_pat
     data = (px4_dir / "sample.ulg").read_bytes()
     cut = tmp_path / "cut.ulg"
     cut.write_bytes(data[: len(data) // 3])
-    capture, res = _import(tmp_path, cut, "--procedure", "gyro-drift")
+    # --instance 0: the log has two gyro slots and no sensor_selection (else a line says so)
+    capture, res = _import(tmp_path, cut, "--procedure", "gyro-drift", "--instance", "0")
     assert res.stderr.count("\n") == 1, res.stderr
     assert f"cut.ulg: warning: the log is cut short inside a message at byte {len(data) // 3}" in res.stderr
     n = len(capture.columns["t"])
     said = int(res.stderr.split("the samples before it are imported, ")[1].split(" samples up to")[0])
     assert n <= said <= n + 3  # the log's samples; the capture ends where every sensor has one
-    whole, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "gyro-drift")
+    whole, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "gyro-drift", "--instance", "0")
     assert "cut short" not in res.stderr
     assert 0 < n < len(whole.columns["t"])
     np.testing.assert_array_equal(capture.columns["gx"], whole.columns["gx"][:n])  # what is there, whole
@@ -268,7 +269,8 @@ def test_an_instance_asked_of_a_log_with_one_combined_stream_is_refused(tmp_path
 
     out = tmp_path / "o.csv"
     res = run_station("import", px4_dir / "sample.ulg", "--procedure", "gyro-drift", "--out", out, "--instance", "5")
-    assert_one_line_refusal(res, "sample.ulg: --instance 5: the log has no sensor_accel/sensor_gyro/sensor_mag topics")
+    # no sensor_selection in this log: --instance names the CAL slot of the voter's sensor, and slot 5 is empty
+    assert_one_line_refusal(res, "sample.ulg: --instance 5: no CAL_GYRO5_ID in the log (CAL_GYRO0_ID 2162688, ")
     assert not out.exists()
     res = run_station(
         "import",
@@ -315,3 +317,24 @@ def test_a_dataflash_log_named_ulg_is_read_as_the_dataflash_log_it_is(tmp_path):
     assert got.meta == want.meta
     for k in want.columns:
         np.testing.assert_array_equal(got.columns[k], want.columns[k])
+
+
+def test_a_log_without_sensor_selection_says_which_sensors_the_voter_chose_from(tmp_path, px4_dir):
+    """sample.ulg (AUAV-X21, PX4 before v1.10) has sensor_combined and no sensor_selection: the
+    sensors module's voter (VotedSensorsUpdate, DataValidatorGroup::get_best) chose the sensor by
+    the drivers' uORB priority and health; no parameter chose it (CAL_*_PRIME is only what the
+    preflight check requires present; read in PX4/PX4-Autopilot src/modules/sensors and
+    commander). The import named no sensor and the export then took slot 0 without a word. Now:
+    two accelerometer slots in use -> one warning line naming both and --instance; --instance 1
+    names slot 1; one magnetometer slot -> its device id."""
+    cap, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "accel-tabletop")
+    lines = [w for w in res.stderr.splitlines() if "voter" in w]
+    assert len(lines) == 1, res.stderr
+    assert "CAL_ACC0_ID 1245450 or CAL_ACC1_ID 1441792" in lines[0] and "--instance N" in lines[0]
+    assert "CAL_ACC_PRIME 1245450 is the calibration's primary" in lines[0]
+    assert "accel_device_id" not in cap.meta and "sensor_device_id" not in cap.meta
+    cap, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "accel-tabletop", "--instance", "1")
+    assert "voter" not in res.stderr
+    assert cap.meta["accel_device_id"] == "1441792" and cap.meta["sensor_instance"] == "1"
+    cap, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "compass")
+    assert "voter" not in res.stderr and cap.meta["mag_device_id"] == "262144"  # CAL_MAG0_ID, the only one

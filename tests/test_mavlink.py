@@ -304,3 +304,28 @@ def test_px4_board_asked_for_highres_imu_and_its_integer_parameters_decoded_byte
     assert meta["firmware"] == "px4" and meta["param.CAL_ACC0_ID"] == "1310988"
     assert meta["param.CAL_ACC0_XOFF"] == "0.0125" and meta["accel_device_id"] == "1310988"
     assert meta["params_received"] == "2/2" and meta["corrected"] == "true"
+
+
+def test_a_parameter_the_board_changes_while_streaming_is_params_changed_not_in_use():
+    """An ArduPilot board sends PARAM_VALUE when it saves a parameter: COMPASS_LEARN = 3 sets the
+    compass offsets in flight (Compass_learn.cpp) while the station records. The later value
+    replaced the one the recorded samples were corrected with, silently; the export then composed
+    with it. Now the first value stays param.*, the name is in params_changed."""
+    board = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+
+    def frame(msg):
+        data = bytes(msg.pack(board))
+        board.seq = (board.seq + 1) % 256
+        return data
+
+    p = MavlinkParser(request_hz=200.0)  # the station asks for the parameter list
+    p.feed(frame(board.heartbeat_encode(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0)))
+    real = mavlink2.MAV_PARAM_TYPE_REAL32
+    p.feed(frame(board.param_value_encode(b"COMPASS_OFS_X", 10.0, real, 3, 0)))
+    p.feed(frame(board.param_value_encode(b"COMPASS_LEARN", 3.0, mavlink2.MAV_PARAM_TYPE_INT8, 3, 1)))
+    p.feed(frame(board.param_value_encode(b"COMPASS_OFS_Y", -20.0, real, 3, 2)))
+    p.feed(frame(board.param_value_encode(b"COMPASS_OFS_Y", -20.0, real, 3, 2)))  # the list sent again: no change
+    p.feed(frame(board.param_value_encode(b"COMPASS_OFS_X", -35.0, real, 3, 65535)))  # learnt, saved
+    meta = p.board_meta()
+    assert meta["param.COMPASS_OFS_X"] == "10" and meta["param.COMPASS_OFS_Y"] == "-20"
+    assert meta["params_changed"] == "COMPASS_OFS_X"

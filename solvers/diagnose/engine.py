@@ -61,6 +61,10 @@ GROUPS_TOL = 1e-6  # round-off in an effective count of groups (a step between t
 # a generic term displaces library effects whose columns hold most (> CONFUSION_CORR) of its
 # signature only when its model's BIC is lower by this much (χ²₁(0.95)): a clearly better fit
 DISPLACE_MARGIN = 3.84
+# where the residual wanders (``Problem.wander_calibrated``), a candidate whose profiled ratio passes
+# χ²_k at this tail is calibrated on this many draws of the wander fitted beside it (``WanderModel.null_lr``)
+WANDER_NULL_P = 0.05
+WANDER_NULL_DRAWS = 100
 
 
 @dataclass
@@ -150,6 +154,11 @@ class Problem:
     # a candidate's deviance is then taken net of a white + Gauss–Markov noise fitted by REML on
     # the residual its own model leaves (``wander.WanderModel``); None: no such model
     wander_t_s: np.ndarray | None = None
+    # with ``wander_t_s``: a candidate is also tested against the wander where the residual the
+    # model leaves *without* it wanders (a line or a step that takes a wander whole leaves a white
+    # residual of its own), and its profiled ratio is calibrated on records of noise alone drawn
+    # from the wander fitted beside it (``WanderModel.null_lr``; ``_null_equivalent``)
+    wander_calibrated: bool = False
     series_names: dict = field(default_factory=dict)  # a series id's name for a person (P4's axes, the LDV's beams)
     _wander: object = None
 
@@ -1085,13 +1094,16 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
     if shared and problem.shared_noise is not None:
         infl = max(infl, shared_inflation(problem, _orth(np.hstack([A, cc.J])), e, sig))
     wm = wander_model(problem)
+    T_w, wanders = None, False
     if wm is not None and k > 0 and D > 0:
-        T_w, wanders = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0)
+        cal = problem.wander_calibrated
+        T_w, wanders = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0, baseline=cal)
+        if wanders and cal and T_w > chi2_isf(WANDER_NULL_P, k):
+            T_w = min(T_w, _null_equivalent(T_w, wm.null_lr(A, cc.J, e, WANDER_NULL_DRAWS), k))
         if wanders:
             infl = max(infl, D / max(T_w, 1e-9))
     ev = _Eval(cc, db, cvc, sig, int(k), D, infl, cv_ref=cv_ref)
-    if wm is not None and k > 0 and D > 0:
-        ev.wander_T, ev.wanders = T_w, wanders
+    ev.wander_T, ev.wanders = T_w, wanders
     t = _only_kind(problem, cc.J, types)
     if t is not None and k > 0:
         # tested on its own rows: their deviance, against the residual degrees of freedom they
@@ -1104,6 +1116,19 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
         ev.D = ev.n_kind * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
         ev.infl = serial_inflation(np.where(sel, e, 0.0), np.where(sel, sig, 0.0), problem.series)
     return ev
+
+
+def _null_equivalent(T: float, null: np.ndarray, k: int) -> float:
+    """``T`` as the χ²_k statistic of the same tail probability under ``null``, its distribution
+    on noise alone (draws) taken as a scaled χ² of matched mean and variance (Satterthwaite)."""
+    m, v = float(np.mean(null)), float(np.var(null, ddof=1))
+    if m <= 0 or v <= 0:
+        return T
+    c, nu = v / (2.0 * m), 2.0 * m * m / v
+    p = float(gammaincc(nu / 2.0, T / (2.0 * c)))
+    if p <= 0:
+        return T
+    return chi2_isf(p, k)
 
 
 def wander_model(problem: Problem):

@@ -297,6 +297,9 @@ def gyro_problem(
     prob.shared_noise = np.repeat(time_blocks(tb, GYRO_SHARED_BLOCKS) * 3, 3) + np.tile(np.arange(3), len(idx))
     prob.shared_first = True
     prob.wander_t_s = np.repeat(tb, 3)  # at most max_rows blocks per axis
+    # a wander of a tenth to a half of the record that a line or a step takes whole is tested as
+    # such (blind generator nulls: 15 of 40 named a line or a step before, docs/benchmarks.md)
+    prob.wander_calibrated = True
     prob.series_names = {0: "x", 1: "y", 2: "z"}
     return prob
 

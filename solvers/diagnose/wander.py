@@ -63,20 +63,12 @@ class WanderModel:
             for tau in span * np.geomspace(*TAU_PER_SPAN, TAU_STEPS):
                 lam, V = np.linalg.eigh(a[:, None] * np.exp(-dt / tau) * a[None, :])
                 eig.append((float(tau), np.maximum(lam, 0.0), V))
-            self.parts.append(_Part(int(sid), idx, bins, np.sqrt(cnt), eig))
+            self.parts.append(_Part(int(sid), idx, bins, np.sqrt(cnt), eig, tb, ww))
 
     def fit(self, X: np.ndarray, e: np.ndarray) -> list[tuple[float, float, float, float]]:
         """Per series: (λ, τ_s, s², LR) maximising the REML likelihood of residual ``e`` (weighted
         rows) of a model with columns ``X``; LR: twice its log-likelihood over white noise's (λ = 0)."""
-        out = []
-        for part in self.parts:
-            ll, rss, dof = _part_loglik(part, X, e[:, None], reml=True)  # (τ, λ, 1)
-            i, j = np.unravel_index(int(np.argmax(ll[..., 0])), ll.shape[:2])
-            best = float(ll[i, j, 0])
-            out.append(
-                (float(LAMBDA_GRID[j]), part.eig[i][0], float(rss[i, j, 0] / dof), 2.0 * (best - float(ll[0, 0, 0])))
-            )
-        return out
+        return [_reml_fit(part, *_part_loglik(part, X, e[:, None])[1:]) for part in self.parts]
 
     def evident(self, X: np.ndarray, e: np.ndarray, sigma: np.ndarray) -> list[dict]:
         """The series whose residual ``e`` (weighted rows) of a model with columns ``X`` wanders
@@ -95,19 +87,47 @@ class WanderModel:
         coefficients (GLS), of residual(s) ``E`` (weighted rows; one column per draw) of a model
         with columns ``X``: shape (series, draws)."""
         E = E.reshape(len(E), -1)
-        return np.asarray([_part_loglik(part, X, E, reml=False)[0].max(axis=(0, 1)) for part in self.parts])
+        return np.asarray([_part_loglik(part, X, E)[0].max(axis=(0, 1)) for part in self.parts])
 
-    def lr(self, A: np.ndarray, J: np.ndarray, e0: np.ndarray, e1: np.ndarray, cache: dict) -> tuple[float, bool]:
+    def null_lr(self, A: np.ndarray, J: np.ndarray, e1: np.ndarray, draws: int, seed: int = 0) -> np.ndarray:
+        """The statistic of ``lr`` on ``draws`` records of noise alone, drawn from the slow noise that
+        REML fits to ``e1``, the residual of ``[A J]`` (the candidate's signature never taken for
+        wander): its distribution where the candidate explains nothing. A series whose wander is
+        correlated over the whole record or longer is drawn white: over this record such a wander
+        is a drift, and a drift is what the candidates test for (a gyro's warm-up from power-up)."""
+        AJ = np.hstack([A, J])
+        rng = np.random.default_rng(seed)
+        E = np.zeros((len(e1), draws))
+        for part, (lam, tau, s2, _) in zip(self.parts, self.fit(AJ, e1)):
+            if tau >= part.t_bin[-1] - part.t_bin[0]:
+                lam = 0.0  # correlated over more than the record: a drift over it, not noise to test one against
+            white = rng.standard_normal((part.idx.size, draws))
+            E[part.idx] = np.sqrt(s2) * (white + np.sqrt(lam) * part.draw(tau, rng, draws))
+        return np.maximum(0.0, 2.0 * (np.sum(self.profile(AJ, E), axis=0) - np.sum(self.profile(A, E), axis=0)))
+
+    def lr(
+        self, A: np.ndarray, J: np.ndarray, e0: np.ndarray, e1: np.ndarray, cache: dict, baseline: bool = False
+    ) -> tuple[float, bool]:
         """(the likelihood-ratio statistic of columns ``J`` beside ``A`` with the slow noise profiled
         out under both, whether the residual of ``[A J]`` wanders): ``e0``, ``e1`` the residuals of
         ``A`` and of ``[A J]``; it wanders where REML's ratio over white noise is at least
-        ``EVIDENT_LR`` in some series (else the white-noise deviance stands). ``cache`` holds what
-        depends on ``A`` only."""
+        ``EVIDENT_LR`` in some series (else the white-noise deviance stands); ``baseline``: or where
+        the residual of ``A`` alone does. ``cache`` holds what depends on ``A`` only."""
         AJ = np.hstack([A, J])
-        evident = max((f[3] for f in self.fit(AJ, e1)), default=0.0) >= EVIDENT_LR
+        ll1, evident = 0.0, False
+        for part in self.parts:  # one pass per series gives both likelihoods of [A J]
+            ml, reml, rss, dof = _part_loglik(part, AJ, e1[:, None])
+            ll1 += float(ml.max())
+            evident = evident or _reml_fit(part, reml, rss, dof)[3] >= EVIDENT_LR
         if "ll0" not in cache:
-            cache["ll0"] = float(np.sum(self.profile(A, e0)))
-        return max(0.0, 2.0 * (float(np.sum(self.profile(AJ, e1))) - cache["ll0"])), evident
+            ll0, ev0 = 0.0, False
+            for part in self.parts:
+                ml, reml, rss, dof = _part_loglik(part, A, e0[:, None])
+                ll0 += float(ml.max())
+                ev0 = ev0 or _reml_fit(part, reml, rss, dof)[3] >= EVIDENT_LR
+            cache["ll0"], cache["evident0"] = ll0, ev0
+        evident = evident or (baseline and cache["evident0"])
+        return max(0.0, 2.0 * (ll1 - cache["ll0"])), evident
 
 
 def _cols(X: np.ndarray) -> np.ndarray:
@@ -128,13 +148,34 @@ class _Part:
     bins: np.ndarray  # per row: its bin
     root_cnt: np.ndarray  # per bin: √rows
     eig: list  # per τ: (τ, eigenvalues, eigenvectors) of the bins' kernel
+    t_bin: np.ndarray  # per bin: its mean time (s)
+    w_rel: np.ndarray  # per row: its weight over the series' mean weight
+
+    def draw(self, tau: float, rng, draws: int) -> np.ndarray:
+        """Rows × draws of a unit Gauss–Markov wander of correlation time ``tau`` (s), constant
+        within a bin, in weighted rows (the ``K_τ`` of the model)."""
+        rho = np.exp(-np.diff(self.t_bin) / tau)
+        x = np.empty((len(self.t_bin), draws))
+        x[0] = rng.standard_normal(draws)
+        for i, r in enumerate(rho):
+            x[i + 1] = r * x[i] + np.sqrt(1.0 - r * r) * rng.standard_normal(draws)
+        return self.w_rel[:, None] * x[self.bins]
 
 
-def _part_loglik(part: _Part, X: np.ndarray, E: np.ndarray, reml: bool):
-    """(log-likelihood, weighted RSS, degrees of freedom) of residuals ``E`` (rows × draws) of a
-    model with columns ``X`` on one series, per τ and λ of the grid: shapes (τ, λ, draws). The
-    rows split into the bins' mean directions, where the wander lives, and what is within the
-    bins (white); the model's coefficients are fitted by GLS over both."""
+def _reml_fit(part: _Part, ll: np.ndarray, rss: np.ndarray, dof: int) -> tuple[float, float, float, float]:
+    """(λ, τ_s, s², LR over white noise) at the REML optimum of one series' grid (one draw)."""
+    i, j = np.unravel_index(int(np.argmax(ll[..., 0])), ll.shape[:2])
+    best = float(ll[i, j, 0])
+    return float(LAMBDA_GRID[j]), part.eig[i][0], float(rss[i, j, 0] / dof), 2.0 * (best - float(ll[0, 0, 0]))
+
+
+def _part_loglik(part: _Part, X: np.ndarray, E: np.ndarray):
+    """(ML log-likelihood, REML log-likelihood, weighted RSS, REML degrees of freedom) of
+    residuals ``E`` (rows × draws) of a model with columns ``X`` on one series, per τ and λ of
+    the grid: shapes (τ, λ, draws). The rows split into the bins' mean directions, where the
+    wander lives, and what is within the bins (white); the model's coefficients are fitted by GLS
+    over both. The ML likelihood profiles ``s²`` over ``n`` rows, REML over ``n − p`` with the
+    model's information ``log det M`` added (the likelihood of the part outside its columns)."""
     Xm, Em = _cols(X[part.idx]), E[part.idx]
     n, p = Xm.shape
     nb = len(part.root_cnt)
@@ -149,7 +190,7 @@ def _part_loglik(part: _Part, X: np.ndarray, E: np.ndarray, reml: bool):
     qw = np.sum(Em * Em, axis=0) - np.sum(Eb * Eb, axis=0)
     L = len(LAMBDA_GRID)
     ll = np.empty((len(part.eig), L, Em.shape[1]))
-    rss_all = np.empty_like(ll)
+    ll_r, rss_all = np.empty_like(ll), np.empty_like(ll)
     for i, (_, lam, V) in enumerate(part.eig):
         Xt, Et = V.T @ Xb, V.T @ Eb
         W = 1.0 / (1.0 + LAMBDA_GRID[:, None] * lam[None, :])  # (λ, bins)
@@ -160,10 +201,9 @@ def _part_loglik(part: _Part, X: np.ndarray, E: np.ndarray, reml: bool):
             M = Gw[None] + np.einsum("ln,np,nq->lpq", W, Xt, Xt)
             b = gw[None] + np.einsum("ln,np,nb->lpb", W, Xt, Et)
             rss = rss - np.einsum("lpb,lpb->lb", b, np.linalg.solve(M + 1e-12 * np.eye(p), b))
-            if reml:
-                logdet_m = np.linalg.slogdet(M)[1]
+            logdet_m = np.linalg.slogdet(M)[1]
         rss = np.maximum(rss, 1e-300)
-        dof = n - p if reml else n
-        ll[i] = -0.5 * (logdet[:, None] + logdet_m[:, None] + dof * np.log(rss / dof))
+        ll[i] = -0.5 * (logdet[:, None] + n * np.log(rss / n))
+        ll_r[i] = -0.5 * (logdet[:, None] + logdet_m[:, None] + (n - p) * np.log(rss / (n - p)))
         rss_all[i] = rss
-    return ll, rss_all, (n - p if reml else n)
+    return ll, ll_r, rss_all, n - p

@@ -138,16 +138,11 @@ def _text(result: dict) -> str:
 def _save(args: argparse.Namespace, capture, result: dict) -> int:
     """Judge, then save as the rules say (module docstring); the exit status.
 
-    The database's errors are one line and exit 2 (as the db commands do)."""
-    import sqlite3
-    import sys
-
-    from db.store import DuplicateCapture
+    The database's errors are one line and exit 2 (as the db commands do). The save keeps the
+    judgement current: when another process saved a new reference for the device between the
+    judgement and the save, nothing is saved, a line says so, and the result is judged again."""
     from station.cli import db_path
-    from station.commands._dbutil import db_error_text
     from station.errors import InputError
-    from station.procedures.review import review_record
-    from station.store import judge, kind_added, save_result
 
     if not (args.device or "").strip() and not str(result.get("device") or "").strip():
         # before the database is opened (or made): the store's own refusal names its argument
@@ -155,6 +150,35 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
             args.file, None, "the capture names no device (no '# device:' line): give --device ID to save it"
         )
     path = db_path(args)
+    for _ in range(REJUDGE_TRIES):
+        status = _judge_and_save(args, capture, result, path)
+        if status is not None:
+            return status
+    raise InputError(
+        path,
+        None,
+        f"not saved: the device's reference changed {REJUDGE_TRIES} times while this result was judged "
+        "(other saves of the same device and procedure); try again",
+    )
+
+
+# Saves of one device and procedure by other processes between a judgement and its save: each
+# one means judging again; beyond this many, a one-line refusal instead of a loop.
+REJUDGE_TRIES = 5
+
+
+def _judge_and_save(args: argparse.Namespace, capture, result: dict, path: str) -> int | None:
+    """One judgement against the reference in the database and its save; the exit status, or
+    None when another process saved a new reference for the device in between (judge again)."""
+    import sqlite3
+    import sys
+
+    from db.store import DuplicateCapture, ReferenceChanged
+    from station.commands._dbutil import db_error_text
+    from station.errors import InputError
+    from station.procedures.review import review_record
+    from station.store import judge, kind_added, save_result
+
     try:
         assessment, device, previous = judge(path, result, args.device)
     except (sqlite3.Error, OSError, ValueError) as exc:
@@ -192,7 +216,11 @@ def _save(args: argparse.Namespace, capture, result: dict) -> int:
             operator=args.operator,
             accepted=decision != "rejected",
             review=stored,
+            judged_reference=previous,
         )
+    except ReferenceChanged as exc:
+        print(f"station: {exc}: judged again", file=sys.stderr)
+        return None
     except DuplicateCapture as exc:
         raise InputError(args.file, None, str(exc)) from None
     except (sqlite3.Error, OSError) as exc:

@@ -29,7 +29,11 @@ def register(subparsers) -> None:
     )
     p.add_argument("calibration_id", metavar="CALIBRATION_ID", type=record_id("calibration"))
     p.add_argument("--format", required=True, choices=FORMATS)
-    p.add_argument("--instance", type=int, help="firmware sensor slot (ArduPilot 1-3, default 1; PX4 0-3, default 0)")
+    p.add_argument(
+        "--instance",
+        type=int,
+        help="firmware sensor slot (ArduPilot 1-3, default 1; PX4 0-3, default: the slot of the capture's sensor, the only one in use, or 0)",
+    )
     p.add_argument(
         "--device-id",
         type=int,

@@ -390,6 +390,7 @@ class BoardLink:
         self.firmware: str | None = None
         self.uid: str | None = None
         self.params: dict[str, float | int] = {}
+        self.changed: set[str] = set()  # calibration parameters whose value changed while streaming
         self.param_count: int | None = None
         self._asked_params = False
         self._heartbeats = 0
@@ -459,7 +460,14 @@ class BoardLink:
             self.param_count = int(m.param_count)
             self._param_indices.add(int(m.param_index))
             if name.startswith(PARAM_PREFIXES):
-                self.params[name] = _param_value(float(m.param_value), int(m.param_type), self.firmware)
+                value = _param_value(float(m.param_value), int(m.param_type), self.firmware)
+                # the first value is the one in use since the stream began; a later different one is
+                # a change while the data run (a board sends PARAM_VALUE when it saves a parameter:
+                # ArduPilot's in-flight compass learning, COMPASS_LEARN): said, never taken as in use
+                if name in self.params and self.params[name] != value:
+                    self.changed.add(name)
+                else:
+                    self.params.setdefault(name, value)
 
     def device_name(self, key: tuple[int, int]) -> str:
         if self.uid:
@@ -473,6 +481,8 @@ class BoardLink:
             out["corrected"] = "true"  # RAW_IMU/SCALED_IMU*/HIGHRES_IMU of both firmwares: calibrated, rotated
         if self.uid:
             out["autopilot_uid"] = self.uid
+        if self.changed:  # as the log importers write it; the exports compose with none of these
+            out["params_changed"] = ",".join(sorted(self.changed))
         if self.param_count is not None:  # PARAM_VALUEs received of the board's total (UDP may lose some)
             out["params_received"] = f"{len(self._param_indices)}/{self.param_count}"
         for name in sorted(self.params):

@@ -223,11 +223,17 @@ def recover_partial(partial: str, out: str | None = None) -> str:
     return out
 
 
-def _median_dt(batch: Batch) -> float | None:
-    if len(batch) < 3:
+def _median_dt(batch: Batch, before: tuple[float, int] | None = None) -> float | None:
+    """Median step between the batch's samples of one segment, the step from ``before`` (the
+    previous batch's last t and segment) included: a device at 10 Hz gives a batch of one
+    sample per 0.1 s poll, whose rate was never measured (no sample_rate_hz)."""
+    t, seg = batch.t_s, batch.segment
+    if before is not None:
+        t, seg = np.concatenate(([before[0]], t)), np.concatenate(([before[1]], seg))
+    if len(t) < 2:
         return None
-    same = batch.segment[1:] == batch.segment[:-1]
-    d = np.diff(batch.t_s)[same]
+    same = seg[1:] == seg[:-1]
+    d = np.diff(t)[same]
     d = d[d > 0]
     return float(np.median(d)) if len(d) else None
 
@@ -283,6 +289,7 @@ def record(
         meta = _start_meta(header, procedure, recorded_at, port, protocol, baud, extra_meta, warn)
         stream = CaptureStream(out, columns, meta)
         dts: list[float] = []
+        last_t: tuple[float, int] | None = None  # the last row's (t, segment): steps across batches count
         stopped = "stopped"
         # host time the newest rows arrived (the reader's arrival time, not when they were taken
         # from it: rows that came during the header wait are taken after it)
@@ -298,9 +305,10 @@ def record(
             if b is not None and len(b):
                 stream.write(b)
                 last_rows_at = _arrived(reader, last_rows_at)
-                d = _median_dt(b)
+                d = _median_dt(b, last_t)
                 if d is not None:
                     dts.append(d)
+                last_t = (float(b.t_s[-1]), int(b.segment[-1]))
             if changes:
                 old, new, _ = changes[0]
                 warn(f"device changed ({old.device_id} {old.units} -> {new.device_id} {new.units}): recording stopped")
@@ -330,7 +338,8 @@ def record(
         events = reader.events()
         final = dict(meta)
         board = getattr(reader.parser, "board_meta", dict)()  # MAVLink: firmware, uid, parameters in use
-        final.update({k: v for k, v in board.items() if k not in final})
+        have = {k.lower() for k in final}
+        final.update({k: v for k, v in board.items() if k.lower() not in have})
         final.update(_end_meta(stats, events, stream.rows, dts, time.monotonic() - started))
         incomplete = _ending(at_end, last_rows_at, started, ended_at, dts, stopped, seconds)
         if incomplete:
@@ -355,6 +364,9 @@ _OWN_KEYS = frozenset(
     {"station-capture", "recorded_at", "source", "protocol", "baud", "nominal_rate_hz", "samples", "gaps"}
     | {"parse_errors", "parse_errors_by_kind", "dropped", "reconnects", "restarts", "segments", "duration_s"}
     | {"complete", "incomplete", "last_data_s", "recovered"}
+    # measured from the samples' times (_end_meta): a --meta value was replaced silently, and one
+    # spelled in other letter case (Sample_Rate_Hz) stayed beside it: a capture the reader refuses
+    | {"sample_rate_hz"}
 )
 
 
@@ -408,7 +420,17 @@ def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, war
     if not port.split(":", 1)[0].endswith(("socket", "loop", "rfc2217", "udp", "udpin", "udpout", "tcp", "tcpin")):
         meta["baud"] = str(baud)
     for k, v in (extra or {}).items():
-        meta[k] = v
+        # the reader takes a key in any letter case: --meta Device=X replaces 'device', never
+        # stands beside it (a head with both is refused as one key spelled twice)
+        same = next((have for have in meta if have.lower() == k.lower()), k)
+        if same in SENSOR_GROUPS and same in meta and meta[same] != v:
+            raise InputError(
+                None,
+                None,
+                f"--meta {k}={v}: the device says {same} {meta[same]} (its header); "
+                "--meta sets a unit only for a device that does not say it",
+            )
+        meta[same] = v
     return meta
 
 

@@ -183,6 +183,38 @@ def _ap_device_id(params: dict, kind: str, instance: int) -> int | None:
     return int(value) if value else None
 
 
+# COMPASS_LEARN (AP_Compass.cpp): 1 internal learning (older firmware), 2 the EKF's offsets saved
+# at disarm, 3 in flight (Compass_learn.cpp: mag_cal_fixed_yaw once the GSF yaw converges, then
+# COMPASS_LEARN set back to 0). A saved parameter is logged as a PARM record (GCS::send_parameter_value
+# "also log to AP_Logger"); the offsets each MAG sample was corrected with are its OfsX..OfsZ.
+COMPASS_LEARN = {1: "internal learning", 2: "EKF learning", 3: "in-flight learning"}
+
+
+def _offsets_learnt(mag_ofs, have_mag: bool, inst: int, unit: str | None, params: dict, late: set[str]) -> str:
+    """Where the offsets in MAG's OfsX..OfsZ change during the imported samples (in-flight
+    learning changes them with or without a PARM record): their names join ``late``, and the
+    change is said (values, time, COMPASS_LEARN); "" when they do not change."""
+    if mag_ofs is None or not have_mag:
+        return ""
+    t_us, ofs = mag_ofs
+    if len(ofs) < 2 or not np.any(ofs != ofs[0]):
+        return ""
+    n = "" if inst == 0 else str(inst + 1)
+    late.update(f"COMPASS_OFS{n}_{a}" for a in "XYZ")
+    at = int(np.flatnonzero(np.any(ofs != ofs[0], axis=1))[0])
+    mgauss = 1000.0 if DF_UNITS.get(unit or "") == "gauss" else 1.0  # FMTU 'G' x 'C': the reader gave gauss
+
+    def show(v) -> str:
+        return ",".join(f"{x * mgauss:g}" for x in v)
+
+    mode = params.get("COMPASS_LEARN")
+    how = f", COMPASS_LEARN = {int(mode)}: {COMPASS_LEARN[int(mode)]}" if mode in COMPASS_LEARN else ""
+    return (
+        f"MAG[{inst}] offsets {show(ofs[0])} -> {show(ofs[-1])} mGauss from {(t_us[at] - t_us[0]) * 1e-6:.3g} s"
+        f"{how}: the samples were corrected with offsets that changed"
+    )
+
+
 # ------------------------------------------------------------------------------------- DataFlash
 
 
@@ -221,6 +253,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     fixes: list[tuple[float, float, float]] = []
     units = {}
     instances_seen: dict[str, set] = {imu_name: set(), mag_name: set()}
+    mag_ofs = None
     try:
         # The bulk (IMU, MAG: hundreds of thousands of fixed-size records) is decoded at once
         # from pymavlink's own index (offsets per message type) and format table; a DFMessage
@@ -252,6 +285,9 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 units[kind] = fmt.get_unit(fields[kind][0]) if fmt.units else ""
             if name == imu_name:
                 temps = c["T"][keep].astype(np.float64) if "T" in c else np.full(len(t_us), math.nan)
+            if name == mag_name and all(f in c for f in ("OfsX", "OfsY", "OfsZ")):
+                # the offsets each MAG sample was corrected with (compass.get_offsets: COMPASS_OFS in use)
+                mag_ofs = (t_us, np.column_stack([c[f][keep].astype(np.float64) for f in ("OfsX", "OfsY", "OfsZ")]))
         if cols["PARM"] is not None:
             c = cols["PARM"]
             for ofs, raw, value in zip(c["_offset"].tolist(), c["Name"].tolist(), c["Value"].tolist()):
@@ -316,11 +352,12 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
     warnings = [w for w in (skipped.warning(),) if w]
+    learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst, units.get("mag"), params, late)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
         warnings.append(
             f"parameters changed while the data were logged: {', '.join(sorted(late))} "
-            "(param.* holds the values at the start)"
+            "(param.* holds the values at the start" + (f"; {learnt}" if learnt else "") + ")"
         )
     if gps_utc_offset is not None and first_us is not None:
         set_date(meta, warnings, gps_utc_offset + first_us * 1e-6, "GPS")

@@ -116,6 +116,35 @@ def _slot(params: dict, kind: str, device_id: int | None) -> int | None:
     return None
 
 
+def _voted_sensor(path, params: dict, kind: str, instance: int | None, needed: bool, warnings: list[str]) -> int | None:
+    """The device id of the sensor in ``sensor_combined`` of a log without ``sensor_selection``
+    (PX4 before v1.10). There the sensors module's voter (``VotedSensorsUpdate``, ECL's
+    ``DataValidatorGroup::get_best``) chose it by the drivers' uORB priority and the sensors'
+    health, sample by sample; no parameter chooses it (``CAL_*_PRIME`` is the calibration's
+    primary, which only the preflight check requires present). So: the one slot with a
+    ``CAL_*n_ID`` when the board has one such sensor; the slot ``--instance`` names; otherwise
+    None, said in one warning line naming the candidates (``needed``: the procedure's sensor,
+    whose --instance slot must hold one, whose ambiguity is said; the others are left unknown)."""
+    prefix = CAL_PREFIX[kind]
+    slots = {n: int(params[f"{prefix}{n}_ID"]) for n in range(8) if params.get(f"{prefix}{n}_ID")}
+    if instance is not None and instance in slots:
+        return slots[instance]
+    if instance is not None and needed:
+        have = ", ".join(f"{prefix}{n}_ID {v}" for n, v in slots.items()) or f"no {prefix}n_ID set"
+        raise InputError(path, None, f"--instance {instance}: no {prefix}{instance}_ID in the log ({have})")
+    if len(slots) == 1:
+        return next(iter(slots.values()))
+    if len(slots) > 1 and needed:
+        prime = params.get(f"{prefix}_PRIME")
+        warnings.append(
+            f"sensor_combined's {kind} is the sensor PX4's voter chose (priority and health; this log has no "
+            f"sensor_selection topic to say which): {' or '.join(f'{prefix}{n}_ID {v}' for n, v in slots.items())}"
+            + (f" ({prefix}_PRIME {int(prime)} is the calibration's primary, not the voter's choice)" if prime else "")
+            + "; give --instance N to name its slot"
+        )
+    return None
+
+
 def _external(data: dict) -> bool | None:
     """The topic's own ``is_external`` (sensor_mag has it: the driver's word that the sensor is
     not on the board), or None when the topic has no such field or it changes during the log."""
@@ -225,7 +254,10 @@ def read(
                 "or 'combined' on the import screen)"
             )
     else:
-        if instance not in (None, 0):  # one stream: the board's selected sensor, whatever was asked
+        selection = _topics(ulog, "sensor_selection")
+        # without sensor_selection (PX4 before v1.10), --instance N names the CAL_*N slot of the
+        # sensor the voter chose (_voted_sensor); with it, the log says which
+        if instance not in (None, 0) and selection:  # one stream: the board's selected sensor
             raise InputError(
                 path,
                 None,
@@ -239,14 +271,16 @@ def read(
             )
         d = combined[min(combined)].data
         t_us = np.asarray(d["timestamp"], dtype=np.int64)
-        selection = _topics(ulog, "sensor_selection")
         sel = selection[min(selection)].data if selection else {}
         for kind, field in COMBINED.items():
             cols = [f"{field}[{j}]" for j in range(3)]
             if not all(c in d for c in cols):
                 continue
-            ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
-            device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
+            if selection:
+                ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
+                device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
+            else:
+                device_id = _voted_sensor(path, params, kind, instance, kind == (primary or kind), warnings)
             t_k, rows, how = t_us, slice(None), ""
             rel = d.get("magnetometer_timestamp_relative") if kind == "mag" else None
             if rel is not None:

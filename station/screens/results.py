@@ -125,6 +125,15 @@ class ResultsScreen(NoticesMixin, Screen):
             self.post_message(StoreLoaded("device", None, error=str(exc)))
 
     def on_store_loaded(self, message: StoreLoaded) -> None:
+        if message.what == "reference":  # the reference changed under a save: judge again
+            self.previous, self.decision = message.data, None
+            self.draw()
+            self.query_one("#saved", Static).update(
+                f"[b yellow]Not saved: {tui_markup(message.error)}; judged again against it above: s saves[/]"
+            )
+            if self.app.session.autosave and not (self.assessment is not None and self.assessment.failed):
+                self.action_save()
+            return
         if message.what != "device":
             return
         self.device = message.data or {}
@@ -281,6 +290,7 @@ class ResultsScreen(NoticesMixin, Screen):
     def save(self, decision: str = "accepted", note: str = "") -> None:
         s = self.app.session
         try:
+            from db.store import ReferenceChanged
             from station.store import save_result
 
             for key in ("operator", "place", "reference_equipment"):  # entered on Connect
@@ -291,16 +301,25 @@ class ResultsScreen(NoticesMixin, Screen):
             started = getattr(s.guide, "started", None)  # the run's start, with its time of day
             if not (isinstance(started, str) and started[:10] == str(self.capture.meta.get("date", ""))[:10]):
                 started = None  # not this capture's run (an imported file)
-            cal_id = save_result(
-                s.db_path,
-                self.capture,
-                self.result,
-                device_id=s.device_id,
-                operator=s.extra.get("operator") or None,
-                accepted=decision != "rejected",
-                review=review,
-                time=started if isinstance(started, str) else None,
-            )
+            try:
+                cal_id = save_result(
+                    s.db_path,
+                    self.capture,
+                    self.result,
+                    device_id=s.device_id,
+                    operator=s.extra.get("operator") or None,
+                    accepted=decision != "rejected",
+                    review=review,
+                    time=started if isinstance(started, str) else None,
+                    judged_reference=self.previous,
+                )
+            except ReferenceChanged as exc:
+                # another process (a second station, calibrate --save) saved a new reference while
+                # this result was on screen: nothing saved; judged again against it, as calibrate does
+                store = s.open_store()
+                now = store.reference(exc.device_id, exc.procedure) if store is not None else None
+                self.post_message(StoreLoaded("reference", now, error=str(exc)))
+                return
             guide = s.guide
             state_path = getattr(guide, "state_path", None)
             if state_path and os.path.exists(state_path):
