@@ -180,3 +180,21 @@ def test_a_six_position_capture_offers_the_six_position_fit_on_f8(tmp_path, shar
     assert result["method"] == want["method"]
     np.testing.assert_allclose(np.array(result["params"]["B"]), want["params"]["B"], rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.array(result["params"]["M"]), want["params"]["M"], rtol=0, atol=1e-12)
+
+
+def test_warnings_past_the_two_shown_are_counted_not_dropped():
+    """The summary has room for two warnings at 80x24; the rest are said by count, with the
+    command that prints them all (they were dropped without a word)."""
+    from station.importers._common import Imported, Stream
+    from station.screens.importfile import WIDTH, summary_lines
+
+    t = np.arange(100) / 100.0
+    stream = Stream("gyro", t, np.zeros((100, 3)), "rad/s", "raw")
+    warnings = [f"warning number {i}" for i in range(5)]
+    lines = summary_lines("/logs/flight 12.ulg", "ulog", Imported({"gyro": stream}, {}, warnings))
+    text = "\n".join(lines)
+    assert "warning number 0" in text and "warning number 1" in text and "warning number 2" not in text
+    assert "… and 3 more warnings: station import flight 12.ulg prints them all" in text
+    assert all(len(line) <= WIDTH for line in lines)
+    two = summary_lines("/logs/a.ulg", "ulog", Imported({"gyro": stream}, {}, warnings[:2]))
+    assert not any("more warning" in line for line in two)

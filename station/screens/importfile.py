@@ -76,6 +76,7 @@ class CaptureBuilt(Message):
 
 
 WIDTH = 76  # 80 columns less the padding and the scroll bar
+SHOWN_WARNINGS = 2  # warnings the summary has room for at 80x24
 
 
 def _wrapped(items: list[str], indent: str, max_lines: int) -> list[str]:
@@ -131,8 +132,12 @@ def summary_lines(path: str, fmt: str, imported) -> list[str]:
         lines += _wrapped([safe(f"{k}={params[k]}") for k in ids + rest], "  ", 3)
     else:
         lines.append("in use: no calibration parameters in the log (an export cannot compose)")
-    for w in imported.warnings[:2]:
+    for w in imported.warnings[:SHOWN_WARNINGS]:
         lines += textwrap.wrap(safe(f"warning: {w}"), WIDTH, subsequent_indent="  ")
+    more = len(imported.warnings) - SHOWN_WARNINGS
+    if more > 0:  # the screen has room for two; the rest are not dropped unsaid
+        text = f"… and {more} more warning{'s' if more > 1 else ''}: station import {os.path.basename(path)} prints them all"
+        lines += textwrap.wrap(safe(text), WIDTH, subsequent_indent="  ")
     return lines
 
 
