@@ -22,7 +22,13 @@ from station.procedures import registry
 def procedure_module(procedure: str | None, path=None):
     """The module of ``procedure`` (InputError naming ``path`` when there is none)."""
     if not procedure:
-        raise InputError(path, None, "metadata has no 'procedure': say which procedure this capture is for")
+        raise InputError(
+            path,
+            None,
+            "metadata has no 'procedure': say which procedure this capture is for, a line "
+            f"'# procedure: P' with P one of {', '.join(registry.names())} "
+            "(station record --procedure P writes it)",
+        )
     entry = registry.get(procedure)
     if entry is None:
         raise InputError(path, None, f"unknown procedure {procedure!r}")

@@ -250,3 +250,15 @@ def test_a_capture_dated_before_the_year_1000_is_stored_with_an_iso_date(tmp_pat
     assert res.returncode == 0, res.stderr
     hist = run_station("history", "OLD-1", "--json", "--db", db)
     assert hist.returncode == 0 and '"0999-06-01T00:00:00Z"' in hist.stdout, hist.stdout[:300]
+
+
+def test_a_capture_without_a_procedure_says_how_to_name_one(tmp_path):
+    """A capture `station record` wrote without --procedure is refused by calibrate and diagnose;
+    the line said only "say which procedure", not how or which there are."""
+    path = tmp_path / "rec.csv"
+    rows = ["# station-capture: 1", "# device: X", "# sample_rate_hz: 100", "t,ax,ay,az"]
+    rows += [f"{i / 100},0,0,9.8" for i in range(20)]
+    path.write_text("\n".join(rows) + "\n")
+    for command in ("calibrate", "diagnose"):
+        res = run_station(command, path)
+        assert_one_line_refusal(res, "no 'procedure'", "# procedure: P", "accel-tabletop", "ldv", "--procedure")
