@@ -101,6 +101,17 @@ def test_a_quarter_turn_is_not_called_upside_down():
     assert not [e for e in events if e[0] == "captured"]
 
 
+def test_three_eighths_of_a_turn_is_not_called_a_quarter_turn():
+    """Anything between 45° and 135° off was called 'a quarter turn' (seen at 134°): only near 90°."""
+    from station.procedures.tabletop_guide import wrong_face_message
+
+    assert "quarter turn" in wrong_face_message(91.0)
+    for angle in (55.0, 125.0, 134.0):
+        message = wrong_face_message(angle)
+        assert "quarter turn" not in message and f"{angle:.0f}° off" in message, message
+    assert wrong_face_message(150.0).startswith("Upside down")
+
+
 def test_a_tilted_placement_is_not_in_position():
     sim, guide = make()
     feed(guide, sim, 1.5, follow=False)

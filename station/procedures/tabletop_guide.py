@@ -138,6 +138,16 @@ def p1_steps(names: list[str] | None = None) -> list[Step]:
     return out
 
 
+def wrong_face_message(angle_deg: float) -> str:
+    """What the operator is told when another face is up, ``angle_deg`` from the asked direction:
+    a quarter turn only near 90°, upside down past 135°."""
+    if angle_deg > 135.0:
+        return "Upside down: turn the unit over"
+    if 67.5 <= angle_deg <= 112.5:
+        return f"Wrong face up: {angle_deg:.0f}° off, a quarter turn; put the face shown up"
+    return f"Wrong face up: {angle_deg:.0f}° off; put the face shown up"
+
+
 class P1Guide:
     """The P1 (level table) guided run. See the module docstring for the phases.
 
@@ -390,10 +400,8 @@ class P1Guide:
             self._message = "In position and still: averaging starts shortly"
         else:
             self.phase = "place"
-            if wrong and angle > 135.0:
-                self._message = "Upside down: turn the unit over"
-            elif wrong:
-                self._message = f"Wrong face up: {angle:.0f}° off, a quarter turn; put the face shown up"
+            if wrong:
+                self._message = wrong_face_message(angle)
             elif st.is_still and known and not ok:
                 self._message = f"Not in position: {angle:.0f}° from the asked direction"
             else:

@@ -46,7 +46,7 @@ HELP = """\
 shows and let go. When it is still and in position the station waits a
 moment, then averages for the set time (the source asks 3–5 minutes)
 and moves on. "WRONG FACE UP" means another face is up: the message
-under it says whether it is a quarter turn or upside down.
+under it says how far off it is (a quarter turn, upside down).
 """
 
 
