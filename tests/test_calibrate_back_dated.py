@@ -182,3 +182,29 @@ def test_results_screen_judges_a_back_dated_result_against_the_calibration_of_it
         assert saved["supersedes"] == saved["review"]["previous_calibration_id"] == first
         assert saved["superseded_by"] == latest
         assert s.verify() == []
+
+
+def test_the_save_checks_the_reference_at_the_results_own_date(tmp_path):
+    """Inside the save's transaction the reference is read at the result's date: a calibration
+    saved meanwhile with a later date does not make a February judgement stale (before the fix:
+    ReferenceChanged, as the latest had changed), one dated between does (nothing saved)."""
+    from db_testdata import accel_result, small_capture
+
+    from db.store import ReferenceChanged
+
+    def cap(seed, date):
+        meta, cols = small_capture(device="D", seed=seed)
+        return dict(meta, date=date), cols
+
+    with Store(str(tmp_path / "s.db")) as s:
+        meta, cols = cap(1, "2026-01-10")
+        jan = s.save_calibration(accel_result(device="D"), meta=meta, columns=cols, judged_reference=None)
+        meta, cols = cap(2, "2026-03-10")
+        s.save_calibration(accel_result(device="D"), meta=meta, columns=cols, judged_reference=jan)
+        meta, cols = cap(3, "2026-02-10")  # judged against January, the calibration of its date
+        feb = s.save_calibration(accel_result(device="D"), meta=meta, columns=cols, judged_reference=jan)
+        assert s.calibration(feb)["supersedes"] == jan
+        meta, cols = cap(4, "2026-02-20")  # judged against January too, but February landed meanwhile
+        with pytest.raises(ReferenceChanged, match=f"judged against calibration #{jan}: it is now calibration #{feb}"):
+            s.save_calibration(accel_result(device="D"), meta=meta, columns=cols, judged_reference=jan)
+        assert len(s.history("D")) == 3
