@@ -560,3 +560,28 @@ def test_a_database_in_a_folder_this_user_cannot_write_says_so(tmp_path, capsys)
     for code, out, err in results:
         assert code == 2 and out == "" and err.count("\n") == 1, err
         assert f"the folder {folder} is not writable" in err and "-wal and -shm" in err, err
+
+
+def test_devices_show_says_when_the_device_falls_due(capsys, db):
+    """`devices show` gave the interval but no date: the next due date was said only by `due`,
+    and only within its window (`--within`), so a device due in a year had none anywhere;
+    a calibrated device without an interval (the TUI registers them so) is never due."""
+    now = datetime.now(UTC)
+    with Store(db) as s:
+        meta, cols = small_capture(device="IMU-1")
+        ten_days_ago = (now - timedelta(days=10)).strftime("%Y-%m-%dT%H:%M:%SZ")
+        s.save_calibration(accel_result(), meta=dict(meta, date=ten_days_ago), columns=cols)
+        s.add_device("NEW-1", interval_days=30)
+
+    def due_line(device):
+        code, out, err = run(capsys, "devices", "show", device, "--db", db)
+        assert code == 0, err
+        return next(line for line in out.splitlines() if line.startswith("due: "))
+
+    assert due_line("IMU-1") == "due: never (no recalibration interval: station devices add ID --interval-days N)"
+    assert due_line("NEW-1") == "due: never calibrated"
+    assert run(capsys, "devices", "add", "IMU-1", "--interval-days", "365", "--db", db)[0] == 0
+    when = (now - timedelta(days=10) + timedelta(days=365)).date().isoformat()
+    assert due_line("IMU-1") == f"due: in 355 d ({when})"
+    code, out, _ = run(capsys, "due", "--db", db)  # outside `due`'s window: not listed there
+    assert "IMU-1" not in out

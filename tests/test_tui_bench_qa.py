@@ -306,3 +306,305 @@ def test_a_device_due_later_is_not_called_due_on_history_or_connect(tmp_path):
     assert len(rows) == 2, devices
     assert "in 20 d" in rows["IMU-8"] and "in 5 d" in rows["IMU-9"], rows
     assert not any(" due" in row for row in rows.values()), rows
+
+
+def test_history_says_when_the_device_falls_due_and_i_sets_its_interval(tmp_path):
+    """A new unit calibrated on the TUI is registered without an interval, so it is never due;
+    History called it "ok" and showed no due date anywhere (`station due` says "nothing due"
+    and names it on stderr only), and no screen could set the interval. History now says the
+    highlighted device's due date or that it is never due, and ``i`` sets the interval, stored
+    as ``devices add --interval-days`` does (the CLI sees the same date)."""
+    import datetime as dt
+
+    from db.store import Store
+    from station.store import save_result
+    from tests.station_run import run_station
+    from tests.test_tui import screen_lines, screen_name
+    from tests.tui_data import p1_result
+
+    db = str(tmp_path / "s.db")
+    ten_days_ago = (dt.datetime.now(dt.UTC) - dt.timedelta(days=10)).strftime("%Y-%m-%dT%H:%M:%SZ")
+    cap, result = p1_result("IMU-5", date=ten_days_ago)
+    save_result(db, cap, result, device_id="IMU-5", operator="test")
+    assert Store(db).get_device("IMU-5")["interval_days"] is None
+
+    def shown(app) -> str:
+        return " ".join(" ".join(screen_lines(app)).split())
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-5" in text_of(app, "#devices"))
+            await wait_for(pilot, lambda: "never due: no recalibration interval (i sets one)" in shown(app), 30)
+            before = text_of(app, "#devices")
+            await pilot.press("i")
+            await wait_for(pilot, lambda: screen_name(app) == "IntervalScreen" and "never due" in shown(app))
+            for key in "abc":
+                await pilot.press(key)
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: "not a number of days" in shown(app))
+            assert Store(db).get_device("IMU-5")["interval_days"] is None
+            await pilot.press("backspace", "backspace", "backspace", "3", "0", "enter")
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "interval 30 d" in shown(app))
+            return before, shown(app), text_of(app, "#devices")
+
+    before, after, devices = asyncio.run(story())
+    assert "no int" in before and " ok" not in before, before
+    assert Store(db).get_device("IMU-5")["interval_days"] == 30
+    assert "due in 20 d" in after and "interval 30 d" in after, after
+    assert "in 20 d" in devices, devices
+    res = run_station("due", "--within", "30", "--db", db)  # the command line gives the same date
+    assert res.returncode == 1 and "IMU-5" in res.stdout, (res.stdout, res.stderr)
+
+
+def test_the_noise_runs_p4_verdict_is_shown_whole_at_80x24(tmp_path):
+    """The Allan result's verdict had two rows: "No still P4 record reaches 1σ ≤ 1 °/h on every
+    axis: the fitted noise floor of x (bias instability, rate random walk) is above it; y alone
+    needs 70 min, z" was all a noise run on the simulator showed, the rest ("alone needs 70
+    min.") cut off. It now takes the rows it needs, the plot giving them."""
+    import numpy as np
+
+    from station.capture import read_capture
+    from station.procedures.noise import noise_report, p4_record_verdict
+    from station.screens.noise import AllanScreen
+    from tests.station_run import run_station
+    from tests.test_tui import screen_name
+
+    cap_path = tmp_path / "still.csv"
+    assert run_station("simulate", "--procedure", "gyro-drift", "--seed", 400003, "--out", cap_path).returncode == 0
+    cap = read_capture(cap_path)
+    gyro = np.column_stack([cap.columns[c] for c in ("gx", "gy", "gz")])
+    report = noise_report(gyro, float(cap.meta["sample_rate_hz"]), cap.meta.get("gyro_unit"))
+    accuracy = "4.6"  # on this record: x reaches it, y never does, z in 73 min
+    verdict = p4_record_verdict(report.time_needed_s(float(accuracy)), float(accuracy))
+    assert len(verdict) > 2 * 78, verdict  # more than two rows of the screen's 78 columns
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(AllanScreen(cap, report))
+            await wait_for(pilot, lambda: screen_name(app) == "AllanScreen")
+            # the screen takes the focus off the field once drawn: the keys are the footer's
+            await wait_for(pilot, lambda: "P4 needs" in text_of(app, "#table") and app.screen.focused is None)
+            await pilot.press("t")
+            await wait_for(pilot, lambda: app.screen.focused is not None and app.screen.focused.id == "accuracy")
+            await pilot.press(*["backspace"] * 6, *accuracy, "enter")
+            await wait_for(pilot, lambda: f"≤ {accuracy} °/h" in text_of(app, "#status"))
+            return " ".join(text_of(app, "#status").split())
+
+    assert asyncio.run(story()) == verdict
+
+
+def test_the_compass_prompt_is_shown_whole_at_80x24():
+    """P3's prompt line was one row of the 48 columns beside the coverage map: "Turn the unit
+    slowly through every orientation" was all it showed of "... (all faces up, all headings)"."""
+    from tests.test_tui import screen_name
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#procedure").value = "compass"
+            clock = BenchClock()
+            src = app.session.source = SimSource(seed=3, procedure="compass", clock=clock)
+            await pilot.press("f5")
+            await run_bench(pilot, src, clock, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2)
+            asked = app.screen.last_status.message
+            assert "all faces up" in asked, asked
+            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            try:  # the clock is stopped: the prompt settles; what is drawn must be all of it
+                await wait_for(pilot, lambda: shown() == asked, timeout_s=10)
+            except AssertionError:
+                raise AssertionError((shown(), asked)) from None
+
+    asyncio.run(story())
+
+
+def test_a_disagreeing_centrifuge_row_is_said_whole_at_80x24():
+    """P2's message had two rows of 56 columns: a row that disagrees (here typed at another speed
+    than asked) read "Entered 1 @ 6.28: DISAGREES (speed 9 rad/s, asked 6.283); r redoes it.
+    Next: Mount in orientation 1, spin at" and lost where to spin next. It takes the rows it needs.
+    With no table rate measured, the readout's second row "table rate (gyro) — rad/s  (no rate
+    measured: asked 12.57)" was two columns too long and lost "12.57)"."""
+    from tests.test_tui import screen_lines, screen_name
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            app.screen.query_one("#procedure").value = "accel-centrifuge"
+            clock = BenchClock()
+            src = app.session.source = SimSource(seed=3, procedure="accel-centrifuge", clock=clock)
+            await pilot.press("f5")
+            await run_bench(
+                pilot, src, clock, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.guide is not None
+            )
+            await pilot.press("m")
+            await wait_for(pilot, lambda: app.screen.focused is not None and app.screen.focused.id == "in-ax")
+            for name, value in (("ax", "1.1"), ("ay", "0.3"), ("az", "0.9"), ("speed", "9")):
+                app.screen.query_one(f"#in-{name}").value = value
+            app.screen.query_one("#in-speed").focus()
+            await pilot.press("enter")
+            await wait_for(pilot, lambda: "DISAGREES" in app.screen.guide.status().message)
+            asked = " ".join(app.screen.guide.status().message.split())
+            assert "r redoes it" in asked and "Next: Mount" in asked, asked
+            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            try:  # the clock is stopped: the message settles; what is drawn must be all of it
+                await wait_for(pilot, lambda: shown() == asked, timeout_s=10)
+            except AssertionError:
+                raise AssertionError((shown(), asked, "\n".join(screen_lines(app)))) from None
+            # no table rate yet (a triad without a gyro never has one): its line is whole too
+            return text_of(app, "#readouts")
+
+    readouts = asyncio.run(story())
+    assert "table rate (gyro) — rad/s (not measured, asked 12.57)" in readouts, readouts
+
+
+def test_why_p1_left_its_gyro_uncalibrated_is_said_whole(tmp_path):
+    """A P1 capture whose t column contradicts its sample_rate_hz keeps its accelerometer
+    result and leaves the gyro uncalibrated, saying why. Results cut the why at 60 characters:
+    "gyro not calibrated: line 10: metadata 'sample_rate_hz': 100 Hz, but the t column", what
+    to correct lost. Now the whole reason, as `station calibrate` says it."""
+    from station.calibrate import calibrate_capture
+    from station.capture import read_capture
+    from station.screens.results import ResultsScreen
+    from tests.station_run import run_station
+    from tests.test_tui import screen_name
+
+    path = tmp_path / "p1.csv"
+    assert run_station("simulate", "--procedure", "accel-tabletop", "--seed", 1, "--out", path).returncode == 0
+    lines = path.read_text().splitlines(keepends=True)
+    head = next(i for i, line in enumerate(lines) if line.startswith("t,"))
+    for i in range(head + 1, len(lines)):  # t in ms, sample_rate_hz still 100
+        t, rest = lines[i].split(",", 1)
+        lines[i] = f"{float(t) * 1000:g},{rest}"
+    path.write_text("".join(lines))
+    cap = read_capture(path)
+    result = calibrate_capture(cap)
+    why = result["gyro"]["error"]
+    assert "correct sample_rate_hz or t" in why, why
+
+    async def story():
+        app = make_app(None)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "ResultsScreen" and "gyro not" in text_of(app, "#summary")
+            )
+            return " ".join(text_of(app, "#summary").split())
+
+    shown = asyncio.run(story())
+    assert f"gyro not calibrated: {' '.join(why.split())}" in shown, shown
+
+
+def test_history_says_when_devices_fall_due_in_a_row_each_and_why_beside_the_device(tmp_path):
+    """Four devices overdue: History's header gave three of them two rows each (when, and why:
+    "IMU-1: overdue — accel-tabletop: 365-day interval since 2024-03-01 ends / 2025-03-01; drift
+    of B[0] ..."), the fourth not at all, and left the drift plot three rows at 80x24. Now one
+    row each, the rest counted, and why over the highlighted device's calibrations."""
+    from tests.test_tui import screen_name
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    for device in ("IMU-1", "IMU-2", "IMU-3", "IMU-4"):
+        seed_history(db, device, n=4, interval_days=365, tolerances={"B": 0.5}, start_year=2021)
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-1:" in text_of(app, "#due"))
+            await wait_for(pilot, lambda: "365-day interval" in text_of(app, "#next"))
+            plot = app.screen.query_one("#plot").region.height
+            return text_of(app, "#due"), " ".join(text_of(app, "#next").split()), plot
+
+    header, beside, plot_rows = asyncio.run(story())
+    rows = [r.strip() for r in header.splitlines() if r.strip()]
+    assert rows[:3] == [f"IMU-{k}: overdue by {rows[0].split('by ')[1]}" for k in (1, 2, 3)], rows
+    assert rows[3].startswith("… and 1 more"), rows
+    assert len(rows) == 4, rows
+    assert beside.startswith("overdue by ") and "accel-tabletop: 365-day interval since 2024-03-01" in beside, beside
+    assert plot_rows >= 8, plot_rows  # its minimum: the header no longer squeezes it
+
+
+def test_new_run_asks_before_it_drops_an_unsaved_result(tmp_path):
+    """`n` on Results went back to Connect at once, the result of the run gone unsaved (a
+    quarter hour of P1), where ctrl+q asks first. It asks now; n keeps the result, y drops it;
+    a saved result goes without a question."""
+    from station.screens.results import ResultsScreen
+    from tests.test_tui import screen_name
+    from tests.tui_data import p1_result
+
+    db = str(tmp_path / "s.db")
+    cap, result = p1_result("IMU-3")
+
+    async def story():
+        app = make_app(db, device_id="IMU-3")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "ResultsScreen" and app.screen.query_one("#params").row_count
+            )
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            question = " ".join(text_of(app, "#box").split())
+            await pilot.press("n")  # no: the result stays
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
+            await pilot.press("s")
+            await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            await pilot.press("n")  # saved: no question
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(
+                pilot, lambda: screen_name(app) == "ResultsScreen" and app.screen.query_one("#params").row_count
+            )
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")  # yes: dropped
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            return question
+
+    question = asyncio.run(story())
+    assert "not saved" in question and "lost" in question, question
+
+
+def test_new_run_asks_before_it_drops_an_unexported_noise_record(tmp_path):
+    """The Allan result's `n` dropped the record at once: nothing stores a noise run, so a
+    record of hours was gone on one key. It asks unless the record was exported (`e`). Back from
+    a question (or Help) the accuracy field had the focus, so `e` was typed into it."""
+    import os
+
+    import numpy as np
+
+    from station.capture import read_capture
+    from station.procedures.noise import noise_report
+    from station.screens.noise import AllanScreen
+    from tests.station_run import run_station
+    from tests.test_tui import screen_name
+
+    cap_path = tmp_path / "still.csv"
+    assert run_station("simulate", "--procedure", "gyro-drift", "--seed", 400003, "--out", cap_path).returncode == 0
+    cap = read_capture(cap_path)
+    gyro = np.column_stack([cap.columns[c] for c in ("gx", "gy", "gz")])
+    report = noise_report(gyro, float(cap.meta["sample_rate_hz"]), cap.meta.get("gyro_unit"))
+    out = tmp_path / "exports"
+    os.makedirs(out)
+
+    async def story():
+        app = make_app(None)
+        app.session.extra["export_dir"] = str(out)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(AllanScreen(cap, report))
+            await wait_for(pilot, lambda: "P4 needs" in text_of(app, "#table") and app.screen.focused is None)
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            question = " ".join(text_of(app, "#box").split())
+            await pilot.press("n")  # no: the record stays
+            await wait_for(pilot, lambda: screen_name(app) == "AllanScreen")
+            await pilot.press("e")
+            # the footer's keys work again (the field took the focus back and the e was typed in it)
+            await wait_for(pilot, lambda: bool(app.screen.exported))
+            await pilot.press("n")  # exported: no question
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            return question
+
+    question = asyncio.run(story())
+    assert "not exported" in question and "lost" in question, question
+    assert os.listdir(out)

@@ -395,9 +395,14 @@ def _limit_text(name: str, lim, contexts: list[dict]) -> str:
 
 
 def _show(args: argparse.Namespace) -> int:
+    from db.store import MAX_INTERVAL_DAYS
+    from station.formatting import due_when
+
     with open_store(args) as store:
         device = require_device(store, args.id)
         history = store.history(args.id)
+        # every date ahead: the device's next due date, which `due` lists only within its window
+        due = [d for d in store.due(within_days=2 * MAX_INTERVAL_DAYS) if d["device_id"] == args.id]
     latest = {}
     for h in history:
         if h["accepted"]:
@@ -414,6 +419,14 @@ def _show(args: argparse.Namespace) -> int:
         f"model: {safe(device['model'] or '-')}",
         f"sensor kinds: {safe(', '.join(device['sensor_kinds']) or '-')}",
         f"interval: {fmt_num(device['interval_days'])} days" if device["interval_days"] else "interval: -",
+        "due: "
+        + (
+            due_when(due[0]).removeprefix("due ")
+            if due
+            else "never (no recalibration interval: station devices add ID --interval-days N)"
+            if device["interval_days"] is None
+            else "-"
+        ),
         "tolerances: "
         + (", ".join(_with_units(k, [v], contexts, fmt_num) for k, v in device["tolerances"].items()) or "-"),
         "limits: " + (", ".join(_limit_text(k, lim, contexts) for k, lim in device.get("limits", {}).items()) or "-"),

@@ -52,7 +52,8 @@ class CentrifugeScreen(NoticesMixin, GuidedScreenMixin, Screen):
     CentrifugeScreen #manual Label { width: auto; color: $text-muted; }
     CentrifugeScreen #manual Input { width: 1fr; margin-right: 1; }
     CentrifugeScreen #entry-error { height: 1; color: $error; }
-    CentrifugeScreen #message { height: 2; text-style: bold; }
+    /* the rows it needs (a disagreeing row's reason and the next step ran past two rows) */
+    CentrifugeScreen #message { height: auto; min-height: 2; text-style: bold; }
     CentrifugeScreen #progress { height: 1; color: $text-muted; }
     /* notices in the free rows under the progress, not toasts over the entry and the prompt */
     CentrifugeScreen ToastHolder { display: none; }
@@ -155,11 +156,12 @@ class CentrifugeScreen(NoticesMixin, GuidedScreenMixin, Screen):
 
     # ------------------------------------------------------------ drawing
 
-    def _put(self, selector: str, text) -> None:
-        """Update a Static only when its text changed (each update costs a repaint)."""
+    def _put(self, selector: str, text, layout: bool = False) -> None:
+        """Update a Static only when its text changed (each update costs a repaint); ``layout``
+        for one whose height follows its text (the message)."""
         if self._shown.get(selector) != text:
             self._shown[selector] = text
-            self.query_one(selector, Static).update(text, layout=False)  # fixed heights: no re-layout
+            self.query_one(selector, Static).update(text, layout=layout)  # fixed heights: no re-layout
 
     def on_live_update(self, message: LiveUpdate) -> None:
         st = message.status
@@ -187,7 +189,8 @@ class CentrifugeScreen(NoticesMixin, GuidedScreenMixin, Screen):
         r, stats = st.raw, message.stats
         au = self.app.session.source.units.get("accel_unit") or "raw"
         if step is None or not (st.table_rate_rad_s == st.table_rate_rad_s):
-            speed = "" if step is None else f"  (no rate measured: asked {step.speed_rad_s:.2f})"
+            # one row of the 56 beside the steps: "  (no rate measured: asked 12.57)" ran past it
+            speed = "" if step is None else f" (not measured, asked {step.speed_rad_s:.2f})"
         else:
             speed = f" of {step.speed_rad_s:.2f} " + ("[green]AT SPEED[/]" if st.at_speed else "[b red]NOT AT SPEED[/]")
         self._put(
@@ -198,7 +201,7 @@ class CentrifugeScreen(NoticesMixin, GuidedScreenMixin, Screen):
             + "\n"
             f"table rate (gyro) {num(st.table_rate_rad_s, '.3f')} rad/s{speed}",
         )
-        self._put("#message", st.message)
+        self._put("#message", st.message, layout=True)
         self._put(
             "#progress", f"{st.n_captured}/{len(g.steps)} captured, {st.n_skipped} skipped · t={num(st.t_s, '.0f')} s"
         )

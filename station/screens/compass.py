@@ -35,7 +35,8 @@ class CompassScreen(GuidedScreenMixin, Screen):
     CompassScreen #instruction { height: 3; }
     CompassScreen #progress { height: 2; }
     CompassScreen #readouts { height: 6; margin-top: 1; }
-    CompassScreen #message { height: 1; text-style: bold; }
+    /* the rows it needs beside the map (48 columns): one cut "(all faces up, all headings)" off */
+    CompassScreen #message { height: auto; text-style: bold; }
     """
     BINDINGS = [
         Binding("f", "finish", "Finish now"),

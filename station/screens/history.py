@@ -42,6 +42,23 @@ def short_id(device_id: str, width: int = DEVICE_WIDTH) -> str:
     return device_id[:head] + "…" + device_id[-(width - 1 - head) :]
 
 
+def next_due_text(device: dict | None, due: dict | None) -> str:
+    """One line over a device's calibrations: when it falls due (``formatting.due_when``), or
+    that it never does, having no recalibration interval (the TUI registers devices without
+    one, so a new unit's first calibration leaves it so: ``station due`` would never name it).
+    Says the key that sets the interval (``i``)."""
+    interval = (device or {}).get("interval_days")
+    if due is None:
+        if not interval:
+            return "never due: no recalibration interval (i sets one)"
+        return f"not scheduled yet, interval {interval:g} d"
+    when = due_when(due)
+    line = f"{when}, interval {interval:g} d" if interval else f"{when}, no interval (i sets one)"
+    # why, for a date within the 30 days the header lists (its rows say only when)
+    soon = due.get("days_left") is not None and due["days_left"] <= 30
+    return f"{line}\n{due['reason']}" if soon and due.get("reason") else line
+
+
 def _rate_text(d: dict, k: float, unit: str) -> str:
     """The plot title's trend of one parameter (``Store.drift`` entry ``d``, shown = stored * k):
     rate ± σ per year and how many σ, * when significant (it can move the due date); under
@@ -66,6 +83,7 @@ class HistoryScreen(NoticesMixin, Screen):
     HistoryScreen #devices { width: 26; height: 1fr; }
     HistoryScreen DataTable:focus { border-left: thick $accent; }
     HistoryScreen #right { width: 1fr; height: 1fr; border-left: vkey $secondary; }
+    HistoryScreen #next { height: auto; padding: 0 1; }
     HistoryScreen #calibrations { height: 1fr; }
     HistoryScreen #plot { height: 1fr; min-height: 8; }
     /* notices under the plot, not a toast over its last points and date axis (the reminder
@@ -78,6 +96,7 @@ class HistoryScreen(NoticesMixin, Screen):
         Binding("p", "next_param", "Next parameter"),
         Binding("g", "diagnose", "Diagnose"),
         Binding("l", "limits", "Limits"),
+        Binding("i", "interval", "Interval"),
     ]
 
     def __init__(self) -> None:
@@ -95,6 +114,7 @@ class HistoryScreen(NoticesMixin, Screen):
         with Horizontal():
             yield DataTable(id="devices", cursor_type="row", zebra_stripes=True)
             with Vertical(id="right"):
+                yield Static("", id="next")
                 yield DataTable(id="calibrations", cursor_type="row", zebra_stripes=True)
                 yield PlotextPlot(id="plot")
         yield Static("", id="notices")
@@ -127,7 +147,17 @@ class HistoryScreen(NoticesMixin, Screen):
     def load_device(self, device_id: str) -> None:
         try:
             store = self.app.session.open_store()
-            data = {"id": device_id, "history": store.history(device_id), "drift": store.drift(device_id)}
+            from db.store import MAX_INTERVAL_DAYS
+
+            # every date ahead, not only the 30 days the header lists: the device's next due date
+            due = [d for d in store.due(within_days=2 * MAX_INTERVAL_DAYS) if d["device_id"] == device_id]
+            data = {
+                "id": device_id,
+                "history": store.history(device_id),
+                "drift": store.drift(device_id),
+                "device": store.get_device(device_id),
+                "due": due[0] if due else None,
+            }
             self.post_message(StoreLoaded("device-history", data))
         except Exception as exc:  # noqa: BLE001
             self.post_message(StoreLoaded("device-history", None, error=str(exc)))
@@ -144,16 +174,17 @@ class HistoryScreen(NoticesMixin, Screen):
             t.clear()
             for d in self.devices:
                 st = status.get(d["id"])
-                word = due_status(st) if st else "ok"
+                # calibrated without an interval: never due, not "ok" (`station due` never names it)
+                word = due_status(st) if st else ("ok" if d.get("interval_days") else "no int")
                 t.add_row(tui_markup(short_id(d["id"])), str(d["n_calibrations"]), word, key=d["id"])
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
-            # a date ahead (within the 30 days asked for) says when, as `station due --within` does
-            text = "\n".join(
-                tui_markup(
-                    f"{d['device_id']}: {due_when(d) if d['status'] == 'due' else d['status']} — {d['reason']}"[:200]
-                )
-                for d in bad[:3]
-            )
+            # one row per device, when (as `station due --within` says it); why is said over the
+            # highlighted device's calibrations (#next): three reasons of two rows each here left
+            # the drift plot three rows at 80x24
+            rows = [f"{short_id(d['device_id'], 40)}: {due_when(d)}" for d in bad[:3]]
+            if len(bad) > 3:
+                rows.append(f"… and {len(bad) - 3} more (status column)")
+            text = "\n".join(tui_markup(r) for r in rows)
             if not self.devices:
                 text = "No devices yet: calibrate one (Connect → Start P1) or run `station demo`."
             self.query_one("#due", Static).update(text)
@@ -164,6 +195,8 @@ class HistoryScreen(NoticesMixin, Screen):
             self.device_id = message.data["id"]
             self.history = message.data["history"]
             self.drift = [d for d in message.data["drift"] if d["n"] >= 1]
+            said = next_due_text(message.data.get("device"), message.data.get("due"))
+            self.query_one("#next", Static).update("\n".join(tui_markup(x) for x in said.split("\n")))
             from station.procedures.review import shown_residual
 
             c = self.query_one("#calibrations", DataTable)
@@ -215,6 +248,21 @@ class HistoryScreen(NoticesMixin, Screen):
             self.notify("No device to set limits for", severity="warning")
             return
         self.app.push_screen(LimitsScreen(self.device_id))
+
+    def action_interval(self) -> None:
+        """Set the highlighted device's recalibration interval (station.screens.interval)."""
+        from station.screens.interval import IntervalScreen
+
+        if not self.device_id:
+            self.notify("No device to set an interval for", severity="warning")
+            return
+
+        def changed(done: bool | None) -> None:
+            if done:  # the due dates moved: read the devices (and this device) again, and the reminder
+                self.load()
+                self.app.load_due()
+
+        self.app.push_screen(IntervalScreen(self.device_id), changed)
 
     def action_next_param(self) -> None:
         if self.drift:

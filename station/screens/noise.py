@@ -87,13 +87,19 @@ class AllanPlot(PlotextPlot):
 
 
 class AllanScreen(NoticesMixin, Screen):
+    # nothing focused, so the footer's keys work: Textual's default ("*") gave the accuracy field
+    # the focus each time the screen came back (after Help, after a question), and t, e, n
+    # were typed into it
+    AUTO_FOCUS = ""
     CSS = """
     AllanScreen #plot { height: 1fr; min-height: 8; max-height: 12; }
     AllanScreen #table { height: 5; padding: 0 1; }
     AllanScreen #ask { height: 1; padding: 0 1; }
     AllanScreen #ask Label { width: 26; }
     AllanScreen #accuracy { width: 12; }
-    AllanScreen #status { height: 2; padding: 0 1; }
+    /* the verdict takes the rows it needs (three at 80 columns when one axis never gets there
+       and the others are named): two cut "...; x alone needs 3 min, z" off; the plot gives them */
+    AllanScreen #status { height: auto; min-height: 2; padding: 0 1; }
     /* notices under the answer (the plot gives them rows if needed), not a toast over the table */
     AllanScreen ToastHolder { display: none; }
     AllanScreen #notices { height: auto; max-height: 4; padding: 0 1; }
@@ -127,7 +133,6 @@ class AllanScreen(NoticesMixin, Screen):
         yield footer()
 
     def on_mount(self) -> None:
-        self.call_after_refresh(self.set_focus, None)  # the keys stay in the footer
         self.plot()
         if self.report is None:
             self.query_one("#table", Static).update(f"[b red]Allan analysis failed: {self.error}[/]")
@@ -193,8 +198,21 @@ class AllanScreen(NoticesMixin, Screen):
         self.set_focus(None)
 
     def action_new(self) -> None:
-        self.app.session.guide = None
-        self.app.pop_screen()
+        """A new run; asked first when the record is not exported (nothing else keeps it: a
+        noise run of hours went on one key)."""
+        from station.screens.decide import ConfirmScreen
+
+        if self.exported or self.capture is None or self.app.session.scripted:
+            self._new_run(True)
+            return
+        self.app.push_screen(
+            ConfirmScreen("New run? This record is not exported and is lost (e exports it)."), self._new_run
+        )
+
+    def _new_run(self, yes: bool | None) -> None:
+        if yes:
+            self.app.session.guide = None
+            self.app.pop_screen()
 
     def action_export(self) -> None:
         self.export()

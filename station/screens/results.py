@@ -219,7 +219,8 @@ class ResultsScreen(NoticesMixin, Screen):
             )
             summary.update("\n".join(lines))
         elif isinstance(gyro, dict) and gyro.get("error"):
-            lines.append(f"[yellow]gyro not calibrated: {gyro['error'][:60]}[/]")
+            # the whole reason, escaped: cut at 60 characters it lost what to correct
+            lines.append(f"[yellow]gyro not calibrated: {tui_markup(str(gyro['error']))}[/]")
             summary.update("\n".join(lines))
         residuals.clear(columns=True)
         headers, rows_res = residual_table(self.capture, r)  # in the summary's residual unit
@@ -403,8 +404,22 @@ class ResultsScreen(NoticesMixin, Screen):
         self.app.push_screen(DiagnoseScreen(capture=self.capture))
 
     def action_new(self) -> None:
-        self.app.session.guide = None
-        self.app.pop_screen()
+        """A new run; asked first when it would lose a result neither saved nor discarded (one
+        key dropped a whole run's result unasked, where ctrl+q asks)."""
+        from station.screens.decide import ConfirmScreen
+
+        unsaved = self.result is not None and self.calibration_id is None and not self.discarded
+        if not unsaved or self.app.session.scripted:
+            self._new_run(True)
+            return
+        self.app.push_screen(
+            ConfirmScreen("New run? This result is not saved and is lost (s saves it, e exports it)."), self._new_run
+        )
+
+    def _new_run(self, yes: bool | None) -> None:
+        if yes:
+            self.app.session.guide = None
+            self.app.pop_screen()
 
     def action_limits(self) -> None:
         """View and edit the device's absolute limits (as from History); the verdict is drawn
