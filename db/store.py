@@ -76,12 +76,16 @@ class DuplicateCapture(ValueError):
 
 
 class ReferenceChanged(ValueError):
-    """Another calibration became the device's reference (its latest accepted one of the
-    procedure) after the result being saved was judged against ``judged_id``: the judgement
-    (the change from the reference, the previous_calibration_id it records) is out of date."""
+    """Another calibration became the result's reference (the device's latest accepted one of
+    the procedure at or before the result's time ``at``) after the result being saved was
+    judged against ``judged_id``: the judgement (the change from the reference, the
+    previous_calibration_id it records) is out of date."""
 
-    def __init__(self, device_id: str, procedure: str, judged_id: int | None, now_id: int | None):
+    def __init__(
+        self, device_id: str, procedure: str, judged_id: int | None, now_id: int | None, at: str | None = None
+    ):
         self.device_id, self.procedure, self.judged_id, self.now_id = device_id, procedure, judged_id, now_id
+        self.at = at  # the result's own time: its reference is the one in use then (`Store.reference(before=at)`)
         judged = f"calibration #{judged_id}" if judged_id is not None else "no previous calibration"
         now = f"calibration #{now_id}" if now_id is not None else "none"
         super().__init__(
@@ -742,11 +746,15 @@ class Store:
         A capture whose samples and metadata are already stored raises
         `DuplicateCapture` unless `allow_duplicate`.
 
-        ``judged_reference``: the id of the reference (`reference(device, procedure)`, None for
-        none) the result was judged against. It is read again inside the write transaction
-        (BEGIN IMMEDIATE: no other save can come between), and a different one raises
-        `ReferenceChanged` with nothing saved: two processes saving at once were both judged
-        against the same reference, and the second stored a judgement the first had made stale.
+        ``judged_reference``: the id of the reference (`reference(device, procedure, before=time)`:
+        the calibration in use at the result's own time, None for none) the result was judged
+        against. It is read again inside the write transaction (BEGIN IMMEDIATE: no other save can
+        come between), and a different one raises `ReferenceChanged` with nothing saved: two
+        processes saving at once were both judged against the same reference, and the second
+        stored a judgement the first had made stale. The calibration it supersedes is that same
+        reference, so its `supersedes` and the judgement's `previous_calibration_id` agree, also
+        for a result dated before the device's latest (a back-dated capture: it takes its place
+        in the history at its date; the later calibrations keep their records, see `later`).
         """
         meta = dict(meta or {})
         device = device_id or result.get("device") or meta.get("device")
@@ -792,14 +800,15 @@ class Store:
                 if dup is not None:
                     raise DuplicateCapture(dup["capture_id"], dup["calibration_id"], dup["device_id"])
             if judged_reference is not _UNSET:
+                # the calibration in use at the result's own time: the one it supersedes below
                 ref = conn.execute(
-                    """SELECT id FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1
+                    """SELECT id FROM calibrations WHERE device_id = ? AND procedure = ? AND accepted = 1 AND time <= ?
                        ORDER BY time DESC, id DESC LIMIT 1""",
-                    [device, procedure],
+                    [device, procedure, when],
                 ).fetchone()
                 now_id = ref["id"] if ref else None
                 if now_id != judged_reference:
-                    raise ReferenceChanged(device, procedure, judged_reference, now_id)
+                    raise ReferenceChanged(device, procedure, judged_reference, now_id, when)
             self._ensure_device(conn, device, sensor_kind)
             capture_id, capture_sha = self._insert_capture(
                 conn, device_id=device, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
@@ -879,7 +888,11 @@ class Store:
     def history(self, device_id: str, procedure: str | None = None) -> list[dict]:
         """The device's calibrations, oldest first (by time, then id); [] for an unknown device.
 
-        Each also says `superseded_by` (the later accepted calibration that replaced it).
+        Each accepted one also says `superseded_by`: the next accepted calibration of its
+        procedure by time (None: the one in use). `supersedes` is what a calibration replaced
+        when it was saved; a result saved later with an earlier date (a back-dated capture)
+        takes its place between the two by date, so `superseded_by` follows the dates, not
+        the order of the saves.
         """
         sql = "SELECT * FROM calibrations WHERE device_id = ?"
         args = [device_id]
@@ -888,18 +901,13 @@ class Store:
             args.append(procedure)
         rows = self._query(sql + " ORDER BY time, id", args)
         out = [self._cal_dict(r) for r in rows]
-        if procedure is None:
-            replaced = {d["supersedes"]: d["id"] for d in out if d["supersedes"] is not None}
-        else:
-            replaced = {
-                r["supersedes"]: r["id"]
-                for r in self._query(
-                    "SELECT id, supersedes FROM calibrations WHERE device_id = ? AND procedure = ? AND supersedes IS NOT NULL",
-                    [device_id, procedure],
-                )
-            }
+        last: dict[str, dict] = {}  # procedure -> its latest accepted so far
         for d in out:
-            d["superseded_by"] = replaced.get(d["id"])
+            d["superseded_by"] = None
+            if d["accepted"]:
+                if d["procedure"] in last:
+                    last[d["procedure"]]["superseded_by"] = d["id"]
+                last[d["procedure"]] = d
         return out
 
     def calibration(self, calibration_id: int) -> dict:
@@ -928,9 +936,23 @@ class Store:
         }
         result.update(d["extra"])
         d["result"] = result
-        later = self._query("SELECT id FROM calibrations WHERE supersedes = ? ORDER BY id LIMIT 1", [calibration_id])
-        d["superseded_by"] = later[0]["id"] if later else None
+        later = self.later(calibration_id)[:1] if d["accepted"] else []
+        d["superseded_by"] = later[0]["id"] if later else None  # by time, as `history` says it
         return d
+
+    def later(self, calibration_id: int) -> list[dict]:
+        """The accepted calibrations of the same device and procedure dated after this one
+        (by time, then id), oldest first: [] for the one in use. The first supersedes it in
+        the history; for a calibration saved after them (a back-dated capture) they were
+        judged, when saved, against the one before it."""
+        rows = self._query(
+            """SELECT l.* FROM calibrations c JOIN calibrations l
+                   ON l.device_id = c.device_id AND l.procedure = c.procedure AND l.accepted = 1
+                      AND (l.time > c.time OR (l.time = c.time AND l.id > c.id))
+               WHERE c.id = ? ORDER BY l.time, l.id""",
+            [calibration_id],
+        )
+        return [self._cal_dict(r) for r in rows]
 
     def reference(self, device_id: str, procedure: str, before=None) -> dict | None:
         """The calibration in use: the device's latest accepted calibration of `procedure`

@@ -69,11 +69,43 @@ def save_result(
         store.close()
 
 
-def judge(path: str | None, result: dict, device_id: str | None = None):
+def save_time(capture, time=None) -> str:
+    """The time a save of ``capture`` stores (``Store.save_calibration``): ``time``, else the
+    capture's ``date``, else now; UTC text. ValueError for a date that is not ISO 8601."""
+    from db import params as P
+
+    return P.normalize_time(time if time is not None else (capture.meta.get("date") or P.now_utc()))
+
+
+def run_start(capture, started) -> str | None:
+    """``started`` (a guided run's start, with its time of day) when it is this capture's run
+    (on the capture's date), else None (an imported file): the time the TUI saves with."""
+    if isinstance(started, str) and started[:10] == str(capture.meta.get("date", ""))[:10]:
+        return started
+    return None
+
+
+def previous_at(store, device_id: str, procedure: str, capture, started=None) -> dict | None:
+    """The calibration a TUI result of ``capture`` is judged against: the device's accepted one
+    of ``procedure`` in use at the time its save stores (`save_time`, `run_start`)."""
+    try:
+        at = save_time(capture, run_start(capture, started))
+    except ValueError:
+        at = None  # the save refuses the date; nothing better to compare with than the latest
+    return store.reference(device_id, procedure, before=at)
+
+
+def judge(path: str | None, result: dict, device_id: str | None = None, at=None):
     """(Assessment, device dict or None, previous accepted calibration or None) of ``result``
-    against the device in the database at ``path`` (nothing to compare without one)."""
+    against the device in the database at ``path`` (nothing to compare without one).
+
+    The previous calibration is the one in use at the result's own time ``at`` (`save_time`;
+    None: now): a capture dated before the device's latest calibration (an older log imported,
+    a file calibrated late) is judged against the calibration current at its date, the one its
+    save supersedes (``Store.save_calibration``), not against a later one."""
     import os
 
+    from db import params as P
     from station.procedures.review import assess
 
     device = device_id or result.get("device")
@@ -82,10 +114,35 @@ def judge(path: str | None, result: dict, device_id: str | None = None):
         store = open_store(path)
         try:
             dev = store.get_device(device)
-            previous = store.reference(device, result.get("procedure") or "")
+            before = at if at is not None else P.now_utc()
+            previous = store.reference(device, result.get("procedure") or "", before=before)
         finally:
             store.close()
     return assess(result, previous, dev), dev, previous
+
+
+def later_line(path: str, calibration_id: int) -> str | None:
+    """One line for a calibration saved with a date before the device's latest of its procedure
+    (a back-dated capture), naming the next one and what it stays judged against; None when it
+    is the latest. The later records are not rewritten: each is hashed into the device's chain
+    with the judgement made when it was saved (README, "Tamper evidence")."""
+    store = open_store(path)
+    try:
+        saved = store.calibration(calibration_id)
+        later = store.later(calibration_id) if saved["accepted"] else []
+    finally:
+        store.close()
+    if not later:
+        return None
+    nxt = later[0]
+    judged = (nxt.get("review") or {}).get("previous_calibration_id", nxt["supersedes"])
+    was = f"judged when saved against #{judged}" if judged is not None else "saved with no previous calibration"
+    more = f" and {len(later) - 1} more" if len(later) > 1 else ""
+    return (
+        f"calibration {calibration_id} is dated {saved['time'][:10]}, before #{nxt['id']} of "
+        f"{nxt['time'][:10]}{more}: it takes its place in the history at its date, superseded by #{nxt['id']}, "
+        f"which stays as saved ({was}, not judged again)"
+    )
 
 
 def kind_added(device: dict | None, result: dict) -> str | None:

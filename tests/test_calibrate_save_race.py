@@ -7,6 +7,7 @@ by tests/station_barrier.py (conditions, not sleeps)."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -121,6 +122,12 @@ def test_the_results_screen_judges_again_when_another_process_saved_meanwhile(tm
     cap, result = p1_result("IMU-7", drift=0.02, date="2026-03-01")
     other = tmp_path / "other.csv"
     assert run_station("simulate", "--procedure", "accel-tabletop", "--seed", 4, "--out", other).returncode == 0
+    # dated between #1 (2024-03-01) and the result (2026-03-01): it becomes the calibration in use at
+    # the result's date, its reference (one dated after the result would not be: a back-dated result
+    # is judged against the calibration of its own date, tests/test_calibrate_back_dated.py)
+    text = other.read_text()
+    assert "\n# date: " in text
+    other.write_text(re.sub(r"^# date: .*$", "# date: 2026-02-01", text, count=1, flags=re.M))
 
     async def story():
         app = make_app(str(db), device_id="IMU-7")

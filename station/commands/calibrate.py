@@ -10,7 +10,8 @@ checks) and the exit status says what happened:
     3  saved as rejected (--reject REASON): kept in the history, never the reference
 
 Whatever is saved says so on stderr, one line, ``station: saved calibration N as DECISION``
-(stdout holds only the result: with --json, one JSON object, calibrate.md).
+(a result dated before the device's latest calibration adds one `station: note:` line saying where it
+stands; stdout holds only the result: with --json, one JSON object, calibrate.md).
 """
 
 from __future__ import annotations
@@ -138,8 +139,10 @@ def _text(result: dict) -> str:
 def _save(args: argparse.Namespace, capture, result: dict) -> int:
     """Judge, then save as the rules say (module docstring); the exit status.
 
-    The database's errors are one line and exit 2 (as the db commands do). The save keeps the
-    judgement current: when another process saved a new reference for the device between the
+    The database's errors are one line and exit 2 (as the db commands do). The result is judged
+    against the calibration in use at its own time (the capture's date: a back-dated capture is
+    not judged against a later calibration), which is the one its save supersedes. The save keeps
+    the judgement current: when another process saved a new reference for it between the
     judgement and the save, nothing is saved, a line says so, and the result is judged again."""
     from station.cli import db_path
     from station.errors import InputError
@@ -177,10 +180,14 @@ def _judge_and_save(args: argparse.Namespace, capture, result: dict, path: str) 
     from station.commands._dbutil import db_error_text
     from station.errors import InputError
     from station.procedures.review import review_record
-    from station.store import judge, kind_added, save_result
+    from station.store import judge, kind_added, later_line, save_result, save_time
 
     try:
-        assessment, device, previous = judge(path, result, args.device)
+        at = save_time(capture)  # judged against the calibration in use then, which the save supersedes
+    except ValueError as exc:
+        raise InputError(args.file, None, str(exc)) from None
+    try:
+        assessment, device, previous = judge(path, result, args.device, at=at)
     except (sqlite3.Error, OSError, ValueError) as exc:
         raise InputError(path, None, f"cannot read the station database: {exc}") from None
     if args.override is not None:
@@ -216,6 +223,7 @@ def _judge_and_save(args: argparse.Namespace, capture, result: dict, path: str) 
             operator=args.operator,
             accepted=decision != "rejected",
             review=stored,
+            time=at,
             judged_reference=previous,
         )
     except ReferenceChanged as exc:
@@ -229,6 +237,14 @@ def _judge_and_save(args: argparse.Namespace, capture, result: dict, path: str) 
         raise InputError(None, None, str(exc)) from None
     # stdout holds only the result (calibrate.md: with --json, one JSON object): the id on stderr
     print(f"station: saved calibration {result['calibration_id']} as {decision}", file=sys.stderr)
+    try:
+        back_dated = later_line(path, result["calibration_id"])
+    except (sqlite3.Error, OSError, ValueError):
+        back_dated = None  # saved: the note is not worth a failure
+    if back_dated:
+        from station.textsafe import safe
+
+        print(f"station: note: {safe(back_dated)}", file=sys.stderr)
     added = kind_added(device, result)
     if added:
         from station.textsafe import safe

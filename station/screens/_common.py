@@ -183,8 +183,8 @@ class GuidedScreenMixin:
     def _fit(self, history_procedure: str | None) -> None:
         """Capture the guide, calibrate it and post CalibrationReady (once per screen).
 
-        With ``history_procedure`` the device's last accepted calibration of that
-        procedure rides along as ``previous``."""
+        With ``history_procedure`` the device's accepted calibration of that procedure in use
+        at the capture's time (``station.store.previous_at``) rides along as ``previous``."""
         if self._fitting:
             return
         self._fitting = True
@@ -195,8 +195,10 @@ class GuidedScreenMixin:
             try:
                 store = self.app.session.open_store()
                 if store is not None:
-                    hist = [c for c in store.history(self.app.session.device_id, history_procedure) if c["accepted"]]
-                    previous = hist[-1] if hist else None
+                    from station.store import previous_at
+
+                    started = getattr(self.guide, "started", None)
+                    previous = previous_at(store, self.app.session.device_id, history_procedure, capture, started)
             except Exception:  # noqa: BLE001 - no comparison then
                 previous = None
         try:

@@ -266,8 +266,11 @@ class ImportScreen(Screen):
             store = self.app.session.open_store()
             device = capture.meta.get("device")
             if store is not None and device:
-                hist = [c for c in store.history(device, capture.procedure) if c["accepted"]]
-                previous = hist[-1] if hist else None
+                from station.store import previous_at
+
+                # at the capture's date: an older log is judged against the calibration of its day
+                started = getattr(self.app.session.guide, "started", None)
+                previous = previous_at(store, device, capture.procedure, capture, started)
         except Exception:  # noqa: BLE001 - no comparison then
             previous = None
         try:

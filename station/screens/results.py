@@ -291,16 +291,15 @@ class ResultsScreen(NoticesMixin, Screen):
         s = self.app.session
         try:
             from db.store import ReferenceChanged
-            from station.store import save_result
+            from station.store import run_start, save_result
 
             for key in ("operator", "place", "reference_equipment"):  # entered on Connect
                 if s.extra.get(key) and not self.capture.meta.get(key):
                     self.capture.meta[key] = s.extra[key]
             review = review_record(self.assessment or assess(self.result), decision, note)
             review["previous_calibration_id"] = self.previous["id"] if self.previous else None
-            started = getattr(s.guide, "started", None)  # the run's start, with its time of day
-            if not (isinstance(started, str) and started[:10] == str(self.capture.meta.get("date", ""))[:10]):
-                started = None  # not this capture's run (an imported file)
+            # the run's start, with its time of day; None when not this capture's run (an imported file)
+            started = run_start(self.capture, getattr(s.guide, "started", None))
             try:
                 cal_id = save_result(
                     s.db_path,
@@ -317,7 +316,8 @@ class ResultsScreen(NoticesMixin, Screen):
                 # another process (a second station, calibrate --save) saved a new reference while
                 # this result was on screen: nothing saved; judged again against it, as calibrate does
                 store = s.open_store()
-                now = store.reference(exc.device_id, exc.procedure) if store is not None else None
+                # the one in use at the result's own time (a back-dated capture's is not the latest)
+                now = store.reference(exc.device_id, exc.procedure, before=exc.at) if store is not None else None
                 self.post_message(StoreLoaded("reference", now, error=str(exc)))
                 return
             guide = s.guide
