@@ -60,12 +60,14 @@ class CalibrationReady(Message):
 
 
 class Saved(Message):
-    """A calibration was stored (``calibration_id``) or could not be (``error``)."""
+    """A calibration was stored (``calibration_id``) or could not be (``error``); ``note``: one
+    line to tell the operator beside it (a back-dated result's place in the history)."""
 
-    def __init__(self, calibration_id: int | None, error: str | None = None) -> None:
+    def __init__(self, calibration_id: int | None, error: str | None = None, note: str | None = None) -> None:
         super().__init__()
         self.calibration_id = calibration_id
         self.error = error
+        self.note = note
 
 
 class Exported(Message):

@@ -174,6 +174,8 @@ def test_results_screen_judges_a_back_dated_result_against_the_calibration_of_it
             assert f"previous #{first}" in text_of(app, "#summary")
             await pilot.press("s")
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
+            # where it went in the history is said, as calibrate --save says it
+            await wait_for(pilot, lambda: any("before #" in str(n.message) for n in app._notifications))
             return app.screen.calibration_id
 
     cal_id = asyncio.run(story())

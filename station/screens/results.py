@@ -324,7 +324,13 @@ class ResultsScreen(NoticesMixin, Screen):
             state_path = getattr(guide, "state_path", None)
             if state_path and os.path.exists(state_path):
                 os.unlink(state_path)
-            self.post_message(Saved(cal_id))
+            from station.store import later_line
+
+            try:
+                note = later_line(s.db_path, cal_id)
+            except Exception:  # noqa: BLE001 - saved all the same; the note is only a courtesy
+                note = None
+            self.post_message(Saved(cal_id, note=note))
         except Exception as exc:  # noqa: BLE001
             self.post_message(Saved(None, error=str(exc)))
 
@@ -339,6 +345,8 @@ class ResultsScreen(NoticesMixin, Screen):
             "override": "[b yellow]Saved (override) as calibration",
         }.get(self.decision, "[b green]Saved as calibration")
         label.update(f"{how} #{message.calibration_id} for {tui_markup(self.app.session.device_id)}[/]")
+        if message.note:  # a back-dated result: where it went in the history, as calibrate --save says it
+            self.notify(message.note[:1].upper() + message.note[1:], severity="information", timeout=15, markup=False)
         added = kind_added(self.device, self.result or {})
         if added:  # as calibrate --save says it: the device id may name another unit
             self.notify(
