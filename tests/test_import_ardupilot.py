@@ -328,8 +328,10 @@ def test_bin_calibrates_directly_and_recovers_the_truth(tmp_path):
 # ------------------------------------------------------------------------------------------- tlog
 
 
-def write_tlog(path, autopilot=3, n=100, t0=1_700_000_000.0, second_imu=False):
-    """A telemetry log as MAVProxy / Mission Planner keep it, written by pymavlink."""
+def write_tlog(path, autopilot=3, n=100, t0=1_700_000_000.0, second_imu=False, offsets=()):
+    """A telemetry log as MAVProxy / Mission Planner keep it, written by pymavlink;
+    ``offsets``: (sample index, (x, y, z) mGauss) of SENSOR_OFFSETS messages (index −1: before
+    the first sample)."""
     log = mavutil.mavlogfile(str(path), write=True, source_system=1, source_component=1)
     mav = log.mav
 
@@ -342,10 +344,19 @@ def write_tlog(path, autopilot=3, n=100, t0=1_700_000_000.0, second_imu=False):
     for i, (name, value) in enumerate(PARAMS.items()):
         at(t0)
         mav.param_value_send(name.encode(), float(value), ints.get(name, 9), len(PARAMS), i)
+
+    def sensor_offsets(k, t):
+        for at_k, (x, y, z) in offsets:
+            if at_k == k:
+                at(t)
+                mav.sensor_offsets_send(x, y, z, 0.0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
     rng = np.random.default_rng(5)
     sent = []
+    sensor_offsets(-1, t0)
     for k in range(n):
         t = t0 + 0.1 + k * 0.02  # 50 Hz
+        sensor_offsets(k, t)
         acc = (int(10 + rng.integers(-3, 4)), -20, -1000)  # mG: level, Z down
         gyro = (5, -6, 7)  # mrad/s
         magv = (200, -100, 400)  # mgauss
@@ -397,6 +408,23 @@ def test_tlog_round_trip_units_from_pymavlink_definitions(tmp_path):
     c1 = read_capture(tmp_path / "i1.csv")
     assert c1.meta["import_source"].startswith("SCALED_IMU2") and "mx" not in c1.columns  # no compass there
     assert np.all(c1.columns["az"] == -990)
+
+
+def test_tlog_compass_offsets_learnt_while_logging_are_said(tmp_path):
+    """In-flight learning (COMPASS_LEARN) shows in a telemetry log as SENSOR_OFFSETS, with no
+    PARAM_VALUE sent: the import said nothing and the export composed with the start values."""
+    log = tmp_path / "learn.tlog"
+    write_tlog(log, offsets=[(-1, (120, -3, 7)), (10, (120, -3, 7)), (60, (95, -3, 31))])
+    out = tmp_path / "c.csv"
+    res = run_station("import", log, "--procedure", "compass", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert "COMPASS_OFS_X" in res.stderr and "COMPASS_OFS_Z" in res.stderr and "COMPASS_OFS_Y" not in res.stderr
+    assert read_capture(out).meta["params_changed"] == "COMPASS_OFS_X,COMPASS_OFS_Z"
+    steady = tmp_path / "steady.tlog"
+    write_tlog(steady, offsets=[(-1, (120, -3, 7)), (50, (120, -3, 7))])
+    res = run_station("import", steady, "--procedure", "compass", "--out", tmp_path / "s.csv")
+    assert res.returncode == 0 and "changed" not in res.stderr, res.stderr
+    assert "params_changed" not in read_capture(tmp_path / "s.csv").meta
 
 
 def test_tlog_raw_imu_from_another_autopilot_is_counts(tmp_path):

@@ -503,7 +503,8 @@ def _param_value(msg, firmware: str | None) -> float | int:
 
 
 def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
-    """RAW_IMU / SCALED_IMU{,2,3} / HIGHRES_IMU and PARAM_VALUE from a MAVLink log."""
+    """RAW_IMU / SCALED_IMU{,2,3} / HIGHRES_IMU and PARAM_VALUE from a MAVLink log (and
+    SENSOR_OFFSETS: compass offsets that change while the data run are ``params_changed``)."""
     from pymavlink import mavutil
 
     inst = 0 if instance is None else int(instance)
@@ -534,6 +535,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     arrivals: dict[tuple[str, int, int], float] = {}  # (message, system, component) → first arrival
     params: dict[str, object] = {}
     param_msgs = []
+    offset_msgs = []
     firmware = None
     board_uid = None
     fixes: list[tuple[float, float, float]] = []
@@ -544,7 +546,9 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     try:
         with _quiet():
             while True:
-                m = log.recv_match(type=wanted + ["PARAM_VALUE", "HEARTBEAT", "GPS_RAW_INT", "AUTOPILOT_VERSION"])
+                m = log.recv_match(
+                    type=wanted + ["PARAM_VALUE", "HEARTBEAT", "GPS_RAW_INT", "AUTOPILOT_VERSION", "SENSOR_OFFSETS"]
+                )
                 if m is None:
                     break
                 name = m.get_type()
@@ -553,6 +557,8 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
                         firmware = MAV_AUTOPILOT[m.autopilot]
                 elif name == "PARAM_VALUE":
                     param_msgs.append((first_t is not None, m))
+                elif name == "SENSOR_OFFSETS":  # ArduPilot's primary compass offsets in use (mGauss)
+                    offset_msgs.append((first_t is not None, m))
                 elif name == "GPS_RAW_INT":
                     if m.fix_type >= 3:
                         fixes.append((m.lat * 1e-7, m.lon * 1e-7, m.alt * 1e-3))
@@ -588,6 +594,7 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     if len(sources) > 1:
         by_type[name] = [(t, m) for t, m in by_type[name] if (m.get_srcSystem(), m.get_srcComponent()) == source]
         param_msgs = [(a, m) for a, m in param_msgs if m.get_srcSystem() == source[0]] or param_msgs
+        offset_msgs = [(a, m) for a, m in offset_msgs if m.get_srcSystem() == source[0]]
         others = ", ".join(
             f"system {s_}, component {c_} ({sources[(s_, c_)]})" for s_, c_ in sources if (s_, c_) != source
         )
@@ -604,6 +611,15 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             params[pid] = value
         elif params[pid] != value and pid.startswith(PARAM_PREFIXES):
             late.add(pid)
+    # offsets learnt in flight (COMPASS_LEARN) reach a telemetry log as SENSOR_OFFSETS, not always
+    # as a PARAM_VALUE: a change after the data began is a changed COMPASS_OFS_* all the same
+    first_ofs = None
+    for after_start, m in offset_msgs:
+        ofs = (m.mag_ofs_x, m.mag_ofs_y, m.mag_ofs_z)
+        if first_ofs is None:
+            first_ofs = ofs
+        elif after_start:
+            late.update(f"COMPASS_OFS_{a}" for a, v0, v in zip("XYZ", first_ofs, ofs) if v != v0)
     samples = by_type[name]
     t = np.array([s[0] for s in samples])
     units = getattr(msg_class[name], "fieldunits_by_name", {})
