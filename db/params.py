@@ -119,6 +119,23 @@ def normalize_time(value) -> str:
     return iso(parse_time(value))
 
 
+def capture_time(meta) -> str | None:
+    """When a capture was measured, stored form, or None without a ``date``: its ``date``, with
+    the time of day of ``recorded_at`` where that falls on the same date (``station record``
+    writes both). A date alone reads as midnight UTC, which sorted a recording before a
+    calibration saved earlier that day and left that one in use. ValueError: ``date`` not ISO."""
+    date = str(meta.get("date") or "").strip()
+    if not date:
+        return None
+    rec = str(meta.get("recorded_at") or "").strip()
+    if len(date) == 10 and rec[:10] == date:
+        try:
+            return normalize_time(rec)
+        except ValueError:
+            pass  # the date stands
+    return normalize_time(date)
+
+
 def now_utc() -> datetime:
     return datetime.now(UTC)
 

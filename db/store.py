@@ -583,7 +583,7 @@ class Store:
         lengths = {c["length"] for c in encoded}
         if len(lengths) != 1:
             raise ValueError(f"capture columns differ in length: {sorted(lengths)}")
-        time = P.normalize_time(meta["date"]) if meta.get("date") else P.iso(P.now_utc())
+        time = P.capture_time(meta) or P.iso(P.now_utc())
 
         def place(key):
             try:
@@ -766,7 +766,7 @@ class Store:
             raise ValueError("no procedure in the result or the capture")
         if not isinstance(result.get("params"), dict):
             raise ValueError("the result has no 'params' object")
-        when = P.normalize_time(time if time is not None else (meta.get("date") or P.now_utc()))
+        when = P.normalize_time(time) if time is not None else (P.capture_time(meta) or P.iso(P.now_utc()))
         if P.parse_time(when) > P.now_utc() + FUTURE_MARGIN:  # a typo (2062 for 2026) hid the device from `due`
             raise ValueError(
                 f"the calibration's time {when} (the capture's 'date') is in the future (now "

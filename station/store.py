@@ -74,7 +74,7 @@ def save_time(capture, time=None) -> str:
     capture's ``date``, else now; UTC text. ValueError for a date that is not ISO 8601."""
     from db import params as P
 
-    return P.normalize_time(time if time is not None else (capture.meta.get("date") or P.now_utc()))
+    return P.normalize_time(time) if time is not None else (P.capture_time(capture.meta) or P.iso(P.now_utc()))
 
 
 def run_start(capture, started) -> str | None:

@@ -210,3 +210,29 @@ def test_the_save_checks_the_reference_at_the_results_own_date(tmp_path):
         with pytest.raises(ReferenceChanged, match=f"judged against calibration #{jan}: it is now calibration #{feb}"):
             s.save_calibration(accel_result(device="D"), meta=meta, columns=cols, judged_reference=jan)
         assert len(s.history("D")) == 3
+
+
+def test_a_recording_dated_the_same_day_as_a_timed_calibration_follows_it(tmp_path, captures):
+    """`station record` writes `date` (the day) and `recorded_at` (its time). A date alone read as
+    midnight, so a recording saved in the afternoon sorted before a calibration saved that morning
+    with its time of day (the TUI's): it was judged against the one before, and the morning's
+    stayed in use. Its time of day now counts."""
+    db = tmp_path / "station.db"
+    assert run_station("--db", db, "devices", "add", "DEV-1", "--interval-days", 365).returncode == 0
+    text = captures[1].read_text()
+    morning, afternoon = tmp_path / "morning.csv", tmp_path / "afternoon.csv"
+    morning.write_text(re.sub(r"^# date: .*$", "# date: 2026-01-10T10:00:00Z", text, count=1, flags=re.M))
+    day = "# date: 2026-01-10\n# recorded_at: 2026-01-10T14:00:00Z"
+    afternoon.write_text(re.sub(r"^# date: .*$", day, text, count=1, flags=re.M))
+    ids = []
+    for path in (morning, afternoon):
+        res = run_station("--db", db, "calibrate", path, "--save", "--device", "DEV-1", "--json")
+        assert res.returncode == 0, res.stderr
+        ids.append(json.loads(res.stdout)["calibration_id"])
+        assert "before #" not in res.stderr, res.stderr
+    with Store(str(db)) as s:
+        later = s.calibration(ids[1])
+        assert later["time"] == "2026-01-10T14:00:00Z"
+        assert later["supersedes"] == ids[0] and later["superseded_by"] is None
+        assert s.calibration(ids[0])["superseded_by"] == ids[1]
+        assert s.reference("DEV-1", "accel-tabletop")["id"] == ids[1]
