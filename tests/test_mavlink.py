@@ -329,3 +329,9 @@ def test_a_parameter_the_board_changes_while_streaming_is_params_changed_not_in_
     meta = p.board_meta()
     assert meta["param.COMPASS_OFS_X"] == "10" and meta["param.COMPASS_OFS_Y"] == "-20"
     assert meta["params_changed"] == "COMPASS_OFS_X"
+    # learnt offsets that reach the link only as SENSOR_OFFSETS (no PARAM_VALUE) change them too
+    p.feed(frame(board.sensor_offsets_encode(10, -20, 4, 0.0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
+    p.feed(frame(board.sensor_offsets_encode(10, -20, 4, 0.0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
+    assert p.board_meta()["params_changed"] == "COMPASS_OFS_X"
+    p.feed(frame(board.sensor_offsets_encode(10, -26, 4, 0.0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
+    assert p.board_meta()["params_changed"] == "COMPASS_OFS_X,COMPASS_OFS_Y"

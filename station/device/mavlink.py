@@ -395,6 +395,7 @@ class BoardLink:
         self._asked_params = False
         self._heartbeats = 0
         self._param_indices: set[int] = set()
+        self._first_offsets: tuple[int, int, int] | None = None  # SENSOR_OFFSETS' mag_ofs when first seen
 
     def _send(self, msg) -> None:
         self.outgoing.append(bytes(msg.pack(self.mav)))
@@ -468,6 +469,15 @@ class BoardLink:
                     self.changed.add(name)
                 else:
                     self.params.setdefault(name, value)
+
+        elif t == "SENSOR_OFFSETS" and key == self.target:
+            # ArduPilot's primary compass offsets in use (mGauss): learnt in flight, they change
+            # here, often with no PARAM_VALUE sent (as the .tlog importer reads them)
+            ofs = (int(m.mag_ofs_x), int(m.mag_ofs_y), int(m.mag_ofs_z))
+            if self._first_offsets is None:
+                self._first_offsets = ofs
+            else:
+                self.changed.update(f"COMPASS_OFS_{a}" for a, v0, v in zip("XYZ", self._first_offsets, ofs) if v != v0)
 
     def device_name(self, key: tuple[int, int]) -> str:
         if self.uid:
