@@ -461,27 +461,9 @@ def test_composed_compass_offsets_follow_whether_ardupilot_applies_compass_scale
     composition divided the hard iron by any non-zero COMPASS_SCALE in use: with 2.0 in use (not
     applied) the new offsets missed the truth by half the fitted hard iron. Simulated as
     correct_field does: d = P_old (s (r + o_old)), s = COMPASS_SCALE where valid, else 1."""
-    from solvers.simulate import simulate
-
-    sim = simulate("compass", seed=2)
-    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
-    o_old = np.array([-35.0, 52.0, 18.0])
     P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
     applied = scale if 0.85 <= scale <= 1.4 else 1.0  # Compass::have_scale_factor
-    d_gauss = applied * (r_mG + o_old) @ P_old.T / 1000.0
-    meta = dict(
-        sim.meta,
-        mag_unit="gauss",
-        corrected="true",
-        firmware="ardupilot",
-        **{"param.AHRS_ORIENTATION": "0", "param.COMPASS_SCALE": repr(scale)},
-        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
-    )
-    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
-    path = tmp_path / "mag.csv"
-    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    path, sim = _ardupilot_compass_capture(tmp_path, P_old, scale=scale)
     db = str(tmp_path / "s.db")
     code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
     assert code == 0, err
@@ -644,23 +626,27 @@ def test_qgc_vehicle_ids_outside_mavlinks_byte_are_refused(capsys, db, vehicle):
     assert code == 0 and "255\t0\tCAL_GYRO0_ID" in out, err
 
 
-def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None):
-    """Simulated P3 raw field -> ArduPilot's correction d = P_old (r + o_old) (mGauss,
+def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None, scale=None):
+    """Simulated P3 raw field -> ArduPilot's correction d = P_old (s (r + o_old)) (mGauss,
     AP_Compass_Backend::correct_field) -> capture of d marked corrected, with the parameters in
-    use (DIA as ``dia_in_use`` when given: the parameter values, P_old the matrix they give)."""
+    use (DIA as ``dia_in_use`` when given: the parameter values, P_old the matrix they give;
+    COMPASS_SCALE ``scale`` when given, s = scale where Compass::have_scale_factor holds it
+    valid, 0.85 to 1.4, else 1)."""
     from solvers.simulate import simulate
 
     sim = simulate("compass", seed=2)
     r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
     o_old = np.array([-35.0, 52.0, 18.0])
-    d_gauss = (r_mG + o_old) @ P_old.T / 1000.0
+    applied = scale if scale is not None and 0.85 <= scale <= 1.4 else 1.0
+    d_gauss = applied * (r_mG + o_old) @ P_old.T / 1000.0
     dia = np.diag(P_old) if dia_in_use is None else dia_in_use
+    in_use = {"param.AHRS_ORIENTATION": "0"} | ({} if scale is None else {"param.COMPASS_SCALE": repr(scale)})
     meta = dict(
         sim.meta,
         mag_unit="gauss",
         corrected="true",
         firmware="ardupilot",
-        **{"param.AHRS_ORIENTATION": "0"},
+        **in_use,
         **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
         **{f"param.COMPASS_DIA_{a}": repr(float(dia[i])) for i, a in enumerate(XYZ)},
         **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
