@@ -26,14 +26,18 @@ from station_run import station_json
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 
-@pytest.mark.parametrize("seed", [560001, 560003, 560004, 560009])
-def test_bias_instability_alone_names_nothing(tmp_path, seed):
+def _verdict(tmp_path, procedure, effect, seed) -> list:
+    """`station diagnose --json`'s verdict on the blind generator's capture of this seed."""
     import blind_generator
 
     path = tmp_path / "capture.csv"
-    blind_generator.generate("gyro-drift", None, seed, str(path))
-    res = station_json("diagnose", path, "--json")
-    assert res["verdict"] == [], res["verdict"]
+    blind_generator.generate(procedure, effect, seed, str(path))
+    return station_json("diagnose", path, "--json")["verdict"]
+
+
+@pytest.mark.parametrize("seed", [560001, 560003, 560004, 560009])
+def test_bias_instability_alone_names_nothing(tmp_path, seed):
+    assert _verdict(tmp_path, "gyro-drift", None, seed) == []
 
 
 @pytest.mark.parametrize(
@@ -41,22 +45,12 @@ def test_bias_instability_alone_names_nothing(tmp_path, seed):
     [("gyro-drift", 560002), ("gyro-drift", 560007), ("gyro-drift", 560013), ("ldv", 580001), ("ldv", 580002)],
 )
 def test_a_wander_the_candidate_leaves_is_not_named(tmp_path, procedure, seed):
-    import blind_generator
-
-    path = tmp_path / "capture.csv"
-    blind_generator.generate(procedure, None, seed, str(path))
-    res = station_json("diagnose", path, "--json")
-    assert res["verdict"] == [], res["verdict"]
+    assert _verdict(tmp_path, procedure, None, seed) == []
 
 
 @pytest.mark.parametrize("seed", [560000, 560016, 560017, 560019])
 def test_a_wander_a_line_or_a_step_takes_whole_is_not_named(tmp_path, seed):
-    import blind_generator
-
-    path = tmp_path / "capture.csv"
-    blind_generator.generate("gyro-drift", None, seed, str(path))
-    res = station_json("diagnose", path, "--json")
-    assert res["verdict"] == [], res["verdict"]
+    assert _verdict(tmp_path, "gyro-drift", None, seed) == []
 
 
 @pytest.mark.parametrize(
@@ -66,12 +60,7 @@ def test_a_wander_a_line_or_a_step_takes_whole_is_not_named(tmp_path, seed):
 def test_an_effect_beside_the_wander_is_still_named(tmp_path, procedure, effect, seed):
     """Effects the blind generator sized at 10σ of its own noise (wander included); the LDV offset
     of 580500 was lost to a generic term before."""
-    import blind_generator
-
-    path = tmp_path / "capture.csv"
-    blind_generator.generate(procedure, effect, seed, str(path))
-    res = station_json("diagnose", path, "--json")
-    assert effect in res["verdict"], res["verdict"]
+    assert effect in _verdict(tmp_path, procedure, effect, seed)
 
 
 @pytest.mark.parametrize("procedure,seed,unit", [("gyro-drift", 560002, "deg_h"), ("ldv", 580002, "m/s")])
