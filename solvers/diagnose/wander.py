@@ -113,21 +113,22 @@ class WanderModel:
         ``A`` and of ``[A J]``; it wanders where REML's ratio over white noise is at least
         ``EVIDENT_LR`` in some series (else the white-noise deviance stands); ``baseline``: or where
         the residual of ``A`` alone does. ``cache`` holds what depends on ``A`` only."""
-        AJ = np.hstack([A, J])
-        ll1, evident = 0.0, False
-        for part in self.parts:  # one pass per series gives both likelihoods of [A J]
-            ml, reml, rss, dof = _part_loglik(part, AJ, e1[:, None])
-            ll1 += float(ml.max())
-            evident = evident or _reml_fit(part, reml, rss, dof)[3] >= EVIDENT_LR
+        ll1, evident = self._ml_and_evident(np.hstack([A, J]), e1)
         if "ll0" not in cache:
-            ll0, ev0 = 0.0, False
-            for part in self.parts:
-                ml, reml, rss, dof = _part_loglik(part, A, e0[:, None])
-                ll0 += float(ml.max())
-                ev0 = ev0 or _reml_fit(part, reml, rss, dof)[3] >= EVIDENT_LR
-            cache["ll0"], cache["evident0"] = ll0, ev0
+            cache["ll0"], cache["evident0"] = self._ml_and_evident(A, e0)
         evident = evident or (baseline and cache["evident0"])
         return max(0.0, 2.0 * (ll1 - cache["ll0"])), evident
+
+    def _ml_and_evident(self, X: np.ndarray, e: np.ndarray) -> tuple[float, bool]:
+        """(the profiled ML log-likelihood summed over the series, whether REML's ratio over white
+        noise reaches ``EVIDENT_LR`` in some series) of residual ``e`` of a model with columns
+        ``X``: one pass per series gives both."""
+        ll, evident = 0.0, False
+        for part in self.parts:
+            ml, reml, rss, dof = _part_loglik(part, X, e[:, None])
+            ll += float(ml.max())
+            evident = evident or _reml_fit(part, reml, rss, dof)[3] >= EVIDENT_LR
+        return ll, evident
 
 
 def _cols(X: np.ndarray) -> np.ndarray:
