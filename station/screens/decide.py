@@ -114,3 +114,19 @@ class ConfirmScreen(ModalScreen):
 
     def action_answer(self, yes: bool) -> None:
         self.dismiss(yes)
+
+
+def new_run(screen, lost: str | None) -> None:
+    """Leave ``screen`` for a new run (the guide dropped, the screen popped); asked first when
+    ``lost`` says what the run would lose (a result not saved, a record not exported), never in a
+    scripted session."""
+
+    def go(yes: bool | None) -> None:
+        if yes:
+            screen.app.session.guide = None
+            screen.app.pop_screen()
+
+    if lost is None or screen.app.session.scripted:
+        go(True)
+    else:
+        screen.app.push_screen(ConfirmScreen(f"New run? {lost}"), go)

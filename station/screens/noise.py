@@ -200,19 +200,10 @@ class AllanScreen(NoticesMixin, Screen):
     def action_new(self) -> None:
         """A new run; asked first when the record is not exported (nothing else keeps it: a
         noise run of hours went on one key)."""
-        from station.screens.decide import ConfirmScreen
+        from station.screens.decide import new_run
 
-        if self.exported or self.capture is None or self.app.session.scripted:
-            self._new_run(True)
-            return
-        self.app.push_screen(
-            ConfirmScreen("New run? This record is not exported and is lost (e exports it)."), self._new_run
-        )
-
-    def _new_run(self, yes: bool | None) -> None:
-        if yes:
-            self.app.session.guide = None
-            self.app.pop_screen()
+        kept = self.exported or self.capture is None
+        new_run(self, None if kept else "This record is not exported and is lost (e exports it).")
 
     def action_export(self) -> None:
         self.export()

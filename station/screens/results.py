@@ -414,20 +414,10 @@ class ResultsScreen(NoticesMixin, Screen):
     def action_new(self) -> None:
         """A new run; asked first when it would lose a result neither saved nor discarded (one
         key dropped a whole run's result unasked, where ctrl+q asks)."""
-        from station.screens.decide import ConfirmScreen
+        from station.screens.decide import new_run
 
         unsaved = self.result is not None and self.calibration_id is None and not self.discarded
-        if not unsaved or self.app.session.scripted:
-            self._new_run(True)
-            return
-        self.app.push_screen(
-            ConfirmScreen("New run? This result is not saved and is lost (s saves it, e exports it)."), self._new_run
-        )
-
-    def _new_run(self, yes: bool | None) -> None:
-        if yes:
-            self.app.session.guide = None
-            self.app.pop_screen()
+        new_run(self, "This result is not saved and is lost (s saves it, e exports it)." if unsaved else None)
 
     def action_limits(self) -> None:
         """View and edit the device's absolute limits (as from History); the verdict is drawn
