@@ -575,7 +575,9 @@ class Store:
 
     # --- captures -----------------------------------------------------------------------
 
-    def _insert_capture(self, conn, *, device_id, procedure, meta, columns, operator, host) -> tuple[int, str]:
+    def _insert_capture(
+        self, conn, *, device_id, procedure, meta, columns, operator, host, now=None
+    ) -> tuple[int, str]:
         meta = {str(k): str(v) for k, v in dict(meta or {}).items()}
         if not columns:
             raise ValueError("a capture needs at least one column")
@@ -583,7 +585,8 @@ class Store:
         lengths = {c["length"] for c in encoded}
         if len(lengths) != 1:
             raise ValueError(f"capture columns differ in length: {sorted(lengths)}")
-        time = P.capture_time(meta) or P.iso(P.now_utc())
+        now = now or P.now_utc()  # the save's time (a date alone is read at it: `params.capture_time`)
+        time = P.capture_time(meta, now) or P.iso(now)
 
         def place(key):
             try:
@@ -735,7 +738,9 @@ class Store:
         """Store a capture and its calibration result (calibrate.md shape) in one transaction.
 
         The device is `device_id`, else `result['device']`, else `meta['device']`
-        (created if unknown). An accepted calibration supersedes the device's latest
+        (created if unknown). Its time is ``time``, else the capture's (`params.capture_time`:
+        a date alone is read at this save, so a capture dated today is stored at the save's
+        time), else now. An accepted calibration supersedes the device's latest
         accepted calibration of the same procedure at or before its time. ``sensor_kind``
         (accel, gyro, mag, ldv) is merged into the device's ``sensor_kinds``. Returns the
         calibration id.
@@ -766,8 +771,9 @@ class Store:
             raise ValueError("no procedure in the result or the capture")
         if not isinstance(result.get("params"), dict):
             raise ValueError("the result has no 'params' object")
-        when = P.normalize_time(time) if time is not None else (P.capture_time(meta) or P.iso(P.now_utc()))
-        if P.parse_time(when) > P.now_utc() + FUTURE_MARGIN:  # a typo (2062 for 2026) hid the device from `due`
+        now = P.now_utc()  # one clock reading: a date alone is read at the save (`params.capture_time`)
+        when = P.normalize_time(time) if time is not None else (P.capture_time(meta, now) or P.iso(now))
+        if P.parse_time(when) > now + FUTURE_MARGIN:  # a typo (2062 for 2026) hid the device from `due`
             raise ValueError(
                 f"the calibration's time {when} (the capture's 'date') is in the future (now "
                 f"{P.iso(P.now_utc())}): it is when the data were measured; correct the date"
@@ -811,7 +817,14 @@ class Store:
                     raise ReferenceChanged(device, procedure, judged_reference, now_id, when)
             self._ensure_device(conn, device, sensor_kind)
             capture_id, capture_sha = self._insert_capture(
-                conn, device_id=device, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
+                conn,
+                device_id=device,
+                procedure=procedure,
+                meta=meta,
+                columns=columns,
+                operator=operator,
+                host=host,
+                now=now,
             )
             supersedes = None
             if accepted:

@@ -71,7 +71,9 @@ def save_result(
 
 def save_time(capture, time=None) -> str:
     """The time a save of ``capture`` stores (``Store.save_calibration``): ``time``, else the
-    capture's ``date``, else now; UTC text. ValueError for a date that is not ISO 8601."""
+    capture's ``date`` (``db.params.capture_time``: a date alone is read at now, so one dated
+    today is now and an earlier one its date's 23:59:59), else now; UTC text. ValueError for a
+    date that is not ISO 8601."""
     from db import params as P
 
     return P.normalize_time(time) if time is not None else (P.capture_time(capture.meta) or P.iso(P.now_utc()))

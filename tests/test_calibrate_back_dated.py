@@ -19,6 +19,7 @@ import re
 import pytest
 
 from db import Store
+from db.params import iso
 from tests.station_run import run_station
 
 # seeds whose simulated units differ so that a 1 m/s^2 tolerance on B tells them apart:
@@ -236,3 +237,89 @@ def test_a_recording_dated_the_same_day_as_a_timed_calibration_follows_it(tmp_pa
         assert later["supersedes"] == ids[0] and later["superseded_by"] is None
         assert s.calibration(ids[0])["superseded_by"] == ids[1]
         assert s.reference("DEV-1", "accel-tabletop")["id"] == ids[1]
+
+
+def _dated(path, src, date_lines):
+    """``src`` with its ``# date:`` line replaced by ``date_lines``."""
+    path.write_text(re.sub(r"^# date: .*$", date_lines, src.read_text(), count=1, flags=re.M))
+    return path
+
+
+def test_a_capture_dated_today_saved_after_a_calibration_of_this_morning_is_in_use(tmp_path, captures):
+    """A calibration saved earlier today with its time of day (the TUI saves its run's start),
+    then `calibrate --save` of a capture whose `date` is today's date alone (no time, no
+    `recorded_at`: `station simulate`, a CSV written by hand). The date alone read as midnight:
+    the new one sorted before this morning's, was judged against the one before it, and this
+    morning's stayed in use, with a back-dated note. A date alone on the day of the save now
+    reads as the save's time. Real CLI in subprocesses, a real SQLite file."""
+    from datetime import UTC, datetime, timedelta
+
+    now = datetime.now(UTC).replace(microsecond=0)
+    # earlier today: an hour ago, or midnight when the day is younger than that
+    morning = max(now - timedelta(hours=1), now.replace(hour=0, minute=0, second=0))
+    db = tmp_path / "station.db"
+    first = _dated(tmp_path / "morning.csv", captures[1], f"# date: {morning.isoformat().replace('+00:00', 'Z')}")
+    res = run_station("--db", db, "calibrate", first, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    morning_id = json.loads(res.stdout)["calibration_id"]
+    day = datetime.now(UTC).date().isoformat()  # read again: the save above may have crossed midnight
+    later = _dated(tmp_path / "today.csv", captures[2], f"# date: {day}")
+    res = run_station("--db", db, "calibrate", later, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert "note:" not in res.stderr, res.stderr  # before: "... is dated <today>, before #1 of <today> ..."
+    assert out["review"]["previous_calibration_id"] == morning_id
+    with Store(str(db)) as s:
+        saved = s.calibration(out["calibration_id"])
+        assert saved["time"][:10] == day and saved["time"] >= iso(morning)
+        assert saved["supersedes"] == morning_id and saved["superseded_by"] is None
+        assert s.reference("DEV-1", "accel-tabletop")["id"] == out["calibration_id"]
+        assert s.calibration(morning_id)["superseded_by"] == out["calibration_id"]
+        assert s.verify() == []
+
+
+def test_a_capture_dated_a_past_day_sorts_after_the_calibrations_of_that_day(tmp_path, captures):
+    """A date alone from a past day (a file calibrated the next morning) is that day's last second:
+    after a calibration saved with a time of day on the same date (before: midnight, before it,
+    which stayed in use), and still before a calibration of a later date (back-dated, as before)."""
+    db = tmp_path / "station.db"
+    timed = _dated(tmp_path / "timed.csv", captures[1], "# date: 2026-01-10T10:00:00Z")
+    res = run_station("--db", db, "calibrate", timed, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    timed_id = json.loads(res.stdout)["calibration_id"]
+    res = run_station("--db", db, "calibrate", captures[3], "--save", "--device", "DEV-1", "--json")
+    assert res.returncode == 0, res.stderr
+    march = json.loads(res.stdout)["calibration_id"]
+    day = _dated(tmp_path / "day.csv", captures[2], "# date: 2026-01-10")
+    res = run_station("--db", db, "calibrate", day, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["review"]["previous_calibration_id"] == timed_id
+    # back-dated before March, not before the morning of its own date
+    assert f"before #{march} of 2026-03-10" in res.stderr, res.stderr
+    with Store(str(db)) as s:
+        saved = s.calibration(out["calibration_id"])
+        assert saved["time"] == "2026-01-10T23:59:59Z"
+        assert saved["supersedes"] == timed_id and saved["superseded_by"] == march
+        assert s.calibration(timed_id)["superseded_by"] == out["calibration_id"]
+        assert s.verify() == []
+
+
+@pytest.mark.parametrize(
+    ("saved_at", "stored"),
+    [
+        ("2026-01-10T15:30:12Z", "2026-01-10T15:30:12Z"),  # saved on its date: the save's time
+        ("2026-01-11T00:10:00Z", "2026-01-10T23:59:59Z"),  # a later day: its date's last second
+        ("2026-01-09T23:30:00Z", "2026-01-10T00:00:00Z"),  # still ahead (east of UTC): its first
+    ],
+)
+def test_a_date_alone_is_the_time_of_the_save_moved_into_its_date(saved_at, stored):
+    """The one rule (db.params.capture_time), continuous in the save's time: no jump at midnight
+    UTC, which a bench west of UTC passes in its working afternoon."""
+    from db.params import capture_time
+
+    assert capture_time({"date": "2026-01-10"}, saved_at) == stored
+    assert capture_time({"date": "2026-01-10T08:00:00Z"}, saved_at) == "2026-01-10T08:00:00Z"
+    rec = {"date": "2026-01-10", "recorded_at": "2026-01-10T14:00:00Z"}
+    assert capture_time(rec, saved_at) == "2026-01-10T14:00:00Z"
+
