@@ -147,6 +147,27 @@ def later_line(path: str, calibration_id: int) -> str | None:
     )
 
 
+def back_dated_line(record: dict, before: list[dict]) -> str | None:
+    """One short line for a calibration (``record``: a `history` or `calibration` dict) before
+    which back-dated captures were saved later (``before``: `Store.back_dated_before`, nearest
+    first; None when empty): which one, its date, when it was saved, and that ``record`` keeps
+    the judgement made when it was saved. The `history`, `devices show`, report and History
+    screen say it alike; `later_line` is the same event told when the back-dated one is saved."""
+    if not before:
+        return None
+    b = before[0]
+    # its time of day where the two share a date (a date alone sorts at its day's end)
+    dated = b["time"][:10] if b["time"][:10] != record["time"][:10] else b["time"][:16].replace("T", " ")
+    saved = str(b.get("saved_at") or "?")[:16].replace("T", " ")
+    more = f" (and {len(before) - 1} more)" if len(before) > 1 else ""
+    x = record["id"]
+    from db.store import compared_with
+
+    ref = compared_with(record)
+    stays = f"judged against #{ref}" if ref is not None else "with no previous calibration"
+    return f"#{b['id']} dated {dated}, saved {saved} UTC after #{x}, now precedes it{more}; #{x} stays as {stays}"
+
+
 def kind_added(device: dict | None, result: dict) -> str | None:
     """The sensor kind a save adds to an existing device registered for other kinds (a compass
     result saved to a unit registered as an accelerometer); None when it has that kind, has

@@ -323,3 +323,83 @@ def test_a_date_alone_is_the_time_of_the_save_moved_into_its_date(saved_at, stor
     rec = {"date": "2026-01-10", "recorded_at": "2026-01-10T14:00:00Z"}
     assert capture_time(rec, saved_at) == "2026-01-10T14:00:00Z"
 
+
+def test_the_later_calibration_says_a_back_dated_one_was_saved_before_it(tmp_path, captures):
+    """#1 January, #2 March, then February saved: #2 stays in use, and `calibrate --save` said so
+    once. Its own views said nothing afterwards (before: `history` showed #2 with no word,
+    `devices show` its id and date, the report "Compared with calibration #1 ..., the calibration
+    in use before this one" while the history put February between). Each now says, in one
+    line, which calibration dated before it was saved after it, its date and when it was saved.
+    Real CLI in subprocesses, a real SQLite file."""
+    db = _db_with_january_and_march(tmp_path, captures)
+    rejected = _dated(tmp_path / "rejected.csv", captures[2], "# date: 2026-02-20")
+    res = run_station("--db", db, "calibrate", rejected, "--save", "--device", "DEV-1", "--reject", "bad mount")
+    assert res.returncode == 3, res.stderr  # rejected: neither precedes #2 nor is said to
+    res = run_station("--db", db, "calibrate", captures[2], "--save", "--device", "DEV-1", "--json")
+    assert res.returncode == 0, res.stderr
+    feb = json.loads(res.stdout)["calibration_id"]
+    with Store(str(db)) as s:
+        saved_at = s.calibration(feb)["saved_at"][:16].replace("T", " ")
+    said = f"#{feb} dated 2026-02-10, saved {saved_at} UTC after #2, now precedes it; #2 stays as judged against #1"
+
+    res = run_station("--db", db, "history", "DEV-1", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("#2 "))
+    assert lines[at + 1] == f"    note: {said}", res.stdout
+    assert sum("note:" in line for line in lines) == 1, res.stdout  # only on #2 (not on the rejected #3)
+    records = json.loads(run_station("--db", db, "history", "DEV-1", "--json", subprocess_run=True).stdout)
+    assert {r["id"]: r["back_dated_before"] for r in records} == {1: [], 2: [feb], 3: [], feb: []}
+
+    res = run_station("--db", db, "devices", "show", "DEV-1", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    at = lines.index(next(line for line in lines if line.startswith("latest accel-tabletop: #2 ")))
+    assert lines[at + 1] == f"  note: {said}", res.stdout
+    shown = json.loads(run_station("--db", db, "devices", "show", "DEV-1", "--json", subprocess_run=True).stdout)
+    assert shown["latest"]["accel-tabletop"]["back_dated_before"] == [feb]
+
+    res = run_station("--db", db, "report", 2, "-o", "-", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    assert f"<p id='back-dated'>Back-dated since: {said}.</p>" in res.stdout
+    res = run_station("--db", db, "report", feb, "-o", "-", subprocess_run=True)
+    assert res.returncode == 0 and "back-dated" not in res.stdout
+
+
+def test_history_screen_says_a_back_dated_one_was_saved_before_the_highlighted_calibration(tmp_path):
+    """The History screen (real app, pilot, 80x24, a real SQLite file): #1 2024-03-01, #2
+    2025-03-01, then a capture dated 2024-09-01 saved (#3). With #2 highlighted (the newest row,
+    where the screen opens) the line under the calibrations says #3, its date and when it was
+    saved, whole on the screen; on #3 and #1 there is no line. Before: the rows only, #2 "in use"."""
+    import asyncio
+
+    from station.app import make_app
+    from station.store import save_result
+    from tests.test_tui import SIZE, text_of, wait_for
+    from tests.tui_data import p1_result, seed_history
+
+    db = tmp_path / "station.db"
+    seed_history(str(db), "IMU-7", n=2)  # #1 2024-03-01, #2 2025-03-01
+    cap, result = p1_result("IMU-7", drift=0.01, date="2024-09-01")
+    back = save_result(str(db), cap, result, device_id="IMU-7", judged_reference={"id": 1})
+    with Store(str(db)) as s:
+        saved = s.calibration(back)["saved_at"][:16].replace("T", " ")
+
+    async def story():
+        app = make_app(str(db), device_id="IMU-7", start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: app.screen.query_one("#calibrations").row_count == 3)
+            await wait_for(pilot, lambda: app.screen.query_one("#calnote").display)
+            shown = " ".join(text_of(app, "#calnote").split())  # wrapped in the right-hand column
+            assert shown == (
+                f"#{back} dated 2024-09-01, saved {saved} UTC after #2, now precedes it; #2 stays as judged against #1"
+            )
+            table = app.screen.query_one("#calibrations")
+            table.focus()
+            for _ in range(2):  # #3, then #1: nothing to say
+                await pilot.press("down")
+                await wait_for(pilot, lambda: not app.screen.query_one("#calnote").display)
+            await pilot.press("up", "up")
+            await wait_for(pilot, lambda: app.screen.query_one("#calnote").display)
+
+    asyncio.run(story())
