@@ -147,12 +147,13 @@ def later_line(path: str, calibration_id: int) -> str | None:
     )
 
 
-def back_dated_line(record: dict, before: list[dict]) -> str | None:
+def back_dated_line(record: dict, before: list[dict], judged: bool = True) -> str | None:
     """One short line for a calibration (``record``: a `history` or `calibration` dict) before
     which back-dated captures were saved later (``before``: `Store.back_dated_before`, nearest
     first; None when empty): which one, its date, when it was saved, and that ``record`` keeps
-    the judgement made when it was saved. The `history`, `devices show`, report and History
-    screen say it alike; `later_line` is the same event told when the back-dated one is saved."""
+    the judgement made when it was saved (``judged=False``: not that, for the History screen's
+    narrow column at 80x24). The `history`, `devices show`, report and History screen say it
+    alike; `later_line` is the same event told when the back-dated one is saved."""
     if not before:
         return None
     b = before[0]
@@ -161,11 +162,15 @@ def back_dated_line(record: dict, before: list[dict]) -> str | None:
     saved = str(b.get("saved_at") or "?")[:16].replace("T", " ")
     more = f" (and {len(before) - 1} more)" if len(before) > 1 else ""
     x = record["id"]
+    line = f"#{b['id']} dated {dated}, saved {saved} UTC after #{x}, now precedes it{more}"
+    if not judged:
+        return line
     from db.store import compared_with
 
     ref = compared_with(record)
-    stays = f"judged against #{ref}" if ref is not None else "with no previous calibration"
-    return f"#{b['id']} dated {dated}, saved {saved} UTC after #{x}, now precedes it{more}; #{x} stays as {stays}"
+    return (
+        line + f"; #{x} stays as " + (f"judged against #{ref}" if ref is not None else "with no previous calibration")
+    )
 
 
 def kind_added(device: dict | None, result: dict) -> str | None:

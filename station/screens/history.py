@@ -245,7 +245,7 @@ class HistoryScreen(NoticesMixin, Screen):
         newest_first = list(reversed(self.history))  # the table's order
         h = newest_first[row] if 0 <= row < len(newest_first) else None
         before = [by_id[i] for i in (h or {}).get("back_dated_before") or [] if i in by_id]
-        note = back_dated_line(h, before) if h is not None else None
+        note = back_dated_line(h, before, judged=False) if h is not None else None  # 2 rows at 80x24
         label = self.query_one("#calnote", Static)
         label.update(tui_markup(note) if note else "")
         label.display = bool(note)
