@@ -952,8 +952,12 @@ class Store:
                     last[d["procedure"]]["superseded_by"] = d["id"]
                 last[d["procedure"]] = d
         by_id = {d["id"]: d for d in out}
+        saved_last = 0  # the highest id among the records before d (by time, then id)
         for d in out:
-            d["back_dated_before"] = [b["id"] for b in _back_dated_before(d, out, by_id.get(compared_with(d)))]
+            # only a record saved after d can precede it: most have none, and no list is scanned
+            before = _back_dated_before(d, out, by_id.get(compared_with(d))) if saved_last > d["id"] else []
+            d["back_dated_before"] = [b["id"] for b in before]
+            saved_last = max(saved_last, d["id"])
         return out
 
     def calibration(self, calibration_id: int) -> dict:
