@@ -1,0 +1,66 @@
+"""Real flight logs cut short (a power loss while logging, a copy stopped part-way) given to
+the commands that read them: where what is left cannot be calibrated, the one refusal line says
+the log was cut and where, not only what the cut left ("no IMU data", "only 1 accelerometer
+sample"), which sends the operator looking for a wrong topic or a wrong procedure; the database
+given with --save gets no row. An outside tester's findings (branch qa-s24b)."""
+
+from __future__ import annotations
+
+import sqlite3
+
+import pytest
+
+from tests.station_run import assert_one_line_refusal, run_station
+
+SMALL_ULG = "px4_ulog/original/sample_log_small.ulg"
+# byte offsets inside sample_log_small.ulg (921,631 bytes): 1,325 is inside its definitions
+# (format and parameter messages), 220,080 inside a data message after the first raw
+# sensor_accel sample, 357,876 inside one after the second (the other sensors have not all
+# begun by then)
+CUTS = {
+    1325: "no IMU data",
+    220080: "only 1 accelerometer sample",
+    357876: "fewer than 2 accelerometer samples where all sensors overlap",
+}
+
+
+def _rows(db) -> dict[str, int]:
+    with sqlite3.connect(db) as con:
+        tables = [r[0] for r in con.execute("select name from sqlite_master where type = 'table'")]
+        return {t: con.execute(f'select count(*) from "{t}"').fetchone()[0] for t in tables}
+
+
+@pytest.mark.parametrize("cut", sorted(CUTS))
+def test_a_ulog_cut_inside_a_message_is_refused_saying_it_was_cut(tmp_path, shared_data, cut):
+    data = (shared_data / SMALL_ULG).read_bytes()
+    log = tmp_path / "cut.ulg"
+    log.write_bytes(data[:cut])
+    db = tmp_path / "station.db"
+    assert run_station("--db", db, "devices", "add", "BENCH-1").returncode == 0
+    before = _rows(db)
+    res = run_station(
+        "calibrate", log, "--procedure", "accel-tabletop", "--json", "--save", "--db", db, subprocess_run=True
+    )
+    assert "Traceback" not in res.stderr
+    assert_one_line_refusal(res, f"{log}: ", CUTS[cut], f"cut short inside a message at byte {cut}")
+    assert _rows(db) == before
+
+
+@pytest.mark.parametrize("command", ["import", "diagnose"])
+def test_the_other_commands_say_the_cut_in_their_refusal_too(tmp_path, shared_data, command):
+    log = tmp_path / "cut.ulg"
+    log.write_bytes((shared_data / SMALL_ULG).read_bytes()[:220080])
+    out = tmp_path / "out.csv"
+    args = ("--out", out) if command == "import" else ("--json",)
+    res = run_station(command, log, "--procedure", "accel-tabletop", *args)
+    assert_one_line_refusal(res, f"{log}: ", "cut short inside a message at byte 220080")
+    assert not out.exists()
+
+
+def test_a_ulog_that_ends_between_two_messages_says_no_cut(tmp_path, shared_data):
+    """The whole log, and the log cut where one message ends and the next begins, import
+    without a word about a cut: nothing in them is cut."""
+    log = shared_data / SMALL_ULG
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "whole.csv")
+    assert res.returncode == 0, res.stderr
+    assert "cut short" not in res.stderr
