@@ -64,3 +64,55 @@ def test_a_ulog_that_ends_between_two_messages_says_no_cut(tmp_path, shared_data
     res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "whole.csv")
     assert res.returncode == 0, res.stderr
     assert "cut short" not in res.stderr
+
+
+# --- ArduPilot DataFlash -------------------------------------------------------------------------
+
+# pymavlink's own test log (tests/data/ardupilot_pymavlink/SOURCE.md): its MAG records (34 bytes)
+# start at bytes 27,755 and 44,670, its IMU records (53 bytes) at 15,561, 19,460, 23,565, ...;
+# a record ends exactly at byte 20,000 and the next one's header starts there
+TEST_BIN = "tests/data/ardupilot_pymavlink/test.BIN"
+
+
+def _cut_bin(tmp_path, n: int):
+    from tests.station_run import ROOT
+
+    log = tmp_path / "cut.BIN"
+    log.write_bytes((ROOT / TEST_BIN).read_bytes()[:n])
+    return log
+
+
+def test_a_dataflash_log_cut_inside_a_record_is_imported_with_a_warning(tmp_path):
+    """Before: the IMU record cut by the end of the file was left out without a word."""
+    log = _cut_bin(tmp_path, 23565 + 20)
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "out.csv")
+    assert res.returncode == 0, res.stderr
+    assert "warning: the log is cut short inside a record (IMU) at byte 23565 (20 of its 53 bytes there)" in (
+        res.stderr
+    )
+
+
+def test_a_dataflash_log_cut_inside_a_records_header_is_imported_with_a_warning(tmp_path):
+    log = _cut_bin(tmp_path, 20002)
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "out.csv")
+    assert res.returncode == 0, res.stderr
+    assert "cut short inside a record's header at byte 20000 (2 of its 3 bytes there)" in res.stderr
+
+
+def test_a_dataflash_log_that_ends_where_a_record_ends_says_no_cut(tmp_path):
+    res = run_station("import", _cut_bin(tmp_path, 20000), "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
+    assert res.returncode == 0, res.stderr
+    assert "cut short" not in res.stderr
+
+
+def test_a_dataflash_log_cut_to_one_compass_sample_is_refused_saying_it_was_cut(tmp_path):
+    log = _cut_bin(tmp_path, 44670 + 10)
+    db = tmp_path / "station.db"
+    assert run_station("--db", db, "devices", "add", "BENCH-1").returncode == 0
+    before = _rows(db)
+    res = run_station("calibrate", log, "--procedure", "compass", "--json", "--save", "--db", db, subprocess_run=True)
+    assert "Traceback" not in res.stderr
+    assert_one_line_refusal(
+        res, f"{log}: ", "only 1 magnetometer sample", "cut short inside a record (MAG) at byte 44670 (10 of its 34"
+    )
+    assert _rows(db) == before

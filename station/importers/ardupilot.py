@@ -310,6 +310,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                     gps_s = d["GWk"] * 604800.0 + d["GMS"] * 1e-3
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         first_us = float(min(r[0, 0] for r in rows.values())) if rows else None
+        cut = _df_cut(log)
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001
@@ -318,15 +319,17 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         with contextlib.suppress(Exception):
             log.close()
     if not rows:
+        also = f"; warning: {cut}" if cut else ""  # what the cut left may be why there is nothing
         seen = {k: sorted(v) for k, v in instances_seen.items() if v}
         if seen:
             raise InputError(
                 path,
                 None,
                 f"--instance {inst}: the log has "
-                + "; ".join(f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items()),
+                + "; ".join(f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items())
+                + also,
             )
-        raise InputError(path, None, "no IMU or MAG messages in the DataFlash log")
+        raise InputError(path, None, "no IMU or MAG messages in the DataFlash log" + also)
     streams = {}
     for kind, arr in rows.items():
         if not len(arr) or (kinds is not None and kind not in kinds):
@@ -351,7 +354,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
-    warnings = [w for w in (skipped.warning(),) if w]
+    warnings = [w for w in (skipped.warning(), cut) if w]
     learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst, units.get("mag"), params, late)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
@@ -402,6 +405,36 @@ def _df_columns(log, name: str) -> dict[str, np.ndarray] | None:
             v = v / (1 / mult) if 0.0 < mult < 1.0 else v * mult
         out[column] = v
     return out
+
+
+def _df_cut(log) -> str:
+    """The warning for a DataFlash log that ends inside a record (a power loss while logging, a
+    copy stopped part-way), "" when it ends where a record ends. pymavlink indexes a record whose
+    3 header bytes are there and leaves it out where its body is not (``_df_columns`` too),
+    without a word; 1 to 3 bytes of a record's header at the very end it does not index at all."""
+    end = log.data_len
+    last_end, cut = 0, None
+    for type_id, offsets in enumerate(log.offsets):
+        fmt = log.formats.get(type_id) if offsets else None
+        if fmt is None:
+            continue
+        ofs = int(offsets[-1])
+        if ofs + fmt.len > end:
+            cut = (ofs, fmt.name, fmt.len)
+            ofs = int(offsets[-2]) if len(offsets) > 1 else -fmt.len
+        last_end = max(last_end, ofs + fmt.len)
+    if cut is None and 0 < end - last_end <= 3 and log.data_map[last_end] == 0xA3:  # DataFlash HEAD1
+        return (
+            f"the log is cut short inside a record's header at byte {last_end} ({end - last_end} of its 3 bytes "
+            "there): the records before it are imported"
+        )
+    if cut is None:
+        return ""
+    ofs, name, length = cut
+    return (
+        f"the log is cut short inside a record ({name}) at byte {ofs} ({end - ofs} of its {length} bytes there): "
+        "the records before it are imported"
+    )
 
 
 def _df_text(raw) -> str:
