@@ -116,3 +116,52 @@ def test_a_dataflash_log_cut_to_one_compass_sample_is_refused_saying_it_was_cut(
         res, f"{log}: ", "only 1 magnetometer sample", "cut short inside a record (MAG) at byte 44670 (10 of its 34"
     )
     assert _rows(db) == before
+
+
+# --- MAVLink telemetry log -----------------------------------------------------------------------
+
+
+def _tlog_cut_in_a_new_message(tmp_path):
+    """A telemetry log (written by pymavlink, tests/test_import_ardupilot.write_tlog) whose
+    recording stopped inside a STATUSTEXT, the first of its kind in the log, and the byte where
+    that record starts."""
+    import struct
+
+    from pymavlink import mavutil
+
+    from tests.test_import_ardupilot import write_tlog
+
+    log = tmp_path / "flight.tlog"
+    write_tlog(log)
+    whole = log.read_bytes()
+    mav = mavutil.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    frame = mav.statustext_encode(6, b"EKF3 IMU0 is using GPS").pack(mav)
+    record = struct.pack(">Q", 1_700_000_003_000_000) + frame
+    log.write_bytes(whole + record[: len(record) // 2])
+    return log, len(whole)
+
+
+def test_a_tlog_cut_inside_the_first_message_of_its_kind_is_read_up_to_it(tmp_path):
+    """Before: pymavlink reads the first record of each type while it indexes, met the cut one
+    and the whole log was refused as 'not a readable MAVLink log (AttributeError: 'NoneType'
+    object has no attribute '_instance_field')', its 100 RAW_IMU samples with it."""
+    log, at = _tlog_cut_in_a_new_message(tmp_path)
+    out = tmp_path / "imu.csv"
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.startswith(f"{out}: accel-tabletop, 100 rows"), res.stdout
+    assert f"warning: the log is cut short inside a message at byte {at}: the messages before it" in res.stderr
+    assert "hold no readable message" not in res.stderr  # a cut, not a corrupt stretch
+
+
+def test_a_tlog_cut_inside_its_first_record_is_refused_saying_it_was_cut(tmp_path):
+    """Before: the same AttributeError line, for a log cut 20 bytes in (inside its first
+    HEARTBEAT record: 8 bytes of time, then the frame)."""
+    from tests.test_import_ardupilot import write_tlog
+
+    log = tmp_path / "flight.tlog"
+    write_tlog(log)
+    log.write_bytes(log.read_bytes()[:20])
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
+    assert_one_line_refusal(res, f"{log}: ", "no RAW_IMU", "cut short inside a message at byte 0")
+    assert "AttributeError" not in res.stderr

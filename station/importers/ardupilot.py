@@ -109,6 +109,7 @@ class _SkippedBytes(io.TextIOBase):
         self.bytes = 0
         self.stretches = 0
         self.first: int | None = None
+        self.cut_at: int | None = None  # a tlog's last record, cut by the end of the file (_tlog_unreadable)
         self._last = -2
         self._tail = ""
 
@@ -472,9 +473,11 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
     checking them, steps over any byte where no frame starts one at a time, and drops a frame
     whose checksum fails when it reads it. The records are walked here by the same rule, and
     counted: the bytes stepped over, and the records whose frame fails its checksum (CRC-16/
-    MCRF4XX with the message's CRC_EXTRA, as pymavlink checks it) or is cut by the end of the
-    file. A frame of a message the dialect does not know cannot be checked; it is counted only
-    where a stretch counted touches it (a false start in garbage), else taken as sound.
+    MCRF4XX with the message's CRC_EXTRA, as pymavlink checks it). A record cut by the end of the
+    file (a power loss, a copy stopped part-way; 1 to 14 bytes of one too) is not counted but
+    kept as ``cut_at``, its first byte. A frame of a message the dialect does not know cannot be
+    checked; it is counted only where a stretch counted touches it (a false start in garbage),
+    else taken as sound.
     """
     from pymavlink.generator.mavcrc import x25crc
 
@@ -507,6 +510,8 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
         length = data[ofs + 9]
         frame_end = ofs + 8 + header + length + 2
         mlen = frame_end - ofs + (13 if marker == 0xFD and data[ofs + 10] & signed else 0)
+        if ofs + mlen > n:  # the file ends inside this record
+            break
         cls = known.get(mtype)
         if cls is None:
             sound = not bad.follows(ofs)
@@ -523,7 +528,37 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
         else:
             unknown = None
         ofs += mlen
+    if ofs < n:
+        bad.cut_at = ofs
     return bad
+
+
+def _mmaplog_upto(path, end: int):
+    """pymavlink's ``mavmmaplog`` of ``path`` indexing only its first ``end`` bytes: it reads the
+    first record of each message type whole while it indexes, and fails (AttributeError on the
+    None it gets) where the file ends inside the first record of its type."""
+    from pymavlink import mavutil
+
+    class Upto(mavutil.mavmmaplog):
+        def init_arrays(self, progress_callback=None):
+            self.data_len = min(self.data_len, end)
+            super().init_arrays(progress_callback)
+
+    return Upto(str(path))
+
+
+def _tlog_cut_at(path) -> int | None:
+    """Where a tlog ends inside a record (``_tlog_unreadable``), None when it ends whole or
+    cannot be read."""
+    import mmap
+
+    from pymavlink import mavutil
+
+    try:
+        with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            return _tlog_unreadable(data, mavutil.mavlink).cut_at
+    except (OSError, ValueError):
+        return None
 
 
 def _param_value(msg, firmware: str | None) -> float | int:
@@ -558,7 +593,14 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             # mavmmaplog directly: mavlink_connection() would try to *execute* a path holding '/bin/'
             log = mavutil.mavmmaplog(str(path))
     except Exception as exc:  # noqa: BLE001
-        raise _open_error(path, exc, "MAVLink log") from None
+        cut = _tlog_cut_at(path) if not isinstance(exc, OSError) else None
+        if cut is None:
+            raise _open_error(path, exc, "MAVLink log") from None
+        try:  # the records before the cut, as a log that ends whole
+            with _quiet():
+                log = _mmaplog_upto(path, cut)
+        except Exception as exc2:  # noqa: BLE001
+            raise _open_error(path, exc2, "MAVLink log") from None
     try:
         unreadable = _tlog_unreadable(log.data_map if log.data_map is not None else b"", mavutil.mavlink)
     except Exception:  # noqa: BLE001 - the check must not stop a log pymavlink reads
@@ -618,7 +660,12 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         raise InputError(
             path,
             None,
-            f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})",
+            f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})"
+            + (
+                f"; warning: it is cut short inside a message at byte {unreadable.cut_at}"
+                if unreadable.cut_at is not None
+                else ""
+            ),
         )
     # a link with several vehicles (or autopilots) on it: one source's IMU, not theirs interleaved
     sources = Counter((m.get_srcSystem(), m.get_srcComponent()) for _, m in by_type[name])
@@ -691,7 +738,12 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         meta["frame"] = FRD
     if board_uid:
         meta["board_uid"] = str(board_uid)
-    warnings = [w for w in (unreadable.warning(),) if w]
+    cut = (
+        f"the log is cut short inside a message at byte {unreadable.cut_at}: the messages before it are imported"
+        if unreadable.cut_at is not None
+        else None
+    )
+    warnings = [w for w in (unreadable.warning(), cut) if w]
     warnings += skipped
     arrival = arrivals[(name, *source)]
     if arrival > 946684800:  # the ground station's clock (UTC) when the first sample came
