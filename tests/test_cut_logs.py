@@ -165,3 +165,16 @@ def test_a_tlog_cut_inside_its_first_record_is_refused_saying_it_was_cut(tmp_pat
     res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
     assert_one_line_refusal(res, f"{log}: ", "no RAW_IMU", "cut short inside a message at byte 0")
     assert "AttributeError" not in res.stderr
+
+
+def test_a_file_that_is_no_tlog_read_as_one_is_not_called_cut(shared_data, tmp_path):
+    """A ULog given with --format tlog is garbage to the MAVLink walker to its last byte: that
+    end is no message cut short, and the refusal does not say it is. In a subprocess: pymavlink
+    meeting a 0xFD byte switches the whole process to MAVLink 2 (os.environ['MAVLINK20'], its
+    dialect reloaded), which would change what later tests' write_tlog writes."""
+    log = shared_data / SMALL_ULG
+    res = run_station(
+        "import", log, "--format", "tlog", "--procedure", "gyro-drift", "--out", tmp_path / "o.csv", subprocess_run=True
+    )
+    assert_one_line_refusal(res, f"{log}: ", "no RAW_IMU")
+    assert "cut short" not in res.stderr

@@ -474,8 +474,9 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
     whose checksum fails when it reads it. The records are walked here by the same rule, and
     counted: the bytes stepped over, and the records whose frame fails its checksum (CRC-16/
     MCRF4XX with the message's CRC_EXTRA, as pymavlink checks it). A record cut by the end of the
-    file (a power loss, a copy stopped part-way; 1 to 14 bytes of one too) is not counted but
-    kept as ``cut_at``, its first byte. A frame of a message the dialect does not know cannot be
+    file right after a sound one (a power loss, a copy stopped part-way; 1 to 14 bytes of one
+    too) is not counted but kept as ``cut_at``, its first byte; inside a stretch counted, it is
+    part of the stretch. A frame of a message the dialect does not know cannot be
     checked; it is counted only where a stretch counted touches it (a false start in garbage),
     else taken as sound.
     """
@@ -511,6 +512,9 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
         frame_end = ofs + 8 + header + length + 2
         mlen = frame_end - ofs + (13 if marker == 0xFD and data[ofs + 10] & signed else 0)
         if ofs + mlen > n:  # the file ends inside this record
+            if bad.follows(ofs):  # a false start in a stretch of garbage that runs to the end
+                lost(ofs, n - ofs)
+                ofs = n
             break
         cls = known.get(mtype)
         if cls is None:
@@ -528,7 +532,7 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
         else:
             unknown = None
         ofs += mlen
-    if ofs < n:
+    if ofs < n and not bad.follows(ofs):  # after a sound record (or at the start): a cut
         bad.cut_at = ofs
     return bad
 
