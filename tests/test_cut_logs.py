@@ -178,3 +178,38 @@ def test_a_file_that_is_no_tlog_read_as_one_is_not_called_cut(shared_data, tmp_p
     )
     assert_one_line_refusal(res, f"{log}: ", "no RAW_IMU")
     assert "cut short" not in res.stderr
+
+
+def test_reading_a_mavlink2_tlog_leaves_the_process_on_its_mavlink_version(tmp_path):
+    """pymavlink, meeting a MAVLink 2 frame in a log, sets os.environ['MAVLINK20'] and reloads
+    its dialect for the whole process: afterwards every MAVLink object the process makes (the
+    TUI's live link, a later import's checks, a test's writer) speaks MAVLink 2. Reading a log is
+    no reason to change that: the import leaves both as they were."""
+    import os
+    import struct
+
+    from pymavlink import mavutil
+    from pymavlink.dialects.v20 import ardupilotmega as v2
+
+    mav = v2.MAVLink(None, srcSystem=1, srcComponent=1)
+    records = []
+    for k in range(50):
+        t_us = 1_700_000_000_000_000 + k * 20_000
+        frame = mav.raw_imu_encode(1_000_000 + k * 20_000, 10, -20, -1000, 5, -6, 7, 200, -100, 400).pack(mav)
+        records.append(struct.pack(">Q", t_us) + frame)
+    log = tmp_path / "v2.tlog"
+    log.write_bytes(b"".join(records))
+    before = (os.environ.get("MAVLINK20"), mavutil.mavlink, mavutil.mavlink.WIRE_PROTOCOL_VERSION)
+    res = run_station("import", log, "--procedure", "gyro-drift", "--out", tmp_path / "o.csv")
+    after = (os.environ.get("MAVLINK20"), mavutil.mavlink, mavutil.mavlink.WIRE_PROTOCOL_VERSION)
+    try:
+        assert res.returncode == 0, res.stderr
+        assert res.stdout.startswith(f"{tmp_path / 'o.csv'}: gyro-drift, 50 rows"), res.stdout
+        assert after == before
+    finally:  # never leave the process switched for the tests after this one
+        if after != before:
+            if before[0] is None:
+                os.environ.pop("MAVLINK20", None)
+            else:
+                os.environ["MAVLINK20"] = before[0]
+            mavutil.mavlink = before[1]

@@ -574,9 +574,33 @@ def _param_value(msg, firmware: str | None) -> float | int:
     return value
 
 
+@contextlib.contextmanager
+def _same_mavlink_version():
+    """pymavlink's reader, meeting a MAVLink 2 frame, sets ``os.environ['MAVLINK20']`` and reloads
+    its dialect (``mavfile.auto_mavlink_version``): every MAVLink object the process makes after
+    that speaks MAVLink 2. A log read is no reason to change the process: both are put back."""
+    from pymavlink import mavutil
+
+    env, module = os.environ.get("MAVLINK20"), mavutil.mavlink
+    try:
+        yield
+    finally:
+        if os.environ.get("MAVLINK20") != env:
+            if env is None:
+                os.environ.pop("MAVLINK20", None)
+            else:
+                os.environ["MAVLINK20"] = env
+        mavutil.mavlink = module
+
+
 def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     """RAW_IMU / SCALED_IMU{,2,3} / HIGHRES_IMU and PARAM_VALUE from a MAVLink log (and
     SENSOR_OFFSETS: compass offsets that change while the data run are ``params_changed``)."""
+    with _same_mavlink_version():
+        return _read_tlog(path, instance=instance, kinds=kinds)
+
+
+def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     from pymavlink import mavutil
 
     inst = 0 if instance is None else int(instance)
