@@ -424,11 +424,15 @@ def _df_cut(log) -> str:
             cut = (ofs, fmt.name, fmt.len)
             ofs = int(offsets[-2]) if len(offsets) > 1 else -fmt.len
         last_end = max(last_end, ofs + fmt.len)
-    if cut is None and 0 < end - last_end <= 3 and log.data_map[last_end] == 0xA3:  # DataFlash HEAD1
-        return (
-            f"the log is cut short inside a record's header at byte {last_end} ({end - last_end} of its 3 bytes "
-            "there): the records before it are imported"
-        )
+    tail = end - last_end
+    if cut is None and 0 < tail <= 3 and log.data_map[last_end] == 0xA3:  # DataFlash HEAD1
+        fmt = log.formats.get(log.data_map[last_end + 2]) if tail == 3 else None
+        if fmt is None:
+            return (
+                f"the log is cut short inside a record's header at byte {last_end} ({tail} of its 3 bytes there): "
+                "the records before it are imported"
+            )
+        cut = (last_end, fmt.name, fmt.len)
     if cut is None:
         return ""
     ofs, name, length = cut
