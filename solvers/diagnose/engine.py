@@ -147,6 +147,10 @@ class Problem:
     # baseline's D and the cubic's C3 by itself, and their held-out errors, 10-100 times the
     # noise, decided against a 10σ cubic)
     cv_max_leverage: float | None = None
+    # whether a generic term (``residual:<driver>``) is compared on those rows too (False: on every
+    # row): a flexible term overfits exactly where a row alone fixes a direction, which is what the
+    # held-out test of a 6–12 parameter function must see (P1 tables of averages)
+    cv_leverage_generic: bool = True
     # the auxiliary rows' noise scale (variance components) measured again after each selection,
     # against the refitted extended model, instead of once on the baseline (compass: measured there)
     aux_scale_refit: bool = False
@@ -931,11 +935,12 @@ class _Round:
             mask &= keep
         return float(np.sqrt(np.mean(cv[mask] ** 2))) if mask.any() else 0.0
 
-    def solve(self, J):
+    def solve(self, J, leverage: bool = True):
         """(δ, full residual e, held-out RMS, the current model's held-out RMS over the same rows
-        or None when that is all of them) of ``r0 + [A J] δ``."""
+        or None when that is all of them) of ``r0 + [A J] δ``; ``leverage`` False: every row
+        counts, whatever ``max_leverage`` says."""
         d, e, out = self._held_out(J)
-        if self.max_leverage is None:
+        if self.max_leverage is None or not leverage:
             return d, e, self._rms(out), None
         Q = _orth(np.hstack([self.A, J]))
         keep = np.sum(Q**2, axis=1) <= self.max_leverage
@@ -1083,7 +1088,7 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
     A, QA = rnd.A, rnd.QA
     Jp = cc.J - QA @ (QA.T @ cc.J)
     k = _gram_rank(Jp.T @ Jp) if Jp.shape[1] else 0
-    d, e, cvc, cv_ref = rnd.solve(cc.J)
+    d, e, cvc, cv_ref = rnd.solve(cc.J, leverage=cc.cand.setup is None or problem.cv_leverage_generic)
     if cc.cand.scan is not None and k > 0:
         k += 1  # the scanned scalar (hard-iron step time) is a parameter too
     D = term_cur - typed_fit_term(e, types)
