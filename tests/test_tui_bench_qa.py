@@ -608,3 +608,29 @@ def test_new_run_asks_before_it_drops_an_unexported_noise_record(tmp_path):
     question = asyncio.run(story())
     assert "not exported" in question and "lost" in question, question
     assert os.listdir(out)
+
+
+def test_p1_abort_notice_counts_its_positions_in_words(tmp_path):
+    """`a`, `y` on P1 said "P1 aborted with 1 positions captured" (seen at 80x24); one position
+    is "1 position", none is said as none."""
+    from tests.test_tui import screen_name
+
+    async def story(n_wanted):
+        clock = BenchClock()
+        src = SimSource(seed=3, clock=clock)
+        app = make_app(str(tmp_path / f"s{n_wanted}.db"), device=src, start="procedure", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            guide = app.screen.guide
+            if n_wanted:
+                await run_bench(pilot, src, clock, lambda: guide.n_captured == n_wanted)  # x_up: it starts there
+            await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")
+            await wait_for(pilot, lambda: "aborted" in text_of(app, "#notices"))
+            return " ".join(text_of(app, "#notices").split())
+
+    one = asyncio.run(story(1))
+    assert "P1 aborted with 1 position captured: Resume (F6) continues it" in one, one
+    none = asyncio.run(story(0))
+    assert "P1 aborted with no position captured" in none, none
