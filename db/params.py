@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import math
-from datetime import UTC, datetime
+from datetime import UTC, date, datetime, timedelta
 
 from solvers.jsonable import jsonable
 
@@ -119,21 +119,36 @@ def normalize_time(value) -> str:
     return iso(parse_time(value))
 
 
-def capture_time(meta) -> str | None:
-    """When a capture was measured, stored form, or None without a ``date``: its ``date``, with
-    the time of day of ``recorded_at`` where that falls on the same date (``station record``
-    writes both). A date alone reads as midnight UTC, which sorted a recording before a
-    calibration saved earlier that day and left that one in use. ValueError: ``date`` not ISO."""
-    date = str(meta.get("date") or "").strip()
-    if not date:
+def capture_time(meta, now=None) -> str | None:
+    """When a capture was measured, stored form, or None without a ``date``: its ``date`` where
+    that has a time of day. A date alone leaves the time of day open; it is ``recorded_at``
+    where that falls on the date (``station record`` writes both), else the time of the save
+    (``now``: a datetime or ISO text, default the clock) moved into that date: the save itself
+    on the same UTC date, the date's last second (23:59:59) for an earlier date, its first
+    second for a date still ahead (written east of UTC before midnight UTC). A capture
+    calibrated on the day it was measured so counts as saved then, and one calibrated on a
+    later day sorts after every calibration stored earlier for its date, as it would had it
+    been saved that evening; read as midnight, a capture saved in the afternoon sorted before
+    a calibration saved that morning and left that one in use. ValueError: ``date`` not ISO."""
+    text = str(meta.get("date") or "").strip()
+    if not text:
         return None
+    try:
+        day = date.fromisoformat(text)
+    except ValueError:
+        return normalize_time(text)  # a date-time (ValueError for what is neither)
     rec = str(meta.get("recorded_at") or "").strip()
-    if len(date) == 10 and rec[:10] == date:
+    if rec[:10] == day.isoformat():
         try:
             return normalize_time(rec)
         except ValueError:
             pass  # the date stands
-    return normalize_time(date)
+    start = datetime(day.year, day.month, day.day, tzinfo=UTC)
+    save = parse_time(now) if now is not None else now_utc()
+    return iso(min(max(save, start), start + DAY_LAST_SECOND))
+
+
+DAY_LAST_SECOND = timedelta(seconds=86399)  # a date's 23:59:59, from its 00:00:00
 
 
 def now_utc() -> datetime:

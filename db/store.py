@@ -266,6 +266,35 @@ def _loads(text, default=None):
         ) from None
 
 
+def compared_with(cal: dict) -> int | None:
+    """The calibration ``cal`` was compared with when saved: its review's
+    `previous_calibration_id` (None: there was none), else what it `supersedes` (saves
+    without a judgement: imports, tools)."""
+    review = cal.get("review") or {}
+    return review["previous_calibration_id"] if "previous_calibration_id" in review else cal.get("supersedes")
+
+
+def _back_dated_before(cal: dict, others: list[dict], compared: dict | None) -> list[dict]:
+    """Of ``others``, the accepted calibrations of ``cal``'s device and procedure saved after it
+    (a higher id) that sort before it by (time, id) and after ``compared`` (the one it was
+    compared with, None: all before it), nearest first (`Store.back_dated_before`); [] for a
+    rejected ``cal`` (never in use, its place in the history changes nothing)."""
+    if not cal["accepted"]:
+        return []
+    low = (compared["time"], compared["id"]) if compared is not None else None
+    hits = [
+        o
+        for o in others
+        if o["accepted"]
+        and o["device_id"] == cal["device_id"]
+        and o["procedure"] == cal["procedure"]
+        and o["id"] > cal["id"]
+        and (o["time"], o["id"]) < (cal["time"], cal["id"])
+        and (low is None or (o["time"], o["id"]) > low)
+    ]
+    return sorted(hits, key=lambda o: (o["time"], o["id"]), reverse=True)
+
+
 class Store:
     """The station database. Thread-safe (one lock). Several in one process (the TUI's screens
     and saves) keep SQLite's locks: see `_OPEN_FILES`."""
@@ -575,7 +604,9 @@ class Store:
 
     # --- captures -----------------------------------------------------------------------
 
-    def _insert_capture(self, conn, *, device_id, procedure, meta, columns, operator, host) -> tuple[int, str]:
+    def _insert_capture(
+        self, conn, *, device_id, procedure, meta, columns, operator, host, now=None
+    ) -> tuple[int, str]:
         meta = {str(k): str(v) for k, v in dict(meta or {}).items()}
         if not columns:
             raise ValueError("a capture needs at least one column")
@@ -583,7 +614,8 @@ class Store:
         lengths = {c["length"] for c in encoded}
         if len(lengths) != 1:
             raise ValueError(f"capture columns differ in length: {sorted(lengths)}")
-        time = P.capture_time(meta) or P.iso(P.now_utc())
+        now = now or P.now_utc()  # the save's time (a date alone is read at it: `params.capture_time`)
+        time = P.capture_time(meta, now) or P.iso(now)
 
         def place(key):
             try:
@@ -735,7 +767,9 @@ class Store:
         """Store a capture and its calibration result (calibrate.md shape) in one transaction.
 
         The device is `device_id`, else `result['device']`, else `meta['device']`
-        (created if unknown). An accepted calibration supersedes the device's latest
+        (created if unknown). Its time is ``time``, else the capture's (`params.capture_time`:
+        a date alone is read at this save, so a capture dated today is stored at the save's
+        time), else now. An accepted calibration supersedes the device's latest
         accepted calibration of the same procedure at or before its time. ``sensor_kind``
         (accel, gyro, mag, ldv) is merged into the device's ``sensor_kinds``. Returns the
         calibration id.
@@ -766,8 +800,9 @@ class Store:
             raise ValueError("no procedure in the result or the capture")
         if not isinstance(result.get("params"), dict):
             raise ValueError("the result has no 'params' object")
-        when = P.normalize_time(time) if time is not None else (P.capture_time(meta) or P.iso(P.now_utc()))
-        if P.parse_time(when) > P.now_utc() + FUTURE_MARGIN:  # a typo (2062 for 2026) hid the device from `due`
+        now = P.now_utc()  # one clock reading: a date alone is read at the save (`params.capture_time`)
+        when = P.normalize_time(time) if time is not None else (P.capture_time(meta, now) or P.iso(now))
+        if P.parse_time(when) > now + FUTURE_MARGIN:  # a typo (2062 for 2026) hid the device from `due`
             raise ValueError(
                 f"the calibration's time {when} (the capture's 'date') is in the future (now "
                 f"{P.iso(P.now_utc())}): it is when the data were measured; correct the date"
@@ -811,7 +846,14 @@ class Store:
                     raise ReferenceChanged(device, procedure, judged_reference, now_id, when)
             self._ensure_device(conn, device, sensor_kind)
             capture_id, capture_sha = self._insert_capture(
-                conn, device_id=device, procedure=procedure, meta=meta, columns=columns, operator=operator, host=host
+                conn,
+                device_id=device,
+                procedure=procedure,
+                meta=meta,
+                columns=columns,
+                operator=operator,
+                host=host,
+                now=now,
             )
             supersedes = None
             if accepted:
@@ -892,7 +934,8 @@ class Store:
         procedure by time (None: the one in use). `supersedes` is what a calibration replaced
         when it was saved; a result saved later with an earlier date (a back-dated capture)
         takes its place between the two by date, so `superseded_by` follows the dates, not
-        the order of the saves.
+        the order of the saves. `back_dated_before` lists such results that came before it
+        after it was saved (`back_dated_before`), as ids, nearest first.
         """
         sql = "SELECT * FROM calibrations WHERE device_id = ?"
         args = [device_id]
@@ -908,6 +951,13 @@ class Store:
                 if d["procedure"] in last:
                     last[d["procedure"]]["superseded_by"] = d["id"]
                 last[d["procedure"]] = d
+        by_id = {d["id"]: d for d in out}
+        saved_last = 0  # the highest id among the records before d (by time, then id)
+        for d in out:
+            # only a record saved after d can precede it: most have none, and no list is scanned
+            before = _back_dated_before(d, out, by_id.get(compared_with(d))) if saved_last > d["id"] else []
+            d["back_dated_before"] = [b["id"] for b in before]
+            saved_last = max(saved_last, d["id"])
         return out
 
     def calibration(self, calibration_id: int) -> dict:
@@ -938,7 +988,30 @@ class Store:
         d["result"] = result
         later = self.later(calibration_id)[:1] if d["accepted"] else []
         d["superseded_by"] = later[0]["id"] if later else None  # by time, as `history` says it
+        d["back_dated_before"] = [b["id"] for b in self.back_dated_before(calibration_id)]
         return d
+
+    def back_dated_before(self, calibration_id: int) -> list[dict]:
+        """For an accepted calibration, the accepted ones of the same device and procedure saved
+        after it and dated before it, but after the one it was compared with when saved (its review's
+        `previous_calibration_id`, else what it `supersedes`): back-dated captures that now come
+        between the two in the history. Nearest first; [] for none. This one's record stays as
+        saved, with the judgement made then (see `later`)."""
+        rows = self._query(
+            """SELECT l.* FROM calibrations c JOIN calibrations l
+                   ON l.device_id = c.device_id AND l.procedure = c.procedure AND l.accepted = 1
+                      AND l.id > c.id AND l.time < c.time
+               WHERE c.id = ? ORDER BY l.time DESC, l.id DESC""",
+            [calibration_id],
+        )
+        if not rows:
+            return []
+        cal = self._cal_dict(self._query("SELECT * FROM calibrations WHERE id = ?", [calibration_id])[0])
+        ref = compared_with(cal)
+        ref_rows = self._query("SELECT * FROM calibrations WHERE id = ?", [ref]) if ref is not None else []
+        return _back_dated_before(
+            cal, [self._cal_dict(r) for r in rows], self._cal_dict(ref_rows[0]) if ref_rows else None
+        )
 
     def later(self, calibration_id: int) -> list[dict]:
         """The accepted calibrations of the same device and procedure dated after this one

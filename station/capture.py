@@ -127,6 +127,11 @@ _RAW_COLUMN_UNIT_KEY = {
 # units (V, mV, counts), angles, time and unknown columns have none there: any finite number
 # reads, and the numerics' guard (station.guard) bounds them by MAX_ABS.
 PLAUSIBLE_SI = {"accel": 1e7, "gyro": 1e4, "mag": 1e10, "velocity": 1e5}
+# temp_c, °C: no thermometer reads below absolute zero, and none on a sensor above 1e4 °C (hotter
+# than the Sun's surface; parts are rated to 125-200 °C, a thermocouple to 1800 °C). A cell beyond
+# either is refused on its line, as one beyond PLAUSIBLE_SI.
+ABSOLUTE_ZERO_C = -273.15
+TEMP_MAX_C = 1e4
 # Largest magnitude of any other numeric cell: raw counts (32-bit), Unix time in ns (1.7e18)
 # fit; 1e20 squared is 1e40 and the fourth powers some fits form stay far from float64's 1.8e308.
 MAX_ABS = 1e20
@@ -680,6 +685,7 @@ class _Parser:
         limits = {j: plausible_limit(n, meta or {}) for j, n in enumerate(names) if j not in self.text}
         self.limits = {j: v for j, v in limits.items() if v is not None}
         self.t_index = names.index("t") if "t" in names else None
+        self.temp_index = names.index("temp_c") if "temp_c" in names else None
         self.n_index = names.index("n") if "n" in names else None
         self.std_index = [j for j, n in enumerate(names) if n.endswith("_std") and n not in TEXT_COLUMNS]
         self.prev_t = -math.inf
@@ -752,6 +758,8 @@ class _Parser:
                         return None  # the per-cell path names the line
             if j == self.t_index and (col[0] < self.prev_t or np.any(col[1:] < col[:-1])):
                 return None
+            if j == self.temp_index and np.any((col < ABSOLUTE_ZERO_C) | (col > TEMP_MAX_C)):
+                return None  # the per-cell path names the line
             if j == self.n_index and not np.all(np.isnan(col) | ((col >= 1) & (col == np.floor(col)))):
                 return None
             if j in self.std_index and np.any(col < 0):
@@ -839,6 +847,15 @@ class _Parser:
             if x < self.prev_t:
                 raise InputError(self.path, lineno, f"t goes backwards: {v} after {self.prev_t_text}")
             self.prev_t, self.prev_t_text = x, v
+        elif j == self.temp_index and x < ABSOLUTE_ZERO_C:
+            raise InputError(self.path, lineno, f"column '{name}': {x:g} °C is below absolute zero (-273.15 °C)")
+        elif j == self.temp_index and x > TEMP_MAX_C:
+            raise InputError(
+                self.path,
+                lineno,
+                f"column '{name}': {x:g} °C is beyond what any thermometer on a sensor reports "
+                f"(up to {TEMP_MAX_C:g} °C is accepted)",
+            )
         elif j == self.n_index and (x < 1 or x != math.floor(x)):
             raise InputError(self.path, lineno, f"column 'n': {_show(v)} is not a whole number of samples (1 or more)")
         elif j in self.std_index and x < 0:

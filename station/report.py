@@ -84,6 +84,7 @@ def build_report(store, calibration_id: int) -> dict:
         capture_info = store.capture_info(cal["capture_id"])
         meta, columns = store.load_capture(cal["capture_id"])
     previous = _previous_of(store, cal)
+    back_dated = store.back_dated_before(calibration_id)  # saved after it, dated before it
     result = cal["result"]
     assessment = assess(result, previous, device)
     history = [h for h in store.history(cal["device_id"], cal["procedure"]) if h["accepted"] or h["id"] == cal["id"]]
@@ -111,6 +112,7 @@ def build_report(store, calibration_id: int) -> dict:
         "meta": meta,
         "columns": columns,
         "previous": previous,
+        "back_dated": back_dated,
         "assessment": assessment,
         "history": history,
         "verify_problems": mine,
@@ -364,6 +366,10 @@ def render_html(rep: dict) -> str:
         )
     else:
         h.append("<p>No earlier accepted calibration of this procedure: nothing to compare with.</p>")
+    if rep.get("back_dated"):  # a capture dated before this one, saved after it (station.store)
+        from station.store import back_dated_line
+
+        h.append(f"<p id='back-dated'>Back-dated since: {escape(back_dated_line(cal, rep['back_dated']))}.</p>")
     n_acc = sum(1 for x in rep["history"] if x["accepted"])
     h.append(f"<p>{n_acc} accepted calibration{'s' if n_acc != 1 else ''} of this procedure in the history.</p>")
     # figures

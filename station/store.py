@@ -71,7 +71,9 @@ def save_result(
 
 def save_time(capture, time=None) -> str:
     """The time a save of ``capture`` stores (``Store.save_calibration``): ``time``, else the
-    capture's ``date``, else now; UTC text. ValueError for a date that is not ISO 8601."""
+    capture's ``date`` (``db.params.capture_time``: a date alone is read at now, so one dated
+    today is now and an earlier one its date's 23:59:59), else now; UTC text. ValueError for a
+    date that is not ISO 8601."""
     from db import params as P
 
     return P.normalize_time(time) if time is not None else (P.capture_time(capture.meta) or P.iso(P.now_utc()))
@@ -142,6 +144,32 @@ def later_line(path: str, calibration_id: int) -> str | None:
         f"calibration {calibration_id} is dated {saved['time'][:10]}, before #{nxt['id']} of "
         f"{nxt['time'][:10]}{more}: it takes its place in the history at its date, superseded by #{nxt['id']}, "
         f"which stays as saved ({was}, not judged again)"
+    )
+
+
+def back_dated_line(record: dict, before: list[dict], judged: bool = True) -> str | None:
+    """One short line for a calibration (``record``: a `history` or `calibration` dict) before
+    which back-dated captures were saved later (``before``: `Store.back_dated_before`, nearest
+    first; None when empty): which one, its date, when it was saved, and that ``record`` keeps
+    the judgement made when it was saved (``judged=False``: not that, for the History screen's
+    narrow column at 80x24). The `history`, `devices show`, report and History screen say it
+    alike; `later_line` is the same event told when the back-dated one is saved."""
+    if not before:
+        return None
+    b = before[0]
+    # its time of day where the two share a date (a date alone sorts at its day's end)
+    dated = b["time"][:10] if b["time"][:10] != record["time"][:10] else b["time"][:16].replace("T", " ")
+    saved = str(b.get("saved_at") or "?")[:16].replace("T", " ")
+    more = f" (and {len(before) - 1} more)" if len(before) > 1 else ""
+    x = record["id"]
+    line = f"#{b['id']} dated {dated}, saved {saved} UTC after #{x}, now precedes it{more}"
+    if not judged:
+        return line
+    from db.store import compared_with
+
+    ref = compared_with(record)
+    return (
+        line + f"; #{x} stays as " + (f"judged against #{ref}" if ref is not None else "with no previous calibration")
     )
 
 

@@ -19,6 +19,7 @@ import re
 import pytest
 
 from db import Store
+from db.params import iso
 from tests.station_run import run_station
 
 # seeds whose simulated units differ so that a 1 m/s^2 tolerance on B tells them apart:
@@ -236,3 +237,169 @@ def test_a_recording_dated_the_same_day_as_a_timed_calibration_follows_it(tmp_pa
         assert later["supersedes"] == ids[0] and later["superseded_by"] is None
         assert s.calibration(ids[0])["superseded_by"] == ids[1]
         assert s.reference("DEV-1", "accel-tabletop")["id"] == ids[1]
+
+
+def _dated(path, src, date_lines):
+    """``src`` with its ``# date:`` line replaced by ``date_lines``."""
+    path.write_text(re.sub(r"^# date: .*$", date_lines, src.read_text(), count=1, flags=re.M))
+    return path
+
+
+def test_a_capture_dated_today_saved_after_a_calibration_of_this_morning_is_in_use(tmp_path, captures):
+    """A calibration saved earlier today with its time of day (the TUI saves its run's start),
+    then `calibrate --save` of a capture whose `date` is today's date alone (no time, no
+    `recorded_at`: `station simulate`, a CSV written by hand). The date alone read as midnight:
+    the new one sorted before this morning's, was judged against the one before it, and this
+    morning's stayed in use, with a back-dated note. A date alone on the day of the save now
+    reads as the save's time. Real CLI in subprocesses, a real SQLite file."""
+    from datetime import UTC, datetime, timedelta
+
+    now = datetime.now(UTC).replace(microsecond=0)
+    # earlier today: an hour ago, or midnight when the day is younger than that
+    morning = max(now - timedelta(hours=1), now.replace(hour=0, minute=0, second=0))
+    db = tmp_path / "station.db"
+    first = _dated(tmp_path / "morning.csv", captures[1], f"# date: {morning.isoformat().replace('+00:00', 'Z')}")
+    res = run_station("--db", db, "calibrate", first, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    morning_id = json.loads(res.stdout)["calibration_id"]
+    day = datetime.now(UTC).date().isoformat()  # read again: the save above may have crossed midnight
+    later = _dated(tmp_path / "today.csv", captures[2], f"# date: {day}")
+    res = run_station("--db", db, "calibrate", later, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert "note:" not in res.stderr, res.stderr  # before: "... is dated <today>, before #1 of <today> ..."
+    assert out["review"]["previous_calibration_id"] == morning_id
+    with Store(str(db)) as s:
+        saved = s.calibration(out["calibration_id"])
+        assert saved["time"][:10] == day and saved["time"] >= iso(morning)
+        assert saved["supersedes"] == morning_id and saved["superseded_by"] is None
+        assert s.reference("DEV-1", "accel-tabletop")["id"] == out["calibration_id"]
+        assert s.calibration(morning_id)["superseded_by"] == out["calibration_id"]
+        assert s.verify() == []
+
+
+def test_a_capture_dated_a_past_day_sorts_after_the_calibrations_of_that_day(tmp_path, captures):
+    """A date alone from a past day (a file calibrated the next morning) is that day's last second:
+    after a calibration saved with a time of day on the same date (before: midnight, before it,
+    which stayed in use), and still before a calibration of a later date (back-dated, as before)."""
+    db = tmp_path / "station.db"
+    timed = _dated(tmp_path / "timed.csv", captures[1], "# date: 2026-01-10T10:00:00Z")
+    res = run_station("--db", db, "calibrate", timed, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    timed_id = json.loads(res.stdout)["calibration_id"]
+    res = run_station("--db", db, "calibrate", captures[3], "--save", "--device", "DEV-1", "--json")
+    assert res.returncode == 0, res.stderr
+    march = json.loads(res.stdout)["calibration_id"]
+    day = _dated(tmp_path / "day.csv", captures[2], "# date: 2026-01-10")
+    res = run_station("--db", db, "calibrate", day, "--save", "--device", "DEV-1", "--json", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["review"]["previous_calibration_id"] == timed_id
+    # back-dated before March, not before the morning of its own date
+    assert f"before #{march} of 2026-03-10" in res.stderr, res.stderr
+    with Store(str(db)) as s:
+        saved = s.calibration(out["calibration_id"])
+        assert saved["time"] == "2026-01-10T23:59:59Z"
+        assert saved["supersedes"] == timed_id and saved["superseded_by"] == march
+        assert s.calibration(timed_id)["superseded_by"] == out["calibration_id"]
+        assert s.verify() == []
+
+
+@pytest.mark.parametrize(
+    ("saved_at", "stored"),
+    [
+        ("2026-01-10T15:30:12Z", "2026-01-10T15:30:12Z"),  # saved on its date: the save's time
+        ("2026-01-11T00:10:00Z", "2026-01-10T23:59:59Z"),  # a later day: its date's last second
+        ("2026-01-09T23:30:00Z", "2026-01-10T00:00:00Z"),  # still ahead (east of UTC): its first
+    ],
+)
+def test_a_date_alone_is_the_time_of_the_save_moved_into_its_date(saved_at, stored):
+    """The one rule (db.params.capture_time), continuous in the save's time: no jump at midnight
+    UTC, which a bench west of UTC passes in its working afternoon."""
+    from db.params import capture_time
+
+    assert capture_time({"date": "2026-01-10"}, saved_at) == stored
+    assert capture_time({"date": "2026-01-10T08:00:00Z"}, saved_at) == "2026-01-10T08:00:00Z"
+    rec = {"date": "2026-01-10", "recorded_at": "2026-01-10T14:00:00Z"}
+    assert capture_time(rec, saved_at) == "2026-01-10T14:00:00Z"
+
+
+def test_the_later_calibration_says_a_back_dated_one_was_saved_before_it(tmp_path, captures):
+    """#1 January, #2 March, then February saved: #2 stays in use, and `calibrate --save` said so
+    once. Its own views said nothing afterwards (before: `history` showed #2 with no word,
+    `devices show` its id and date, the report "Compared with calibration #1 ..., the calibration
+    in use before this one" while the history put February between). Each now says, in one
+    line, which calibration dated before it was saved after it, its date and when it was saved.
+    Real CLI in subprocesses, a real SQLite file."""
+    db = _db_with_january_and_march(tmp_path, captures)
+    rejected = _dated(tmp_path / "rejected.csv", captures[2], "# date: 2026-02-20")
+    res = run_station("--db", db, "calibrate", rejected, "--save", "--device", "DEV-1", "--reject", "bad mount")
+    assert res.returncode == 3, res.stderr  # rejected: neither precedes #2 nor is said to
+    res = run_station("--db", db, "calibrate", captures[2], "--save", "--device", "DEV-1", "--json")
+    assert res.returncode == 0, res.stderr
+    feb = json.loads(res.stdout)["calibration_id"]
+    with Store(str(db)) as s:
+        saved_at = s.calibration(feb)["saved_at"][:16].replace("T", " ")
+    said = f"#{feb} dated 2026-02-10, saved {saved_at} UTC after #2, now precedes it; #2 stays as judged against #1"
+
+    res = run_station("--db", db, "history", "DEV-1", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("#2 "))
+    assert lines[at + 1] == f"    note: {said}", res.stdout
+    assert sum("note:" in line for line in lines) == 1, res.stdout  # only on #2 (not on the rejected #3)
+    records = json.loads(run_station("--db", db, "history", "DEV-1", "--json", subprocess_run=True).stdout)
+    assert {r["id"]: r["back_dated_before"] for r in records} == {1: [], 2: [feb], 3: [], feb: []}
+
+    res = run_station("--db", db, "devices", "show", "DEV-1", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    at = lines.index(next(line for line in lines if line.startswith("latest accel-tabletop: #2 ")))
+    assert lines[at + 1] == f"  note: {said}", res.stdout
+    shown = json.loads(run_station("--db", db, "devices", "show", "DEV-1", "--json", subprocess_run=True).stdout)
+    assert shown["latest"]["accel-tabletop"]["back_dated_before"] == [feb]
+
+    res = run_station("--db", db, "report", 2, "-o", "-", subprocess_run=True)
+    assert res.returncode == 0, res.stderr
+    assert f"<p id='back-dated'>Back-dated since: {said}.</p>" in res.stdout
+    res = run_station("--db", db, "report", feb, "-o", "-", subprocess_run=True)
+    assert res.returncode == 0 and "back-dated" not in res.stdout
+
+
+def test_history_screen_says_a_back_dated_one_was_saved_before_the_highlighted_calibration(tmp_path):
+    """The History screen (real app, pilot, 80x24, a real SQLite file): #1 2024-03-01, #2
+    2025-03-01, then a capture dated 2024-09-01 saved (#3). With #2 highlighted (the newest row,
+    where the screen opens) the line under the calibrations says #3, its date and when it was
+    saved, whole on the screen; on #3 and #1 there is no line. Before: the rows only, #2 "in use"."""
+    import asyncio
+
+    from station.app import make_app
+    from station.store import save_result
+    from tests.test_tui import SIZE, text_of, wait_for
+    from tests.tui_data import p1_result, seed_history
+
+    db = tmp_path / "station.db"
+    seed_history(str(db), "IMU-7", n=2)  # #1 2024-03-01, #2 2025-03-01
+    cap, result = p1_result("IMU-7", drift=0.01, date="2024-09-01")
+    back = save_result(str(db), cap, result, device_id="IMU-7", judged_reference={"id": 1})
+    with Store(str(db)) as s:
+        saved = s.calibration(back)["saved_at"][:16].replace("T", " ")
+
+    async def story():
+        app = make_app(str(db), device_id="IMU-7", start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: app.screen.query_one("#calibrations").row_count == 3)
+            await wait_for(pilot, lambda: app.screen.query_one("#calnote").display)
+            shown = " ".join(text_of(app, "#calnote").split())  # wrapped in the right-hand column
+            # without "; #2 stays as judged against #1" (history, the report): two rows, not three
+            assert shown == f"#{back} dated 2024-09-01, saved {saved} UTC after #2, now precedes it"
+            assert app.screen.query_one("#calnote").region.height == 2
+            table = app.screen.query_one("#calibrations")
+            table.focus()
+            for _ in range(2):  # #3, then #1: nothing to say
+                await pilot.press("down")
+                await wait_for(pilot, lambda: not app.screen.query_one("#calnote").display)
+            await pilot.press("up", "up")
+            await wait_for(pilot, lambda: app.screen.query_one("#calnote").display)
+
+    asyncio.run(story())

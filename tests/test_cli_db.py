@@ -257,7 +257,8 @@ def test_history_text(capsys, filled):
     code, out, _ = run(capsys, "history", "IMU-1", "--procedure", "accel-tabletop", "--db", filled)
     lines = out.splitlines()
     assert code == 0 and lines[0] == "device IMU-1: 3 calibrations of accel-tabletop, oldest first"
-    assert "2024-01-01T00:00:00Z  accel-tabletop  accepted, superseded by #2" in lines[1]
+    # a date alone, saved on a later day: its date's last second (db.params.capture_time)
+    assert "2024-01-01T23:59:59Z  accel-tabletop  accepted, superseded by #2" in lines[1]
     assert lines[2].strip().startswith("B [m/s^2]: 0.1±0.01  0.2±0.01  0.3±0.01")
 
 
@@ -305,7 +306,8 @@ def test_due_exit_status_for_cron(capsys, filled):
     # compass interval ends 2025-03-01; B[0]'s 0.02/year against a 0.01 tolerance is 1.4 sigma, not a
     # drift: accel due at its interval's end, 2026-01-01
     code, out, _ = run(capsys, "due", "--now", "2025-03-20", "--db", filled)
-    assert code == 1 and out.startswith("IMU-1: overdue by 19 d (due 2025-03-01)")
+    # due at the end of 2025-03-01 (the compass capture's date alone is that day's last second)
+    assert code == 1 and out.startswith("IMU-1: overdue by 18 d (due 2025-03-01)")
     assert "compass: 365-day interval" in out and "accel-tabletop" not in out
     code, out, _ = run(capsys, "due", "--now", "2025-08-01", "--json", "--db", filled)
     [e] = json.loads(out)
@@ -314,11 +316,11 @@ def test_due_exit_status_for_cron(capsys, filled):
     code, out, _ = run(capsys, "due", "--now", "2026-01-02", "--json", "--db", filled)
     [e] = json.loads(out)
     [accel] = [r for r in e["reasons"] if r["procedure"] == "accel-tabletop"]
-    assert accel["kind"] == "interval" and accel["due"] == "2026-01-01T00:00:00Z"
+    assert accel["kind"] == "interval" and accel["due"] == "2026-01-01T23:59:59Z"
     assert "no significant drift over 3 calibrations (steepest B[0] +0.02 ± 0.014/year, 1.4σ < 3σ)" in accel["text"]
     assert run(capsys, "due", "--now", "2025-02-01", "--within", "20", "--db", filled)[0] == 0
     code, out, _ = run(capsys, "due", "--now", "2025-02-01", "--within", "40", "--db", filled)
-    assert code == 1 and out.startswith("IMU-1: due in 28 d (2025-03-01)")
+    assert code == 1 and out.startswith("IMU-1: due in 29 d (2025-03-01)")
 
 
 def test_due_real_process_exit_codes(tmp_path):

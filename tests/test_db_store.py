@@ -272,7 +272,8 @@ def test_save_calibration_stores_capture_result_and_device(store):
         r, meta=meta, columns=cols, operator="bo", software_version="0.1.0", sensor_kind="accel"
     )
     cal = store.calibration(cid)
-    assert cal["device_id"] == "IMU-9" and cal["time"] == "2026-11-21T00:00:00Z"
+    # a date alone, saved on a later day: that day's last second (db.params.capture_time)
+    assert cal["device_id"] == "IMU-9" and cal["time"] == "2026-11-21T23:59:59Z"
     assert cal["software_version"] == "0.1.0" and cal["operator"] == "bo" and cal["accepted"] is True
     expected = dict(r)
     expected["uncertainty"] = {"B": [0.01, None, 0.01], "M": r["uncertainty"]["M"]}  # NaN stored as null

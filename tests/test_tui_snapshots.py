@@ -80,9 +80,14 @@ def test_results_snapshot(snap_compare, size):
 
 
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
-def test_history_snapshot(snap_compare, size, tmp_path):
+def test_history_snapshot(snap_compare, size, tmp_path, monkeypatch):
+    """The due line counts days from the clock: held at the day the picture was taken, or the
+    picture would change every day ("overdue by 1005 d")."""
+    from datetime import UTC, datetime
+
     from tests.tui_data import seed_history
 
+    monkeypatch.setattr("db.params.now_utc", lambda: datetime(2026, 11, 29, 12, 0, tzinfo=UTC))
     db = str(tmp_path / "station.db")
     seed_history(db, "IMU-7", n=3, interval_days=365, start_year=2021)
     app = make_app(db, start="history")

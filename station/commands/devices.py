@@ -410,7 +410,10 @@ def _show(args: argparse.Namespace) -> int:
     if args.json:
         device = dict(device)
         device["n_calibrations"] = len(history)
-        device["latest"] = {p: {"id": h["id"], "time": h["time"]} for p, h in latest.items()}
+        device["latest"] = {
+            p: {"id": h["id"], "time": h["time"], "back_dated_before": h["back_dated_before"]}
+            for p, h in latest.items()
+        }
         print_json(device)
         return 0
     contexts = unit_contexts(history)
@@ -433,8 +436,14 @@ def _show(args: argparse.Namespace) -> int:
         f"created: {safe(device['created'])}",
         f"calibrations: {len(history)}",
     ]
+    by_id = {h["id"]: h for h in history}
     for procedure, h in sorted(latest.items()):
         out.append(f"latest {safe(procedure)}: #{h['id']} {safe(h['time'])}")
+        if h["back_dated_before"]:  # a back-dated capture saved after it now comes before it
+            from station.store import back_dated_line
+
+            note = back_dated_line(h, [by_id[i] for i in h["back_dated_before"]])
+            out.append(f"  note: {safe(note)}")
     out.append(f"notes: {safe(device['notes']) if device['notes'] is not None else '-'}")
     sys.stdout.write("\n".join(out) + "\n")
     return 0

@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     width = terminal_width()
     what = f" of {args.procedure}" if args.procedure else ""
     out = [f"device {safe(args.id)}: {len(records)} calibration{'s' if len(records) != 1 else ''}{what}, oldest first"]
+    by_id = {r["id"]: r for r in records}
     for r in records:
         status = "accepted" if r["accepted"] else "rejected"
         if r["superseded_by"] is not None:
@@ -80,6 +81,11 @@ def run(args: argparse.Namespace) -> int:
                 width,
             )
         )
+        if r["back_dated_before"]:  # a back-dated capture saved after it now comes before it
+            from station.store import back_dated_line
+
+            before = [by_id[i] for i in r["back_dated_before"]]
+            out.append(fit_line(f"note: {safe(back_dated_line(r, before))}", "    ", width))
         out.extend(fit_line(line, "    ", width) for line in _param_lines(r))
         out.extend(fit_line(f"warning: {safe(w)}", "    ", width) for w in r["warnings"])
     sys.stdout.write("\n".join(out) + "\n")

@@ -332,6 +332,17 @@ def to_capture(
             columns[name] = values[:, j]
         meta[f"{kind}_unit"] = s.unit
     temp = grid.temp_c[rows] if grid.temp_c is not None else None
+    if temp is not None:
+        from station.capture import ABSOLUTE_ZERO_C, TEMP_MAX_C
+
+        with np.errstate(invalid="ignore"):
+            impossible = (temp < ABSOLUTE_ZERO_C) | (temp > TEMP_MAX_C)
+        if impossible.any():  # a driver's "no reading" value, a corrupt field: the IMU data stand
+            temp = np.where(impossible, np.nan, temp)
+            imported.warnings.append(
+                f"{int(impossible.sum())} temperature samples below absolute zero or above {TEMP_MAX_C:g} °C "
+                f"(the first {grid.temp_c[rows][impossible][0]:g}): left empty"
+            )
     if temp is not None and np.isfinite(temp).any():
         columns["temp_c"] = temp
     for key, value in imported.meta.items():

@@ -109,6 +109,7 @@ class _SkippedBytes(io.TextIOBase):
         self.bytes = 0
         self.stretches = 0
         self.first: int | None = None
+        self.cut_at: int | None = None  # a tlog's last record, cut by the end of the file (_tlog_unreadable)
         self._last = -2
         self._tail = ""
 
@@ -310,6 +311,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                     gps_s = d["GWk"] * 604800.0 + d["GMS"] * 1e-3
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         first_us = float(min(r[0, 0] for r in rows.values())) if rows else None
+        cut = _df_cut(log)
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001
@@ -318,15 +320,17 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         with contextlib.suppress(Exception):
             log.close()
     if not rows:
+        also = f"; warning: {cut}" if cut else ""  # what the cut left may be why there is nothing
         seen = {k: sorted(v) for k, v in instances_seen.items() if v}
         if seen:
             raise InputError(
                 path,
                 None,
                 f"--instance {inst}: the log has "
-                + "; ".join(f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items()),
+                + "; ".join(f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items())
+                + also,
             )
-        raise InputError(path, None, "no IMU or MAG messages in the DataFlash log")
+        raise InputError(path, None, "no IMU or MAG messages in the DataFlash log" + also)
     streams = {}
     for kind, arr in rows.items():
         if not len(arr) or (kinds is not None and kind not in kinds):
@@ -351,7 +355,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
-    warnings = [w for w in (skipped.warning(),) if w]
+    warnings = [w for w in (skipped.warning(), cut) if w]
     learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst, units.get("mag"), params, late)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
@@ -404,6 +408,40 @@ def _df_columns(log, name: str) -> dict[str, np.ndarray] | None:
     return out
 
 
+def _df_cut(log) -> str:
+    """The warning for a DataFlash log that ends inside a record (a power loss while logging, a
+    copy stopped part-way), "" when it ends where a record ends. pymavlink indexes a record whose
+    3 header bytes are there and leaves it out where its body is not (``_df_columns`` too),
+    without a word; 1 to 3 bytes of a record's header at the very end it does not index at all."""
+    end = log.data_len
+    last_end, cut = 0, None
+    for type_id, offsets in enumerate(log.offsets):
+        fmt = log.formats.get(type_id) if offsets else None
+        if fmt is None:
+            continue
+        ofs = int(offsets[-1])
+        if ofs + fmt.len > end:
+            cut = (ofs, fmt.name, fmt.len)
+            ofs = int(offsets[-2]) if len(offsets) > 1 else -fmt.len
+        last_end = max(last_end, ofs + fmt.len)
+    tail = end - last_end
+    if cut is None and 0 < tail <= 3 and log.data_map[last_end] == 0xA3:  # DataFlash HEAD1
+        fmt = log.formats.get(log.data_map[last_end + 2]) if tail == 3 else None
+        if fmt is None:
+            return (
+                f"the log is cut short inside a record's header at byte {last_end} ({tail} of its 3 bytes there): "
+                "the records before it are imported"
+            )
+        cut = (last_end, fmt.name, fmt.len)
+    if cut is None:
+        return ""
+    ofs, name, length = cut
+    return (
+        f"the log is cut short inside a record ({name}) at byte {ofs} ({end - ofs} of its {length} bytes there): "
+        "the records before it are imported"
+    )
+
+
 def _df_text(raw) -> str:
     """A DataFlash char[] field as DFMessage gives it: up to the first NUL, UTF-8 else Latin-1."""
     raw = bytes(raw).split(b"\0", 1)[0]
@@ -439,9 +477,12 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
     checking them, steps over any byte where no frame starts one at a time, and drops a frame
     whose checksum fails when it reads it. The records are walked here by the same rule, and
     counted: the bytes stepped over, and the records whose frame fails its checksum (CRC-16/
-    MCRF4XX with the message's CRC_EXTRA, as pymavlink checks it) or is cut by the end of the
-    file. A frame of a message the dialect does not know cannot be checked; it is counted only
-    where a stretch counted touches it (a false start in garbage), else taken as sound.
+    MCRF4XX with the message's CRC_EXTRA, as pymavlink checks it). A record cut by the end of the
+    file right after a sound one (a power loss, a copy stopped part-way; 1 to 14 bytes of one
+    too) is not counted but kept as ``cut_at``, its first byte; inside a stretch counted, it is
+    part of the stretch. A frame of a message the dialect does not know cannot be
+    checked; it is counted only where a stretch counted touches it (a false start in garbage),
+    else taken as sound.
     """
     from pymavlink.generator.mavcrc import x25crc
 
@@ -474,6 +515,11 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
         length = data[ofs + 9]
         frame_end = ofs + 8 + header + length + 2
         mlen = frame_end - ofs + (13 if marker == 0xFD and data[ofs + 10] & signed else 0)
+        if ofs + mlen > n:  # the file ends inside this record
+            if bad.follows(ofs):  # a false start in a stretch of garbage that runs to the end
+                lost(ofs, n - ofs)
+                ofs = n
+            break
         cls = known.get(mtype)
         if cls is None:
             sound = not bad.follows(ofs)
@@ -490,7 +536,37 @@ def _tlog_unreadable(data, mavlink) -> _SkippedBytes:
         else:
             unknown = None
         ofs += mlen
+    if ofs < n and not bad.follows(ofs):  # after a sound record (or at the start): a cut
+        bad.cut_at = ofs
     return bad
+
+
+def _mmaplog_upto(path, end: int):
+    """pymavlink's ``mavmmaplog`` of ``path`` indexing only its first ``end`` bytes: it reads the
+    first record of each message type whole while it indexes, and fails (AttributeError on the
+    None it gets) where the file ends inside the first record of its type."""
+    from pymavlink import mavutil
+
+    class Upto(mavutil.mavmmaplog):
+        def init_arrays(self, progress_callback=None):
+            self.data_len = min(self.data_len, end)
+            super().init_arrays(progress_callback)
+
+    return Upto(str(path))
+
+
+def _tlog_cut_at(path) -> int | None:
+    """Where a tlog ends inside a record (``_tlog_unreadable``), None when it ends whole or
+    cannot be read."""
+    import mmap
+
+    from pymavlink import mavutil
+
+    try:
+        with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            return _tlog_unreadable(data, mavutil.mavlink).cut_at
+    except (OSError, ValueError):
+        return None
 
 
 def _param_value(msg, firmware: str | None) -> float | int:
@@ -502,9 +578,33 @@ def _param_value(msg, firmware: str | None) -> float | int:
     return value
 
 
+@contextlib.contextmanager
+def _same_mavlink_version():
+    """pymavlink's reader, meeting a MAVLink 2 frame, sets ``os.environ['MAVLINK20']`` and reloads
+    its dialect (``mavfile.auto_mavlink_version``): every MAVLink object the process makes after
+    that speaks MAVLink 2. A log read is no reason to change the process: both are put back."""
+    from pymavlink import mavutil
+
+    env, module = os.environ.get("MAVLINK20"), mavutil.mavlink
+    try:
+        yield
+    finally:
+        if os.environ.get("MAVLINK20") != env:
+            if env is None:
+                os.environ.pop("MAVLINK20", None)
+            else:
+                os.environ["MAVLINK20"] = env
+        mavutil.mavlink = module
+
+
 def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     """RAW_IMU / SCALED_IMU{,2,3} / HIGHRES_IMU and PARAM_VALUE from a MAVLink log (and
     SENSOR_OFFSETS: compass offsets that change while the data run are ``params_changed``)."""
+    with _same_mavlink_version():
+        return _read_tlog(path, instance=instance, kinds=kinds)
+
+
+def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     from pymavlink import mavutil
 
     inst = 0 if instance is None else int(instance)
@@ -525,7 +625,14 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             # mavmmaplog directly: mavlink_connection() would try to *execute* a path holding '/bin/'
             log = mavutil.mavmmaplog(str(path))
     except Exception as exc:  # noqa: BLE001
-        raise _open_error(path, exc, "MAVLink log") from None
+        cut = _tlog_cut_at(path) if not isinstance(exc, OSError) else None
+        if cut is None:
+            raise _open_error(path, exc, "MAVLink log") from None
+        try:  # the records before the cut, as a log that ends whole
+            with _quiet():
+                log = _mmaplog_upto(path, cut)
+        except Exception as exc2:  # noqa: BLE001
+            raise _open_error(path, exc2, "MAVLink log") from None
     try:
         unreadable = _tlog_unreadable(log.data_map if log.data_map is not None else b"", mavutil.mavlink)
     except Exception:  # noqa: BLE001 - the check must not stop a log pymavlink reads
@@ -585,7 +692,12 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         raise InputError(
             path,
             None,
-            f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})",
+            f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})"
+            + (
+                f"; warning: it is cut short inside a message at byte {unreadable.cut_at}"
+                if unreadable.cut_at is not None
+                else ""
+            ),
         )
     # a link with several vehicles (or autopilots) on it: one source's IMU, not theirs interleaved
     sources = Counter((m.get_srcSystem(), m.get_srcComponent()) for _, m in by_type[name])
@@ -658,7 +770,12 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         meta["frame"] = FRD
     if board_uid:
         meta["board_uid"] = str(board_uid)
-    warnings = [w for w in (unreadable.warning(),) if w]
+    cut = (
+        f"the log is cut short inside a message at byte {unreadable.cut_at}: the messages before it are imported"
+        if unreadable.cut_at is not None
+        else None
+    )
+    warnings = [w for w in (unreadable.warning(), cut) if w]
     warnings += skipped
     arrival = arrivals[(name, *source)]
     if arrival > 946684800:  # the ground station's clock (UTC) when the first sample came

@@ -162,7 +162,15 @@ def capture_of(
         from station.importers import px4
 
         device = px4.default_device(imported, primary(procedure))
-    capture = to_capture(path, imported, procedure, device=device)
+    try:
+        capture = to_capture(path, imported, procedure, device=device)
+    except InputError as exc:
+        # what the reader noticed first (a log cut short, raw topics at 1 Hz) is often why
+        # too little is left: the one refusal line carries it, as the CLI folds in warnings
+        if not imported.warnings:
+            raise
+        also = "".join(f"; warning: {w}" for w in imported.warnings)
+        raise InputError(exc.path, exc.line, f"{exc.message}{also}") from None
     _escape_text(capture.meta, imported.warnings)
     return capture, list(imported.warnings)
 

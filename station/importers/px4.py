@@ -40,21 +40,25 @@ SOURCES = ("auto", "raw", "combined")
 
 
 class _CutWatch:
-    """The log file as pyulog reads it, remembering the last read that came back short:
-    pyulog stops without a word where a cut file ends inside a message."""
+    """The log file as pyulog reads it, remembering the first read that came back short (the
+    first that met the end of the file): pyulog stops without a word where a cut file ends
+    inside a message. The first, not the last: a log cut inside its definitions has pyulog
+    read on into its data section, whose next read finds the end cleanly (3 bytes asked, none
+    there) and would hide the cut."""
 
     def __init__(self, fh) -> None:
         self._fh = fh
-        self.short: tuple[int, int, int] | None = None  # (asked, got, where) of the last read, when short
+        self.short: tuple[int, int, int] | None = None  # (asked, got, where) of the first short read
 
     def read(self, n=-1):
         data = self._fh.read(n)
-        self.short = (n, len(data), self._fh.tell()) if n is not None and 0 < n and len(data) < n else None
+        if self.short is None and n is not None and 0 < n and len(data) < n:
+            self.short = (n, len(data), self._fh.tell())
         return data
 
     def cut_at(self) -> int | None:
         """The byte where the log ends inside a message, None when it ends between two
-        (the last read asked for a message header and found the end of the file)."""
+        (the read that met the end asked for a message header and found nothing)."""
         if self.short is None or self.short[:2] == (3, 0):
             return None
         return self.short[2]
@@ -185,11 +189,13 @@ def read(
             "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic (try the combined source: "
             "--source combined, or 'combined' on the import screen)",
         )
+    cut = getattr(ulog, "station_cut_at", None)
     if not use_raw and not combined:
         raise InputError(
             path,
             None,
-            "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag nor sensor_combined",
+            "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag nor sensor_combined"
+            + (f" (it is cut short inside a message at byte {cut}, before any)" if cut is not None else ""),
         )
     streams: dict[str, Stream] = {}
     meta: dict[str, str] = {"firmware": "px4"}
@@ -344,7 +350,6 @@ def read(
             params[name] = value
         elif ts <= t1_us:
             late.add(name)
-    cut = getattr(ulog, "station_cut_at", None)
     if cut is not None:  # a power loss or a copy cut short: what was written before it is whole
         warnings.append(
             f"the log is cut short inside a message at byte {cut}: the samples before it are imported, "

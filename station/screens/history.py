@@ -86,6 +86,7 @@ class HistoryScreen(NoticesMixin, Screen):
     HistoryScreen #right { width: 1fr; height: 1fr; border-left: vkey $secondary; }
     HistoryScreen #next { height: auto; padding: 0 1; }
     HistoryScreen #calibrations { height: 1fr; }
+    HistoryScreen #calnote { height: auto; padding: 0 1; color: $warning; display: none; }
     HistoryScreen #plot { height: 1fr; min-height: 8; }
     /* notices under the plot, not a toast over its last points and date axis (the reminder
        that brings the operator here says F2) */
@@ -117,6 +118,8 @@ class HistoryScreen(NoticesMixin, Screen):
             with Vertical(id="right"):
                 yield Static("", id="next")
                 yield DataTable(id="calibrations", cursor_type="row", zebra_stripes=True)
+                # the highlighted calibration's back-dated note (station.store.back_dated_line)
+                yield Static("", id="calnote")
                 yield PlotextPlot(id="plot")
         yield Static("", id="notices")
         yield footer()
@@ -235,6 +238,7 @@ class HistoryScreen(NoticesMixin, Screen):
                     state,
                     key=str(h["id"]),
                 )
+            self.show_note(c.cursor_row)
             # keep the parameter the operator chose when the same device is read again
             # (the first row highlight can ask for it a second time)
             self.param_index = self.param_index % len(self.drift) if (same and self.drift) else 0
@@ -245,6 +249,23 @@ class HistoryScreen(NoticesMixin, Screen):
             return  # a row the cursor has left since (clear() passes the first on its way)
         if event.row_key is not None and event.row_key.value != self.device_id:
             self.load_device(event.row_key.value)
+        elif event.data_table.id == "calibrations":
+            self.show_note(event.cursor_row)
+
+    def show_note(self, row: int) -> None:
+        """Under the calibrations, the highlighted one's back-dated note: a calibration dated
+        before it that was saved after it (which, its date, when saved), as `history` says it;
+        nothing (no line taken from the plot) for the others."""
+        from station.store import back_dated_line
+
+        by_id = {h["id"]: h for h in self.history}
+        newest_first = list(reversed(self.history))  # the table's order
+        h = newest_first[row] if 0 <= row < len(newest_first) else None
+        before = [by_id[i] for i in (h or {}).get("back_dated_before") or [] if i in by_id]
+        note = back_dated_line(h, before, judged=False) if h is not None else None  # 2 rows at 80x24
+        label = self.query_one("#calnote", Static)
+        label.update(tui_markup(note) if note else "")
+        label.display = bool(note)
 
     def action_diagnose(self) -> None:
         """Diagnose the calibration under the cursor of the calibrations table."""
