@@ -245,10 +245,11 @@ class HistoryScreen(NoticesMixin, Screen):
             self.plot()
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
-        if event.data_table.id != "devices" or event.cursor_row != event.data_table.cursor_row:
+        if event.cursor_row != event.data_table.cursor_row:
             return  # a row the cursor has left since (clear() passes the first on its way)
-        if event.row_key is not None and event.row_key.value != self.device_id:
-            self.load_device(event.row_key.value)
+        if event.data_table.id == "devices":
+            if event.row_key is not None and event.row_key.value != self.device_id:
+                self.load_device(event.row_key.value)
         elif event.data_table.id == "calibrations":
             self.show_note(event.cursor_row)
 
