@@ -567,6 +567,12 @@ def calibrate(
             "some coefficients are poorly determined; add positions with gravity along other directions"
         )
     n = len(positions)
+    if n <= MIN_DISTINCT:  # as many norm rows as the norm's parameters: they are met exactly
+        warnings.append(
+            f"{n} positions for the norm condition's {MIN_DISTINCT} parameters: no degree of freedom is "
+            "left, so |A| − g is 0 by construction and the residual checks nothing (neither the model "
+            "nor a position that moved); add positions (P1 asks 12)"
+        )
     r_n = res.residuals[:n]
     s_n = sig_n
     z = r_n / s_n  # noqa: F841

@@ -112,6 +112,23 @@ def test_any_number_of_positions_from_nine():
     assert np.all(np.abs(z_scores(r, B, M)) < 5)
 
 
+def test_nine_positions_say_the_residual_checks_nothing():
+    """docs/protocol.md's example (`sim-device --auto`, `record --seconds 120`) records 9 holds:
+    9 norm rows for the norm's 9 parameters, and `calibrate` printed "residual 2.51e-15 m/s^2 RMS"
+    with no word that a zero residual is all 9 rows can give. It says so; with 10 it does not."""
+    names = list(P1_POSITIONS)[:6] + ["xy_45", "yz_45", "xz_45"]
+    for labelled in (True, False):
+        pos, _, _ = fast_table(4, names=names)
+        if not labelled:
+            for p in pos:
+                p.direction = None
+        r = T.calibrate(pos, G)
+        said = [w for w in r.warnings if "no degree of freedom" in w]
+        assert len(said) == 1 and said[0].startswith("9 positions for the norm condition's 9 parameters"), r.warnings
+    pos, _, _ = fast_table(4, names=names + ["xz_135"])
+    assert not any("no degree of freedom" in w for w in T.calibrate(pos, G).warnings)
+
+
 def test_one_position_far_off_is_named():
     """With redundancy (each P1 position twice) a position 0.01 m/s² off (~45σ) is named;
     with none off, none is."""

@@ -896,3 +896,23 @@ def test_a_device_that_sends_nothing_is_said_on_the_procedure_screen():
     assert "t=— s" in progress and "nan" not in progress, progress
     flat = " ".join(lines.split())
     assert f"no data from {path}" in flat and "baud rate" in flat, lines
+
+
+def test_headless_demo_run_twice_says_it_is_saved_already(tmp_path, capsys):
+    """`station demo --headless` runs on a simulated clock: the same seed gives the same capture,
+    sample for sample. A second run (a script that runs it again) ended in "cannot process this
+    input (DuplicateCapture ...)" and exit 2; it says which calibration holds that run, exit 0,
+    and stores nothing twice."""
+    from db.store import Store
+    from station.cli import main
+
+    db = str(tmp_path / "station.db")
+    assert main(["demo", "--headless", "--db", db]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == f"saved as calibration #1 in {db}"
+    assert main(["demo", "--headless", "--db", db]) == 0
+    out, err = capsys.readouterr()
+    assert out.splitlines()[-1] == (
+        f"already saved as calibration #1 in {db}: the same --seed runs the same demo (--seed N for another)"
+    )
+    assert err == ""
+    assert len(Store(db).history("SIM-ACC-0000")) == 1

@@ -608,3 +608,75 @@ def test_new_run_asks_before_it_drops_an_unexported_noise_record(tmp_path):
     question = asyncio.run(story())
     assert "not exported" in question and "lost" in question, question
     assert os.listdir(out)
+
+
+def test_p1_abort_notice_counts_its_positions_in_words(tmp_path):
+    """`a`, `y` on P1 said "P1 aborted with 1 positions captured" (seen at 80x24); one position
+    is "1 position", none is said as none."""
+    from tests.test_tui import screen_name
+
+    async def story(n_wanted):
+        clock = BenchClock()
+        src = SimSource(seed=3, clock=clock)
+        app = make_app(str(tmp_path / f"s{n_wanted}.db"), device=src, start="procedure", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            guide = app.screen.guide
+            if n_wanted:
+                await run_bench(pilot, src, clock, lambda: guide.n_captured == n_wanted)  # x_up: it starts there
+            await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")
+            await wait_for(pilot, lambda: "aborted" in text_of(app, "#notices"))
+            return " ".join(text_of(app, "#notices").split())
+
+    one = asyncio.run(story(1))
+    assert "P1 aborted with 1 position captured: Resume (F6) continues it" in one, one
+    none = asyncio.run(story(0))
+    assert "P1 aborted with no position captured" in none, none
+
+
+def test_history_i_on_the_second_device_stays_on_it(tmp_path):
+    """Seen at 80x24: `i` on History with the second of three devices highlighted set its
+    interval (the notice named it), then the devices were read again, the cursor went back to
+    the first device and the line over the calibrations showed *its* due date ("due in 365 d")
+    under the 30 days just typed for the other. The cursor and the right side stay on the device
+    whose interval was set; both say its new date."""
+    from db.store import Store
+    from tests.test_tui import screen_lines, screen_name
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    seed_history(db, "IMU-1", n=1, interval_days=365, start_year=2026)
+    seed_history(db, "IMU-2", n=1, start_year=2026)
+    seed_history(db, "IMU-3", n=1, start_year=2026)
+
+    def shown(app) -> str:
+        return " ".join(" ".join(screen_lines(app)).split())
+
+    def highlighted(app) -> str:
+        t = app.screen.query_one("#devices")
+        return t.coordinate_to_cell_key(t.cursor_coordinate).row_key.value
+
+    async def story():
+        app = make_app(db, start="history")
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-3" in text_of(app, "#devices"))
+            await wait_for(pilot, lambda: app.screen.device_id == "IMU-1" and "interval 365 d" in shown(app))
+            await pilot.press("down")
+            await wait_for(pilot, lambda: app.screen.device_id == "IMU-2" and "never due" in shown(app))
+            await pilot.press("i")
+            await wait_for(pilot, lambda: screen_name(app) == "IntervalScreen")
+            await pilot.press("3", "0", "enter")
+            # the devices read again (IMU-2 no longer "no int"), then the device's own read
+            await wait_for(
+                pilot, lambda: screen_name(app) == "HistoryScreen" and text_of(app, "#devices").count("no int") == 1
+            )
+            await app.workers.wait_for_complete()
+            await pilot.pause()
+            return highlighted(app), app.screen.device_id, text_of(app, "#next")
+
+    cursor, right_side, next_line = asyncio.run(story())
+    assert Store(db).get_device("IMU-2")["interval_days"] == 30
+    assert (cursor, right_side) == ("IMU-2", "IMU-2")
+    assert "interval 30 d" in next_line and "365" not in next_line, next_line

@@ -9,7 +9,6 @@ encoder (tests/test_import_ardupilot.py's DataFlashWriter): no real ArduPilot lo
 from __future__ import annotations
 
 import asyncio
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,11 +17,12 @@ from station.app import make_app
 from station.capture import read_capture
 from station.importers import load
 from station.importers.options import ImportOptions
+from tests.conftest import SHARED
 from tests.station_run import run_station
 from tests.test_import_ardupilot import PARAMS, DataFlashWriter
 from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for
 
-PX4 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "px4_ulog" / "original"
+PX4 = SHARED / "data" / "px4_ulog" / "original"  # ../shared, or $STATION_SHARED for a worktree elsewhere
 
 
 def _settled(app) -> bool:
@@ -200,3 +200,20 @@ def test_warnings_past_the_two_shown_are_counted_not_dropped():
     assert all(len(line) <= WIDTH for line in lines)
     two = summary_lines("/logs/a.ulg", "ulog", Imported({"gyro": stream}, {}, warnings[:2]))
     assert not any("more warning" in line for line in two)
+
+
+def test_a_missing_csv_is_said_missing_without_the_plain_csv_route(tmp_path):
+    """F7, a mistyped `/tmp/nonexistent.csv`, Enter: "no such file" came with three lines on
+    naming a plain CSV's columns with `station import --map` (the route for a CSV the reader
+    cannot name), which sends a new user off to the shell for a typo. A file that is not there
+    is said so, alone."""
+
+    async def story():
+        app = make_app(str(tmp_path / "s.db"))
+        async with app.run_test(size=SIZE) as pilot:
+            await _open(pilot, app, tmp_path / "nonexistent.csv")
+            return " ".join(text_of(app, "#status").split())
+
+    status = asyncio.run(story())
+    assert "no such file" in status, status
+    assert "plain CSV" not in status and "--map" not in status, status

@@ -108,13 +108,25 @@ def _calibrate_and_save(guide, device_id: str, db: str | None, out) -> int:
         if assessment.failed:  # the scripted operator never decides for a person
             print("FAIL, not saved: " + "; ".join(assessment.reasons), file=out)
             return 1
-        cal_id = save_result(
-            db,
-            capture,
-            result,
-            device_id=device_id,
-            review=review_record(assessment, "accepted"),
-            time=getattr(guide, "started", None),
-        )
+        from db.store import DuplicateCapture
+
+        try:
+            cal_id = save_result(
+                db,
+                capture,
+                result,
+                device_id=device_id,
+                review=review_record(assessment, "accepted"),
+                time=getattr(guide, "started", None),
+            )
+        except DuplicateCapture as exc:  # the same seed runs the same demo, sample for sample
+            held = (
+                f"calibration #{exc.calibration_id}" if exc.calibration_id is not None else f"capture #{exc.capture_id}"
+            )
+            print(
+                f"already saved as {held} in {db}: the same --seed runs the same demo (--seed N for another)",
+                file=out,
+            )
+            return 0
         print(f"saved as calibration #{cal_id} in {db}", file=out)
     return 0

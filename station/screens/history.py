@@ -9,6 +9,7 @@ from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.coordinate import Coordinate
 from textual.screen import Screen
 from textual.widgets import DataTable, Static
 from textual_plotext import PlotextPlot
@@ -174,12 +175,26 @@ class HistoryScreen(NoticesMixin, Screen):
             self.due = message.data["due"]
             status = {d["device_id"]: d for d in self.due}
             t = self.query_one("#devices", DataTable)
-            t.clear()
+            ids = [d["id"] for d in self.devices]
+            # read again (an interval or limits set here): the cursor stays on the device it was
+            # on; a clear() put it back on the first, whose due line then showed under the other's
+            keep = self.device_id if self.device_id in ids else (ids[0] if ids else None)
+            cells = []
             for d in self.devices:
                 st = status.get(d["id"])
                 # calibrated without an interval: never due, not "ok" (`station due` never names it)
                 word = due_status(st) if st else ("ok" if d.get("interval_days") else "no int")
-                t.add_row(tui_markup(short_id(d["id"])), str(d["n_calibrations"]), word, key=d["id"])
+                cells.append((tui_markup(short_id(d["id"])), str(d["n_calibrations"]), word))
+            if t.row_count and [k.value for k in t.rows] == ids:  # the same devices: the cells only
+                for i, row in enumerate(cells):
+                    for j, value in enumerate(row):
+                        t.update_cell_at(Coordinate(i, j), value)
+            else:
+                t.clear()
+                for device_id, row in zip(ids, cells, strict=True):
+                    t.add_row(*row, key=device_id)
+                if keep is not None:
+                    t.move_cursor(row=ids.index(keep))
             bad = [d for d in self.due if d["status"] in ("overdue", "due")]
             # one row per device, when (as `station due --within` says it); why is said over the
             # highlighted device's calibrations (#next): three reasons of two rows each here left
@@ -191,8 +206,8 @@ class HistoryScreen(NoticesMixin, Screen):
             if not self.devices:
                 text = "No devices yet: calibrate one (Connect → Start P1) or run `station demo`."
             self.query_one("#due", Static).update(text)
-            if self.devices:
-                self.load_device(self.devices[0]["id"])
+            if keep is not None:
+                self.load_device(keep)
         elif message.what == "device-history" and message.data:
             same = message.data["id"] == self.device_id  # a second load of the same device
             self.device_id = message.data["id"]
@@ -230,8 +245,11 @@ class HistoryScreen(NoticesMixin, Screen):
             self.plot()
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
-        if event.data_table.id == "devices" and event.row_key is not None and event.row_key.value != self.device_id:
-            self.load_device(event.row_key.value)
+        if event.cursor_row != event.data_table.cursor_row:
+            return  # a row the cursor has left since (clear() passes the first on its way)
+        if event.data_table.id == "devices":
+            if event.row_key is not None and event.row_key.value != self.device_id:
+                self.load_device(event.row_key.value)
         elif event.data_table.id == "calibrations":
             self.show_note(event.cursor_row)
 

@@ -234,7 +234,9 @@ class ImportScreen(Screen):
             if fmt is None and os.path.isfile(path) and load.is_station_capture(path):
                 self._calibrate_capture(path)
                 return
-            plain = fmt is None  # no log format, no station capture: a CSV read by its column names
+            # no log format, no station capture: a CSV read by its column names (a path that is
+            # not there is said so alone: the route to --map is no answer to a typo)
+            plain = fmt is None and os.path.exists(path)
             fmt = fmt or "csv"
             try:
                 imported = load.read(path, ImportOptions(source=source), fmt)

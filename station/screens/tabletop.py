@@ -210,7 +210,11 @@ class ProcedureScreen(NoticesMixin, GuidedScreenMixin, Screen):
             n = 0
         self.workers.cancel_group(self, "stream")
         self.app.session.guide = None
-        self.app.notify(f"P1 aborted with {n} positions captured: Resume (F6) continues it", timeout=6)
+        if n:
+            said = f"{n} position{'s' if n != 1 else ''} captured: Resume (F6) continues it"
+        else:
+            said = "no position captured"
+        self.app.notify(f"P1 aborted with {said}", timeout=6)
         self.app.pop_screen()
 
     def action_sim_place(self) -> None:
