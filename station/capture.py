@@ -79,6 +79,10 @@ _NUMERIC_META: dict[str, tuple] = {
     "heading_deg": (lambda x: -360.0 <= x <= 720.0, "must be between -360 and 720"),
     "sample_rate_hz": (lambda x: 0.0 < x <= 1.0e9, "must be positive and at most 1e9"),
 }
+# A device id is shown by every command, stored in the database and named in the firmware files:
+# an ESC sequence or a newline in it is a corrupt or hostile file (station.importers.load says the
+# same of `station import --device`).
+DEVICE_TEXT_RULE = "a capture's device cannot hold a control character or spaces at its ends"
 # The metadata keys capture-format.md defines (those _check_meta checks); one in other letter
 # case is read as it.
 SPEC_KEYS = frozenset({"procedure", "device", "date", "gyro_mode", *UNIT_KEYS, *_NUMERIC_META})
@@ -447,6 +451,9 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
             _dt.datetime.fromisoformat(meta["date"])
         except ValueError:
             bad("date", f"metadata 'date': {_show(meta['date'])} is not an ISO date (YYYY-MM-DD[THH:MM:SS])")
+    device = meta.get("device")
+    if device is not None and not device.isprintable():  # as `station import --device` refuses it
+        bad("device", f"metadata 'device': {_show(device)}: {DEVICE_TEXT_RULE}")
     mode = meta.get("gyro_mode")
     if mode is not None and mode not in GYRO_MODES:
         bad("gyro_mode", f"unknown gyro_mode {_show(mode)} (expected one of {', '.join(GYRO_MODES)})")
