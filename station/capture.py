@@ -515,9 +515,6 @@ def _check_meta(path, meta: dict[str, str], lines: dict[str, int]) -> None:
             _dt.datetime.fromisoformat(meta["date"])
         except ValueError:
             bad("date", f"metadata 'date': {_show(meta['date'])} is not an ISO date (YYYY-MM-DD[THH:MM:SS])")
-    device = meta.get("device")
-    if device is not None and not device.isprintable():  # as `station import --device` refuses it
-        bad("device", f"metadata 'device': {_show(device)}: {DEVICE_TEXT_RULE}")
     mode = meta.get("gyro_mode")
     if mode is not None and mode not in GYRO_MODES:
         bad("gyro_mode", f"unknown gyro_mode {_show(mode)} (expected one of {', '.join(GYRO_MODES)})")
@@ -659,6 +656,8 @@ def _read_head(path: str) -> _Head:
                 key, value = key.strip(), value.strip()
                 if not sep or not key:
                     raise InputError(path, lineno, f"metadata line without 'key: value': {_show(stripped)}")
+                if not (key.isprintable() and value.isprintable()):  # an ESC sequence, a tab, a bidi override
+                    raise InputError(path, lineno, _meta_text_problem(key, value))
                 if len(head.meta) > MAX_META_LINES:  # the first line counted is station-capture
                     raise InputError(path, lineno, f"more than {MAX_META_LINES} metadata lines: not a capture head")
                 if key in head.meta:
@@ -698,6 +697,18 @@ def _read_head(path: str) -> _Head:
             head.meta[key] = aliases[head.meta[key]]
     _check_meta(path, head.meta, head.meta_lines)
     return head
+
+
+def _meta_text_problem(key: str, value: str) -> str:
+    """Why a metadata line holding a control character is refused: the device id as `station
+    import --device` refuses it (it is stored, shown and written into firmware files); any other
+    key or value because the writer (`export-capture` of the stored capture) could not give it back."""
+    if key.isprintable() and key.lower() == "device":
+        return f"metadata {_show(key)}: {_show(value)}: {DEVICE_TEXT_RULE}"
+    return (
+        f"metadata {_show(key)}: {_show(value)}: a capture's metadata cannot hold a control character "
+        "(a tab, an ESC sequence, a bidi override)"
+    )
 
 
 def _spelled_twice(meta: dict[str, str]) -> tuple[str, str] | None:

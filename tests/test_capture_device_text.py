@@ -73,3 +73,24 @@ def test_printable_device_ids_still_read(tmp_path):
     for device in ("IMU 0042 rev B", "Größe-Ω/7 (bench #2)", "日本-1"):
         capture, _ = _with_device(tmp_path, device)
         assert read_capture(capture).meta["device"] == device
+
+
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("# operator: Bob\x1b[31mRED", "metadata 'operator': 'Bob\\x1b[31mRED': a capture's metadata cannot hold"),
+        ("# notes: left\tright", "metadata 'notes': 'left\\tright': a capture's metadata cannot hold"),
+        ("# op\x1bx: 1", "metadata 'op\\x1bx': '1': a capture's metadata cannot hold"),
+    ],
+)
+def test_any_metadata_line_with_a_control_character_is_refused_on_its_line(tmp_path, line, says):
+    """Any other key too (the format keeps unknown keys): before, such a capture was saved and
+    `export-capture` of it then failed, as the writer refuses what it cannot give back."""
+    capture, device_line = _with_device(tmp_path, "IMU-0042")
+    lines = capture.read_text().splitlines()
+    lines.insert(device_line, line)
+    capture.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    db = tmp_path / "station.db"
+    res = run_station("calibrate", capture, "--save", "--db", db, subprocess_run=True)
+    assert_one_line_refusal(res, f"{capture}:{device_line + 1}: {says}")
+    assert not db.exists() or sqlite3.connect(db).execute("select count(*) from calibrations").fetchone()[0] == 0
