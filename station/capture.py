@@ -79,6 +79,10 @@ _NUMERIC_META: dict[str, tuple] = {
     "heading_deg": (lambda x: -360.0 <= x <= 720.0, "must be between -360 and 720"),
     "sample_rate_hz": (lambda x: 0.0 < x <= 1.0e9, "must be positive and at most 1e9"),
 }
+# A device id is shown by every command, stored in the database and named in the firmware files:
+# an ESC sequence or a newline in it is a corrupt or hostile file (station.importers.load says the
+# same of `station import --device`).
+DEVICE_TEXT_RULE = "a capture's device cannot hold a control character or spaces at its ends"
 # The metadata keys capture-format.md defines (those _check_meta checks); one in other letter
 # case is read as it.
 SPEC_KEYS = frozenset({"procedure", "device", "date", "gyro_mode", *UNIT_KEYS, *_NUMERIC_META})
@@ -135,6 +139,34 @@ TEMP_MAX_C = 1e4
 # Largest magnitude of any other numeric cell: raw counts (32-bit), Unix time in ns (1.7e18)
 # fit; 1e20 squared is 1e40 and the fourth powers some fits form stay far from float64's 1.8e308.
 MAX_ABS = 1e20
+# A table of averages (capture-format.md: per-position means, ``n`` samples averaged, ``<col>_std``
+# their standard deviation) gives the noise every fit weighs its positions by (P1, P2:
+# sigma = std / sqrt(n)). Numbers no hold can have are refused on their line, not weighed:
+# - n: a whole number, 1 to 1e9 samples (1e9 is 11.6 days of a hold at 1 kHz, 2.8 h at 100 kHz).
+# - <col>_std: finite, 0 or more, within the column's plausibility bound (PLAUSIBLE_SI, in its
+#   unit), and at most STD_OVER_MEAN times the largest |mean| of its quantity in the table: the
+#   column's, or the largest of its triad (ax ay az, ...), since one axis may lie level in every
+#   position and average near 0 while its noise is the triad's. A hold is still and its samples
+#   lie within the sensor's range, so its spread is of the order of the signal at most (16 times
+#   it for a +-16 g part resting at 1 g); 1e3 times it holds for any unit (m/s^2, g, V with its
+#   offset, counts) and leaves the rest to the fit. A table whose means are all 0 has no scale, and
+#   a _std column without its mean column nothing to compare: only the first two rules apply.
+MAX_N_SAMPLES = 1e9
+STD_OVER_MEAN = 1e3
+_TRIADS = {
+    c: tuple(t.split())
+    for t in (
+        "ax ay az",
+        "gx gy gz",
+        "mx my mz",
+        "ref_gx ref_gy ref_gz",
+        "vl1 vl2 vl3",
+        "vx vy vz",
+        "vn ve vd",
+        "wx wy wz",
+    )
+    for c in t.split()
+}
 _KIND_WORDS = {"accel": "accelerometer", "gyro": "gyro", "mag": "magnetometer", "velocity": "velocity sensor"}
 _FIXED_UNIT_KIND = {"rad/s": ("gyro", 1.0), "m/s": ("velocity", 1.0)}
 
@@ -159,6 +191,46 @@ def plausible_limit(name: str, meta: dict[str, str]) -> tuple[float, str] | None
         return None
     bound = PLAUSIBLE_SI[kind] / factor
     return bound, f"what any {_KIND_WORDS[kind]} reports (magnitudes up to {bound:.3g} {unit} are accepted)"
+
+
+def column_unit(name: str, meta: dict[str, str]) -> str | None:
+    """The unit of column ``name`` under metadata ``meta`` (raw columns: its ``*_unit``), or None."""
+    base = name[:-4] if name.endswith("_std") else name
+    key = _RAW_COLUMN_UNIT_KEY.get(base)
+    if key is not None:
+        return meta.get(key) or None
+    return COLUMN_UNITS.get(base)
+
+
+def wide_std(columns: dict[str, np.ndarray], meta: dict[str, str]) -> tuple[int, str, str] | None:
+    """The first row (0-based, in row order; of several columns the leftmost) whose ``<col>_std``
+    is more than STD_OVER_MEAN times the largest |mean| of its quantity in the table:
+    ``(row, column, what is wrong)``; None when there is none."""
+    first = None
+    for name, col in columns.items():
+        if not name.endswith("_std") or name in TEXT_COLUMNS:
+            continue
+        base = name[:-4]
+        group = [c for c in _TRIADS.get(base, (base,)) if c in columns and c not in TEXT_COLUMNS]
+        means = [np.abs(np.asarray(columns[c], dtype=np.float64)) for c in group]
+        means = [m[np.isfinite(m)] for m in means]
+        scale = max((float(m.max()) for m in means if m.size), default=0.0)
+        if not scale > 0:
+            continue
+        std = np.asarray(col, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            over = np.flatnonzero(std > STD_OVER_MEAN * scale)
+        if over.size and (first is None or over[0] < first[0]):
+            unit = column_unit(name, meta)
+            unit = f" {unit}" if unit and unit != "samples" else ""
+            which = ", ".join(group)
+            first = (
+                int(over[0]),
+                name,
+                f"{float(std[over[0]]):g}{unit} is more than {STD_OVER_MEAN:g} times the largest magnitude of {which} in the "
+                f"table ({scale:.4g}{unit}): no still hold spreads that wide (a standard deviation in another unit?)",
+            )
+    return first
 
 
 def column_limit(name: str, meta: dict[str, str]) -> tuple[float, str]:
@@ -310,11 +382,7 @@ class Capture:
 
     def unit(self, name: str) -> str | None:
         """The unit of column ``name`` (raw columns: the capture's ``*_unit``), or None if unknown."""
-        base = name[:-4] if name.endswith("_std") else name
-        key = _RAW_COLUMN_UNIT_KEY.get(base)
-        if key is not None:
-            return self.meta.get(key) or None
-        return COLUMN_UNITS.get(base)
+        return column_unit(name, self.meta)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Capture):
@@ -588,6 +656,8 @@ def _read_head(path: str) -> _Head:
                 key, value = key.strip(), value.strip()
                 if not sep or not key:
                     raise InputError(path, lineno, f"metadata line without 'key: value': {_show(stripped)}")
+                if not (key.isprintable() and value.isprintable()):  # an ESC sequence, a tab, a bidi override
+                    raise InputError(path, lineno, _meta_text_problem(key, value))
                 if len(head.meta) > MAX_META_LINES:  # the first line counted is station-capture
                     raise InputError(path, lineno, f"more than {MAX_META_LINES} metadata lines: not a capture head")
                 if key in head.meta:
@@ -627,6 +697,18 @@ def _read_head(path: str) -> _Head:
             head.meta[key] = aliases[head.meta[key]]
     _check_meta(path, head.meta, head.meta_lines)
     return head
+
+
+def _meta_text_problem(key: str, value: str) -> str:
+    """Why a metadata line holding a control character is refused: the device id as `station
+    import --device` refuses it (it is stored, shown and written into firmware files); any other
+    key or value because the writer (`export-capture` of the stored capture) could not give it back."""
+    if key.isprintable() and key.lower() == "device":
+        return f"metadata {_show(key)}: {_show(value)}: {DEVICE_TEXT_RULE}"
+    return (
+        f"metadata {_show(key)}: {_show(value)}: a capture's metadata cannot hold a control character "
+        "(a tab, an ESC sequence, a bidi override)"
+    )
 
 
 def _spelled_twice(meta: dict[str, str]) -> tuple[str, str] | None:
@@ -760,7 +842,9 @@ class _Parser:
                 return None
             if j == self.temp_index and np.any((col < ABSOLUTE_ZERO_C) | (col > TEMP_MAX_C)):
                 return None  # the per-cell path names the line
-            if j == self.n_index and not np.all(np.isnan(col) | ((col >= 1) & (col == np.floor(col)))):
+            if j == self.n_index and not np.all(
+                np.isnan(col) | ((col >= 1) & (col <= MAX_N_SAMPLES) & (col == np.floor(col)))
+            ):
                 return None
             if j in self.std_index and np.any(col < 0):
                 return None
@@ -858,9 +942,16 @@ class _Parser:
             )
         elif j == self.n_index and (x < 1 or x != math.floor(x)):
             raise InputError(self.path, lineno, f"column 'n': {_show(v)} is not a whole number of samples (1 or more)")
+        elif j == self.n_index and x > MAX_N_SAMPLES:
+            raise InputError(self.path, lineno, f"column 'n': {_show(v)} {_TOO_MANY_SAMPLES}")
         elif j in self.std_index and x < 0:
             raise InputError(self.path, lineno, f"column '{name}': {_show(v)} is negative (it is a standard deviation)")
         return x
+
+
+_TOO_MANY_SAMPLES = (
+    f"samples are more than any hold averages (at most {MAX_N_SAMPLES:.0e}, 11.6 days at 1 kHz)".replace("e+0", "e")
+)
 
 
 def _blocks(f, block_bytes: int, path: str, first_line: int) -> Iterator[bytes]:
@@ -979,6 +1070,10 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
         pieces = parts[name]
         columns[name] = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
         pieces.clear()
+    wide = wide_std(columns, head.meta)
+    if wide is not None:  # data rows follow the header line by line (no blank or comment line between)
+        row, name, what = wide
+        raise InputError(path, head.header_line + 1 + row, f"column '{name}': {what}")
     return Capture(
         meta=head.meta,
         columns=columns,
@@ -1107,6 +1202,10 @@ def _number_cells(path, name: str, col: np.ndarray, start: int, prev_t: float, i
             raise InputError(
                 path, None, f"column 'n', row {start + i + 1}: {float(col[i])!r} is not a whole number of samples"
             )
+        many = finite & (col > MAX_N_SAMPLES)
+        if many.any():
+            i = int(np.flatnonzero(many)[0])
+            raise InputError(path, None, f"column 'n', row {start + i + 1}: {float(col[i]):g} {_TOO_MANY_SAMPLES}")
     elif name.endswith("_std"):
         wrong = finite & (col < 0)
         if wrong.any():
@@ -1156,6 +1255,10 @@ def _prepare(path, capture: Capture) -> tuple[dict[str, str], list[str], list[np
         raise InputError(path, None, f"columns differ in length ({lengths})")
     if n == 0:
         raise InputError(path, None, "capture has no data rows")
+    wide = wide_std({k: a for k, a in zip(names, arrays) if k not in TEXT_COLUMNS}, meta)
+    if wide is not None:
+        row, name, what = wide
+        raise InputError(path, None, f"column '{name}', row {row + 1}: {what}")
     return meta, names, arrays, n
 
 

@@ -57,6 +57,49 @@ def test_the_other_commands_say_the_cut_in_their_refusal_too(tmp_path, shared_da
     assert not out.exists()
 
 
+def test_a_ulog_cut_to_one_sample_says_one_sample(tmp_path, shared_data):
+    """The cut warning counted "1 samples" (and the raw-topic hint "hold 1 samples")."""
+    log = tmp_path / "cut.ulg"
+    log.write_bytes((shared_data / SMALL_ULG).read_bytes()[:220080])
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "out.csv")
+    assert_one_line_refusal(
+        res, "the raw sensor topics hold 1 sample, ", "the samples before it are imported, 1 sample up to 0.015202 s"
+    )
+    assert "1 samples" not in res.stderr
+
+
+@pytest.mark.parametrize("n", [1, 4, 7, 8, 15])
+def test_a_ulog_cut_inside_its_header_is_refused_in_the_stations_words(tmp_path, shared_data, n):
+    """A ULog cut inside its 16-byte file header (magic, version, start time) was refused with
+    pyulog's words: `not a readable PX4 ULog file (ULogException: Invalid file format (Header too
+    short))`. Now the station's own line says it was cut, and where."""
+    log = tmp_path / "cut.ulg"
+    log.write_bytes((shared_data / SMALL_ULG).read_bytes()[:n])
+    db = tmp_path / "station.db"
+    assert run_station("--db", db, "devices", "add", "BENCH-1").returncode == 0
+    before = _rows(db)
+    res = run_station(
+        "calibrate", log, "--procedure", "accel-tabletop", "--json", "--save", "--db", db, subprocess_run=True
+    )
+    bytes_ = "byte" if n == 1 else "bytes"
+    assert_one_line_refusal(
+        res, f"{log}: a PX4 ULog cut short inside its 16-byte header ({n} {bytes_} in the file): nothing to read"
+    )
+    assert "ULogException" not in res.stderr and "Header too short" not in res.stderr
+    assert _rows(db) == before
+
+
+@pytest.mark.parametrize("content", [b"hello, this is not a log\n", b"ULog\x02", b"xyz"])
+def test_a_file_named_ulg_that_is_no_ulog_says_so_in_the_stations_words(tmp_path, content):
+    """Not pyulog's 'Invalid file format (Failed to parse header)': what the file starts with."""
+    log = tmp_path / "flight.ulg"
+    log.write_bytes(content)
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
+    assert_one_line_refusal(res, f"{log}: not a PX4 ULog file: it does not start with the ULog header (ULog 01 12 35")
+    assert "ULogException" not in res.stderr
+    assert not (tmp_path / "o.csv").exists()
+
+
 def test_a_ulog_that_ends_between_two_messages_says_no_cut(tmp_path, shared_data):
     """The whole log, and the log cut where one message ends and the next begins, import
     without a word about a cut: nothing in them is cut."""

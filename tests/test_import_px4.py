@@ -152,7 +152,7 @@ def test_calibrate_and_diagnose_read_the_log_directly(tmp_path, px4_dir):
     "content, says",
     [
         (b"", "empty file"),
-        (b"hello, this is not a log\n", "not a readable PX4 ULog file"),
+        (b"hello, this is not a log\n", "not a PX4 ULog file: it does not start with the ULog header"),
     ],
 )
 def test_bad_ulog_one_line_and_nothing_written(tmp_path, content, says):

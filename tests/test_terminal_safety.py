@@ -88,8 +88,9 @@ def hostile_db(tmp_path_factory):
     db = d / "station.db"
     cap = d / "p2.csv"
     assert run_station("simulate", "--procedure", "accel-centrifuge", "--out", cap, "--seed", 5).returncode == 0
-    # the capture's own # device: line is hostile too
-    text = cap.read_text().replace("# device: SIM-CFG-0005", "# device: CAP\x1b[5mBLINK\x9d8;;http://x\x9c", 1)
+    clean = cap.read_text()
+    # the capture's own # device: line is hostile too (the reader refuses it, in one escaped line)
+    text = clean.replace("# device: SIM-CFG-0005", "# device: CAP\x1b[5mBLINK\x9d8;;http://x\x9c", 1)
     assert "CAP\x1b" in text
     cap.write_text(text)
     r = run_station(
@@ -110,7 +111,7 @@ def hostile_db(tmp_path_factory):
     assert r.returncode == 0, r.stderr
     for date in ("2024-01-01", "2024-06-01"):
         dated = d / f"p2-{date}.csv"
-        dated.write_text(text.replace("# radius_m:", f"# date: {date}\n# radius_m:", 1))
+        dated.write_text(clean.replace("# radius_m:", f"# date: {date}\n# radius_m:", 1))
         r = run_station("calibrate", dated, "--save", "--device", HOSTILE_ID, "--db", db)
         assert r.returncode == 0, r.stderr
     return db, cap
@@ -151,7 +152,7 @@ def test_database_text_reaches_a_real_terminal_escaped(hostile_db, args):
 def test_a_capture_device_line_reaches_a_real_terminal_escaped(hostile_db, command):
     _, cap = hostile_db
     rc, out = _pty_run(command, cap)
-    assert rc == 0, out[-400:]
+    assert rc == 2, out[-400:]  # refused on its line, as `import --device` refuses the same text
     for raw in RAW:
         assert raw not in out, (raw, out[:600])
     assert b"CAP\\x1b[5mBLINK\\x9d8;;http://x\\x9c" in out

@@ -7,7 +7,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from station.capture import Capture, read_capture, write_capture
+from station.capture import DEVICE_TEXT_RULE, Capture, read_capture, write_capture
 from station.errors import InputError
 from station.fileio import LOG_MAGIC, check_input
 from station.importers._common import NAME, Imported, to_capture
@@ -130,9 +130,7 @@ def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     """``path`` as a capture (not yet written) and the reader's warnings."""
     device = opts.device
     if device is not None and (device != device.strip() or not device.isprintable()):  # found before the reading
-        raise InputError(
-            None, None, f"--device {device!r}: a capture's device cannot hold a control character or spaces at its ends"
-        )
+        raise InputError(None, None, f"--device {device!r}: {DEVICE_TEXT_RULE}")
     fmt = opts.fmt or detect(path)
     if fmt is None:
         if is_station_capture(path):

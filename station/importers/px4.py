@@ -27,6 +27,7 @@ import io
 import numpy as np
 
 from station.errors import InputError
+from station.fileio import LOG_MAGIC
 from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, set_date
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
@@ -67,6 +68,27 @@ class _CutWatch:
         return getattr(self._fh, name)
 
 
+ULOG_HEADER_BYTES = 16  # the file header: the 7 magic bytes, the version byte, the start time (uint64 us)
+
+
+def _header_problem(head: bytes) -> str | None:
+    """What is wrong with a ULog's first (up to 16) bytes, in the station's words (pyulog's are
+    'Invalid file format (Header too short)'), or None: a header cut short, or no ULog header."""
+    magic = next(m for m, fmt, _ in LOG_MAGIC if fmt == "px4")
+    n = len(head)
+    if n >= ULOG_HEADER_BYTES and head.startswith(magic):
+        return None
+    if n < ULOG_HEADER_BYTES and (head.startswith(magic) or magic.startswith(head)):
+        return (
+            f"a PX4 ULog cut short inside its {ULOG_HEADER_BYTES}-byte header ({n} byte{'s' if n != 1 else ''} "
+            "in the file): nothing to read (a copy or a write stopped part-way)"
+        )
+    return (
+        f"not a PX4 ULog file: it does not start with the ULog header ({magic[:4].decode()} "
+        f"{magic[4:].hex(' ')}; its first bytes: {head[:8].hex(' ')})"
+    )
+
+
 def _load(path):
     from pyulog import ULog
 
@@ -78,10 +100,16 @@ def _load(path):
     ]
     try:
         with open(path, "rb") as fh, contextlib.redirect_stdout(io.StringIO()):  # pyulog reports oddities on stdout
+            problem = _header_problem(fh.read(ULOG_HEADER_BYTES))
+            if problem:
+                raise InputError(path, None, problem)
+            fh.seek(0)
             watch = _CutWatch(fh)
             ulog = ULog(watch, wanted)
             ulog.station_cut_at = watch.cut_at()
             return ulog
+    except InputError:
+        raise
     except FileNotFoundError:
         raise InputError(path, None, "no such file") from None
     except IsADirectoryError:
@@ -255,7 +283,7 @@ def read(
         n_comb = len(combined[min(combined)].data["timestamp"]) if combined else 0
         if n_comb > 4 * n_raw:
             warnings.append(
-                f"the raw sensor topics hold {n_raw} samples, sensor_combined {n_comb}: "
+                f"the raw sensor topics hold {n_raw} sample{'s' if n_raw != 1 else ''}, sensor_combined {n_comb}: "
                 "the combined source reads those (already corrected by the board: --source combined, "
                 "or 'combined' on the import screen)"
             )
@@ -351,9 +379,10 @@ def read(
         elif ts <= t1_us:
             late.add(name)
     if cut is not None:  # a power loss or a copy cut short: what was written before it is whole
+        n_before = len(next(iter(streams.values())).t_s)
         warnings.append(
             f"the log is cut short inside a message at byte {cut}: the samples before it are imported, "
-            f"{len(next(iter(streams.values())).t_s)} samples up to {max(s.t_s[-1] for s in streams.values()):g} s"
+            f"{n_before} sample{'s' if n_before != 1 else ''} up to {max(s.t_s[-1] for s in streams.values()):g} s"
         )
     if getattr(ulog, "file_corruption", False):  # pyulog skipped to the next sync marker: never silently
         warnings.append(
