@@ -4,11 +4,13 @@ are read as the unit they name: the same calibration as the spec's spelling, on 
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 import pytest
 from station_run import ROOT, assert_one_line_refusal, run_station
 
-DATA = ROOT.parent / "shared" / "data"
+DATA = Path(os.environ.get("STATION_SHARED") or ROOT.parent / "shared") / "data"
 
 
 def _calibrated(path, *args) -> dict:

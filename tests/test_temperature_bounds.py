@@ -79,6 +79,6 @@ def test_an_imported_temperature_no_thermometer_reads_is_left_empty_with_a_warni
         "--unit", "accel=m/s^2,t=s", "--out", out,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
-    assert "1 temperature samples below absolute zero or above 10000 °C (the first -300): left empty" in res.stderr
+    assert "1 temperature sample below absolute zero or above 10000 °C (the first -300): left empty" in res.stderr
     temp = read_capture(out).columns["temp_c"]
     assert len(temp) == 200 and temp[7] != temp[7] and (temp[:7] == 24.5).all()

@@ -134,7 +134,7 @@ def clean_stream(path, stream: Stream, warnings: list[str] | None = None) -> Str
         tk = t[keep]
         late = float(np.max(np.maximum.accumulate(tk)[back] - tk[back + 1]))
         warnings.append(
-            f"{back.size} {NAME[stream.kind]} samples are stamped earlier than the sample before them "
+            f"{back.size} {NAME[stream.kind]} sample{'s are' if back.size != 1 else ' is'} stamped earlier than the sample before them "
             f"(by up to {late:.3g} s; the first {tk[back[0] + 1] - tk.min():.3f} s into the log): put in time order"
         )
     order = np.argsort(t[keep], kind="stable")
@@ -154,7 +154,10 @@ def clean_stream(path, stream: Stream, warnings: list[str] | None = None) -> Str
         t, xyz = t[~same], xyz[~same]
         temp = None if temp is None else temp[~same]
         if warnings is not None:
-            warnings.append(f"{int(same.sum())} repeated {NAME[stream.kind]} samples (same time and values) read once")
+            k = int(same.sum())
+            warnings.append(
+                f"{k} repeated {NAME[stream.kind]} sample{'s' if k != 1 else ''} (same time and values) read once"
+            )
     return Stream(
         stream.kind,
         t,
@@ -340,7 +343,8 @@ def to_capture(
         if impossible.any():  # a driver's "no reading" value, a corrupt field: the IMU data stand
             temp = np.where(impossible, np.nan, temp)
             imported.warnings.append(
-                f"{int(impossible.sum())} temperature samples below absolute zero or above {TEMP_MAX_C:g} °C "
+                f"{int(impossible.sum())} temperature sample{'s' if impossible.sum() != 1 else ''} below absolute zero "
+                f"or above {TEMP_MAX_C:g} °C "
                 f"(the first {grid.temp_c[rows][impossible][0]:g}): left empty"
             )
     if temp is not None and np.isfinite(temp).any():
