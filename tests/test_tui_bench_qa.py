@@ -160,6 +160,38 @@ def test_resume_follows_the_procedure_picked_and_f6_is_shown_only_when_it_resume
     asyncio.run(story())
 
 
+def test_a_run_aborted_before_its_first_position_is_not_offered_for_resume(tmp_path):
+    """P1 aborted with no position captured leaves its state file; Connect offered `Resume 0/12`,
+    which would only start the same run again. Nothing captured: no Resume, no F6."""
+    import json
+
+    from station.procedures.state import default_state_path
+    from tests.test_tui import screen_lines, screen_name
+
+    path = default_state_path("IMU-5", base=str(tmp_path))
+
+    def write(n_captured):
+        steps = [{"status": "captured"}] * n_captured + [{"status": "pending"}] * (12 - n_captured)
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump({"phase": "guide", "steps": steps}, fh)
+
+    async def story():
+        write(1)  # one position captured: offered (the control for what follows)
+        app = make_app(str(tmp_path / "s.db"))
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            app.screen.query_one("#serial").value = "IMU-5"
+            await wait_for(pilot, lambda: any("Resume 1/12 [F6]" in line for line in screen_lines(app)))
+            write(0)
+            app.screen.query_one("#serial").value = "IMU-6"
+            app.screen.query_one("#serial").value = "IMU-5"
+            await wait_for(pilot, lambda: app.screen.query_one("#resume").disabled)
+            await wait_for(pilot, lambda: "f6" not in screen_lines(app)[-1])
+            assert not any("0/12" in line for line in screen_lines(app)), screen_lines(app)
+
+    asyncio.run(story())
+
+
 def test_a_device_lost_mid_run_is_said_on_the_procedure_screen():
     """The device on a port stops mid-run (unplugged; here its pty closed): P4 kept saying
     "Recording: keep the unit still" over a countdown stopped at 2:55, with only DISCONNECTED

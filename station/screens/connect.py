@@ -283,7 +283,8 @@ class ConnectScreen(Screen):
                 with open(path, encoding="utf-8") as fh:
                     state = json.load(fh)
                 n = sum(st["status"] == "captured" for st in state["steps"])
-                ok = state.get("phase") != "done" and n < len(state["steps"])
+                # nothing captured: nothing to continue (an abort before the first position)
+                ok = state.get("phase") != "done" and 0 < n < len(state["steps"])
                 if ok:
                     button.label = f"Resume {n}/{len(state['steps'])} \\[F6]"
                     button.refresh(layout=True)  # its width follows the label ("[F6]" was cut off)
