@@ -109,6 +109,13 @@ def db_path(args: argparse.Namespace) -> str:
     return default_db_path()
 
 
+def db_source(args: argparse.Namespace) -> str | None:
+    """Where ``db_path(args)`` came from: "--db", "$STATION_DB", or None for the built-in default."""
+    if getattr(args, "db", None):
+        return "--db"
+    return "$STATION_DB" if os.environ.get("STATION_DB") else None
+
+
 def _require_folder(path: str, source: str) -> None:
     """InputError when the folder of a database path that was given does not exist (or is no folder)."""
     if path == ":memory:" or path.startswith("file:"):

@@ -196,6 +196,24 @@ def test_the_default_database_location_gets_its_folder(capsys, tmp_path, monkeyp
     assert code == 0 and (tmp_path / "bench.db").is_file(), err
 
 
+def test_no_database_yet_names_what_named_the_path(capsys, tmp_path, monkeypatch):
+    """A reading command with no database said "(mistyped --db or $STATION_DB?)" also where
+    neither was given (the default location on a new machine): it names the one that was given,
+    and the default as the default."""
+    monkeypatch.delenv("STATION_DB", raising=False)
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    default = tmp_path / "xdg" / "station" / "station.db"
+    code, out, err = run(capsys, "history", "IMU-1")
+    assert code == 2 and out == "", err
+    assert err.startswith(f"station: {default}: no station database here (the default database, none made yet); "), err
+    code, out, err = run(capsys, "--db", tmp_path / "nope.db", "history", "IMU-1")
+    assert code == 2 and "(mistyped --db?)" in err, err
+    monkeypatch.setenv("STATION_DB", str(tmp_path / "nope.db"))
+    code, out, err = run(capsys, "history", "IMU-1")
+    assert code == 2 and "(mistyped $STATION_DB?)" in err, err
+    assert not default.exists() and not (tmp_path / "nope.db").exists()
+
+
 def test_unusable_database_file_is_one_line(capsys, tmp_path):
     bad = tmp_path / "not-a-db"
     bad.write_text("hello, I am a text file, not SQLite\n" * 100)

@@ -33,10 +33,13 @@ def add_db_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--db", default=argparse.SUPPRESS, help="station database file")
 
 
-def require_existing(path: str) -> None:
+def require_existing(path: str, source: str | None = "--db or $STATION_DB") -> None:
     """A command that reads the database refuses a path with no database (a mistyped --db would
-    otherwise create an empty one, folders included, and report "nothing due")."""
+    otherwise create an empty one, folders included, and report "nothing due"). ``source``: what
+    named the path ("--db", "$STATION_DB"), None for the built-in default (then no typo to suspect)."""
     import os
+
+    hint = f"mistyped {source}?" if source else "the default database, none made yet"
 
     if path == ":memory:" or path.startswith("file:"):
         return
@@ -51,13 +54,13 @@ def require_existing(path: str) -> None:
         raise InputError(
             path,
             None,
-            "no station database here (mistyped --db or $STATION_DB?); "
+            f"no station database here ({hint}); "
             "`station devices add ID` or `station calibrate FILE --save` creates one",
         )
     if os.path.isdir(path):
         raise InputError(path, None, "is a directory, not a station database")
     if os.path.isfile(path) and os.path.getsize(path) == 0:  # SQLite would make it a database
-        raise InputError(path, None, "empty file, not a station database (mistyped --db or $STATION_DB?)")
+        raise InputError(path, None, f"empty file, not a station database ({hint})")
 
 
 def refuse_database_as_output(args, out: str | None, option: str) -> None:
@@ -105,11 +108,11 @@ def open_store(args, create: bool = False):
     database is an InputError (exit 2), see :func:`require_existing`.
     """
     from db.store import NotFound, Store
-    from station.cli import db_path
+    from station.cli import db_path, db_source
 
     path = db_path(args)
     if not create:
-        require_existing(path)
+        require_existing(path, db_source(args))
     try:
         store = Store(path)
     except Exception as exc:  # sqlite3.DatabaseError, OSError: not a usable database
