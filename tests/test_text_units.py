@@ -108,7 +108,7 @@ def test_diagnose_text_p4_residuals_in_deg_per_hour_json_in_rad_per_s(tmp_path):
     assert r.returncode == 0, r.stderr
     text = run_station("diagnose", path, "--no-plots").stdout
     js = json.loads(run_station("diagnose", path, "--json").stdout)
-    res = re.search(r"baseline .*\n +residual (\S+) (\S+) RMS, held-out (\S+) (\S+) RMS", text)
+    res = re.search(r"baseline .*\n +residual (\S+) (\S+) RMS of \S+ s block means, held-out (\S+) (\S+) RMS", text)
     assert res.group(2) == res.group(4) == "°/h", text
     assert re.search(r"time_drift +ΔBIC +\S+ +held-out RMS \S+ °/h", text), text
     assert float(res.group(1)) == pytest.approx(js["baseline"]["residual_rms"] / DEG_H, rel=1e-3)

@@ -98,6 +98,7 @@ class Problem:
     unit: str = ""
     time_ordered: bool = False  # rows are a time series (Ljung–Box) or averages (χ²)
     row_labels: list[str] | None = None  # a name per row for quality findings
+    rows_are: str = ""  # what a residual row is, said beside its RMS (P4: "10 s block means")
     extended_model: Callable[[list[str]], str] | None = None
     row_types: np.ndarray | None = None
     # the row kinds whose σ is measured (the held-out RMS is taken on them; no noise scale fitted):

@@ -286,6 +286,10 @@ def gyro_problem(
         row_labels=[f"position {p} t={x:.1f} s {a}" for p, x in zip(pb, tb) for a in "xyz"],
         extended_model=lambda names: base_model.split(" (")[0] + _suffix(names, GYRO_TERMS),
     )
+    # its residuals are of block means, not of samples (calibrate's residual is per sample): said
+    # beside their RMS with the block's length, `per` samples at the record's median interval
+    dt_s = float(np.median(np.diff(t))) if n > 1 else 0.0
+    prob.rows_are = f"{per * dt_s:.3g} s block means" if dt_s > 0 else f"block means of {per} samples"
     prob.drivers = {"time [s]": np.repeat(tb, 3)}
     if Tb is not None:
         prob.drivers["temperature [°C]"] = np.repeat(Tb, 3)

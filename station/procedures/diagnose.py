@@ -278,6 +278,8 @@ def format_text(
 
     r = jsonable(result)
     scale, unit = _said_in(r.get("procedure"), diag.problem.unit)
+    # what the RMS is over (P4: block means, where calibrate's residual is per sample)
+    of = f" of {diag.problem.rows_are}" if getattr(diag.problem, "rows_are", "") else ""
     L = [f"procedure   {r['procedure']}"]
     for q in r["quality"]:  # structured residuals are said first, before any verdict
         if q["kind"] == "residuals_not_white":
@@ -287,7 +289,7 @@ def format_text(
             )
     L += [
         f"baseline    {r['baseline']['model']}",
-        f"            residual {scale * r['baseline']['residual_rms']:.4g} {unit} RMS, "
+        f"            residual {scale * r['baseline']['residual_rms']:.4g} {unit} RMS{of}, "
         f"held-out {scale * r['baseline']['cv_rms']:.4g} {unit} RMS",
         # the bound is the exact F test's on the degrees of freedom left (engine.deviance_quantile),
         # which is F·χ²_k only for many rows
@@ -324,7 +326,7 @@ def format_text(
             L.append(f"            {k} = {_value_sigma_unit(v, e['uncertainty'][k], inp.param_units.get(k))}")
     L.append(f"extended    {r['extended']['model']}")
     L.append(
-        f"            residual {scale * r['extended']['residual_rms']:.4g} {unit} RMS, "
+        f"            residual {scale * r['extended']['residual_rms']:.4g} {unit} RMS{of}, "
         f"held-out {scale * r['extended']['cv_rms']:.4g} {unit} RMS"
     )
     rt = diag.residual_test

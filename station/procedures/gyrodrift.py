@@ -52,6 +52,9 @@ PARAM_UNITS = {"drift": "rad/s", "earth_rate_body": "rad/s"}
 PARAM_SHAPES = {"drift": (3,), "earth_rate_body": (3,), "pitch_deg": (), "roll_deg": ()}  # every parameter
 # what the screens show them in (a bench engineer reads gyro drift in °/h); the result, its
 # exports and the database keep rad/s
+# what residual_rms is over, said beside it (the Results screen, `station calibrate`): the
+# samples about the fitted drift; `station diagnose` fits block means and says so beside its own
+RESIDUAL_OF = "per sample"
 DISPLAY_UNITS = {k: ("°/h", 1.0 / gd.DEG_H_RAD_S) for k in ("drift", "earth_rate_body", "residual_rms")}
 LIMIT_EXAMPLE = "e.g. drift=-10:10  (°/h)"  # the limits box's example, in the unit shown
 # why a stated sample_rate_hz that the t column contradicts is refused (Capture.series_rate_hz)
@@ -526,7 +529,7 @@ def format_text(result: dict) -> str:
             )
         )
     res, res_unit = shown_residual(result)
-    lines.append(f"residual   {res:.4g} {res_unit} RMS (noise about the model)")
+    lines.append(f"residual   {res:.4g} {res_unit} RMS {RESIDUAL_OF} (noise about the model)")
     lines.append(f"positions  {result['n_positions']}")
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")

@@ -55,10 +55,18 @@ class LogRead(Message):
     """A worker read a log: its format and the importer's :class:`Imported` (or an error)."""
 
     def __init__(
-        self, path: str, fmt: str | None, imported, error: str | None = None, source: str = "auto", hint: str = ""
+        self,
+        path: str,
+        fmt: str | None,
+        imported,
+        error: str | None = None,
+        source: str = "auto",
+        hint: str = "",
+        instance: int | None = None,
     ) -> None:
         super().__init__()
         self.source = source
+        self.instance = instance
         self.hint = hint  # a line under the error: what to do instead
         self.path = path
         self.fmt = fmt
@@ -77,6 +85,9 @@ class CaptureBuilt(Message):
 
 WIDTH = 76  # 80 columns less the padding and the scroll bar
 SHOWN_WARNINGS = 2  # warnings the summary has room for at 80x24
+# a PX4 warning's "give --instance N" (station import's flag), said as this screen's choice
+INSTANCE_HERE = "pick its slot under instance"
+INSTANCES = 4  # the slots offered (CAL_*0_ID … CAL_*3_ID)
 
 
 def _wrapped(items: list[str], indent: str, max_lines: int) -> list[str]:
@@ -133,6 +144,7 @@ def summary_lines(path: str, fmt: str, imported) -> list[str]:
     else:
         lines.append("in use: no calibration parameters in the log (an export cannot compose)")
     for w in imported.warnings[:SHOWN_WARNINGS]:
+        w = w.replace("give --instance N to name its slot", INSTANCE_HERE)  # the flag is this screen's choice
         lines += textwrap.wrap(safe(f"warning: {w}"), WIDTH, subsequent_indent="  ")
     more = len(imported.warnings) - SHOWN_WARNINGS
     if more > 0:  # the screen has room for two; the rest are not dropped unsaid
@@ -152,6 +164,9 @@ class ImportScreen(Screen):
     ImportScreen #choose.shown { display: block; }
     ImportScreen #choose Select { width: 24; margin-right: 2; }
     ImportScreen #choose #source { width: 16; }
+    ImportScreen #slot { height: 1; display: none; }
+    ImportScreen #slot.shown { display: block; }
+    ImportScreen #slot Select { width: 16; margin-right: 2; }
     ImportScreen #choose Button { margin-right: 2; }
     """
     BINDINGS = [
@@ -167,6 +182,7 @@ class ImportScreen(Screen):
         self.fmt: str | None = None
         self.imported = None
         self.source = "auto"
+        self.instance: int | None = None  # station import --instance (PX4)
         self.refused = None  # (capture, method): a capture refused with a method it does allow
 
     def check_action(self, action: str, parameters) -> bool | None:
@@ -190,6 +206,14 @@ class ImportScreen(Screen):
                 )
                 yield Button("Calibrate \\[F5]", id="calibrate", variant="primary", compact=True)
                 yield Button("Diagnose \\[F6]", id="diagnose", compact=True)
+            with Horizontal(id="slot"):  # PX4: station import --instance
+                yield Select(
+                    [("instance auto", "auto")] + [(f"instance {n}", str(n)) for n in range(INSTANCES)],
+                    id="instance",
+                    allow_blank=False,
+                    compact=True,
+                )
+                yield Static("the sensor's slot: uORB instance, CAL_*n_ID", id="slot-help")
             yield Static("", id="device")
             yield Static("", id="found")
         yield footer()
@@ -211,8 +235,11 @@ class ImportScreen(Screen):
         self.query_one("#found", Static).update("")
         self.query_one("#device", Static).update("")
         self.query_one("#choose").remove_class("shown")
+        self.query_one("#slot").remove_class("shown")
         self._status(f"Reading {tui_markup(path)}…")
         self.query_one("#source", Select).value = "auto"
+        self.query_one("#instance", Select).value = "auto"
+        self.instance = None
         self.read_file(path)
 
     @on(Select.Changed, "#source")
@@ -221,10 +248,22 @@ class ImportScreen(Screen):
         if self.imported is None or self.fmt != "px4" or event.value == self.source:
             return
         self._status(f"Reading {tui_markup(self.path)} ({event.value})…")
-        self.read_file(self.path, str(event.value))
+        self.read_file(self.path, str(event.value), self.instance, self._procedure())
+
+    @on(Select.Changed, "#instance")
+    def _reread_instance(self, event: Select.Changed) -> None:
+        """PX4: the sensor's slot (``station import --instance``), read for the procedure picked
+        (a slot the other sensors lack leaves them out, as on the command line)."""
+        instance = None if event.value == "auto" else int(event.value)
+        if self.imported is None or self.fmt != "px4" or instance == self.instance:
+            return
+        self._status(f"Reading {tui_markup(self.path)} (instance {event.value})…")
+        self.read_file(self.path, self.source, instance, self._procedure())
 
     @work(thread=True, exclusive=True, group="import", exit_on_error=False, description="read a file")
-    def read_file(self, path: str, source: str = "auto") -> None:
+    def read_file(
+        self, path: str, source: str = "auto", instance: int | None = None, procedure: str | None = None
+    ) -> None:
         from station.errors import StationError
         from station.importers import load
         from station.importers.options import ImportOptions
@@ -239,14 +278,17 @@ class ImportScreen(Screen):
             plain = fmt is None and os.path.exists(path)
             fmt = fmt or "csv"
             try:
-                imported = load.read(path, ImportOptions(source=source), fmt)
+                opts = ImportOptions(source=source, instance=instance)
+                if instance is not None:  # the procedure's sensor must have the slot, the others may lack it
+                    opts.procedure = procedure
+                imported = load.read(path, opts, fmt)
             except StationError as exc:
                 if not plain:
                     raise
                 # the reader's hint names --map, which this screen has nowhere to type
                 self.post_message(LogRead(path, None, None, error=str(exc), hint=PLAIN_CSV_ROUTE))
                 return
-            self.post_message(LogRead(path, fmt, imported, source=source))
+            self.post_message(LogRead(path, fmt, imported, source=source, instance=instance))
         except (StationError, OSError, ValueError) as exc:  # one line: file: what is wrong
             self.post_message(LogRead(path, None, None, error=str(exc)))
 
@@ -307,7 +349,9 @@ class ImportScreen(Screen):
 
         self.path, self.fmt, self.imported = message.path, message.fmt, message.imported
         self.source = message.source
+        self.instance = message.instance
         self.query_one("#source", Select).display = self.fmt == "px4"
+        self.query_one("#slot").set_class(self.fmt == "px4", "shown")
         kinds = set(self.imported.streams)
         options = procedure_options(kinds)
         fits = [name for _, name in options]

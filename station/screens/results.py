@@ -165,9 +165,13 @@ class ResultsScreen(NoticesMixin, Screen):
             if self.previous
             else "no previous calibration"
         )
+        entry = registry.get(r.get("procedure"))
+        module = entry.load() if entry is not None else None
         res, unit = shown_residual(r)  # in the unit the parameters below are shown in
+        # what the RMS is over where a procedure says (P4: per sample; its diagnosis: block means)
+        of = getattr(module, "RESIDUAL_OF", "")
         rest = (
-            f"residual {num(res, '.3g')} {unit} RMS · "
+            f"residual {num(res, '.3g')} {unit} RMS{' ' + of if of else ''} · "
             f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))}"
         )
         # the previous calibration on the next line when the whole would not fit 80 columns
@@ -175,8 +179,6 @@ class ResultsScreen(NoticesMixin, Screen):
         sep = " · " if 1 + len(word) + 3 + len(rest) + 3 + len(prev) <= 79 else "\n"
         lines = [f"[{style}] {word.upper()} [/] {rest}{sep}{prev}"]
         lines += [f"[red]✗ {tui_markup(x)}[/]" for x in reasons]
-        entry = registry.get(r.get("procedure"))
-        module = entry.load() if entry is not None else None
         lines += [tui_markup(x) for x in getattr(module, "results_lines", lambda _r: [])(r)]  # its own lines
         lines += [f"[yellow]warning: {tui_markup(w)}[/]" for w in (r.get("warnings") or [])]
         if a.failed:
