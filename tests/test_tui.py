@@ -462,6 +462,8 @@ def test_a_damaged_resume_file_is_said_on_screen_not_a_crash(tmp_path):
     guide = P1Guide(sample_rate_hz=100.0, accel_unit="V", device_id=src.device_id, config=GuideConfig())
     state = guide.to_state()
     state["index"] = 999
+    # a run with something to resume (nothing captured: not offered)
+    state["steps"][0].update(status="captured", mean=[1.0, 0.0, 0.0], std=[0.001] * 3, n=100, t_s=1.0, t0_s=0.0)
     with open(path, "w", encoding="utf-8") as fh:
         json.dump(state, fh)
 
