@@ -112,6 +112,17 @@ def screen_lines(app) -> list[str]:
     return [strip.text for strip in app.screen._compositor.render_strips()]
 
 
+async def start_on_sim(pilot, app, procedure: str, seed: int, until):
+    """On Connect: pick ``procedure``, give the session a simulated device of it on a bench clock,
+    F5, and run the bench until ``until()`` holds; returns (source, clock) to run it on."""
+    app.screen.query_one("#procedure").value = procedure
+    clock = BenchClock()
+    src = app.session.source = SimSource(seed=seed, procedure=procedure, clock=clock)
+    await pilot.press("f5")
+    await run_bench(pilot, src, clock, until)
+    return src, clock
+
+
 def text_of(app, selector) -> str:
     """The text shown in the widget's region of the screen."""
     r = app.screen.query_one(selector).region
@@ -261,11 +272,9 @@ def test_compass_sweep_from_connect_to_a_saved_result(tmp_path):
         # was looked at
         app.session.extra["compass_min_s"] = 120.0
         async with app.run_test(size=SIZE) as pilot:
-            app.screen.query_one("#procedure").value = "compass"
-            clock = BenchClock()
-            src = app.session.source = SimSource(seed=3, procedure="compass", clock=clock)
-            await pilot.press("f5")
-            await run_bench(pilot, src, clock, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2)
+            src, clock = await start_on_sim(
+                pilot, app, "compass", 3, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2
+            )
             await wait_for(pilot, lambda: "+z" in text_of(app, "#map") and "Coverage" in text_of(app, "#progress"))
             # both lines in sight at 80x24: a longer coverage line wrapped and hid 'Recorded'
             progress = text_of(app, "#progress")

@@ -7,7 +7,7 @@ import asyncio
 
 from station.app import make_app
 from station.sources import SimSource
-from tests.test_tui import SIZE, BenchClock, run_bench, text_of, wait_for
+from tests.test_tui import SIZE, BenchClock, run_bench, start_on_sim, text_of, wait_for
 
 
 def test_p1_quarter_turn_prompt_is_shown_whole_at_80x24():
@@ -435,11 +435,9 @@ def test_the_compass_prompt_is_shown_whole_at_80x24():
     async def story():
         app = make_app(None)
         async with app.run_test(size=SIZE) as pilot:
-            app.screen.query_one("#procedure").value = "compass"
-            clock = BenchClock()
-            src = app.session.source = SimSource(seed=3, procedure="compass", clock=clock)
-            await pilot.press("f5")
-            await run_bench(pilot, src, clock, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2)
+            src, clock = await start_on_sim(
+                pilot, app, "compass", 3, lambda: screen_name(app) == "CompassScreen" and app.screen.updates > 2
+            )
             asked = app.screen.last_status.message
             assert "all faces up" in asked, asked
             shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
@@ -462,12 +460,12 @@ def test_a_disagreeing_centrifuge_row_is_said_whole_at_80x24():
     async def story():
         app = make_app(None)
         async with app.run_test(size=SIZE) as pilot:
-            app.screen.query_one("#procedure").value = "accel-centrifuge"
-            clock = BenchClock()
-            src = app.session.source = SimSource(seed=3, procedure="accel-centrifuge", clock=clock)
-            await pilot.press("f5")
-            await run_bench(
-                pilot, src, clock, lambda: screen_name(app) == "CentrifugeScreen" and app.screen.guide is not None
+            src, clock = await start_on_sim(
+                pilot,
+                app,
+                "accel-centrifuge",
+                3,
+                lambda: screen_name(app) == "CentrifugeScreen" and app.screen.guide is not None,
             )
             await pilot.press("m")
             await wait_for(pilot, lambda: app.screen.focused is not None and app.screen.focused.id == "in-ax")

@@ -11,7 +11,7 @@ import pytest
 
 from station.app import make_app
 from station.sources import SimSource
-from tests.test_tui import SIZE, BenchClock, run_bench, screen_lines, screen_name, text_of, wait_for
+from tests.test_tui import SIZE, BenchClock, run_bench, screen_lines, screen_name, start_on_sim, text_of, wait_for
 
 
 def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
@@ -122,11 +122,9 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
         app = make_app(None, average_s=200.0)
         app.session.extra["export_dir"] = str(tmp_path)
         async with app.run_test(size=SIZE) as pilot:
-            app.screen.query_one("#procedure").value = "gyro-noise"
-            clock = BenchClock()
-            src = app.session.source = SimSource(seed=4, procedure="gyro-noise", clock=clock)
-            await pilot.press("f5")
-            await run_bench(pilot, src, clock, lambda: screen_name(app) == "NoiseHoldScreen" and app.screen.updates > 2)
+            src, clock = await start_on_sim(
+                pilot, app, "gyro-noise", 4, lambda: screen_name(app) == "NoiseHoldScreen" and app.screen.updates > 2
+            )
             assert "gyro noise (Allan) run" in screen_lines(app)[0]
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "AllanScreen", step_s=1.0)
             scr = app.screen

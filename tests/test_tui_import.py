@@ -30,6 +30,23 @@ def _settled(app) -> bool:
     return s != "" and "…" not in s
 
 
+def still_gyro_bin(log, seed: int) -> list:
+    """Write a still gyro record, 200 s at 50 Hz (a constant drift plus white noise), as an
+    ArduPilot DataFlash log with pymavlink's formats; returns the gyro samples as written (float32)."""
+    rng = np.random.default_rng(seed)
+    w = DataFlashWriter(log)
+    for name, value in PARAMS.items():
+        w.param(1000, name, value)
+    drift = np.array([0.002, -0.001, 0.0005])
+    gyros = []
+    for k in range(10_000):
+        gyro = drift + rng.normal(0, 0.002, 3)
+        gyros.append(np.asarray(gyro, dtype=np.float32))
+        w.imu(500_000 + k * 20_000, 0, gyro, (0.0, 0.0, -9.8))
+    w.close()
+    return gyros
+
+
 async def _open(pilot, app, path):
     await pilot.press("f7")
     await wait_for(pilot, lambda: screen_name(app) == "ImportScreen")
@@ -96,17 +113,7 @@ def test_a_dataflash_log_goes_on_to_results_and_to_a_diagnosis(tmp_path):
     the capture the loader built to the Results screen (the drift equals the mean of the log's
     gyro samples), and Diagnose opens the diagnosis of the same capture."""
     log = tmp_path / "00000007.BIN"
-    rng = np.random.default_rng(11)
-    w = DataFlashWriter(log)
-    for name, value in PARAMS.items():
-        w.param(1000, name, value)
-    drift = np.array([0.002, -0.001, 0.0005])
-    gyros = []
-    for k in range(10_000):
-        gyro = drift + rng.normal(0, 0.002, 3)
-        gyros.append(np.asarray(gyro, dtype=np.float32))
-        w.imu(500_000 + k * 20_000, 0, gyro, (0.0, 0.0, -9.8))
-    w.close()
+    gyros = still_gyro_bin(log, seed=11)
 
     async def story():
         app = make_app(str(tmp_path / "s.db"))

@@ -12,9 +12,8 @@ import numpy as np
 
 from solvers.diagnose.problems import gyro_problem
 from station.app import make_app
-from tests.test_import_ardupilot import PARAMS, DataFlashWriter
 from tests.test_tui import SIZE, screen_lines, screen_name, wait_for
-from tests.test_tui_import import _open
+from tests.test_tui_import import _open, still_gyro_bin
 
 
 def _report(app) -> str:
@@ -22,15 +21,8 @@ def _report(app) -> str:
 
 
 def test_results_and_diagnose_say_what_their_residual_rms_is_over(tmp_path):
-    log = tmp_path / "00000009.BIN"  # a still gyro record, 200 s at 50 Hz
-    rng = np.random.default_rng(24)
-    w = DataFlashWriter(log)
-    for name, value in PARAMS.items():
-        w.param(1000, name, value)
-    for k in range(10_000):
-        gyro = np.array([0.002, -0.001, 0.0005]) + rng.normal(0, 0.002, 3)
-        w.imu(500_000 + k * 20_000, 0, np.asarray(gyro, dtype=np.float32), (0.0, 0.0, -9.8))
-    w.close()
+    log = tmp_path / "00000009.BIN"
+    still_gyro_bin(log, seed=24)
 
     async def story():
         app = make_app(str(tmp_path / "s.db"))
@@ -65,5 +57,6 @@ def test_results_and_diagnose_say_what_their_residual_rms_is_over(tmp_path):
     assert all(len(line) <= 80 for line in report.splitlines()), report
     # the problem itself says the same length (the label is the code's, not a copy of it)
     t = np.arange(n) * 0.02
+    rng = np.random.default_rng(24)
     prob = gyro_problem(t, np.zeros((n, 3)) + rng.normal(0, 1e-3, (n, 3)), None, None, None, np.full(n, "a"))
     assert prob.rows_are == "0.5 s block means"
