@@ -272,3 +272,30 @@ def test_a_recording_that_dies_leaves_a_partial_that_recover_makes_readable(sim_
     _, start = _layout(data)
     res = run_station("record", "--recover", partial)
     _assert_recovered(res, partial, data[start : data.rfind(b"\n") + 1].splitlines(keepends=True))
+
+
+def test_recover_of_a_partial_a_running_recording_writes_is_refused_and_the_recording_ends_whole(sim_port, tmp_path):
+    """`--recover` run (from another terminal) on the partial of a recording still running
+    wrote a capture of the rows so far and removed the partial; the recording went on writing
+    into the removed file and ended with 'k.csv.partial: no such file', exit 2, every row
+    after that moment lost. The recording holds a lock on its partial file (which a kill or a
+    power cut releases): `--recover` and a second recording into the same name are refused
+    while it runs, and the recording ends with its capture."""
+    out = tmp_path / "live.csv"
+    partial = Path(str(out) + ".partial")
+    rec = station("record", "--port", sim_port, "--out", str(out))
+    _wait_for_rows(partial, 5000)
+    res = run_station("record", "--recover", partial)
+    assert_one_line_refusal(res, f"station: {partial}: a recording is writing it now")
+    assert partial.exists() and not out.exists()
+    second = run_station("record", "--port", sim_port, "--seconds", "1", "--out", out)
+    assert_one_line_refusal(second, f"station: {partial}: a recording is writing it now")
+    size = partial.stat().st_size
+    _wait_for_rows(partial, size + 5000)  # still recording
+    rec.send_signal(signal.SIGINT)
+    stdout, stderr = rec.communicate(timeout=20)
+    assert rec.returncode == 0, stderr
+    assert stdout.startswith("recorded ") and stderr == ""
+    cap = read_capture(out)
+    assert cap.meta["complete"] == "true" and not partial.exists()
+    assert os.path.getsize(out) > size

@@ -39,6 +39,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not on POSIX
+    fcntl = None
+
 from station.device.protocol import Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
 from station.errors import InputError, StationError
@@ -99,10 +104,41 @@ def format_rows(batch: Batch, columns: list[str]) -> str:
     return "".join(out)
 
 
+def _lock(f) -> bool:
+    """Take the advisory lock (flock) a recording holds on its partial file while it writes
+    it; the kernel drops it when the process ends, however it ends (SIGKILL, a power cut too).
+    False when another process holds it: a recording is writing the file."""
+    if fcntl is None:  # no flock here: a live partial cannot be told from a killed one's
+        return True
+    try:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError:  # a file system without locks: nothing to learn from it
+        return True
+    return True
+
+
+def _being_written(path: str) -> bool:
+    """Whether a running recording holds ``path`` (its partial file) locked."""
+    if not os.path.isfile(path):
+        return False
+    try:
+        with open(path, "rb") as f:
+            return not _lock(f)
+    except OSError:
+        return False
+
+
 def refuse_unrecovered(out: str) -> None:
     """Refuse a recording into ``out`` while ``<out>.partial`` exists: the rows of a killed
-    recording, not yet recovered, which the new one would write over and remove."""
+    recording, not yet recovered, which the new one would write over and remove (or of a
+    recording still running)."""
     partial = os.fspath(out) + PARTIAL_SUFFIX
+    if _being_written(partial):
+        raise InputError(
+            partial, None, "a recording is writing it now: wait for it to end, or stop it (Ctrl-C, SIGTERM)"
+        )
     if os.path.lexists(partial):
         raise InputError(
             partial,
@@ -131,6 +167,7 @@ class CaptureStream:
             raise
         except OSError as exc:
             raise InputError(self.partial, None, f"cannot write: {exc.strerror or exc}") from None
+        _lock(self._f)  # held until the partial is finished and removed: --recover leaves it alone
         self._f.write(_head_text(head, columns))
         self._f.flush()
         try:  # the head must be one the capture reader accepts (units, --meta values)
@@ -149,17 +186,22 @@ class CaptureStream:
         self.rows += len(batch)
 
     def abandon(self) -> None:
-        self._f.close()
         try:
             os.unlink(self.partial)
         except FileNotFoundError:
             pass
+        finally:
+            self._f.close()
 
     def finish(self, meta: dict[str, str]) -> None:
-        """Final metadata + the partial file's rows -> temp file -> os.replace(out)."""
-        self._f.close()
-        _rewrite_head(self.partial, self.out, meta, self.columns)
-        os.unlink(self.partial)
+        """Final metadata + the partial file's rows -> temp file -> os.replace(out). The
+        partial stays open (locked) until it is removed."""
+        try:
+            self._f.flush()
+            _rewrite_head(self.partial, self.out, meta, self.columns)
+            os.unlink(self.partial)
+        finally:
+            self._f.close()
 
 
 def _head_text(meta: dict[str, str], columns: list[str]) -> str:
@@ -284,25 +326,35 @@ def recover_partial(partial: str, out: str | None = None, *, warn=None) -> Recov
         raise InputError(
             partial, None, f"no such file: nothing to recover ({out} is there: recovered, or the recording finished)"
         )
-    with open_input(partial) as f:
-        end, size, nul = _last_line_end(f)
-    try:
-        checked = check_capture_upto(partial, end)  # the head, then every whole row as the reader takes it
-    except InputError as exc:
-        if exc.line is not None and exc.path == partial and not _holds_lines(partial, end, exc.line):
-            # refused on the cut last line: the kill came before the head was written whole
+    with open_input(partial) as f:  # open, and locked, until the partial is removed
+        if not _lock(f):
             raise InputError(
-                partial, None, f"no complete data row to recover (the head is cut short on line {exc.line})"
-            ) from None
-        raise
-    if checked.rows == 0:
-        raise InputError(partial, None, "no complete data row to recover")
-    meta = dict(checked.meta)
-    meta["complete"] = "false"
-    meta["recovered"] = "true"
-    columns = checked.header + ([""] if checked.trailing_comma else [])  # the rows keep their last comma
-    lines = _copy_rows(partial, out, _head_text(meta, columns), checked.data_offset, end)
-    os.unlink(partial)
+                partial,
+                None,
+                f"a recording is writing it now: nothing to recover; stopped (Ctrl-C, SIGTERM) it finishes {out} "
+                "itself",
+            )
+        end, size, nul = _last_line_end(f)
+        try:
+            checked = check_capture_upto(partial, end)  # the head, then every whole row as the reader takes it
+        except InputError as exc:
+            if exc.line is not None and exc.path == partial and not _holds_lines(partial, end, exc.line):
+                # refused on the cut last line: the kill came before the head was written whole
+                raise InputError(
+                    partial, None, f"no complete data row to recover (the head is cut short on line {exc.line})"
+                ) from None
+            raise
+        if checked.rows == 0:
+            raise InputError(partial, None, "no complete data row to recover")
+        meta = dict(checked.meta)
+        meta["complete"] = "false"
+        meta["recovered"] = "true"
+        columns = checked.header + ([""] if checked.trailing_comma else [])  # the rows keep their last comma
+        lines = _copy_rows(partial, out, _head_text(meta, columns), checked.data_offset, end)
+        try:
+            os.unlink(partial)
+        except FileNotFoundError:  # another --recover removed it after writing the same capture
+            pass
     dropped = ""
     if size > end:
         line = checked.header_line + lines + 1
