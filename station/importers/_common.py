@@ -53,6 +53,9 @@ COLUMNS = {
     "mag": ("mx", "my", "mz"),
 }
 NAME = {"accel": "accelerometer", "gyro": "gyro", "mag": "magnetometer"}
+# the end of a reader's warning that the log holds several sensors of a kind and the import
+# took one (station import --instance; the TUI's Import screen says its own choice instead)
+INSTANCE_ADVICE = "give --instance N to name its slot"
 
 
 @dataclass

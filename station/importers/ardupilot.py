@@ -35,7 +35,7 @@ from collections import Counter
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import FRD, Imported, Stream, fmt_param, set_date
+from station.importers._common import FRD, INSTANCE_ADVICE, Imported, Stream, fmt_param, set_date
 
 PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
@@ -216,7 +216,30 @@ def _offsets_learnt(mag_ofs, have_mag: bool, inst: int, unit: str | None, params
     )
 
 
+def _several_warning(instances: dict[str, list[int]], read: int) -> str | None:
+    """The warning for a log with several IMUs (or compasses) read without ``--instance``: which
+    instances it has, which was read, what to give for another; None for one of each."""
+    several = {what: v for what, v in instances.items() if len(v) > 1}
+    if not several:
+        return None
+    has = " and ".join(f"{len(v)} {what} (instances {', '.join(map(str, v))})" for what, v in several.items())
+    return f"the log has {has}: instance {read} read; {INSTANCE_ADVICE}"
+
+
 # ------------------------------------------------------------------------------------- DataFlash
+
+
+def _df_instances(log, c: dict | None, base: str) -> list[int]:
+    """The instances of ``base`` (IMU, MAG) in a DataFlash log: its ``I`` field's values (``c``:
+    its columns), and IMU2/IMU3 (MAG2/MAG3) of the logs before that field."""
+    found: set[int] = set()
+    if c is not None:
+        found.update(int(i) for i in np.unique(c["I"])) if "I" in c else found.add(0)
+    for n in (2, 3):
+        type_id = getattr(log, "name_to_id", {}).get(f"{base}{n}")
+        if type_id is not None and log.offsets[type_id]:
+            found.add(n - 1)
+    return sorted(found)
 
 
 def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
@@ -312,6 +335,12 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         first_us = float(min(r[0, 0] for r in rows.values())) if rows else None
         cut = _df_cut(log)
+        several = None
+        if instance is None:  # instance 0 read by default: say so where the log has others
+            several = _several_warning(
+                {"IMUs": _df_instances(log, cols["IMU"], "IMU"), "compasses": _df_instances(log, cols["MAG"], "MAG")},
+                inst,
+            )
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001
@@ -355,7 +384,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
-    warnings = [w for w in (skipped.warning(), cut) if w]
+    warnings = [w for w in (skipped.warning(), cut, several) if w]
     learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst, units.get("mag"), params, late)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
@@ -637,6 +666,9 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         unreadable = _tlog_unreadable(log.data_map if log.data_map is not None else b"", mavutil.mavlink)
     except Exception:  # noqa: BLE001 - the check must not stop a log pymavlink reads
         unreadable = _SkippedBytes()
+    # the IMU instances the log holds (mavmmaplog's index: message counts by id)
+    counts, ids = getattr(log, "counts", {}), getattr(log, "name_to_id", {})
+    imus = [i for i, names in IMU_MESSAGES.items() if any(counts.get(ids.get(n), 0) for n in names)]
     wanted = list(IMU_MESSAGES[inst])
     by_type: dict[str, list] = {name: [] for name in wanted}
     arrivals: dict[tuple[str, int, int], float] = {}  # (message, system, component) → first arrival
@@ -775,7 +807,8 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         if unreadable.cut_at is not None
         else None
     )
-    warnings = [w for w in (unreadable.warning(), cut) if w]
+    several = _several_warning({"IMUs": imus}, inst) if instance is None else None
+    warnings = [w for w in (unreadable.warning(), cut, several) if w]
     warnings += skipped
     arrival = arrivals[(name, *source)]
     if arrival > 946684800:  # the ground station's clock (UTC) when the first sample came

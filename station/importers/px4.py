@@ -28,7 +28,7 @@ import numpy as np
 
 from station.errors import InputError
 from station.fileio import LOG_MAGIC
-from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, set_date
+from station.importers._common import FRD, INSTANCE_ADVICE, Imported, Stream, fmt_param, frame_in_frd, set_date
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
@@ -172,7 +172,7 @@ def _voted_sensor(path, params: dict, kind: str, instance: int | None, needed: b
             f"sensor_combined's {kind} is the sensor PX4's voter chose (priority and health; this log has no "
             f"sensor_selection topic to say which): {' or '.join(f'{prefix}{n}_ID {v}' for n, v in slots.items())}"
             + (f" ({prefix}_PRIME {int(prime)} is the calibration's primary, not the voter's choice)" if prime else "")
-            + "; give --instance N to name its slot"
+            + f"; {INSTANCE_ADVICE}"
         )
     return None
 
