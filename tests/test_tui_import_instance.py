@@ -123,3 +123,24 @@ def test_an_instance_the_log_lacks_leaves_the_read_shown_and_says_so(tmp_path):
     assert "Still shown: the log as read with instance auto." in out["status"], out["status"]
     assert "IMU[0]" in out["after"]
     assert all(len(line) <= 80 for line in out["screen_after"])
+
+
+def test_a_px4_log_with_three_imus_on_the_raw_topics_says_so(tmp_path):
+    """sample_log_small.ulg (a CubeOrange) logs sensor_accel and sensor_gyro three times and
+    sensor_mag twice: the raw topics were read as instance 0 without a word (the sensor_combined
+    path said which slot to name)."""
+    log = PX4 / "sample_log_small.ulg"
+    if not log.exists():
+        pytest.skip("../shared/data/px4_ulog is not here")
+    said = (
+        "the log has 3 sensor_accel (instances 0, 1, 2), 3 sensor_gyro (instances 0, 1, 2) and "
+        "2 sensor_mag (instances 0, 1): instance 0 read; "
+    )
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "c.csv")
+    assert res.returncode == 0 and said + "give --instance N to name its slot" in res.stderr, res.stderr
+    one = run_station("import", log, "--procedure", "accel-tabletop", "--instance", "1", "--out", tmp_path / "1.csv")
+    assert one.returncode == 0 and "the log has" not in one.stderr, one.stderr
+
+    out = _pick_instance(log, "1", lambda app: "sensor_accel[1]" in _found(app) and _settled(app), tmp_path)
+    assert said + "pick its slot under instance" in " ".join(out["found"].split()), out["found"]
+    assert "the log has" not in out["after"], out["after"]

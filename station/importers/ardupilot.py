@@ -35,7 +35,7 @@ from collections import Counter
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import FRD, INSTANCE_ADVICE, Imported, Stream, fmt_param, set_date
+from station.importers._common import FRD, Imported, Stream, fmt_param, set_date, several_instances_warning
 
 PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
@@ -216,16 +216,6 @@ def _offsets_learnt(mag_ofs, have_mag: bool, inst: int, unit: str | None, params
     )
 
 
-def _several_warning(instances: dict[str, list[int]], read: int) -> str | None:
-    """The warning for a log with several IMUs (or compasses) read without ``--instance``: which
-    instances it has, which was read, what to give for another; None for one of each."""
-    several = {what: v for what, v in instances.items() if len(v) > 1}
-    if not several:
-        return None
-    has = " and ".join(f"{len(v)} {what} (instances {', '.join(map(str, v))})" for what, v in several.items())
-    return f"the log has {has}: instance {read} read; {INSTANCE_ADVICE}"
-
-
 # ------------------------------------------------------------------------------------- DataFlash
 
 
@@ -337,7 +327,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         cut = _df_cut(log)
         several = None
         if instance is None:  # instance 0 read by default: say so where the log has others
-            several = _several_warning(
+            several = several_instances_warning(
                 {"IMUs": _df_instances(log, cols["IMU"], "IMU"), "compasses": _df_instances(log, cols["MAG"], "MAG")},
                 inst,
             )
@@ -807,7 +797,7 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         if unreadable.cut_at is not None
         else None
     )
-    several = _several_warning({"IMUs": imus}, inst) if instance is None else None
+    several = several_instances_warning({"IMUs": imus}, inst) if instance is None else None
     warnings = [w for w in (unreadable.warning(), cut, several) if w]
     warnings += skipped
     arrival = arrivals[(name, *source)]

@@ -28,7 +28,16 @@ import numpy as np
 
 from station.errors import InputError
 from station.fileio import LOG_MAGIC
-from station.importers._common import FRD, INSTANCE_ADVICE, Imported, Stream, fmt_param, frame_in_frd, set_date
+from station.importers._common import (
+    FRD,
+    INSTANCE_ADVICE,
+    Imported,
+    Stream,
+    fmt_param,
+    frame_in_frd,
+    set_date,
+    several_instances_warning,
+)
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
@@ -270,10 +279,15 @@ def read(
     t0_us = None
     if use_raw:
         corrected = False
+        several: dict[str, list[int]] = {}  # read without --instance: the topics with other instances
+        reads: set[int] = set()
         for kind, topics in raw.items():
             if not topics:
                 continue
             inst = 0 if instance is None else instance
+            if instance is None and len(topics) > 1:
+                several[RAW_TOPICS[kind]] = sorted(topics)
+                reads.add(inst if inst in topics else min(topics))
             if inst not in topics:
                 if instance is None:
                     inst = min(topics)
@@ -318,6 +332,8 @@ def read(
                     "no calibration slot to this sensor"
                 )
         meta["corrected"] = "true" if corrected else "false"
+        said = several_instances_warning(several, next(iter(reads)) if len(reads) == 1 else "the first of each")
+        warnings += [said] if said else []
         n_raw = max(len(s.t_s) for s in streams.values()) if streams else 0
         n_comb = len(combined[min(combined)].data["timestamp"]) if combined else 0
         if n_comb > 4 * n_raw:
