@@ -8,13 +8,16 @@ same choice and a warning that names it (they were read as instance 0 without a 
 from __future__ import annotations
 
 import asyncio
+import struct
 
+import numpy as np
 import pytest
 
 from station.app import make_app
+from station.capture import read_capture
 from station.importers import load, px4
 from station.importers.options import ImportOptions
-from tests.station_run import run_station
+from tests.station_run import assert_one_line_refusal, run_station
 from tests.test_import_ardupilot import write_bin, write_tlog
 from tests.test_tui import SIZE, screen_lines, text_of, wait_for
 from tests.test_tui_import import PX4, _open, _settled
@@ -108,7 +111,11 @@ def test_an_ardupilot_log_with_two_imus_says_so_and_offers_the_instance(tmp_path
     assert "instance auto" in shown and all(len(line) <= 80 for line in out["screen"]), shown
     after = " ".join(out["after"].split())
     assert "accel 100 samples" in after or "accel 200 samples" in after, after
-    assert "id 2818564" in after and "warning" not in after, after  # INS_ACC2_ID: the second IMU
+    assert "id 2818564" in after and "IMUs" not in after, after  # INS_ACC2_ID: the second IMU
+    if suffix == "bin":  # one compass: instance 1 has none, and says so
+        assert "warning: --instance 1: no MAG[1] (its instances: 0), so no mag columns" in after, after
+    else:
+        assert "warning" not in after, after
     assert "Pick the procedure" in out["status"], out["status"]
 
 
@@ -144,3 +151,47 @@ def test_a_px4_log_with_three_imus_on_the_raw_topics_says_so(tmp_path):
     out = _pick_instance(log, "1", lambda app: "sensor_accel[1]" in _found(app) and _settled(app), tmp_path)
     assert said + "pick its slot under instance" in " ".join(out["found"].split()), out["found"]
     assert "the log has" not in out["after"], out["after"]
+
+
+def test_an_ardupilot_log_whose_imus_start_above_0_is_read_from_its_first(tmp_path):
+    """Without --instance, a .bin whose IMUs are instances 1 and 2 was refused "accel-tabletop
+    needs accelerometer data; this file has magnetometer" (instance 0 of each, and only the
+    compass had one), and a .tlog with only SCALED_IMU2 "no RAW_IMU / SCALED_IMU / HIGHRES_IMU
+    messages": errors on the first read, before the screen could offer an instance. They read
+    from the first instance the log has, as PX4's raw topics do; an --instance a sensor lacks
+    says which it has."""
+    from pymavlink import mavutil
+
+    from tests.test_import_ardupilot import PARAMS, DataFlashWriter
+
+    bin_log = tmp_path / "from1.bin"
+    w = DataFlashWriter(bin_log)
+    for name, value in PARAMS.items():
+        w.param(1000, name, value)
+    for k in range(100):
+        for i in (1, 2):
+            w.imu(500_000 + k * 2500, i, (0.0, 0.0, 0.0), (0.0, 0.0, -9.8))
+        if k % 4 == 0:
+            w.mag(500_100 + k * 2500, 0, (200, -150, 420))
+    w.close()
+    tlog = tmp_path / "only2.tlog"
+    out = mavutil.mavlogfile(str(tlog), write=True, source_system=1, source_component=1)
+    for k in range(50):
+        out.write(struct.pack(">Q", int((1.7e9 + k * 0.02) * 1e6)))
+        out.mav.scaled_imu2_send(1000 + k * 20, 11, 12, -990, 1, 2, 3, 0, 0, 0)
+    out.close()
+
+    res = run_station("import", bin_log, "--procedure", "accel-tabletop", "--out", tmp_path / "b.csv")
+    assert res.returncode == 0, res.stderr
+    assert "the log has 2 IMUs (instances 1, 2): instance 1 (IMU), 0 (compass) read" in res.stderr, res.stderr
+    assert read_capture(tmp_path / "b.csv").meta["sensor_device_id"] == str(PARAMS["INS_ACC2_ID"])
+    res = run_station("import", tlog, "--procedure", "accel-tabletop", "--out", tmp_path / "t.csv")
+    assert res.returncode == 0, res.stderr
+    assert np.all(read_capture(tmp_path / "t.csv").columns["az"] == -990)  # SCALED_IMU2's
+    asked = run_station("import", bin_log, "--procedure", "accel-tabletop", "--instance", "0", "--out", tmp_path / "x")
+    assert_one_line_refusal(asked, "--instance 0: no IMU[0] (its instances: 1, 2), so no accel and gyro columns")
+    asked = run_station("import", tlog, "--procedure", "accel-tabletop", "--instance", "0", "--out", tmp_path / "x")
+    assert_one_line_refusal(asked, "no RAW_IMU / SCALED_IMU / HIGHRES_IMU messages", "it has IMU instances 1")
+    # the screen reads it too, and offers the instance
+    seen = _pick_instance(bin_log, "2", lambda app: "IMU[2]" in _found(app) and _settled(app), tmp_path)
+    assert "accel 100 samples" in seen["found"] and "IMU[1]" in seen["found"], seen["found"]

@@ -267,6 +267,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     fixes: list[tuple[float, float, float]] = []
     units = {}
     instances_seen: dict[str, set] = {imu_name: set(), mag_name: set()}
+    inst_of: dict[str, int] = {imu_name: inst, mag_name: inst}  # the instance read of each
     mag_ofs = None
     try:
         # The bulk (IMU, MAG: hundreds of thousands of fixed-size records) is decoded at once
@@ -282,7 +283,11 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             if "I" in c:
                 instances_seen[name].update(int(i) for i in np.unique(c["I"]))
                 if name in ("IMU", "MAG"):
-                    keep = c["I"] == inst
+                    # without --instance, a log whose sensors start above 0 is read from its first
+                    # (as PX4's raw topics are), not refused as if --instance 0 had been asked
+                    first = inst if instance is not None or inst in instances_seen[name] else min(instances_seen[name])
+                    inst_of[name] = first
+                    keep = c["I"] == first
             if not keep.any():
                 continue
             first_ofs = min(first_ofs, int(c["_offset"][keep][0]))
@@ -326,10 +331,11 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         first_us = float(min(r[0, 0] for r in rows.values())) if rows else None
         cut = _df_cut(log)
         several = None
-        if instance is None:  # instance 0 read by default: say so where the log has others
+        if instance is None:  # the first instance read by default: say so where the log has others
+            reads = {inst_of[n] for n, k in ((imu_name, "gyro"), (mag_name, "mag")) if k in rows}
             several = several_instances_warning(
                 {"IMUs": _df_instances(log, cols["IMU"], "IMU"), "compasses": _df_instances(log, cols["MAG"], "MAG")},
-                inst,
+                next(iter(reads)) if len(reads) == 1 else f"{inst_of[imu_name]} (IMU), {inst_of[mag_name]} (compass)",
             )
     except InputError:
         raise
@@ -361,21 +367,29 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 None,
                 f"{kind} unit {units[kind]!r} in the log's FMTU is not one the station knows",
             )
+        name = mag_name if kind == "mag" else imu_name
         stream = Stream(
             kind,
             arr[:, 0] * 1e-6,
             arr[:, 1:4],
             unit or DF_DEFAULT[kind],
-            f"{imu_name if kind != 'mag' else mag_name}[{inst}]",
-            _ap_device_id(params, kind, inst),
-            inst,
+            f"{name}[{inst_of[name]}]",
+            _ap_device_id(params, kind, inst_of[name]),
+            inst_of[name],
             temps if kind == "accel" else None,
         )
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
     warnings = [w for w in (skipped.warning(), cut, several) if w]
-    learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst, units.get("mag"), params, late)
+    if instance is not None:  # the instance asked, where one of IMU/MAG lacks it (as PX4's raw topics say it)
+        for name, kind in ((imu_name, "accel and gyro"), (mag_name, "mag")):
+            have = sorted(instances_seen[name])
+            if have and inst not in have:
+                warnings.append(
+                    f"--instance {inst}: no {name}[{inst}] (its instances: {', '.join(map(str, have))}), so no {kind} columns"
+                )
+    learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst_of[mag_name], units.get("mag"), params, late)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
         warnings.append(
@@ -659,6 +673,8 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     # the IMU instances the log holds (mavmmaplog's index: message counts by id)
     counts, ids = getattr(log, "counts", {}), getattr(log, "name_to_id", {})
     imus = [i for i, names in IMU_MESSAGES.items() if any(counts.get(ids.get(n), 0) for n in names)]
+    if instance is None and imus and inst not in imus:  # no --instance: the first the log has
+        inst = imus[0]
     wanted = list(IMU_MESSAGES[inst])
     by_type: dict[str, list] = {name: [] for name in wanted}
     arrivals: dict[tuple[str, int, int], float] = {}  # (message, system, component) → first arrival
@@ -715,6 +731,7 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             path,
             None,
             f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})"
+            + (f"; it has IMU instances {', '.join(map(str, imus))}" if imus else "")
             + (
                 f"; warning: it is cut short inside a message at byte {unreadable.cut_at}"
                 if unreadable.cut_at is not None
