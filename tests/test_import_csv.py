@@ -513,3 +513,31 @@ def test_a_time_column_in_seconds_or_with_its_unit_given_is_not_warned_about(tmp
         )
         assert res.returncode == 0, res.stderr
         assert "--unit t=" not in res.stderr, res.stderr
+
+
+def test_a_csv_without_a_header_row_is_read_with_its_columns_named_by_number(tmp_path, shared_data):
+    """imu_tk's Xsens recording (shared data; text despite its '.mat' name) has no header row:
+    four numbers a line, t and the accelerometer in counts. It was refused "no header row: the
+    first line must name the columns", though --map names columns by number ("e.g. --map
+    ax=2"); the numbered map reads it, every line data, and the refusal says so."""
+    src = shared_data / "imu_tk_xsens" / "original" / "xsens_acc.mat"
+    rows = np.loadtxt(src)
+    assert rows.shape == (51175, 4)  # the file as imu_tk's authors wrote it (%15.7e)
+    out = tmp_path / "o.csv"
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--format", "csv", "--out", out)
+    assert_one_line_refusal(
+        res,
+        f"{src}:1: no header row: this line holds 4 numbers; name the columns by their number "
+        "(--map t=1,ax=2,... of 1-4) or add a first line that names them",
+    )
+    mapped = ("--map", "t=1,ax=2,ay=3,az=4", "--unit", "accel=counts")
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--format", "csv", *mapped, "--out", out)
+    assert res.returncode == 0, res.stderr
+    cap = read_capture(out)
+    np.testing.assert_array_equal(np.column_stack([cap.columns[c] for c in ("ax", "ay", "az")]), rows[:, 1:])
+    np.testing.assert_allclose(cap.columns["t"], rows[:, 0] - rows[0, 0], atol=1e-9)
+    # a bad cell still names its own line (line 1 is data: line 2 is the second row)
+    bad = tmp_path / "bad.txt"
+    bad.write_text("0.01 1 2 3\n0.02 1 2 x\n0.03 1 2 3\n")
+    res = run_station("import", bad, "--procedure", "accel-tabletop", "--format", "csv", *mapped, "--out", out)
+    assert_one_line_refusal(res, f"{bad}:2: column 'az': 'x' is not a number")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import codecs
 import csv
+import itertools
 import math
 import re
 from collections.abc import Iterator
@@ -574,12 +575,19 @@ def read_plain(
         raise InputError(path, 1, "empty file: no header row")
     delimiter = _sniff_delimiter(head)
     header = [c.strip() for c in _cells(path, hi, head, delimiter)]
+    first_data = hi + 1
     if all(_NUMBER.fullmatch(c) for c in header if c):
-        raise InputError(
-            path,
-            hi,
-            "no header row: this line holds numbers; the first line must name the columns",
-        )
+        if not (mapping and all(src.isdigit() for src in mapping.values())):
+            raise InputError(
+                path,
+                hi,
+                f"no header row: this line holds {len(header)} numbers; name the columns by their number "
+                f"(--map t=1,ax=2,... of 1-{len(header)}) or add a first line that names them",
+            )
+        # no header: the columns named by their number, every line data (the first one too)
+        lines = itertools.chain([(hi, head)], lines)
+        header = [str(j + 1) for j in range(len(header))]
+        first_data = hi
     warnings: list[str] = []
     if not _names_columns(header, mapping):
         # a logger's preamble above the header ('Fs,100', 'Logging Type,1', ...): the header is
@@ -674,7 +682,7 @@ def read_plain(
         raise InputError(
             None, None, f"--rate must be a positive number of Hz, at most {MAX_RATE_HZ:g}, got {rate_hz:g}"
         )
-    values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
+    values, linenos = _rows(path, lines, first_data, delimiter, len(header), cols)
     _check_limits(path, values, linenos, units)
     _cut_last_row(path, linenos, warnings)
     if "t" in values:
