@@ -221,20 +221,17 @@ def run(args: argparse.Namespace) -> int:
     )
     if takes_site:
         options["site"] = {"date": day}
-    if args.procedure == "compass":  # the field is IGRF's of that day: a day it cannot give is the date's fault
-        from solvers.geomag import igrf_date
-
-        try:
-            igrf_date(day)
-        except ValueError as exc:
-            raise InputError(None, None, f"--date {day}: {exc}") from None
     try:
         sim = simulate(args.procedure, seed=args.seed, effects=effects, **options)
     except (SimulationError, TypeError) as exc:
         raise InputError(None, None, f"simulate: {exc}") from None
     except (MemoryError, OverflowError):  # OverflowError: a length beyond any integer (hold_s=1e308)
         raise InputError(None, None, "simulate: the options ask for more samples than fit in memory") from None
-    except (ValueError, IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
+    except ValueError as exc:  # a day the site's model cannot give (P3: IGRF's field of --date), or an option
+        if args.date and args.date in str(exc):
+            raise InputError(None, None, f"--date {args.date}: {exc}") from None
+        raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
+    except (IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
         raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
     _refuse_implausible(sim)
     if not takes_site and args.date:  # a table without a site (P2): the date given is still its date
