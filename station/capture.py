@@ -208,9 +208,9 @@ class WideStd:
     then :meth:`first` is what :func:`wide_std` says of the whole table.
 
     The bound depends on the whole table (the largest |mean| of each triad), so a row is judged
-    only at the end. Memory stays small: a row can be the first over the final bound only if
-    its std is above every std before it in its column and above the bound so far (the bound
-    only grows), so only such rows are kept, and a growing bound drops them again."""
+    only at the end. A row can be the first over the final bound only if its std is above every
+    std before it in its column and above the bound so far (the bound only grows): only such
+    rows are kept, and a growing bound drops them again (a table within the rule keeps none)."""
 
     def __init__(self, names, meta: dict[str, str]) -> None:
         names = [n for n in names if n not in TEXT_COLUMNS]
