@@ -318,7 +318,7 @@ def test_report_shows_p4_and_the_compass_in_the_units_of_the_screens_in_chromium
         text = re.sub(r"<[^>]+>", " ", dom)
         assert f"{block} in {stored}" in " ".join(text.split())  # what the JSON and exports keep
         if proc == "gyro-drift":
-            res = re.search(r"Residual RMS (\S+) (\S+) ·", " ".join(text.split()))
+            res = re.search(r"Residual RMS (\S+) (\S+) per sample ·", " ".join(text.split()))
             assert res and res.group(2) == "°/h"
             assert float(res.group(1)) == pytest.approx(cal["residual_rms"] / deg_h, rel=1e-3)
             assert not [row for row in rows[1:] if "rad/s" in row[4]]
