@@ -555,6 +555,26 @@ def _header_problem(names: list[str]) -> str | None:
     return None
 
 
+# What loggers and spreadsheets call a time column. Without a `t` column a capture is a table of
+# averages (one row per position), so a time series whose `t` is named so would be read as
+# thousands of one-sample positions; such a name beside no `t` is refused (a table's own time
+# column, P2's `elapsed_s`, is no such name).
+_TIME_LIKE = re.compile(r"(t|time|times|timestamp|sec|secs|seconds)(_?(s|sec|ms|us|ns))?")
+
+
+def _time_column_problem(names: list[str]) -> str | None:
+    if "t" in names:
+        return None
+    for name in names:
+        if _TIME_LIKE.fullmatch(name.lower()):
+            return (
+                f"column '{name}' looks like the time, but a capture's time column is named 't' (seconds); "
+                "without 't' the rows are read as a table of averages, one row per position "
+                f"(rename it 't', or convert a plain CSV: station import FILE --map t={name} --unit t=s|ms|us)"
+            )
+    return None
+
+
 def _label_problem(label: str) -> str | None:
     if '"' in label:
         return f"column 'position': {_show(label)} holds a quote, which plain CSV cannot hold"
@@ -670,7 +690,7 @@ def _read_head(path: str) -> _Head:
             names = [_unquoted(c.strip()) for c in text.split(",")]
             if len(names) > 1 and names[-1] == "" and all(names[:-1]):
                 names, head.trailing_comma = names[:-1], True
-            problem = _header_problem(names)
+            problem = _header_problem(names) or _time_column_problem(names)
             if problem:
                 raise InputError(path, lineno, problem)
             head.header = names
