@@ -58,12 +58,13 @@ from station.device.protocol import (
 # $STC,TEMP set points [degC]: above absolute zero, within a thermal chamber's reach (-70..180 degC
 # for common test chambers, with room to spare)
 TEMP_MIN_C, TEMP_MAX_C = -100.0, 300.0
-# what each command takes after its verb (docs/protocol.md section 5), said when it comes without it
+# what each command takes after its verb (docs/protocol.md section 5), said when it comes without
+# it; no ',', '$' or '*', which an answer's text cannot carry
 _TAKES = {
-    "ORIENT": "a position or setting: $STC,ORIENT,<name> (x_up, s1, level, sweep, 3@12.5, drive, ...)",
-    "TEMP": f"a set point: $STC,TEMP,<degC> from {TEMP_MIN_C:g} to {TEMP_MAX_C:g}",
-    "AUTO": "$STC,AUTO,<procedure>, ON or OFF",
-    "RATE": "a sample rate: $STC,RATE,<hz> from 0.1 to 100000",
+    "ORIENT": "a position or setting name (x_up; s1; level; sweep; still; 3@12.5; drive ...)",
+    "TEMP": f"a set point in degC from {TEMP_MIN_C:g} to {TEMP_MAX_C:g}",
+    "AUTO": "a procedure name or ON or OFF",
+    "RATE": "a sample rate in Hz from 0.1 to 100000",
 }
 
 
