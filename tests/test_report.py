@@ -27,7 +27,10 @@ REQUIRED = "chromium" in os.environ.get("STATION_REQUIRE_TOOLS", "").split()
 
 def _sim(tmp_path, procedure, seed, device, date, options=(), **meta):
     path = tmp_path / f"{procedure}-{seed}.csv"
-    r = run_station("simulate", "--procedure", procedure, "--seed", seed, "--out", path, *options)
+    # simulated on the day it is then dated (the compass field is IGRF's of that day): the report's
+    # figures are the same on any day the suite runs
+    day = ["--date", date[:10]]
+    r = run_station("simulate", "--procedure", procedure, "--seed", seed, "--out", path, *day, *options)
     assert r.returncode == 0, r.stderr
     cap = read_capture(path)
     cap.meta.update(device=device, date=date, **meta)
