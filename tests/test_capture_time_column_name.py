@@ -45,3 +45,18 @@ def test_a_table_of_averages_and_a_time_series_read_as_before(tmp_path, series):
     res = run_station("simulate", "--procedure", "accel-tabletop", "--out", table, "--option", "averages=1")
     assert res.returncode == 0, res.stderr
     assert run_station("calibrate", table).returncode == 0
+
+
+@pytest.mark.parametrize("command", ["calibrate", "diagnose", "inspect"])
+def test_a_time_series_without_its_t_column_is_refused_at_its_first_hold(tmp_path, series, command):
+    """The `t` column left out altogether (a spreadsheet's column deleted): each sample was a
+    position of a table of averages, 28 400 for one P1 recording. A run of 100 rows holding one
+    position is a hold's samples, not a table's rows: refused on the run's first line."""
+    lines = series.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("t,"))
+    lines[at:] = [line.split(",", 1)[1] for line in lines[at:] if line]
+    path = tmp_path / "no_t.csv"
+    path.write_text("\n".join(lines) + "\n")
+    first_hold = next(i for i in range(at + 1, len(lines)) if lines[i].split(",")[0])
+    res = run_station(command, path)
+    assert_one_line_refusal(res, f"{path}:{first_hold + 1}: ", "'x_up'", "table of averages", "'t' column")
