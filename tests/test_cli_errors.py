@@ -312,7 +312,7 @@ def test_single_position_no_runtime_warning_on_stderr(tmp_path):
     proc = station_subprocess("calibrate", path)
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0, proc.stderr  # was: a RuntimeWarning and its source line
-    assert "distinct orientations" in proc.stderr and "Warning" not in proc.stderr
+    assert "1 distinct orientation in 1 static position" in proc.stderr and "Warning" not in proc.stderr
 
 
 def test_absurd_values_fail_with_a_reason_not_a_traceback(tmp_path, capsys, ldv_capture):
