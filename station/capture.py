@@ -602,6 +602,26 @@ def _header_problem(names: list[str]) -> str | None:
     return None
 
 
+# What loggers and spreadsheets call a time column. Without a `t` column a capture is a table of
+# averages (one row per position), so a time series whose `t` is named so would be read as
+# thousands of one-sample positions; such a name beside no `t` is refused (a table's own time
+# column, P2's `elapsed_s`, is no such name).
+_TIME_LIKE = re.compile(r"(t|time|times|timestamp|sec|secs|seconds)(_?(s|sec|ms|us|ns))?")
+
+
+def _time_column_problem(names: list[str]) -> str | None:
+    if "t" in names:
+        return None
+    for name in names:
+        if _TIME_LIKE.fullmatch(name.lower()):
+            return (
+                f"column '{name}' looks like the time, but a capture's time column is named 't' (seconds); "
+                "without 't' the rows are read as a table of averages, one row per position "
+                f"(rename it 't', or convert a plain CSV: station import FILE --map t={name} --unit t=s|ms|us)"
+            )
+    return None
+
+
 def _label_problem(label: str) -> str | None:
     if '"' in label:
         return f"column 'position': {_show(label)} holds a quote, which plain CSV cannot hold"
@@ -717,7 +737,7 @@ def _read_head(path: str) -> _Head:
             names = [_unquoted(c.strip()) for c in text.split(",")]
             if len(names) > 1 and names[-1] == "" and all(names[:-1]):
                 names, head.trailing_comma = names[:-1], True
-            problem = _header_problem(names)
+            problem = _header_problem(names) or _time_column_problem(names)
             if problem:
                 raise InputError(path, lineno, problem)
             head.header = names
@@ -1036,6 +1056,7 @@ def _data_chunks(
     path = head.path
     parser = _Parser(path, head.header + ([_TRAILING] if head.trailing_comma else []), head.meta)
     wide = WideStd(head.header, head.meta)  # a table of averages' whole-table rule, judged at its end
+    runs = _LabelRuns(path, head.header_line + 1) if "t" not in head.header and "position" in head.header else None
     with _open(path) as f:
         f.seek(head.data_offset)
         sample = f.readline(_MAX_DATA_LINE + 1)
@@ -1075,6 +1096,8 @@ def _data_chunks(
                     )
             n_rows += n_lines
             wide.add(chunk)
+            if runs is not None:
+                runs.add(chunk["position"])
             yield chunk
     if n_rows == 0:
         raise InputError(path, head.header_line + 1, "no data rows after the header")
@@ -1084,6 +1107,38 @@ def _data_chunks(
         raise InputError(path, head.header_line + 1 + row, f"column '{name}': {what}")
     if not ends_line and notes is not None and pending_blank is None:
         notes.append(no_line_end_note(lineno - 1))
+
+
+# A table of averages has one row per position; this many rows in a row with one label are the
+# samples of a hold: a time series whose `t` column is missing (read as a table, each sample
+# was a position: 28 400 of them for one P1 recording).
+MAX_LABEL_RUN = 100
+
+
+class _LabelRuns:
+    """The longest run of one `position` label in a table of averages, over its chunks:
+    InputError at the run's first row once it reaches MAX_LABEL_RUN rows."""
+
+    def __init__(self, path: str, first_line: int) -> None:
+        self.path, self.line = path, first_line  # the file line of the next row
+        self.label, self.start, self.length = None, first_line, 0
+
+    def add(self, labels: np.ndarray) -> None:
+        for k, lab in enumerate(labels):
+            lab = lab or None  # an empty label is a position of its own, never a run
+            if lab is not None and lab == self.label:
+                self.length += 1
+                if self.length >= MAX_LABEL_RUN:
+                    raise InputError(
+                        self.path,
+                        self.start,
+                        f"this row and the {MAX_LABEL_RUN - 1} after it hold position {_show(str(lab))}: without a 't' "
+                        "column the rows are a table of averages, one row per position; a time series needs "
+                        "its 't' column (seconds)",
+                    )
+            else:
+                self.label, self.start, self.length = lab, self.line + k, 1
+        self.line += len(labels)
 
 
 CUT_SHORT = "the file was cut short (a write stopped part-way, or one still going on)"
