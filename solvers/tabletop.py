@@ -478,7 +478,8 @@ def calibrate(
         if s8 is not None and len({tuple(np.round(p.direction, 3)) for p in known}) >= 6:
             hint = "; the labelled ±axis positions allow the six-position linear solution (--method six-position)"
         raise TooFewPositions(
-            f"{n_distinct} distinct orientations in {len(positions)} static positions; the "
+            f"{n_distinct} distinct orientation{'' if n_distinct == 1 else 's'} in {len(positions)} static "
+            f"position{'' if len(positions) == 1 else 's'}; the "
             f"norm-condition fit needs at least {MIN_DISTINCT}{hint}",
             alternative="six-position" if hint else None,
         )

@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
-from textual import work
+from textual import events, work
 from textual.app import App
 from textual.binding import Binding
 from textual.notifications import Notify
@@ -82,6 +82,58 @@ class StationApp(App):
         self.start = start
         self.due: list = []  # the due/overdue list read at start-up
         self.notices: list = []  # every notification (textual.notifications.Notification), in order
+        self._keys_held: list[events.Key] = []  # typed ahead while an earlier key is still handled
+        self._key_in_flight: events.Key | None = None
+
+    # ------------------------------------------------------------------ one key at a time
+    # Textual sends each key the terminal gives to the widget focused when it is read, and runs a
+    # binding that is not a priority one (F7 Import, l Limits, s Save, ...) only when the key has
+    # bubbled back up to the App. Keys that come in one burst (a paste without bracketed paste,
+    # `tmux send-keys F7 'path' Enter`, a fast typist) were all sent to the old screen's focus
+    # before F7 opened Import; they bubbled up after it, unbound there, and were dropped, or met a
+    # binding of the screen then on top. So a key goes to the widgets only when the one before it
+    # has been through every widget it was sent to, the App included, and a screen it opened has
+    # mounted and focused its field: keys typed ahead land where they would have, typed slowly.
+
+    async def on_event(self, event: events.Event) -> None:
+        if isinstance(event, events.Key) and not event.is_forwarded:
+            if self._key_in_flight is not None:
+                self._keys_held.append(event)
+                return
+            await self._route_key(event)
+            return
+        await super().on_event(event)
+
+    async def _route_key(self, event: events.Key) -> None:
+        self._key_in_flight = event
+        target = self.focused or self.screen  # where App.on_event sends it
+        path = list(target.ancestors_with_self)  # the widgets it bubbles through, the App last
+        # a safety net, run by the App as the path is: a widget removed before its turn never runs it
+        self.set_timer(1.0, lambda: self.call_later(self._key_done, event))
+        try:
+            await super().on_event(event)
+        finally:
+            self._follow(path, 0, event)
+
+    def _follow(self, path: list, k: int, event: events.Key) -> None:
+        """Once ``path[k]`` has handled what it was sent before now (the key, or its bubble from
+        ``path[k - 1]``), the same for ``path[k + 1]``; after the App, the screen now on top."""
+        while k < len(path):
+            if path[k].call_later(self._follow, path, k + 1, event):
+                return
+            k += 1  # closed (a widget removed): nothing more comes through it
+        screen = self.screen
+        if screen.is_mounted:  # its on_mount has asked the App for its focus: after that
+            self.call_later(self._key_done, event)
+        elif not screen.call_later(self.call_later, self._key_done, event):
+            self.call_later(self._key_done, event)
+
+    async def _key_done(self, event: events.Key) -> None:
+        if self._key_in_flight is not event:
+            return  # done already (the safety net, or the path, came second)
+        self._key_in_flight = None
+        if self._keys_held:
+            await self._route_key(self._keys_held.pop(0))
 
     def on_mount(self) -> None:
         from station.screens.connect import ConnectScreen

@@ -202,35 +202,82 @@ def column_unit(name: str, meta: dict[str, str]) -> str | None:
     return COLUMN_UNITS.get(base)
 
 
+class WideStd:
+    """The STD_OVER_MEAN rule over a table read in chunks of rows (the streaming reader) or
+    whole (the reader's result, the writer's capture): :meth:`add` each chunk in row order,
+    then :meth:`first` is what :func:`wide_std` says of the whole table.
+
+    The bound depends on the whole table (the largest |mean| of each triad), so a row is judged
+    only at the end. A row can be the first over the final bound only if its std is above every
+    std before it in its column and above the bound so far (the bound only grows): only such
+    rows are kept, and a growing bound drops them again (a table within the rule keeps none)."""
+
+    def __init__(self, names, meta: dict[str, str]) -> None:
+        names = [n for n in names if n not in TEXT_COLUMNS]
+        self.meta = meta
+        self.rows = 0
+        self.groups = {
+            n: [c for c in _TRIADS.get(n[:-4], (n[:-4],)) if c in names] for n in names if n.endswith("_std")
+        }
+        self.scale = dict.fromkeys(self.groups, 0.0)
+        self.top = dict.fromkeys(self.groups, -math.inf)  # the largest std so far
+        self.kept: dict[str, tuple[np.ndarray, np.ndarray]] = {
+            n: (np.empty(0, np.int64), np.empty(0)) for n in self.groups
+        }
+
+    def add(self, chunk: dict[str, np.ndarray]) -> None:
+        """The next rows of the table (every column of the table, in row order)."""
+        size = 0
+        for name, group in self.groups.items():
+            for c in group:
+                m = np.abs(np.asarray(chunk[c], dtype=np.float64))
+                m = m[np.isfinite(m)]
+                if m.size:
+                    self.scale[name] = max(self.scale[name], float(m.max()))
+            std = np.asarray(chunk[name], dtype=np.float64)
+            size = len(std)
+            before = np.fmax.accumulate(np.concatenate(([self.top[name]], std)))
+            self.top[name] = float(before[-1])
+            with np.errstate(invalid="ignore"):
+                new = np.flatnonzero(std > before[:-1])  # above every std before it
+            rows, values = self.kept[name]
+            rows = np.concatenate((rows, new + self.rows))
+            values = np.concatenate((values, std[new]))
+            if self.scale[name] > 0:
+                keep = values > STD_OVER_MEAN * self.scale[name]
+                rows, values = rows[keep], values[keep]
+            self.kept[name] = (rows, values)
+        self.rows += size
+
+    def first(self) -> tuple[int, str, str] | None:
+        """The first row (0-based, in row order; of several columns the leftmost) whose
+        ``<col>_std`` is more than STD_OVER_MEAN times the largest |mean| of its quantity in the
+        table: ``(row, column, what is wrong)``; None when there is none."""
+        first = None
+        for name, group in self.groups.items():
+            scale = self.scale[name]
+            rows, values = self.kept[name]
+            if not scale > 0 or not rows.size:
+                continue
+            over = np.flatnonzero(values > STD_OVER_MEAN * scale)
+            if over.size and (first is None or rows[over[0]] < first[0]):
+                unit = column_unit(name, self.meta)
+                unit = f" {unit}" if unit and unit != "samples" else ""
+                first = (
+                    int(rows[over[0]]),
+                    name,
+                    f"{float(values[over[0]]):g}{unit} is more than {STD_OVER_MEAN:g} times the largest magnitude of "
+                    f"{', '.join(group)} in the table ({scale:.4g}{unit}): no still hold spreads that wide "
+                    "(a standard deviation in another unit?)",
+                )
+        return first
+
+
 def wide_std(columns: dict[str, np.ndarray], meta: dict[str, str]) -> tuple[int, str, str] | None:
-    """The first row (0-based, in row order; of several columns the leftmost) whose ``<col>_std``
-    is more than STD_OVER_MEAN times the largest |mean| of its quantity in the table:
-    ``(row, column, what is wrong)``; None when there is none."""
-    first = None
-    for name, col in columns.items():
-        if not name.endswith("_std") or name in TEXT_COLUMNS:
-            continue
-        base = name[:-4]
-        group = [c for c in _TRIADS.get(base, (base,)) if c in columns and c not in TEXT_COLUMNS]
-        means = [np.abs(np.asarray(columns[c], dtype=np.float64)) for c in group]
-        means = [m[np.isfinite(m)] for m in means]
-        scale = max((float(m.max()) for m in means if m.size), default=0.0)
-        if not scale > 0:
-            continue
-        std = np.asarray(col, dtype=np.float64)
-        with np.errstate(invalid="ignore"):
-            over = np.flatnonzero(std > STD_OVER_MEAN * scale)
-        if over.size and (first is None or over[0] < first[0]):
-            unit = column_unit(name, meta)
-            unit = f" {unit}" if unit and unit != "samples" else ""
-            which = ", ".join(group)
-            first = (
-                int(over[0]),
-                name,
-                f"{float(std[over[0]]):g}{unit} is more than {STD_OVER_MEAN:g} times the largest magnitude of {which} in the "
-                f"table ({scale:.4g}{unit}): no still hold spreads that wide (a standard deviation in another unit?)",
-            )
-    return first
+    """:meth:`WideStd.first` of the whole table ``columns``."""
+    check = WideStd(list(columns), meta)
+    check.add(columns)
+    return check.first()
 
 
 def column_limit(name: str, meta: dict[str, str]) -> tuple[float, str]:
@@ -555,6 +602,26 @@ def _header_problem(names: list[str]) -> str | None:
     return None
 
 
+# What loggers and spreadsheets call a time column. Without a `t` column a capture is a table of
+# averages (one row per position), so a time series whose `t` is named so would be read as
+# thousands of one-sample positions; such a name beside no `t` is refused (a table's own time
+# column, P2's `elapsed_s`, is no such name).
+_TIME_LIKE = re.compile(r"(t|time|times|timestamp|sec|secs|seconds)(_?(s|sec|ms|us|ns))?")
+
+
+def _time_column_problem(names: list[str]) -> str | None:
+    if "t" in names:
+        return None
+    for name in names:
+        if _TIME_LIKE.fullmatch(name.lower()):
+            return (
+                f"column '{name}' looks like the time, but a capture's time column is named 't' (seconds); "
+                "without 't' the rows are read as a table of averages, one row per position "
+                f"(rename it 't', or convert a plain CSV: station import FILE --map t={name} --unit t=s|ms|us)"
+            )
+    return None
+
+
 def _label_problem(label: str) -> str | None:
     if '"' in label:
         return f"column 'position': {_show(label)} holds a quote, which plain CSV cannot hold"
@@ -670,7 +737,7 @@ def _read_head(path: str) -> _Head:
             names = [_unquoted(c.strip()) for c in text.split(",")]
             if len(names) > 1 and names[-1] == "" and all(names[:-1]):
                 names, head.trailing_comma = names[:-1], True
-            problem = _header_problem(names)
+            problem = _header_problem(names) or _time_column_problem(names)
             if problem:
                 raise InputError(path, lineno, problem)
             head.header = names
@@ -1013,6 +1080,8 @@ def _data_chunks(
 ) -> Iterator[dict[str, np.ndarray]]:
     path = head.path
     parser = _Parser(path, head.header + ([_TRAILING] if head.trailing_comma else []), head.meta)
+    wide = WideStd(head.header, head.meta)  # a table of averages' whole-table rule, judged at its end
+    runs = _LabelRuns(path, head.header_line + 1) if "t" not in head.header and "position" in head.header else None
     with _open(path) as whole:
         f = whole if end is None else _Upto(whole, end)
         f.seek(head.data_offset)
@@ -1052,11 +1121,50 @@ def _data_chunks(
                         f"a value after the last column (column {len(head.header) + 1} has no name in the header)",
                     )
             n_rows += n_lines
+            wide.add(chunk)
+            if runs is not None:
+                runs.add(chunk["position"])
             yield chunk
     if n_rows == 0:
         raise InputError(path, head.header_line + 1, "no data rows after the header")
+    first = wide.first()
+    if first is not None:  # data rows follow the header line by line (no blank or comment line between)
+        row, name, what = first
+        raise InputError(path, head.header_line + 1 + row, f"column '{name}': {what}")
     if not ends_line and notes is not None and pending_blank is None:
         notes.append(no_line_end_note(lineno - 1))
+
+
+# A table of averages has one row per position; this many rows in a row with one label are the
+# samples of a hold: a time series whose `t` column is missing (read as a table, each sample
+# was a position: 28 400 of them for one P1 recording).
+MAX_LABEL_RUN = 100
+
+
+class _LabelRuns:
+    """The longest run of one `position` label in a table of averages, over its chunks:
+    InputError at the run's first row once it reaches MAX_LABEL_RUN rows."""
+
+    def __init__(self, path: str, first_line: int) -> None:
+        self.path, self.line = path, first_line  # the file line of the next row
+        self.label, self.start, self.length = None, first_line, 0
+
+    def add(self, labels: np.ndarray) -> None:
+        for k, lab in enumerate(labels):
+            lab = lab or None  # an empty label is a position of its own, never a run
+            if lab is not None and lab == self.label:
+                self.length += 1
+                if self.length >= MAX_LABEL_RUN:
+                    raise InputError(
+                        self.path,
+                        self.start,
+                        f"this row and the {MAX_LABEL_RUN - 1} after it hold position {_show(str(lab))}: without a 't' "
+                        "column the rows are a table of averages, one row per position; a time series needs "
+                        "its 't' column (seconds)",
+                    )
+            else:
+                self.label, self.start, self.length = lab, self.line + k, 1
+        self.line += len(labels)
 
 
 CUT_SHORT = "the file was cut short (a write stopped part-way, or one still going on)"
@@ -1075,7 +1183,10 @@ def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):
 
     ``meta`` and ``header`` are read and validated at once; ``chunks`` yields
     ``dict[name, ndarray]`` blocks of about ``rows`` rows (read as bytes, sized from the first
-    data line), validating as it goes: an InputError may come from any ``next``.
+    data line), validating as it goes: an InputError may come from any ``next``. A rule on the
+    whole table (a table of averages' ``*_std`` bound, :class:`WideStd`) is judged after the
+    last chunk, so the ``next`` that would end the stream raises it, on the line
+    :func:`read_capture` names.
     """
     path = os.fspath(path)
     head = _read_head(path)
@@ -1098,11 +1209,11 @@ class CheckedRows:
 
 def check_capture_upto(path, end: int, *, chunk_rows: int = DEFAULT_CHUNK_ROWS) -> CheckedRows:
     """Validate the capture ``path`` as :func:`read_capture` would read its first ``end``
-    bytes, without holding its columns (only those a whole-table rule needs: ``<col>_std`` and
-    its quantity). ``end`` is a line end (the byte after it): the bytes from ``data_offset`` to
-    ``end`` are then rows the reader takes as they are. ``rows`` 0 when no data row ends before
-    ``end`` (nor the header row, when ``end`` < ``data_offset``). InputError ``file:line: what
-    is wrong`` on the first thing it refuses."""
+    bytes (the chunked reader, whole-table rules included), without holding its columns.
+    ``end`` is a line end (the byte after it): the bytes from ``data_offset`` to ``end`` are
+    then rows the reader takes as they are. ``rows`` 0 when no data row ends before ``end``
+    (nor the header row, when ``end`` < ``data_offset``). InputError ``file:line: what is
+    wrong`` on the first thing it refuses."""
     path = os.fspath(path)
     head = _read_head(path)
     checked = CheckedRows(
@@ -1110,20 +1221,8 @@ def check_capture_upto(path, end: int, *, chunk_rows: int = DEFAULT_CHUNK_ROWS) 
     )
     if end <= head.data_offset:
         return checked
-    keep = {n for n in head.header if n.endswith("_std") and n not in TEXT_COLUMNS}
-    keep |= {c for n in keep for c in _TRIADS.get(n[:-4], (n[:-4],))}
-    parts: dict[str, list[np.ndarray]] = {name: [] for name in head.header if name in keep}
-    n_rows = 0
     for chunk in _data_chunks(head, max(1, int(chunk_rows)), end=end):
-        n_rows += len(next(iter(chunk.values())))
-        for name in parts:
-            parts[name].append(chunk[name])
-    if parts:
-        wide = wide_std({n: np.concatenate(p) for n, p in parts.items()}, head.meta)
-        if wide is not None:
-            row, name, what = wide
-            raise InputError(path, head.header_line + 1 + row, f"column '{name}': {what}")
-    checked.rows = n_rows
+        checked.rows += len(next(iter(chunk.values())))
     return checked
 
 
@@ -1141,10 +1240,6 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
         pieces = parts[name]
         columns[name] = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
         pieces.clear()
-    wide = wide_std(columns, head.meta)
-    if wide is not None:  # data rows follow the header line by line (no blank or comment line between)
-        row, name, what = wide
-        raise InputError(path, head.header_line + 1 + row, f"column '{name}': {what}")
     return Capture(
         meta=head.meta,
         columns=columns,

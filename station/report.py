@@ -27,6 +27,7 @@ from station.procedures.review import (
     flatten,
     param_unit,
     record_result,
+    residual_of,
     result_unit,
     shown_residual,
     shown_rows,
@@ -343,8 +344,9 @@ def render_html(rep: dict) -> str:
         )
     h.append("</table>")
     res, res_unit = shown_residual(result)
+    of = residual_of(result)  # what the RMS is over, as calibrate says it (P4: per sample)
     h.append(
-        f"<p>Residual RMS {num(res, '.4g')} {escape(res_unit)} · "
+        f"<p>Residual RMS {num(res, '.4g')} {escape(res_unit)}{escape(' ' + of) if of else ''} · "
         f"{_e(registry.count_text(result.get('procedure'), result.get('n_positions')))}.</p>"
     )
     if review.get("reasons") or a.reasons:

@@ -296,7 +296,15 @@ def _tabletop_table(path: Path, rows: np.ndarray) -> Path:
 def test_all_zero_tabletop_is_refused_as_one_orientation(tmp_path, capsys):
     path = _tabletop_table(tmp_path / "zero.csv", np.zeros((12, 3)))  # was: LinAlgError traceback
     code, _, err = run(capsys, "calibrate", path)
-    assert code == 2 and "1 distinct orientations in 12" in one_line(err)
+    assert code == 2 and "1 distinct orientation in 12 static positions" in one_line(err)
+
+
+def test_one_position_is_counted_in_the_singular(tmp_path, capsys):
+    """A still PX4 log imported for P1 was refused as "1 distinct orientations in 1 static
+    positions"."""
+    path = _tabletop_table(tmp_path / "one.csv", np.full((1, 3), 1.65))
+    code, _, err = run(capsys, "calibrate", path)
+    assert code == 2 and "1 distinct orientation in 1 static position;" in one_line(err)
 
 
 def test_single_position_no_runtime_warning_on_stderr(tmp_path):
@@ -304,7 +312,7 @@ def test_single_position_no_runtime_warning_on_stderr(tmp_path):
     proc = station_subprocess("calibrate", path)
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0, proc.stderr  # was: a RuntimeWarning and its source line
-    assert "distinct orientations" in proc.stderr and "Warning" not in proc.stderr
+    assert "1 distinct orientation in 1 static position" in proc.stderr and "Warning" not in proc.stderr
 
 
 def test_absurd_values_fail_with_a_reason_not_a_traceback(tmp_path, capsys, ldv_capture):

@@ -264,3 +264,66 @@ def test_reading_a_mavlink2_tlog_leaves_the_process_on_its_mavlink_version(tmp_p
             else:
                 os.environ["MAVLINK20"] = before[0]
             mavutil.mavlink = before[1]
+
+
+# ------------------------------------------------------------------ ULogs without IMU data
+# written by pyulog's own writer (ULog.write_ulog) from the shared logs, the data sections left
+# out where a test says so: header, definitions and parameters exactly as pyulog writes them
+
+
+def _rewrite(src, dest, keep) -> object:
+    """``src`` written again by pyulog with only the data sets ``keep(name)`` keeps."""
+    from pyulog import ULog
+
+    ulog = ULog(str(src))
+    ulog._data_list = [d for d in ulog.data_list if keep(d.name)]  # pyulog keeps no public setter
+    ulog.write_ulog(str(dest))
+    return ULog(str(dest))
+
+
+@pytest.mark.parametrize("source", ["auto", "raw", "combined"])
+def test_a_header_only_ulog_says_it_holds_no_data_messages(tmp_path, shared_data, source):
+    """A valid ULog that holds its header, formats and parameters but no data message (the
+    logger stopped before any) was refused "no IMU data: the log has neither sensor_accel/...
+    nor sensor_combined", naming topics its formats do define, as if the wrong ones were logged."""
+    log = tmp_path / "header_only.ulg"
+    back = _rewrite(shared_data / SMALL_ULG, log, lambda _name: False)
+    assert back.data_list == [] and not back.file_corruption
+    want = (
+        f"{log}: no IMU data: the log holds no data messages, only its header ({len(back.message_formats)} "
+        f"topic formats, {len(back.initial_parameters)} parameters): no topic was logged"
+    )
+    for command, args in (("import", ("--out", tmp_path / "o.csv")), ("calibrate", ())):
+        res = run_station(
+            command, log, "--procedure", "accel-tabletop", "--source", source, *args, subprocess_run=command == "import"
+        )
+        assert "Traceback" not in res.stderr
+        assert_one_line_refusal(res, want)
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_a_ulog_without_imu_topics_names_the_topics_it_has(tmp_path, shared_data):
+    log = tmp_path / "no_imu.ulg"
+    back = _rewrite(shared_data / "px4_ulog/original/sample.ulg", log, lambda name: name != "sensor_combined")
+    topics = sorted({d.name for d in back.data_list})
+    assert len(topics) == 14
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
+    assert_one_line_refusal(
+        res,
+        f"{log}: no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag nor sensor_combined; "
+        f"its 14 logged topics: {', '.join(topics[:6])} (+8 more)",
+    )
+
+
+def test_combined_asked_of_a_log_with_only_raw_topics_says_raw(tmp_path, shared_data):
+    """--source combined of a log with sensor_accel/gyro/mag but no sensor_combined said the log
+    had neither: it has the raw ones, and the refusal says so and how to read them."""
+    log = tmp_path / "raw_only.ulg"
+    _rewrite(shared_data / SMALL_ULG, log, lambda name: name != "sensor_combined")
+    res = run_station("import", log, "--procedure", "accel-tabletop", "--source", "combined", "--out", tmp_path / "o")
+    assert_one_line_refusal(
+        res,
+        f"{log}: --source combined: the log has no sensor_combined, only the raw topics "
+        "sensor_accel/sensor_gyro/sensor_mag (--source raw, or 'raw topics' on the import screen)",
+    )
+    assert run_station("import", log, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv").returncode == 0

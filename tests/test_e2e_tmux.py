@@ -365,6 +365,37 @@ def test_a_new_users_walkthrough_at_80x24_in_tmux(tmp_path):
     assert math.isclose(high, 2000 * math.pi / 648000, rel_tol=1e-12) and math.isclose(low, -high, rel_tol=1e-12)
 
 
+def test_keys_sent_in_one_burst_open_a_screen_and_fill_its_field_in_tmux(tmp_path):
+    """`tmux send-keys F7 PATH Enter` in one burst: the path was lost (sent to Connect's Start
+    button before F7 opened Import, dropped when it came back up), and so was the limit after
+    `l` on Results. Each burst is one send-keys, waited on by what the screen then shows."""
+    from station_run import run_station
+
+    sock = f"test-burst-{os.getpid()}"
+    db = tmp_path / "station.db"
+    capture = tmp_path / "p4.csv"
+    r = run_station(
+        "simulate", "--procedure", "gyro-drift", "--seed", 403000, "--option", "duration_s=60", "--out", capture
+    )
+    assert r.returncode == 0, r.stderr
+    _start_tui(sock, db)
+    try:
+        _wait_pane(sock, lambda s: "f5 Start" in s and "Import file" in s, 60, "the Connect screen")
+        tmux(sock, "send-keys", "-t", "demo", "F7", str(capture), "Enter")  # one send-keys: one burst
+        _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " RMS " in s, 240, "P4 Results")
+        tmux(sock, "send-keys", "-t", "demo", "l", "drift=-2000:2000", "Enter")
+        _wait_pane(sock, lambda s: "stored: drift = -2000 … 2000 °/h" in s, 60, "the limit stored")
+        _keys(sock, "Escape")  # alone: an escape with a key after it in one read is alt+that key
+        _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " PASS " in s, 60, "Results judged by the limit")
+        _keys(sock, "C-q")
+        _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
+        _keys(sock, "y")
+        _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
+        assert "EXIT=0" in pane(sock)
+    finally:
+        tmux(sock, "kill-server", check=False)
+
+
 def test_station_with_only_port_starts_the_tui_on_that_device_in_tmux(tmp_path):
     """README: `station` is the TUI "on the built-in simulated device unless --port is given".
     `station --port /dev/ttyUSB0` was refused by the argument parser (the port taken for a

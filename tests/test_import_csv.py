@@ -330,6 +330,37 @@ def test_a_loggers_preamble_above_the_header_is_skipped_and_said(tmp_path, share
     assert_one_line_refusal(res, f"{src}:1:", "no column 'acc_x'")
 
 
+def test_what_a_loggers_csv_leaves_unsaid_is_said_at_once_on_its_header_line(tmp_path, shared_data):
+    """The MPU-6050 logger's file (shared data) names its columns but no unit and has no time
+    column: `station: give the accel unit: ...` named neither the file nor its line, and after
+    --unit accel=... came the gyro's unit, then the time, one run each."""
+    src = shared_data / "mpu6050_unc" / "original" / "imu_static_test.csv"
+    out = tmp_path / "o.csv"
+    res = run_station("import", src, "--procedure", "gyro-drift", "--out", out)
+    assert_one_line_refusal(
+        res,
+        f"station: {src}:5: the file does not say the unit of its accelerometer and gyro columns: "
+        "give --unit accel=UNIT,gyro=UNIT (accel: V, mV, counts, g, m/s^2, mps2, mg; "
+        "gyro: V, mV, counts, rad/s, deg/s, mrad/s, deg/h); "
+        "it has no time column either: --map t=COLUMN or the sample rate, --rate HZ",
+    )
+    res = run_station("import", src, "--procedure", "gyro-drift", "--unit", "accel=counts,gyro=counts", "--out", out)
+    assert_one_line_refusal(res, f"station: {src}:5: no time column: map one (--map t=COLUMN)")
+    assert not out.exists()
+
+
+def test_a_csv_whose_columns_have_other_names_lists_them(tmp_path, shared_data):
+    """imucal's example session (shared data) names its columns n_samples, gyr_x, ... acc_z:
+    the refusal said only what the station's names are, not the file's to map them from."""
+    src = shared_data / "imucal_ferraris" / "original" / "example_ferraris_session.csv"
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--out", tmp_path / "o.csv")
+    assert_one_line_refusal(
+        res,
+        f"{src}:1: no column is named like a capture column (t, ax, ay, az, gx, gy, gz, mx, my, mz, temp_c); "
+        "its columns: 'n_samples', 'gyr_x', 'gyr_y', 'gyr_z', 'acc_x', 'acc_y', 'acc_z': say which is which",
+    )
+
+
 @pytest.mark.parametrize(("bits", "unit", "step"), [(32, "us", 10_000), (16, "ms", 10), (32, "ms", 10)])
 def test_a_wrapping_counter_as_time_is_unwrapped_with_a_warning(tmp_path, bits, unit, step):
     """A logger's time stamp from a 32-bit micros() (wraps after 71.6 min) or a 16-bit
@@ -482,3 +513,31 @@ def test_a_time_column_in_seconds_or_with_its_unit_given_is_not_warned_about(tmp
         )
         assert res.returncode == 0, res.stderr
         assert "--unit t=" not in res.stderr, res.stderr
+
+
+def test_a_csv_without_a_header_row_is_read_with_its_columns_named_by_number(tmp_path, shared_data):
+    """imu_tk's Xsens recording (shared data; text despite its '.mat' name) has no header row:
+    four numbers a line, t and the accelerometer in counts. It was refused "no header row: the
+    first line must name the columns", though --map names columns by number ("e.g. --map
+    ax=2"); the numbered map reads it, every line data, and the refusal says so."""
+    src = shared_data / "imu_tk_xsens" / "original" / "xsens_acc.mat"
+    rows = np.loadtxt(src)
+    assert rows.shape == (51175, 4)  # the file as imu_tk's authors wrote it (%15.7e)
+    out = tmp_path / "o.csv"
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--format", "csv", "--out", out)
+    assert_one_line_refusal(
+        res,
+        f"{src}:1: no header row: this line holds 4 numbers; name the columns by their number "
+        "(--map t=1,ax=2,... of 1-4) or add a first line that names them",
+    )
+    mapped = ("--map", "t=1,ax=2,ay=3,az=4", "--unit", "accel=counts")
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--format", "csv", *mapped, "--out", out)
+    assert res.returncode == 0, res.stderr
+    cap = read_capture(out)
+    np.testing.assert_array_equal(np.column_stack([cap.columns[c] for c in ("ax", "ay", "az")]), rows[:, 1:])
+    np.testing.assert_allclose(cap.columns["t"], rows[:, 0] - rows[0, 0], atol=1e-9)
+    # a bad cell still names its own line (line 1 is data: line 2 is the second row)
+    bad = tmp_path / "bad.txt"
+    bad.write_text("0.01 1 2 3\n0.02 1 2 x\n0.03 1 2 3\n")
+    res = run_station("import", bad, "--procedure", "accel-tabletop", "--format", "csv", *mapped, "--out", out)
+    assert_one_line_refusal(res, f"{bad}:2: column 'az': 'x' is not a number")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from solvers.simulate import LiveImu
@@ -90,3 +91,54 @@ def test_a_temperature_set_point_no_chamber_reaches_is_refused(set_point):
         ack = dev.ask("TEMP", set_point)
         assert not ack.ok and "degC" in ack.text and "convert" not in ack.text, ack
         assert dev.ask("TEMP", "35").ok
+
+
+@pytest.mark.parametrize("verb", ["ORIENT", "TEMP", "AUTO", "RATE"])
+def test_a_known_command_without_its_argument_is_answered_with_what_it_takes(verb):
+    """`$STC,ORIENT` (no position) was answered "unknown command ORIENT", as if the device did
+    not know ORIENT at all (docs/protocol.md section 5 lists it); TEMP, AUTO and RATE alike. The
+    answer names the argument the command takes."""
+    with Served(LiveImu(procedure="accel-tabletop", seed=1, rate_hz=50.0)) as dev:
+        ack = dev.ask(verb)
+        assert not ack.ok and "unknown command" not in ack.text, ack
+        assert ack.text.startswith(f"{verb} takes "), ack
+        assert "STC" not in ack.text, ack  # a '$' or ',' in the text would be mangled on the line
+
+
+@pytest.mark.parametrize("rate", ["abc", "", "nan"])
+def test_a_rate_that_is_no_number_is_answered_in_the_devices_words(rate):
+    """`$STC,RATE,abc` was answered with Python's "could not convert string to float: 'abc'"; it
+    is answered as a rate out of range is, with the range the device takes."""
+    with Served(LiveImu(procedure="accel-tabletop", seed=1, rate_hz=50.0)) as dev:
+        ack = dev.ask("RATE", rate)
+        assert not ack.ok and "convert" not in ack.text and "0.1..100000 Hz" in ack.text, ack
+        assert dev.ask("RATE", "100").ok
+
+
+@pytest.mark.parametrize("new_rate_hz", [20.0, 200.0])
+def test_the_centrifuge_clock_runs_on_when_its_rate_is_changed(new_rate_hz):
+    """The P2 bench stamped sample i at i / rate: `$STC,RATE,20` on a 100 Hz bench moved its
+    device clock 5 times further on at once (t_device_us jumped from 1 s to 5 s between two
+    consecutive samples), `$STC,RATE,200` sent it back in time, which a reader takes for a
+    restart of the device (docs/protocol.md section 3). A device's clock runs on: every step
+    after the change is the new period."""
+    with Served(CentrifugeImu(seed=1, rate_hz=100.0)) as dev:
+        t_us: list[float] = []
+
+        def collect(until):
+            t_end = time.monotonic() + 10.0
+            while time.monotonic() < t_end and not until():
+                dev.parser.feed(dev.port.read(4096))
+                block = dev.parser.take()
+                if block is not None:
+                    t_us.extend(block.t_dev_us.tolist())
+
+        collect(lambda: len(t_us) >= 20)
+        assert dev.ask("RATE", f"{new_rate_hz:g}").ok
+        n_before = len(t_us)
+        collect(lambda: len(t_us) >= n_before + 20)
+        steps = np.diff(t_us)
+        assert steps.min() > 0, f"the device clock went back: {steps.min()} us"
+        period_us = 1e6 / new_rate_hz
+        assert np.all((np.abs(steps - 10_000) <= 1) | (np.abs(steps - period_us) <= 1)), sorted(set(steps))
+        assert dev.parser.stats.restarts == 0

@@ -186,3 +186,102 @@ def test_cli_simulate_refuses_options_that_make_a_capture_the_reader_refuses(tmp
     res = run_station("simulate", "--procedure", procedure, "--out", out, "--option", option.replace("1e300", "0.01"))
     assert res.returncode == 0, res.stderr
     assert run_station("inspect", out).returncode == 0
+
+
+def _today_utc() -> str:
+    import datetime as dt
+
+    return dt.datetime.now(dt.UTC).date().isoformat()
+
+
+def test_a_capture_simulated_now_is_dated_today_and_filed_now(tmp_path):
+    """`station simulate` wrote the simulator's fixed date (2026-11-21) into every capture, so one
+    simulated and saved days later (after a demo's calibration, say) was filed on that old day's
+    last second, behind what was saved since (qa-s25b). A capture simulated now says today (UTC),
+    and `calibrate --save` files it at the save."""
+    import datetime as dt
+    import sqlite3
+
+    from tests.station_run import run_station
+
+    before = _today_utc()
+    out, db = tmp_path / "p1.csv", tmp_path / "station.db"
+    assert run_station("simulate", "--procedure", "accel-tabletop", "--seed", "3", "--out", out).returncode == 0
+    assert read_capture(out).meta["date"] in {before, _today_utc()}
+    assert run_station("--db", db, "devices", "add", "SIM-ACC-0000").returncode == 0
+    start = dt.datetime.now(dt.UTC).replace(microsecond=0)
+    res = run_station("calibrate", out, "--save", "--device", "SIM-ACC-0000", "--db", db)
+    assert res.returncode == 0, res.stderr
+    end = dt.datetime.now(dt.UTC)
+    with sqlite3.connect(db) as con:
+        (time,) = con.execute("select time from calibrations").fetchone()
+    assert start <= dt.datetime.fromisoformat(time.replace("Z", "+00:00")) <= end, time
+
+
+@pytest.mark.parametrize("procedure", ["accel-tabletop", "compass", "gyro-drift", "ldv"])
+def test_the_date_comes_from_the_command_line_and_the_simulator_gets_it(tmp_path, procedure):
+    """Two routes, one answer: `simulate --date D` is the simulator's capture at site date D (the
+    compass field is IGRF's of D), and without --date it is today's; solvers/ reads no clock."""
+    from solvers.simulate import DEFAULT_SITE
+    from tests.station_run import run_station
+
+    options = {"compass": {"n_orientations": 10, "hold_s": 1.0, "move_s": 1.0}}.get(procedure, {})
+    args = [a for k, v in options.items() for a in ("--option", f"{k}={v:g}")]
+    for date in ("2024-02-29", None):
+        out = tmp_path / f"{date}.csv"
+        res = run_station(
+            "simulate",
+            "--procedure",
+            procedure,
+            "--seed",
+            "9",
+            "--out",
+            out,
+            *args,
+            *(["--date", date] if date else []),
+        )
+        assert res.returncode == 0, res.stderr
+        day = date or _today_utc()
+        want = simulate(procedure, seed=9, site={"date": day}, **options)
+        got = read_capture(out)
+        assert got.meta["date"] == day
+        for name, col in want.columns.items():
+            if col.dtype == object:
+                assert list(got.columns[name]) == list(col)
+            else:
+                np.testing.assert_array_equal(got.columns[name], col, err_msg=name)
+    assert DEFAULT_SITE["date"] == "2026-11-21"  # the simulator's own default stays fixed (reproducible)
+
+
+def test_a_table_without_a_site_takes_a_date_only_when_given(tmp_path):
+    """P2's simulated table has no site and wrote no date (it is filed at its save); --date gives it one."""
+    from tests.station_run import run_station
+
+    out = tmp_path / "p2.csv"
+    assert run_station("simulate", "--procedure", "accel-centrifuge", "--out", out).returncode == 0
+    assert "date" not in read_capture(out).meta
+    assert (
+        run_station("simulate", "--procedure", "accel-centrifuge", "--out", out, "--date", "2025-06-01").returncode == 0
+    )
+    assert read_capture(out).meta["date"] == "2025-06-01"
+
+
+@pytest.mark.parametrize(
+    "procedure, date, needle",
+    [
+        ("accel-tabletop", "2025-13-01", "'2025-13-01' is not a date (YYYY-MM-DD"),
+        ("accel-tabletop", "21/11/2026", "'21/11/2026' is not a date (YYYY-MM-DD"),
+        ("accel-tabletop", "20261121", "'20261121' is not a date (YYYY-MM-DD"),
+        ("compass", "1700-01-01", "--date 1700-01-01: 1700-01-01 is 200.0 years outside the IGRF coverage"),
+    ],
+)
+def test_a_date_the_capture_cannot_carry_is_one_line(tmp_path, procedure, date, needle):
+    out = tmp_path / "x.csv"
+    r = subprocess.run(
+        [sys.executable, "-m", "station", "simulate", "--procedure", procedure, "--out", str(out), "--date", date],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 2 and r.stdout == ""
+    assert needle in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not out.exists()

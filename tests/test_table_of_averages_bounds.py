@@ -13,7 +13,7 @@ import sqlite3
 import numpy as np
 import pytest
 
-from station.capture import Capture, read_capture, write_capture
+from station.capture import Capture, iter_capture_chunks, read_capture, write_capture
 from station.errors import InputError
 from tests.station_run import assert_one_line_refusal, run_station
 
@@ -171,3 +171,52 @@ def test_every_real_table_reads_and_so_do_tables_of_averages_of_every_real_recor
         back = read_capture(out)
         assert back.n_rows == rows // k and set(back.columns) == set(cols), path
     assert tables >= 1
+
+
+def _streamed(path, rows: int) -> int:
+    """Every chunk of ``path`` through the streaming reader (the one `station record` reads
+    captures with), ``rows`` rows at a time: the rows read."""
+    _, _, chunks = iter_capture_chunks(path, rows=rows)
+    return sum(len(chunk["n"]) for chunk in chunks)
+
+
+@pytest.mark.parametrize("rows", [1, 5, 1000])
+def test_the_streaming_reader_refuses_a_wide_std_on_the_line_the_reader_names(table_v, tmp_path, rows):
+    """The streaming reader applied the per-cell bounds (n above 1e9) but not the whole-table one:
+    ax_std = 1e15 V streamed through in full (qa-s25b). Both readers now judge it by one
+    implementation (WideStd) and name the same line, whatever the chunk size."""
+    capture, first = _table(table_v, tmp_path, edit=lambda cols: [(2, "ax_std", "1e15")])
+    with pytest.raises(InputError) as whole:
+        read_capture(capture)
+    with pytest.raises(InputError) as streamed:
+        _streamed(capture, rows)
+    assert str(streamed.value) == str(whole.value)
+    assert str(streamed.value).startswith(f"{capture}:{first + 2}: column 'ax_std': 1e+15 V is more than 1000 times")
+
+
+@pytest.mark.parametrize("rows", [1, 5, 1000])
+def test_the_bound_is_the_whole_tables_in_both_readers(table_v, tmp_path, rows):
+    """The bound comes from the whole table: a std on row 1 that is 5000 times every mean before
+    it but under 1000 times a larger mean on a later row reads; the first of several rows over
+    the final bound is named, not the widest, nor an earlier one only over the bound so far."""
+
+    def quiet_until_the_last_row(cols):
+        peak = max(np.abs(cols[a]).max() for a in AXES)
+        small = {a: f"{1e-3 * peak:.6g}" for a in AXES}  # every mean but the last row's is tiny
+        edits = [(k, a, small[a]) for k in range(11) for a in AXES]
+        return edits + [(1, "ay_std", f"{5 * peak:.6g}"), (11, "ax", f"{peak:.6g}")]
+
+    capture, _ = _table(table_v, tmp_path, edit=quiet_until_the_last_row)
+    assert read_capture(capture).n_rows == 12 and _streamed(capture, rows) == 12
+
+    def two_over(cols):
+        peak = max(np.abs(cols[a]).max() for a in AXES)
+        return [(3, "az_std", f"{2000 * peak:.6g}"), (5, "ax_std", f"{9000 * peak:.6g}"), (1, "ay_std", "1e-9")]
+
+    capture, first = _table(table_v, tmp_path, edit=two_over)
+    with pytest.raises(InputError) as whole:
+        read_capture(capture)
+    with pytest.raises(InputError) as streamed:
+        _streamed(capture, rows)
+    assert str(streamed.value) == str(whole.value)
+    assert str(streamed.value).startswith(f"{capture}:{first + 3}: column 'az_std': ")

@@ -146,7 +146,7 @@ def test_too_few_and_too_alike_positions_refused():
         T.calibrate(pos, G)
     assert T.calibrate(pos, G, method="six-position").method == "six-position"
     alike, _, _ = fast_table(7, names=["z_up"] * 12)
-    with pytest.raises(T.TooFewPositions, match="1 distinct orientations"):
+    with pytest.raises(T.TooFewPositions, match="1 distinct orientation in"):
         T.calibrate(alike, G)
 
 

@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(records)
         return 0
-    from station.procedures.review import record_result, shown_residual
+    from station.procedures.review import record_result, residual_of, shown_residual
 
     # on a terminal, the parameter lines (a P1 M is nine value±σ pairs, 175 columns) wrap at its
     # width between pairs, indented; into a pipe or a file they stay one line each
@@ -73,10 +73,12 @@ def run(args: argparse.Namespace) -> int:
         if r["superseded_by"] is not None:
             status += f", superseded by #{r['superseded_by']}"
         res, unit = shown_residual(record_result(r))
+        of = residual_of(record_result(r))  # what the RMS is over, as calibrate says it (P4: per sample)
         out.append(
             fit_line(
                 f"#{r['id']}  {safe(r['time'])}  {safe(r['procedure'])}  {status}  residual_rms "
-                f"{fmt_num(res, 4)}{f' {safe(unit)}' if unit else ''}  software {safe(r['software_version'] or '-')}",
+                f"{fmt_num(res, 4)}{f' {safe(unit)}' if unit else ''}{f' {of}' if of else ''}  "
+                f"software {safe(r['software_version'] or '-')}",
                 "",
                 width,
             )

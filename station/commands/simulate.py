@@ -1,4 +1,5 @@
-"""`station simulate --procedure NAME --out FILE [--seed N] [--effect NAME=VALUE ...] [--truth FILE.json]`."""
+"""`station simulate --procedure NAME --out FILE [--seed N] [--date YYYY-MM-DD] [--effect NAME=VALUE ...]
+[--truth FILE.json]`."""
 
 from __future__ import annotations
 
@@ -37,6 +38,26 @@ def seed_arg(text: str) -> int:
     return value
 
 
+def date_arg(text: str) -> str:
+    """argparse type: a calendar date, YYYY-MM-DD (what the capture's ``date`` holds)."""
+    import datetime as _dt
+    import re
+
+    try:
+        if not re.fullmatch(r"\d{4}-\d{2}-\d{2}", text.strip()):
+            raise ValueError
+        return _dt.date.fromisoformat(text.strip()).isoformat()
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a date (YYYY-MM-DD, e.g. 2026-11-29)") from None
+
+
+def today_utc() -> str:
+    """Today's date in UTC, YYYY-MM-DD: the date a capture simulated now carries."""
+    import datetime as _dt
+
+    return _dt.datetime.now(_dt.UTC).date().isoformat()
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate",
@@ -48,6 +69,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, help="capture file to write")
     p.add_argument("--seed", type=seed_arg, default=0)
+    p.add_argument(
+        "--date",
+        type=date_arg,
+        metavar="YYYY-MM-DD",
+        help="the day the capture says it was measured (its 'date'; the compass field is IGRF's of that "
+        "day); default: today (UTC), so a calibration saved from it is filed now, not on an old date",
+    )
     p.add_argument(
         "--effect",
         action="append",
@@ -154,8 +182,10 @@ def _refuse_implausible(sim) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import inspect
     import math
 
+    import solvers.simulate
     from solvers.simulate import SimulationError, simulate
     from station.capture import Capture, write_capture
 
@@ -185,15 +215,27 @@ def run(args: argparse.Namespace) -> int:
             "--option label_positions=0 applies to time series: a table of averages "
             "(averages=1) always names its positions",
         )
+    day = args.date or today_utc()  # the clock is read here: solvers/ stays pure
+    takes_site = (
+        "site" in inspect.signature(getattr(solvers.simulate, registry.get(args.procedure).simulator)).parameters
+    )
+    if takes_site:
+        options["site"] = {"date": day}
     try:
         sim = simulate(args.procedure, seed=args.seed, effects=effects, **options)
     except (SimulationError, TypeError) as exc:
         raise InputError(None, None, f"simulate: {exc}") from None
     except (MemoryError, OverflowError):  # OverflowError: a length beyond any integer (hold_s=1e308)
         raise InputError(None, None, "simulate: the options ask for more samples than fit in memory") from None
-    except (ValueError, IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
+    except ValueError as exc:  # a day the site's model cannot give (P3: IGRF's field of --date), or an option
+        if args.date and args.date in str(exc):
+            raise InputError(None, None, f"--date {args.date}: {exc}") from None
+        raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
+    except (IndexError, ZeroDivisionError) as exc:  # an option the simulator cannot honour
         raise InputError(None, None, f"simulate: these options cannot be simulated ({exc})") from None
     _refuse_implausible(sim)
+    if not takes_site and args.date:  # a table without a site (P2): the date given is still its date
+        sim.meta["date"] = day
     capture = Capture(meta=sim.meta, columns=sim.columns, path=args.out)
     if args.truth:  # both or neither: the truth's temporary is made first, renamed after the capture
         text = json.dumps(sim.truth, indent=2)

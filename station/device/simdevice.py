@@ -58,6 +58,14 @@ from station.device.protocol import (
 # $STC,TEMP set points [degC]: above absolute zero, within a thermal chamber's reach (-70..180 degC
 # for common test chambers, with room to spare)
 TEMP_MIN_C, TEMP_MAX_C = -100.0, 300.0
+# what each command takes after its verb (docs/protocol.md section 5), said when it comes without
+# it; no ',', '$' or '*', which an answer's text cannot carry
+_TAKES = {
+    "ORIENT": "a position or setting name (x_up; s1; level; sweep; still; 3@12.5; drive ...)",
+    "TEMP": f"a set point in degC from {TEMP_MIN_C:g} to {TEMP_MAX_C:g}",
+    "AUTO": "a procedure name or ON or OFF",
+    "RATE": "a sample rate in Hz from 0.1 to 100000",
+}
 
 
 @dataclass
@@ -229,6 +237,8 @@ class SimDevice:
     def _handle(self, cmd: Command) -> tuple[bool, str]:
         imu = self.imu
         v, a = cmd.verb, cmd.args
+        if v in _TAKES and not a:  # a known command without its argument is no unknown command
+            return False, f"{v} takes {_TAKES[v]}"
         try:
             if v == "HDR":
                 self._queue(self._header_bytes(), 0)
@@ -259,7 +269,10 @@ class SimDevice:
                     return True, ",".join(imu.positions)
                 return False, f"this device simulates {imu.procedure}"
             if v == "RATE" and a:
-                hz = float(a[0])
+                try:
+                    hz = float(a[0])
+                except ValueError:
+                    hz = math.nan  # said below, as a rate out of range
                 if not (0.1 <= hz <= 100_000):
                     return False, "rate must be 0.1..100000 Hz"
                 self._rebase_rate(hz)

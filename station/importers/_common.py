@@ -53,6 +53,21 @@ COLUMNS = {
     "mag": ("mx", "my", "mz"),
 }
 NAME = {"accel": "accelerometer", "gyro": "gyro", "mag": "magnetometer"}
+# the end of a reader's warning that the log holds several sensors of a kind and the import
+# took one (station import --instance; the TUI's Import screen says its own choice instead)
+INSTANCE_ADVICE = "give --instance N to name its slot"
+
+
+def several_instances_warning(instances: dict[str, list[int]], read: int | str) -> str | None:
+    """The warning for a log with several sensors of a kind (IMUs, compasses, uORB instances of
+    a topic) read without ``--instance``: which instances it has, which was read, what to give
+    for another; None where there is one of each."""
+    several = {what: v for what, v in instances.items() if len(v) > 1}
+    if not several:
+        return None
+    each = [f"{len(v)} {what} (instances {', '.join(map(str, v))})" for what, v in several.items()]
+    has = " and ".join([", ".join(each[:-1]), each[-1]] if len(each) > 1 else each)
+    return f"the log has {has}: instance {read} read; {INSTANCE_ADVICE}"
 
 
 @dataclass

@@ -35,7 +35,7 @@ from collections import Counter
 import numpy as np
 
 from station.errors import InputError
-from station.importers._common import FRD, Imported, Stream, fmt_param, set_date
+from station.importers._common import FRD, Imported, Stream, fmt_param, set_date, several_instances_warning
 
 PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
@@ -219,6 +219,19 @@ def _offsets_learnt(mag_ofs, have_mag: bool, inst: int, unit: str | None, params
 # ------------------------------------------------------------------------------------- DataFlash
 
 
+def _df_instances(log, c: dict | None, base: str) -> list[int]:
+    """The instances of ``base`` (IMU, MAG) in a DataFlash log: its ``I`` field's values (``c``:
+    its columns), and IMU2/IMU3 (MAG2/MAG3) of the logs before that field."""
+    found: set[int] = set()
+    if c is not None:
+        found.update(int(i) for i in np.unique(c["I"])) if "I" in c else found.add(0)
+    for n in (2, 3):
+        type_id = getattr(log, "name_to_id", {}).get(f"{base}{n}")
+        if type_id is not None and log.offsets[type_id]:
+            found.add(n - 1)
+    return sorted(found)
+
+
 def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     """IMU/MAG of one instance (default 0) and the parameters in use from a DataFlash log."""
     from pymavlink import DFReader
@@ -254,6 +267,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     fixes: list[tuple[float, float, float]] = []
     units = {}
     instances_seen: dict[str, set] = {imu_name: set(), mag_name: set()}
+    inst_of: dict[str, int] = {imu_name: inst, mag_name: inst}  # the instance read of each
     mag_ofs = None
     try:
         # The bulk (IMU, MAG: hundreds of thousands of fixed-size records) is decoded at once
@@ -269,7 +283,11 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             if "I" in c:
                 instances_seen[name].update(int(i) for i in np.unique(c["I"]))
                 if name in ("IMU", "MAG"):
-                    keep = c["I"] == inst
+                    # without --instance, a log whose sensors start above 0 is read from its first
+                    # (as PX4's raw topics are), not refused as if --instance 0 had been asked
+                    first = inst if instance is not None or inst in instances_seen[name] else min(instances_seen[name])
+                    inst_of[name] = first
+                    keep = c["I"] == first
             if not keep.any():
                 continue
             first_ofs = min(first_ofs, int(c["_offset"][keep][0]))
@@ -312,6 +330,13 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         first_us = float(min(r[0, 0] for r in rows.values())) if rows else None
         cut = _df_cut(log)
+        several = None
+        if instance is None:  # the first instance read by default: say so where the log has others
+            reads = {inst_of[n] for n, k in ((imu_name, "gyro"), (mag_name, "mag")) if k in rows}
+            several = several_instances_warning(
+                {"IMUs": _df_instances(log, cols["IMU"], "IMU"), "compasses": _df_instances(log, cols["MAG"], "MAG")},
+                next(iter(reads)) if len(reads) == 1 else f"{inst_of[imu_name]} (IMU), {inst_of[mag_name]} (compass)",
+            )
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001
@@ -342,21 +367,29 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 None,
                 f"{kind} unit {units[kind]!r} in the log's FMTU is not one the station knows",
             )
+        name = mag_name if kind == "mag" else imu_name
         stream = Stream(
             kind,
             arr[:, 0] * 1e-6,
             arr[:, 1:4],
             unit or DF_DEFAULT[kind],
-            f"{imu_name if kind != 'mag' else mag_name}[{inst}]",
-            _ap_device_id(params, kind, inst),
-            inst,
+            f"{name}[{inst_of[name]}]",
+            _ap_device_id(params, kind, inst_of[name]),
+            inst_of[name],
             temps if kind == "accel" else None,
         )
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
-    warnings = [w for w in (skipped.warning(), cut) if w]
-    learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst, units.get("mag"), params, late)
+    warnings = [w for w in (skipped.warning(), cut, several) if w]
+    if instance is not None:  # the instance asked, where one of IMU/MAG lacks it (as PX4's raw topics say it)
+        for name, kind in ((imu_name, "accel and gyro"), (mag_name, "mag")):
+            have = sorted(instances_seen[name])
+            if have and inst not in have:
+                warnings.append(
+                    f"--instance {inst}: no {name}[{inst}] (its instances: {', '.join(map(str, have))}), so no {kind} columns"
+                )
+    learnt = _offsets_learnt(mag_ofs, "mag" in streams, inst_of[mag_name], units.get("mag"), params, late)
     if late:
         meta["params_changed"] = ",".join(sorted(late))
         warnings.append(
@@ -637,6 +670,11 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         unreadable = _tlog_unreadable(log.data_map if log.data_map is not None else b"", mavutil.mavlink)
     except Exception:  # noqa: BLE001 - the check must not stop a log pymavlink reads
         unreadable = _SkippedBytes()
+    # the IMU instances the log holds (mavmmaplog's index: message counts by id)
+    counts, ids = getattr(log, "counts", {}), getattr(log, "name_to_id", {})
+    imus = [i for i, names in IMU_MESSAGES.items() if any(counts.get(ids.get(n), 0) for n in names)]
+    if instance is None and imus and inst not in imus:  # no --instance: the first the log has
+        inst = imus[0]
     wanted = list(IMU_MESSAGES[inst])
     by_type: dict[str, list] = {name: [] for name in wanted}
     arrivals: dict[tuple[str, int, int], float] = {}  # (message, system, component) → first arrival
@@ -693,6 +731,7 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             path,
             None,
             f"no {' / '.join(wanted)} messages in the MAVLink log (instance {inst})"
+            + (f"; it has IMU instances {', '.join(map(str, imus))}" if imus else "")
             + (
                 f"; warning: it is cut short inside a message at byte {unreadable.cut_at}"
                 if unreadable.cut_at is not None
@@ -775,7 +814,8 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         if unreadable.cut_at is not None
         else None
     )
-    warnings = [w for w in (unreadable.warning(), cut) if w]
+    several = several_instances_warning({"IMUs": imus}, inst) if instance is None else None
+    warnings = [w for w in (unreadable.warning(), cut, several) if w]
     warnings += skipped
     arrival = arrivals[(name, *source)]
     if arrival > 946684800:  # the ground station's clock (UTC) when the first sample came

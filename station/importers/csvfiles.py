@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import codecs
 import csv
+import itertools
 import math
 import re
 from collections.abc import Iterator
@@ -24,7 +25,7 @@ import numpy as np
 from station.capture import CUT_SHORT, MAX_ABS, UNIT_ALIASES, UNIT_KEYS, no_line_end_note, plausible_limit
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
-from station.importers._common import COLUMNS, Imported, Stream
+from station.importers._common import COLUMNS, NAME, Imported, Stream
 from station.importers.options import TARGETS
 
 KIND_OF = {c: k for k, cols in COLUMNS.items() for c in cols}
@@ -32,6 +33,7 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 # --unit t= spelled as people write it: read as the unit it names
 TIME_ALIASES = {"sec": "s", "msec": "ms", "µs": "us", "μs": "us", "usec": "us", "nsec": "ns"}
 MAX_RATE_HZ = 1e9  # the capture format's largest sample_rate_hz
+SHOWN_COLUMNS = 12  # header names a refusal lists
 EUROC_COLUMNS = {
     "w_RS_S_x": "gx",
     "w_RS_S_y": "gy",
@@ -573,12 +575,19 @@ def read_plain(
         raise InputError(path, 1, "empty file: no header row")
     delimiter = _sniff_delimiter(head)
     header = [c.strip() for c in _cells(path, hi, head, delimiter)]
+    first_data = hi + 1
     if all(_NUMBER.fullmatch(c) for c in header if c):
-        raise InputError(
-            path,
-            hi,
-            "no header row: this line holds numbers; the first line must name the columns",
-        )
+        if not (mapping and all(src.isdigit() for src in mapping.values())):
+            raise InputError(
+                path,
+                hi,
+                f"no header row: this line holds {len(header)} numbers; name the columns by their number "
+                f"(--map t=1,ax=2,... of 1-{len(header)}) or add a first line that names them",
+            )
+        # no header: the columns named by their number, every line data (the first one too)
+        lines = itertools.chain([(hi, head)], lines)
+        header = [str(j + 1) for j in range(len(header))]
+        first_data = hi
     warnings: list[str] = []
     if not _names_columns(header, mapping):
         # a logger's preamble above the header ('Fs,100', 'Logging Type,1', ...): the header is
@@ -600,8 +609,10 @@ def read_plain(
             raise InputError(
                 path,
                 hi,
-                f"no column is named like a capture column ({', '.join(TARGETS)}): "
-                "say which is which with --map, e.g. --map t=time,ax=acc_x,ay=acc_y,az=acc_z",
+                f"no column is named like a capture column ({', '.join(TARGETS)}); its columns: "
+                + ", ".join(repr(c) for c in header[:SHOWN_COLUMNS])
+                + (f" (+{len(header) - SHOWN_COLUMNS} more)" if len(header) > SHOWN_COLUMNS else "")
+                + ": say which is which with --map, e.g. --map t=time,ax=acc_x,ay=acc_y,az=acc_z",
             )
     cols: dict[str, int] = {}
     for target, source in mapping.items():
@@ -634,15 +645,23 @@ def read_plain(
     if rate_hz is not None and "t" in cols:
         raise InputError(None, None, "--rate is for a file without a time column; t is mapped (leave out one of them)")
     kinds_present = {KIND_OF[c] for c in cols if c in KIND_OF}
+    # what the file leaves unsaid, all of it in one line at its header: the units of the columns
+    # it has, and the time when it has no time column and no --rate
+    unsaid = [kind for kind in sorted(kinds_present) if units.get(kind) is None]
+    no_time = "t" not in cols and rate_hz is None
+    if unsaid:
+        give = ",".join(f"{kind}=UNIT" for kind in unsaid)
+        allowed = "; ".join(f"{kind}: {', '.join(UNIT_KEYS[f'{kind}_unit'])}" for kind in unsaid)
+        raise InputError(
+            path,
+            hi,
+            f"the file does not say the unit of its {' and '.join(NAME[k] for k in unsaid)} columns: "
+            f"give --unit {give} ({allowed})"
+            + ("; it has no time column either: --map t=COLUMN or the sample rate, --rate HZ" if no_time else ""),
+        )
     for kind in sorted(kinds_present):
         unit = units.get(kind)
         allowed = UNIT_KEYS[f"{kind}_unit"]
-        if unit is None:
-            raise InputError(
-                None,
-                None,
-                f"give the {kind} unit: --unit {kind}=UNIT (one of {', '.join(allowed)})",
-            )
         if unit not in allowed:
             raise InputError(
                 None,
@@ -653,17 +672,17 @@ def read_plain(
     t_unit = units.get("t", "s")
     if t_unit not in TIME_UNITS:
         raise InputError(None, None, f"--unit t={t_unit}: expected one of {', '.join(TIME_UNITS)}")
-    if "t" not in cols and rate_hz is None:
+    if no_time:
         raise InputError(
-            None,
-            None,
+            path,
+            hi,
             "no time column: map one (--map t=COLUMN) or give the sample rate (--rate HZ)",
         )
     if rate_hz is not None and not (0 < rate_hz <= MAX_RATE_HZ):  # the capture's sample_rate_hz takes no more
         raise InputError(
             None, None, f"--rate must be a positive number of Hz, at most {MAX_RATE_HZ:g}, got {rate_hz:g}"
         )
-    values, linenos = _rows(path, lines, hi + 1, delimiter, len(header), cols)
+    values, linenos = _rows(path, lines, first_data, delimiter, len(header), cols)
     _check_limits(path, values, linenos, units)
     _cut_last_row(path, linenos, warnings)
     if "t" in values:

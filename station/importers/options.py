@@ -85,7 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser, *, for_import: bool = False) 
         default=None,
         metavar="N",
         help="PX4: uORB instance of sensor_accel/gyro/mag; ArduPilot/MAVLink: IMU and compass "
-        "instance (0 = first; default 0)",
+        "instance (0 = first; default: the first the log has, a warning naming the others)",
     )
     g.add_argument(
         "--source",

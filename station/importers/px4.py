@@ -28,7 +28,16 @@ import numpy as np
 
 from station.errors import InputError
 from station.fileio import LOG_MAGIC
-from station.importers._common import FRD, Imported, Stream, fmt_param, frame_in_frd, set_date
+from station.importers._common import (
+    FRD,
+    INSTANCE_ADVICE,
+    Imported,
+    Stream,
+    fmt_param,
+    frame_in_frd,
+    set_date,
+    several_instances_warning,
+)
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
@@ -120,6 +129,36 @@ def _load(path):
         raise InputError(path, None, f"not a readable PX4 ULog file ({type(exc).__name__}: {exc})") from None
 
 
+SHOWN_TOPICS = 6  # topics named in the refusal of a log without IMU data
+
+
+def _what_it_holds(path, ulog) -> str:
+    """What a ULog without IMU data holds instead, for its refusal: no data message at all (its
+    header and definitions only), or the topics it logged. ``ulog`` was read for the IMU topics
+    alone; the others are counted by reading the log again, all of it (this path only)."""
+    from pyulog import ULog
+
+    topics = None
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            topics = sorted({d.name for d in ULog(str(path)).data_list})
+    except Exception:  # noqa: BLE001 - the refusal stands without the list
+        pass
+    if topics == []:
+        return (
+            f"the log holds no data messages, only its header ({len(ulog.message_formats)} topic formats, "
+            f"{len(ulog.initial_parameters)} parameters): no topic was logged"
+        )
+    said = "the log has neither sensor_accel/sensor_gyro/sensor_mag nor sensor_combined"
+    if topics:
+        more = len(topics) - SHOWN_TOPICS
+        said += (
+            f"; its {len(topics)} logged topic{'s' if len(topics) != 1 else ''}: {', '.join(topics[:SHOWN_TOPICS])}"
+            + (f" (+{more} more)" if more > 0 else "")
+        )
+    return said
+
+
 def _readable_param(name, value) -> bool:
     """A parameter as a firmware writes it: a name (no control characters, no ':') and an int or
     float. A flipped byte in its definition ('flxat CAL_ACC0_XOFF') leaves pyulog the raw bytes."""
@@ -172,7 +211,7 @@ def _voted_sensor(path, params: dict, kind: str, instance: int | None, needed: b
             f"sensor_combined's {kind} is the sensor PX4's voter chose (priority and health; this log has no "
             f"sensor_selection topic to say which): {' or '.join(f'{prefix}{n}_ID {v}' for n, v in slots.items())}"
             + (f" ({prefix}_PRIME {int(prime)} is the calibration's primary, not the voter's choice)" if prime else "")
-            + "; give --instance N to name its slot"
+            + f"; {INSTANCE_ADVICE}"
         )
     return None
 
@@ -210,6 +249,15 @@ def read(
     have_raw = any(raw[k] for k in wanted)
     combined = _topics(ulog, "sensor_combined")
     use_raw = source == "raw" or (source == "auto" and have_raw)
+    cut = getattr(ulog, "station_cut_at", None)
+    if not have_raw and not combined:  # whichever source: what the log holds instead
+        raise InputError(
+            path,
+            None,
+            "no IMU data: "
+            + _what_it_holds(path, ulog)
+            + (f" (it is cut short inside a message at byte {cut}, before any)" if cut is not None else ""),
+        )
     if source == "raw" and not have_raw:
         raise InputError(
             path,
@@ -217,13 +265,13 @@ def read(
             "--source raw: the log has no sensor_accel, sensor_gyro or sensor_mag topic (try the combined source: "
             "--source combined, or 'combined' on the import screen)",
         )
-    cut = getattr(ulog, "station_cut_at", None)
     if not use_raw and not combined:
         raise InputError(
             path,
             None,
-            "no IMU data: the log has neither sensor_accel/sensor_gyro/sensor_mag nor sensor_combined"
-            + (f" (it is cut short inside a message at byte {cut}, before any)" if cut is not None else ""),
+            "--source combined: the log has no sensor_combined, only the raw topics "
+            + "/".join(RAW_TOPICS[k] for k in wanted if raw[k])
+            + " (--source raw, or 'raw topics' on the import screen)",
         )
     streams: dict[str, Stream] = {}
     meta: dict[str, str] = {"firmware": "px4"}
@@ -231,10 +279,15 @@ def read(
     t0_us = None
     if use_raw:
         corrected = False
+        several: dict[str, list[int]] = {}  # read without --instance: the topics with other instances
+        reads: set[int] = set()
         for kind, topics in raw.items():
             if not topics:
                 continue
             inst = 0 if instance is None else instance
+            if instance is None and len(topics) > 1:
+                several[RAW_TOPICS[kind]] = sorted(topics)
+                reads.add(inst if inst in topics else min(topics))
             if inst not in topics:
                 if instance is None:
                     inst = min(topics)
@@ -279,6 +332,8 @@ def read(
                     "no calibration slot to this sensor"
                 )
         meta["corrected"] = "true" if corrected else "false"
+        said = several_instances_warning(several, next(iter(reads)) if len(reads) == 1 else "the first of each")
+        warnings += [said] if said else []
         n_raw = max(len(s.t_s) for s in streams.values()) if streams else 0
         n_comb = len(combined[min(combined)].data["timestamp"]) if combined else 0
         if n_comb > 4 * n_raw:

@@ -661,6 +661,8 @@ class CentrifugeImu:
         sim = simulate_centrifuge(seed, radius_m=radius_m, g_mps2=g_mps2)
         self.params = {k: np.asarray(sim.truth[k], float) for k in ("S", "b", "D")}
         self.orients = centrifuge_orientations(20)
+        self._i = 0  # samples produced
+        self._anchor_i, self._anchor_t_s = 0, 0.0  # sample _anchor_i is at device time _anchor_t_s
         self.rate_hz, self.radius_m, self.g_mps2 = float(rate_hz), float(radius_m), float(g_mps2)
         self.noise_g, self.ramp_s, self.handle_s = noise_g, ramp_s, handle_s
         self.speed_error = 1e-8
@@ -669,9 +671,26 @@ class CentrifugeImu:
         self.units = {"accel_unit": "g", "gyro_unit": "rad/s"}
         self.site: dict = {}
         self.positions = [f"{k}@0" for k in range(1, 21)]
-        self._i = 0  # samples produced
         self._plan = [(-math.inf, 1, 0.0, 1, 0.0, "steady")]  # (t0, k0, w0, k1, w1, kind)
         self.k, self.w = 1, 0.0
+
+    @property
+    def rate_hz(self) -> float:
+        return self._rate_hz
+
+    @rate_hz.setter
+    def rate_hz(self, hz: float) -> None:
+        # `$STC,RATE` changes the sample period, not the device's clock: the next sample comes
+        # one new period after the last (before, sample i was stamped i / rate, and the clock
+        # jumped on by the rates' ratio, or back, which a reader takes for a restart)
+        if self._i:
+            self._anchor_t_s = self._t_of(self._i - 1) + 1.0 / float(hz)
+            self._anchor_i = self._i
+        self._rate_hz = float(hz)
+
+    def _t_of(self, i):
+        """Device time (s) of sample(s) i."""
+        return self._anchor_t_s + (np.asarray(i, float) - self._anchor_i) / self._rate_hz
 
     def truth(self) -> dict:
         return {k: v.tolist() for k, v in self.params.items()}
@@ -688,7 +707,7 @@ class CentrifugeImu:
                 f"unknown centrifuge setting {shown!r}: 'k@omega', mounting k in 1..{len(self.orients)} at omega rad/s "
                 "(e.g. 3@12.5; 3 alone stands still)"
             )
-        t = self._i / self.rate_hz
+        t = float(self._t_of(self._i))
         k0, w0 = (float(x[0]) for x in self._state(t)[:2])
         k0 = int(k0)
         w = w * (1.0 + self.speed_error * self.rng.normal()) if w > 0 else 0.0
@@ -724,7 +743,7 @@ class CentrifugeImu:
     def read(self, n: int) -> dict:
         from solvers.models import accel as accel_model
 
-        t = (self._i + np.arange(n)) / self.rate_hz
+        t = self._t_of(self._i + np.arange(n))
         self._i += n
         k, w, handled = self._state(t)
         f = np.empty((n, 3))

@@ -355,6 +355,12 @@ def shown_residual(result: dict) -> tuple[float | None, str]:
     return (res * disp[0] if _finite(res) else res), disp[1]
 
 
+def residual_of(result: dict) -> str:
+    """What the result's residual RMS is taken over, where its procedure says (P4: "per sample";
+    its diagnosis fits block means and says so beside its own), else ""."""
+    return getattr(_procedure_module(result), "RESIDUAL_OF", "")
+
+
 def residual_table(capture, result: dict) -> tuple[tuple[str, ...], list[tuple[str, str, str]]]:
     """The Results screen's per-position (per-row) table: its headers and rows as text, in
     the unit and with the decimals of the summary's residual RMS (``shown_residual``), so the

@@ -215,15 +215,18 @@ class HistoryScreen(NoticesMixin, Screen):
             self.drift = [d for d in message.data["drift"] if d["n"] >= 1]
             said = next_due_text(message.data.get("device"), message.data.get("due"))
             self.query_one("#next", Static).update("\n".join(tui_markup(x) for x in said.split("\n")))
-            from station.procedures.review import shown_residual
+            from station.procedures.review import residual_of, shown_residual
 
             c = self.query_one("#calibrations", DataTable)
             c.clear()
             for h in reversed(self.history):
                 res = h["residual_rms"]
                 in_use = h["accepted"] and h.get("superseded_by") is None
-                # in the unit its Results screen shows it in (P4: °/h)
+                # in the unit its Results screen shows it in (P4: °/h), and what its RMS is taken
+                # over where that screen says (P4: per sample), on a second line of the row: the
+                # column has 12 characters at 80x24
                 res, unit = shown_residual({"procedure": h["procedure"], "residual_rms": res})
+                of = residual_of({"procedure": h["procedure"]})
                 decision = (h.get("review") or {}).get("decision")
                 state = (
                     "in use"
@@ -234,9 +237,10 @@ class HistoryScreen(NoticesMixin, Screen):
                     str(h["id"]),
                     h["time"][:16].replace("T", " "),
                     tui_markup(_short(h["procedure"])),
-                    f"{res:.3g} {unit}" if isinstance(res, (int, float)) else "—",
+                    (f"{res:.3g} {unit}" + (f" RMS\n{of}" if of else "")) if isinstance(res, (int, float)) else "—",
                     state,
                     key=str(h["id"]),
+                    height=2 if of and isinstance(res, (int, float)) else 1,
                 )
             self.show_note(c.cursor_row)
             # keep the parameter the operator chose when the same device is read again

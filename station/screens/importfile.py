@@ -85,9 +85,15 @@ class CaptureBuilt(Message):
 
 WIDTH = 76  # 80 columns less the padding and the scroll bar
 SHOWN_WARNINGS = 2  # warnings the summary has room for at 80x24
-# a PX4 warning's "give --instance N" (station import's flag), said as this screen's choice
+# a reader's warning's "give --instance N" (station import's flag), said as this screen's choice
 INSTANCE_HERE = "pick its slot under instance"
-INSTANCES = 4  # the slots offered (CAL_*0_ID … CAL_*3_ID)
+INSTANCES = 4  # the slots offered (PX4's CAL_*0_ID … CAL_*3_ID; ArduPilot and MAVLink have 3)
+# the logs read with station import --instance: what the instance chooses in each
+SLOT_HELP = {
+    "px4": "the sensor's slot: uORB instance, CAL_*n_ID",
+    "ardupilot": "the IMU and compass: IMU[n], MAG[n]",
+    "tlog": "the IMU: RAW_IMU, SCALED_IMU2, SCALED_IMU3",
+}
 
 
 def _wrapped(items: list[str], indent: str, max_lines: int) -> list[str]:
@@ -143,8 +149,10 @@ def summary_lines(path: str, fmt: str, imported) -> list[str]:
         lines += _wrapped([safe(f"{k}={params[k]}") for k in ids + rest], "  ", 3)
     else:
         lines.append("in use: no calibration parameters in the log (an export cannot compose)")
+    from station.importers._common import INSTANCE_ADVICE
+
     for w in imported.warnings[:SHOWN_WARNINGS]:
-        w = w.replace("give --instance N to name its slot", INSTANCE_HERE)  # the flag is this screen's choice
+        w = w.replace(INSTANCE_ADVICE, INSTANCE_HERE)  # the flag is this screen's choice
         lines += textwrap.wrap(safe(f"warning: {w}"), WIDTH, subsequent_indent="  ")
     more = len(imported.warnings) - SHOWN_WARNINGS
     if more > 0:  # the screen has room for two; the rest are not dropped unsaid
@@ -182,7 +190,7 @@ class ImportScreen(Screen):
         self.fmt: str | None = None
         self.imported = None
         self.source = "auto"
-        self.instance: int | None = None  # station import --instance (PX4)
+        self.instance: int | None = None  # station import --instance (PX4, ArduPilot, MAVLink)
         self.refused = None  # (capture, method): a capture refused with a method it does allow
 
     def check_action(self, action: str, parameters) -> bool | None:
@@ -206,14 +214,14 @@ class ImportScreen(Screen):
                 )
                 yield Button("Calibrate \\[F5]", id="calibrate", variant="primary", compact=True)
                 yield Button("Diagnose \\[F6]", id="diagnose", compact=True)
-            with Horizontal(id="slot"):  # PX4: station import --instance
+            with Horizontal(id="slot"):  # PX4, ArduPilot, MAVLink: station import --instance
                 yield Select(
                     [("instance auto", "auto")] + [(f"instance {n}", str(n)) for n in range(INSTANCES)],
                     id="instance",
                     allow_blank=False,
                     compact=True,
                 )
-                yield Static("the sensor's slot: uORB instance, CAL_*n_ID", id="slot-help")
+                yield Static(SLOT_HELP["px4"], id="slot-help")
             yield Static("", id="device")
             yield Static("", id="found")
         yield footer()
@@ -252,10 +260,11 @@ class ImportScreen(Screen):
 
     @on(Select.Changed, "#instance")
     def _reread_instance(self, event: Select.Changed) -> None:
-        """PX4: the sensor's slot (``station import --instance``), read for the procedure picked
-        (a slot the other sensors lack leaves them out, as on the command line)."""
+        """The sensor's slot (``station import --instance``: PX4's uORB instance, ArduPilot's
+        IMU and compass, MAVLink's IMU), read for the procedure picked (PX4: a slot the other
+        sensors lack leaves them out, as on the command line)."""
         instance = None if event.value == "auto" else int(event.value)
-        if self.imported is None or self.fmt != "px4" or instance == self.instance:
+        if self.imported is None or self.fmt not in SLOT_HELP or instance == self.instance:
             return
         self._status(f"Reading {tui_markup(self.path)} (instance {event.value})…")
         self.read_file(self.path, self.source, instance, self._procedure())
@@ -343,6 +352,14 @@ class ImportScreen(Screen):
     def on_log_read(self, message: LogRead) -> None:
         if message.error:
             hint = f"\n{tui_markup(message.hint)}" if message.hint else ""
+            if self.imported is not None and message.path == self.path:
+                # a re-read (another slot or source) refused: the choices go back to the read shown,
+                # which is still the one F5/F6 would take
+                self.query_one("#source", Select).value = self.source
+                self.query_one("#instance", Select).value = "auto" if self.instance is None else str(self.instance)
+                shown = f"instance {'auto' if self.instance is None else self.instance}"
+                shown += f", source {self.source}" if self.fmt == "px4" else ""
+                hint += f"\nStill shown: the log as read with {shown}."
             self._status(f"[b red]{tui_markup(message.error)}[/]{hint}")
             return
         from station.importers.options import primary
@@ -351,7 +368,8 @@ class ImportScreen(Screen):
         self.source = message.source
         self.instance = message.instance
         self.query_one("#source", Select).display = self.fmt == "px4"
-        self.query_one("#slot").set_class(self.fmt == "px4", "shown")
+        self.query_one("#slot").set_class(self.fmt in SLOT_HELP, "shown")
+        self.query_one("#slot-help", Static).update(tui_markup(SLOT_HELP.get(self.fmt, "")))
         kinds = set(self.imported.streams)
         options = procedure_options(kinds)
         fits = [name for _, name in options]

@@ -21,6 +21,7 @@ from station.procedures import registry
 from station.procedures.review import (
     assess,
     param_rows,
+    residual_of,
     residual_table,
     review_record,
     shown_residual,
@@ -169,7 +170,7 @@ class ResultsScreen(NoticesMixin, Screen):
         module = entry.load() if entry is not None else None
         res, unit = shown_residual(r)  # in the unit the parameters below are shown in
         # what the RMS is over where a procedure says (P4: per sample; its diagnosis: block means)
-        of = getattr(module, "RESIDUAL_OF", "")
+        of = residual_of(r)
         rest = (
             f"residual {num(res, '.3g')} {unit} RMS{' ' + of if of else ''} · "
             f"{registry.count_text(r.get('procedure'), r.get('n_positions', self.capture.n_rows))}"
