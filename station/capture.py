@@ -1050,14 +1050,40 @@ def _count_lines(block: bytes) -> int:
     return block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
 
 
+class _Upto:
+    """A binary file read only up to byte ``end``: what lies beyond is as if not there (the
+    reader of `station record --recover` stops before a cut last line)."""
+
+    def __init__(self, f, end: int) -> None:
+        self._f, self._end = f, end
+
+    def _left(self, size: int) -> int:
+        left = max(0, self._end - self._f.tell())
+        return left if size is None or size < 0 else min(size, left)
+
+    def read(self, size: int = -1) -> bytes:
+        return self._f.read(self._left(size))
+
+    def readline(self, size: int = -1) -> bytes:
+        left = self._left(size)
+        return self._f.readline(left) if left else b""
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._f.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+
 def _data_chunks(
-    head: _Head, rows: int, force_slow: bool = False, notes: list[str] | None = None
+    head: _Head, rows: int, force_slow: bool = False, notes: list[str] | None = None, end: int | None = None
 ) -> Iterator[dict[str, np.ndarray]]:
     path = head.path
     parser = _Parser(path, head.header + ([_TRAILING] if head.trailing_comma else []), head.meta)
     wide = WideStd(head.header, head.meta)  # a table of averages' whole-table rule, judged at its end
     runs = _LabelRuns(path, head.header_line + 1) if "t" not in head.header and "position" in head.header else None
-    with _open(path) as f:
+    with _open(path) as whole:
+        f = whole if end is None else _Upto(whole, end)
         f.seek(head.data_offset)
         sample = f.readline(_MAX_DATA_LINE + 1)
         if len(sample) > _MAX_DATA_LINE:
@@ -1165,6 +1191,39 @@ def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):
     path = os.fspath(path)
     head = _read_head(path)
     return dict(head.meta), list(head.header), _data_chunks(head, max(1, int(rows)))
+
+
+@dataclass
+class CheckedRows:
+    """What :func:`check_capture_upto` read: the head, where the data rows start and end
+    (byte offsets), how many rows and lines they hold."""
+
+    meta: dict[str, str]
+    header: list[str]
+    header_line: int
+    trailing_comma: bool  # every line ends in a comma (read_capture drops that unnamed column)
+    data_offset: int
+    end: int
+    rows: int
+
+
+def check_capture_upto(path, end: int, *, chunk_rows: int = DEFAULT_CHUNK_ROWS) -> CheckedRows:
+    """Validate the capture ``path`` as :func:`read_capture` would read its first ``end``
+    bytes (the chunked reader, whole-table rules included), without holding its columns.
+    ``end`` is a line end (the byte after it): the bytes from ``data_offset`` to ``end`` are
+    then rows the reader takes as they are. ``rows`` 0 when no data row ends before ``end``
+    (nor the header row, when ``end`` < ``data_offset``). InputError ``file:line: what is
+    wrong`` on the first thing it refuses."""
+    path = os.fspath(path)
+    head = _read_head(path)
+    checked = CheckedRows(
+        dict(head.meta), list(head.header), head.header_line, head.trailing_comma, head.data_offset, end, 0
+    )
+    if end <= head.data_offset:
+        return checked
+    for chunk in _data_chunks(head, max(1, int(chunk_rows)), end=end):
+        checked.rows += len(next(iter(chunk.values())))
+    return checked
 
 
 def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = False) -> Capture:

@@ -80,7 +80,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--recover",
         metavar="FILE.partial",
-        help="finish the .partial file a killed recording left (drops a cut last line) and exit",
+        help="finish the .partial file a killed recording left and exit: every whole row is kept, a cut "
+        "last line dropped (said on stderr); a file with a bad row before its last line is refused, nothing written",
     )
     p.set_defaults(func=run)
 
@@ -100,8 +101,10 @@ def run(args: argparse.Namespace) -> int:
     from station.device.record import record, recover_partial, refuse_unrecovered
 
     if args.recover:
-        path = recover_partial(args.recover, args.out)
-        print(f"recovered {safe(args.recover)} -> {safe(path)}")
+        res = recover_partial(
+            args.recover, args.out, warn=lambda msg: print(f"station record: {safe(msg)}", file=sys.stderr)
+        )
+        print(f"recovered {safe(args.recover)} -> {safe(res.path)}: {res.rows} rows")
         return 0
     if not args.port:
         raise InputError(None, None, "--port is required (a device path or a pyserial URL)")

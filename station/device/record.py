@@ -7,8 +7,10 @@ the rows copied from the partial file into a temporary file beside `<out>`, whic
 then renamed to `<out>` (atomic), and the partial file is removed. So a recording that
 is stopped leaves a complete capture; one that is killed outright (SIGKILL, power cut)
 leaves only `<out>.partial`, a valid capture up to its last line, which may be cut in
-the middle: `recover_partial()` (`station record --recover FILE.partial`) drops the cut
-line and finishes the file as `complete: false`.
+the middle, or a tail of NUL bytes after a power cut: `recover_partial()` (`station record
+--recover FILE.partial`) keeps every whole row, drops that cut last line (and says so), and
+finishes the file as `complete: false`; it refuses, writing nothing, a file whose rows the
+capture reader refuses before the last line.
 
 Columns: `t` (s, from the device clock, see reader.py), `segment` (0, 1, ...: a new
 segment after each reconnection or device restart, so a gap is visible in the data),
@@ -36,6 +38,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not on POSIX
+    fcntl = None
 
 from station.device.protocol import Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
@@ -97,10 +104,41 @@ def format_rows(batch: Batch, columns: list[str]) -> str:
     return "".join(out)
 
 
+def _lock(f) -> bool:
+    """Take the advisory lock (flock) a recording holds on its partial file while it writes
+    it; the kernel drops it when the process ends, however it ends (SIGKILL, a power cut too).
+    False when another process holds it: a recording is writing the file."""
+    if fcntl is None:  # no flock here: a live partial cannot be told from a killed one's
+        return True
+    try:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError:  # a file system without locks: nothing to learn from it
+        return True
+    return True
+
+
+def _being_written(path: str) -> bool:
+    """Whether a running recording holds ``path`` (its partial file) locked."""
+    if not os.path.isfile(path):
+        return False
+    try:
+        with open(path, "rb") as f:
+            return not _lock(f)
+    except OSError:
+        return False
+
+
 def refuse_unrecovered(out: str) -> None:
     """Refuse a recording into ``out`` while ``<out>.partial`` exists: the rows of a killed
-    recording, not yet recovered, which the new one would write over and remove."""
+    recording, not yet recovered, which the new one would write over and remove (or of a
+    recording still running)."""
     partial = os.fspath(out) + PARTIAL_SUFFIX
+    if _being_written(partial):
+        raise InputError(
+            partial, None, "a recording is writing it now: wait for it to end, or stop it (Ctrl-C, SIGTERM)"
+        )
     if os.path.lexists(partial):
         raise InputError(
             partial,
@@ -129,6 +167,7 @@ class CaptureStream:
             raise
         except OSError as exc:
             raise InputError(self.partial, None, f"cannot write: {exc.strerror or exc}") from None
+        _lock(self._f)  # held until the partial is finished and removed: --recover leaves it alone
         self._f.write(_head_text(head, columns))
         self._f.flush()
         try:  # the head must be one the capture reader accepts (units, --meta values)
@@ -147,17 +186,22 @@ class CaptureStream:
         self.rows += len(batch)
 
     def abandon(self) -> None:
-        self._f.close()
         try:
             os.unlink(self.partial)
         except FileNotFoundError:
             pass
+        finally:
+            self._f.close()
 
     def finish(self, meta: dict[str, str]) -> None:
-        """Final metadata + the partial file's rows -> temp file -> os.replace(out)."""
-        self._f.close()
-        _rewrite_head(self.partial, self.out, meta, self.columns)
-        os.unlink(self.partial)
+        """Final metadata + the partial file's rows -> temp file -> os.replace(out). The
+        partial stays open (locked) until it is removed."""
+        try:
+            self._f.flush()
+            _rewrite_head(self.partial, self.out, meta, self.columns)
+            os.unlink(self.partial)
+        finally:
+            self._f.close()
 
 
 def _head_text(meta: dict[str, str], columns: list[str]) -> str:
@@ -171,7 +215,7 @@ def _head_text(meta: dict[str, str], columns: list[str]) -> str:
     return "".join(lines)
 
 
-def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str], *, cut_tail: bool = False) -> int:
+def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str]) -> int:
     """Copy src's data rows under a new head into dst atomically; returns rows copied."""
     rows = 0
     with open_input(src) as fin, atomic_open(dst, "wb") as fout:
@@ -193,17 +237,84 @@ def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str], 
             fout.write(block[:cut])
             rows += block.count(b"\n", 0, cut)
             tail = block[cut:]
-        if tail and not cut_tail:
+        if tail:
             raise InputError(src, None, "last line is cut short (use --recover)")
     return rows
 
 
-def recover_partial(partial: str, out: str | None = None) -> str:
-    """Finish a `<out>.partial` left by a killed recording: drop a cut last line, keep
-    `complete: false`, add `recovered: true`; write `out` (default: the name without
-    `.partial`) atomically and remove the partial file."""
-    from station.capture import iter_capture_chunks
+_COPY_BYTES = 1 << 20
 
+
+def _last_line_end(f) -> tuple[int, int, int]:
+    """(the byte after the last line end of the open binary file ``f``, 0 when it has none;
+    the file's size; the NUL bytes after that line end)."""
+    size = os.fstat(f.fileno()).st_size
+    pos = size
+    nul = 0
+    while pos > 0:
+        start = max(0, pos - _COPY_BYTES)
+        f.seek(start)
+        block = f.read(pos - start)
+        nl = block.rfind(b"\n")
+        nul += block.count(b"\0", nl + 1)
+        if nl >= 0:
+            return start + nl + 1, size, nul
+        pos = start
+    return 0, size, nul
+
+
+def _holds_lines(path: str, end: int, n: int) -> bool:
+    """Whether the first ``end`` bytes of ``path`` hold ``n`` whole lines (read only as far as needed)."""
+    seen = 0
+    with open_input(path) as f:
+        left = end
+        while left > 0 and seen < n:
+            block = f.read(min(left, _COPY_BYTES))
+            if not block:
+                break
+            seen += block.count(b"\n")
+            left -= len(block)
+    return seen >= n
+
+
+def _copy_rows(src: str, dst: str, head: str, start: int, end: int) -> int:
+    """Write ``head`` then src's bytes ``start`` to ``end`` into dst atomically; returns the
+    line ends copied."""
+    lines = 0
+    with open_input(src) as fin, atomic_open(dst, "wb") as fout:
+        fout.write(head.encode("utf-8"))
+        fin.seek(start)
+        left = end - start
+        while left > 0:
+            block = fin.read(min(left, _COPY_BYTES))
+            if not block:  # the file shrank since it was checked
+                raise InputError(src, None, "changed while it was being recovered (is a recording still writing it?)")
+            fout.write(block)
+            lines += block.count(b"\n")
+            left -= len(block)
+    return lines
+
+
+@dataclass
+class Recovered:
+    path: str  # the capture written
+    rows: int  # the data rows it holds: every whole row of the partial file
+    dropped: str = ""  # the cut last line that was left out, said as a warning ("" when none)
+
+
+def recover_partial(partial: str, out: str | None = None, *, warn=None) -> Recovered:
+    """Finish a `<out>.partial` left by a killed recording: keep every whole row, drop a cut
+    last line (``warn``: one line naming it), keep `complete: false`, add `recovered: true`;
+    write `out` (default: the name without `.partial`) atomically and remove the partial file.
+
+    The rows kept are checked by the capture reader (station.capture.check_capture_upto): a
+    file with a bad row before its last line (a line that has its line end) is no cut a kill
+    or a power cut made, and is refused on that line with nothing written; so is one without a
+    whole row. A power cut can leave the last blocks of the file as NUL bytes with no line end
+    among them: that tail is the cut last line."""
+    from station.capture import check_capture_upto
+
+    warn = warn or (lambda msg: None)
     partial = os.fspath(partial)
     if out is None:
         if not partial.endswith(PARTIAL_SUFFIX):
@@ -211,16 +322,53 @@ def recover_partial(partial: str, out: str | None = None) -> str:
         out = partial[: -len(PARTIAL_SUFFIX)]
     if same_file(out, partial):  # written over, then removed as recovered: the recording gone
         raise InputError(out, None, "--out is the .partial file being recovered: choose another name")
-    meta, header, _ = iter_capture_chunks(partial)  # validates the head
-    meta = dict(meta)
-    meta["complete"] = "false"
-    meta["recovered"] = "true"
-    rows = _rewrite_head(partial, out, meta, header, cut_tail=True)
-    if rows == 0:
-        os.unlink(out)
-        raise InputError(partial, None, "no complete data row to recover")
-    os.unlink(partial)
-    return out
+    if not os.path.lexists(partial) and os.path.isfile(out):  # run twice, or after a finished recording
+        raise InputError(
+            partial, None, f"no such file: nothing to recover ({out} is there: recovered, or the recording finished)"
+        )
+    with open_input(partial) as f:  # open, and locked, until the partial is removed
+        if not _lock(f):
+            raise InputError(
+                partial,
+                None,
+                f"a recording is writing it now: nothing to recover; stopped (Ctrl-C, SIGTERM) it finishes {out} "
+                "itself",
+            )
+        end, size, nul = _last_line_end(f)
+        try:
+            checked = check_capture_upto(partial, end)  # the head, then every whole row as the reader takes it
+        except InputError as exc:
+            if exc.line is not None and exc.path == partial and not _holds_lines(partial, end, exc.line):
+                # refused on the cut last line: the kill came before the head was written whole
+                raise InputError(
+                    partial, None, f"no complete data row to recover (the head is cut short on line {exc.line})"
+                ) from None
+            raise
+        if checked.rows == 0:
+            raise InputError(partial, None, "no complete data row to recover")
+        meta = dict(checked.meta)
+        meta["complete"] = "false"
+        meta["recovered"] = "true"
+        columns = checked.header + ([""] if checked.trailing_comma else [])  # the rows keep their last comma
+        lines = _copy_rows(partial, out, _head_text(meta, columns), checked.data_offset, end)
+        try:
+            os.unlink(partial)
+        except FileNotFoundError:  # another --recover removed it after writing the same capture
+            pass
+    dropped = ""
+    if size > end:
+        line = checked.header_line + lines + 1
+        cut = f"{size - end} byte{'s' if size - end > 1 else ''}"
+        never = f"{nul} NUL byte{'s' if nul > 1 else ''}: blocks never written, as a power cut leaves a file"
+        if not nul:
+            what = f"a row the recording was writing when it stopped, {cut}"
+        elif nul == size - end:
+            what = never
+        else:
+            what = f"a row cut short, then {never}; {cut}"
+        dropped = f"{partial}:{line}: the last line has no line end ({what}): dropped"
+        warn(dropped)
+    return Recovered(out, checked.rows, dropped)
 
 
 def _median_dt(batch: Batch, before: tuple[float, int] | None = None) -> float | None:
