@@ -25,7 +25,9 @@ class Served:
     def __init__(self, imu) -> None:
         from station.device.simdevice import SimDevice
 
-        self.dev = SimDevice(imu)
+        # a 30 s UART buffer: the device clock's steps are read back whole even when the
+        # machine leaves this thread out for over 0.5 s (the default buffer drops, a gap)
+        self.dev = SimDevice(imu, max_pending_s=30.0)
         self.path = self.dev.open()
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self.dev.run, args=(self.stop,), daemon=True)

@@ -62,6 +62,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--auto", action="store_true", help="start with the scripted operator on")
     p.add_argument("--mavlink-scaled", action="store_true", help="with --protocol mavlink, also send SCALED_IMU")
     p.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds")
+    p.add_argument(
+        "--buffer-s",
+        type=float,
+        default=0.5,
+        metavar="S",
+        help="seconds of output the simulated UART holds while the host does not read; beyond that "
+        "everything waiting is discarded and the reader sees a gap (default 0.5)",
+    )
     p.set_defaults(func=run)
 
 
@@ -73,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, None, f"--rate {args.rate:g}: must be 0.1..100000 Hz")
     require_positive("--hold", args.hold, "seconds")
     require_positive("--seconds", args.seconds, "seconds")
+    require_positive("--buffer-s", args.buffer_s, "seconds")
     effects = _effects(args.effect)
     # the bench the TUI's built-in device runs for this procedure (its guide module makes it)
     entry, reference = registry.device_of(args.procedure)
@@ -102,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
             imu.rate_hz = float(args.rate)
     if args.auto:
         imu.set_auto(True)
-    dev = SimDevice(imu, protocol=args.protocol, mavlink_scaled=args.mavlink_scaled)
+    dev = SimDevice(imu, protocol=args.protocol, mavlink_scaled=args.mavlink_scaled, max_pending_s=args.buffer_s)
     stop = threading.Event()
 
     def _stop(signum, frame):  # noqa: ARG001
