@@ -61,6 +61,12 @@ GROUPS_TOL = 1e-6  # round-off in an effective count of groups (a step between t
 # a generic term displaces library effects whose columns hold most (> CONFUSION_CORR) of its
 # signature only when its model's BIC is lower by this much (χ²₁(0.95)): a clearly better fit
 DISPLACE_MARGIN = 3.84
+# the final named model: an effect without which the held-out RMS is lower by more than this
+# fraction is not named (``_held_out_guard``). Not 0: a 10σ quadratic and a periodic bias in a
+# labelled P1 series (seed 513003) are reported at gains of −2.3 % and −6.6 %, the final refit's
+# held-out RMS a little above the first round's; an effect that only trades with another what a
+# large effect's linearisation left is reported at −100 % to −550 %
+GUARD_CV_RTOL = 0.25
 # where the residual wanders (``Problem.wander_calibrated``), a candidate whose profiled ratio passes
 # χ²_k at this tail is calibrated on this many draws of the wander fitted beside it (``WanderModel.null_lr``)
 WANDER_NULL_P = 0.05
@@ -1124,6 +1130,49 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
     return ev
 
 
+def _held_out_guard(problem, picked, generic_effect, cur_fit, free, refit_with, baseline_fit, cv0, entries, cv_args):
+    """The named model as finally refitted, checked on held-out rows (the held-out RMS that each
+    effect's reported gain is measured with): an effect without which the rest, refitted, predicts
+    the held-out rows better than the whole model by more than ``GUARD_CV_RTOL`` is not named, the
+    worst first, until none is. Each effect was tested linearised at the model of its round; the
+    final refit moves every parameter at once, and two effects can trade what one large effect's
+    linearisation left (an LDV offset of 10 m/s: a time delay of 0.31 s against a periodic term of
+    1 m/s in time, gains −550 % and −104 %). Effects validated on some rows only (the compass dip,
+    a library effect on a table: ``cv_max_leverage``) are left to their own test.
+    Returns (picked, generic_effect, fit, free)."""
+    sigma, folds, primary = cv_args
+
+    def cv_of(fit_, fr):
+        J, _, _ = jacobian(problem, fit_.params, fr)
+        return cv_rms(J, fit_.weighted_residuals, sigma, folds, primary)
+
+    while picked or generic_effect is not None:
+        items = list(picked) + ([(generic_effect[0].cc, None)] if generic_effect is not None else [])
+        cv_all = cv_of(cur_fit, free)
+        worst = None
+        for item in items:
+            if item[0].cand.folds in problem.cv_rows:
+                continue
+            if problem.cv_max_leverage is not None and item[1] is not None:
+                # a library effect on a table (P2, P1 averages) was validated on the rows its model
+                # does not alone fix, where the whole table's held-out RMS is an extrapolation
+                continue
+            others = [o for o in items if o is not item]
+            fit_wo, fr_wo = refit_with(others, cur_fit) if others else (baseline_fit, dict(problem.free))
+            cv_wo = cv_of(fit_wo, fr_wo) if others else cv0
+            if cv_wo * (1.0 + GUARD_CV_RTOL) < cv_all and (worst is None or cv_wo < worst[1]):
+                worst = (item, cv_wo, fit_wo, fr_wo)
+        if worst is None:
+            break
+        item, _, cur_fit, free = worst
+        if item[1] is None:
+            generic_effect = None
+        else:
+            picked = [p for p in picked if p is not item]
+            entries[item[0].cand.name]["selected"] = False
+    return picked, generic_effect, cur_fit, free
+
+
 def _null_equivalent(T: float, null: np.ndarray, k: int) -> float:
     """``T`` as the χ²_k statistic of the same tail probability under ``null``, its distribution
     on noise alone (draws) taken as a scaled χ² of matched mean and variance (Satterthwaite)."""
@@ -1825,6 +1874,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                         {"name": gen.cc.cand.name, "correlation": float(corr_g.get(e["name"], 0.0))},
                     ]
 
+    picked, generic_effect, cur_fit, free = _held_out_guard(
+        problem, picked, generic_effect, cur_fit, free, refit_with, baseline_fit, cv0, entries, (sigma, folds, primary)
+    )
+    if generic_effect is None:
+        generic_tied = []
     ext = cur_fit
     Je, _, _ = jacobian(problem, ext.params, free)
     cv_ext = cv_rms(Je, ext.weighted_residuals, sigma, folds, primary) if (picked or generic_effect) else cv0
