@@ -1196,7 +1196,7 @@ def iter_capture_chunks(path, rows: int = DEFAULT_CHUNK_ROWS):
 @dataclass
 class CheckedRows:
     """What :func:`check_capture_upto` read: the head, where the data rows start and end
-    (byte offsets), how many rows and lines they hold."""
+    (byte offsets), how many rows they hold."""
 
     meta: dict[str, str]
     header: list[str]

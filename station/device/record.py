@@ -215,10 +215,12 @@ def _head_text(meta: dict[str, str], columns: list[str]) -> str:
     return "".join(lines)
 
 
+_COPY_BYTES = 1 << 20
+
+
 def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str]) -> int:
-    """Copy src's data rows under a new head into dst atomically; returns rows copied."""
-    rows = 0
-    with open_input(src) as fin, atomic_open(dst, "wb") as fout:
+    """Copy src's data rows under a new head into dst atomically (``_copy_rows``); returns rows copied."""
+    with open_input(src) as fin:
         # skip the old head: metadata lines, then the header row
         while True:
             line = fin.readline()
@@ -226,23 +228,12 @@ def _rewrite_head(src: str, dst: str, meta: dict[str, str], columns: list[str]) 
                 raise InputError(src, None, "no header row: not a partial recording")
             if not line.startswith(b"#"):
                 break
-        fout.write(_head_text(meta, columns).encode("utf-8"))
-        tail = b""
-        while True:
-            block = fin.read(1 << 20)
-            if not block:
-                break
-            block = tail + block
-            cut = block.rfind(b"\n") + 1
-            fout.write(block[:cut])
-            rows += block.count(b"\n", 0, cut)
-            tail = block[cut:]
-        if tail:
-            raise InputError(src, None, "last line is cut short (use --recover)")
-    return rows
-
-
-_COPY_BYTES = 1 << 20
+        start = fin.tell()
+        end, size, _ = _last_line_end(fin)
+    end = max(end, start)
+    if size > end:
+        raise InputError(src, None, "last line is cut short (use --recover)")
+    return _copy_rows(src, dst, _head_text(meta, columns), start, end)
 
 
 def _last_line_end(f) -> tuple[int, int, int]:
