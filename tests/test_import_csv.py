@@ -591,6 +591,13 @@ def test_a_first_line_of_numbers_with_a_bad_field_is_a_data_row_not_a_header(tmp
         "--rate", "100", "--out", out,
     )  # fmt: skip
     assert_one_line_refusal(res, f"station: {short}:1: column 'az': 'abc' is not a number")
+    res = run_station(
+        "import", short, "--procedure", "accel-tabletop", "--map", "ax=acc_x,ay=2,az=3", "--unit", "accel=g",
+        "--rate", "100", "--out", out,
+    )  # fmt: skip
+    assert_one_line_refusal(
+        res, f"station: {short}:1: --map ax=acc_x: no column 'acc_x'", "no header (2 of its 3 fields are numbers)"
+    )
     # the same rows, whole, are read from line 1 on; a header of names is still a header
     good = tmp_path / "good.csv"
     _write_rows(good, rows)

@@ -662,8 +662,18 @@ def read_plain(
         else:
             # a logger's preamble ('Fs,100') above the header, or a data row with a bad field
             found = _later_header(path, lines, mapping, skipped)
-            if found is None and not mapping:  # (a --map by names no line holds is refused below)
+            if found is None and not mapping:
                 raise _data_row_refusal(path, hi, header)
+            if found is None:  # --map names a column no line of the first ones names
+                target, source = next((t, c) for t, c in mapping.items() if not c.isdigit() and c not in header)
+                numbers = sum(1 for c in header if _is_number(c))
+                raise InputError(
+                    path,
+                    hi,
+                    f"--map {target}={source}: no column {source!r}: none of the first {PREAMBLE_MAX_LINES + 1} "
+                    f"lines names it, and this one is no header ({numbers} of its {len(header)} "
+                    "fields are numbers)",
+                )
     elif not _names_columns(header, mapping):
         found = _later_header(path, lines, mapping, skipped)
     if found is not None:
