@@ -628,6 +628,13 @@ def test_the_rate_a_loggers_preamble_declares_numbers_the_rows(tmp_path, shared_
     by_fs, by_rate = read_capture(tmp_path / "fs.csv"), read_capture(tmp_path / "rate.csv")
     assert by_fs.meta["sample_rate_hz"] == "100" and by_fs.n_rows == len(lines) - 5
     np.testing.assert_array_equal(by_fs.columns["t"], by_rate.columns["t"])
+    # columns by number: the header under the preamble is found too (it was 'no column 3 in the
+    # header (Fs, 100)')
+    res = run_station("import", src, *opts, "--map", "ax=1,ay=2,az=3,gx=4,gy=5,gz=6", "--out", tmp_path / "n.csv")
+    assert res.returncode == 0 and "'Fs,100'" in res.stderr, res.stderr
+    by_number = read_capture(tmp_path / "n.csv")
+    for c in ("t", "ax", "gz"):
+        np.testing.assert_array_equal(by_number.columns[c], by_fs.columns[c])
     res = run_station("import", src, *opts, "--rate", "50", "--out", tmp_path / "r50.csv")
     assert res.returncode == 0, res.stderr
     assert "--rate 50 differs from the 100 Hz line 1 declares ('Fs,100'): --rate used" in res.stderr

@@ -542,11 +542,13 @@ def _later_header(
 ) -> tuple[int, str] | None:
     """(line number, text) of the first of the next PREAMBLE_MAX_LINES lines that is the header
     for ``mapping`` (lines read from ``lines``, which then goes on after it), None when none is.
-    The lines passed over are appended to ``skipped``."""
+    Every line read and passed over is appended to ``skipped`` (so the caller can read them
+    again as data when no header is found)."""
     for lineno, text in lines:
-        if lineno > PREAMBLE_MAX_LINES + 1:
-            return None
-        if not text.strip() or text.lstrip().startswith("#"):
+        if lineno > PREAMBLE_MAX_LINES + 1 or not text.strip() or text.lstrip().startswith("#"):
+            skipped.append((lineno, text))
+            if lineno > PREAMBLE_MAX_LINES + 1:
+                return None
             continue
         cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text))]
         if _names_columns(cells, mapping) and _is_header(cells):
@@ -647,33 +649,34 @@ def read_plain(
     skipped: list[tuple[int, str]] = [(hi, head)]
     found = None
     if not _is_header(header):  # a data row (numbers, maybe with a bad field), not column names
-        if by_number:
-            # no header: the columns named by their number, every line data (the first one too)
-            lines = itertools.chain([(hi, head)], lines)
-            header = [str(j + 1) for j in range(len(header))]
-            first_data = hi
-        elif all(_is_number(c) or c.lower() in _MISSING for c in header):
+        numbers_only = all(_is_number(c) or c.lower() in _MISSING for c in header)
+        if numbers_only and not by_number:
             raise InputError(
                 path,
                 hi,
                 f"no header row: this line holds {len(header)} numbers; name the columns by their number "
                 f"(--map t=1,ax=2,... of 1-{len(header)}) or add a first line that names them",
             )
-        else:
+        if not numbers_only:
             # a logger's preamble ('Fs,100') above the header, or a data row with a bad field
             found = _later_header(path, lines, mapping, skipped)
-            if found is None and not mapping:
-                raise _data_row_refusal(path, hi, header)
-            if found is None:  # --map names a column no line of the first ones names
-                target, source = next((t, c) for t, c in mapping.items() if not c.isdigit() and c not in header)
-                numbers = sum(1 for c in header if _is_number(c))
-                raise InputError(
-                    path,
-                    hi,
-                    f"--map {target}={source}: no column {source!r}: none of the first {PREAMBLE_MAX_LINES + 1} "
-                    f"lines names it, and this one is no header ({numbers} of its {len(header)} "
-                    "fields are numbers)",
-                )
+        if found is None and by_number:
+            # no header: the columns named by their number, every line data (the first one too,
+            # and those a search for a header under a preamble read)
+            lines = itertools.chain(skipped, lines)
+            header = [str(j + 1) for j in range(len(header))]
+            first_data = hi
+        elif found is None and not mapping:
+            raise _data_row_refusal(path, hi, header)
+        elif found is None:  # --map names a column no line of the first ones names
+            target, source = next((t, c) for t, c in mapping.items() if not c.isdigit() and c not in header)
+            numbers = sum(1 for c in header if _is_number(c))
+            raise InputError(
+                path,
+                hi,
+                f"--map {target}={source}: no column {source!r}: none of the first {PREAMBLE_MAX_LINES + 1} "
+                f"lines names it, and this one is no header ({numbers} of its {len(header)} fields are numbers)",
+            )
     elif not _names_columns(header, mapping):
         found = _later_header(path, lines, mapping, skipped)
     if found is not None:
