@@ -119,6 +119,43 @@ _RAW_COLUMN_UNIT_KEY = {
     for k, cols in (("accel_unit", "ax ay az"), ("gyro_unit", "gx gy gz"), ("mag_unit", "mx my mz"))
     for c in cols.split()
 }
+# The columns capture-format.md names, and P2's `elapsed_s` (a table's hold times, written by
+# `station simulate`, read by P2's diagnosis); a table of averages may also hold `<col>_std` of each.
+SPEC_COLUMNS = frozenset({*COLUMN_UNITS, *_RAW_COLUMN_UNIT_KEY, "elapsed_s"})
+
+
+def unknown_table_columns(header: list[str]) -> list[str]:
+    """The columns of a table of averages (no `t`) that capture-format.md does not name (nor
+    their `<col>_std`): read and then used by nothing, so said (``tmperature_C`` for
+    ``temp_c``), not ignored without a word. The spec keeps unknown metadata keys and ignores
+    them; it does not make an unknown column an error, so this is a warning."""
+    if "t" in header:
+        return []
+    return [
+        c
+        for c in header
+        if c
+        and c not in SPEC_COLUMNS
+        and not (c.endswith("_std") and c[:-4] in SPEC_COLUMNS and c[:-4] not in ("position", "n"))
+    ]
+
+
+def unknown_columns_note(unknown: list[str], header_line: int | None = None) -> str:
+    """The one warning line for :func:`unknown_table_columns`, with the spec's name a misspelt
+    one is closest to."""
+    import difflib
+
+    named = []
+    for c in unknown:
+        names = sorted(SPEC_COLUMNS | {f"{n}_std" for n in SPEC_COLUMNS - {"position", "n"}})
+        near = difflib.get_close_matches(c.lower(), names, n=1, cutoff=0.6)
+        named.append(repr(c) + (f" (did you mean {near[0]!r}?)" if near else ""))
+    where = f"line {header_line}: " if header_line is not None else ""
+    return (
+        f"{where}column{'s' if len(unknown) > 1 else ''} {', '.join(named)} of this table of averages: "
+        f"no column of a capture (capture-format.md), ignored"
+    )
+
 
 # Plausibility bounds: magnitudes beyond these no sensor of the kind reports, so a cell beyond
 # one is refused on its line (a corrupt or hostile file, not a measurement). Each is a large
@@ -1232,6 +1269,9 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
     head = _read_head(path)
     parts: dict[str, list[np.ndarray]] = {name: [] for name in head.header}
     notes: list[str] = []
+    unknown = unknown_table_columns(head.header)
+    if unknown:
+        notes.append(unknown_columns_note(unknown, head.header_line))
     for chunk in _data_chunks(head, max(1, int(rows)), force_slow=_force_slow, notes=notes):
         for name, arr in chunk.items():
             parts[name].append(arr)

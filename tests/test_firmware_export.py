@@ -757,3 +757,22 @@ def test_parameters_changed_during_the_log_are_not_composed_with(capsys, tmp_pat
     code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert says in err and "while the capture's data were logged" in err
+
+
+@pytest.mark.parametrize("fmt", ["px4", "qgc"])
+def test_px4_device_id_in_hex_as_px4_prints_it(capsys, db, fmt):
+    """`--device-id 0x25000A` was refused by argparse ('invalid int value'), though PX4's
+    `listener sensor_accel` and its drivers print a device id in hex (QA s26). Decimal and
+    0x-hex name the same id; anything else is one line, exit 2, nothing written."""
+    cid = _save(db, gyro_result(device="G"), gyro_unit="rad/s")
+    decimal = run(capsys, "export", cid, "--format", fmt, "--device-id", "2424842", "--db", db)
+    for spelling in ("0x25000A", "0x25000a", "0X25000A"):
+        code, out, err = run(capsys, "export", cid, "--format", fmt, "--device-id", spelling, "--db", db)
+        assert (code, err) == (0, ""), err
+        assert "2424842" in out and out == decimal[1]
+    for bad in ("25000A", "0x", "1.5", "0x25000G", "id7"):
+        with pytest.raises(SystemExit) as exc:
+            run(capsys, "export", cid, "--format", fmt, "--device-id", bad, "--db", db)
+        out, err = capsys.readouterr()
+        assert exc.value.code == 2 and out == "" and err.count("\n") == 1, err
+        assert f"'{bad}' is no device id" in err and "0x" in err

@@ -336,16 +336,26 @@ def test_what_a_loggers_csv_leaves_unsaid_is_said_at_once_on_its_header_line(tmp
     --unit accel=... came the gyro's unit, then the time, one run each."""
     src = shared_data / "mpu6050_unc" / "original" / "imu_static_test.csv"
     out = tmp_path / "o.csv"
+    units = (
+        "the file does not say the unit of its accelerometer and gyro columns: "
+        "give --unit accel=UNIT,gyro=UNIT (accel: V, mV, counts, g, m/s^2, mps2, mg; "
+        "gyro: V, mV, counts, rad/s, deg/s, mrad/s, deg/h)"
+    )
     res = run_station("import", src, "--procedure", "gyro-drift", "--out", out)
+    # its 'Fs,100' line says the rate (test_the_rate_a_loggers_preamble_declares_numbers_the_rows)
+    assert_one_line_refusal(res, f"station: {src}:5: {units}\n")
+    # a file without such a line needs the rate too, said in the same line
+    headless = tmp_path / "no_fs.csv"
+    headless.write_text("\n".join(src.read_text().splitlines()[4:]) + "\n")
+    res = run_station("import", headless, "--procedure", "gyro-drift", "--out", out)
     assert_one_line_refusal(
         res,
-        f"station: {src}:5: the file does not say the unit of its accelerometer and gyro columns: "
-        "give --unit accel=UNIT,gyro=UNIT (accel: V, mV, counts, g, m/s^2, mps2, mg; "
-        "gyro: V, mV, counts, rad/s, deg/s, mrad/s, deg/h); "
-        "it has no time column either: --map t=COLUMN or the sample rate, --rate HZ",
+        f"station: {headless}:1: {units}; it has no time column either: --map t=COLUMN or the sample rate, --rate HZ",
     )
-    res = run_station("import", src, "--procedure", "gyro-drift", "--unit", "accel=counts,gyro=counts", "--out", out)
-    assert_one_line_refusal(res, f"station: {src}:5: no time column: map one (--map t=COLUMN)")
+    res = run_station(
+        "import", headless, "--procedure", "gyro-drift", "--unit", "accel=counts,gyro=counts", "--out", out
+    )
+    assert_one_line_refusal(res, f"station: {headless}:1: no time column: map one (--map t=COLUMN)")
     assert not out.exists()
 
 
@@ -541,3 +551,151 @@ def test_a_csv_without_a_header_row_is_read_with_its_columns_named_by_number(tmp
     bad.write_text("0.01 1 2 3\n0.02 1 2 x\n0.03 1 2 3\n")
     res = run_station("import", bad, "--procedure", "accel-tabletop", "--format", "csv", *mapped, "--out", out)
     assert_one_line_refusal(res, f"{bad}:2: column 'az': 'x' is not a number")
+
+
+# ------------------------------------------------------------------ QA s26: first line, Fs, epoch
+
+
+def _write_rows(path, rows, header=None) -> None:
+    """A CSV as Python's csv module writes it (the format's own writer)."""
+    import csv
+
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        if header is not None:
+            w.writerow(header)
+        w.writerows(rows)
+
+
+def test_a_first_line_of_numbers_with_a_bad_field_is_a_data_row_not_a_header(tmp_path, shared_data):
+    """A plain CSV without a header whose first data row has one corrupt field (`1.0,2.0,abc`)
+    was taken as its header (QA s26): with --map by numbers it lost that row without a word
+    (`0.00,0.1,0.2,abc` → 2 rows imported of 3), without --map it was refused for having no
+    capture-named column, '0.0', '1', ... A first line is a header only when (almost) all its
+    fields are names; else it is a data row and its bad field is refused on its line, exit 2."""
+    src = shared_data / "mpu6050_unc" / "original" / "imu_static_test.csv"
+    rows = [line.split(",") for line in src.read_text().splitlines()[5:25]]  # real samples, counts
+    bad = tmp_path / "bad.csv"
+    _write_rows(bad, [rows[0][:2] + ["abc"] + rows[0][3:]] + rows[1:])
+    out = tmp_path / "o.csv"
+    opts = ("--procedure", "gyro-drift", "--unit", "accel=counts,gyro=counts", "--rate", "100", "--out", out)
+    res = run_station("import", bad, "--map", "ax=1,ay=2,az=3,gx=4,gy=5,gz=6", *opts)
+    assert_one_line_refusal(res, f"station: {bad}:1: column 'az': 'abc' is not a number")
+    res = run_station("import", bad, *opts)
+    assert_one_line_refusal(res, f"station: {bad}:1: field 3: 'abc' is not a number, in a data row")
+    assert not out.exists()
+    short = tmp_path / "short.csv"
+    _write_rows(short, [["1.0", "2.0", "abc"], ["1.0", "2.0", "9.8"]])
+    res = run_station(
+        "import", short, "--procedure", "accel-tabletop", "--map", "ax=1,ay=2,az=3", "--unit", "accel=g",
+        "--rate", "100", "--out", out,
+    )  # fmt: skip
+    assert_one_line_refusal(res, f"station: {short}:1: column 'az': 'abc' is not a number")
+    res = run_station(
+        "import", short, "--procedure", "accel-tabletop", "--map", "ax=acc_x,ay=2,az=3", "--unit", "accel=g",
+        "--rate", "100", "--out", out,
+    )  # fmt: skip
+    assert_one_line_refusal(
+        res, f"station: {short}:1: --map ax=acc_x: no column 'acc_x'", "no header (2 of its 3 fields are numbers)"
+    )
+    # the same rows, whole, are read from line 1 on; a header of names is still a header
+    good = tmp_path / "good.csv"
+    _write_rows(good, rows)
+    res = run_station("import", good, "--map", "ax=1,ay=2,az=3,gx=4,gy=5,gz=6", *opts)
+    assert res.returncode == 0, res.stderr
+    assert read_capture(out).n_rows == len(rows)
+    named = tmp_path / "named.csv"
+    _write_rows(named, rows, header=["ax", "ay", "az", "gx", "gy", "gz"])
+    res = run_station("import", named, *opts[:-1], tmp_path / "n.csv")
+    assert res.returncode == 0 and res.stderr == "", res.stderr
+    assert read_capture(tmp_path / "n.csv").n_rows == len(rows)
+
+
+def test_the_rate_a_loggers_preamble_declares_numbers_the_rows(tmp_path, shared_data):
+    """The MPU-6050 logger's `Fs,100` line (shared data, mpu6050_unc) was skipped with the rest
+    of its preamble and `--rate` still required (QA s26). The rate it declares now numbers the
+    rows, said in one warning line; a --rate that differs wins, said; a time column that
+    disagrees with it is said too (and kept)."""
+    src = shared_data / "mpu6050_unc" / "original" / "imu_static_test.csv"
+    lines = src.read_text().splitlines()
+    assert lines[0] == "Fs,100"
+    opts = ("--procedure", "gyro-drift", "--unit", "accel=counts,gyro=counts")
+    res = run_station("import", src, *opts, "--out", tmp_path / "fs.csv")
+    assert res.returncode == 0, res.stderr
+    assert "no time column: the rows are numbered at the 100 Hz line 1 declares ('Fs,100')" in res.stderr
+    res = run_station("import", src, *opts, "--rate", "100", "--out", tmp_path / "rate.csv")
+    assert res.returncode == 0 and "declares" not in res.stderr, res.stderr
+    by_fs, by_rate = read_capture(tmp_path / "fs.csv"), read_capture(tmp_path / "rate.csv")
+    assert by_fs.meta["sample_rate_hz"] == "100" and by_fs.n_rows == len(lines) - 5
+    np.testing.assert_array_equal(by_fs.columns["t"], by_rate.columns["t"])
+    # columns by number: the header under the preamble is found too (it was 'no column 3 in the
+    # header (Fs, 100)')
+    res = run_station("import", src, *opts, "--map", "ax=1,ay=2,az=3,gx=4,gy=5,gz=6", "--out", tmp_path / "n.csv")
+    assert res.returncode == 0 and "'Fs,100'" in res.stderr, res.stderr
+    by_number = read_capture(tmp_path / "n.csv")
+    for c in ("t", "ax", "gz"):
+        np.testing.assert_array_equal(by_number.columns[c], by_fs.columns[c])
+    res = run_station("import", src, *opts, "--rate", "50", "--out", tmp_path / "r50.csv")
+    assert res.returncode == 0, res.stderr
+    assert "--rate 50 differs from the 100 Hz line 1 declares ('Fs,100'): --rate used" in res.stderr
+    assert read_capture(tmp_path / "r50.csv").meta["sample_rate_hz"] == "50"
+    # the same preamble over rows with their own time, 200 Hz: the file contradicts itself
+    timed = tmp_path / "timed.csv"
+    rows = [[f"{i / 200:.3f}", *line.split(",")] for i, line in enumerate(lines[5:505])]
+    timed.write_text("\n".join(lines[:4]) + "\n")
+    with open(timed, "a", newline="") as f:
+        import csv
+
+        w = csv.writer(f)
+        w.writerow(["t", "ax", "ay", "az", "gx", "gy", "gz"])
+        w.writerows(rows)
+    res = run_station("import", timed, *opts, "--out", tmp_path / "t.csv")
+    assert res.returncode == 0, res.stderr
+    assert "median step, 0.005 s (200 Hz), disagrees with the 100 Hz line 1 declares ('Fs,100')" in res.stderr
+    assert read_capture(tmp_path / "t.csv").meta["sample_rate_hz"] == "200"
+
+
+@pytest.mark.parametrize(
+    ("column", "unit", "first"),
+    [("time_s", "s", 1732900000.0), ("time_ms", "ms", 1732900000000), ("stamp_ns", "ns", 1732900000000000000)],
+)
+def test_a_unix_time_column_gives_the_capture_its_date(tmp_path, column, unit, first):
+    """A time column in seconds, ms or ns since 1970 gave no `date` (QA s26): the calibration was
+    then dated by its save. Now its first sample, in UTC, is the capture's date; `t` still
+    starts at 0. 1732900000 s is 2024-11-29 17:06:40 UTC."""
+    step = {"s": 0.01, "ms": 10, "ns": 10_000_000}[unit]
+    src = tmp_path / "epoch.csv"
+    _write_rows(src, [[first + i * step, 0.01, -0.02, 1.0] for i in range(200)], header=[column, "x", "y", "z"])
+    out = tmp_path / "o.csv"
+    res = run_station(
+        "import", src, "--procedure", "accel-tabletop", "--map", f"t={column},ax=x,ay=y,az=z",
+        "--unit", f"accel=g,t={unit}", "--out", out,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    cap = read_capture(out)
+    assert cap.meta["date"] == "2024-11-29T17:06:40"
+    assert cap.columns["t"][0] == 0 and abs(cap.columns["t"][-1] - 1.99) < 1e-6
+    # a logger's time since power-up is no date
+    _write_rows(src, [[5.0 + i * 0.01, 0.01, -0.02, 1.0] for i in range(200)], header=["t", "ax", "ay", "az"])
+    res = run_station("import", src, "--procedure", "accel-tabletop", "--unit", "accel=g", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert "date" not in read_capture(out).meta
+
+
+def test_euroc_unix_stamps_give_the_capture_its_date(tmp_path):
+    """EuRoC's stamps are Unix ns (MH_01 starts 2014-06-24 19:02:59 UTC): now the capture's date."""
+    t, w, a = _imu_rows(np.random.default_rng(3))
+    src = tmp_path / "data.csv"
+    src.write_text(
+        EUROC
+        + "\n"
+        + "".join(
+            ",".join([str(ti)] + [repr(x) for x in wi + ai]) + "\n"
+            for ti, wi, ai in zip(t.tolist(), w.tolist(), a.tolist())
+        )
+    )
+    out = tmp_path / "o.csv"
+    res = run_station("import", src, "--procedure", "gyro-drift", "--out", out)
+    assert res.returncode == 0, res.stderr
+    cap = read_capture(out)
+    assert cap.meta["date"] == "2014-06-24T19:02:59" and cap.columns["t"][0] == 0

@@ -299,3 +299,30 @@ def test_recover_of_a_partial_a_running_recording_writes_is_refused_and_the_reco
     cap = read_capture(out)
     assert cap.meta["complete"] == "true" and not partial.exists()
     assert os.path.getsize(out) > size
+
+
+def test_recover_into_another_existing_file_is_refused_unless_forced(killed, tmp_path):
+    """`--recover PARTIAL --out X` wrote over an existing X without a word (QA s26): a capture
+    recorded earlier, lost. Now refused in one line naming X, exit 2, nothing written and the
+    partial kept; `--force` replaces X. Recovering into the recording's own name (what it was
+    started to replace) needs no --force."""
+    partial = tmp_path / "k.csv.partial"
+    partial.write_bytes(killed)
+    other = tmp_path / "earlier.csv"
+    other.write_bytes(b"an earlier capture\n")
+    res = run_station("record", "--recover", partial, "--out", other)
+    assert_one_line_refusal(res, f"station: {other}: already exists", "--force")
+    assert other.read_bytes() == b"an earlier capture\n" and partial.read_bytes() == killed
+    assert sorted(os.listdir(tmp_path)) == ["earlier.csv", "k.csv.partial"]
+    res = run_station("record", "--recover", partial, "--out", other, "--force")
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.startswith(f"recovered {partial} -> {other}: ")
+    assert read_capture(other).meta["recovered"] == "true" and not partial.exists()
+    own = tmp_path / "k.csv"
+    own.write_bytes(b"the capture the killed recording was to replace\n")
+    partial.write_bytes(killed)
+    res = run_station("record", "--recover", partial, "--out", own)
+    assert res.returncode == 0, res.stderr
+    assert read_capture(own).meta["recovered"] == "true"
+    res = run_station("record", "--port", "loop://", "--out", tmp_path / "n.csv", "--force")
+    assert_one_line_refusal(res, "--force applies to --recover only")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from station.commands._dbutil import open_store, record_id, refuse_database_as_output
@@ -16,6 +17,21 @@ FORMATS = (
     "qgc",
     "c-header",
 )  # = station.firmware_export.FORMATS (not imported: start-up time)
+
+
+def device_id_arg(text: str) -> int:
+    """argparse type of --device-id: a whole number, decimal (``2424842``, as QGroundControl and
+    Mission Planner list CAL_ACC0_ID / INS_ACC_ID) or hexadecimal with ``0x`` (``0x250002``, as
+    PX4's ``listener`` and drivers print a device id). Its range is the format's to judge
+    (station.firmware_export), so a value out of it is refused there, naming the parameter."""
+    cell = text.strip()
+    if re.fullmatch(r"[+-]?[0-9]+", cell):
+        return int(cell, 10)
+    if re.fullmatch(r"[+-]?0[xX][0-9a-fA-F]+", cell):
+        return int(cell, 16)
+    raise argparse.ArgumentTypeError(
+        f"{text!r} is no device id: give a whole number, decimal (2424842) or hexadecimal with 0x (0x250002)"
+    )
 
 
 def register(subparsers) -> None:
@@ -36,9 +52,10 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--device-id",
-        type=int,
+        type=device_id_arg,
         metavar="ID",
-        help="PX4: the sensor's device id for CAL_*n_ID when the capture does not hold it",
+        help="PX4: the sensor's device id for CAL_*n_ID when the capture does not hold it, decimal (2424842) "
+        "or hexadecimal (0x250002)",
     )
     p.add_argument(
         "--vehicle",

@@ -83,6 +83,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="finish the .partial file a killed recording left and exit: every whole row is kept, a cut "
         "last line dropped (said on stderr); a file with a bad row before its last line is refused, nothing written",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --recover: replace an existing --out (without it such a file is refused, nothing written)",
+    )
     p.set_defaults(func=run)
 
 
@@ -102,10 +107,15 @@ def run(args: argparse.Namespace) -> int:
 
     if args.recover:
         res = recover_partial(
-            args.recover, args.out, warn=lambda msg: print(f"station record: {safe(msg)}", file=sys.stderr)
+            args.recover,
+            args.out,
+            warn=lambda msg: print(f"station record: {safe(msg)}", file=sys.stderr),
+            force=args.force,
         )
         print(f"recovered {safe(args.recover)} -> {safe(res.path)}: {res.rows} rows")
         return 0
+    if args.force:
+        raise InputError(None, None, "--force applies to --recover only (a recording replaces its --out)")
     if not args.port:
         raise InputError(None, None, "--port is required (a device path or a pyserial URL)")
     if not args.out:

@@ -293,7 +293,7 @@ class Recovered:
     dropped: str = ""  # the cut last line that was left out, said as a warning ("" when none)
 
 
-def recover_partial(partial: str, out: str | None = None, *, warn=None) -> Recovered:
+def recover_partial(partial: str, out: str | None = None, *, warn=None, force: bool = False) -> Recovered:
     """Finish a `<out>.partial` left by a killed recording: keep every whole row, drop a cut
     last line (``warn``: one line naming it), keep `complete: false`, add `recovered: true`;
     write `out` (default: the name without `.partial`) atomically and remove the partial file.
@@ -302,7 +302,10 @@ def recover_partial(partial: str, out: str | None = None, *, warn=None) -> Recov
     file with a bad row before its last line (a line that has its line end) is no cut a kill
     or a power cut made, and is refused on that line with nothing written; so is one without a
     whole row. A power cut can leave the last blocks of the file as NUL bytes with no line end
-    among them: that tail is the cut last line."""
+    among them: that tail is the cut last line.
+
+    An ``out`` other than the recording's own (the partial's name without ``.partial``, which the
+    recording was started to replace) that exists is refused, nothing written, unless ``force``."""
     from station.capture import check_capture_upto
 
     warn = warn or (lambda msg: None)
@@ -316,6 +319,11 @@ def recover_partial(partial: str, out: str | None = None, *, warn=None) -> Recov
     if not os.path.lexists(partial) and os.path.isfile(out):  # run twice, or after a finished recording
         raise InputError(
             partial, None, f"no such file: nothing to recover ({out} is there: recovered, or the recording finished)"
+        )
+    own = partial.endswith(PARTIAL_SUFFIX) and same_file(out, partial[: -len(PARTIAL_SUFFIX)])
+    if not force and not own and os.path.lexists(out):
+        raise InputError(
+            out, None, "already exists: --recover writes no file over another (give --force to replace it)"
         )
     with open_input(partial) as f:  # open, and locked, until the partial is removed
         if not _lock(f):

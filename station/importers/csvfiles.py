@@ -25,7 +25,7 @@ import numpy as np
 from station.capture import CUT_SHORT, MAX_ABS, UNIT_ALIASES, UNIT_KEYS, no_line_end_note, plausible_limit
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
-from station.importers._common import COLUMNS, NAME, Imported, Stream
+from station.importers._common import COLUMNS, NAME, Imported, Stream, set_date
 from station.importers.options import TARGETS
 
 KIND_OF = {c: k for k, cols in COLUMNS.items() for c in cols}
@@ -505,11 +505,14 @@ def read_euroc(path, *, kinds=None) -> Imported:
     _check_limits(path, values, linenos, units)
     warnings: list[str] = []
     _cut_last_row(path, linenos, warnings)
+    first_s = int(values["t"][0]) * 1e-9
     t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=warnings)
+    meta: dict[str, str] = {}
+    _epoch_date(first_s, header[cols["t"]], meta, warnings)  # EuRoC's stamps are Unix ns
     streams = _streams(path, values, t_s, units, "EuRoC/Kalibr CSV")
     if kinds is not None:
         streams = {k: s for k, s in streams.items() if k in kinds}
-    return Imported(streams, {}, warnings)
+    return Imported(streams, meta, warnings)
 
 
 # ------------------------------------------------------------------------------------- plain CSV
@@ -534,18 +537,81 @@ def _names_columns(header: list[str], mapping: dict[str, str]) -> bool:
     return not named or all(src in header for src in named)
 
 
-def _later_header(path, lines: Iterator[tuple[int, str]], mapping: dict[str, str]) -> tuple[int, str] | None:
+def _later_header(
+    path, lines: Iterator[tuple[int, str]], mapping: dict[str, str], skipped: list[tuple[int, str]]
+) -> tuple[int, str] | None:
     """(line number, text) of the first of the next PREAMBLE_MAX_LINES lines that is the header
-    for ``mapping`` (lines read from ``lines``, which then goes on after it), None when none is."""
+    for ``mapping`` (lines read from ``lines``, which then goes on after it), None when none is.
+    Every line read and passed over is appended to ``skipped`` (so the caller can read them
+    again as data when no header is found)."""
     for lineno, text in lines:
-        if lineno > PREAMBLE_MAX_LINES + 1:
-            return None
-        if not text.strip() or text.lstrip().startswith("#"):
+        if lineno > PREAMBLE_MAX_LINES + 1 or not text.strip() or text.lstrip().startswith("#"):
+            skipped.append((lineno, text))
+            if lineno > PREAMBLE_MAX_LINES + 1:
+                return None
             continue
         cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text))]
-        if _names_columns(cells, mapping) and not all(_NUMBER.fullmatch(c) for c in cells if c):
+        if _names_columns(cells, mapping) and _is_header(cells):
             return lineno, text
+        skipped.append((lineno, text))
     return None
+
+
+def _is_number(cell: str) -> bool:
+    return bool(_NUMBER.fullmatch(cell) or _DECIMAL_COMMA.fullmatch(cell))
+
+
+def _is_header(cells: list[str]) -> bool:
+    """Whether a line's (stripped) fields are column names: (almost) all of them text, at most
+    one field in ten a number (a header may name a column '2'). A line of numbers with some text
+    among them (``1.0,2.0,abc``: a data row with a corrupt field) is a data row, not a header."""
+    filled = [c for c in cells if c and c.lower() not in _MISSING]
+    numbers = sum(1 for c in filled if _is_number(c))
+    return bool(filled) and numbers * 10 <= len(filled)
+
+
+def _data_row_refusal(path, lineno: int, cells: list[str]) -> InputError:
+    """The refusal of a first line that is a data row (mostly numbers) with a field that is no
+    number, where the columns are asked for by name: the field, said as a data row's would be."""
+    numbers = sum(1 for c in cells if _is_number(c))
+    j, bad = next((j, c) for j, c in enumerate(cells) if c and not _is_number(c) and c.lower() not in _MISSING)
+    return InputError(
+        path,
+        lineno,
+        f"field {j + 1}: {bad[:40]!r} is not a number, in a data row ({numbers} of its {len(cells)} fields are "
+        "numbers, so it is no header): correct the field, or add a first line that names the columns",
+    )
+
+
+# a logger's preamble line that declares the sample rate ('Fs,100': the MPU-6050 logger of
+# shared/data/mpu6050_unc; 'Sample rate (Hz),200', 'sampling_frequency,50')
+_RATE_KEY = re.compile(
+    r"(?:fs|sample[ _-]?rate|sampling[ _-]?(?:rate|frequency|freq))\s*(?:[(\[]\s*hz\s*[)\]]|_hz|hz)?", re.IGNORECASE
+)
+
+
+def _declared_rate(path, skipped: list[tuple[int, str]]) -> tuple[float, int, str] | None:
+    """(Hz, line number, line) of the first preamble line that declares the sample rate, None
+    when none does (or its value is no positive number of Hz)."""
+    for lineno, text in skipped:
+        cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text))]
+        if len(cells) >= 2 and _RATE_KEY.fullmatch(cells[0]) and _NUMBER.fullmatch(cells[1]):
+            hz = float(cells[1])
+            if 0 < hz <= MAX_RATE_HZ:
+                return hz, lineno, text.strip()
+    return None
+
+
+# Unix times a time column may start at to be read as a calendar date: 1e9 s (2001-09-09) to
+# 4.1e9 s (2099-12-03). A bench logger's time since power-up stays far below 1e9 s (31 years).
+EPOCH_RANGE_S = (1e9, 4.1e9)
+
+
+def _epoch_date(first_s: float, column: str, meta: dict[str, str], warnings: list[str]) -> None:
+    """The capture's ``date`` (UTC) when the time column's first value, in seconds, is clearly a
+    Unix time (:data:`EPOCH_RANGE_S`); the time axis stays relative to the first sample."""
+    if EPOCH_RANGE_S[0] <= first_s <= EPOCH_RANGE_S[1]:
+        set_date(meta, warnings, first_s, f"{column!r} column's Unix")
 
 
 def read_plain(
@@ -576,32 +642,56 @@ def read_plain(
     delimiter = _sniff_delimiter(head)
     header = [c.strip() for c in _cells(path, hi, head, delimiter)]
     first_data = hi + 1
-    if all(_NUMBER.fullmatch(c) for c in header if c):
-        if not (mapping and all(src.isdigit() for src in mapping.values())):
+    by_number = bool(mapping) and all(src.isdigit() for src in mapping.values())
+    warnings: list[str] = []
+    meta: dict[str, str] = {}
+    declared = None  # (Hz, line, text): the sample rate a preamble line declares ('Fs,100')
+    skipped: list[tuple[int, str]] = [(hi, head)]
+    found = None
+    if not _is_header(header):  # a data row (numbers, maybe with a bad field), not column names
+        numbers_only = all(_is_number(c) or c.lower() in _MISSING for c in header)
+        if numbers_only and not by_number:
             raise InputError(
                 path,
                 hi,
                 f"no header row: this line holds {len(header)} numbers; name the columns by their number "
                 f"(--map t=1,ax=2,... of 1-{len(header)}) or add a first line that names them",
             )
-        # no header: the columns named by their number, every line data (the first one too)
-        lines = itertools.chain([(hi, head)], lines)
-        header = [str(j + 1) for j in range(len(header))]
-        first_data = hi
-    warnings: list[str] = []
-    if not _names_columns(header, mapping):
+        if not numbers_only:
+            # a logger's preamble ('Fs,100') above the header, or a data row with a bad field
+            found = _later_header(path, lines, mapping, skipped)
+        if found is None and by_number:
+            # no header: the columns named by their number, every line data (the first one too,
+            # and those a search for a header under a preamble read)
+            lines = itertools.chain(skipped, lines)
+            header = [str(j + 1) for j in range(len(header))]
+            first_data = hi
+        elif found is None and not mapping:
+            raise _data_row_refusal(path, hi, header)
+        elif found is None:  # --map names a column no line of the first ones names
+            target, source = next((t, c) for t, c in mapping.items() if not c.isdigit() and c not in header)
+            numbers = sum(1 for c in header if _is_number(c))
+            raise InputError(
+                path,
+                hi,
+                f"--map {target}={source}: no column {source!r}: none of the first {PREAMBLE_MAX_LINES + 1} "
+                f"lines names it, and this one is no header ({numbers} of its {len(header)} fields are numbers)",
+            )
+    elif not _names_columns(header, mapping):
+        found = _later_header(path, lines, mapping, skipped)
+    if found is not None:
         # a logger's preamble above the header ('Fs,100', 'Logging Type,1', ...): the header is
         # the first line that names the columns asked for; the lines above it are said, not read
-        found = _later_header(path, lines, mapping)
-        if found is not None:
-            first, first_text = hi, head
-            hi, head = found
-            delimiter = _sniff_delimiter(head)
-            header = [c.strip() for c in _cells(path, hi, head, delimiter)]
-            warnings.append(
-                f"lines {first}-{hi - 1} above the header (line {hi}) are not data: skipped "
-                f"(line {first}: {first_text.strip()[:40]!r})"
-            )
+        first, first_text = hi, head
+        hi, head = found
+        delimiter = _sniff_delimiter(head)
+        header = [c.strip() for c in _cells(path, hi, head, delimiter)]
+        first_data = hi + 1
+        warnings.append(
+            f"lines {first}-{hi - 1} above the header (line {hi}) are not data: skipped "
+            f"(line {first}: {first_text.strip()[:40]!r})"
+        )
+        declared = _declared_rate(path, skipped)
     given = bool(mapping)
     if not mapping:  # a header that already uses the capture's names
         mapping = {c: c for c in header if c in TARGETS}
@@ -644,6 +734,17 @@ def read_plain(
         taken[j] = target
     if rate_hz is not None and "t" in cols:
         raise InputError(None, None, "--rate is for a file without a time column; t is mapped (leave out one of them)")
+    if declared is not None and "t" not in cols:
+        hz, at, text = declared
+        if rate_hz is None:  # the rate the logger declares numbers the rows
+            rate_hz = hz
+            warnings.append(
+                f"no time column: the rows are numbered at the {hz:g} Hz line {at} declares ({text[:40]!r})"
+            )
+        elif not math.isclose(rate_hz, hz, rel_tol=1e-9):
+            warnings.append(
+                f"--rate {rate_hz:g} differs from the {hz:g} Hz line {at} declares ({text[:40]!r}): --rate used"
+            )
     kinds_present = {KIND_OF[c] for c in cols if c in KIND_OF}
     # what the file leaves unsaid, all of it in one line at its header: the units of the columns
     # it has, and the time when it has no time column and no --rate
@@ -686,9 +787,20 @@ def read_plain(
     _check_limits(path, values, linenos, units)
     _cut_last_row(path, linenos, warnings)
     if "t" in values:
+        t_column = str(mapping.get("t", "t"))
+        first_s = float(values["t"][0]) * TIME_UNITS[t_unit]
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
         if "t" not in units:
-            _seconds_said(str(mapping.get("t", "t")), t_s, warnings)
+            _seconds_said(t_column, t_s, warnings)
+        _epoch_date(first_s, t_column, meta, warnings)
+        if declared is not None and len(t_s) > 1:
+            hz, at, text = declared
+            step = float(np.median(np.diff(t_s)))
+            if step > 0 and not math.isclose(1.0 / step, hz, rel_tol=0.05):
+                warnings.append(
+                    f"the time column's median step, {step:g} s ({1 / step:.4g} Hz), disagrees with the {hz:g} Hz "
+                    f"line {at} declares ({text[:40]!r}): the time column is used"
+                )
     else:
         t_s = np.arange(len(linenos), dtype=np.float64) / rate_hz
         if len(t_s) and not t_s[-1] <= MAX_ABS:  # the time a capture can hold (station.capture.MAX_ABS)
@@ -704,4 +816,4 @@ def read_plain(
     )
     if kinds is not None:
         streams = {k: s for k, s in streams.items() if k in kinds}
-    return Imported(streams, {}, warnings)
+    return Imported(streams, meta, warnings)
