@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -34,6 +35,40 @@ def run_station(*args, subprocess_run: bool = False) -> subprocess.CompletedProc
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = main([str(a) for a in args])
     return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
+
+
+class SimDevice:
+    """A running ``station sim-device``: ``port`` (the pty it printed), ``proc``; once the
+    context has ended, ``returncode`` and ``stderr`` (its summary line)."""
+
+    def __init__(self, proc: subprocess.Popen):
+        self.proc = proc
+        self.port = ""
+        self.returncode: int | None = None
+        self.stderr = ""
+
+
+@contextlib.contextmanager
+def sim_device(*args: str):
+    """``station sim-device ARGS`` in a subprocess for the length of the context: its pty read
+    from the first line of stdout (asserted to be one), then stopped with SIGINT and waited for
+    (20 s); its exit status and stderr are left on the :class:`SimDevice` for the caller to check."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station", "sim-device", *args],
+        cwd=ROOT,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    sim = SimDevice(proc)
+    try:
+        sim.port = proc.stdout.readline().strip()
+        assert sim.port.startswith("/dev/pts/"), (sim.port, proc.stderr.read() if proc.poll() is not None else "")
+        yield sim
+    finally:
+        proc.send_signal(signal.SIGINT)
+        _, sim.stderr = proc.communicate(timeout=20)
+        sim.returncode = proc.returncode
 
 
 def run_main(capsys, *argv) -> tuple[int, str, str]:

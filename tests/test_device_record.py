@@ -21,6 +21,7 @@ from station.capture import read_capture
 from station.device.protocol import Header, data_sentence, header_sentence
 from station.device.reader import Batch, Reader
 from station.device.record import RecordError, record
+from tests.station_run import sim_device
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -51,15 +52,10 @@ def station(*args: str, **kw) -> subprocess.Popen:
 @pytest.fixture(scope="module")
 def sim_path():
     """One `station sim-device` (500 Hz, seed 7) for the module's recordings."""
-    p = station("sim-device", "--rate", "500", "--seed", "7")
-    line = p.stdout.readline().strip()
-    assert line.startswith("/dev/pts/"), (line, p.stderr.read() if p.poll() is not None else "")
-    yield line
-    p.send_signal(signal.SIGINT)
-    assert p.wait(20) == 0  # a clean exit on SIGINT
-    assert "samples sent" in p.stderr.read()
-    p.stdout.close()
-    p.stderr.close()
+    with sim_device("--rate", "500", "--seed", "7") as sim:
+        yield sim.port
+    assert sim.returncode == 0, sim.stderr  # a clean exit on SIGINT
+    assert "samples sent" in sim.stderr
 
 
 def test_record_from_sim_device_reads_back(tmp_path):
@@ -67,15 +63,12 @@ def test_record_from_sim_device_reads_back(tmp_path):
     `--buffer-s 30`: with the default 0.5 s the simulated UART drops what waits whenever the
     `record` process is not scheduled for half a second (a loaded 2-core machine did that), and
     the test failed on the scheduler, not on the station."""
-    sim = station("sim-device", "--rate", "500", "--seed", "7", "--buffer-s", "30")
-    try:
-        path = sim.stdout.readline().strip()
-        assert path.startswith("/dev/pts/"), (path, sim.stderr.read() if sim.poll() is not None else "")
+    with sim_device("--rate", "500", "--seed", "7", "--buffer-s", "30") as sim:
         out = tmp_path / "cap.csv"
         rec = station(
             "record",
             "--port",
-            path,
+            sim.port,
             "--seconds",
             "1.5",
             "--out",
@@ -86,12 +79,9 @@ def test_record_from_sim_device_reads_back(tmp_path):
             "latitude_deg=39.98",
         )
         stdout, stderr = rec.communicate(timeout=60)
-    finally:
-        sim.send_signal(signal.SIGINT)
-        _, sim_stderr = sim.communicate(timeout=20)
-    assert sim.returncode == 0, sim_stderr
-    sent = re.search(r"(\d+) samples sent, (\d+) dropped", sim_stderr)
-    assert sent and sent[2] == "0", sim_stderr  # the device discarded nothing
+    assert sim.returncode == 0, sim.stderr
+    sent = re.search(r"(\d+) samples sent, (\d+) dropped", sim.stderr)
+    assert sent and sent[2] == "0", sim.stderr  # the device discarded nothing
     assert rec.returncode == 0, stderr
     assert "recorded" in stdout and stderr == ""
     cap = read_capture(out)
@@ -631,15 +621,9 @@ def test_a_slow_device_gets_its_sample_rate_measured(tmp_path):
     `station record` said '? Hz'. The steps between batches count."""
     from tests.station_run import run_station
 
-    sim = station("sim-device", "--rate", "10", "--seed", "3")
-    try:
-        port = sim.stdout.readline().strip()
-        assert port.startswith("/dev/pts/"), port
+    with sim_device("--rate", "10", "--seed", "3") as sim:
         out = tmp_path / "slow.csv"
-        res = run_station("record", "--port", port, "--seconds", "1.5", "--out", out)
+        res = run_station("record", "--port", sim.port, "--seconds", "1.5", "--out", out)
         assert res.returncode == 0, res.stderr
         assert "? Hz" not in res.stdout and ", 10 Hz)" in res.stdout, res.stdout
         assert read_capture(out).meta["sample_rate_hz"] == "10"
-    finally:
-        sim.send_signal(signal.SIGINT)
-        sim.communicate(timeout=20)

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from station.capture import read_capture
-from tests.station_run import ROOT, assert_one_line_refusal, run_station
+from tests.station_run import ROOT, assert_one_line_refusal, run_station, sim_device
 
 HEADER = b"t,segment,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c\n"
 
@@ -43,14 +43,9 @@ def _wait_for_rows(partial: Path, size_bytes: int) -> None:
 @pytest.fixture(scope="module")
 def sim_port():
     """One `station sim-device` (500 Hz, seed 7) for the module's recordings."""
-    p = station("sim-device", "--rate", "500", "--seed", "7")
-    line = p.stdout.readline().strip()
-    assert line.startswith("/dev/pts/"), (line, p.stderr.read() if p.poll() is not None else "")
-    yield line
-    p.send_signal(signal.SIGINT)
-    assert p.wait(20) == 0
-    p.stdout.close()
-    p.stderr.close()
+    with sim_device("--rate", "500", "--seed", "7") as sim:
+        yield sim.port
+    assert sim.returncode == 0, sim.stderr
 
 
 @pytest.fixture(scope="module")
