@@ -167,6 +167,15 @@ def _quit(sock):
     assert "EXIT=0" in pane(sock)
 
 
+def _quit_discarding_the_result(sock):
+    """On Results with an unsaved result: ctrl+q, answer yes to losing it, the app exits 0."""
+    _keys(sock, "C-q")
+    _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
+    _keys(sock, "y")
+    _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
+    assert "EXIT=0" in pane(sock)
+
+
 def _history(db, device):
     out = subprocess.run(
         [sys.executable, "-m", "station", "history", device, "--json", "--db", str(db)],
@@ -350,11 +359,7 @@ def test_a_new_users_walkthrough_at_80x24_in_tmux(tmp_path):
         _keys(sock, "Escape")
         # judged again with the limit set: inside it
         _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " PASS " in s, 60, "Results again")
-        _keys(sock, "C-q")
-        _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
-        _keys(sock, "y")
-        _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
-        assert "EXIT=0" in pane(sock)
+        _quit_discarding_the_result(sock)
     finally:
         tmux(sock, "kill-server", check=False)
     from db import Store
@@ -387,11 +392,7 @@ def test_keys_sent_in_one_burst_open_a_screen_and_fill_its_field_in_tmux(tmp_pat
         _wait_pane(sock, lambda s: "stored: drift = -2000 … 2000 °/h" in s, 60, "the limit stored")
         _keys(sock, "Escape")  # alone: an escape with a key after it in one read is alt+that key
         _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " PASS " in s, 60, "Results judged by the limit")
-        _keys(sock, "C-q")
-        _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
-        _keys(sock, "y")
-        _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
-        assert "EXIT=0" in pane(sock)
+        _quit_discarding_the_result(sock)
     finally:
         tmux(sock, "kill-server", check=False)
 
