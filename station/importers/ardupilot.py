@@ -644,6 +644,8 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
 def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     from pymavlink import mavutil
 
+    from station.device.mavlink import compass_offsets_changed  # as the live MAVLink link reads them
+
     inst = 0 if instance is None else int(instance)
     if inst not in IMU_MESSAGES:
         raise InputError(
@@ -774,7 +776,7 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         if first_ofs is None:
             first_ofs = ofs
         elif after_start:
-            late.update(f"COMPASS_OFS_{a}" for a, v0, v in zip("XYZ", first_ofs, ofs) if v != v0)
+            late.update(compass_offsets_changed(first_ofs, ofs))
     samples = by_type[name]
     t = np.array([s[0] for s in samples])
     units = getattr(msg_class[name], "fieldunits_by_name", {})
