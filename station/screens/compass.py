@@ -9,8 +9,6 @@ posting replaceable LiveUpdates (~15 Hz) and GuideEvents.
 
 from __future__ import annotations
 
-import threading
-
 from rich.text import Text
 from textual import work
 from textual.app import ComposeResult
@@ -45,14 +43,6 @@ class CompassScreen(GuidedScreenMixin, Screen):
         Binding("p", "sim_sweep", "Sweep (sim)"),
         Binding("l", "sim_level", "Level (sim)"),
     ]
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0
-        self._fitting = False
 
     def compose(self) -> ComposeResult:
         yield TitleBar("P3 compass sweep")

@@ -13,7 +13,6 @@ guide (``station.procedures.ldv_guide``), posting replaceable LiveUpdates and Gu
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 from rich.text import Text
@@ -56,14 +55,6 @@ class LdvScreen(GuidedScreenMixin, Screen):
         Binding("d", "sim_drive", "Drive/stop (sim)"),
         Binding("t", "sim_turns", "Turns (sim)"),
     ]
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0
-        self._fitting = False
 
     def compose(self) -> ComposeResult:
         yield TitleBar("P5 laser velocimeter on a vehicle")
