@@ -36,8 +36,8 @@ import numpy as np
 from solvers import frames
 from solvers.detectors import orientation_check
 from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS
-from solvers.stillness import StillnessTracker
 from station.fileio import atomic_write_json
+from station.procedures.guide_base import stillness_tracker
 from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
 # the guide keeps its captured positions in a resume file (station.procedures.state): an
@@ -224,16 +224,7 @@ class P1Guide:
         return zero, sens
 
     def _new_tracker(self) -> None:
-        c = self.config
-        init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
-        self.tracker = StillnessTracker(
-            self.sample_rate_hz,
-            init_rest_s=init,
-            window_s=c.window_s,
-            min_duration_s=0.0,
-            margin_s=0.0,
-            nan_policy="omit",
-        )
+        self.tracker = stillness_tracker(self.config, self.sample_rate_hz)
         self.phase = "noise" if self.phase not in ("done", "aborted") else self.phase
 
     def _avg_reset(self) -> None:
