@@ -107,6 +107,15 @@ def _axis_ticks(lim, axis_lim, log: bool) -> tuple[list[float], list[str]]:
     return ticks, [_fmt_tick(v, step) for v in ticks]
 
 
+def _figure_start(ax: _Axes, label: str) -> list[str]:
+    """The opening ``<svg>`` of a figure of ``ax``'s size, named ``label``, and its plot area."""
+    return [
+        f'<svg xmlns="http://www.w3.org/2000/svg" class="figure" role="img" width="{ax.w}" height="{ax.h}" '
+        f'viewBox="0 0 {ax.w} {ax.h}" aria-label="{escape(label)}">',
+        f'<rect x="{ax.x0}" y="{ax.y1}" width="{ax.x1 - ax.x0}" height="{ax.y0 - ax.y1}" fill="#fff" stroke="#888"/>',
+    ]
+
+
 def _limits(values, log: bool, pad: float = 0.05):
     vals = [v for v in values if v is not None and math.isfinite(v) and (v > 0 or not log)]
     if not vals:
@@ -151,11 +160,7 @@ def xy_plot(
     xlim = _limits(xs, log_x, pad=0.03)
     ylim = _limits(ys, log_y)
     ax = _Axes(width, height, xlim, ylim, log_x, log_y)
-    out = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" class="figure" role="img" width="{width}" height="{height}" '
-        f'viewBox="0 0 {width} {height}" aria-label="{escape(title or y_label)}">',
-        f'<rect x="{ax.x0}" y="{ax.y1}" width="{ax.x1 - ax.x0}" height="{ax.y0 - ax.y1}" fill="#fff" stroke="#888"/>',
-    ]
+    out = _figure_start(ax, title or y_label)
     yt, ylab = _axis_ticks(ylim, ax.ylim, log_y)
     for v, lab in zip(yt, ylab):
         y = ax.Y(v)
@@ -227,11 +232,7 @@ def bar_plot(
     vals = [v for v in values if v is not None and math.isfinite(v)]
     span = max([abs(v) for v in vals] + ([limit] if limit else []) + [1e-12])
     ax = _Axes(width, height, (0, max(len(labels), 1)), (-span * 1.1, span * 1.1), bottom=56)
-    out = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" class="figure" role="img" width="{width}" height="{height}" '
-        f'viewBox="0 0 {width} {height}" aria-label="{escape(title or y_label)}">',
-        f'<rect x="{ax.x0}" y="{ax.y1}" width="{ax.x1 - ax.x0}" height="{ax.y0 - ax.y1}" fill="#fff" stroke="#888"/>',
-    ]
+    out = _figure_start(ax, title or y_label)
     yt, ylab = _axis_ticks((-span * 1.1, span * 1.1), ax.ylim, False)
     for v, lab in zip(yt, ylab):
         y = ax.Y(v)
