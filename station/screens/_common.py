@@ -104,6 +104,23 @@ class GuidedScreenMixin:
         )
         self.app.push_screen(ConfirmScreen("Abort this run?" + keep), lambda yes: self.action_abort() if yes else None)
 
+    def _finish_guide(self) -> None:
+        """End the recording now (the guide's ``finish``) and post its events (``done`` fits)."""
+        if self.guide is not None:
+            with self._lock:
+                self.guide.finish()
+                events = self.guide.take_events()
+            for kind, detail in events:
+                self.post_message(GuideEvent(kind, detail))
+
+    def _restart_guide(self) -> None:
+        """Start the recording again (the guide's ``restart``), said here, not by its event."""
+        if self.guide is not None:
+            with self._lock:
+                self.guide.restart()
+                self.guide.take_events()
+            self.notify("Recording restarted", timeout=2)
+
     def _start_guide(self, src, make_guide: Callable) -> bool:
         """Start ``src`` and set ``self.guide`` (and the session's) to ``make_guide()``;
         False, with a SourceFailed posted, when either fails."""

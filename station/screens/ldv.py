@@ -159,19 +159,10 @@ class LdvScreen(GuidedScreenMixin, Screen):
         self.query_one("#message", Static).update(f"[b red]device: {message.error}[/]")
 
     def action_finish(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.finish()
-                events = self.guide.take_events()
-            for kind, detail in events:
-                self.post_message(GuideEvent(kind, detail))
+        self._finish_guide()
 
     def action_restart(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.restart()
-                self.guide.take_events()
-            self.notify("Recording restarted", timeout=2)
+        self._restart_guide()
 
     def action_abort(self) -> None:
         self._abort("P5 aborted: nothing saved")
