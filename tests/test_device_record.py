@@ -21,7 +21,7 @@ from station.capture import read_capture
 from station.device.protocol import Header, data_sentence, header_sentence
 from station.device.reader import Batch, Reader
 from station.device.record import RecordError, record
-from tests.station_run import sim_device
+from tests.station_run import popen_station, sim_device, wait_for_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,17 +36,6 @@ def raw_pty():
     finally:
         os.close(m)
         os.close(s)
-
-
-def station(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "station", *args],
-        cwd=ROOT,
-        text=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        **kw,
-    )
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +54,7 @@ def test_record_from_sim_device_reads_back(tmp_path):
     the test failed on the scheduler, not on the station."""
     with sim_device("--rate", "500", "--seed", "7", "--buffer-s", "30") as sim:
         out = tmp_path / "cap.csv"
-        rec = station(
+        rec = popen_station(
             "record",
             "--port",
             sim.port,
@@ -130,7 +119,7 @@ def test_a_reader_stalled_past_the_device_buffer_sees_a_gap_and_within_it_loses_
     with dev:
         th = threading.Thread(target=dev.run, args=(stop,), daemon=True)
         th.start()
-        rec = station("record", "--port", dev.path, "--out", str(out))
+        rec = popen_station("record", "--port", dev.path, "--out", str(out))
         try:
             _wait_for(lambda: rows() > 100, "the first rows")
             rec.send_signal(signal.SIGSTOP)
@@ -172,11 +161,9 @@ def test_a_reader_stalled_past_the_device_buffer_sees_a_gap_and_within_it_loses_
 def test_sigterm_ends_a_recording_with_a_complete_capture(sim_path, tmp_path):
     path = sim_path
     out = tmp_path / "c.csv"
-    rec = station("record", "--port", path, "--out", str(out))
+    rec = popen_station("record", "--port", path, "--out", str(out))
     partial = Path(str(out) + ".partial")
-    end = time.monotonic() + 30
-    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
-        time.sleep(0.05)
+    wait_for_rows(partial, 3000)
     rec.send_signal(signal.SIGTERM)
     assert rec.wait(20) == 0, rec.stderr.read()
     rec.stdout.close()
@@ -190,11 +177,9 @@ def test_an_interrupt_before_the_seconds_asked_keeps_the_rows_marked_incomplete(
     shorter than asked (`complete: false`, why) and the exit status is 1, as for a device lost;
     it was kept as complete, with exit 0."""
     out = tmp_path / "c.csv"
-    rec = station("record", "--port", sim_path, "--seconds", "120", "--out", str(out))
+    rec = popen_station("record", "--port", sim_path, "--seconds", "120", "--out", str(out))
     partial = Path(str(out) + ".partial")
-    end = time.monotonic() + 30
-    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
-        time.sleep(0.05)  # waiting on the rows, not a pace
+    wait_for_rows(partial, 3000)
     rec.send_signal(signal.SIGINT)
     stdout, stderr = rec.communicate(timeout=20)
     assert rec.returncode == 1, stderr
@@ -208,10 +193,8 @@ def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_path, tmp
     path = sim_path
     out = tmp_path / "k.csv"
     partial = Path(str(out) + ".partial")
-    rec = station("record", "--port", path, "--out", str(out))
-    end = time.monotonic() + 30
-    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
-        time.sleep(0.05)
+    rec = popen_station("record", "--port", path, "--out", str(out))
+    wait_for_rows(partial, 3000)
     rec.kill()
     rec.wait(10)
     rec.stdout.close()
@@ -219,7 +202,7 @@ def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_path, tmp
     assert not out.exists() and partial.exists()
     with open(partial, "a") as f:
         f.write("99.000000,0,2.41")  # a row cut by the kill
-    fix = station("record", "--recover", str(partial))
+    fix = popen_station("record", "--recover", str(partial))
     stdout, stderr = fix.communicate(timeout=60)
     assert fix.returncode == 0, stderr
     cap = read_capture(out)
