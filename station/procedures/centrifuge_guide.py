@@ -39,14 +39,13 @@ live, ``n, ax_std, ay_std, az_std``; metadata ``procedure: accel-centrifuge``,
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.procedures.guide_base import GuideBase, stillness_tracker
+from station.procedures.guide_base import GuideBase, started_utc, stillness_tracker
 
 PHASES = ("noise", "change", "place", "settle", "average", "done", "aborted")
 STATUSES = ("pending", "captured", "skipped")
@@ -195,7 +194,7 @@ class CentrifugeGuide(GuideBase):
         self.units = dict(units)
         self.device_id = device_id
         self.steps = steps if steps is not None else centrifuge_steps(self.config)
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self.tracker = stillness_tracker(self.config, self.sample_rate_hz)
         self.phase = "noise"
         self.index: int | None = 0

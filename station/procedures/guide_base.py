@@ -1,10 +1,17 @@
 """What the guides (``station/procedures/<stem>_guide.py``) do alike: the queue of events
-the screen takes, abort, the end of a recording, and the rest detector of those that wait
-for the unit to be still."""
+the screen takes, abort, the end of a recording, the time it started, and the rest detector
+of those that wait for the unit to be still."""
 
 from __future__ import annotations
 
+import datetime as _dt
+
 from solvers.stillness import StillnessTracker
+
+
+def started_utc() -> str:
+    """Now, as a guide's ``started``: UTC to the second, ``YYYY-MM-DDTHH:MM:SSZ``."""
+    return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def stillness_tracker(config, sample_rate_hz: float) -> StillnessTracker:

@@ -11,13 +11,12 @@ capture with ``gyro_mode: static``, ``latitude_deg``, ``heading_deg`` and ``fram
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from station.procedures.guide_base import GuideBase, stillness_tracker
+from station.procedures.guide_base import GuideBase, started_utc, stillness_tracker
 
 # `station demo`: P4 averages 180 s at the least (the drift is not resolved in less)
 DEMO_MIN_AVERAGE_S = 180.0
@@ -82,7 +81,7 @@ class HoldGuide(GuideBase):
         self.units = dict(units)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self.tracker = stillness_tracker(self.config, self.sample_rate_hz)
         self.phase = "noise"
         self._events: list[tuple[str, str]] = []
@@ -279,7 +278,7 @@ class ReferenceGuide(GuideBase):
         self.units = dict(units)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self.phase = "wait"
         self._events: list[tuple[str, str]] = []
         self._message = "Waiting for the reference IMU"

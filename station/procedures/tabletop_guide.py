@@ -25,7 +25,6 @@ saved as a small JSON file after every change so an interrupted run can be resum
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import math
 import os
@@ -37,7 +36,7 @@ from solvers import frames
 from solvers.detectors import orientation_check
 from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS
 from station.fileio import atomic_write_json
-from station.procedures.guide_base import stillness_tracker
+from station.procedures.guide_base import started_utc, stillness_tracker
 from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
 # the guide keeps its captured positions in a resume file (station.procedures.state): an
@@ -195,7 +194,7 @@ class P1Guide:
         self.index = 0
         self.phase = "noise"
         self.state_path = state_path
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self._events: list[tuple[str, str]] = []
         self._message = "Hold the unit still: measuring the sensor noise"
         self._nominal = self._nominal_from(nominal, accel_unit)
