@@ -98,9 +98,7 @@ def db_path(args: argparse.Namespace) -> str:
     A path given (--db, $STATION_DB) in a folder that does not exist is refused (InputError):
     a mistyped one made that folder and a new empty database in it. Only the built-in default
     (XDG) gets its folder made, when a command creates the database."""
-    explicit, source = getattr(args, "db", None), "--db"
-    if not explicit:
-        explicit, source = os.environ.get("STATION_DB"), "$STATION_DB"
+    explicit, source = _given_db(args)
     if explicit:
         _require_folder(explicit, source)
         return explicit
@@ -111,9 +109,17 @@ def db_path(args: argparse.Namespace) -> str:
 
 def db_source(args: argparse.Namespace) -> str | None:
     """Where ``db_path(args)`` came from: "--db", "$STATION_DB", or None for the built-in default."""
+    return _given_db(args)[1]
+
+
+def _given_db(args: argparse.Namespace) -> tuple[str, str] | tuple[None, None]:
+    """The database path given and where: --db, else $STATION_DB (an empty one is not given);
+    (None, None) for the built-in default. The one place of that precedence."""
     if getattr(args, "db", None):
-        return "--db"
-    return "$STATION_DB" if os.environ.get("STATION_DB") else None
+        return args.db, "--db"
+    if os.environ.get("STATION_DB"):
+        return os.environ["STATION_DB"], "$STATION_DB"
+    return None, None
 
 
 def _require_folder(path: str, source: str) -> None:

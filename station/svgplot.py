@@ -96,6 +96,26 @@ class _Axes:
         return self.y0 - (v - a) / (b - a or 1.0) * (self.y0 - self.y1)
 
 
+def _axis_ticks(lim, axis_lim, log: bool) -> tuple[list[float], list[str]]:
+    """Ticks along one axis and their labels: on a log axis the decades (``1eN``) within
+    ``axis_lim`` (its limits as ``_Axes`` keeps them, log10), else round steps within ``lim``."""
+    if log:
+        ticks = [10.0**k for k in range(int(round(axis_lim[0])), int(round(axis_lim[1])) + 1)]
+        return ticks, [f"1e{int(round(math.log10(v)))}" for v in ticks]
+    ticks = _ticks(*lim)
+    step = ticks[1] - ticks[0] if len(ticks) > 1 else 1.0
+    return ticks, [_fmt_tick(v, step) for v in ticks]
+
+
+def _figure_start(ax: _Axes, label: str) -> list[str]:
+    """The opening ``<svg>`` of a figure of ``ax``'s size, named ``label``, and its plot area."""
+    return [
+        f'<svg xmlns="http://www.w3.org/2000/svg" class="figure" role="img" width="{ax.w}" height="{ax.h}" '
+        f'viewBox="0 0 {ax.w} {ax.h}" aria-label="{escape(label)}">',
+        f'<rect x="{ax.x0}" y="{ax.y1}" width="{ax.x1 - ax.x0}" height="{ax.y0 - ax.y1}" fill="#fff" stroke="#888"/>',
+    ]
+
+
 def _limits(values, log: bool, pad: float = 0.05):
     vals = [v for v in values if v is not None and math.isfinite(v) and (v > 0 or not log)]
     if not vals:
@@ -140,19 +160,8 @@ def xy_plot(
     xlim = _limits(xs, log_x, pad=0.03)
     ylim = _limits(ys, log_y)
     ax = _Axes(width, height, xlim, ylim, log_x, log_y)
-    out = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" class="figure" role="img" width="{width}" height="{height}" '
-        f'viewBox="0 0 {width} {height}" aria-label="{escape(title or y_label)}">',
-        f'<rect x="{ax.x0}" y="{ax.y1}" width="{ax.x1 - ax.x0}" height="{ax.y0 - ax.y1}" fill="#fff" stroke="#888"/>',
-    ]
-    # y ticks
-    if log_y:
-        yt = [10.0**k for k in range(int(round(ax.ylim[0])), int(round(ax.ylim[1])) + 1)]
-        ylab = [f"1e{int(round(math.log10(v)))}" for v in yt]
-    else:
-        yt = _ticks(*ylim)
-        step = yt[1] - yt[0] if len(yt) > 1 else 1.0
-        ylab = [_fmt_tick(v, step) for v in yt]
+    out = _figure_start(ax, title or y_label)
+    yt, ylab = _axis_ticks(ylim, ax.ylim, log_y)
     for v, lab in zip(yt, ylab):
         y = ax.Y(v)
         out.append(f'<line x1="{ax.x0}" x2="{ax.x1}" y1="{y:.1f}" y2="{y:.1f}" stroke="#e5e5e5"/>')
@@ -161,13 +170,8 @@ def xy_plot(
     if time_x:
         xt, fmt = _time_ticks(*xlim)
         xlab = [datetime.fromtimestamp(v, UTC).strftime(fmt) for v in xt]
-    elif log_x:
-        xt = [10.0**k for k in range(int(round(ax.xlim[0])), int(round(ax.xlim[1])) + 1)]
-        xlab = [f"1e{int(round(math.log10(v)))}" for v in xt]
     else:
-        xt = _ticks(*xlim)
-        step = xt[1] - xt[0] if len(xt) > 1 else 1.0
-        xlab = [_fmt_tick(v, step) for v in xt]
+        xt, xlab = _axis_ticks(xlim, ax.xlim, log_x)
     for v, lab in zip(xt, xlab):
         x = ax.X(v)
         out.append(f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{ax.y1}" y2="{ax.y0}" stroke="#e5e5e5"/>')
@@ -228,18 +232,13 @@ def bar_plot(
     vals = [v for v in values if v is not None and math.isfinite(v)]
     span = max([abs(v) for v in vals] + ([limit] if limit else []) + [1e-12])
     ax = _Axes(width, height, (0, max(len(labels), 1)), (-span * 1.1, span * 1.1), bottom=56)
-    out = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" class="figure" role="img" width="{width}" height="{height}" '
-        f'viewBox="0 0 {width} {height}" aria-label="{escape(title or y_label)}">',
-        f'<rect x="{ax.x0}" y="{ax.y1}" width="{ax.x1 - ax.x0}" height="{ax.y0 - ax.y1}" fill="#fff" stroke="#888"/>',
-    ]
-    yt = _ticks(-span * 1.1, span * 1.1)
-    step = yt[1] - yt[0] if len(yt) > 1 else 1.0
-    for v in yt:
+    out = _figure_start(ax, title or y_label)
+    yt, ylab = _axis_ticks((-span * 1.1, span * 1.1), ax.ylim, False)
+    for v, lab in zip(yt, ylab):
         y = ax.Y(v)
         out.append(
             f'<line x1="{ax.x0}" x2="{ax.x1}" y1="{y:.1f}" y2="{y:.1f}" stroke="#e5e5e5"/>'
-            f'<text x="{ax.x0 - 4}" y="{y + 4:.1f}" text-anchor="end" {_FONT}>{_fmt_tick(v, step)}</text>'
+            f'<text x="{ax.x0 - 4}" y="{y + 4:.1f}" text-anchor="end" {_FONT}>{lab}</text>'
         )
     if limit:
         for v in (-limit, limit):

@@ -5,8 +5,10 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +36,54 @@ def run_station(*args, subprocess_run: bool = False) -> subprocess.CompletedProc
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = main([str(a) for a in args])
     return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
+
+
+def popen_station(*args) -> subprocess.Popen:
+    """``station ARGS`` started in a subprocess (stdout and stderr text pipes), not waited for."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "station", *map(str, args)],
+        cwd=ROOT,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+
+
+def wait_for_rows(partial: Path, size_bytes: int, timeout_s: float = 30.0) -> None:
+    """Until the recording's ``partial`` file holds more than ``size_bytes`` (waiting on the rows
+    the device sends, not a pace); fails after ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while not (partial.exists() and partial.stat().st_size > size_bytes):
+        assert time.monotonic() < end, f"{partial}: no rows after {timeout_s:g} s"
+        time.sleep(0.05)
+
+
+class SimDevice:
+    """A running ``station sim-device``: ``port`` (the pty it printed), ``proc``; once the
+    context has ended, ``returncode`` and ``stderr`` (its summary line)."""
+
+    def __init__(self, proc: subprocess.Popen):
+        self.proc = proc
+        self.port = ""
+        self.returncode: int | None = None
+        self.stderr = ""
+
+
+@contextlib.contextmanager
+def sim_device(*args: str):
+    """``station sim-device ARGS`` in a subprocess for the length of the context: its pty read
+    from the first line of stdout (asserted to be one), then stopped with SIGINT and waited for
+    (20 s); its exit status and stderr are left on the :class:`SimDevice` for the caller to check."""
+    proc = popen_station("sim-device", *args)
+    sim = SimDevice(proc)
+    try:
+        sim.port = proc.stdout.readline().strip()
+        assert sim.port.startswith("/dev/pts/"), (sim.port, proc.stderr.read() if proc.poll() is not None else "")
+        yield sim
+    finally:
+        proc.send_signal(signal.SIGINT)
+        _, sim.stderr = proc.communicate(timeout=20)
+        sim.returncode = proc.returncode
 
 
 def run_main(capsys, *argv) -> tuple[int, str, str]:

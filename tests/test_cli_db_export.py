@@ -12,6 +12,7 @@ from db_testdata import accel_result, compass_result, gyro_result, ldv_result, s
 
 from db import Store
 from tests.station_run import run_main as run
+from tests.test_firmware_export import names_in
 
 G0 = 9.80665  # the firmwares' standard gravity (GRAVITY_MSS, CONSTANTS_ONE_G)
 
@@ -25,19 +26,6 @@ def _save(db, result, **meta):
         return s.save_calibration(result, meta=m, columns=cols, allow_duplicate=True)
 
 
-def _params(text: str, fmt: str) -> dict[str, float]:
-    out = {}
-    for line in text.splitlines():
-        if line.startswith("#") or not line.strip():
-            continue
-        if fmt == "ardupilot":
-            name, value = line.split(",")
-        else:
-            _, _, name, value = line.split()
-        out[name] = float(value)
-    return out
-
-
 M_TRUE = [[1.02, 0.003, -0.002], [0.0, 0.985, 0.004], [0.0, 0.0, 1.01]]
 B_TRUE = [0.12, -0.34, 0.56]
 
@@ -49,7 +37,7 @@ def test_accel_tabletop_offsets_and_scales_reproduce_the_diagonal_model(capsys, 
     cid = _save(db, accel_result(device="A", B=B_TRUE, M=M), accel_unit=unit)
     code, out, _ = run(capsys, "export", str(cid), "--format", fmt, "--db", db)
     assert code == 0
-    p = _params(out, fmt)
+    p = names_in(out, fmt)
     names = ["INS_ACCOFFS_", "INS_ACCSCAL_"] if fmt == "ardupilot" else ["CAL_ACC0_{}OFF", "CAL_ACC0_{}SCALE"]
     rng = np.random.default_rng(1)
     for _ in range(5):
@@ -79,7 +67,7 @@ def test_accel_centrifuge_px4(capsys, db):
     }
     cid = _save(db, r, accel_unit="g")
     code, out, _ = run(capsys, "export", str(cid), "--format", "px4", "--db", db)
-    p = _params(out, "px4")
+    p = names_in(out, "px4")
     f_g = np.array([0.3, -0.7, 1.1])
     N = np.array(r["params"]["S"]) * f_g + np.array(r["params"]["b"])  # in g, as the sensor reports
     for i, ax in enumerate("XYZ"):
@@ -104,7 +92,7 @@ def test_compass_ardupilot_and_px4_reproduce_the_field_norm(capsys, db, unit, nT
     code, ap, _ = run(capsys, "export", str(cid), "--format", "ardupilot", "--db", db)
     code2, px, _ = run(capsys, "export", str(cid), "--format", "px4", "--db", db)
     assert code == code2 == 0
-    a, p = _params(ap, "ardupilot"), _params(px, "px4")
+    a, p = names_in(ap, "ardupilot"), names_in(px, "px4")
     mat_ap = np.array(
         [
             [a["COMPASS_DIA_X"], a["COMPASS_ODI_X"], a["COMPASS_ODI_Y"]],
@@ -135,7 +123,7 @@ def test_compass_ardupilot_and_px4_reproduce_the_field_norm(capsys, db, unit, nT
 def test_gyro_offsets_and_instances(capsys, db):
     cid = _save(db, gyro_result(device="G", drift=(1e-4, -2e-4, 5e-5)), gyro_unit="deg/s")
     _, out, _ = run(capsys, "export", str(cid), "--format", "px4", "--instance", "1", "--db", db)
-    assert _params(out, "px4") == pytest.approx(
+    assert names_in(out, "px4") == pytest.approx(
         {
             "CAL_GYRO1_XOFF": 1e-4,
             "CAL_GYRO1_YOFF": -2e-4,
@@ -145,7 +133,7 @@ def test_gyro_offsets_and_instances(capsys, db):
         }
     )
     _, out, _ = run(capsys, "export", str(cid), "--format", "ardupilot", "--instance", "2", "--db", db)
-    assert set(_params(out, "ardupilot")) == {"INS_GYR2OFFS_X", "INS_GYR2OFFS_Y", "INS_GYR2OFFS_Z"}
+    assert set(names_in(out, "ardupilot")) == {"INS_GYR2OFFS_X", "INS_GYR2OFFS_Y", "INS_GYR2OFFS_Z"}
     assert "# calibration warning: no temperature column" in out
     code, _, err = run(capsys, "export", str(cid), "--format", "ardupilot", "--instance", "7", "--db", db)
     assert code == 2 and "1, 2 or 3" in err

@@ -21,6 +21,7 @@ from station.capture import read_capture
 from station.device.protocol import Header, data_sentence, header_sentence
 from station.device.reader import Batch, Reader
 from station.device.record import RecordError, record
+from tests.station_run import popen_station, sim_device, wait_for_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -37,29 +38,13 @@ def raw_pty():
         os.close(s)
 
 
-def station(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "station", *args],
-        cwd=ROOT,
-        text=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        **kw,
-    )
-
-
 @pytest.fixture(scope="module")
 def sim_path():
     """One `station sim-device` (500 Hz, seed 7) for the module's recordings."""
-    p = station("sim-device", "--rate", "500", "--seed", "7")
-    line = p.stdout.readline().strip()
-    assert line.startswith("/dev/pts/"), (line, p.stderr.read() if p.poll() is not None else "")
-    yield line
-    p.send_signal(signal.SIGINT)
-    assert p.wait(20) == 0  # a clean exit on SIGINT
-    assert "samples sent" in p.stderr.read()
-    p.stdout.close()
-    p.stderr.close()
+    with sim_device("--rate", "500", "--seed", "7") as sim:
+        yield sim.port
+    assert sim.returncode == 0, sim.stderr  # a clean exit on SIGINT
+    assert "samples sent" in sim.stderr
 
 
 def test_record_from_sim_device_reads_back(tmp_path):
@@ -67,15 +52,12 @@ def test_record_from_sim_device_reads_back(tmp_path):
     `--buffer-s 30`: with the default 0.5 s the simulated UART drops what waits whenever the
     `record` process is not scheduled for half a second (a loaded 2-core machine did that), and
     the test failed on the scheduler, not on the station."""
-    sim = station("sim-device", "--rate", "500", "--seed", "7", "--buffer-s", "30")
-    try:
-        path = sim.stdout.readline().strip()
-        assert path.startswith("/dev/pts/"), (path, sim.stderr.read() if sim.poll() is not None else "")
+    with sim_device("--rate", "500", "--seed", "7", "--buffer-s", "30") as sim:
         out = tmp_path / "cap.csv"
-        rec = station(
+        rec = popen_station(
             "record",
             "--port",
-            path,
+            sim.port,
             "--seconds",
             "1.5",
             "--out",
@@ -86,12 +68,9 @@ def test_record_from_sim_device_reads_back(tmp_path):
             "latitude_deg=39.98",
         )
         stdout, stderr = rec.communicate(timeout=60)
-    finally:
-        sim.send_signal(signal.SIGINT)
-        _, sim_stderr = sim.communicate(timeout=20)
-    assert sim.returncode == 0, sim_stderr
-    sent = re.search(r"(\d+) samples sent, (\d+) dropped", sim_stderr)
-    assert sent and sent[2] == "0", sim_stderr  # the device discarded nothing
+    assert sim.returncode == 0, sim.stderr
+    sent = re.search(r"(\d+) samples sent, (\d+) dropped", sim.stderr)
+    assert sent and sent[2] == "0", sim.stderr  # the device discarded nothing
     assert rec.returncode == 0, stderr
     assert "recorded" in stdout and stderr == ""
     cap = read_capture(out)
@@ -140,7 +119,7 @@ def test_a_reader_stalled_past_the_device_buffer_sees_a_gap_and_within_it_loses_
     with dev:
         th = threading.Thread(target=dev.run, args=(stop,), daemon=True)
         th.start()
-        rec = station("record", "--port", dev.path, "--out", str(out))
+        rec = popen_station("record", "--port", dev.path, "--out", str(out))
         try:
             _wait_for(lambda: rows() > 100, "the first rows")
             rec.send_signal(signal.SIGSTOP)
@@ -182,11 +161,9 @@ def test_a_reader_stalled_past_the_device_buffer_sees_a_gap_and_within_it_loses_
 def test_sigterm_ends_a_recording_with_a_complete_capture(sim_path, tmp_path):
     path = sim_path
     out = tmp_path / "c.csv"
-    rec = station("record", "--port", path, "--out", str(out))
+    rec = popen_station("record", "--port", path, "--out", str(out))
     partial = Path(str(out) + ".partial")
-    end = time.monotonic() + 30
-    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
-        time.sleep(0.05)
+    wait_for_rows(partial, 3000)
     rec.send_signal(signal.SIGTERM)
     assert rec.wait(20) == 0, rec.stderr.read()
     rec.stdout.close()
@@ -200,11 +177,9 @@ def test_an_interrupt_before_the_seconds_asked_keeps_the_rows_marked_incomplete(
     shorter than asked (`complete: false`, why) and the exit status is 1, as for a device lost;
     it was kept as complete, with exit 0."""
     out = tmp_path / "c.csv"
-    rec = station("record", "--port", sim_path, "--seconds", "120", "--out", str(out))
+    rec = popen_station("record", "--port", sim_path, "--seconds", "120", "--out", str(out))
     partial = Path(str(out) + ".partial")
-    end = time.monotonic() + 30
-    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
-        time.sleep(0.05)  # waiting on the rows, not a pace
+    wait_for_rows(partial, 3000)
     rec.send_signal(signal.SIGINT)
     stdout, stderr = rec.communicate(timeout=20)
     assert rec.returncode == 1, stderr
@@ -218,10 +193,8 @@ def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_path, tmp
     path = sim_path
     out = tmp_path / "k.csv"
     partial = Path(str(out) + ".partial")
-    rec = station("record", "--port", path, "--out", str(out))
-    end = time.monotonic() + 30
-    while not (partial.exists() and partial.stat().st_size > 3000) and time.monotonic() < end:
-        time.sleep(0.05)
+    rec = popen_station("record", "--port", path, "--out", str(out))
+    wait_for_rows(partial, 3000)
     rec.kill()
     rec.wait(10)
     rec.stdout.close()
@@ -229,7 +202,7 @@ def test_a_killed_recording_leaves_a_partial_capture_that_recovers(sim_path, tmp
     assert not out.exists() and partial.exists()
     with open(partial, "a") as f:
         f.write("99.000000,0,2.41")  # a row cut by the kill
-    fix = station("record", "--recover", str(partial))
+    fix = popen_station("record", "--recover", str(partial))
     stdout, stderr = fix.communicate(timeout=60)
     assert fix.returncode == 0, stderr
     cap = read_capture(out)
@@ -631,15 +604,9 @@ def test_a_slow_device_gets_its_sample_rate_measured(tmp_path):
     `station record` said '? Hz'. The steps between batches count."""
     from tests.station_run import run_station
 
-    sim = station("sim-device", "--rate", "10", "--seed", "3")
-    try:
-        port = sim.stdout.readline().strip()
-        assert port.startswith("/dev/pts/"), port
+    with sim_device("--rate", "10", "--seed", "3") as sim:
         out = tmp_path / "slow.csv"
-        res = run_station("record", "--port", port, "--seconds", "1.5", "--out", out)
+        res = run_station("record", "--port", sim.port, "--seconds", "1.5", "--out", out)
         assert res.returncode == 0, res.stderr
         assert "? Hz" not in res.stdout and ", 10 Hz)" in res.stdout, res.stdout
         assert read_capture(out).meta["sample_rate_hz"] == "10"
-    finally:
-        sim.send_signal(signal.SIGINT)
-        sim.communicate(timeout=20)

@@ -167,6 +167,15 @@ def _quit(sock):
     assert "EXIT=0" in pane(sock)
 
 
+def _quit_discarding_the_result(sock):
+    """On Results with an unsaved result: ctrl+q, answer yes to losing it, the app exits 0."""
+    _keys(sock, "C-q")
+    _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
+    _keys(sock, "y")
+    _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
+    assert "EXIT=0" in pane(sock)
+
+
 def _history(db, device):
     out = subprocess.run(
         [sys.executable, "-m", "station", "history", device, "--json", "--db", str(db)],
@@ -350,11 +359,7 @@ def test_a_new_users_walkthrough_at_80x24_in_tmux(tmp_path):
         _keys(sock, "Escape")
         # judged again with the limit set: inside it
         _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " PASS " in s, 60, "Results again")
-        _keys(sock, "C-q")
-        _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
-        _keys(sock, "y")
-        _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
-        assert "EXIT=0" in pane(sock)
+        _quit_discarding_the_result(sock)
     finally:
         tmux(sock, "kill-server", check=False)
     from db import Store
@@ -387,11 +392,7 @@ def test_keys_sent_in_one_burst_open_a_screen_and_fill_its_field_in_tmux(tmp_pat
         _wait_pane(sock, lambda s: "stored: drift = -2000 … 2000 °/h" in s, 60, "the limit stored")
         _keys(sock, "Escape")  # alone: an escape with a key after it in one read is alt+that key
         _wait_pane(sock, lambda s: "P4 gyro drift result" in s and " PASS " in s, 60, "Results judged by the limit")
-        _keys(sock, "C-q")
-        _wait_pane(sock, lambda s: "The unsaved result is lost" in s, 60, "the question before quitting")
-        _keys(sock, "y")
-        _wait_pane(sock, lambda s: "EXIT=" in s, 60, "the exit")
-        assert "EXIT=0" in pane(sock)
+        _quit_discarding_the_result(sock)
     finally:
         tmux(sock, "kill-server", check=False)
 
@@ -401,39 +402,29 @@ def test_station_with_only_port_starts_the_tui_on_that_device_in_tmux(tmp_path):
     `station --port /dev/ttyUSB0` was refused by the argument parser (the port taken for a
     command name); it is `station tui --port ...`: Connect with the port filled in, and Start
     reads the device."""
-    import signal
+    from station_run import sim_device
 
-    sim = subprocess.Popen(
-        [sys.executable, "-m", "station", "sim-device", "--seed", "5"],
-        cwd=ROOT,
-        text=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-    )
     sock = f"test-port-{os.getpid()}"
-    try:
-        port = sim.stdout.readline().strip()
-        assert port.startswith("/dev/pts/"), port
-        cmd = (
-            f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station --port {port} --db {tmp_path / 'st.db'}; "
-            "echo EXIT=$?; sleep 30"
-        )
-        tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
-        screen = _wait_pane(
-            sock,
-            lambda s: ("f5 Start" in s and f"Port or URL     {port}" in s and "Other port" in s) or "EXIT=" in s,
-            120,
-            "the Connect screen with the port",
-        )
-        assert "EXIT=" not in screen, screen
-        _keys(sock, "F5")
-        _wait_pane(sock, lambda s: "Stillness" in s and "0/12 captured" in s, 120, "P1 on the serial device")
-        _keys(sock, "a")
-        _wait_pane(sock, lambda s: "y yes" in s, 60, "the abort question")
-        _keys(sock, "y")
-        _quit(sock)
-    finally:
-        tmux(sock, "kill-server", check=False)
-        sim.send_signal(signal.SIGINT)
-        sim.wait(20)
-        sim.stdout.close()
+    with sim_device("--seed", "5") as sim:  # stopped by SIGINT after the tmux server
+        port = sim.port
+        try:
+            cmd = (
+                f"cd {ROOT} && TERM=xterm-256color {sys.executable} -m station --port {port} --db {tmp_path / 'st.db'}; "
+                "echo EXIT=$?; sleep 30"
+            )
+            tmux(sock, "new-session", "-d", "-s", "demo", "-x", "80", "-y", "24", cmd)
+            screen = _wait_pane(
+                sock,
+                lambda s: ("f5 Start" in s and f"Port or URL     {port}" in s and "Other port" in s) or "EXIT=" in s,
+                120,
+                "the Connect screen with the port",
+            )
+            assert "EXIT=" not in screen, screen
+            _keys(sock, "F5")
+            _wait_pane(sock, lambda s: "Stillness" in s and "0/12 captured" in s, 120, "P1 on the serial device")
+            _keys(sock, "a")
+            _wait_pane(sock, lambda s: "y yes" in s, 60, "the abort question")
+            _keys(sock, "y")
+            _quit(sock)
+        finally:
+            tmux(sock, "kill-server", check=False)

@@ -72,6 +72,14 @@ def test_solvers_keep_the_same_list():
     assert set(S.EFFECTS_BY_PROCEDURE) == set(registry.names())
 
 
+@pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
+def test_the_registry_says_which_simulators_take_a_site(entry):
+    """`station simulate` passes --date as the site's date where the registry says the
+    simulator takes one (it read the simulator's signature): the two agree."""
+    takes = "site" in inspect.signature(getattr(S, entry.simulator)).parameters
+    assert entry.takes_site == takes, entry.name
+
+
 def test_cli_choices_are_the_registry():
     from station.cli import build_parser
 

@@ -12,45 +12,23 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from station.capture import read_capture
-from tests.station_run import ROOT, assert_one_line_refusal, run_station
+from tests.station_run import assert_one_line_refusal, popen_station, run_station, sim_device, wait_for_rows
 
 HEADER = b"t,segment,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c\n"
-
-
-def station(*args: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "station", *args], cwd=ROOT, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
-
-
-def _wait_for_rows(partial: Path, size_bytes: int) -> None:
-    """Until ``partial`` holds ``size_bytes`` (waiting on the rows the device sends, not a pace)."""
-    end = time.monotonic() + 30
-    while not (partial.exists() and partial.stat().st_size > size_bytes):
-        assert time.monotonic() < end, f"{partial}: no rows after 30 s"
-        time.sleep(0.05)
 
 
 @pytest.fixture(scope="module")
 def sim_port():
     """One `station sim-device` (500 Hz, seed 7) for the module's recordings."""
-    p = station("sim-device", "--rate", "500", "--seed", "7")
-    line = p.stdout.readline().strip()
-    assert line.startswith("/dev/pts/"), (line, p.stderr.read() if p.poll() is not None else "")
-    yield line
-    p.send_signal(signal.SIGINT)
-    assert p.wait(20) == 0
-    p.stdout.close()
-    p.stderr.close()
+    with sim_device("--rate", "500", "--seed", "7") as sim:
+        yield sim.port
+    assert sim.returncode == 0, sim.stderr
 
 
 @pytest.fixture(scope="module")
@@ -60,8 +38,8 @@ def killed(sim_port, tmp_path_factory) -> bytes:
     own tail)."""
     out = tmp_path_factory.mktemp("killed") / "k.csv"
     partial = Path(str(out) + ".partial")
-    rec = station("record", "--port", sim_port, "--out", str(out))
-    _wait_for_rows(partial, 40_000)
+    rec = popen_station("record", "--port", sim_port, "--out", str(out))
+    wait_for_rows(partial, 40_000)
     rec.kill()
     rec.wait(10)
     rec.stdout.close()
@@ -240,8 +218,8 @@ def test_an_interrupted_recording_leaves_a_capture_and_nothing_for_recover_to_br
     afterwards says there is nothing to recover and leaves the capture as it was."""
     out = tmp_path / "s.csv"
     partial = Path(str(out) + ".partial")
-    rec = station("record", "--port", sim_port, "--out", str(out))
-    _wait_for_rows(partial, 5000)
+    rec = popen_station("record", "--port", sim_port, "--out", str(out))
+    wait_for_rows(partial, 5000)
     rec.send_signal(sig)
     stdout, stderr = rec.communicate(timeout=20)
     assert rec.returncode == 0, stderr
@@ -262,8 +240,8 @@ def test_a_recording_that_dies_leaves_a_partial_that_recover_makes_readable(sim_
     it, whatever its last bytes, into a capture holding every whole row."""
     out = tmp_path / "h.csv"
     partial = Path(str(out) + ".partial")
-    rec = station("record", "--port", sim_port, "--out", str(out))
-    _wait_for_rows(partial, 5000)
+    rec = popen_station("record", "--port", sim_port, "--out", str(out))
+    wait_for_rows(partial, 5000)
     rec.send_signal(sig)
     rec.communicate(timeout=20)
     assert rec.returncode == -sig
@@ -283,15 +261,15 @@ def test_recover_of_a_partial_a_running_recording_writes_is_refused_and_the_reco
     while it runs, and the recording ends with its capture."""
     out = tmp_path / "live.csv"
     partial = Path(str(out) + ".partial")
-    rec = station("record", "--port", sim_port, "--out", str(out))
-    _wait_for_rows(partial, 5000)
+    rec = popen_station("record", "--port", sim_port, "--out", str(out))
+    wait_for_rows(partial, 5000)
     res = run_station("record", "--recover", partial)
     assert_one_line_refusal(res, f"station: {partial}: a recording is writing it now")
     assert partial.exists() and not out.exists()
     second = run_station("record", "--port", sim_port, "--seconds", "1", "--out", out)
     assert_one_line_refusal(second, f"station: {partial}: a recording is writing it now")
     size = partial.stat().st_size
-    _wait_for_rows(partial, size + 5000)  # still recording
+    wait_for_rows(partial, size + 5000)  # still recording
     rec.send_signal(signal.SIGINT)
     stdout, stderr = rec.communicate(timeout=20)
     assert rec.returncode == 0, stderr

@@ -28,47 +28,11 @@ def _found(app) -> str:
     return str(app.screen.query_one("#found").render())
 
 
-def test_a_px4_warning_about_the_sensor_slot_is_answered_on_the_screen(tmp_path):
-    log = PX4 / "sample.ulg"
-    if not log.exists():
-        pytest.skip("../shared/data/px4_ulog is not here")
-    auto = load.read(log, ImportOptions(), "px4")
-    assert any("give --instance N" in w for w in auto.warnings)  # the file still says it
-    slot0 = load.read(log, ImportOptions(instance=0, procedure="accel-tabletop"), "px4")
-    assert slot0.warnings == []
-    want = px4.default_device(slot0, "accel")
-
-    async def story():
-        app = make_app(str(tmp_path / "s.db"))
-        out = {}
-        async with app.run_test(size=SIZE) as pilot:
-            await _open(pilot, app, log)
-            out["found"] = _found(app)
-            out["screen"] = screen_lines(app)
-            app.screen.query_one("#instance").value = "0"
-            await wait_for(pilot, lambda: "voter" not in _found(app) and _settled(app), timeout_s=60)
-            out["found0"] = _found(app)
-            out["device0"] = text_of(app, "#device")
-            out["status0"] = text_of(app, "#status")
-        return out
-
-    out = asyncio.run(story())
-    found = " ".join(out["found"].split())
-    assert "voter chose" in found and "--instance" not in found, found
-    assert "pick its slot under instance" in found, found
-    assert all(len(line) <= 80 for line in out["screen"])
-    assert "instance auto" in "\n".join(out["screen"])  # the choice is on the screen, at 80x24
-    assert "warning" not in out["found0"], out["found0"]
-    assert f"device {want}" in out["device0"], out["device0"]
-    assert "Pick the procedure" in out["status0"]
-
-
-# ------------------------------------------------------------------------- ArduPilot and MAVLink
-# .bin and .tlog WRITTEN BY PYMAVLINK'S OWN encoders (tests/test_import_ardupilot.py): two IMUs
-# each, instance 0 and 1 (INS_ACC_ID 2753028, INS_ACC2_ID 2818564).
-
-
 def _pick_instance(log, instance: str, done, tmp_path) -> dict:
+    """Import ``log`` on the real app, set the instance choice to ``instance``, wait until
+    ``done(app)``: the summary and screen before; the summary, status (white space folded),
+    device line, choice and screen after."""
+
     async def story():
         app = make_app(str(tmp_path / "s.db"))
         out = {}
@@ -80,11 +44,38 @@ def _pick_instance(log, instance: str, done, tmp_path) -> dict:
             await wait_for(pilot, lambda: done(app), timeout_s=60)
             out["after"] = _found(app)
             out["status"] = " ".join(text_of(app, "#status").split())
+            out["device"] = text_of(app, "#device")
             out["value"] = app.screen.query_one("#instance").value
             out["screen_after"] = screen_lines(app)
         return out
 
     return asyncio.run(story())
+
+
+def test_a_px4_warning_about_the_sensor_slot_is_answered_on_the_screen(tmp_path):
+    log = PX4 / "sample.ulg"
+    if not log.exists():
+        pytest.skip("../shared/data/px4_ulog is not here")
+    auto = load.read(log, ImportOptions(), "px4")
+    assert any("give --instance N" in w for w in auto.warnings)  # the file still says it
+    slot0 = load.read(log, ImportOptions(instance=0, procedure="accel-tabletop"), "px4")
+    assert slot0.warnings == []
+    want = px4.default_device(slot0, "accel")
+
+    out = _pick_instance(log, "0", lambda app: "voter" not in _found(app) and _settled(app), tmp_path)
+    found = " ".join(out["found"].split())
+    assert "voter chose" in found and "--instance" not in found, found
+    assert "pick its slot under instance" in found, found
+    assert all(len(line) <= 80 for line in out["screen"])
+    assert "instance auto" in "\n".join(out["screen"])  # the choice is on the screen, at 80x24
+    assert "warning" not in out["after"], out["after"]
+    assert f"device {want}" in out["device"], out["device"]
+    assert "Pick the procedure" in out["status"], out["status"]
+
+
+# ------------------------------------------------------------------------- ArduPilot and MAVLink
+# .bin and .tlog WRITTEN BY PYMAVLINK'S OWN encoders (tests/test_import_ardupilot.py): two IMUs
+# each, instance 0 and 1 (INS_ACC_ID 2753028, INS_ACC2_ID 2818564).
 
 
 @pytest.mark.parametrize("suffix", ["bin", "tlog"])

@@ -182,10 +182,8 @@ def _refuse_implausible(sim) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import inspect
     import math
 
-    import solvers.simulate
     from solvers.simulate import SimulationError, simulate
     from station.capture import Capture, write_capture
 
@@ -216,9 +214,7 @@ def run(args: argparse.Namespace) -> int:
             "(averages=1) always names its positions",
         )
     day = args.date or today_utc()  # the clock is read here: solvers/ stays pure
-    takes_site = (
-        "site" in inspect.signature(getattr(solvers.simulate, registry.get(args.procedure).simulator)).parameters
-    )
+    takes_site = registry.get(args.procedure).takes_site
     if takes_site:
         options["site"] = {"date": day}
     try:

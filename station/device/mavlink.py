@@ -309,6 +309,12 @@ PARAM_PREFIXES = ("INS_ACC", "INS_GYR", "COMPASS_", "AHRS_ORIENTATION", "CAL_ACC
 FIRMWARE = {mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA: "ardupilot", mavlink2.MAV_AUTOPILOT_PX4: "px4"}
 
 
+def compass_offsets_changed(first, now) -> set[str]:
+    """The COMPASS_OFS_X/Y/Z whose value in SENSOR_OFFSETS' mag_ofs ``now`` (x, y, z) differs
+    from the ``first`` seen: ArduPilot's learnt compass offsets, often sent with no PARAM_VALUE."""
+    return {f"COMPASS_OFS_{a}" for a, v0, v in zip("XYZ", first, now) if v != v0}
+
+
 def is_network(port: str) -> bool:
     """`udp:127.0.0.1:14550` (listen; MAVProxy's convention), `udpout:`, `tcp:host:5760`, `tcpin:`."""
     return port.lower().startswith(NETWORK_PREFIXES)
@@ -477,7 +483,7 @@ class BoardLink:
             if self._first_offsets is None:
                 self._first_offsets = ofs
             else:
-                self.changed.update(f"COMPASS_OFS_{a}" for a, v0, v in zip("XYZ", self._first_offsets, ofs) if v != v0)
+                self.changed.update(compass_offsets_changed(self._first_offsets, ofs))
 
     def device_name(self, key: tuple[int, int]) -> str:
         if self.uid:

@@ -219,12 +219,13 @@ def _offsets_learnt(mag_ofs, have_mag: bool, inst: int, unit: str | None, params
 # ------------------------------------------------------------------------------------- DataFlash
 
 
-def _df_instances(log, c: dict | None, base: str) -> list[int]:
-    """The instances of ``base`` (IMU, MAG) in a DataFlash log: its ``I`` field's values (``c``:
-    its columns), and IMU2/IMU3 (MAG2/MAG3) of the logs before that field."""
+def _df_instances(log, c: dict | None, seen: set[int], base: str) -> list[int]:
+    """The instances of ``base`` (IMU, MAG) in a DataFlash log: ``seen``, its ``I`` field's
+    values as the decoding counted them (``c``: its columns; instance 0 where it has no ``I``),
+    and IMU2/IMU3 (MAG2/MAG3) of the logs before that field."""
     found: set[int] = set()
     if c is not None:
-        found.update(int(i) for i in np.unique(c["I"])) if "I" in c else found.add(0)
+        found.update(seen) if "I" in c else found.add(0)
     for n in (2, 3):
         type_id = getattr(log, "name_to_id", {}).get(f"{base}{n}")
         if type_id is not None and log.offsets[type_id]:
@@ -334,7 +335,10 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         if instance is None:  # the first instance read by default: say so where the log has others
             reads = {inst_of[n] for n, k in ((imu_name, "gyro"), (mag_name, "mag")) if k in rows}
             several = several_instances_warning(
-                {"IMUs": _df_instances(log, cols["IMU"], "IMU"), "compasses": _df_instances(log, cols["MAG"], "MAG")},
+                {  # without --instance, imu_name and mag_name are IMU and MAG
+                    "IMUs": _df_instances(log, cols["IMU"], instances_seen["IMU"], "IMU"),
+                    "compasses": _df_instances(log, cols["MAG"], instances_seen["MAG"], "MAG"),
+                },
                 next(iter(reads)) if len(reads) == 1 else f"{inst_of[imu_name]} (IMU), {inst_of[mag_name]} (compass)",
             )
     except InputError:
@@ -640,6 +644,8 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
 def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     from pymavlink import mavutil
 
+    from station.device.mavlink import compass_offsets_changed  # as the live MAVLink link reads them
+
     inst = 0 if instance is None else int(instance)
     if inst not in IMU_MESSAGES:
         raise InputError(
@@ -770,7 +776,7 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         if first_ofs is None:
             first_ofs = ofs
         elif after_start:
-            late.update(f"COMPASS_OFS_{a}" for a, v0, v in zip("XYZ", first_ofs, ofs) if v != v0)
+            late.update(compass_offsets_changed(first_ofs, ofs))
     samples = by_type[name]
     t = np.array([s[0] for s in samples])
     units = getattr(msg_class[name], "fieldunits_by_name", {})

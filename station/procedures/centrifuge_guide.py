@@ -39,15 +39,13 @@ live, ``n, ax_std, ay_std, az_std``; metadata ``procedure: accel-centrifuge``,
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from solvers.stillness import StillnessTracker
-from station.procedures.guide_base import GuideBase
+from station.procedures.guide_base import GuideBase, started_utc, stillness_tracker
 
 PHASES = ("noise", "change", "place", "settle", "average", "done", "aborted")
 STATUSES = ("pending", "captured", "skipped")
@@ -196,17 +194,8 @@ class CentrifugeGuide(GuideBase):
         self.units = dict(units)
         self.device_id = device_id
         self.steps = steps if steps is not None else centrifuge_steps(self.config)
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-        c = self.config
-        init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
-        self.tracker = StillnessTracker(
-            self.sample_rate_hz,
-            init_rest_s=init,
-            window_s=c.window_s,
-            min_duration_s=0.0,
-            margin_s=0.0,
-            nan_policy="omit",
-        )
+        self.started = started_utc()
+        self.tracker = stillness_tracker(self.config, self.sample_rate_hz)
         self.phase = "noise"
         self.index: int | None = 0
         self._need_change = True  # the rest is the stopped centrifuge: spin up first

@@ -37,7 +37,7 @@ from solvers.compass import MIN_COVERAGE
 from solvers.detectors import FieldCoverage
 from solvers.frames import G_STANDARD_MPS2
 from solvers.units import si_factor
-from station.procedures.guide_base import GuideBase
+from station.procedures.guide_base import GuideBase, started_utc
 
 PHASES = ("sweep", "done", "aborted")
 
@@ -124,7 +124,7 @@ class CompassGuide(GuideBase):
             )
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self.phase = "sweep"
         self._events: list[tuple[str, str]] = []
         self._reset()

@@ -1,7 +1,32 @@
 """What the guides (``station/procedures/<stem>_guide.py``) do alike: the queue of events
-the screen takes, abort, and the end of a recording."""
+the screen takes, abort, the end of a recording, the time it started, and the rest detector
+of those that wait for the unit to be still."""
 
 from __future__ import annotations
+
+import datetime as _dt
+
+from solvers.stillness import StillnessTracker
+
+
+def started_utc() -> str:
+    """Now, as a guide's ``started``: UTC to the second, ``YYYY-MM-DDTHH:MM:SSZ``."""
+    return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def stillness_tracker(config, sample_rate_hz: float) -> StillnessTracker:
+    """The rest detector of a guide whose ``config`` has ``init_rest_s`` and ``window_s`` [s]:
+    its initial rest at least one window of samples (made odd) and 2 more."""
+    c = config
+    init = max(c.init_rest_s, (2 * int(round(c.window_s * sample_rate_hz / 2)) + 3) / sample_rate_hz)
+    return StillnessTracker(
+        sample_rate_hz,
+        init_rest_s=init,
+        window_s=c.window_s,
+        min_duration_s=0.0,
+        margin_s=0.0,
+        nan_policy="omit",
+    )
 
 
 class GuideBase:

@@ -11,14 +11,12 @@ capture with ``gyro_mode: static``, ``latitude_deg``, ``heading_deg`` and ``fram
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from solvers.stillness import StillnessTracker
-from station.procedures.guide_base import GuideBase
+from station.procedures.guide_base import GuideBase, started_utc, stillness_tracker
 
 # `station demo`: P4 averages 180 s at the least (the drift is not resolved in less)
 DEMO_MIN_AVERAGE_S = 180.0
@@ -83,17 +81,8 @@ class HoldGuide(GuideBase):
         self.units = dict(units)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-        c = self.config
-        init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
-        self.tracker = StillnessTracker(
-            self.sample_rate_hz,
-            init_rest_s=init,
-            window_s=c.window_s,
-            min_duration_s=0.0,
-            margin_s=0.0,
-            nan_policy="omit",
-        )
+        self.started = started_utc()
+        self.tracker = stillness_tracker(self.config, self.sample_rate_hz)
         self.phase = "noise"
         self._events: list[tuple[str, str]] = []
         self._message = "Place the unit level, forward axis at the set heading; keep it still"
@@ -289,7 +278,7 @@ class ReferenceGuide(GuideBase):
         self.units = dict(units)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self.phase = "wait"
         self._events: list[tuple[str, str]] = []
         self._message = "Waiting for the reference IMU"

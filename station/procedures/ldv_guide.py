@@ -20,7 +20,6 @@ frame, x forward, y right, z down) for ``station.procedures.ldv``.
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 from dataclasses import dataclass
 
@@ -28,7 +27,7 @@ import numpy as np
 
 from solvers.ldv import KAPPA_REFUSE, KAPPA_WARN
 from solvers.models import ldv as ldv_model
-from station.procedures.guide_base import GuideBase
+from station.procedures.guide_base import GuideBase, started_utc
 
 BEAMS = ("vl1", "vl2", "vl3")
 REF = ("vx", "vy", "vz")
@@ -85,7 +84,7 @@ class LdvGuide(GuideBase):
         self.sample_rate_hz = float(sample_rate_hz)
         self.device_id = device_id
         self.site = dict(site or {})
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self.phase = "record"
         self._events: list[tuple[str, str]] = []
         self._reset()

@@ -65,6 +65,9 @@ class Procedure:
     resumes: bool = False
     # its simulator in solvers/simulate.py (station simulate names its --option choices from it)
     simulator: str = ""
+    # that simulator takes a site (place and date: station simulate passes it --date); without
+    # one (P2's table) the date given is written into the capture (a test holds this to the signature)
+    takes_site: bool = False
 
     def load(self):
         """The procedure's module (imported on first use)."""
@@ -96,6 +99,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     Procedure(
         name="accel-tabletop",
         simulator="simulate_tabletop",
+        takes_site=True,
         code="P1",
         resumes=True,
         stem="tabletop",
@@ -139,6 +143,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     Procedure(
         name="compass",
         simulator="simulate_compass",
+        takes_site=True,
         code="P3",
         stem="compass",
         title="compass sweep",
@@ -160,6 +165,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     Procedure(
         name="gyro-drift",
         simulator="simulate_gyro_drift",
+        takes_site=True,
         code="P4",
         stem="gyrodrift",
         title="gyro drift, static base",
@@ -183,6 +189,7 @@ PROCEDURES: tuple[Procedure, ...] = (
     Procedure(
         name="ldv",
         simulator="simulate_ldv",
+        takes_site=True,
         code="P5",
         stem="ldv",
         title="laser velocimeter",

@@ -25,7 +25,6 @@ saved as a small JSON file after every change so an interrupted run can be resum
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import math
 import os
@@ -36,8 +35,8 @@ import numpy as np
 from solvers import frames
 from solvers.detectors import orientation_check
 from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS
-from solvers.stillness import StillnessTracker
 from station.fileio import atomic_write_json
+from station.procedures.guide_base import started_utc, stillness_tracker
 from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
 # the guide keeps its captured positions in a resume file (station.procedures.state): an
@@ -195,7 +194,7 @@ class P1Guide:
         self.index = 0
         self.phase = "noise"
         self.state_path = state_path
-        self.started = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        self.started = started_utc()
         self._events: list[tuple[str, str]] = []
         self._message = "Hold the unit still: measuring the sensor noise"
         self._nominal = self._nominal_from(nominal, accel_unit)
@@ -224,16 +223,7 @@ class P1Guide:
         return zero, sens
 
     def _new_tracker(self) -> None:
-        c = self.config
-        init = max(c.init_rest_s, (2 * int(round(c.window_s * self.sample_rate_hz / 2)) + 3) / self.sample_rate_hz)
-        self.tracker = StillnessTracker(
-            self.sample_rate_hz,
-            init_rest_s=init,
-            window_s=c.window_s,
-            min_duration_s=0.0,
-            margin_s=0.0,
-            nan_policy="omit",
-        )
+        self.tracker = stillness_tracker(self.config, self.sample_rate_hz)
         self.phase = "noise" if self.phase not in ("done", "aborted") else self.phase
 
     def _avg_reset(self) -> None:

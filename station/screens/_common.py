@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 import time
 from collections.abc import Callable
 
@@ -60,10 +61,19 @@ def no_data_text(src, silent_s: float, since_data: bool = False) -> str:
 
 
 class GuidedScreenMixin:
-    """For a Screen with ``_lock``, ``guide`` and ``_fitting`` (see ``__init__`` of the screens).
+    """For a guided Screen (listed before ``Screen`` in its bases): ``__init__`` gives it its
+    ``_lock``, ``guide``, ``last_status``, ``updates`` and ``_fitting``.
 
     Actions named ``sim_*`` move the simulated bench (the operator's hand on the built-in
     device); their keys show only when the source is simulated."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._lock = threading.Lock()  # held by the stream worker and the UI around the guide
+        self.guide = None  # the procedure's guide, once the source has started
+        self.last_status = None  # the status of the newest LiveUpdate drawn
+        self.updates = 0  # LiveUpdates drawn (the benchmark's refresh count)
+        self._fitting = False  # the fit runs once per screen
 
     def check_action(self, action: str, parameters) -> bool | None:
         if action.startswith("sim_"):
@@ -93,6 +103,23 @@ class GuidedScreenMixin:
             else " (nothing of this run is saved)"
         )
         self.app.push_screen(ConfirmScreen("Abort this run?" + keep), lambda yes: self.action_abort() if yes else None)
+
+    def _finish_guide(self) -> None:
+        """End the recording now (the guide's ``finish``) and post its events (``done`` fits)."""
+        if self.guide is not None:
+            with self._lock:
+                self.guide.finish()
+                events = self.guide.take_events()
+            for kind, detail in events:
+                self.post_message(GuideEvent(kind, detail))
+
+    def _restart_guide(self) -> None:
+        """Start the recording again (the guide's ``restart``), said here, not by its event."""
+        if self.guide is not None:
+            with self._lock:
+                self.guide.restart()
+                self.guide.take_events()
+            self.notify("Recording restarted", timeout=2)
 
     def _start_guide(self, src, make_guide: Callable) -> bool:
         """Start ``src`` and set ``self.guide`` (and the session's) to ``make_guide()``;

@@ -14,8 +14,6 @@ Same pattern as the P1 screen: a thread worker drains the source and feeds the g
 
 from __future__ import annotations
 
-import threading
-
 from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -72,11 +70,6 @@ class CentrifugeScreen(NoticesMixin, GuidedScreenMixin, Screen):
 
     def __init__(self) -> None:
         super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0
-        self._fitting = False
         self._shown: dict[str, object] = {}
 
     def compose(self) -> ComposeResult:

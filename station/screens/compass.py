@@ -9,8 +9,6 @@ posting replaceable LiveUpdates (~15 Hz) and GuideEvents.
 
 from __future__ import annotations
 
-import threading
-
 from rich.text import Text
 from textual import work
 from textual.app import ComposeResult
@@ -45,14 +43,6 @@ class CompassScreen(GuidedScreenMixin, Screen):
         Binding("p", "sim_sweep", "Sweep (sim)"),
         Binding("l", "sim_level", "Level (sim)"),
     ]
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0
-        self._fitting = False
 
     def compose(self) -> ComposeResult:
         yield TitleBar("P3 compass sweep")
@@ -175,19 +165,10 @@ class CompassScreen(GuidedScreenMixin, Screen):
         self.query_one("#message", Static).update(f"[b red]device: {message.error}[/]")
 
     def action_finish(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.finish()
-                events = self.guide.take_events()
-            for kind, detail in events:
-                self.post_message(GuideEvent(kind, detail))
+        self._finish_guide()
 
     def action_restart(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.restart()
-                self.guide.take_events()
-            self.notify("Recording restarted", timeout=2)
+        self._restart_guide()
 
     def action_abort(self) -> None:
         self._abort("P3 aborted: nothing saved")

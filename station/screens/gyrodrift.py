@@ -8,7 +8,6 @@ Same pattern as the P1 screen: a thread worker drains the source and feeds the g
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 from textual import work
@@ -44,14 +43,6 @@ class HoldScreen(GuidedScreenMixin, Screen):
     HoldScreen #message { height: 1; text-style: bold; margin-top: 1; }
     """
     BINDINGS = [Binding("r", "restart", "Restart"), Binding("a", "ask_abort", "Abort")]
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0
-        self._fitting = False
 
     SUBJECT = "P4 gyro drift, static base"
     INSTRUCTION = (
@@ -176,14 +167,6 @@ class ReferenceScreen(GuidedScreenMixin, Screen):
         Binding("p", "sim_table", "Rate table (sim)"),
     ]
     SUBJECT = "P4 gyro drift, reference IMU"
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0
-        self._fitting = False
 
     def compose(self) -> ComposeResult:
         yield TitleBar(self.SUBJECT)

@@ -13,7 +13,6 @@ guide (``station.procedures.ldv_guide``), posting replaceable LiveUpdates and Gu
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 from rich.text import Text
@@ -56,14 +55,6 @@ class LdvScreen(GuidedScreenMixin, Screen):
         Binding("d", "sim_drive", "Drive/stop (sim)"),
         Binding("t", "sim_turns", "Turns (sim)"),
     ]
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0
-        self._fitting = False
 
     def compose(self) -> ComposeResult:
         yield TitleBar("P5 laser velocimeter on a vehicle")
@@ -168,19 +159,10 @@ class LdvScreen(GuidedScreenMixin, Screen):
         self.query_one("#message", Static).update(f"[b red]device: {message.error}[/]")
 
     def action_finish(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.finish()
-                events = self.guide.take_events()
-            for kind, detail in events:
-                self.post_message(GuideEvent(kind, detail))
+        self._finish_guide()
 
     def action_restart(self) -> None:
-        if self.guide is not None:
-            with self._lock:
-                self.guide.restart()
-                self.guide.take_events()
-            self.notify("Recording restarted", timeout=2)
+        self._restart_guide()
 
     def action_abort(self) -> None:
         self._abort("P5 aborted: nothing saved")

@@ -10,7 +10,6 @@ replaceable LiveUpdate ~15 times a second and a GuideEvent for each capture.
 from __future__ import annotations
 
 import os
-import threading
 
 from textual import on, work
 from textual.app import ComposeResult
@@ -52,14 +51,6 @@ class ProcedureScreen(NoticesMixin, GuidedScreenMixin, Screen):
         Binding("f", "finish", "Fit now"),
         Binding("p", "sim_place", "Place (sim)"),
     ]
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._lock = threading.Lock()
-        self.guide = None
-        self.last_status = None
-        self.updates = 0  # LiveUpdates drawn (the benchmark's refresh count)
-        self._fitting = False
 
     def compose(self) -> ComposeResult:
         yield TitleBar("P1 accelerometer, level table")
