@@ -398,3 +398,25 @@ def test_bad_capture_one_line_with_file_and_line(tmp_path, name, edit, line, nee
     path.write_bytes(data)
     for cmd in ("calibrate", "diagnose"):
         assert_one_line_refusal(run_station(cmd, path, "--json"), f"{name}.csv:{line}: ", needle)
+
+
+def test_p3_place_without_date_names_the_missing_date(tmp_path):
+    """IGRF needs place and date. With latitude and longitude but no `date` the reference is null
+    (every key present) and the warnings said "no declination without a place", which the
+    capture has: they name the date now."""
+    rng = np.random.default_rng(12)
+    F = G.igrf_ned_nT(39.98, 116.35, 52.0, "2026-11-21")
+    W, h, mags, accs = G.p3_raw(F, G.random_rotations(30, rng), "uT", 9.8)
+    rows = [[i + 1, *(m + rng.normal(0, 0.02, 3)), *(a / 9.8)] for i, (m, a) in enumerate(zip(mags, accs))]
+    meta = [("procedure", "compass"), ("device", "S26-P3"), ("mag_unit", "uT"), ("accel_unit", "g")]
+    meta += [("latitude_deg", "39.98"), ("longitude_deg", "116.35")]
+    path = tmp_path / "nodate.csv"
+    path.write_bytes(G.render(meta, ["position", "mx", "my", "mz", "ax", "ay", "az"], rows))
+    j = _calibrate(path)
+    _common(j, "compass", "S26-P3")
+    ref = j["params"]["reference"]
+    assert set(ref) >= {"north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg"}
+    assert all(v is None for v in ref.values())
+    _within("hard_iron", j["params"]["hard_iron"], j["uncertainty"]["hard_iron"], h)
+    decl = [w for w in j["warnings"] if "declination" in w]
+    assert decl and all("date" in w and "without a place" not in w for w in decl), j["warnings"]
