@@ -606,7 +606,7 @@ def calibrate(
             f"{res.reduced_chi2:.3g}): A = B + M V does not explain everything (temperature, "
             "non-linearity, moving positions?); uncertainties are scaled up by that factor"
         )
-    if not noise_known:
+    if not noise_known and not any("uncertainties assume a norm noise" in w for w in warnings):
         warnings.append(
             f"no per-position noise given: the norm noise is estimated from the residuals "
             f"({s_n[0]:.3g} m/s^2), so uncertainties include any model misfit"

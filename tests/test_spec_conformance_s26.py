@@ -83,6 +83,8 @@ def test_p1_noise_free_table_at_full_precision_is_calibrated(tmp_path):
     np.testing.assert_allclose(j["params"]["B"], G.P1_B, rtol=3e-5, atol=1e-9)
     np.testing.assert_allclose(j["params"]["M"], G.P1_M, rtol=3e-5, atol=1e-9)
     assert any("noise-free" in w for w in j["warnings"]), j["warnings"]
+    # and no second warning contradicting it ("estimated from the residuals (9.8e-07 m/s^2)")
+    assert not any("estimated from the residuals" in w for w in j["warnings"]), j["warnings"]
 
 
 @pytest.mark.parametrize(
