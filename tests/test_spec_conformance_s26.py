@@ -422,3 +422,58 @@ def test_p3_place_without_date_names_the_missing_date(tmp_path):
     _within("hard_iron", j["params"]["hard_iron"], j["uncertainty"]["hard_iron"], h)
     decl = [w for w in j["warnings"] if "declination" in w]
     assert decl and all("date" in w and "without a place" not in w for w in decl), j["warnings"]
+
+
+# ---------------------------------------------------------------------------- found, not fixed
+
+
+def _diagnose_json(path) -> dict:
+    res = run_station("diagnose", path, "--json")
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="diagnose on noise-free tables: the noise scale comes from ~0 residuals, so any "
+    "candidate clears the margin (P1 names quadratic + scale_asymmetry, P2 cubic); diagnose.md "
+    "'say nothing where there is nothing'. Not fixed in s26 (solvers/diagnose/engine.py).",
+)
+@pytest.mark.parametrize("procedure", ["accel-tabletop", "accel-centrifuge"])
+def test_noise_free_tables_have_verdict_none(tmp_path, procedure):
+    rng = np.random.default_rng(13)
+    if procedure == "accel-tabletop":
+        data = _p1_table(rng, noise_v=0.0, fmt="{:.17g}")
+    else:
+        fs = G.p2_forces(9.8, 1.0, (2 * np.pi, 4 * np.pi, 6 * np.pi), 20, rng)
+        meta = [
+            ("procedure", procedure),
+            ("device", "S26-P2"),
+            ("accel_unit", "g"),
+            ("radius_m", "1"),
+            ("g_mps2", "9.8"),
+        ]
+        rows = [[i + 1, w, *G.p2_output(f)] for i, (w, f) in enumerate(fs)]
+        data = G.render(meta, ["position", "speed_rad_s", "ax", "ay", "az"], rows, fmt="{:.17g}")
+    path = tmp_path / "exact.csv"
+    path.write_bytes(data)
+    assert _diagnose_json(path)["verdict"] == []
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="diagnose refuses a valid compass table of averages ('compass diagnosis needs a time "
+    "series'), exit 2 as for bad input; field_anomaly and mag_accel_misalignment need no time. "
+    "Not fixed in s26.",
+)
+def test_compass_table_of_averages_is_diagnosed(tmp_path):
+    rng = np.random.default_rng(14)
+    F = G.igrf_ned_nT(39.98, 116.35, 52.0, "2026-11-21")
+    W, h, mags, accs = G.p3_raw(F, G.random_rotations(30, rng), "uT", 9.8)
+    rows = [[i + 1, *(m + rng.normal(0, 0.02, 3)), *(a / 9.8)] for i, (m, a) in enumerate(zip(mags, accs))]
+    meta = [("procedure", "compass"), ("device", "S26-P3"), ("mag_unit", "uT"), ("accel_unit", "g")]
+    meta += [("latitude_deg", "39.98"), ("longitude_deg", "116.35"), ("altitude_m", "52"), ("date", "2026-11-21")]
+    path = tmp_path / "p3_table.csv"
+    path.write_bytes(G.render(meta, ["position", "mx", "my", "mz", "ax", "ay", "az"], rows))
+    assert _calibrate(path)["procedure"] == "compass"  # calibrate takes it
+    _diagnose_json(path)
