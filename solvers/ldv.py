@@ -132,7 +132,10 @@ def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None, for
         Y = Y[:, None]
     n = len(H)
     if n < 4:
-        raise TooFewPositions(f"{n} epochs: the least squares needs at least 3 (and a 4th for its σ)")
+        raise TooFewPositions(
+            f"ldv: {n} epoch{'' if n == 1 else 's'}: 3 determine each beam's X (P5's n >= 3) but leave "
+            "nothing to estimate its uncertainty; record at least 4 epochs in different motion states"
+        )
     kappa = velocity_condition(H)
     warnings: list[str] = []
     if kappa > KAPPA_REFUSE:

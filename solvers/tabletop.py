@@ -51,6 +51,12 @@ PLACEMENT_SIGMA_AXIS_RAD = math.radians(0.4)
 PLACEMENT_SIGMA_TILTED_RAD = math.radians(1.1)
 DISTINCT_ANGLE_DEG = 7.0  # two positions closer than this are one orientation
 MIN_DISTINCT = 9  # the norm fit's 9 identifiable parameters
+# The smallest norm noise (as a fraction of g) an estimate from the residuals may give: 0.1 µg,
+# below any real average (a navigation-grade accelerometer, 10 µg/√Hz held 5 min, averages to
+# ~0.6 µg). Noise-free simulated holds written at full precision left residuals of ~1e-15 m/s²;
+# weighted against the placement σ of the labelled directions (0.07 m/s²) the rotation columns
+# fell 1e14 below the norm rows and the fit called the off-diagonal of M undeterminable.
+NORM_NOISE_FLOOR_G = 1e-7
 CONDITION_WARN = 30.0  # position-set condition above this: warn "too alike"
 # A label whose direction lies further than this from its position's reading (after the one
 # rotation that best matches all labelled readings to their directions) does not describe it;
@@ -504,6 +510,13 @@ def calibrate(
             sig_n = norm_sigma(positions, B0, M0, True)
         else:
             s_est = estimate_norm_noise(positions, g_mps2, B0, M0)
+            if s_est is not None and s_est < NORM_NOISE_FLOOR_G * g_mps2:
+                notes.append(
+                    f"the residuals ({s_est:.3g} m/s^2) are below any real sensor's noise (noise-free data?): "
+                    f"uncertainties assume a norm noise of {NORM_NOISE_FLOOR_G * g_mps2:.3g} m/s^2 "
+                    f"({NORM_NOISE_FLOOR_G:g} g)"
+                )
+                s_est = NORM_NOISE_FLOOR_G * g_mps2
             if s_est is None:
                 s_est = 1e-3 * g_mps2
                 notes.append(
@@ -593,7 +606,7 @@ def calibrate(
             f"{res.reduced_chi2:.3g}): A = B + M V does not explain everything (temperature, "
             "non-linearity, moving positions?); uncertainties are scaled up by that factor"
         )
-    if not noise_known:
+    if not noise_known and not any("uncertainties assume a norm noise" in w for w in warnings):
         warnings.append(
             f"no per-position noise given: the norm noise is estimated from the residuals "
             f"({s_n[0]:.3g} m/s^2), so uncertainties include any model misfit"

@@ -291,7 +291,9 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     }
     decl = 0.0 if ref is None else ref["declination_deg"]
     if ref is None:
-        warnings.append("no declination without a place: true heading = magnetic heading")
+        placed = all(capture.meta.get(k) for k in ("latitude_deg", "longitude_deg"))
+        without = "a date (IGRF needs it)" if placed else "a place"
+        warnings.append(f"no declination without {without}: true heading = magnetic heading")
     if t is None or rate is None:
         pitch, roll = C.pitch_roll_from_accel(f_f)
         mh, th = C.heading_deg(m_cal, pitch, roll, decl)

@@ -224,16 +224,23 @@ def prepare(capture, reference=None) -> Prepared:
 
 
 # A vehicle at rest: the reference speed the guide calls parked, and the fewest moving epochs a
-# fit is tried on. At rest the beams and the reference read their noise, whose directions are
-# random: a well-conditioned set of nothing (a 2 s parked record gave δK = -0.73 ± 0.65, cond 2.4).
+# fit is tried on when some epochs are parked. At rest the beams and the reference read their
+# noise, whose directions are random: a well-conditioned set of nothing (a 2 s parked record gave
+# δK = -0.73 ± 0.65, cond 2.4). A record whose every epoch moves is not parked, however few its
+# epochs: P5 asks for n >= 3 epochs in different motion states (a table of 3 to 9 averaged epochs
+# was refused as "hardly moved: 4 of 4 epochs at 0.5 m/s or more"); the solver's own minimum
+# (4 epochs: 3 for X, a 4th for its σ) and the conditioning check judge it.
 PARKED_MPS = 0.5
 MIN_MOVING_EPOCHS = 10
+# Fewer residual degrees of freedom than this (n − 3 per beam): the σ is itself uncertain by
+# more than ~20 % and a warning gives the Student-t interval.
+FEW_DOF = 10
 
 
 def _refuse_parked(capture, v_body: np.ndarray, force: bool) -> None:
     speed = np.linalg.norm(v_body, axis=1)
     moving = int(np.count_nonzero(speed >= PARKED_MPS))
-    if moving < MIN_MOVING_EPOCHS and not force:
+    if moving < MIN_MOVING_EPOCHS and moving < len(speed) and not force:
         raise UnsupportedError(
             f"{capture.path or 'capture'}: ldv: the vehicle hardly moved: {moving} of {len(speed)} epochs at a "
             f"reference speed of {PARKED_MPS:g} m/s or more (at rest the beams see only their noise); drive, with "
@@ -255,6 +262,13 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
     except SolverError as exc:
         raise UnsupportedError(f"{capture.path or 'capture'}: {exc}") from None
     warnings += res.warnings
+    if res.n - 3 < FEW_DOF:
+        from scipy import stats
+
+        warnings.append(
+            f"{res.n} epochs: each beam's σ rests on {res.n - 3} degree{'' if res.n == 4 else 's'} of freedom "
+            f"(n − 3); a 95 % interval is ±{float(stats.t.isf(0.025, res.n - 3)):.3g}σ, not ±1.96σ: record more epochs"
+        )
     params, unc, fit = {}, {}, {}
     for j, b in enumerate(res.beams):
         key = f"beam{j + 1}"
