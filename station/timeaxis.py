@@ -4,7 +4,9 @@ Plot libraries given decimal years or POSIX seconds pick their own ticks; with a
 points on one day (or one point) the span is ~0 and the axis was widened to nonsense
 (the drift plot ran from year 1013 to 3040). ``time_axis`` returns x as days since the
 first time, a fixed x range that is never empty, and tick positions labelled as dates
-(or times of day when the span is under two days).
+(or times of day when the span is under two days). Dates are written with a four-digit year,
+not strftime's ``%Y``: glibc writes year 1 as ``1``, and a calibration dated 0001-01-01 (a
+logger's zero date) was labelled ``1-01-01``.
 """
 
 from __future__ import annotations
@@ -29,8 +31,9 @@ def time_axis(times: list[str], n_ticks: int = 4) -> dict:
         fmt, label = "%m-%d %H:%M", "date and time (UTC)"
     else:
         pad = span * 0.05
-        fmt, label = "%Y-%m-%d", "date (UTC)"
+        fmt, label = "{:04d}-%m-%d", "date (UTC)"  # the year filled in below
     lo, hi = -pad, span + pad
     ticks = [span * k / (n_ticks - 1) for k in range(n_ticks)] if span > 0 and n_ticks > 1 else [0.0]
-    labels = [(t0 + timedelta(days=t)).strftime(fmt) for t in ticks]
+    days = [t0 + timedelta(days=t) for t in ticks]
+    labels = [d.strftime(fmt).format(d.year) for d in days]
     return {"x": xs, "xlim": (lo, hi), "ticks": ticks, "labels": labels, "label": label, "t0": t0}

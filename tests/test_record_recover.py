@@ -10,15 +10,19 @@ never written), a row broken in the middle. The real CLI reads them; `read_captu
 
 from __future__ import annotations
 
+import fcntl
 import os
 import signal
+import subprocess
+import sys
+import termios
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from station.capture import read_capture
-from tests.station_run import assert_one_line_refusal, popen_station, run_station, sim_device, wait_for_rows
+from tests.station_run import ROOT, assert_one_line_refusal, popen_station, run_station, sim_device, wait_for_rows
 
 HEADER = b"t,segment,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c\n"
 
@@ -212,10 +216,15 @@ def test_recover_run_twice_keeps_the_capture_it_wrote(killed, tmp_path):
     assert out.read_bytes() == written and os.listdir(tmp_path) == ["k.csv"]
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+HUNG_UP = "station record: hang-up (SIGHUP: the terminal or SSH session closed): the recording ended as on Ctrl-C"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP"])
 def test_an_interrupted_recording_leaves_a_capture_and_nothing_for_recover_to_break(sim_port, tmp_path, sig):
-    """Ctrl-C or SIGTERM ends a recording with its capture finished (no partial left); `--recover`
-    afterwards says there is nothing to recover and leaves the capture as it was."""
+    """Ctrl-C, SIGTERM or a hang-up (the SSH session dropped) ends a recording with its capture
+    finished (no partial left); `--recover` afterwards says there is nothing to recover and
+    leaves the capture as it was. A hang-up killed `record` where it stood (the rows left in
+    FILE.partial for `--recover`); it is said on stderr, which is still there to write here."""
     out = tmp_path / "s.csv"
     partial = Path(str(out) + ".partial")
     rec = popen_station("record", "--port", sim_port, "--out", str(out))
@@ -223,28 +232,81 @@ def test_an_interrupted_recording_leaves_a_capture_and_nothing_for_recover_to_br
     rec.send_signal(sig)
     stdout, stderr = rec.communicate(timeout=20)
     assert rec.returncode == 0, stderr
-    assert stdout.startswith("recorded ") and stderr == ""
+    assert stdout.startswith("recorded ")
+    assert stderr == (f"{HUNG_UP}; {out} is complete\n" if sig == signal.SIGHUP else ""), stderr
     assert not partial.exists()
     written = out.read_bytes()
     cap = read_capture(out)
     assert cap.meta["complete"] == "true" and cap.n_rows > 10 and not cap.notes
+    assert f"{cap.n_rows} samples" in stdout
     res = run_station("record", "--recover", partial)
     assert_one_line_refusal(res, f"station: {partial}: no such file", f"{out} is there")
     assert out.read_bytes() == written and os.listdir(tmp_path) == ["s.csv"]
 
 
-@pytest.mark.parametrize("sig", [signal.SIGHUP, signal.SIGKILL], ids=["SIGHUP", "SIGKILL"])
-def test_a_recording_that_dies_leaves_a_partial_that_recover_makes_readable(sim_port, tmp_path, sig):
-    """A hang-up (the operator's SSH session dropped: `record` does not catch SIGHUP) or a kill
-    ends the process where it stands: FILE.partial is left as it was, and `--recover` turns
-    it, whatever its last bytes, into a capture holding every whole row."""
+def test_a_hang_up_before_the_seconds_asked_keeps_the_rows_marked_incomplete_as_ctrl_c_does(sim_port, tmp_path):
+    """`--seconds 120` cut short by a hang-up: as by Ctrl-C, every row kept in a finished capture
+    that says it is shorter than asked, exit status 1."""
+    out = tmp_path / "s.csv"
+    partial = Path(str(out) + ".partial")
+    rec = popen_station("record", "--port", sim_port, "--seconds", "120", "--out", str(out))
+    wait_for_rows(partial, 5000)
+    rec.send_signal(signal.SIGHUP)
+    stdout, stderr = rec.communicate(timeout=20)
+    assert rec.returncode == 1, stderr
+    assert "INCOMPLETE: interrupted" in stdout and not partial.exists()
+    assert stderr.endswith(f"{HUNG_UP}; {out} is complete: false (interrupted)\n"), stderr
+    cap = read_capture(out)
+    assert cap.meta["complete"] == "false" and cap.meta["incomplete"].startswith("interrupted ")
+    assert cap.n_rows > 10 and not cap.notes
+
+
+def test_a_recording_whose_ssh_session_drops_finishes_its_capture(sim_port, tmp_path):
+    """The operator's SSH session drops (no tmux): the kernel hangs up the terminal `record`
+    runs in, which sends SIGHUP to it and makes its stdout and stderr unwritable (EIO). Here
+    the terminal is a real pty that is `record`'s controlling terminal (it leads its session,
+    as a login shell's job does when the shell has gone), and closing its master side is the
+    dropped connection. The recording was killed, its rows left in FILE.partial; it finishes
+    its capture now, and exits as on SIGTERM (status 0) though nothing can be said."""
+    out = tmp_path / "ssh.csv"
+    partial = Path(str(out) + ".partial")
+    master, slave = os.openpty()
+
+    def own_terminal() -> None:  # in the child, after setsid: the pty becomes its terminal
+        fcntl.ioctl(1, termios.TIOCSCTTY, 0)
+
+    rec = subprocess.Popen(
+        [sys.executable, "-m", "station", "record", "--port", sim_port, "--out", str(out)],
+        cwd=ROOT,
+        stdin=subprocess.DEVNULL,
+        stdout=slave,
+        stderr=slave,
+        start_new_session=True,
+        preexec_fn=own_terminal,  # noqa: PLW1509 - one call, no threads started in the child
+    )
+    os.close(slave)
+    try:
+        wait_for_rows(partial, 5000)
+    finally:
+        os.close(master)  # the connection drops: the terminal hangs up
+    assert rec.wait(20) == 0
+    assert not partial.exists()
+    cap = read_capture(out)
+    assert cap.meta["complete"] == "true" and cap.n_rows > 10 and not cap.notes
+    assert run_station("inspect", out).returncode == 0
+
+
+def test_a_killed_recording_leaves_a_partial_that_recover_makes_readable(sim_port, tmp_path):
+    """A kill (SIGKILL, or a power cut) ends the process where it stands: FILE.partial is left
+    as it was, and `--recover` turns it, whatever its last bytes, into a capture holding every
+    whole row."""
     out = tmp_path / "h.csv"
     partial = Path(str(out) + ".partial")
     rec = popen_station("record", "--port", sim_port, "--out", str(out))
     wait_for_rows(partial, 5000)
-    rec.send_signal(sig)
+    rec.kill()
     rec.communicate(timeout=20)
-    assert rec.returncode == -sig
+    assert rec.returncode == -signal.SIGKILL
     assert not out.exists()
     data = partial.read_bytes()
     _, start = _layout(data)

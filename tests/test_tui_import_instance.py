@@ -104,7 +104,9 @@ def test_an_ardupilot_log_with_two_imus_says_so_and_offers_the_instance(tmp_path
     assert "accel 100 samples" in after or "accel 200 samples" in after, after
     assert "id 2818564" in after and "IMUs" not in after, after  # INS_ACC2_ID: the second IMU
     if suffix == "bin":  # one compass: instance 1 has none, and says so
-        assert "warning: --instance 1: no MAG[1] (its instances: 0), so no mag columns" in after, after
+        # in the screen's terms: the slot picked under instance, not station import's flag
+        assert "warning: instance 1 (the slot picked): no MAG[1] (its instances: 0), so no mag columns" in after, after
+        assert "--instance" not in after, after
     else:
         assert "warning" not in after, after
     assert "Pick the procedure" in out["status"], out["status"]
@@ -115,8 +117,9 @@ def test_an_instance_the_log_lacks_leaves_the_read_shown_and_says_so(tmp_path):
     'instance 2' over the instance-0 read that F5 would still have calibrated."""
     log = tmp_path / "two_imus.bin"
     write_bin(log)
-    out = _pick_instance(log, "2", lambda app: "--instance 2" in text_of(app, "#status"), tmp_path)
-    assert "--instance 2: the log has IMU instances 0, 1" in out["status"], out["status"]
+    out = _pick_instance(log, "2", lambda app: "instance 2" in text_of(app, "#status"), tmp_path)
+    assert "instance 2 (the slot picked): the log has IMU instances 0, 1" in out["status"], out["status"]
+    assert "--instance" not in out["status"], out["status"]
     assert out["value"] == "auto"
     assert "Still shown: the log as read with instance auto." in out["status"], out["status"]
     assert "IMU[0]" in out["after"]

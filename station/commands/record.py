@@ -8,7 +8,7 @@ import signal
 import sys
 import threading
 
-from station.errors import InputError, require_positive
+from station.errors import InputError, OutputError, require_positive
 from station.fileio import check_output
 from station.procedures import registry
 from station.textsafe import safe
@@ -40,7 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "record",
         help="record a device (serial port or pyserial URL) into a capture file",
         description="Record samples from a device into a capture file until --seconds pass or "
-        "SIGINT/SIGTERM. Rows are written as they arrive to FILE.partial; the finished capture "
+        "SIGINT/SIGTERM/SIGHUP (a hang-up, e.g. an SSH session dropped, ends it as Ctrl-C does; under nohup it "
+        "goes on). Rows are written as they arrive to FILE.partial; the finished capture "
         "replaces FILE atomically. --port takes a device path (/dev/ttyUSB0, /dev/pts/3) or a "
         "pyserial URL (socket://host:port, rfc2217://host:port, loop://); with --protocol mavlink also a network "
         "endpoint through pymavlink: udp:127.0.0.1:14550 (listen), udpout:HOST:PORT, tcp:HOST:5760, tcpin:HOST:PORT.",
@@ -101,6 +102,28 @@ def _meta(items: list[str] | None) -> dict[str, str]:
     return out
 
 
+def _to_null(fd: int) -> None:
+    """What is written to ``fd`` from now on (and what its buffer still holds, at exit) goes to
+    the null device: a terminal that hung up answers every write with EIO, and the interpreter's
+    flush at exit would turn the recording's exit status into 120."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, fd)
+        os.close(null)
+    except OSError:
+        pass
+
+
+def _warn(msg: str) -> None:
+    """A line on stderr, if it can still be written: a terminal that hung up (SIGHUP) answers
+    with EIO, and a warning raised there would leave the recording unfinished."""
+    try:
+        print(f"station record: {msg}", file=sys.stderr)
+        sys.stderr.flush()
+    except OSError:
+        _to_null(2)
+
+
 def run(args: argparse.Namespace) -> int:
     from station.device.mavlink import parse_source
     from station.device.record import record, recover_partial, refuse_unrecovered
@@ -135,11 +158,20 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise InputError(None, None, f"--mavlink-message: {exc}") from None
     stop = threading.Event()
+    hung_up = threading.Event()
 
     def _stop(signum, frame):  # noqa: ARG001
+        if signum == signal.SIGHUP:
+            hung_up.set()
         stop.set()
 
-    old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    # A hang-up (the terminal closed, an SSH session dropped without tmux) ends the recording as
+    # Ctrl-C does: it killed the process where it stood, the rows left in FILE.partial. Under
+    # `nohup` (SIGHUP ignored) it stays ignored: the recording goes on.
+    signals = [signal.SIGINT, signal.SIGTERM]
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+        signals.append(signal.SIGHUP)
+    old = {s: signal.signal(s, _stop) for s in signals}
     try:
         res = record(
             args.port,
@@ -152,16 +184,30 @@ def run(args: argparse.Namespace) -> int:
             mavlink_source=args.mavlink_message,
             mavlink_rate_hz=args.mavlink_rate or None,
             stop=stop,
-            warn=lambda msg: print(f"station record: {msg}", file=sys.stderr),
+            warn=_warn,
         )
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+    if hung_up.is_set():
+        ended = "complete: false (interrupted)" if res.incomplete else "complete"
+        _warn(
+            "hang-up (SIGHUP: the terminal or SSH session closed): the recording ended as on Ctrl-C; "
+            f"{res.path} is {ended}"
+        )
     m = res.meta
-    print(
+    summary = (
         f"recorded {res.samples} samples ({m.get('duration_s', '?')} s, {m.get('sample_rate_hz', '?')} Hz) "
         f"from {args.port} into {res.path}: gaps {m['gaps']}, parse errors {m['parse_errors']}, "
         f"reconnects {m['reconnects']}, dropped {m['dropped']}"
         + (f"; INCOMPLETE: {res.incomplete}" if res.incomplete else "")
     )
+    if not hung_up.is_set():
+        print(summary)
+    else:  # the terminal may be gone: the capture is written, a summary nobody can read is no error
+        try:
+            print(summary)
+            sys.stdout.flush()
+        except (OSError, OutputError):
+            _to_null(1)
     return 1 if res.incomplete else 0  # every sample is kept; the exit status says the data stop early

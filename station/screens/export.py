@@ -14,10 +14,12 @@ from station.textsafe import tui_markup
 
 def export_files(screen, capture, what: str, payload: Callable) -> None:
     """Write ``capture`` (CSV) and ``payload()`` (JSON, unless None) to the export folder
-    as ``<device>-<what>-<stamp>.*``, atomically; post Exported to ``screen``."""
+    as ``<device>-<what>-<stamp>.*``, atomically; post Exported to ``screen``. The stamp is
+    UTC, ``YYYYMMDD-HHMMSSZ``, as every time the station writes (the database, captures,
+    reports, ``station export``); it was the computer's local time."""
     s = screen.app.session
     folder = s.extra.get("export_dir") or os.getcwd()
-    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%d-%H%M%SZ")
     base = os.path.join(folder, f"{file_name_part(s.device_id)}-{what}-{stamp}")  # 'lab/unit7': no folder
     try:
         from station.capture import write_capture

@@ -12,6 +12,7 @@ picks the procedure and goes on to a calibration or a diagnosis.
 from __future__ import annotations
 
 import os
+import re
 
 from textual import on, work
 from textual.app import ComposeResult
@@ -87,6 +88,21 @@ WIDTH = 76  # 80 columns less the padding and the scroll bar
 SHOWN_WARNINGS = 2  # warnings the summary has room for at 80x24
 # a reader's warning's "give --instance N" (station import's flag), said as this screen's choice
 INSTANCE_HERE = "pick its slot under instance"
+_FLAG = re.compile(r"--instance (\d+)")
+
+
+def in_screen_terms(text: str) -> str:
+    """A reader's warning or refusal worded with ``station import``'s flag, in this screen's
+    terms: ``--instance N`` is the slot picked under instance (``instance N``), "give
+    --instance N" is picking it there, "--instance 0 or none" is instance 0 or auto. The
+    flag appeared as such where the screen read a slot a secondary sensor lacks ("--instance
+    1: no MAG[1] ..."), a flag the screen has nowhere to type."""
+    from station.importers._common import INSTANCE_ADVICE
+
+    text = text.replace(INSTANCE_ADVICE, INSTANCE_HERE).replace("--instance 0 or none", "instance 0 or auto")
+    return _FLAG.sub(r"instance \1 (the slot picked)", text).replace("--instance", "instance")
+
+
 INSTANCES = 4  # the slots offered (PX4's CAL_*0_ID … CAL_*3_ID; ArduPilot and MAVLink have 3)
 # the logs read with station import --instance: what the instance chooses in each
 SLOT_HELP = {
@@ -149,10 +165,8 @@ def summary_lines(path: str, fmt: str, imported) -> list[str]:
         lines += _wrapped([safe(f"{k}={params[k]}") for k in ids + rest], "  ", 3)
     else:
         lines.append("in use: no calibration parameters in the log (an export cannot compose)")
-    from station.importers._common import INSTANCE_ADVICE
-
     for w in imported.warnings[:SHOWN_WARNINGS]:
-        w = w.replace(INSTANCE_ADVICE, INSTANCE_HERE)  # the flag is this screen's choice
+        w = in_screen_terms(w)  # the flag is this screen's choice
         lines += textwrap.wrap(safe(f"warning: {w}"), WIDTH, subsequent_indent="  ")
     more = len(imported.warnings) - SHOWN_WARNINGS
     if more > 0:  # the screen has room for two; the rest are not dropped unsaid
@@ -360,7 +374,7 @@ class ImportScreen(Screen):
                 shown = f"instance {'auto' if self.instance is None else self.instance}"
                 shown += f", source {self.source}" if self.fmt == "px4" else ""
                 hint += f"\nStill shown: the log as read with {shown}."
-            self._status(f"[b red]{tui_markup(message.error)}[/]{hint}")
+            self._status(f"[b red]{tui_markup(in_screen_terms(message.error))}[/]{hint}")
             return
         from station.importers.options import primary
 
