@@ -57,6 +57,10 @@ ALPHA = 0.05  # family-wise level the per-candidate deviance quantiles start fro
 WHITE_P = 0.01  # a residual test's p above this: the residuals are noise-like
 MIN_DOF = 3  # an extension must leave this many degrees of freedom
 REFIT_MAX_MATRIX_CHANGE = 0.5  # a refit that moves a model matrix by more than this share of its norm ran off
+# ... unless the data fix the move: held where it was, the model leaves this many times the χ² of
+# the free refit (a 10 m/s LDV offset the baseline X had taken: held, 1e5 times; a run-off along a
+# direction the data hardly fix costs a few units of χ² when held)
+REFIT_HELD_CHI2_RATIO = 4.0
 GROUPS_TOL = 1e-6  # round-off in an effective count of groups (a step between two holds leaves a whole number)
 # a generic term displaces library effects whose columns hold most (> CONFUSION_CORR) of its
 # signature only when its model's BIC is lower by this much (χ²₁(0.95)): a clearly better fit
@@ -161,6 +165,11 @@ class Problem:
     # the auxiliary rows' noise scale (variance components) measured again after each selection,
     # against the refitted extended model, instead of once on the baseline (compass: measured there)
     aux_scale_refit: bool = False
+    # the noise of each ``series`` was measured as the spread of the baseline's residual: after each
+    # selection it is measured again on the refitted model's residual and lowered where that is
+    # smaller (an LDV offset of 10 m/s left 3.8 m/s of baseline residual against 0.01 m/s of noise,
+    # and every later test and the offset's own uncertainty were 300 times too lenient)
+    series_scale_refit: bool = False
     # per row: its time (s) where the rows of each ``series`` share a slow wander (bias instability):
     # a candidate's deviance is then taken net of a white + Gauss–Markov noise fitted by REML on
     # the residual its own model leaves (``wander.WanderModel``); None: no such model
@@ -826,6 +835,25 @@ def _aux_scales(problem: Problem, fit_: FitResult, free: dict, sigma: np.ndarray
             sigma[sel] *= s
 
 
+def _series_scales(problem: Problem, fit_: FitResult, sigma: np.ndarray) -> bool:
+    """Each series' noise lowered to the RMS its rows' residual has under ``fit_`` where that is
+    smaller (``Problem.series_scale_refit``); ``sigma`` is scaled in place. True when it changed."""
+    if not problem.series_scale_refit or problem.series is None:
+        return False
+    rw = fit_.weighted_residuals
+    series = np.asarray(problem.series)
+    changed = False
+    for k in np.unique(series):
+        sel = series == k
+        s = math.sqrt(float(np.mean(rw[sel] ** 2)))
+        if 0 < s < 1.0:
+            sigma[sel] *= s
+            changed = True
+    if changed:
+        problem._wander = None  # made with the old weights
+    return changed
+
+
 def _displaced(picked: list, kept: list) -> list:
     """The items of ``picked`` (candidate columns, effect entry) that ``kept`` no longer holds."""
     return [item for item in picked if not any(item[0] is k[0] for k in kept)]
@@ -835,21 +863,24 @@ def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> Fit
     """Nonlinear refit from the linearised step at ``params``. Where the refit or that step runs
     off along a direction the data hardly fix (``_ran_off``), it is done again with the matrix
     blocks that ran off held at their values in ``params``: the added terms take only what the
-    model's scale and mounting cannot."""
+    model's scale and mounting cannot. A move the data fix firmly (held, the model leaves more
+    than ``REFIT_HELD_CHI2_RATIO`` times the free refit's χ²) is kept: then ``params``' matrix
+    was the one off, having taken an effect the baseline had no term for."""
     Jx, _, packer = jacobian(problem, params, free)
     d, _ = _lstsq_rss(Jx, _weighted(problem, params))
     start = packer.unpack(packer.pack(packer.template) + d)
-    off = _ran_off(params, start, free, problem.baseline)
-    if not off:
-        try:
-            res = fit(problem.residual, start, free=free, sigma=sigma)
-            if res.chi2 > float(np.sum(_weighted(problem, start) ** 2)) * 1.0001:
-                raise ValueError("refit worse than its start")
-        except Exception:
-            res = fit(problem.residual, start, free=free, sigma=sigma, max_nfev=1)
-        off = _ran_off(params, res.params, free, problem.baseline)
+    try:
+        res = fit(problem.residual, start, free=free, sigma=sigma)
+        if res.chi2 > float(np.sum(_weighted(problem, start) ** 2)) * 1.0001:
+            raise ValueError("refit worse than its start")
+    except Exception:
+        res = fit(problem.residual, start, free=free, sigma=sigma, max_nfev=1)
+    off = _ran_off(params, start, free, problem.baseline) or _ran_off(params, res.params, free, problem.baseline)
     if off:
-        return _refit(problem, params, {**free, **{k: False for k in off}}, sigma)
+        held = _refit(problem, params, {**free, **{k: False for k in off}}, sigma)
+        if np.isfinite(res.chi2) and held.chi2 > REFIT_HELD_CHI2_RATIO * res.chi2:
+            return res
+        return held
     return res
 
 
@@ -1575,6 +1606,8 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             # the auxiliary rows' noise measured again against the model as it now stands: on the
             # baseline an effect not yet modelled (a rotation in the compass dip rows) inflated it
             _aux_scales(problem, cur_fit, free, sigma)
+            cur_fit = _refit(problem, dict(cur_fit.params), free, sigma)
+        if _series_scales(problem, cur_fit, sigma):
             cur_fit = _refit(problem, dict(cur_fit.params), free, sigma)
         state = dict(cur_fit.params)
         drop = {cc.cand.name} | {c["name"] for c in confused}

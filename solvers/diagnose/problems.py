@@ -407,6 +407,7 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     if t is not None:
         prob.wander_t_s = np.repeat(t, 3)
     prob.series_names = {0: "beam 1", 1: "beam 2", 2: "beam 3"}
+    prob.series_scale_refit = True  # sig_beam is the baseline residual's spread
     # the baseline has no constant: a drift or a temperature bias from a zero outside the capture
     # (power-up, 25 °C) brings its mean with it, which the offset takes; both named, they are tied
     prob.intercept_of = {"offset": {"time_drift": t, "temperature_bias": T}}
