@@ -170,6 +170,11 @@ class Problem:
     # smaller (an LDV offset of 10 m/s left 3.8 m/s of baseline residual against 0.01 m/s of noise,
     # and every later test and the offset's own uncertainty were 300 times too lenient)
     series_scale_refit: bool = False
+    # the smallest noise a real capture of this kind has (data units of the measured rows): a model
+    # whose residual RMS is below it has nothing left to explain, and no candidate is sought beside
+    # it (a simulator's exact table at full precision: the F tests, scale-free, found a quadratic
+    # and a scale asymmetry in a P1 baseline's 3e-7 m/s² of rounding; None: no floor)
+    noise_floor: float | None = None
     # per row: its time (s) where the rows of each ``series`` share a slow wander (bias instability):
     # a candidate's deviance is then taken net of a white + Gauss–Markov noise fitted by REML on
     # the residual its own model leaves (``wander.WanderModel``); None: no such model
@@ -854,6 +859,17 @@ def _series_scales(problem: Problem, fit_: FitResult, sigma: np.ndarray) -> bool
     return changed
 
 
+def below_noise_floor(problem: Problem, rw: np.ndarray, sigma: np.ndarray, primary=None) -> bool:
+    """Whether the weighted residual ``rw`` is, in data units over the measured rows, below
+    ``problem.noise_floor`` (RMS): nothing is left there for an effect to explain."""
+    if problem.noise_floor is None:
+        return False
+    e = np.asarray(rw, float) * sigma
+    if primary is not None:
+        e = e[primary]
+    return bool(e.size) and float(np.sqrt(np.mean(e * e))) <= problem.noise_floor
+
+
 def _displaced(picked: list, kept: list) -> list:
     """The items of ``picked`` (candidate columns, effect entry) that ``kept`` no longer holds."""
     return [item for item in picked if not any(item[0] is k[0] for k in kept)]
@@ -1530,6 +1546,24 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     # linearisation left behind does not pass then)
     while remaining:
         r0 = _weighted(problem, state)
+        if below_noise_floor(problem, r0, sigma, primary):
+            if first:
+                e0 = (r0 * sigma)[primary] if primary is not None else r0 * sigma
+                why = (
+                    f"the baseline fits the data to {float(np.sqrt(np.mean(e0 * e0))):.2g} {problem.unit} RMS, "
+                    f"below the {problem.noise_floor:.2g} {problem.unit} of any real capture's noise: "
+                    "nothing is left for an effect to explain (exact, noise-free data?)"
+                )
+                for c in remaining:
+                    entries[c.name] = {
+                        "name": c.name,
+                        "delta_bic": None,
+                        "cv_rms": None,
+                        "selected": False,
+                        "resolvable": False,
+                        "reason": why,
+                    }
+            break
         J0, _, _ = jacobian(problem, state, free)
         Q0 = _orth(J0)
         term_cur = typed_fit_term(r0, types)
@@ -1623,7 +1657,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         picked, cur_fit, state, free = prune(picked, cur_fit)
 
     # effects outside the library: a smooth function of one driver (residual:<driver>)
-    gens = generic_candidates(problem)
+    gens = [] if below_noise_floor(problem, cur_fit.weighted_residuals, sigma, primary) else generic_candidates(problem)
     # every basis tried is a test (a scan: its grid members, or the independent ones it says)
     m_gen = sum((item[3] if len(item) > 3 else len(item[1])) if item[0] == "scan" else 1 for item in gens)
 

@@ -31,7 +31,7 @@ from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
-from solvers.tabletop import perp_basis
+from solvers.tabletop import NORM_NOISE_FLOOR_G, perp_basis
 
 # Deviance-test scales F from null simulations (bench_diagnose.py --null-only --trials 200).
 # The comment gives that run's 95th-percentile null score; F is set a little above it.
@@ -89,6 +89,8 @@ DIP_MAX_SCATTER = 0.2
 # sample, and the derivative of the shift there (the delay's column at τ = 0) is mostly the
 # reference's noise: shifting all of it cut a 3.5σ delay's deviance from 10.8 to 3.1.
 LDV_DELAY_BAND_FS = 0.25
+# m/s: a micrometre per second, far below any LDV or INS: a drive fitted closer than this is exact
+LDV_NOISE_FLOOR_MPS = 1e-6
 MIN_TEMP_SPAN_C = 0.2  # a temperature that varies less than this cannot resolve a temperature term
 
 
@@ -408,6 +410,7 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
         prob.wander_t_s = np.repeat(t, 3)
     prob.series_names = {0: "beam 1", 1: "beam 2", 2: "beam 3"}
     prob.series_scale_refit = True  # sig_beam is the baseline residual's spread
+    prob.noise_floor = LDV_NOISE_FLOOR_MPS
     # the baseline has no constant: a drift or a temperature bias from a zero outside the capture
     # (power-up, 25 °C) brings its mean with it, which the offset takes; both named, they are tied
     prob.intercept_of = {"offset": {"time_drift": t, "temperature_bias": T}}
@@ -607,6 +610,7 @@ def tabletop_problem(
     )
     nn, nc = len(s_n), len(s_c)
     prob.generic_scale = GENERIC_SCALES["accel-tabletop"]
+    prob.noise_floor = NORM_NOISE_FLOOR_G * g_mps2  # calibrate's floor on the norm noise
     # the changes across holds: measured noise as the norm rows, a noise scale of their own in the
     # deviance (a model that misfits the norm rows must not borrow their quiet to look significant)
     prob.row_types = np.concatenate([np.zeros(nn, int), np.ones(len(s_v), int), np.full(nc, 2)])
@@ -790,6 +794,7 @@ def centrifuge_problem(
             + "".join(" + " + ACCEL_TERMS[x] for x in names if x in ("temperature_bias", "time_drift"))
         ),
     )
+    prob.noise_floor = NORM_NOISE_FLOOR_G  # g: below any real average
     # held-out folds: rows dealt across mountings, ``(mounting + speed rank) mod K``, so a fold
     # leaves out one speed of several mountings. Leaving a whole mounting out (the display
     # groups) takes one of only 6–20 orientations away from S, b, D: their extrapolation then
