@@ -125,9 +125,9 @@ SPEC_COLUMNS = frozenset({*COLUMN_UNITS, *_RAW_COLUMN_UNIT_KEY, "elapsed_s"})
 
 
 def unknown_table_columns(header: list[str]) -> list[str]:
-    """The columns of a table of averages (no `t`) that capture-format.md does not name (nor
-    their `<col>_std`): read and then used by nothing, so said (``tmperature_C`` for
-    ``temp_c``), not ignored without a word. The spec keeps unknown metadata keys and ignores
+    """The columns of a capture (a table of averages, or a time series: QA s26d) that
+    capture-format.md does not name (nor their `<col>_std`): read and then used by nothing, so
+    said (``tmperature_C`` for ``temp_c``), not ignored without a word. The spec keeps unknown metadata keys and ignores
     them; it does not make an unknown column an error, so this is a warning."""
     return [
         c

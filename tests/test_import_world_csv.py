@@ -138,13 +138,20 @@ def test_a_time_column_beside_numbered_channels_is_a_header(tmp_path, session):
     assert not out.exists()
 
 
-def test_a_data_row_of_whole_numbers_from_zero_is_still_data(tmp_path):
-    """'0,1,2' over rows of whole numbers (a counter and counts) stays a data row."""
+def test_a_data_row_of_whole_numbers_from_zero_is_still_data_and_said(tmp_path):
+    """'0,1,2' over rows of whole numbers (a counter and counts) stays a data row, said in one
+    line, since pandas' to_csv(index=False) of an integer array writes the same; --map by
+    those numbers (ax=0: no column's position) reads it as that header."""
     src = tmp_path / "ints.csv"
     src.write_text("0,1,2\n" + "".join(f"{k},{k + 1},{k + 2}\n" for k in range(1, 20)))
-    res, out = _import(tmp_path, src, "--map", "ax=1,ay=2,az=3", "--rate", "100", "--unit", "accel=counts")
-    assert res.returncode == 0 and res.stderr == "", res.stderr
+    args = ("--rate", "100", "--unit", "accel=counts")
+    res, out = _import(tmp_path, src, "--map", "ax=1,ay=2,az=3", *args)
+    assert res.returncode == 0 and res.stderr.count("\n") == 1, res.stderr
+    assert "line 1 ('0,1,2') is read as data, though its numbers run as pandas' to_csv" in res.stderr
     assert read_capture(out).columns["ax"][0] == 0.0 and read_capture(out).n_rows == 20
+    res, out = _import(tmp_path, src, "--map", "ax=0,ay=1,az=2", *args)
+    assert res.returncode == 0, res.stderr
+    assert read_capture(out).columns["ax"][0] == 1.0 and read_capture(out).n_rows == 19
 
 
 # ------------------------------------------------------------- (c) unknown columns are said

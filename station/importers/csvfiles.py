@@ -771,7 +771,14 @@ def read_plain(
         if peek is not None:
             lines = itertools.chain([peek], lines)
             under = [c.strip() for c in _cells(path, peek[0], peek[1], delimiter)]
-            is_header = not all(re.fullmatch(r"[+-]?[0-9]+", c) for c in under)
+            # '--map ax=0': a 0 is no column's position, so the numbers are names: a header
+            is_header = "0" in mapping.values() or not all(re.fullmatch(r"[+-]?[0-9]+", c) for c in under)
+            if not is_header:
+                warnings.append(
+                    f"line {hi} ({head.strip()[:40]!r}) is read as data, though its numbers run as pandas' to_csv "
+                    "numbers an array's columns; if it is that header, map the columns by those numbers "
+                    "(--map ax=0,...)"
+                )
     if commented is not None:
         # numpy.savetxt's header= ('# t ax ay az' above the numbers), read as numpy.genfromtxt(names=True)
         # reads it: the names of the data under it; that first data line is data
