@@ -334,3 +334,41 @@ def test_libreoffice_csv_export_of_an_xlsx_it_wrote(tmp_path, session):
     capture, stderr = _imported(tmp_path, exported, *UNITS)
     _same_accel(capture, session)
     assert stderr == ""
+
+
+@needs_data
+@pytest.mark.parametrize("zone", [None, "Europe/Berlin"], ids=["naive", "tz-aware"])
+def test_a_time_column_of_dates_and_times_as_pandas_writes_a_datetime_index(tmp_path, session, zone):
+    """A logger's frame indexed by pd.to_datetime (naive, or tz_convert'ed: pandas writes
+    '2024-03-01 01:00:00.009765625+01:00'). Before: "column 't': '2024-03-01 00:00:00' is not
+    a number". Now t is read to the ns, from 0, and the first gives the capture's date in UTC
+    (a time without a zone is read as UTC, said)."""
+    import pandas as pd
+
+    t, acc, _ = session
+    stamps = pd.DatetimeIndex(pd.to_datetime(t * 1e9, unit="ns", origin="2024-03-01"))
+    if zone:
+        stamps = stamps.tz_localize("UTC").tz_convert(zone)
+    frame = pd.DataFrame({"ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2]}, index=stamps.rename("t"))
+    src = tmp_path / "stamped.csv"
+    frame.to_csv(src)
+    assert (
+        src.read_text()
+        .splitlines()[1]
+        .startswith("2024-03-01 01:00:00.000000000+01:00," if zone else "2024-03-01 00:00:00.000000000,")
+    )
+    capture, stderr = _imported(tmp_path, src, *UNITS)
+    _same_accel(capture, session)
+    assert capture.meta["date"] == "2024-03-01T00:00:00"
+    if zone:
+        assert stderr == ""
+    else:
+        assert stderr.count("\n") == 1 and "have no time zone" in stderr, stderr
+    res, out = _import(tmp_path, src, "--unit", "accel=m/s^2,t=ms")
+    assert_one_line_refusal(res, "--unit t=ms: the time column holds dates and times")
+    lines = src.read_text().splitlines(keepends=True)
+    lines[5] = "not a time" + lines[5][lines[5].index(",") :]
+    bad = tmp_path / "bad.csv"
+    bad.write_text("".join(lines))
+    res, out = _import(tmp_path, bad, *UNITS)
+    assert_one_line_refusal(res, f"{bad}:6: column 't': 'not a time' is not a date and time")

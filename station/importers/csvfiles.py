@@ -294,10 +294,12 @@ def _rows(
     ncols: int,
     cols: dict[str, int],
     int_time: str | None = None,
+    iso_time: bool = False,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Parse the data lines ``lines`` ((number, text), the first numbered ``first_lineno``):
     ``{target: values}`` and each row's line number. Rows become float64 array chunks as they
-    come (``_FLUSH_ROWS`` at a time), so a large file is held once, as numbers."""
+    come (``_FLUSH_ROWS`` at a time), so a large file is held once, as numbers. ``int_time``'s
+    cells are whole ns, or with ``iso_time`` dates and times (:func:`_iso_ns`)."""
     done: dict[str, list] = {t: [] for t in cols if t != int_time}  # array chunks
     out: dict[str, list] = {t: [] for t in cols}
     ints: list[int] = out[int_time] if int_time else []
@@ -323,7 +325,9 @@ def _rows(
                 message += f", on the last line, which has no line end: {CUT_SHORT}"
             raise InputError(path, lineno, message)
         for target, j in cols.items():
-            if target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
+            if target == int_time and iso_time:  # '2024-03-01 12:00:00.010': ns since 1970, UTC
+                ints.append(_iso_ns(path, lineno, target, cells[j].strip()))
+            elif target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
                 cell = cells[j].strip()
                 if not re.fullmatch(r"[+-]?[0-9]+", cell):
                     raise InputError(
@@ -646,6 +650,30 @@ def _units_row(
             )
 
 
+# a date and time as pandas writes a DatetimeIndex ('2024-03-01 00:00:00.010000000'), ISO 8601
+# with 'T', a zone 'Z' or '+01:00' (to the minute) or none
+_ISO_TIME = re.compile(
+    r"([0-9]{4}-[0-9]{2}-[0-9]{2})[T ]([0-9]{2}:[0-9]{2}:[0-9]{2}(?:\.[0-9]{1,9})?)(Z|[+-][0-9]{2}:?[0-9]{2})?"
+)
+
+
+def _iso_ns(path, lineno: int, name: str, cell: str) -> int:
+    """ns since 1970 (UTC) of a date and time cell (:data:`_ISO_TIME`; no zone: read as UTC)."""
+    m = _ISO_TIME.fullmatch(cell)
+    try:
+        if m is None:
+            raise ValueError
+        ns = int(np.datetime64(f"{m[1]}T{m[2]}", "ns").astype(np.int64))
+    except ValueError:
+        raise InputError(path, lineno, f"column '{name}': {cell[:40]!r} is not a date and time") from None
+    zone = m[3]
+    if zone and zone != "Z":  # local time at an offset: back to UTC
+        sign = 1 if zone[0] == "+" else -1
+        digits = zone[1:].replace(":", "")
+        ns -= sign * (int(digits[:2]) * 3600 + int(digits[2:]) * 60) * 1_000_000_000
+    return ns
+
+
 def _is_number(cell: str) -> bool:
     return bool(_NUMBER.fullmatch(cell) or _DECIMAL_COMMA.fullmatch(cell))
 
@@ -742,6 +770,7 @@ def read_plain(
             raise InputError(None, None, f"--unit {key}=…: expected t, accel, gyro or mag")
     # the spellings a capture's own unit keys take (dps, m/s2, µT ...) name the same units here
     units = {k: (TIME_ALIASES if k == "t" else UNIT_ALIASES.get(f"{k}_unit", {})).get(v, v) for k, v in units.items()}
+    t_given = "t" in units  # --unit t= (a units row may add one below)
     lines = _open_text(path)
     hi, head, above = None, "", None  # the first line that is no comment, and the line above it
     for hi, head in lines:
@@ -960,10 +989,38 @@ def read_plain(
         raise InputError(
             None, None, f"--rate must be a positive number of Hz, at most {MAX_RATE_HZ:g}, got {rate_hz:g}"
         )
-    values, linenos = _rows(path, lines, first_data, delimiter, len(header), cols)
+    iso_time = False  # the time column holds dates and times (pandas' DatetimeIndex): ns since 1970
+    if "t" in cols:
+        first = next(((n, x) for n, x in lines if x.strip() and not x.lstrip().startswith("#")), None)
+        if first is not None:
+            lines = itertools.chain([first], lines)
+            row = _cells(path, first[0], first[1], delimiter)
+            m = _ISO_TIME.fullmatch(row[cols["t"]].strip()) if len(row) > cols["t"] else None
+            if m is not None:
+                iso_time = True
+                if t_given:
+                    raise InputError(
+                        None,
+                        None,
+                        f"--unit t={units['t']}: the time column holds dates and times ({m[0]!r}, line "
+                        f"{first[0]}), not numbers in a unit: leave --unit t out",
+                    )
+                if not m[3]:
+                    warnings.append(
+                        f"the time column's dates and times have no time zone ({m[0]!r}, line {first[0]}): "
+                        "read as UTC for the capture's date"
+                    )
+    values, linenos = _rows(
+        path, lines, first_data, delimiter, len(header), cols, int_time="t" if iso_time else None, iso_time=iso_time
+    )
     _check_limits(path, values, linenos, units)
     _cut_last_row(path, linenos, warnings)
-    if "t" in values:
+    if iso_time:
+        t_column = str(mapping.get("t", "t"))
+        first_s = int(values["t"][0]) * 1e-9
+        t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=warnings)
+        set_date(meta, warnings, first_s, f"{t_column!r} column's")
+    elif "t" in values:
         t_column = str(mapping.get("t", "t"))
         first_s = float(values["t"][0]) * TIME_UNITS[t_unit]
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
