@@ -125,12 +125,10 @@ SPEC_COLUMNS = frozenset({*COLUMN_UNITS, *_RAW_COLUMN_UNIT_KEY, "elapsed_s"})
 
 
 def unknown_table_columns(header: list[str]) -> list[str]:
-    """The columns of a table of averages (no `t`) that capture-format.md does not name (nor
-    their `<col>_std`): read and then used by nothing, so said (``tmperature_C`` for
-    ``temp_c``), not ignored without a word. The spec keeps unknown metadata keys and ignores
+    """The columns of a capture (a table of averages, or a time series: QA s26d) that
+    capture-format.md does not name (nor their `<col>_std`): read and then used by nothing, so
+    said (``tmperature_C`` for ``temp_c``), not ignored without a word. The spec keeps unknown metadata keys and ignores
     them; it does not make an unknown column an error, so this is a warning."""
-    if "t" in header:
-        return []
     return [
         c
         for c in header
@@ -140,7 +138,7 @@ def unknown_table_columns(header: list[str]) -> list[str]:
     ]
 
 
-def unknown_columns_note(unknown: list[str], header_line: int | None = None) -> str:
+def unknown_columns_note(unknown: list[str], header_line: int | None = None, *, series: bool = False) -> str:
     """The one warning line for :func:`unknown_table_columns`, with the spec's name a misspelt
     one is closest to."""
     import difflib
@@ -151,8 +149,9 @@ def unknown_columns_note(unknown: list[str], header_line: int | None = None) -> 
         near = difflib.get_close_matches(c.lower(), names, n=1, cutoff=0.6)
         named.append(repr(c) + (f" (did you mean {near[0]!r}?)" if near else ""))
     where = f"line {header_line}: " if header_line is not None else ""
+    kind = "time series" if series else "table of averages"
     return (
-        f"{where}column{'s' if len(unknown) > 1 else ''} {', '.join(named)} of this table of averages: "
+        f"{where}column{'s' if len(unknown) > 1 else ''} {', '.join(named)} of this {kind}: "
         f"no column of a capture (capture-format.md), ignored"
     )
 
@@ -1279,7 +1278,7 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
     notes: list[str] = []
     unknown = unknown_table_columns(head.header)
     if unknown:
-        notes.append(unknown_columns_note(unknown, head.header_line))
+        notes.append(unknown_columns_note(unknown, head.header_line, series="t" in head.header))
     for chunk in _data_chunks(head, max(1, int(rows)), force_slow=_force_slow, notes=notes):
         for name, arr in chunk.items():
             parts[name].append(arr)

@@ -22,7 +22,14 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from station.capture import CUT_SHORT, MAX_ABS, UNIT_ALIASES, UNIT_KEYS, no_line_end_note, plausible_limit
+from station.capture import (
+    CUT_SHORT,
+    MAX_ABS,
+    UNIT_ALIASES,
+    UNIT_KEYS,
+    no_line_end_note,
+    plausible_limit,
+)
 from station.errors import InputError
 from station.fileio import looks_utf16, open_input
 from station.importers._common import COLUMNS, NAME, Imported, Stream, set_date
@@ -58,6 +65,10 @@ KALIBR_UNITS = {
 _NUMBER = re.compile(r"\s*[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\s*")
 # a decimal comma ('0,01'), as a decimal-comma locale writes numbers where ',' is not the separator
 _DECIMAL_COMMA = re.compile(r"\s*[+-]?[0-9]+,[0-9]+(?:[eE][+-]?[0-9]+)?\s*")
+
+
+# a number written with thousands separators: '15,032', '-1,234,567.5', '15.032,5'
+_THOUSANDS = re.compile(r"\s*[+-]?[0-9]{1,3}(?:(?:,[0-9]{3})+(?:\.[0-9]*)?|(?:\.[0-9]{3})+(?:,[0-9]*)?)\s*")
 
 
 _MAX_LINE_BYTES = 1 << 20  # a line longer than this is no CSV row (the capture reader's limit)
@@ -230,7 +241,10 @@ def _number(path, lineno: int, name: str, cell: str) -> float:
     if not _NUMBER.fullmatch(cell):
         if cell.strip().lower() in _MISSING:
             return math.nan
-        raise InputError(path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number")
+        hint = ""
+        if _THOUSANDS.fullmatch(cell):  # '15,032' (a spreadsheet's 1000 separator), '15.032,5'
+            hint = ": a thousands separator? save the file with plain numbers (no 1000 separator)"
+        raise InputError(path, lineno, f"column '{name}': {cell.strip()[:40]!r} is not a number{hint}")
     x = float(cell)
     if not math.isfinite(x):
         raise InputError(path, lineno, f"column '{name}': {cell.strip()!r} is out of range")
@@ -280,10 +294,12 @@ def _rows(
     ncols: int,
     cols: dict[str, int],
     int_time: str | None = None,
+    iso_time: bool = False,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Parse the data lines ``lines`` ((number, text), the first numbered ``first_lineno``):
     ``{target: values}`` and each row's line number. Rows become float64 array chunks as they
-    come (``_FLUSH_ROWS`` at a time), so a large file is held once, as numbers."""
+    come (``_FLUSH_ROWS`` at a time), so a large file is held once, as numbers. ``int_time``'s
+    cells are whole ns, or with ``iso_time`` dates and times (:func:`_iso_ns`)."""
     done: dict[str, list] = {t: [] for t in cols if t != int_time}  # array chunks
     out: dict[str, list] = {t: [] for t in cols}
     ints: list[int] = out[int_time] if int_time else []
@@ -309,7 +325,9 @@ def _rows(
                 message += f", on the last line, which has no line end: {CUT_SHORT}"
             raise InputError(path, lineno, message)
         for target, j in cols.items():
-            if target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
+            if target == int_time and iso_time:  # '2024-03-01 12:00:00.010': ns since 1970, UTC
+                ints.append(_iso_ns(path, lineno, target, cells[j].strip()))
+            elif target == int_time:  # nanosecond integers: keep every digit (float64 would round them)
                 cell = cells[j].strip()
                 if not re.fullmatch(r"[+-]?[0-9]+", cell):
                     raise InputError(
@@ -519,8 +537,12 @@ def read_euroc(path, *, kinds=None) -> Imported:
 
 
 def _sniff_delimiter(header: str) -> str:
-    for d in (",", ";", "\t"):
-        if d in header:
+    """The line's delimiter: ``;`` or tab where one stands outside quotes (a decimal-comma
+    locale's file: ``0,00;0,1;9,8`` is four fields, not ``0`` and ``00;0``), else ``,``, else a
+    space (numpy.savetxt's default)."""
+    bare = re.sub(r'"[^"]*"', "", header)  # a quoted field's delimiters are its text
+    for d in (";", "\t", ","):
+        if d in bare:
             return d
     return " "
 
@@ -557,17 +579,130 @@ def _later_header(
     return None
 
 
+def _commented_header(path, above: tuple[int, str] | None, n_fields: int, mapping: dict[str, str]) -> list[str] | None:
+    """The column names of a ``#`` comment line directly above the first data row, as
+    numpy.savetxt writes its ``header=`` (``# t ax ay az``) and numpy.genfromtxt(names=True) reads
+    it: as many names as the row has fields, naming what ``--map`` asks for (without ``--map``: a
+    capture column). None when the line above is none such (a comment of other words)."""
+    if above is None or not above[1].lstrip().startswith("#"):
+        return None
+    text = above[1].lstrip()[1:].strip()
+    cells = [c.strip() for c in _cells(path, above[0], text, _sniff_delimiter(text))]
+    if len(cells) != n_fields or not _is_header(cells) or not _names_columns(cells, mapping):
+        return None
+    return cells
+
+
+def unknown_series_note(unknown: list[str], header_line: int) -> str:
+    """The one warning line for a header's columns that are no capture column (``tmperature_C``,
+    ``pressure``): not imported, with the capture name a misspelt one is closest to."""
+    import difflib
+
+    named = []
+    for c in unknown[:SHOWN_COLUMNS]:
+        near = difflib.get_close_matches(c.lower(), TARGETS, n=1, cutoff=0.6)
+        named.append(repr(c) + (f" (did you mean {near[0]!r}?)" if near else ""))
+    more = f" (+{len(unknown) - SHOWN_COLUMNS} more)" if len(unknown) > SHOWN_COLUMNS else ""
+    return (
+        f"line {header_line}: column{'s' if len(unknown) > 1 else ''} {', '.join(named)}{more}: no capture column "
+        f"({', '.join(TARGETS)}), not imported; --map COL=NAME takes one in"
+    )
+
+
+def _units_row(
+    path,
+    lineno: int,
+    row: list[str],
+    cols: dict[str, int],
+    units: dict[str, str],
+    row_said: dict[str, str],
+    warnings: list[str],
+) -> None:
+    """Read a units row (``s,m/s^2,m/s^2,m/s^2`` under ``t,ax,ay,az``; ``[m/s^2]`` too) into
+    ``units`` for each sensor (and ``t``) that ``--unit`` leaves unsaid; a ``--unit`` that
+    differs is used, and said. A sensor's columns in different units are refused."""
+    for kind in ("t", "accel", "gyro", "mag"):
+        names = ["t"] if kind == "t" else [c for c in COLUMNS[kind] if c in cols]
+        cells = [re.sub(r"^[\[(](.*)[\])]$", r"\1", row[cols[c]]).strip() for c in names if c in cols]
+        if not cells or not any(cells):
+            continue
+        aliases = TIME_ALIASES if kind == "t" else UNIT_ALIASES.get(f"{kind}_unit", {})
+        known = TIME_UNITS if kind == "t" else UNIT_KEYS[f"{kind}_unit"]
+        said = {aliases.get(c, c) for c in cells}
+        if len(said) > 1:
+            raise InputError(
+                path,
+                lineno,
+                f"units row: the {NAME.get(kind, 'time')} columns {', '.join(names)} are in different units "
+                f"({', '.join(repr(c) for c in cells)}): one unit per sensor",
+            )
+        (unit,) = said
+        if unit not in known:
+            row_said[kind] = cells[0]
+            continue
+        given = units.get(kind)
+        if given is None:
+            units[kind] = unit
+        elif given != unit:
+            warnings.append(
+                f"--unit {kind}={given} differs from the units row (line {lineno}: {unit!r} for "
+                f"{', '.join(names)}): --unit used"
+            )
+
+
+# a date and time as pandas writes a DatetimeIndex ('2024-03-01 00:00:00.010000000'), ISO 8601
+# with 'T', a zone 'Z' or '+01:00' (to the minute) or none
+_ISO_TIME = re.compile(
+    r"([0-9]{4}-[0-9]{2}-[0-9]{2})[T ]([0-9]{2}:[0-9]{2}:[0-9]{2}(?:\.[0-9]{1,9})?)(Z|[+-][0-9]{2}:?[0-9]{2})?"
+)
+
+
+def _iso_ns(path, lineno: int, name: str, cell: str) -> int:
+    """ns since 1970 (UTC) of a date and time cell (:data:`_ISO_TIME`; no zone: read as UTC)."""
+    m = _ISO_TIME.fullmatch(cell)
+    try:
+        if m is None:
+            raise ValueError
+        ns = int(np.datetime64(f"{m[1]}T{m[2]}", "ns").astype(np.int64))
+    except ValueError:
+        raise InputError(path, lineno, f"column '{name}': {cell[:40]!r} is not a date and time") from None
+    zone = m[3]
+    if zone and zone != "Z":  # local time at an offset: back to UTC
+        sign = 1 if zone[0] == "+" else -1
+        digits = zone[1:].replace(":", "")
+        ns -= sign * (int(digits[:2]) * 3600 + int(digits[2:]) * 60) * 1_000_000_000
+    return ns
+
+
 def _is_number(cell: str) -> bool:
     return bool(_NUMBER.fullmatch(cell) or _DECIMAL_COMMA.fullmatch(cell))
 
 
 def _is_header(cells: list[str]) -> bool:
     """Whether a line's (stripped) fields are column names: (almost) all of them text, at most
-    one field in ten a number (a header may name a column '2'). A line of numbers with some text
+    one field in ten a number (a header may name a column '2'), or channels numbered as pandas
+    names an array's columns (:func:`_numbered_channels`). A line of numbers with some text
     among them (``1.0,2.0,abc``: a data row with a corrupt field) is a data row, not a header."""
     filled = [c for c in cells if c and c.lower() not in _MISSING]
     numbers = sum(1 for c in filled if _is_number(c))
-    return bool(filled) and numbers * 10 <= len(filled)
+    return bool(filled) and (numbers * 10 <= len(filled) or _numbered_channels(cells))
+
+
+def _numbered_channels(cells: list[str]) -> bool:
+    """Whether a line's last fields are its channels numbered 0, 1, 2, ... (or 1, 2, 3, ...),
+    each a bare whole number, at least two of them, after fields that are text or empty: pandas'
+    ``to_csv`` of a numpy array (``,0,1,2`` with its index; ``0,1,2`` without), a logger's
+    ``time,0,1,2``. No data row of a sensor reads so."""
+    k = len(cells)
+    while k and re.fullmatch(r"[0-9]+", cells[k - 1]):
+        k -= 1
+    run = [int(c) for c in cells[k:]]
+    return (
+        len(run) >= 2
+        and run[0] in ((0, 1) if k else (0,))  # a line of numbers alone: from 0, as pandas numbers
+        and run == list(range(run[0], run[0] + len(run)))
+        and not any(_is_number(c) for c in cells[:k])
+    )
 
 
 def _data_row_refusal(path, lineno: int, cells: list[str]) -> InputError:
@@ -635,8 +770,15 @@ def read_plain(
             raise InputError(None, None, f"--unit {key}=…: expected t, accel, gyro or mag")
     # the spellings a capture's own unit keys take (dps, m/s2, µT ...) name the same units here
     units = {k: (TIME_ALIASES if k == "t" else UNIT_ALIASES.get(f"{k}_unit", {})).get(v, v) for k, v in units.items()}
+    t_given = "t" in units  # --unit t= (a units row may add one below)
     lines = _open_text(path)
-    hi, head = next(((n, s) for n, s in lines if s.strip() and not s.lstrip().startswith("#")), (None, ""))
+    hi, head, above = None, "", None  # the first line that is no comment, and the line above it
+    for hi, head in lines:
+        if head.strip() and not head.lstrip().startswith("#"):
+            break
+        above = (hi, head)
+    else:
+        hi = None
     if hi is None:
         raise InputError(path, 1, "empty file: no header row")
     delimiter = _sniff_delimiter(head)
@@ -648,8 +790,31 @@ def read_plain(
     declared = None  # (Hz, line, text): the sample rate a preamble line declares ('Fs,100')
     skipped: list[tuple[int, str]] = [(hi, head)]
     found = None
-    if not _is_header(header):  # a data row (numbers, maybe with a bad field), not column names
-        numbers_only = all(_is_number(c) or c.lower() in _MISSING for c in header)
+    numbers_only = all(_is_number(c) or c.lower() in _MISSING for c in header)
+    commented = _commented_header(path, above, len(header), mapping) if numbers_only else None
+    is_header = _is_header(header)
+    if is_header and numbers_only and all(header):
+        # '0,1,2' alone: pandas' numbered columns over its rows of floats, or a data row of whole
+        # numbers ('0,1,2,3' then '1,1,2,3'): the line under it tells
+        peek = next(lines, None)
+        if peek is not None:
+            lines = itertools.chain([peek], lines)
+            under = [c.strip() for c in _cells(path, peek[0], peek[1], delimiter)]
+            # '--map ax=0': a 0 is no column's position, so the numbers are names: a header
+            is_header = "0" in mapping.values() or not all(re.fullmatch(r"[+-]?[0-9]+", c) for c in under)
+            if not is_header:
+                warnings.append(
+                    f"line {hi} ({head.strip()[:40]!r}) is read as data, though its numbers run as pandas' to_csv "
+                    "numbers an array's columns; if it is that header, map the columns by those numbers "
+                    "(--map ax=0,...)"
+                )
+    if commented is not None:
+        # numpy.savetxt's header= ('# t ax ay az' above the numbers), read as numpy.genfromtxt(names=True)
+        # reads it: the names of the data under it; that first data line is data
+        lines = itertools.chain([(hi, head)], lines)
+        header, first_data = commented, hi
+        hi = above[0]
+    elif not is_header:  # a data row (numbers, maybe with a bad field), not column names
         if numbers_only and not by_number:
             raise InputError(
                 path,
@@ -669,8 +834,11 @@ def read_plain(
         elif found is None and not mapping:
             raise _data_row_refusal(path, hi, header)
         elif found is None:  # --map names a column no line of the first ones names
-            target, source = next((t, c) for t, c in mapping.items() if not c.isdigit() and c not in header)
             numbers = sum(1 for c in header if _is_number(c))
+            missing = next(((t, c) for t, c in mapping.items() if not c.isdigit() and c not in header), None)
+            if missing is None:  # every name is on this line, among numbers: no header all the same
+                raise _data_row_refusal(path, hi, header)
+            target, source = missing
             raise InputError(
                 path,
                 hi,
@@ -692,9 +860,17 @@ def read_plain(
             f"(line {first}: {first_text.strip()[:40]!r})"
         )
         declared = _declared_rate(path, skipped)
+    if commented is None and found is None and header != [str(j + 1) for j in range(len(header))] and numbers_only:
+        warnings.append(
+            f"line {hi} ({head.strip()[:40]!r}) is read as a header of numbered columns, as pandas' to_csv "
+            "names an array's columns, not as data"
+        )
     given = bool(mapping)
     if not mapping:  # a header that already uses the capture's names
         mapping = {c: c for c in header if c in TARGETS}
+        unknown = [c for c in header if c and c not in TARGETS and not c.isdigit()]
+        if mapping and unknown:  # columns the capture has no place for: said, not dropped without a word
+            warnings.append(unknown_series_note(unknown, hi))
         if not mapping:
             raise InputError(
                 path,
@@ -725,13 +901,42 @@ def read_plain(
                 hi,
                 f"--map {target}={source}: no column {source!r} in the header ({', '.join(header)})",
             )
+    # a number that is also a column's name (pandas' ',0,1,2'): the name, as the header shows it
+    renamed = [
+        f"{t}={src} (column {cols[t] + 1})"
+        for t, src in mapping.items()
+        if src.isdigit() and src in header and cols[t] != int(src) - 1
+    ]
     taken: dict[int, str] = {}
     for target, j in cols.items():  # one column's samples as two quantities (gx=a,gy=a; gx=2,temp_c=a)
         if j in taken:
             raise InputError(
-                path, hi, f"--map: column {header[j]!r} ({j + 1}) is given for both {taken[j]} and {target}"
+                path,
+                hi,
+                f"--map: column {header[j]!r} ({j + 1}) is given for both {taken[j]} and {target}"
+                + (
+                    f" (a number in --map is the column so named where the header names one: {', '.join(renamed)})"
+                    if renamed
+                    else ""
+                ),
             )
         taken[j] = target
+    if renamed:
+        warnings.append(
+            f"--map {', '.join(renamed)}: the header's column names, not column numbers (line {hi} names "
+            "its columns by numbers)"
+        )
+    # a units row under the header ('t,ax,ay,az' then 's,m/s^2,m/s^2,m/s^2'): no data; its units
+    # are the file's where --unit does not give them
+    row_said: dict[str, str] = {}  # kind → what the units row writes for its columns, when no unit we know
+    peek = next(lines, None)
+    if peek is not None:
+        lines = itertools.chain([peek], lines)
+        row = [c.strip() for c in _cells(path, peek[0], peek[1], delimiter)] if peek[1].strip() else []
+        if len(row) == len(header) and any(row) and not any(_is_number(c) for c in row):
+            next(lines)
+            first_data = peek[0] + 1
+            _units_row(path, peek[0], row, cols, units, row_said, warnings)
     if rate_hz is not None and "t" in cols:
         raise InputError(None, None, "--rate is for a file without a time column; t is mapped (leave out one of them)")
     if declared is not None and "t" not in cols:
@@ -756,8 +961,9 @@ def read_plain(
         raise InputError(
             path,
             hi,
-            f"the file does not say the unit of its {' and '.join(NAME[k] for k in unsaid)} columns: "
-            f"give --unit {give} ({allowed})"
+            f"the file does not say the unit of its {' and '.join(NAME[k] for k in unsaid)} columns"
+            + "".join(f" (its units row: {row_said[k]!r})" for k in unsaid if k in row_said)
+            + f": give --unit {give} ({allowed})"
             + ("; it has no time column either: --map t=COLUMN or the sample rate, --rate HZ" if no_time else ""),
         )
     for kind in sorted(kinds_present):
@@ -783,10 +989,38 @@ def read_plain(
         raise InputError(
             None, None, f"--rate must be a positive number of Hz, at most {MAX_RATE_HZ:g}, got {rate_hz:g}"
         )
-    values, linenos = _rows(path, lines, first_data, delimiter, len(header), cols)
+    iso_time = False  # the time column holds dates and times (pandas' DatetimeIndex): ns since 1970
+    if "t" in cols:
+        first = next(((n, x) for n, x in lines if x.strip() and not x.lstrip().startswith("#")), None)
+        if first is not None:
+            lines = itertools.chain([first], lines)
+            row = _cells(path, first[0], first[1], delimiter)
+            m = _ISO_TIME.fullmatch(row[cols["t"]].strip()) if len(row) > cols["t"] else None
+            if m is not None:
+                iso_time = True
+                if t_given:
+                    raise InputError(
+                        None,
+                        None,
+                        f"--unit t={units['t']}: the time column holds dates and times ({m[0]!r}, line "
+                        f"{first[0]}), not numbers in a unit: leave --unit t out",
+                    )
+                if not m[3]:
+                    warnings.append(
+                        f"the time column's dates and times have no time zone ({m[0]!r}, line {first[0]}): "
+                        "read as UTC for the capture's date"
+                    )
+    values, linenos = _rows(
+        path, lines, first_data, delimiter, len(header), cols, int_time="t" if iso_time else None, iso_time=iso_time
+    )
     _check_limits(path, values, linenos, units)
     _cut_last_row(path, linenos, warnings)
-    if "t" in values:
+    if iso_time:
+        t_column = str(mapping.get("t", "t"))
+        first_s = int(values["t"][0]) * 1e-9
+        t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=warnings)
+        set_date(meta, warnings, first_s, f"{t_column!r} column's")
+    elif "t" in values:
         t_column = str(mapping.get("t", "t"))
         first_s = float(values["t"][0]) * TIME_UNITS[t_unit]
         t_s = _time_seconds(path, values.pop("t"), linenos, TIME_UNITS[t_unit], integer=False, warnings=warnings)
