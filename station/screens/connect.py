@@ -20,6 +20,7 @@ from station.textsafe import tui_markup, tui_text
 from station.widgets.field import Field
 from station.widgets.title import TitleBar, footer
 
+
 def failure_text(exc: BaseException, port: str = "") -> str:
     """Connect's line for a source that did not open, with what to do next: it said only the
     system's reason ("Cannot connect: /dev/ttyUSB3: cannot open: No such file or directory"),
