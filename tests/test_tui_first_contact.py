@@ -39,3 +39,34 @@ def test_a_port_path_that_does_not_exist_says_what_to_do_next(tmp_path):
     )
     assert not start_disabled
     assert all(len(line) <= SIZE[0] for line in lines)
+
+
+def test_a_save_that_fails_says_how_to_keep_the_result(tmp_path):
+    """`s` on Results with a database that cannot take the save (here another program wrote
+    over the file: not SQLite) said 'Not saved: file is not a database ...' and nothing more:
+    the operator did not learn that `e` keeps the capture and result as files, nor that `s`
+    tries again once the database is mended. Both are said now, whole at 80x24; the result is
+    still unsaved (ctrl+q asks)."""
+    from station.screens.results import ResultsScreen
+    from tests.tui_data import p1_result
+
+    db = tmp_path / "station.db"
+    db.write_text("a spreadsheet saved over the station database\n")
+    cap, result = p1_result("IMU-8")
+
+    async def story():
+        app = make_app(str(db), device_id="IMU-8")
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#residuals").row_count == 12)
+            await pilot.press("s")
+            await wait_for(pilot, lambda: "Not saved" in text_of(app, "#saved"))
+            saved = _joined(text_of(app, "#saved"))
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            return saved, screen_lines(app)
+
+    saved, lines = asyncio.run(story())
+    assert saved.startswith("Not saved: file is not a database")
+    assert saved.endswith("e exports the capture and result to files; s tries again")
+    assert all(len(line) <= SIZE[0] for line in lines)
