@@ -70,3 +70,38 @@ def test_a_save_that_fails_says_how_to_keep_the_result(tmp_path):
     assert saved.startswith("Not saved: file is not a database")
     assert saved.endswith("e exports the capture and result to files; s tries again")
     assert all(len(line) <= SIZE[0] for line in lines)
+
+
+def test_question_mark_opens_the_help_and_a_field_keeps_it_as_text(tmp_path):
+    """`?`, the key a newcomer guesses for help (less, man, htop), did nothing: only F1 opened
+    it. It opens and closes the help now, on Connect and on Results; typed in a field (an
+    operator's note, a place) it stays text."""
+    from station.screens.results import ResultsScreen
+    from tests.tui_data import p1_result
+
+    cap, result = p1_result("IMU-8")
+
+    async def story():
+        app = make_app(str(tmp_path / "station.db"), device_id="IMU-8")
+        seen = []
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            app.screen.query_one("#start").focus()
+            await pilot.press("question_mark")
+            await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
+            seen.append(any("F1 or ? help" in line for line in screen_lines(app)))
+            await pilot.press("question_mark")
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            app.screen.query_one("#place").focus()
+            await pilot.press("b", "a", "y", "question_mark")
+            await wait_for(pilot, lambda: app.screen.query_one("#place").value == "bay?")
+            seen.append(screen_name(app))
+            await app.push_screen(ResultsScreen(cap, result, None, None))
+            await wait_for(pilot, lambda: app.screen.query_one("#residuals").row_count == 12)
+            await pilot.press("question_mark")
+            await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
+            return seen
+
+    assert asyncio.run(story()) == [True, "ConnectScreen"]
