@@ -89,7 +89,9 @@ def test_question_mark_opens_the_help_and_a_field_keeps_it_as_text(tmp_path):
             app.screen.query_one("#start").focus()
             await pilot.press("question_mark")
             await wait_for(pilot, lambda: screen_name(app) == "HelpScreen")
-            seen.append(any("F1 or ? help" in line for line in screen_lines(app)))
+            seen.append(
+                any("F1 ? help · ctrl+q quit · tab/shift+tab move · enter choose" in line for line in screen_lines(app))
+            )
             await pilot.press("question_mark")
             await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
             app.screen.query_one("#place").focus()

@@ -14,7 +14,7 @@ from station.widgets.title import footer
 HELP = """\
 [b]Calibration station: keys[/]   (esc, F1 or ? closes this; ↑ ↓ scroll)
 
-[b]Everywhere[/]  F1 or ? help · ctrl+q quit · tab/shift+tab move · enter choose
+[b]Everywhere[/]  F1 ? help · ctrl+q quit · tab/shift+tab move · enter choose
             F2 history · ctrl+p command palette
 [b]Connect[/]     F5 start · F6 resume a P1 · F7 import a file · F2 history
             Average (s): seconds per position or row, or the record's
