@@ -107,3 +107,58 @@ def test_question_mark_opens_the_help_and_a_field_keeps_it_as_text(tmp_path):
             return seen
 
     assert asyncio.run(story()) == [True, "ConnectScreen"]
+
+
+def test_history_exports_a_calibration_for_a_flight_controller(tmp_path):
+    """From the console there was no way to a flight controller's parameters (`station export`
+    was only in the README). `e` on History's highlighted calibration writes it in the format
+    typed, named by device and calibration, in the export folder; the footer shows the key at
+    80 columns, and a format the calibration cannot go to is refused in one line, nothing written."""
+    from db import Store
+    from station.firmware_export import export
+    from station.screens.history import HistoryScreen
+    from station.store import save_result
+    from tests.tui_data import p1_result
+
+    db = str(tmp_path / "station.db")
+    cap, result = p1_result("IMU-8")
+    cal_id = save_result(db, cap, result, device_id="IMU-8")
+    out = tmp_path / "out"
+    out.mkdir()
+
+    async def story():
+        app = make_app(db)
+        app.session.extra["export_dir"] = str(out)
+        async with app.run_test(size=SIZE) as pilot:
+            await app.push_screen(HistoryScreen())
+            await wait_for(pilot, lambda: app.screen.query_one("#calibrations").row_count == 1)
+            app.screen.query_one("#calibrations").focus()
+            await wait_for(pilot, lambda: "f1 Help" in screen_lines(app)[-1])
+            footer = screen_lines(app)[-1]
+            await pilot.press("e")
+            await wait_for(pilot, lambda: screen_name(app) == "FirmwareScreen")
+            await pilot.press(*"ardupilot", "enter")  # a capture in volts: ArduPilot's drivers deliver m/s^2
+            await wait_for(pilot, lambda: "Not exported" in text_of(app, "#said"))
+            refused = [_joined(text_of(app, "#said"))]
+            await pilot.press("ctrl+a", "ctrl+k", *"betaflight", "enter")
+            await wait_for(pilot, lambda: "no format" in text_of(app, "#said"))
+            refused.append(_joined(text_of(app, "#said")))
+            await pilot.press("ctrl+a", "ctrl+k", *"c-header", "enter")
+            await wait_for(pilot, lambda: "Wrote" in text_of(app, "#said"))
+            wrote = _joined(text_of(app, "#said"))
+            lines = screen_lines(app)
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen")
+            return footer, wrote, refused, lines
+
+    footer, wrote, refused, lines = asyncio.run(story())
+    assert "e Firmware" in footer and footer.rstrip().endswith("f1 Help")
+    assert refused[0].startswith("Not exported: ardupilot: accel-tabletop calibration of raw 'V' (accel_unit)")
+    assert refused[1] == "no format betaflight: one of ardupilot, px4, qgc, c-header, json"
+    assert wrote == f"Wrote IMU-8-cal{cal_id}.h in {out}"
+    with Store(db) as store:
+        cal = store.calibration(cal_id)
+        meta = store.capture_info(cal["capture_id"])["meta"]
+    assert (out / f"IMU-8-cal{cal_id}.h").read_text() == export(cal, meta, "c-header")
+    assert sorted(p.name for p in out.iterdir()) == [f"IMU-8-cal{cal_id}.h"]  # nothing from the refusals
+    assert all(len(line) <= SIZE[0] for line in lines)

@@ -40,7 +40,9 @@ HELP = """\
 [b]History[/]     up/down device · p next parameter · tab to the calibrations,
             g diagnose the one under the cursor · l the device's limits
             · i its recalibration interval (the line over its
-            calibrations says when it falls due) · escape back
+            calibrations says when it falls due) · e the one under the
+            cursor for a flight controller (ArduPilot .param, PX4,
+            QGroundControl .params, C header, JSON) · escape back
 
 [b]P1 in short[/]  Put the unit in each of the 12 positions the drawing
 shows and let go. When it is still and in position the station waits a
