@@ -162,3 +162,44 @@ def test_history_exports_a_calibration_for_a_flight_controller(tmp_path):
     assert (out / f"IMU-8-cal{cal_id}.h").read_text() == export(cal, meta, "c-header")
     assert sorted(p.name for p in out.iterdir()) == [f"IMU-8-cal{cal_id}.h"]  # nothing from the refusals
     assert all(len(line) <= SIZE[0] for line in lines)
+
+
+def test_start_asks_before_a_new_run_replaces_the_positions_kept_for_resume(tmp_path):
+    """After an aborted P1 (positions kept, `Resume 1/12 [F6]` on Connect), F5 started a new
+    run at once, and its first captured position wrote over the resume file: the positions
+    captured before (3-5 minutes each at the source's averaging time) were gone without a word.
+    F5 asks now; n (or Esc) keeps them and F6 still resumes them; y starts anew."""
+    from station.sources import SimSource
+    from tests.test_tui import BenchClock, run_bench
+
+    db = str(tmp_path / "station.db")
+
+    async def story():
+        clock = BenchClock()
+        src = SimSource(seed=5, clock=clock)
+        app = make_app(db, device=src, start="procedure", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            g = app.screen.guide
+            await run_bench(pilot, src, clock, lambda: g.n_captured == 1)  # x_up: the unit starts there
+            await pilot.press("a")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            await pilot.press("y")
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            resume = app.screen.query_one("#resume")
+            await wait_for(pilot, lambda: not resume.disabled)
+            app.screen.query_one("#start").focus()
+            await pilot.press("f5")
+            await wait_for(pilot, lambda: any("Start a new run?" in line for line in screen_lines(app)))
+            box = [line.split("│")[1] for line in screen_lines(app) if line.count("│") == 2]  # the box's lines
+            asked = " ".join(" ".join(box).split())
+            await pilot.press("n")
+            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+            await pilot.press("f6")  # what was kept still resumes
+            await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen" and app.screen.guide is not None)
+            return asked, app.screen.guide.n_captured
+
+    asked, n_resumed = asyncio.run(story())
+    assert "Start a new run? The interrupted run's 1/12 positions are discarded" in asked
+    assert "F6 (Resume) continues them instead" in asked
+    assert n_resumed == 1

@@ -336,7 +336,26 @@ class ConnectScreen(Screen):
 
     @on(Button.Pressed, "#start")
     def action_start(self) -> None:
-        self._connect(resume=False)
+        self._start_new()
+
+    def _start_new(self) -> None:
+        """Start a new run; with an interrupted P1 to resume, after asking: the new run's first
+        position replaced the resume file, and the positions captured before (minutes each at
+        the source's averaging time) were gone without a word."""
+        from station.screens.decide import ConfirmScreen
+
+        resume = self.query_one("#resume", Button)
+        if resume.disabled or self.app.session.scripted:
+            self._connect(resume=False)
+            return
+        kept = str(resume.label).removeprefix("Resume ").split(" ")[0]  # "3/12"
+        self.app.push_screen(
+            ConfirmScreen(
+                f"Start a new run? The interrupted run's {kept} positions are discarded once the new "
+                "one captures its first. F6 (Resume) continues them instead."
+            ),
+            lambda yes: self._connect(resume=False) if yes else None,
+        )
 
     @on(Button.Pressed, "#resume")
     def action_resume(self) -> None:
@@ -357,7 +376,7 @@ class ConnectScreen(Screen):
 
     @on(Input.Submitted)
     def _submitted(self) -> None:
-        self._connect(resume=False)
+        self._start_new()
 
     def _connect(self, resume: bool) -> None:
         s = self.app.session
