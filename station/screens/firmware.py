@@ -42,6 +42,8 @@ class FirmwareScreen(ModalScreen):
     FirmwareScreen #box { width: 72; height: auto; border: round $primary; background: $surface; padding: 0 1; }
     FirmwareScreen #said { height: auto; }
     FirmwareScreen Input:focus { border: tall $accent; }
+    /* History's notice lines show under the box: a toast over them cut them */
+    FirmwareScreen ToastHolder { display: none; }
     """
     BINDINGS = [Binding("escape", "app.pop_screen", "Back", priority=True)]
 
