@@ -515,7 +515,8 @@ def test_the_console_refuses_a_read_only_database_before_it_starts(tmp_path, cap
     """`station tui` on a database this user may read but not write started, and every F5 on
     Connect said "Cannot connect: attempt to write a readonly database" (a device that was fine;
     found at 80x24 in tmux). It is refused before the screen is drawn, in one line saying what
-    to do; nothing in it changes. A writable one goes on to the console (here: no terminal)."""
+    to do; nothing in it changes. A writable one goes on to the console (here: no terminal).
+    So is `station demo` unless --no-save: it failed after its whole run."""
     import shutil
 
     db = str(db_with_calibration)
@@ -531,12 +532,16 @@ def test_the_console_refuses_a_read_only_database_before_it_starts(tmp_path, cap
         pytest.skip("cannot make a file read-only for root here")
     try:
         code, out, err = run(capsys, "--db", db, "tui")
+        # the demo saved only after its whole run: 'cannot process this input (OperationalError: ...)'
+        demo = run(capsys, "--db", db, "demo", "--headless")
     finally:
         undo()
     line = one_line(err)
     assert code == 2 and out == ""
     assert line.startswith(f"station: {db}: cannot write the station database: attempt to write a readonly database")
     assert "make it writable, or give --db another file" in line
+    code, out, err = demo
+    assert code == 2 and out == "" and "cannot write the station database" in one_line(err) and "--no-save" in err
     assert Path(db).read_bytes() == before
 
 

@@ -41,47 +41,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _require_writable_database(path: str) -> None:
-    """InputError (one line, exit 2, before the screen is drawn) for a database the console
-    cannot use: one that is no station database, or one this user may read but not write. The
-    console writes it on Connect (the device, the bench's settings) and on every save; a
-    read-only one started, then every Connect said "Cannot connect: attempt to write a readonly
-    database" about a device that was fine. A path with no database yet is made on the first save."""
-    import os
-    import sqlite3
-
-    from station.errors import InputError
-
-    if path == ":memory:" or path.startswith("file:") or not os.path.exists(path):
-        return
-    from db.store import Store
-
-    what_next = (
-        "the console saves every calibration there: make it writable, or give --db another file "
-        "(`station history` and `station devices` read it as it is)"
-    )
-    try:
-        store = Store(path)
-    except Exception as exc:  # noqa: BLE001 - sqlite3.DatabaseError, OSError: not a usable database
-        text = f"cannot open the station database: {exc}"
-        raise InputError(path, None, f"{text}; {what_next}" if "readonly" in str(exc) else text) from None
-    try:
-        store.check_writable()
-    except sqlite3.Error as exc:
-        raise InputError(path, None, f"cannot write the station database: {exc}; {what_next}") from None
-    finally:
-        store.close()
-
-
 def run(args: argparse.Namespace) -> int:
     import sys
 
     from station.app import make_app
     from station.cli import db_path
+    from station.commands._dbutil import require_writable
     from station.errors import InputError, require_positive
 
     path = db_path(args)  # a given --db in a missing folder is refused before the screen is drawn
-    _require_writable_database(path)
+    require_writable(
+        path,
+        "the console saves every calibration there: make it writable, or give --db another file "
+        "(`station history` and `station devices` read it as it is)",
+    )
     require_positive("--speed", args.speed)
     require_positive("--average-s", args.average_s, "seconds")
     site = None
