@@ -458,6 +458,27 @@ class Store:
         with self._lock:
             return self.conn.execute(sql, args).fetchall()
 
+    def check_writable(self) -> None:
+        """Raise sqlite3.OperationalError when a write to this database would fail (a file that
+        may be read but not written: a read-only mode, an immutable file, a read-only mount).
+        Opening such a WAL database succeeds and reads work, so the failure came only with the
+        first write: in the TUI after a whole procedure. Nothing is written (the probe table is
+        rolled back); a database another connection is writing counts as writable."""
+        with self._lock:
+            self.conn.execute("PRAGMA busy_timeout = 0")
+            try:
+                self.conn.execute("BEGIN IMMEDIATE")
+                try:
+                    self.conn.execute("CREATE TABLE station_write_probe (x)")
+                finally:
+                    self.conn.execute("ROLLBACK")
+            except sqlite3.OperationalError as exc:
+                if "locked" not in str(exc) and "busy" not in str(exc):
+                    _why_not_writable(self.path, exc, False)
+                    raise
+            finally:
+                self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
+
     def close(self) -> None:
         with self._lock:
             self.conn.close()

@@ -72,6 +72,8 @@ class StationApp(App):
     SUB_TITLE = "operator console"
     BINDINGS = [
         Binding("f1", "help", "Help"),
+        # the key a newcomer guesses first (less, man, vim, htop); a field being typed in keeps it
+        Binding("question_mark", "help", "Help", show=False),
         Binding("f2", "history", "History", show=False),
         Binding("ctrl+q", "quit", "Quit", priority=True),
     ]

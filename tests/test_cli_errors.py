@@ -511,6 +511,40 @@ def test_read_only_database_is_one_line(tmp_path, capsys, db_with_calibration):
         undo()
 
 
+def test_the_console_refuses_a_read_only_database_before_it_starts(tmp_path, capsys, db_with_calibration):
+    """`station tui` on a database this user may read but not write started, and every F5 on
+    Connect said "Cannot connect: attempt to write a readonly database" (a device that was fine;
+    found at 80x24 in tmux). It is refused before the screen is drawn, in one line saying what
+    to do; nothing in it changes. A writable one goes on to the console (here: no terminal).
+    So is `station demo` unless --no-save: it failed after its whole run."""
+    import shutil
+
+    db = str(db_with_calibration)
+    code, _, err = run(capsys, "--db", db, "tui")  # writable: past the database, to the terminal check
+    assert code == 2 and "needs a terminal" in one_line(err)
+    before = Path(db).read_bytes()
+    if os.geteuid() != 0:
+        os.chmod(db, 0o444)
+        undo = lambda: os.chmod(db, 0o644)  # noqa: E731
+    elif shutil.which("chattr") and subprocess.run(["chattr", "+i", db], capture_output=True).returncode == 0:
+        undo = lambda: subprocess.run(["chattr", "-i", db], check=True)  # noqa: E731
+    else:
+        pytest.skip("cannot make a file read-only for root here")
+    try:
+        code, out, err = run(capsys, "--db", db, "tui")
+        # the demo saved only after its whole run: 'cannot process this input (OperationalError: ...)'
+        demo = run(capsys, "--db", db, "demo", "--headless")
+    finally:
+        undo()
+    line = one_line(err)
+    assert code == 2 and out == ""
+    assert line.startswith(f"station: {db}: cannot write the station database: attempt to write a readonly database")
+    assert "make it writable, or give --db another file" in line
+    code, out, err = demo
+    assert code == 2 and out == "" and "cannot write the station database" in one_line(err) and "--no-save" in err
+    assert Path(db).read_bytes() == before
+
+
 @pytest.mark.parametrize("value", ["-1", "0", "nan", "inf"])
 def test_calibrate_accuracy_must_be_positive(tmp_path, capsys, value):
     path = tmp_path / "g.csv"

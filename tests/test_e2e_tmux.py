@@ -428,3 +428,37 @@ def test_station_with_only_port_starts_the_tui_on_that_device_in_tmux(tmp_path):
             _quit(sock)
         finally:
             tmux(sock, "kill-server", check=False)
+
+
+def test_history_boxes_leave_the_reminder_whole_at_80x24_in_tmux(tmp_path):
+    """The start-up reminder of an overdue device, with History's interval box (`i`) or the
+    firmware box (`e`) open, was drawn twice: on History's notice lines under the box and as a
+    toast over them, which cut the line ('Recalibration: overdue: OLD-UNIT-7; du▌'). Textual's
+    pilot does not draw that toast; the real terminal does."""
+    from db import Store
+    from station.store import save_result
+    from tests.tui_data import p1_result
+
+    db = tmp_path / "station.db"
+    cap, result = p1_result("OLD-UNIT-7")
+    save_result(str(db), cap, result, device_id="OLD-UNIT-7")  # 2026-03-01
+    with Store(str(db)) as store:
+        store.add_device("OLD-UNIT-7", interval_days=30)
+    sock = f"test-boxes-{os.getpid()}"
+    _start_tui(sock, db)
+    try:
+        _wait_pane(sock, lambda s: "f5 Start" in s and "OLD-UNIT-7" in s, 60, "Connect with the reminder")
+        seen = {}
+        for key, what in (("i", "Recalibration interval of"), ("e", "for a flight controller")):
+            _keys(sock, "F2")
+            _wait_pane(sock, lambda s: "devices and calibrations" in s and "e Firmware" in s, 60, "History")
+            _keys(sock, "Tab", key)
+            seen[key] = _wait_pane(sock, lambda s, w=what: w in s and "(F2 history)" in s, 60, what)
+            _keys(sock, "Escape", "Escape")
+        _quit(sock)
+    finally:
+        tmux(sock, "kill-server", check=False)
+    for key, screen in seen.items():
+        assert "▌" not in screen, (key, screen)  # a toast's left edge
+        flat = " ".join(screen.split())
+        assert "Recalibration: overdue: OLD-UNIT-7 (F2 history)" in flat, (key, screen)

@@ -209,7 +209,7 @@ def test_help_opens_and_closes_with_the_keyboard():
             await wait_for(pilot, lambda: "s skip" in text_of(app, "HelpScreen Static"))
             # how to close it is on screen (the footer showed Connect's keys, dead under the box)
             await wait_for(pilot, lambda: screen_lines(app)[-1].split() == ["esc", "Close"])
-            assert "esc or F1 closes this" in text_of(app, "HelpScreen Static")
+            assert "esc, F1 or ? closes this" in text_of(app, "HelpScreen Static")
             # the simulated device's keys of every procedure (P1 and P2 were missing)
             assert "simulated: p place the unit" in text_of(app, "HelpScreen Static")
             assert "simulated: p mount and spin" in text_of(app, "HelpScreen Static")

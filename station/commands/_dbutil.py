@@ -169,3 +169,29 @@ def fmt_num(value, digits: int = 6) -> str:
     if isinstance(value, (int, float)):
         return f"{value:.{digits}g}"
     return str(value)
+
+
+def require_writable(path: str, what_next: str) -> None:
+    """InputError (one line, exit 2) for a database that a command would write only at its end
+    (the TUI on Connect and on every save, the demo after its run): one that is no station
+    database, or one this user may read but not write. The TUI on a read-only one started, then
+    every Connect said "Cannot connect: attempt to write a readonly database" about a device
+    that was fine; the demo failed after its whole run. ``what_next``: what the operator can do,
+    said after the reason. A path with no database yet is made on the first save."""
+    import os
+
+    if path == ":memory:" or path.startswith("file:") or not os.path.exists(path):
+        return
+    from db.store import Store
+
+    try:
+        store = Store(path)
+    except Exception as exc:  # noqa: BLE001 - sqlite3.DatabaseError, OSError: not a usable database
+        text = f"cannot open the station database: {exc}"
+        raise InputError(path, None, f"{text}; {what_next}" if "readonly" in str(exc) else text) from None
+    try:
+        store.check_writable()
+    except sqlite3.Error as exc:
+        raise InputError(path, None, f"cannot write the station database: {exc}; {what_next}") from None
+    finally:
+        store.close()

@@ -43,6 +43,12 @@ def run(args: argparse.Namespace) -> int:
 
     require_positive("--average-s", args.average_s, "seconds")
     require_positive("--speed", args.speed)
+    if not args.no_save:  # refused now, not after the whole run
+        from station.commands._dbutil import require_writable
+
+        require_writable(
+            db_path(args), "the demo saves its result there: make it writable, give --db another file, or --no-save"
+        )
     if args.headless:
         return headless(args, None if args.no_save else db_path(args))
     import sys

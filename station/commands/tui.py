@@ -46,9 +46,15 @@ def run(args: argparse.Namespace) -> int:
 
     from station.app import make_app
     from station.cli import db_path
+    from station.commands._dbutil import require_writable
     from station.errors import InputError, require_positive
 
     path = db_path(args)  # a given --db in a missing folder is refused before the screen is drawn
+    require_writable(
+        path,
+        "the console saves every calibration there: make it writable, or give --db another file "
+        "(`station history` and `station devices` read it as it is)",
+    )
     require_positive("--speed", args.speed)
     require_positive("--average-s", args.average_s, "seconds")
     site = None

@@ -20,6 +20,34 @@ from station.textsafe import tui_markup, tui_text
 from station.widgets.field import Field
 from station.widgets.title import TitleBar, footer
 
+
+def failure_text(exc: BaseException, port: str = "") -> str:
+    """Connect's line for a source that did not open, with what to do next: it said only the
+    system's reason ("Cannot connect: /dev/ttyUSB3: cannot open: No such file or directory"),
+    and a database that could not be written was "Cannot connect" too."""
+    import sqlite3
+
+    from station.device.reader import PortError
+
+    text = str(exc)
+    if isinstance(exc, sqlite3.Error):  # the device opened: registering it or the settings failed
+        return f"Cannot use the database: {text}: nothing was saved; ctrl+q, then start with --db another file"
+    if not isinstance(exc, PortError):
+        return f"Cannot connect: {text}"
+    if port and text.startswith(f"{port}: cannot open: "):  # "PORT: cannot open: WHY": the port is in its field
+        text = f"cannot open the port: {text[len(port) + len(': cannot open: ') :]}"
+    low = text.lower()
+    if "no such file" in low:
+        what = "check the path and the cable (Source lists the ports found)"
+    elif "permission denied" in low:
+        what = "this user may not open it: add it to the port's group (dialout), log in again"
+    elif "busy" in low:
+        what = "another program has it open: close that program"
+    else:
+        what = "check the port or URL, the cable and the device's power"
+    return f"Cannot connect: {text}: {what}"
+
+
 SIM = "sim"
 OTHER = "other"
 # what a lab's report states, remembered between sessions: settings name -> input
@@ -308,7 +336,26 @@ class ConnectScreen(Screen):
 
     @on(Button.Pressed, "#start")
     def action_start(self) -> None:
-        self._connect(resume=False)
+        self._start_new()
+
+    def _start_new(self) -> None:
+        """Start a new run; with an interrupted P1 to resume, after asking: the new run's first
+        position replaced the resume file, and the positions captured before (minutes each at
+        the source's averaging time) were gone without a word."""
+        from station.screens.decide import ConfirmScreen
+
+        resume = self.query_one("#resume", Button)
+        if resume.disabled or self.app.session.scripted:
+            self._connect(resume=False)
+            return
+        kept = str(resume.label).removeprefix("Resume ").split(" ")[0]  # "3/12"
+        self.app.push_screen(
+            ConfirmScreen(
+                f"Start a new run? The interrupted run's {kept} positions are discarded once the new "
+                "one captures its first. F6 (Resume) continues them instead."
+            ),
+            lambda yes: self._connect(resume=False) if yes else None,
+        )
 
     @on(Button.Pressed, "#resume")
     def action_resume(self) -> None:
@@ -329,7 +376,7 @@ class ConnectScreen(Screen):
 
     @on(Input.Submitted)
     def _submitted(self) -> None:
-        self._connect(resume=False)
+        self._start_new()
 
     def _connect(self, resume: bool) -> None:
         s = self.app.session
@@ -428,11 +475,11 @@ class ConnectScreen(Screen):
                 src.site = dict(site)  # a serial device does not know where it is
             self.post_message(Connected(src, device_id))
         except Exception as exc:  # noqa: BLE001 - shown as one line
-            self.post_message(SourceFailed(str(exc)))
+            self.post_message(SourceFailed(failure_text(exc, port)))
 
     def on_source_failed(self, message: SourceFailed) -> None:
         self.query_one("#start", Button).disabled = False
-        self._status(f"Cannot connect: {message.error}", error=True)
+        self._status(message.error, error=True)
 
     def on_connected(self, message: Connected) -> None:
         s = self.app.session

@@ -12,9 +12,9 @@ from station.widgets.notices import NoticesMixin
 from station.widgets.title import footer
 
 HELP = """\
-[b]Calibration station: keys[/]   (esc or F1 closes this; ↑ ↓ scroll)
+[b]Calibration station: keys[/]   (esc, F1 or ? closes this; ↑ ↓ scroll)
 
-[b]Everywhere[/]  F1 help · ctrl+q quit · tab/shift+tab move · enter choose
+[b]Everywhere[/]  F1 ? help · ctrl+q quit · tab/shift+tab move · enter choose
             F2 history · ctrl+p command palette
 [b]Connect[/]     F5 start · F6 resume a P1 · F7 import a file · F2 history
             Average (s): seconds per position or row, or the record's
@@ -40,7 +40,9 @@ HELP = """\
 [b]History[/]     up/down device · p next parameter · tab to the calibrations,
             g diagnose the one under the cursor · l the device's limits
             · i its recalibration interval (the line over its
-            calibrations says when it falls due) · escape back
+            calibrations says when it falls due) · e the one under the
+            cursor for a flight controller (ArduPilot .param, PX4,
+            QGroundControl .params, C header, JSON) · escape back
 
 [b]P1 in short[/]  Put the unit in each of the 12 positions the drawing
 shows and let go. When it is still and in position the station waits a
@@ -63,7 +65,11 @@ class HelpScreen(NoticesMixin, ModalScreen):
     HelpScreen #under { dock: bottom; margin-bottom: 1; height: auto; max-height: 4; }
     HelpScreen #notices { height: auto; background: $surface; padding: 0 1; }
     """
-    BINDINGS = [Binding("escape", "app.pop_screen", "Close"), Binding("f1", "app.pop_screen", "Close", show=False)]
+    BINDINGS = [
+        Binding("escape", "app.pop_screen", "Close"),
+        Binding("f1", "app.pop_screen", "Close", show=False),
+        Binding("question_mark", "app.pop_screen", "Close", show=False),
+    ]
 
     def compose(self) -> ComposeResult:
         with VerticalScroll(id="help"):

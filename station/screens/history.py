@@ -95,10 +95,11 @@ class HistoryScreen(NoticesMixin, Screen):
     """
     BINDINGS = [
         Binding("escape", "app.pop_screen", "Back"),
-        Binding("p", "next_param", "Next parameter"),
+        Binding("p", "next_param", "Next param"),  # short: the footer keeps to 80 columns with e
         Binding("g", "diagnose", "Diagnose"),
         Binding("l", "limits", "Limits"),
         Binding("i", "interval", "Interval"),
+        Binding("e", "firmware", "Firmware"),
     ]
 
     def __init__(self) -> None:
@@ -282,6 +283,17 @@ class HistoryScreen(NoticesMixin, Screen):
             return
         row = table.get_row_at(table.cursor_row)
         self.app.push_screen(DiagnoseScreen(calibration_id=int(row[0])))
+
+    def action_firmware(self) -> None:
+        """The highlighted calibration as a flight controller's parameters (station.screens.firmware)."""
+        from station.screens.firmware import FirmwareScreen
+
+        table = self.query_one("#calibrations", DataTable)
+        if table.row_count == 0 or not self.device_id:
+            self.notify("No calibration to export", severity="warning")
+            return
+        row = table.get_row_at(table.cursor_row)
+        self.app.push_screen(FirmwareScreen(int(row[0]), self.device_id))
 
     def action_limits(self) -> None:
         """View and edit the highlighted device's absolute limits (station.screens.limits)."""

@@ -44,6 +44,8 @@ class IntervalScreen(ModalScreen):
     IntervalScreen #box { width: 60; height: auto; border: round $primary; background: $surface; padding: 0 1; }
     IntervalScreen #error { height: auto; color: $error; }
     IntervalScreen Input:focus { border: tall $accent; }
+    /* History's notice lines show under the box: a toast over them cut them */
+    IntervalScreen ToastHolder { display: none; }
     """
     BINDINGS = [Binding("escape", "close", "Back", priority=True)]
 

@@ -340,7 +340,11 @@ class ResultsScreen(NoticesMixin, Screen):
     def on_saved(self, message: Saved) -> None:
         label = self.query_one("#saved", Static)
         if message.error:
-            label.update(f"[b red]Not saved: {tui_markup(message.error)}[/]")
+            # what to do with the result still on screen: it is lost on quit unless kept somehow
+            label.update(
+                f"[b red]Not saved: {tui_markup(message.error)}[/]: "
+                "[b]e[/] exports the capture and result to files; [b]s[/] tries again"
+            )
             return
         self.calibration_id = message.calibration_id
         how = {
