@@ -534,6 +534,7 @@ def _table_diagnosis_input(capture, base: dict, y, good) -> DiagnosisInput:
         prob,
         {},
         "a position far off the field sphere: a magnetic disturbance nearby or a moved unit",
+        group_kind="block of positions",
         param_units=diagnosis_units(capture.meta.get("mag_unit")),
     )
 
