@@ -10,6 +10,7 @@ one must be refused in one line naming file and line, exit 2, nothing on stdout.
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -477,20 +478,60 @@ def test_a_noise_free_table_with_an_effect_names_it_alone(tmp_path):
     np.testing.assert_allclose(res["effects"][0]["params"]["D"], D, rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="diagnose refuses a valid compass table of averages ('compass diagnosis needs a time "
-    "series'), exit 2 as for bad input; field_anomaly and mag_accel_misalignment need no time. "
-    "Not fixed in s26.",
-)
-def test_compass_table_of_averages_is_diagnosed(tmp_path):
-    rng = np.random.default_rng(14)
-    F = G.igrf_ned_nT(39.98, 116.35, 52.0, "2026-11-21")
-    W, h, mags, accs = G.p3_raw(F, G.random_rotations(30, rng), "uT", 9.8)
-    rows = [[i + 1, *(m + rng.normal(0, 0.02, 3)), *(a / 9.8)] for i, (m, a) in enumerate(zip(mags, accs))]
+def _compass_table(path, seed, *, rotate_deg=0.0, field_scale=1.0, dip_deg=0.0, std=False):
+    """A compass table of averages (30 positions, 20 nT per mean, 0.2 mg) written from the spec;
+    ``rotate_deg``: the accelerometer turned against the magnetometer about a fixed axis;
+    ``field_scale``, ``dip_deg``: the local field's magnitude and inclination against IGRF's."""
+    rng = np.random.default_rng(seed)
+    F = np.asarray(G.igrf_ned_nT(39.98, 116.35, 52.0, "2026-11-21"), float)
+    hor = float(np.hypot(F[0], F[1]))
+    inc = math.atan2(F[2], hor) + math.radians(dip_deg)
+    tot = float(np.linalg.norm(F)) * field_scale
+    F = np.array([F[0] / hor * tot * math.cos(inc), F[1] / hor * tot * math.cos(inc), tot * math.sin(inc)])
+    _, _, mags, accs = G.p3_raw(F, G.random_rotations(30, rng), "uT", 9.8)
+    ax = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    K = np.array([[0, -ax[2], ax[1]], [ax[2], 0, -ax[0]], [-ax[1], ax[0], 0]])
+    th = math.radians(rotate_deg)
+    R = np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+    rows = [
+        [i + 1, *(m + rng.normal(0, 0.02, 3)), *((R @ a) / 9.8 + rng.normal(0, 2e-4, 3))]
+        for i, (m, a) in enumerate(zip(mags, accs))
+    ]
+    cols = ["position", "mx", "my", "mz", "ax", "ay", "az"]
+    if std:  # 0.2 uT per sample over 100 samples: 20 nT per mean
+        rows = [r + [0.2, 0.2, 0.2, 100] for r in rows]
+        cols += ["mx_std", "my_std", "mz_std", "n"]
     meta = [("procedure", "compass"), ("device", "S26-P3"), ("mag_unit", "uT"), ("accel_unit", "g")]
     meta += [("latitude_deg", "39.98"), ("longitude_deg", "116.35"), ("altitude_m", "52"), ("date", "2026-11-21")]
-    path = tmp_path / "p3_table.csv"
-    path.write_bytes(G.render(meta, ["position", "mx", "my", "mz", "ax", "ay", "az"], rows))
+    path.write_bytes(G.render(meta, cols, rows))
+    return path
+
+
+@pytest.mark.parametrize("std", [False, True])
+def test_compass_table_of_averages_is_diagnosed(tmp_path, std):
+    """A compass table of averages (capture-format: one row per position, no `t`) was refused by
+    diagnose ("compass diagnosis needs a time series", exit 2) though calibrate takes it. The dip
+    and the field's magnitude need no time: a null table names nothing, and what needs time says
+    so."""
+    path = _compass_table(tmp_path / "p3_table.csv", 14, std=std)
     assert _calibrate(path)["procedure"] == "compass"  # calibrate takes it
-    _diagnose_json(path)
+    res = _diagnose_json(path)
+    assert res["verdict"] == [], res["verdict"]
+    reasons = {c["name"]: c.get("reason") or "" for c in res["candidates"]}
+    assert "no time" in reasons["time_drift"] and "no time" in reasons["time_varying_hard_iron"], reasons
+    assert res["candidates"][[c["name"] for c in res["candidates"]].index("mag_accel_misalignment")]["delta_bic"]
+
+
+def test_a_compass_table_names_a_rotation_between_the_sensors_and_a_field_anomaly(tmp_path):
+    """The same tables with the accelerometer turned 2° against the magnetometer, and with a local
+    field 6 % stronger and 1.5° steeper than IGRF's: each is named alone, the rotation's size and
+    the dip's change recovered (the magnitude a common scale of W: diagnose.md)."""
+    res = _diagnose_json(_compass_table(tmp_path / "rot.csv", 15, rotate_deg=2.0))
+    assert res["verdict"] == ["mag_accel_misalignment"], res["verdict"]
+    rho = np.asarray(res["effects"][0]["params"]["rho"])
+    assert abs(math.degrees(np.linalg.norm(rho)) - 2.0) < 0.2, rho
+    res = _diagnose_json(_compass_table(tmp_path / "field.csv", 21, field_scale=1.06, dip_deg=1.5))
+    assert res["verdict"] == ["field_anomaly"], res["verdict"]
+    inc = math.atan2(*np.asarray(G.igrf_ned_nT(39.98, 116.35, 52.0, "2026-11-21"), float)[[2, 0]])
+    expected = -math.cos(inc) * math.radians(1.5)  # the change of −sin I
+    assert abs(res["effects"][0]["params"]["dc_dip"] - expected) < 0.2 * abs(expected), res["effects"][0]["params"]

@@ -841,6 +841,7 @@ def compass_problem(
     still=None,
     shared_raw=None,
     max_rows: int = 4000,
+    table: bool = False,
 ) -> Problem:
     """Magnitude rows ``|W(y − h …)| − F``, each the mean over a block of consecutive samples
     (at most ``max_rows`` rows), plus dip rows: ``f̂ · m̂ − c`` (``c`` free, −sin I nominally),
@@ -867,7 +868,11 @@ def compass_problem(
     rest over its samples. As many rows of one stretch, each with the white noise alone, a
     hard-iron step fitted some of the stretches' rounding constants as if every row held it
     anew (red-team `counts_quiet` nulls: 5 of 10 named something). ``noise_raw`` is then the
-    white noise of a moving sample, σ² + q²/12 per axis."""
+    white noise of a moving sample, σ² + q²/12 per axis.
+
+    ``table``: a table of averages (capture-format: no ``t``, one row per position): ``t_s`` is
+    the row number, one magnitude row and one dip row per position, ``noise_raw`` the noise of a
+    row's mean (a number or one per row); nothing in time is sought, and row order is no series."""
     t = np.asarray(t_s, float)
     y = np.asarray(y_raw, float)
     step = max(1, int(math.ceil(len(y) / max_rows)))
@@ -887,7 +892,8 @@ def compass_problem(
     is_still = np.isin(starts, [i for i, _ in still]) & np.isin(starts + count.astype(int), [j for _, j in still])
     T = np.asarray(temp_c, float) if temp_c is not None else None
     tref = float(np.mean(t))
-    cond = Conditions(t_s=t, temp_c=T, temp_rate_c_s=_rate(t, T), temp_ref_c=_ref(T), t_ref_s=tref)
+    rate = None if table else _rate(t, T)  # a table's rows are positions, not moments
+    cond = Conditions(t_s=t, temp_c=T, temp_rate_c_s=rate, temp_ref_c=_ref(T), t_ref_s=tref)
     t_all, y_all, T_all = t, y, T
 
     def block_mean(x):
@@ -905,7 +911,9 @@ def compass_problem(
         Tq = np.asarray(dip_blocks["temp"], float) if dip_blocks.get("temp") is not None else None
         q_starts = np.asarray(dip_blocks["starts"], int)
         q_count = np.diff(np.r_[q_starts, len(tq)]).astype(float)
-        cond_q = Conditions(t_s=tq, temp_c=Tq, temp_rate_c_s=_rate(tq, Tq), temp_ref_c=cond.temp_ref_c, t_ref_s=tref)
+        cond_q = Conditions(
+            t_s=tq, temp_c=Tq, temp_rate_c_s=None if table else _rate(tq, Tq), temp_ref_c=cond.temp_ref_c, t_ref_s=tref
+        )
         shrink = 1.0 - min(float(dip_blocks.get("rel_var", 0.0)), 0.5)
 
         def dips(p):
@@ -967,7 +975,7 @@ def compass_problem(
         base["c_dip"] = np.array(-math.sin(math.radians(inclination_deg)) if dip_known else float(np.mean([0.0])))
         free["c_dip"] = not dip_known
     # c_dip's start: the measured mean
-    s_mag = max(noise_raw, 1e-12) * np.sqrt(block_mean(g0**2)) / np.sqrt(count)
+    s_mag = np.maximum(noise_raw, 1e-12) * np.sqrt(block_mean(g0**2)) / np.sqrt(count)
     if is_still.any():
         # a still stretch's row: its shared rounding error along the normal (n̂ = Wᵀû/|Wᵀû| per
         # sample, raw) plus the white rest of each sample, σ² + q²/12 − τ², over its count
@@ -980,9 +988,10 @@ def compass_problem(
     g_mag = time_blocks(t)
     g_dip = time_blocks(np.concatenate([t, dip_t]))[len(t) :] if have_dip else np.zeros(0, int)
     dur = float(t.max() - t.min())
+    no_time = "a table of averages has no time (t column): nothing in time can be measured"
     cands = [
         _temp_candidate(T, rate=cond.temp_rate_c_s),
-        _time_candidate(t),
+        Candidate("time_drift", reason=no_time) if table else _time_candidate(t),
         Candidate("mag_accel_misalignment", {"rho": np.zeros(3)}, folds="dip")
         if have_dip
         else Candidate(
@@ -1000,7 +1009,9 @@ def compass_problem(
             "the dip angle cannot be compared with IGRF's inclination, and a field magnitude that "
             "differs from IGRF is a common scale of W",
         ),
-        Candidate(
+        Candidate("time_varying_hard_iron", reason=no_time)
+        if table
+        else Candidate(
             "time_varying_hard_iron",
             {"dh": np.zeros(3), "t_on_s": np.array(0.0)},
             free={"dh": True, "t_on_s": False},
@@ -1019,11 +1030,16 @@ def compass_problem(
         THRESHOLDS["compass"],
         unit="nT",
         time_ordered=False,
-        row_labels=[
-            f"still t={t_all[i]:.2f}–{t_all[i + int(c) - 1]:.2f} s |m|" if st else f"t={x:.2f} s |m|"
-            for x, i, c, st in zip(t, starts, count, is_still)
-        ]
-        + [f"{dip_kind} t={x:.1f} s dip" for x in (dip_t if have_dip else [])],
+        row_labels=(
+            [f"position {int(x) + 1} |m|" for x in t]
+            + [f"position {int(x) + 1} dip" for x in (dip_t if have_dip else [])]
+            if table
+            else [
+                f"still t={t_all[i]:.2f}–{t_all[i + int(c) - 1]:.2f} s |m|" if st else f"t={x:.2f} s |m|"
+                for x, i, c, st in zip(t, starts, count, is_still)
+            ]
+            + [f"{dip_kind} t={x:.1f} s dip" for x in (dip_t if have_dip else [])]
+        ),
         extended_model=lambda names: "m = W R(ρ)ᵀ (y − h − Δh[t ≥ t_on] − …)" if names else "m = W (y − h)",
     )
     prob.row_types = np.concatenate([np.zeros(len(y), int), np.ones(len(s_dip), int)])
@@ -1034,12 +1050,14 @@ def compass_problem(
             | {"explanation": dip_reason}
         )
     pad = np.full(len(s_dip), np.nan)
-    prob.drivers = {"time [s]": np.concatenate([t, pad])}
+    prob.drivers = {("position #" if table else "time [s]"): np.concatenate([t + 1.0 if table else t, pad])}
     if T is not None:
         prob.drivers["temperature [°C]"] = np.concatenate([T, pad])
     # runs of a turned record are a time series of their own: the hand's acceleration, smooth over
     # a second or so, bends neighbouring runs alike (holds are apart in time: none)
     prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), 1 if dip_kind == "run" else -1)])
+    if table:  # positions in the order written: no serial correlation to allow for
+        prob.series = np.full(len(y) + len(s_dip), -1)
     # F is already raised for the wandering hard iron, which a smooth function of time fits as
     # well as a drift does: the generic extension's margin is 0.75 of it (3.6·q at F = 4.8)
     prob.generic_scale = GENERIC_SCALES["compass"]
@@ -1053,8 +1071,10 @@ def compass_problem(
     # not yet modelled inflates it (4× on seed 547033): after each selection it is measured again
     prob.aux_scale_refit = True
     # the generic terms act per sample on the baseline's field m0, as the forward model does
-    prob.generic = [(cond, {"time": t_all, "temperature": T_all, "input_axis": m0})]
+    prob.generic = [(cond, {"time": None if table else t_all, "temperature": T_all, "input_axis": m0})]
     if have_dip:
-        prob.generic.append((cond_q, {"time": tq, "temperature": Tq, "input_axis": (yq - h0) @ W0.T}))
+        prob.generic.append(
+            (cond_q, {"time": None if table else tq, "temperature": Tq, "input_axis": (yq - h0) @ W0.T})
+        )
     prob.cand_thresholds = dict(CAND_THRESHOLDS.get("compass", {}))
     return prob

@@ -418,7 +418,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     if len(bad) == len(good) and (good & ~bad).sum() >= 16:
         good = good & ~bad
     if t is None:
-        raise UnsupportedError(f"{capture.path or 'capture'}: compass diagnosis needs a time series ('t' column)")
+        return _table_diagnosis_input(capture, base, y, good)
     W0 = np.asarray(base["params"]["soft_iron"], float)
     h0 = np.asarray(base["params"]["hard_iron"], float)
     F = float(base["field_nT"])
@@ -473,6 +473,68 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         prob,
         {},
         "a sample far off the field sphere: a magnetic disturbance nearby or a glitch",
+        param_units=diagnosis_units(capture.meta.get("mag_unit")),
+    )
+
+
+def _table_noise_raw(capture, good) -> np.ndarray | None:
+    """Per row, the noise of its mean field (raw units, RMS over the axes) from the table's
+    ``m*_std`` and ``n`` columns (capture-format), or None where the table does not give them."""
+    stds = [capture.columns.get(f"m{a}_std") for a in "xyz"]
+    if any(s is None for s in stds):
+        return None
+    s = np.sqrt(np.mean(np.column_stack([np.asarray(x, float) for x in stds]) ** 2, axis=1))
+    n = np.asarray(capture.columns["n"], float) if "n" in capture.columns else np.ones(len(s))
+    out = (s / np.sqrt(np.maximum(n, 1.0)))[good]
+    return out if np.all(np.isfinite(out)) and np.all(out > 0) else None
+
+
+def _table_diagnosis_input(capture, base: dict, y, good) -> DiagnosisInput:
+    """A table of averages (one row per position, no ``t``): one magnitude row and, with the
+    accelerometer's columns, one dip row per position; the noise of a row from its ``m*_std`` and
+    ``n`` columns, else calibrate's (the residual's). Nothing in time is sought."""
+    from solvers.diagnose import problems as DP
+
+    W0 = np.asarray(base["params"]["soft_iron"], float)
+    h0 = np.asarray(base["params"]["hard_iron"], float)
+    F = float(base["field_nT"])
+    incl = base["params"]["reference"].get("inclination_deg")
+    noise = _table_noise_raw(capture, good)
+    if noise is None:
+        noise = base.get("noise_raw") or 1.0
+    temp = np.asarray(capture.columns["temp_c"], float) if "temp_c" in capture.columns else None
+    rows = np.arange(len(y), dtype=float)
+    static = {}
+    a = _xyz(capture, "a")
+    if a is not None:
+        k = np.flatnonzero(good & np.all(np.isfinite(a), axis=1))
+        if len(k) >= 4:
+            static["dip_blocks"] = {
+                "f": a[k],
+                "y": y[k],
+                "t": rows[k],
+                "temp": None if temp is None else temp[k],
+                "starts": np.arange(len(k)),
+                "rel_var": 0.0,  # a mean of many samples: its shrinkage is negligible
+                "kind": "position",
+            }
+    prob = DP.compass_problem(
+        rows[good],
+        y[good],
+        W0,
+        h0,
+        F,
+        incl,
+        noise_raw=noise,
+        temp_c=None if temp is None else temp[good],
+        table=True,
+        **static,
+    )
+    return DiagnosisInput(
+        prob,
+        {},
+        "a position far off the field sphere: a magnetic disturbance nearby or a moved unit",
+        group_kind="block of positions",
         param_units=diagnosis_units(capture.meta.get("mag_unit")),
     )
 

@@ -436,6 +436,9 @@ def _per_group(diag, kind: str, k: float = 1.0, unit: str | None = None) -> list
         if kind == "time block" and "time [s]" in prob.drivers:
             tt = np.asarray(prob.drivers["time [s]"])[m]
             name = f"t {np.nanmin(tt):.1f}–{np.nanmax(tt):.1f} s"
+        elif kind == "block of positions" and "position #" in prob.drivers:
+            pp = np.asarray(prob.drivers["position #"])[m]
+            name = f"positions {np.nanmin(pp):.0f}–{np.nanmax(pp):.0f}"
         rows.append(
             (
                 name,
