@@ -442,6 +442,10 @@ def test_a_different_device_on_the_port_ends_the_recording_keeping_what_came_bef
         and cap.n_rows == 50
         and list(cap.columns) == ["t", "segment", "ax", "ay", "az", "temp_c"]
     )
+    # stopped before the 10 s asked for: not complete (it was `complete: true`, exit 0, in a
+    # new user's `--seconds 12` stopped at 4.05 s), as an interrupt or a lost device is
+    assert cap.meta["complete"] == "false" and cap.meta["incomplete"].startswith("device changed ")
+    assert res.incomplete.endswith("into the 10 s asked for"), res.incomplete
 
 
 def _refused_port() -> int:

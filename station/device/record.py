@@ -613,9 +613,12 @@ def _ending(
 ) -> str:
     """Why a recording that ran to its end is incomplete: the device was lost and never came
     back, or it is connected but sends nothing (after a reconnection: came back silent), or
-    it was interrupted (SIGINT, SIGTERM) before the ``seconds`` asked for. "" when the data ran
-    to the end (without ``seconds`` an interrupt is the end asked for)."""
+    it was interrupted (SIGINT, SIGTERM) or another device came on the port before the
+    ``seconds`` asked for. "" when the data ran to the end (without ``seconds`` an interrupt or a
+    device change is the end)."""
     if stopped == "device changed":
+        if seconds is not None and ended_at - started < seconds:
+            return f"device changed {ended_at - started:.2f} s into the {seconds:g} s asked for"
         return ""
     last = last_rows_at if last_rows_at is not None else started
     quiet_s = ended_at - last
