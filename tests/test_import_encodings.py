@@ -98,6 +98,11 @@ def test_a_byte_windows_1252_does_not_define_is_still_refused(tmp_path, frame):
     res, out = _import(tmp_path, stray)
     assert_one_line_refusal(res, f"{stray}:1: not UTF-8 text: byte 0xb2")
     assert not out.exists()
+    marked = tmp_path / "marked.csv"  # a UTF-8 byte-order mark says UTF-8: a 0xb2 then is an error
+    marked.write_bytes(codecs.BOM_UTF8 + src.read_bytes())
+    res, out = _import(tmp_path, marked)
+    assert_one_line_refusal(res, f"{marked}:1: not UTF-8 text: byte 0xb2")
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("writer", ["pandas-utf-16-tab", "utf-16", "utf-16-be-with-bom"])

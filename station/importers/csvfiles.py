@@ -171,13 +171,13 @@ def _check_text(path) -> tuple[str, str | None]:
     decoder = codecs.getincrementaldecoder("utf-8")()
     bad = None  # the first UTF-8 error: reported once no NUL or overlong line follows it
     cp1252 = True  # every byte so far is a Windows-1252 character
-    bom = False  # a UTF-8 byte-order mark: written as UTF-8, never read as Windows-1252
+    bom = None  # a UTF-8 byte-order mark: written as UTF-8, never read as Windows-1252
     lines_before = 0
     try:
         with open_input(path, "a CSV file") as f:
             for chunk in _chunks(f, path):
-                if not lines_before and not bad:
-                    bom = bom or chunk.startswith(codecs.BOM_UTF8)
+                if bom is None:
+                    bom = chunk.startswith(codecs.BOM_UTF8)
                 if bad is None:
                     try:
                         decoder.decode(chunk)
