@@ -78,10 +78,28 @@ _FLUSH_ROWS = 1 << 16  # parsed rows kept as Python floats before they become an
 _LINE_ENDS = "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"
 
 
-def _chunks(f, path) -> Iterator[bytes]:
+_UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+# what Excel's "CSV (Comma delimited)" saves in on Windows: read where a file is not UTF-8
+CP1252 = "cp1252"
+
+
+def _bom_encoding(path) -> str:
+    """``"utf-16"`` for a file that starts with a UTF-16 byte-order mark (LE or BE: Excel's
+    "Unicode Text"), else ``"utf-8"``."""
+    try:
+        with open_input(path, "a CSV file") as f:
+            head = f.read(2)
+    except (InputError, OSError):  # the reader that follows says why
+        return "utf-8"
+    return "utf-16" if head.startswith(_UTF16_BOMS) else "utf-8"
+
+
+def _chunks(f, path, utf16: bool = False) -> Iterator[bytes]:
     """The file in chunks, each checked as it comes: a NUL byte or a line longer than
     ``_MAX_LINE_BYTES`` stops the reading at once (``/dev/zero``, a binary blob or a file
-    without line ends would otherwise be read on and on)."""
+    without line ends would otherwise be read on and on). ``utf16``: a file with a UTF-16
+    byte-order mark, whose NUL bytes are half its characters (a NUL character is refused
+    once decoded, by :func:`_check_text`)."""
     lines_before = 0  # newlines in the chunks already read
     run = 0  # bytes since the last newline
     first_chunk = True
@@ -90,9 +108,11 @@ def _chunks(f, path) -> Iterator[bytes]:
         chunk = f.read(_CHUNK_BYTES)  # no longer than the limit: a longer line crosses a chunk's end
         if not chunk:
             return
-        nul = chunk.find(b"\0")
+        nul = -1 if utf16 else chunk.find(b"\0")
         if nul >= 0 and first_chunk and looks_utf16(chunk):
-            raise InputError(path, 1, "UTF-16 text; CSV files are read as UTF-8 (save the file as UTF-8)")
+            raise InputError(
+                path, 1, "UTF-16 text without a byte-order mark; save the file as UTF-8 (or as Unicode Text, with one)"
+            )
         if nul >= 0:
             raise InputError(
                 path, lines_before + chunk.count(b"\n", 0, nul) + 1, "NUL byte: binary data, not a CSV file"
@@ -111,20 +131,63 @@ def _chunks(f, path) -> Iterator[bytes]:
         yield chunk
 
 
-def _check_text(path) -> None:
-    """Read the file once, keeping nothing: InputError for what is not text (a NUL byte, an
-    overlong line, then the first byte that is not UTF-8, naming its line)."""
+def _check_utf16(path) -> None:
+    """:func:`_check_text` for a file with a UTF-16 byte-order mark: every character decodes
+    and none is NUL (binary data behind a mark)."""
+    decoder = codecs.getincrementaldecoder("utf-16")()
+    lines_before = 0
+    try:
+        with open_input(path, "a CSV file") as f:
+            for chunk in _chunks(f, path, utf16=True):
+                try:
+                    text = decoder.decode(chunk)
+                except UnicodeDecodeError as exc:
+                    raise InputError(path, lines_before + 1, f"not UTF-16 text: {exc.reason}") from None
+                nul = text.find("\0")
+                if nul >= 0:
+                    raise InputError(
+                        path, lines_before + text.count("\n", 0, nul) + 1, "NUL character: binary data, not a CSV file"
+                    )
+                lines_before += text.count("\n")
+            decoder.decode(b"", final=True)
+    except UnicodeDecodeError as exc:  # a character cut off by the end of the file
+        raise InputError(path, lines_before + 1, f"not UTF-16 text: {exc.reason}") from None
+    except OSError as exc:  # reading, after the open
+        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
+
+
+def _check_text(path) -> tuple[str, str | None]:
+    """Read the file once, keeping nothing: the encoding to read it in and the warning that
+    says so, or InputError for what is not text (a NUL byte, an overlong line, then the first
+    byte that is not UTF-8, naming its line).
+
+    UTF-16 with a byte-order mark (Excel's "Unicode Text") is read as such. A file that is not
+    UTF-8 is read as Windows-1252 (Excel's "CSV (Comma delimited)" on Windows: '°' is 0xb0,
+    'µ' 0xb5) when every byte is a Windows-1252 character, said in the warning; a byte that is
+    none (0x81, 0x8d, 0x8f, 0x90, 0x9d) leaves it refused as not UTF-8."""
+    if _bom_encoding(path) == "utf-16":
+        _check_utf16(path)
+        return "utf-16", None
     decoder = codecs.getincrementaldecoder("utf-8")()
     bad = None  # the first UTF-8 error: reported once no NUL or overlong line follows it
+    cp1252 = True  # every byte so far is a Windows-1252 character
+    bom = None  # a UTF-8 byte-order mark: written as UTF-8, never read as Windows-1252
     lines_before = 0
     try:
         with open_input(path, "a CSV file") as f:
             for chunk in _chunks(f, path):
+                if bom is None:
+                    bom = chunk.startswith(codecs.BOM_UTF8)
                 if bad is None:
                     try:
                         decoder.decode(chunk)
                     except UnicodeDecodeError as exc:  # exc.object: the bytes held over, then this chunk
                         bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
+                if cp1252:
+                    try:
+                        chunk.decode(CP1252)  # one byte a character: chunks decode alone
+                    except UnicodeDecodeError:
+                        cp1252 = False
                 lines_before += chunk.count(b"\n")
     except OSError as exc:  # reading, after the open
         raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
@@ -133,35 +196,48 @@ def _check_text(path) -> None:
             decoder.decode(b"", final=True)
         except UnicodeDecodeError as exc:  # a character cut off by the end of the file
             bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
-    if bad is not None:
+    if bad is None:
+        return "utf-8", None
+    if not cp1252 or bom:
         raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x}")
+    return CP1252, (
+        f"not UTF-8 (byte 0x{bad[1]:02x} on line {bad[0]}): read as Windows-1252, as Excel's "
+        "'CSV (Comma delimited)' saves on Windows"
+    )
+
+
+def _tail(path, n_bytes: int) -> str | None:
+    """The file's last ``n_bytes`` (about) as text, enough to see how it ends: UTF-16 by its
+    byte-order mark, else byte for character (its line ends and ``#`` are ASCII); None when unreadable."""
+    utf16 = _bom_encoding(path) == "utf-16"
+    try:
+        with open_input(path, "a CSV file") as f:
+            head = f.read(2)
+            size = f.seek(0, 2)
+            start = max(0, size - n_bytes)
+            f.seek(max(2, start - start % 2) if utf16 else start)
+            raw = f.read()
+    except (InputError, OSError):
+        return None
+    if utf16:  # from an even offset: whole code units
+        return raw.decode("utf-16-le" if head == codecs.BOM_UTF16_LE else "utf-16-be", "replace")
+    return raw.decode("latin-1")
 
 
 def _ends_without_line_end(path) -> bool:
-    try:
-        with open_input(path, "a CSV file") as f:
-            size = f.seek(0, 2)
-            f.seek(max(0, size - 1))
-            return f.read(1) not in (b"", b"\n", b"\r")
-    except (InputError, OSError):
-        return False
+    tail = _tail(path, 1)
+    return bool(tail) and tail[-1] not in ("\n", "\r")
 
 
 def _cut_last_row(path, linenos: np.ndarray, warnings: list[str]) -> None:
     """Warn, as the capture reader does, when the file's last line is a data row with no line end:
     a file cut short (a copy of a log still being written, a logger killed) ends so, and its
     last value may be cut ('9.8123' read as '9.8')."""
-    try:
-        with open_input(path, "a CSV file") as f:
-            size = f.seek(0, 2)
-            f.seek(max(0, size - _MAX_LINE_BYTES - 2))
-            tail = f.read()
-    except (InputError, OSError):
+    tail = _tail(path, _MAX_LINE_BYTES + 2)
+    if not tail or tail.endswith(("\n", "\r")):
         return
-    if not tail or tail.endswith((b"\n", b"\r")):
-        return
-    last = tail[tail.rfind(b"\n") + 1 :].strip()
-    if last and not last.startswith(b"#") and len(linenos):
+    last = tail[tail.rfind("\n") + 1 :].strip()
+    if last and not last.startswith("#") and len(linenos):
         warnings.append(no_line_end_note(int(linenos[-1])))
 
 
@@ -171,15 +247,15 @@ def _strip_end(line: str) -> str:
     return line[:-1] if line and line[-1] in _LINE_ENDS else line
 
 
-def _lines(path) -> Iterator[str]:
-    """The lines of a file :func:`_check_text` passed, without their ends, as
-    ``text.splitlines()`` of the whole decoded file gives them, read a chunk at a time."""
-    decoder = codecs.getincrementaldecoder("utf-8")()
+def _lines(path, encoding: str = "utf-8") -> Iterator[str]:
+    """The lines of a file :func:`_check_text` passed, in the ``encoding`` it found, without
+    their ends, as ``text.splitlines()`` of the whole decoded file gives them, read a chunk at a time."""
+    decoder = codecs.getincrementaldecoder(encoding)()
     carry = ""  # an unfinished line (or one ending in "\r", whose "\n" may come next)
     start = True  # a byte order mark at the start is no text
     try:
         with open_input(path, "a CSV file") as f:
-            for chunk in _chunks(f, path):
+            for chunk in _chunks(f, path, utf16=encoding == "utf-16"):
                 text = decoder.decode(chunk)
                 if start and text:
                     text, start = text.removeprefix("\ufeff"), False
@@ -193,7 +269,7 @@ def _lines(path) -> Iterator[str]:
     except OSError as exc:
         raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
-        raise InputError(path, None, "changed while it was read: not UTF-8 text any more") from None
+        raise InputError(path, None, f"changed while it was read: not {encoding} text any more") from None
 
 
 def _cells(path, lineno: int, text: str, delimiter: str) -> list[str]:
@@ -205,19 +281,23 @@ def _cells(path, lineno: int, text: str, delimiter: str) -> list[str]:
         raise InputError(path, lineno, f"not a CSV row: {exc}") from None
 
 
-def _open_text(path) -> Iterator[tuple[int, str]]:
+def _open_text(path) -> tuple[Iterator[tuple[int, str]], list[str]]:
     """The file's lines (no line ends) with their numbers, streamed: the whole file is never
-    held. InputError for what is not text, raised here, before any line is given."""
-    _check_text(path)
-    return enumerate(_lines(path), 1)
+    held; and the warnings so far (a file read as Windows-1252). InputError for what is not
+    text, raised here, before any line is given."""
+    encoding, note = _check_text(path)
+    return enumerate(_lines(path, encoding), 1), [note] if note else []
 
 
 def first_line(path) -> str:
     try:
         with open_input(path) as f:
-            raw = f.readline(4096)
+            raw = f.read(4096) if _bom_encoding(path) == "utf-16" else f.readline(4096)
     except (InputError, OSError):  # the reader that follows says why
         return ""
+    if raw.startswith(_UTF16_BOMS):
+        text = raw[: len(raw) // 2 * 2].decode("utf-16", "replace")
+        return (text.splitlines() or [""])[0].strip()
     return raw.lstrip(b"\xef\xbb\xbf").decode("utf-8", "replace").strip()
 
 
@@ -474,7 +554,7 @@ def _streams(
 
 
 def read_euroc(path, *, kinds=None) -> Imported:
-    lines = _open_text(path)
+    lines, warnings = _open_text(path)
     first = next(lines, None)
     if first is None:
         raise InputError(path, 1, "empty file")
@@ -521,7 +601,6 @@ def read_euroc(path, *, kinds=None) -> Imported:
         )
     values, linenos = _rows(path, lines, 2, ",", len(header), cols, int_time="t")
     _check_limits(path, values, linenos, units)
-    warnings: list[str] = []
     _cut_last_row(path, linenos, warnings)
     first_s = int(values["t"][0]) * 1e-9
     t_s = _time_seconds(path, values.pop("t"), linenos, 1e-9, integer=True, warnings=warnings)
@@ -771,7 +850,7 @@ def read_plain(
     # the spellings a capture's own unit keys take (dps, m/s2, µT ...) name the same units here
     units = {k: (TIME_ALIASES if k == "t" else UNIT_ALIASES.get(f"{k}_unit", {})).get(v, v) for k, v in units.items()}
     t_given = "t" in units  # --unit t= (a units row may add one below)
-    lines = _open_text(path)
+    lines, warnings = _open_text(path)
     hi, head, above = None, "", None  # the first line that is no comment, and the line above it
     for hi, head in lines:
         if head.strip() and not head.lstrip().startswith("#"):
@@ -785,7 +864,6 @@ def read_plain(
     header = [c.strip() for c in _cells(path, hi, head, delimiter)]
     first_data = hi + 1
     by_number = bool(mapping) and all(src.isdigit() for src in mapping.values())
-    warnings: list[str] = []
     meta: dict[str, str] = {}
     declared = None  # (Hz, line, text): the sample rate a preamble line declares ('Fs,100')
     skipped: list[tuple[int, str]] = [(hi, head)]
