@@ -58,6 +58,61 @@ def test_p1_exact_time_series_has_verdict_none(tmp_path):
     j = _diagnose(path)
     assert j["verdict"] == [], j["candidates"]
     assert any("noise-free" in (c.get("reason") or "") for c in j["candidates"]), j["candidates"]
+    # and no data-quality finding made of the rounding: main (with the floor above) had two
+    # "outlier" rows beyond 5σ and "residuals_not_white ... something remains" at 1e-16 m/s²
+    assert j["quality"] == [], j["quality"]
+
+
+# ---------------------------------------------------------------------------- P2
+
+
+def test_p2_exact_table_with_elapsed_s_keeps_every_row(tmp_path):
+    """P2's 60 exact rows (20 orientations at 2π, 4π, 6π rad/s, R = 1 m) with `elapsed_s` and a
+    constant temperature: calibrate's outlier screen measured a spread of 1.3e-15 g and left a
+    row 1.4e-14 g off out of the fit as "far beyond the others" (main: n_positions 59, and diagnose
+    reported it as an `outlier`). The spread has the 0.1 µg floor now: every row is kept, S, b, D
+    come back to 1e-9, and diagnose finds nothing."""
+    rng = np.random.default_rng(5)
+    fs = G.p2_forces(9.8, 1.0, (2 * np.pi, 4 * np.pi, 6 * np.pi), 20, rng)
+    rows = [[i + 1, w, *G.p2_output(f), 60.0 * i, 25.0] for i, (w, f) in enumerate(fs)]
+    meta = [("procedure", "accel-centrifuge"), ("device", "S26F-P2"), ("accel_unit", "g")]
+    meta += [("radius_m", "1"), ("g_mps2", "9.8")]
+    path = _write(
+        tmp_path / "p2_exact.csv", meta, ["position", "speed_rad_s", "ax", "ay", "az", "elapsed_s", "temp_c"], rows
+    )
+    res = run_station("calibrate", path, "--json")
+    assert res.returncode == 0, res.stderr
+    j = json.loads(res.stdout)
+    assert j["n_positions"] == 60, j["warnings"]
+    assert not any("disagree" in w for w in j["warnings"]), j["warnings"]
+    for name, true in (("S", G.P2_S), ("b", G.P2_B), ("D", G.P2_D)):
+        np.testing.assert_allclose(j["params"][name], true, rtol=1e-9, atol=1e-12)
+    d = _diagnose(path)
+    assert d["verdict"] == [] and d["quality"] == [], (d["verdict"], d["quality"])
+
+
+# ---------------------------------------------------------------------------- P3
+
+
+def test_p3_exact_holds_have_verdict_none_and_no_outliers(tmp_path):
+    """24 exact holds of a compass (IGRF field at the place and date through W and h, gravity,
+    gyro columns exactly 0): diagnose found 9 rows "beyond 5σ" in 1e-8 nT of rounding and said the
+    residuals were not noise-like (main). The compass problem has a noise floor now (1e-3 nT)."""
+    rng = np.random.default_rng(6)
+    F = G.igrf_ned_nT(39.98, 116.35, 52.0, "2026-11-21")
+    _, _, mags, accs = G.p3_raw(F, G.random_rotations(24, rng), "uT", 9.8)
+    rows, t = [], 0.0
+    for i, (m, a) in enumerate(zip(mags, accs)):
+        for _ in range(40):
+            rows.append([t, i + 1, *m, *(a / 9.8), 0.0, 0.0])
+            t += 0.02
+    meta = [("procedure", "compass"), ("device", "S26F-P3"), ("mag_unit", "uT"), ("accel_unit", "g")]
+    meta += [("gyro_unit", "deg/s"), ("latitude_deg", "39.98"), ("longitude_deg", "116.35")]
+    meta += [("altitude_m", "52"), ("date", "2026-11-21")]
+    cols = ["t", "position", "mx", "my", "mz", "ax", "ay", "az", "gx", "gy"]
+    j = _diagnose(_write(tmp_path / "p3_holds.csv", meta, cols, rows))
+    assert j["verdict"] == [] and j["quality"] == [], (j["verdict"], j["quality"])
+    assert any("noise-free" in (c.get("reason") or "") for c in j["candidates"]), j["candidates"]
 
 
 # ---------------------------------------------------------------------------- P4
@@ -81,7 +136,7 @@ def test_p4_mode_a_exact_has_verdict_none(tmp_path):
     free, named `residual:time` in that rounding (main). Below the gyro noise floor (1e-9 rad/s,
     under any real gyro's block mean) nothing is sought."""
     j = _diagnose(_write(tmp_path / "p4a_exact.csv", *_p4_mode_a()))
-    assert j["verdict"] == [], j["effects"]
+    assert j["verdict"] == [] and j["quality"] == [], (j["effects"], j["quality"])
     assert any("noise-free" in (c.get("reason") or "") for c in j["candidates"]), j["candidates"]
 
 

@@ -96,6 +96,11 @@ LDV_NOISE_FLOOR_MPS = 1e-6
 # hour; 1e-9 rad/s (2e-4 °/h) is below every real record's block means, and 1e8 times above the
 # rounding of an exact simulator's rates (1e-17 rad/s), where the F tests named `residual:time`
 GYRO_NOISE_FLOOR_RAD_S = 1e-9
+# P3: the smallest noise of a magnitude row [nT]. Compass magnetometers (AMR, MEMS, fluxgate) read
+# 0.1–300 nT per sample; even a laboratory fluxgate (~10 pT/√Hz) averages to 1 pT only over
+# minutes. An exact simulator's field, fitted, leaves 1e-8 (holds) to 3e-5 nT (a tumble, the
+# chain's tolerance): 1e-3 nT is between, and outliers "beyond 5σ" were found in that rounding
+MAG_NOISE_FLOOR_NT = 1e-3
 MIN_TEMP_SPAN_C = 0.2  # a temperature that varies less than this cannot resolve a temperature term
 
 
@@ -1068,4 +1073,5 @@ def compass_problem(
     if have_dip:
         prob.generic.append((cond_q, {"time": tq, "temperature": Tq, "input_axis": (yq - h0) @ W0.T}))
     prob.cand_thresholds = dict(CAND_THRESHOLDS.get("compass", {}))
+    prob.noise_floor = MAG_NOISE_FLOOR_NT
     return prob
