@@ -168,6 +168,19 @@ def test_p4_mode_a_exact_with_a_time_drift_names_it_alone(tmp_path):
 # ---------------------------------------------------------------------------- found, not fixed
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="mode A written to 2 decimals (0.01 rad/s, quantisation the only noise): diagnose names "
+    "residual:time (periodic, 18.8 s, gain 0.016). Rounding a sinusoid without noise to dither it "
+    "leaves an error that is a function of the rate itself, periodic with it: real structure, but "
+    "the quantiser's, not the gyro's. Needs an undithered-quantiser model in gyro_problem (as the "
+    "compass has: solvers.compass.quantised_noise). Not fixed in s26f.",
+)
+def test_p4_mode_a_rounded_to_two_decimals_has_verdict_none(tmp_path):
+    j = _diagnose(_write(tmp_path / "p4a_q.csv", *_p4_mode_a(), fmt="{:.2f}"))
+    assert j["verdict"] == [], j["effects"]
+
+
 def _p3_tumble(n: int = 960) -> tuple[list, list, list]:
     """A compass tumbling slowly at 50 Hz, R(t) = Rz(0.35 t) Ry(0.23 t) Rx(0.41 t), exact field
     (IGRF at the place and date, ppigrf) through W and h, accelerometer exactly gravity."""
