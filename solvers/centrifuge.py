@@ -47,6 +47,7 @@ from solvers import linalg
 from solvers.errors import NotIdentifiable, TooFewPositions
 from solvers.fit import FitResult, fit, linear_fit
 from solvers.models import accel
+from solvers.tabletop import NORM_NOISE_FLOOR_G
 
 GAMMA_FREE = np.array([False, False, True, False, True, True])  # γyx, γzx, γzy (see module doc)
 AXES = "xyz"
@@ -349,13 +350,16 @@ def screen_rows(N, rho, *, gamma: bool = False, threshold: float = 8.0) -> Scree
     prev, prev_s = None, math.inf
     rel = row_sigma(N, p, 1.0)
     z = norm_residual(N, rho, p) / rel
-    s = max(1.4826 * float(np.median(np.abs(z))), 1e-300)
+    # the spread is at least the noise floor of any real average (0.1 µg, as P1's calibration):
+    # an exact table's rounding spreads 1.3e-15 g, and a row 1.4e-14 g off was left out as 8σ
+    floor = NORM_NOISE_FLOOR_G / float(np.median(rel))
+    s = max(1.4826 * float(np.median(np.abs(z))), floor, 1e-300)
     if np.all(np.abs(z) <= threshold * s):  # the least-squares fit already explains every row
         return Screen(np.ones(len(N), bool), z * rel, s * float(np.median(rel)), {})
     for _ in range(15):
         rel = row_sigma(N, p, 1.0)
         z = norm_residual(N, rho, p) / rel
-        s = max(1.4826 * float(np.median(np.abs(z))), 1e-300)
+        s = max(1.4826 * float(np.median(np.abs(z))), NORM_NOISE_FLOOR_G / float(np.median(rel)), 1e-300)
         out = np.abs(z) > threshold * s
         if prev is not None and np.array_equal(out, prev) and s > 0.5 * prev_s:
             break

@@ -45,6 +45,7 @@ batch sizes. No Python loop runs over samples.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -679,6 +680,7 @@ def detect_static_intervals(
     margin_s: float | None = None,
     robust_quantile: float = 0.1,
     nan_policy: str = "raise",
+    gyro_std_floor: float | None = None,
 ) -> StillnessResult:
     """Find the static intervals of a recording.
 
@@ -694,6 +696,10 @@ def detect_static_intervals(
         `StillnessConfig`.
     nan_policy: 'raise' (StillnessInputError naming the first bad row) or 'omit' (windows
         containing a non-finite row are motion; indices keep referring to the input rows).
+    gyro_std_floor: the smallest per-axis noise (standard deviation of one sample) the rates
+        are taken to have [gyro unit], or None. Noise-free (simulated) rates measure a noise of
+        ~0 (their rounding), and the rate test then calls any change of the bias a turn: a
+        noise-free P4 record whose bias drifted 2e-7 rad/s per s kept 6.6 s of its 300.
 
     Raises StillnessInputError (a ValueError and a SolverError) on bad input: mismatched
     lengths, wrong shapes, non-increasing or NaN times, too few samples for one window,
@@ -751,6 +757,8 @@ def detect_static_intervals(
     else:
         noise, warnings = _robust_noise(stats, a, g, bad, robust_quantile)
 
+    if gyro_std_floor is not None and noise.gyro_var is not None:
+        noise = dataclasses.replace(noise, gyro_var=np.maximum(noise.gyro_var, float(gyro_std_floor) ** 2))
     thr = _thresholds(noise, cfg, has_gyro)
     lev_w, a_norm_w, g_dev_w = _levels(stats, noise, thr)
     del stats  # nine values per window, no longer needed: freed before the intervals' statistics

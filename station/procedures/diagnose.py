@@ -79,6 +79,21 @@ def screen(capture, moved=()) -> tuple[np.ndarray, list[dict]]:
     return bad, found
 
 
+def _noise_free(diag) -> bool:
+    """Whether the extended model fits the measured rows to within the problem's noise floor
+    (``Problem.noise_floor``, data units, RMS): exact, noise-free data. Outliers and a
+    non-white test are then about the rounding, studentized by a noise of ~0 (an exact P1 time
+    series had 2 rows "beyond 5σ" and "residuals not noise-like: something remains" at 1e-16 m/s²),
+    and are not reported; the candidates say why nothing was sought."""
+    prob = diag.problem
+    if prob.noise_floor is None:
+        return False
+    r = np.asarray(diag.extended.residuals, float)
+    if prob.row_types is not None:
+        r = r[np.isin(np.asarray(prob.row_types), sorted(prob.measured_kinds))]
+    return bool(r.size) and float(np.sqrt(np.mean(r * r))) <= prob.noise_floor
+
+
 def _quality(capture, diag, inp) -> list[dict]:
     out: list[dict] = list(diag.problem.screened)  # rows the data-quality screen left out, by line
     out += [dict(q) for q in diag.problem.findings]
@@ -105,9 +120,10 @@ def _quality(capture, diag, inp) -> list[dict]:
         if "row_stop" in q:
             q["line_stop"] = _line(capture, q.pop("row_stop") - 1)
         out.append(q)
-    for q in Q.outliers(diag.studentized, diag.problem.row_labels, inp.explain):
+    exact = _noise_free(diag)
+    for q in [] if exact else Q.outliers(diag.studentized, diag.problem.row_labels, inp.explain):
         out.append(q)
-    if diag.residual_test.get("white") is False:
+    if diag.residual_test.get("white") is False and not exact:
         rt = diag.residual_test
         drivers = [
             {"driver": d["driver"], "correlation": d["correlation"], "explained_by_trend": d["explained_by_trend"]}

@@ -60,6 +60,12 @@ LIMIT_EXAMPLE = "e.g. drift=-10:10  (°/h)"  # the limits box's example, in the 
 # why a stated sample_rate_hz that the t column contradicts is refused (Capture.series_rate_hz)
 RATE_CONSEQUENCE = "the drift's error (Allan deviation) and the record's length scale with the rate"
 ZERO_IS_A_RESULT = True
+# rad/s per sample and axis: the least rate noise the stillness detector assumes (mode B without
+# positions). P4's gyros are low-cost MEMS, whose samples carry 1e-4 to 1e-2 rad/s of noise (the
+# best, ADIS16490 class, 8e-5 rad/s at 10 Hz); noise-free simulated rates measure ~0, and a bias
+# drifting by 2e-7 rad/s per s was then a turn (6.6 s of 300 kept, refused as too short). With
+# it a window is a turn above 10·√3·3e-5 = 5e-4 rad/s (0.03 °/s, 100 °/h), far below a turn by hand
+GYRO_STD_FLOOR_RAD_S = 3e-5
 
 # Devices whose captures are known to break the conventions (their SOURCE.md).
 KNOWN_CONVENTIONS = {
@@ -325,7 +331,9 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
     idx = np.flatnonzero(ok)
     rows = slice(None) if len(idx) == len(ok) else idx  # every row finite: views, not (N, 3) copies
     try:
-        st = detect_static_intervals(strictly_increasing_t(capture.columns["t"][rows]), f_b[rows], w_b[rows])
+        st = detect_static_intervals(
+            strictly_increasing_t(capture.columns["t"][rows]), f_b[rows], w_b[rows], gyro_std_floor=GYRO_STD_FLOOR_RAD_S
+        )
     except SolverError as exc:
         warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
         return [(ok, head0, "1")]
