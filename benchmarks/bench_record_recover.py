@@ -6,13 +6,14 @@ Run it from another tree (``PYTHONPATH=TREE python TREE/benchmarks/...``, or thi
 ``--tree TREE``) to compare a version before a change: the copy-only baseline of each run
 makes the figures of two runs on a busy computer comparable.
 
-Writes the partial file a killed `station record` leaves (its own head, `_head_text`; rows as
-it writes them: `t` to the microsecond, then 10 device values of 7 significant digits through
-its `_fmt`, gyro-sized ones so that some are written `1.2e-05`; a row cut by the kill last),
-then times, interleaved round by round so that a busy computer weighs on each alike:
+Writes the partial file a killed `station record` leaves (its head as capture-format.md
+writes it; rows as record writes them: `t` to the microsecond, then 10 device values of 7
+significant digits, gyro-sized ones so that some are written `1.2e-05`; a row cut by the kill
+last), then times, interleaved round by round so that a busy computer weighs on each alike:
 
-- ``copy only``: the bytes under a new head (`_copy_rows`), what `--recover` did before it
-  read the rows it keeps (the QA's 0.7 s at 800k rows);
+- ``copy only``: the file's bytes copied (public `shutil.copyfile`: the cost of what
+  `--recover` did before it read the rows it keeps, a copy under a new head; the QA's 0.7 s
+  at 800k rows);
 - ``recover``: `recover_partial`, which reads every row it keeps with the capture reader
   (`check_capture_upto`: the chunked reader's fast path, numpy's loadtxt on each block)
   before it copies them (the QA's 6.4 s);
@@ -63,7 +64,7 @@ def write_partial(path: str, rows: int, seed: int = 1) -> None:
     scale = np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3, 30.0, 30.0, 30.0, 0.1])
     seven = np.vectorize(lambda x: float(f"{x:.7g}"))
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write(rec._head_text(meta, COLUMNS))
+        f.write("".join(f"# {k}: {v}\n" for k, v in meta.items()) + ",".join(COLUMNS) + "\n")  # capture-format
         step = 50_000
         for start in range(0, rows, step):
             k = min(step, rows - start)
@@ -72,7 +73,7 @@ def write_partial(path: str, rows: int, seed: int = 1) -> None:
             t = (np.arange(start, start + k) * 0.002).tolist()
             f.write(
                 "".join(
-                    "%.6f,0,%s\n" % (t[i], ",".join(rec._fmt(x) for x in row))  # noqa: UP031 - as record writes
+                    "%.6f,0,%s\n" % (t[i], ",".join(f"{x:.7g}" for x in row))  # noqa: UP031 - as record writes
                     for i, row in enumerate(v.tolist())
                 )
             )
@@ -92,14 +93,11 @@ def main() -> int:
         write_partial(source, args.rows)
         size_mb = os.path.getsize(source) / 1e6
         print(f"partial: {args.rows} rows, {size_mb:.1f} MB (written in {time.perf_counter() - t0:.1f} s)")
-        head = capture._read_head(source)
-        with open(source, "rb") as f:
-            end, _, _ = rec._last_line_end(f)
         out = os.path.join(tmp, "r.csv")
         partial = out + ".partial"
 
-        def copy_only() -> None:
-            rec._copy_rows(source, out, rec._head_text(dict(head.meta), head.header), head.data_offset, end)
+        def copy_only() -> None:  # the bytes alone (the copy under a new head costs the same)
+            shutil.copyfile(source, out)
 
         def recover():
             shutil.copyfile(source, partial)

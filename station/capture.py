@@ -119,9 +119,11 @@ _RAW_COLUMN_UNIT_KEY = {
     for k, cols in (("accel_unit", "ax ay az"), ("gyro_unit", "gx gy gz"), ("mag_unit", "mx my mz"))
     for c in cols.split()
 }
-# The columns capture-format.md names, and P2's `elapsed_s` (a table's hold times, written by
-# `station simulate`, read by P2's diagnosis); a table of averages may also hold `<col>_std` of each.
-SPEC_COLUMNS = frozenset({*COLUMN_UNITS, *_RAW_COLUMN_UNIT_KEY, "elapsed_s"})
+# The columns capture-format.md names, and the station's own: P2's `elapsed_s` (a table's hold
+# times, written by `station simulate`, read by P2's diagnosis) and `rate_gyro_rad_s` (the P2
+# guide's rate gyro), `station record`'s `segment` (docs/protocol.md); a table of averages may
+# also hold `<col>_std` of each.
+SPEC_COLUMNS = frozenset({*COLUMN_UNITS, *_RAW_COLUMN_UNIT_KEY, "elapsed_s", "segment", "rate_gyro_rad_s"})
 
 
 def unknown_table_columns(header: list[str]) -> list[str]:
