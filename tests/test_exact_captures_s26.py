@@ -194,14 +194,11 @@ def _p3_tumble(n: int = 960) -> tuple[list, list, list]:
     return meta, ["t", "mx", "my", "mz", "ax", "ay", "az"], rows
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="an exact compass tumble: calibrate recovers W and h exactly, but diagnose's baseline "
-    "refit leaves 39 nT RMS and names field_anomaly (field_scale 1.0007, gain 1.0): engine._aux_scales "
-    "scales the dip rows' σ to their exact residual (1e-10), 1e10 below the magnitude rows', and the "
-    "refit goes astray. Needs a floor in engine.py (not ours to change). Not fixed in s26f.",
-)
 def test_p3_exact_tumble_has_verdict_none(tmp_path):
+    """An exact compass tumble: calibrate recovers W and h exactly, but diagnose's baseline refit
+    left 39 nT RMS and named `field_anomaly` (gain 1.0): `engine._aux_scales` took the dip rows'
+    σ down to their exact residual (1e-10), 1e10 below the magnitude rows'. The dip rows' σ now
+    has a floor (`Problem.aux_noise_floor`, 1e-6)."""
     j = _diagnose(_write(tmp_path / "p3_tumble.csv", *_p3_tumble()))
     assert j["verdict"] == [], j["effects"]
 

@@ -165,6 +165,10 @@ class Problem:
     # the auxiliary rows' noise scale (variance components) measured again after each selection,
     # against the refitted extended model, instead of once on the baseline (compass: measured there)
     aux_scale_refit: bool = False
+    # per auxiliary row kind, the least σ its measured scale may give a row (that kind's units):
+    # on exact data the scale would follow the rounding down (compass dip rows 1e-10, 1e10 below
+    # the magnitude rows, and the refit went astray: an exact tumble named `field_anomaly`)
+    aux_noise_floor: dict = field(default_factory=dict)
     # the noise of each ``series`` was measured as the spread of the baseline's residual: after each
     # selection it is measured again on the refitted model's residual and lowered where that is
     # smaller (an LDV offset of 10 m/s left 3.8 m/s of baseline residual against 0.01 m/s of noise,
@@ -837,7 +841,7 @@ def _aux_scales(problem: Problem, fit_: FitResult, free: dict, sigma: np.ndarray
         sel = problem.row_types == k
         s = math.sqrt(float(np.mean(rw[sel] ** 2)))
         if s > 0:
-            sigma[sel] *= s
+            sigma[sel] = np.maximum(sigma[sel] * s, problem.aux_noise_floor.get(int(k), 0.0))
 
 
 def _series_scales(problem: Problem, fit_: FitResult, sigma: np.ndarray) -> bool:

@@ -1086,6 +1086,9 @@ def compass_problem(
     # the dip rows' noise scale is measured on the baseline, where a rotation between the sensors
     # not yet modelled inflates it (4× on seed 547033): after each selection it is measured again
     prob.aux_scale_refit = True
+    # f̂·m̂ of a dip row: 1e-6 is a microradian of dip, a thousand times below what an accelerometer
+    # and a magnetometer resolve together (their dip rows scatter by 1e-3 to 1e-2)
+    prob.aux_noise_floor = {1: 1e-6}
     # the generic terms act per sample on the baseline's field m0, as the forward model does
     prob.generic = [(cond, {"time": None if table else t_all, "temperature": T_all, "input_axis": m0})]
     if have_dip:
