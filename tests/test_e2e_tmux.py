@@ -451,7 +451,16 @@ def test_history_boxes_leave_the_reminder_whole_at_80x24_in_tmux(tmp_path):
         seen = {}
         for key, what in (("i", "Recalibration interval of"), ("e", "for a flight controller")):
             _keys(sock, "F2")
-            _wait_pane(sock, lambda s: "devices and calibrations" in s and "e Firmware" in s, 60, "History")
+            # the device's calibrations drawn (its interval and its row), not only the screen: a key
+            # before that finds no device highlighted (CI: `e` said "No calibration to export")
+            _wait_pane(
+                sock,
+                lambda s: (
+                    "devices and calibrations" in s and "e Firmware" in s and "30-day interval" in s and "in use" in s
+                ),
+                60,
+                "History with the device's calibration",
+            )
             _keys(sock, "Tab", key)
             seen[key] = _wait_pane(sock, lambda s, w=what: w in s and "(F2 history)" in s, 60, what)
             _keys(sock, "Escape", "Escape")
