@@ -35,7 +35,11 @@ async def wait_for(pilot, cond, timeout_s=120.0, step_s=0.05):
         except NoMatches:
             pass
         await pilot.pause(step_s)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {cond}")
+    try:  # what the screen showed, to tell a hung app from a condition that never held
+        shown = "\n".join(screen_lines(pilot.app))
+    except Exception as exc:  # noqa: BLE001 - a screen that cannot be drawn says so instead
+        shown = f"(no screen: {exc!r})"
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {cond}; the screen:\n{shown}")
 
 
 async def history_shown(pilot, app, rows: int):
