@@ -490,18 +490,23 @@ def test_record_edited_into_invalid_json_is_named(tmp_path, capsys, db_with_cali
         assert code == 2 and "not valid JSON" in one_line(err) and "station verify" in err, argv
 
 
-def test_read_only_database_is_one_line(tmp_path, capsys, db_with_calibration):
-    """A database the user may read but not write: reads work, writes are one line and exit 2."""
+def _read_only(db: str):
+    """Make ``db`` unwritable for this user (chattr +i for root) and return what undoes it;
+    skip where that cannot be done."""
     import shutil
 
-    db = str(db_with_calibration)  # its -wal and -shm stay writable, as in a shared read-only install
     if os.geteuid() != 0:
         os.chmod(db, 0o444)
-        undo = lambda: os.chmod(db, 0o644)  # noqa: E731
-    elif shutil.which("chattr") and subprocess.run(["chattr", "+i", db], capture_output=True).returncode == 0:
-        undo = lambda: subprocess.run(["chattr", "-i", db], check=True)  # noqa: E731
-    else:
-        pytest.skip("cannot make a file read-only for root here")
+        return lambda: os.chmod(db, 0o644)
+    if shutil.which("chattr") and subprocess.run(["chattr", "+i", db], capture_output=True).returncode == 0:
+        return lambda: subprocess.run(["chattr", "-i", db], check=True)
+    pytest.skip("cannot make a file read-only for root here")
+
+
+def test_read_only_database_is_one_line(tmp_path, capsys, db_with_calibration):
+    """A database the user may read but not write: reads work, writes are one line and exit 2."""
+    db = str(db_with_calibration)  # its -wal and -shm stay writable, as in a shared read-only install
+    undo = _read_only(db)
     try:
         code, out, err = run(capsys, "--db", db, "history", "SIM-LDV-0003")
         assert code == 0 and "1 calibration" in out, err
@@ -517,19 +522,11 @@ def test_the_console_refuses_a_read_only_database_before_it_starts(tmp_path, cap
     found at 80x24 in tmux). It is refused before the screen is drawn, in one line saying what
     to do; nothing in it changes. A writable one goes on to the console (here: no terminal).
     So is `station demo` unless --no-save: it failed after its whole run."""
-    import shutil
-
     db = str(db_with_calibration)
     code, _, err = run(capsys, "--db", db, "tui")  # writable: past the database, to the terminal check
     assert code == 2 and "needs a terminal" in one_line(err)
     before = Path(db).read_bytes()
-    if os.geteuid() != 0:
-        os.chmod(db, 0o444)
-        undo = lambda: os.chmod(db, 0o644)  # noqa: E731
-    elif shutil.which("chattr") and subprocess.run(["chattr", "+i", db], capture_output=True).returncode == 0:
-        undo = lambda: subprocess.run(["chattr", "-i", db], check=True)  # noqa: E731
-    else:
-        pytest.skip("cannot make a file read-only for root here")
+    undo = _read_only(db)
     try:
         code, out, err = run(capsys, "--db", db, "tui")
         # the demo saved only after its whole run: 'cannot process this input (OperationalError: ...)'

@@ -874,6 +874,11 @@ def below_noise_floor(problem: Problem, rw: np.ndarray, sigma: np.ndarray, prima
     return bool(e.size) and float(np.sqrt(np.mean(e * e))) <= problem.noise_floor
 
 
+def _unresolvable(name: str, reason: str) -> dict:
+    """A candidate's entry when it cannot be tested, saying why."""
+    return {"name": name, "delta_bic": None, "cv_rms": None, "selected": False, "resolvable": False, "reason": reason}
+
+
 def _displaced(picked: list, kept: list) -> list:
     """The items of ``picked`` (candidate columns, effect entry) that ``kept`` no longer holds."""
     return [item for item in picked if not any(item[0] is k[0] for k in kept)]
@@ -1429,14 +1434,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     entries: dict[str, dict] = {}
     for c in problem.candidates:
         if c.reason is not None:
-            entries[c.name] = {
-                "name": c.name,
-                "delta_bic": None,
-                "cv_rms": None,
-                "selected": False,
-                "resolvable": False,
-                "reason": c.reason,
-            }
+            entries[c.name] = _unresolvable(c.name, c.reason)
     state, free = dict(base_params), dict(problem.free)
     cur_fit = baseline_fit
     cv_cur = cv0
@@ -1559,14 +1557,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     "nothing is left for an effect to explain (exact, noise-free data?)"
                 )
                 for c in remaining:
-                    entries[c.name] = {
-                        "name": c.name,
-                        "delta_bic": None,
-                        "cv_rms": None,
-                        "selected": False,
-                        "resolvable": False,
-                        "reason": why,
-                    }
+                    entries[c.name] = _unresolvable(c.name, why)
             break
         J0, _, _ = jacobian(problem, state, free)
         Q0 = _orth(J0)
@@ -1578,14 +1569,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         for cc in cands:
             if cc.reason is not None:
                 if first:
-                    entries[cc.cand.name] = {
-                        "name": cc.cand.name,
-                        "delta_bic": None,
-                        "cv_rms": None,
-                        "selected": False,
-                        "resolvable": False,
-                        "reason": cc.reason,
-                    }
+                    entries[cc.cand.name] = _unresolvable(cc.cand.name, cc.reason)
                 continue
             ev = _evaluate(
                 problem, cc, rounds.get(cc.cand.folds), term_cur, types, n, shared=bool(picked) or problem.shared_first
