@@ -29,18 +29,19 @@ def _imu_rows(rng, n=600, hz=200):
     return t, w, a
 
 
+def _write_imu_csv(path, header, t_ns, w, a):
+    """An EuRoC/Kalibr ``data.csv``: the header line, then one row a sample (ns stamp, ω, a)."""
+    rows = (
+        ",".join([str(ti)] + [repr(x) for x in wi + ai]) for ti, wi, ai in zip(t_ns.tolist(), w.tolist(), a.tolist())
+    )
+    path.write_text(header + "\n" + "".join(row + "\n" for row in rows))
+    return path
+
+
 @pytest.mark.parametrize("header", [EUROC, KALIBR])
 def test_euroc_and_kalibr_round_trip(tmp_path, header):
     t, w, a = _imu_rows(np.random.default_rng(1))
-    src = tmp_path / "data.csv"
-    src.write_text(
-        header
-        + "\n"
-        + "".join(
-            ",".join([str(ti)] + [repr(x) for x in wi + ai]) + "\n"
-            for ti, wi, ai in zip(t.tolist(), w.tolist(), a.tolist())
-        )
-    )
+    src = _write_imu_csv(tmp_path / "data.csv", header, t, w, a)
     out = tmp_path / "c.csv"
     res = run_station("import", src, "--procedure", "gyro-drift", "--out", out)
     assert res.returncode == 0, res.stderr
@@ -198,33 +199,10 @@ def test_plain_csv_without_time_uses_rate(tmp_path):
     src = tmp_path / "adc.csv"
     src.write_text("x,y,z\n" + "".join(f"{2.5 + 0.001 * i},{1.6},{1.7}\n" for i in range(10)))
     out = tmp_path / "o.csv"
-    res = run_station(
-        "import",
-        src,
-        "--procedure",
-        "accel-tabletop",
-        "--map",
-        "ax=x,ay=y,az=z",
-        "--unit",
-        "accel=V",
-        "--out",
-        out,
-    )
+    opts = ["--procedure", "accel-tabletop", "--map", "ax=x,ay=y,az=z", "--unit", "accel=V", "--out", out]
+    res = run_station("import", src, *opts)
     assert res.returncode == 2 and "--rate HZ" in res.stderr
-    res = run_station(
-        "import",
-        src,
-        "--procedure",
-        "accel-tabletop",
-        "--map",
-        "ax=x,ay=y,az=z",
-        "--unit",
-        "accel=V",
-        "--rate",
-        "100",
-        "--out",
-        out,
-    )
+    res = run_station("import", src, *opts, "--rate", "100")
     assert res.returncode == 0, res.stderr
     np.testing.assert_allclose(read_capture(out).columns["t"], np.arange(10) / 100)
 
@@ -685,15 +663,7 @@ def test_a_unix_time_column_gives_the_capture_its_date(tmp_path, column, unit, f
 def test_euroc_unix_stamps_give_the_capture_its_date(tmp_path):
     """EuRoC's stamps are Unix ns (MH_01 starts 2014-06-24 19:02:59 UTC): now the capture's date."""
     t, w, a = _imu_rows(np.random.default_rng(3))
-    src = tmp_path / "data.csv"
-    src.write_text(
-        EUROC
-        + "\n"
-        + "".join(
-            ",".join([str(ti)] + [repr(x) for x in wi + ai]) + "\n"
-            for ti, wi, ai in zip(t.tolist(), w.tolist(), a.tolist())
-        )
-    )
+    src = _write_imu_csv(tmp_path / "data.csv", EUROC, t, w, a)
     out = tmp_path / "o.csv"
     res = run_station("import", src, "--procedure", "gyro-drift", "--out", out)
     assert res.returncode == 0, res.stderr
