@@ -351,7 +351,8 @@ def simulate_centrifuge(
 
     The table frame is (radial outward, tangential, up); the specific force at the centre
     of the triad is ``f = (−ω²R/g, 0, 1)`` in g (centripetal inward plus the reaction to
-    gravity), so ``|f|² = A² + 1`` with ``A = ω²R/g``.
+    gravity; ``solvers.models.accel.centrifuge_specific_force_g``), so ``|f|² = A² + 1`` with
+    ``A = ω²R/g``.
     """
     effects = _check_effects("accel-centrifuge", effects)
     rng = np.random.default_rng(seed)
@@ -368,9 +369,8 @@ def simulate_centrifuge(
     orients = centrifuge_orientations(n_orientations)
     rows_f, rows_c, rows_w, pos, spd = [], [], [], [], []
     for w in speeds_rad_s:
-        A = float(accel_model.centrifuge_input_g(w, radius_m, g_mps2))
+        f_t = accel_model.centrifuge_specific_force_g(w, radius_m, g_mps2)
         for k, C_t_b in enumerate(orients):
-            f_t = np.array([-A, 0.0, 1.0])
             rows_f.append(C_t_b.T @ f_t)
             rows_c.append(C_t_b.T @ np.array([-1.0, 0.0, 0.0]))
             rows_w.append(w)

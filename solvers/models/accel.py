@@ -58,6 +58,14 @@ def centrifuge_input_g(speed_rad_s, radius_m: float, g_mps2: float):
     return np.asarray(speed_rad_s, dtype=float) ** 2 * radius_m / g_mps2
 
 
+def centrifuge_specific_force_g(speed_rad_s, radius_m: float, g_mps2: float) -> np.ndarray:
+    """P2's specific force at the triad in the table frame (radial outward, tangential, up), in
+    g: ``f = (−A, 0, 1)``, the centripetal input of :func:`centrifuge_input_g` pointing inward
+    plus the reaction to gravity, so ``|f|² = A² + 1``. (3,) for one speed, (N, 3) for N."""
+    A = centrifuge_input_g(speed_rad_s, radius_m, g_mps2)
+    return np.stack([-A, np.zeros_like(A), np.ones_like(A)], axis=-1)
+
+
 def phi_matrix(gamma) -> np.ndarray:
     """Installation-error matrix Φ(γ), γ in the order γxy, γxz, γyx, γyz, γzx, γzy."""
     g = np.asarray(gamma, dtype=float)

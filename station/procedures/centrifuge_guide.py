@@ -630,8 +630,9 @@ class CentrifugeImu:
     time it is set: an encoder-locked drive; P2 needs it, since |f| moves twice the relative
     speed error and at 36 g a 1e-6 error is already 7e-5 g, ten times a row's averaged
     noise); the gyro on the table (1e-3 rad/s noise per sample) measures it. Specific force
-    in the table frame (radial out, tangential, up) is ``(−ω²R/g, 0, 1)`` g (the simulator's
-    convention); the forward model is ``solvers.models.accel.forward``. The gyro reads the
+    in the table frame (radial out, tangential, up) is ``(−ω²R/g, 0, 1)`` g
+    (``solvers.models.accel.centrifuge_specific_force_g``, as the simulator's); the forward
+    model is ``solvers.models.accel.forward``. The gyro reads the
     table's rate, ``(0, 0, ω)`` in the table frame, in rad/s."""
 
     def __init__(
@@ -741,7 +742,7 @@ class CentrifugeImu:
             sel = k == kk
             C_t_b = self.orients[kk - 1]
             ws = w[sel]
-            f_t = np.column_stack([-ws * ws * self.radius_m / self.g_mps2, np.zeros_like(ws), np.ones_like(ws)])
+            f_t = accel_model.centrifuge_specific_force_g(ws, self.radius_m, self.g_mps2)
             f[sel] = f_t @ C_t_b  # rows of C_t_bᵀ f_t
             g[sel] = np.column_stack([np.zeros_like(ws), np.zeros_like(ws), ws]) @ C_t_b
         shake = np.where(handled[:, None], self.rng.normal(scale=0.3, size=(n, 3)), 0.0)
