@@ -690,8 +690,8 @@ def report_figures(result: dict, meta: dict, columns: dict) -> list[tuple[str, s
     try:
         W = np.asarray(result["params"]["soft_iron"], dtype=float)
         h = np.asarray(result["params"]["hard_iron"], dtype=float)
-        m = np.column_stack([columns[c] for c in ("mx", "my", "mz")]) - h
-        m = m[np.isfinite(m).all(axis=1)] @ W.T
+        raw = np.column_stack([columns[c] for c in ("mx", "my", "mz")])
+        m = C.calibrated(raw[np.isfinite(raw).all(axis=1)], W, h)
         d = m / np.linalg.norm(m, axis=1, keepdims=True)
         cov = result.get("coverage")
         cap = f" ({100 * cov:.0f} % of the sphere within 30° of a visited direction)" if isinstance(cov, float) else ""

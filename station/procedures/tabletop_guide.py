@@ -34,6 +34,7 @@ import numpy as np
 
 from solvers import frames
 from solvers.detectors import orientation_check
+from solvers.models import accel as accel_model
 from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS
 from station.fileio import atomic_write_json
 from station.procedures.guide_base import started_utc, stillness_tracker
@@ -274,7 +275,7 @@ class P1Guide:
         B, M, known = self._model
         raw = np.asarray(raw, dtype=float)
         Mz = np.where(np.isfinite(M), M, 0.0)
-        f = raw @ Mz.T + np.where(known, B, 0.0)
+        f = accel_model.p1_apply(raw, np.where(known, B, 0.0), Mz).reshape(raw.shape)
         return np.where(known, f, np.nan)
 
     # ------------------------------------------------------------ properties
