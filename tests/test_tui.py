@@ -87,6 +87,43 @@ async def run_bench(pilot, src, clock: BenchClock, until, step_s=0.2, max_device
         await pilot.pause(0.01)
 
 
+class Bench:
+    """A guided screen on a simulated unit whose clock the test advances (:func:`guided_bench`):
+    the ``app``, its ``pilot``, the source ``src`` and its ``clock``."""
+
+    def __init__(self, app, pilot, src, clock: BenchClock) -> None:
+        self.app, self.pilot, self.src, self.clock = app, pilot, src, clock
+
+    async def run(self, until, **options) -> None:
+        """Run the bench until ``until()`` holds (:func:`run_bench`'s options)."""
+        await run_bench(self.pilot, self.src, self.clock, until, **options)
+
+
+@contextlib.asynccontextmanager
+async def guided_bench(db=None, *, seed: int, notifications: bool = False, **app_options):
+    """The app started on P1's guided screen (``make_app(..., start="procedure")`` with
+    ``app_options``: ``average_s``, ``settle_s``) over a simulated unit of ``seed`` on a
+    :class:`BenchClock`, at 80x24; yields a :class:`Bench` once the screen's guide is up."""
+    clock = BenchClock()
+    src = SimSource(seed=seed, clock=clock)
+    app = make_app(db, device=src, start="procedure", **app_options)
+    async with app.run_test(size=SIZE, notifications=notifications) as pilot:
+        await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+        yield Bench(app, pilot, src, clock)
+
+
+async def abort_to_resume(pilot, app):
+    """``a`` on a guided screen and ``y`` to its question: back on Connect, whose Resume button
+    (for the positions kept) is returned once it is enabled."""
+    await pilot.press("a")
+    await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+    await pilot.press("y")
+    await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
+    resume = app.screen.query_one("#resume")
+    await wait_for(pilot, lambda: not resume.disabled)
+    return resume
+
+
 @contextlib.contextmanager
 def simulated_device_on_a_pty(seed: int, rate_hz: float, buffer_s: float = 0.5):
     """The built-in device serving a real pseudo-terminal from a thread; yields the device and
@@ -369,19 +406,11 @@ def test_gyro_drift_hold_to_a_saved_result(tmp_path):
 
 def test_wrong_face_up_is_shown_and_blocks_capture():
     async def story():
-        clock = BenchClock()
-        src = SimSource(seed=1, clock=clock)
-        app = make_app(None, device=src, start="procedure", average_s=60.0)
-        async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
-            src.place("x_down")  # asked for x_up
-            await run_bench(
-                pilot,
-                src,
-                clock,
-                lambda: (
-                    app.screen.last_status and app.screen.last_status.wrong_face and app.screen.last_status.is_still
-                ),
+        async with guided_bench(seed=1, average_s=60.0) as bench:
+            app, pilot = bench.app, bench.pilot
+            bench.src.place("x_down")  # asked for x_up
+            await bench.run(
+                lambda: app.screen.last_status and app.screen.last_status.wrong_face and app.screen.last_status.is_still
             )
             await wait_for(pilot, lambda: "WRONG FACE UP" in text_of(app, "#orientation"))
             assert "Upside down: turn the unit over" in text_of(app, "#message")
@@ -396,11 +425,8 @@ def test_p1_live_rate_reads_in_degrees_per_second():
     import re
 
     async def story():
-        clock = BenchClock()
-        src = SimSource(seed=3, clock=clock)
-        app = make_app(None, device=src, start="procedure", average_s=60.0)
-        async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+        async with guided_bench(seed=3, average_s=60.0) as bench:
+            app, src = bench.app, bench.src
             src.place("y_up")  # a quarter turn from x_up: tens of °/s for a few seconds
             seen = {}
 
@@ -411,7 +437,7 @@ def test_p1_live_rate_reads_in_degrees_per_second():
                 seen["gyro"], seen["text"] = st.gyro, str(app.screen.query_one("#readouts").render())
                 return max(map(abs, st.gyro)) > math.radians(10.0)
 
-            await run_bench(pilot, src, clock, turning, step_s=0.05)
+            await bench.run(turning, step_s=0.05)
             return src.units["gyro_unit"], seen
 
     unit, seen = asyncio.run(story())
@@ -428,18 +454,15 @@ def test_skip_redo_abort_and_resume(tmp_path):
     db = str(tmp_path / "station.db")
 
     async def story():
-        clock = BenchClock()
-        src = SimSource(seed=5, clock=clock)
-        app = make_app(db, device=src, start="procedure", average_s=1.0, settle_s=0.5)
-        async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+        async with guided_bench(db, seed=5, average_s=1.0, settle_s=0.5) as bench:
+            app, pilot, src = bench.app, bench.pilot, bench.src
             g = app.screen.guide
-            await run_bench(pilot, src, clock, lambda: g.n_captured == 1)  # x_up: the unit starts there
+            await bench.run(lambda: g.n_captured == 1)  # x_up: the unit starts there
             await pilot.press("s")  # skip x_down
             await wait_for(pilot, lambda: g.steps[1].status == "skipped")
             assert g.step.name == "y_up"
             src.place("y_up")
-            await run_bench(pilot, src, clock, lambda: g.steps[2].status == "captured")
+            await bench.run(lambda: g.steps[2].status == "captured")
             steps = app.screen.query_one("#steps")
             await wait_for(pilot, lambda: "✓" in str(steps.get_option_at_index(2).prompt))
             await pilot.press("a")  # abort asks first; n keeps the run
@@ -447,12 +470,7 @@ def test_skip_redo_abort_and_resume(tmp_path):
             await pilot.press("n")
             await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
             assert g.phase != "aborted"
-            await pilot.press("a")
-            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
-            await pilot.press("y")
-            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
-            resume = app.screen.query_one("#resume")
-            await wait_for(pilot, lambda: not resume.disabled)
+            resume = await abort_to_resume(pilot, app)
             assert "2/12" in str(resume.label)
             await pilot.press("f6")
             await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen" and app.screen.guide is not None)

@@ -6,8 +6,7 @@ from __future__ import annotations
 import asyncio
 
 from station.app import make_app
-from station.sources import SimSource
-from tests.test_tui import SIZE, BenchClock, run_bench, start_on_sim, text_of, wait_for
+from tests.test_tui import SIZE, guided_bench, start_on_sim, text_of, wait_for
 
 
 def test_p1_quarter_turn_prompt_is_shown_whole_at_80x24():
@@ -15,13 +14,10 @@ def test_p1_quarter_turn_prompt_is_shown_whole_at_80x24():
     "Wrong face up: 90° off, a quarter turn; put the face" (the rest, "shown up", lost)."""
 
     async def story():
-        clock = BenchClock()
-        src = SimSource(seed=1, clock=clock)
-        app = make_app(None, device=src, start="procedure", average_s=60.0)
-        async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
-            src.place("y_up")  # asked for x_up: a quarter turn off
-            await run_bench(pilot, src, clock, lambda: "quarter turn" in app.screen.guide.status().message)
+        async with guided_bench(seed=1, average_s=60.0) as bench:
+            app, pilot = bench.app, bench.pilot
+            bench.src.place("y_up")  # asked for x_up: a quarter turn off
+            await bench.run(lambda: "quarter turn" in app.screen.guide.status().message)
             await wait_for(pilot, lambda: "quarter turn" in text_of(app, "#message"))
             # the clock is stopped: the prompt settles; what is drawn must be all of it
             shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
@@ -268,18 +264,15 @@ def test_quitting_p1_with_captured_positions_says_they_are_kept_for_resume(tmp_p
     from tests.test_tui import screen_name
 
     async def story():
-        clock = BenchClock()
-        src = SimSource(seed=3, clock=clock)
-        app = make_app(str(tmp_path / "s.db"), device=src, start="procedure", average_s=1.0, settle_s=0.5)
-        async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+        async with guided_bench(str(tmp_path / "s.db"), seed=3, average_s=1.0, settle_s=0.5) as bench:
+            app, pilot = bench.app, bench.pilot
             guide = app.screen.guide
             await pilot.press("ctrl+q")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
             before = app.screen.question
             await pilot.press("n")
             await wait_for(pilot, lambda: screen_name(app) != "ConfirmScreen")
-            await run_bench(pilot, src, clock, lambda: guide.n_captured == 1)  # x_up: the unit starts there
+            await bench.run(lambda: guide.n_captured == 1)  # x_up: the unit starts there
             await wait_for(pilot, lambda: os.path.exists(guide.state_path))
             await pilot.press("ctrl+q")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
@@ -646,14 +639,12 @@ def test_p1_abort_notice_counts_its_positions_in_words(tmp_path):
     from tests.test_tui import screen_name
 
     async def story(n_wanted):
-        clock = BenchClock()
-        src = SimSource(seed=3, clock=clock)
-        app = make_app(str(tmp_path / f"s{n_wanted}.db"), device=src, start="procedure", average_s=1.0, settle_s=0.5)
-        async with app.run_test(size=SIZE, notifications=True) as pilot:
-            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+        db = str(tmp_path / f"s{n_wanted}.db")
+        async with guided_bench(db, seed=3, notifications=True, average_s=1.0, settle_s=0.5) as bench:
+            app, pilot = bench.app, bench.pilot
             guide = app.screen.guide
             if n_wanted:
-                await run_bench(pilot, src, clock, lambda: guide.n_captured == n_wanted)  # x_up: it starts there
+                await bench.run(lambda: guide.n_captured == n_wanted)  # x_up: it starts there
             await pilot.press("a")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
             await pilot.press("y")

@@ -170,25 +170,16 @@ def test_start_asks_before_a_new_run_replaces_the_positions_kept_for_resume(tmp_
     run at once, and its first captured position wrote over the resume file: the positions
     captured before (3-5 minutes each at the source's averaging time) were gone without a word.
     F5 asks now; n (or Esc) keeps them and F6 still resumes them; y starts anew."""
-    from station.sources import SimSource
-    from tests.test_tui import BenchClock, run_bench
+    from tests.test_tui import abort_to_resume, guided_bench
 
     db = str(tmp_path / "station.db")
 
     async def story():
-        clock = BenchClock()
-        src = SimSource(seed=5, clock=clock)
-        app = make_app(db, device=src, start="procedure", average_s=1.0, settle_s=0.5)
-        async with app.run_test(size=SIZE) as pilot:
-            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+        async with guided_bench(db, seed=5, average_s=1.0, settle_s=0.5) as bench:
+            app, pilot = bench.app, bench.pilot
             g = app.screen.guide
-            await run_bench(pilot, src, clock, lambda: g.n_captured == 1)  # x_up: the unit starts there
-            await pilot.press("a")
-            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
-            await pilot.press("y")
-            await wait_for(pilot, lambda: screen_name(app) == "ConnectScreen")
-            resume = app.screen.query_one("#resume")
-            await wait_for(pilot, lambda: not resume.disabled)
+            await bench.run(lambda: g.n_captured == 1)  # x_up: the unit starts there
+            await abort_to_resume(pilot, app)
             app.screen.query_one("#start").focus()
             await pilot.press("f5")
             await wait_for(pilot, lambda: any("Start a new run?" in line for line in screen_lines(app)))
