@@ -378,7 +378,8 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
         omega_body_rad_s=W,
         delay_band_hz=LDV_DELAY_BAND_FS / dt if dt > 0 else None,
     )
-    r0 = v @ np.asarray(X0).T - y
+    y0 = ldv_model.forward(v, {"X": np.asarray(X0, float)})  # the baseline's beam outputs
+    r0 = y0 - y
     sig_beam = np.maximum(np.std(r0, axis=0), 1e-12)
 
     def residual(p):
@@ -433,7 +434,7 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
                 "temperature": T,
                 "input": np.linalg.norm(v, axis=1),
                 "rate": None if W is None else np.linalg.norm(W, axis=1),
-                "input_axis": v @ np.asarray(X0, float).T,
+                "input_axis": y0,
             },
         )
     ]
@@ -1092,9 +1093,8 @@ def compass_problem(
     # the generic terms act per sample on the baseline's field m0, as the forward model does
     prob.generic = [(cond, {"time": None if table else t_all, "temperature": T_all, "input_axis": m0})]
     if have_dip:
-        prob.generic.append(
-            (cond_q, {"time": None if table else tq, "temperature": Tq, "input_axis": (yq - h0) @ W0.T})
-        )
+        mq0 = mag_model.inverse(yq, {"W": W0, "h": np.asarray(h0, float)})  # the baseline's field at the dip rows
+        prob.generic.append((cond_q, {"time": None if table else tq, "temperature": Tq, "input_axis": mq0}))
     prob.cand_thresholds = dict(CAND_THRESHOLDS.get("compass", {}))
     prob.noise_floor = MAG_NOISE_FLOOR_NT
     return prob
