@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import asyncio
 import threading
-import time
 
 import numpy as np
 
 from db.store import Store
 from station.app import make_app
 from station.device.protocol import StationParser
+from tests.test_tui import screen_name, screen_text
+from tests.test_tui import wait_for as tui_wait_for
 
 SIZE = (80, 24)
 
@@ -47,22 +48,9 @@ class Served:
         self.dev.close()
 
 
-async def wait_for(pilot, cond, timeout_s=300.0, step_s=0.05):
-    """Wait until ``cond()``; the timeout is a safety net for a hung app, not a pace."""
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if cond():
-            return
-        await pilot.pause(step_s)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {cond}")
-
-
-def screen_name(app) -> str:
-    return type(app.screen).__name__
-
-
-def screen_text(app) -> str:
-    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
+async def wait_for(pilot, cond, timeout_s=300.0):
+    """tests.test_tui's wait with a longer safety net (not a pace): the device is on a real pty."""
+    await tui_wait_for(pilot, cond, timeout_s=timeout_s)
 
 
 async def connect(pilot, app, screen: str) -> None:

@@ -155,6 +155,11 @@ def screen_lines(app) -> list[str]:
     return [strip.text for strip in app.screen._compositor.render_strips()]
 
 
+def screen_text(app) -> str:
+    """The terminal as one text, a line per row."""
+    return "\n".join(screen_lines(app))
+
+
 async def start_on_sim(pilot, app, procedure: str, seed: int, until):
     """On Connect: pick ``procedure``, give the session a simulated device of it on a bench clock,
     F5, and run the bench until ``until()`` holds; returns (source, clock) to run it on."""

@@ -12,40 +12,13 @@ from __future__ import annotations
 
 import asyncio
 import math
-import time
 
 import numpy as np
 
 from db.store import Store
 from station.app import make_app
 from station.sources import SimSource
-
-SIZE = (80, 24)
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.t = 0.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
-async def wait_for(pilot, cond, timeout_s=120.0, step_s=0.02):
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if cond():
-            return
-        await pilot.pause(step_s)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {cond}")
-
-
-def screen_name(app) -> str:
-    return type(app.screen).__name__
-
-
-def screen_text(app) -> str:
-    return "\n".join(strip.text for strip in app.screen._compositor.render_strips())
+from tests.test_tui import SIZE, BenchClock, screen_name, screen_text, wait_for
 
 
 def caught_up(app, t: float) -> bool:
@@ -65,13 +38,13 @@ def streaming(app) -> bool:
 async def run_until(pilot, app, clock, until, step_s=1.0, max_device_s=900.0):
     """Advance the device clock in steps until ``until()`` (each step consumed first)."""
     while not until():
-        assert clock.t < max_device_s, f"not done after {max_device_s:g} s of device time:\n{screen_text(app)}"
-        clock.t += step_s
+        assert clock.t_s < max_device_s, f"not done after {max_device_s:g} s of device time:\n{screen_text(app)}"
+        clock.t_s += step_s
         try:
-            await wait_for(pilot, lambda: caught_up(app, clock.t) or not streaming(app))
+            await wait_for(pilot, lambda: caught_up(app, clock.t_s) or not streaming(app), step_s=0.02)
         except AssertionError:
             g = getattr(app.screen, "guide", None)
-            raise AssertionError(f"clock {clock.t}: {g.status() if g else None}\n{screen_text(app)}") from None
+            raise AssertionError(f"clock {clock.t_s}: {g.status() if g else None}\n{screen_text(app)}") from None
 
 
 async def connect(pilot, app, screen: str) -> None:
@@ -94,7 +67,7 @@ def saved(db, device, cal_id):
 
 def test_p1_by_hand_the_p_key_places_each_position(tmp_path):
     db = str(tmp_path / "station.db")
-    clock = Clock()
+    clock = BenchClock()
     src = SimSource(seed=21, clock=clock, max_batch_s=5.0)
 
     async def story():
@@ -107,14 +80,14 @@ def test_p1_by_hand_the_p_key_places_each_position(tmp_path):
             while g.phase != "done":
                 name = g.step.name
                 if not (first and name == "x_up"):  # the unit starts on x_up
-                    t_press = clock.t
+                    t_press = clock.t_s
                     await pilot.press("p")
                     await wait_for(pilot, lambda: src.imu._move is not None)
                     if name == "y_up":  # looked at: the unit rocks just after it is set down
                         seen = []
-                        while clock.t < t_press + src.imu.MOVE_S + 1.5:
-                            await run_until(pilot, app, clock, lambda t=clock.t: clock.t >= t + 0.2, step_s=0.2)
-                            if clock.t > t_press + src.imu.MOVE_S:
+                        while clock.t_s < t_press + src.imu.MOVE_S + 1.5:
+                            await run_until(pilot, app, clock, lambda t=clock.t_s: clock.t_s >= t + 0.2, step_s=0.2)
+                            if clock.t_s > t_press + src.imu.MOVE_S:
                                 st = g.status()
                                 seen.append((st.is_still, st.phase))
                         assert any(not still for still, _ in seen), seen  # the detector saw it rock
@@ -135,7 +108,7 @@ def test_p1_by_hand_the_p_key_places_each_position(tmp_path):
 
 def test_p2_by_hand_the_p_key_mounts_and_spins_the_centrifuge(tmp_path):
     db = str(tmp_path / "station.db")
-    clock = Clock()
+    clock = BenchClock()
     src = SimSource(seed=22, clock=clock, procedure="accel-centrifuge", max_batch_s=5.0)
 
     async def story():
@@ -176,7 +149,7 @@ def test_p2_by_hand_the_p_key_mounts_and_spins_the_centrifuge(tmp_path):
 
 def test_p3_by_hand_the_p_key_sweeps_the_compass(tmp_path):
     db = str(tmp_path / "station.db")
-    clock = Clock()
+    clock = BenchClock()
     src = SimSource(seed=23, clock=clock, procedure="compass", max_batch_s=5.0)
 
     async def story():
@@ -184,7 +157,7 @@ def test_p3_by_hand_the_p_key_sweeps_the_compass(tmp_path):
         async with app.run_test(size=SIZE) as pilot:
             await connect(pilot, app, "CompassScreen")
             g = app.screen.guide
-            await run_until(pilot, app, clock, lambda: clock.t >= 10, step_s=2.0)
+            await run_until(pilot, app, clock, lambda: clock.t_s >= 10, step_s=2.0)
             assert g.coverage < 0.2  # untouched: one direction
             await pilot.press("p")
             await wait_for(pilot, lambda: src.bench("driving") == "sweep")
@@ -200,7 +173,7 @@ def test_p3_by_hand_the_p_key_sweeps_the_compass(tmp_path):
 
 def test_p4_reference_imu_by_hand_the_p_key_runs_the_rate_table(tmp_path):
     db = str(tmp_path / "station.db")
-    clock = Clock()
+    clock = BenchClock()
     src = SimSource(seed=24, clock=clock, procedure="gyro-reference", max_batch_s=5.0)
 
     async def story():
@@ -210,7 +183,7 @@ def test_p4_reference_imu_by_hand_the_p_key_runs_the_rate_table(tmp_path):
             g = app.screen.guide
             await pilot.press("p")
             await wait_for(pilot, lambda: src.bench("driving") == "table")
-            await run_until(pilot, app, clock, lambda: clock.t >= 60, step_s=2.0)
+            await run_until(pilot, app, clock, lambda: clock.t_s >= 60, step_s=2.0)
             await wait_for(pilot, lambda: "mounting check: |M|" in screen_text(app) and "OK" in screen_text(app))
             await run_until(pilot, app, clock, lambda: g.phase == "done", step_s=2.0, max_device_s=300)
             cal_id = await save(pilot, app)
@@ -229,7 +202,7 @@ def test_p4_reference_imu_by_hand_the_p_key_runs_the_rate_table(tmp_path):
 
 def test_p5_by_hand_d_drives_t_turns_and_the_conditioning_says_when_it_is_enough(tmp_path):
     db = str(tmp_path / "station.db")
-    clock = Clock()
+    clock = BenchClock()
     src = SimSource(seed=25, clock=clock, procedure="ldv", max_batch_s=5.0)
 
     async def story():
@@ -239,7 +212,7 @@ def test_p5_by_hand_d_drives_t_turns_and_the_conditioning_says_when_it_is_enough
             g = app.screen.guide
             await pilot.press("d")
             await wait_for(pilot, lambda: src.bench("driving") is True)
-            await run_until(pilot, app, clock, lambda: clock.t >= 40, step_s=2.0)
+            await run_until(pilot, app, clock, lambda: clock.t_s >= 40, step_s=2.0)
             await wait_for(pilot, lambda: app.screen.last_status is not None and app.screen.last_status.t_s >= 40)
             assert g.status().verdict == "refused" and "ILL-CONDITIONED" in screen_text(app)
             await pilot.press("t")
@@ -275,9 +248,9 @@ async def _level_and_read(pilot, app, clock, src):
     """`l`: the simulated unit is set down level; once it has settled, the live readout."""
     await pilot.press("l")
     await wait_for(pilot, lambda: src.imu._move is not None)
-    await run_until(pilot, app, clock, lambda: src.imu._move is None, step_s=0.5, max_device_s=clock.t + 30)
-    await run_until(pilot, app, clock, lambda t=clock.t: clock.t >= t + 1.0, step_s=0.5)
-    await wait_for(pilot, lambda: app.screen.last_status is not None and app.screen.last_status.t_s >= clock.t - 0.1)
+    await run_until(pilot, app, clock, lambda: src.imu._move is None, step_s=0.5, max_device_s=clock.t_s + 30)
+    await run_until(pilot, app, clock, lambda t=clock.t_s: clock.t_s >= t + 1.0, step_s=0.5)
+    await wait_for(pilot, lambda: app.screen.last_status is not None and app.screen.last_status.t_s >= clock.t_s - 0.1)
     return app.screen.last_status
 
 
@@ -296,7 +269,7 @@ def test_p3_live_tilt_and_heading_nominal_front_end_then_the_units_p1_calibratio
     seen = {}
 
     async def story(label):
-        clock = Clock()
+        clock = BenchClock()
         src = SimSource(seed=23, clock=clock, procedure="compass", max_batch_s=5.0)
         app = make_app(db, device=src)
         app.session.extra["compass_min_s"] = 900.0  # keep sweeping until the test says
@@ -309,7 +282,7 @@ def test_p3_live_tilt_and_heading_nominal_front_end_then_the_units_p1_calibratio
             await pilot.press("p")
             await wait_for(pilot, lambda: src.bench("driving") == "sweep")
             for _ in range(40):  # 80 s of sweeping: every axis turned over
-                await run_until(pilot, app, clock, lambda t=clock.t: clock.t >= t + 2.0, step_s=1.0)
+                await run_until(pilot, app, clock, lambda t=clock.t_s: clock.t_s >= t + 2.0, step_s=1.0)
                 heads.append(app.screen.guide.status().heading_deg)
             await pilot.press("p")
             await wait_for(pilot, lambda: src.bench("driving") is None)

@@ -213,16 +213,14 @@ def test_p_on_a_position_already_taken_keeps_the_running_average(tmp_path):
     import math
 
     from station.sources import SimSource
-    from tests.test_tui_by_hand import Clock, caught_up, streaming
+    from tests.test_tui import BenchClock
+    from tests.test_tui_by_hand import run_until
 
-    clock = Clock()
+    clock = BenchClock()
     src = SimSource(seed=21, clock=clock, max_batch_s=5.0)
 
-    async def advance(pilot, app, until):
-        while not until():
-            assert clock.t < 120.0
-            clock.t += 0.5
-            await wait_for(pilot, lambda: caught_up(app, clock.t) or not streaming(app))
+    async def advance(pilot, app, until):  # half-second steps, two minutes of device time at most
+        await run_until(pilot, app, clock, until, step_s=0.5, max_device_s=120.0)
 
     async def story():
         app = make_app(None, device=src, start="procedure", average_s=20.0, settle_s=1.0)
