@@ -37,7 +37,7 @@ from solvers.compass import MIN_COVERAGE
 from solvers.detectors import FieldCoverage
 from solvers.frames import G_STANDARD_MPS2
 from solvers.units import si_factor
-from station.procedures.guide_base import GuideBase, started_utc
+from station.procedures.guide_base import GuideBase, site_meta, started_utc
 
 PHASES = ("sweep", "done", "aborted")
 
@@ -264,9 +264,7 @@ class CompassGuide(GuideBase):
                 meta[k] = self.units[k]
         if self.frontend is not None and si_factor("accel", self.units.get("accel_unit")) is None:
             meta.update(self.frontend.meta())  # the fit's tilt and headings use the same front end
-        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
-            if key in self.site:
-                meta[key] = repr(float(self.site[key]))
+        meta.update(site_meta(self.site))
         if "date" in self.site:
             meta["date"] = str(self.site["date"])
         meta.update({k: str(v) for k, v in (extra_meta or {}).items()})

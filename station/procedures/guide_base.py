@@ -1,6 +1,6 @@
 """What the guides (``station/procedures/<stem>_guide.py``) do alike: the queue of events
-the screen takes, abort, the end of a recording, the time it started, and the rest detector
-of those that wait for the unit to be still."""
+the screen takes, abort, the end of a recording, the time it started, the place in the
+capture's metadata, and the rest detector of those that wait for the unit to be still."""
 
 from __future__ import annotations
 
@@ -12,6 +12,14 @@ from solvers.stillness import StillnessTracker
 def started_utc() -> str:
     """Now, as a guide's ``started``: UTC to the second, ``YYYY-MM-DDTHH:MM:SSZ``."""
     return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+SITE_KEYS = ("latitude_deg", "longitude_deg", "altitude_m")
+
+
+def site_meta(site: dict) -> dict[str, str]:
+    """A guide's capture metadata for the bench's place: those of ``SITE_KEYS`` the site gives, as numbers."""
+    return {key: repr(float(site[key])) for key in SITE_KEYS if key in site}
 
 
 def stillness_tracker(config, sample_rate_hz: float) -> StillnessTracker:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.procedures.guide_base import GuideBase, started_utc, stillness_tracker
+from station.procedures.guide_base import GuideBase, site_meta, started_utc, stillness_tracker
 
 # `station demo`: P4 averages 180 s at the least (the drift is not resolved in less)
 DEMO_MIN_AVERAGE_S = 180.0
@@ -470,9 +470,7 @@ def _capture_meta(guide, mode: dict[str, str], extra_meta: dict | None) -> dict[
     for k in ("accel_unit", "gyro_unit"):
         if guide.units.get(k):
             meta[k] = guide.units[k]
-    for key in ("latitude_deg", "longitude_deg", "altitude_m"):
-        if key in guide.site:
-            meta[key] = repr(float(guide.site[key]))
+    meta.update(site_meta(guide.site))
     meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
     return meta
 

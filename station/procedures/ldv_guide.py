@@ -27,7 +27,7 @@ import numpy as np
 
 from solvers.ldv import KAPPA_REFUSE, KAPPA_WARN
 from solvers.models import ldv as ldv_model
-from station.procedures.guide_base import GuideBase, started_utc
+from station.procedures.guide_base import GuideBase, site_meta, started_utc
 
 BEAMS = ("vl1", "vl2", "vl3")
 REF = ("vx", "vy", "vz")
@@ -236,9 +236,7 @@ class LdvGuide(GuideBase):
             "sample_rate_hz": repr(self.sample_rate_hz),
             "frame": "body x forward, y right, z down",
         }
-        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
-            if key in self.site:
-                meta[key] = repr(float(self.site[key]))
+        meta.update(site_meta(self.site))
         meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
         return Capture(meta=meta, columns=cols)
 

@@ -37,7 +37,7 @@ from solvers.detectors import orientation_check
 from solvers.models import accel as accel_model
 from solvers.positions import P1_INSTRUCTIONS, P1_POSITIONS
 from station.fileio import atomic_write_json
-from station.procedures.guide_base import started_utc, stillness_tracker
+from station.procedures.guide_base import site_meta, started_utc, stillness_tracker
 from station.procedures.state import default_state_path  # noqa: F401 - re-exported
 
 # the guide keeps its captured positions in a resume file (station.procedures.state): an
@@ -563,9 +563,7 @@ class P1Guide:
             "date": self.started[:10],
             "g_mps2": repr(float(self.g_mps2)),
         }
-        for key in ("latitude_deg", "longitude_deg", "altitude_m"):
-            if key in self.site:
-                meta[key] = repr(float(self.site[key]))
+        meta.update(site_meta(self.site))
         meta["averaging_s"] = repr(self.config.average_s)
         meta.update({k: str(v) for k, v in (extra_meta or {}).items()})
         if series is not None:
