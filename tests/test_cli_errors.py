@@ -224,35 +224,14 @@ def test_simulate_non_finite_effect(tmp_path, capsys):
 
 def test_simulate_good_options_still_work(tmp_path, capsys):
     out_file = tmp_path / "t.csv"
+    simulate = ("simulate", "--procedure", "accel-tabletop", "--out", out_file)
     code, out, err = run(
-        capsys,
-        "simulate",
-        "--procedure",
-        "accel-tabletop",
-        "--out",
-        out_file,
-        "--option",
-        "averages=1",
-        "--option",
-        "extra_positions=2",
-        "--option",
-        "table_tilt_deg=-0.5",
+        capsys, *simulate, "--option", "averages=1", "--option", "extra_positions=2", "--option", "table_tilt_deg=-0.5"
     )
     assert code == 0, err
     cap = read_capture(out_file)
     assert not cap.is_time_series and cap.n_rows == 14
-    code, out, err = run(
-        capsys,
-        "simulate",
-        "--procedure",
-        "accel-tabletop",
-        "--out",
-        out_file,
-        "--option",
-        "label_positions=0",
-        "--option",
-        "hold_s=5",
-    )
+    code, out, err = run(capsys, *simulate, "--option", "label_positions=0", "--option", "hold_s=5")
     assert code == 0, err
     cap = read_capture(out_file)
     assert cap.is_time_series and "position" not in cap.columns
