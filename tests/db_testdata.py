@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sqlite3
+
 import numpy as np
 
 
@@ -112,3 +114,25 @@ def small_capture(seed=0, n=50, procedure="accel-tabletop", device="IMU-1", date
         "az": rng.normal(9.8, 0.01, n),
     }
     return m, cols
+
+
+def database_before(path: str, n_migrations: int) -> sqlite3.Connection:
+    """A database file as an older station left it: only the first ``n_migrations`` of
+    ``db.schema.MIGRATIONS`` applied (by sqlite-utils' Migrations, as the station applies
+    them); returns an open connection to it."""
+    from sqlite_utils import Database, Migrations
+
+    from db.schema import MIGRATIONS
+
+    conn = sqlite3.connect(path)
+    old = Migrations("station")
+    for name, statements in MIGRATIONS[:n_migrations]:
+
+        def run(db, statements=statements):
+            for sql in statements:
+                db.execute(sql)
+
+        run.__name__ = name
+        old(name=name)(run)
+    old.apply(Database(conn))
+    return conn

@@ -4,7 +4,6 @@ store (real CLI, real SQLite, captures from the simulator; see README "Accepting
 from __future__ import annotations
 
 import json
-import sqlite3
 
 import numpy as np
 import pytest
@@ -218,22 +217,10 @@ def test_store_refuses_the_same_samples_twice_whoever_saves_them(tmp_path):
 def test_review_is_hashed_and_old_records_keep_their_hash(tmp_path):
     """A database written before migration 0002: opening it adds the columns, its records
     still verify, and an edited review on a new record is caught."""
-    from sqlite_utils import Database, Migrations
-
-    from db.schema import MIGRATIONS
+    from db_testdata import database_before
 
     path = str(tmp_path / "old.db")
-    conn = sqlite3.connect(path)
-    old = Migrations("station")
-    name, statements = MIGRATIONS[0]
-
-    def run(db, statements=statements):
-        for sql in statements:
-            db.execute(sql)
-
-    run.__name__ = name
-    old(name=name)(run)
-    old.apply(Database(conn))
+    conn = database_before(path, 1)
     conn.execute("INSERT INTO devices (id, created) VALUES ('OLD-1', '2024-01-01T00:00:00Z')")
     row = {
         "id": 1,

@@ -12,7 +12,7 @@ import sqlite3
 from datetime import UTC, datetime, timedelta
 
 import pytest
-from db_testdata import accel_result, compass_result, small_capture
+from db_testdata import accel_result, compass_result, database_before, small_capture
 
 from db import Store
 from station.cli import main
@@ -129,23 +129,10 @@ def test_limits_of_a_database_from_before_0004_are_anchored_when_it_is_opened(ca
     """A database whose anchors predate the limits' hashing (migrations 0001-0003 only, limits
     set then): it verifies as it is, opening it anchors the limits as found, and an edit of
     them afterwards is seen."""
-    from sqlite_utils import Database, Migrations
-
     from db.integrity import settings_hash
-    from db.schema import MIGRATIONS
 
     path = str(tmp_path / "old.db")
-    conn = sqlite3.connect(path)
-    old = Migrations("station")
-    for name, statements in MIGRATIONS[:3]:
-
-        def run(db, statements=statements):
-            for sql in statements:
-                db.execute(sql)
-
-        run.__name__ = name
-        old(name=name)(run)
-    old.apply(Database(conn))
+    conn = database_before(path, 3)
     created = "2024-01-01T00:00:00Z"
     conn.execute("INSERT INTO devices (id, created, limits) VALUES ('OLD-2', ?, ?)", [created, '{"B": [-0.5, 0.5]}'])
     dev = dict(zip(("id", "created"), ("OLD-2", created)))
