@@ -233,8 +233,10 @@ def calibrate(
             m["G"] = p["G"]
         return m
 
+    hold_cond = Conditions(f_mps2=F)
+
     def resid(p):
-        hold = (U * p["wU"]) @ p["K"].T + p["eps"] + F @ p["G"].T - Ybar
+        hold = gyro.forward(U * p["wU"], model(p), hold_cond) - Ybar  # K ω + ε (+ G f) at each hold
         R = gyro.integrate_rates(b.rates(model(p)), b.t)
         v = np.einsum("mji,mj->mi", R, u0)  # Rᵀ u_k0
         rot = np.einsum("mci,mi->mc", E, v).ravel()
