@@ -177,6 +177,12 @@ def text_of(app, selector) -> str:
     return "\n".join(line[r.x : r.right] for line in screen_lines(app)[r.y : r.bottom])
 
 
+def words_of(app, selector=None) -> str:
+    """The words shown in the widget's region (without ``selector``, on the whole screen) as one
+    line: the text as it reads, wherever the screen wrapped it."""
+    return " ".join((text_of(app, selector) if selector else screen_text(app)).split())
+
+
 # ---------------------------------------------------------------- Connect
 
 
@@ -236,7 +242,7 @@ def test_connect_refuses_a_p4_record_too_short_for_its_fit_before_recording(proc
             app.screen.query_one("#average").value = "1"
             await pilot.press("f5")
             await wait_for(pilot, lambda: "too short" in text_of(app, "#status"))
-            status = " ".join(text_of(app, "#status").split())
+            status = words_of(app, "#status")
             assert f"at least {MIN_DURATION_S:g} s" in status and "P4 asks ≥ 180 s" in status
             assert screen_name(app) == "ConnectScreen" and app.session.source is None
             app.screen.query_one("#average").value = f"{MIN_DURATION_S:g}"
@@ -661,14 +667,14 @@ def test_import_an_ldv_file_with_its_conditioning_check(tmp_path):
                         and text_of(app, "#status").strip() != ""
                     ),
                 )
-                out[key] = " ".join(text_of(app, "#status").split())
+                out[key] = words_of(app, "#status")
             app.screen.query_one("#path").value = good
             await pilot.press("enter")
             await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
             # the summary is drawn once the device's record is read (a worker): wait for it
             await wait_for(pilot, lambda: "cond(HᵀH) =" in text_of(app, "#summary"))
             out["title"] = screen_lines(app)[0]
-            out["summary"] = " ".join(text_of(app, "#summary").split())
+            out["summary"] = words_of(app, "#summary")
             table = app.screen.query_one("#params")
             out["cond"] = next(
                 table.get_row_at(i) for i in range(table.row_count) if table.get_row_at(i)[0] == "condition_number"
@@ -892,7 +898,7 @@ def test_a_port_typed_while_source_is_simulated_is_the_port_used(tmp_path):
                 app.screen.query_one("#source").value = "sim"  # the simulator chosen again
                 await pilot.press("f5")
                 await wait_for(pilot, lambda: "clear the port" in text_of(app, "#status"))
-                refused = " ".join(text_of(app, "#status").split())
+                refused = words_of(app, "#status")
                 assert screen_name(app) == "ConnectScreen" and app.session.source is None
                 app.screen.query_one("#port").value = ""
                 await pilot.click("#port")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 
 from station.app import make_app
-from tests.test_tui import SIZE, guided_bench, start_on_sim, text_of, wait_for
+from tests.test_tui import SIZE, guided_bench, start_on_sim, text_of, wait_for, words_of
 
 
 def test_p1_quarter_turn_prompt_is_shown_whole_at_80x24():
@@ -20,7 +20,7 @@ def test_p1_quarter_turn_prompt_is_shown_whole_at_80x24():
             await bench.run(lambda: "quarter turn" in app.screen.guide.status().message)
             await wait_for(pilot, lambda: "quarter turn" in text_of(app, "#message"))
             # the clock is stopped: the prompt settles; what is drawn must be all of it
-            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            shown = lambda: words_of(app, "#message")  # noqa: E731
             try:
                 await wait_for(pilot, lambda: shown() == app.screen.guide.status().message, timeout_s=10)
             except AssertionError:
@@ -108,8 +108,8 @@ def test_a_capture_that_names_no_device_is_not_saved_under_the_last_device(tmp_p
             await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=60)
             await wait_for(pilot, lambda: app.screen.device is not None)
             await pilot.press("s")
-            await wait_for(pilot, lambda: "no device" in " ".join(text_of(app, "#saved").split()), timeout_s=20)
-            return " ".join(text_of(app, "#saved").split()), app.screen.calibration_id
+            await wait_for(pilot, lambda: "no device" in words_of(app, "#saved"), timeout_s=20)
+            return words_of(app, "#saved"), app.screen.calibration_id
 
     saved, cal_id = asyncio.run(story())
     assert cal_id is None and "--device" in saved, saved
@@ -344,7 +344,7 @@ def test_history_says_when_the_device_falls_due_and_i_sets_its_interval(tmp_path
     from db.store import Store
     from station.store import save_result
     from tests.station_run import run_station
-    from tests.test_tui import screen_lines, screen_name
+    from tests.test_tui import screen_name
     from tests.tui_data import p1_result
 
     db = str(tmp_path / "s.db")
@@ -353,25 +353,22 @@ def test_history_says_when_the_device_falls_due_and_i_sets_its_interval(tmp_path
     save_result(db, cap, result, device_id="IMU-5", operator="test")
     assert Store(db).get_device("IMU-5")["interval_days"] is None
 
-    def shown(app) -> str:
-        return " ".join(" ".join(screen_lines(app)).split())
-
     async def story():
         app = make_app(db, start="history")
         async with app.run_test(size=SIZE) as pilot:
             await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-5" in text_of(app, "#devices"))
-            await wait_for(pilot, lambda: "never due: no recalibration interval (i sets one)" in shown(app), 30)
+            await wait_for(pilot, lambda: "never due: no recalibration interval (i sets one)" in words_of(app), 30)
             before = text_of(app, "#devices")
             await pilot.press("i")
-            await wait_for(pilot, lambda: screen_name(app) == "IntervalScreen" and "never due" in shown(app))
+            await wait_for(pilot, lambda: screen_name(app) == "IntervalScreen" and "never due" in words_of(app))
             for key in "abc":
                 await pilot.press(key)
             await pilot.press("enter")
-            await wait_for(pilot, lambda: "not a number of days" in shown(app))
+            await wait_for(pilot, lambda: "not a number of days" in words_of(app))
             assert Store(db).get_device("IMU-5")["interval_days"] is None
             await pilot.press("backspace", "backspace", "backspace", "3", "0", "enter")
-            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "interval 30 d" in shown(app))
-            return before, shown(app), text_of(app, "#devices")
+            await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "interval 30 d" in words_of(app))
+            return before, words_of(app), text_of(app, "#devices")
 
     before, after, devices = asyncio.run(story())
     assert "no int" in before and " ok" not in before, before
@@ -415,7 +412,7 @@ def test_the_noise_runs_p4_verdict_is_shown_whole_at_80x24(tmp_path):
             await wait_for(pilot, lambda: app.screen.focused is not None and app.screen.focused.id == "accuracy")
             await pilot.press(*["backspace"] * 6, *accuracy, "enter")
             await wait_for(pilot, lambda: f"≤ {accuracy} °/h" in text_of(app, "#status"))
-            return " ".join(text_of(app, "#status").split())
+            return words_of(app, "#status")
 
     assert asyncio.run(story()) == verdict
 
@@ -433,7 +430,7 @@ def test_the_compass_prompt_is_shown_whole_at_80x24():
             )
             asked = app.screen.last_status.message
             assert "all faces up" in asked, asked
-            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            shown = lambda: words_of(app, "#message")  # noqa: E731
             try:  # the clock is stopped: the prompt settles; what is drawn must be all of it
                 await wait_for(pilot, lambda: shown() == asked, timeout_s=10)
             except AssertionError:
@@ -469,7 +466,7 @@ def test_a_disagreeing_centrifuge_row_is_said_whole_at_80x24():
             await wait_for(pilot, lambda: "DISAGREES" in app.screen.guide.status().message)
             asked = " ".join(app.screen.guide.status().message.split())
             assert "r redoes it" in asked and "Next: Mount" in asked, asked
-            shown = lambda: " ".join(text_of(app, "#message").split())  # noqa: E731
+            shown = lambda: words_of(app, "#message")  # noqa: E731
             try:  # the clock is stopped: the message settles; what is drawn must be all of it
                 await wait_for(pilot, lambda: shown() == asked, timeout_s=10)
             except AssertionError:
@@ -512,7 +509,7 @@ def test_why_p1_left_its_gyro_uncalibrated_is_said_whole(tmp_path):
             await wait_for(
                 pilot, lambda: screen_name(app) == "ResultsScreen" and "gyro not" in text_of(app, "#summary")
             )
-            return " ".join(text_of(app, "#summary").split())
+            return words_of(app, "#summary")
 
     shown = asyncio.run(story())
     assert f"gyro not calibrated: {' '.join(why.split())}" in shown, shown
@@ -536,7 +533,7 @@ def test_history_says_when_devices_fall_due_in_a_row_each_and_why_beside_the_dev
             await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-1:" in text_of(app, "#due"))
             await wait_for(pilot, lambda: "365-day interval" in text_of(app, "#next"))
             plot = app.screen.query_one("#plot").region.height
-            return text_of(app, "#due"), " ".join(text_of(app, "#next").split()), plot
+            return text_of(app, "#due"), words_of(app, "#next"), plot
 
     header, beside, plot_rows = asyncio.run(story())
     rows = [r.strip() for r in header.splitlines() if r.strip()]
@@ -567,7 +564,7 @@ def test_new_run_asks_before_it_drops_an_unsaved_result(tmp_path):
             )
             await pilot.press("n")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
-            question = " ".join(text_of(app, "#box").split())
+            question = words_of(app, "#box")
             await pilot.press("n")  # no: the result stays
             await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen")
             await pilot.press("s")
@@ -618,7 +615,7 @@ def test_new_run_asks_before_it_drops_an_unexported_noise_record(tmp_path):
             await wait_for(pilot, lambda: "P4 needs" in text_of(app, "#table") and app.screen.focused is None)
             await pilot.press("n")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
-            question = " ".join(text_of(app, "#box").split())
+            question = words_of(app, "#box")
             await pilot.press("n")  # no: the record stays
             await wait_for(pilot, lambda: screen_name(app) == "AllanScreen")
             await pilot.press("e")
@@ -649,7 +646,7 @@ def test_p1_abort_notice_counts_its_positions_in_words(tmp_path):
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
             await pilot.press("y")
             await wait_for(pilot, lambda: "aborted" in text_of(app, "#notices"))
-            return " ".join(text_of(app, "#notices").split())
+            return words_of(app, "#notices")
 
     one = asyncio.run(story(1))
     assert "P1 aborted with 1 position captured: Resume (F6) continues it" in one, one
@@ -664,16 +661,13 @@ def test_history_i_on_the_second_device_stays_on_it(tmp_path):
     under the 30 days just typed for the other. The cursor and the right side stay on the device
     whose interval was set; both say its new date."""
     from db.store import Store
-    from tests.test_tui import screen_lines, screen_name
+    from tests.test_tui import screen_name
     from tests.tui_data import seed_history
 
     db = str(tmp_path / "s.db")
     seed_history(db, "IMU-1", n=1, interval_days=365, start_year=2026)
     seed_history(db, "IMU-2", n=1, start_year=2026)
     seed_history(db, "IMU-3", n=1, start_year=2026)
-
-    def shown(app) -> str:
-        return " ".join(" ".join(screen_lines(app)).split())
 
     def highlighted(app) -> str:
         t = app.screen.query_one("#devices")
@@ -683,9 +677,9 @@ def test_history_i_on_the_second_device_stays_on_it(tmp_path):
         app = make_app(db, start="history")
         async with app.run_test(size=SIZE) as pilot:
             await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen" and "IMU-3" in text_of(app, "#devices"))
-            await wait_for(pilot, lambda: app.screen.device_id == "IMU-1" and "interval 365 d" in shown(app))
+            await wait_for(pilot, lambda: app.screen.device_id == "IMU-1" and "interval 365 d" in words_of(app))
             await pilot.press("down")
-            await wait_for(pilot, lambda: app.screen.device_id == "IMU-2" and "never due" in shown(app))
+            await wait_for(pilot, lambda: app.screen.device_id == "IMU-2" and "never due" in words_of(app))
             await pilot.press("i")
             await wait_for(pilot, lambda: screen_name(app) == "IntervalScreen")
             await pilot.press("3", "0", "enter")

@@ -7,12 +7,7 @@ from __future__ import annotations
 import asyncio
 
 from station.app import make_app
-from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for
-
-
-def _joined(text: str) -> str:
-    """A widget's text as one line: the words it wrapped at 80 columns put back together."""
-    return " ".join(line.strip() for line in text.splitlines() if line.strip())
+from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for, words_of
 
 
 def test_a_port_path_that_does_not_exist_says_what_to_do_next(tmp_path):
@@ -30,7 +25,7 @@ def test_a_port_path_that_does_not_exist_says_what_to_do_next(tmp_path):
             await pilot.press(*port)
             await pilot.press("f5")
             await wait_for(pilot, lambda: "Cannot connect" in text_of(app, "#status"))
-            return _joined(text_of(app, "#status")), app.screen.query_one("#start").disabled, screen_lines(app)
+            return words_of(app, "#status"), app.screen.query_one("#start").disabled, screen_lines(app)
 
     status, start_disabled, lines = asyncio.run(story())
     assert status == (  # the port is in its field above: a long /dev/serial/by-id/ path pushed the rest off
@@ -61,7 +56,7 @@ def test_a_save_that_fails_says_how_to_keep_the_result(tmp_path):
             await wait_for(pilot, lambda: app.screen.query_one("#residuals").row_count == 12)
             await pilot.press("s")
             await wait_for(pilot, lambda: "Not saved" in text_of(app, "#saved"))
-            saved = _joined(text_of(app, "#saved"))
+            saved = words_of(app, "#saved")
             await pilot.press("ctrl+q")
             await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
             return saved, screen_lines(app)
@@ -139,13 +134,13 @@ def test_history_exports_a_calibration_for_a_flight_controller(tmp_path):
             await wait_for(pilot, lambda: screen_name(app) == "FirmwareScreen")
             await pilot.press(*"ardupilot", "enter")  # a capture in volts: ArduPilot's drivers deliver m/s^2
             await wait_for(pilot, lambda: "Not exported" in text_of(app, "#said"))
-            refused = [_joined(text_of(app, "#said"))]
+            refused = [words_of(app, "#said")]
             await pilot.press("ctrl+a", "ctrl+k", *"betaflight", "enter")
             await wait_for(pilot, lambda: "no format" in text_of(app, "#said"))
-            refused.append(_joined(text_of(app, "#said")))
+            refused.append(words_of(app, "#said"))
             await pilot.press("ctrl+a", "ctrl+k", *"c-header", "enter")
             await wait_for(pilot, lambda: "Wrote" in text_of(app, "#said"))
-            wrote = _joined(text_of(app, "#said"))
+            wrote = words_of(app, "#said")
             lines = screen_lines(app)
             await pilot.press("escape")
             await wait_for(pilot, lambda: screen_name(app) == "HistoryScreen")
