@@ -37,7 +37,7 @@ from solvers.compass import MIN_COVERAGE
 from solvers.detectors import FieldCoverage
 from solvers.frames import G_STANDARD_MPS2
 from solvers.units import si_factor
-from station.procedures.guide_base import GuideBase, site_meta, started_utc
+from station.procedures.guide_base import GuideBase, recorded_columns, site_meta, started_utc
 
 PHASES = ("sweep", "done", "aborted")
 
@@ -242,16 +242,8 @@ class CompassGuide(GuideBase):
         """The recording as a P3 time-series capture."""
         from station.capture import Capture
 
-        ch = self._chunks
-        t = np.concatenate([c["t"] for c in ch]) if ch else np.zeros(0)
-        cols = {"t": t}
-        for key, names in (("a", ("ax", "ay", "az")), ("g", ("gx", "gy", "gz")), ("m", ("mx", "my", "mz"))):
-            arr = np.concatenate([c[key] for c in ch]) if ch else np.zeros((0, 3))
-            for i, n in enumerate(names):
-                cols[n] = arr[:, i]
-        temp = np.concatenate([c["temp"] for c in ch]) if ch else np.zeros(0)
-        if np.isfinite(temp).any():
-            cols["temp_c"] = temp
+        blocks = (("a", ("ax", "ay", "az")), ("g", ("gx", "gy", "gz")), ("m", ("mx", "my", "mz")))
+        cols = recorded_columns(self._chunks, blocks)
         meta = {
             "station-capture": "1",
             "procedure": self.procedure,

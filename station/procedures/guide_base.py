@@ -1,10 +1,12 @@
 """What the guides (``station/procedures/<stem>_guide.py``) do alike: the queue of events
 the screen takes, abort, the end of a recording, the time it started, the place in the
-capture's metadata, and the rest detector of those that wait for the unit to be still."""
+capture's metadata, the recording's columns, and the rest detector of those that wait for the unit to be still."""
 
 from __future__ import annotations
 
 import datetime as _dt
+
+import numpy as np
 
 from solvers.stillness import StillnessTracker
 
@@ -20,6 +22,28 @@ SITE_KEYS = ("latitude_deg", "longitude_deg", "altitude_m")
 def site_meta(site: dict) -> dict[str, str]:
     """A guide's capture metadata for the bench's place: those of ``SITE_KEYS`` the site gives, as numbers."""
     return {key: repr(float(site[key])) for key in SITE_KEYS if key in site}
+
+
+def recorded_columns(chunks: list[dict], blocks, optional: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """A recording's capture columns from its chunks (dicts holding ``t`` and ``temp`` (n,) and the
+    (n, 3) arrays named in ``blocks``, ``((key, (x, y, z column names)), ...)``): ``t``, each block's
+    three columns in order (a block named in ``optional`` is left out when it holds no number),
+    and ``temp_c`` when a temperature was read."""
+
+    def joined(key: str, empty: np.ndarray) -> np.ndarray:
+        return np.concatenate([c[key] for c in chunks]) if chunks else empty
+
+    cols = {"t": joined("t", np.zeros(0))}
+    for key, names in blocks:
+        arr = joined(key, np.zeros((0, 3)))
+        if key in optional and not np.isfinite(arr).any():
+            continue
+        for i, name in enumerate(names):
+            cols[name] = arr[:, i]
+    temp = joined("temp", np.zeros(0))
+    if np.isfinite(temp).any():
+        cols["temp_c"] = temp
+    return cols
 
 
 def stillness_tracker(config, sample_rate_hz: float) -> StillnessTracker:

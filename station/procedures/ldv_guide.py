@@ -27,7 +27,7 @@ import numpy as np
 
 from solvers.ldv import KAPPA_REFUSE, KAPPA_WARN
 from solvers.models import ldv as ldv_model
-from station.procedures.guide_base import GuideBase, site_meta, started_utc
+from station.procedures.guide_base import GuideBase, recorded_columns, site_meta, started_utc
 
 BEAMS = ("vl1", "vl2", "vl3")
 REF = ("vx", "vy", "vz")
@@ -217,17 +217,7 @@ class LdvGuide(GuideBase):
         """The recording as a P5 time-series capture (body-frame reference)."""
         from station.capture import Capture
 
-        ch = self._chunks
-        cols = {"t": np.concatenate([c["t"] for c in ch]) if ch else np.zeros(0)}
-        for key, names in (("vl", BEAMS), ("v", REF), ("w", RATES)):
-            arr = np.concatenate([c[key] for c in ch]) if ch else np.zeros((0, 3))
-            if key == "w" and not np.isfinite(arr).any():
-                continue
-            for i, n in enumerate(names):
-                cols[n] = arr[:, i]
-        temp = np.concatenate([c["temp"] for c in ch]) if ch else np.zeros(0)
-        if np.isfinite(temp).any():
-            cols["temp_c"] = temp
+        cols = recorded_columns(self._chunks, (("vl", BEAMS), ("v", REF), ("w", RATES)), optional=("w",))
         meta = {
             "station-capture": "1",
             "procedure": self.procedure,
