@@ -375,7 +375,7 @@ def test_history_screen_says_a_back_dated_one_was_saved_before_the_highlighted_c
 
     from station.app import make_app
     from station.store import save_result
-    from tests.test_tui import SIZE, text_of, wait_for
+    from tests.test_tui import SIZE, wait_for, words_of
     from tests.tui_data import p1_result, seed_history
 
     db = tmp_path / "station.db"
@@ -390,7 +390,7 @@ def test_history_screen_says_a_back_dated_one_was_saved_before_the_highlighted_c
         async with app.run_test(size=SIZE) as pilot:
             await wait_for(pilot, lambda: app.screen.query_one("#calibrations").row_count == 3)
             await wait_for(pilot, lambda: app.screen.query_one("#calnote").display)
-            shown = " ".join(text_of(app, "#calnote").split())  # wrapped in the right-hand column
+            shown = words_of(app, "#calnote")  # wrapped in the right-hand column
             # without "; #2 stays as judged against #1" (history, the report): two rows, not three
             assert shown == f"#{back} dated 2024-09-01, saved {saved} UTC after #2, now precedes it"
             assert app.screen.query_one("#calnote").region.height == 2

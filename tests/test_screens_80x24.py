@@ -25,6 +25,7 @@ from tests.test_tui import (
     screen_name,
     text_of,
     wait_for,
+    words_of,
 )
 from tests.tui_data import p1_result
 
@@ -309,7 +310,7 @@ def test_a_refused_fit_says_why_in_words_not_none():
         async with app.run_test(size=SIZE) as pilot:
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.5)
             await wait_for(pilot, lambda: "too short" in text_of(app, "#summary"))
-            return " ".join(text_of(app, "#summary").split())
+            return words_of(app, "#summary")
 
     summary = asyncio.run(story())
     assert "None" not in summary and "is too short for a drift" in summary
@@ -462,7 +463,7 @@ def test_results_l_sets_the_devices_limits_and_judges_the_result_again(tmp_path)
             await wait_for(pilot, lambda: "B " in text_of(app, "#current"))
             await pilot.press("escape")
             await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen" and "FAIL" in text_of(app, "#summary"))
-            return before, " ".join(text_of(app, "#summary").split())
+            return before, words_of(app, "#summary")
 
     before, after = asyncio.run(story())
     assert "NO TOLERANCE" in before and "FAIL" not in before
@@ -504,7 +505,7 @@ def test_limits_and_tolerances_are_shown_and_typed_in_the_units_results_shows(tm
         async with app.run_test(size=SIZE) as pilot:
             await app.push_screen(ResultsScreen(cap, result, None, previous))
             await wait_for(pilot, lambda: "FAIL" in text_of(app, "#summary"))
-            reasons = " ".join(text_of(app, "#summary").split())
+            reasons = words_of(app, "#summary")
             await pilot.press("l")
             await wait_for(pilot, lambda: screen_name(app) == "LimitsScreen" and "drift" in text_of(app, "#current"))
             shown = text_of(app, "#current")
@@ -814,7 +815,7 @@ def _covered(app, selectors) -> list[str]:
 
 def _notices(app) -> str:
     """The notices line of the screen on top ("" where there is none), in words."""
-    return " ".join(text_of(app, "#notices").split()) if app.screen.query("#notices") else ""
+    return words_of(app, "#notices") if app.screen.query("#notices") else ""
 
 
 def _shown(app, *words) -> bool:
@@ -1096,7 +1097,7 @@ def test_saving_a_compass_to_a_unit_registered_as_an_accelerometer_is_said(tmp_p
                 await pilot.press("s")
                 await wait_for(pilot, lambda: "Saved as calibration" in text_of(app, "#saved"))
                 await pilot.pause(0.2)
-                said.append(" ".join(text_of(app, "#notices").split()) if app.screen.query("#notices") else "")
+                said.append(words_of(app, "#notices") if app.screen.query("#notices") else "")
         return said
 
     acc, mag = asyncio.run(story())

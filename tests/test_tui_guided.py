@@ -11,7 +11,17 @@ import pytest
 
 from station.app import make_app
 from station.sources import SimSource
-from tests.test_tui import SIZE, BenchClock, run_bench, screen_lines, screen_name, start_on_sim, text_of, wait_for
+from tests.test_tui import (
+    SIZE,
+    BenchClock,
+    run_bench,
+    screen_lines,
+    screen_name,
+    start_on_sim,
+    text_of,
+    wait_for,
+    words_of,
+)
 
 
 def test_centrifuge_manual_entry_refuses_bad_values_then_skip_and_abort():
@@ -97,7 +107,7 @@ def test_centrifuge_live_run_to_a_saved_result(tmp_path):
             )
             await run_bench(pilot, src, clock, lambda: screen_name(app) == "ResultsScreen", step_s=0.25)
             await wait_for(pilot, lambda: app.screen.calibration_id is not None)
-            summary = " ".join(text_of(app, "#summary").split())
+            summary = words_of(app, "#summary")
             return screen_lines(app)[0], summary, app.screen.result, scr.guide, app.screen.capture
 
     title, summary, result, guide, capture = asyncio.run(story())
@@ -151,7 +161,7 @@ def test_gyro_noise_run_shows_the_allan_deviation_and_the_p4_time(tmp_path):
             # get there are named, the others' times repeated
             rows = text_of(app, "#table").splitlines()[1:4]
             never = [row.split()[0] for row in rows if row.rstrip().endswith("never")]
-            status = " ".join(text_of(app, "#status").split())
+            status = words_of(app, "#status")
             assert status.startswith("No still P4 record" if never else "For 1σ ≤ 5 °/h")
             assert all(f" {ax} " in status for ax in never)
             await pilot.press("e")

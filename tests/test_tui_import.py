@@ -20,7 +20,7 @@ from station.importers.options import ImportOptions
 from tests.conftest import SHARED
 from tests.station_run import run_station
 from tests.test_import_ardupilot import PARAMS, DataFlashWriter
-from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for
+from tests.test_tui import SIZE, screen_lines, screen_name, text_of, wait_for, words_of
 
 PX4 = SHARED / "data" / "px4_ulog" / "original"  # ../shared, or $STATION_SHARED for a worktree elsewhere
 
@@ -79,7 +79,7 @@ def test_a_real_px4_log_shows_what_it_holds_then_the_procedures_own_refusal(tmp_
             app.screen.query_one("#procedure").value = "gyro-drift"
             await pilot.press("f5")
             await wait_for(pilot, lambda: "Calibrating" not in text_of(app, "#status"), timeout_s=60)
-            out["refused"] = " ".join(text_of(app, "#status").split())
+            out["refused"] = words_of(app, "#status")
             out["still"] = screen_name(app)
             # the board-corrected sensor_combined instead (the warning says it holds more samples)
             app.screen.query_one("#source").value = "combined"
@@ -169,7 +169,7 @@ def test_a_six_position_capture_offers_the_six_position_fit_on_f8(tmp_path, shar
             app.screen.query_one("#path").value = str(path)
             await pilot.press("enter")
             await wait_for(pilot, lambda: "F8" in text_of(app, "#status"), timeout_s=120)
-            status = " ".join(text_of(app, "#status").split())
+            status = words_of(app, "#status")
             footer = screen_lines(app)[-1]
             await pilot.press("f8")
             await wait_for(pilot, lambda: screen_name(app) == "ResultsScreen", timeout_s=120)
@@ -219,7 +219,7 @@ def test_a_missing_csv_is_said_missing_without_the_plain_csv_route(tmp_path):
         app = make_app(str(tmp_path / "s.db"))
         async with app.run_test(size=SIZE) as pilot:
             await _open(pilot, app, tmp_path / "nonexistent.csv")
-            return " ".join(text_of(app, "#status").split())
+            return words_of(app, "#status")
 
     status = asyncio.run(story())
     assert "no such file" in status, status

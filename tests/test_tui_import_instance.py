@@ -19,7 +19,7 @@ from station.importers import load, px4
 from station.importers.options import ImportOptions
 from tests.station_run import assert_one_line_refusal, run_station
 from tests.test_import_ardupilot import write_bin, write_tlog
-from tests.test_tui import SIZE, screen_lines, text_of, wait_for
+from tests.test_tui import SIZE, screen_lines, text_of, wait_for, words_of
 from tests.test_tui_import import PX4, _open, _settled
 
 
@@ -43,7 +43,7 @@ def _pick_instance(log, instance: str, done, tmp_path) -> dict:
             app.screen.query_one("#instance").value = instance
             await wait_for(pilot, lambda: done(app), timeout_s=60)
             out["after"] = _found(app)
-            out["status"] = " ".join(text_of(app, "#status").split())
+            out["status"] = words_of(app, "#status")
             out["device"] = text_of(app, "#device")
             out["value"] = app.screen.query_one("#instance").value
             out["screen_after"] = screen_lines(app)

@@ -10,7 +10,7 @@ from solvers.simulate import simulate
 from station.app import make_app
 from station.procedures import centrifuge
 from tests.station_run import capture_of
-from tests.test_tui import SIZE, screen_lines, text_of, wait_for
+from tests.test_tui import SIZE, screen_lines, text_of, wait_for, words_of
 from tests.tui_data import p1_result
 
 
@@ -278,7 +278,7 @@ def test_help_says_what_average_is_and_where_it_is_set():
         async with app.run_test(size=SIZE) as pilot:
             await pilot.press("f1")
             await wait_for(pilot, lambda: "Average (s)" in text_of(app, "HelpScreen Static"))
-            return " ".join(text_of(app, "HelpScreen Static").split())
+            return words_of(app, "HelpScreen Static")
 
     text = asyncio.run(story())
     assert "seconds per position or row" in text and "simulator" in text
