@@ -189,7 +189,9 @@ def test_a_log_cut_inside_a_message_is_imported_with_a_warning_saying_so(tmp_pat
     cut.write_bytes(data[: len(data) // 3])
     # --instance 0: the log has two gyro slots and no sensor_selection (else a line says so)
     capture, res = _import(tmp_path, cut, "--procedure", "gyro-drift", "--instance", "0")
-    assert res.stderr.count("\n") == 1, res.stderr
+    # one line of its own (the other, sample.ulg's 31 ms dropout before the cut: the dropouts test)
+    assert [w for w in res.stderr.splitlines() if "dropped messages" not in w and "cut short" not in w] == []
+    assert res.stderr.count("cut short") == 1, res.stderr
     assert f"cut.ulg: warning: the log is cut short inside a message at byte {len(data) // 3}" in res.stderr
     n = len(capture.columns["t"])
     said = int(res.stderr.split("the samples before it are imported, ")[1].split(" samples up to")[0])
@@ -338,3 +340,31 @@ def test_a_log_without_sensor_selection_says_which_sensors_the_voter_chose_from(
     assert cap.meta["accel_device_id"] == "1441792" and cap.meta["sensor_instance"] == "1"
     cap, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "compass")
     assert "voter" not in res.stderr and cap.meta["mag_device_id"] == "262144"  # CAL_MAG0_ID, the only one
+
+
+@pytest.mark.parametrize("name", LOGS)
+def test_the_loggers_own_dropouts_are_said(tmp_path, px4_dir, name):
+    """PX4's logger writes a dropout message ('O', duration in ms) where its buffer overflowed and
+    messages were lost. sample.ulg (AUAV-X21) has four, two of them (31 ms, 62 ms) while the
+    samples run: the import kept the gaps in the time axis and said nothing of them (a 64 ms
+    hole in a 250 Hz record looked like any other stretch). Now one warning with their number,
+    total and longest, as pyulog reads them; a log without any inside its samples says none."""
+    log = px4_dir / name
+    capture, res = _import(tmp_path, log, "--procedure", "gyro-drift", "--source", "combined")
+    u = ULog(str(log), ["sensor_combined"])
+    t = _topic(u, "sensor_combined")["timestamp"]
+    lost = [d.duration for d in u.dropouts if d.duration > 0 and t[0] <= d.timestamp <= t[-1]]
+    said = [w for w in res.stderr.splitlines() if "the logger dropped messages" in w]
+    if not lost:
+        assert not said, res.stderr
+        return
+    n = len(lost)
+    assert said and f"dropped messages {n} time{'s' if n != 1 else ''}" in said[0], res.stderr
+    assert f"({sum(lost)} ms in all, the longest {max(lost)} ms" in said[0], res.stderr
+    # and each one is a gap in the capture's time axis right after the sample it is stamped with
+    tc = np.asarray(capture.columns["t"])
+    for d in u.dropouts:
+        if d.duration > 0 and t[0] <= d.timestamp <= t[-1]:
+            at = (d.timestamp - t[0]) * 1e-6
+            i = np.searchsorted(tc, at + 1e-9)
+            assert tc[i] - tc[i - 1] >= d.duration * 1e-3, (at, tc[i - 1 : i + 1])

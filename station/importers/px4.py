@@ -444,6 +444,15 @@ def read(
             "the log holds a corrupt stretch (pyulog skipped it to the next sync marker): the messages in it "
             "are lost, a gap in the samples there"
         )
+    # the logger's own record of what it lost (ULog 'O' dropout messages, duration in ms): the
+    # samples are missing there, gaps in the time axis, which nothing else in the capture says
+    lost = [d.duration for d in getattr(ulog, "dropouts", []) if d.duration > 0 and t0_us <= d.timestamp <= t1_us]
+    if lost:
+        warnings.append(
+            f"the logger dropped messages {len(lost)} time{'s' if len(lost) != 1 else ''} while the samples run "
+            f"({sum(lost)} ms in all, the longest {max(lost)} ms; its dropout records): the samples lost there are "
+            "gaps in the time axis"
+        )
     if unreadable:
         warnings.append(
             f"{len(unreadable)} parameter(s) with no number in the log (a corrupt definition): "
