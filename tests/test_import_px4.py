@@ -5,6 +5,7 @@ the same files and against physics (|g| at rest, the Earth's field in gauss)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -368,3 +369,64 @@ def test_the_loggers_own_dropouts_are_said(tmp_path, px4_dir, name):
             at = (d.timestamp - t[0]) * 1e-6
             i = np.searchsorted(tc, at + 1e-9)
             assert tc[i] - tc[i - 1] >= d.duration * 1e-3, (at, tc[i - 1 : i + 1])
+
+
+V5 = Path(__file__).resolve().parent / "data" / "px4_fmu_v5_robologs" / "test_sensors.ulg"
+
+
+def test_a_selection_that_changes_while_the_samples_run_is_said(tmp_path):
+    """A Pixhawk 5 log (tests/data/px4_fmu_v5_robologs, SOURCE.md there) whose sensor_selection
+    switches sensor_combined's accel from 4259850 to 3932170 (and back, and again) 2.4 s into the
+    samples: the import wrote a capture naming no sensor and said nothing (the export then asked
+    which accel it was). The data mix two IMUs: now a warning says which, from when, as the
+    log's own sensor_selection (read by pyulog) has them."""
+    u = ULog(str(V5), ["sensor_selection", "sensor_combined"])
+    t = _topic(u, "sensor_combined")["timestamp"]
+    sel = _topic(u, "sensor_selection")
+    ts, ids = sel["timestamp"], sel["accel_device_id"]
+    start = max(int(np.searchsorted(ts, t[0], side="right")) - 1, 0)
+    in_effect = [int(i) for i, tt in zip(ids[start:], ts[start:]) if tt <= t[-1]]
+    assert len(set(in_effect)) == 2  # the log as it is
+    capture, res = _import(tmp_path, V5, "--procedure", "accel-tabletop", "--source", "combined")
+    assert "accel_device_id" not in capture.meta
+    said = [w for w in res.stderr.splitlines() if "came from 2 sensors while the samples run" in w]
+    assert len(said) == 1 and "sensor_combined's accel" in said[0], res.stderr
+    assert f"{in_effect[0]} from the start, {in_effect[1]} from {(ts[start + 1] - t[0]) * 1e-6:.3f} s" in said[0]
+
+
+def test_a_selection_that_changed_before_the_samples_names_the_one_in_effect(tmp_path):
+    """The same log, its sensor_combined cut by pyulog's own writer to the samples after the last
+    change (3932170 from 5.715 s of boot): every sample is from CAL_ACC2's sensor, but the import
+    took the selection's records before the samples too, found two ids and named none, so the
+    export refused ("which accel the data came from is unknown"). Now the id in effect, and the
+    export writes CAL_ACC2 with it."""
+    u = ULog(str(V5))
+    sel = _topic(u, "sensor_selection")
+    last = int(sel["timestamp"][-1])
+    for d in u.data_list:
+        if d.name == "sensor_combined":
+            keep = d.data["timestamp"] > last + 50_000
+            d.data = {k: v[keep] for k, v in d.data.items()}
+    cut = tmp_path / "after_switch.ulg"
+    u.write_ulog(str(cut))
+    want = int(sel["accel_device_id"][-1])
+    assert want == int(u.initial_parameters["CAL_ACC2_ID"]) == 3932170  # the log as it is
+    capture, res = _import(tmp_path, cut, "--procedure", "accel-tabletop", "--source", "combined")
+    assert capture.meta["accel_device_id"] == str(want), capture.meta
+    assert "sensors while the samples run" not in res.stderr
+    db = tmp_path / "s.db"
+    cal = run_station("calibrate", tmp_path / "after_switch.capture.csv", "--json", "--save", "--db", db)
+    if cal.returncode != 0:  # a ground log has one pose: the export is checked on a stored fit
+        from db_testdata import accel_result
+
+        from db import Store
+
+        with Store(str(db)) as s:
+            cid = s.save_calibration(
+                accel_result(device=capture.meta["device"]), meta=capture.meta, columns=capture.columns
+            )
+    else:
+        cid = json.loads(cal.stdout)["calibration_id"]
+    res = run_station("export", cid, "--format", "px4", "--db", db)
+    assert res.returncode == 0, res.stderr
+    assert f"param set CAL_ACC2_ID {want}" in res.stdout, res.stdout
