@@ -153,7 +153,20 @@ def test_a_calibration_that_changes_nothing_exports_the_logs_own_parameters(caps
     calibrate with the correction that changes nothing, export: every name written must be in
     the board's own parameter list with its own type, and every value the one the board
     stored. Read back as QGroundControl and PX4's shell read them."""
-    log = shared_data / "px4_ulog" / "original" / name
+    _px4_round_trip(capsys, tmp_path, shared_data / "px4_ulog" / "original" / name, kind)
+
+
+@pytest.mark.parametrize("kind", ["accel", "gyro", "mag"])
+def test_the_same_on_a_pixhawk_5_log(capsys, tmp_path, kind):
+    """The same on a newer board's real log (PX4_FMU_V5, tests/data/px4_fmu_v5_robologs: four
+    CAL_ACC slots, _PRIO 50, two IMUs), where sensor_combined mixes two IMUs (its
+    sensor_selection changes while the samples run: the import says so and names no slot, so that
+    source is left out; the raw topics are each one sensor's)."""
+    _px4_round_trip(capsys, tmp_path, Path(__file__).resolve().parent / "data" / "px4_fmu_v5_robologs" /
+                    "test_sensors.ulg", kind)  # fmt: skip
+
+
+def _px4_round_trip(capsys, tmp_path, log, kind):
     u = ulog(log, [TOPIC[kind]])
     params = dict(u.initial_parameters)
     instances = sorted({d.multi_id for d in u.data_list if d.name == TOPIC[kind]})
@@ -169,6 +182,8 @@ def test_a_calibration_that_changes_nothing_exports_the_logs_own_parameters(caps
             if code != 0:
                 assert code == 2 and err.count("\n") == 1, err  # no such topic in this log: refused in one line
                 continue
+            if "sensors while the samples run" in err:
+                continue  # sensor_combined mixes two sensors: no slot to reproduce
             meta = read_capture(out).meta
             corrected = meta["corrected"] == "true"
             dev = meta.get(f"{kind}_device_id")
@@ -518,3 +533,177 @@ def test_older_px4_gyro_scales_in_use_divide_the_composed_drift(capsys, tmp_path
     got = qgc_load(text, in_log)
     assert np.allclose([got[f"CAL_GYRO0_{a}OFF"] for a in XYZ], o_old + D / s_old, rtol=1e-6, atol=1e-9)
     assert "CAL_GYRO0_PRIO" not in got and "drift / SCALE_in_use" in text
+
+
+# --- every name, type, index range, unit and range against the firmwares' own definitions ---
+# tests/data/firmware_params holds the calibration parameters extracted from the firmwares' own
+# definitions (SOURCE.md there: PX4 src/modules/sensors/module.yaml at 5cda32d5; ArduPilot
+# AP_InertialSensor.cpp var_info at 002f23e3 and AP_Compass.cpp var_info at 7e87c92e).
+FW_PARAMS = Path(__file__).resolve().parent / "data" / "firmware_params"
+# the upstream @Units / unit: spellings, as SI factors (m/s^2, rad/s, nT per unit)
+UPSTREAM_UNIT = {"m/s^2": 1.0, "m/s/s": 1.0, "rad/s": 1.0, "gauss": 1e5, "mGauss": 1e2}
+
+
+def _rows(name: str) -> list[list[str]]:
+    lines = (FW_PARAMS / name).read_text(encoding="utf-8").splitlines()
+    return [line.split("\t") for line in lines if line and not line.startswith("#")]
+
+
+def px4_definitions() -> dict:
+    """name -> (type, unit, min, max) for every instance module.yaml defines (${i} = 0..3)."""
+    out = {}
+    for name, typ, unit, lo, hi in _rows("px4_sensors_module_yaml.tsv"):
+        for i in range(4):  # num_instances: 4, instance_start: 0
+            out[name.replace("${i}", str(i))] = (
+                typ,
+                unit,
+                None if lo == "-" else float(lo),
+                None if hi == "-" else float(hi),
+            )
+    return out
+
+
+def ardupilot_definitions() -> dict:
+    """name -> (unit, min, max, readonly), a vector parameter as its _X, _Y, _Z."""
+    out = {}
+    for name, _index, vector, unit, lo, hi, ro in _rows("ardupilot_var_info.tsv"):
+        spec = (unit, None if lo == "-" else float(lo), None if hi == "-" else float(hi), ro == "yes")
+        for n in [f"{name}_{a}" for a in XYZ] if vector == "yes" else [name]:
+            out[n] = spec
+    return out
+
+
+def _parse(text: str, fmt: str) -> dict:
+    """name -> (value text, QGC type or None) of an exported file, as its reader splits it."""
+    out = {}
+    for line in text.splitlines():
+        if not line.strip() or line.startswith("#"):
+            continue
+        if fmt == "ardupilot":
+            name, value = line.split(",")
+            out[name] = (value, None)
+        elif fmt == "px4":
+            _, _, name, value = line.split(" ")
+            out[name] = (value, None)
+        else:
+            _, _, name, value, typ = line.split("\t")
+            out[name] = (value, int(typ))
+    return out
+
+
+def _upstream_exports(capsys, db):
+    """(kind, fmt, instance, text) for a modest calibration of each kind, every format and every
+    instance the CLI takes, with the physical offsets each one holds (SI: m/s^2, rad/s, nT)."""
+    hard_iron_uT = (10.0, -5.0, 2.0)
+    cals = {
+        "accel": (accel_result(device="A", B=(0.1, -0.2, 0.3), M=np.diag([1.01, 0.99, 1.0])), {"accel_unit": "m/s^2"}),
+        "gyro": (gyro_result(device="G", drift=(0.01, -0.02, 0.03)), {"gyro_unit": "rad/s"}),
+        "mag": (compass_result(device="M", hard_iron=hard_iron_uT, soft_iron=(1e3 * np.eye(3)).tolist()),
+                {"mag_unit": "uT"}),
+    }  # fmt: skip
+    out = []
+    for kind, (result, meta) in cals.items():
+        m, cols = small_capture(procedure=result["procedure"], device=result["device"], sensor_device_id="1310988",
+                                **meta)  # fmt: skip
+        with Store(db) as s:
+            cid = s.save_calibration(result, meta=m, columns=cols)
+        for fmt, instances in (("ardupilot", (1, 2, 3)), ("px4", (0, 1, 2, 3)), ("qgc", (0, 1, 2, 3))):
+            for inst in instances:
+                code, text, err = run(capsys, "export", cid, "--format", fmt, "--instance", inst, "--db", db)
+                assert code == 0, (kind, fmt, inst, err)
+                out.append((kind, fmt, inst, text))
+    return out
+
+
+def test_every_exported_name_type_unit_and_range_is_the_firmwares_own(capsys, tmp_path):
+    """Every parameter every export writes (accel, gyro, compass; .param, `param set`, QGC
+    .params; every instance the CLI accepts) against the list extracted from the firmwares' own
+    definitions (tests/data/firmware_params, SOURCE.md there):
+
+    - PX4/PX4-Autopilot src/modules/sensors/module.yaml, commit
+      5cda32d5565b9047eb792056cb8c2aaf6da5c2a3: CAL_{ACC,GYRO,MAG}${i}_* with num_instances 4
+      (__max_num_sensor_instances, line 1) and instance_start 0; type int32/enum (QGC type 6) or
+      float (9); unit (m/s^2, rad/s, gauss); min/max (SCALE 0.1..3.0, ROT -1..40, MAG ROT -1..100).
+    - ArduPilot/ardupilot libraries/AP_InertialSensor/AP_InertialSensor.cpp, commit
+      002f23e3d574306a293450bfbdfe5abb59ea2c96, AP_InertialSensor::var_info: GYROFFS (index 3),
+      GYR2OFFS (7), GYR3OFFS (10), ACCSCAL (12, @Range 0.8 1.2), ACCOFFS (13, @Units m/s/s,
+      @Range -3.5 3.5), ACC2SCAL/ACC2OFFS (14/15), ACC3SCAL/ACC3OFFS (16/17).
+    - ArduPilot/ardupilot libraries/AP_Compass/AP_Compass.cpp, commit
+      7e87c92e0c89f990666f6f8a452fbea70404b047, Compass::var_info: OFS (1, @Units mGauss,
+      @Range -400 400), OFS2 (10), OFS3 (13), DEV_ID* (15-17, @ReadOnly), DIA/ODI (24/25),
+      DIA2/ODI2 (26/27), DIA3/ODI3 (28/29), OFFS_MAX (31, @Range 500 3000), SCALE* (40-42).
+
+    Each value must lie in the documented range, an ArduPilot @ReadOnly parameter must not be
+    written, the QGC type must be the definition's, and an offset written in the definition's
+    unit must be the calibration's physical offset."""
+    px4, ap = px4_definitions(), ardupilot_definitions()
+    for kind, fmt, inst, text in _upstream_exports(capsys, str(tmp_path / "s.db")):
+        got = _parse(text, fmt)
+        assert got, (kind, fmt, inst, text)
+        for name, (value, qgc_type) in got.items():
+            if fmt == "ardupilot":
+                assert name in ap, f"{name}: not in ArduPilot's var_info"
+                unit, lo, hi, readonly = ap[name]
+                assert not readonly, f"{name} is @ReadOnly in ArduPilot"
+            else:
+                assert name in px4, f"{name}: not in PX4's module.yaml"
+                typ, unit, lo, hi = px4[name]
+                if qgc_type is not None:
+                    assert qgc_type == (9 if typ == "float" else 6), (name, qgc_type, typ)
+                if typ != "float":
+                    assert re.fullmatch(r"-?\d+", value), (name, value)
+            v = float(value)
+            assert (lo is None or v >= lo) and (hi is None or v <= hi), f"{name} = {v} outside {lo}..{hi}"
+        # the offsets in the definition's unit: accel B = -o*s (o m/s^2), gyro drift = o, mag h (uT)
+        off = {
+            "accel": [n for n in got if n.endswith(("XOFF", "YOFF", "ZOFF")) or "ACC" in n and "OFFS_" in n],
+            "gyro": [n for n in got if n.endswith(("XOFF", "YOFF", "ZOFF")) or "GYR" in n and "OFFS_" in n],
+            "mag": [n for n in got if n.endswith(("XOFF", "YOFF", "ZOFF")) or n.startswith("COMPASS_OFS")],
+        }[kind]
+        assert len(off) == 3, (kind, fmt, got)
+        si = np.array([float(got[n][0]) * UPSTREAM_UNIT[(ap[n][0] if fmt == "ardupilot" else px4[n][1])] for n in off])
+        want = {
+            "accel": np.array([0.1, -0.2, 0.3]) / -np.array([1.01, 0.99, 1.0]),  # B = -o s -> o = -B / s
+            "gyro": np.array([0.01, -0.02, 0.03]),
+            # PX4 subtracts CAL_MAG_OFF = h; ArduPilot ADDS COMPASS_OFS = -h (uT -> nT)
+            "mag": np.array([10.0, -5.0, 2.0]) * 1e3 * (-1 if fmt == "ardupilot" else 1),
+        }[kind]
+        assert np.allclose(si, want, rtol=1e-6), (kind, fmt, inst, dict(zip(off, si)), want)
+
+
+def test_the_instances_the_export_takes_are_the_firmwares_slots(capsys, tmp_path):
+    """PX4 defines CAL_*${i} for i = 0..3 (module.yaml num_instances 4, instance_start 0);
+    ArduPilot INS_ACC{,2,3}, INS_GYR{,2,3}, COMPASS_OFS{,2,3} (the var_info above): the export
+    takes exactly those, and one more is refused in one line, exit 2, nothing on stdout."""
+    px4, ap = px4_definitions(), ardupilot_definitions()
+    px4_slots = {int(re.match(r"CAL_ACC(\d+)_ID$", n)[1]) for n in px4 if re.match(r"CAL_ACC\d+_ID$", n)}
+    ap_slots = {int(m[1] or 1) for n in ap if (m := re.match(r"COMPASS_OFS(\d?)_X$", n))}
+    assert px4_slots == {0, 1, 2, 3} and ap_slots == {1, 2, 3}
+    db = str(tmp_path / "s.db")
+    m, cols = small_capture(procedure="compass", mag_unit="uT", sensor_device_id="197388")
+    with Store(db) as s:
+        cid = s.save_calibration(compass_result(device="M", soft_iron=(1e3 * np.eye(3)).tolist()), meta=m, columns=cols)
+    for fmt, slots in (("ardupilot", ap_slots), ("px4", px4_slots), ("qgc", px4_slots)):
+        for inst in sorted(slots) + [max(slots) + 1, min(slots) - 1]:
+            code, text, err = run(capsys, "export", cid, "--format", fmt, "--instance", inst, "--db", db)
+            if inst in slots:
+                assert code == 0, (fmt, inst, err)
+            else:
+                assert code == 2 and text == "" and err.count("\n") == 1, (fmt, inst, text, err)
+
+
+def test_the_bounds_the_export_checks_are_the_documented_ones():
+    """The constants station/firmware_export.py checks against, compared with the definitions:
+    ArduPilot INS_ACCOFFS @Range -3.5 3.5 and INS_ACCSCAL @Range 0.8 1.2; PX4 CAL_ACC/MAG SCALE
+    min 0.1, max 3.0; PX4's PRIO -1..100 and ROT -1..40 (accel, gyro), -1..100 (mag)."""
+    from station import firmware_export as fx
+
+    px4, ap = px4_definitions(), ardupilot_definitions()
+    for n in ("INS_ACCOFFS_X", "INS_ACC2OFFS_Y", "INS_ACC3OFFS_Z"):
+        assert (ap[n][1], ap[n][2]) == (-fx.AP_ACC_OFFS_MAX_MPS2, fx.AP_ACC_OFFS_MAX_MPS2), n
+    for n in ("INS_ACCSCAL_X", "INS_ACC2SCAL_Y", "INS_ACC3SCAL_Z"):
+        assert (ap[n][1], ap[n][2]) == fx.AP_ACC_SCALE_RANGE, n
+    for n in ("CAL_ACC0_XSCALE", "CAL_ACC3_ZSCALE", "CAL_MAG0_YSCALE", "CAL_MAG3_ZSCALE"):
+        assert px4[n][2:] == fx.PX4_SCALE_RANGE, n
+    assert px4["CAL_ACC0_ROT"][2:] == px4["CAL_GYRO3_ROT"][2:] == (-1.0, 40.0)
+    assert px4["CAL_MAG0_ROT"][2:] == (-1.0, 100.0)

@@ -85,3 +85,25 @@ def test_a_log_from_before_arducopter_3_3_imports_with_its_time_date_and_place(t
     assert m["date"] == dt.datetime.fromtimestamp(int(want), dt.UTC).strftime("%Y-%m-%dT%H:%M:%S")
     assert m["date"].startswith("2015-04-19")
     assert abs(float(m["latitude_deg"]) - 48.2493733) < 1e-6 and abs(float(m["altitude_m"]) - 512.0) < 1e-6
+
+
+def test_an_instance_the_old_log_lacks_is_refused_not_read_from_instance_0(tmp_path):
+    """Logs before the IMU/MAG ``I`` field name their second and third sensors IMU2/IMU3,
+    MAG2/MAG3, and a board with one IMU and one compass has no such format at all (erlerobot/logs
+    commit 3f7d4a0, ``pxf/copter/27-9-2014/70.BIN``: IMU and MAG, no MAG2 in its FMT records).
+    ``--instance 1`` read IMU (MAG), instance 0, as instance 1: "MAG[1]" in the capture, with the
+    second sensor's device id, so the export wrote the first sensor's fit into the second slot
+    (INS_ACC2OFFS, COMPASS_OFS2). Now refused in one line naming the instances the log has; a log
+    with IMU2 declared but never written (``pxf/plane/4-12-2014/329.BIN``) said "no IMU or MAG
+    messages in the DataFlash log" and now says the same."""
+    log = tmp_path / "70.BIN"
+    _write_old_bin(log, n=60)
+    for procedure in ("accel-tabletop", "compass", "gyro-drift"):
+        for inst in (1, 2):
+            out = tmp_path / f"{procedure}-{inst}.csv"
+            res = run_station("import", log, "--procedure", procedure, "--instance", inst, "--out", out)
+            assert res.returncode == 2 and res.stdout == "" and not out.exists(), (procedure, inst, res)
+            assert res.stderr.count("\n") == 1, res.stderr
+            assert f"--instance {inst}: the log has IMU instances 0; MAG instances 0" in res.stderr, res.stderr
+        res = run_station("import", log, "--procedure", procedure, "--instance", 0, "--out", tmp_path / "ok.csv")
+        assert res.returncode == 0, res.stderr

@@ -5,6 +5,7 @@ the same files and against physics (|g| at rest, the Earth's field in gauss)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -189,7 +190,9 @@ def test_a_log_cut_inside_a_message_is_imported_with_a_warning_saying_so(tmp_pat
     cut.write_bytes(data[: len(data) // 3])
     # --instance 0: the log has two gyro slots and no sensor_selection (else a line says so)
     capture, res = _import(tmp_path, cut, "--procedure", "gyro-drift", "--instance", "0")
-    assert res.stderr.count("\n") == 1, res.stderr
+    # one line of its own (the other, sample.ulg's 31 ms dropout before the cut: the dropouts test)
+    assert [w for w in res.stderr.splitlines() if "dropped messages" not in w and "cut short" not in w] == []
+    assert res.stderr.count("cut short") == 1, res.stderr
     assert f"cut.ulg: warning: the log is cut short inside a message at byte {len(data) // 3}" in res.stderr
     n = len(capture.columns["t"])
     said = int(res.stderr.split("the samples before it are imported, ")[1].split(" samples up to")[0])
@@ -338,3 +341,92 @@ def test_a_log_without_sensor_selection_says_which_sensors_the_voter_chose_from(
     assert cap.meta["accel_device_id"] == "1441792" and cap.meta["sensor_instance"] == "1"
     cap, res = _import(tmp_path, px4_dir / "sample.ulg", "--procedure", "compass")
     assert "voter" not in res.stderr and cap.meta["mag_device_id"] == "262144"  # CAL_MAG0_ID, the only one
+
+
+@pytest.mark.parametrize("name", LOGS)
+def test_the_loggers_own_dropouts_are_said(tmp_path, px4_dir, name):
+    """PX4's logger writes a dropout message ('O', duration in ms) where its buffer overflowed and
+    messages were lost. sample.ulg (AUAV-X21) has four, two of them (31 ms, 62 ms) while the
+    samples run: the import kept the gaps in the time axis and said nothing of them (a 64 ms
+    hole in a 250 Hz record looked like any other stretch). Now one warning with their number,
+    total and longest, as pyulog reads them; a log without any inside its samples says none."""
+    log = px4_dir / name
+    capture, res = _import(tmp_path, log, "--procedure", "gyro-drift", "--source", "combined")
+    u = ULog(str(log), ["sensor_combined"])
+    t = _topic(u, "sensor_combined")["timestamp"]
+    lost = [d.duration for d in u.dropouts if d.duration > 0 and t[0] <= d.timestamp <= t[-1]]
+    said = [w for w in res.stderr.splitlines() if "the logger dropped messages" in w]
+    if not lost:
+        assert not said, res.stderr
+        return
+    n = len(lost)
+    assert said and f"dropped messages {n} time{'s' if n != 1 else ''}" in said[0], res.stderr
+    assert f"({sum(lost)} ms in all, the longest {max(lost)} ms" in said[0], res.stderr
+    # and each one is a gap in the capture's time axis right after the sample it is stamped with
+    tc = np.asarray(capture.columns["t"])
+    for d in u.dropouts:
+        if d.duration > 0 and t[0] <= d.timestamp <= t[-1]:
+            at = (d.timestamp - t[0]) * 1e-6
+            i = np.searchsorted(tc, at + 1e-9)
+            assert tc[i] - tc[i - 1] >= d.duration * 1e-3, (at, tc[i - 1 : i + 1])
+
+
+V5 = Path(__file__).resolve().parent / "data" / "px4_fmu_v5_robologs" / "test_sensors.ulg"
+
+
+def test_a_selection_that_changes_while_the_samples_run_is_said(tmp_path):
+    """A Pixhawk 5 log (tests/data/px4_fmu_v5_robologs, SOURCE.md there) whose sensor_selection
+    switches sensor_combined's accel from 4259850 to 3932170 (and back, and again) 2.4 s into the
+    samples: the import wrote a capture naming no sensor and said nothing (the export then asked
+    which accel it was). The data mix two IMUs: now a warning says which, from when, as the
+    log's own sensor_selection (read by pyulog) has them."""
+    u = ULog(str(V5), ["sensor_selection", "sensor_combined"])
+    t = _topic(u, "sensor_combined")["timestamp"]
+    sel = _topic(u, "sensor_selection")
+    ts, ids = sel["timestamp"], sel["accel_device_id"]
+    start = max(int(np.searchsorted(ts, t[0], side="right")) - 1, 0)
+    in_effect = [int(i) for i, tt in zip(ids[start:], ts[start:]) if tt <= t[-1]]
+    assert len(set(in_effect)) == 2  # the log as it is
+    capture, res = _import(tmp_path, V5, "--procedure", "accel-tabletop", "--source", "combined")
+    assert "accel_device_id" not in capture.meta
+    said = [w for w in res.stderr.splitlines() if "came from 2 sensors while the samples run" in w]
+    assert len(said) == 1 and "sensor_combined's accel" in said[0], res.stderr
+    assert f"{in_effect[0]} from the start, {in_effect[1]} from {(ts[start + 1] - t[0]) * 1e-6:.3f} s" in said[0]
+
+
+def test_a_selection_that_changed_before_the_samples_names_the_one_in_effect(tmp_path):
+    """The same log, its sensor_combined cut by pyulog's own writer to the samples after the last
+    change (3932170 from 5.715 s of boot): every sample is from CAL_ACC2's sensor, but the import
+    took the selection's records before the samples too, found two ids and named none, so the
+    export refused ("which accel the data came from is unknown"). Now the id in effect, and the
+    export writes CAL_ACC2 with it."""
+    u = ULog(str(V5))
+    sel = _topic(u, "sensor_selection")
+    last = int(sel["timestamp"][-1])
+    for d in u.data_list:
+        if d.name == "sensor_combined":
+            keep = d.data["timestamp"] > last + 50_000
+            d.data = {k: v[keep] for k, v in d.data.items()}
+    cut = tmp_path / "after_switch.ulg"
+    u.write_ulog(str(cut))
+    want = int(sel["accel_device_id"][-1])
+    assert want == int(u.initial_parameters["CAL_ACC2_ID"]) == 3932170  # the log as it is
+    capture, res = _import(tmp_path, cut, "--procedure", "accel-tabletop", "--source", "combined")
+    assert capture.meta["accel_device_id"] == str(want), capture.meta
+    assert "sensors while the samples run" not in res.stderr
+    db = tmp_path / "s.db"
+    cal = run_station("calibrate", tmp_path / "after_switch.capture.csv", "--json", "--save", "--db", db)
+    if cal.returncode != 0:  # a ground log has one pose: the export is checked on a stored fit
+        from db_testdata import accel_result
+
+        from db import Store
+
+        with Store(str(db)) as s:
+            cid = s.save_calibration(
+                accel_result(device=capture.meta["device"]), meta=capture.meta, columns=capture.columns
+            )
+    else:
+        cid = json.loads(cal.stdout)["calibration_id"]
+    res = run_station("export", cid, "--format", "px4", "--db", db)
+    assert res.returncode == 0, res.stderr
+    assert f"param set CAL_ACC2_ID {want}" in res.stdout, res.stdout

@@ -281,6 +281,11 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             if c is None:
                 continue
             keep = np.ones(len(c["_offset"]), dtype=bool)
+            if "I" not in c and name in ("IMU", "MAG") and inst != 0:
+                # a log before the I field: IMU (MAG) is instance 0 alone, the others are IMU2, IMU3
+                # (MAG2, MAG3), here not in its formats; instance 0 read as the one asked went to its slot
+                instances_seen[name].add(0)
+                continue
             if "I" in c:
                 instances_seen[name].update(int(i) for i in np.unique(c["I"]))
                 if name in ("IMU", "MAG"):
@@ -329,6 +334,15 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 if gps_utc_offset is None and d.get("GWk") and d.get("Status", 0) >= 3 and "TimeUS" in d:
                     gps_s = d["GWk"] * 604800.0 + d["GMS"] * 1e-3
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
+        available = {}  # the instances the log holds, for the refusal of one it lacks
+        if not rows:
+            for base in ("IMU", "MAG"):
+                c = cols[base] if base in cols else _df_columns(log, base)
+                have = _df_instances(
+                    log, c, {int(i) for i in np.unique(c["I"])} if c is not None and "I" in c else set(), base
+                )
+                if have:
+                    available[base] = have
         first_us = float(min(r[0, 0] for r in rows.values())) if rows else None
         cut = _df_cut(log)
         several = None
@@ -350,7 +364,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             log.close()
     if not rows:
         also = f"; warning: {cut}" if cut else ""  # what the cut left may be why there is nothing
-        seen = {k: sorted(v) for k, v in instances_seen.items() if v}
+        seen = available or {k: sorted(v) for k, v in instances_seen.items() if v}
         if seen:
             raise InputError(
                 path,

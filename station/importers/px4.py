@@ -216,6 +216,25 @@ def _voted_sensor(path, params: dict, kind: str, instance: int | None, needed: b
     return None
 
 
+def _selected_while(sel: dict, kind: str, t_us) -> list[tuple[int, int]]:
+    """(time µs, device id) of each sensor PX4's ``sensor_selection`` names for ``kind`` while the
+    samples ``t_us`` run: the record in effect at the first sample (the first record where none
+    comes before it), then each change up to the last sample. Records before the samples no longer
+    say which sensor they hold (a log whose selection changed before the data start named none)."""
+    ts = np.asarray(sel.get("timestamp", []), dtype=np.int64)
+    ids = np.asarray(sel.get(f"{kind}_device_id", []), dtype=np.int64)
+    if not len(ids) or not len(t_us):
+        return []
+    start = max(int(np.searchsorted(ts, t_us[0], side="right")) - 1, 0)
+    out: list[tuple[int, int]] = []
+    for t, i in zip(ts[start:].tolist(), ids[start:].tolist()):
+        if t > t_us[-1]:
+            break
+        if not out or out[-1][1] != i:
+            out.append((max(t, int(t_us[0])), i))
+    return out
+
+
 def _external(data: dict) -> bool | None:
     """The topic's own ``is_external`` (sensor_mag has it: the driver's word that the sensor is
     not on the board), or None when the topic has no such field or it changes during the log."""
@@ -366,8 +385,19 @@ def read(
             if not all(c in d for c in cols):
                 continue
             if selection:
-                ids = np.asarray(sel.get(f"{kind}_device_id", [0]))
-                device_id = int(ids[0]) if len(ids) and len(np.unique(ids)) == 1 and ids[0] else None
+                chosen = _selected_while(sel, kind, t_us)
+                device_id = chosen[0][1] if len(chosen) == 1 and chosen[0][1] else None
+                if len(chosen) > 1 and kind == (primary or kind):
+                    warnings.append(
+                        f"sensor_combined's {kind} came from {len({i for _, i in chosen})} sensors while the samples "
+                        "run (sensor_selection: "
+                        + ", ".join(
+                            f"{i} from {'the start' if k == 0 else f'{(t - t_us[0]) * 1e-6:.3f} s'}"
+                            for k, (t, i) in enumerate(chosen)
+                        )
+                        + "): the capture mixes them and names no sensor slot; import one sensor's own topic "
+                        "(--source raw, --instance N) or a stretch that one sensor recorded"
+                    )
             else:
                 device_id = _voted_sensor(path, params, kind, instance, kind == (primary or kind), warnings)
             t_k, rows, how = t_us, slice(None), ""
@@ -443,6 +473,15 @@ def read(
         warnings.append(
             "the log holds a corrupt stretch (pyulog skipped it to the next sync marker): the messages in it "
             "are lost, a gap in the samples there"
+        )
+    # the logger's own record of what it lost (ULog 'O' dropout messages, duration in ms): the
+    # samples are missing there, gaps in the time axis, which nothing else in the capture says
+    lost = [d.duration for d in getattr(ulog, "dropouts", []) if d.duration > 0 and t0_us <= d.timestamp <= t1_us]
+    if lost:
+        warnings.append(
+            f"the logger dropped messages {len(lost)} time{'s' if len(lost) != 1 else ''} while the samples run "
+            f"({sum(lost)} ms in all, the longest {max(lost)} ms; its dropout records): the samples lost there are "
+            "gaps in the time axis"
         )
     if unreadable:
         warnings.append(
