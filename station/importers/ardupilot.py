@@ -655,6 +655,30 @@ def read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         return _read_tlog(path, instance=instance, kinds=kinds)
 
 
+LINK_GAP_FACTOR = 1.5  # a step this many times the median interval: a sample or more lost, not jitter
+
+
+def _link_gaps(t: np.ndarray, name: str) -> str | None:
+    """The warning for samples a telemetry link lost: steps in the IMU messages' own time of more
+    than ``LINK_GAP_FACTOR`` times their median interval (a radio link drops packets; the log
+    keeps only what arrived, and nothing else in the capture says where the holes are)."""
+    if len(t) < 3:
+        return None
+    dt = np.diff(t)
+    med = float(np.median(dt))
+    if not med > 0:
+        return None
+    big = dt > LINK_GAP_FACTOR * med
+    if not big.any():
+        return None
+    lost = int(np.sum(np.round(dt[big] / med)) - big.sum())
+    return (
+        f"the telemetry link lost {name} messages: {int(big.sum())} gaps longer than "
+        f"{LINK_GAP_FACTOR:g} times the median interval ({med * 1e3:.0f} ms), about {lost} samples "
+        f"in all, the longest {float(dt[big].max()):.2f} s at t = {float(t[1:][big][np.argmax(dt[big])] - t[0]):.1f} s"
+    )
+
+
 def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
     from pymavlink import mavutil
 
@@ -793,6 +817,7 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
             late.update(compass_offsets_changed(first_ofs, ofs))
     samples = by_type[name]
     t = np.array([s[0] for s in samples])
+    link_gaps = _link_gaps(t, name)
     units = getattr(msg_class[name], "fieldunits_by_name", {})
     streams = {}
     for kind, fields in MAV_FIELDS.items():
@@ -835,7 +860,7 @@ def _read_tlog(path, *, instance: int | None = None, kinds=None) -> Imported:
         else None
     )
     several = several_instances_warning({"IMUs": imus}, inst) if instance is None else None
-    warnings = [w for w in (unreadable.warning(), cut, several) if w]
+    warnings = [w for w in (unreadable.warning(), cut, several, link_gaps) if w]
     warnings += skipped
     arrival = arrivals[(name, *source)]
     if arrival > 946684800:  # the ground station's clock (UTC) when the first sample came
