@@ -89,12 +89,16 @@ class DecideScreen(NoticesMixin, ModalScreen):
         self.dismiss(None)
 
 
-class ConfirmScreen(ModalScreen):
-    """y / Enter confirms, n / Escape declines."""
+class ConfirmScreen(NoticesMixin, ModalScreen):
+    """y / Enter confirms, n / Escape declines. The notices are lines in the box, under the
+    question: as toasts (bottom right, two stacked) they lay over its last lines at 80x24."""
 
     CSS = """
     ConfirmScreen { align: center middle; }
-    ConfirmScreen #box { width: 60; height: auto; border: round $warning; background: $surface; padding: 0 1; }
+    ConfirmScreen #box { width: 60; height: auto; max-height: 20; border: round $warning; background: $surface;
+                         padding: 0 1; }
+    ConfirmScreen ToastHolder { display: none; }
+    ConfirmScreen #notices { height: auto; max-height: 6; margin-top: 1; }
     """
     BINDINGS = [
         Binding("y", "answer(True)", "Yes", priority=True),
@@ -110,6 +114,7 @@ class ConfirmScreen(ModalScreen):
     def compose(self) -> ComposeResult:
         with Vertical(id="box"):
             yield Static(self.question + "\n\n[b]y[/] yes · [b]n[/] no")
+            yield Static("", id="notices")
         yield footer()  # this box's keys: the screen underneath showed its own, dead while it is open
 
     def action_answer(self, yes: bool) -> None:
