@@ -6,6 +6,9 @@ file, the simulated device."""
 from __future__ import annotations
 
 import asyncio
+import os
+import re
+import sys
 
 from station.app import make_app
 from station.sources import SimSource
@@ -41,3 +44,85 @@ def test_a_toast_never_covers_the_quit_question(tmp_path):
     flat = " ".join(" ".join(line.strip(" │╭╮╰╯─") for line in lines).split())
     assert "Quit? The run in progress is lost." in flat, "\n".join(lines)
     assert "y yes · n no" in flat, "\n".join(lines)
+
+
+# ---------------------------------------------------------------- 2. a diagnosis that says how far it is
+
+
+def _diagnosis_running() -> list[str]:
+    """What of a diagnosis still runs in this process (a thread in its code) or under it (a child
+    process): the world's view, not the screen's."""
+    busy = []
+    for tid, frame in sys._current_frames().items():
+        f = frame
+        while f is not None:
+            name = f.f_code.co_filename.replace(os.sep, "/")
+            if "/solvers/diagnose/" in name or name.endswith("procedures/diagnose.py"):
+                busy.append(f"thread {tid}: {name}:{f.f_lineno}")
+                break
+            f = f.f_back
+    pid = os.getpid()
+    for task in os.listdir(f"/proc/{pid}/task"):
+        try:
+            with open(f"/proc/{pid}/task/{task}/children") as fh:
+                kids = fh.read().split()
+        except OSError:
+            continue
+        for kid in kids:
+            try:
+                with open(f"/proc/{kid}/cmdline", "rb") as fh:
+                    cmd = fh.read().replace(b"\0", b" ").decode()
+            except OSError:
+                continue
+            if "diagnos" in cmd:
+                busy.append(f"process {kid}: {cmd}")
+    return busy
+
+
+SEARCHING = {"calibrating (the baseline model)", "fitting the baseline and searching the candidate effects"}
+
+
+def test_a_long_diagnosis_says_its_step_and_time_and_escape_stops_it():
+    """Diagnose showed "Diagnosing: fitting the baseline and the candidate effects…" and nothing
+    else for 60-90 s on a loaded machine (a compass capture); Escape went back but the diagnosis
+    ran on in its thread, and a second Diagnose ran beside it. Now the screen says the step it is
+    at and the seconds taken, and Escape stops it: nothing of it runs afterwards."""
+    from solvers.simulate import simulate_compass
+    from station.screens.diagnose import DiagnoseScreen
+    from tests.station_run import capture_of
+
+    # a long hand-held tumble (60 attitudes held 10 s at 200 Hz): minutes of diagnosis
+    cap = capture_of(simulate_compass(seed=5, rate_hz=200.0, n_orientations=60, hold_s=10.0))
+    progress = re.compile(r"Diagnosing \((\d+) s\): (.+?)…")
+
+    def said():
+        m = progress.search(" ".join(screen_lines(app)))
+        return (int(m.group(1)), m.group(2)) if m else None
+
+    async def story():
+        nonlocal app
+        app = make_app(None)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await app.push_screen(DiagnoseScreen(capture=cap))
+            seen = []
+            # it says the step it has begun, and the seconds count on while it works in it
+            await wait_for(pilot, lambda: (s := said()) and (seen.append(s) or s[1] in SEARCHING))
+            t_s = seen[-1][0]
+            await wait_for(pilot, lambda: (s := said()) and (seen.append(s) or s[0] > t_s))
+            steps = {s[1] for s in seen}
+            report = app.screen.report
+            lines = screen_lines(app)
+            await pilot.press("escape")
+            await wait_for(pilot, lambda: screen_name(app) != "DiagnoseScreen")
+            await wait_for(pilot, lambda: not _diagnosis_running(), timeout_s=30.0)
+            back = screen_name(app)
+            notices = " ".join(n.message for n in app._notifications)
+        return steps, report, lines, back, notices
+
+    app = None
+    steps, report, lines, back, notices = asyncio.run(story())
+    assert report is None, report  # still working when it was stopped
+    assert steps & SEARCHING, (steps, "\n".join(lines))
+    assert any("Esc" in line and "stops" in line for line in lines), "\n".join(lines)
+    assert back == "ConnectScreen"
+    assert "Diagnosis stopped" in notices, notices
