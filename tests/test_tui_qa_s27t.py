@@ -126,3 +126,41 @@ def test_a_long_diagnosis_says_its_step_and_time_and_escape_stops_it():
     assert any("Esc" in line and "stops" in line for line in lines), "\n".join(lines)
     assert back == "ConnectScreen"
     assert "Diagnosis stopped" in notices, notices
+
+
+# ---------------------------------------------------------------- 3. Connect's lines under the buttons
+
+
+def test_connect_keeps_its_error_and_its_notices_within_the_screen(tmp_path):
+    """Under Connect's buttons there are 3 rows at 80x24. A refused port (2 rows), the start-up
+    reminder and the notices a run left (a device error, an abort) took 5 and more: the screen
+    scrolled (a scroll bar narrowed it, the Reference hint lost its ')'), and the newest notices,
+    the device's error among them, were below the footer, where no key brings them. Now the
+    status stays whole, the newest error is shown first and the rest are counted."""
+    from tests.tui_data import seed_history
+
+    db = str(tmp_path / "s.db")
+    seed_history(db, "IMU-7", n=1, interval_days=30, start_year=2021)  # overdue: the start-up reminder
+    device_error = "device: /dev/ttyUSB0: read failed: the device is not answering (unplugged?)"
+
+    async def story():
+        app = make_app(db)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await wait_for(pilot, lambda: "IMU-7" in " ".join(screen_lines(app)[19:23]))
+            app.notify(device_error, severity="error", timeout=120)
+            app.notify("P1 aborted: nothing saved", timeout=120)
+            app.screen.query_one("#port").focus()
+            await pilot.press(*"/dev/ttyNOPE", "f5")
+            await wait_for(pilot, lambda: "Cannot connect" in " ".join(screen_lines(app)))
+            await pilot.pause()
+            return app.screen.max_scroll_y, screen_lines(app)
+
+    scroll_rows, lines = asyncio.run(story())
+    shown = "\n".join(lines)
+    flat = " ".join(shown.split())
+    assert scroll_rows == 0, shown  # nothing out of sight
+    assert "Cannot connect: cannot open the port: No such file or directory: check the path and the cable" in flat
+    assert "device: /dev/ttyUSB0: read failed" in flat, shown  # the newest error, if cut, begun
+    assert re.search(r"\b[23] (more )?notices\b", flat), shown  # the rest counted
+    assert "model and serial)" in flat, shown  # no scroll bar took a column
+    assert lines[-1].startswith("f5 Start")
