@@ -445,10 +445,16 @@ class ConnectScreen(Screen):
             return len(Content.from_markup(markup).wrap(width))
 
         status = self.query_one("#status", Static)
+        notices = current_notices(self.app)
+        line = self.query_one("#notices", Static)
+        if not (self._status_text or notices):  # two empty lines, as they always were
+            status.styles.max_height = line.styles.max_height = None
+            line.update("")
+            line.display = True
+            return
         status_rows = min(rows_of(self._status_text), rows) if self._status_text else 0
         status.styles.max_height = status_rows
         free = rows - status_rows
-        notices = current_notices(self.app)
         order = notices[::-1]  # newest first, the newest error before them all
         errors = [n for n in order if n.severity == "error"]
         if errors:
@@ -472,7 +478,6 @@ class ConnectScreen(Screen):
                 newest = "newest error" if order[0].severity == "error" else "newest"
                 more = f"[dim]{dropped} notices, the {newest}:[/] " + notice_markup(order[0])
             lines.insert(0, more)
-        line = self.query_one("#notices", Static)
         line.update("\n".join(lines))
         line.styles.max_height = free
         line.display = bool(lines) and free > 0
