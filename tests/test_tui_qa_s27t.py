@@ -9,6 +9,7 @@ import asyncio
 import os
 import re
 import sys
+import time
 
 from station.app import make_app
 from station.sources import SimSource
@@ -164,3 +165,64 @@ def test_connect_keeps_its_error_and_its_notices_within_the_screen(tmp_path):
     assert re.search(r"\b[23] (more )?notices\b", flat), shown  # the rest counted
     assert "model and serial)" in flat, shown  # no scroll bar took a column
     assert lines[-1].startswith("f5 Start")
+
+
+# ---------------------------------------------------------------- end to end, in a real terminal
+
+
+def _children(pid: int) -> list[str]:
+    """The command lines of the processes ``pid`` started that still run."""
+    out = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        try:
+            with open(f"/proc/{pid}/task/{task}/children") as fh:
+                kids = fh.read().split()
+        except OSError:
+            continue
+        for kid in kids:
+            try:
+                with open(f"/proc/{kid}/cmdline", "rb") as fh:
+                    out.append(fh.read().replace(b"\0", b" ").decode())
+            except OSError:
+                pass
+    return out
+
+
+def test_diagnose_in_tmux_says_its_step_and_escape_stops_it(tmp_path):
+    """`station` at 80x24 in tmux, keys only: F7 imports a real compass capture (sunsided's full
+    sphere, ../shared/data), `g` diagnoses it: the screen says the step and the seconds; Esc is
+    back on Results at once with "Diagnosis stopped", and the app has nothing of it running."""
+    import pytest
+
+    from tests.test_e2e_tmux import REQUIRED, STACKS, TMUX, _keys, _quit_discarding_the_result, _start_tui, _wait_pane
+    from tests.test_e2e_tmux import tmux as run_tmux
+
+    if not os.path.exists(TMUX) and not REQUIRED:
+        pytest.skip("tmux not installed")
+    shared = os.environ.get("STATION_SHARED") or os.path.join(os.path.dirname(__file__), "..", "..", "shared")
+    capture = os.path.join(shared, "data", "sunsided_marg", "sunsided_full_sphere.capture.csv")
+    if not os.path.exists(capture):
+        pytest.skip(f"{capture}: not here")
+    sock = f"test-s27t-{os.getpid()}"
+    _start_tui(sock, tmp_path / "s.db")
+    try:
+        _wait_pane(sock, lambda s: "f5 Start" in s, 60, "Connect")
+        _keys(sock, "F7")
+        _wait_pane(sock, lambda s: "path/to/file" in s, 60, "Import")
+        _keys(sock, capture, "Enter")
+        _wait_pane(sock, lambda s: "P3 compass result" in s and "g Diagnose" in s, 120, "the P3 result")
+        _keys(sock, "g")
+        working = re.compile(r"Diagnosing \((\d+) s\): (calibrating|fitting the baseline)")
+        screen = _wait_pane(sock, lambda s: working.search(s), 120, "the diagnosis's step and time")
+        assert "Esc stops it" in screen, screen
+        _keys(sock, "Escape")
+        _wait_pane(sock, lambda s: "P3 compass result" in s and "Diagnosis stopped" in s, 60, "Results again")
+        with open(STACKS[sock] + ".pid") as fh:
+            app_pid = int(fh.read())
+        t_end = time.monotonic() + 30
+        while [c for c in _children(app_pid) if "diagnos" in c] and time.monotonic() < t_end:
+            time.sleep(0.2)  # polling, not a pace
+        assert not [c for c in _children(app_pid) if "diagnos" in c], _children(app_pid)
+        _quit_discarding_the_result(sock)
+    finally:
+        run_tmux(sock, "kill-server", check=False)
