@@ -47,6 +47,43 @@ def test_a_toast_never_covers_the_quit_question(tmp_path):
     assert "y yes · n no" in flat, "\n".join(lines)
 
 
+def test_the_quit_question_follows_the_run_going_on_behind_it(tmp_path):
+    """The P1 run goes on while the quit question is up (the operator may have the unit on the
+    table already): a position captured then was kept for Resume, but the box still said "The 1
+    captured position is kept" (found at 80x24 in tmux: two ticked in the step list behind it).
+    The question now says what quitting keeps at the moment it is answered."""
+    from tests.test_tui import run_bench
+
+    async def story():
+        clock = BenchClock()
+        src = SimSource(seed=3, clock=clock)
+        app = make_app(str(tmp_path / "s.db"), device=src, start="procedure", average_s=1.0, settle_s=0.5)
+        async with app.run_test(size=SIZE) as pilot:
+            await wait_for(pilot, lambda: getattr(app.screen, "guide", None) is not None)
+            guide, procedure = app.screen.guide, app.screen
+            await run_bench(pilot, src, clock, lambda: guide.n_captured == 1)  # x_up: the unit starts there
+            await wait_for(pilot, lambda: os.path.exists(guide.state_path))
+            await pilot.press("p")  # turned to x_down
+            await wait_for(pilot, lambda: "turned to x_down" in " ".join(n.message for n in app._notifications))
+            await pilot.press("ctrl+q")
+            await wait_for(pilot, lambda: screen_name(app) == "ConfirmScreen")
+            before = app.screen.question
+            # the bench goes on behind the box: x_down settles, is averaged, captured and kept
+            await run_bench(pilot, src, clock, lambda: guide.n_captured == 2)
+            try:
+                await wait_for(pilot, lambda: "The 2 captured positions are kept" in app.screen.question, timeout_s=30)
+            except AssertionError:
+                pass
+            after = app.screen.question
+            await pilot.press("n")
+            await wait_for(pilot, lambda: app.screen is procedure)
+            return before, after
+
+    before, after = asyncio.run(story())
+    assert "The 1 captured position is kept" in before, before
+    assert "The 2 captured positions are kept: F6 on the Connect screen resumes." in after, after
+
+
 # ---------------------------------------------------------------- 2. a diagnosis that says how far it is
 
 

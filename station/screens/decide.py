@@ -107,15 +107,31 @@ class ConfirmScreen(NoticesMixin, ModalScreen):
         Binding("escape", "answer(False)", "No", show=False, priority=True),
     ]
 
-    def __init__(self, question: str) -> None:
+    def __init__(self, question: str, update=None) -> None:
+        """``update``: called each half second for the question as it stands now (what a
+        quit keeps changes while the run goes on behind the box)."""
         super().__init__()
         self.question = question
+        self.question_now = update
 
     def compose(self) -> ComposeResult:
         with Vertical(id="box"):
-            yield Static(self.question + "\n\n[b]y[/] yes · [b]n[/] no")
+            yield Static(self._text(), id="question")
             yield Static("", id="notices")
         yield footer()  # this box's keys: the screen underneath showed its own, dead while it is open
+
+    def _text(self) -> str:
+        return self.question + "\n\n[b]y[/] yes · [b]n[/] no"
+
+    def on_mount(self) -> None:  # (NoticesMixin's runs too: Textual calls each class's handler)
+        if self.question_now is not None:
+            self.set_interval(0.5, self._refresh_question)
+
+    def _refresh_question(self) -> None:
+        question = self.question_now()
+        if question != self.question:
+            self.question = question
+            self.query_one("#question", Static).update(self._text())
 
     def action_answer(self, yes: bool) -> None:
         self.dismiss(yes)
