@@ -225,7 +225,7 @@ def _children(pid: int) -> list[str]:
     return out
 
 
-def test_diagnose_in_tmux_says_its_step_and_escape_stops_it(tmp_path):
+def test_diagnose_in_tmux_says_its_step_and_escape_stops_it(tmp_path, shared_data):
     """`station` at 80x24 in tmux, keys only: F7 imports a real compass capture (sunsided's full
     sphere, ../shared/data), `g` diagnoses it: the screen says the step and the seconds; Esc is
     back on Results at once with "Diagnosis stopped", and the app has nothing of it running."""
@@ -236,10 +236,7 @@ def test_diagnose_in_tmux_says_its_step_and_escape_stops_it(tmp_path):
 
     if not os.path.exists(TMUX) and not REQUIRED:
         pytest.skip("tmux not installed")
-    shared = os.environ.get("STATION_SHARED") or os.path.join(os.path.dirname(__file__), "..", "..", "shared")
-    capture = os.path.join(shared, "data", "sunsided_marg", "sunsided_full_sphere.capture.csv")
-    if not os.path.exists(capture):
-        pytest.skip(f"{capture}: not here")
+    capture = str(shared_data / "sunsided_marg" / "sunsided_full_sphere.capture.csv")
     sock = f"test-s27t-{os.getpid()}"
     _start_tui(sock, tmp_path / "s.db")
     try:
