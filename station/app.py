@@ -239,12 +239,23 @@ class StationApp(App):
             return
         if isinstance(self.screen, ConfirmScreen):
             return
-        text = f"Quit? {lost[0].upper() + lost[1:]} is lost."
-        if kept:
-            text += (
-                f" The {kept} captured position{'s are' if kept > 1 else ' is'} kept: F6 on the Connect screen resumes."
-            )
-        self.push_screen(ConfirmScreen(text), lambda yes: self.exit() if yes else None)
+
+        def question(lost: str = lost, kept: int = kept) -> str:
+            # the run goes on behind the question: said again as positions are captured
+            text = f"Quit? {lost[0].upper() + lost[1:]} is lost."
+            if kept:
+                text += (
+                    f" The {kept} captured position{'s are' if kept > 1 else ' is'} kept: F6 on the Connect screen"
+                    " resumes."
+                )
+            return text
+
+        def now() -> str:
+            kept = self.kept_for_resume()
+            lost = self.unsaved_work(kept)
+            return question(lost, kept) if lost else question()
+
+        self.push_screen(ConfirmScreen(question(), update=now), lambda yes: self.exit() if yes else None)
 
     def action_history(self) -> None:
         from station.screens.history import HistoryScreen

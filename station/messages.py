@@ -95,3 +95,11 @@ class Connected(Message):
         self.source = source
         self.device_id = device_id
         self.devices = devices or []
+
+
+class DiagnoseStep(Message):
+    """The step a running diagnosis has begun, in words (station.diagnose_process)."""
+
+    def __init__(self, step: str) -> None:
+        super().__init__()
+        self.step = step

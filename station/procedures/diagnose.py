@@ -178,17 +178,27 @@ def _explained(diag, flagged) -> bool:
     return not Q.group_outliers(diag.studentized, prob.groups, list(flagged), primary)
 
 
-def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
-    """(diagnose.md dict, the engine's Diagnosis, the procedure's diagnosis input)."""
+def analyse(capture, progress=None) -> tuple[dict, object, DiagnosisInput]:
+    """(diagnose.md dict, the engine's Diagnosis, the procedure's diagnosis input).
+
+    ``progress``: called with the step begun, in words ("searching the candidate effects"),
+    before each (the TUI says it while it works; a step may take a minute)."""
     from station.calibrate import calibrate_capture, guarded, procedure_module
     from station.guard import check_extremes, quiet_stdout
+
+    def step(what: str) -> None:
+        if progress is not None:
+            progress(what)
 
     module = procedure_module(capture.procedure, capture.path)  # unknown/missing procedure → InputError
     if not hasattr(module, "diagnosis_input"):
         raise UnsupportedError(f"{capture.procedure}: no diagnosis for this procedure")
+    step("checking and preparing the capture")
     check_extremes(capture)
     with quiet_stdout():  # a dependency's print never reaches stdout (the result carries the findings)
         prepared = guarded(capture, module.prepare, capture)
+    if module.DIAGNOSIS_BASELINE:
+        step("calibrating (the baseline model)")
     base = calibrate_capture(capture, prepared=prepared) if module.DIAGNOSIS_BASELINE else None
 
     def run():
@@ -198,9 +208,11 @@ def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
         except SolverError as exc:
             raise UnsupportedError(f"{_where(capture)}: {capture.procedure}: diagnosis failed: {exc}") from None
 
+    step("fitting the baseline and searching the candidate effects")
     with quiet_stdout():
         inp, diag = guarded(capture, run)
         if inp.kept is not None:
+            step("searching again with the outlier positions kept")
             # groups the screen left out as outliers may be the effect itself (a temperature bias
             # shows most on the positions along it): searched with them kept, the result stands
             # when it names effects under which none of them is an outlier any more
@@ -223,6 +235,7 @@ def analyse(capture) -> tuple[dict, object, DiagnosisInput]:
             except SolverError as exc:  # the first sensor's diagnosis stands on its own
                 return str(exc)
 
+        step(f"diagnosing the second sensor ({name})")
         with quiet_stdout():
             got = guarded(capture, run_sub)
         if isinstance(got, str):

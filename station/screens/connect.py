@@ -74,7 +74,7 @@ class ConnectScreen(Screen):
     ConnectScreen #status { padding: 0 1; height: auto; }
     /* notices are lines under the buttons here, not toasts over them (80x24) */
     ConnectScreen ToastHolder { display: none; }
-    ConnectScreen #notices { padding: 0 1; height: auto; max-height: 2; }
+    ConnectScreen #notices { padding: 0 1; height: auto; max-height: 3; text-wrap: wrap; text-overflow: ellipsis; }
     ConnectScreen #title { text-style: bold; padding: 0 1; }
     """
 
@@ -211,6 +211,7 @@ class ConnectScreen(Screen):
         self.call_after_refresh(self.load_devices)
         self.show_due(getattr(self.app, "due", []))
         self.show_notices()
+        self.call_after_refresh(self.show_notices)  # again once laid out: the rows under the buttons
         self._check_resume()
         self.query_one("#start", Button).focus()
 
@@ -260,6 +261,7 @@ class ConnectScreen(Screen):
             )
         for label in self.query("#due"):  # none yet when the due list arrives before this screen is composed
             label.update(text)
+            self.call_after_refresh(self.show_notices)  # a due line of two rows leaves one fewer under the buttons
 
     @on(Select.Changed, "#known")
     def _known_picked(self, event: Select.Changed) -> None:
@@ -422,15 +424,76 @@ class ConnectScreen(Screen):
         self.open_source(choice, port, self.query_one("#protocol", Select).value)
 
     def show_notices(self) -> None:
-        """The app's current notices as lines under the buttons: a toast, bottom right, covered
-        them at 80x24 (``station.widgets.notices``)."""
-        from station.widgets.notices import show_notices
+        """The status line and the app's current notices under the buttons (a toast, bottom
+        right, covered the buttons at 80x24), in the rows there are between the buttons and the
+        footer (3 at 80x24). A refused port (2 rows), the start-up reminder and a notice from
+        the run took 5 rows: the screen scrolled and the newest notice was under the footer.
+        The status, Connect's latest outcome (an error says what to do next), is kept whole;
+        the notices newest first, the newest error among them always, as many as fit; how many
+        are not shown is said on the first line."""
+        from textual.content import Content
 
-        show_notices(self)
+        from station.widgets.notices import current_notices, notice_markup
+
+        if not (self.query("#notices") and self.query("#status")):
+            return
+        width = max(self.size.width - 2, 20)  # the lines' padding
+        buttons = self.query_one("#buttons").region
+        rows = max(self.size.height - 1 - buttons.bottom, 1) if buttons.height else 3  # above the footer
+
+        def rows_of(markup: str) -> int:
+            return len(Content.from_markup(markup).wrap(width))
+
+        status = self.query_one("#status", Static)
+        notices = current_notices(self.app)
+        line = self.query_one("#notices", Static)
+        if not (self._status_text or notices):  # two empty lines, as they always were
+            status.styles.max_height = line.styles.max_height = None
+            line.update("")
+            line.display = True
+            return
+        status_rows = min(rows_of(self._status_text), rows) if self._status_text else 0
+        status.styles.max_height = status_rows
+        free = rows - status_rows
+        order = notices[::-1]  # newest first, the newest error before them all
+        errors = [n for n in order if n.severity == "error"]
+        if errors:
+            order.remove(errors[0])
+            order.insert(0, errors[0])
+        if sum(rows_of(notice_markup(n)) for n in notices) <= free:
+            shown = notices
+        else:
+            room, kept = free - 1, []  # a line says how many are not shown
+            for n in order:
+                if rows_of(notice_markup(n)) > room:
+                    break
+                kept.append(n)
+                room -= rows_of(notice_markup(n))
+            shown = [n for n in notices if n in kept]
+        lines = [notice_markup(n) for n in shown]
+        dropped = len(notices) - len(shown)
+        if dropped and free >= 1:
+            more = f"[dim]{dropped} more notice{'s' if dropped > 1 else ''} not shown[/]"
+            if not shown and order:  # one row: the count, and as much of the newest (error) as fits
+                newest = "newest error" if order[0].severity == "error" else "newest"
+                more = f"[dim]{dropped} notices, the {newest}:[/] " + notice_markup(order[0])
+            lines.insert(0, more)
+        line.update("\n".join(lines))
+        line.styles.max_height = free
+        line.display = bool(lines) and free > 0
+        if notices:  # again when the first goes, so its line goes as the toast would have
+            self.set_timer(max(min(n.time_left for n in notices), 0.0) + 0.05, self.show_notices)
+
+    def on_resize(self) -> None:
+        self.call_after_refresh(self.show_notices)
+
+    _status_text = ""
 
     def _status(self, text: str, error: bool = False) -> None:
         text = tui_markup(text)  # device ids, ports and errors come from outside
-        self.query_one("#status", Static).update(f"[b red]{text}[/]" if error else text)
+        self._status_text = f"[b red]{text}[/]" if error else text
+        self.query_one("#status", Static).update(self._status_text)
+        self.show_notices()
 
     @work(thread=True, exclusive=True, group="connect", exit_on_error=False, description="open the device")
     def open_source(self, choice, port: str, protocol: str) -> None:

@@ -89,12 +89,16 @@ class DecideScreen(NoticesMixin, ModalScreen):
         self.dismiss(None)
 
 
-class ConfirmScreen(ModalScreen):
-    """y / Enter confirms, n / Escape declines."""
+class ConfirmScreen(NoticesMixin, ModalScreen):
+    """y / Enter confirms, n / Escape declines. The notices are lines in the box, under the
+    question: as toasts (bottom right, two stacked) they lay over its last lines at 80x24."""
 
     CSS = """
     ConfirmScreen { align: center middle; }
-    ConfirmScreen #box { width: 60; height: auto; border: round $warning; background: $surface; padding: 0 1; }
+    ConfirmScreen #box { width: 60; height: auto; max-height: 20; border: round $warning; background: $surface;
+                         padding: 0 1; }
+    ConfirmScreen ToastHolder { display: none; }
+    ConfirmScreen #notices { height: auto; max-height: 6; margin-top: 1; }
     """
     BINDINGS = [
         Binding("y", "answer(True)", "Yes", priority=True),
@@ -103,14 +107,31 @@ class ConfirmScreen(ModalScreen):
         Binding("escape", "answer(False)", "No", show=False, priority=True),
     ]
 
-    def __init__(self, question: str) -> None:
+    def __init__(self, question: str, update=None) -> None:
+        """``update``: called each half second for the question as it stands now (what a
+        quit keeps changes while the run goes on behind the box)."""
         super().__init__()
         self.question = question
+        self.question_now = update
 
     def compose(self) -> ComposeResult:
         with Vertical(id="box"):
-            yield Static(self.question + "\n\n[b]y[/] yes · [b]n[/] no")
+            yield Static(self._text(), id="question")
+            yield Static("", id="notices")
         yield footer()  # this box's keys: the screen underneath showed its own, dead while it is open
+
+    def _text(self) -> str:
+        return self.question + "\n\n[b]y[/] yes · [b]n[/] no"
+
+    def on_mount(self) -> None:  # (NoticesMixin's runs too: Textual calls each class's handler)
+        if self.question_now is not None:
+            self.set_interval(0.5, self._refresh_question)
+
+    def _refresh_question(self) -> None:
+        question = self.question_now()
+        if question != self.question:
+            self.question = question
+            self.query_one("#question", Static).update(self._text())
 
     def action_answer(self, yes: bool) -> None:
         self.dismiss(yes)

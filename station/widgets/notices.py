@@ -18,6 +18,20 @@ from station.textsafe import tui_markup
 SEVERITY_STYLE = {"error": "b red", "warning": "yellow"}
 
 
+def current_notices(app) -> list:
+    """The app's notices not expired yet (``StationApp.notices``), oldest first."""
+    return [n for n in getattr(app, "notices", []) if not n.has_expired]
+
+
+def notice_markup(n) -> str:
+    """One notice as one markup line (its title first, in its severity's colour)."""
+    text = " ".join(f"{n.title}: {n.message}".split()) if n.title else " ".join(n.message.split())
+    if not n.markup:
+        text = tui_markup(text)
+    style = SEVERITY_STYLE.get(n.severity)
+    return f"[{style}]{text}[/]" if style else text
+
+
 def show_notices(screen, limit: int = 2, hide_empty: bool = False) -> None:
     """The app's notices still current (``StationApp.notices``), newest last, at most
     ``limit``, each on its own line(s) in ``screen``'s ``#notices``; drawn again when the
@@ -25,14 +39,8 @@ def show_notices(screen, limit: int = 2, hide_empty: bool = False) -> None:
     the line takes no room while it is empty (Results: the tables keep every line then)."""
     if not screen.query("#notices"):  # not composed yet: its on_mount shows them
         return
-    notices = [n for n in getattr(screen.app, "notices", []) if not n.has_expired][-limit:]
-    lines = []
-    for n in notices:
-        text = " ".join(f"{n.title}: {n.message}".split()) if n.title else " ".join(n.message.split())
-        if not n.markup:
-            text = tui_markup(text)
-        style = SEVERITY_STYLE.get(n.severity)
-        lines.append(f"[{style}]{text}[/]" if style else text)
+    notices = current_notices(screen.app)[-limit:]
+    lines = [notice_markup(n) for n in notices]
     line = screen.query_one("#notices", Static)
     line.update("\n".join(lines))
     if hide_empty:  # no blank line taken from the screen while there is nothing to say
