@@ -201,3 +201,26 @@ def test_a_capture_no_encoding_reads_is_refused_alike_by_inspect_and_import(tmp_
     out = tmp_path / "x.csv"
     assert_one_line_refusal(run_station("import", path, "--procedure", "accel-tabletop", "--out", out), said)
     assert not out.exists()
+
+
+# ------------------------------------------------------------- a spreadsheet's padded blank rows
+
+
+def test_blank_rows_padded_to_the_tables_width_are_blank(tmp_path, session):
+    """csv.writer of a sheet whose first rows are empty (Excel and LibreOffice write the used
+    range: ',,,' for an empty row). Before: 'line 1: no header row: this line holds 4 numbers'."""
+    t, acc = session
+    src = tmp_path / "padded.csv"
+    with open(src, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerows([["", "", "", ""], ["", "", "", ""], ["t", "ax", "ay", "az"]])
+        w.writerows(np.column_stack([t, acc]).tolist())
+    assert src.read_bytes().startswith(b",,,\r\n")
+    res, out = _import(tmp_path, src, *UNITS)
+    assert res.returncode == 0 and res.stderr == "", res.stderr
+    np.testing.assert_allclose(read_capture(out).columns["az"], acc[:, 2], rtol=1e-12, atol=0)
+    only = tmp_path / "only.csv"
+    with open(only, "w", newline="") as fh:
+        csv.writer(fh).writerows([["", "", "", ""]] * 3)
+    res, out = _import(tmp_path, only, *UNITS)
+    assert_one_line_refusal(res, f"{only}:1: empty file: no header row")

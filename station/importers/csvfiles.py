@@ -216,8 +216,10 @@ def text_encoding(path, what: str = "a CSV file") -> tuple[str, str | None]:
     try:
         return _check_text(path)
     except InputError as exc:
-        if what != "a CSV file":
-            raise InputError(exc.path, exc.line, exc.message.replace("a CSV file", what)) from None
+        if what != "a CSV file":  # 'not a CSV file', 'not a CSV row' said of what it is
+            row = what.replace("file", "row")
+            message = exc.message.replace("a CSV file", what).replace("a CSV row", row)
+            raise InputError(exc.path, exc.line, message) from None
         raise
 
 
@@ -906,7 +908,8 @@ def read_plain(
         if hi == 1 and sep is None and (m := _SEP_LINE.fullmatch(head)):
             sep = m[1]
             continue
-        if head.strip() and not head.lstrip().startswith("#"):
+        # a row of empty cells (',,,', a spreadsheet's blank row padded to the table's width) is blank
+        if head.strip(" \t,;") and not head.lstrip().startswith("#"):
             break
         above = (hi, head)
     else:
