@@ -13,6 +13,11 @@ through inspect, import --out, calibrate, calibrate --save --db (a real SQLite f
 diagnose; what each writes is checked (``half-written``: an --out or a database left changed by
 a refused run, a temporary left beside them).
 
+``--world N``: N of the world's own files (../shared/data/*/original: the imucal session as
+pandas wrote it, the MPU-6050 logger's CSV under its preamble, a PX4 ULog) mutated (their
+text, or the log's bytes) and imported with their own options, ``--out`` checked; each
+capture made is calibrated and diagnosed.
+
 Targets (issue 16): 0 hangs, 0 last-resort errors, 0 stray stdout, 0 crashes, 0 bad exits.
 The harness is `tests/fuzzkit.py` (its docstring says what each outcome means); the CI share
 is `tests/test_fuzz.py`. Prints one line of progress per 100 captures, then the figures, and
@@ -97,8 +102,11 @@ def main() -> int:
     ap.add_argument("--out", default=None, help="write every outcome as JSON here")
     ap.add_argument("--update-docs", action="store_true", help="write the figures into docs/benchmarks.md")
     ap.add_argument("--hostile", type=int, default=0, help="run the world's and hostile files' campaign instead")
+    ap.add_argument("--world", type=int, default=0, help="run the world's own files through import instead")
     a = ap.parse_args()
     t0 = time.monotonic()
+    if a.world:
+        return _world(a, t0)
     if a.hostile:
         jobs = [(j, n, a.seed + 1000 * j, a.timeout, a.out) for j, n in enumerate(_split(a.hostile, a.jobs))]
     else:
@@ -140,6 +148,30 @@ def main() -> int:
             json.dump([o.__dict__ for o in outcomes], f)
     if a.update_docs:
         _update_docs(lines, a)
+    return 1 if s["failures"] else 0
+
+
+def _world(a, t0: float) -> int:
+    folder = tempfile.mkdtemp(prefix="world-")
+    bases = F.world_import_bases(folder)
+
+    def progress(k, outcomes):
+        if k % 50 == 0:
+            bad = sum(1 for o in outcomes if o.kind in F.FAILURES)
+            print(f"{k}/{a.world} files, {bad} failures, {time.monotonic() - t0:.0f} s", flush=True)
+
+    outcomes = F.run_world_import_campaign(
+        folder, bases, n_mutated=a.world, seed=a.seed, timeout_s=a.timeout, progress=progress
+    )
+    s = F.summary(outcomes)
+    lines = _hostile_lines(s, outcomes, a, time.monotonic() - t0)
+    lines[0] = f"files: {s['captures']} mutated from {', '.join(sorted(bases))}"
+    print("\n".join(lines))
+    for o in s["failures"]:
+        print(f"FAILURE {o.kind} {o.command} {o.case}: {o.detail}")
+    if a.out:
+        with open(a.out, "w") as f:
+            json.dump([o.__dict__ for o in outcomes], f)
     return 1 if s["failures"] else 0
 
 

@@ -1046,3 +1046,123 @@ def run_hostile_campaign(
     finally:
         runner.close()
     return runner.outcomes
+
+
+# ------------------------------------------------------- the world's own files through `import`
+#
+# The files as their writers wrote them (../shared/data/*/original): the imucal session (pandas),
+# the MPU-6050 logger's CSV under its preamble (`Fs,100`), a PX4 ULog; each mutated (text or
+# bytes) and imported with the options its SOURCE.md gives, then the capture written, if any,
+# calibrated and diagnosed (the whole files: cut short, the session holds too few positions).
+
+WORLD_IMPORTS = {
+    # name: (path under data/, import options, first bytes kept (None: first lines kept))
+    "imucal-original": (
+        "imucal_ferraris/original/example_ferraris_session.csv",
+        [
+            "--procedure",
+            "accel-tabletop",
+            "--map",
+            "ax=acc_x,ay=acc_y,az=acc_z,gx=gyr_x,gy=gyr_y,gz=gyr_z",
+            "--rate",
+            "102.4",
+            "--unit",
+            "accel=m/s^2,gyro=deg/s",
+        ],
+        None,
+    ),
+    "mpu6050-original": (
+        "mpu6050_unc/original/imu_static_test.csv",
+        ["--procedure", "gyro-drift", "--unit", "accel=counts,gyro=counts"],
+        None,
+    ),
+    "px4-ulog": ("px4_ulog/original/sample_log_small.ulg", ["--procedure", "accel-tabletop"], 1 << 24),
+}
+
+
+def world_import_bases(folder: str, shared: str | None = None, max_lines: int = 20_000) -> dict[str, tuple]:
+    """{name: (path of the copy in ``folder``, import options, binary)} for :data:`WORLD_IMPORTS`
+    present in ``shared``."""
+    shared = shared or os.environ.get("STATION_SHARED") or os.path.join(os.path.dirname(__file__), "..", "..", "shared")
+    out = {}
+    for name, (rel, options, n_bytes) in WORLD_IMPORTS.items():
+        src = os.path.join(shared, "data", rel)
+        if not os.path.exists(src):
+            continue
+        with open(src, "rb") as f:
+            data = f.read(n_bytes) if n_bytes else b"".join(line for _, line in zip(range(max_lines), f))
+        path = os.path.join(folder, name + os.path.splitext(rel)[1])
+        with open(path, "wb") as f:
+            f.write(data)
+        out[name] = (path, options, n_bytes is not None)
+    return out
+
+
+def mutate_bytes(data: bytes, rng: random.Random) -> tuple[str, bytes]:
+    """A binary log's bytes changed as a corrupt copy changes them: flipped, inserted, deleted,
+    zeroed, repeated, cut."""
+    b = bytearray(data)
+    op = rng.choice(["flip", "insert", "delete", "zeros", "repeat", "cut", "flip-head"])
+    i = rng.randrange(len(b))
+    n = rng.choice([1, 4, 64, 4096])
+    if op == "flip":
+        for _ in range(rng.randint(1, 16)):
+            j = rng.randrange(len(b))
+            b[j] = rng.randrange(256)
+    elif op == "flip-head":  # the definitions and header, where a wrong byte counts most
+        for _ in range(rng.randint(1, 4)):
+            j = rng.randrange(min(len(b), 4096))
+            b[j] = rng.randrange(256)
+    elif op == "insert":
+        b[i:i] = bytes(rng.randrange(256) for _ in range(n))
+    elif op == "delete":
+        del b[i : i + n]
+    elif op == "zeros":
+        b[i : i + n] = bytes(len(b[i : i + n]))
+    elif op == "repeat":
+        b[i:i] = b[i : i + n]
+    else:
+        del b[i:]
+    return op, bytes(b)
+
+
+def run_world_import_campaign(
+    folder: str, bases: dict[str, tuple], *, n_mutated: int, seed: int, timeout_s: float, progress=None
+) -> list[Outcome]:
+    """``n_mutated`` of the world's files mutated, each imported (``--out`` checked as in
+    :func:`check_writes`), and the capture it made, when it made one, calibrated and diagnosed."""
+    rng = random.Random(seed)
+    names = sorted(bases)
+    work = os.path.join(folder, "work")
+    os.makedirs(work, exist_ok=True)
+    os.environ["STATION_DB"] = os.path.join(work, "default.db")
+    runner = Runner(timeout_s=timeout_s)
+    out = os.path.join(work, "out.capture.csv")
+    try:
+        for k in range(n_mutated):
+            name = names[k % len(names)]
+            path, options, binary = bases[name]
+            with open(path, "rb") as f:
+                data = f.read()
+            if binary:
+                what, data = mutate_bytes(data, rng)
+            else:
+                what, data = mutate_hostile(data.decode("utf-8"), rng)
+            case_path = os.path.join(folder, "case" + os.path.splitext(path)[1])
+            with open(case_path, "wb") as f:
+                f.write(data)
+            case = f"world#{seed}.{k} {name}: {what}"
+            if os.path.exists(out):
+                os.unlink(out)
+            outcome = runner.run("import", case_path, case, argv=["import", case_path, *options, "--out", out])
+            checked = check_writes("import", outcome, work, (None, 0))
+            if checked is not outcome:
+                runner.outcomes[-1] = checked
+            if checked.kind == "ok":
+                for command in ("calibrate", "diagnose"):
+                    runner.run(command, out, case)
+            if progress is not None:
+                progress(k + 1, runner.outcomes)
+    finally:
+        runner.close()
+    return runner.outcomes

@@ -102,7 +102,7 @@ def test_a_corrupt_first_row_ending_in_whole_numbers_is_refused_on_its_line(tmp_
     assert not out.exists()
 
 
-@pytest.mark.parametrize("first", [",0,1,2", "time,0,1,2", "Unnamed: 0,0,1,2"])
+@pytest.mark.parametrize("first", [",0,1,2", "time,0,1,2", "Unnamed: 0,0,1,2", "imu1_time (s),0,1,2"])
 def test_pandas_numbered_headers_are_still_headers(tmp_path, session, first):
     """The headers pandas writes (its index unnamed, named, or read back and written again)."""
     import pandas as pd

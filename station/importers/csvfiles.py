@@ -813,8 +813,10 @@ def _is_header(cells: list[str]) -> bool:
 
 
 # the name pandas (or a logger) gives the index column before numbered channels: a word, maybe
-# with a unit ('time', 'time (s)', 'Unnamed: 0', 'timestamp_us'); a corrupt number is none
-_INDEX_NAME = re.compile(r"[A-Za-z_][A-Za-z_ ]*(?:[0-9]+|:\s*[0-9]+)?(?:\s*[\[(][^\])]*[\])])?")
+# with digits, dots or a unit ('time', 'time (s)', 'Unnamed: 0', 'imu1_time', 'header.stamp');
+# a corrupt number ('x1.5', '9.81e') is none: it holds a decimal number, or starts with a digit
+_INDEX_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_ :.\-]*(?:\s*[\[(][^\])]*[\])])?")
+_DECIMAL_INSIDE = re.compile(r"[0-9]\.[0-9]|[0-9][eE][+-]?[0-9]")
 
 
 def _numbered_channels(cells: list[str]) -> bool:
@@ -831,7 +833,7 @@ def _numbered_channels(cells: list[str]) -> bool:
         len(run) >= 2
         and run == list(range(len(run)))
         and k <= 1
-        and (k == 0 or not cells[0] or bool(_INDEX_NAME.fullmatch(cells[0])))
+        and (k == 0 or not cells[0] or (bool(_INDEX_NAME.fullmatch(cells[0])) and not _DECIMAL_INSIDE.search(cells[0])))
     )
 
 
