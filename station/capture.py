@@ -1343,6 +1343,9 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
         return _read_reencoded(path, rows, _force_slow)
 
 
+_ENCODING_NAMES = {"cp1252": "Windows-1252", "utf-16": "UTF-16"}
+
+
 def _read_reencoded(path: str, rows: int, force_slow: bool) -> Capture:
     """:func:`read_capture` of a capture that is not UTF-8: its text, in the encoding the
     importer finds, copied as UTF-8 to a temporary file (line for line, line ends kept) and read
@@ -1352,13 +1355,22 @@ def _read_reencoded(path: str, rows: int, force_slow: bool) -> Capture:
     from station.importers.csvfiles import copy_as_utf8, text_encoding
 
     encoding, note = text_encoding(path, "a capture file")
-    with tempfile.TemporaryDirectory(prefix="station-capture-") as tmp:
-        copy = os.path.join(tmp, "capture.csv")
-        copy_as_utf8(path, encoding, copy)
-        try:
-            capture = _read_capture(copy, rows, force_slow)
-        except InputError as exc:
-            raise InputError(path, exc.line, exc.message) from None
+    try:
+        with tempfile.TemporaryDirectory(prefix="station-capture-") as tmp:
+            copy = os.path.join(tmp, "capture.csv")
+            copy_as_utf8(path, encoding, copy)
+            try:
+                capture = _read_capture(copy, rows, force_slow)
+            except InputError as exc:
+                raise InputError(path, exc.line, exc.message) from None
+    except OSError as exc:  # no temporary folder to write in (TMPDIR gone, a full disk)
+        raise InputError(
+            path,
+            None,
+            f"{_ENCODING_NAMES.get(encoding, encoding)} text, read through a UTF-8 copy that could not be made "
+            f"({exc.strerror or exc}): "
+            "save it as UTF-8",
+        ) from None
     capture.path = path
     if note:
         capture.notes.insert(0, note)

@@ -224,3 +224,35 @@ def test_blank_rows_padded_to_the_tables_width_are_blank(tmp_path, session):
         csv.writer(fh).writerows([["", "", "", ""]] * 3)
     res, out = _import(tmp_path, only, *UNITS)
     assert_one_line_refusal(res, f"{only}:1: empty file: no header row")
+
+
+def test_a_capture_that_cannot_be_copied_as_utf8_is_refused_in_one_line(tmp_path):
+    """The UTF-8 copy a Windows-1252 capture is read through, where no file may grow past
+    64 KiB (the OS's own limit, RLIMIT_FSIZE: as a full disk stops the write). Before the
+    copy's write was told from its read: 'cannot read: File too large', of the wrong file."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    text = open(os.path.join(SHARED, "data", "imucal_ferraris", "imucal_ferraris.capture.csv"), encoding="utf-8").read()
+    path = tmp_path / "big.capture.csv"
+    path.write_bytes(text.replace("# device:", "# operator: Jürgen\n# device:", 1).encode("cp1252"))
+    assert path.stat().st_size > 4 * 65536
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails (EFBIG), not the process
+        resource.setrlimit(resource.RLIMIT_FSIZE, (65536, 65536))
+
+    res = subprocess.run(
+        [sys.executable, "-m", "station", "inspect", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=limit,
+        env={**os.environ, "TMPDIR": str(tmp_path)},
+    )
+    assert_one_line_refusal(
+        res, f"{path}: Windows-1252 text, read through a UTF-8 copy that could not be made (File too large)"
+    )
+    assert [p.name for p in tmp_path.iterdir()] == ["big.capture.csv"]  # the temporary copy removed

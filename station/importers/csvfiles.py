@@ -226,13 +226,21 @@ def text_encoding(path, what: str = "a CSV file") -> tuple[str, str | None]:
 def copy_as_utf8(path, encoding: str, dest) -> None:
     """Write the text of ``path`` (in ``encoding``, as :func:`text_encoding` found it) to
     ``dest`` as UTF-8, byte for byte the same lines and line ends (a UTF-16 byte-order mark is
-    no text). ``dest`` is a new file of the caller's (a temporary one)."""
+    no text). ``dest`` is a new file of the caller's (a temporary one): an OSError writing it is
+    the caller's to say; reading ``path`` is an InputError."""
+    with open(dest, "wb") as out:
+        for text in _decoded(path, encoding):
+            out.write(text.encode("utf-8", "surrogatepass"))
+
+
+def _decoded(path, encoding: str) -> Iterator[str]:
+    """The text of ``path`` in ``encoding``, a chunk at a time."""
     decoder = codecs.getincrementaldecoder(encoding)()
     try:
-        with open_input(path, "a CSV file") as f, open(dest, "wb") as out:
+        with open_input(path, "a CSV file") as f:
             for chunk in _chunks(f, path, utf16=encoding == "utf-16"):
-                out.write(decoder.decode(chunk).encode("utf-8", "surrogatepass"))
-            out.write(decoder.decode(b"", final=True).encode("utf-8", "surrogatepass"))
+                yield decoder.decode(chunk)
+            yield decoder.decode(b"", final=True)
     except UnicodeDecodeError:
         raise InputError(path, None, f"changed while it was read: not {encoding} text any more") from None
     except OSError as exc:
