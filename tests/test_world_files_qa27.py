@@ -256,3 +256,15 @@ def test_a_capture_that_cannot_be_copied_as_utf8_is_refused_in_one_line(tmp_path
         res, f"{path}: Windows-1252 text, read through a UTF-8 copy that could not be made (File too large)"
     )
     assert [p.name for p in tmp_path.iterdir()] == ["big.capture.csv"]  # the temporary copy removed
+
+
+def test_a_file_with_no_capture_column_is_told_the_map_its_names_suggest(tmp_path):
+    """The imucal session as its authors wrote it (n_samples, gyr_x, ..., acc_z), imported
+    without --map. Before: the fixed example '--map t=time,ax=acc_x,ay=acc_y,az=acc_z', which
+    names columns this file does not have; now the --map its own names suggest."""
+    out = tmp_path / "x.capture.csv"
+    res = run_station("import", FERRARIS, "--procedure", "accel-tabletop", "--out", out)
+    assert_one_line_refusal(
+        res, "say which is which with --map, e.g. --map ax=acc_x,ay=acc_y,az=acc_z,gx=gyr_x,gy=gyr_y,gz=gyr_z"
+    )
+    assert not out.exists()

@@ -1016,13 +1016,19 @@ def read_plain(
         if mapping and unknown:  # columns the capture has no place for: said, not dropped without a word
             warnings.append(unknown_series_note(unknown, hi))
         if not mapping:
+            guess: dict[str, str] = {}  # the capture column each name most likely means (acc_x: ax)
+            for c in header:
+                near = nearest_column(c, TARGETS) if c and "," not in c and "=" not in c else None
+                if near is not None and near not in guess:
+                    guess[near] = c
+            example = ",".join(f"{t}={guess[t]}" for t in TARGETS if t in guess) or "t=time,ax=acc_x,ay=acc_y,az=acc_z"
             raise InputError(
                 path,
                 hi,
                 f"no column is named like a capture column ({', '.join(TARGETS)}); its columns: "
                 + ", ".join(repr(c) for c in header[:SHOWN_COLUMNS])
                 + (f" (+{len(header) - SHOWN_COLUMNS} more)" if len(header) > SHOWN_COLUMNS else "")
-                + ": say which is which with --map, e.g. --map t=time,ax=acc_x,ay=acc_y,az=acc_z",
+                + f": say which is which with --map, e.g. --map {example}",
             )
     cols: dict[str, int] = {}
     for target, source in mapping.items():
