@@ -866,10 +866,15 @@ def _meta_text_problem(key: str, value: str) -> str:
     key or value because the writer (`export-capture` of the stored capture) could not give it back."""
     if key.isprintable() and key.lower() == "device":
         return f"metadata {_show(key)}: {_show(value)}: {DEVICE_TEXT_RULE}"
-    return (
+    said = (
         f"metadata {_show(key)}: {_show(value)}: a capture's metadata cannot hold a control character "
         "(a tab, an ESC sequence, a bidi override)"
     )
+    if key.isprintable() and "\t" in value and value.replace("\t", "").isprintable():
+        # '# source: Wang & Li 2021<TAB> Table 1': the line's commas written as tabs, as a spreadsheet
+        # saves the file tab-separated (Excel's "Unicode Text")
+        said += "; tabs where the line had commas? A capture is comma-separated: save the file as CSV"
+    return said
 
 
 def _spelled_twice(meta: dict[str, str]) -> tuple[str, str] | None:

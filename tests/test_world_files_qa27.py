@@ -268,3 +268,19 @@ def test_a_file_with_no_capture_column_is_told_the_map_its_names_suggest(tmp_pat
         res, "say which is which with --map, e.g. --map ax=acc_x,ay=acc_y,az=acc_z,gx=gyr_x,gy=gyr_y,gz=gyr_z"
     )
     assert not out.exists()
+
+
+def test_a_capture_saved_as_excels_unicode_text_says_to_save_it_as_csv(tmp_path):
+    """Excel opens a capture as a table (each line split at its commas) and saves it as
+    "Unicode Text": UTF-16 with a mark, the cells joined by tabs (csv's excel-tab dialect, as
+    Excel writes it). Before: 'a capture's metadata cannot hold a control character (a tab,
+    ...)', with no word of what to do; now read as UTF-16, the tabs said, and what to save."""
+    rows = list(csv.reader(open(TABLE1, encoding="utf-8")))
+    path = tmp_path / "unicode.capture.txt"
+    with open(path, "w", encoding="utf-16", newline="") as fh:
+        csv.writer(fh, dialect="excel-tab").writerows(rows)
+    line = next(k for k, r in enumerate(rows, 1) if r[0].startswith("# source"))
+    res = run_station("inspect", path)
+    assert_one_line_refusal(
+        res, f"{path}:{line}: metadata 'source'", "tabs where the line had commas? A capture is comma-separated: save"
+    )
