@@ -284,3 +284,18 @@ def test_a_capture_saved_as_excels_unicode_text_says_to_save_it_as_csv(tmp_path)
     assert_one_line_refusal(
         res, f"{path}:{line}: metadata 'source'", "tabs where the line had commas? A capture is comma-separated: save"
     )
+
+
+def test_a_loggers_channels_numbered_from_1_are_a_header_when_map_names_its_time(tmp_path, session):
+    """csv.writer of 'time,1,2,3' (a logger numbering its channels from 1) over the imucal rows,
+    with --map t=time,ax=1,...: the line holds the column --map names, so it is the header
+    (as before this session's stricter numbered header; a guard, not a fix)."""
+    t, acc = session
+    src = tmp_path / "logger.csv"
+    with open(src, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", "1", "2", "3"])
+        w.writerows(np.column_stack([t, acc]).tolist())
+    res, out = _import(tmp_path, src, "--map", "t=time,ax=1,ay=2,az=3", *UNITS)
+    assert res.returncode == 0, res.stderr
+    np.testing.assert_allclose(read_capture(out).columns["ax"], acc[:, 0], rtol=1e-12, atol=0)

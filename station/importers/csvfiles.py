@@ -936,7 +936,10 @@ def read_plain(
     found = None
     numbers_only = all(_is_number(c) or c.lower() in _MISSING for c in header)
     commented = _commented_header(path, above, len(header), mapping, sep) if numbers_only else None
-    is_header = _is_header(header)
+    # a line that holds every column --map names by name is the header, whatever its numbers
+    # ('time,1,2,3' under --map t=time,ax=1,...: a logger's channels numbered from 1)
+    named = [src for src in mapping.values() if not src.isdigit()]
+    is_header = _is_header(header) or (bool(named) and all(src in header for src in named))
     if is_header and numbers_only and all(header):
         # '0,1,2' alone: pandas' numbered columns over its rows of floats, or a data row of whole
         # numbers ('0,1,2,3' then '1,1,2,3'): the line under it tells
