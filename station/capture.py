@@ -140,16 +140,68 @@ def unknown_table_columns(header: list[str]) -> list[str]:
     ]
 
 
-def unknown_columns_note(unknown: list[str], header_line: int | None = None, *, series: bool = False) -> str:
-    """The one warning line for :func:`unknown_table_columns`, with the spec's name a misspelt
-    one is closest to."""
+# The names loggers, spreadsheets and libraries give the capture's columns (imucal's acc_x and
+# gyr_x, EuRoC's w_RS_S_x, ROS's angular_velocity.x, a bench's temperature): a column named
+# near one of them is taken to mean that capture column by :func:`nearest_column`.
+COLUMN_ALIASES = {
+    "t": ("time", "timestamp", "times", "stamp", "seconds", "elapsed"),
+    "temp_c": ("temp", "temperature", "tmp", "imu_temp", "temp_degc", "temperature_degc", "die_temp"),
+    **{
+        f"{p}{a}": tuple(f"{w}{sep}{a}" for w in words for sep in ("_", "", ".", " "))
+        for p, words in (
+            ("a", ("acc", "accel", "acceleration", "accelerometer", "linear_acceleration", "a")),
+            ("g", ("gyr", "gyro", "omega", "angular_velocity", "rate", "w", "g")),
+            ("m", ("mag", "magn", "magnetometer", "magnetic_field", "m")),
+        )
+        for a in "xyz"
+    },
+}
+# a unit at a column name's end ('_C', '_degC', ' (m/s^2)', '[uT]', '_mps2', '_dps'): left out
+# before names are compared, as the capture's names carry none but temp_c's
+_UNIT_SUFFIX = re.compile(
+    r"(?:\s*[\[(][^\])]*[\])]|[_ .-]?(?:c|degc|°c|k|s|ms|us|ns|sec|g|mg|mps2|ms2|m_s2|m/s\^?2|m_s|mps|m/s|dps|degps|"
+    r"deg_s|rads|rad_s|rad/s|ut|nt|mt|gauss|mgauss|v|mv|counts|raw|lsb))$",
+    re.IGNORECASE,
+)
+
+
+def _name_key(name: str) -> str:
+    """A column name as :func:`nearest_column` compares it: lower case, its unit left out."""
+    key = name.strip().lower()
+    for _ in range(2):  # 'acc_x_mps2 (m/s^2)': both
+        bare = _UNIT_SUFFIX.sub("", key)
+        if not bare:
+            break
+        key = bare
+    return key
+
+
+def nearest_column(name: str, columns) -> str | None:
+    """The capture column (one of ``columns``) that ``name`` most likely means, or None:
+    ``tmperature_C`` → ``temp_c``, ``acc_x_mps2`` → ``ax``, ``axx`` → ``ax``. The name, its unit
+    suffix left out, is compared (difflib's ratio) with each column and each of its
+    :data:`COLUMN_ALIASES`, so a misspelt long name meets the long name it misspells."""
     import difflib
 
+    key = _name_key(name)
+    candidates: dict[str, str] = {}
+    for c in columns:
+        for spelling in (c, _name_key(c), *COLUMN_ALIASES.get(c, ())):
+            candidates.setdefault(spelling.lower(), c)
+    if key in candidates:
+        return candidates[key]
+    near = difflib.get_close_matches(key, list(candidates), n=1, cutoff=0.75)
+    return candidates[near[0]] if near else None
+
+
+def unknown_columns_note(unknown: list[str], header_line: int | None = None, *, series: bool = False) -> str:
+    """The one warning line for :func:`unknown_table_columns`, with the spec's name a misspelt
+    one is closest to (:func:`nearest_column`)."""
+    names = sorted(SPEC_COLUMNS | {f"{n}_std" for n in SPEC_COLUMNS - {"position", "n"}})
     named = []
     for c in unknown:
-        names = sorted(SPEC_COLUMNS | {f"{n}_std" for n in SPEC_COLUMNS - {"position", "n"}})
-        near = difflib.get_close_matches(c.lower(), names, n=1, cutoff=0.6)
-        named.append(repr(c) + (f" (did you mean {near[0]!r}?)" if near else ""))
+        near = nearest_column(c, names)
+        named.append(repr(c) + (f" (did you mean {near!r}?)" if near else ""))
     where = f"line {header_line}: " if header_line is not None else ""
     kind = "time series" if series else "table of averages"
     return (
@@ -693,6 +745,12 @@ def _open(path) -> io.BufferedReader:
     return open_input(path, "a capture file")
 
 
+class _NotUtf8(InputError):
+    """Text that is not UTF-8 (UTF-16, a byte UTF-8 has not): :func:`read_capture` reads such a
+    file again as ``station import`` decides its encoding (Windows-1252, UTF-16 with a mark), or
+    refuses it in the importer's one line."""
+
+
 def _decode(path: str, raw: bytes, lineno: int) -> str:
     """One physical line as text without its line ending; binary data is an InputError."""
     nul = raw.find(b"\0")
@@ -701,9 +759,7 @@ def _decode(path: str, raw: bytes, lineno: int) -> str:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(
-            path, lineno, f"not UTF-8 text: byte 0x{raw[exc.start]:02x} at column {exc.start + 1}"
-        ) from None
+        raise _NotUtf8(path, lineno, f"not UTF-8 text: byte 0x{raw[exc.start]:02x} at column {exc.start + 1}") from None
     if text.endswith("\n"):
         text = text[:-1]
     if text.endswith("\r"):
@@ -740,7 +796,7 @@ def _read_head(path: str) -> _Head:
                 if raw.startswith(codecs.BOM_UTF8):
                     raw = raw[len(codecs.BOM_UTF8) :]
                 elif looks_utf16(raw + f.peek(64)[:64]):  # with a byte-order mark or without
-                    raise InputError(path, 1, "UTF-16 text; capture files are UTF-8")
+                    raise _NotUtf8(path, 1, "UTF-16 text; capture files are UTF-8")
             text = _decode(path, raw, lineno)
             stripped = text.strip()
             if lineno == 1:
@@ -810,10 +866,15 @@ def _meta_text_problem(key: str, value: str) -> str:
     key or value because the writer (`export-capture` of the stored capture) could not give it back."""
     if key.isprintable() and key.lower() == "device":
         return f"metadata {_show(key)}: {_show(value)}: {DEVICE_TEXT_RULE}"
-    return (
+    said = (
         f"metadata {_show(key)}: {_show(value)}: a capture's metadata cannot hold a control character "
         "(a tab, an ESC sequence, a bidi override)"
     )
+    if key.isprintable() and "\t" in value and value.replace("\t", "").isprintable():
+        # '# source: Wang & Li 2021<TAB> Table 1': the line's commas written as tabs, as a spreadsheet
+        # saves the file tab-separated (Excel's "Unicode Text")
+        said += "; tabs where the line had commas? A capture is comma-separated: save the file as CSV"
+    return said
 
 
 def _spelled_twice(meta: dict[str, str]) -> tuple[str, str] | None:
@@ -1273,8 +1334,55 @@ def check_capture_upto(path, end: int, *, chunk_rows: int = DEFAULT_CHUNK_ROWS) 
 
 
 def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = False) -> Capture:
-    """Read and validate a capture file; InputError ``file:line: what is wrong`` on bad input."""
+    """Read and validate a capture file; InputError ``file:line: what is wrong`` on bad input.
+
+    A capture a spreadsheet saved in another encoding than UTF-8 is read as ``station import``
+    reads a CSV (one decision, :func:`station.importers.csvfiles.text_encoding`): Windows-1252
+    (Excel's "CSV (Comma delimited)" on Windows; said in a note, as import says it) and UTF-16
+    with a byte-order mark (Excel's "Unicode Text"); anything else is refused in the
+    importer's one line (the byte and its line, or what to save the file as)."""
     path = os.fspath(path)
+    try:
+        return _read_capture(path, rows, _force_slow)
+    except _NotUtf8:
+        return _read_reencoded(path, rows, _force_slow)
+
+
+_ENCODING_NAMES = {"cp1252": "Windows-1252", "utf-16": "UTF-16"}
+
+
+def _read_reencoded(path: str, rows: int, force_slow: bool) -> Capture:
+    """:func:`read_capture` of a capture that is not UTF-8: its text, in the encoding the
+    importer finds, copied as UTF-8 to a temporary file (line for line, line ends kept) and read
+    from there; a refusal names ``path`` and the same line."""
+    import tempfile
+
+    from station.importers.csvfiles import copy_as_utf8, text_encoding
+
+    encoding, note = text_encoding(path, "a capture file")
+    try:
+        with tempfile.TemporaryDirectory(prefix="station-capture-") as tmp:
+            copy = os.path.join(tmp, "capture.csv")
+            copy_as_utf8(path, encoding, copy)
+            try:
+                capture = _read_capture(copy, rows, force_slow)
+            except InputError as exc:
+                raise InputError(path, exc.line, exc.message) from None
+    except OSError as exc:  # no temporary folder to write in (TMPDIR gone, a full disk)
+        raise InputError(
+            path,
+            None,
+            f"{_ENCODING_NAMES.get(encoding, encoding)} text, read through a UTF-8 copy that could not be made "
+            f"({exc.strerror or exc}): "
+            "save it as UTF-8",
+        ) from None
+    capture.path = path
+    if note:
+        capture.notes.insert(0, note)
+    return capture
+
+
+def _read_capture(path: str, rows: int, _force_slow: bool) -> Capture:
     head = _read_head(path)
     parts: dict[str, list[np.ndarray]] = {name: [] for name in head.header}
     notes: list[str] = []

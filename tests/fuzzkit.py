@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 COMMANDS = ("calibrate", "diagnose")
-FAILURES = ("hang", "last-resort", "stray-stdout", "bad-exit", "crash")
+FAILURES = ("hang", "last-resort", "stray-stdout", "bad-exit", "crash", "half-written")
 
 # Small but realistic bases: (name, procedure, simulator options). Sized so one calibrate plus
 # one diagnose takes about a second on one core.
@@ -474,8 +474,9 @@ class Outcome:
     detail: str = ""
 
 
-def _run_main(command: str, path: str) -> tuple[int | None, str, str, bytes, str]:
-    """main([command, path, --json]) with Python stdout/stderr captured and fd 1 redirected."""
+def _run_main(argv: list[str]) -> tuple[int | None, str, str, bytes, str]:
+    """main(argv) (``[command, path, --json]`` and the like) with Python stdout/stderr captured
+    and fd 1 redirected."""
     from station.cli import main
 
     out, err = io.StringIO(), io.StringIO()
@@ -487,7 +488,7 @@ def _run_main(command: str, path: str) -> tuple[int | None, str, str, bytes, str
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
-                rc = main([command, path, "--json"])
+                rc = main(list(argv))
             except SystemExit as exc:  # argparse
                 rc = exc.code if isinstance(exc.code, int) else 2
             except BaseException as exc:  # noqa: BLE001 - the harness records it
@@ -508,8 +509,18 @@ def _run_main(command: str, path: str) -> tuple[int | None, str, str, bytes, str
 
 
 def classify(
-    command: str, case: str, rc, stdout: str, stderr: str, stray: bytes, crash: str, seconds: float
+    command: str,
+    case: str,
+    rc,
+    stdout: str,
+    stderr: str,
+    stray: bytes,
+    crash: str,
+    seconds: float,
+    json_out: bool = True,
 ) -> Outcome:
+    """The outcome of one run. ``json_out``: the result on stdout is one JSON document (the
+    ``--json`` commands); otherwise (``inspect``, ``import``) any text, but not none."""
     if crash:
         return Outcome("crash", command, case, seconds, crash[:300])
     if stray:
@@ -518,9 +529,11 @@ def classify(
         return Outcome("last-resort", command, case, seconds, stderr.strip()[:300])
     if rc == 0:
         try:
-            json.loads(stdout)
+            json.loads(stdout) if json_out else None
         except ValueError:
             return Outcome("stray-stdout", command, case, seconds, stdout[:200])
+        if not json_out and not stdout.strip():
+            return Outcome("bad-exit", command, case, seconds, f"exit 0 and no result on stdout: {stderr[:200]!r}")
         return Outcome("ok", command, case, seconds)
     if rc == 2 and stdout == "" and stderr.count("\n") == 1 and stderr.startswith("station: "):
         return Outcome("refused", command, case, seconds, stderr.strip()[:200])
@@ -535,10 +548,10 @@ def _worker(conn) -> None:
         job = conn.recv()
         if job is None:
             return
-        command, path, case = job
+        command, argv, case = job
         t0 = time.monotonic()
-        rc, out, err, stray, crash = _run_main(command, path)
-        conn.send(classify(command, case, rc, out, err, stray, crash, time.monotonic() - t0))
+        rc, out, err, stray, crash = _run_main(argv)
+        conn.send(classify(command, case, rc, out, err, stray, crash, time.monotonic() - t0, "--json" in argv))
 
 
 # A case is a hang when its worker spends more than the limit in CPU time (a machine shared
@@ -572,12 +585,14 @@ class Runner:
         self._proc.start()
         self._conn = parent
 
-    def run(self, command: str, path: str, case: str) -> Outcome:
+    def run(self, command: str, path: str, case: str, argv: list[str] | None = None) -> Outcome:
+        """``station <command> <path> --json`` (or ``argv``, the whole command line; ``command``
+        then names it in the outcome)."""
         if self._proc is None or not self._proc.is_alive():
             self._start()
         t0 = time.monotonic()
         cpu0 = _cpu_s(self._proc.pid)
-        self._conn.send((command, path, case))
+        self._conn.send((command, list(argv) if argv is not None else [command, path, "--json"], case))
         while True:
             if self._conn.poll(0.25):
                 try:
@@ -674,3 +689,480 @@ def summary(outcomes: list[Outcome]) -> dict:
         "max_s": max(times, default=0.0),
         "median_s": float(np.median(times)) if times else 0.0,
     }
+
+
+# ------------------------------------------------------------------ the world's files, hostile ones
+#
+# QA s27i: the same harness over real captures (../shared/data, cut to their first rows) as well
+# as simulated ones, more ways a file is broken, the special files a path can name, and every
+# command that reads a capture: ``inspect``, ``import`` (with ``--out``), ``calibrate`` (also with
+# ``--save`` to a real SQLite file), ``diagnose``. What a command writes is checked too: a refused
+# run leaves ``--out`` unwritten and the database byte for byte as it was, no temporary beside
+# them; a run that succeeds leaves a capture the reader reads and a database SQLite finds whole.
+# An outcome that breaks one of these is ``half-written``.
+
+HOSTILE_COMMANDS = ("inspect", "import", "calibrate", "calibrate-save", "diagnose")
+IMPORT_PROCEDURES = ("accel-tabletop", "compass", "gyro-drift")  # what `station import --procedure` takes
+REAL_MAX_ROWS = 1500  # rows kept of each real capture: its own head and layout, a second to run
+
+
+def real_bases(folder: str, shared: str | None = None, max_rows: int = REAL_MAX_ROWS) -> dict[str, str]:
+    """The real captures of ``shared/data`` (``*.capture.csv``), each cut to its head and first
+    ``max_rows`` data rows, copied into ``folder``; {name: path}. Empty when the data are absent."""
+    import glob
+
+    shared = shared or os.environ.get("STATION_SHARED") or os.path.join(os.path.dirname(__file__), "..", "..", "shared")
+    out = {}
+    for src in sorted(glob.glob(os.path.join(shared, "data", "*", "*.capture.csv"))):
+        name = "real-" + os.path.basename(src).removesuffix(".capture.csv")
+        with open(src, encoding="utf-8") as f:
+            kept, data = [], 0
+            for line in f:
+                kept.append(line)
+                if line.strip() and not line.startswith("#"):
+                    data += 1
+                    if data > max_rows:
+                        break
+        path = os.path.join(folder, f"{name}.csv")
+        with open(path, "w", encoding="utf-8", newline="") as f:
+            f.write("".join(kept))
+        out[name] = path
+    return out
+
+
+def _first_data_index(lines: list[str]) -> int | None:
+    h = _data_start(lines) - 1
+    return h if 0 <= h < len(lines) - 1 else None
+
+
+def m_header_again(text, rng):
+    """The header row repeated among the data (two captures pasted into one)."""
+    lines = _lines(text)
+    h = _first_data_index(lines)
+    if h is None:
+        raise ValueError
+    i = rng.randrange(h + 1, len(lines))
+    lines.insert(i, lines[h])
+    return "\n".join(lines)
+
+
+def m_meta_twice(text, rng):
+    """A metadata key written twice with different values (an edit that added, not replaced)."""
+    lines = _lines(text)
+    metas = [i for i, line in enumerate(lines) if line.startswith("# ") and ":" in line and i > 0]
+    if not metas:
+        raise ValueError
+    i = rng.choice(metas)
+    key, _, value = lines[i][2:].partition(":")
+    other = rng.choice(["0", "1e308", "compass", "X", value.strip() + "0", "", value.strip().upper()])
+    spelled = rng.choice([key, key.upper(), key.title()])
+    lines.insert(rng.randrange(1, _data_start(lines)), f"# {spelled}: {other}")
+    return "\n".join(lines)
+
+
+def m_time(text, rng):
+    """The time column duplicated, run backwards, frozen or jumped (a logger's clock)."""
+    lines = _lines(text)
+    h = _first_data_index(lines)
+    if h is None or "t" not in lines[h].split(","):
+        raise ValueError
+    j = lines[h].split(",").index("t")
+    rows = [i for i in range(h + 1, len(lines)) if lines[i]]
+    if len(rows) < 3:
+        raise ValueError
+    a = rng.randrange(len(rows) - 2)
+    b = min(len(rows), a + rng.randint(2, 200))
+    span = rows[a:b]
+    ts = [lines[i].split(",")[j] for i in span]
+    op = rng.choice(["dup", "backwards", "frozen", "jump", "negative"])
+    if op == "dup":
+        new = [ts[0]] * len(ts)
+    elif op == "backwards":
+        new = ts[::-1]
+    elif op == "frozen":
+        new = [ts[0]] * len(ts)
+    elif op == "jump":
+        new = [rng.choice(["1e9", "1e15", "-1", "0"])] + ts[1:]
+    else:
+        new = ["-" + t.lstrip("-") for t in ts]
+    for i, t in zip(span, new):
+        cells = lines[i].split(",")
+        if len(cells) > j:
+            cells[j] = t
+            lines[i] = ",".join(cells)
+    return "\n".join(lines)
+
+
+def m_nul_run(text, rng):
+    """A run of NUL bytes where a copy stopped (a file system's hole), maybe with the rest after."""
+    b = text.encode("utf-8", "surrogatepass")
+    i = rng.randrange(len(b))
+    return b[:i] + b"\0" * rng.choice([1, 512, 4096, 65536]) + (b[i:] if rng.random() < 0.5 else b"")
+
+
+def m_huge_line(text, rng):
+    """One line of 10 MB: a field that never ends, or a file of one line."""
+    lines = _lines(text)
+    i = rng.randrange(len(lines))
+    filler = rng.choice(["9", "1,", " ", "a"]) * (10 * 1024 * 1024 // 2)
+    lines[i] = lines[i] + filler[: 10 * 1024 * 1024]
+    return "\n".join(lines)
+
+
+def m_truncate_mid_line(text, rng):
+    """Cut inside a data line (a copy stopped part-way): the last line without its end."""
+    lines = _lines(text)
+    h = _first_data_index(lines)
+    if h is None:
+        raise ValueError
+    i = rng.randrange(h + 1, len(lines))
+    if not lines[i]:
+        raise ValueError
+    return "\n".join(lines[:i] + [lines[i][: rng.randrange(1, len(lines[i]) + 1)]])
+
+
+def m_encoding(text, rng):
+    """The file as Excel saves it elsewhere: Windows-1252 (with a line only it can say), UTF-16
+    with or without its mark, a UTF-8 mark, or Latin-1 bytes no Windows-1252 has."""
+    lines = _lines(text)
+    lines.insert(1, "# operator: Jürgen Weiß, 23 °C ±0.5")
+    t = "\n".join(lines)
+    op = rng.choice(["cp1252", "utf-16", "utf-16-le", "utf-16-be", "bom", "bad"])
+    if op == "bom":
+        return b"\xef\xbb\xbf" + t.encode("cp1252")
+    if op == "bad":
+        return t.encode("cp1252").replace(b"\xfc", b"\x81")
+    return t.encode(op)
+
+
+MUTATORS_HOSTILE = MUTATORS + [
+    m_header_again,
+    m_meta_twice,
+    m_time,
+    m_time,
+    m_nul_run,
+    m_huge_line,
+    m_truncate_mid_line,
+    m_encoding,
+    m_encoding,
+]
+
+
+def mutate_hostile(text: str, rng: random.Random) -> tuple[str, bytes]:
+    """:func:`mutate` with :data:`MUTATORS_HOSTILE`: one to three mutations (a mutation that made
+    bytes no UTF-8 text reads is the last: the next would see only its replacement characters)."""
+    names, data = [], text
+    for _ in range(rng.choice([1, 1, 2, 3])):
+        if isinstance(data, bytes):
+            break
+        for _attempt in range(20):
+            m = rng.choice(MUTATORS_HOSTILE)
+            try:
+                out = m(data, rng)
+            except (ValueError, IndexError):
+                continue
+            names.append(m.__name__[2:])
+            data = out
+            break
+    return "+".join(names) or "none", (data if isinstance(data, bytes) else data.encode("utf-8", "surrogatepass"))
+
+
+def special_inputs(folder: str) -> dict[str, str]:
+    """Paths that are no capture file: an empty file, a folder, a named pipe (nothing ever
+    writes to it: a reader that opens it waits for ever), /dev/zero (never ends), a file of
+    one 10 MB line, a 64 MiB hole of zeros (sparse)."""
+    out = {}
+    empty = os.path.join(folder, "empty.csv")
+    open(empty, "wb").close()
+    out["empty file"] = empty
+    d = os.path.join(folder, "a-folder.csv")
+    os.makedirs(d, exist_ok=True)
+    out["directory"] = d
+    fifo = os.path.join(folder, "pipe.csv")
+    if not os.path.exists(fifo) and hasattr(os, "mkfifo"):
+        os.mkfifo(fifo)
+    if os.path.exists(fifo):
+        out["fifo"] = fifo
+    if os.path.exists("/dev/zero"):
+        out["/dev/zero"] = "/dev/zero"
+    one = os.path.join(folder, "one-line.csv")
+    with open(one, "wb") as f:
+        f.write(b"# station-capture: 1" + b"," * (10 * 1024 * 1024))
+    out["10 MB first line"] = one
+    hole = os.path.join(folder, "hole.csv")
+    with open(hole, "wb") as f:
+        f.truncate(64 * 1024 * 1024)
+    out["64 MiB of zeros"] = hole
+    return out
+
+
+def _procedure_of(data: bytes) -> str | None:
+    for line in data[:4096].decode("utf-8", "replace").splitlines():
+        if line.replace(" ", "").startswith("#procedure:"):
+            return line.split(":", 1)[1].strip()
+    return None
+
+
+def _argv(command: str, path: str, work: str, procedure: str | None) -> list[str] | None:
+    """The command line of one of :data:`HOSTILE_COMMANDS` on ``path``; None where it does not apply."""
+    if command == "inspect":
+        return ["inspect", path]
+    if command == "calibrate":
+        return ["calibrate", path, "--json"]
+    if command == "diagnose":
+        return ["diagnose", path, "--json"]
+    if command == "calibrate-save":  # --override: a result that fails its checks is saved too
+        return ["calibrate", path, "--json", "--save", "--override", "fuzz", "--db", os.path.join(work, "station.db")]
+    if command == "import":  # read as a plain CSV: its '#' lines skipped, its header and rows read
+        proc = procedure if procedure in IMPORT_PROCEDURES else "accel-tabletop"
+        return [
+            "import",
+            path,
+            "--format",
+            "csv",
+            "--procedure",
+            proc,
+            "--unit",
+            "accel=m/s^2,gyro=rad/s,mag=uT",
+            "--out",
+            os.path.join(work, "out.capture.csv"),
+        ]
+    raise ValueError(command)
+
+
+def _db_state(db: str) -> tuple[bytes | None, int]:
+    """(the database file's bytes, its saved calibrations) or (None, 0) when there is none."""
+    import sqlite3
+
+    if not os.path.exists(db):
+        return None, 0
+    with open(db, "rb") as f:
+        data = f.read()
+    con = sqlite3.connect(f"file:{db}?mode=ro&immutable=1", uri=True)  # no -wal, -shm of its own
+    try:
+        n = con.execute("select count(*) from calibrations").fetchone()[0]
+    except sqlite3.Error:
+        n = 0
+    finally:
+        con.close()
+    return data, n
+
+
+def _leftovers(work: str) -> list[str]:
+    return sorted(n for n in os.listdir(work) if n.endswith(".tmp") or n.endswith("-journal") or n.endswith("-wal"))
+
+
+def check_writes(command: str, outcome: Outcome, work: str, before: tuple[bytes | None, int]) -> Outcome:
+    """``outcome`` as it was, or ``half-written`` when what the command wrote (or left) breaks
+    the rules: see the section's comment."""
+    import sqlite3
+
+    def bad(why: str) -> Outcome:
+        return Outcome(
+            "half-written", command, outcome.case, outcome.seconds, f"{why} ({outcome.kind}: {outcome.detail})"
+        )
+
+    left = _leftovers(work)
+    if left:
+        return bad(f"left beside its output: {', '.join(left)}")
+    if command == "import":
+        out = os.path.join(work, "out.capture.csv")
+        if outcome.kind == "ok":
+            from station.capture import read_capture
+            from station.errors import InputError
+
+            try:
+                read_capture(out)
+            except (InputError, OSError) as exc:
+                return bad(f"--out written but not read back: {exc}")
+        elif os.path.exists(out):
+            return bad("--out written by a run that failed")
+    if command == "calibrate-save":
+        db = os.path.join(work, "station.db")
+        after = _db_state(db)
+        if outcome.kind != "ok" and after[0] != before[0]:
+            return bad("the database changed in a run that failed")
+        if outcome.kind == "ok":
+            if after[1] != before[1] + 1:
+                return bad(f"saved calibrations {before[1]} -> {after[1]} (one expected)")
+            con = sqlite3.connect(f"file:{db}?mode=ro&immutable=1", uri=True)  # no -wal, -shm of its own
+            try:
+                check = con.execute("pragma integrity_check").fetchone()[0]
+            finally:
+                con.close()
+            if check != "ok":
+                return bad(f"integrity_check: {check}")
+    return outcome
+
+
+def run_hostile_campaign(
+    folder: str,
+    bases: dict[str, str],
+    *,
+    n_mutated: int,
+    seed: int,
+    timeout_s: float,
+    commands=HOSTILE_COMMANDS,
+    specials: bool = True,
+    progress=None,
+) -> list[Outcome]:
+    """``n_mutated`` captures mutated by :data:`MUTATORS_HOSTILE` from ``bases`` (real and
+    simulated), and with ``specials`` the :func:`special_inputs`, each through every one of
+    ``commands``, what it writes checked (:func:`check_writes`)."""
+    rng = random.Random(seed)
+    texts = {name: open(p, encoding="utf-8").read() for name, p in bases.items()}
+    names = sorted(bases)
+    work = os.path.join(folder, "work")
+    os.makedirs(work, exist_ok=True)
+    os.environ["STATION_DB"] = os.path.join(work, "default.db")  # a command without --db: not the operator's
+    runner = Runner(timeout_s=timeout_s)
+    cases: list[tuple[str, str, bytes | None]] = []
+    if specials:
+        cases += [(f"special {what}", p, None) for what, p in special_inputs(folder).items()]
+    path = os.path.join(folder, "case.csv")
+
+    def one(case: str, p: str, procedure: str | None) -> None:
+        for command in commands:
+            out = os.path.join(work, "out.capture.csv")
+            if os.path.exists(out):
+                os.unlink(out)
+            before = _db_state(os.path.join(work, "station.db")) if command == "calibrate-save" else (None, 0)
+            outcome = runner.run(command, p, case, argv=_argv(command, p, work, procedure))
+            checked = check_writes(command, outcome, work, before)
+            if checked is not outcome:
+                runner.outcomes[-1] = checked
+
+    try:
+        for case, p, _ in cases:
+            one(case, p, None)
+        for k in range(n_mutated):
+            base = names[k % len(names)]
+            what, data = mutate_hostile(texts[base], rng)
+            with open(path, "wb") as f:
+                f.write(data)
+            one(f"hostile#{seed}.{k} {base}: {what}", path, _procedure_of(texts[base].encode()))
+            if progress is not None:
+                progress(k + 1, runner.outcomes)
+    finally:
+        runner.close()
+    return runner.outcomes
+
+
+# ------------------------------------------------------- the world's own files through `import`
+#
+# The files as their writers wrote them (../shared/data/*/original): the imucal session (pandas),
+# the MPU-6050 logger's CSV under its preamble (`Fs,100`), a PX4 ULog; each mutated (text or
+# bytes) and imported with the options its SOURCE.md gives, then the capture written, if any,
+# calibrated and diagnosed (the whole files: cut short, the session holds too few positions).
+
+WORLD_IMPORTS = {
+    # name: (path under data/, import options, first bytes kept (None: first lines kept))
+    "imucal-original": (
+        "imucal_ferraris/original/example_ferraris_session.csv",
+        [
+            "--procedure",
+            "accel-tabletop",
+            "--map",
+            "ax=acc_x,ay=acc_y,az=acc_z,gx=gyr_x,gy=gyr_y,gz=gyr_z",
+            "--rate",
+            "102.4",
+            "--unit",
+            "accel=m/s^2,gyro=deg/s",
+        ],
+        None,
+    ),
+    "mpu6050-original": (
+        "mpu6050_unc/original/imu_static_test.csv",
+        ["--procedure", "gyro-drift", "--unit", "accel=counts,gyro=counts"],
+        None,
+    ),
+    "px4-ulog": ("px4_ulog/original/sample_log_small.ulg", ["--procedure", "accel-tabletop"], 1 << 24),
+}
+
+
+def world_import_bases(folder: str, shared: str | None = None, max_lines: int = 20_000) -> dict[str, tuple]:
+    """{name: (path of the copy in ``folder``, import options, binary)} for :data:`WORLD_IMPORTS`
+    present in ``shared``."""
+    shared = shared or os.environ.get("STATION_SHARED") or os.path.join(os.path.dirname(__file__), "..", "..", "shared")
+    out = {}
+    for name, (rel, options, n_bytes) in WORLD_IMPORTS.items():
+        src = os.path.join(shared, "data", rel)
+        if not os.path.exists(src):
+            continue
+        with open(src, "rb") as f:
+            data = f.read(n_bytes) if n_bytes else b"".join(line for _, line in zip(range(max_lines), f))
+        path = os.path.join(folder, name + os.path.splitext(rel)[1])
+        with open(path, "wb") as f:
+            f.write(data)
+        out[name] = (path, options, n_bytes is not None)
+    return out
+
+
+def mutate_bytes(data: bytes, rng: random.Random) -> tuple[str, bytes]:
+    """A binary log's bytes changed as a corrupt copy changes them: flipped, inserted, deleted,
+    zeroed, repeated, cut."""
+    b = bytearray(data)
+    op = rng.choice(["flip", "insert", "delete", "zeros", "repeat", "cut", "flip-head"])
+    i = rng.randrange(len(b))
+    n = rng.choice([1, 4, 64, 4096])
+    if op == "flip":
+        for _ in range(rng.randint(1, 16)):
+            j = rng.randrange(len(b))
+            b[j] = rng.randrange(256)
+    elif op == "flip-head":  # the definitions and header, where a wrong byte counts most
+        for _ in range(rng.randint(1, 4)):
+            j = rng.randrange(min(len(b), 4096))
+            b[j] = rng.randrange(256)
+    elif op == "insert":
+        b[i:i] = bytes(rng.randrange(256) for _ in range(n))
+    elif op == "delete":
+        del b[i : i + n]
+    elif op == "zeros":
+        b[i : i + n] = bytes(len(b[i : i + n]))
+    elif op == "repeat":
+        b[i:i] = b[i : i + n]
+    else:
+        del b[i:]
+    return op, bytes(b)
+
+
+def run_world_import_campaign(
+    folder: str, bases: dict[str, tuple], *, n_mutated: int, seed: int, timeout_s: float, progress=None
+) -> list[Outcome]:
+    """``n_mutated`` of the world's files mutated, each imported (``--out`` checked as in
+    :func:`check_writes`), and the capture it made, when it made one, calibrated and diagnosed."""
+    rng = random.Random(seed)
+    names = sorted(bases)
+    work = os.path.join(folder, "work")
+    os.makedirs(work, exist_ok=True)
+    os.environ["STATION_DB"] = os.path.join(work, "default.db")
+    runner = Runner(timeout_s=timeout_s)
+    out = os.path.join(work, "out.capture.csv")
+    try:
+        for k in range(n_mutated):
+            name = names[k % len(names)]
+            path, options, binary = bases[name]
+            with open(path, "rb") as f:
+                data = f.read()
+            if binary:
+                what, data = mutate_bytes(data, rng)
+            else:
+                what, data = mutate_hostile(data.decode("utf-8"), rng)
+            case_path = os.path.join(folder, "case" + os.path.splitext(path)[1])
+            with open(case_path, "wb") as f:
+                f.write(data)
+            case = f"world#{seed}.{k} {name}: {what}"
+            if os.path.exists(out):
+                os.unlink(out)
+            outcome = runner.run("import", case_path, case, argv=["import", case_path, *options, "--out", out])
+            checked = check_writes("import", outcome, work, (None, 0))
+            if checked is not outcome:
+                runner.outcomes[-1] = checked
+            if checked.kind == "ok":
+                for command in ("calibrate", "diagnose"):
+                    runner.run(command, out, case)
+            if progress is not None:
+                progress(k + 1, runner.outcomes)
+    finally:
+        runner.close()
+    return runner.outcomes

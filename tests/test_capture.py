@@ -202,15 +202,26 @@ BAD = [
         1,
         "NUL byte at column 1: binary data, not a text capture",
     ),
-    ("bad-utf8-data", _good().encode() + b"1.5,\xff2,2.4,1.5,1.6\n", 9, "not UTF-8 text: byte 0xff at column 5"),
+    # not UTF-8 and not Windows-1252 either (0x81 is no character of it; 0xff, 0xe9 are: qa-s27i reads them)
+    (
+        "bad-utf8-data",
+        _good().encode() + b"1.5,\x812,2.4,1.5,1.6\n",
+        9,
+        "not UTF-8 text: byte 0x81 (nor a Windows-1252 character): save the file as UTF-8",
+    ),
     (
         "bad-utf8-meta",
-        b"# station-capture: 1\n# device: caf\xe9\n" + (HDR + ROWS).encode(),
+        b"# station-capture: 1\n# device: caf\x81\n" + (HDR + ROWS).encode(),
         2,
-        "not UTF-8 text: byte 0xe9 at column 14",
+        "not UTF-8 text: byte 0x81 (nor a Windows-1252 character): save the file as UTF-8",
     ),
-    ("png", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", 1, "not UTF-8 text: byte 0x89 at column 1"),
-    ("utf16", "# station-capture: 1\nt,ax\n0,1\n".encode("utf-16"), 1, "UTF-16 text; capture files are UTF-8"),
+    ("png", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", 3, "NUL byte: binary data, not a capture file"),
+    (
+        "utf16-without-mark",
+        "# station-capture: 1\nt,ax\n0,1\n".encode("utf-16-le"),
+        1,
+        "UTF-16 text without a byte-order mark; save the file as UTF-8 (or as Unicode Text, with one)",
+    ),
     (
         "bare-cr-endings",
         b"# station-capture: 1\rt,ax\r0,1\r",

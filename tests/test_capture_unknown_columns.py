@@ -37,8 +37,11 @@ def _with_columns(shared_data, path, extra: dict[str, list[str]]) -> None:
 @pytest.mark.parametrize(
     ("extra", "said"),
     [
-        (["tmperature_C"], "column 'tmperature_C'"),
-        (["temperature", "tmp_c_std"], "columns 'temperature', 'tmp_c_std' (did you mean 'temp_c_std'?)"),
+        (["tmperature_C"], "column 'tmperature_C' (did you mean 'temp_c'?)"),
+        (
+            ["temperature", "tmp_c_std"],
+            "columns 'temperature' (did you mean 'temp_c'?), 'tmp_c_std' (did you mean 'temp_c_std'?)",
+        ),
     ],
 )
 def test_an_unknown_column_in_a_table_of_averages_is_said_and_the_table_still_read(tmp_path, shared_data, extra, said):

@@ -61,7 +61,7 @@ def test_the_harness_sees_each_kind_of_failure(tmp_path, monkeypatch):
     )
     # a real hang: a worker that never answers is killed at the limit and reported
     runner = F.Runner(timeout_s=1.0)  # a sleeping worker: caught by the wall-time bound (10 x)
-    monkeypatch.setattr(F, "_run_main", lambda command, path: __import__("time").sleep(3600))
+    monkeypatch.setattr(F, "_run_main", lambda argv: __import__("time").sleep(3600))
     try:
         assert runner.run("calibrate", str(tmp_path / "x.csv"), "sleeper").kind == "hang"
     finally:
@@ -86,3 +86,70 @@ def test_mutating_a_file_cut_to_its_first_lines_still_works():
     rng = random.Random(9)
     for _ in range(300):  # every mutator meets a file with no data line
         F.mutate(text[: rng.randrange(len(text))], rng)
+
+
+# ------------------------------------------- the world's files and hostile ones (QA s27i)
+
+
+@pytest.fixture(scope="module")
+def world_bases(tmp_path_factory):
+    """Two real captures cut short (Wang & Li's table, the imucal session) and a simulated P4."""
+    folder = str(tmp_path_factory.mktemp("hostile"))
+    real = F.real_bases(folder, max_rows=300)
+    if not real:
+        pytest.skip("../shared/data is not beside this clone")
+    bases = {k: v for k, v in real.items() if k in ("real-table1", "real-imucal_ferraris")}
+    bases.update(F.make_bases(folder, seed=5, names=("p4-static",)))
+    return bases
+
+
+def test_hostile_files_through_every_command_give_a_result_or_one_line(world_bases, tmp_path):
+    """The special paths (empty file, folder, FIFO, /dev/zero, a 10 MB line, a 64 MiB hole) and
+    captures mutated the hostile ways, through inspect, import --out, calibrate, calibrate
+    --save (a real SQLite file) and diagnose: a result, or one line and exit 2; nothing
+    half-written. The long run is `benchmarks/bench_fuzz.py --hostile N`."""
+    outcomes = F.run_hostile_campaign(str(tmp_path), world_bases, n_mutated=6, seed=2027, timeout_s=TIMEOUT_S)
+    s = F.summary(outcomes)
+    assert s["failures"] == [], _report(outcomes)
+    commands = {o.command for o in outcomes}
+    assert commands == set(F.HOSTILE_COMMANDS)
+    assert s["counts"].get("refused", 0) > 0 and s["counts"].get("ok", 0) > 0
+
+
+def test_the_write_checks_see_what_a_command_left(tmp_path):
+    """check_writes is not blind: a temporary left beside the output, an --out written by a
+    refused import, a database changed by a refused save are each 'half-written'."""
+    refused = F.Outcome("refused", "import", "c", 0.1, "station: x:1: bad")
+    (tmp_path / "out.capture.csv").write_text("# station-capture: 1\n")
+    assert F.check_writes("import", refused, str(tmp_path), (None, 0)).kind == "half-written"
+    (tmp_path / "out.capture.csv").unlink()
+    assert F.check_writes("import", refused, str(tmp_path), (None, 0)).kind == "refused"
+    (tmp_path / ".out.capture.csv.1-0a0b0c0d.tmp").write_text("")
+    assert F.check_writes("import", refused, str(tmp_path), (None, 0)).kind == "half-written"
+    (tmp_path / ".out.capture.csv.1-0a0b0c0d.tmp").unlink()
+    import sqlite3
+
+    con = sqlite3.connect(tmp_path / "station.db")
+    con.execute("create table calibrations (id integer)")
+    con.commit()
+    con.close()
+    before = F._db_state(str(tmp_path / "station.db"))
+    con = sqlite3.connect(tmp_path / "station.db")
+    con.execute("insert into calibrations values (1)")
+    con.commit()
+    con.close()
+    saved = F.Outcome("refused", "calibrate-save", "c", 0.1, "station: x:1: bad")
+    assert F.check_writes("calibrate-save", saved, str(tmp_path), before).kind == "half-written"
+    ok = F.Outcome("ok", "calibrate-save", "c", 0.1)
+    assert F.check_writes("calibrate-save", ok, str(tmp_path), before).kind == "ok"
+
+
+def test_hostile_mutators_change_the_file():
+    text = "# station-capture: 1\n# procedure: compass\n# mag_unit: uT\nt,mx,my,mz\n" + "".join(
+        f"{k * 0.1:.1f},{k},{-k},{2 * k}\n" for k in range(50)
+    )
+    rng = random.Random(27)
+    for m in F.MUTATORS_HOSTILE[len(F.MUTATORS) :]:
+        for _ in range(20):
+            out = m(text, rng)
+            assert (out if isinstance(out, bytes) else out.encode()) != text.encode(), m.__name__

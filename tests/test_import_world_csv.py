@@ -170,7 +170,10 @@ def test_columns_no_capture_has_are_said_in_one_line(tmp_path, session):
     capture, stderr = _imported(tmp_path, src, *UNITS)
     _same_accel(capture, session)
     assert stderr.count("\n") == 1, stderr
-    assert "line 1: columns 'tmperature_C', 'axx' (did you mean 'ax'?): no capture column" in stderr, stderr
+    assert (
+        "line 1: columns 'tmperature_C' (did you mean 'temp_c'?), 'axx' (did you mean 'ax'?): no capture column"
+        in stderr
+    ), stderr
 
 
 @needs_data
@@ -189,7 +192,7 @@ def test_a_time_series_capture_with_an_unknown_column_warns_once(tmp_path):
         w.writerows(r + ["25.0"] for r in rows[1:])
     res = run_station("inspect", path)
     assert res.returncode == 0, res.stderr
-    said = f"line {len(meta) + 1}: column 'tmperature_C' of this time series: no column of a capture"
+    said = f"line {len(meta) + 1}: column 'tmperature_C' (did you mean 'temp_c'?) of this time series: no column of a capture"
     assert res.stderr.count("\n") == 1 and said in res.stderr, res.stderr
 
 

@@ -27,6 +27,7 @@ from station.capture import (
     MAX_ABS,
     UNIT_ALIASES,
     UNIT_KEYS,
+    nearest_column,
     no_line_end_note,
     plausible_limit,
 )
@@ -199,11 +200,51 @@ def _check_text(path) -> tuple[str, str | None]:
     if bad is None:
         return "utf-8", None
     if not cp1252 or bom:
-        raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x}")
+        why = "under a UTF-8 byte-order mark" if bom else "nor a Windows-1252 character"
+        raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x} ({why}): save the file as UTF-8")
     return CP1252, (
         f"not UTF-8 (byte 0x{bad[1]:02x} on line {bad[0]}): read as Windows-1252, as Excel's "
         "'CSV (Comma delimited)' saves on Windows"
     )
+
+
+def text_encoding(path, what: str = "a CSV file") -> tuple[str, str | None]:
+    """The encoding a text file is read in (``utf-8``, ``cp1252``, ``utf-16``) and the warning
+    that says so, or InputError for what is none (:func:`_check_text`): the one decision the
+    importer and the capture reader (``station.capture.read_capture``) share. ``what``: the
+    file's kind in a refusal ("not a CSV file" is said of a capture as "not a capture file")."""
+    try:
+        return _check_text(path)
+    except InputError as exc:
+        if what != "a CSV file":  # 'not a CSV file', 'not a CSV row' said of what it is
+            row = what.replace("file", "row")
+            message = exc.message.replace("a CSV file", what).replace("a CSV row", row)
+            raise InputError(exc.path, exc.line, message) from None
+        raise
+
+
+def copy_as_utf8(path, encoding: str, dest) -> None:
+    """Write the text of ``path`` (in ``encoding``, as :func:`text_encoding` found it) to
+    ``dest`` as UTF-8, byte for byte the same lines and line ends (a UTF-16 byte-order mark is
+    no text). ``dest`` is a new file of the caller's (a temporary one): an OSError writing it is
+    the caller's to say; reading ``path`` is an InputError."""
+    with open(dest, "wb") as out:
+        for text in _decoded(path, encoding):
+            out.write(text.encode("utf-8", "surrogatepass"))
+
+
+def _decoded(path, encoding: str) -> Iterator[str]:
+    """The text of ``path`` in ``encoding``, a chunk at a time."""
+    decoder = codecs.getincrementaldecoder(encoding)()
+    try:
+        with open_input(path, "a CSV file") as f:
+            for chunk in _chunks(f, path, utf16=encoding == "utf-16"):
+                yield decoder.decode(chunk)
+            yield decoder.decode(b"", final=True)
+    except UnicodeDecodeError:
+        raise InputError(path, None, f"changed while it was read: not {encoding} text any more") from None
+    except OSError as exc:
+        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
 
 
 def _tail(path, n_bytes: int) -> str | None:
@@ -615,10 +656,18 @@ def read_euroc(path, *, kinds=None) -> Imported:
 # ------------------------------------------------------------------------------------- plain CSV
 
 
-def _sniff_delimiter(header: str) -> str:
-    """The line's delimiter: ``;`` or tab where one stands outside quotes (a decimal-comma
+# Excel's first line naming the file's delimiter ('sep=;', 'sep=,', 'sep=\t' as a tab): Excel
+# writes it (and reads it) where the locale's list separator would leave the file ambiguous
+_SEP_LINE = re.compile(r'"?sep=([;,\t|: ])"?\1*')
+
+
+def _sniff_delimiter(header: str, sep: str | None = None) -> str:
+    """The line's delimiter: ``sep`` when the file's first line named one (Excel's ``sep=;``),
+    else ``;`` or tab where one stands outside quotes (a decimal-comma
     locale's file: ``0,00;0,1;9,8`` is four fields, not ``0`` and ``00;0``), else ``,``, else a
     space (numpy.savetxt's default)."""
+    if sep is not None:
+        return sep
     bare = re.sub(r'"[^"]*"', "", header)  # a quoted field's delimiters are its text
     for d in (";", "\t", ","):
         if d in bare:
@@ -639,7 +688,11 @@ def _names_columns(header: list[str], mapping: dict[str, str]) -> bool:
 
 
 def _later_header(
-    path, lines: Iterator[tuple[int, str]], mapping: dict[str, str], skipped: list[tuple[int, str]]
+    path,
+    lines: Iterator[tuple[int, str]],
+    mapping: dict[str, str],
+    skipped: list[tuple[int, str]],
+    sep: str | None = None,
 ) -> tuple[int, str] | None:
     """(line number, text) of the first of the next PREAMBLE_MAX_LINES lines that is the header
     for ``mapping`` (lines read from ``lines``, which then goes on after it), None when none is.
@@ -651,14 +704,16 @@ def _later_header(
             if lineno > PREAMBLE_MAX_LINES + 1:
                 return None
             continue
-        cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text))]
+        cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text, sep))]
         if _names_columns(cells, mapping) and _is_header(cells):
             return lineno, text
         skipped.append((lineno, text))
     return None
 
 
-def _commented_header(path, above: tuple[int, str] | None, n_fields: int, mapping: dict[str, str]) -> list[str] | None:
+def _commented_header(
+    path, above: tuple[int, str] | None, n_fields: int, mapping: dict[str, str], sep: str | None = None
+) -> list[str] | None:
     """The column names of a ``#`` comment line directly above the first data row, as
     numpy.savetxt writes its ``header=`` (``# t ax ay az``) and numpy.genfromtxt(names=True) reads
     it: as many names as the row has fields, naming what ``--map`` asks for (without ``--map``: a
@@ -666,7 +721,7 @@ def _commented_header(path, above: tuple[int, str] | None, n_fields: int, mappin
     if above is None or not above[1].lstrip().startswith("#"):
         return None
     text = above[1].lstrip()[1:].strip()
-    cells = [c.strip() for c in _cells(path, above[0], text, _sniff_delimiter(text))]
+    cells = [c.strip() for c in _cells(path, above[0], text, _sniff_delimiter(text, sep))]
     if len(cells) != n_fields or not _is_header(cells) or not _names_columns(cells, mapping):
         return None
     return cells
@@ -675,12 +730,10 @@ def _commented_header(path, above: tuple[int, str] | None, n_fields: int, mappin
 def unknown_series_note(unknown: list[str], header_line: int) -> str:
     """The one warning line for a header's columns that are no capture column (``tmperature_C``,
     ``pressure``): not imported, with the capture name a misspelt one is closest to."""
-    import difflib
-
     named = []
     for c in unknown[:SHOWN_COLUMNS]:
-        near = difflib.get_close_matches(c.lower(), TARGETS, n=1, cutoff=0.6)
-        named.append(repr(c) + (f" (did you mean {near[0]!r}?)" if near else ""))
+        near = nearest_column(c, TARGETS)
+        named.append(repr(c) + (f" (did you mean {near!r}?)" if near else ""))
     more = f" (+{len(unknown) - SHOWN_COLUMNS} more)" if len(unknown) > SHOWN_COLUMNS else ""
     return (
         f"line {header_line}: column{'s' if len(unknown) > 1 else ''} {', '.join(named)}{more}: no capture column "
@@ -767,20 +820,28 @@ def _is_header(cells: list[str]) -> bool:
     return bool(filled) and (numbers * 10 <= len(filled) or _numbered_channels(cells))
 
 
+# the name pandas (or a logger) gives the index column before numbered channels: a word, maybe
+# with digits, dots or a unit ('time', 'time (s)', 'Unnamed: 0', 'imu1_time', 'header.stamp');
+# a corrupt number ('x1.5', '9.81e') is none: it holds a decimal number, or starts with a digit
+_INDEX_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_ :.\-]*(?:\s*[\[(][^\])]*[\])])?")
+_DECIMAL_INSIDE = re.compile(r"[0-9]\.[0-9]|[0-9][eE][+-]?[0-9]")
+
+
 def _numbered_channels(cells: list[str]) -> bool:
-    """Whether a line's last fields are its channels numbered 0, 1, 2, ... (or 1, 2, 3, ...),
-    each a bare whole number, at least two of them, after fields that are text or empty: pandas'
-    ``to_csv`` of a numpy array (``,0,1,2`` with its index; ``0,1,2`` without), a logger's
-    ``time,0,1,2``. No data row of a sensor reads so."""
+    """Whether a line is pandas' header of an array's numbered columns: ``,0,1,2`` (its index
+    unnamed), ``time,0,1,2`` (named), ``0,1,2`` (``index=False``): the numbers 0 to n-1 in order,
+    at least two of them, after one field that is empty or a name (:data:`_INDEX_NAME`), or
+    none. A corrupt data row that ends in small whole numbers (``abc,1,2,3``, ``1.5x,0,1,2``,
+    ``a,b,0,1``) is none: its bad field is refused on its line."""
     k = len(cells)
     while k and re.fullmatch(r"[0-9]+", cells[k - 1]):
         k -= 1
     run = [int(c) for c in cells[k:]]
     return (
         len(run) >= 2
-        and run[0] in ((0, 1) if k else (0,))  # a line of numbers alone: from 0, as pandas numbers
-        and run == list(range(run[0], run[0] + len(run)))
-        and not any(_is_number(c) for c in cells[:k])
+        and run == list(range(len(run)))
+        and k <= 1
+        and (k == 0 or not cells[0] or (bool(_INDEX_NAME.fullmatch(cells[0])) and not _DECIMAL_INSIDE.search(cells[0])))
     )
 
 
@@ -804,11 +865,11 @@ _RATE_KEY = re.compile(
 )
 
 
-def _declared_rate(path, skipped: list[tuple[int, str]]) -> tuple[float, int, str] | None:
+def _declared_rate(path, skipped: list[tuple[int, str]], sep: str | None = None) -> tuple[float, int, str] | None:
     """(Hz, line number, line) of the first preamble line that declares the sample rate, None
     when none does (or its value is no positive number of Hz)."""
     for lineno, text in skipped:
-        cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text))]
+        cells = [c.strip() for c in _cells(path, lineno, text, _sniff_delimiter(text, sep))]
         if len(cells) >= 2 and _RATE_KEY.fullmatch(cells[0]) and _NUMBER.fullmatch(cells[1]):
             hz = float(cells[1])
             if 0 < hz <= MAX_RATE_HZ:
@@ -852,15 +913,20 @@ def read_plain(
     t_given = "t" in units  # --unit t= (a units row may add one below)
     lines, warnings = _open_text(path)
     hi, head, above = None, "", None  # the first line that is no comment, and the line above it
+    sep = None  # the delimiter a first line 'sep=;' names (Excel writes it and reads it so)
     for hi, head in lines:
-        if head.strip() and not head.lstrip().startswith("#"):
+        if hi == 1 and sep is None and (m := _SEP_LINE.fullmatch(head)):
+            sep = m[1]
+            continue
+        # a row of empty cells (',,,', a spreadsheet's blank row padded to the table's width) is blank
+        if head.strip(" \t,;") and not head.lstrip().startswith("#"):
             break
         above = (hi, head)
     else:
         hi = None
     if hi is None:
-        raise InputError(path, 1, "empty file: no header row")
-    delimiter = _sniff_delimiter(head)
+        raise InputError(path, 1, "empty file: no header row" + (f" under its 'sep={sep}' line" if sep else ""))
+    delimiter = _sniff_delimiter(head, sep)
     header = [c.strip() for c in _cells(path, hi, head, delimiter)]
     first_data = hi + 1
     by_number = bool(mapping) and all(src.isdigit() for src in mapping.values())
@@ -869,8 +935,11 @@ def read_plain(
     skipped: list[tuple[int, str]] = [(hi, head)]
     found = None
     numbers_only = all(_is_number(c) or c.lower() in _MISSING for c in header)
-    commented = _commented_header(path, above, len(header), mapping) if numbers_only else None
-    is_header = _is_header(header)
+    commented = _commented_header(path, above, len(header), mapping, sep) if numbers_only else None
+    # a line that holds every column --map names by name is the header, whatever its numbers
+    # ('time,1,2,3' under --map t=time,ax=1,...: a logger's channels numbered from 1)
+    named = [src for src in mapping.values() if not src.isdigit()]
+    is_header = _is_header(header) or (bool(named) and all(src in header for src in named))
     if is_header and numbers_only and all(header):
         # '0,1,2' alone: pandas' numbered columns over its rows of floats, or a data row of whole
         # numbers ('0,1,2,3' then '1,1,2,3'): the line under it tells
@@ -902,7 +971,7 @@ def read_plain(
             )
         if not numbers_only:
             # a logger's preamble ('Fs,100') above the header, or a data row with a bad field
-            found = _later_header(path, lines, mapping, skipped)
+            found = _later_header(path, lines, mapping, skipped, sep)
         if found is None and by_number:
             # no header: the columns named by their number, every line data (the first one too,
             # and those a search for a header under a preamble read)
@@ -924,20 +993,20 @@ def read_plain(
                 f"lines names it, and this one is no header ({numbers} of its {len(header)} fields are numbers)",
             )
     elif not _names_columns(header, mapping):
-        found = _later_header(path, lines, mapping, skipped)
+        found = _later_header(path, lines, mapping, skipped, sep)
     if found is not None:
         # a logger's preamble above the header ('Fs,100', 'Logging Type,1', ...): the header is
         # the first line that names the columns asked for; the lines above it are said, not read
         first, first_text = hi, head
         hi, head = found
-        delimiter = _sniff_delimiter(head)
+        delimiter = _sniff_delimiter(head, sep)
         header = [c.strip() for c in _cells(path, hi, head, delimiter)]
         first_data = hi + 1
         warnings.append(
             f"lines {first}-{hi - 1} above the header (line {hi}) are not data: skipped "
             f"(line {first}: {first_text.strip()[:40]!r})"
         )
-        declared = _declared_rate(path, skipped)
+        declared = _declared_rate(path, skipped, sep)
     if commented is None and found is None and header != [str(j + 1) for j in range(len(header))] and numbers_only:
         warnings.append(
             f"line {hi} ({head.strip()[:40]!r}) is read as a header of numbered columns, as pandas' to_csv "
@@ -950,13 +1019,19 @@ def read_plain(
         if mapping and unknown:  # columns the capture has no place for: said, not dropped without a word
             warnings.append(unknown_series_note(unknown, hi))
         if not mapping:
+            guess: dict[str, str] = {}  # the capture column each name most likely means (acc_x: ax)
+            for c in header:
+                near = nearest_column(c, TARGETS) if c and "," not in c and "=" not in c else None
+                if near is not None and near not in guess:
+                    guess[near] = c
+            example = ",".join(f"{t}={guess[t]}" for t in TARGETS if t in guess) or "t=time,ax=acc_x,ay=acc_y,az=acc_z"
             raise InputError(
                 path,
                 hi,
                 f"no column is named like a capture column ({', '.join(TARGETS)}); its columns: "
                 + ", ".join(repr(c) for c in header[:SHOWN_COLUMNS])
                 + (f" (+{len(header) - SHOWN_COLUMNS} more)" if len(header) > SHOWN_COLUMNS else "")
-                + ": say which is which with --map, e.g. --map t=time,ax=acc_x,ay=acc_y,az=acc_z",
+                + f": say which is which with --map, e.g. --map {example}",
             )
     cols: dict[str, int] = {}
     for target, source in mapping.items():

@@ -134,6 +134,9 @@ def import_file(path, opts: ImportOptions) -> tuple[Capture, list[str]]:
     fmt = opts.fmt or detect(path)
     if fmt is None:
         if is_station_capture(path):
+            # what inspect would say of it: a capture it refuses is refused here in its words
+            # (a Windows-1252 one it reads is "already a capture"; one no encoding reads is not)
+            read_capture(path)
             raise InputError(
                 path,
                 1,
