@@ -65,16 +65,13 @@ def test_p1_exact_time_series_has_verdict_none(tmp_path):
     assert j["quality"] == [], j["quality"]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="an exact P1 series with a quadratic term (D = 2e-4, -1e-4, 1.5e-4 per m/s²): the "
-    "quadratic takes the held-out RMS from 2e-3 to 7.7e-7 m/s² yet its delta_bic is +564 and the "
-    "verdict is []. The deviance profiles a noise scale per row kind (engine.typed_fit_term, "
-    "_Eval.D: n_k ln(RSS0/RSS1), RSS floored at 1e-300 only); the hold contrasts' residual is rounding "
-    "(<= 9e-16 m/s²) and its ratio is arbitrary. Needs Problem.noise_floor in that RSS (engine.py). "
-    "With 1e-4 V of noise the quadratic is named. Not fixed in s26f.",
-)
 def test_p1_exact_time_series_with_a_quadratic_names_it_alone(tmp_path):
+    """An exact P1 series with a quadratic term (D = 2e-4, -1e-4, 1.5e-4 per m/s²): the quadratic
+    takes the held-out RMS from 2e-3 to 7.7e-7 m/s², yet main's verdict was [] (delta_bic +564):
+    the deviance profiles a noise scale per kind of row, and the hold contrasts' residual is
+    rounding (<= 9e-16 m/s²) before and after, their ratio arbitrary. A kind the baseline
+    leaves below the noise floor now counts at the floor (``engine.row_floor``): the quadratic
+    alone, D to 1e-12."""
     path = _write(tmp_path / "p1_quadratic.csv", *_p1_holds(D=[2e-4, -1e-4, 1.5e-4]))
     assert _diagnose(path)["verdict"] == ["quadratic"]
 

@@ -190,6 +190,7 @@ class Problem:
     wander_calibrated: bool = False
     series_names: dict = field(default_factory=dict)  # a series id's name for a person (P4's axes, the LDV's beams)
     _wander: object = None
+    _r_base: np.ndarray | None = None  # the baseline's weighted residual (``analyse``)
 
 
 @dataclass
@@ -338,12 +339,48 @@ def bic(rss: float, n: int, k: int) -> float:
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
 
-def typed_fit_term(e: np.ndarray, types) -> float:
+def floored_rss(e: np.ndarray, floor=None) -> float:
+    """``e·e``; with ``floor`` = (σ, f) of the same rows (``row_floor``, data units), scaled up to
+    the floor where the residual in data units is below it (exact data: rounding, whose ratio
+    between two fits is arbitrary, counts as the floor in both)."""
+    r = float(e @ e)
+    if floor is None:
+        return r
+    sigma, f = floor
+    r_data, f_data = float(np.sum((e * sigma) ** 2)), float(np.sum(f**2))
+    return r * f_data / max(r_data, 1e-300) if r_data < f_data else r
+
+
+def typed_fit_term(e: np.ndarray, types, floor=None) -> float:
     """``Σ_t n_t ln(RSS_t / n_t)``: the Gaussian profile likelihood term with an unknown noise
-    scale per kind of row (one kind when ``types`` is None)."""
+    scale per kind of row (one kind when ``types`` is None); each RSS ``floored_rss``."""
     if types is None:
-        return bic(float(e @ e), e.size, 0)
-    return sum(bic(float(e[types == t] @ e[types == t]), int((types == t).sum()), 0) for t in np.unique(types))
+        return bic(floored_rss(e, floor), e.size, 0)
+    out = 0.0
+    for t in np.unique(types):
+        sel = types == t
+        fl = None if floor is None else (floor[0][sel], floor[1][sel])
+        out += bic(floored_rss(e[sel], fl), int(sel.sum()), 0)
+    return out
+
+
+def row_floor(problem, sigma: np.ndarray, r_base: np.ndarray):
+    """(σ, per-row noise floor) in data units for ``typed_fit_term``, or None: ``Problem.noise_floor``
+    on the measured rows, ``aux_noise_floor`` on the others, each kind only where the baseline's
+    weighted residual ``r_base`` is already below it there (exact data; a kind that a model with
+    many parameters fits to 1e-8 of its noise is no rounding and keeps its RSS)."""
+    if problem.noise_floor is None and not problem.aux_noise_floor:
+        return None
+    sigma = np.asarray(sigma, float)
+    types = np.zeros(sigma.shape, int) if problem.row_types is None else np.asarray(problem.row_types)
+    kinds = problem.measured_kinds if problem.row_types is not None else {0}
+    f = np.zeros(sigma.shape)
+    for t in np.unique(types):
+        sel = types == t
+        fl = problem.noise_floor if int(t) in kinds else problem.aux_noise_floor.get(int(t))
+        if fl and float(np.sqrt(np.mean((r_base[sel] * sigma[sel]) ** 2))) <= fl:
+            f[sel] = fl
+    return (sigma, f) if f.any() else None
 
 
 def _orth(A: np.ndarray) -> np.ndarray:
@@ -1154,7 +1191,8 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
     d, e, cvc, cv_ref = rnd.solve(cc.J, leverage=cc.cand.setup is None or problem.cv_leverage_generic)
     if cc.cand.scan is not None and k > 0:
         k += 1  # the scanned scalar (hard-iron step time) is a parameter too
-    D = term_cur - typed_fit_term(e, types)
+    floor = row_floor(problem, rnd.sigma, problem._r_base) if problem._r_base is not None else None
+    D = term_cur - typed_fit_term(e, types, floor)
     db = max(k, 0) * math.log(n) - D
     sig = cc.J @ d[A.shape[1] :]
     sig = sig - QA @ (QA.T @ sig)
@@ -1178,7 +1216,8 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool 
         # have left (rows minus the leverage the model puts on them, minus k)
         sel = types == t
         r_cur = rnd.r0 - QA @ (QA.T @ rnd.r0)  # the current model's residual (linearised)
-        rss0, rss1 = float(r_cur[sel] @ r_cur[sel]), float(e[sel] @ e[sel])
+        fl = None if floor is None else (floor[0][sel], floor[1][sel])
+        rss0, rss1 = floored_rss(r_cur[sel], fl), floored_rss(e[sel], fl)
         ev.kind, ev.n_kind = int(t), int(sel.sum())
         ev.dof_kind = ev.n_kind - float(np.sum(QA[sel] ** 2)) - k
         ev.D = ev.n_kind * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
@@ -1426,8 +1465,15 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         problem.sigma = sigma
         baseline_fit = fit(problem.residual, baseline_fit.params, free=problem.free, sigma=sigma)
     types = None if problem.row_types is None else np.asarray(problem.row_types)
+
     base_params = baseline_fit.params
     r_base = _weighted(problem, base_params)
+    problem._r_base = r_base  # the kinds at the noise floor (row_floor) are the baseline's
+
+    def fit_term(e: np.ndarray) -> float:
+        """The profile likelihood term of weighted residual ``e`` (``typed_fit_term``, floored)."""
+        return typed_fit_term(e, types, row_floor(problem, sigma, r_base))
+
     J_base, _, _ = jacobian(problem, base_params, problem.free)
     cv0 = cv_rms(J_base, r_base, sigma, folds, primary)
 
@@ -1465,9 +1511,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     ok = False
                 else:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
-                    ev = _evaluate(
-                        problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n, shared=True
-                    )
+                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), fit_term(r0), types, n, shared=True)
                     ok = _passes(
                         problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n
                     )
@@ -1518,7 +1562,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                                     problem,
                                     cand,
                                     rr.get(cand.cand.folds),
-                                    typed_fit_term(r0, types),
+                                    fit_term(r0),
                                     types,
                                     n,
                                     shared=len(picked) > 2,
@@ -1561,7 +1605,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             break
         J0, _, _ = jacobian(problem, state, free)
         Q0 = _orth(J0)
-        term_cur = typed_fit_term(r0, types)
+        term_cur = fit_term(r0)
         cv_cur = cv_rms(J0, r0, sigma, folds, primary)
         cands = [_candidate_columns(problem, state, c, Q0, r0) for c in remaining]
         rounds = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
@@ -1661,7 +1705,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         r0 = _weighted(problem, state)
         J0, _, _ = jacobian(problem, state, free)
         Q0 = _orth(J0)
-        term_cur = typed_fit_term(r0, types)
+        term_cur = fit_term(r0)
         cv_g = cv_rms(J0, r0, sigma, folds, primary)
         rank_cur = _gram_rank(J0.T @ J0)
         evals = []
@@ -1758,12 +1802,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
 
     def model_bic(fit_, free_) -> float:
         """Gaussian BIC of a fitted model (unknown noise scale per kind of row)."""
-        return typed_fit_term(fit_.weighted_residuals, types) + len(Packer.build(fit_.params, free_).names) * math.log(
-            n
-        )
+        return fit_term(fit_.weighted_residuals) + len(Packer.build(fit_.params, free_).names) * math.log(n)
 
     def term_of(fit_) -> float:
-        return typed_fit_term(fit_.weighted_residuals, types)
+        return fit_term(fit_.weighted_residuals)
 
     def npar(free_, fit_) -> int:
         return len(Packer.build(fit_.params, free_).names)
@@ -1784,7 +1826,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         if cc_.reason is not None:
             return False
         rr_ = _Rounds(J0_, r0_, sigma, fold_map, primary, problem.cv_max_leverage)
-        ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), typed_fit_term(r0_, types), types, n)
+        ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), fit_term(r0_), types, n)
         if ev_.k <= 0 or n - _gram_rank(J0_.T @ J0_) - ev_.k < MIN_DOF:
             return False
         return _cv_lower(ev_, rr_.cv0(cand_.folds)) and ev_.D_rob > decisive_margin(problem)
@@ -1859,7 +1901,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 ok = False
                 if cand.reason is None:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
-                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), typed_fit_term(r0, types), types, n)
+                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), fit_term(r0), types, n)
                     ev.k += int(_scanned(res0[0].desc))
                     _count_groups(problem, ev, J0, _scanned(res0[0].desc), r0)
                     ok = _passes(
@@ -1878,7 +1920,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     for oc, _ in _displaced(picked, picked2):
                         lcc = _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
                         if lcc.reason is None and lcc.J.shape[1]:
-                            lev = _evaluate(problem, lcc, rr.get(oc.cand.folds), typed_fit_term(r0, types), types, n)
+                            lev = _evaluate(problem, lcc, rr.get(oc.cand.folds), fit_term(r0), types, n)
                             infl = max(infl, lev.infl)
                     gain = (term_of(cur_fit) - term_of(fit2)) / infl - (
                         npar(fr2, fit2) - npar(free, cur_fit)
