@@ -71,6 +71,28 @@ def _xyz(capture, prefix: str) -> np.ndarray | None:
     return np.column_stack([np.asarray(capture.columns[n], float) for n in names])
 
 
+def _accel_as_calibrated(capture, base: dict) -> np.ndarray | None:
+    """The accelerometer columns as calibrate reads them for tilt (``_tilt_and_heading``): through
+    the capture's front end (a raw unit's zero and scale: ``accel_offset``, ``accel_scale_mps2_per_unit``)
+    or its unit's factor (raw where it has neither: only directions are used), in m/s², and turned
+    to specific force where calibrate found (or was told) that it reports gravity. None without
+    accelerometer columns."""
+    from station.procedures.accel_frontend import Frontend
+
+    a = _xyz(capture, "a")
+    if a is None:
+        return None
+    frontend = Frontend.from_meta(capture.meta)  # calibrate has refused a bad one already
+    if frontend is not None:
+        a = frontend(a)
+    else:
+        factor = si_factor("accel", capture.meta.get("accel_unit"))
+        a = a * factor if factor is not None else a
+    if (base.get("accel_sign") or {}).get("used") == "gravity":
+        a = -a
+    return a
+
+
 def _reference(capture, warnings: list[str]) -> dict | None:
     lat, lon = capture.float_meta("latitude_deg"), capture.float_meta("longitude_deg")
     if lat is None or lon is None:
@@ -430,7 +452,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         noise = base.get("noise_raw") or 1.0
     temp = fill_missing(capture.columns["temp_c"], t) if "temp_c" in capture.columns else None
     static = {}
-    a = _xyz(capture, "a")
+    a = _accel_as_calibrated(capture, base)
     gyro = _xyz(capture, "g")
     quant = None if a is None else _undithered(t[good], y[good], a[good], None if gyro is None else gyro[good])
     if quant is not None:
@@ -505,7 +527,7 @@ def _table_diagnosis_input(capture, base: dict, y, good) -> DiagnosisInput:
     temp = np.asarray(capture.columns["temp_c"], float) if "temp_c" in capture.columns else None
     rows = np.arange(len(y), dtype=float)
     static = {}
-    a = _xyz(capture, "a")
+    a = _accel_as_calibrated(capture, base)
     if a is not None:
         k = np.flatnonzero(good & np.all(np.isfinite(a), axis=1))
         if len(k) >= 4:
