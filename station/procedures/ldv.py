@@ -334,6 +334,41 @@ def format_text(result: dict) -> str:
     return "\n".join(lines)
 
 
+def body_rate_from_attitude(t_s, roll_deg, pitch_deg, yaw_deg) -> np.ndarray:
+    """Body angular rate (n, 3) [rad/s] from an attitude series (``C_n_b = Rz Ry Rx``): the
+    rotation vector of ``C_kᵀ C_k+1`` over the step, at the step's middle, interpolated to the
+    samples' times. Rows without a finite attitude or time, and steps across a gap longer than
+    5 median steps, give NaN (the lever arm is then not tested)."""
+    t = np.asarray(t_s, float)
+    ok = np.isfinite(t) & np.isfinite(roll_deg) & np.isfinite(pitch_deg) & np.isfinite(yaw_deg)
+    out = np.full((len(t), 3), np.nan)
+    idx = np.flatnonzero(ok)
+    if len(idx) < 3:
+        return out
+    r, p, y = (np.radians(np.asarray(a, float)[idx]) for a in (roll_deg, pitch_deg, yaw_deg))
+    C = np.stack([frames.euler_to_C_n_b(a, b, c) for a, b, c in zip(r, p, y)])
+    tt = t[idx]
+    dt = np.diff(tt)
+    step = np.einsum("nji,njk->nik", C[:-1], C[1:])  # C_kᵀ C_k+1: the turn in the body frame
+    good = (dt > 0) & (dt <= 5 * float(np.median(dt[dt > 0]))) if np.any(dt > 0) else np.zeros(len(dt), bool)
+    if not good.any():
+        return out
+    w = np.stack([frames.matrix_to_rotvec(m) for m in step[good]]) / dt[good, None]
+    mid = (tt[:-1] + tt[1:])[good] / 2.0
+    inside = (tt >= mid[0]) & (tt <= mid[-1])
+    # a sample between two steps that straddle a gap: no rate there
+    gap_after = np.r_[~good, False]
+    gap_before = np.r_[False, ~good]
+    keep = inside & ~(gap_after & gap_before)
+    out[idx[keep]] = np.column_stack([np.interp(tt[keep], mid, w[:, k]) for k in range(3)])
+    return out
+
+
+def _finite(t, x):
+    ok = np.isfinite(t) & np.isfinite(x)
+    return (t[ok], x[ok]) if ok.any() else (np.array([0.0]), np.array([np.nan]))
+
+
 def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> DiagnosisInput:
     """The P5 diagnosis problem around the baseline ``base`` (a calibrate result)."""
     from solvers.diagnose import problems as DP
@@ -352,6 +387,12 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     W = None
     if rows is not None and all(c in capture.columns for c in ("wx", "wy", "wz")):
         W = np.column_stack([pick(c) for c in ("wx", "wy", "wz")])
+    elif rows is not None and "t" in capture.columns and all(c in capture.columns for c in NAV_COLS[3:]):
+        # no wx wy wz: the body rate from the attitude the reference carries (capture-format:
+        # wx wy wz are optional), so that a lever arm (ω × r) can still be tested
+        t_all = np.asarray(capture.columns["t"], float)
+        W = body_rate_from_attitude(t_all, *(np.asarray(capture.columns[c], float) for c in NAV_COLS[3:]))
+        W = np.column_stack([np.interp(t_all[rows], *_finite(t_all, W[:, k])) for k in range(3)])
     X0 = np.array([base["fit"][f"beam{j + 1}"]["X"] for j in range(3)], float)
     temp = None
     if rows is not None and "temp_c" in capture.columns:  # a few empty fields: interpolated over time
