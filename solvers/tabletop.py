@@ -535,7 +535,9 @@ def calibrate(
 
     res, sig_n, notes, n_after = run(gauge, B0, M0)
     labels_used = True
-    if gauge == "table" and auto and len(positions) >= LABEL_CHECK_MIN_POSITIONS:
+    # with fewer positions the check can take right labels for wrong (no redundancy), but a fit the
+    # labels collapsed is no calibration: then the fit without them is tried whatever the count
+    if gauge == "table" and auto and (len(positions) >= LABEL_CHECK_MIN_POSITIONS or n_after < MIN_DISTINCT):
         # labels that do not describe the data (holds numbered 1..N in the bench's own order)
         # pull the fit away or collapse it: then the fit without them, if it holds
         idx = [k for k, p in enumerate(positions) if p.direction is not None]

@@ -92,6 +92,32 @@ def _rows(capture):
     return np.array(N).reshape(-1, 3), np.array(W), L, np.array(S).reshape(-1, 3), lines
 
 
+def _hold_means(capture, lines: list[int], column: str) -> np.ndarray | None:
+    """A time series' ``column`` (``t``, ``temp_c``) averaged over each hold that :func:`_rows`
+    made a row (the hold starting at data line ``lines[i]``, one mounting at one speed): the
+    elapsed time and temperature the diagnosis needs for ``time_drift`` and ``temperature_bias``.
+    None without the column, or where a hold has no value of it."""
+    x = capture.columns.get(column)
+    if x is None or not lines:
+        return None
+    x = np.asarray(x, float)
+    a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
+    w = np.asarray(capture.column("speed_rad_s"), dtype=float)
+    pos = capture.columns["position"]
+    first = (capture.header_line or 0) + 1
+    out = []
+    for ln in lines:
+        k = ln - first
+        j = k + 1
+        while j < len(a) and str(pos[j]) == str(pos[k]) and w[j] == w[k]:
+            j += 1
+        ok = np.all(np.isfinite(a[k:j]), axis=1) & np.isfinite(x[k:j])
+        if not ok.any():
+            return None
+        out.append(float(np.mean(x[k:j][ok])))
+    return np.array(out)
+
+
 @dataclass
 class Prepared:
     """A P2 capture read once: the rows of mean outputs, the radius and local gravity."""
@@ -341,6 +367,9 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         if "elapsed_s" in capture.columns and not capture.is_time_series
         else None
     )
+    if capture.is_time_series:  # each hold's mean time and temperature (they were left out: no time_drift)
+        temp = _hold_means(capture, lines, "temp_c")
+        el = _hold_means(capture, lines, "t")
     if temp is not None:  # a few empty temp_c fields: interpolated, not the whole temperature candidate lost
         temp = fill_missing(temp, el)
     # the calibration's own screen (solvers.centrifuge.screen_rows): rows that disagree with the

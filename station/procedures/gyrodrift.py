@@ -568,6 +568,17 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
     dt = _dt(capture)
     ok = _finite_rows([w_b, f_b], warnings, "gyro or accelerometer")
     segs = _segments(capture, w_b, f_b, dt, ok, warnings) if not mode_ref else [(ok, 0.0, "1")]
+    if mode_ref and f_b is not None:
+        # mode A on several positions (the pair turned between holds, labelled or found still as in
+        # mode B): each its own orientation, so a gyro bias that follows the specific force
+        # (g_sensitivity) can be told from the constant one; the turns between them are left out.
+        # One position, or a record never still (a vehicle): the whole record, as before
+        try:
+            held = _segments(capture, prep.w_b, f_b, dt, ok, [])
+        except (UnsupportedError, SolverError):
+            held = []
+        if len(held) >= 2:
+            segs = held
     n = len(w_b)
     t = np.asarray(capture.columns["t"], float) if "t" in capture.columns else np.arange(n) * dt
     label = np.full(n, "", dtype=object)

@@ -528,6 +528,10 @@ def diagnosis_input(
     any_left_out = any(q["kind"] == "outlier" and q["screened"] for q in screened)
     B, M = np.asarray(base["params"]["B"], float), np.asarray(base["params"]["M"], float)
     dirs = [p.direction for p in positions]
+    if base.get("labels_used") is False:
+        # the calibration set the labels aside (holds numbered 1..N in the bench's own order: they
+        # read far from P1's directions): their direction rows would pull the fit as it did not
+        dirs = [None] * len(positions)
     if sum(d is not None for d in dirs) < 3:
         B, M = T.to_upper(B, M)
     fw = accel_model.p1_to_forward(B, M)
