@@ -153,3 +153,41 @@ def test_a_quiet_reading_at_a_power_of_two_inside_the_columns_range_is_not_clipp
     clipped = np.clip(x * 200.0, -32768.0, 32767.0)  # a 16-bit converter driven beyond its range
     found = saturation({"mz": clipped})
     assert [(q["column"], q["value"]) for q in found] == [("mz", 32767.0), ("mz", -32768.0)], found
+
+
+def test_a_still_unit_pausing_where_one_axis_peaks_is_not_clipping():
+    """A magnetometer in gauss (a 1.5 mG step, its noise below a step) turned by hand and held
+    still for a second where ``mx`` is at its largest: every axis reads one value through the
+    pause, ``mx`` the column's extreme, and it was named saturation ("stuck at 0.318 gauss, its
+    extreme reading"; QA s27d, generator seed 700120) and the pause left out of the effect
+    search. Nothing tells a clip where the whole unit is still; ``mx`` pinned while ``my`` and
+    ``mz`` go on moving still is one."""
+    from solvers.diagnose.quality import saturation
+
+    q = 0.0015
+    t = np.arange(1000) * 0.01
+    field = 0.3 * np.column_stack([np.cos(0.7 * t), np.sin(0.7 * t) * np.cos(0.3 * t), np.sin(0.3 * t)])
+    field[500:600] = field[500]  # the pause
+    field[500:600, 0] = field[:, 0].max() + 0.01  # where mx peaks
+    cols = {f"m{a}": np.round(field[:, i] / q) * q for i, a in enumerate("xyz")}
+    assert saturation(cols) == [], saturation(cols)
+    fine = {f"m{a}": field[:, i] for i, a in enumerate("xyz")}  # a converter far finer than the noise
+    moving = dict(fine, mx=np.minimum(fine["mx"], 0.27))  # clipped at 0.27 while the unit turns
+    assert [q_["column"] for q_ in saturation(moving)] == ["mx"]
+
+
+def test_a_slow_quantised_signal_turning_at_its_peak_is_not_clipping():
+    """A magnetometer read at 8 Hz in 1.5 mG steps (an AK8963's), turned slowly: where ``mx``
+    turns at its largest it stays on one step for 5 or more samples while ``my`` and ``mz``
+    move on, and that was named saturation ("mx stuck at 0.318 gauss, its extreme reading";
+    QA s27d, generator seed 700120) and left out. A parabola through the samples on both sides
+    stays within a step of the reading there; a clipped signal's goes beyond it."""
+    from solvers.diagnose.quality import saturation
+
+    q = 0.0015
+    t = np.arange(400) / 8.0
+    field = np.column_stack([0.318 * np.cos(0.3 * t), 0.2 * np.sin(0.3 * t), 0.1 + 0.05 * np.sin(0.11 * t)])
+    cols = {f"m{a}": np.round(field[:, i] / q) * q for i, a in enumerate("xyz")}
+    assert saturation(cols) == [], saturation(cols)
+    clipped = dict(cols, mx=np.minimum(cols["mx"], 0.3))  # a range of 0.3 gauss: a flat top
+    assert {q_["column"] for q_ in saturation(clipped)} == {"mx"}

@@ -9,6 +9,7 @@ import numpy as np
 OUTLIER_SIGMA = 5.0  # |studentized residual| beyond this is a finding
 GAP_FACTOR = 5.0  # a time step this many times the median is a gap
 SATURATION_RUN = 5  # this many equal consecutive samples at a column's extreme
+STUCK_RUN = 20  # a run this long at the extreme is named whatever the signal does around it
 ORDINARY_REPEAT = 0.02  # such runs in more than this fraction of the other samples: a quantised, quiet column
 MOVED_FRACTION = 0.1  # a labelled position with more than this fraction of moving samples
 GAP_MARGIN_S = 1.0  # samples this close to a gap are left out of the effect search (settling after it)
@@ -80,6 +81,37 @@ def _adc_limit(value: float, lo: float, hi: float) -> bool:
     return False
 
 
+def _siblings_still(columns: dict, name: str, a: int, b: int) -> bool:
+    """Whether the other axes of ``name``'s sensor (``mx`` → ``my``, ``mz``), where the columns
+    have them, each hold a single value over rows ``a:b``; False without such axes."""
+    if len(name) != 2 or name[1] not in "xyz":
+        return False
+    others = [columns[name[0] + c] for c in "xyz" if c != name[1] and name[0] + c in columns]
+    if not others:
+        return False
+    return all(np.ptp(np.asarray(o, float)[a:b]) == 0 for o in others)
+
+
+def _smooth_turn(x: np.ndarray, a: int, b: int, at_max: bool) -> bool:
+    """Whether a short run ``x[a:b]`` at the column's extreme is the signal turning there, read
+    through a quantiser: a parabola through the samples on both sides (three each) stays within
+    two steps of the reading over the run. A clipped signal, continued from both sides, goes
+    beyond it; a run of STUCK_RUN or more is a stuck reading whatever its sides."""
+    if b - a >= STUCK_RUN or a < 3 or b + 3 > len(x):
+        return False
+    idx = np.r_[a - 3 : a, b : b + 3]
+    y = x[idx]
+    if not np.all(np.isfinite(y)):
+        return False
+    v = np.unique(x[np.isfinite(x)])
+    steps = np.diff(v)
+    q = float(np.min(steps[steps > 0])) if (steps > 0).any() else 0.0
+    c = np.polyfit(idx - a, y, 2)
+    peak = np.polyval(c, np.arange(-1, b - a + 1))
+    beyond = (peak.max() - x[a]) if at_max else (x[a] - peak.min())
+    return bool(beyond <= 2.0 * q)
+
+
 def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
     """Runs of SATURATION_RUN or more identical values at a column's extreme reading: one
     finding per column and extreme (its longest run), with every such run in ``runs``
@@ -98,8 +130,20 @@ def saturation(columns: dict[str, np.ndarray]) -> list[dict]:
             at = ok & (x == extreme)
             if at.sum() < SATURATION_RUN:
                 continue
-            # longest run
             starts, stops = _runs(at)
+            # a run in which the sensor's other axes hold one value each too is the whole unit
+            # still, read through a quantiser coarser than its noise (a hand pausing where this
+            # axis peaks): nothing tells a clip there, and one axis pinned at its limit while the
+            # others still move is what clipping looks like
+            moving = [
+                j
+                for j, (a, b) in enumerate(zip(starts, stops))
+                if not _siblings_still(columns, name, a, b) and not _smooth_turn(x, a, b, extreme == np.nanmax(x))
+            ]
+            starts, stops = starts[moving], stops[moving]
+            if not len(starts):
+                continue
+            # longest run
             lengths = stops - starts
             k = int(np.argmax(lengths))
             if lengths[k] >= SATURATION_RUN:
