@@ -479,6 +479,19 @@ def calibrate(
         B0, M0 = init if init is not None else minmax_initial(V, g_mps2)
     clusters = orientation_clusters(accel.p1_apply(V, B0, M0))
     n_distinct = int(clusters.max() + 1) if len(clusters) else 0
+    labels_suspect = False
+    if n_distinct < MIN_DISTINCT and s8 is not None:
+        # the labels' step 8 as the start can merge orientations the data hold apart (holds
+        # numbered 1..N in the bench's own order): counted from a start without them, and the
+        # labels then checked against the fit whatever the count
+        init = ellipsoid_initial(V, g_mps2)
+        Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
+        free_clusters = orientation_clusters(accel.p1_apply(V, Bu, Mu))
+        sv = np.linalg.svd(V - V.mean(axis=0), compute_uv=False) if len(V) >= 3 else np.zeros(1)
+        spread = len(sv) == 3 and sv[0] > 0 and sv[2] > 0.1 * sv[0]  # the readings span three directions
+        if spread and len(free_clusters) and int(free_clusters.max() + 1) >= MIN_DISTINCT:
+            B0, M0, clusters = Bu, Mu, free_clusters
+            n_distinct, labels_suspect = int(free_clusters.max() + 1), True
     if n_distinct < MIN_DISTINCT:
         hint = ""
         if s8 is not None and len({tuple(np.round(p.direction, 3)) for p in known}) >= 6:
@@ -537,13 +550,17 @@ def calibrate(
     labels_used = True
     # with fewer positions the check can take right labels for wrong (no redundancy), but a fit the
     # labels collapsed is no calibration: then the fit without them is tried whatever the count
-    if gauge == "table" and auto and (len(positions) >= LABEL_CHECK_MIN_POSITIONS or n_after < MIN_DISTINCT):
+    if (
+        gauge == "table"
+        and auto
+        and (len(positions) >= LABEL_CHECK_MIN_POSITIONS or n_after < MIN_DISTINCT or labels_suspect)
+    ):
         # labels that do not describe the data (holds numbered 1..N in the bench's own order)
         # pull the fit away or collapse it: then the fit without them, if it holds
         idx = [k for k, p in enumerate(positions) if p.direction is not None]
         angles = label_angles_deg(V[idx], res.params["B"], res.params["M"], dirs)
         agree = int(np.sum(angles <= LABEL_AGREEMENT_DEG))
-        if n_after < MIN_DISTINCT or agree < max(3, (len(idx) + 1) // 2):
+        if n_after < MIN_DISTINCT or labels_suspect or agree < max(3, (len(idx) + 1) // 2):
             init = ellipsoid_initial(V, g_mps2)
             Bu, Mu = init if init is not None else minmax_initial(V, g_mps2)
             try:

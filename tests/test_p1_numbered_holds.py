@@ -124,3 +124,26 @@ def test_a_large_unmodelled_effect_keeps_correct_labels(tmp_path, effect):
     path, _ = redteam_capture(tmp_path, "accel-tabletop", {"noise": 0.0005}, effect=effect, seed=4242)
     out = json.loads(run_station("calibrate", path, "--json").stdout)
     assert out["gauge"] == "table" and out["labels_used"] is True
+
+
+def test_nine_positions_numbered_in_the_benchs_own_order_are_calibrated(tmp_path):
+    """A table of 9 positions in volts, numbered 1..9 in the order taken (QA s27s's independent
+    generator, benchmarks/indep_s27_generator.py, seed 700875): the labels' six-position start
+    merged the data's 9 orientations into 7 and calibrate refused ("7 distinct orientations in 9
+    static positions"). Counted from a start without the labels there are 9; the labels are then
+    checked and set aside, saying so."""
+    import sys
+
+    from tests.station_run import ROOT
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import indep_s27_generator
+
+    path = tmp_path / "nine.csv"
+    indep_s27_generator.make_one("P1", "none", 10.0, 700875, str(path))
+    res = run_station("calibrate", path, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["n_distinct_orientations"] == 9
+    assert out["labels_used"] is False and out["gauge"] == "upper-triangular"
+    assert any("position labels do not describe" in w for w in out["warnings"]), out["warnings"]
