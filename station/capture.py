@@ -1337,7 +1337,7 @@ def read_capture(path, *, rows: int = DEFAULT_CHUNK_ROWS, _force_slow: bool = Fa
     """Read and validate a capture file; InputError ``file:line: what is wrong`` on bad input.
 
     A capture a spreadsheet saved in another encoding than UTF-8 is read as ``station import``
-    reads a CSV (one decision, :func:`station.importers.csvfiles.text_encoding`): Windows-1252
+    reads a CSV (one decision, :func:`station.textencoding.text_encoding`): Windows-1252
     (Excel's "CSV (Comma delimited)" on Windows; said in a note, as import says it) and UTF-16
     with a byte-order mark (Excel's "Unicode Text"); anything else is refused in the
     importer's one line (the byte and its line, or what to save the file as)."""
@@ -1357,7 +1357,7 @@ def _read_reencoded(path: str, rows: int, force_slow: bool) -> Capture:
     from there; a refusal names ``path`` and the same line."""
     import tempfile
 
-    from station.importers.csvfiles import copy_as_utf8, text_encoding
+    from station.textencoding import copy_as_utf8, text_encoding
 
     encoding, note = text_encoding(path, "a capture file")
     try:

@@ -39,14 +39,24 @@ def run_station(*args, subprocess_run: bool = False) -> subprocess.CompletedProc
 
 
 def popen_station(*args) -> subprocess.Popen:
-    """``station ARGS`` started in a subprocess (stdout and stderr text pipes), not waited for."""
-    return subprocess.Popen(
-        [sys.executable, "-m", "station", *map(str, args)],
-        cwd=ROOT,
-        text=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    """``station ARGS`` started in a subprocess (stdout and stderr text pipes), not waited for.
+    The child gets SIGHUP's default action even where the tests run under ``nohup`` (an ignored
+    signal is inherited: `record` then rightly goes on after a hang-up, and the tests that hang
+    it up waited for it in vain)."""
+    hup = signal.getsignal(signal.SIGHUP)
+    if hup is signal.SIG_IGN:
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-m", "station", *map(str, args)],
+            cwd=ROOT,
+            text=True,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+    finally:
+        if hup is signal.SIG_IGN:
+            signal.signal(signal.SIGHUP, signal.SIG_IGN)
 
 
 def wait_for_rows(partial: Path, size_bytes: int, timeout_s: float = 30.0) -> None:

@@ -228,9 +228,14 @@ def test_an_interrupted_recording_leaves_a_capture_and_nothing_for_recover_to_br
     out = tmp_path / "s.csv"
     partial = Path(str(out) + ".partial")
     rec = popen_station("record", "--port", sim_port, "--out", str(out))
-    wait_for_rows(partial, 5000)
-    rec.send_signal(sig)
-    stdout, stderr = rec.communicate(timeout=20)
+    try:
+        wait_for_rows(partial, 5000)
+        rec.send_signal(sig)
+        stdout, stderr = rec.communicate(timeout=60)
+    finally:  # a recording left running holds its port's pty and the next test's reader hangs
+        if rec.poll() is None:
+            rec.kill()
+            rec.communicate()
     assert rec.returncode == 0, stderr
     assert stdout.startswith("recorded ")
     assert stderr == (f"{HUNG_UP}; {out} is complete\n" if sig == signal.SIGHUP else ""), stderr
@@ -250,9 +255,14 @@ def test_a_hang_up_before_the_seconds_asked_keeps_the_rows_marked_incomplete_as_
     out = tmp_path / "s.csv"
     partial = Path(str(out) + ".partial")
     rec = popen_station("record", "--port", sim_port, "--seconds", "120", "--out", str(out))
-    wait_for_rows(partial, 5000)
-    rec.send_signal(signal.SIGHUP)
-    stdout, stderr = rec.communicate(timeout=20)
+    try:
+        wait_for_rows(partial, 5000)
+        rec.send_signal(signal.SIGHUP)
+        stdout, stderr = rec.communicate(timeout=60)
+    finally:
+        if rec.poll() is None:
+            rec.kill()
+            rec.communicate()
     assert rec.returncode == 1, stderr
     assert "INCOMPLETE: interrupted" in stdout and not partial.exists()
     assert stderr.endswith(f"{HUNG_UP}; {out} is complete: false (interrupted)\n"), stderr
@@ -274,6 +284,7 @@ def test_a_recording_whose_ssh_session_drops_finishes_its_capture(sim_port, tmp_
 
     def own_terminal() -> None:  # in the child, after setsid: the pty becomes its terminal
         fcntl.ioctl(1, termios.TIOCSCTTY, 0)
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)  # as a login shell's job has it, under nohup too
 
     rec = subprocess.Popen(
         [sys.executable, "-m", "station", "record", "--port", sim_port, "--out", str(out)],
@@ -286,10 +297,15 @@ def test_a_recording_whose_ssh_session_drops_finishes_its_capture(sim_port, tmp_
     )
     os.close(slave)
     try:
-        wait_for_rows(partial, 5000)
+        try:
+            wait_for_rows(partial, 5000)
+        finally:
+            os.close(master)  # the connection drops: the terminal hangs up
+        assert rec.wait(60) == 0
     finally:
-        os.close(master)  # the connection drops: the terminal hangs up
-    assert rec.wait(20) == 0
+        if rec.poll() is None:
+            rec.kill()
+            rec.wait()
     assert not partial.exists()
     cap = read_capture(out)
     assert cap.meta["complete"] == "true" and cap.n_rows > 10 and not cap.notes

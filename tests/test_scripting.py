@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import pty
+import select
 import subprocess
 import sys
 from pathlib import Path
@@ -48,7 +49,15 @@ def _on_a_terminal(argv, env) -> bytes:
         )
         os.close(slave)
         out = bytearray()
+        # read until the terminal hangs up (EIO), or, once the child has exited, until nothing is
+        # left: another process still holding this pty (a leaked child of an earlier test) keeps
+        # EIO away for good, and a blocking read hung CI's worker for 20 minutes
         while True:
+            ready, _, _ = select.select([master], [], [], 1.0)
+            if not ready:
+                if p.poll() is not None:
+                    break
+                continue
             try:
                 chunk = os.read(master, 65536)
             except OSError:  # EIO: the child closed the terminal

@@ -10,7 +10,7 @@
   ``temp_c``), their unit left out and the names loggers use (``acc_x``, ``gyr_z``) known.
 - A station capture Excel saved as Windows-1252 (a metadata line with '°', 'ü') or as UTF-16
   with a byte-order mark is read as ``station import`` reads them (one decision,
-  ``csvfiles.text_encoding``); one that no encoding reads is refused in one line saying what to
+  ``station.textencoding.text_encoding``); one that no encoding reads is refused in one line saying what to
   do, by ``inspect`` and ``import`` alike.
 
 The rows are real: the imucal Ferraris session and Wang & Li's centrifuge table

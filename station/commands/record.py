@@ -6,7 +6,7 @@ import argparse
 import os
 import signal
 import sys
-import threading
+import time
 
 from station.errors import InputError, OutputError, require_positive
 from station.fileio import check_output
@@ -18,6 +18,28 @@ from station.textsafe import safe
 # (FTDI's FT232H, FT2232H) take up to 12 Mbaud. Beyond that no serial device runs: 1e14 reached
 # the driver's call and failed there ("signed integer is greater than maximum").
 BAUD_MIN, BAUD_MAX = 50, 12_000_000
+
+
+class SignalFlag:
+    """A stop flag that a signal handler may set. ``threading.Event.set()`` takes the lock that
+    ``Event.wait()`` holds on entering and leaving its wait; a handler run in the main thread at
+    that moment waited for that lock for good (CI, under load: `record` sent SIGHUP, then
+    SIGTERM, asleep with its partial open 20 minutes later). Setting a bool takes no lock;
+    ``wait`` sleeps (a signal interrupts the sleep and the handler runs) and then looks."""
+
+    def __init__(self) -> None:
+        self._set = False
+
+    def set(self) -> None:
+        self._set = True
+
+    def is_set(self) -> bool:
+        return self._set
+
+    def wait(self, timeout: float) -> bool:
+        if not self._set:
+            time.sleep(timeout)
+        return self._set
 
 
 def baud_arg(text: str) -> int:
@@ -157,8 +179,7 @@ def run(args: argparse.Namespace) -> int:
         parse_source(args.mavlink_message)
     except ValueError as exc:
         raise InputError(None, None, f"--mavlink-message: {exc}") from None
-    stop = threading.Event()
-    hung_up = threading.Event()
+    stop, hung_up = SignalFlag(), SignalFlag()
 
     def _stop(signum, frame):  # noqa: ARG001
         if signum == signal.SIGHUP:

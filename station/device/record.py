@@ -401,7 +401,9 @@ def record(
     reader: Reader | None = None,
     warn=None,
 ) -> RecordResult:
-    """Record `port` into the capture `out` until `seconds` pass or `stop` is set.
+    """Record `port` into the capture `out` until `seconds` pass or `stop` is set (anything with
+    ``wait(timeout) -> bool``: a ``threading.Event``, or from a signal handler
+    ``station.commands.record.SignalFlag``, which an Event must not be).
 
     Returns the final metadata and the reader's statistics. Raises PortError when the
     port cannot be opened and RecordError when no sample arrived.

@@ -32,9 +32,17 @@ from station.capture import (
     plausible_limit,
 )
 from station.errors import InputError
-from station.fileio import looks_utf16, open_input
+from station.fileio import open_input
 from station.importers._common import COLUMNS, NAME, Imported, Stream, set_date
 from station.importers.options import TARGETS
+from station.textencoding import (
+    LINE_ENDS,
+    MAX_LINE_BYTES,
+    UTF16_BOMS,
+    bom_encoding,
+    check_text,
+    read_chunks,
+)
 
 KIND_OF = {c: k for k, cols in COLUMNS.items() for c in cols}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -72,185 +80,13 @@ _DECIMAL_COMMA = re.compile(r"\s*[+-]?[0-9]+,[0-9]+(?:[eE][+-]?[0-9]+)?\s*")
 _THOUSANDS = re.compile(r"\s*[+-]?[0-9]{1,3}(?:(?:,[0-9]{3})+(?:\.[0-9]*)?|(?:\.[0-9]{3})+(?:,[0-9]*)?)\s*")
 
 
-_MAX_LINE_BYTES = 1 << 20  # a line longer than this is no CSV row (the capture reader's limit)
-_CHUNK_BYTES = 1 << 20
 _FLUSH_ROWS = 1 << 16  # parsed rows kept as Python floats before they become an array chunk
-# what str.splitlines ends a line at ("\r\n" is one end)
-_LINE_ENDS = "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"
-
-
-_UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
-# what Excel's "CSV (Comma delimited)" saves in on Windows: read where a file is not UTF-8
-CP1252 = "cp1252"
-
-
-def _bom_encoding(path) -> str:
-    """``"utf-16"`` for a file that starts with a UTF-16 byte-order mark (LE or BE: Excel's
-    "Unicode Text"), else ``"utf-8"``."""
-    try:
-        with open_input(path, "a CSV file") as f:
-            head = f.read(2)
-    except (InputError, OSError):  # the reader that follows says why
-        return "utf-8"
-    return "utf-16" if head.startswith(_UTF16_BOMS) else "utf-8"
-
-
-def _chunks(f, path, utf16: bool = False) -> Iterator[bytes]:
-    """The file in chunks, each checked as it comes: a NUL byte or a line longer than
-    ``_MAX_LINE_BYTES`` stops the reading at once (``/dev/zero``, a binary blob or a file
-    without line ends would otherwise be read on and on). ``utf16``: a file with a UTF-16
-    byte-order mark, whose NUL bytes are half its characters (a NUL character is refused
-    once decoded, by :func:`_check_text`)."""
-    lines_before = 0  # newlines in the chunks already read
-    run = 0  # bytes since the last newline
-    first_chunk = True
-    too_long = f"line longer than {_MAX_LINE_BYTES} bytes: not a CSV row"
-    while True:
-        chunk = f.read(_CHUNK_BYTES)  # no longer than the limit: a longer line crosses a chunk's end
-        if not chunk:
-            return
-        nul = -1 if utf16 else chunk.find(b"\0")
-        if nul >= 0 and first_chunk and looks_utf16(chunk):
-            raise InputError(
-                path, 1, "UTF-16 text without a byte-order mark; save the file as UTF-8 (or as Unicode Text, with one)"
-            )
-        if nul >= 0:
-            raise InputError(
-                path, lines_before + chunk.count(b"\n", 0, nul) + 1, "NUL byte: binary data, not a CSV file"
-            )
-        first = chunk.find(b"\n")
-        if first < 0:
-            run += len(chunk)
-        elif run + first > _MAX_LINE_BYTES:
-            raise InputError(path, lines_before + 1, too_long)
-        else:
-            run = len(chunk) - chunk.rfind(b"\n") - 1
-        lines_before += chunk.count(b"\n")
-        if run > _MAX_LINE_BYTES:
-            raise InputError(path, lines_before + 1, too_long)
-        first_chunk = False
-        yield chunk
-
-
-def _check_utf16(path) -> None:
-    """:func:`_check_text` for a file with a UTF-16 byte-order mark: every character decodes
-    and none is NUL (binary data behind a mark)."""
-    decoder = codecs.getincrementaldecoder("utf-16")()
-    lines_before = 0
-    try:
-        with open_input(path, "a CSV file") as f:
-            for chunk in _chunks(f, path, utf16=True):
-                try:
-                    text = decoder.decode(chunk)
-                except UnicodeDecodeError as exc:
-                    raise InputError(path, lines_before + 1, f"not UTF-16 text: {exc.reason}") from None
-                nul = text.find("\0")
-                if nul >= 0:
-                    raise InputError(
-                        path, lines_before + text.count("\n", 0, nul) + 1, "NUL character: binary data, not a CSV file"
-                    )
-                lines_before += text.count("\n")
-            decoder.decode(b"", final=True)
-    except UnicodeDecodeError as exc:  # a character cut off by the end of the file
-        raise InputError(path, lines_before + 1, f"not UTF-16 text: {exc.reason}") from None
-    except OSError as exc:  # reading, after the open
-        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
-
-
-def _check_text(path) -> tuple[str, str | None]:
-    """Read the file once, keeping nothing: the encoding to read it in and the warning that
-    says so, or InputError for what is not text (a NUL byte, an overlong line, then the first
-    byte that is not UTF-8, naming its line).
-
-    UTF-16 with a byte-order mark (Excel's "Unicode Text") is read as such. A file that is not
-    UTF-8 is read as Windows-1252 (Excel's "CSV (Comma delimited)" on Windows: '°' is 0xb0,
-    'µ' 0xb5) when every byte is a Windows-1252 character, said in the warning; a byte that is
-    none (0x81, 0x8d, 0x8f, 0x90, 0x9d) leaves it refused as not UTF-8."""
-    if _bom_encoding(path) == "utf-16":
-        _check_utf16(path)
-        return "utf-16", None
-    decoder = codecs.getincrementaldecoder("utf-8")()
-    bad = None  # the first UTF-8 error: reported once no NUL or overlong line follows it
-    cp1252 = True  # every byte so far is a Windows-1252 character
-    bom = None  # a UTF-8 byte-order mark: written as UTF-8, never read as Windows-1252
-    lines_before = 0
-    try:
-        with open_input(path, "a CSV file") as f:
-            for chunk in _chunks(f, path):
-                if bom is None:
-                    bom = chunk.startswith(codecs.BOM_UTF8)
-                if bad is None:
-                    try:
-                        decoder.decode(chunk)
-                    except UnicodeDecodeError as exc:  # exc.object: the bytes held over, then this chunk
-                        bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
-                if cp1252:
-                    try:
-                        chunk.decode(CP1252)  # one byte a character: chunks decode alone
-                    except UnicodeDecodeError:
-                        cp1252 = False
-                lines_before += chunk.count(b"\n")
-    except OSError as exc:  # reading, after the open
-        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
-    if bad is None:
-        try:
-            decoder.decode(b"", final=True)
-        except UnicodeDecodeError as exc:  # a character cut off by the end of the file
-            bad = (lines_before + exc.object[: exc.start].count(b"\n") + 1, exc.object[exc.start])
-    if bad is None:
-        return "utf-8", None
-    if not cp1252 or bom:
-        why = "under a UTF-8 byte-order mark" if bom else "nor a Windows-1252 character"
-        raise InputError(path, bad[0], f"not UTF-8 text: byte 0x{bad[1]:02x} ({why}): save the file as UTF-8")
-    return CP1252, (
-        f"not UTF-8 (byte 0x{bad[1]:02x} on line {bad[0]}): read as Windows-1252, as Excel's "
-        "'CSV (Comma delimited)' saves on Windows"
-    )
-
-
-def text_encoding(path, what: str = "a CSV file") -> tuple[str, str | None]:
-    """The encoding a text file is read in (``utf-8``, ``cp1252``, ``utf-16``) and the warning
-    that says so, or InputError for what is none (:func:`_check_text`): the one decision the
-    importer and the capture reader (``station.capture.read_capture``) share. ``what``: the
-    file's kind in a refusal ("not a CSV file" is said of a capture as "not a capture file")."""
-    try:
-        return _check_text(path)
-    except InputError as exc:
-        if what != "a CSV file":  # 'not a CSV file', 'not a CSV row' said of what it is
-            row = what.replace("file", "row")
-            message = exc.message.replace("a CSV file", what).replace("a CSV row", row)
-            raise InputError(exc.path, exc.line, message) from None
-        raise
-
-
-def copy_as_utf8(path, encoding: str, dest) -> None:
-    """Write the text of ``path`` (in ``encoding``, as :func:`text_encoding` found it) to
-    ``dest`` as UTF-8, byte for byte the same lines and line ends (a UTF-16 byte-order mark is
-    no text). ``dest`` is a new file of the caller's (a temporary one): an OSError writing it is
-    the caller's to say; reading ``path`` is an InputError."""
-    with open(dest, "wb") as out:
-        for text in _decoded(path, encoding):
-            out.write(text.encode("utf-8", "surrogatepass"))
-
-
-def _decoded(path, encoding: str) -> Iterator[str]:
-    """The text of ``path`` in ``encoding``, a chunk at a time."""
-    decoder = codecs.getincrementaldecoder(encoding)()
-    try:
-        with open_input(path, "a CSV file") as f:
-            for chunk in _chunks(f, path, utf16=encoding == "utf-16"):
-                yield decoder.decode(chunk)
-            yield decoder.decode(b"", final=True)
-    except UnicodeDecodeError:
-        raise InputError(path, None, f"changed while it was read: not {encoding} text any more") from None
-    except OSError as exc:
-        raise InputError(path, None, f"cannot read: {exc.strerror or exc}") from None
 
 
 def _tail(path, n_bytes: int) -> str | None:
     """The file's last ``n_bytes`` (about) as text, enough to see how it ends: UTF-16 by its
     byte-order mark, else byte for character (its line ends and ``#`` are ASCII); None when unreadable."""
-    utf16 = _bom_encoding(path) == "utf-16"
+    utf16 = bom_encoding(path) == "utf-16"
     try:
         with open_input(path, "a CSV file") as f:
             head = f.read(2)
@@ -274,7 +110,7 @@ def _cut_last_row(path, linenos: np.ndarray, warnings: list[str]) -> None:
     """Warn, as the capture reader does, when the file's last line is a data row with no line end:
     a file cut short (a copy of a log still being written, a logger killed) ends so, and its
     last value may be cut ('9.8123' read as '9.8')."""
-    tail = _tail(path, _MAX_LINE_BYTES + 2)
+    tail = _tail(path, MAX_LINE_BYTES + 2)
     if not tail or tail.endswith(("\n", "\r")):
         return
     last = tail[tail.rfind("\n") + 1 :].strip()
@@ -285,24 +121,24 @@ def _cut_last_row(path, linenos: np.ndarray, warnings: list[str]) -> None:
 def _strip_end(line: str) -> str:
     if line.endswith("\r\n"):
         return line[:-2]
-    return line[:-1] if line and line[-1] in _LINE_ENDS else line
+    return line[:-1] if line and line[-1] in LINE_ENDS else line
 
 
 def _lines(path, encoding: str = "utf-8") -> Iterator[str]:
-    """The lines of a file :func:`_check_text` passed, in the ``encoding`` it found, without
+    """The lines of a file :func:`check_text` passed, in the ``encoding`` it found, without
     their ends, as ``text.splitlines()`` of the whole decoded file gives them, read a chunk at a time."""
     decoder = codecs.getincrementaldecoder(encoding)()
     carry = ""  # an unfinished line (or one ending in "\r", whose "\n" may come next)
     start = True  # a byte order mark at the start is no text
     try:
         with open_input(path, "a CSV file") as f:
-            for chunk in _chunks(f, path, utf16=encoding == "utf-16"):
+            for chunk in read_chunks(f, path, utf16=encoding == "utf-16"):
                 text = decoder.decode(chunk)
                 if start and text:
                     text, start = text.removeprefix("\ufeff"), False
                 pieces = (carry + text).splitlines(keepends=True)
                 carry = ""
-                if pieces and (pieces[-1][-1] not in _LINE_ENDS or pieces[-1][-1] == "\r"):
+                if pieces and (pieces[-1][-1] not in LINE_ENDS or pieces[-1][-1] == "\r"):
                     carry = pieces.pop()
                 for piece in pieces:
                     yield _strip_end(piece)
@@ -326,17 +162,17 @@ def _open_text(path) -> tuple[Iterator[tuple[int, str]], list[str]]:
     """The file's lines (no line ends) with their numbers, streamed: the whole file is never
     held; and the warnings so far (a file read as Windows-1252). InputError for what is not
     text, raised here, before any line is given."""
-    encoding, note = _check_text(path)
+    encoding, note = check_text(path)
     return enumerate(_lines(path, encoding), 1), [note] if note else []
 
 
 def first_line(path) -> str:
     try:
         with open_input(path) as f:
-            raw = f.read(4096) if _bom_encoding(path) == "utf-16" else f.readline(4096)
+            raw = f.read(4096) if bom_encoding(path) == "utf-16" else f.readline(4096)
     except (InputError, OSError):  # the reader that follows says why
         return ""
-    if raw.startswith(_UTF16_BOMS):
+    if raw.startswith(UTF16_BOMS):
         text = raw[: len(raw) // 2 * 2].decode("utf-16", "replace")
         return (text.splitlines() or [""])[0].strip()
     return raw.lstrip(b"\xef\xbb\xbf").decode("utf-8", "replace").strip()
