@@ -193,7 +193,6 @@ class Problem:
     wander_calibrated: bool = False
     series_names: dict = field(default_factory=dict)  # a series id's name for a person (P4's axes, the LDV's beams)
     _wander: object = None
-    _r_base: np.ndarray | None = None  # the baseline's weighted residual (``analyse``)
 
 
 @dataclass
@@ -1184,17 +1183,16 @@ def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: bool, r: 
     return ev
 
 
-def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, shared: bool = False) -> _Eval:
-    """The tests of one candidate added to the round's model; ``shared``: its deviance is also taken
-    net of the noise the rows of a group share (``shared_inflation``, a test beside library effects
-    already named)."""
+def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, floor=None, shared: bool = False) -> _Eval:
+    """The tests of one candidate added to the round's model; ``floor``: the rows' noise floor
+    (``row_floor``, once per analysis); ``shared``: its deviance is also taken net of the noise the
+    rows of a group share (``shared_inflation``, a test beside library effects already named)."""
     A, QA = rnd.A, rnd.QA
     Jp = cc.J - QA @ (QA.T @ cc.J)
     k = _gram_rank(Jp.T @ Jp) if Jp.shape[1] else 0
     d, e, cvc, cv_ref = rnd.solve(cc.J, leverage=cc.cand.setup is None or problem.cv_leverage_generic)
     if cc.cand.scan is not None and k > 0:
         k += 1  # the scanned scalar (hard-iron step time) is a parameter too
-    floor = row_floor(problem, rnd.sigma, problem._r_base) if problem._r_base is not None else None
     D = term_cur - typed_fit_term(e, types, floor)
     db = max(k, 0) * math.log(n) - D
     sig = cc.J @ d[A.shape[1] :]
@@ -1480,11 +1478,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
 
     base_params = baseline_fit.params
     r_base = _weighted(problem, base_params)
-    problem._r_base = r_base  # the kinds at the noise floor (row_floor) are the baseline's
+    floor = row_floor(problem, sigma, r_base)  # the kinds the baseline already fits to the noise floor
 
     def fit_term(e: np.ndarray) -> float:
         """The profile likelihood term of weighted residual ``e`` (``typed_fit_term``, floored)."""
-        return typed_fit_term(e, types, row_floor(problem, sigma, r_base))
+        return typed_fit_term(e, types, floor)
 
     J_base, _, _ = jacobian(problem, base_params, problem.free)
     cv0 = cv_rms(J_base, r_base, sigma, folds, primary)
@@ -1523,7 +1521,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     ok = False
                 else:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
-                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), fit_term(r0), types, n, shared=True)
+                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), fit_term(r0), types, n, floor, shared=True)
                     ok = _passes(
                         problem, ev, len(problem.candidates), rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n
                     )
@@ -1577,6 +1575,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                                     fit_term(r0),
                                     types,
                                     n,
+                                    floor,
                                     shared=len(picked) > 2,
                                 )
                             )
@@ -1628,7 +1627,14 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     entries[cc.cand.name] = _unresolvable(cc.cand.name, cc.reason)
                 continue
             ev = _evaluate(
-                problem, cc, rounds.get(cc.cand.folds), term_cur, types, n, shared=bool(picked) or problem.shared_first
+                problem,
+                cc,
+                rounds.get(cc.cand.folds),
+                term_cur,
+                types,
+                n,
+                floor,
+                shared=bool(picked) or problem.shared_first,
             )
             evals.append(ev)
             if first:
@@ -1748,7 +1754,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             pool.sort(key=lambda x: x[0])
             chosen = None
             for _, cand, cc, desc in pool:
-                ev = _evaluate(problem, cc, rounds.get(cand.folds), term_cur, types, n, shared=problem.shared_first)
+                ev = _evaluate(
+                    problem, cc, rounds.get(cand.folds), term_cur, types, n, floor, shared=problem.shared_first
+                )
                 ev.desc = desc
                 if item[0] == "scan":
                     ev.k += 1  # the scanned location or period
@@ -1795,7 +1803,14 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 for name, _, lcc in lib:
                     if name in rule:
                         lev = _evaluate(
-                            problem, lcc, rounds.get(lcc.cand.folds), term_cur, types, n, shared=problem.shared_first
+                            problem,
+                            lcc,
+                            rounds.get(lcc.cand.folds),
+                            term_cur,
+                            types,
+                            n,
+                            floor,
+                            shared=problem.shared_first,
                         )
                         if lev.k > 0 and _rival_margin(lev, best, n) > decisive_margin(problem, max(lev.k, best.k)):
                             rule.discard(name)
@@ -1838,7 +1853,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         if cc_.reason is not None:
             return False
         rr_ = _Rounds(J0_, r0_, sigma, fold_map, primary, problem.cv_max_leverage)
-        ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), fit_term(r0_), types, n)
+        ev_ = _evaluate(problem, cc_, rr_.get(cand_.folds), fit_term(r0_), types, n, floor)
         if ev_.k <= 0 or n - _gram_rank(J0_.T @ J0_) - ev_.k < MIN_DOF:
             return False
         return _cv_lower(ev_, rr_.cv0(cand_.folds)) and ev_.D_rob > decisive_margin(problem)
@@ -1913,7 +1928,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 ok = False
                 if cand.reason is None:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
-                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), fit_term(r0), types, n)
+                    ev = _evaluate(problem, cand, rr.get(cand.cand.folds), fit_term(r0), types, n, floor)
                     ev.k += int(_scanned(res0[0].desc))
                     _count_groups(problem, ev, J0, _scanned(res0[0].desc), r0)
                     ok = _passes(
@@ -1932,7 +1947,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     for oc, _ in _displaced(picked, picked2):
                         lcc = _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
                         if lcc.reason is None and lcc.J.shape[1]:
-                            lev = _evaluate(problem, lcc, rr.get(oc.cand.folds), fit_term(r0), types, n)
+                            lev = _evaluate(problem, lcc, rr.get(oc.cand.folds), fit_term(r0), types, n, floor)
                             infl = max(infl, lev.infl)
                     gain = (term_of(cur_fit) - term_of(fit2)) / infl - (
                         npar(fr2, fit2) - npar(free, cur_fit)

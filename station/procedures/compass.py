@@ -71,23 +71,30 @@ def _xyz(capture, prefix: str) -> np.ndarray | None:
     return np.column_stack([np.asarray(capture.columns[n], float) for n in names])
 
 
-def _accel_as_calibrated(capture, base: dict) -> np.ndarray | None:
-    """The accelerometer columns as calibrate reads them for tilt (``_tilt_and_heading``): through
-    the capture's front end (a raw unit's zero and scale: ``accel_offset``, ``accel_scale_mps2_per_unit``)
-    or its unit's factor (raw where it has neither: only directions are used), in m/s², and turned
-    to specific force where calibrate found (or was told) that it reports gravity. None without
-    accelerometer columns."""
+def _accel_si(capture, a: np.ndarray) -> tuple[np.ndarray | None, str | None]:
+    """The accelerometer columns ``a`` in m/s²: through the capture's front end (a raw unit's zero
+    and scale: ``accel_offset``, ``accel_scale_mps2_per_unit``) or its unit's factor. Returns
+    (a_mps2, the front end's source or None); a_mps2 is None where the unit has neither. Raises
+    ``FrontendError`` on a bad front end. The one conversion calibrate and diagnose share."""
     from station.procedures.accel_frontend import Frontend
 
+    frontend = Frontend.from_meta(capture.meta)
+    if frontend is not None:
+        return frontend(a), frontend.source
+    factor = si_factor("accel", capture.meta.get("accel_unit"))
+    return (a * factor if factor is not None else None), None
+
+
+def _accel_as_calibrated(capture, base: dict) -> np.ndarray | None:
+    """The accelerometer columns as calibrate reads them for tilt (``_tilt_and_heading``), in m/s²
+    (raw where the unit has no factor and no front end: only directions are used), turned to
+    specific force where calibrate found (or was told) that it reports gravity. None without
+    accelerometer columns."""
     a = _xyz(capture, "a")
     if a is None:
         return None
-    frontend = Frontend.from_meta(capture.meta)  # calibrate has refused a bad one already
-    if frontend is not None:
-        a = frontend(a)
-    else:
-        factor = si_factor("accel", capture.meta.get("accel_unit"))
-        a = a * factor if factor is not None else a
+    a_si, _ = _accel_si(capture, a)  # calibrate has refused a bad front end already
+    a = a if a_si is None else a_si
     if (base.get("accel_sign") or {}).get("used") == "gravity":
         a = -a
     return a
@@ -249,25 +256,22 @@ def _tilt_and_heading(capture, t, good, cal, ref, result, warnings) -> None:
     if a is None:
         warnings.append("no accelerometer columns: no tilt, no heading")
         return
-    from station.procedures.accel_frontend import OFFSET_KEY, SCALE_KEY, Frontend, FrontendError
+    from station.procedures.accel_frontend import OFFSET_KEY, SCALE_KEY, FrontendError
 
     try:
-        frontend = Frontend.from_meta(capture.meta)
+        a_si, frontend_source = _accel_si(capture, a)
     except FrontendError as exc:
         raise InputError(capture.path, capture.meta_lines.get(exc.key), f"metadata {exc}") from None
-    a_factor = si_factor("accel", capture.meta.get("accel_unit"))
-    if frontend is not None:  # a raw accelerometer with its zero and scale (accel_frontend.py)
-        f_g = frontend(a) / G_STANDARD_MPS2
-        result["accel_frontend"] = frontend.source
-    elif a_factor is None:
+    if a_si is None:
         warnings.append(
             f"accel_unit {capture.meta.get('accel_unit')!r} has no physical factor: "
             f"no tilt, no heading (give '{OFFSET_KEY}' and '{SCALE_KEY}', e.g. from the unit's "
             "P1 calibration)"
         )
         return
-    else:
-        f_g = a * (a_factor / G_STANDARD_MPS2)
+    if frontend_source is not None:  # a raw accelerometer with its zero and scale (accel_frontend.py)
+        result["accel_frontend"] = frontend_source
+    f_g = a_si / G_STANDARD_MPS2
     w = _xyz(capture, "g")
     w_factor = si_factor("gyro", capture.meta.get("gyro_unit"))
     if w is None and all(c in capture.columns for c in ("gx", "gy")):
