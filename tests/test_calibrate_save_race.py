@@ -48,10 +48,16 @@ def test_a_save_judged_against_a_reference_another_process_replaced_is_judged_ag
     saves nothing, says so in one line and is judged again against #2."""
     db = tmp_path / "station.db"
     caps = []
-    for seed in (1, 2, 3):
+    # each dated to the second, B's before A's: B's save is then A's reference at A's own time
+    # however long the machine takes between them (a date alone is read at the clock: under load
+    # B's save could fall a second after A's, making A a back-dated result that rightly keeps #1)
+    for seed, when in ((1, "10:00:00"), (2, "10:00:02"), (3, "10:00:01")):
         out = tmp_path / f"c{seed}.csv"
         res = run_station("simulate", "--procedure", "accel-tabletop", "--seed", seed, "--out", out)
         assert res.returncode == 0, res.stderr
+        text = out.read_text()
+        assert "\n# date: " in text
+        out.write_text(re.sub(r"^# date: .*$", f"# date: 2026-03-01T{when}Z", text, count=1, flags=re.M))
         caps.append(out)
     res = run_station("--db", db, "calibrate", caps[0], "--save", "--device", "DEV-1")
     assert res.returncode == 0, res.stderr
