@@ -101,6 +101,9 @@ GYRO_NOISE_FLOOR_RAD_S = 1e-9
 # minutes. An exact simulator's field, fitted, leaves 1e-8 (holds) to 3e-5 nT (a tumble, the
 # chain's tolerance): 1e-3 nT is between, and outliers "beyond 5σ" were found in that rounding
 MAG_NOISE_FLOOR_NT = 1e-3
+# P3: the magnitude rows' whiteness is also tested over lags spanning this long (engine.Problem.whiteness_lags):
+# a hand's temperature, a current switched on for a while, a bias that swings over seconds
+MAG_WHITENESS_WINDOW_S = 10.0
 MIN_TEMP_SPAN_C = 0.2  # a temperature that varies less than this cannot resolve a temperature term
 
 
@@ -1097,4 +1100,6 @@ def compass_problem(
         prob.generic.append((cond_q, {"time": None if table else tq, "temperature": Tq, "input_axis": mq0}))
     prob.cand_thresholds = dict(CAND_THRESHOLDS.get("compass", {}))
     prob.noise_floor = MAG_NOISE_FLOOR_NT
+    if not table and dur > 0:
+        prob.whiteness_lags = int(round(MAG_WHITENESS_WINDOW_S * len(t) / dur))
     return prob
