@@ -42,7 +42,8 @@ import numpy as np
 from station.errors import InputError
 from station.importers._common import FRD, Imported, Stream, fmt_param, set_date, several_instances_warning
 
-PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
+# INS4_/INS5_: IMUs 4 and 5 (AP_InertialSensor_Params, where INS_MAX_INSTANCES > 3)
+PARAM_PREFIXES = ("INS_", "INS4_", "INS5_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
 DF_UNITS = {
     "rad/s": "rad/s",
@@ -178,8 +179,12 @@ def _params_meta(params: dict[str, float], meta: dict[str, str]) -> None:
 
 
 def _ap_device_id(params: dict, kind: str, instance: int) -> int | None:
-    """The sensor's id from INS_ACC_ID / INS_ACC2_ID …, INS_GYR_ID …, COMPASS_DEV_ID / _DEV_ID2 …"""
+    """The sensor's id from INS_ACC_ID / INS_ACC2_ID … INS4_ACC_ID, INS5_ACC_ID, INS_GYR_ID …,
+    COMPASS_DEV_ID / _DEV_ID2 …"""
     n = "" if instance == 0 else str(instance + 1)
+    if kind != "mag" and instance >= 3:  # IMUs 4 and 5: the INS4_/INS5_ groups
+        value = params.get(f"INS{instance + 1}_{'ACC' if kind == 'accel' else 'GYR'}_ID")
+        return int(value) if value else None
     name = {
         "accel": f"INS_ACC{n}_ID",
         "gyro": f"INS_GYR{n}_ID",
@@ -259,9 +264,9 @@ def _raw_notes(params: dict[str, float], inst_read: dict[str, int]) -> list[str]
         out = []
         for kind, inst in inst_read.items():
             ids = (
-                ("INS_ACC_ID", "INS_ACC2_ID", "INS_ACC3_ID")
+                ("INS_ACC_ID", "INS_ACC2_ID", "INS_ACC3_ID", "INS4_ACC_ID", "INS5_ACC_ID")
                 if kind == "accel"
-                else ("INS_GYR_ID", "INS_GYR2_ID", "INS_GYR3_ID")
+                else ("INS_GYR_ID", "INS_GYR2_ID", "INS_GYR3_ID", "INS4_GYR_ID", "INS5_GYR_ID")
             )
             count = sum(1 for n in ids if (params.get(n) or 0) > 0)
             if count and inst >= count:
