@@ -232,11 +232,11 @@ def _offsets_learnt(mag_ofs, have_mag: bool, inst: int, unit: str | None, params
 def _df_instances(log, c: dict | None, seen: set[int], base: str) -> list[int]:
     """The instances of ``base`` (IMU, MAG) in a DataFlash log: ``seen``, its ``I`` field's
     values as the decoding counted them (``c``: its columns; instance 0 where it has no ``I``),
-    and IMU2/IMU3 (MAG2/MAG3) of the logs before that field."""
+    and IMU2/IMU3 (MAG2/MAG3; ACC1-ACC3, GYR1-GYR3) of the logs before that field."""
     found: set[int] = set()
     if c is not None:
         found.update(seen) if "I" in c else found.add(0)
-    for n in (2, 3):
+    for n in (1, 2, 3) if base in ("ACC", "GYR") else (2, 3):
         type_id = getattr(log, "name_to_id", {}).get(f"{base}{n}")
         if type_id is not None and log.offsets[type_id]:
             found.add(n - 1)
