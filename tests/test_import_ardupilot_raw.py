@@ -128,6 +128,8 @@ def test_the_second_sensor_and_the_gyro_and_the_old_names(tmp_path):
         c = read_capture(out)
         assert c.meta["sensor_instance"] == "1" and c.meta["sensor_device_id"] == str(PARAMS["INS_ACC2_ID"])
         np.testing.assert_array_equal(c.columns["ay"], _f32(V[: c.n_rows, 1] + 0.5))
+        res = run_station("import", log, "--procedure", "accel-tabletop", "--instance", "4", "--out", out)
+        assert_one_line_refusal(res, "--instance 4: the log has ACC instances 0, 1; GYR instances 0, 1")
         out = tmp_path / f"acc0-{old}.csv"
         res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
         assert res.returncode == 0 and "the log has 2 IMUs (instances 0, 1): instance 0 read" in res.stderr, res.stderr

@@ -418,7 +418,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         available = {}  # the instances the log holds, for the refusal of one it lacks
         if not rows:
-            for base in ("IMU", "MAG"):
+            for base in ("IMU", "MAG", *(DF_RAW.values() if use_raw else ())):
                 c = cols[base] if base in cols else _df_columns(log, base)
                 have = _df_instances(
                     log, c, {int(i) for i in np.unique(c["I"])} if c is not None and "I" in c else set(), base
