@@ -1,11 +1,12 @@
 """ArduPilot DataFlash (.bin) import speed: `station.importers.ardupilot.read_bin` on a long log.
 
-    python benchmarks/bench_bin_import.py [--minutes M] [--rate HZ] [--imus K] [--repeat R] [--keep PATH]
+    python benchmarks/bench_bin_import.py [--minutes M] [--rate HZ] [--imus K] [--repeat R] [--keep PATH] [--raw]
 
 No real ArduPilot log is in ../shared, so the log is WRITTEN BY PYMAVLINK'S OWN DataFlash encoder
 (``DFReader.DFFormat`` + ``make_format_msgbuf``/``make_msgbuf``, tests/test_import_ardupilot.py's
 ``DataFlashWriter``, ArduPilot's LogStructure formats): K IMU instances at HZ, a compass at 100 Hz,
 attitude (ATT) at 50 Hz and GPS at 10 Hz as other traffic, and the INS_/COMPASS_ parameters.
+``--raw``: the sensors as ACC and GYR (LogStructure.h ``QBQfff``, every sample) and no IMU records.
 Printed: the file, the time pymavlink's own indexer takes (``DFReader_binary`` with
 PYMAVLINK_FAST_INDEX=0, as the importer opens it), and the whole ``read_bin`` (median of R runs).
 """
@@ -25,12 +26,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 
-def write_log(path, minutes: float, rate_hz: float, imus: int) -> int:
+def write_log(path, minutes: float, rate_hz: float, imus: int, raw: bool = False) -> int:
     from pymavlink import DFReader
 
     from tests.test_import_ardupilot import PARAMS, DataFlashWriter
+    from tests.test_import_ardupilot_raw import RawWriter
 
-    w = DataFlashWriter(path)
+    w = RawWriter(path) if raw else DataFlashWriter(path)
     att = w.enc.add_format(
         DFReader.DFFormat(0, "ATT", 0, "QccccCCCCB", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw,ErrRP,ErrYaw,AEKF")
     )
@@ -46,8 +48,13 @@ def write_log(path, minutes: float, rate_hz: float, imus: int) -> int:
     for k in range(n):
         t = 500_000 + k * step_us
         for inst in range(imus):
-            w.imu(t, inst, gyro[k], acc[k] + inst)
-            count += 1
+            if raw:
+                w.write("ACC", t + 50, inst, t, *(acc[k] + inst))
+                w.write("GYR", t + 50, inst, t, *gyro[k])
+                count += 2
+            else:
+                w.imu(t, inst, gyro[k], acc[k] + inst)
+                count += 1
         if k % max(1, int(rate_hz // 100)) == 0:
             w.mag(t + 100, 0, (200 + k % 7, -150, 420))
             count += 1
@@ -68,6 +75,7 @@ def main() -> None:
     ap.add_argument("--imus", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--keep", default=None, help="write the log here (reused when it exists)")
+    ap.add_argument("--raw", action="store_true", help="ACC/GYR instead of IMU records")
     a = ap.parse_args()
     from pymavlink import DFReader
 
@@ -77,9 +85,11 @@ def main() -> None:
     path = a.keep or os.path.join(tmp.name, "bench.bin")
     if not os.path.exists(path):
         t0 = time.perf_counter()
-        count = write_log(path, a.minutes, a.rate, a.imus)
+        count = write_log(path, a.minutes, a.rate, a.imus, a.raw)
         print(f"wrote {count} messages, {os.path.getsize(path) / 1e6:.1f} MB in {time.perf_counter() - t0:.1f} s")
-    print(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB ({a.minutes:g} min, {a.imus} IMUs at {a.rate:g} Hz)")
+    print(
+        f"{path}: {os.path.getsize(path) / 1e6:.1f} MB ({a.minutes:g} min, {a.imus} IMUs at {a.rate:g} Hz{', ACC/GYR' if a.raw else ''})"
+    )
     os.environ["PYMAVLINK_FAST_INDEX"] = "0"
     t0 = time.perf_counter()
     DFReader.DFReader_binary(path, zero_time_base=True)

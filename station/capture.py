@@ -677,6 +677,8 @@ def _header_problem(names: list[str]) -> str | None:
                 return (
                     f"the header's columns are separated by {said}: a capture's are separated by commas, "
                     "with '.' as the decimal mark"
+                    # a spreadsheet's "Text (tab delimited)" / "Unicode Text": the way out, in the same line
+                    + (" (save it from the spreadsheet as 'CSV (comma delimited)')" if sep == "\t" else "")
                 )
     seen: dict[str, int] = {}
     for j, name in enumerate(names, 1):

@@ -14,8 +14,8 @@ lists the files and commits, README "Firmware parameters" links them):
 
 | firmware | sensor | applied to driver output in the sensor frame | parameters (instance n) |
 |---|---|---|---|
-| ArduPilot | accel | `a = (a_drv - INS_ACCOFFS) * INS_ACCSCAL` (m/s^2), then the board rotation (`AP_InertialSensor_Backend::_rotate_and_correct_accel`) | `INS_ACC{,2,3}OFFS_X/Y/Z`, `INS_ACC{,2,3}SCAL_X/Y/Z` |
-| ArduPilot | gyro | `w = w_drv - INS_GYROFFS` (rad/s) | `INS_GYROFFS_*`, `INS_GYR2OFFS_*`, `INS_GYR3OFFS_*` |
+| ArduPilot | accel | `a = (a_drv - INS_ACCOFFS) * INS_ACCSCAL` (m/s^2), then the board rotation (`AP_InertialSensor_Backend::_rotate_and_correct_accel`) | `INS_ACC{,2,3}OFFS_X/Y/Z`, `INS_ACC{,2,3}SCAL_X/Y/Z`; IMUs 4, 5: `INS{4,5}_ACCOFFS_*`, `INS{4,5}_ACCSCAL_*` |
+| ArduPilot | gyro | `w = w_drv - INS_GYROFFS` (rad/s) | `INS_GYROFFS_*`, `INS_GYR2OFFS_*`, `INS_GYR3OFFS_*`, `INS{4,5}_GYROFFS_*` |
 | ArduPilot | compass | `m = [DIA/ODI] * (COMPASS_SCALE * (m_drv + COMPASS_OFS))` (mGauss, offsets ADDED; `AP_Compass_Backend::correct_field`) | `COMPASS_OFS{,2,3}_*`, `COMPASS_DIA{,2,3}_*`, `COMPASS_ODI{,2,3}_*` |
 | PX4 | accel | `a = R * ((a_drv - CAL_ACCn_OFF) .* CAL_ACCn_SCALE)` (m/s^2; `calibration::Accelerometer::Correct`) | `CAL_ACCn_{X,Y,Z}OFF`, `CAL_ACCn_{X,Y,Z}SCALE`, `CAL_ACCn_ID`, `_PRIO`, `_ROT` |
 | PX4 | gyro | `w = R * (w_drv - CAL_GYROn_OFF)` (rad/s) | `CAL_GYROn_{X,Y,Z}OFF`, `_ID`, `_PRIO`, `_ROT` |
@@ -108,10 +108,16 @@ class Export:
     def __init__(self, comment: str):
         self.comment = comment
         self.notes: list[str] = []
+        self.warnings: list[str] = []
         self.values: list[tuple[str, float | int]] = []
 
     def note(self, text: str) -> None:
         self.notes.append(text)
+
+    def warn(self, text: str) -> None:
+        """A value written that the firmware takes but its documentation bounds: in the file, and on
+        the command line's stderr (``warnings``)."""
+        self.warnings.append(text)
 
     def set(self, name: str, value: float) -> None:
         if value is None or not math.isfinite(value):
@@ -406,8 +412,26 @@ def _device_id(meta: dict, kind: str) -> int | None:
     return None
 
 
+# ArduPilot's slots: IMUs 1-3 in AP_InertialSensor::var_info (INS_ACC*, INS_GYR*), IMUs 4 and 5
+# in its subgroups "4_"/"5_" of AP_InertialSensor_Params (INS4_*, INS5_*, built where
+# INS_MAX_INSTANCES > 3); compasses 1-3 alone (Compass::var_info: COMPASS_OFS, OFS2, OFS3)
+AP_SLOTS = {"accel": (1, 2, 3, 4, 5), "gyro": (1, 2, 3, 4, 5), "mag": (1, 2, 3)}
+# the documented @Range of COMPASS_OFS* (AP_Compass.cpp), narrower than what the firmware's own
+# calibration stores (below COMPASS_OFFS_MAX)
+AP_COMPASS_OFS_DOC_RANGE_MGAUSS = 400.0
+
+
 def _ap_names(kind: str, n: int) -> dict:
     s = "" if n == 1 else str(n)
+    if kind in ("accel", "gyro") and n > 3:  # AP_InertialSensor_Params: ACCSCAL, ACCOFFS, ACC_ID, GYROFFS, GYR_ID
+        g = f"INS{n}_"
+        if kind == "accel":
+            return {
+                "off": [f"{g}ACCOFFS_{a}" for a in AXES],
+                "scale": [f"{g}ACCSCAL_{a}" for a in AXES],
+                "id": f"{g}ACC_ID",
+            }
+        return {"off": [f"{g}GYROFFS_{a}" for a in AXES], "id": f"{g}GYR_ID"}
     if kind == "accel":
         return {
             "off": [f"INS_ACC{s}OFFS_{a}" for a in AXES],
@@ -621,13 +645,31 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
     kind = _kind(cal, fmt, "ArduPilot")
     use = InUse(meta, fmt, "ardupilot")
     dev = _device_id(meta, kind)
-    slot = _slot(use, dev, lambda k: _ap_names(kind, k), (1, 2, 3))
+    slots = AP_SLOTS[kind]
+    what = "compasses" if kind == "mag" else "IMUs"
+    if instance is not None and instance not in slots:
+        raise UnsupportedError(
+            f"{fmt}: --instance {instance}: ArduPilot's parameters hold {what} {slots[0]}-{slots[-1]} "
+            + ("(COMPASS_OFS, COMPASS_OFS2, COMPASS_OFS3)" if kind == "mag" else "(INS_, INS2-3, INS4_/INS5_)")
+        )
+    slot = _slot(use, dev, lambda k: _ap_names(kind, k), slots)
     _check_instance(instance, slot, dev, fmt, lambda k: _ap_names(kind, k)["id"])
     n = instance or slot
     if n is None:
         si = (meta or {}).get("sensor_instance")
-        n = int(si) + 1 if si not in (None, "") and use.source_firmware == "ardupilot" and 0 <= int(si) <= 2 else 1
+        n = int(si) + 1 if si not in (None, "") and use.source_firmware == "ardupilot" else 1
+        if n not in slots:  # the log's sensor has no slot: never another sensor's by default
+            raise UnsupportedError(
+                f"{fmt}: the capture's sensor is ArduPilot's {'compass' if kind == 'mag' else 'IMU'} instance {n - 1} "
+                f"(sensor_instance), and ArduPilot's parameters hold {what} {slots[0]}-{slots[-1]} only: "
+                "no slot to write; nothing written"
+            )
     names = _ap_names(kind, n)
+    if n > 3:
+        ex.note(
+            f"{names['id'][:5]} parameters exist in firmware built for more than {n - 1} IMUs "
+            "(INS_MAX_INSTANCES, AP_InertialSensor_Params)"
+        )
     # INS offsets and scales act in the sensor frame, before AHRS_ORIENTATION
     # (_rotate_and_correct_accel/_gyro); the compass's after its rotation to the body frame
     # (AP_Compass_Backend: rotate_field, then correct_field), so it needs none
@@ -696,6 +738,15 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         # CompassCalibrator::fit_acceptable: |offset| < COMPASS_OFFS_MAX, 0.2 < diag < 5, |offdiag| < 1
         for name, v in zip(names["off"], ofs):
             _check_range(fmt, name, v, -offs_max, offs_max, "COMPASS_OFFS_MAX", strict=True)
+        beyond = [f"{name} = {v:.1f}" for name, v in zip(names["off"], ofs) if abs(v) > AP_COMPASS_OFS_DOC_RANGE_MGAUSS]
+        if beyond:
+            # written, as ArduPilot's own calibration writes them (below COMPASS_OFFS_MAX), and said
+            ex.warn(
+                f"{', '.join(beyond)} mGauss: beyond the documented @Range -{AP_COMPASS_OFS_DOC_RANGE_MGAUSS:g}.."
+                f"{AP_COMPASS_OFS_DOC_RANGE_MGAUSS:g} (AP_Compass.cpp), within COMPASS_OFFS_MAX ({offs_max:g}), "
+                "as the firmware's own calibration accepts it; a ground station may flag it on loading, and an offset "
+                "this large often means magnetised or current-carrying parts near the compass"
+            )
         for name, i in zip(names["dia"], range(3)):
             _check_range(fmt, name, P[i, i], *AP_COMPASS_DIA_RANGE, "CompassCalibrator::fit_acceptable", strict=True)
         for name, (i, j) in zip(names["odi"], ODIAG_PAIRS):
@@ -1005,8 +1056,8 @@ def export(
         return _c_header(cal, meta)
     ex = Export("#")
     if fmt == "ardupilot":
-        if instance is not None and instance not in (1, 2, 3):
-            raise UnsupportedError("ardupilot: --instance is 1, 2 or 3")
+        if instance is not None and instance not in (1, 2, 3, 4, 5):
+            raise UnsupportedError("ardupilot: --instance is 1 to 5 (IMUs; compasses 1 to 3)")
         _ardupilot(cal, meta, instance, ex)
         body = [f"{name},{value:.9g}" if isinstance(value, float) else f"{name},{value}" for name, value in ex.values]
     elif fmt in ("px4", "qgc"):
@@ -1031,6 +1082,7 @@ def export(
         raise UnsupportedError(f"unknown export format '{fmt}' (one of {', '.join(FORMATS)})")
     head = [f"# {_c_comment(line)}" for line in _header(cal)]
     head += [f"# converted: {_c_comment(n)}" for n in ex.notes]
+    head += [f"# warning: {_c_comment(w)}" for w in ex.warnings]
     if fmt == "ardupilot" and registry.firmware_kind(cal["procedure"]) == "mag":
         # AP_Compass_Backend::accumulate_sample: rotate_field (to the body frame), then correct_field
         head += ["# offsets and matrix apply in the body frame, after the compass's rotation (ArduPilot compass)"]

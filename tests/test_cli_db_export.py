@@ -136,7 +136,7 @@ def test_gyro_offsets_and_instances(capsys, db):
     assert set(names_in(out, "ardupilot")) == {"INS_GYR2OFFS_X", "INS_GYR2OFFS_Y", "INS_GYR2OFFS_Z"}
     assert "# calibration warning: no temperature column" in out
     code, _, err = run(capsys, "export", str(cid), "--format", "ardupilot", "--instance", "7", "--db", db)
-    assert code == 2 and "1, 2 or 3" in err
+    assert code == 2 and "--instance is 1 to 5 (IMUs; compasses 1 to 3)" in err  # s28: INS4_/INS5_
 
 
 @pytest.mark.parametrize(

@@ -621,7 +621,8 @@ def test_help_lines_fit_the_box_at_80x24():
 
     height, lines = asyncio.run(story())
     assert height == len(HELP.split("\n"))  # one screen row per line (the last one empty): nothing wrapped
-    assert any("simulated: p rate table (P4 reference IMU)" in line for line in lines)
+    # (s28: the box's last page since the Diagnose entry, above the P1 text)
+    assert any("esc stops it and goes back (nothing is saved or changed)" in line for line in lines)
     assert any(line.strip(" │").startswith("under it says") for line in lines)  # the last line, reached
 
 

@@ -48,7 +48,7 @@ def register(subparsers) -> None:
     p.add_argument(
         "--instance",
         type=int,
-        help="firmware sensor slot (ArduPilot 1-3, default 1; PX4 0-3, default: the slot of the capture's sensor, the only one in use, or 0)",
+        help="firmware sensor slot (ArduPilot IMUs 1-5, compasses 1-3, default: the capture's sensor's, else 1; PX4 0-3, default: the slot of the capture's sensor, the only one in use, or 0)",
     )
     p.add_argument(
         "--device-id",
@@ -93,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
             None, None, f"--vehicle {args.vehicle!r}: MAVLink ids are a system 1-255 and a component 0-255"
         )
     text = export(cal, meta, args.format, args.instance, device_id=args.device_id, vehicle=(sysid, compid))
+    for line in text.splitlines():  # a value the firmware takes beyond its documented range: said here too
+        if line.startswith("# warning: "):
+            print(f"station: warning: {line[len('# warning: ') :]}", file=sys.stderr)
     if args.output is not None and args.output != "-":
         with cannot_write(args.output):
             atomic_write_text(args.output, text)

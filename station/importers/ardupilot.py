@@ -5,6 +5,11 @@ DataFlash (``DFReader_binary``), ArduPilot's ``LogStructure`` definitions:
 - ``IMU`` (``TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,…,T``, units ``s#EEEooo--O``): rad/s and
   m/s², the IMU's output after the calibration in use, rotated to the body frame. Old logs name
   the second and third IMU ``IMU2``/``IMU3`` (no ``I`` field).
+- ``ACC`` / ``GYR`` (``TimeUS,I,SampleUS,AccX,AccY,AccZ`` / ``…,GyrX,GyrY,GyrZ``, units
+  ``s#sooo`` / ``s#sEEE``): every sample of each sensor at its own rate (``LOG_BITMASK`` IMU_RAW,
+  ``INS_RAW_LOG_OPT``), corrected and rotated as ``IMU`` is (``_rotate_and_correct_accel`` before
+  ``log_accel_raw``), timed by ``SampleUS``. Read where the log has no ``IMU`` records, or with
+  ``--source raw``. Logs before the ``I`` field name them ``ACC1``…``ACC3``, ``GYR1``…``GYR3``.
 - ``MAG`` (``TimeUS,I,MagX,MagY,MagZ,OfsX,…``, units ``G`` × multiplier ``C`` = 10⁻³): milligauss,
   offsets, diagonals and motor compensation applied, body frame.
 - ``PARM`` (``Name,Value``): the parameters; a name's first record is its value in use (the
@@ -37,7 +42,8 @@ import numpy as np
 from station.errors import InputError
 from station.importers._common import FRD, Imported, Stream, fmt_param, set_date, several_instances_warning
 
-PARAM_PREFIXES = ("INS_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
+# INS4_/INS5_: IMUs 4 and 5 (AP_InertialSensor_Params, where INS_MAX_INSTANCES > 3)
+PARAM_PREFIXES = ("INS_", "INS4_", "INS5_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
 # DataFlash unit strings (after FMTU/MULT) → capture units
 DF_UNITS = {
     "rad/s": "rad/s",
@@ -173,8 +179,12 @@ def _params_meta(params: dict[str, float], meta: dict[str, str]) -> None:
 
 
 def _ap_device_id(params: dict, kind: str, instance: int) -> int | None:
-    """The sensor's id from INS_ACC_ID / INS_ACC2_ID …, INS_GYR_ID …, COMPASS_DEV_ID / _DEV_ID2 …"""
+    """The sensor's id from INS_ACC_ID / INS_ACC2_ID … INS4_ACC_ID, INS5_ACC_ID, INS_GYR_ID …,
+    COMPASS_DEV_ID / _DEV_ID2 …"""
     n = "" if instance == 0 else str(instance + 1)
+    if kind != "mag" and instance >= 3:  # IMUs 4 and 5: the INS4_/INS5_ groups
+        value = params.get(f"INS{instance + 1}_{'ACC' if kind == 'accel' else 'GYR'}_ID")
+        return int(value) if value else None
     name = {
         "accel": f"INS_ACC{n}_ID",
         "gyro": f"INS_GYR{n}_ID",
@@ -222,21 +232,66 @@ def _offsets_learnt(mag_ofs, have_mag: bool, inst: int, unit: str | None, params
 def _df_instances(log, c: dict | None, seen: set[int], base: str) -> list[int]:
     """The instances of ``base`` (IMU, MAG) in a DataFlash log: ``seen``, its ``I`` field's
     values as the decoding counted them (``c``: its columns; instance 0 where it has no ``I``),
-    and IMU2/IMU3 (MAG2/MAG3) of the logs before that field."""
+    and IMU2/IMU3 (MAG2/MAG3; ACC1-ACC3, GYR1-GYR3) of the logs before that field."""
     found: set[int] = set()
     if c is not None:
         found.update(seen) if "I" in c else found.add(0)
-    for n in (2, 3):
+    for n in (1, 2, 3) if base in ("ACC", "GYR") else (2, 3):
         type_id = getattr(log, "name_to_id", {}).get(f"{base}{n}")
         if type_id is not None and log.offsets[type_id]:
             found.add(n - 1)
     return sorted(found)
 
 
-def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
-    """IMU/MAG of one instance (default 0) and the parameters in use from a DataFlash log."""
+# ArduPilot's full-rate sensor messages (AP_InertialSensor/LogStructure.h): kind -> (message, fields)
+DF_RAW = {"accel": "ACC", "gyro": "GYR"}
+SOURCES_BIN = ("auto", "raw", "combined")  # --source for a DataFlash log: ACC/GYR, IMU, or IMU where logged
+
+
+def _df_has(log, *names: str) -> bool:
+    """Whether the log holds a record of any of message ``names`` (a format alone is none)."""
+    ids = getattr(log, "name_to_id", {})
+    return any(n in ids and len(log.offsets[ids[n]]) for n in names)
+
+
+def _raw_notes(params: dict[str, float], inst_read: dict[str, int]) -> list[str]:
+    """What ``INS_RAW_LOG_OPT`` says about the ACC/GYR samples read (AP_InertialSensor_Backend
+    ``log_gyro_raw``/``log_accel_raw``): bit 2 (4) post filter, the samples after the IMU's
+    low-pass and notch filters; bit 3 (8) pre and post filter, each sensor's filtered copy logged as
+    instance + the number of sensors (the batch sampler's numbering)."""
+    opt = int(params.get("INS_RAW_LOG_OPT", 0) or 0)
+    if opt & 8:
+        out = []
+        for kind, inst in inst_read.items():
+            ids = (
+                ("INS_ACC_ID", "INS_ACC2_ID", "INS_ACC3_ID", "INS4_ACC_ID", "INS5_ACC_ID")
+                if kind == "accel"
+                else ("INS_GYR_ID", "INS_GYR2_ID", "INS_GYR3_ID", "INS4_GYR_ID", "INS5_GYR_ID")
+            )
+            count = sum(1 for n in ids if (params.get(n) or 0) > 0)
+            if count and inst >= count:
+                out.append(
+                    f"INS_RAW_LOG_OPT {opt} (pre and post filter): {DF_RAW[kind]}[{inst}] is the filtered copy of "
+                    f"{DF_RAW[kind]}[{inst - count}] ({count} sensors): a calibration needs the unfiltered one, "
+                    f"--instance {inst - count}"
+                )
+        return out
+    if opt & 4:
+        return [
+            f"INS_RAW_LOG_OPT {opt} (post filter): the ACC/GYR samples were logged after the IMU's low-pass and notch "
+            "filters, not as the sensor gave them"
+        ]
+    return []
+
+
+def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "auto") -> Imported:
+    """IMU/MAG of one instance (default 0) and the parameters in use from a DataFlash log;
+    ``source``: ``raw`` reads the accelerometer and gyro from ACC/GYR (every sample),
+    ``combined`` from IMU, ``auto`` from IMU where the log has it, else from ACC/GYR."""
     from pymavlink import DFReader
 
+    if source not in SOURCES_BIN:
+        raise InputError(None, None, f"--source {source!r}: expected one of {', '.join(SOURCES_BIN)}")
     inst = 0 if instance is None else int(instance)
     if _no_header_in_head(path, (b"\xa3\x95",)):  # DataFlash message header (DFReader_binary HEAD1, HEAD2)
         raise InputError(
@@ -260,6 +315,25 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     names = set(getattr(log, "name_to_id", {}))
     imu_name = "IMU" if inst == 0 or "IMU" in names and f"IMU{inst + 1}" not in names else f"IMU{inst + 1}"
     mag_name = "MAG" if inst == 0 or "MAG" in names and f"MAG{inst + 1}" not in names else f"MAG{inst + 1}"
+    # ACC/GYR (ACC1-3/GYR1-3 before the I field): where asked, or where the log has no IMU records
+    raw_names = {k: m if m in names else f"{m}{inst + 1}" for k, m in DF_RAW.items()}
+    has_imu = _df_has(log, "IMU", "IMU2", "IMU3")
+    has_raw = _df_has(log, "ACC", "GYR", *(f"{m}{n}" for m in DF_RAW.values() for n in (1, 2, 3)))
+    if source == "raw" and not has_raw:
+        with contextlib.suppress(Exception):
+            log.close()
+        raise InputError(
+            path,
+            None,
+            "--source raw: the log has no ACC or GYR records (ArduPilot logs them with LOG_BITMASK's IMU_RAW "
+            "or INS_RAW_LOG_OPT); its IMU records are read without --source",
+        )
+    use_raw = source == "raw" or (source == "auto" and not has_imu and has_raw)
+    # the message each kind is read from
+    src_of = (
+        {"accel": raw_names["accel"], "gyro": raw_names["gyro"]} if use_raw else {"accel": imu_name, "gyro": imu_name}
+    )
+    src_of["mag"] = mag_name
     rows: dict[str, np.ndarray] = {}
     temps = None
     params: dict[str, float] = {}
@@ -267,28 +341,33 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
     gps_utc_offset = None
     fixes: list[tuple[float, float, float]] = []
     units = {}
-    instances_seen: dict[str, set] = {imu_name: set(), mag_name: set()}
-    inst_of: dict[str, int] = {imu_name: inst, mag_name: inst}  # the instance read of each
+    instances_seen: dict[str, set] = {n: set() for n in (imu_name, mag_name, *src_of.values())}
+    inst_of: dict[str, int] = dict.fromkeys(instances_seen, inst)  # the instance read of each
     mag_ofs = None
     try:
         # The bulk (IMU, MAG: hundreds of thousands of fixed-size records) is decoded at once
         # from pymavlink's own index (offsets per message type) and format table; a DFMessage
         # per record cost ~100 µs each. Parameters and GPS, a few hundred, the same way.
-        cols = {name: _df_columns(log, name) for name in (imu_name, mag_name, "PARM", "GPS")}
+        cols = {name: _df_columns(log, name) for name in (imu_name, mag_name, *src_of.values(), "PARM", "GPS")}
         first_ofs = math.inf  # file offset of the first sample used: parameters before it are in use
-        for name, kind_cols in ((imu_name, ("gyro", "accel")), (mag_name, ("mag",))):
+        reads = (
+            ((src_of["gyro"], ("gyro",)), (src_of["accel"], ("accel",)), (mag_name, ("mag",)))
+            if use_raw
+            else ((imu_name, ("gyro", "accel")), (mag_name, ("mag",)))
+        )
+        for name, kind_cols in reads:
             c = cols[name]
             if c is None:
                 continue
             keep = np.ones(len(c["_offset"]), dtype=bool)
-            if "I" not in c and name in ("IMU", "MAG") and inst != 0:
+            if "I" not in c and name in ("IMU", "MAG", *DF_RAW.values()) and inst != 0:
                 # a log before the I field: IMU (MAG) is instance 0 alone, the others are IMU2, IMU3
                 # (MAG2, MAG3), here not in its formats; instance 0 read as the one asked went to its slot
                 instances_seen[name].add(0)
                 continue
             if "I" in c:
                 instances_seen[name].update(int(i) for i in np.unique(c["I"]))
-                if name in ("IMU", "MAG"):
+                if name in ("IMU", "MAG", *DF_RAW.values()):
                     # without --instance, a log whose sensors start above 0 is read from its first
                     # (as PX4's raw topics are), not refused as if --instance 0 had been asked
                     first = inst if instance is not None or inst in instances_seen[name] else min(instances_seen[name])
@@ -300,6 +379,9 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             fmt = log.formats[log.name_to_id[name]]
             # TimeUS: µs since boot; logs before ArduPilot 3.3 (2015) have TimeMS, ms since boot
             t_us = c["TimeUS"][keep].astype(np.float64) if "TimeUS" in c else c["TimeMS"][keep] * 1000.0
+            if "SampleUS" in c:  # ACC/GYR: the time the sensor took the sample (TimeUS where the driver gives none)
+                sample_us = c["SampleUS"][keep].astype(np.float64)
+                t_us = np.where(sample_us > 0, sample_us, t_us)
             fields = {
                 "gyro": ("GyrX", "GyrY", "GyrZ"),
                 "accel": ("AccX", "AccY", "AccZ"),
@@ -308,7 +390,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             for kind in kind_cols:
                 rows[kind] = np.column_stack([t_us] + [c[f][keep].astype(np.float64) for f in fields[kind]])
                 units[kind] = fmt.get_unit(fields[kind][0]) if fmt.units else ""
-            if name == imu_name:
+            if name == imu_name and not use_raw:
                 temps = c["T"][keep].astype(np.float64) if "T" in c else np.full(len(t_us), math.nan)
             if name == mag_name and all(f in c for f in ("OfsX", "OfsY", "OfsZ")):
                 # the offsets each MAG sample was corrected with (compass.get_offsets: COMPASS_OFS in use)
@@ -336,7 +418,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         available = {}  # the instances the log holds, for the refusal of one it lacks
         if not rows:
-            for base in ("IMU", "MAG"):
+            for base in ("IMU", "MAG", *(DF_RAW.values() if use_raw else ())):
                 c = cols[base] if base in cols else _df_columns(log, base)
                 have = _df_instances(
                     log, c, {int(i) for i in np.unique(c["I"])} if c is not None and "I" in c else set(), base
@@ -347,13 +429,17 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
         cut = _df_cut(log)
         several = None
         if instance is None:  # the first instance read by default: say so where the log has others
-            reads = {inst_of[n] for n, k in ((imu_name, "gyro"), (mag_name, "mag")) if k in rows}
+            imu_read = src_of["gyro"]
+            read_inst = {inst_of[n] for n, k in ((imu_read, "gyro"), (mag_name, "mag")) if k in rows}
+            base = DF_RAW["gyro"] if use_raw else "IMU"
             several = several_instances_warning(
-                {  # without --instance, imu_name and mag_name are IMU and MAG
-                    "IMUs": _df_instances(log, cols["IMU"], instances_seen["IMU"], "IMU"),
+                {  # without --instance, the names read are IMU (GYR) and MAG
+                    "IMUs": _df_instances(log, cols.get(base), instances_seen.get(base, set()), base),
                     "compasses": _df_instances(log, cols["MAG"], instances_seen["MAG"], "MAG"),
                 },
-                next(iter(reads)) if len(reads) == 1 else f"{inst_of[imu_name]} (IMU), {inst_of[mag_name]} (compass)",
+                next(iter(read_inst))
+                if len(read_inst) == 1
+                else f"{inst_of[imu_read]} (IMU), {inst_of[mag_name]} (compass)",
             )
     except InputError:
         raise
@@ -385,7 +471,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
                 None,
                 f"{kind} unit {units[kind]!r} in the log's FMTU is not one the station knows",
             )
-        name = mag_name if kind == "mag" else imu_name
+        name = src_of[kind]
         stream = Stream(
             kind,
             arr[:, 0] * 1e-6,
@@ -394,14 +480,19 @@ def read_bin(path, *, instance: int | None = None, kinds=None) -> Imported:
             f"{name}[{inst_of[name]}]",
             _ap_device_id(params, kind, inst_of[name]),
             inst_of[name],
-            temps if kind == "accel" else None,
+            temps if kind == "accel" and not use_raw else None,
         )
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
     warnings = [w for w in (skipped.warning(), cut, several) if w]
+    if use_raw:
+        warnings += _raw_notes(params, {k: inst_of[src_of[k]] for k in DF_RAW if k in streams})
+    elif has_raw and source == "auto" and ("accel" in streams or "gyro" in streams):
+        warnings.append("the log also has ACC/GYR, every sample at the sensor's rate: --source raw reads them")
     if instance is not None:  # the instance asked, where one of IMU/MAG lacks it (as PX4's raw topics say it)
-        for name, kind in ((imu_name, "accel and gyro"), (mag_name, "mag")):
+        said = ((src_of["gyro"], "gyro"), (src_of["accel"], "accel")) if use_raw else ((imu_name, "accel and gyro"),)
+        for name, kind in (*said, (mag_name, "mag")):
             have = sorted(instances_seen[name])
             if have and inst not in have:
                 warnings.append(

@@ -791,6 +791,18 @@ def read_plain(
                     "numbers an array's columns; if it is that header, map the columns by those numbers "
                     "(--map ax=0,...)"
                 )
+    if is_header and by_number and "0" not in mapping.values() and header[0] and _numbered_channels(header):
+        # 'abc,0,1,2,3' under --map ax=1,ay=2,az=3: a data row with a bad first field, or pandas'
+        # header of numbered columns with its index named 'abc'. --map's numbers count the file's
+        # columns from 1 and none is 0 (pandas' first column), so they are no names of this line:
+        # read as names they would take other columns than the ones asked for
+        raise InputError(
+            path,
+            hi,
+            f"field 1: {header[0][:40]!r} is not a number, so the line is no data row; nor is it read as pandas' "
+            f"header of numbered columns (index {header[0][:40]!r}, columns 0-{len(header) - 2}), as --map's "
+            "numbers have no 0: correct the field, or map by the header's names (--map ax=0,...)",
+        )
     if commented is not None:
         # numpy.savetxt's header= ('# t ax ay az' above the numbers), read as numpy.genfromtxt(names=True)
         # reads it: the names of the data under it; that first data line is data

@@ -63,8 +63,8 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
     """The streams and metadata of ``path`` read as ``fmt``."""
     if fmt not in FORMATS:
         raise InputError(None, None, f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
-    if fmt != "px4" and opts.source != "auto":
-        raise InputError(None, None, "--source applies to PX4 logs only")
+    if fmt not in ("px4", "ardupilot") and opts.source != "auto":
+        raise InputError(None, None, "--source applies to PX4 and ArduPilot DataFlash logs only")
     if fmt not in ("px4", "ardupilot", "tlog") and opts.instance is not None:
         raise InputError(None, None, "--instance applies to PX4, ArduPilot and MAVLink logs only")
     if fmt != "ros" and opts.topics:
@@ -92,8 +92,9 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
     if fmt in ("ardupilot", "tlog"):
         from station.importers import ardupilot
 
-        reader = ardupilot.read_bin if fmt == "ardupilot" else ardupilot.read_tlog
-        return reader(path, instance=opts.instance)
+        if fmt == "ardupilot":
+            return ardupilot.read_bin(path, instance=opts.instance, source=opts.source)
+        return ardupilot.read_tlog(path, instance=opts.instance)
     if fmt == "ros":
         from station.importers import ros
 

@@ -92,7 +92,8 @@ def add_arguments(parser: argparse.ArgumentParser, *, for_import: bool = False) 
         choices=("auto", "raw", "combined"),
         default="auto",
         help="PX4: raw sensor_* topics (before the board's calibration) or sensor_combined "
-        "(after it); auto = raw where logged",
+        "(after it); auto = raw where logged. ArduPilot DataFlash: raw = ACC/GYR (every sample, "
+        "corrected as IMU is), combined = IMU; auto = IMU where logged",
     )
     g.add_argument(
         "--topic",

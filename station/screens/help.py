@@ -36,13 +36,18 @@ HELP = """\
 [b]Noise run[/]   as P4; its result: t accuracy asked · e export · n new run
 [b]Results[/]     s save · x reject · d discard · e export (CSV + JSON) ·
             r report · g diagnose · n new run · l the device's limits
-            · F2 history
+            · F2 history · w the notes above the tables (a long
+            warning goes on below them: ↓ End scroll, w again back)
 [b]History[/]     up/down device · p next parameter · tab to the calibrations,
             g diagnose the one under the cursor · l the device's limits
             · i its recalibration interval (the line over its
             calibrations says when it falls due) · e the one under the
             cursor for a flight controller (ArduPilot .param, PX4,
             QGroundControl .params, C header, JSON) · escape back
+[b]Diagnose[/]    (g on Results or History, F6 on Import) the effects in the
+            capture that the calibration model leaves out, named as
+            `station diagnose` names them · ↑ ↓ scroll the report ·
+            esc stops it and goes back (nothing is saved or changed)
 
 [b]P1 in short[/]  Put the unit in each of the 12 positions the drawing
 shows and let go. When it is still and in position the station waits a

@@ -12,6 +12,7 @@ from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical, VerticalScroll
+from textual.css.query import NoMatches
 from textual.screen import Screen
 from textual.widgets import DataTable, Static
 
@@ -60,6 +61,10 @@ class ResultsScreen(NoticesMixin, Screen):
     AUTO_FOCUS = "#params"
     CSS = """
     ResultsScreen #notes { height: auto; max-height: 7; }
+    /* the notes take the keys (w) where a long warning goes on below their 7 lines: shown as the
+       tables show it, and the line under them says how many lines are left and how to reach them */
+    ResultsScreen #notes:focus { border-left: thick $accent; }
+    ResultsScreen #more { height: auto; padding: 0 1; color: $warning; }
     ResultsScreen #summary { height: auto; padding: 0 1; }
     ResultsScreen #tables { height: 1fr; }
     ResultsScreen DataTable:focus { border-left: thick $accent; }
@@ -85,6 +90,7 @@ class ResultsScreen(NoticesMixin, Screen):
         Binding("n", "new", "New run"),
         Binding("f2", "history", "History", show=False),  # F1 lists it: the footer keeps to 80 columns
         Binding("l", "limits", "Limits", show=False),  # F1 lists it too
+        Binding("w", "notes", "Notes", show=False),  # F1 lists it; the line under cut notes says it
     ]
 
     def __init__(self, capture, result: dict | None, error: str | None = None, previous: dict | None = None):
@@ -105,6 +111,7 @@ class ResultsScreen(NoticesMixin, Screen):
         yield TitleBar(registry.result_title(proc))
         with VerticalScroll(id="notes"):
             yield Static("", id="summary")
+        yield Static("", id="more")
         with Vertical(id="tables"):
             yield DataTable(id="params", zebra_stripes=True, cursor_type="row")
             yield DataTable(id="residuals", zebra_stripes=True, cursor_type="row")
@@ -113,7 +120,38 @@ class ResultsScreen(NoticesMixin, Screen):
         yield footer()
 
     def on_mount(self) -> None:
+        notes = self.query_one("#notes", VerticalScroll)
+        self.query_one("#more", Static).display = False
+        self.watch(notes, "scroll_y", lambda _y: self._more(), init=False)
+        self.watch(notes, "virtual_size", lambda _s: self._more(), init=False)
         self.load_device()
+
+    def on_resize(self) -> None:
+        self.call_after_refresh(self._more)
+
+    def _more(self) -> None:
+        """The line under the notes while some of them are below their box (80x24: a second
+        long warning went on out of sight, with nothing but a 2-cell scroll bar to say so)."""
+        try:  # (called after a refresh: the screen may be gone by then)
+            notes = self.query_one("#notes", VerticalScroll)
+            more = self.query_one("#more", Static)
+        except NoMatches:
+            return
+        hidden = round(notes.max_scroll_y - notes.scroll_y)
+        more.display = hidden > 0
+        if hidden > 0:
+            where = "↓ or end scrolls them" if notes.has_focus else "[b]w[/] goes to them, ↓ scrolls"
+            more.update(f"▼ {hidden} more line{'s' if hidden != 1 else ''} of the notes above: {where}")
+
+    def action_notes(self) -> None:
+        """The notes above the tables take the keys (↑ ↓ PgUp PgDn End scroll them); again: back
+        to the parameters."""
+        notes = self.query_one("#notes", VerticalScroll)
+        if notes.has_focus:
+            self.query_one("#params", DataTable).focus()
+        else:
+            notes.focus()
+        self.call_after_refresh(self._more)
 
     @work(thread=True, exclusive=True, group="results-db", exit_on_error=False, description="read the device")
     def load_device(self) -> None:
