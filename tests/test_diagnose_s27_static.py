@@ -71,3 +71,18 @@ def test_p4_mode_a_on_several_positions_names_g_sensitivity(tmp_path):
     ('one static orientation: the specific force does not change') and named nothing."""
     res = _diagnose(_write(tmp_path, "P4", "g_sensitivity", 702003))
     assert "g_sensitivity" in res["verdict"], (res["verdict"], res["candidates"])
+
+
+def test_p1_bias_step_during_a_hold_is_named_not_left_as_an_outlier_part(tmp_path):
+    """A P1 time series of 13 holds (125 Hz, g, a temperature that cycles) with a bias step at
+    10σ that falls during a hold, between two of its parts. The step scan tried places between
+    holds only: there a step (3 + its place) takes every hold mean the baseline leaves (13 − 9)
+    and explains little (deviance 19 against a bound of 46); nothing was named and the hold's
+    part that holds the step was reported as an outlier (6.9σ), as if a knock. A step moves
+    every later hold: tried between the parts of each hold as well, it is named, and no part
+    is left an outlier."""
+    res = _diagnose(_write(tmp_path, "P1", "bias_step", 700013))
+    assert "residual:time" in res["verdict"], (res["verdict"], res["candidates"])
+    step = next(e for e in res["effects"] if e["name"] == "residual:time")
+    assert step["shape"] == "step", step
+    assert not [q for q in res["quality"] if q["kind"] == "outlier"], res["quality"]

@@ -126,6 +126,10 @@ class Problem:
     # driver → where a step is likeliest (P1: between holds in time, where the unit is handled);
     # the step scan's grid is moved to the nearest of them and refined over them as well
     step_places: dict = field(default_factory=dict)
+    # driver → further places a step may fall (P1: between the parts of a hold, a knock or a
+    # switched current during a hold): the grid is moved to the nearest of them as well, those
+    # members counted as tests too, and the refinement runs over them
+    step_places_within: dict = field(default_factory=dict)
     generic_scale: float = 2.0  # the generic extension's margin over the canonical test (nulls)
     fold_sets: dict = field(default_factory=dict)  # other CV groupings by name (e.g. "time": blocks within holds)
     dead_rtol: float = DEAD_RTOL  # a candidate column less outside the baseline's span than this: dead
@@ -820,8 +824,21 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
             grid = lo + GENERIC_STEP_GRID * span
             places = np.asarray(problem.step_places.get(drv, []), float)
             places = places[(places > lo) & (places < hi)]
-            if places.size:  # each grid value moved to the nearest place a step is likeliest
-                grid = np.unique(places[np.argmin(np.abs(grid[:, None] - places[None, :]), axis=1)])
+            within = np.asarray(problem.step_places_within.get(drv, []), float)
+            within = within[(within > lo) & (within < hi)]
+
+            def snap(grid, at):  # each grid value moved to the nearest of the places ``at``
+                return np.unique(at[np.argmin(np.abs(grid[:, None] - at[None, :]), axis=1)])
+
+            if places.size or within.size:
+                # a step between holds (where the unit is handled) and one within a hold both get their
+                # own grid: a step within a hold sits between two parts, and a grid of places between
+                # holds only never reached it (a P1 step of 10σ in a hold of 13: ΔBIC 19 at the best
+                # place between holds, 153 between the hold's parts)
+                grid = np.union1d(
+                    snap(grid, places) if places.size else grid, snap(grid, within) if within.size else []
+                )
+                places = np.union1d(places, within)
 
             def refine(d, step=step, dx=dx, places=places):
                 near = places[np.abs(places - d["at"]) <= dx]

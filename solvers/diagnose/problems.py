@@ -493,6 +493,17 @@ def _between_holds(t_s, pos):
     return 0.5 * (ts[change] + ts[change + 1])
 
 
+def _between_parts(t_s, pos):
+    """Times between consecutive parts of one hold (midway between their time stamps): where a
+    step during a hold (a knock, a current switched on) falls between the parts it moves and
+    those it does not."""
+    t = np.asarray(t_s, float)
+    order = np.argsort(t, kind="stable")
+    ts, ps = t[order], np.asarray(pos)[order]
+    same = np.flatnonzero(ps[1:] == ps[:-1])
+    return 0.5 * (ts[same] + ts[same + 1])
+
+
 def tabletop_problem(
     V,
     std,
@@ -666,6 +677,7 @@ def tabletop_problem(
         fn = (Vn - b0) @ Kinv.T
         prob.generic = [(cond_n, {"time": cond_n.t_s, "temperature": cond_n.temp_c, "input_axis": fn})]
         prob.step_places = {"time": _between_holds(cond_n.t_s, pos_n)}
+        prob.step_places_within = {"time": _between_parts(cond_n.t_s, pos_n)}
         if table:
             prob.generic.append((cond, {"time": t, "temperature": T, "input_axis": f0}))
     else:
