@@ -69,41 +69,12 @@ ARDUPILOT_NAMES = (
         "AHRS_ORIENTATION",
     }
 )
+PX4_CAL = ("ID", "PRIO", "ROT", "XOFF", "YOFF", "ZOFF")  # every CAL_<sensor>n_ has these
+PX4_SCALES = ("XSCALE", "YSCALE", "ZSCALE")
 PX4_SOURCE_NAMES = (
-    {
-        f"CAL_ACC{i}_{s}"
-        for i in range(4)
-        for s in (
-            "ID",
-            "PRIO",
-            "ROT",
-            "XOFF",
-            "YOFF",
-            "ZOFF",
-            "XSCALE",
-            "YSCALE",
-            "ZSCALE",
-        )
-    }
-    | {f"CAL_GYRO{i}_{s}" for i in range(4) for s in ("ID", "PRIO", "ROT", "XOFF", "YOFF", "ZOFF")}
-    | {
-        f"CAL_MAG{i}_{s}"
-        for i in range(4)
-        for s in (
-            "ID",
-            "PRIO",
-            "ROT",
-            "XOFF",
-            "YOFF",
-            "ZOFF",
-            "XSCALE",
-            "YSCALE",
-            "ZSCALE",
-            "XODIAG",
-            "YODIAG",
-            "ZODIAG",
-        )
-    }
+    {f"CAL_ACC{i}_{s}" for i in range(4) for s in PX4_CAL + PX4_SCALES}
+    | {f"CAL_GYRO{i}_{s}" for i in range(4) for s in PX4_CAL}
+    | {f"CAL_MAG{i}_{s}" for i in range(4) for s in PX4_CAL + PX4_SCALES + ("XODIAG", "YODIAG", "ZODIAG")}
     | {"SENS_BOARD_ROT", "SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"}
 )
 
@@ -396,27 +367,8 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     (mGauss, AP_Compass_Backend::correct_field) -> capture of d (gauss) marked corrected ->
     calibrate -> compose. The truth in the firmware's form: OFS = -h (mGauss), DIA/ODI = the
     symmetric part of W (from mGauss to mGauss), the same |m| as the simulator's W."""
-    from solvers.simulate import simulate
-
-    sim = simulate("compass", seed=2)
-    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
-    o_old = np.array([-35.0, 52.0, 18.0])
     P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
-    d_gauss = (r_mG + o_old) @ P_old.T / 1000.0
-    meta = dict(
-        sim.meta,
-        mag_unit="gauss",
-        corrected="true",
-        firmware="ardupilot",
-        mag_device_id="97539",
-        **{"param.AHRS_ORIENTATION": "0", "param.COMPASS_DEV_ID": "97539"},
-        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
-    )
-    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
-    path = tmp_path / "mag.csv"
-    write_capture(path, Capture(meta=meta, columns=cols, path=path))
+    path, sim = _ardupilot_compass_capture(tmp_path, P_old, device_id="97539")
     db = str(tmp_path / "s.db")
     code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
     assert code == 0, err
@@ -626,12 +578,12 @@ def test_qgc_vehicle_ids_outside_mavlinks_byte_are_refused(capsys, db, vehicle):
     assert code == 0 and "255\t0\tCAL_GYRO0_ID" in out, err
 
 
-def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None, scale=None):
+def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None, scale=None, device_id=None):
     """Simulated P3 raw field -> ArduPilot's correction d = P_old (s (r + o_old)) (mGauss,
     AP_Compass_Backend::correct_field) -> capture of d marked corrected, with the parameters in
     use (DIA as ``dia_in_use`` when given: the parameter values, P_old the matrix they give;
     COMPASS_SCALE ``scale`` when given, s = scale where Compass::have_scale_factor holds it
-    valid, 0.85 to 1.4, else 1)."""
+    valid, 0.85 to 1.4, else 1; the magnetometer's ``device_id`` and COMPASS_DEV_ID when given)."""
     from solvers.simulate import simulate
 
     sim = simulate("compass", seed=2)
@@ -641,20 +593,22 @@ def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None, scale=None):
     d_gauss = applied * (r_mG + o_old) @ P_old.T / 1000.0
     dia = np.diag(P_old) if dia_in_use is None else dia_in_use
     in_use = {"param.AHRS_ORIENTATION": "0"} | ({} if scale is None else {"param.COMPASS_SCALE": repr(scale)})
-    meta = dict(
-        sim.meta,
-        mag_unit="gauss",
-        corrected="true",
-        firmware="ardupilot",
-        **in_use,
-        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_DIA_{a}": repr(float(dia[i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
-    )
+    if device_id is not None:
+        in_use |= {"mag_device_id": device_id, "param.COMPASS_DEV_ID": device_id}
+    in_use |= {f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)}
+    in_use |= {f"param.COMPASS_DIA_{a}": repr(float(dia[i])) for i, a in enumerate(XYZ)}
+    in_use |= {f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))}
+    return corrected_compass_capture(tmp_path / "mag.csv", sim, d_gauss, "ardupilot", in_use), sim
+
+
+def corrected_compass_capture(path, sim, d_gauss, firmware: str, in_use: dict):
+    """The simulated compass capture ``sim`` with the field the board handed over, ``d_gauss``
+    (already corrected by it), marked corrected by ``firmware`` with the metadata ``in_use``
+    (its parameters as param.NAME): written to ``path``, which is returned."""
+    meta = dict(sim.meta, mag_unit="gauss", corrected="true", firmware=firmware, **in_use)
     cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
-    path = tmp_path / "mag.csv"
     write_capture(path, Capture(meta=meta, columns=cols, path=path))
-    return path, sim
+    return path
 
 
 def test_a_partly_zero_compass_diagonal_in_use_is_a_broken_calibration_not_identity(capsys, tmp_path):
