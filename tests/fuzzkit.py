@@ -730,17 +730,19 @@ def real_bases(folder: str, shared: str | None = None, max_rows: int = REAL_MAX_
     return out
 
 
-def _first_data_index(lines: list[str]) -> int | None:
+def _lines_and_header(text: str) -> tuple[list[str], int]:
+    """The text's lines and the index of its header row; ValueError (this mutation does not
+    apply) when there is no header with a line after it."""
+    lines = _lines(text)
     h = _data_start(lines) - 1
-    return h if 0 <= h < len(lines) - 1 else None
+    if not 0 <= h < len(lines) - 1:
+        raise ValueError
+    return lines, h
 
 
 def m_header_again(text, rng):
     """The header row repeated among the data (two captures pasted into one)."""
-    lines = _lines(text)
-    h = _first_data_index(lines)
-    if h is None:
-        raise ValueError
+    lines, h = _lines_and_header(text)
     i = rng.randrange(h + 1, len(lines))
     lines.insert(i, lines[h])
     return "\n".join(lines)
@@ -762,9 +764,8 @@ def m_meta_twice(text, rng):
 
 def m_time(text, rng):
     """The time column duplicated, run backwards, frozen or jumped (a logger's clock)."""
-    lines = _lines(text)
-    h = _first_data_index(lines)
-    if h is None or "t" not in lines[h].split(","):
+    lines, h = _lines_and_header(text)
+    if "t" not in lines[h].split(","):
         raise ValueError
     j = lines[h].split(",").index("t")
     rows = [i for i in range(h + 1, len(lines)) if lines[i]]
@@ -811,10 +812,7 @@ def m_huge_line(text, rng):
 
 def m_truncate_mid_line(text, rng):
     """Cut inside a data line (a copy stopped part-way): the last line without its end."""
-    lines = _lines(text)
-    h = _first_data_index(lines)
-    if h is None:
-        raise ValueError
+    lines, h = _lines_and_header(text)
     i = rng.randrange(h + 1, len(lines))
     if not lines[i]:
         raise ValueError
