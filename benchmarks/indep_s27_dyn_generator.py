@@ -181,11 +181,9 @@ def _meta(procedure, device, site, date, rate, **units) -> dict:
     return {**meta, "date": date, "sample_rate_hz": rate}
 
 
-def _truth(procedure, seed, effect, target_z, z, size, z_after, **more) -> dict:
-    """The truth file: what was hidden, at which z, what other candidates leave, then ``more``."""
-    return dict(
-        procedure=procedure, seed=seed, effect=effect, target_z=target_z, z=z, size=size, z_after=z_after, **more
-    )
+def _truth(procedure, seed, effect, target_z, z, size, z_after) -> dict:
+    """The truth file's head: what was hidden, at which z, what other candidates leave."""
+    return dict(procedure=procedure, seed=seed, effect=effect, target_z=target_z, z=z, size=size, z_after=z_after)
 
 
 def _write_capture(path, meta, cols, data, fmts):
@@ -456,14 +454,8 @@ def generate_compass(seed, effect, target_z):
     fmts.update({"t": "%.4f", "mx": mfmt, "my": mfmt, "mz": mfmt, "temp_c": "%.4f", "position": "%.0f"})
     units = {"accel_unit": accel_unit, "gyro_unit": gyro_unit, "mag_unit": unit}
     meta = _meta("compass", f"MAG-{seed % 100000:05d}", site, date.isoformat(), rate, **units)
-    truth = _truth(
-        "compass",
-        seed,
-        effect,
-        target_z,
-        zval,
-        size,
-        z_after,
+    truth = _truth("compass", seed, effect, target_z, zval, size, z_after)
+    truth.update(
         site=site[0],
         part=part["part"],
         mode=mode,
@@ -694,14 +686,8 @@ def generate_ldv(seed, effect, target_z, **force):
     site = SITES[int(rng.integers(len(SITES)))]
     date = dt.date(2024, 1, 1) + dt.timedelta(days=int(rng.integers(0, 900)))
     meta = _meta("ldv", f"LDV-{seed % 100000:05d}", site, date.isoformat(), rate)
-    truth = _truth(
-        "ldv",
-        seed,
-        effect,
-        target_z,
-        zval,
-        size,
-        z_after,
+    truth = _truth("ldv", seed, effect, target_z, zval, size, z_after)
+    truth.update(
         vehicle=vehicle,
         rate_hz=rate,
         rows=n,
