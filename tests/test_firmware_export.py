@@ -96,6 +96,14 @@ def names_in(text: str, fmt: str) -> dict[str, float]:
     return out
 
 
+def _saved(capsys, tmp_path, path, *opts) -> tuple[dict, str]:
+    """``calibrate PATH --json --save`` into tmp_path/s.db (exit 0 asserted): its result, the database."""
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db, *opts)
+    assert code == 0, err
+    return json.loads(out), db
+
+
 def _save(db, result, **meta):
     m, cols = small_capture(device=result["device"], procedure=result["procedure"])
     m.update(meta)
@@ -265,10 +273,7 @@ def _board_corrected_capture(tmp_path, fmt: str, seed: int):
 @pytest.mark.parametrize("fmt,seed", [("ardupilot", 3), ("px4", 4)])
 def test_composed_accel_parameters_reproduce_the_truth(capsys, tmp_path, fmt, seed):
     path, o_true, s_true, _, s_old = _board_corrected_capture(tmp_path, fmt, seed)
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", fmt, "--db", db)
     assert code == 0, err
     p = names_in(text, fmt)
@@ -369,10 +374,7 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     symmetric part of W (from mGauss to mGauss), the same |m| as the simulator's W."""
     P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
     path, sim = _ardupilot_compass_capture(tmp_path, P_old, device_id="97539")
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 0, err
     p = names_in(text, "ardupilot")
@@ -416,10 +418,7 @@ def test_composed_compass_offsets_follow_whether_ardupilot_applies_compass_scale
     P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
     applied = scale if 0.85 <= scale <= 1.4 else 1.0  # Compass::have_scale_factor
     path, sim = _ardupilot_compass_capture(tmp_path, P_old, scale=scale)
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 0, err
     p = names_in(text, "ardupilot")
@@ -459,10 +458,7 @@ def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_pa
     cols = dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])
     path = tmp_path / "mag.csv"
     write_capture(path, Capture(meta=meta, columns=cols, path=path))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", "px4", "--db", db)
     assert code == 0, err
     p = names_in(text, "px4")
@@ -548,11 +544,9 @@ def test_px4_magnetometer_for_a_firmware_without_odiag_writes_the_diagonal_only(
     )
     path = tmp_path / "mag.csv"
     write_capture(path, Capture(meta=meta, columns=dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
+    res, db = _saved(capsys, tmp_path, path)
     for fmt in ("px4", "qgc"):
-        code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", fmt, "--db", db)
+        code, text, err = run(capsys, "export", res["calibration_id"], "--format", fmt, "--db", db)
         assert code == 0, err
         p = names_in(text, fmt)
         assert not [n for n in p if "ODIAG" in n or "PRIO" in n], p
@@ -619,10 +613,8 @@ def test_a_partly_zero_compass_diagonal_in_use_is_a_broken_calibration_not_ident
     multiplied its y axis by 0 (only the off-diagonal terms carry it): refused in one line."""
     P_used = np.array([[1.03, 0.3, -0.01], [0.3, 0.0, 0.3], [-0.01, 0.3, 1.01]])  # what the firmware applied
     path, _ = _ardupilot_compass_capture(tmp_path, P_used)
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db, "--override", "test")
-    assert code == 0, err
-    cid = json.loads(out)["calibration_id"]
+    res, db = _saved(capsys, tmp_path, path, "--override", "test")
+    cid = res["calibration_id"]
     code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert "COMPASS_DIA_Y = 0 in use" in err and "only when all three are 0" in err and "broken calibration" in err
@@ -632,10 +624,8 @@ def test_an_all_zero_compass_diagonal_in_use_is_the_identity_with_the_off_diagon
     """All three DIA zero (never set): correct_field uses 1, 1, 1 and still applies ODI."""
     P_used = np.array([[1.0, 0.02, -0.01], [0.02, 1.0, 0.015], [-0.01, 0.015, 1.0]])
     path, sim = _ardupilot_compass_capture(tmp_path, P_used, dia_in_use=np.zeros(3))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    res, db = _saved(capsys, tmp_path, path)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 0, err
     p = names_in(text, "ardupilot")
     h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
@@ -653,10 +643,8 @@ def test_a_partly_zero_accelerometer_scale_in_use_is_refused_not_read_as_one(cap
     cap = read_capture(path)
     p = tmp_path / "z.csv"
     write_capture(p, Capture(meta=dict(cap.meta, **{"param.INS_ACCSCAL_Z": "0"}), columns=cap.columns, path=p))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
-    assert code == 0, err
-    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    res, db = _saved(capsys, tmp_path, p)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert "INS_ACCSCAL_Z = 0 in use" in err and "AP_InertialSensor::init" in err
 
@@ -674,10 +662,8 @@ def test_px4_with_two_sensors_in_use_and_none_named_is_refused_not_slot_0(capsys
     meta.update({f"param.CAL_ACC1_{a}SCALE": "1" for a in XYZ})
     p = tmp_path / "two.csv"
     write_capture(p, Capture(meta=meta, columns=cap.columns, path=p))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
-    assert code == 0, err
-    cid = json.loads(out)["calibration_id"]
+    res, db = _saved(capsys, tmp_path, p)
+    cid = res["calibration_id"]
     code, text, err = run(capsys, "export", cid, "--format", "px4", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert "CAL_ACC0_ID = 1310988 and CAL_ACC1_ID = 1441792 in use" in err and "--instance N" in err
@@ -705,10 +691,8 @@ def test_parameters_changed_during_the_log_are_not_composed_with(capsys, tmp_pat
     cap = read_capture(path)
     p = tmp_path / "changed.csv"
     write_capture(p, Capture(meta=dict(cap.meta, params_changed=changed), columns=cap.columns, path=p))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
-    assert code == 0, err
-    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    res, db = _saved(capsys, tmp_path, p)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert says in err and "while the capture's data were logged" in err
 

@@ -11,25 +11,19 @@ tests/test_firmware_export.py.
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
 from station.capture import Capture, read_capture, write_capture
-from tests.test_firmware_export import XYZ, _board_corrected_capture, corrected_compass_capture, run
+from tests.test_firmware_export import XYZ, _board_corrected_capture, _saved, corrected_compass_capture, run
 
 PX4_SCALE_MIN, PX4_SCALE_MAX = 0.1, 3.0  # module.yaml, above
 
 
 def _export(capsys, tmp_path, path, fmt):
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
+    res, db = _saved(capsys, tmp_path, path)
     out_file = tmp_path / f"out.{fmt}"
-    code, out, err = run(
-        capsys, "export", json.loads(out)["calibration_id"], "--format", fmt, "--db", db, "-o", out_file
-    )
+    code, out, err = run(capsys, "export", res["calibration_id"], "--format", fmt, "--db", db, "-o", out_file)
     return code, out, err, out_file
 
 
