@@ -307,10 +307,18 @@ MUTATORS = [
 
 def mutate(text: str, rng: random.Random) -> tuple[str, bytes]:
     """(names of the mutators applied, the mutated file's bytes): one to three mutations."""
+    return _mutate_with(text, rng, MUTATORS, [1, 1, 1, 2, 3], bytes_end=False)
+
+
+def _mutate_with(text: str, rng: random.Random, mutators: list, counts: list[int], bytes_end: bool):
+    """(names, bytes) of rng.choice(counts) mutations drawn from ``mutators``; ``bytes_end``: a
+    mutation that made bytes is the last (else the next sees them decoded, bad bytes replaced)."""
     names, data = [], text
-    for _ in range(rng.choice([1, 1, 1, 2, 3])):
+    for _ in range(rng.choice(counts)):
+        if bytes_end and isinstance(data, bytes):
+            break
         for _attempt in range(20):  # a mutator with nothing to act on (no data line left) gives way to another
-            m = rng.choice(MUTATORS)
+            m = rng.choice(mutators)
             try:
                 out = m(data if isinstance(data, str) else data.decode("utf-8", "replace"), rng)
             except (ValueError, IndexError):
@@ -849,20 +857,7 @@ MUTATORS_HOSTILE = MUTATORS + [
 def mutate_hostile(text: str, rng: random.Random) -> tuple[str, bytes]:
     """:func:`mutate` with :data:`MUTATORS_HOSTILE`: one to three mutations (a mutation that made
     bytes no UTF-8 text reads is the last: the next would see only its replacement characters)."""
-    names, data = [], text
-    for _ in range(rng.choice([1, 1, 2, 3])):
-        if isinstance(data, bytes):
-            break
-        for _attempt in range(20):
-            m = rng.choice(MUTATORS_HOSTILE)
-            try:
-                out = m(data, rng)
-            except (ValueError, IndexError):
-                continue
-            names.append(m.__name__[2:])
-            data = out
-            break
-    return "+".join(names) or "none", (data if isinstance(data, bytes) else data.encode("utf-8", "surrogatepass"))
+    return _mutate_with(text, rng, MUTATORS_HOSTILE, [1, 1, 2, 3], bytes_end=True)
 
 
 def special_inputs(folder: str) -> dict[str, str]:
