@@ -140,15 +140,10 @@ def main() -> int:
         lines = _hostile_lines(s, outcomes, a, wall)
     else:
         lines = _lines(s, a, wall)
-    print("\n".join(lines))
-    for o in s["failures"]:
-        print(f"FAILURE {o.kind} {o.command} {o.case}: {o.detail}")
-    if a.out:
-        with open(a.out, "w") as f:
-            json.dump([o.__dict__ for o in outcomes], f)
+    status = _report(lines, s, outcomes, a)
     if a.update_docs:
         _update_docs(lines, a)
-    return 1 if s["failures"] else 0
+    return status
 
 
 def _world(a, t0: float) -> int:
@@ -166,6 +161,11 @@ def _world(a, t0: float) -> int:
     s = F.summary(outcomes)
     lines = _hostile_lines(s, outcomes, a, time.monotonic() - t0)
     lines[0] = f"files: {s['captures']} mutated from {', '.join(sorted(bases))}"
+    return _report(lines, s, outcomes, a)
+
+
+def _report(lines: list[str], s: dict, outcomes: list, a) -> int:
+    """Print the summary and each failure, keep the outcomes (--out); 1 when anything failed."""
     print("\n".join(lines))
     for o in s["failures"]:
         print(f"FAILURE {o.kind} {o.command} {o.case}: {o.detail}")

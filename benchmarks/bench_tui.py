@@ -65,20 +65,6 @@ def startup_s(make: str, runs: int) -> list[float]:
     return out
 
 
-def start_sim(rate: float) -> tuple[subprocess.Popen, str]:
-    p = subprocess.Popen(
-        [sys.executable, "-m", "station", "sim-device", "--rate", f"{rate:g}"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    path = p.stdout.readline().strip()
-    if not path.startswith("/dev/"):
-        raise SystemExit(f"sim-device did not start: {p.stderr.read()}")
-    return p, path
-
-
 def stop_sim(p: subprocess.Popen) -> None:
     p.terminate()
     try:
@@ -160,7 +146,9 @@ def main() -> int:
     )
 
     print(f"\n2. streaming {args.rate:g} Hz over a pty for {args.seconds:g} s")
-    sim, path = start_sim(args.rate)
+    from bench_device import start_sim  # the device benchmark's: same command, same check
+
+    sim, path = start_sim(args.rate, pin=False)
     try:
         base = reader_alone(path, args.seconds)
         ui = app_streaming(path, args.seconds)

@@ -216,6 +216,30 @@ def fmt_col(x, digits):
     return np.char.mod(f"%.{digits}g", x)
 
 
+def hold_timeline(rng, fs, n_holds, move_s, hold_s):
+    """A bench's timeline: a hold, then a move and a hold for each further pose.
+
+    move_s: (lo, hi) [s], each move's length drawn uniform; hold_s: a hold's length [s], or a
+    function drawing one per hold (drawn after that hold's move). Returns the segments
+    [(kind, t0 [s], t1 [s], k)], the sample times tt [s] at ``fs`` [Hz] and each sample's
+    hold index (-1 while moving)."""
+    segs, t = [], 0.0
+    for k in range(n_holds):
+        if k > 0:
+            mv = rng.uniform(*move_s)
+            segs.append(("move", t, t + mv, k))
+            t += mv
+        h = hold_s() if callable(hold_s) else hold_s
+        segs.append(("hold", t, t + h, k))
+        t += h
+    tt = np.arange(0, t, 1 / fs)
+    hold_of = np.full(tt.size, -1)
+    for kind, a, b, k in segs:
+        if kind == "hold":
+            hold_of[(tt >= a) & (tt < b)] = k
+    return segs, tt, hold_of
+
+
 def write_capture(path, meta, cols, rng, shuffle_cols=True):
     """cols: list of (name, array or list of str, digits). Empty string = missing."""
     names = [c[0] for c in cols]
@@ -293,20 +317,10 @@ def gen_tabletop(seed, effect, out, snr=10.0, averages=None, slow_noise=1.0):
         rots = [rots[i] for i in perm]
         face_labels = [face_labels[i] for i in perm]
     # timeline: settle, hold, move
-    segs = []  # (kind, t0, t1, k)
-    t = 0.0
-    for k in range(n_pos):
-        if k > 0:
-            mv = rng.uniform(2.5, 8.0)
-            segs.append(("move", t, t + mv, k))
-            t += mv
-        segs.append(("hold", t, t + hold_s, k))
-        t += hold_s
+    segs, tt, hold_of = hold_timeline(rng, fs, n_pos, (2.5, 8.0), hold_s)
     dt_s = 1 / fs
-    tt = np.arange(0, t, dt_s)
     n = tt.size
     f_body = np.zeros((n, 3))
-    hold_of = np.full(n, -1)
     moving = np.zeros(n, bool)
     lat, lon, alt = site(rng)
     g = normal_gravity(lat, alt)
@@ -314,7 +328,6 @@ def gen_tabletop(seed, effect, out, snr=10.0, averages=None, slow_noise=1.0):
     for kind, a, b, k in segs:
         m = (tt >= a) & (tt < b)
         if kind == "hold":
-            hold_of[m] = k
             f_body[m] = rots[k].inv().apply(g_nav)
         else:
             moving[m] = True
@@ -517,27 +530,16 @@ def gen_compass(seed, effect, out, snr=10.0, soft_iron="upper", slow_noise=1.0):
     g_nav = np.array([0, 0, g])
     hand = rng.uniform(0.05, 0.6)  # m/s^2 rms of the hand, in motion
     rots = [Rotation.random(random_state=rng) for _ in range(n_holds)]
-    segs, t = [], 0.0
-    for k in range(n_holds):
-        if k > 0:
-            mv = rng.uniform(1.0, 3.5)
-            segs.append(("move", t, t + mv, k))
-            t += mv
-        h = rng.uniform(*hold_range)
-        segs.append(("hold", t, t + h, k))
-        t += h
+    segs, tt, hold_of = hold_timeline(rng, fs, n_holds, (1.0, 3.5), lambda: rng.uniform(*hold_range))
     dt_s = 1 / fs
-    tt = np.arange(0, t, dt_s)
     n = tt.size
     quats = np.zeros((n, 4))
     acc_nav = np.zeros((n, 3))
-    hold_of = np.full(n, -1)
     for kind, a, b, k in segs:
         m = (tt >= a) & (tt < b)
         if not m.any():
             continue
         if kind == "hold":
-            hold_of[m] = k
             jit = Rotation.from_rotvec(
                 np.column_stack([gauss_markov(rng, m.sum(), dt_s, np.radians(0.3), 0.5) for _ in range(3)])
             )
@@ -756,23 +758,13 @@ def gen_gyrodrift(seed, effect, out, snr=10.0, slow_noise=1.0):
         poses = [(rng.uniform(-4, 4), rng.uniform(-3, 3), rng.uniform(-3, 3))]
         motion = False
     rots = [_level_rot(*p) for p in poses]
-    segs, t = [], 0.0
-    for k in range(n_pos):
-        if k > 0:
-            mv = rng.uniform(3, 8)
-            segs.append(("move", t, t + mv, k))
-            t += mv
-        segs.append(("hold", t, t + hold, k))
-        t += hold
+    segs, tt, hold_of = hold_timeline(rng, fs, n_pos, (3, 8), hold)
     dt_s = 1 / fs
-    tt = np.arange(0, t, dt_s)
     n = tt.size
     quats = np.zeros((n, 4))
-    hold_of = np.full(n, -1)
     for kind, a, b, k in segs:
         m = (tt >= a) & (tt < b)
         if kind == "hold":
-            hold_of[m] = k
             quats[m] = rots[k].as_quat()
         else:
             sl = Slerp([0, 1], Rotation.concatenate([rots[k - 1], rots[k]]))

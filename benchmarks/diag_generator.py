@@ -154,6 +154,44 @@ def _slerp_moves(C0, C1, n):
     return np.stack([C0 @ frames.rotvec_to_matrix(r * x) for x in s])
 
 
+def _holds_and_moves(atts, hold_n, move_n):
+    """Each attitude held for hold_n samples, joined by smooth moves of move_n samples:
+    (the attitudes (N, 3, 3), each sample's hold index (-1 moving))."""
+    Cs, hid = [], []
+    for k, C in enumerate(atts):
+        if k:
+            Cs.append(_slerp_moves(atts[k - 1], C, move_n))
+            hid += [-1] * move_n
+        Cs.append(np.repeat(C[None], hold_n, axis=0))
+        hid += [k] * hold_n
+    return np.concatenate(Cs), np.array(hid)
+
+
+def _meta(sc, tag, units=None, site=True, **extra) -> dict:
+    """A capture's header (capture-format.md): the procedure, a device named after the trial,
+    ``units``, then (``site``) the site, date and sample rate, then ``extra``."""
+    meta = {"station-capture": "1", "procedure": sc["procedure"], "device": f"IND-{tag}-{sc['seed_rng'] % 10000}"}
+    meta.update(units or {})
+    if site:
+        lat, lon, alt = sc["site"]
+        meta.update(latitude_deg=f"{lat}", longitude_deg=f"{lon}", altitude_m=f"{alt}", date="2025-06-01")
+        meta["sample_rate_hz"] = f"{sc['rate']:g}"
+    meta.update(extra)
+    return meta
+
+
+def _xyz(prefix, v) -> dict:
+    """Columns prefix+x, y, z from the (N, 3) array ``v``."""
+    return {f"{prefix}{c}": v[:, j] for j, c in enumerate("xyz")}
+
+
+def _on_axis(n, j, col) -> np.ndarray:
+    """An (n, 3) raw pattern: ``col`` on output axis j, zero on the others."""
+    e = np.zeros((n, 3))
+    e[:, j] = col
+    return e
+
+
 def _unlisted(name, size, pattern, t, temp):
     """Additive raw terms of the unlisted effects (size in raw units; temp_scale handled by the caller)."""
     tt = (t - t[0]) / max(t[-1] - t[0], 1e-9)
@@ -236,15 +274,7 @@ def tabletop_render(sc, effect=None, size=0.0, noise=True):
         from solvers.positions import C_n_b_for
 
         atts.append(C_n_b_for(d, rng.uniform(0, 2 * np.pi)) @ P)
-    Cs, hold_id = [], []
-    for k, C in enumerate(atts):
-        if k:
-            Cs.append(_slerp_moves(atts[k - 1], C, move_n))
-            hold_id += [-1] * move_n
-        Cs.append(np.repeat(C[None], hold_n, axis=0))
-        hold_id += [k] * hold_n
-    C_all = np.concatenate(Cs)
-    hold_id = np.array(hold_id)
+    C_all, hold_id = _holds_and_moves(atts, hold_n, move_n)
     n = len(C_all)
     t = np.arange(n) / rate
     moving = hold_id < 0
@@ -276,18 +306,7 @@ def tabletop_render(sc, effect=None, size=0.0, noise=True):
     gyro = np.zeros((n, 3))
     gyro[moving] = rng.normal(scale=0.3, size=(int(moving.sum()), 3))
     gyro += rng.normal(scale=0.002, size=(n, 3)) + 0.01
-    meta = {
-        "station-capture": "1",
-        "procedure": "accel-tabletop",
-        "device": f"IND-P1-{sc['seed_rng'] % 10000}",
-        "accel_unit": sc["unit"],
-        "gyro_unit": "rad/s",
-        "latitude_deg": f"{sc['site'][0]}",
-        "longitude_deg": f"{sc['site'][1]}",
-        "altitude_m": f"{sc['site'][2]}",
-        "date": "2025-06-01",
-        "sample_rate_hz": f"{rate:g}",
-    }
+    meta = _meta(sc, "P1", {"accel_unit": sc["unit"], "gyro_unit": "rad/s"})
     lab = np.array([sc["labels"][k] if k >= 0 else "" for k in hold_id], dtype=object)
     if sc["mode"] == "averages":
         cols = {
@@ -314,17 +333,7 @@ def tabletop_render(sc, effect=None, size=0.0, noise=True):
         cols = {"t": t}
         if sc["mode"] == "labelled":
             cols["position"] = lab
-        cols.update(
-            {
-                "ax": y[:, 0],
-                "ay": y[:, 1],
-                "az": y[:, 2],
-                "gx": gyro[:, 0],
-                "gy": gyro[:, 1],
-                "gz": gyro[:, 2],
-                "temp_c": temp,
-            }
-        )
+        cols.update({**_xyz("a", y), **_xyz("g", gyro), "temp_c": temp})
     u = f / np.linalg.norm(f, axis=1, keepdims=True)
     Kinv = np.linalg.inv(sc["K"])
     span = [np.outer(np.ones(n), sc["K"][:, j]) for j in range(3)]
@@ -408,40 +417,20 @@ def gyro_render(sc, effect=None, size=0.0, noise=True):
         y = y + rng.normal(scale=sc["white"], size=(n, 3)) + (_gm(rng, t, sc["gm"], sc["tau"]) if sc["gm"] > 0 else 0)
     acc = f_b + (rng.normal(scale=0.02, size=(n, 3)) if noise else 0)
     k = 1.0 if sc["unit"] == "rad/s" else 180 / math.pi
-    meta = {
-        "station-capture": "1",
-        "procedure": "gyro-drift",
-        "device": f"IND-P4-{sc['seed_rng'] % 10000}",
-        "accel_unit": "m/s^2",
-        "gyro_unit": sc["unit"],
-        "latitude_deg": f"{lat}",
-        "longitude_deg": f"{sc['site'][1]}",
-        "altitude_m": f"{sc['site'][2]}",
-        "date": "2025-06-01",
-        "sample_rate_hz": f"{sc['rate']:g}",
-        "gyro_mode": "static",
-        "frame": "body x forward, y up, z right",
-    }
-    cols = {
-        "t": t,
-        "ax": acc[:, 0],
-        "ay": acc[:, 1],
-        "az": acc[:, 2],
-        "gx": y[:, 0] * k,
-        "gy": y[:, 1] * k,
-        "gz": y[:, 2] * k,
-        "temp_c": temp,
-    }
+    meta = _meta(
+        sc,
+        "P4",
+        {"accel_unit": "m/s^2", "gyro_unit": sc["unit"]},
+        gyro_mode="static",
+        frame="body x forward, y up, z right",
+    )
+    cols = {"t": t, **_xyz("a", acc), **_xyz("g", y * k), "temp_c": temp}
     if sc["n_or"] > 1:
         cols["position"] = np.array([f"o{x + 1}" for x in hid], dtype=object)
         cols["heading_deg"] = np.array(head)
     else:
         meta["heading_deg"] = f"{sc['headings'][0]:.1f}"
-    span = []
-    for j in range(3):
-        e = np.zeros((n, 3))
-        e[:, j] = 1.0
-        span.append(e)
+    span = [_on_axis(n, j, 1.0) for j in range(3)]
     obs = Observation(
         "vector",
         np.ones(n, bool),
@@ -528,31 +517,17 @@ def centrifuge_render(sc, effect=None, size=0.0, noise=True):
         y = y + ((temp - temp.mean())[:, None] * pat["signs"] * size * f) * sc["S"]
     if noise:
         y = y + rng.normal(scale=sc["noise"], size=(n, 3))
-    meta = {
-        "station-capture": "1",
-        "procedure": "accel-centrifuge",
-        "device": f"IND-P2-{sc['seed_rng'] % 10000}",
-        "accel_unit": "g",
-        "radius_m": repr(sc["radius"]),
-        "g_mps2": repr(sc["g"]),
-    }
+    meta = _meta(sc, "P2", {"accel_unit": "g"}, site=False, radius_m=repr(sc["radius"]), g_mps2=repr(sc["g"]))
     cols = {
         "position": np.array(lab, dtype=object),
         "speed_rad_s": ws,
-        "ax": y[:, 0],
-        "ay": y[:, 1],
-        "az": y[:, 2],
+        **_xyz("a", y),
         "temp_c": temp,
         "elapsed_s": el,
     }
     u = f / np.linalg.norm(f, axis=1, keepdims=True)
     S = np.diag(sc["S"])
-    span = []
-    for j in range(3):
-        for col in (np.ones(n), f[:, j], f[:, j] ** 2):
-            e = np.zeros((n, 3))
-            e[:, j] = col * (sc["S"][j] if col is not None else 1.0)
-            span.append(e)
+    span = [_on_axis(n, j, col * sc["S"][j]) for j in range(3) for col in (np.ones(n), f[:, j], f[:, j] ** 2)]
     obs = Observation(
         "radial",
         np.ones(n, bool),
@@ -601,15 +576,7 @@ def compass_render(sc, effect=None, size=0.0, noise=True):
     g = frames.normal_gravity_mps2(lat, alt)
     atts = [frames.rotvec_to_matrix(_rand_dir(rng) * rng.uniform(0, math.pi)) for _ in range(sc["n_h"])]
     hn, mn = int(sc["hold"] * sc["rate"]), int(sc["move"] * sc["rate"])
-    Cs, hid = [], []
-    for k, C in enumerate(atts):
-        if k:
-            Cs.append(_slerp_moves(atts[k - 1], C, mn))
-            hid += [-1] * mn
-        Cs.append(np.repeat(C[None], hn, axis=0))
-        hid += [k] * hn
-    C_all = np.concatenate(Cs)
-    hid = np.array(hid)
+    C_all, hid = _holds_and_moves(atts, hn, mn)
     n = len(C_all)
     t = np.arange(n) / sc["rate"]
     moving = hid < 0
@@ -658,43 +625,15 @@ def compass_render(sc, effect=None, size=0.0, noise=True):
     w[moving] = rng.normal(scale=0.8, size=(int(moving.sum()), 3))
     gyr = np.degrees(w + (rng.normal(scale=0.003, size=(n, 3)) if noise else 0))
     ku = MAG_UNITS[sc["unit"]]
-    meta = {
-        "station-capture": "1",
-        "procedure": "compass",
-        "device": f"IND-P3-{sc['seed_rng'] % 10000}",
-        "accel_unit": sc["accel_unit"],
-        "gyro_unit": "deg/s",
-        "mag_unit": sc["unit"],
-        "latitude_deg": f"{lat}",
-        "longitude_deg": f"{lon}",
-        "altitude_m": f"{alt}",
-        "date": "2025-06-01",
-        "sample_rate_hz": f"{sc['rate']:g}",
-    }
-    cols = {
-        "t": t,
-        "ax": acc[:, 0],
-        "ay": acc[:, 1],
-        "az": acc[:, 2],
-        "gx": gyr[:, 0],
-        "gy": gyr[:, 1],
-        "gz": gyr[:, 2],
-        "mx": y[:, 0] * ku,
-        "my": y[:, 1] * ku,
-        "mz": y[:, 2] * ku,
-        "temp_c": temp,
-    }
+    meta = _meta(sc, "P3", {"accel_unit": sc["accel_unit"], "gyro_unit": "deg/s", "mag_unit": sc["unit"]})
+    cols = {"t": t, **_xyz("a", acc), **_xyz("g", gyr), **_xyz("m", y * ku), "temp_c": temp}
     Winv = np.linalg.inv(sc["W"])
     m_true = C_b_n @ m_ned
     span = []
     for j in range(3):
-        e = np.zeros((n, 3))
-        e[:, j] = 1.0
-        span.append(e)
-        for i in range(j, 3):  # W upper ⇔ W⁻¹ upper: output j from input i ≥ j
-            e = np.zeros((n, 3))
-            e[:, j] = m_true[:, i]
-            span.append(e)
+        span.append(_on_axis(n, j, 1.0))
+        # W upper ⇔ W⁻¹ upper: output j from input i ≥ j
+        span += [_on_axis(n, j, m_true[:, i]) for i in range(j, 3)]
     # a rotation of the field about the vertical (heading is not known)
     span.append((np.einsum("nij,j->ni", C_b_n, np.cross([0, 0, 1.0], m_ned))) @ Winv.T)
     H = len(atts)
@@ -777,17 +716,7 @@ def ldv_render(sc, effect=None, size=0.0, noise=True):
     if noise:
         y = y + rng.normal(scale=sc["noise"], size=(n, 3))
     v_ref = v_b + (rng.normal(scale=sc["noise"] / 4, size=(n, 3)) if noise else 0)
-    meta = {
-        "station-capture": "1",
-        "procedure": "ldv",
-        "device": f"IND-P5-{sc['seed_rng'] % 10000}",
-        "latitude_deg": f"{sc['site'][0]}",
-        "longitude_deg": f"{sc['site'][1]}",
-        "altitude_m": f"{sc['site'][2]}",
-        "date": "2025-06-01",
-        "sample_rate_hz": f"{sc['rate']:g}",
-        "frame": "body x forward, y right, z down",
-    }
+    meta = _meta(sc, "P5", frame="body x forward, y right, z down")
     cols = {"t": t, "vl1": y[:, 0], "vl2": y[:, 1], "vl3": y[:, 2]}
     if sc["ref"] == "nav":
         yaw = np.cumsum(yaw_rate) / sc["rate"]
@@ -804,16 +733,11 @@ def ldv_render(sc, effect=None, size=0.0, noise=True):
             }
         )
     else:
-        cols.update({"vx": v_ref[:, 0], "vy": v_ref[:, 1], "vz": v_ref[:, 2]})
+        cols.update(_xyz("v", v_ref))
     if sc["rates"]:
-        cols.update({"wx": w_b[:, 0], "wy": w_b[:, 1], "wz": w_b[:, 2]})
+        cols.update(_xyz("w", w_b))
     cols["temp_c"] = temp
-    span = []
-    for j in range(3):
-        for i in range(3):
-            e = np.zeros((n, 3))
-            e[:, j] = v_b[:, i]
-            span.append(e)
+    span = [_on_axis(n, j, v_b[:, i]) for j in range(3) for i in range(3)]
     obs = Observation(
         "vector", np.ones(n, bool), None, None, np.full(3, sc["noise"]), 0.0, 1.0, t, np.zeros(n, int), False, span
     )

@@ -168,6 +168,24 @@ def _solve_scale(zfun, target, s0):
     return s, zfun(s)
 
 
+def _xyz(prefix, v) -> dict:
+    """Columns prefix+x, y, z from the (n, 3) array ``v``."""
+    return {f"{prefix}{c}": v[:, j] for j, c in enumerate("xyz")}
+
+
+def _meta(procedure, device, site, date, rate, **units) -> dict:
+    """A capture's header (capture-format.md): ``units`` after the device, then the site (a row of
+    SITES), the date and the sample rate."""
+    meta = {"procedure": procedure, "device": device, **units}
+    meta.update(latitude_deg=site[1], longitude_deg=site[2], altitude_m=site[3])
+    return {**meta, "date": date, "sample_rate_hz": rate}
+
+
+def _truth(procedure, seed, effect, target_z, z, size, z_after) -> dict:
+    """The truth file's head: what was hidden, at which z, what other candidates leave."""
+    return dict(procedure=procedure, seed=seed, effect=effect, target_z=target_z, z=z, size=size, z_after=z_after)
+
+
 def _write_capture(path, meta, cols, data, fmts):
     lines = ["# station-capture: 1"] + [f"# {k}: {v}" for k, v in meta.items()]
     lines.append(",".join(cols))
@@ -423,49 +441,33 @@ def generate_compass(seed, effect, target_z):
     two_axis = rng.random() < 0.3
     temp_meas = np.round((temp + rng.normal(scale=0.03, size=n)) / 0.0625) * 0.0625
     t_out = t + rng.uniform(0, 1000)
-    data = {"t": t_out, "ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2]}
+    data = {"t": t_out, **_xyz("a", acc)}
     data.update({"gx": gyro[:, 0], "gy": gyro[:, 1]})
     if not two_axis:
         data["gz"] = gyro[:, 2]
-    data.update({"mx": m_out[:, 0], "my": m_out[:, 1], "mz": m_out[:, 2], "temp_c": temp_meas})
+    data.update({**_xyz("m", m_out), "temp_c": temp_meas})
     cols = list(data)
     if position is not None and rng.random() < 0.5:
         data["position"] = position.astype(float)
         cols.insert(1, "position")
     fmts = {c: "%.6f" for c in cols}
     fmts.update({"t": "%.4f", "mx": mfmt, "my": mfmt, "mz": mfmt, "temp_c": "%.4f", "position": "%.0f"})
-    meta = {
-        "procedure": "compass",
-        "device": f"MAG-{seed % 100000:05d}",
-        "accel_unit": accel_unit,
-        "gyro_unit": gyro_unit,
-        "mag_unit": unit,
-        "latitude_deg": site[1],
-        "longitude_deg": site[2],
-        "altitude_m": site[3],
-        "date": date.isoformat(),
-        "sample_rate_hz": rate,
-    }
-    truth = {
-        "procedure": "compass",
-        "seed": seed,
-        "effect": effect,
-        "target_z": target_z,
-        "z": zval,
-        "size": size,
-        "z_after": z_after,
-        "site": site[0],
-        "part": part["part"],
-        "mode": mode,
-        "rate_hz": rate,
-        "rows": n,
-        "still_rows": int(still.sum()),
-        "mag_unit": unit,
-        "temp_shape": temp_shape,
-        "corr_T_t": float(np.corrcoef(temp, t)[0, 1]),
-        "field_nT": field_nT,
-        "two_axis_gyro": bool(two_axis),
-    }
+    units = {"accel_unit": accel_unit, "gyro_unit": gyro_unit, "mag_unit": unit}
+    meta = _meta("compass", f"MAG-{seed % 100000:05d}", site, date.isoformat(), rate, **units)
+    truth = _truth("compass", seed, effect, target_z, zval, size, z_after)
+    truth.update(
+        site=site[0],
+        part=part["part"],
+        mode=mode,
+        rate_hz=rate,
+        rows=n,
+        still_rows=int(still.sum()),
+        mag_unit=unit,
+        temp_shape=temp_shape,
+        corr_T_t=float(np.corrcoef(temp, t)[0, 1]),
+        field_nT=field_nT,
+        two_axis_gyro=bool(two_axis),
+    )
     return meta, cols, data, fmts, truth
 
 
@@ -665,7 +667,7 @@ def generate_ldv(seed, effect, target_z, **force):
     data.update({"vl1": beams_meas[:, 0], "vl2": beams_meas[:, 1], "vl3": beams_meas[:, 2]})
     if frame == "body":
         vm = v_b + rng.normal(scale=sigma_v, size=(n, 3))
-        data.update({"vx": vm[:, 0], "vy": vm[:, 1], "vz": vm[:, 2]})
+        data.update(_xyz("v", vm))
     else:
         vm = v_n + rng.normal(scale=sigma_v, size=(n, 3))
         att = rot * Rotation.from_rotvec(rng.normal(scale=sigma_att, size=(n, 3)))
@@ -674,7 +676,7 @@ def generate_ldv(seed, effect, target_z, **force):
         data.update({"roll_deg": ypr[:, 2], "pitch_deg": ypr[:, 1], "yaw_deg": ypr[:, 0]})
     if with_w:
         wm = w_b + rng.normal(scale=3e-4, size=(n, 3))
-        data.update({"wx": wm[:, 0], "wy": wm[:, 1], "wz": wm[:, 2]})
+        data.update(_xyz("w", wm))
     data["temp_c"] = np.round((temp + rng.normal(scale=0.05, size=n)) / 0.01) * 0.01
     cols = list(data)
     fmts = {c: "%.5f" for c in cols}
@@ -682,34 +684,21 @@ def generate_ldv(seed, effect, target_z, **force):
     for c in ("roll_deg", "pitch_deg", "yaw_deg"):
         fmts[c] = "%.5f"
     site = SITES[int(rng.integers(len(SITES)))]
-    meta = {
-        "procedure": "ldv",
-        "device": f"LDV-{seed % 100000:05d}",
-        "latitude_deg": site[1],
-        "longitude_deg": site[2],
-        "altitude_m": site[3],
-        "date": (dt.date(2024, 1, 1) + dt.timedelta(days=int(rng.integers(0, 900)))).isoformat(),
-        "sample_rate_hz": rate,
-    }
-    truth = {
-        "procedure": "ldv",
-        "seed": seed,
-        "effect": effect,
-        "target_z": target_z,
-        "z": zval,
-        "size": size,
-        "z_after": z_after,
-        "vehicle": vehicle,
-        "rate_hz": rate,
-        "rows": n,
-        "frame": frame,
-        "with_w": with_w,
-        "sigma_beam_mps": sigma_b,
-        "temp_shape": temp_shape,
-        "corr_T_t": float(np.corrcoef(temp, t)[0, 1]),
-        "cond_HtH": float(np.linalg.cond(v_b.T @ v_b)),
-        "drives": drives,
-    }
+    date = dt.date(2024, 1, 1) + dt.timedelta(days=int(rng.integers(0, 900)))
+    meta = _meta("ldv", f"LDV-{seed % 100000:05d}", site, date.isoformat(), rate)
+    truth = _truth("ldv", seed, effect, target_z, zval, size, z_after)
+    truth.update(
+        vehicle=vehicle,
+        rate_hz=rate,
+        rows=n,
+        frame=frame,
+        with_w=with_w,
+        sigma_beam_mps=sigma_b,
+        temp_shape=temp_shape,
+        corr_T_t=float(np.corrcoef(temp, t)[0, 1]),
+        cond_HtH=float(np.linalg.cond(v_b.T @ v_b)),
+        drives=drives,
+    )
     return meta, cols, data, fmts, truth
 
 

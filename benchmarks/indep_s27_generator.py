@@ -217,6 +217,29 @@ def hold_means(x: np.ndarray, hold: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+def hold_covs(tnoise: np.ndarray, hold: np.ndarray, k: int, fs: float, noise: list[dict]) -> list[np.ndarray]:
+    """Per axis, the (k, k) covariance of the k hold means (noise_cov at the holds' centres)."""
+    t_c = hold_means(tnoise, hold, k)
+    nk = np.array([(hold == j).sum() for j in range(k)], float)
+    return [noise_cov(t_c, nk, fs, noise[i]) for i in range(3)]
+
+
+def draw_temperature(rng, effect_name: str, trel: np.ndarray, hold: np.ndarray, k: int, p):
+    """The bench's temperature: its kind (drawn with probabilities p over warmup, chamber, cycle,
+    none; never none for an effect that needs a temperature) and its profile (degC, None for none)."""
+    tkind = rng.choice(["warmup", "chamber", "cycle", "none"], p=p)
+    if effect_name in NEEDS_TEMP and tkind == "none":
+        tkind = rng.choice(["warmup", "chamber", "cycle"])
+    return tkind, temperature_profile(rng, tkind, trel, hold, k)
+
+
+def capture_ctx(k, fs, series, trel, tnoise, hold_idx, temp, tkind, unit, **more) -> dict:
+    """What write_capture (and make_one's record) need of a build: the holds, the clocks, the
+    temperature and the unit, then any keys of the procedure's own (``more``)."""
+    ctx = dict(k=k, fs=fs, series=series, trel=trel, tnoise=tnoise, hold_idx=hold_idx, temp=temp, tkind=tkind)
+    return {**ctx, "unit": unit, **more}
+
+
 # ---------------------------------------------------------------- effect shapes
 
 
@@ -237,6 +260,14 @@ class Effect:
         self.phase = rng.uniform(0, 2 * np.pi)
         self.t_ref = 25.0
         self.amp = 0.0
+
+
+def draw_effect(rng, effect_name: str, trel: np.ndarray, temp: np.ndarray | None) -> Effect | None:
+    """The hidden effect (None for "none"), its reference temperature near the bench's mean."""
+    eff = None if effect_name == "none" else Effect(effect_name, rng, trel[-1])
+    if eff is not None and temp is not None:
+        eff.t_ref = float(np.mean(temp)) + rng.uniform(-3, 3)
+    return eff
 
 
 # ---------------------------------------------------------------- P1
@@ -323,10 +354,7 @@ def build_p1(rng, effect_name: str):
     g = G0 + rng.uniform(-0.03, 0.03)
     a_true = r_all.inv().apply([0, 0, g])
     a_true[moving] += rng.normal(0, 0.3, (moving.sum(), 3))  # handling
-    tkind = rng.choice(["warmup", "chamber", "cycle", "none"], p=[0.35, 0.3, 0.2, 0.15])
-    if effect_name in NEEDS_TEMP and tkind == "none":
-        tkind = rng.choice(["warmup", "chamber", "cycle"])
-    temp = temperature_profile(rng, tkind, trel, hold_idx, k)
+    tkind, temp = draw_temperature(rng, effect_name, trel, hold_idx, k, p=[0.35, 0.3, 0.2, 0.15])
     unit = rng.choice(["V", "counts", "g", "m/s^2"])
     if unit == "V":
         s = rng.uniform(0.02, 0.1, 3) * rng.choice([-1, 1], 3, p=[0.2, 0.8])
@@ -346,9 +374,7 @@ def build_p1(rng, effect_name: str):
     if unit == "counts":
         for p in noise:
             p["quant"] = 1.0
-    eff = None if effect_name == "none" else Effect(effect_name, rng, trel[-1])
-    if eff is not None and temp is not None:
-        eff.t_ref = float(np.mean(temp)) + rng.uniform(-3, 3)
+    eff = draw_effect(rng, effect_name, trel, temp)
     m_true = np.linalg.inv(kmat)
     q_, u_ = np.linalg.qr(m_true)
     sgn = np.sign(np.diag(u_))
@@ -362,24 +388,11 @@ def build_p1(rng, effect_name: str):
         return hold_means(o + a @ kmat.T, hold_idx, k)
 
     vbar0 = vbar_of(0.0)
-    t_c = hold_means(tnoise, hold_idx, k)
-    nk = np.array([(hold_idx == j).sum() for j in range(k)], float)
-    covs = [noise_cov(t_c, nk, fs, noise[i]) for i in range(3)]
+    covs = hold_covs(tnoise, hold_idx, k, fs, noise)
     truth = {"theta0": theta0, "vbar0": vbar0}
     # holds numbered in the bench's own order (P1's own numbers mean directions: these do not), or named
     labels = [str(j + 1) for j in range(k)] if rng.random() < 0.5 else [f"pose{j + 1:02d}" for j in range(k)]
-    ctx = dict(
-        k=k,
-        fs=fs,
-        series=series,
-        trel=trel,
-        tnoise=tnoise,
-        hold_idx=hold_idx,
-        temp=temp,
-        tkind=tkind,
-        unit=unit,
-        labels=labels,
-    )
+    ctx = capture_ctx(k, fs, series, trel, tnoise, hold_idx, temp, tkind, unit, labels=labels)
 
     def zfun(amp):
         return p1_z(truth, vbar_of(amp), covs, g)
@@ -579,10 +592,7 @@ def build_p2(rng, effect_name: str):
     f_platform = cen_platform * radius + np.column_stack([np.zeros_like(w), alpha * radius / G0, np.ones_like(w)])
     f = r_sensor.inv().apply(f_platform)
     cen = r_sensor.inv().apply(cen_platform)
-    tkind = rng.choice(["warmup", "chamber", "cycle", "none"], p=[0.35, 0.3, 0.2, 0.15])
-    if effect_name in NEEDS_TEMP and tkind == "none":
-        tkind = rng.choice(["warmup", "chamber", "cycle"])
-    temp = temperature_profile(rng, tkind, trel, hold_idx, k)
+    tkind, temp = draw_temperature(rng, effect_name, trel, hold_idx, k, p=[0.35, 0.3, 0.2, 0.15])
     unit = rng.choice(["V", "g", "m/s^2"])
     sc = {"V": 1.0, "g": 1.0, "m/s^2": G0}[unit]
     par = {
@@ -594,9 +604,7 @@ def build_p2(rng, effect_name: str):
         par["S"] = rng.uniform(0.98, 1.02, 3)
     sw = rng.uniform(1e-4, 2e-3) * sc
     noise = [noise_params(rng, sw, fs, trel[-1]) for _ in range(3)]
-    eff = None if effect_name == "none" else Effect(effect_name, rng, trel[-1])
-    if eff is not None and temp is not None:
-        eff.t_ref = float(np.mean(temp)) + rng.uniform(-3, 3)
+    eff = draw_effect(rng, effect_name, trel, temp)
     theta0 = np.concatenate([par["S"], par["b"], par["D"]])
     amag = a_set[sp_idx]
     fdir = {"centripetal": cen}
@@ -607,20 +615,18 @@ def build_p2(rng, effect_name: str):
         return hold_means(p2_forward(eff, f, temp, trel, par, w, radius, fdir), hold_idx, k)
 
     nbar0 = nbar_of(0.0)
-    t_c = hold_means(tnoise, hold_idx, k)
-    nk = np.array([(hold_idx == j).sum() for j in range(k)], float)
-    covs = [noise_cov(t_c, nk, fs, noise[i]) for i in range(3)]
+    covs = hold_covs(tnoise, hold_idx, k, fs, noise)
     labels = [str(or_idx[j] + 1) for j in range(k)]
-    ctx = dict(
-        k=k,
-        fs=fs,
-        series=series,
-        trel=trel,
-        tnoise=tnoise,
-        hold_idx=hold_idx,
-        temp=temp,
-        tkind=tkind,
-        unit=unit,
+    ctx = capture_ctx(
+        k,
+        fs,
+        series,
+        trel,
+        tnoise,
+        hold_idx,
+        temp,
+        tkind,
+        unit,
         labels=labels,
         with_position=True,
         n_orientations=n_or,
@@ -717,10 +723,7 @@ def build_p4(rng, effect_name: str):
         w_body = r_all.inv().apply(w_ie_n)
         w_body[moving] += rel * (dsm / seglen)[:, None]
     f_body = r_all.inv().apply([0, G0, 0.0])
-    tkind = rng.choice(["warmup", "chamber", "cycle", "none"], p=[0.45, 0.2, 0.2, 0.15])
-    if effect_name in NEEDS_TEMP and tkind == "none":
-        tkind = rng.choice(["warmup", "chamber", "cycle"])
-    temp = temperature_profile(rng, tkind, trel, hold_idx, k)
+    tkind, temp = draw_temperature(rng, effect_name, trel, hold_idx, k, p=[0.45, 0.2, 0.2, 0.15])
     gunit = rng.choice(["rad/s", "deg/s"])
     gsc = 1.0 if gunit == "rad/s" else np.degrees(1.0)
     aunit = rng.choice(["g", "m/s^2"])
@@ -728,9 +731,7 @@ def build_p4(rng, effect_name: str):
     eps = rng.normal(0, 0.01, 3)  # rad/s power-up bias
     sw = rng.uniform(0.002, 0.02)  # rad/s per sample
     noise = [noise_params(rng, sw, fs, trel[-1]) for _ in range(3)]
-    eff = None if effect_name in ("none", "earth_rate") else Effect(effect_name, rng, trel[-1])
-    if eff is not None and temp is not None:
-        eff.t_ref = float(np.mean(temp)) + rng.uniform(-3, 3)
+    eff = draw_effect(rng, "none" if effect_name == "earth_rate" else effect_name, trel, temp)
 
     def gyro_of(amp):
         out = w_body + eps
@@ -752,9 +753,7 @@ def build_p4(rng, effect_name: str):
             return out + w_body * x * np.outer(temp - eff.t_ref, d)
         raise ValueError(n)
 
-    t_c = hold_means(tnoise, hold_idx, k)
-    nk = np.array([(hold_idx == j).sum() for j in range(k)], float)
-    covs = [noise_cov(t_c, nk, fs, noise[i]) for i in range(3)]
+    covs = hold_covs(tnoise, hold_idx, k, fs, noise)
     ones = np.ones(k)
     # what the baseline does not absorb: mode A/B subtract a known rate (the reference's, or the Earth's
     # at the given site); mode "plain" (no latitude) fits a constant only, so the Earth rate is the effect
@@ -776,10 +775,7 @@ def build_p4(rng, effect_name: str):
             z2 += r @ cho_solve(cf, r)
         return float(np.sqrt(z2))
 
-    ctx = dict(
-        k=k, fs=fs, series=series, trel=trel, tnoise=tnoise, hold_idx=hold_idx, temp=temp, tkind=tkind, unit=gunit
-    )
-    ctx["mode"] = mode
+    ctx = capture_ctx(k, fs, series, trel, tnoise, hold_idx, temp, tkind, gunit, mode=mode)
 
     def write(amp, path, scale_noise=1.0):
         gy = gyro_of(amp)

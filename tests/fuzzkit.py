@@ -307,10 +307,18 @@ MUTATORS = [
 
 def mutate(text: str, rng: random.Random) -> tuple[str, bytes]:
     """(names of the mutators applied, the mutated file's bytes): one to three mutations."""
+    return _mutate_with(text, rng, MUTATORS, [1, 1, 1, 2, 3], bytes_end=False)
+
+
+def _mutate_with(text: str, rng: random.Random, mutators: list, counts: list[int], bytes_end: bool):
+    """(names, bytes) of rng.choice(counts) mutations drawn from ``mutators``; ``bytes_end``: a
+    mutation that made bytes is the last (else the next sees them decoded, bad bytes replaced)."""
     names, data = [], text
-    for _ in range(rng.choice([1, 1, 1, 2, 3])):
+    for _ in range(rng.choice(counts)):
+        if bytes_end and isinstance(data, bytes):
+            break
         for _attempt in range(20):  # a mutator with nothing to act on (no data line left) gives way to another
-            m = rng.choice(MUTATORS)
+            m = rng.choice(mutators)
             try:
                 out = m(data if isinstance(data, str) else data.decode("utf-8", "replace"), rng)
             except (ValueError, IndexError):
@@ -730,17 +738,19 @@ def real_bases(folder: str, shared: str | None = None, max_rows: int = REAL_MAX_
     return out
 
 
-def _first_data_index(lines: list[str]) -> int | None:
+def _lines_and_header(text: str) -> tuple[list[str], int]:
+    """The text's lines and the index of its header row; ValueError (this mutation does not
+    apply) when there is no header with a line after it."""
+    lines = _lines(text)
     h = _data_start(lines) - 1
-    return h if 0 <= h < len(lines) - 1 else None
+    if not 0 <= h < len(lines) - 1:
+        raise ValueError
+    return lines, h
 
 
 def m_header_again(text, rng):
     """The header row repeated among the data (two captures pasted into one)."""
-    lines = _lines(text)
-    h = _first_data_index(lines)
-    if h is None:
-        raise ValueError
+    lines, h = _lines_and_header(text)
     i = rng.randrange(h + 1, len(lines))
     lines.insert(i, lines[h])
     return "\n".join(lines)
@@ -762,9 +772,8 @@ def m_meta_twice(text, rng):
 
 def m_time(text, rng):
     """The time column duplicated, run backwards, frozen or jumped (a logger's clock)."""
-    lines = _lines(text)
-    h = _first_data_index(lines)
-    if h is None or "t" not in lines[h].split(","):
+    lines, h = _lines_and_header(text)
+    if "t" not in lines[h].split(","):
         raise ValueError
     j = lines[h].split(",").index("t")
     rows = [i for i in range(h + 1, len(lines)) if lines[i]]
@@ -811,10 +820,7 @@ def m_huge_line(text, rng):
 
 def m_truncate_mid_line(text, rng):
     """Cut inside a data line (a copy stopped part-way): the last line without its end."""
-    lines = _lines(text)
-    h = _first_data_index(lines)
-    if h is None:
-        raise ValueError
+    lines, h = _lines_and_header(text)
     i = rng.randrange(h + 1, len(lines))
     if not lines[i]:
         raise ValueError
@@ -851,20 +857,7 @@ MUTATORS_HOSTILE = MUTATORS + [
 def mutate_hostile(text: str, rng: random.Random) -> tuple[str, bytes]:
     """:func:`mutate` with :data:`MUTATORS_HOSTILE`: one to three mutations (a mutation that made
     bytes no UTF-8 text reads is the last: the next would see only its replacement characters)."""
-    names, data = [], text
-    for _ in range(rng.choice([1, 1, 2, 3])):
-        if isinstance(data, bytes):
-            break
-        for _attempt in range(20):
-            m = rng.choice(MUTATORS_HOSTILE)
-            try:
-                out = m(data, rng)
-            except (ValueError, IndexError):
-                continue
-            names.append(m.__name__[2:])
-            data = out
-            break
-    return "+".join(names) or "none", (data if isinstance(data, bytes) else data.encode("utf-8", "surrogatepass"))
+    return _mutate_with(text, rng, MUTATORS_HOSTILE, [1, 1, 2, 3], bytes_end=True)
 
 
 def special_inputs(folder: str) -> dict[str, str]:

@@ -69,41 +69,12 @@ ARDUPILOT_NAMES = (
         "AHRS_ORIENTATION",
     }
 )
+PX4_CAL = ("ID", "PRIO", "ROT", "XOFF", "YOFF", "ZOFF")  # every CAL_<sensor>n_ has these
+PX4_SCALES = ("XSCALE", "YSCALE", "ZSCALE")
 PX4_SOURCE_NAMES = (
-    {
-        f"CAL_ACC{i}_{s}"
-        for i in range(4)
-        for s in (
-            "ID",
-            "PRIO",
-            "ROT",
-            "XOFF",
-            "YOFF",
-            "ZOFF",
-            "XSCALE",
-            "YSCALE",
-            "ZSCALE",
-        )
-    }
-    | {f"CAL_GYRO{i}_{s}" for i in range(4) for s in ("ID", "PRIO", "ROT", "XOFF", "YOFF", "ZOFF")}
-    | {
-        f"CAL_MAG{i}_{s}"
-        for i in range(4)
-        for s in (
-            "ID",
-            "PRIO",
-            "ROT",
-            "XOFF",
-            "YOFF",
-            "ZOFF",
-            "XSCALE",
-            "YSCALE",
-            "ZSCALE",
-            "XODIAG",
-            "YODIAG",
-            "ZODIAG",
-        )
-    }
+    {f"CAL_ACC{i}_{s}" for i in range(4) for s in PX4_CAL + PX4_SCALES}
+    | {f"CAL_GYRO{i}_{s}" for i in range(4) for s in PX4_CAL}
+    | {f"CAL_MAG{i}_{s}" for i in range(4) for s in PX4_CAL + PX4_SCALES + ("XODIAG", "YODIAG", "ZODIAG")}
     | {"SENS_BOARD_ROT", "SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"}
 )
 
@@ -123,6 +94,14 @@ def names_in(text: str, fmt: str) -> dict[str, float]:
             assert (typ == "6") == name.endswith(("_ID", "_PRIO", "_ROT"))  # INT32 vs REAL32
         out[name] = float(value)
     return out
+
+
+def _saved(capsys, tmp_path, path, *opts) -> tuple[dict, str]:
+    """``calibrate PATH --json --save`` into tmp_path/s.db (exit 0 asserted): its result, the database."""
+    db = str(tmp_path / "s.db")
+    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db, *opts)
+    assert code == 0, err
+    return json.loads(out), db
 
 
 def _save(db, result, **meta):
@@ -294,10 +273,7 @@ def _board_corrected_capture(tmp_path, fmt: str, seed: int):
 @pytest.mark.parametrize("fmt,seed", [("ardupilot", 3), ("px4", 4)])
 def test_composed_accel_parameters_reproduce_the_truth(capsys, tmp_path, fmt, seed):
     path, o_true, s_true, _, s_old = _board_corrected_capture(tmp_path, fmt, seed)
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", fmt, "--db", db)
     assert code == 0, err
     p = names_in(text, fmt)
@@ -396,31 +372,9 @@ def test_composed_compass_parameters_reproduce_the_truth(capsys, tmp_path):
     (mGauss, AP_Compass_Backend::correct_field) -> capture of d (gauss) marked corrected ->
     calibrate -> compose. The truth in the firmware's form: OFS = -h (mGauss), DIA/ODI = the
     symmetric part of W (from mGauss to mGauss), the same |m| as the simulator's W."""
-    from solvers.simulate import simulate
-
-    sim = simulate("compass", seed=2)
-    r_mG = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) * 10.0  # 1 uT = 10 mGauss
-    o_old = np.array([-35.0, 52.0, 18.0])
     P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
-    d_gauss = (r_mG + o_old) @ P_old.T / 1000.0
-    meta = dict(
-        sim.meta,
-        mag_unit="gauss",
-        corrected="true",
-        firmware="ardupilot",
-        mag_device_id="97539",
-        **{"param.AHRS_ORIENTATION": "0", "param.COMPASS_DEV_ID": "97539"},
-        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_DIA_{a}": repr(float(P_old[i, i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
-    )
-    cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
-    path = tmp_path / "mag.csv"
-    write_capture(path, Capture(meta=meta, columns=cols, path=path))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    path, sim = _ardupilot_compass_capture(tmp_path, P_old, device_id="97539")
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 0, err
     p = names_in(text, "ardupilot")
@@ -464,10 +418,7 @@ def test_composed_compass_offsets_follow_whether_ardupilot_applies_compass_scale
     P_old = np.array([[1.03, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]])
     applied = scale if 0.85 <= scale <= 1.4 else 1.0  # Compass::have_scale_factor
     path, sim = _ardupilot_compass_capture(tmp_path, P_old, scale=scale)
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 0, err
     p = names_in(text, "ardupilot")
@@ -507,10 +458,7 @@ def test_composed_px4_magnetometer_parameters_reproduce_the_truth(capsys, tmp_pa
     cols = dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])
     path = tmp_path / "mag.csv"
     write_capture(path, Capture(meta=meta, columns=cols, path=path))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    res = json.loads(out)
+    res, db = _saved(capsys, tmp_path, path)
     code, text, err = run(capsys, "export", res["calibration_id"], "--format", "px4", "--db", db)
     assert code == 0, err
     p = names_in(text, "px4")
@@ -596,11 +544,9 @@ def test_px4_magnetometer_for_a_firmware_without_odiag_writes_the_diagonal_only(
     )
     path = tmp_path / "mag.csv"
     write_capture(path, Capture(meta=meta, columns=dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
+    res, db = _saved(capsys, tmp_path, path)
     for fmt in ("px4", "qgc"):
-        code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", fmt, "--db", db)
+        code, text, err = run(capsys, "export", res["calibration_id"], "--format", fmt, "--db", db)
         assert code == 0, err
         p = names_in(text, fmt)
         assert not [n for n in p if "ODIAG" in n or "PRIO" in n], p
@@ -626,12 +572,12 @@ def test_qgc_vehicle_ids_outside_mavlinks_byte_are_refused(capsys, db, vehicle):
     assert code == 0 and "255\t0\tCAL_GYRO0_ID" in out, err
 
 
-def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None, scale=None):
+def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None, scale=None, device_id=None):
     """Simulated P3 raw field -> ArduPilot's correction d = P_old (s (r + o_old)) (mGauss,
     AP_Compass_Backend::correct_field) -> capture of d marked corrected, with the parameters in
     use (DIA as ``dia_in_use`` when given: the parameter values, P_old the matrix they give;
     COMPASS_SCALE ``scale`` when given, s = scale where Compass::have_scale_factor holds it
-    valid, 0.85 to 1.4, else 1)."""
+    valid, 0.85 to 1.4, else 1; the magnetometer's ``device_id`` and COMPASS_DEV_ID when given)."""
     from solvers.simulate import simulate
 
     sim = simulate("compass", seed=2)
@@ -641,20 +587,22 @@ def _ardupilot_compass_capture(tmp_path, P_old, dia_in_use=None, scale=None):
     d_gauss = applied * (r_mG + o_old) @ P_old.T / 1000.0
     dia = np.diag(P_old) if dia_in_use is None else dia_in_use
     in_use = {"param.AHRS_ORIENTATION": "0"} | ({} if scale is None else {"param.COMPASS_SCALE": repr(scale)})
-    meta = dict(
-        sim.meta,
-        mag_unit="gauss",
-        corrected="true",
-        firmware="ardupilot",
-        **in_use,
-        **{f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_DIA_{a}": repr(float(dia[i])) for i, a in enumerate(XYZ)},
-        **{f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))},
-    )
+    if device_id is not None:
+        in_use |= {"mag_device_id": device_id, "param.COMPASS_DEV_ID": device_id}
+    in_use |= {f"param.COMPASS_OFS_{a}": repr(float(o_old[i])) for i, a in enumerate(XYZ)}
+    in_use |= {f"param.COMPASS_DIA_{a}": repr(float(dia[i])) for i, a in enumerate(XYZ)}
+    in_use |= {f"param.COMPASS_ODI_{a}": repr(float(P_old[i, j])) for a, (i, j) in zip(XYZ, ((0, 1), (0, 2), (1, 2)))}
+    return corrected_compass_capture(tmp_path / "mag.csv", sim, d_gauss, "ardupilot", in_use), sim
+
+
+def corrected_compass_capture(path, sim, d_gauss, firmware: str, in_use: dict):
+    """The simulated compass capture ``sim`` with the field the board handed over, ``d_gauss``
+    (already corrected by it), marked corrected by ``firmware`` with the metadata ``in_use``
+    (its parameters as param.NAME): written to ``path``, which is returned."""
+    meta = dict(sim.meta, mag_unit="gauss", corrected="true", firmware=firmware, **in_use)
     cols = dict(sim.columns, mx=d_gauss[:, 0], my=d_gauss[:, 1], mz=d_gauss[:, 2])
-    path = tmp_path / "mag.csv"
     write_capture(path, Capture(meta=meta, columns=cols, path=path))
-    return path, sim
+    return path
 
 
 def test_a_partly_zero_compass_diagonal_in_use_is_a_broken_calibration_not_identity(capsys, tmp_path):
@@ -665,10 +613,8 @@ def test_a_partly_zero_compass_diagonal_in_use_is_a_broken_calibration_not_ident
     multiplied its y axis by 0 (only the off-diagonal terms carry it): refused in one line."""
     P_used = np.array([[1.03, 0.3, -0.01], [0.3, 0.0, 0.3], [-0.01, 0.3, 1.01]])  # what the firmware applied
     path, _ = _ardupilot_compass_capture(tmp_path, P_used)
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db, "--override", "test")
-    assert code == 0, err
-    cid = json.loads(out)["calibration_id"]
+    res, db = _saved(capsys, tmp_path, path, "--override", "test")
+    cid = res["calibration_id"]
     code, text, err = run(capsys, "export", cid, "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert "COMPASS_DIA_Y = 0 in use" in err and "only when all three are 0" in err and "broken calibration" in err
@@ -678,10 +624,8 @@ def test_an_all_zero_compass_diagonal_in_use_is_the_identity_with_the_off_diagon
     """All three DIA zero (never set): correct_field uses 1, 1, 1 and still applies ODI."""
     P_used = np.array([[1.0, 0.02, -0.01], [0.02, 1.0, 0.015], [-0.01, 0.015, 1.0]])
     path, sim = _ardupilot_compass_capture(tmp_path, P_used, dia_in_use=np.zeros(3))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
-    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    res, db = _saved(capsys, tmp_path, path)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 0, err
     p = names_in(text, "ardupilot")
     h_true_mG = np.asarray(sim.truth["hard_iron"]) * 10.0
@@ -699,10 +643,8 @@ def test_a_partly_zero_accelerometer_scale_in_use_is_refused_not_read_as_one(cap
     cap = read_capture(path)
     p = tmp_path / "z.csv"
     write_capture(p, Capture(meta=dict(cap.meta, **{"param.INS_ACCSCAL_Z": "0"}), columns=cap.columns, path=p))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
-    assert code == 0, err
-    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    res, db = _saved(capsys, tmp_path, p)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert "INS_ACCSCAL_Z = 0 in use" in err and "AP_InertialSensor::init" in err
 
@@ -720,10 +662,8 @@ def test_px4_with_two_sensors_in_use_and_none_named_is_refused_not_slot_0(capsys
     meta.update({f"param.CAL_ACC1_{a}SCALE": "1" for a in XYZ})
     p = tmp_path / "two.csv"
     write_capture(p, Capture(meta=meta, columns=cap.columns, path=p))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
-    assert code == 0, err
-    cid = json.loads(out)["calibration_id"]
+    res, db = _saved(capsys, tmp_path, p)
+    cid = res["calibration_id"]
     code, text, err = run(capsys, "export", cid, "--format", "px4", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert "CAL_ACC0_ID = 1310988 and CAL_ACC1_ID = 1441792 in use" in err and "--instance N" in err
@@ -751,10 +691,8 @@ def test_parameters_changed_during_the_log_are_not_composed_with(capsys, tmp_pat
     cap = read_capture(path)
     p = tmp_path / "changed.csv"
     write_capture(p, Capture(meta=dict(cap.meta, params_changed=changed), columns=cap.columns, path=p))
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", p, "--json", "--save", "--db", db)
-    assert code == 0, err
-    code, text, err = run(capsys, "export", json.loads(out)["calibration_id"], "--format", "ardupilot", "--db", db)
+    res, db = _saved(capsys, tmp_path, p)
+    code, text, err = run(capsys, "export", res["calibration_id"], "--format", "ardupilot", "--db", db)
     assert code == 2 and text == "" and err.count("\n") == 1, (code, text, err)
     assert says in err and "while the capture's data were logged" in err
 

@@ -11,25 +11,19 @@ tests/test_firmware_export.py.
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
 from station.capture import Capture, read_capture, write_capture
-from tests.test_firmware_export import XYZ, _board_corrected_capture, run
+from tests.test_firmware_export import XYZ, _board_corrected_capture, _saved, corrected_compass_capture, run
 
 PX4_SCALE_MIN, PX4_SCALE_MAX = 0.1, 3.0  # module.yaml, above
 
 
 def _export(capsys, tmp_path, path, fmt):
-    db = str(tmp_path / "s.db")
-    code, out, err = run(capsys, "calibrate", path, "--json", "--save", "--db", db)
-    assert code == 0, err
+    res, db = _saved(capsys, tmp_path, path)
     out_file = tmp_path / f"out.{fmt}"
-    code, out, err = run(
-        capsys, "export", json.loads(out)["calibration_id"], "--format", fmt, "--db", db, "-o", out_file
-    )
+    code, out, err = run(capsys, "export", res["calibration_id"], "--format", fmt, "--db", db, "-o", out_file)
     return code, out, err, out_file
 
 
@@ -71,21 +65,15 @@ def test_a_composed_magnetometer_scale_outside_px4s_range_is_refused(capsys, tmp
 
     sim = simulate("compass", seed=5)
     d_G = np.column_stack([sim.columns[k] for k in ("mx", "my", "mz")]) / 100.0  # uT -> gauss
-    meta = dict(
-        sim.meta,
-        mag_unit="gauss",
-        corrected="true",
-        firmware="px4",
-        mag_device_id="396809",
+    in_use = {
+        "mag_device_id": "396809",
         **{"param.CAL_MAG0_ID": "396809", "param.CAL_MAG0_PRIO": "75", "param.CAL_MAG0_ROT": "0"},
         **{"param.SENS_BOARD_ROT": "0"},
         **{f"param.CAL_MAG0_{a}OFF": "0" for a in XYZ},
         **{f"param.CAL_MAG0_{a}SCALE": repr(x_scale if a == "X" else 1.0) for a in XYZ},
         **{f"param.CAL_MAG0_{a}ODIAG": "0" for a in XYZ},
-    )
-    cols = dict(sim.columns, mx=d_G[:, 0], my=d_G[:, 1], mz=d_G[:, 2])
-    path = tmp_path / "mag.csv"
-    write_capture(path, Capture(meta=meta, columns=cols))
+    }
+    path = corrected_compass_capture(tmp_path / "mag.csv", sim, d_G, "px4", in_use)
     code, out, err, out_file = _export(capsys, tmp_path, path, "px4")
     assert code == 2 and out == "" and err.count("\n") == 1, (code, out, err)
     assert "CAL_MAG0_XSCALE" in err and f"{PX4_SCALE_MIN:g}..{PX4_SCALE_MAX:g}" in err, err

@@ -303,19 +303,24 @@ def test_static_intervals_found_without_position_column():
     assert "stillness detection" in text and "no heading column" in text
 
 
+def _quiet_four_headings(seed: int):
+    """P4 at four headings, 480 s, with a quieter gyro: 0.5 mrad/s white, 2e-6 rad/s bias instability."""
+    return simulate(
+        "gyro-drift",
+        seed=seed,
+        mode="static",
+        headings_deg=[0, 90, 180, 270],
+        duration_s=480,
+        gyro_noise_rad_s=5e-4,
+        bias_instability_rad_s=2e-6,
+    )
+
+
 def test_several_positions_without_latitude_estimate_it():
     """No latitude: ε and the Earth rate's north/up components together; a quieter gyro
     (0.5 mrad/s white) so the latitude check is meaningful. Truth 39.98° within 3σ."""
     for seed in range(3):
-        sim = simulate(
-            "gyro-drift",
-            seed=300 + seed,
-            mode="static",
-            headings_deg=[0, 90, 180, 270],
-            duration_s=480,
-            gyro_noise_rad_s=5e-4,
-            bias_instability_rad_s=2e-6,
-        )
+        sim = _quiet_four_headings(300 + seed)
         meta = dict(sim.meta)
         del meta["latitude_deg"]
         out = proc.calibrate(Capture(meta, dict(sim.columns)))
@@ -379,15 +384,7 @@ def test_several_orientations_unknown_headings_no_latitude_give_a_sane_drift():
 def test_several_orientations_unknown_headings_with_latitude_remove_the_vertical_rate():
     z = []
     for seed in range(6):
-        sim = simulate(
-            "gyro-drift",
-            seed=500 + seed,
-            mode="static",
-            headings_deg=[0, 90, 180, 270],
-            duration_s=480,
-            gyro_noise_rad_s=5e-4,
-            bias_instability_rad_s=2e-6,
-        )
+        sim = _quiet_four_headings(500 + seed)
         out = proc.calibrate(_unknown_headings(sim, keep_latitude=True))
         assert "earth_rate_scale" not in out["fit"]
         z.append((np.array(out["params"]["drift"]) - sim.truth["drift"]) / np.array(out["uncertainty"]["drift"]))

@@ -87,6 +87,24 @@ def test_the_quit_question_follows_the_run_going_on_behind_it(tmp_path):
 # ---------------------------------------------------------------- 2. a diagnosis that says how far it is
 
 
+def _children(pid: int) -> list[str]:
+    """The command lines of the processes ``pid`` started that still run."""
+    out = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        try:
+            with open(f"/proc/{pid}/task/{task}/children") as fh:
+                kids = fh.read().split()
+        except OSError:
+            continue
+        for kid in kids:
+            try:
+                with open(f"/proc/{kid}/cmdline", "rb") as fh:
+                    out.append(fh.read().replace(b"\0", b" ").decode())
+            except OSError:
+                pass
+    return out
+
+
 def _diagnosis_running() -> list[str]:
     """What of a diagnosis still runs in this process (a thread in its code) or under it (a child
     process): the world's view, not the screen's."""
@@ -99,21 +117,7 @@ def _diagnosis_running() -> list[str]:
                 busy.append(f"thread {tid}: {name}:{f.f_lineno}")
                 break
             f = f.f_back
-    pid = os.getpid()
-    for task in os.listdir(f"/proc/{pid}/task"):
-        try:
-            with open(f"/proc/{pid}/task/{task}/children") as fh:
-                kids = fh.read().split()
-        except OSError:
-            continue
-        for kid in kids:
-            try:
-                with open(f"/proc/{kid}/cmdline", "rb") as fh:
-                    cmd = fh.read().replace(b"\0", b" ").decode()
-            except OSError:
-                continue
-            if "diagnos" in cmd:
-                busy.append(f"process {kid}: {cmd}")
+    busy += [f"process: {cmd}" for cmd in _children(os.getpid()) if "diagnos" in cmd]
     return busy
 
 
@@ -205,24 +209,6 @@ def test_connect_keeps_its_error_and_its_notices_within_the_screen(tmp_path):
 
 
 # ---------------------------------------------------------------- end to end, in a real terminal
-
-
-def _children(pid: int) -> list[str]:
-    """The command lines of the processes ``pid`` started that still run."""
-    out = []
-    for task in os.listdir(f"/proc/{pid}/task"):
-        try:
-            with open(f"/proc/{pid}/task/{task}/children") as fh:
-                kids = fh.read().split()
-        except OSError:
-            continue
-        for kid in kids:
-            try:
-                with open(f"/proc/{kid}/cmdline", "rb") as fh:
-                    out.append(fh.read().replace(b"\0", b" ").decode())
-            except OSError:
-                pass
-    return out
 
 
 def test_diagnose_in_tmux_says_its_step_and_escape_stops_it(tmp_path, shared_data):
