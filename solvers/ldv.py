@@ -118,11 +118,103 @@ def velocity_condition(v_body_mps) -> float:
     return float((s[0] / s[-1]) ** 2) if s[-1] > 0 else math.inf
 
 
-def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None, force: bool = False) -> LdvResult:
+# The attitude noise is read from the attitude's high-frequency part only where that part is noise:
+# white noise gives the same σ from second and third differences; motion resolved by the rate makes
+# the third-difference figure smaller (slow motion) and motion near the Nyquist rate a little larger
+# (up to 1.1x): outside this band the figure is motion, not noise, and is not used.
+ATT_NOISE_RATIO = (0.85, 1.15)
+
+
+def attitude_noise_rad(C_n_b) -> float | None:
+    """White attitude noise σ [rad per axis] of an attitude series ``C_n_b`` (n, 3, 3), time
+    ordered at a steady rate: the body-frame turns ``C_kᵀ C_k+1`` of consecutive samples, whose
+    differences hold a white per-sample rotation noise ``δθ`` (``C = C_true R(δθ)``) with variance
+    6σ² (second differences of the attitude) and their second differences with 20σ² (third),
+    read with the MAD so that manoeuvres do not count. None when the two disagree
+    (``ATT_NOISE_RATIO``: the high-frequency part is motion) or there are too few samples."""
+    C = np.asarray(C_n_b, float)
+    C = C[np.all(np.isfinite(C), axis=(1, 2))]
+    if len(C) < 20:
+        return None
+    from solvers import frames
+
+    step = np.einsum("nji,njk->nik", C[:-1], C[1:])
+    s = np.stack([frames.matrix_to_rotvec(m) for m in step])
+
+    def mad_sigma(d, var_factor):
+        return float(np.sqrt(np.mean((1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0)) ** 2) / var_factor))
+
+    s2 = mad_sigma(np.diff(s, 1, axis=0), 6.0)
+    s3 = mad_sigma(np.diff(s, 2, axis=0), 20.0)
+    if not (s2 > 0 and ATT_NOISE_RATIO[0] <= s3 / s2 <= ATT_NOISE_RATIO[1]):
+        return None
+    return min(s2, s3)
+
+
+def reference_noise_cov(v_body_mps, sigma_v_mps: float | None, sigma_att_rad: float | None) -> np.ndarray | None:
+    """Per-epoch covariance (n, 3, 3) [m²/s²] of the body-frame reference velocity's noise: the
+    velocity noise ``σ_v² I`` (per axis) and a white attitude noise ``δθ`` (σ per axis) turning
+    ``v_b = C_n_bᵀ v_n`` by ``v_b × δθ``: ``σ_att² (|v|² I − v vᵀ)``. None when both are 0/None."""
+    v = np.asarray(v_body_mps, float)
+    if not sigma_v_mps and not sigma_att_rad:
+        return None
+    cov = np.zeros((len(v), 3, 3))
+    if sigma_v_mps:
+        cov += sigma_v_mps**2 * np.eye(3)
+    if sigma_att_rad:
+        cov += sigma_att_rad**2 * (
+            np.einsum("ni,ni->n", v, v)[:, None, None] * np.eye(3) - np.einsum("ni,nj->nij", v, v)
+        )
+    return cov
+
+
+# a reference noise that puts less than this share of a beam's residual variance in it is not
+# modelled (a simulator's attitude rounded to 1e-6°: its rounding is white, and nothing to correct)
+REF_NOISE_NEGLIGIBLE = 1e-3
+
+
+def reference_noise_share(v_body_mps, vl_mps, ref_cov_mps2) -> np.ndarray:
+    """Per beam, the share of its least-squares residual variance that the reference noise
+    ``ref_cov_mps2`` puts in it: ``mean Xᵀ cov X / mean r²``. Above 1: more than the whole
+    residual, a noise figure read from the reference's high-frequency part that is really
+    motion (a car's attitude at 1 Hz)."""
+    H = np.asarray(v_body_mps, float)
+    Y = np.asarray(vl_mps, float)
+    X, *_ = np.linalg.lstsq(H, Y, rcond=None)  # (3, beams)
+    r = Y - H @ X
+    ref_var = np.einsum("ij,nik,kj->j", X, np.asarray(ref_cov_mps2, float), X) / len(H)
+    return ref_var / np.maximum(np.mean(r**2, axis=0), 1e-300)
+
+
+def instrumented_by_neighbours(v_body_mps) -> np.ndarray:
+    """The reference velocity predicted from its neighbours: the least-squares projection of
+    ``v_t`` on ``[1, v_t−1, v_t+1]`` (instrumental variables, two-stage least squares:
+    Fuller 1987 §1.4, Wooldridge 2010 §5.2). A white reference noise at epoch t is independent
+    of the neighbours' noise, while a motion smooth on the scale of one sample is carried by
+    them: a fit of the beams on the projection (beside any error-free column: an offset, a
+    drift, ω × r, a function of time or |ω|) is free of the errors-in-variables attenuation,
+    which plain least squares on the noisy ``v`` turned into an offset-like misfit. No noise
+    figure is needed; the first and last epochs repeat their one neighbour."""
+    v = np.asarray(v_body_mps, float)
+    if len(v) < 8:
+        return v
+    prev = np.vstack([v[1:2], v[:-1]])
+    nxt = np.vstack([v[1:], v[-2:-1]])
+    Z = np.column_stack([np.ones(len(v)), prev, nxt])
+    B, *_ = np.linalg.lstsq(Z, v, rcond=None)
+    return Z @ B
+
+
+def calibrate_ldv(
+    v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None, ref_cov_mps2=None, force: bool = False
+) -> LdvResult:
     """Per-beam least squares (module docstring). ``v_body_mps`` (N, 3), ``vl_mps`` (N, k).
 
-    ``ref_sigma_mps``: the reference velocity's noise (m/s, per axis); when given, the
-    moment-corrected (errors-in-variables) estimator is used instead of plain OLS.
+    ``ref_sigma_mps``: the reference velocity's noise (m/s, per axis); ``ref_cov_mps2``: the
+    reference's per-epoch noise covariance (N, 3, 3) (:func:`reference_noise_cov`: velocity
+    and attitude noise). When either is given, the moment-corrected (errors-in-variables)
+    estimator ``(HᵀH − Σ cov)⁻¹ Hᵀ V_L`` is used instead of plain OLS, its covariance the
+    sandwich ``σ̂² A⁻¹ HᵀH A⁻¹`` (``A = HᵀH − Σ cov``).
     Raises TooFewPositions (n < 3 epochs, or fewer than 4 for a σ) and NotIdentifiable
     (ill-conditioned velocity set, unless ``force``).
     """
@@ -150,19 +242,26 @@ def calibrate_ldv(v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None, for
     elif kappa > KAPPA_WARN:
         warnings.append(f"velocity set poorly conditioned: cond(HᵀH) = {kappa:.3g}; angles weakly determined")
     HtH_inv = np.linalg.pinv(H.T @ H)
+    S = np.zeros((3, 3))  # Σ over epochs of the reference noise covariance
+    if ref_sigma_mps:
+        S += n * ref_sigma_mps**2 * np.eye(3)
+    if ref_cov_mps2 is not None:
+        S += np.sum(np.asarray(ref_cov_mps2, float), axis=0)
+    eiv = bool(np.any(S))
+    A_inv = np.linalg.pinv(H.T @ H - S) if eiv else HtH_inv
     beams = []
     for j in range(Y.shape[1]):
         fr = linear_fit(H, Y[:, j], sigma=None, names=["X1", "X2", "X3"])
         X = np.asarray(fr.params["x"], dtype=float)
-        bias = -(ref_sigma_mps**2) * n * HtH_inv @ X if ref_sigma_mps else np.zeros(3)
-        if ref_sigma_mps:
-            X = np.linalg.solve(H.T @ H - n * ref_sigma_mps**2 * np.eye(3), H.T @ Y[:, j])
+        bias = -HtH_inv @ S @ X if eiv else np.zeros(3)
+        if eiv:
+            X = A_inv @ (H.T @ Y[:, j])
         r = Y[:, j] - H @ X  # V_L − V̂_L
         s2 = float(r @ r) / max(n - 3, 1)
-        cov = s2 * HtH_inv
+        cov = s2 * (A_inv @ (H.T @ H) @ A_inv if eiv else HtH_inv)
         excess = residual_excess(r)
         if excess > EXCESS_WARN:
-            cov_hac = hac_covariance(H, r, HtH_inv)
+            cov_hac = hac_covariance(H, r, A_inv)
             if np.trace(cov_hac) > np.trace(cov):
                 cov = cov_hac
             warnings.append(

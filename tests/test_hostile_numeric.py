@@ -338,6 +338,7 @@ def test_a_short_static_gyro_record_is_diagnosed_not_the_last_resort(sims):
         ("gyro-drift", ("mode=reference",), "reference_drift_deg_h", "-1", "must be zero or positive"),
         ("gyro-drift", ("mode=reference",), "reference_drift_deg_h", "1e300", "must be zero or positive"),
         ("ldv", (), "reference_sigma_mps", "-1", "must be zero or positive"),
+        ("ldv", (), "reference_attitude_sigma_deg", "-0.02", "must be zero or positive and at most 90"),
     ],
 )
 def test_a_procedure_key_no_bench_could_mean_is_refused_on_its_line(

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from solvers import ldv as ldv_solver
 from solvers import linalg
 from solvers.centrifuge import norm_target
 from solvers.diagnose.engine import Candidate, Problem
@@ -349,7 +350,16 @@ def _suffix(names, terms) -> str:
 # ---------------------------------------------------------------- P5 LDV
 
 
-def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=None, max_rows: int = 20000) -> Problem:
+# The share of a beam's residual variance the reference noise must reach before the beams are
+# fitted on the velocity the neighbours predict: a neighbour's prediction misses the motion's
+# curvature (a car's rough road at 50 Hz), which below it outweighs the attenuation it removes
+# (QA s27d null s700035, 0.4 % of the residual from the attitude: `lever_arm` named)
+LDV_IV_SHARE = 0.05
+
+
+def ldv_problem(
+    t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=None, ref_cov_mps2=None, max_rows: int = 20000
+) -> Problem:
     """Paired reference velocity and beam outputs; baseline X (per beam), all beams stacked.
 
     A drive longer than ``max_rows`` samples is cut into runs of ``step`` consecutive samples
@@ -357,7 +367,16 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     ``v``, ``ω``, ``T`` and ``t`` (only the delay interpolates), so the means obey the same
     model exactly and keep all the information about an effect slower than a run (keeping
     every ``step``-th sample threw away half of a 500 s drive at 50 Hz: a 3.5σ drift fell to
-    2.5σ). The last ``n mod step`` samples are left out."""
+    2.5σ). The last ``n mod step`` samples are left out.
+
+    ``ref_cov_mps2`` (n, 3, 3): the reference velocity's noise per epoch (velocity and attitude
+    noise, :func:`solvers.ldv.reference_noise_cov`; a run mean's is the run's mean over its
+    length). The model is then fitted on the velocity the neighbouring epochs predict
+    (:func:`solvers.ldv.instrumented_by_neighbours`), as the baseline's X is errors-in-variables
+    corrected: a noisy regressor fitted as exact leaves an offset-like misfit (an aircraft's
+    attitude noise of 0.017° at 74 m/s: a constant of 0.05 m/s per beam, deviance 20-27, in a
+    record of noise alone); and each row's σ takes the reference's part ``X_jᵀ cov X_j`` in
+    beside the beam's own noise."""
     t = np.asarray(t_s, float) if t_s is not None else None
     v = np.asarray(v_body_mps, float)
     y = np.asarray(vl_mps, float)
@@ -369,8 +388,12 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
         return None if x is None else np.asarray(x, float)[: m * step].reshape(m, step, *np.shape(x)[1:]).mean(axis=1)
 
     v, y, t = runs(v), runs(y), runs(t)
+    cov_v = None if ref_cov_mps2 is None else runs(ref_cov_mps2) / step
     T = runs(temp_c)
     W = runs(omega_body_rad_s)
+    if cov_v is not None and np.any(ldv_solver.reference_noise_share(v, y, cov_v) >= LDV_IV_SHARE):
+        # a noisy reference: the beams fitted on the part of it the neighbouring epochs carry
+        v = ldv_solver.instrumented_by_neighbours(v)
     dt = float(np.median(np.diff(t))) if t is not None and m > 1 else 0.0
     cond = Conditions(
         t_s=t,
@@ -384,6 +407,12 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
     y0 = ldv_model.forward(v, {"X": np.asarray(X0, float)})  # the baseline's beam outputs
     r0 = y0 - y
     sig_beam = np.maximum(np.std(r0, axis=0), 1e-12)
+    if cov_v is not None:  # the reference's part per row, the beam's own noise the rest (≥ a quarter)
+        ref_var = np.einsum("ji,nik,jk->nj", np.asarray(X0, float), cov_v, np.asarray(X0, float))
+        own = np.maximum(sig_beam**2 - ref_var.mean(axis=0), 0.25 * sig_beam**2)
+        sig_rows = np.sqrt(own[None, :] + ref_var).ravel()
+    else:
+        sig_rows = np.tile(sig_beam, len(v))
 
     def residual(p):
         return (ldv_model.forward(v, p, cond) - y).ravel()
@@ -403,7 +432,7 @@ def ldv_problem(t_s, v_body_mps, vl_mps, X0, *, temp_c=None, omega_body_rad_s=No
         "ldv",
         "V_L = X v (P5)",
         residual,
-        np.tile(sig_beam, len(v)),
+        sig_rows,
         np.repeat(groups, 3),
         {"X": np.asarray(X0, float)},
         {"X": True},

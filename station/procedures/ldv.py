@@ -29,12 +29,21 @@ are, unless ``reference_time_offset_s`` is set: then the reference is shifted by
 ``t`` and interpolated as above.
 
 ``method``: ``force`` computes even when the velocity set is ill-conditioned (loud
-warning); otherwise such a capture is refused. Metadata ``reference_sigma_mps``: the
-reference velocity noise, which switches on the errors-in-variables correction.
+warning); otherwise such a capture is refused.
+
+The reference's noise (:func:`reference_noise`, used by calibrate and diagnose alike): the
+velocity noise ``reference_sigma_mps`` (metadata) and, for a navigation-frame reference, the
+attitude noise ``reference_attitude_sigma_deg`` (metadata; per axis; 0 turns it off), else read
+from the attitude series itself. The attitude noise turns the body velocity by ``v × δθ``
+(≈ 25 mm/s at 70 m/s and 0.02°), across the velocity where an aircraft's spread is small:
+least squares on a noisy regressor is biased (errors in variables), so when a noise is known
+the moment-corrected estimator is used and its uncertainty widened (``estimator``,
+``reference_noise`` in the result).
 """
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 
@@ -91,7 +100,9 @@ def _cols(capture, names):
 
 
 def _reference_body(cap, tcol: str):
-    """(t_ref, v_body (n,3), kind) from a capture holding the reference columns."""
+    """(t_ref, v_body (n,3), kind, attitude noise σ [rad] or None) from a capture holding the
+    reference columns (:func:`solvers.ldv.attitude_noise_rad` on its attitude series)."""
+    att_sigma = None
     if all(c in cap.columns for c in BODY_COLS):
         v = _cols(cap, BODY_COLS)
         kind = "body"
@@ -103,6 +114,7 @@ def _reference_body(cap, tcol: str):
         C = np.stack([frames.euler_to_C_n_b(a, b, c) for a, b, c in zip(r, p, y)])
         v[ok] = np.einsum("nji,nj->ni", C, nav[ok, :3])  # C_n_bᵀ v_n
         kind = "nav"
+        att_sigma = ldv_solver.attitude_noise_rad(C)
     else:
         have = ", ".join(cap.columns)
         raise InputError(
@@ -112,7 +124,7 @@ def _reference_body(cap, tcol: str):
             f"or vn ve vd with roll_deg pitch_deg yaw_deg (have {have})",
         )
     t = np.asarray(cap.columns[tcol], dtype=float) if tcol in cap.columns else None
-    return t, v, kind
+    return t, v, kind, att_sigma
 
 
 def _interp(t_ref, v_ref, t_out, warnings):
@@ -162,11 +174,11 @@ def aligned_velocities(capture, reference=None, warnings=None):
         ref_cap = read_capture(_resolve(os.fspath(ref_path), capture))
         if "t" not in ref_cap.columns or "t" not in capture.columns:
             raise InputError(ref_cap.path, None, "a separate reference stream needs a 't' column in both files")
-        t_ref, v_ref, kind = _reference_body(ref_cap, "t")
+        t_ref, v_ref, kind, info["attitude_sigma_rad"] = _reference_body(ref_cap, "t")
         info["alignment"] = f"reference file {os.path.basename(os.fspath(ref_path))}, interpolated to LDV times"
     else:
         tcol = "ref_t" if "ref_t" in capture.columns else "t"
-        t_ref, v_ref, kind = _reference_body(capture, tcol)
+        t_ref, v_ref, kind, info["attitude_sigma_rad"] = _reference_body(capture, tcol)
         if t_ref is None:
             t_ref = None
         both = np.all(np.isfinite(vl), axis=1) & np.all(np.isfinite(v_ref), axis=1)
@@ -214,13 +226,59 @@ class Prepared:
     vl: np.ndarray  # beam outputs (n, 3), m/s
     info: dict  # alignment, reference kind, rows (capture row of each pair)
     warnings: list[str] = field(default_factory=list)
+    # the reference's noise per epoch (n, 3, 3) [m²/s²] (reference_noise), None: not known
+    ref_cov: np.ndarray | None = None
+    ref_noise: dict = field(default_factory=dict)  # its parts and where they came from
+
+
+# Station metadata keys (unknown keys are kept: capture-format.md): the reference velocity's
+# white noise per axis, and its attitude's (a nav-frame reference), which then replaces the
+# figure read from the attitude series; 0 turns either off.
+REF_SIGMA_KEY = "reference_sigma_mps"
+ATT_SIGMA_KEY = "reference_attitude_sigma_deg"
+
+
+def reference_noise(capture, v_body, vl, info) -> tuple[np.ndarray | None, dict]:
+    """The reference's noise covariance per epoch, the one model calibrate (errors-in-variables
+    estimator and its uncertainty) and diagnose (the regressor and each row's σ) both use:
+    velocity noise from ``reference_sigma_mps`` (metadata), attitude noise from
+    ``reference_attitude_sigma_deg`` (metadata) or else from the attitude series' own
+    high-frequency part (:func:`solvers.ldv.attitude_noise_rad`; not used where it would put
+    more into a beam than its whole residual, or next to nothing:
+    :func:`solvers.ldv.reference_noise_share`), propagated into the body
+    velocity as ``σ_att² (|v|² I − v vᵀ)`` (:func:`solvers.ldv.reference_noise_cov`)."""
+    sig_v = capture.float_meta_within(REF_SIGMA_KEY, None, 1e5, zero=True)
+    note: dict = {}
+    if sig_v:
+        note["velocity_sigma_mps"] = sig_v
+    sig_att = None
+    given = capture.float_meta_within(ATT_SIGMA_KEY, None, 90.0, zero=True)  # a bad value: refused on its line
+    if info.get("reference") == "nav":
+        if given is not None:
+            sig_att = math.radians(given)
+            note["attitude_sigma_deg"] = given
+            note["attitude_sigma_source"] = "metadata"
+        elif info.get("attitude_sigma_rad"):
+            sig_att = float(info["attitude_sigma_rad"])
+            share = (
+                ldv_solver.reference_noise_share(v_body, vl, ldv_solver.reference_noise_cov(v_body, None, sig_att))
+                if len(v_body) >= 4
+                else np.zeros(1)
+            )
+            if np.any(share > 1.0) or np.all(share < ldv_solver.REF_NOISE_NEGLIGIBLE):
+                sig_att = None  # more than the beams' whole residual (the series' motion), or nothing
+            else:
+                note["attitude_sigma_deg"] = math.degrees(sig_att)
+                note["attitude_sigma_source"] = "attitude series (second and third differences)"
+    return ldv_solver.reference_noise_cov(v_body, sig_v, sig_att), note
 
 
 def prepare(capture, reference=None) -> Prepared:
     """The paired velocities of ``capture`` (``reference``: a separate reference capture's path)."""
     warnings: list[str] = []
     v_b, vl, info = aligned_velocities(capture, reference, warnings)
-    return Prepared(v_b, vl, info, warnings)
+    cov, note = reference_noise(capture, v_b, vl, info)
+    return Prepared(v_b, vl, info, warnings, cov, note)
 
 
 # A vehicle at rest: the reference speed the guide calls parked, and the fewest moving epochs a
@@ -256,9 +314,8 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
     warnings = list(prep.warnings)
     v_b, vl, info = prep.v_body, prep.vl, prep.info
     _refuse_parked(capture, v_b, force)
-    ref_sigma = capture.float_meta_within("reference_sigma_mps", None, 1e5, zero=True)
     try:
-        res = ldv_solver.calibrate_ldv(v_b, vl, ref_sigma_mps=ref_sigma, force=force)
+        res = ldv_solver.calibrate_ldv(v_b, vl, ref_cov_mps2=prep.ref_cov, force=force)
     except SolverError as exc:
         raise UnsupportedError(f"{capture.path or 'capture'}: {exc}") from None
     warnings += res.warnings
@@ -305,7 +362,8 @@ def calibrate(capture, method: str | None = None, *, reference=None, prepared: P
         "reference": info.get("reference"),
         "euler_convention": "C_n_b = Rz(yaw) Ry(pitch) Rx(roll), NED, body x fwd y right z down",
         "alignment": info.get("alignment"),
-        "estimator": "errors-in-variables corrected" if ref_sigma else "ordinary least squares",
+        "estimator": "errors-in-variables corrected" if prep.ref_cov is not None else "ordinary least squares",
+        "reference_noise": dict(prep.ref_noise),
         "fit": fit,
     }
 
@@ -329,6 +387,14 @@ def format_text(result: dict) -> str:
             f"  σ {b['sigma_mps']:.4f} m/s"
         )
     lines.append(f"residual   {result['residual_rms']:.4g} m/s RMS")
+    noise = result.get("reference_noise") or {}
+    if noise:
+        parts = []
+        if noise.get("velocity_sigma_mps"):
+            parts.append(f"velocity {noise['velocity_sigma_mps']:.3g} m/s (metadata)")
+        if noise.get("attitude_sigma_deg") is not None:
+            parts.append(f"attitude {noise['attitude_sigma_deg']:.3g}° ({noise.get('attitude_sigma_source')})")
+        lines.append("ref noise  " + ", ".join(parts))
     for w in result.get("warnings", []):
         lines.append(f"warning    {w}")
     return "\n".join(lines)
@@ -375,11 +441,12 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     from station.procedures.diagnose import screen
 
     prep = prepared if prepared is not None else prepare(capture)
-    v_b, vl, rows = prep.v_body, prep.vl, prep.info.get("rows")
+    v_b, vl, rows, ref_cov = prep.v_body, prep.vl, prep.info.get("rows"), prep.ref_cov
     bad, screened = screen(capture)  # gaps and saturated samples: left out of the effect search
     if rows is not None and bad[rows].any() and (~bad[rows]).sum() >= 16:
         keep = ~bad[np.asarray(rows)]
         v_b, vl, rows = v_b[keep], vl[keep], np.asarray(rows)[keep]
+        ref_cov = None if ref_cov is None else ref_cov[keep]
 
     def pick(name):
         return None if name not in capture.columns or rows is None else np.asarray(capture.columns[name], float)[rows]
@@ -397,7 +464,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     temp = None
     if rows is not None and "temp_c" in capture.columns:  # a few empty fields: interpolated over time
         temp = fill_missing(capture.columns["temp_c"], capture.columns.get("t"))[rows]
-    prob = DP.ldv_problem(pick("t"), v_b, vl, X0, temp_c=temp, omega_body_rad_s=W)
+    prob = DP.ldv_problem(pick("t"), v_b, vl, X0, temp_c=temp, omega_body_rad_s=W, ref_cov_mps2=ref_cov)
     prob.screened = screened
     return DiagnosisInput(prob, {"rows": rows}, "a sample far off: a dropout of the LDV or the reference")
 
