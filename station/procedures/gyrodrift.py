@@ -579,6 +579,14 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
             held = []
         if len(held) >= 2:
             segs = held
+    # several orientations with no heading per position: pitch and roll come from the accelerometer,
+    # the heading is unknown (taken as 0 below), so only the Earth rate's up part can be fitted
+    hcol = capture.columns.get("heading_deg")
+    headings_known = (
+        len(segs) <= 1
+        or capture.float_meta("heading_deg") is not None
+        or (hcol is not None and bool(np.any(np.isfinite(hcol))))
+    )
     n = len(w_b)
     t = np.asarray(capture.columns["t"], float) if "t" in capture.columns else np.arange(n) * dt
     label = np.full(n, "", dtype=object)
@@ -628,7 +636,11 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         label[order],
         C_b_n=Cbn[order],
         reference=mode_ref,
+        headings_known=headings_known,
     )
     prob.unit = unit
+    if unit != "rad/s" and "g_sensitivity" in prob.could_be:  # a gyro in counts: Ω's size in them is unknown
+        why = f"no latitude, no heading per position, and the gyro in {unit} with no scale: it may be the Earth rate"
+        prob.could_be["g_sensitivity"] = ("earth_rate", lambda P, S: why)
     prob.screened = screened
     return DiagnosisInput(prob, {"rows": order}, "a block far off the others: a knock, the unit moved, or a bias jump")
