@@ -180,6 +180,7 @@ def gyro_problem(
     max_rows: int = 400,
     reference: bool = False,
     headings_known: bool = True,
+    step_rad_s: float | None = None,
 ) -> Problem:
     """Static gyro record(s) (P4 body frame, rad/s) as block means.
 
@@ -192,6 +193,8 @@ def gyro_problem(
     headings_known: False when ``C_b_n`` has the right pitch and roll but not the heading (several
     orientations, no heading given): ``earth_rate`` is then its up component only, which depends
     on pitch and roll alone, and as that is an isotropic ``G f`` it is tied to g_sensitivity.
+    step_rad_s: the grid the rates are written on (``quantisation_step``), or None: quantisation
+    noise (step²/12 a sample) is then the least noise a block mean can have.
     """
     t = np.asarray(t_s, float)
     w = np.asarray(w_rad_s, float)
@@ -328,6 +331,11 @@ def gyro_problem(
     prob.wander_calibrated = True
     prob.series_names = {0: "x", 1: "y", 2: "z"}
     prob.noise_floor = GYRO_NOISE_FLOOR_RAD_S
+    if step_rad_s:
+        # a rate written on a grid has at least the quantiser's noise, step/√12 a sample and /√per in a
+        # block mean where noise dithers it; a residual below that is the quantiser's (undithered:
+        # noise-free rates rounded leave an error that is a function of the rate itself, not the gyro's)
+        prob.noise_floor = max(prob.noise_floor, step_rad_s / math.sqrt(12.0 * per))
     if not headings_known and not reference and earth_body_rad_s is None and fb is not None and multi:
         # the Earth rate's up part in body axes is Ω sin(lat) f/|f|: the G f of an isotropic G, inside
         # g_sensitivity's span (with headings known its north part tells the two apart)
@@ -337,6 +345,27 @@ def gyro_problem(
         # change between positions stays within what the Earth rate can make is tied to it
         prob.could_be = {"g_sensitivity": ("earth_rate", lambda P, S: _earth_rate_could_make(fb, P["G"], S["G"]))}
     return prob
+
+
+def quantisation_step(x, max_unique_fraction: float = 0.25) -> float | None:
+    """The grid step of values ``x`` (1-D), or None when they are not on a grid: every value an
+    integer multiple of the smallest gap between distinct values (to 1e-3 of it; values closer than
+    1e-9 of the largest are one, the round-off of a difference of two gridded columns), and at most
+    ``max_unique_fraction`` of them distinct (a continuous reading is never mistaken for one)."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if x.size < 16:
+        return None
+    u = np.unique(x)
+    scale = float(np.max(np.abs(u)))
+    if scale == 0:
+        return None
+    u = u[np.r_[True, np.diff(u) > 1e-9 * scale]]
+    if u.size < 2 or u.size > max_unique_fraction * x.size:
+        return None
+    q = float(np.min(np.diff(u)))
+    k = u / q
+    return q if float(np.max(np.abs(k - np.round(k)))) < 1e-3 else None
 
 
 def _earth_rate_could_make(f_mps2, G, sigma_G) -> str | None:

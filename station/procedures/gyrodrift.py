@@ -544,6 +544,15 @@ def format_text(result: dict) -> str:
     return "\n".join(lines)
 
 
+def _step(w_rad_s) -> float | None:
+    """The smallest grid step of the rates' axes (unit − reference in mode A), or None when an axis
+    is not written on a grid."""
+    from solvers.diagnose.problems import quantisation_step
+
+    steps = [quantisation_step(w_rad_s[:, i]) for i in range(3)]
+    return None if any(s is None for s in steps) else min(steps)
+
+
 def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None = None) -> DiagnosisInput:
     """The P4 diagnosis problem (it fits its own baseline: ``base`` is not used)."""
     from solvers.diagnose import problems as DP
@@ -637,6 +646,7 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         C_b_n=Cbn[order],
         reference=mode_ref,
         headings_known=headings_known,
+        step_rad_s=_step(w_b[order]) if unit == "rad/s" else None,
     )
     prob.unit = unit
     if unit != "rad/s" and "g_sensitivity" in prob.could_be:  # a gyro in counts: Ω's size in them is unknown
