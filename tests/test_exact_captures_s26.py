@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import pytest
 
 import tests.spec_captures_s26 as G
 from tests.station_run import run_station
@@ -165,15 +164,11 @@ def test_p4_mode_a_exact_with_a_time_drift_names_it_alone(tmp_path):
 # ---------------------------------------------------------------------------- found, not fixed
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="mode A written to 2 decimals (0.01 rad/s, quantisation the only noise): diagnose names "
-    "residual:time (periodic, 18.8 s, gain 0.016). Rounding a sinusoid without noise to dither it "
-    "leaves an error that is a function of the rate itself, periodic with it: real structure, but "
-    "the quantiser's, not the gyro's. Needs an undithered-quantiser model in gyro_problem (as the "
-    "compass has: solvers.compass.quantised_noise). Not fixed in s26f.",
-)
 def test_p4_mode_a_rounded_to_two_decimals_has_verdict_none(tmp_path):
+    """Mode A written to 2 decimals (0.01 rad/s, quantisation the only noise): diagnose named
+    `residual:time` (periodic, 18.8 s, gain 0.016), the error of rounding a noise-free sinusoid,
+    a function of the rate itself: the quantiser's structure, not the gyro's. Rates on a grid have
+    at least its noise (step/√12 a sample): below it nothing is sought."""
     j = _diagnose(_write(tmp_path / "p4a_q.csv", *_p4_mode_a(), fmt="{:.2f}"))
     assert j["verdict"] == [], j["effects"]
 

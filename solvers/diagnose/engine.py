@@ -200,6 +200,13 @@ class Problem:
     # lags, the rows of some seconds (Bonferroni over the two): 20 lags at 8 Hz span 2.5 s, and a
     # bias that swings over 8–25 s left p 0.08 there, 3e-6 over 10 s (QA s27d seed 700125); None: 20 lags
     whiteness_lags: int | None = None
+    # narrow candidate → wide candidate whose span holds the narrow one's whole (P4 without headings:
+    # the Earth rate's up part is an isotropic G f): the narrow one named, the wide one is tied to it
+    nested: dict = field(default_factory=dict)
+    # named candidate → (other candidate, fn(params, sigma) → reason or None): after the final refit,
+    # the other goes in the named one's ``confused_with`` (with the reason) when fn says it could have
+    # made what the named one fitted (P4 without headings: G f no larger than the Earth rate can be)
+    could_be: dict = field(default_factory=dict)
     _wander: object = None
 
 
@@ -504,6 +511,19 @@ def _tie_intercepts(problem: Problem, named: list[dict]) -> None:
             for a, b in ((const, other), (other, const)):
                 if all(c["name"] != b for c in by_name[a]["confused_with"]):
                     by_name[a]["confused_with"] = [*by_name[a]["confused_with"], {"name": b, "correlation": corr}]
+
+
+def _tie_could_be(problem: Problem, named: list[dict], fitres: FitResult) -> None:
+    """``problem.could_be``: a named effect whose fitted size another candidate could have made
+    too gets that one in its ``confused_with``, with the reason (``why``) instead of a correlation."""
+    names = {e["name"] for e in named}
+    for e in named:
+        other, fn = problem.could_be.get(e["name"], (None, None))
+        if other is None or other in names or any(c["name"] == other for c in e["confused_with"]):
+            continue
+        why = fn(fitres.params, fitres.sigma)
+        if why:
+            e["confused_with"] = [*e["confused_with"], {"name": other, "why": why}]
 
 
 def _candidate_columns(problem: Problem, base_params: dict, c: Candidate, Q: np.ndarray, r0: np.ndarray) -> _Cand:
@@ -1456,6 +1476,17 @@ def _single_basis(desc: dict | None) -> bool:
     return bool(desc) and desc.get("shape") == "linear"
 
 
+def _nested_ties(problem: Problem, best: _Eval, evals: list, tied: list[dict]) -> list[dict]:
+    """``tied`` with the wide candidate of ``problem.nested`` when ``best`` is the narrow one it holds
+    whole (the wide one explains the same; the other way round is ``problem.could_be``'s to say)."""
+    wide = problem.nested.get(best.cc.cand.name)
+    out = list(tied)
+    for ev in evals:
+        if ev.cc.cand.name == wide and ev.k > 0 and all(c["name"] != wide for c in tied):
+            out.append({"name": wide, "correlation": _corr(best.sig, ev.sig)})
+    return out
+
+
 def _head_to_head(problem: Problem, best: _Eval, others: list[_Eval], n: int) -> tuple[list[dict], _Eval | None]:
     """``best`` against each other candidate whose fitted signature (projected off the current
     model) correlates with its own by more than RIVAL_CORR, each alone added to the current model:
@@ -1700,6 +1731,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
             # this one would only stand in for it, and is not named
             remaining = [c for c in remaining if c.name != best.cc.cand.name]
             continue
+        confused = _nested_ties(problem, best, evals, confused)
         cc = best.cc
         entries[cc.cand.name]["selected"] = True
         picked.append((cc, {"name": cc.cand.name, "cv_rms_before": cv_cur, "confused_with": confused}))
@@ -2039,6 +2071,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     if not picked and not generic_effect:
         ext = baseline_fit
     _tie_intercepts(problem, [e for _, e in picked])
+    _tie_could_be(problem, [e for _, e in picked], ext)
     effects: list[dict] = []
     for cc, e in picked:
         e = dict(e)

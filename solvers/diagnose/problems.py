@@ -27,6 +27,7 @@ from solvers import linalg
 from solvers.centrifuge import norm_target
 from solvers.diagnose.engine import Candidate, Problem
 from solvers.errors import TooFewPositions
+from solvers.frames import OMEGA_EARTH_RAD_S
 from solvers.models import Conditions, temperature_rate
 from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
@@ -182,6 +183,8 @@ def gyro_problem(
     C_b_n=None,
     max_rows: int = 400,
     reference: bool = False,
+    headings_known: bool = True,
+    step_rad_s: float | None = None,
 ) -> Problem:
     """Static gyro record(s) (P4 body frame, rad/s) as block means.
 
@@ -191,6 +194,11 @@ def gyro_problem(
     positions: (N,) labels (one static orientation each).
     reference: ``w_rad_s`` is the unit minus a reference IMU on the same mount (P4 mode A):
     the Earth rate is in both and cancels (pass zeros); the baseline says so.
+    headings_known: False when ``C_b_n`` has the right pitch and roll but not the heading (several
+    orientations, no heading given): ``earth_rate`` is then its up component only, which depends
+    on pitch and roll alone, and as that is an isotropic ``G f`` it is tied to g_sensitivity.
+    step_rad_s: the grid the rates are written on (``quantisation_step``), or None: quantisation
+    noise (step²/12 a sample) is then the least noise a block mean can have.
     """
     t = np.asarray(t_s, float)
     w = np.asarray(w_rad_s, float)
@@ -234,7 +242,9 @@ def gyro_problem(
         omega = Eb
         if "wE" in p:
             omega = Eb + gyro_model.project_nav_rate(Cb, np.r_[p["wE"], 0.0])  # north, up; east 0
-        q = {k: v for k, v in p.items() if k != "wE"}
+        elif "wU" in p:  # headings unknown: up only (the up axis in body axes needs no heading)
+            omega = Eb + gyro_model.project_nav_rate(Cb, np.r_[0.0, p["wU"], 0.0])
+        q = {k: v for k, v in p.items() if k not in ("wE", "wU")}
         return (gyro_model.forward(omega, q, cond) - wb).ravel()
 
     cands = [_temp_candidate(Tb, rate=cond.temp_rate_c_s), _time_candidate(tb)]
@@ -280,6 +290,8 @@ def gyro_problem(
                 "force, where g_sensitivity's G f holds it too",
             )
         )
+    elif not headings_known:
+        cands.append(Candidate("earth_rate", {"wU": np.zeros(1)}))
     else:
         cands.append(Candidate("earth_rate", {"wE": np.zeros(2)}))
     if reference:
@@ -323,7 +335,60 @@ def gyro_problem(
     prob.wander_calibrated = True
     prob.series_names = {0: "x", 1: "y", 2: "z"}
     prob.noise_floor = GYRO_NOISE_FLOOR_RAD_S
+    if step_rad_s:
+        # a rate written on a grid has at least the quantiser's noise, step/√12 a sample and /√per in a
+        # block mean where noise dithers it; a residual below that is the quantiser's (undithered:
+        # noise-free rates rounded leave an error that is a function of the rate itself, not the gyro's)
+        prob.noise_floor = max(prob.noise_floor, step_rad_s / math.sqrt(12.0 * per))
+    if not headings_known and not reference and earth_body_rad_s is None and fb is not None and multi:
+        # the Earth rate's up part in body axes is Ω sin(lat) f/|f|: the G f of an isotropic G, inside
+        # g_sensitivity's span (with headings known its north part tells the two apart)
+        prob.nested = {"earth_rate": "g_sensitivity"}
+        # its north part, headings unknown, is an offset of Ω cos(lat) across f at each position, in a
+        # direction of its own: a G f of 9 parameters takes much of it on a few positions. A G f whose
+        # change between positions stays within what the Earth rate can make is tied to it
+        prob.could_be = {"g_sensitivity": ("earth_rate", lambda P, S: _earth_rate_could_make(fb, P["G"], S["G"]))}
     return prob
+
+
+def quantisation_step(x, max_unique_fraction: float = 0.25) -> float | None:
+    """The grid step of values ``x`` (1-D), or None when they are not on a grid: every value an
+    integer multiple of the smallest gap between distinct values (to 1e-3 of it; values closer than
+    1e-9 of the largest are one, the round-off of a difference of two gridded columns), and at most
+    ``max_unique_fraction`` of them distinct (a continuous reading is never mistaken for one)."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if x.size < 16:
+        return None
+    u = np.unique(x)
+    scale = float(np.max(np.abs(u)))
+    if scale == 0:
+        return None
+    u = u[np.r_[True, np.diff(u) > 1e-9 * scale]]
+    if u.size < 2 or u.size > max_unique_fraction * x.size:
+        return None
+    q = float(np.min(np.diff(u)))
+    k = u / q
+    return q if float(np.max(np.abs(k - np.round(k)))) < 1e-3 else None
+
+
+def _earth_rate_could_make(f_mps2, G, sigma_G) -> str | None:
+    """Why the Earth rate (any latitude and headings) could have made a fitted ``G f`` of these
+    block means of the specific force, or None when it could not. The Earth rate in body axes has
+    the magnitude Ω at every orientation, so about its mean (the bias takes the mean) it changes by
+    at most 2 Ω: a fitted G f whose change between rows, less 3 σ of it, stays within that could be it."""
+    f = np.asarray(f_mps2, float)
+    s = f @ np.asarray(G, float).T
+    s = s - s.mean(axis=0)
+    sd = np.sqrt((f**2) @ (np.asarray(sigma_G, float) ** 2).T)  # per row and axis, σ of G f
+    excess = np.linalg.norm(np.maximum(np.abs(s) - 3.0 * sd, 0.0), axis=1)
+    if float(excess.max()) > 2.0 * OMEGA_EARTH_RAD_S:
+        return None
+    return (
+        f"no latitude and no heading per position: the Earth rate, {OMEGA_EARTH_RAD_S:.3g} rad/s at "
+        f"every orientation, changes by up to {2 * OMEGA_EARTH_RAD_S:.3g} rad/s between positions; "
+        f"this G f by {float(np.linalg.norm(s, axis=1).max()):.2g}"
+    )
 
 
 GYRO_TERMS = {

@@ -340,7 +340,10 @@ def format_text(
             f"(gain {100 * e['gain']:.1f} %)"
         )
         for c in e["confused_with"]:
-            L.append(f"            cannot be told apart from {c['name']} (correlation {c['correlation']:+.3f})")
+            if "why" in c:
+                L.append(f"            cannot be told apart from {c['name']} ({c['why']})")
+            else:
+                L.append(f"            cannot be told apart from {c['name']} (correlation {c['correlation']:+.3f})")
         if e["name"].startswith("residual:"):
             corr = ", ".join(f"{k} {v:.2f}" for k, v in e.get("correlation", {}).items())
             L.append(

@@ -544,6 +544,15 @@ def format_text(result: dict) -> str:
     return "\n".join(lines)
 
 
+def _step(w_rad_s) -> float | None:
+    """The smallest grid step of the rates' axes (unit − reference in mode A), or None when an axis
+    is not written on a grid."""
+    from solvers.diagnose.problems import quantisation_step
+
+    steps = [quantisation_step(w_rad_s[:, i]) for i in range(3)]
+    return None if any(s is None for s in steps) else min(steps)
+
+
 def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None = None) -> DiagnosisInput:
     """The P4 diagnosis problem (it fits its own baseline: ``base`` is not used)."""
     from solvers.diagnose import problems as DP
@@ -579,6 +588,14 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
             held = []
         if len(held) >= 2:
             segs = held
+    # several orientations with no heading per position: pitch and roll come from the accelerometer,
+    # the heading is unknown (taken as 0 below), so only the Earth rate's up part can be fitted
+    hcol = capture.columns.get("heading_deg")
+    headings_known = (
+        len(segs) <= 1
+        or capture.float_meta("heading_deg") is not None
+        or (hcol is not None and bool(np.any(np.isfinite(hcol))))
+    )
     n = len(w_b)
     t = np.asarray(capture.columns["t"], float) if "t" in capture.columns else np.arange(n) * dt
     label = np.full(n, "", dtype=object)
@@ -628,7 +645,12 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         label[order],
         C_b_n=Cbn[order],
         reference=mode_ref,
+        headings_known=headings_known,
+        step_rad_s=_step(w_b[order]) if unit == "rad/s" else None,
     )
     prob.unit = unit
+    if unit != "rad/s" and "g_sensitivity" in prob.could_be:  # a gyro in counts: Ω's size in them is unknown
+        why = f"no latitude, no heading per position, and the gyro in {unit} with no scale: it may be the Earth rate"
+        prob.could_be["g_sensitivity"] = ("earth_rate", lambda P, S: why)
     prob.screened = screened
     return DiagnosisInput(prob, {"rows": order}, "a block far off the others: a knock, the unit moved, or a bias jump")
