@@ -660,7 +660,7 @@ def _ardupilot(cal: dict, meta: dict, instance: int | None, ex: Export) -> None:
         n = int(si) + 1 if si not in (None, "") and use.source_firmware == "ardupilot" else 1
         if n not in slots:  # the log's sensor has no slot: never another sensor's by default
             raise UnsupportedError(
-                f"{fmt}: the capture's sensor is ArduPilot's {'compass' if kind == 'mag' else 'IMU'} instance {n - 1} "
+                f"{fmt}: the capture's sensor is ArduPilot's {'compass instance' if kind == 'mag' else 'IMU instance'} {n - 1} "
                 f"(sensor_instance), and ArduPilot's parameters hold {what} {slots[0]}-{slots[-1]} only: "
                 "no slot to write; nothing written"
             )
