@@ -161,6 +161,18 @@ def write_bin(path, n=200, units=True, late_param=False, split_dump=False):
     return {i: np.asarray(v) for i, v in truth.items()}
 
 
+def calibrated_tabletop(log, B: np.ndarray, M: np.ndarray) -> dict:
+    """`station calibrate LOG --procedure accel-tabletop --json`'s result, checked against the truth
+    ``A = B + M V``: B within 5σ (+1e-4), M within 0.01."""
+    res = run_station("calibrate", log, "--procedure", "accel-tabletop", "--json")
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    b, sb = np.array(r["params"]["B"]), np.array(r["uncertainty"]["B"])
+    assert np.all(np.abs(b - B) <= 5 * sb + 1e-4), (b, sb)
+    np.testing.assert_allclose(np.array(r["params"]["M"]), M, atol=0.01)
+    return r
+
+
 def test_bin_round_trip_units_parameters_date_place(tmp_path):
     log = tmp_path / "00000042.BIN"
     truth = write_bin(log)
@@ -313,12 +325,7 @@ def test_bin_calibrates_directly_and_recovers_the_truth(tmp_path):
     for (t, *_), v in zip(true, V):
         w.imu(int(10_000 + t * 1e6), 0, (0.0, 0.0, 0.0), v)
     w.close()
-    res = run_station("calibrate", log, "--procedure", "accel-tabletop", "--json")
-    assert res.returncode == 0, res.stderr
-    r = json.loads(res.stdout)
-    b, sb = np.array(r["params"]["B"]), np.array(r["uncertainty"]["B"])
-    assert np.all(np.abs(b - B) <= 5 * sb + 1e-4), (b, sb)
-    np.testing.assert_allclose(np.array(r["params"]["M"]), M, atol=0.01)
+    r = calibrated_tabletop(log, B, M)
     out = tmp_path / "tabletop.csv"
     assert run_station("import", log, "--procedure", "accel-tabletop", "--out", out).returncode == 0
     via = json.loads(run_station("calibrate", out, "--json").stdout)

@@ -14,15 +14,13 @@ test_import_ardupilot, which names its sources) with those formats, units and mu
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 from pymavlink import DFReader
 
 from solvers.frames import normal_gravity_mps2
 from station.capture import read_capture
 from tests.station_run import assert_one_line_refusal, run_station
-from tests.test_import_ardupilot import PARAMS, DataFlashWriter, _f32, _static_positions
+from tests.test_import_ardupilot import PARAMS, DataFlashWriter, _f32, _static_positions, calibrated_tabletop
 
 RAW_FORMATS = {  # AP_InertialSensor/LogStructure.h LOG_STRUCTURE_FROM_INERTIALSENSOR
     "ACC": ("QBQfff", "TimeUS,I,SampleUS,AccX,AccY,AccZ", "s#sooo", "F-F000"),
@@ -108,12 +106,7 @@ def test_a_log_with_acc_and_gyr_only_calibrates_and_recovers_the_truth(tmp_path)
     assert abs(float(c.meta["sample_rate_hz"]) - 1000.0) < 1e-3  # SampleUS, not the bursts of TimeUS
     np.testing.assert_array_equal(c.columns["ax"], _f32(V[: c.n_rows, 0]))
     np.testing.assert_allclose(c.columns["t"], t_s[: c.n_rows] - t_s[0], atol=2e-6)
-    res = run_station("calibrate", log, "--procedure", "accel-tabletop", "--json")
-    assert res.returncode == 0, res.stderr
-    r = json.loads(res.stdout)
-    b, sb = np.array(r["params"]["B"]), np.array(r["uncertainty"]["B"])
-    assert np.all(np.abs(b - B) <= 5 * sb + 1e-4), (b, sb)
-    np.testing.assert_allclose(np.array(r["params"]["M"]), M, atol=0.01)
+    calibrated_tabletop(log, B, M)
 
 
 def test_the_second_sensor_and_the_gyro_and_the_old_names(tmp_path):
