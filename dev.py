@@ -67,6 +67,10 @@ def main(argv: list[str]) -> int:
         return subprocess.call([str(py), "-m", "station", *rest], env=env)
     if cmd == "test":
         args = rest or ["-q", "-n", "2"]
+        # one BLAS thread per worker: two workers on two cores, each with OpenBLAS's default
+        # threads, spin for each other's cores (station/__init__.py sets the same for the station)
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            env.setdefault(var, "1")
         rc = subprocess.call([str(py), "-m", "pytest", *args], cwd=ROOT, env=env)
         return rc
     if cmd == "bench":

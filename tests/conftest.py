@@ -5,6 +5,8 @@ from pathlib import Path
 
 import pytest
 
+import station  # noqa: F401  (one BLAS thread per process, set before any test module imports numpy)
+
 ROOT = Path(__file__).resolve().parents[1]
 # ../shared beside the clone; a git worktree elsewhere names it in $STATION_SHARED
 SHARED = Path(os.environ.get("STATION_SHARED") or ROOT.parent / "shared")
