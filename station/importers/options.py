@@ -38,8 +38,8 @@ SOURCES: dict[str, tuple[Source, ...]] = {
     "ardupilot": (
         Source("auto", "AP: auto", "IMU where logged, else ACC/GYR, else ISBH/ISBD"),
         Source("raw", "ACC/GYR", "ACC/GYR, every sample at the sensor's rate"),
-        Source("combined", "IMU", "IMU, the samples the EKF used"),
-        Source("batch", "ISB batch", "ISBH/ISBD, the batch sampler's blocks (INS_LOG_BAT_*)"),
+        Source("combined", "IMU", "IMU, the filtered samples at the main loop's rate"),
+        Source("batch", "ISB batch", "ISBH/ISBD, the batch sampler's blocks, INS_LOG_BAT_MASK"),
     ),
 }
 SOURCE_NAMES = {"px4": "PX4 logs", "ardupilot": "ArduPilot DataFlash logs"}
@@ -56,9 +56,7 @@ def check_source(fmt: str, source: str) -> None:
     if source == "auto":
         return
     if fmt not in SOURCES:
-        raise InputError(
-            None, None, f"--source applies to {' and '.join(SOURCE_NAMES[f] for f in SOURCES)} only"
-        )
+        raise InputError(None, None, f"--source applies to {' and '.join(SOURCE_NAMES[f] for f in SOURCES)} only")
     if source not in source_values(fmt):
         raise InputError(
             None,
@@ -69,7 +67,7 @@ def check_source(fmt: str, source: str) -> None:
 
 def _source_help() -> str:
     return "; ".join(
-        f"{SOURCE_NAMES[fmt]}: " + ", ".join(f"{s.value} = {s.reads}" for s in sources)
+        f"{SOURCE_NAMES[fmt]}: " + ", ".join(f"{s.value} ({s.reads})" for s in sources)
         for fmt, sources in SOURCES.items()
     )
 
