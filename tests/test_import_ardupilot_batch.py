@@ -145,6 +145,14 @@ def test_batches_read_back_as_written_in_si_units(tmp_path):
     t = w.acc_t[keep]
     np.testing.assert_allclose(c.columns["t"], t - t[0], atol=2e-6)  # SampleUS is whole microseconds
 
+    # a log cut short in its last block (a power loss): read up to the cut, said once, not as
+    # ISBD records the logger dropped
+    cut = tmp_path / "cut.bin"
+    cut.write_bytes(log.read_bytes()[:-300])
+    res = run_station("import", cut, "--procedure", "accel-tabletop", "--out", tmp_path / "cut.csv")
+    assert res.returncode == 0 and "the log is cut short inside a record (ISBD)" in res.stderr, res.stderr
+    assert "warning: 1 ISBD records of the batches read are missing" in res.stderr, res.stderr  # block 0's alone
+
     out = tmp_path / "gyro.csv"
     res = run_station("import", log, "--procedure", "gyro-drift", "--out", out)
     assert res.returncode == 0, res.stderr

@@ -388,7 +388,12 @@ def _df_batches(log, inst: int, named: bool) -> tuple[dict, dict, dict, int, lis
             k = (seq[:, None] * per + np.arange(per)).ravel()  # each sample's place in the block
             block = np.column_stack([values[a][mine].ravel() for a in ("x", "y", "z")]) / mul
             keep = k < count if count > 0 else np.ones(len(k), dtype=bool)
-            holes += int(count // per - len(seq)) if count > 0 else 0
+            # ISBD records missing: inside the block, or after its last one but for the file's last
+            # block (a log that ends there: the cut is said on its own)
+            last = j == len(htype) - 1
+            holes += int(seq[-1] + 1 - len(seq)) + (
+                0 if last or count <= 0 else max(0, count // per - int(seq[-1]) - 1)
+            )
             t_us = float(h["SampleUS"][j]) + k[keep] * 1e6 / rate
             parts.append(np.column_stack([t_us, block[keep]]))
             first_ofs = min(first_ofs, int(h["_offset"][j]))
