@@ -132,7 +132,7 @@ def test_batches_read_back_as_written_in_si_units(tmp_path):
     out = tmp_path / "acc.csv"
     res = run_station("import", log, "--procedure", "accel-tabletop", "--out", out)
     assert res.returncode == 0, res.stderr
-    assert "1 ISBD records of the batches read are missing" in res.stderr, res.stderr
+    assert "1 ISBD record of the batches read is missing" in res.stderr, res.stderr
     assert "the gyro samples (ISBD gyro[0]) never fall near the accelerometer's" in res.stderr, res.stderr
     c = read_capture(out)
     m = c.meta
@@ -151,7 +151,7 @@ def test_batches_read_back_as_written_in_si_units(tmp_path):
     cut.write_bytes(log.read_bytes()[:-300])
     res = run_station("import", cut, "--procedure", "accel-tabletop", "--out", tmp_path / "cut.csv")
     assert res.returncode == 0 and "the log is cut short inside a record (ISBD)" in res.stderr, res.stderr
-    assert "warning: 1 ISBD records of the batches read are missing" in res.stderr, res.stderr  # block 0's alone
+    assert "warning: 1 ISBD record of the batches read is missing" in res.stderr, res.stderr  # block 0's alone
 
     out = tmp_path / "gyro.csv"
     res = run_station("import", log, "--procedure", "gyro-drift", "--out", out)
@@ -240,7 +240,7 @@ def _no_sensor_messages(path) -> None:
 @pytest.mark.parametrize(
     ("make", "says"),
     [
-        (_cut_in_first_isbd, ("1 ISBH batch headers but no ISBD records", "cut short inside a record (ISBD)")),
+        (_cut_in_first_isbd, ("1 ISBH batch header but no ISBD records", "cut short inside a record (ISBD)")),
         (_headers_only, ("4 ISBH batch headers but no ISBD records",)),
         (
             _no_sensor_messages,

@@ -10,6 +10,10 @@ DataFlash (``DFReader_binary``), ArduPilot's ``LogStructure`` definitions:
   ``INS_RAW_LOG_OPT``), corrected and rotated as ``IMU`` is (``_rotate_and_correct_accel`` before
   ``log_accel_raw``), timed by ``SampleUS``. Read where the log has no ``IMU`` records, or with
   ``--source raw``. Logs before the ``I`` field name them ``ACC1``…``ACC3``, ``GYR1``…``GYR3``.
+- ``ISBH`` / ``ISBD`` (the batch sampler, ``INS_LOG_BAT_MASK``): blocks of one sensor's samples, int16
+  × ``ISBH.mul``, the accelerometer's and the gyro's in turn (never at the same time), each
+  sample at ``SampleUS + k/smp_rate``; corrected and rotated as ACC/GYR. Read where the log has
+  neither ``IMU`` nor ``ACC``/``GYR`` records, or with ``--source batch`` (``_df_batches``).
 - ``MAG`` (``TimeUS,I,MagX,MagY,MagZ,OfsX,…``, units ``G`` × multiplier ``C`` = 10⁻³): milligauss,
   offsets, diagonals and motor compensation applied, body frame.
 - ``PARM`` (``Name,Value``): the parameters; a name's first record is its value in use (the
@@ -357,8 +361,10 @@ def _df_batches(log, inst: int, named: bool) -> tuple[dict, dict, dict, int, lis
     for t, kind in ISB_KIND.items():
         seen[kind] = {int(i) for i in np.unique(hinst[htype == t])}
     if d is None:
+        n = len(htype)
         notes.append(
-            f"{len(htype)} ISBH batch headers but no ISBD records: the batch sampler's samples are not in the log"
+            f"{n} ISBH batch header{'s' if n != 1 else ''} but no ISBD records: the batch sampler's samples are "
+            "not in the log"
         )
         return rows, read, seen, first_ofs, notes
     # each ISBD belongs to the last ISBH before it in the file, where their batch numbers N agree
@@ -401,20 +407,23 @@ def _df_batches(log, inst: int, named: bool) -> tuple[dict, dict, dict, int, lis
             rows[kind] = np.concatenate(parts)
     if holes > 0:
         notes.append(
-            f"{holes} ISBD records of the batches read are missing (the logger dropped them): "
-            f"{holes * per} samples lost, a gap in the block"
+            f"{holes} ISBD record{'s' if holes != 1 else ''} of the batches read {'are' if holes != 1 else 'is'} "
+            f"missing (the logger dropped {'them' if holes != 1 else 'it'}): {holes * per} samples lost, a gap in the block"
         )
     if bad:
-        notes.append(f"{bad} ISBH batches with no ISBD records, or a zero multiplier or rate: left out")
+        notes.append(
+            f"{bad} ISBH batch{'es' if bad != 1 else ''} with no ISBD records, or a zero multiplier or rate: left out"
+        )
     if stray:
-        notes.append(f"{stray} ISBD records follow no ISBH of their batch number: left out")
+        notes.append(f"{stray} ISBD record{'s' if stray != 1 else ''} after no ISBH of their batch number: left out")
     return rows, read, seen, first_ofs, notes
 
 
 def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "auto") -> Imported:
     """IMU/MAG of one instance (default 0) and the parameters in use from a DataFlash log;
     ``source``: ``raw`` reads the accelerometer and gyro from ACC/GYR (every sample),
-    ``combined`` from IMU, ``auto`` from IMU where the log has it, else from ACC/GYR."""
+    ``combined`` from IMU, ``batch`` from ISBH/ISBD, ``auto`` from IMU where the log has it,
+    else from ACC/GYR, else from ISBH/ISBD."""
     from pymavlink import DFReader
 
     if source not in SOURCES_BIN:
