@@ -6,7 +6,10 @@ way, from the vehicle's logger; the conditioning check is the procedure's own). 
 loader as ``station import`` (``station.importers.load``: :func:`read`, then
 :func:`capture_of` and :func:`checked` for the procedure picked here); the screen shows what
 it found (sensors, rates, device ids, the calibration parameters in use) before the operator
-picks the procedure and goes on to a calibration or a diagnosis.
+picks the procedure and goes on to a calibration or a diagnosis. The source a PX4 or ArduPilot
+log is read from is ``station import --source``'s, from the same registry
+(``station.importers.options.SOURCES``); a log that names no device gets a device-id field
+(``--device``), without which its result cannot be saved.
 """
 
 from __future__ import annotations
