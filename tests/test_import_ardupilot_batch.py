@@ -211,6 +211,17 @@ def _cut_in_first_isbd(path) -> None:
     path.write_bytes(data[: first + 40])
 
 
+def _cut_in_the_only_imu_record(path) -> None:
+    """An IMU log cut inside its one IMU record: "cannot read the DataFlash log (ValueError: min()
+    arg is an empty sequence)" before."""
+    w = DataFlashWriter(path)
+    for name, value in PARAMS.items():
+        w.param(1000, name, value)
+    w.imu(500_000, 0, (0.0, 0.0, 0.0), (0.0, 0.0, -9.8))
+    w.close()
+    path.write_bytes(path.read_bytes()[:-10])
+
+
 def _headers_only(path) -> None:
     w = BatchWriter(path)
     for name, value in PARAMS.items():
@@ -241,6 +252,10 @@ def _no_sensor_messages(path) -> None:
     ("make", "says"),
     [
         (_cut_in_first_isbd, ("1 ISBH batch header but no ISBD records", "cut short inside a record (ISBD)")),
+        (
+            _cut_in_the_only_imu_record,
+            ("no IMU, ACC/GYR, ISBH/ISBD or MAG messages in the DataFlash log (it has no sensor records)", "(IMU)"),
+        ),
         (_headers_only, ("4 ISBH batch headers but no ISBD records",)),
         (
             _no_sensor_messages,

@@ -255,11 +255,13 @@ DF_LOOKED_FOR = "IMU, ACC/GYR, ISBH/ISBD or MAG"  # the messages read_bin reads 
 
 
 def _df_what(log) -> str:
-    """The message names a DataFlash log holds records of (FMT, UNIT, MULT, FMTU and PARM aside)."""
+    """The message names a DataFlash log holds whole records of (FMT, UNIT, MULT, FMTU and PARM
+    aside; a record cut by the end of the file is none)."""
     names = [
         n
         for n, i in sorted(getattr(log, "name_to_id", {}).items())
-        if n not in ("FMT", "UNIT", "MULT", "FMTU", "PARM") and len(log.offsets[i])
+        if n not in ("FMT", "UNIT", "MULT", "FMTU", "PARM")
+        and any(o + log.formats[i].len <= log.data_len for o in log.offsets[i][-2:])
     ]
     if not names:
         return "no sensor records"
