@@ -87,7 +87,7 @@ def test_a_path_with_a_newline_keeps_the_refusal_on_one_line(tmp_path, command):
 @pytest.mark.parametrize(
     ("suffix", "says"),
     [
-        (".bin", "no IMU or MAG messages"),
+        (".bin", "no IMU, ACC/GYR, ISBH/ISBD or MAG messages"),
         (".tlog", "no RAW_IMU / SCALED_IMU / HIGHRES_IMU messages"),
         (".bag", "not a ROS 1 bag"),
     ],

@@ -466,7 +466,7 @@ def test_tlog_raw_imu_from_another_autopilot_is_counts(tmp_path):
 @pytest.mark.parametrize(
     "suffix, content, says",
     [
-        (".bin", b"\x00" * 10 + b"not a log", "no IMU or MAG messages"),
+        (".bin", b"\x00" * 10 + b"not a log", "no IMU, ACC/GYR, ISBH/ISBD or MAG messages"),
         (".bin", b"", "empty file"),
         (".tlog", b"garbage" * 50, "no RAW_IMU / SCALED_IMU / HIGHRES_IMU messages"),
     ],

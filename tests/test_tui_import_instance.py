@@ -122,7 +122,8 @@ def test_an_instance_the_log_lacks_leaves_the_read_shown_and_says_so(tmp_path):
     assert "instance 2 (the slot picked): the log has IMU instances 0, 1" in out["status"], out["status"]
     assert "--instance" not in out["status"], out["status"]
     assert out["value"] == "auto"
-    assert "Still shown: the log as read with instance auto." in out["status"], out["status"]
+    # the source too, now that an ArduPilot log has a source choice (its words on the screen)
+    assert "Still shown: the log as read with instance auto, source 'AP: auto'." in out["status"], out["status"]
     assert "IMU[0]" in out["after"]
     assert all(len(line) <= 80 for line in out["screen_after"])
 

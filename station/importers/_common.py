@@ -308,6 +308,16 @@ def to_capture(
                 f"({t0:.3f}–{t1:.3f} s): left out"
             )
             del streams[kind]
+        elif (
+            kind != primary
+            and not np.isfinite(align(grid.t_s, s.t_s, np.ones((len(s.t_s), 1)), _median_period(grid.t_s))[0]).any()
+        ):
+            # within the span but never at the same time: blocks taken in turn (ArduPilot's batch sampler)
+            imported.warnings.append(
+                f"the {NAME[kind]} samples ({s.source}) never fall near the {NAME[primary]}'s "
+                "(the log took them at other times): left out"
+            )
+            del streams[kind]
     start = max(s.t_s[0] for s in streams.values())
     end = min(s.t_s[-1] for s in streams.values())
     rows = (grid.t_s >= start) & (grid.t_s <= end)

@@ -10,6 +10,10 @@ DataFlash (``DFReader_binary``), ArduPilot's ``LogStructure`` definitions:
   ``INS_RAW_LOG_OPT``), corrected and rotated as ``IMU`` is (``_rotate_and_correct_accel`` before
   ``log_accel_raw``), timed by ``SampleUS``. Read where the log has no ``IMU`` records, or with
   ``--source raw``. Logs before the ``I`` field name them ``ACC1``…``ACC3``, ``GYR1``…``GYR3``.
+- ``ISBH`` / ``ISBD`` (the batch sampler, ``INS_LOG_BAT_MASK``): blocks of one sensor's samples, int16
+  × ``ISBH.mul``, the accelerometer's and the gyro's in turn (never at the same time), each
+  sample at ``SampleUS + k/smp_rate``; corrected and rotated as ACC/GYR. Read where the log has
+  neither ``IMU`` nor ``ACC``/``GYR`` records, or with ``--source batch`` (``_df_batches``).
 - ``MAG`` (``TimeUS,I,MagX,MagY,MagZ,OfsX,…``, units ``G`` × multiplier ``C`` = 10⁻³): milligauss,
   offsets, diagonals and motor compensation applied, body frame.
 - ``PARM`` (``Name,Value``): the parameters; a name's first record is its value in use (the
@@ -41,6 +45,7 @@ import numpy as np
 
 from station.errors import InputError
 from station.importers._common import FRD, Imported, Stream, fmt_param, set_date, several_instances_warning
+from station.importers.options import source_values
 
 # INS4_/INS5_: IMUs 4 and 5 (AP_InertialSensor_Params, where INS_MAX_INSTANCES > 3)
 PARAM_PREFIXES = ("INS_", "INS4_", "INS5_", "COMPASS_", "AHRS_ORIENTATION", "AHRS_TRIM_")
@@ -245,7 +250,23 @@ def _df_instances(log, c: dict | None, seen: set[int], base: str) -> list[int]:
 
 # ArduPilot's full-rate sensor messages (AP_InertialSensor/LogStructure.h): kind -> (message, fields)
 DF_RAW = {"accel": "ACC", "gyro": "GYR"}
-SOURCES_BIN = ("auto", "raw", "combined")  # --source for a DataFlash log: ACC/GYR, IMU, or IMU where logged
+SOURCES_BIN = source_values("ardupilot")  # --source of a DataFlash log: the registry (importers.options.SOURCES)
+DF_LOOKED_FOR = "IMU, ACC/GYR, ISBH/ISBD or MAG"  # the messages read_bin reads samples from
+
+
+def _df_what(log) -> str:
+    """The message names a DataFlash log holds whole records of (FMT, UNIT, MULT, FMTU and PARM
+    aside; a record cut by the end of the file is none)."""
+    names = [
+        n
+        for n, i in sorted(getattr(log, "name_to_id", {}).items())
+        if n not in ("FMT", "UNIT", "MULT", "FMTU", "PARM")
+        and any(o + log.formats[i].len <= log.data_len for o in log.offsets[i][-2:])
+    ]
+    if not names:
+        return "no sensor records"
+    more = f" and {len(names) - 8} more" if len(names) > 8 else ""
+    return ", ".join(names[:8]) + more + " records"
 
 
 def _df_has(log, *names: str) -> bool:
@@ -284,10 +305,127 @@ def _raw_notes(params: dict[str, float], inst_read: dict[str, int]) -> list[str]
     return []
 
 
+# The batch sampler (AP_InertialSensor BatchSampler, INS_LOG_BAT_MASK/_CNT/_OPT/_LGIN/_LGCT): a block of
+# INS_LOG_BAT_CNT samples of one sensor at a time, accelerometer then gyro of each IMU in the mask in turn.
+# LogStructure.h: ISBH "QHBBHHQf" TimeUS,N,type,instance,mul,smp_cnt,SampleUS,smp_rate (N the block's
+# number, type IMU_SENSOR_TYPE, mul the int16 scale, SampleUS the first sample's time, smp_rate in Hz);
+# ISBD "QHHaaa" TimeUS,N,seqno,x,y,z (x, y, z: int16[32], samples seqno*32 ... seqno*32+31 of block N).
+# BatchSampler::sample stores multiplier*sample (m/s^2, rad/s: the sample after _rotate_and_correct_*, as
+# ACC/GYR), so a sample is x/mul, taken at SampleUS + k/smp_rate (pymavlink's tools/isb_extract.py).
+ISB_KIND = {0: "accel", 1: "gyro"}  # AP_InertialSensor::IMU_SENSOR_TYPE_ACCEL = 0, _GYRO = 1
+ISB_UNIT = {"accel": "m/s/s", "gyro": "rad/s"}  # ISBD's FMTU says 'o' (m/s/s) for both: the type decides
+ISB_NAME = {kind: f"ISBD {kind}" for kind in ISB_KIND.values()}  # the stream's source, as read
+
+
+def _isb_values(column: np.ndarray) -> np.ndarray:
+    """ISBD's ``a`` field (pymavlink: 64 bytes) as its int16[32] samples, one row per record."""
+    raw = np.ascontiguousarray(column).tobytes()
+    return np.frombuffer(raw, dtype="<i2").reshape(len(column), -1).astype(np.float64)
+
+
+def _batch_notes(params: dict[str, float], inst_read: dict[str, int]) -> list[str]:
+    """What ``INS_LOG_BAT_OPT`` says about the batches read (BatchSampler, Write_ISBH): bit 1 (2)
+    post filter, the samples after the IMU's low-pass and notch filters; where every sample is
+    logged twice (bit 2 (4), pre and post filter, in later firmware), the filtered block is
+    numbered instance + the number of sensors."""
+    opt = int(params.get("INS_LOG_BAT_OPT", 0) or 0)
+    if opt & 4:
+        count = sum(1 for n in ("INS_ACC_ID", "INS_ACC2_ID", "INS_ACC3_ID") if (params.get(n) or 0) > 0)
+        return [
+            f"INS_LOG_BAT_OPT {opt} (pre and post filter): ISBD {kind}[{inst}] is the filtered copy of "
+            f"ISBD {kind}[{inst - count}] ({count} sensors): a calibration needs the unfiltered one, --instance {inst - count}"
+            for kind, inst in inst_read.items()
+            if count and inst >= count
+        ]
+    if opt & 2:
+        return [
+            f"INS_LOG_BAT_OPT {opt} (post filter): the ISBD samples were logged after the IMU's low-pass and notch "
+            "filters, not as the sensor gave them"
+        ]
+    return []
+
+
+def _df_batches(log, inst: int, named: bool) -> tuple[dict, dict, dict, int, list[str]]:
+    """The batch sampler's samples of IMU ``inst`` (``named``: --instance given; else the first
+    instance each sensor type has): ({kind: (n, 4) t_us, x, y, z}, {kind: instance read},
+    {kind: instances in the log}, file offset of the first header read, notes)."""
+    h = _df_columns(log, "ISBH")
+    d = _df_columns(log, "ISBD")
+    rows: dict[str, np.ndarray] = {}
+    read: dict[str, int] = {}
+    seen: dict[str, set[int]] = {k: set() for k in ISB_KIND.values()}
+    notes: list[str] = []
+    first_ofs = math.inf
+    if h is None:
+        return rows, read, seen, first_ofs, notes
+    htype = h["type"].astype(int)
+    hinst = h["instance"].astype(int)
+    for t, kind in ISB_KIND.items():
+        seen[kind] = {int(i) for i in np.unique(hinst[htype == t])}
+    if d is None:
+        n = len(htype)
+        notes.append(
+            f"{n} ISBH batch header{'s' if n != 1 else ''} but no ISBD records: the batch sampler's samples are "
+            "not in the log"
+        )
+        return rows, read, seen, first_ofs, notes
+    # each ISBD belongs to the last ISBH before it in the file, where their batch numbers N agree
+    owner = np.searchsorted(h["_offset"], d["_offset"]) - 1
+    ok = owner >= 0
+    ok[ok] = h["N"][owner[ok]] == d["N"][ok]
+    stray = int((~ok).sum())
+    values = {a: _isb_values(d[a]) for a in ("x", "y", "z")}
+    per = values["x"].shape[1]  # samples per ISBD (32)
+    holes = 0
+    bad = 0
+    for t, kind in ISB_KIND.items():
+        have = seen[kind]
+        if not have:
+            continue
+        pick = inst if named or inst in have else min(have)
+        read[kind] = pick
+        parts = []
+        for j in np.flatnonzero((htype == t) & (hinst == pick)):
+            mul, rate, count = float(h["mul"][j]), float(h["smp_rate"][j]), int(h["smp_cnt"][j])
+            mine = np.flatnonzero(ok & (owner == j))
+            if not (mul > 0 and math.isfinite(rate) and rate > 0) or not len(mine):
+                bad += 1
+                continue
+            seq, first = np.unique(d["seqno"][mine].astype(np.int64), return_index=True)
+            mine = mine[first]
+            k = (seq[:, None] * per + np.arange(per)).ravel()  # each sample's place in the block
+            block = np.column_stack([values[a][mine].ravel() for a in ("x", "y", "z")]) / mul
+            keep = k < count if count > 0 else np.ones(len(k), dtype=bool)
+            # ISBD records missing: inside the block, or after its last one but for the file's last
+            # block (a log that ends there: the cut is said on its own)
+            last = j == len(htype) - 1
+            holes += int(seq[-1] + 1 - len(seq)) + (
+                0 if last or count <= 0 else max(0, count // per - int(seq[-1]) - 1)
+            )
+            t_us = float(h["SampleUS"][j]) + k[keep] * 1e6 / rate
+            parts.append(np.column_stack([t_us, block[keep]]))
+            first_ofs = min(first_ofs, int(h["_offset"][j]))
+        if parts:
+            rows[kind] = np.concatenate(parts)
+    if holes > 0:
+        notes.append(
+            f"{holes} ISBD record{'s' if holes != 1 else ''} of the batches read {'are' if holes != 1 else 'is'} "
+            f"missing (the logger dropped {'them' if holes != 1 else 'it'}): {holes * per} samples lost, a gap in the block"
+        )
+    if bad:
+        notes.append(
+            f"{bad} ISBH batch{'es' if bad != 1 else ''} with no ISBD records, or a zero multiplier or rate: left out"
+        )
+    if stray:
+        notes.append(f"{stray} ISBD record{'s' if stray != 1 else ''} after no ISBH of their batch number: left out")
+    return rows, read, seen, first_ofs, notes
+
+
 def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "auto") -> Imported:
     """IMU/MAG of one instance (default 0) and the parameters in use from a DataFlash log;
     ``source``: ``raw`` reads the accelerometer and gyro from ACC/GYR (every sample),
-    ``combined`` from IMU, ``auto`` from IMU where the log has it, else from ACC/GYR."""
+    ``combined`` from IMU, ``batch`` from ISBH/ISBD, ``auto`` from IMU where the log has it,
+    else from ACC/GYR, else from ISBH/ISBD."""
     from pymavlink import DFReader
 
     if source not in SOURCES_BIN:
@@ -295,7 +433,9 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
     inst = 0 if instance is None else int(instance)
     if _no_header_in_head(path, (b"\xa3\x95",)):  # DataFlash message header (DFReader_binary HEAD1, HEAD2)
         raise InputError(
-            path, None, "no IMU or MAG messages in the DataFlash log (no DataFlash message header in its first 1 MiB)"
+            path,
+            None,
+            f"no {DF_LOOKED_FOR} messages in the DataFlash log (no DataFlash message header in its first 1 MiB)",
         )
     # pymavlink's compiled indexer prints "bad header" lines straight to file descriptor 2, past
     # any Python redirection: its pure-Python indexer (same result) prints through sys.stderr.
@@ -328,13 +468,30 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
             "--source raw: the log has no ACC or GYR records (ArduPilot logs them with LOG_BITMASK's IMU_RAW "
             "or INS_RAW_LOG_OPT); its IMU records are read without --source",
         )
-    use_raw = source == "raw" or (source == "auto" and not has_imu and has_raw)
+    has_isb = _df_has(log, "ISBH")
+    if source == "batch" and not has_isb:
+        with contextlib.suppress(Exception):
+            log.close()
+        raise InputError(
+            path,
+            None,
+            "--source batch: the log has no ISBH/ISBD batches (ArduPilot logs them for the IMUs in "
+            f"INS_LOG_BAT_MASK); it has {_df_what(log)}",
+        )
+    # ISBH/ISBD: where asked, or where the log has neither IMU nor ACC/GYR records
+    use_batch = source == "batch" or (source == "auto" and not has_imu and not has_raw and has_isb)
+    use_raw = not use_batch and (source == "raw" or (source == "auto" and not has_imu and has_raw))
     # the message each kind is read from
     src_of = (
-        {"accel": raw_names["accel"], "gyro": raw_names["gyro"]} if use_raw else {"accel": imu_name, "gyro": imu_name}
+        dict(ISB_NAME)
+        if use_batch
+        else {"accel": raw_names["accel"], "gyro": raw_names["gyro"]}
+        if use_raw
+        else {"accel": imu_name, "gyro": imu_name}
     )
     src_of["mag"] = mag_name
     rows: dict[str, np.ndarray] = {}
+    batch_notes: list[str] = []
     temps = None
     params: dict[str, float] = {}
     late: set[str] = set()
@@ -351,10 +508,20 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
         cols = {name: _df_columns(log, name) for name in (imu_name, mag_name, *src_of.values(), "PARM", "GPS")}
         first_ofs = math.inf  # file offset of the first sample used: parameters before it are in use
         reads = (
-            ((src_of["gyro"], ("gyro",)), (src_of["accel"], ("accel",)), (mag_name, ("mag",)))
+            ((mag_name, ("mag",)),)
+            if use_batch
+            else ((src_of["gyro"], ("gyro",)), (src_of["accel"], ("accel",)), (mag_name, ("mag",)))
             if use_raw
             else ((imu_name, ("gyro", "accel")), (mag_name, ("mag",)))
         )
+        if use_batch:
+            batch_rows, batch_read, batch_seen, first_ofs, batch_notes = _df_batches(log, inst, instance is not None)
+            for kind, arr in batch_rows.items():
+                rows[kind] = arr
+                units[kind] = ISB_UNIT[kind]
+            for kind, name in ISB_NAME.items():
+                instances_seen[name] = batch_seen[kind]
+                inst_of[name] = batch_read.get(kind, inst)
         for name, kind_cols in reads:
             c = cols[name]
             if c is None:
@@ -417,7 +584,8 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
                     gps_s = d["GWk"] * 604800.0 + d["GMS"] * 1e-3
                     gps_utc_offset = GPS_EPOCH_UNIX_S + gps_s - gps_minus_utc_s(gps_s) - d["TimeUS"] * 1e-6
         available = {}  # the instances the log holds, for the refusal of one it lacks
-        if not rows:
+        held = _df_what(log) if not rows else ""
+        if not rows and not use_batch:
             for base in ("IMU", "MAG", *(DF_RAW.values() if use_raw else ())):
                 c = cols[base] if base in cols else _df_columns(log, base)
                 have = _df_instances(
@@ -432,9 +600,14 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
             imu_read = src_of["gyro"]
             read_inst = {inst_of[n] for n, k in ((imu_read, "gyro"), (mag_name, "mag")) if k in rows}
             base = DF_RAW["gyro"] if use_raw else "IMU"
+            imus = (
+                sorted(instances_seen[ISB_NAME["accel"]] | instances_seen[ISB_NAME["gyro"]])
+                if use_batch
+                else _df_instances(log, cols.get(base), instances_seen.get(base, set()), base)
+            )
             several = several_instances_warning(
                 {  # without --instance, the names read are IMU (GYR) and MAG
-                    "IMUs": _df_instances(log, cols.get(base), instances_seen.get(base, set()), base),
+                    "IMUs": imus,
                     "compasses": _df_instances(log, cols["MAG"], instances_seen["MAG"], "MAG"),
                 },
                 next(iter(read_inst))
@@ -450,6 +623,8 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
             log.close()
     if not rows:
         also = f"; warning: {cut}" if cut else ""  # what the cut left may be why there is nothing
+        if use_batch and batch_notes:  # batch headers without their samples: that is what is wrong
+            raise InputError(path, None, f"{batch_notes[0]} (it looked for {DF_LOOKED_FOR})" + also)
         seen = available or {k: sorted(v) for k, v in instances_seen.items() if v}
         if seen:
             raise InputError(
@@ -459,7 +634,7 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
                 + "; ".join(f"{k} instances {', '.join(map(str, v))}" for k, v in seen.items())
                 + also,
             )
-        raise InputError(path, None, "no IMU or MAG messages in the DataFlash log" + also)
+        raise InputError(path, None, f"no {DF_LOOKED_FOR} messages in the DataFlash log (it has {held})" + also)
     streams = {}
     for kind, arr in rows.items():
         if not len(arr) or (kinds is not None and kind not in kinds):
@@ -485,13 +660,21 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
         streams[kind] = stream
     # IMU and MAG are rotated to the vehicle's body frame (AHRS_ORIENTATION) before they are logged
     meta: dict[str, str] = {"firmware": "ardupilot", "corrected": "true", "frame": FRD}
-    warnings = [w for w in (skipped.warning(), cut, several) if w]
+    warnings = [w for w in (skipped.warning(), cut, several) if w] + batch_notes
     if use_raw:
         warnings += _raw_notes(params, {k: inst_of[src_of[k]] for k in DF_RAW if k in streams})
+    elif use_batch:
+        warnings += _batch_notes(params, {k: inst_of[src_of[k]] for k in ISB_NAME if k in streams})
     elif has_raw and source == "auto" and ("accel" in streams or "gyro" in streams):
         warnings.append("the log also has ACC/GYR, every sample at the sensor's rate: --source raw reads them")
+    if has_isb and not use_batch and source == "auto" and ("accel" in streams or "gyro" in streams):
+        warnings.append("the log also has ISBH/ISBD batches of raw IMU samples: --source batch reads them")
     if instance is not None:  # the instance asked, where one of IMU/MAG lacks it (as PX4's raw topics say it)
-        said = ((src_of["gyro"], "gyro"), (src_of["accel"], "accel")) if use_raw else ((imu_name, "accel and gyro"),)
+        said = (
+            ((src_of["gyro"], "gyro"), (src_of["accel"], "accel"))
+            if use_raw or use_batch
+            else ((imu_name, "accel and gyro"),)
+        )
         for name, kind in (*said, (mag_name, "mag")):
             have = sorted(instances_seen[name])
             if have and inst not in have:
@@ -538,6 +721,8 @@ def _df_columns(log, name: str) -> dict[str, np.ndarray] | None:
         raise ValueError(f"{name}: format {fmt.format!r} is {dtype.itemsize} bytes, the log says {body}")
     offsets = np.asarray(log.offsets[type_id], dtype=np.int64)
     offsets = offsets[offsets + fmt.len <= log.data_len]  # a record cut by the end of the file
+    if not len(offsets):  # its one record was the one cut
+        return None
     data = np.frombuffer(log.data_map, dtype=np.uint8)
     recs = data[(offsets + 3)[:, None] + np.arange(body)].view(dtype).reshape(len(offsets))
     out: dict[str, np.ndarray] = {"_offset": offsets}

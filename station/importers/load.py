@@ -14,6 +14,7 @@ from station.importers._common import NAME, Imported, to_capture
 from station.importers.options import (
     FORMATS,
     ImportOptions,
+    check_source,
     options_from_args,
     primary,
 )
@@ -63,8 +64,7 @@ def read(path, opts: ImportOptions, fmt: str) -> Imported:
     """The streams and metadata of ``path`` read as ``fmt``."""
     if fmt not in FORMATS:
         raise InputError(None, None, f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
-    if fmt not in ("px4", "ardupilot") and opts.source != "auto":
-        raise InputError(None, None, "--source applies to PX4 and ArduPilot DataFlash logs only")
+    check_source(fmt, opts.source)
     if fmt not in ("px4", "ardupilot", "tlog") and opts.instance is not None:
         raise InputError(None, None, "--instance applies to PX4, ArduPilot and MAVLink logs only")
     if fmt != "ros" and opts.topics:

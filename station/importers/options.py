@@ -17,6 +17,61 @@ FORMAT_HELP = (
 TARGETS = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp_c")
 
 
+@dataclass(frozen=True)
+class Source:
+    """One ``--source`` of a log format: its value, the import screen's words for it (short:
+    the choice is 16 columns wide at 80x24) and what it reads."""
+
+    value: str
+    label: str
+    reads: str
+
+
+# The one registry of the sources a log format can be read from: `station import --source`
+# (its choices and help) and the import screen's source choice both come from it.
+SOURCES: dict[str, tuple[Source, ...]] = {
+    "px4": (
+        Source("auto", "PX4: auto", "the raw sensor_* topics where logged, else sensor_combined"),
+        Source("raw", "raw topics", "sensor_accel/gyro/mag, before the board's calibration"),
+        Source("combined", "combined", "sensor_combined, after the board's calibration"),
+    ),
+    "ardupilot": (
+        Source("auto", "AP: auto", "IMU where logged, else ACC/GYR, else ISBH/ISBD"),
+        Source("raw", "ACC/GYR", "ACC/GYR, every sample at the sensor's rate"),
+        Source("combined", "IMU", "IMU, the filtered samples at the main loop's rate"),
+        Source("batch", "ISB batch", "ISBH/ISBD, the batch sampler's blocks, INS_LOG_BAT_MASK"),
+    ),
+}
+SOURCE_NAMES = {"px4": "PX4 logs", "ardupilot": "ArduPilot DataFlash logs"}
+
+
+def source_values(fmt: str | None = None) -> tuple[str, ...]:
+    """The ``--source`` values of ``fmt`` (None: of every format, in the registry's order)."""
+    formats = [fmt] if fmt is not None else list(SOURCES)
+    return tuple(dict.fromkeys(s.value for f in formats for s in SOURCES.get(f, ())))
+
+
+def check_source(fmt: str, source: str) -> None:
+    """Refuse a ``--source`` that ``fmt`` has no such source for, in one line."""
+    if source == "auto":
+        return
+    if fmt not in SOURCES:
+        raise InputError(None, None, f"--source applies to {' and '.join(SOURCE_NAMES[f] for f in SOURCES)} only")
+    if source not in source_values(fmt):
+        raise InputError(
+            None,
+            None,
+            f"--source {source}: {SOURCE_NAMES[fmt]} are read from {', '.join(source_values(fmt))}",
+        )
+
+
+def _source_help() -> str:
+    return "; ".join(
+        f"{SOURCE_NAMES[fmt]}: " + ", ".join(f"{s.value} ({s.reads})" for s in sources)
+        for fmt, sources in SOURCES.items()
+    )
+
+
 def primary(procedure: str | None) -> str | None:
     """The sensor kind whose samples are the rows of ``procedure``'s capture made from a log;
     None when a log cannot feed it (registry: ``from_logs``)."""
@@ -89,11 +144,9 @@ def add_arguments(parser: argparse.ArgumentParser, *, for_import: bool = False) 
     )
     g.add_argument(
         "--source",
-        choices=("auto", "raw", "combined"),
+        choices=source_values(),
         default="auto",
-        help="PX4: raw sensor_* topics (before the board's calibration) or sensor_combined "
-        "(after it); auto = raw where logged. ArduPilot DataFlash: raw = ACC/GYR (every sample, "
-        "corrected as IMU is), combined = IMU; auto = IMU where logged",
+        help="where in the log the accelerometer and gyro samples are read from: " + _source_help(),
     )
     g.add_argument(
         "--topic",

@@ -38,6 +38,7 @@ from station.importers._common import (
     set_date,
     several_instances_warning,
 )
+from station.importers.options import source_values
 
 RAW_TOPICS = {"accel": "sensor_accel", "gyro": "sensor_gyro", "mag": "sensor_mag"}
 CAL_PREFIX = {"accel": "CAL_ACC", "gyro": "CAL_GYRO", "mag": "CAL_MAG"}
@@ -46,7 +47,7 @@ COMBINED = {"accel": "accelerometer_m_s2", "gyro": "gyro_rad", "mag": "magnetome
 RELATIVE_TIMESTAMP_INVALID = 0x7FFFFFFF  # PX4 sensor_combined: "no sample of this sensor yet"
 GPS_TOPICS = ("sensor_gps", "vehicle_gps_position")
 PARAM_PREFIXES = ("CAL_", "SENS_BOARD_")
-SOURCES = ("auto", "raw", "combined")
+SOURCES = source_values("px4")  # the registry: station.importers.options.SOURCES
 
 
 class _CutWatch:

@@ -6,7 +6,10 @@ way, from the vehicle's logger; the conditioning check is the procedure's own). 
 loader as ``station import`` (``station.importers.load``: :func:`read`, then
 :func:`capture_of` and :func:`checked` for the procedure picked here); the screen shows what
 it found (sensors, rates, device ids, the calibration parameters in use) before the operator
-picks the procedure and goes on to a calibration or a diagnosis.
+picks the procedure and goes on to a calibration or a diagnosis. The source a PX4 or ArduPilot
+log is read from is ``station import --source``'s, from the same registry
+(``station.importers.options.SOURCES``); a log that names no device gets a device-id field
+(``--device``), without which its result cannot be saved.
 """
 
 from __future__ import annotations
@@ -91,14 +94,31 @@ INSTANCE_HERE = "pick its slot under instance"
 _FLAG = re.compile(r"--instance (\d+)")
 
 
-def in_screen_terms(text: str) -> str:
+def source_options(fmt: str | None) -> list[tuple[str, str]]:
+    """(label, value) of the sources ``fmt`` is read from (``station import --source``): the one
+    registry, station.importers.options.SOURCES; PX4's where the format has none."""
+    from station.importers.options import SOURCES
+
+    return [(s.label, s.value) for s in SOURCES.get(fmt or "", SOURCES["px4"])]
+
+
+_SOURCE_FLAG = re.compile(r"--source (\w+)")
+
+
+def in_screen_terms(text: str, fmt: str | None = None) -> str:
     """A reader's warning or refusal worded with ``station import``'s flag, in this screen's
     terms: ``--instance N`` is the slot picked under instance (``instance N``), "give
     --instance N" is picking it there, "--instance 0 or none" is instance 0 or auto. The
     flag appeared as such where the screen read a slot a secondary sensor lacks ("--instance
     1: no MAG[1] ..."), a flag the screen has nowhere to type."""
     from station.importers._common import INSTANCE_ADVICE
+    from station.importers.options import SOURCES
 
+    labels = {s.value: s.label for s in SOURCES.get(fmt or "", ())}
+    if labels:  # "--source batch reads them": the source picked here, by its words on the screen
+        text = _SOURCE_FLAG.sub(
+            lambda m: f"source '{labels[m.group(1)]}'" if m.group(1) in labels else m.group(0), text
+        )
     text = text.replace(INSTANCE_ADVICE, INSTANCE_HERE).replace("--instance 0 or none", "instance 0 or auto")
     return _FLAG.sub(r"instance \1 (the slot picked)", text).replace("--instance", "instance")
 
@@ -166,7 +186,7 @@ def summary_lines(path: str, fmt: str, imported) -> list[str]:
     else:
         lines.append("in use: no calibration parameters in the log (an export cannot compose)")
     for w in imported.warnings[:SHOWN_WARNINGS]:
-        w = in_screen_terms(w)  # the flag is this screen's choice
+        w = in_screen_terms(w, fmt)  # the flags are this screen's choices
         lines += textwrap.wrap(safe(f"warning: {w}"), WIDTH, subsequent_indent="  ")
     more = len(imported.warnings) - SHOWN_WARNINGS
     if more > 0:  # the screen has room for two; the rest are not dropped unsaid
@@ -182,6 +202,8 @@ class ImportScreen(Screen):
     ImportScreen #status { height: auto; }
     ImportScreen #found { height: auto; margin-top: 1; }
     ImportScreen #device { height: auto; }
+    ImportScreen #device-id { display: none; width: 60; }
+    ImportScreen #device-id.shown { display: block; }
     ImportScreen #choose { height: 1; display: none; }
     ImportScreen #choose.shown { display: block; }
     ImportScreen #choose Select { width: 24; margin-right: 2; }
@@ -221,7 +243,7 @@ class ImportScreen(Screen):
             with Horizontal(id="choose"):
                 yield Select(procedure_options(), id="procedure", allow_blank=False, compact=True)
                 yield Select(
-                    [("PX4: auto", "auto"), ("raw topics", "raw"), ("combined", "combined")],
+                    source_options("px4"),
                     id="source",
                     allow_blank=False,
                     compact=True,
@@ -237,6 +259,9 @@ class ImportScreen(Screen):
                 )
                 yield Static(SLOT_HELP["px4"], id="slot-help")
             yield Static("", id="device")
+            # a log that names no device (ArduPilot, MAVLink, CSV): the operator names it, as
+            # station import --device does; without one the result cannot be saved
+            yield Field(placeholder="device id, needed to save (e.g. quad-7-imu0)", id="device-id", compact=True)
             yield Static("", id="found")
         yield footer()
 
@@ -256,6 +281,7 @@ class ImportScreen(Screen):
         self.refresh_bindings()
         self.query_one("#found", Static).update("")
         self.query_one("#device", Static).update("")
+        self.query_one("#device-id").remove_class("shown")
         self.query_one("#choose").remove_class("shown")
         self.query_one("#slot").remove_class("shown")
         self._status(f"Reading {tui_markup(path)}…")
@@ -266,8 +292,11 @@ class ImportScreen(Screen):
 
     @on(Select.Changed, "#source")
     def _reread(self, event: Select.Changed) -> None:
-        """PX4: the raw per-sensor topics or sensor_combined (``station import --source``)."""
-        if self.imported is None or self.fmt != "px4" or event.value == self.source:
+        """The source the log is read from (``station import --source``, the registry's): PX4's raw
+        per-sensor topics or sensor_combined, ArduPilot's IMU, ACC/GYR or ISBH/ISBD batches."""
+        from station.importers.options import SOURCES
+
+        if self.imported is None or self.fmt not in SOURCES or event.value == self.source:
             return
         self._status(f"Reading {tui_markup(self.path)} ({event.value})…")
         self.read_file(self.path, str(event.value), self.instance, self._procedure())
@@ -364,6 +393,8 @@ class ImportScreen(Screen):
         self._calibrate_capture(capture.path, capture, method)
 
     def on_log_read(self, message: LogRead) -> None:
+        from station.importers.options import SOURCES
+
         if message.error:
             hint = f"\n{tui_markup(message.hint)}" if message.hint else ""
             if self.imported is not None and message.path == self.path:
@@ -372,16 +403,24 @@ class ImportScreen(Screen):
                 self.query_one("#source", Select).value = self.source
                 self.query_one("#instance", Select).value = "auto" if self.instance is None else str(self.instance)
                 shown = f"instance {'auto' if self.instance is None else self.instance}"
-                shown += f", source {self.source}" if self.fmt == "px4" else ""
+                label = dict((v, k) for k, v in source_options(self.fmt)).get(self.source, self.source)
+                shown += f", source '{label}'" if self.fmt in SOURCES else ""  # its words on the screen
                 hint += f"\nStill shown: the log as read with {shown}."
-            self._status(f"[b red]{tui_markup(in_screen_terms(message.error))}[/]{hint}")
+            fmt = self.fmt if self.imported is not None and message.path == self.path else None
+            self._status(f"[b red]{tui_markup(in_screen_terms(message.error, fmt))}[/]{hint}")
             return
         from station.importers.options import primary
 
         self.path, self.fmt, self.imported = message.path, message.fmt, message.imported
         self.source = message.source
         self.instance = message.instance
-        self.query_one("#source", Select).display = self.fmt == "px4"
+        source = self.query_one("#source", Select)
+        source.display = self.fmt in SOURCES
+        if self.fmt in SOURCES:  # this format's sources, the choice showing the one read
+            with source.prevent(Select.Changed):
+                source.set_options(source_options(self.fmt))
+                source.value = self.source
+                source.mutate_reactive(Select.value)  # the label of a value that stayed (auto) is redrawn too
         self.query_one("#slot").set_class(self.fmt in SLOT_HELP, "shown")
         self.query_one("#slot-help", Static).update(tui_markup(SLOT_HELP.get(self.fmt, "")))
         kinds = set(self.imported.streams)
@@ -409,14 +448,25 @@ class ImportScreen(Screen):
         procedure = self._procedure()
         if self.imported is None or procedure is None:
             return
+        device = self._log_device(procedure)
+        self.query_one("#device", Static).update(f"device {tui_markup(device)}" if device else "")
+        self.query_one("#device-id").set_class(not device, "shown")
+
+    def _log_device(self, procedure: str) -> str | None:
+        """The device the log names for ``procedure`` (PX4: board, uid and the sensor), or None."""
         from station.importers.options import primary
 
-        device = self.imported.meta.get("device")
         if self.fmt == "px4":
             from station.importers import px4
 
-            device = px4.default_device(self.imported, primary(procedure))
-        self.query_one("#device", Static).update(f"device {tui_markup(device)}" if device else "")
+            return px4.default_device(self.imported, primary(procedure))
+        return self.imported.meta.get("device")
+
+    def _device(self, procedure: str) -> str | None:
+        """The capture's device: the one typed where the log names none (``--device``)."""
+        if self._log_device(procedure):
+            return None  # capture_of names it, as station import does
+        return self.query_one("#device-id", Input).value.strip() or None
 
     def _procedure(self) -> str | None:
         value = self.query_one("#procedure", Select).value
@@ -428,7 +478,7 @@ class ImportScreen(Screen):
         if self.imported is None or procedure is None:
             return
         self._status(f"Calibrating {tui_markup(os.path.basename(self.path))} as {procedure}…")
-        self.build(procedure, diagnose=False)
+        self.build(procedure, diagnose=False, device=self._device(procedure))
 
     @on(Button.Pressed, "#diagnose")
     def action_diagnose_log(self) -> None:
@@ -436,15 +486,15 @@ class ImportScreen(Screen):
         if self.imported is None or procedure is None:
             return
         self._status(f"Preparing {tui_markup(os.path.basename(self.path))} for a diagnosis as {procedure}…")
-        self.build(procedure, diagnose=True)
+        self.build(procedure, diagnose=True, device=self._device(procedure))
 
     @work(thread=True, exclusive=True, group="import", exit_on_error=False, description="import a log")
-    def build(self, procedure: str, diagnose: bool) -> None:
+    def build(self, procedure: str, diagnose: bool, device: str | None = None) -> None:
         from station.errors import StationError
         from station.importers import load
 
         try:
-            capture, _ = load.capture_of(self.path, self.imported, self.fmt, procedure)
+            capture, _ = load.capture_of(self.path, self.imported, self.fmt, procedure, device)
             capture = load.checked(self.path, capture)
         except (StationError, OSError, ValueError) as exc:
             self.post_message(CaptureBuilt(None, error=str(exc)))
