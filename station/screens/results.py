@@ -288,8 +288,9 @@ class ResultsScreen(NoticesMixin, Screen):
             return False
         if not self._named():
             self.query_one("#saved", Static).update(
-                "[b red]Not saved: the capture names no device (no '# device:' line); make it with "
-                "station import ... --device ID, or add the line[/]"
+                "[b red]Not saved: the capture names no device. A log: esc, type its device id "
+                "on the import screen. A capture file: add a '# device:' line, or make it with "
+                "station import ... --device ID[/]"
             )
             return False
         return True
