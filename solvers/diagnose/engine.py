@@ -207,7 +207,15 @@ class Problem:
     # the other goes in the named one's ``confused_with`` (with the reason) when fn says it could have
     # made what the named one fitted (P4 without headings: G f no larger than the Earth rate can be)
     could_be: dict = field(default_factory=dict)
+    # per row pair: the covariance of a slow noise the rows share, in the data's unit squared, known
+    # before the fit (a prior: P2's bias instability between hold means, sized from the within-hold
+    # white noise, ``solvers.allan``). A candidate's deviance is then taken net of it: its likelihood
+    # ratio under the rows' noise ``diag(σ²) + slow_cov`` (``slow_prior_lr``). None: the rows' σ alone
+    slow_cov: np.ndarray | None = None
+    # what the slow-noise prior is (or why there is none), for the report
+    slow_noise: dict = field(default_factory=dict)
     _wander: object = None
+    _slow_chol: tuple | None = None
 
 
 @dataclass
@@ -1250,6 +1258,8 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, floor=None, s
             T_w = min(T_w, _null_equivalent(T_w, wm.null_lr(A, cc.J, e, WANDER_NULL_DRAWS), k))
         if wanders:
             infl = max(infl, D / max(T_w, 1e-9))
+    if problem.slow_cov is not None and k > 0 and D > 0:
+        infl = max(infl, D / max(slow_prior_lr(problem, A, cc.J, rnd.r0), 1e-9))
     ev = _Eval(cc, db, cvc, sig, int(k), D, infl, cv_ref=cv_ref)
     ev.wander_T, ev.wanders = T_w, wanders
     t = _only_kind(problem, cc.J, types)
@@ -1330,6 +1340,27 @@ def _null_equivalent(T: float, null: np.ndarray, k: int) -> float:
     if p <= 0:
         return T
     return chi2_isf(p, k)
+
+
+def slow_prior_lr(problem: Problem, A: np.ndarray, J: np.ndarray, r0: np.ndarray) -> float:
+    """The likelihood-ratio statistic (noise scale profiled, as the deviance) of columns ``J``
+    beside ``A`` for the linearised weighted residual ``r0 + A δ`` under the rows' noise with the
+    known slow part ``Problem.slow_cov``: ``C = I + slow_cov / (σ σᵀ)`` in weighted rows, every
+    column and ``r0`` whitened by its Cholesky factor (generalised least squares)."""
+    sigma = np.asarray(problem.sigma, float)
+    key = (sigma.ctypes.data, float(sigma.sum()))
+    if problem._slow_chol is None or problem._slow_chol[0] != key:
+        C = np.eye(sigma.size) + np.asarray(problem.slow_cov, float) / np.outer(sigma, sigma)
+        problem._slow_chol = (key, np.linalg.cholesky(C))
+    L = problem._slow_chol[1]
+
+    def rss(X, y):
+        Q = _orth(X)
+        return float(y @ y - np.sum((Q.T @ y) ** 2))
+
+    y = np.linalg.solve(L, r0)
+    rss0, rss1 = rss(np.linalg.solve(L, A), y), rss(np.linalg.solve(L, np.hstack([A, J])), y)
+    return max(0.0, sigma.size * math.log(max(rss0, 1e-300) / max(rss1, 1e-300)))
 
 
 def wander_model(problem: Problem):

@@ -25,7 +25,7 @@ import numpy as np
 from solvers import ldv as ldv_solver
 from solvers import linalg
 from solvers.centrifuge import norm_target
-from solvers.diagnose.engine import Candidate, Problem
+from solvers.diagnose.engine import Candidate, Problem, jacobian
 from solvers.errors import TooFewPositions
 from solvers.frames import OMEGA_EARTH_RAD_S
 from solvers.models import Conditions, temperature_rate
@@ -948,6 +948,46 @@ def centrifuge_problem(
     prob.generic_scale = GENERIC_SCALES["accel-centrifuge"]
     prob.cand_thresholds = dict(CAND_THRESHOLDS.get("accel-centrifuge", {}))
     return prob
+
+
+# A sensor's bias instability over its white noise density, s^-1/2: the Allan deviation's floor
+# (bias instability B = σ_min / 0.664) over N (the white term √c0 of solvers.allan's noise model),
+# measured on the real static accelerometer records of ../shared/data: MPU-6050 (tinit_static,
+# 449 s: 0.15, 0.15, 0.27 per axis), the sunsided MARG (10 min: 0.16, 0.31, 0.13); the median.
+# The within-hold samples cannot measure it themselves: a wander of τ 60–600 s the size of a 30 s
+# mean's white noise adds 1e-4 of the white Allan variance at the longest τ a 5–30 s hold allows,
+# whose estimate scatters by 4 % (benchmarks/bench_static_wander_prior.py); they measure N.
+SLOW_BIAS_PER_WHITE_DENSITY = 0.15
+# the prior wander's correlation time as a fraction of the capture's span (flicker has every
+# time scale; a wander this slow is the most drift-like of those the span holds)
+SLOW_BIAS_TAU_FRACTION = 0.3
+
+
+def set_slow_bias_prior(prob: Problem, t_s, white_density) -> None:
+    """Give a problem of hold means at times ``t_s`` (s) the covariance of a first-order
+    Gauss–Markov bias per axis (``Problem.slow_cov``): standard deviation
+    ``SLOW_BIAS_PER_WHITE_DENSITY`` × the axis's white noise density ``white_density`` (output unit
+    · √s, measured within the holds), correlation time ``SLOW_BIAS_TAU_FRACTION`` of the span,
+    carried to each row by its sensitivity to the bias block ``b`` (the baseline's Jacobian)."""
+    t = np.asarray(t_s, float)
+    sigma = np.asarray(prob.sigma, float)
+    Jb, _, _ = jacobian(prob, dict(prob.baseline), {"b": True})
+    U = Jb * sigma[:, None]  # data units per unit of bias, per axis
+    span = float(np.ptp(t))
+    if span <= 0 or U.shape[1] != 3:
+        return
+    tau = SLOW_BIAS_TAU_FRACTION * span
+    sb = SLOW_BIAS_PER_WHITE_DENSITY * np.asarray(white_density, float)
+    prob.slow_cov = np.exp(-np.abs(t[:, None] - t[None, :]) / tau) * ((U * sb**2) @ U.T)
+    prob.slow_noise = {
+        "modelled": True,
+        "model": "first-order Gauss–Markov bias per axis (a prior; candidates tested net of it)",
+        "white_density": [float(x) for x in white_density],
+        "bias_sigma": [float(x) for x in sb],
+        "tau_s": float(tau),
+        "from": f"the white noise density within holds (Allan white term) × {SLOW_BIAS_PER_WHITE_DENSITY:g} /√s, "
+        "a bias instability typical of the real accelerometer records",
+    }
 
 
 # ---------------------------------------------------------------- P3 compass

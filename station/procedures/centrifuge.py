@@ -118,6 +118,46 @@ def _hold_means(capture, lines: list[int], column: str) -> np.ndarray | None:
     return np.array(out)
 
 
+def _hold_slices(capture, lines: list[int]) -> list[slice]:
+    """The capture rows of each hold that :func:`_rows` made a row (starting at data line ``lines[i]``)."""
+    w = np.asarray(capture.column("speed_rad_s"), dtype=float)
+    pos = capture.columns["position"]
+    first = (capture.header_line or 0) + 1
+    out = []
+    for ln in lines:
+        k = ln - first
+        j = k + 1
+        while j < len(w) and str(pos[j]) == str(pos[k]) and w[j] == w[k]:
+            j += 1
+        out.append(slice(k, j))
+    return out
+
+
+def _white_density(capture, lines: list[int]) -> np.ndarray | None:
+    """Per axis, the white noise density N (output unit · √s) of the samples within holds: the
+    white term ``c0 = N²`` of the Allan noise model calibrate fits (``solvers.allan``), the median
+    over the holds. None where no hold gives one."""
+    from solvers.allan import mean_standard_error
+
+    a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
+    t = np.asarray(capture.column("t"), dtype=float)
+    c0 = []
+    for sl in _hold_slices(capture, lines):
+        ok = np.all(np.isfinite(a[sl]), axis=1)
+        seg, ts = a[sl][ok], t[sl][ok]
+        if len(seg) < 16:
+            continue
+        dt = float(np.median(np.diff(ts)))
+        if not dt > 0:
+            continue
+        me = mean_standard_error(seg, dt)
+        if me.noise_model is not None:
+            c0.append(me.noise_model[:, 0])
+    if not c0:
+        return None
+    return np.sqrt(np.median(np.array(c0), axis=0))
+
+
 @dataclass
 class Prepared:
     """A P2 capture read once: the rows of mean outputs, the radius and local gravity."""
@@ -404,6 +444,18 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     )
     prob.row_labels = [f"line {ln} (position {lab}, ω={x:.3g} rad/s)" for ln, lab, x in zip(lines, labels, w)]
     prob.screened = screened
+    if capture.is_time_series and el is not None:
+        # the hold means share a slow bias wander that the rows' white σ leaves out: a prior on
+        # its size from the white noise measured within the holds (the Allan model's white term)
+        dens = _white_density(capture, lines)
+        if dens is not None:
+            DP.set_slow_bias_prior(prob, el, dens)
+    else:
+        prob.slow_noise = {
+            "modelled": False,
+            "reason": "a table of averages has no samples within holds: the bias instability between "
+            "rows is not sized, and time-like effects are tested against the rows' white noise alone",
+        }
     return DiagnosisInput(
         prob,
         {"position": labels, "speed_rad_s": w},

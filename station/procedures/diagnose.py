@@ -255,6 +255,8 @@ def _result(capture, procedure, diag, inp) -> dict:
             "params": bp.params,
             "residual_rms": diag.rms(bp),
             "cv_rms": diag.baseline_cv_rms,
+            # not in diagnose.md: the slow noise the candidates were tested against, or why none
+            **({"slow_noise": diag.problem.slow_noise} if diag.problem.slow_noise else {}),
         },
         "candidates": diag.candidates,
         "effects": diag.effects,
