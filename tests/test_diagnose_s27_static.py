@@ -117,3 +117,21 @@ def test_p4_latitude_without_headings_fits_each_heading_not_north(tmp_path):
     # at 30σ over 10 positions a heading is fixed to about 10° (the north part, Ω cos L, is ~6σ
     # of one position's mean); heading 0 would be off by 21-158° at every one of these 10
     assert np.median(np.abs(err)) < 10.0 and np.max(np.abs(err)) < 25.0, np.round(err, 1)
+
+
+def test_p4_null_with_slow_noise_below_the_wander_gate_names_nothing(tmp_path):
+    """Mode B, 18 positions over 17 min at 50 Hz, no temperature, no effect: the generator's noise
+    is white plus a Gauss–Markov bias (τ 60-600 s) and a random walk on each axis. REML did not
+    call the wander evident (ratio over white noise below 16 on every axis), so a line in time was
+    tested against white noise: deviance 13.6 against a bound of 11.7, and `time_drift` was named.
+    With the slow noise profiled out the line's ratio is 6.4: nothing is named."""
+    res = _diagnose(_write(tmp_path, "P4", "none", 702131))
+    assert res["verdict"] == [], (res["verdict"], res["candidates"])
+
+
+def test_p4_power_up_record_still_names_its_warm_up(shared_data):
+    """The real MPU-6050 record from power-up (449 s unmoved, counts, no temperature): its warm-up
+    is a drift in time well beyond its wander, and stays named (`time_drift`) with every
+    candidate tested against the slow noise."""
+    res = _diagnose(shared_data / "mpu6050_unc" / "mpu6050_unc_tinit_static.capture.csv")
+    assert "time_drift" in res["verdict"], (res["verdict"], res["candidates"])
