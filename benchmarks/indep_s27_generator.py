@@ -681,7 +681,11 @@ def p4_orientations(rng, k: int, mode: str):
     return np.array(mats), np.array(heads)
 
 
-def build_p4(rng, effect_name: str):
+def build_p4(rng, effect_name: str, no_heading: bool = False):
+    """``no_heading``: no ``heading_deg`` column, the latitude given (a tabletop session's positions
+    at a known site): mode B (the same draws as with the column), and ``earth_rate`` (mode
+    "plain", its noise scaled to the Earth rate's z) with the latitude written, so the Earth rate
+    is the baseline's and nothing is to be named."""
     k = int(rng.integers(9, 31))
     if effect_name == "earth_rate":
         mode = "plain"
@@ -804,8 +808,10 @@ def build_p4(rng, effect_name: str):
                 meta["latitude_deg"] = f"{lat:.5f}"
                 meta["longitude_deg"] = f"{rng.uniform(-180, 180):.4f}"
                 meta["altitude_m"] = f"{rng.uniform(0, 1200):.0f}"
+            elif no_heading:
+                meta["latitude_deg"] = f"{lat:.5f}"
             hd = heads[prev]
-            if mode == "B" or rng.random() < 0.5:
+            if not no_heading and (mode == "B" or rng.random() < 0.5):
                 extra["heading_deg"] = np.round(hd, 2)
                 extra_dec["heading_deg"] = 2
         dec = 9 if gunit == "rad/s" else 7
@@ -822,11 +828,11 @@ def build_p4(rng, effect_name: str):
 BUILDERS = {"P1": build_p1, "P2": build_p2, "P4": build_p4}
 
 
-def make_one(proc: str, effect: str, z_target: float, seed: int, out: str) -> dict:
+def make_one(proc: str, effect: str, z_target: float, seed: int, out: str, no_heading: bool = False) -> dict:
     if seed < 700000:
         raise SystemExit("seeds 700000 and up only")
     rng = np.random.default_rng(seed)
-    zfun, write, ctx, eff = BUILDERS[proc](rng, effect)
+    zfun, write, ctx, eff = BUILDERS[proc](rng, effect, **({"no_heading": True} if no_heading else {}))
     info = {
         "procedure": proc,
         "effect": effect,
@@ -966,6 +972,7 @@ def main(argv=None):
     o.add_argument("--z", type=float, default=10.0)
     o.add_argument("--seed", type=int, required=True)
     o.add_argument("--out", required=True)
+    o.add_argument("--no-heading", action="store_true", help="P4 mode B: no heading_deg column (latitude only)")
     b = sub.add_parser("batch")
     b.add_argument("--out", required=True)
     b.add_argument("--per-cell", type=int, default=4)
@@ -980,7 +987,7 @@ def main(argv=None):
     t.add_argument("dir")
     a = ap.parse_args(argv)
     if a.cmd == "one":
-        print(json.dumps(make_one(a.procedure, a.effect, a.z, a.seed, a.out)))
+        print(json.dumps(make_one(a.procedure, a.effect, a.z, a.seed, a.out, a.no_heading)))
     elif a.cmd == "batch":
         batch(Path(a.out), a.per_cell, a.nulls, a.z, a.seed0, a.procedures)
     elif a.cmd == "run":

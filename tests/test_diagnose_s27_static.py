@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import sys
 
+import numpy as np
 from station_run import ROOT, run_station
 
 
@@ -86,3 +87,51 @@ def test_p1_bias_step_during_a_hold_is_named_not_left_as_an_outlier_part(tmp_pat
     step = next(e for e in res["effects"] if e["name"] == "residual:time")
     assert step["shape"] == "step", step
     assert not [q for q in res["quality"] if q["kind"] == "outlier"], res["quality"]
+
+
+def test_p4_latitude_without_headings_fits_each_heading_not_north(tmp_path):
+    """Mode B at a known latitude (-33.3°), 10 positions labelled, no `heading_deg` (a tabletop
+    session's positions: pitch and roll from the accelerometer, the heading unknown), the gyro
+    noise scaled so the Earth rate is at 30σ of it (the generator's `earth_rate` row written with
+    the latitude: nothing is hidden beyond the Earth rate, which the baseline must hold). The
+    diagnosis took every heading as 0 (north): the Earth rate's north part, Ω cos L, was removed
+    along the wrong direction at every position, the residuals were reported as structured and
+    `g_sensitivity` was named. Each position's heading is now fitted with the bias: the verdict
+    is empty, and the headings found are the bench's (written by the same seed with its heading
+    column, read back from that file)."""
+    gen = _generator()
+    path, with_heading = tmp_path / "capture.csv", tmp_path / "with_heading.csv"
+    gen.make_one("P4", "earth_rate", 30.0, 708029, str(path), no_heading=True)
+    gen.make_one("P4", "earth_rate", 30.0, 708029, str(with_heading))
+    assert "heading_deg" not in path.read_text().split("\nt,", 1)[1].split("\n", 1)[0]
+    res = _diagnose(path)
+    assert res["verdict"] == [], (res["verdict"], res["candidates"])
+    assert not [q for q in res["quality"] if q["kind"] == "residuals_not_white"], res["quality"]
+    from station.capture import read_capture
+
+    h = read_capture(str(with_heading)).columns["heading_deg"]
+    bench_deg = np.array(list(dict.fromkeys(np.round(h[np.isfinite(h)], 2))))  # one per position, in order
+    fitted_deg = np.degrees(np.asarray(res["baseline"]["params"]["heading_rad"], float))
+    assert fitted_deg.shape == bench_deg.shape
+    err = (fitted_deg - bench_deg + 180.0) % 360.0 - 180.0
+    # at 30σ over 10 positions a heading is fixed to about 10° (the north part, Ω cos L, is ~6σ
+    # of one position's mean); heading 0 would be off by 21-158° at every one of these 10
+    assert np.median(np.abs(err)) < 10.0 and np.max(np.abs(err)) < 25.0, np.round(err, 1)
+
+
+def test_p4_null_with_slow_noise_below_the_wander_gate_names_nothing(tmp_path):
+    """Mode B, 18 positions over 17 min at 50 Hz, no temperature, no effect: the generator's noise
+    is white plus a Gauss–Markov bias (τ 60-600 s) and a random walk on each axis. REML did not
+    call the wander evident (ratio over white noise below 16 on every axis), so a line in time was
+    tested against white noise: deviance 13.6 against a bound of 11.7, and `time_drift` was named.
+    With the slow noise profiled out the line's ratio is 6.4: nothing is named."""
+    res = _diagnose(_write(tmp_path, "P4", "none", 702131))
+    assert res["verdict"] == [], (res["verdict"], res["candidates"])
+
+
+def test_p4_power_up_record_still_names_its_warm_up(shared_data):
+    """The real MPU-6050 record from power-up (449 s unmoved, counts, no temperature): its warm-up
+    is a drift in time well beyond its wander, and stays named (`time_drift`) with every
+    candidate tested against the slow noise."""
+    res = _diagnose(shared_data / "mpu6050_unc" / "mpu6050_unc_tinit_static.capture.csv")
+    assert "time_drift" in res["verdict"], (res["verdict"], res["candidates"])

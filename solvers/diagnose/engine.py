@@ -1256,7 +1256,12 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, floor=None, s
         T_w, wanders = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0, baseline=cal)
         if wanders and cal and T_w > chi2_isf(WANDER_NULL_P, k):
             T_w = min(T_w, _null_equivalent(T_w, wm.null_lr(A, cc.J, e, WANDER_NULL_DRAWS), k))
-        if wanders:
+        if wanders or cal:
+            # calibrated (P4): the ratio with the slow noise profiled out stands even where REML
+            # does not call the wander evident: a Gauss–Markov wander of a few percent of a block's
+            # variance over hundreds of blocks hides below EVIDENT_LR and still moves a line's white
+            # deviance past its bound (indep_s27 P4 nulls 702104, 702125, 702131: 13.6-14.1 against
+            # 11.7-12.9; profiled, 6.4 on 702131)
             infl = max(infl, D / max(T_w, 1e-9))
     if problem.slow_cov is not None and k > 0 and D > 0:
         infl = max(infl, D / max(slow_prior_lr(problem, A, cc.J, rnd.r0), 1e-9))

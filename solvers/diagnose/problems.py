@@ -185,6 +185,7 @@ def gyro_problem(
     reference: bool = False,
     headings_known: bool = True,
     step_rad_s: float | None = None,
+    latitude_deg: float | None = None,
 ) -> Problem:
     """Static gyro record(s) (P4 body frame, rad/s) as block means.
 
@@ -199,6 +200,11 @@ def gyro_problem(
     on pitch and roll alone, and as that is an isotropic ``G f`` it is tied to g_sensitivity.
     step_rad_s: the grid the rates are written on (``quantisation_step``), or None: quantisation
     noise (step²/12 a sample) is then the least noise a block mean can have.
+    latitude_deg: with ``earth_body_rad_s`` None, ``headings_known`` False and several
+    orientations (``C_b_n`` with pitch and roll, heading 0): the latitude is known but not the
+    headings, so the mode-B baseline is the Earth rate at that latitude with each position's
+    heading fitted beside the bias (``heading_rad``, one per position): its up part needs no
+    heading, its north part (Ω cos L, across the up direction) is turned about up by it.
     """
     t = np.asarray(t_s, float)
     w = np.asarray(w_rad_s, float)
@@ -238,13 +244,35 @@ def gyro_problem(
         t_s=tb, temp_c=Tb, temp_rate_c_s=_rate(tb, Tb), temp_ref_c=_ref(Tb), t_ref_s=float(tb.mean()), f_mps2=fb
     )
 
+    fit_heading = (
+        latitude_deg is not None
+        and earth_body_rad_s is None
+        and not headings_known
+        and not reference
+        and Cb is not None
+        and fb is not None
+        and multi
+    )
+    if fit_heading:
+        pos_of = np.array([uniq.index(x) for x in pb])
+        w_n, w_u = gyro_model.earth_rate_nue(latitude_deg)[:2]  # NUE: north, up (east 0)
+
+        def earth_of(psi_rad):
+            # C_b_n(heading ψ) = C_b_n(heading 0) R_U(ψ)ᵀ: the north part turned about up by ψ
+            ps = np.asarray(psi_rad, float)[pos_of]
+            v = np.column_stack([w_n * np.cos(ps), np.full(len(ps), w_u), -w_n * np.sin(ps)])
+            return np.einsum("nij,nj->ni", Cb, v)
+
+        psi0 = _headings_start(wb, Cb, pos_of, len(uniq), w_n, w_u)
+        Eb = earth_of(psi0)  # the start: the baseline's ε below is taken about it
+
     def residual(p):
-        omega = Eb
+        omega = earth_of(p["heading_rad"]) if fit_heading else Eb
         if "wE" in p:
             omega = Eb + gyro_model.project_nav_rate(Cb, np.r_[p["wE"], 0.0])  # north, up; east 0
         elif "wU" in p:  # headings unknown: up only (the up axis in body axes needs no heading)
             omega = Eb + gyro_model.project_nav_rate(Cb, np.r_[0.0, p["wU"], 0.0])
-        q = {k: v for k, v in p.items() if k not in ("wE", "wU")}
+        q = {k: v for k, v in p.items() if k not in ("wE", "wU", "heading_rad")}
         return (gyro_model.forward(omega, q, cond) - wb).ravel()
 
     cands = [_temp_candidate(Tb, rate=cond.temp_rate_c_s), _time_candidate(tb)]
@@ -274,6 +302,14 @@ def gyro_problem(
                 reason="part of the baseline here: the latitude is known and the Earth rate is removed (mode B)",
             )
         )
+    elif fit_heading:
+        cands.append(
+            Candidate(
+                "earth_rate",
+                reason="part of the baseline here: the latitude is known and the Earth rate is removed, each "
+                "position's heading (not given) fitted with the bias (mode B)",
+            )
+        )
     elif not multi:
         cands.append(
             Candidate(
@@ -298,14 +334,16 @@ def gyro_problem(
         base_model = "y = ε (P4 mode A: y = unit − reference)"
     else:
         base_model = "y = ω_E + ε (P4 mode B)" if earth_body_rad_s is not None else "y = ε"
+        if fit_heading:
+            base_model = "y = ω_E(ψ_k) + ε (P4 mode B, each position's heading ψ_k fitted)"
     prob = Problem(
         "gyro-drift",
         base_model,
         residual,
         sigma,
         np.repeat(groups, 3),
-        {"eps": wb.mean(axis=0) - Eb.mean(axis=0)},
-        {"eps": True},
+        {"eps": wb.mean(axis=0) - Eb.mean(axis=0)} | ({"heading_rad": psi0} if fit_heading else {}),
+        {"eps": True} | ({"heading_rad": True} if fit_heading else {}),
         cands,
         THRESHOLDS["gyro-drift"],
         unit="rad/s",
@@ -340,7 +378,14 @@ def gyro_problem(
         # block mean where noise dithers it; a residual below that is the quantiser's (undithered:
         # noise-free rates rounded leave an error that is a function of the rate itself, not the gyro's)
         prob.noise_floor = max(prob.noise_floor, step_rad_s / math.sqrt(12.0 * per))
-    if not headings_known and not reference and earth_body_rad_s is None and fb is not None and multi:
+    if (
+        not headings_known
+        and not reference
+        and earth_body_rad_s is None
+        and fb is not None
+        and multi
+        and not fit_heading
+    ):
         # the Earth rate's up part in body axes is Ω sin(lat) f/|f|: the G f of an isotropic G, inside
         # g_sensitivity's span (with headings known its north part tells the two apart)
         prob.nested = {"earth_rate": "g_sensitivity"}
@@ -349,6 +394,23 @@ def gyro_problem(
         # change between positions stays within what the Earth rate can make is tied to it
         prob.could_be = {"g_sensitivity": ("earth_rate", lambda P, S: _earth_rate_could_make(fb, P["G"], S["G"]))}
     return prob
+
+
+def _headings_start(wb, C_b_n, pos_of, n_pos: int, w_n: float, w_u: float, rounds: int = 8) -> np.ndarray:
+    """Start values of each position's heading (rad) for the mode-B baseline with the latitude
+    known and the headings not (``gyro_problem``): the bias and the headings by turns, each
+    heading the direction of its position's mean rate less bias and up part, in the nav frame's
+    north-east plane (``C_b_n`` at heading 0 per block)."""
+    C_n_b = np.transpose(C_b_n, (0, 2, 1))
+    psi = np.zeros(n_pos)
+    for _ in range(rounds):
+        v = np.column_stack([w_n * np.cos(psi[pos_of]), np.full(len(pos_of), w_u), -w_n * np.sin(psi[pos_of])])
+        eps = np.mean(wb - np.einsum("nij,nj->ni", C_b_n, v), axis=0)
+        nav = np.einsum("nij,nj->ni", C_n_b, wb - eps)  # N, U, E at heading 0
+        for k in range(n_pos):
+            m = pos_of == k
+            psi[k] = math.atan2(-float(np.mean(nav[m, 2])), float(np.mean(nav[m, 0])))
+    return psi
 
 
 def quantisation_step(x, max_unique_fraction: float = 0.25) -> float | None:

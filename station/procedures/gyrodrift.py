@@ -611,7 +611,7 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
             p, r = 0.0, 0.0
         Cnb = frames.p4_C_n_b(p, r, math.radians(head))
         Cbn[m] = Cnb.T
-        if lat is not None:
+        if lat is not None and (headings_known or f_b is None):  # else each heading is fitted (gyro_problem)
             E[m] = gyro_model.earth_rate_body(lat, Cnb)
     # the data-quality screen: gaps, saturated samples, moved positions are left out
     from station.procedures.diagnose import moved_positions, screen
@@ -641,12 +641,13 @@ def diagnosis_input(capture, base: dict | None = None, prepared: Prepared | None
         w_b[order],
         f_mps2,
         temp,
-        E[order] if (lat is not None or mode_ref) else None,
+        E[order] if ((lat is not None and (headings_known or f_b is None)) or mode_ref) else None,
         label[order],
         C_b_n=Cbn[order],
         reference=mode_ref,
         headings_known=headings_known,
         step_rad_s=_step(w_b[order]) if unit == "rad/s" else None,
+        latitude_deg=lat,
     )
     prob.unit = unit
     if unit != "rad/s" and "g_sensitivity" in prob.could_be:  # a gyro in counts: Ω's size in them is unknown
