@@ -1301,6 +1301,17 @@ def compass_problem(
     # f̂·m̂ of a dip row: 1e-6 is a microradian of dip, a thousand times below what an accelerometer
     # and a magnetometer resolve together (their dip rows scatter by 1e-3 to 1e-2)
     prob.aux_noise_floor = {1: 1e-6}
+    if have_dip and dip_blocks.get("rel_var", 0.0) > 0:
+        # each dip row's white noise: a sample's f̂·m̂ moves by the two unit vectors' noise across
+        # each other, (1 − c²)·rel_var, over the block's samples; a quantiser's rounding error,
+        # shared by a still unit's samples, does not average out. A floor under the scale the
+        # candidate's own residual gives those rows (``Problem.aux_noise_model``): the scale the
+        # baseline measured there holds the effect too
+        c0 = float(np.mean(dips(base)))
+        gain_f = float(np.mean(np.abs(np.diag(W0)))) / field_nT
+        shared_var = float(np.mean(tau2)) * gain_f**2 if dip_kind == "hold" else 0.0
+        var_row = (1.0 - c0**2) * (float(dip_blocks["rel_var"]) / q_count + shared_var)
+        prob.aux_noise_model = {1: np.sqrt(var_row)}
     # the generic terms act per sample on the baseline's field m0, as the forward model does
     prob.generic = [(cond, {"time": None if table else t_all, "temperature": T_all, "input_axis": m0})]
     if have_dip:

@@ -1,0 +1,40 @@
+"""`station diagnose` on compass captures written by an independent generator
+(benchmarks/indep_s27_dyn_generator.py: written from the contracts alone, its own parts, sites,
+motions and temperatures). The hidden effect is sized at 10σ of its true extension under the
+generator's noise; only the generator is told what it is.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import indep_s27_dyn_generator as G  # noqa: E402
+
+
+def _verdict(tmp_path, capsys, generated, name: str) -> list[str]:
+    """``station diagnose FILE --json`` through the real CLI on the generated capture."""
+    from station.cli import main
+
+    meta, cols, data, fmts, _truth = generated
+    path = tmp_path / f"{name}.csv"
+    G._write_capture(path, meta, cols, data, fmts)
+    rc = main(["diagnose", str(path), "--json", "--no-plots"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    return json.loads(out)["verdict"]
+
+
+def test_temperature_bias_on_holds_is_named_where_the_dip_rows_see_it(tmp_path, capsys):
+    """17 holds of a QMC5883L at 10 Hz, warmed then cooled: a hard iron that moves with the
+    temperature at 10σ (about half of it in the dip rows). The dip rows' scale was measured on
+    the baseline's residual, which holds the effect (1.9 times their white noise), and their
+    deviance n ln(RSS₀/RSS₁) saturates on 17 rows: 26 where the noise model gives 47, and the
+    bias went unnamed (s700113 of the generator's QA run). The same bench without the effect
+    names nothing."""
+    assert _verdict(tmp_path, capsys, G.generate_compass(700113, "temperature_bias", 10.0), "bias") == [
+        "temperature_bias"
+    ]
+    assert _verdict(tmp_path, capsys, G.generate_compass(700113, "none", 0.0), "null") == []
