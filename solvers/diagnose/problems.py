@@ -502,8 +502,11 @@ def ldv_problem(
     (:func:`solvers.ldv.instrumented_by_neighbours`), as the baseline's X is errors-in-variables
     corrected: a noisy regressor fitted as exact leaves an offset-like misfit (an aircraft's
     attitude noise of 0.017° at 74 m/s: a constant of 0.05 m/s per beam, deviance 20-27, in a
-    record of noise alone); and each row's σ takes the reference's part ``X_jᵀ cov X_j`` in
-    beside the beam's own noise."""
+    record of noise alone); and the rows are whitened by the noise they share
+    (:func:`solvers.ldv.whitened_rows`): the reference's part ``X cov Xᵀ`` is common to the three
+    beams of an epoch and, through the prediction, to epochs up to 2K apart; taken as white and
+    independent, a null drive's residual was "not white" (Ljung–Box p 1e-71) and a periodic term
+    in time common to the beams was named (QA s27d s700040)."""
     t = np.asarray(t_s, float) if t_s is not None else None
     v = np.asarray(v_body_mps, float)
     y = np.asarray(vl_mps, float)
@@ -518,10 +521,13 @@ def ldv_problem(
     cov_v = None if ref_cov_mps2 is None else runs(ref_cov_mps2) / step
     T = runs(temp_c)
     W = runs(omega_body_rad_s)
+    dt = float(np.median(np.diff(t))) if t is not None and m > 1 else 0.0
+    coef = None
     if cov_v is not None and np.any(ldv_solver.reference_noise_share(v, y, cov_v) >= LDV_IV_SHARE):
         # a noisy reference: the beams fitted on the part of it the neighbouring epochs carry
-        v = ldv_solver.instrumented_by_neighbours(v)
-    dt = float(np.median(np.diff(t))) if t is not None and m > 1 else 0.0
+        K = ldv_solver.iv_neighbours(dt)
+        coef = ldv_solver.instrument_coefficients(v, K=K)
+        v = ldv_solver.instrumented_by_neighbours(v, K=K)
     cond = Conditions(
         t_s=t,
         temp_c=T,
@@ -534,15 +540,21 @@ def ldv_problem(
     y0 = ldv_model.forward(v, {"X": np.asarray(X0, float)})  # the baseline's beam outputs
     r0 = y0 - y
     sig_beam = np.maximum(np.std(r0, axis=0), 1e-12)
-    if cov_v is not None:  # the reference's part per row, the beam's own noise the rest (≥ a quarter)
-        ref_var = np.einsum("ji,nik,jk->nj", np.asarray(X0, float), cov_v, np.asarray(X0, float))
-        own = np.maximum(sig_beam**2 - ref_var.mean(axis=0), 0.25 * sig_beam**2)
-        sig_rows = np.sqrt(own[None, :] + ref_var).ravel()
+    whiten = None
+    if cov_v is not None:
+        # the reference's part of each row (shared by the beams of an epoch and, fitted on the
+        # neighbours' prediction, by epochs up to 2K apart), the beam's own noise the rest (≥ a
+        # quarter); the rows whitened by that covariance
+        X0a = np.asarray(X0, float)
+        ref_sig, _ = ldv_solver.whitened_rows(X0a, None, cov_v, coef)
+        own = np.maximum(sig_beam**2 - (ref_sig.reshape(-1, 3) ** 2).mean(axis=0), 0.25 * sig_beam**2)
+        sig_rows, whiten = ldv_solver.whitened_rows(X0a, own, cov_v, coef)
     else:
         sig_rows = np.tile(sig_beam, len(v))
 
     def residual(p):
-        return (ldv_model.forward(v, p, cond) - y).ravel()
+        r = (ldv_model.forward(v, p, cond) - y).ravel()
+        return r if whiten is None else whiten(r)
 
     cands = [_temp_candidate(T, rate=cond.temp_rate_c_s), _time_candidate(t)]
     if t is None:

@@ -199,8 +199,10 @@ def _part_loglik(part: _Part, X: np.ndarray, E: np.ndarray):
         logdet = np.sum(np.log1p(LAMBDA_GRID[:, None] * lam[None, :]), axis=1)
         logdet_m = np.zeros(L)
         if p:
-            M = Gw[None] + np.einsum("ln,np,nq->lpq", W, Xt, Xt)
-            b = gw[None] + np.einsum("ln,np,nb->lpb", W, Xt, Et)
+            # Σ_n W[l, n] Xt[n, p] Xt[n, q] as one matrix product (a plain einsum loops in Python
+            # order over l, n, p, q: most of an LDV diagnosis with a dozen columns)
+            M = Gw[None] + (W @ (Xt[:, :, None] * Xt[:, None, :]).reshape(len(Xt), p * p)).reshape(L, p, p)
+            b = gw[None] + (W @ (Xt[:, :, None] * Et[:, None, :]).reshape(len(Xt), -1)).reshape(L, p, Et.shape[1])
             rss = rss - np.einsum("lpb,lpb->lb", b, np.linalg.solve(M + 1e-12 * np.eye(p), b))
             logdet_m = np.linalg.slogdet(M)[1]
         rss = np.maximum(rss, 1e-300)

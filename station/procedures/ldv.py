@@ -240,7 +240,7 @@ ATT_SIGMA_KEY = "reference_attitude_sigma_deg"
 
 def reference_noise(capture, v_body, vl, info) -> tuple[np.ndarray | None, dict]:
     """The reference's noise covariance per epoch, the one model calibrate (errors-in-variables
-    estimator and its uncertainty) and diagnose (the regressor and each row's σ) both use:
+    estimator and its uncertainty) and diagnose (the regressor and the rows' whitening) both use:
     velocity noise from ``reference_sigma_mps`` (metadata), attitude noise from
     ``reference_attitude_sigma_deg`` (metadata) or else from the attitude series' own
     high-frequency part (:func:`solvers.ldv.attitude_noise_rad`; not used where it would put
