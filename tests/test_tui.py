@@ -900,9 +900,13 @@ def test_a_port_typed_while_source_is_simulated_is_the_port_used(tmp_path):
                 await wait_for(pilot, lambda: "clear the port" in text_of(app, "#status"))
                 refused = words_of(app, "#status")
                 assert screen_name(app) == "ConnectScreen" and app.session.source is None
-                app.screen.query_one("#port").value = ""
-                await pilot.click("#port")
-                await pilot.press(*path, "enter")
+                # the port as typed above (Source follows it); typed again key by key, each key
+                # waited up to 2 s for an app kept busy by the device's stream (pilot's idle wait)
+                port = app.screen.query_one("#port")
+                port.value = ""
+                port.value = path
+                port.focus()
+                await pilot.press("enter")
                 await wait_for(pilot, lambda: screen_name(app) == "ProcedureScreen")
                 src = app.session.source
                 kind, port = src.kind, getattr(src, "port", None)
