@@ -389,7 +389,8 @@ def test_history_screen_says_a_back_dated_one_was_saved_before_the_highlighted_c
         app = make_app(str(db), device_id="IMU-7", start="history")
         async with app.run_test(size=SIZE) as pilot:
             await wait_for(pilot, lambda: app.screen.query_one("#calibrations").row_count == 3)
-            await wait_for(pilot, lambda: app.screen.query_one("#calnote").display)
+            # shown, not only displayed: the region is laid out a refresh after display is set
+            await wait_for(pilot, lambda: words_of(app, "#calnote"))
             shown = words_of(app, "#calnote")  # wrapped in the right-hand column
             # without "; #2 stays as judged against #1" (history, the report): two rows, not three
             assert shown == f"#{back} dated 2024-09-01, saved {saved} UTC after #2, now precedes it"
