@@ -102,19 +102,12 @@ def _hold_means(capture, lines: list[int], column: str) -> np.ndarray | None:
         return None
     x = np.asarray(x, float)
     a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
-    w = np.asarray(capture.column("speed_rad_s"), dtype=float)
-    pos = capture.columns["position"]
-    first = (capture.header_line or 0) + 1
     out = []
-    for ln in lines:
-        k = ln - first
-        j = k + 1
-        while j < len(a) and str(pos[j]) == str(pos[k]) and w[j] == w[k]:
-            j += 1
-        ok = np.all(np.isfinite(a[k:j]), axis=1) & np.isfinite(x[k:j])
+    for rows in _hold_slices(capture, lines):
+        ok = np.all(np.isfinite(a[rows]), axis=1) & np.isfinite(x[rows])
         if not ok.any():
             return None
-        out.append(float(np.mean(x[k:j][ok])))
+        out.append(float(np.mean(x[rows][ok])))
     return np.array(out)
 
 
