@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import collections
 import math
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -167,6 +168,12 @@ URL_SCHEMES = {
     "cp2110": ("cp2110://BUS:DEVICE:INTERFACE", None),
 }
 LOG_LEVELS = ("debug", "info", "warning", "error")
+EMPTY_READ_GRACE_S = 0.25  # empty "ready" reads for this long: the port is gone
+
+
+def _path_still_there(port: str) -> bool:
+    """False only for a device path that has vanished (URLs and endpoints: True)."""
+    return "://" in port or port.lower().startswith(NETWORK_PREFIXES) or os.path.exists(port)
 
 
 def _port_number_problem(text: str, form: str) -> str | None:
@@ -301,6 +308,7 @@ class Reader:
         self._taken = 0  # parser samples already turned into batches
         self._pending_gap: GapEvent | None = None
         self._gaps_before_break = 0
+        self._empty_since: float | None = None  # first of a run of empty "ready" reads
 
     # ------------------------------------------------------------ lifecycle
 
@@ -434,6 +442,8 @@ class Reader:
                 # TypeError/AttributeError: pyserial racing a close from stop()
                 if self._stop.is_set():
                     break
+                if self._empty_read_is_transient(exc):
+                    continue
                 last_error = str(exc)
                 with self._lock:
                     self._stats.connected = False
@@ -442,6 +452,7 @@ class Reader:
                 down_since = time.monotonic()
                 continue
             if data:
+                self._empty_since = None
                 self._ingest(data, time.monotonic())
             if self._out:
                 try:
@@ -452,6 +463,23 @@ class Reader:
                 self._stats.cpu_s = time.thread_time() - cpu0
         with self._lock:
             self._stats.cpu_s = time.thread_time() - cpu0
+
+    def _empty_read_is_transient(self, exc: Exception) -> bool:
+        """pyserial's "readiness to read but returned no data" is what an unplugged port
+        shows, always; but a loaded Linux pty shows it once too (select wakes before the
+        line discipline has handed the bytes over; pyserial reads with VMIN=0). Closing
+        then would flush what the device sent meanwhile, so the port is given
+        `EMPTY_READ_GRACE_S` of such reads, and closed at once if its path is gone."""
+        if "returned no data" not in str(exc):
+            return False
+        now = time.monotonic()
+        if self._empty_since is None:
+            self._empty_since = now
+        if now - self._empty_since >= EMPTY_READ_GRACE_S or not _path_still_there(self.port):
+            self._empty_since = None
+            return False
+        self._stop.wait(min(self.poll_s, 0.005))
+        return True
 
     def _close(self) -> None:
         with self._wlock:
