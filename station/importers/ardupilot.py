@@ -275,6 +275,13 @@ def _df_has(log, *names: str) -> bool:
     return any(n in ids and len(log.offsets[ids[n]]) for n in names)
 
 
+def _closed_refusal(log, path, message: str) -> InputError:
+    """The log closed, and the one line that says why it was refused (raise what this returns)."""
+    with contextlib.suppress(Exception):
+        log.close()
+    return InputError(path, None, message)
+
+
 def _raw_notes(params: dict[str, float], inst_read: dict[str, int]) -> list[str]:
     """What ``INS_RAW_LOG_OPT`` says about the ACC/GYR samples read (AP_InertialSensor_Backend
     ``log_gyro_raw``/``log_accel_raw``): bit 2 (4) post filter, the samples after the IMU's
@@ -460,21 +467,17 @@ def read_bin(path, *, instance: int | None = None, kinds=None, source: str = "au
     has_imu = _df_has(log, "IMU", "IMU2", "IMU3")
     has_raw = _df_has(log, "ACC", "GYR", *(f"{m}{n}" for m in DF_RAW.values() for n in (1, 2, 3)))
     if source == "raw" and not has_raw:
-        with contextlib.suppress(Exception):
-            log.close()
-        raise InputError(
+        raise _closed_refusal(
+            log,
             path,
-            None,
             "--source raw: the log has no ACC or GYR records (ArduPilot logs them with LOG_BITMASK's IMU_RAW "
             "or INS_RAW_LOG_OPT); its IMU records are read without --source",
         )
     has_isb = _df_has(log, "ISBH")
     if source == "batch" and not has_isb:
-        with contextlib.suppress(Exception):
-            log.close()
-        raise InputError(
+        raise _closed_refusal(
+            log,
             path,
-            None,
             "--source batch: the log has no ISBH/ISBD batches (ArduPilot logs them for the IMUs in "
             f"INS_LOG_BAT_MASK); it has {_df_what(log)}",
         )
