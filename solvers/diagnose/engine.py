@@ -1292,27 +1292,8 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, floor=None, s
     if wm is not None and k > 0 and D > 0:
         cal = problem.wander_calibrated
         T_w, wanders = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0, baseline=cal)
-        import os as _os
-
-        _v = _os.environ.get("S30_VARIANT", "")
-        if cal and _v.startswith("fixed") and not wanders:
-            T_w = wm.fixed_lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0)
-            if _v == "fixedcal" and T_w > chi2_isf(WANDER_NULL_P, k):
-                T_w = min(T_w, _null_equivalent(T_w, wm.null_fixed_lr(A, cc.J, e, WANDER_NULL_DRAWS), k))
-        if cal and _v == "fixedall":
-            T_w = wm.fixed_lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0)
-        if _os.environ.get("S30_DEBUG") and cal:
-            _e0 = rnd.r0 - QA @ (QA.T @ rnd.r0)
-            _tp = wm.lr(A, cc.J, _e0, e, {}, baseline=True)[0]
-            _tf = wm.fixed_lr(A, cc.J, _e0, e, {})
-            _nf = wm.null_fixed_lr(A, cc.J, e, 100) if _os.environ.get("S30_DEBUG") == "2" else np.ones(3)
-            _np = wm.null_lr(A, cc.J, e, 100) if _os.environ.get("S30_DEBUG") == "2" else np.ones(3)
-            print(f"DBG {cc.cand.name:18s} k={k} D={D:6.1f} Tprof={_tp:6.1f} Tfix={_tf:6.1f} wand={wanders} "
-                  f"nullfix m/95={np.mean(_nf):.1f}/{np.percentile(_nf,95):.1f} eq={_null_equivalent(_tf,_nf,k):.1f} sd={np.std(_nf):.1f} nullprof m/95={np.mean(_np):.1f}/{np.percentile(_np,95):.1f} "
-                  f"fitH1={[(round(a,3),(round(b) if b < 1e12 else 'RW'),round(d,1)) for a,b,c,d in wm.fit(np.hstack([A,cc.J]), e)]} "
-                  f"fitH0={[(round(a,3),(round(b) if b < 1e12 else 'RW'),round(d,1)) for a,b,c,d in wm.fit(A, _e0)]} chi2={chi2_isf(WANDER_NULL_P, k):.1f}", file=__import__('sys').stderr)
         if wanders and cal and T_w > chi2_isf(WANDER_NULL_P, k):
-            T_w = min(T_w, _null_equivalent(T_w, wm.null_lr(A, cc.J, e, WANDER_NULL_DRAWS, e0=rnd.r0 - QA @ (QA.T @ rnd.r0)), k))
+            T_w = min(T_w, _null_equivalent(T_w, wm.null_lr(A, cc.J, e, WANDER_NULL_DRAWS), k))
         if wanders or cal:
             # calibrated (P4): the ratio with the slow noise profiled out stands even where REML
             # does not call the wander evident: a Gauss–Markov wander of a few percent of a block's

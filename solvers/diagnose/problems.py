@@ -393,10 +393,6 @@ def gyro_problem(
         # direction of its own: a G f of 9 parameters takes much of it on a few positions. A G f whose
         # change between positions stays within what the Earth rate can make is tied to it
         prob.could_be = {"g_sensitivity": ("earth_rate", lambda P, S: _earth_rate_could_make(fb, P["G"], S["G"]))}
-    import os as _os
-
-    if _os.environ.get("S30_PRIOR") and dt_s > 0:
-        set_slow_bias_prior(prob, np.repeat(tb, 3), sig_axis * math.sqrt(per * dt_s), block="eps")
     return prob
 
 
@@ -1041,7 +1037,7 @@ SLOW_BIAS_PER_WHITE_DENSITY = 0.15
 SLOW_BIAS_TAU_FRACTION = 0.3
 
 
-def set_slow_bias_prior(prob: Problem, t_s, white_density, block: str = "b") -> None:
+def set_slow_bias_prior(prob: Problem, t_s, white_density) -> None:
     """Give a problem of hold means at times ``t_s`` (s) the covariance of a first-order
     Gauss–Markov bias per axis (``Problem.slow_cov``): standard deviation
     ``SLOW_BIAS_PER_WHITE_DENSITY`` × the axis's white noise density ``white_density`` (output unit
@@ -1049,7 +1045,7 @@ def set_slow_bias_prior(prob: Problem, t_s, white_density, block: str = "b") -> 
     carried to each row by its sensitivity to the bias block ``b`` (the baseline's Jacobian)."""
     t = np.asarray(t_s, float)
     sigma = np.asarray(prob.sigma, float)
-    Jb, _, _ = jacobian(prob, dict(prob.baseline), {block: True})
+    Jb, _, _ = jacobian(prob, dict(prob.baseline), {"b": True})
     U = Jb * sigma[:, None]  # data units per unit of bias, per axis
     span = float(np.ptp(t))
     if span <= 0 or U.shape[1] != 3:

@@ -63,12 +63,6 @@ class WanderModel:
             for tau in span * np.geomspace(*TAU_PER_SPAN, TAU_STEPS):
                 lam, V = np.linalg.eigh(a[:, None] * np.exp(-dt / tau) * a[None, :])
                 eig.append((float(tau), np.maximum(lam, 0.0), V))
-            import os as _os
-
-            if _os.environ.get("S30_RW"):
-                s_rel = (tb - tb[0]) / span
-                lam, V = np.linalg.eigh(a[:, None] * np.minimum(s_rel[:, None], s_rel[None, :]) * a[None, :])
-                eig.append((float("inf"), np.maximum(lam, 0.0), V))
             self.parts.append(_Part(int(sid), idx, bins, np.sqrt(cnt), eig, tb, ww))
 
     def fit(self, X: np.ndarray, e: np.ndarray) -> list[tuple[float, float, float, float]]:
@@ -95,7 +89,7 @@ class WanderModel:
         E = E.reshape(len(E), -1)
         return np.asarray([_part_loglik(part, X, E)[0].max(axis=(0, 1)) for part in self.parts])
 
-    def null_lr(self, A: np.ndarray, J: np.ndarray, e1: np.ndarray, draws: int, seed: int = 0, e0=None) -> np.ndarray:
+    def null_lr(self, A: np.ndarray, J: np.ndarray, e1: np.ndarray, draws: int, seed: int = 0) -> np.ndarray:
         """The statistic of ``lr`` on ``draws`` records of noise alone, drawn from the slow noise that
         REML fits to ``e1``, the residual of ``[A J]`` (the candidate's signature never taken for
         wander): its distribution where the candidate explains nothing. A series whose wander is
@@ -104,11 +98,8 @@ class WanderModel:
         AJ = np.hstack([A, J])
         rng = np.random.default_rng(seed)
         E = np.zeros((len(e1), draws))
-        import os as _os
-
-        fits = self.fit(A, e0) if (e0 is not None and _os.environ.get("S30_H0NULL")) else self.fit(AJ, e1)
-        for part, (lam, tau, s2, _) in zip(self.parts, fits):
-            if np.isfinite(tau) and tau >= part.t_bin[-1] - part.t_bin[0]:
+        for part, (lam, tau, s2, _) in zip(self.parts, self.fit(AJ, e1)):
+            if tau >= part.t_bin[-1] - part.t_bin[0]:
                 lam = 0.0  # correlated over more than the record: a drift over it, not noise to test one against
             white = rng.standard_normal((part.idx.size, draws))
             E[part.idx] = np.sqrt(s2) * (white + np.sqrt(lam) * part.draw(tau, rng, draws))
@@ -128,41 +119,6 @@ class WanderModel:
         evident = evident or (baseline and cache["evident0"])
         return max(0.0, 2.0 * (ll1 - cache["ll0"])), evident
 
-    def fixed_lr(self, A: np.ndarray, J: np.ndarray, e0: np.ndarray, e1: np.ndarray, cache: dict) -> float:
-        """The likelihood-ratio statistic of columns ``J`` beside ``A`` (noise scale profiled, as
-        the deviance) under the slow noise REML fits to ``e1``, the residual of ``[A J]``, held
-        fixed under both models (generalised least squares): the wander is sized where the
-        candidate's signature is outside it, so it cannot take the candidate whole."""
-        AJ = np.hstack([A, J])
-        out = 0.0
-        for pi, part in enumerate(self.parts):
-            ml1, reml, _, _ = _part_loglik(part, AJ, e1[:, None])
-            i, j = np.unravel_index(int(np.argmax(reml[..., 0])), reml.shape[:2])
-            key = ("ml0", pi)
-            if key not in cache:
-                cache[key] = _part_loglik(part, A, e0[:, None])[0]
-            out += 2.0 * (float(ml1[i, j, 0]) - float(cache[key][i, j, 0]))
-        return max(0.0, out)
-
-    def null_fixed_lr(self, A: np.ndarray, J: np.ndarray, e1: np.ndarray, draws: int, seed: int = 0) -> np.ndarray:
-        """The statistic of ``fixed_lr`` on ``draws`` records of noise alone, drawn from the slow
-        noise REML fits to ``e1`` (the residual of ``[A J]``) as fitted, its size estimated again
-        on each draw: its distribution where the candidate explains nothing."""
-        AJ = np.hstack([A, J])
-        rng = np.random.default_rng(seed)
-        E = np.zeros((len(e1), draws))
-        for part, (lam, tau, s2, _) in zip(self.parts, self.fit(AJ, e1)):
-            white = rng.standard_normal((part.idx.size, draws))
-            E[part.idx] = np.sqrt(s2) * (white + np.sqrt(lam) * part.draw(tau, rng, draws))
-        out = np.zeros(draws)
-        cols = np.arange(draws)
-        for part in self.parts:
-            ml1, reml, _, _ = _part_loglik(part, AJ, E)
-            ml0 = _part_loglik(part, A, E)[0]
-            flat = reml.reshape(-1, draws).argmax(axis=0)
-            out += 2.0 * (ml1.reshape(-1, draws)[flat, cols] - ml0.reshape(-1, draws)[flat, cols])
-        return np.maximum(0.0, out)
-
     def _ml_and_evident(self, X: np.ndarray, e: np.ndarray) -> tuple[float, bool]:
         """(the profiled ML log-likelihood summed over the series, whether REML's ratio over white
         noise reaches ``EVIDENT_LR`` in some series) of residual ``e`` of a model with columns
@@ -170,14 +126,7 @@ class WanderModel:
         ll, evident = 0.0, False
         for part in self.parts:
             ml, reml, rss, dof = _part_loglik(part, X, e[:, None])
-            import os as _os
-
-            if _os.environ.get("S30_TAUMAX"):
-                span = part.t_bin[-1] - part.t_bin[0]
-                keep = [i for i, x in enumerate(part.eig) if x[0] <= float(_os.environ["S30_TAUMAX"]) * span]
-                ll += float(ml[keep].max())
-            else:
-                ll += float(ml.max())
+            ll += float(ml.max())
             evident = evident or _reml_fit(part, reml, rss, dof)[3] >= EVIDENT_LR
         return ll, evident
 
@@ -206,14 +155,8 @@ class _Part:
     def draw(self, tau: float, rng, draws: int) -> np.ndarray:
         """Rows × draws of a unit Gauss–Markov wander of correlation time ``tau`` (s), constant
         within a bin, in weighted rows (the ``K_τ`` of the model)."""
-        x = np.empty((len(self.t_bin), draws))
-        if not np.isfinite(tau):  # a random walk from the series' start, unit variance at its end
-            s_rel = (self.t_bin - self.t_bin[0]) / (self.t_bin[-1] - self.t_bin[0])
-            steps = np.sqrt(np.diff(s_rel))[:, None] * rng.standard_normal((len(s_rel) - 1, draws))
-            x[0] = 0.0
-            x[1:] = np.cumsum(steps, axis=0)
-            return self.w_rel[:, None] * x[self.bins]
         rho = np.exp(-np.diff(self.t_bin) / tau)
+        x = np.empty((len(self.t_bin), draws))
         x[0] = rng.standard_normal(draws)
         for i, r in enumerate(rho):
             x[i + 1] = r * x[i] + np.sqrt(1.0 - r * r) * rng.standard_normal(draws)
