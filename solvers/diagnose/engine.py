@@ -135,6 +135,7 @@ class Problem:
     dead_rtol: float = DEAD_RTOL  # a candidate column less outside the baseline's span than this: dead
     cv_rows: dict = field(default_factory=dict)  # fold set name → rows its held-out RMS is taken on
     cv_groups: np.ndarray | None = None  # the default CV folds when they are not ``groups`` (P2: rows across mountings)
+    cv_max_folds: int = MAX_FOLDS  # at most this many default folds (more groups are dealt into them in order)
     screened: list = field(default_factory=list)  # quality findings of rows left out before the effect search
     findings: list = field(default_factory=list)  # other quality findings the problem's rows gave (compass dip)
     # a constant the baseline lacks → {time-like candidate: its driver}: the constant is that candidate's
@@ -290,12 +291,12 @@ def _lstsq_rss(A: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
     return d, float(e @ e)
 
 
-def folds_of(groups: np.ndarray) -> np.ndarray:
-    """Fold index per row: each group its own fold, or groups dealt into MAX_FOLDS folds in order."""
+def folds_of(groups: np.ndarray, max_folds: int = MAX_FOLDS) -> np.ndarray:
+    """Fold index per row: each group its own fold, or groups dealt into ``max_folds`` folds in order."""
     uniq, inv = np.unique(np.asarray(groups), return_inverse=True)
-    if len(uniq) <= MAX_FOLDS:
+    if len(uniq) <= max_folds:
         return inv
-    return (inv * MAX_FOLDS) // len(uniq)
+    return (inv * max_folds) // len(uniq)
 
 
 def cv_rms(A: np.ndarray, r: np.ndarray, sigma: np.ndarray, folds: np.ndarray, primary=None, rows=None) -> float:
@@ -1589,7 +1590,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
     sigma = np.asarray(problem.sigma, dtype=float).ravel()
     problem.sigma = sigma
     n = sigma.size
-    folds = folds_of(problem.groups if problem.cv_groups is None else problem.cv_groups)
+    folds = folds_of(problem.groups if problem.cv_groups is None else problem.cv_groups, problem.cv_max_folds)
     fold_map = {None: folds, **{k: folds_of(v) for k, v in problem.fold_sets.items()}}
     for k, rows in problem.cv_rows.items():  # a fold set whose held-out RMS is taken on some rows only
         fold_map[k] = (fold_map.get(k, folds), np.asarray(rows, bool))
