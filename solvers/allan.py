@@ -174,6 +174,30 @@ def hold_mean_se(seg, t_s) -> np.ndarray | None:
     return np.maximum(np.asarray(me.se_white, dtype=float), np.asarray(me.se_model, dtype=float))
 
 
+def white_density(holds) -> np.ndarray | None:
+    """Per column, the white noise density N (unit · √s) of the samples within holds: the white
+    term ``c0 = N²`` of the noise model :func:`mean_standard_error` fits (the one calibrate uses),
+    the median over the holds. ``holds``: ``(samples (N, k), times (N,))`` per hold; rows with a
+    non-finite value are dropped. None where no hold gives one (fewer than 16 rows, times that do
+    not advance, no model fitted)."""
+    c0 = []
+    for seg, ts in holds:
+        seg, ts = np.asarray(seg, dtype=float), np.asarray(ts, dtype=float)
+        ok = np.all(np.isfinite(seg), axis=1)
+        seg, ts = seg[ok], ts[ok]
+        if len(seg) < 16:
+            continue
+        dt = float(np.median(np.diff(ts)))
+        if not dt > 0:
+            continue
+        me = mean_standard_error(seg, dt)
+        if me.noise_model is not None:
+            c0.append(me.noise_model[:, 0])
+    if not c0:
+        return None
+    return np.sqrt(np.median(np.array(c0), axis=0))
+
+
 def time_needed_s(me: MeanError, accuracy: float) -> np.ndarray:
     """Record length for a 1-sigma of ``accuracy`` (same unit as the data), per axis.
 

@@ -42,3 +42,21 @@ def eigh(a):
     a = np.asarray(a, dtype=float)
     _check("eigen decomposition", a)
     return np.linalg.eigh(a)
+
+
+def cholesky_lower(a):
+    """The lower Cholesky factor of the symmetric positive-definite ``a``, NaN/inf refused."""
+    from scipy.linalg import cholesky
+
+    a = np.asarray(a, dtype=float)
+    _check("Cholesky factorisation", a)
+    return cholesky(a, lower=True, check_finite=False)
+
+
+def solve_lower(L, b):
+    """``L⁻¹ b`` for a lower-triangular ``L`` (forward substitution), NaN/inf refused."""
+    from scipy.linalg import solve_triangular
+
+    L, b = np.asarray(L, dtype=float), np.asarray(b, dtype=float)
+    _check("triangular solve", L, b)
+    return solve_triangular(L, b, lower=True, check_finite=False)

@@ -1386,25 +1386,41 @@ def _null_equivalent(T: float, null: np.ndarray, k: int) -> float:
     return chi2_isf(p, k)
 
 
+def _slow_factor(problem: Problem) -> np.ndarray:
+    """The lower Cholesky factor of ``C = I + slow_cov / (σ σᵀ)`` (the rows' noise in weighted
+    rows), made once per problem and made again only when ``σ`` or ``slow_cov`` is another
+    (compared by value and identity: an address and a sum can both repeat for different rows)."""
+    sigma = np.asarray(problem.sigma, float)
+    cached = problem._slow_chol
+    if cached is None or cached[1] is not problem.slow_cov or not np.array_equal(cached[0], sigma):
+        C = np.eye(sigma.size) + np.asarray(problem.slow_cov, float) / np.outer(sigma, sigma)
+        problem._slow_chol = cached = (sigma.copy(), problem.slow_cov, linalg.cholesky_lower(C))
+    return cached[2]
+
+
 def slow_prior_lr(problem: Problem, A: np.ndarray, J: np.ndarray, r0: np.ndarray) -> float:
     """The likelihood-ratio statistic (noise scale profiled, as the deviance) of columns ``J``
     beside ``A`` for the linearised weighted residual ``r0 + A δ`` under the rows' noise with the
     known slow part ``Problem.slow_cov``: ``C = I + slow_cov / (σ σᵀ)`` in weighted rows, every
-    column and ``r0`` whitened by its Cholesky factor (generalised least squares)."""
-    sigma = np.asarray(problem.sigma, float)
-    key = (sigma.ctypes.data, float(sigma.sum()))
-    if problem._slow_chol is None or problem._slow_chol[0] != key:
-        C = np.eye(sigma.size) + np.asarray(problem.slow_cov, float) / np.outer(sigma, sigma)
-        problem._slow_chol = (key, np.linalg.cholesky(C))
-    L = problem._slow_chol[1]
+    column and ``r0`` whitened once by its Cholesky factor (generalised least squares). With
+    ``Problem.row_types``, a noise scale per kind, as the deviance has (``typed_fit_term``): the
+    prior must then not couple rows of two kinds (``set_slow_bias_prior``'s ``rows``), so that
+    whitening keeps every row in its kind."""
+    L = _slow_factor(problem)
+    X = linalg.solve_lower(L, np.column_stack([r0, A, J]))
+    y, Xa, Xall = X[:, 0], X[:, 1 : 1 + A.shape[1]], X[:, 1:]
 
-    def rss(X, y):
-        Q = _orth(X)
-        return float(y @ y - np.sum((Q.T @ y) ** 2))
+    def resid(Q):
+        return y - Q @ (Q.T @ y)
 
-    y = np.linalg.solve(L, r0)
-    rss0, rss1 = rss(np.linalg.solve(L, A), y), rss(np.linalg.solve(L, np.hstack([A, J])), y)
-    return max(0.0, sigma.size * math.log(max(rss0, 1e-300) / max(rss1, 1e-300)))
+    e0, e1 = resid(_orth(Xa)), resid(_orth(Xall))
+    types = problem.row_types
+    kinds = [np.ones(y.size, bool)] if types is None else [types == t for t in np.unique(types)]
+    out = 0.0
+    for sel in kinds:
+        rss0, rss1 = float(e0[sel] @ e0[sel]), float(e1[sel] @ e1[sel])
+        out += int(sel.sum()) * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
+    return max(0.0, out)
 
 
 def wander_model(problem: Problem):

@@ -127,28 +127,13 @@ def _hold_slices(capture, lines: list[int]) -> list[slice]:
 
 
 def _white_density(capture, lines: list[int]) -> np.ndarray | None:
-    """Per axis, the white noise density N (output unit · √s) of the samples within holds: the
-    white term ``c0 = N²`` of the Allan noise model calibrate fits (``solvers.allan``), the median
-    over the holds. None where no hold gives one."""
-    from solvers.allan import mean_standard_error
+    """Per axis, the white noise density N (output unit · √s) of the samples within holds
+    (``solvers.allan.white_density``: the Allan model's white term, the median over the holds)."""
+    from solvers.allan import white_density
 
     a = np.column_stack([np.asarray(capture.column(c), dtype=float) for c in ("ax", "ay", "az")])
     t = np.asarray(capture.column("t"), dtype=float)
-    c0 = []
-    for sl in _hold_slices(capture, lines):
-        ok = np.all(np.isfinite(a[sl]), axis=1)
-        seg, ts = a[sl][ok], t[sl][ok]
-        if len(seg) < 16:
-            continue
-        dt = float(np.median(np.diff(ts)))
-        if not dt > 0:
-            continue
-        me = mean_standard_error(seg, dt)
-        if me.noise_model is not None:
-            c0.append(me.noise_model[:, 0])
-    if not c0:
-        return None
-    return np.sqrt(np.median(np.array(c0), axis=0))
+    return white_density((a[sl], t[sl]) for sl in _hold_slices(capture, lines))
 
 
 @dataclass
