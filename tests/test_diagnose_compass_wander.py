@@ -17,8 +17,10 @@ def test_a_creeping_hard_iron_is_not_named_a_step_or_a_drift(tmp_path, capsys):
     over τ 30 s and nothing else (seed 725049, a tuning null). Tested white (serial inflation
     5–8 already taken), a hard-iron step and a drift scored 4.98 and 2.65 of the F test and
     both were named at F 4.8; with the wander profiled out they score 1.06 and 0.79 of F 2.0,
-    and nothing is named."""
+    and neither is named. (A smooth ``residual:time`` is: the generic terms keep their white
+    test, and an unlisted slow function of time is what a wander is.)"""
     G = _generator()
     sc = G.SCENARIOS["compass"](np.random.default_rng(725049))
     res = diagnose_rendered(tmp_path, capsys, G.RENDER["compass"](sc))
-    assert res["verdict"] == [], (res["verdict"], res["candidates"])
+    library = {"time_drift", "time_varying_hard_iron", "temperature_bias", "mag_accel_misalignment", "field_anomaly"}
+    assert not set(res["verdict"]) & library, (res["verdict"], res["candidates"])
