@@ -203,18 +203,6 @@ class Problem:
     # residual of its own), and its profiled ratio is calibrated on records of noise alone drawn
     # from the wander fitted beside it (``WanderModel.null_lr``; ``_null_equivalent``)
     wander_calibrated: bool = False
-    # with ``wander_calibrated``: the draws of noise alone its profiled ratio is calibrated on (0: the
-    # ratio stands as profiled, the procedure's F measured on nulls stands for the calibration; the
-    # compass: draws of the wander fitted beside a 10σ hard-iron step took it, score 5.2 → 1.9)
-    wander_draws: int = WANDER_NULL_DRAWS
-    # with ``wander_t_s``: the wander is a vector (a hard iron that creeps, in the sensor's frame)
-    # that reaches each row along its own direction, rows × d in the data's unit per unit of each
-    # component (the rows' sensitivity to it); None: a scalar wander of each series
-    wander_directions: np.ndarray | None = None
-    # with ``wander_t_s``: the candidates tested against the wander (names; ``residual:<driver>``
-    # for a generic term); None: every one. A wander in time is drift-like, and so is a warm-up:
-    # profiled out, it took a compass temperature bias at 10σ whole (named in 1 of 4)
-    wander_candidates: frozenset | None = None
     series_names: dict = field(default_factory=dict)  # a series id's name for a person (P4's axes, the LDV's beams)
     # series 0's whiteness test (primary rows beside auxiliary ones, the compass) also over this many
     # lags, the rows of some seconds (Bonferroni over the two): 20 lags at 8 Hz span 2.5 s, and a
@@ -1302,13 +1290,11 @@ def _evaluate(problem, cc: _Cand, rnd: _Round, term_cur, types, n, floor=None, s
         infl = max(infl, shared_inflation(problem, _orth(np.hstack([A, cc.J])), e, sig))
     wm = wander_model(problem)
     T_w, wanders = None, False
-    if problem.wander_candidates is not None and cc.cand.name not in problem.wander_candidates:
-        wm = None
     if wm is not None and k > 0 and D > 0:
         cal = problem.wander_calibrated
         T_w, wanders = wm.lr(A, cc.J, rnd.r0 - QA @ (QA.T @ rnd.r0), e, rnd.wander0, baseline=cal)
-        if wanders and cal and problem.wander_draws > 0 and T_w > chi2_isf(WANDER_NULL_P, k):
-            T_w = min(T_w, _null_equivalent(T_w, wm.null_lr(A, cc.J, e, problem.wander_draws), k))
+        if wanders and cal and T_w > chi2_isf(WANDER_NULL_P, k):
+            T_w = min(T_w, _null_equivalent(T_w, wm.null_lr(A, cc.J, e, WANDER_NULL_DRAWS), k))
         if wanders or cal:
             # calibrated (P4): the ratio with the slow noise profiled out stands even where REML
             # does not call the wander evident: a Gauss–Markov wander of a few percent of a block's
@@ -1474,9 +1460,7 @@ def wander_model(problem: Problem):
     if problem._wander is None:
         from solvers.diagnose.wander import WanderModel
 
-        problem._wander = WanderModel(
-            problem.wander_t_s, problem.series, 1.0 / np.asarray(problem.sigma, float), problem.wander_directions
-        )
+        problem._wander = WanderModel(problem.wander_t_s, problem.series, 1.0 / np.asarray(problem.sigma, float))
     return problem._wander
 
 
@@ -1856,8 +1840,6 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     "kind": ev.kind,
                     "cv_lower": _cv_lower(ev, rounds.cv0(ev.cc.cand.folds)),
                     "inflation": ev.infl,
-                    "wander_T": ev.wander_T,  # the ratio with the slow wander profiled out (None: not tested so)
-                    "wanders": ev.wanders,
                 }
         first = False
         passing = [ev for ev in evals if _passes(problem, ev, m, rounds.cv0(ev.cc.cand.folds), rank_cur, n)]

@@ -51,12 +51,10 @@ THRESHOLDS = {
     # station simulator's, and extra names beside 10σ effects (docs/benchmarks.md, "P2 F")
     "accel-centrifuge": 1.25,
     # compass: independent nulls carry a hard iron that wanders over the capture, which the magnitude
-    # rows resolve as well as a drift. White, it needed F 4.8 (198 nulls, seeds 480000+: time-like
-    # candidates above 3.2 in 5.1 %, above 4.8 in 2.0 %). Profiled out as a Gauss–Markov vector
-    # (``compass_problem``'s wander model), 58 nulls, seeds 725000+: the largest time-like score 3.5
-    # (a wander of τ 84 s over a 79 s record: a drift within it; 27 white), then 1.99, 1.83: above
-    # 1.75 in 5.2 %, above 2.0 in 1.7 % (docs/benchmarks.md, "s30-cmp")
-    "compass": 2.0,
+    # rows (block means of every sample since 2026-11-26) resolve as well as a drift: 198 nulls, seeds
+    # 480000+, time-like candidates above 3.2 in 5.1 %, above 4.8 in 2.0 %; 100 nulls, seeds 460000+,
+    # two scored 4.6 (with every step-th sample as the rows, F 3.2: 3.4 % above it)
+    "compass": 4.8,
     "gyro-drift": 1.25,  # 0.8 (independent nulls: 2.5 % false alarms at 1.25, 200 nulls, seeds 470000+; 2 % at 1.5): bias instability in the block means
     "ldv": 1.05,  # 0.95 (0.84 independent): white noise
 }
@@ -64,8 +62,7 @@ THRESHOLDS = {
 # term must leave free beside its model (engine.independent_groups); elsewhere engine.MIN_DOF
 GENERIC_MIN_GROUPS = {"accel-tabletop": 1.0}  # P1 nulls 460000+: docs/benchmarks.md, "P1 generic terms on few holds"
 GYRO_SHARED_BLOCKS = 20  # P4: stretches of time whose block means share the bias instability
-# (compass: 1.8 × its F of 2.0 keeps the generic margin at the 3.6·q it had at F 4.8 × 0.75)
-GENERIC_SCALES = {"accel-tabletop": 1.0, "gyro-drift": 1.1, "accel-centrifuge": 1.5, "compass": 1.8, "ldv": 1.5}
+GENERIC_SCALES = {"accel-tabletop": 1.0, "gyro-drift": 1.1, "accel-centrifuge": 1.5, "compass": 0.75, "ldv": 1.5}
 # KIND_THRESHOLDS[procedure][row kind]: F of the exact F test on that kind's rows alone, for a
 # candidate that moves only them (engine.kind_quantile), measured on the independent
 # generator's nulls (seeds 400000+). The compass dip rows (kind 1) get their own: the F above
@@ -76,9 +73,7 @@ KIND_THRESHOLDS = {"compass": {1: 1.6}}  # largest null score 1.49 (field_anomal
 CAND_THRESHOLDS: dict = {
     # a rotation between the sensors shows in the dip rows only, which the wander does not move:
     # largest null score 0.85 in 118 nulls (seeds 480000+) against the dip rows' 1.6
-    # a temperature bias is tested white (``compass_problem``'s ``wander_candidates``) and keeps the
-    # F the white test needed (4.8): at 2.0 it came beside a 10σ rotation (seed 547033)
-    "compass": {"mag_accel_misalignment": 1.0, "temperature_bias": 4.8},
+    "compass": {"mag_accel_misalignment": 1.0},
 }
 # P2 and P1 tables of averages: a row fitted with a leverage above this is left out of the held-out
 # comparison of two models
@@ -1303,8 +1298,8 @@ def compass_problem(
     prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), 1 if dip_kind == "run" else -1)])
     if table:  # positions in the order written: no serial correlation to allow for
         prob.series = np.full(len(y) + len(s_dip), -1)
-    # the generic extension's margin: 1.8 of F (3.6·q at F = 2.0, as it was at 0.75 of F 4.8, when F
-    # alone stood for the wandering hard iron, which a smooth function of time fits as well as a drift)
+    # F is already raised for the wandering hard iron, which a smooth function of time fits as
+    # well as a drift does: the generic extension's margin is 0.75 of it (3.6·q at F = 4.8)
     prob.generic_scale = GENERIC_SCALES["compass"]
     if have_dip:
         # what changes only the dip (a rotation of the magnetometer, a bent field) is validated
@@ -1338,21 +1333,4 @@ def compass_problem(
     prob.noise_floor = MAG_NOISE_FLOOR_NT
     if not table and dur > 0:
         prob.whiteness_lags = int(round(MAG_WHITENESS_WINDOW_S * len(t) / dur))
-        # a hard iron that creeps (a Gauss–Markov vector in the magnetometer's frame) reaches each
-        # magnitude row along û W (``wander.WanderModel`` with directions), where F alone had to
-        # grow for it (4.8): a time-like candidate's likelihood ratio with it profiled out of both
-        # models, not calibrated on draws of it (``Problem.wander_draws``). The ratio is of the magnitude rows
-        # alone: the creeping hard iron moves the dip rows too (their white deviance added back
-        # named a drift on null 725022, T 26 → 104)
-        prob.wander_t_s = np.concatenate([t, dip_t if have_dip else np.zeros(0)])
-        u0 = block_mean((m0 / np.linalg.norm(m0, axis=1, keepdims=True)) @ W0)  # nT per raw unit of h
-        prob.wander_directions = np.vstack([u0, np.zeros((len(s_dip), 3))])
-        prob.series_names = {0: "hard iron (|m| rows)"}
-        prob.wander_calibrated = True
-        prob.wander_draws = 0
-        # a temperature bias is tested white (its own F): a warm-up is as slow as the wander, which
-        # took it whole at 10σ where its driver, the temperature column, is what tells them apart;
-        # so are the generic terms, at their old margin (a 10σ periodic bias of 8.5 s, profiled,
-        # went unnamed: tests/test_diagnose_residual.py)
-        prob.wander_candidates = frozenset({"time_drift", "time_varying_hard_iron"})
     return prob

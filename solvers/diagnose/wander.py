@@ -6,13 +6,6 @@ the wander's variance relative to the white part ``λ`` and its correlation time
 (``K_τ``'s eigenvectors are computed once per series and ``τ``, so each likelihood is a few
 weighted sums).
 
-A wander of a vector (a compass's hard iron that creeps, in the magnetometer's frame) reaches each
-row along its own direction: with ``directions`` (rows × d, the rows' sensitivity to each of the
-vector's d components) the covariance is ``s² (I + λ K_τ)``, ``K_τ[i, j] = exp(−|t_i − t_j| / τ)
-dᵢ · dⱼ / mean |d|²`` (weighted rows), each component an independent Gauss–Markov of the same
-variance and ``τ``. The wander is stochastic: it is profiled out of every model's likelihood, where
-a candidate (a hard-iron step, a drift) is a deterministic shape tested beside it.
-
 A candidate is tested (``WanderModel.lr``) where the residual its own model leaves still wanders
 (REML, the likelihood of the data's part outside the model's columns, so the candidate's signature
 is never read as wander): by the likelihood ratio of the model with and without it, the wander
@@ -45,7 +38,7 @@ class WanderModel:
     ``MAX_BINS`` bins of consecutive rows, the wander constant within each: its likelihood is then
     the white noise's within the bins times the wander's on the bins' means (``_part_loglik``)."""
 
-    def __init__(self, t_s: np.ndarray, series: np.ndarray, w: np.ndarray, directions: np.ndarray | None = None):
+    def __init__(self, t_s: np.ndarray, series: np.ndarray, w: np.ndarray):
         t_s, series, w = np.asarray(t_s, float), np.asarray(series), np.asarray(w, float)
         self.parts = []
         for sid in np.unique(series):
@@ -58,11 +51,6 @@ class WanderModel:
             t = t_s[idx]
             span = float(t.max() - t.min())
             if span <= 0:
-                continue
-            if directions is not None:
-                part = _vector_part(int(sid), idx, t, span, w[idx, None] * np.asarray(directions, float)[idx])
-                if part is not None:
-                    self.parts.append(part)
                 continue
             nb = min(idx.size, MAX_BINS)
             bins = (np.arange(idx.size) * nb) // idx.size
@@ -162,72 +150,17 @@ class _Part:
     root_cnt: np.ndarray  # per bin: √rows
     eig: list  # per τ: (τ, eigenvalues, eigenvectors) of the bins' kernel
     t_bin: np.ndarray  # per bin: its mean time (s)
-    w_rel: np.ndarray  # per row: its weight over the series' mean weight (a vector wander: its directions, rows × d)
-    # a vector wander: the orthonormal coordinates of each bin's span of directions (coordinates ×
-    # rows of the series), where ``root_cnt``'s scalar projection takes the bin's mean otherwise
-    proj: np.ndarray | None = None
-    bin_times: np.ndarray | None = None  # a vector wander: per bin its mean time (``t_bin`` is per coordinate)
+    w_rel: np.ndarray  # per row: its weight over the series' mean weight
 
     def draw(self, tau: float, rng, draws: int) -> np.ndarray:
         """Rows × draws of a unit Gauss–Markov wander of correlation time ``tau`` (s), constant
         within a bin, in weighted rows (the ``K_τ`` of the model)."""
-        tb = self.t_bin if self.bin_times is None else self.bin_times
-        rho = np.exp(-np.diff(tb) / tau)
-        d = 1 if self.proj is None else self.w_rel.shape[1]
-        x = np.empty((len(tb), d, draws))
-        x[0] = rng.standard_normal((d, draws))
+        rho = np.exp(-np.diff(self.t_bin) / tau)
+        x = np.empty((len(self.t_bin), draws))
+        x[0] = rng.standard_normal(draws)
         for i, r in enumerate(rho):
-            x[i + 1] = r * x[i] + np.sqrt(1.0 - r * r) * rng.standard_normal((d, draws))
-        if self.proj is None:
-            return self.w_rel[:, None] * x[self.bins, 0]
-        return np.einsum("nc,ncb->nb", self.w_rel, x[self.bins])
-
-    def project(self, Y: np.ndarray) -> np.ndarray:
-        """The rows' coordinates (columns of ``Y``, the series' rows) where the wander lives: each
-        bin's mean (scalar wander), or each bin's span of directions (vector wander)."""
-        if self.proj is not None:
-            return self.proj @ Y
-        out = np.zeros((len(self.root_cnt), Y.shape[1]))
-        np.add.at(out, self.bins, Y)
-        return out / self.root_cnt[:, None]
-
-
-def _vector_part(sid: int, idx: np.ndarray, t: np.ndarray, span: float, D: np.ndarray) -> _Part | None:
-    """The series' part of a vector wander (``D``: its rows' weighted directions, rows × d, in time
-    order), or None where the directions have no energy. ``MAX_BINS`` coordinates at most: bins of
-    consecutive rows, each the orthonormal span of its rows' directions (≤ d coordinates), the
-    wander constant within a bin; the kernel between coordinates ``exp(−|Δt|/τ) (C Cᵀ)``, C each
-    coordinate's loading on the d components."""
-    scale = float(np.mean(np.sum(D * D, axis=1)))
-    if not scale > 0:
-        return None
-    D = D / np.sqrt(scale)
-    n, d = D.shape
-    nb = max(1, min(n, MAX_BINS // d))
-    bins = (np.arange(n) * nb) // n
-    cnt = np.bincount(bins, minlength=nb).astype(float)
-    tbin = np.bincount(bins, weights=t, minlength=nb) / cnt
-    rows, loads, tc = [], [], []
-    for b in range(nb):
-        sel = np.flatnonzero(bins == b)
-        U, sv, Vt = np.linalg.svd(D[sel], full_matrices=False)
-        keep = sv > (sv[0] if sv.size else 0.0) * 1e-6
-        for j in np.flatnonzero(keep):
-            row = np.zeros(n)
-            row[sel] = U[:, j]
-            rows.append(row)
-            loads.append(sv[j] * Vt[j])  # the coordinate's loading on the d components (Uᵀ D)
-            tc.append(tbin[b])
-    if not rows:
-        return None
-    P, C, tc = np.asarray(rows), np.asarray(loads), np.asarray(tc)
-    dt = np.abs(tc[:, None] - tc[None, :])
-    G = C @ C.T
-    eig = []
-    for tau in span * np.geomspace(*TAU_PER_SPAN, TAU_STEPS):
-        lam, V = np.linalg.eigh(np.exp(-dt / tau) * G)
-        eig.append((float(tau), np.maximum(lam, 0.0), V))
-    return _Part(sid, idx, bins, np.sqrt(cnt), eig, tc, D, proj=P, bin_times=tbin)
+            x[i + 1] = r * x[i] + np.sqrt(1.0 - r * r) * rng.standard_normal(draws)
+        return self.w_rel[:, None] * x[self.bins]
 
 
 def _reml_fit(part: _Part, ll: np.ndarray, rss: np.ndarray, dof: int) -> tuple[float, float, float, float]:
@@ -246,7 +179,14 @@ def _part_loglik(part: _Part, X: np.ndarray, E: np.ndarray):
     model's information ``log det M`` added (the likelihood of the part outside its columns)."""
     Xm, Em = _cols(X[part.idx]), E[part.idx]
     n, p = Xm.shape
-    Xb, Eb = part.project(Xm), part.project(Em)
+    nb = len(part.root_cnt)
+
+    def binned(Y):
+        out = np.zeros((nb, Y.shape[1]))
+        np.add.at(out, part.bins, Y)
+        return out / part.root_cnt[:, None]
+
+    Xb, Eb = binned(Xm), binned(Em)
     Gw, gw = Xm.T @ Xm - Xb.T @ Xb, Xm.T @ Em - Xb.T @ Eb  # within the bins
     qw = np.sum(Em * Em, axis=0) - np.sum(Eb * Eb, axis=0)
     L = len(LAMBDA_GRID)
