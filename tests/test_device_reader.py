@@ -182,23 +182,26 @@ def test_replug_onto_a_restarted_device_keeps_time_increasing(pty_link):
 def test_one_empty_ready_read_is_not_an_unplug(pty_link, monkeypatch):
     """A loaded Linux pty can wake select before the bytes reach the reader, and pyserial
     (VMIN=0) then raises "readiness to read but returned no data" once: CI saw the reader
-    close the port on it and flush 390 samples. It cannot be forced on a kernel, so the
-    real port raises pyserial's own exception once, with the device writing meanwhile."""
+    close the port on it and flush 390 samples. It cannot be forced on a kernel, so once the
+    first 100 samples are in, the real port raises pyserial's own exception once, with the
+    device writing 100 more meanwhile."""
+    import threading
+
     import serial
 
     import station.device.reader as reader_mod
 
     real_open = reader_mod.open_port
-    raised = []
+    armed, raised = threading.Event(), []
 
     def open_with_one_empty_read(port, baud=115200, timeout_s=0.02):
         ser = real_open(port, baud, timeout_s)
         real_read = ser.read
 
         def read(size=1):
-            if not raised and pty_link.master is not None:
-                pty_link.write(sentences(range(100, 200), DT_US * np.arange(100, 200)))
+            if armed.is_set() and not raised:
                 raised.append(True)
+                pty_link.write(sentences(range(100, 200), DT_US * np.arange(100, 200)))
                 raise serial.SerialException(
                     "device reports readiness to read but returned no data "
                     "(device disconnected or multiple access on port?)"
@@ -211,10 +214,12 @@ def test_one_empty_ready_read_is_not_an_unplug(pty_link, monkeypatch):
     monkeypatch.setattr(reader_mod, "open_port", open_with_one_empty_read)
     with Reader(pty_link.link, backoff_s=0.02, backoff_max_s=0.1) as r:
         pty_link.write(header_sentence(HEADER) + sentences(range(100), DT_US * np.arange(100)))
-        b = collect(r, 200)
+        first = collect(r, 100)
+        armed.set()
+        second = collect(r, 100)
         s = r.stats()
     assert raised
-    np.testing.assert_array_equal(b.seq, np.arange(200))
+    np.testing.assert_array_equal(Batch.concat([first, second]).seq, np.arange(200))
     assert s.reconnects == 0 and s.gaps == 0 and s.connected and r.events() == []
 
 
