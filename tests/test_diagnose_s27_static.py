@@ -146,3 +146,31 @@ def test_p1_null_whose_linearised_asymmetry_vanishes_when_refitted_names_nothing
     path = _write(tmp_path, "P1", "none", 721101)
     res = _diagnose(path)
     assert res["verdict"] == [], (res["verdict"], res["candidates"])
+
+
+def test_p4_heading_column_labels_the_holds_and_the_turns_between_them_are_left_out(tmp_path):
+    """12 positions with a per-row `heading_deg` and no `position` column, no latitude, the turns
+    between holds in the record (the bench writes the last hold's heading until the next one),
+    the gyro noise scaled so the Earth rate is at 10σ. Each heading's rows were taken as one
+    static position, turns and all: rates of up to 1.9 rad/s averaged into the position means,
+    the Earth rate not identifiable (±4.2e-5 rad/s against 7.3e-5) and diagnose named nothing.
+    The heading now labels the static intervals found in the record; the latitude the gyros
+    imply is the bench's (written by the same seed into the file it makes without headings)."""
+    gen = _generator()
+    path, site = tmp_path / "capture.csv", tmp_path / "site.csv"
+    gen.make_one("P4", "earth_rate", 10.0, 742003, str(path))
+    gen.make_one("P4", "earth_rate", 10.0, 742003, str(site), no_heading=True)
+    header = path.read_text().split("\nt,", 1)[1].split("\n", 1)[0]
+    assert "heading_deg" in header and "position" not in header and "latitude_deg" not in path.read_text()
+    from station.capture import read_capture
+
+    lat_deg = read_capture(str(site)).float_meta("latitude_deg")
+    cal = run_station("calibrate", path, "--json")
+    assert cal.returncode == 0, cal.stderr
+    fit = json.loads(cal.stdout)["fit"]
+    assert fit["latitude_identifiable"], fit
+    err = fit["latitude_from_gyros_deg"] - lat_deg
+    assert abs(err) < 3.0 * fit["sigma_latitude_from_gyros_deg"], (fit, lat_deg)
+    assert fit["sigma_latitude_from_gyros_deg"] < 15.0, fit
+    res = _diagnose(path)
+    assert res["verdict"] == ["earth_rate"], (res["verdict"], res["candidates"])

@@ -1373,7 +1373,7 @@ def _held_out_guard(problem, picked, generic_effect, cur_fit, free, refit_with, 
     return picked, generic_effect, cur_fit, free
 
 
-def _refit_evidence_guard(problem, picked, generic, cur_fit, free, refit_with, types, floor, n):
+def _refit_evidence_guard(problem, picked, generic, cur_fit, free, refit_with, types, floor, n, entries):
     """A library effect named on its linearised test keeps its name only if the final model,
     refitted without it, fits the rows worse by at least the unscaled level-α/m bound: the
     deviance ``typed_fit_term`` of the nonlinear fits with and without it. A linearised step far
@@ -1381,7 +1381,8 @@ def _refit_evidence_guard(problem, picked, generic, cur_fit, free, refit_with, t
     in its columns as in the rows (s27 P1 null 721101: a scale asymmetry linearised at A = −1.4
     fitted the changes within holds of an axis near 0, deviance 84, held-out RMS −32 %; refitted,
     A = 0 ± 4e-5 and the residual the baseline's). The worst goes first, until every one stands.
-    ``generic``: the named ``residual:`` term's item, kept in every refit. Returns (picked, fit, free)."""
+    ``generic``: the named ``residual:`` term's item, kept in every refit; a dropped effect's
+    entry is marked not selected. Returns (picked, fit, free)."""
     m = max(len(problem.candidates), 1)
     while picked:
         t_with = typed_fit_term(_weighted(problem, cur_fit.params), types, floor)
@@ -1400,6 +1401,7 @@ def _refit_evidence_guard(problem, picked, generic, cur_fit, free, refit_with, t
             break
         item, _, cur_fit, free = worst
         picked = [p for p in picked if p is not item]
+        entries[item[0].cand.name]["selected"] = False
     return picked, cur_fit, free
 
 
@@ -2172,12 +2174,10 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                         {"name": gen.cc.cand.name, "correlation": float(corr_g.get(e["name"], 0.0))},
                     ]
 
-    if picked:
-        before = {cc.cand.name for cc, _ in picked}
-        gen = [(generic_effect[0].cc, None)] if generic_effect is not None else []
-        picked, cur_fit, free = _refit_evidence_guard(problem, picked, gen, cur_fit, free, refit_with, types, floor, n)
-        for name in before - {cc.cand.name for cc, _ in picked}:
-            entries[name]["selected"] = False
+    gen = [(generic_effect[0].cc, None)] if generic_effect is not None else []
+    picked, cur_fit, free = _refit_evidence_guard(
+        problem, picked, gen, cur_fit, free, refit_with, types, floor, n, entries
+    )
     picked, generic_effect, cur_fit, free = _held_out_guard(
         problem,
         picked,

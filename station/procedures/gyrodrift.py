@@ -321,9 +321,9 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
             h = h[np.isfinite(h)]
             segs.append((m, float(np.median(h)) if len(h) else head0, str(lab)))
         return segs
-    if hcol is not None and np.any(np.isfinite(hcol)):
-        vals = [v for v in dict.fromkeys(np.round(hcol[np.isfinite(hcol)], 6))]
-        return [(ok & (np.round(hcol, 6) == v), float(v), f"heading {v:g}") for v in vals]
+    heads = hcol is not None and bool(np.any(np.isfinite(hcol)))
+    if (f_b is None or not capture.is_time_series) and heads:
+        return _heading_runs(hcol, ok)
     if f_b is None or not capture.is_time_series:
         return [(ok, head0, "1")]
     from solvers.stillness import detect_static_intervals
@@ -335,35 +335,58 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
             strictly_increasing_t(capture.columns["t"][rows]), f_b[rows], w_b[rows], gyro_std_floor=GYRO_STD_FLOOR_RAD_S
         )
     except SolverError as exc:
+        if heads:
+            warnings.append(f"stillness detection failed ({exc}); each heading's rows taken as static")
+            return _heading_runs(hcol, ok)
         warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
         return [(ok, head0, "1")]
     if not st.intervals:
+        if heads:
+            warnings.append("no static interval found; each heading's rows taken as static")
+            return _heading_runs(hcol, ok)
         raise UnsupportedError(f"{capture.path or 'capture'}: no static interval found; mode B needs the unit at rest")
-    # group intervals of the same orientation (accelerometer direction within 5°)
+    # group intervals of the same orientation (accelerometer direction within 5°) and, with a
+    # heading column, the same heading: the column labels the holds, it does not bound them (it
+    # changes somewhere in the turn between two holds, whose samples are not at rest)
     groups: list[list] = []
     for iv in st.intervals:
         u = iv.accel_mean / np.linalg.norm(iv.accel_mean)
-        for g in groups:
-            if float(np.dot(u, g[0])) > math.cos(math.radians(5.0)):
-                g[1].append(iv)
-                break
-        else:
-            groups.append([u, [iv]])
+        rows_iv = idx[iv.start : iv.stop]
+        parts = [(rows_iv, head0)]
+        if heads:
+            h = np.round(hcol[rows_iv], 6)
+            parts = [(rows_iv[h == v], float(v)) for v in dict.fromkeys(h[np.isfinite(h)])]
+        for r, hd in parts:
+            for g in groups:
+                if g[2] == hd and float(np.dot(u, g[0])) > math.cos(math.radians(5.0)):
+                    g[1].append(r)
+                    break
+            else:
+                groups.append([u, [r], hd])
     segs = []
-    for j, (_, ivs) in enumerate(groups):
+    for j, (_, parts, hd) in enumerate(groups):
         m = np.zeros(len(ok), dtype=bool)
-        for iv in ivs:
-            m[idx[iv.start : iv.stop]] = True
-        segs.append((m, head0, str(j + 1)))
+        for r in parts:
+            m[r] = True
+        segs.append((m, hd, f"heading {hd:g}" if heads else str(j + 1)))
+    if heads and len({s[2] for s in segs}) < len(segs):  # one heading, two tilts: tell them apart
+        segs = [(m, hd, f"{lab} #{j + 1}") for j, (m, hd, lab) in enumerate(segs)]
     used = sum(int(s[0].sum()) for s in segs)
     if used < ok.sum():
         warnings.append(f"{int(ok.sum()) - used} moving samples left out (stillness detection)")
-    if len(segs) > 1 and capture.float_meta("heading_deg") is not None:
+    if len(segs) > 1 and not heads and capture.float_meta("heading_deg") is not None:
         warnings.append(
             f"{len(segs)} static orientations found with no heading column: all taken as "
             f"heading {head0:g}° (the metadata's); the Earth-rate scale checks this"
         )
     return segs
+
+
+def _heading_runs(hcol, ok):
+    """[(row mask, heading_deg, label)]: each heading value's rows, moving or not (a table, or a
+    record the stillness detector cannot read)."""
+    vals = [v for v in dict.fromkeys(np.round(hcol[np.isfinite(hcol)], 6))]
+    return [(ok & (np.round(hcol, 6) == v), float(v), f"heading {v:g}") for v in vals]
 
 
 def _mode_b(capture, w_b, C, asign, dt, warnings):
