@@ -17,9 +17,10 @@ Mode: ``method`` ('reference' | 'static'), else the ``gyro_mode`` metadata, else
   warning. Every conversion is stated in ``warnings``; ``drift`` is in P4's body frame
   (x fwd, y up, z right) and ``drift_raw`` in the capture's own axes and gyro unit.
 
-Positions (mode B): a ``position`` or per-row ``heading_deg`` column splits the record;
-without them, static intervals are found (solvers.stillness) and moving samples dropped;
-intervals of different orientation become positions. Two or more positions: ε and the
+Positions (mode B): a ``position`` column splits the record; without one, static intervals
+are found (solvers.stillness) and moving samples dropped; intervals of different orientation
+(or of a different per-row ``heading_deg``, which labels the holds but does not bound them)
+become positions. Two or more positions: ε and the
 Earth-rate scale together (solvers.gyrodrift.drift_multi).
 """
 
