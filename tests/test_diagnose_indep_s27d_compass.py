@@ -38,3 +38,14 @@ def test_temperature_bias_on_holds_is_named_where_the_dip_rows_see_it(tmp_path, 
         "temperature_bias"
     ]
     assert _verdict(tmp_path, capsys, G.generate_compass(700113, "none", 0.0), "null") == []
+
+
+def test_hard_iron_switched_on_is_named_alone_where_the_data_separate_it_from_a_drift(tmp_path, capsys):
+    """A current switched on during a capture on holds (BMM150, 10 Hz, warming up): a hard-iron step
+    at 10σ, 6.0σ apart from a drift's signature (the generator's own projection). The decisive
+    margin took the compass's F of 4.8 (set by nulls whose hard iron wanders): 45.5 for the
+    step's four parameters, and the drift was named beside it, tied. With the margin's F capped
+    at 2.5 the step is named alone (s743008 of the generator's run of 2026-11-30)."""
+    assert _verdict(tmp_path, capsys, G.generate_compass(743008, "time_varying_hard_iron", 10.0), "step") == [
+        "time_varying_hard_iron"
+    ]

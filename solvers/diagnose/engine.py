@@ -1554,6 +1554,12 @@ def _by_evidence(problem: Problem, evs: list, n: int) -> list:
     return out
 
 
+# the largest noise scale F the decisive margin takes: a procedure's F is set by its nulls'
+# worst candidates (the compass's 4.8 by a hard iron that wanders, which a test of one candidate
+# against noise sees whole and a comparison of two candidates that both fit it does not)
+TIE_F_MAX = 2.5
+
+
 def decisive_margin(problem: Problem, k: int = 1) -> float:
     """BIC margin by which one of two correlated candidates of at most ``k`` parameters each
     must beat the other for the data to tell them apart: ``F·χ²_k(1 − α)``. The deviance
@@ -1562,8 +1568,10 @@ def decisive_margin(problem: Problem, k: int = 1) -> float:
     at F = 2.5) whatever s is. Two k-parameter candidates whose fitted signatures agree still
     span different k-dimensional spaces: each takes the noise along its own other k − 1
     directions, and the difference of those two χ²-like parts (of up to k degrees of freedom)
-    decides between them when the signal does not."""
-    return problem.threshold * chi2_isf(ALPHA, max(k, 1))
+    decides between them when the signal does not. ``F`` is capped at ``TIE_F_MAX``: at the
+    compass's 4.8 the margin for three parameters was 37.5, and two time-like effects 6σ apart
+    (a deviance difference of about 36) were tied in most captures."""
+    return min(problem.threshold, TIE_F_MAX) * chi2_isf(ALPHA, max(k, 1))
 
 
 def _rival_margin(a: _Eval, b: _Eval, n: int) -> float:
