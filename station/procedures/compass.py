@@ -627,14 +627,28 @@ def _grown(stretches, y) -> list[tuple[int, int]]:
     return out
 
 
+# the detector's window (and shortest hold) for the dip's holds: calibrate's 1 s first; where it
+# finds fewer than 4, half a second. A hand tumbling the unit pauses for a second or two between
+# turns, and a 1 s window (with its margins) keeps a few of those pauses or none: the dip was then
+# taken on runs that hold the turns too, whose hand acceleration tilts f̂ (dip rows 1.8 times their
+# white noise), and a bent field at 10σ of the pauses went unnamed (s743003 of the s27 dynamic
+# generator: 3 holds at 1 s, 13 at 0.5 s). Each dip row is a mean of per-sample dips, which hold
+# while the unit turns, and the detector's rate test keeps the turns out
+DIP_HOLD_WINDOWS_S = (1.0, 0.5)
+
+
 def _dip_holds(t, a, gyro):
     """(sample indices, start of each hold within them) of the static holds calibrate's detector
-    finds, at least 5 samples each; None where there are fewer than 4."""
+    finds (a shorter window where it finds fewer than 4, ``DIP_HOLD_WINDOWS_S``), at least 5
+    samples each; None where there are fewer than 4."""
     from solvers.stillness import detect_static_intervals
 
-    st = detect_static_intervals(t, a, gyro, nan_policy="omit")
-    ivs = [iv for iv in st.intervals if iv.n >= 5]
-    if len(ivs) < 4:
+    for window_s in DIP_HOLD_WINDOWS_S:
+        st = detect_static_intervals(t, a, gyro, nan_policy="omit", window_s=window_s, min_duration_s=window_s)
+        ivs = [iv for iv in st.intervals if iv.n >= 5]
+        if len(ivs) >= 4:
+            break
+    else:
         return None
     sizes = [iv.stop - iv.start for iv in ivs]
     return np.concatenate([np.arange(iv.start, iv.stop) for iv in ivs]), np.r_[0, np.cumsum(sizes)[:-1]].astype(int)
