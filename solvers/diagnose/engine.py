@@ -61,6 +61,7 @@ REFIT_MAX_MATRIX_CHANGE = 0.5  # a refit that moves a model matrix by more than 
 # the free refit (a 10 m/s LDV offset the baseline X had taken: held, 1e5 times; a run-off along a
 # direction the data hardly fix costs a few units of χ² when held)
 REFIT_HELD_CHI2_RATIO = 4.0
+REFIT_FIRM_MAX_SCALE = 4.0  # ... and only where the matrix keeps its norm within this factor
 GROUPS_TOL = 1e-6  # round-off in an effective count of groups (a step between two holds leaves a whole number)
 # a generic term displaces library effects whose columns hold most (> CONFUSION_CORR) of its
 # signature only when its model's BIC is lower by this much (χ²₁(0.95)): a clearly better fit
@@ -996,13 +997,39 @@ def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> Fit
             raise ValueError("refit worse than its start")
     except Exception:
         res = fit(problem.residual, start, free=free, sigma=sigma, max_nfev=1)
+    chi2_at = float(np.sum(np.asarray(problem.residual(params), float) ** 2 / np.asarray(sigma, float) ** 2))
+    if not res.chi2 <= chi2_at * 1.0001:
+        # the linearised step led into a worse basin than ``params`` (a nested model: an added
+        # effect at 0) had: refitted from ``params`` itself, so adding a term never fits worse
+        # (a P1 drift beside a scale asymmetry on 11 unlabelled positions: 214 worse in deviance)
+        try:
+            res = fit(problem.residual, params, free=free, sigma=sigma)
+        except Exception:
+            pass
     off = _ran_off(params, start, free, problem.baseline) or _ran_off(params, res.params, free, problem.baseline)
     if off:
         held = _refit(problem, params, {**free, **{k: False for k in off}}, sigma)
-        if np.isfinite(res.chi2) and held.chi2 > REFIT_HELD_CHI2_RATIO * res.chi2:
+        if (
+            np.isfinite(res.chi2)
+            and held.chi2 > REFIT_HELD_CHI2_RATIO * res.chi2
+            and _rescaled_within(params, res.params, off)
+        ):
             return res
         return held
     return res
+
+
+def _rescaled_within(before: dict, after: dict, keys) -> bool:
+    """Whether each matrix block ``keys`` keeps its norm within a factor ``REFIT_FIRM_MAX_SCALE``
+    from ``before`` to ``after``: a move the data fix firmly changes a scale and mounting by a
+    fraction (the LDV's X row 1.5 → 1.0 beside a 10 m/s offset), the degenerate fit of a norm-only
+    model by orders of magnitude (P1 on unlabelled positions: K 1e5 times its size, every
+    position read as one specific force, χ² 1e-8 of the noise's)."""
+    for k in keys:
+        a, b = float(np.linalg.norm(before[k])), float(np.linalg.norm(after[k]))
+        if not (a > 0 and b > 0 and 1.0 / REFIT_FIRM_MAX_SCALE <= b / a <= REFIT_FIRM_MAX_SCALE):
+            return False
+    return True
 
 
 def _ran_off(before: dict, after: dict, free: dict, baseline: dict) -> list[str]:

@@ -468,9 +468,13 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         try:
             idx = np.flatnonzero(ok)
             gain = _mean_gain(W0)
-            m0 = C.calibrated(y[ok], W0, h0)  # the baseline's field: m̂ keeps still in a hold
-            s_m = noise * gain / F * math.sqrt(2.0 / 3.0) if math.isfinite(noise * gain / F) else 0.0
-            blocks = _dip_holds(strictly_increasing_t(t[ok]), a[ok], None if gyro is None else gyro[ok], m0, s_m)
+
+            def field(ok=ok):
+                # the baseline's field (m̂ keeps still in a hold) and a floor under its noise
+                s_m = noise * gain / F * math.sqrt(2.0 / 3.0)
+                return C.calibrated(y[ok], W0, h0), (s_m if math.isfinite(s_m) else 0.0)
+
+            blocks = _dip_holds(strictly_increasing_t(t[ok]), a[ok], None if gyro is None else gyro[ok], field)
             kind = "hold"
             if blocks is None:
                 blocks, kind = _gravity_runs(t[ok], a[ok]), "run"
@@ -642,21 +646,25 @@ DIP_HOLD_WINDOWS_S = (1.0, 0.5)
 DIP_HOLD_TURN_TOL = 3.0
 
 
-def _dip_holds(t, a, gyro, m=None, s_m=0.0):
+def _dip_holds(t, a, gyro, field=None):
     """(sample indices, start of each hold within them) of the static holds calibrate's detector
     finds, at least 5 samples each; None where there are fewer than 4. Where the 1 s window finds
     fewer, a shorter one (``DIP_HOLD_WINDOWS_S``), whose holds count only where the unit does not
-    turn in them: ``m`` the field per sample (any frame that turns with the unit; None: no such
-    hold), ``s_m`` the white noise of a component of m̂ (a floor under what its samples show)."""
+    turn in them: ``field()`` gives (the field per sample in any frame that turns with the unit,
+    the white noise of a component of m̂ as a floor under what its samples show), called only when
+    the short window is tried (None: no such hold)."""
     from solvers.stillness import detect_static_intervals
 
+    units = None
     for k, window_s in enumerate(DIP_HOLD_WINDOWS_S):
         st = detect_static_intervals(t, a, gyro, nan_policy="omit", window_s=window_s, min_duration_s=window_s)
         ivs = [iv for iv in st.intervals if iv.n >= 5]
         if k > 0:
-            if m is None:
+            if field is None:
                 return None
-            ivs = [iv for iv in ivs if not _turns(a, m, s_m, iv.start, iv.stop)]
+            if units is None:
+                units = _unit_directions(a, *field())
+            ivs = [iv for iv in ivs if not _turns(units, iv.start, iv.stop)]
         if len(ivs) >= 4:
             break
     else:
@@ -665,15 +673,22 @@ def _dip_holds(t, a, gyro, m=None, s_m=0.0):
     return np.concatenate([np.arange(iv.start, iv.stop) for iv in ivs]), np.r_[0, np.cumsum(sizes)[:-1]].astype(int)
 
 
-def _turns(a, m, s_m, i, j) -> bool:
-    """Whether f̂ or m̂ spreads over samples ``i:j`` by more than DIP_HOLD_TURN_TOL times its white
-    noise (per component, from the record's second differences; ``s_m`` a floor for m̂): the
-    spread of a unit vector about its mean, Σ|v̂ − v̄|²/n, is 2σ² across it, 3 s² of the
-    axes-averaged s² the second differences give."""
+def _unit_directions(a, m, s_m):
+    """[(f̂, its white noise), (m̂, its white noise)]: unit vectors per sample, the noise per
+    component from the record's second differences (``s_m`` a floor for m̂'s, 1e-6 for both)."""
+    out = []
     for v, floor in ((a, 0.0), (m, s_m)):
         u = v / np.linalg.norm(v, axis=1, keepdims=True)
         s = C.noise_from_second_differences(u)
-        s = max(s if math.isfinite(s) else 0.0, floor, 1e-6)
+        out.append((u, max(s if math.isfinite(s) else 0.0, floor, 1e-6)))
+    return out
+
+
+def _turns(units, i, j) -> bool:
+    """Whether f̂ or m̂ (``_unit_directions``) spreads over samples ``i:j`` by more than
+    DIP_HOLD_TURN_TOL times its white noise: the spread of a unit vector about its mean,
+    Σ|v̂ − v̄|²/n, is 2σ² across it, 3 s² of the axes-averaged s² the second differences give."""
+    for u, s in units:
         w = u[i:j]
         spread = math.sqrt(float(np.mean(np.sum((w - w.mean(axis=0)) ** 2, axis=1))))
         if not spread <= DIP_HOLD_TURN_TOL * math.sqrt(3.0) * s:

@@ -331,21 +331,21 @@ def _segments(capture, w_b, f_b, dt, ok, warnings):
 
     idx = np.flatnonzero(ok)
     rows = slice(None) if len(idx) == len(ok) else idx  # every row finite: views, not (N, 3) copies
+    st, why = None, "no static interval found"
     try:
         st = detect_static_intervals(
             strictly_increasing_t(capture.columns["t"][rows]), f_b[rows], w_b[rows], gyro_std_floor=GYRO_STD_FLOOR_RAD_S
         )
     except SolverError as exc:
-        if heads:
-            warnings.append(f"stillness detection failed ({exc}); each heading's rows taken as static")
+        why = f"stillness detection failed ({exc})"
+    if st is None or not st.intervals:
+        if heads:  # the heading column still tells the holds apart
+            warnings.append(f"{why}; each heading's rows taken as static")
             return _heading_runs(hcol, ok)
-        warnings.append(f"stillness detection failed ({exc}); the whole record taken as static")
-        return [(ok, head0, "1")]
-    if not st.intervals:
-        if heads:
-            warnings.append("no static interval found; each heading's rows taken as static")
-            return _heading_runs(hcol, ok)
-        raise UnsupportedError(f"{capture.path or 'capture'}: no static interval found; mode B needs the unit at rest")
+        if st is None:
+            warnings.append(f"{why}; the whole record taken as static")
+            return [(ok, head0, "1")]
+        raise UnsupportedError(f"{capture.path or 'capture'}: {why}; mode B needs the unit at rest")
     # group intervals of the same orientation (accelerometer direction within 5°) and, with a
     # heading column, the same heading: the column labels the holds, it does not bound them (it
     # changes somewhere in the turn between two holds, whose samples are not at rest)
