@@ -241,7 +241,7 @@ def test_p2_p3_and_p4_in_both_modes_by_keys_alone_in_tmux(tmp_path):
     with the reference IMU (`p` runs the rate table); each saved."""
     sock = f"test-keys2-{os.getpid()}"
     db = tmp_path / "station.db"
-    _start_tui(sock, db, "--average-s 60")  # per P2 row; the P4 record (≥ 30 s)
+    _start_tui(sock, db, "--average-s 40")  # per P2 row; the P4 record (≥ 30 s)
     try:
         _pick(sock, "P2 accelerometer, centrifuge")
         _keys(sock, "F5")

@@ -893,7 +893,11 @@ def test_a_port_typed_while_source_is_simulated_is_the_port_used(tmp_path):
             app = make_app(None)
             async with app.run_test(size=SIZE) as pilot:
                 await pilot.click("#port")
-                await pilot.press(*path)
+                # typed: all but the last key put in at once (each key pressed waits up to 2 s for
+                # an app kept busy by the device's stream), the last one pressed
+                app.screen.query_one("#port").insert_text_at_cursor(path[:-1])
+                await pilot.press(path[-1])
+                assert app.screen.query_one("#port").value == path
                 assert app.screen.query_one("#source").value == "other"
                 app.screen.query_one("#source").value = "sim"  # the simulator chosen again
                 await pilot.press("f5")

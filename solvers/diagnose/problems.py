@@ -1067,6 +1067,12 @@ def set_slow_bias_prior(prob: Problem, t_s, white_density) -> None:
 # ---------------------------------------------------------------- P3 compass
 
 
+def _row_norms(x: np.ndarray) -> np.ndarray:
+    """|xᵢ| per row of (N, k) ``x``, without ``np.linalg.norm``'s temporaries (the compass
+    residual takes it on every sample, a dozen times per numeric Jacobian)."""
+    return np.sqrt(np.einsum("ij,ij->i", x, x))
+
+
 def compass_problem(
     t_s,
     y_raw,
@@ -1159,20 +1165,20 @@ def compass_problem(
         def dips(p):
             """Per block, the mean of the per-sample ``f̂ᵢ · m̂ᵢ`` with ``m`` from the model at ``p``."""
             m = mag_model.inverse(yq, p, cond_q)
-            d = np.einsum("ij,ij->i", fq, m / np.linalg.norm(m, axis=1, keepdims=True))
+            d = np.einsum("ij,ij->i", fq, m) / _row_norms(m)
             return np.add.reduceat(d, q_starts) / q_count
 
         dip_t = np.add.reduceat(tq, q_starts) / q_count  # per dip row: its block's mean time (labels, folds)
 
-    def gain(W, m_w, bR=None):
+    def gain(W, m_w, bR=None, norm_m=None):
         """|∂|m|/∂y| per sample (û = m_w/|m_w|, m_w = W (y − h …)): raw noise → radial misfit,
         ``|Wᵀû|``; a generic term in the measured input m0 = W0 (y − h0) moves with the noise
-        too (its slope ``d`` per axis): ``|(I − diag(d) W0)ᵀ Wᵀû|``."""
-        v = (m_w / np.linalg.norm(m_w, axis=1, keepdims=True)) @ np.asarray(W, float)
+        too (its slope ``d`` per axis): ``|(I − diag(d) W0)ᵀ Wᵀû|``. ``norm_m``: |m_w| if known."""
+        v = (m_w @ np.asarray(W, float)) / (_row_norms(m_w) if norm_m is None else norm_m)[:, None]
         slope = cond.extra.get("basis_dinput") if bR is not None else None
         if slope is not None:
             v = v - (np.einsum("npk,pk->nk", slope, np.asarray(bR, float)) * v) @ W0
-        return np.linalg.norm(v, axis=1)
+        return _row_norms(v)
 
     W0 = np.triu(np.asarray(W0, float))
     # the radial misfit in units of the raw noise along the ellipsoid's normal (|Wᵀû|), at the
@@ -1202,7 +1208,8 @@ def compass_problem(
         c_dip = p["c_dip"] + p["dc_dip"] if "dc_dip" in p else p.get("c_dip")
         # the rotation ρ leaves |m| as it is
         m_w = mag_model.inverse(y_all, {k: v for k, v in q.items() if k != "rho"}, cond)
-        mag = block_mean((np.linalg.norm(m_w, axis=1) - F) * (g0 / gain(q["W"], m_w, q.get("bR"))))
+        norm_m = _row_norms(m_w)
+        mag = block_mean((norm_m - F) * (g0 / gain(q["W"], m_w, q.get("bR"), norm_m)))
         if not have_dip:
             return mag
         return np.concatenate([mag, dips(q) / shrink - c_dip])

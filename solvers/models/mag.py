@@ -38,13 +38,13 @@ SHAPES = {"W": (3, 3), "h": (3,), "rho": (3,), "field_scale": (), "dh": (3,), "t
 
 def hard_iron(params: dict, cond: Conditions | None, n: int) -> np.ndarray:
     """Total additive offset (N, 3): ``h`` plus the step, temperature and time terms."""
-    out = np.broadcast_to(np.asarray(params["h"], dtype=float), (n, 3)).copy()
+    out = np.asarray(params["h"], dtype=float) + additive_terms(params, cond, n)  # (n, 3)
     if "dh" in params:
         if cond is None or cond.t_s is None:
             raise ValueError("time_varying_hard_iron needs the time (cond.t_s)")
         on = np.asarray(cond.t_s, dtype=float) >= float(params["t_on_s"])
         out += np.outer(on, params["dh"])
-    return out + additive_terms(params, cond, n)
+    return out
 
 
 def forward(m_body_nT, params: dict, cond: Conditions | None = None) -> np.ndarray:
