@@ -26,7 +26,7 @@ from solvers import ldv as ldv_solver
 from solvers import linalg
 from solvers.centrifuge import norm_target
 from solvers.diagnose.engine import Candidate, Problem, jacobian
-from solvers.errors import TooFewPositions
+from solvers.errors import NotFinite, TooFewPositions
 from solvers.frames import OMEGA_EARTH_RAD_S
 from solvers.models import Conditions, temperature_rate
 from solvers.models import accel as accel_model
@@ -922,6 +922,12 @@ def centrifuge_problem(
         centripetal_dir=np.zeros((len(N), 3)),
     )
 
+    # per mounting, the row of the least-squares solution that gives the slope of f on the
+    # centripetal input (a line with an offset): fixed by the table, made once, not per residual
+    slope_rows = [
+        linalg.lstsq(np.column_stack([A_g[idx], np.ones(len(idx))]), np.eye(len(idx)))[0][0] for idx in mounts
+    ]
+
     def centripetal_dir(p) -> np.ndarray:
         """Per mounting, the body-frame centripetal direction c (toward the axis) that ``p``
         implies: the change of ``u`` with the centripetal input, ``u = A (1 + dr/R)∘c + up``, so c
@@ -933,9 +939,10 @@ def centrifuge_problem(
 
         def slopes(f, scale):
             c_dir = np.zeros((len(N), 3))
-            for idx in mounts:
-                coef, *_ = linalg.lstsq(np.column_stack([A_g[idx], np.ones(len(idx))]), f[idx], rcond=None)
-                c = coef[0] / scale
+            for idx, slope_of in zip(mounts, slope_rows):
+                c = (slope_of @ f[idx]) / scale
+                if not np.all(np.isfinite(c)):  # as linalg.lstsq refuses it: never into the fit's LAPACK
+                    raise NotFinite("centripetal direction: the numbers overflowed or are not finite")
                 c_dir[idx] = c / max(np.linalg.norm(c), 1e-12)
             return c_dir
 
