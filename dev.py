@@ -66,7 +66,9 @@ def main(argv: list[str]) -> int:
     if cmd == "station":
         return subprocess.call([str(py), "-m", "station", *rest], env=env)
     if cmd == "test":
-        args = rest or ["-q", "-n", "2"]
+        # worksteal: a worker that runs out of tests takes the other's queued ones (with "load"
+        # the last minute ran on one core while the other waited on a long test)
+        args = rest or ["-q", "-n", "2", "--dist", "worksteal"]
         # one BLAS thread per worker: two workers on two cores, each with OpenBLAS's default
         # threads, spin for each other's cores (station/__init__.py sets the same for the station)
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
