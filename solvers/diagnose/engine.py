@@ -997,7 +997,7 @@ def _refit(problem: Problem, params: dict, free: dict, sigma: np.ndarray) -> Fit
             raise ValueError("refit worse than its start")
     except Exception:
         res = fit(problem.residual, start, free=free, sigma=sigma, max_nfev=1)
-    chi2_at = float(np.sum((np.asarray(problem.residual(params), float).ravel() / np.asarray(sigma, float)) ** 2))
+    chi2_at = float(np.sum(_weighted(problem, params) ** 2))
     if not res.chi2 <= chi2_at * 1.0001:
         # the linearised step led into a worse basin than ``params`` (a nested model: an added
         # effect at 0) had: refitted from ``params`` itself, so adding a term never fits worse
