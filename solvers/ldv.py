@@ -306,6 +306,53 @@ def whitened_rows(X, own_var, ref_cov_mps2, coef=None):
     return sig, whiten
 
 
+# the least share of each beam's noise variance taken as its own (not shared with the other beams
+# of the epoch) when the shared part is measured from the residual: as ``whitened_rows``' callers
+# keep at least a quarter of a beam's variance as its own noise
+OWN_NOISE_MIN_SHARE = 0.25
+
+
+def shared_noise_correlation(r) -> np.ndarray:
+    """The correlation (k, k) of the beams' noise within an epoch, read from the residual ``r``
+    (m, k; time-ordered epochs) of a fit: from its first differences, whose covariance is twice
+    the noise's where the noise is white in time, and which a slow misfit (an offset, a drift, a
+    temperature bias) hardly moves. The reference's noise ``X δv`` is common to every beam of an
+    epoch: three beams that all look down (``X_j3`` ≈ 0.9) share its vertical part, and a
+    reference as noisy as the beams makes their residuals correlated by 0.5 or more; counted as
+    independent, a line in time that the reference's noise holds in all beams at once was taken
+    at twice its χ² (QA s31 null s744031: ``time_drift``). Its eigenvalues are held to at least
+    ``OWN_NOISE_MIN_SHARE`` (shrunk toward the identity): each beam keeps some noise of its own."""
+    d = np.diff(np.asarray(r, float), axis=0)
+    k = d.shape[1] if d.ndim == 2 else 1
+    if d.ndim != 2 or len(d) < 4 * k:
+        return np.eye(k)
+    C = d.T @ d
+    s = np.sqrt(np.diag(C))
+    if not np.all(s > 0):
+        return np.eye(k)
+    R = C / np.outer(s, s)
+    lo = float(np.linalg.eigvalsh(R)[0])
+    if lo < OWN_NOISE_MIN_SHARE:
+        lam = (OWN_NOISE_MIN_SHARE - lo) / (1.0 - lo)
+        R = (1.0 - lam) * R + lam * np.eye(k)
+    return R
+
+
+def epoch_whitener(sigma, corr):
+    """``whiten(r)`` of a flat residual (rows epoch-major, ``k t + j``) whose rows of one epoch
+    have the σ ``sigma`` (k,) and the correlation ``corr`` (k, k), epochs independent:
+    ``D L⁻¹ D⁻¹`` per epoch (``L Lᵀ = corr``, ``D = diag σ``), rows independent with the σ given,
+    as :func:`whitened_rows` does for a modelled reference noise."""
+    sig = np.asarray(sigma, float)
+    M = (np.linalg.inv(np.linalg.cholesky(np.asarray(corr, float))) * (1.0 / sig)[None, :]) * sig[:, None]
+    k = len(sig)
+
+    def whiten(r):
+        return (np.asarray(r, float).reshape(-1, k) @ M.T).ravel()
+
+    return whiten
+
+
 def calibrate_ldv(
     v_body_mps, vl_mps, *, ref_sigma_mps: float | None = None, ref_cov_mps2=None, force: bool = False
 ) -> LdvResult:

@@ -976,6 +976,22 @@ def _unresolvable(name: str, reason: str) -> dict:
     return {"name": name, "delta_bic": None, "cv_rms": None, "selected": False, "resolvable": False, "reason": reason}
 
 
+def _nested_share(J_lib: np.ndarray, J_gen: np.ndarray, Q: np.ndarray) -> float:
+    """The least share (0..1) of a library candidate's columns ``J_lib``, outside the baseline's
+    span ``Q``, that a generic term's columns ``J_gen`` span: 1 where the library effect is one of
+    the generic term's own shapes (an LDV offset, a constant per beam, inside a smooth function of
+    each beam's input)."""
+    if J_lib.shape[1] == 0 or J_gen.shape[1] == 0:
+        return 0.0
+    L = J_lib - Q @ (Q.T @ J_lib)
+    live = np.linalg.norm(L, axis=0) > DEAD_RTOL * np.linalg.norm(J_lib, axis=0)
+    if not live.any():  # the baseline spans it: nothing of it is left to nest
+        return 0.0
+    L = L[:, live]
+    G = _orth(J_gen - Q @ (Q.T @ J_gen))
+    return float(np.min(np.linalg.norm(G.T @ L, axis=0) / np.linalg.norm(L, axis=0)))
+
+
 def _displaced(picked: list, kept: list) -> list:
     """The items of ``picked`` (candidate columns, effect entry) that ``kept`` no longer holds."""
     return [item for item in picked if not any(item[0] is k[0] for k in kept)]
@@ -2149,6 +2165,21 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 # replaced by a step that only approximates it
                 # (clearly better, by DISPLACE_MARGIN, where a library effect held most of its signature)
                 margin = DISPLACE_MARGIN if any(res0[1].get(x, 0.0) > CONFUSION_CORR for x in held) else 0.0
+                if ok and len(picked2) < len(picked):
+                    # the library effects it would displace are shapes of its own (an LDV offset, a
+                    # constant per beam, inside a smooth function of each beam's input; a P1
+                    # quadratic inside one of each axis' input): with them it is the same model, and
+                    # what it adds beside them was tested in the round above and did not pass. A
+                    # BIC gain here is its extra parameters fitting slow noise (a beam wander took
+                    # a 10σ offset into `residual:input_axis`, gain 1639, seed 580500)
+                    nested = [
+                        _nested_share(lcc.J, cand.J, Q0) if lcc.reason is None else 0.0
+                        for lcc in (
+                            _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
+                            for oc, _ in _displaced(picked, picked2)
+                        )
+                    ]
+                    ok = min(nested) <= ALIAS_CORR
                 gain = model_bic(cur_fit, free) - model_bic(fit2, fr2)  # > 0: the generic model fits better
                 if ok and margin > 0 and _single_basis(res0[0].desc):
                     # one fixed basis against the library effects it displaces: head to head, as two

@@ -550,7 +550,10 @@ def ldv_problem(
         own = np.maximum(sig_beam**2 - (ref_sig.reshape(-1, 3) ** 2).mean(axis=0), 0.25 * sig_beam**2)
         sig_rows, whiten = ldv_solver.whitened_rows(X0a, own, cov_v, coef)
     else:
+        # the reference's noise unknown: what the beams of an epoch share, measured on the baseline's
+        # residual (solvers.ldv.shared_noise_correlation), the rows of an epoch whitened by it
         sig_rows = np.tile(sig_beam, len(v))
+        whiten = ldv_solver.epoch_whitener(sig_beam, ldv_solver.shared_noise_correlation(r0))
 
     def residual(p):
         r = (ldv_model.forward(v, p, cond) - y).ravel()
