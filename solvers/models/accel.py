@@ -109,6 +109,11 @@ def forward(f, params: dict, cond: Conditions | None = None) -> np.ndarray:
     return u @ K_matrix(params).T + np.asarray(params["b"]) + additive_terms(params, cond, len(u))
 
 
+# Newton's stop in :func:`inverse`: the residual of ``f + D f² + C3 f³ + A min(f, 0) = u`` below
+# this share of max |u| (a few units in the last place)
+NEWTON_RTOL = 4.0 * np.finfo(float).eps
+
+
 def inverse(y, params: dict, cond: Conditions | None = None, iterations: int = 8) -> np.ndarray:
     """Raw output (N, 3) → specific force (N, 3): the exact inverse of :func:`forward`.
 
@@ -127,10 +132,15 @@ def inverse(y, params: dict, cond: Conditions | None = None, iterations: int = 8
     C3 = np.asarray(params.get("C3", np.zeros(3)))
     A = np.asarray(params.get("A", np.zeros(3)))
     f = u.copy()
+    # converged: the equation's residual at the rounding of u (Newton's next step would move f
+    # by less than that); at D = C3 = A = 0 (a candidate at its null value) that is the start
+    tol = NEWTON_RTOL * float(np.max(np.abs(u), initial=0.0))
     for _ in range(iterations):
-        neg = f < 0.0
-        g = f + D * f * f + C3 * f**3 + A * np.where(neg, f, 0.0) - u
-        dg = 1.0 + 2.0 * D * f + 3.0 * C3 * f * f + np.where(neg, A, 0.0)
+        fm = np.minimum(f, 0.0)
+        g = f + (D * f + C3 * (f * f)) * f + A * fm - u
+        if not np.max(np.abs(g), initial=0.0) > tol:
+            break
+        dg = 1.0 + (2.0 * D + 3.0 * C3 * f) * f + A * (f < 0.0)
         f = f - g / dg
     return f
 
