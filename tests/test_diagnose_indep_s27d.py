@@ -59,7 +59,7 @@ def test_ldv_lever_arm_without_body_rate_columns_is_tested_through_the_attitude(
     named = next(e for e in res["effects"] if e["name"] == "lever_arm")
     null, _ = _diagnose(tmp_path, capsys, G.generate_ldv(700900, "none", 10.0, **kw))
     assert "lever_arm" not in null["verdict"]
-    ties = {c["name"] if isinstance(c, dict) else c for c in named.get("confused_with", [])}
+    ties = {c["name"] for c in named.get("confused_with", [])}
     assert set(res["verdict"]) <= {"lever_arm", *ties, *null["verdict"]}, (res["verdict"], null["verdict"])
 
 

@@ -2165,6 +2165,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 # replaced by a step that only approximates it
                 # (clearly better, by DISPLACE_MARGIN, where a library effect held most of its signature)
                 margin = DISPLACE_MARGIN if any(res0[1].get(x, 0.0) > CONFUSION_CORR for x in held) else 0.0
+                lib_cols: list = []
                 if ok and len(picked2) < len(picked):
                     # the library effects it would displace are shapes of its own (an LDV offset, a
                     # constant per beam, inside a smooth function of each beam's input; a P1
@@ -2172,13 +2173,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     # what it adds beside them was tested in the round above and did not pass. A
                     # BIC gain here is its extra parameters fitting slow noise (a beam wander took
                     # a 10σ offset into `residual:input_axis`, gain 1639, seed 580500)
-                    nested = [
-                        _nested_share(lcc.J, cand.J, Q0) if lcc.reason is None else 0.0
-                        for lcc in (
-                            _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
-                            for oc, _ in _displaced(picked, picked2)
-                        )
+                    lib_cols = [
+                        (oc, _candidate_columns(problem, wo.params, oc.cand, Q0, r0))
+                        for oc, _ in _displaced(picked, picked2)
                     ]
+                    nested = [_nested_share(lcc.J, cand.J, Q0) if lcc.reason is None else 0.0 for _, lcc in lib_cols]
                     ok = min(nested) <= ALIAS_CORR
                 gain = model_bic(cur_fit, free) - model_bic(fit2, fr2)  # > 0: the generic model fits better
                 if ok and margin > 0 and _single_basis(res0[0].desc):
@@ -2186,8 +2185,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     # library candidates are (both deviances net of the larger serial-correlation
                     # inflation): the better fit is named, the other tied to it within the decisive margin
                     infl = ev.infl
-                    for oc, _ in _displaced(picked, picked2):
-                        lcc = _candidate_columns(problem, wo.params, oc.cand, Q0, r0)
+                    for oc, lcc in lib_cols:  # the displaced effects' columns, built for the nested test
                         if lcc.reason is None and lcc.J.shape[1]:
                             lev = _evaluate(problem, lcc, rr.get(oc.cand.folds), fit_term(r0), types, n, floor)
                             infl = max(infl, lev.infl)
