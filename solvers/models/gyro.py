@@ -17,6 +17,8 @@ factor; the model works in rad/s]::
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from solvers.frames import earth_rate_nue
@@ -109,12 +111,26 @@ def _so3_series(phi, small_rad: float, coefficients) -> np.ndarray:
     Taylor series in θ (``small`` is True there and ``θ_safe`` 1, so the closed forms stay
     finite)."""
     phi = np.asarray(phi, dtype=float)
-    th = np.linalg.norm(phi, axis=-1)[..., None, None]
-    K = skew(phi)
+    th2 = np.einsum("...i,...i->...", phi, phi)[..., None, None]
+    th = np.sqrt(th2)
     small = th < small_rad
     ths = np.where(small, 1.0, th)
     a, b = coefficients(th, ths, small)
-    return np.eye(3) + a * K + b * (K @ K)
+    # I + a [φ]× + b (φφᵀ − θ² I), entry by entry ([φ]×² = φφᵀ − θ² I)
+    a, b, th2 = a[..., 0, 0], b[..., 0, 0], th2[..., 0, 0]
+    out = np.empty((*phi.shape[:-1], 3, 3))
+    bp = b[..., None] * phi
+    for i in range(3):
+        out[..., i, :] = bp * phi[..., i, None]
+        out[..., i, i] += 1.0 - b * th2
+    ap = a[..., None] * phi
+    out[..., 0, 1] -= ap[..., 2]
+    out[..., 0, 2] += ap[..., 1]
+    out[..., 1, 0] += ap[..., 2]
+    out[..., 1, 2] -= ap[..., 0]
+    out[..., 2, 0] -= ap[..., 1]
+    out[..., 2, 1] += ap[..., 0]
+    return out
 
 
 def _one_minus_cos_over_th2(th, ths, small):
@@ -124,15 +140,12 @@ def _one_minus_cos_over_th2(th, ths, small):
 
 def skew(v: np.ndarray) -> np.ndarray:
     """``[v]×`` for vectors (..., 3) → (..., 3, 3)."""
-    z = np.zeros(v.shape[:-1])
-    return np.stack(
-        [
-            np.stack([z, -v[..., 2], v[..., 1]], -1),
-            np.stack([v[..., 2], z, -v[..., 0]], -1),
-            np.stack([-v[..., 1], v[..., 0], z], -1),
-        ],
-        -2,
-    )
+    v = np.asarray(v, dtype=float)
+    K = np.zeros((*v.shape[:-1], 3, 3))
+    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
+    return K
 
 
 def integrate_rates(omega_rad_s, t_s, *, with_jacobian: bool = False):
@@ -154,17 +167,52 @@ def integrate_rates(omega_rad_s, t_s, *, with_jacobian: bool = False):
     dt = np.diff(t, axis=1)[..., None]
     phi = 0.5 * (w[:, 1:] + w[:, :-1]) * dt
     S = rotvec_matrices(phi)  # (m, n-1, 3, 3)
-    m, n1 = phi.shape[:2]
-    P = np.empty_like(S)  # suffix products after step j
-    acc = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()
-    for j in range(n1 - 1, -1, -1):
-        P[:, j] = acc
-        acc = S[:, j] @ acc
-    R = acc
     if not with_jacobian:
+        R = _product(S)
         return R[0] if single else R
+    R, P = _suffix_products(S)
     Q = np.swapaxes(P, -1, -2) @ right_jacobian(phi)
     return (R[0], Q[0]) if single else (R, Q)
+
+
+def _product(S: np.ndarray) -> np.ndarray:
+    """``S_0 S_1 … S_{n−1}`` for matrices ``S`` (m, n, 3, 3), in order, by pairs (about log₂ n
+    batched products)."""
+    m = S.shape[0]
+    while S.shape[1] > 1:
+        if S.shape[1] % 2:
+            S = np.concatenate([S, np.broadcast_to(np.eye(3), (m, 1, 3, 3))], axis=1)
+        S = S[:, 0::2] @ S[:, 1::2]
+    if S.shape[1] == 0:
+        return np.broadcast_to(np.eye(3), (m, 3, 3)).copy()
+    return S[:, 0].copy()
+
+
+def _suffix_products(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For matrices ``S`` (m, n, 3, 3): the products ``S_0 S_1 … S_{n−1}`` (m, 3, 3) and, per j,
+    ``P_j = S_{j+1} … S_{n−1}`` (m, n, 3, 3; ``P_{n−1} = I``). In blocks of about √n steps:
+    the suffix products within each block, then across the blocks' own products, then the two
+    composed, so the Python loops run about 2√n times rather than n."""
+    m, n = S.shape[:2]
+    if n == 0:
+        return np.broadcast_to(np.eye(3), (m, 3, 3)).copy(), S.copy()
+    b = max(1, math.isqrt(n - 1) + 1)  # steps per block
+    c = -(-n // b)  # blocks
+    padded = np.broadcast_to(np.eye(3), (m, c * b, 3, 3)).copy()  # identity steps after the last
+    padded[:, :n] = S
+    blocks = padded.reshape(m, c, b, 3, 3)
+    local = np.empty_like(blocks)  # within a block: the product of its steps after i
+    acc = np.broadcast_to(np.eye(3), (m, c, 3, 3)).copy()
+    for i in range(b - 1, -1, -1):
+        local[:, :, i] = acc
+        acc = blocks[:, :, i] @ acc
+    after = np.empty_like(acc)  # the product of the blocks after block k
+    tail = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()
+    for k in range(c - 1, -1, -1):
+        after[:, k] = tail
+        tail = acc[:, k] @ tail
+    P = (local @ after[:, :, None]).reshape(m, c * b, 3, 3)[:, :n]
+    return tail, P
 
 
 def rotation_from_output(y, t_s, params: dict, cond: Conditions | None = None) -> np.ndarray:
