@@ -25,6 +25,42 @@ def test_quarter_turn_about_z_by_hand():
     np.testing.assert_allclose(R.T @ [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], atol=1e-12)
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 17, 250])
+def test_integrated_turn_matches_scipys_rotations_and_its_jacobian_the_finite_difference(n):
+    """Batched stretches of uneven lengths (padded with repeated times) against scipy's own
+    composition of the same trapezoid steps; ``Q`` against a central finite difference of
+    one step's rotation vector, ``δθ`` read off ``Rᵀ R(φ + δ)``."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(n)
+    t = np.sort(rng.uniform(0.0, 4.0, (3, n)), axis=1)
+    t[1, n // 2 :] = t[1, n // 2]  # a shorter stretch: zero steps after its end
+    w = rng.normal(0.0, 1.5, (3, n, 3))
+    R, Q = gyro.integrate_rates(w, t, with_jacobian=True)
+    phi = 0.5 * (w[:, 1:] + w[:, :-1]) * np.diff(t, axis=1)[..., None]
+    for m in range(3):
+        ref = Rotation.identity()
+        for step in phi[m]:
+            ref = ref * Rotation.from_rotvec(step)
+        np.testing.assert_allclose(R[m], ref.as_matrix(), atol=1e-12)
+        np.testing.assert_allclose(gyro.integrate_rates(w[m], t[m]), R[m], atol=1e-12)
+    if n < 2:
+        assert Q.shape == (3, 0, 3, 3)
+        return
+    j, h = (n - 1) // 2, 1e-6
+    steps = [gyro.rotvec_matrices(p) for p in phi[0]]
+    for k in range(3):
+        turned = []
+        for sgn in (1.0, -1.0):
+            d = np.zeros(3)
+            d[k] = sgn * h
+            prod = np.eye(3)
+            for i, S in enumerate(steps):
+                prod = prod @ (gyro.rotvec_matrices(phi[0, i] + d) if i == j else S)
+            turned.append(Rotation.from_matrix(R[0].T @ prod).as_rotvec())
+        np.testing.assert_allclose((turned[0] - turned[1]) / (2 * h), Q[0, j][:, k], atol=1e-7)
+
+
 def test_rotation_from_output_inverts_the_forward_model():
     """Output made by ``forward`` with a scale/misalignment/bias integrates back to the true turn."""
     t = np.linspace(0.0, 3.0, 601)
