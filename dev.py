@@ -66,10 +66,13 @@ def main(argv: list[str]) -> int:
     if cmd == "station":
         return subprocess.call([str(py), "-m", "station", *rest], env=env)
     if cmd == "test":
-        # worksteal: a worker that runs out of tests takes the other's queued ones (with "load"
-        # the last minute ran on one core while the other waited on a long test)
-        args = rest or ["-q", "-n", "2", "--dist", "worksteal"]
-        # one BLAS thread per worker: two workers on two cores, each with OpenBLAS's default
+        # worksteal: a worker that runs out of tests takes the others' queued ones (with "load"
+        # the last minute ran on one core while the other waited on a long test). Three workers
+        # on two cores: the terminal, pseudo-terminal and TUI tests wait on the clock about half
+        # their time (user+sys 264 s of 502 s wall), and a third worker uses the core they
+        # leave; the whole suite 1218 s with two, 1066 s with three (2026-12-01, this machine)
+        args = rest or ["-q", "-n", "3", "--dist", "worksteal"]
+        # one BLAS thread per worker: workers on two cores, each with OpenBLAS's default
         # threads, spin for each other's cores (station/__init__.py sets the same for the station)
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             env.setdefault(var, "1")
