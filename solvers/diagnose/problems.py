@@ -1074,6 +1074,81 @@ def set_slow_bias_prior(prob: Problem, t_s, white_density) -> None:
     }
 
 
+MOUNTING_BIAS_GRID = np.concatenate([[0.0], np.logspace(-3, 3, 61)])  # λ per unit of the rows' mean bias leverage
+
+
+def set_mounting_bias_noise(prob: Problem) -> None:
+    """Give a table of averages whose rows are grouped by mounting (``prob.groups``, P2) the
+    covariance of a bias the rows of one mounting share (``Problem.slow_cov``): the bias wanders
+    while a mounting's speeds are run, and a table keeps no samples within its rows to size that
+    wander. Each axis' bias, of variance ``λ`` (output units², the same per axis), reaches a row
+    through the row's sensitivity to the bias block ``b`` (the baseline's Jacobian); mountings
+    independent. ``λ`` is estimated on the table itself by restricted maximum likelihood (the
+    noise scale profiled) against the baseline with every library candidate's columns beside it,
+    so that an effect the library holds is not taken for the wander; where ``λ`` is 0 the rows'
+    σ stand alone. Candidates are then tested net of it (``engine.slow_prior_lr``)."""
+    g = np.asarray(prob.groups)
+    _, inv, cnt = np.unique(g, return_inverse=True, return_counts=True)
+    if not np.any(cnt >= 2):
+        return
+    base = dict(prob.baseline)
+    Jb, _, _ = jacobian(prob, base, {"b": True})
+    if Jb.shape[1] != 3 or not np.all(np.isfinite(Jb)):
+        return
+    same = inv[:, None] == inv[None, :]
+    Bw = same * (Jb @ Jb.T)  # weighted rows, per unit of bias variance
+    cols = [jacobian(prob, base, prob.free)[0]]
+    for c in prob.candidates:
+        if c.reason is None and c.blocks and c.scan is None:
+            free = dict(c.free) if c.free is not None else {k: True for k in c.blocks}
+            cols.append(jacobian(prob, {**base, **{k: np.asarray(v, float) for k, v in c.blocks.items()}}, free)[0])
+    X = np.hstack(cols)
+    X = X[:, np.linalg.norm(X, axis=0) > 0]
+    r = np.asarray(prob.residual(base), float) / np.asarray(prob.sigma, float)
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(r))):
+        return
+    U, sv, _ = np.linalg.svd(X / np.linalg.norm(X, axis=0), full_matrices=False)
+    Q = U[:, sv > 1e-8 * sv[0]]
+    n, q = r.size, Q.shape[1]
+    if n - q < 4:
+        return
+    unit = float(np.mean(np.diag(Bw)))
+    if not unit > 0:
+        return
+
+    def reml(lam: float) -> tuple[float, float]:
+        """(REML log-likelihood with the noise scale profiled, that scale²) at ``λ``."""
+        L = np.linalg.cholesky(np.eye(n) + lam * Bw)
+        Xw = linalg.solve_lower(L, Q)
+        yw = linalg.solve_lower(L, r)
+        G = Xw.T @ Xw
+        e = yw - Xw @ np.linalg.solve(G, Xw.T @ yw)
+        rss = max(float(e @ e), 1e-300)
+        logdet = 2.0 * float(np.sum(np.log(np.diag(L)))) + float(np.linalg.slogdet(G)[1])
+        return -0.5 * (logdet + (n - q) * math.log(rss)), rss / (n - q)
+
+    lams = MOUNTING_BIAS_GRID / unit
+    fits = [reml(lam) for lam in lams]
+    best = int(np.argmax([f[0] for f in fits]))
+    lam, scale2 = float(lams[best]), fits[best][1]
+    if lam <= 0:
+        prob.slow_noise = {
+            "modelled": True,
+            "model": "a bias per mounting, shared by its rows (estimated on the table: none evident)",
+            "bias_sigma": 0.0,
+        }
+        return
+    U_data = Jb * np.asarray(prob.sigma, float)[:, None]
+    prob.slow_cov = lam * same * (U_data @ U_data.T)
+    prob.slow_noise = {
+        "modelled": True,
+        "model": "a bias per mounting, shared by its rows (estimated on the table by REML; "
+        "candidates tested net of it)",
+        "bias_sigma": math.sqrt(lam * scale2),  # output units: λ is relative to the rows' σ, whose scale is fitted
+        "from": "the table's residual beside the baseline and every library candidate",
+    }
+
+
 # ---------------------------------------------------------------- P3 compass
 
 

@@ -429,11 +429,14 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         if dens is not None:
             DP.set_slow_bias_prior(prob, el, dens)
     else:
+        # no samples within the rows to size the bias wander: a bias per mounting, sized on the table
         prob.slow_noise = {
             "modelled": False,
-            "reason": "a table of averages has no samples within holds: the bias instability between "
-            "rows is not sized, and time-like effects are tested against the rows' white noise alone",
+            "reason": "a table of averages has no samples within holds, and no mounting has two rows: "
+            "the bias instability between rows is not sized, and effects are tested against the rows' "
+            "white noise alone",
         }
+        DP.set_mounting_bias_noise(prob)
     return DiagnosisInput(
         prob,
         {"position": labels, "speed_rad_s": w},
