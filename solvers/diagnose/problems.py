@@ -1075,6 +1075,9 @@ def set_slow_bias_prior(prob: Problem, t_s, white_density) -> None:
 
 
 MOUNTING_BIAS_GRID = np.concatenate([[0.0], np.logspace(-3, 3, 61)])  # λ per unit of the rows' mean bias leverage
+# the REML likelihood ratio of a mounting bias against none that makes it evident: χ²₁'s 0.90
+# quantile, the 0.05 level of the boundary's ½χ²₀ + ½χ²₁
+MOUNTING_BIAS_EVIDENT_LR = 2.71
 
 
 def set_mounting_bias_noise(prob: Problem) -> None:
@@ -1085,8 +1088,9 @@ def set_mounting_bias_noise(prob: Problem) -> None:
     through the row's sensitivity to the bias block ``b`` (the baseline's Jacobian); mountings
     independent. ``λ`` is estimated on the table itself by restricted maximum likelihood (the
     noise scale profiled) against the baseline with every library candidate's columns beside it,
-    so that an effect the library holds is not taken for the wander; where ``λ`` is 0 the rows'
-    σ stand alone. Candidates are then tested net of it (``engine.slow_prior_lr``)."""
+    so that an effect the library holds is not taken for the wander. Only where it is evident
+    (likelihood ratio against ``λ = 0`` at least ``MOUNTING_BIAS_EVIDENT_LR``) are candidates
+    tested net of it (``engine.slow_prior_lr``); elsewhere the rows' σ stand alone."""
     g = np.asarray(prob.groups)
     _, inv, cnt = np.unique(g, return_inverse=True, return_counts=True)
     if not np.any(cnt >= 2):
@@ -1131,10 +1135,14 @@ def set_mounting_bias_noise(prob: Problem) -> None:
     fits = [reml(lam) for lam in lams]
     best = int(np.argmax([f[0] for f in fits]))
     lam, scale2 = float(lams[best]), fits[best][1]
-    if lam <= 0:
+    lr = 2.0 * (fits[best][0] - fits[0][0])  # against no such bias (λ = 0, the grid's first)
+    if lam <= 0 or lr < MOUNTING_BIAS_EVIDENT_LR:
+        # not evident: modelled on every table it took, on half of them, a small λ that then
+        # took most of each mounting's rows from every test (U spans two of a mounting's 3–5 rows)
         prob.slow_noise = {
             "modelled": True,
-            "model": "a bias per mounting, shared by its rows (estimated on the table: none evident)",
+            "model": "a bias per mounting, shared by its rows (estimated on the table: none evident, "
+            f"likelihood ratio {lr:.2g} < {MOUNTING_BIAS_EVIDENT_LR:g}); the rows' σ alone",
             "bias_sigma": 0.0,
         }
         return
