@@ -52,8 +52,17 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
         path = os.path.realpath(path)
     folder = os.path.dirname(os.path.abspath(path))
     old_mode = stat.S_IMODE(st.st_mode) if st is not None and stat.S_ISREG(st.st_mode) else None
-    fd, tmp = _create_beside(folder, os.path.basename(path))
+    tmp = None
     try:
+        # the name is known before the file is made: a SIGTERM (raised as an exception) that
+        # lands just after the file is created still finds it to remove (it left it behind when
+        # it landed between the creation and this block, seen under load)
+        for tmp in _names_beside(folder, os.path.basename(path)):
+            try:
+                fd = os.open(tmp, _CREATE_FLAGS, 0o666)
+                break
+            except FileExistsError:
+                tmp = None
         if old_mode is not None:
             os.chmod(tmp, old_mode)
         if mode == "wb":
@@ -66,10 +75,11 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
         raise
     _sync_folder(folder)
 
@@ -267,18 +277,17 @@ def remove_stale_temporaries(folder: str, name: str) -> list[str]:
     return removed
 
 
-def _create_beside(folder: str, name: str) -> tuple[int, str]:
-    """A new hidden file in ``folder``, created with mode 0o666 so that the umask applies
-    as it does to ``open()``; returns (descriptor, path). Its name carries the writer's pid,
-    so that a later write can tell a killed writer's leftover (``remove_stale_temporaries``)."""
+# a new file only (never one another writer made), mode 0o666 so that the umask applies as to open()
+_CREATE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+def _names_beside(folder: str, name: str) -> Iterator[str]:
+    """Names for a new hidden file beside ``name`` in ``folder``, tried in turn (``O_EXCL``):
+    each carries the writer's pid, so that a later write can tell a killed writer's leftover
+    (``remove_stale_temporaries``), and no other process makes a file of that name."""
     remove_stale_temporaries(folder, name)
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0) | getattr(os, "O_CLOEXEC", 0)
     for _ in range(100):
-        tmp = os.path.join(folder, f".{name}.{os.getpid()}-{os.urandom(4).hex()}.tmp")
-        try:
-            return os.open(tmp, flags, 0o666), tmp
-        except FileExistsError:
-            continue
+        yield os.path.join(folder, f".{name}.{os.getpid()}-{os.urandom(4).hex()}.tmp")
     raise FileExistsError(f"no free temporary name beside {name} in {folder}")
 
 
