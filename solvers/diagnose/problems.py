@@ -25,7 +25,7 @@ import numpy as np
 from solvers import ldv as ldv_solver
 from solvers import linalg
 from solvers.centrifuge import norm_target
-from solvers.diagnose.engine import Candidate, Problem, jacobian
+from solvers.diagnose.engine import Candidate, Problem, _free_of, jacobian
 from solvers.errors import NotFinite, TooFewPositions
 from solvers.frames import OMEGA_EARTH_RAD_S
 from solvers.models import Conditions, temperature_rate
@@ -33,6 +33,7 @@ from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
+from solvers.params import as_params
 from solvers.tabletop import NORM_NOISE_FLOOR_G, perp_basis
 
 # Deviance-test scales F from null simulations (bench_diagnose.py --null-only --trials 200).
@@ -1104,8 +1105,7 @@ def set_mounting_bias_noise(prob: Problem) -> None:
     cols = [jacobian(prob, base, prob.free)[0]]
     for c in prob.candidates:
         if c.reason is None and c.blocks and c.scan is None:
-            free = dict(c.free) if c.free is not None else {k: True for k in c.blocks}
-            cols.append(jacobian(prob, {**base, **{k: np.asarray(v, float) for k, v in c.blocks.items()}}, free)[0])
+            cols.append(jacobian(prob, {**base, **as_params(c.blocks)}, _free_of(c))[0])
     X = np.hstack(cols)
     X = X[:, np.linalg.norm(X, axis=0) > 0]
     r = np.asarray(prob.residual(base), float) / np.asarray(prob.sigma, float)

@@ -432,9 +432,9 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
         # no samples within the rows to size the bias wander: a bias per mounting, sized on the table
         prob.slow_noise = {
             "modelled": False,
-            "reason": "a table of averages has no samples within holds, and no mounting has two rows: "
-            "the bias instability between rows is not sized, and effects are tested against the rows' "
-            "white noise alone",
+            "reason": "a table of averages has no samples within holds, and no bias per mounting could be "
+            "sized (no mounting has two rows, or too few rows are left beside the model): the bias "
+            "instability between rows is not sized, and effects are tested against the rows' white noise alone",
         }
         DP.set_mounting_bias_noise(prob)
     return DiagnosisInput(
