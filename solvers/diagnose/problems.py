@@ -25,7 +25,7 @@ import numpy as np
 from solvers import ldv as ldv_solver
 from solvers import linalg
 from solvers.centrifuge import norm_target
-from solvers.diagnose.engine import Candidate, Problem, _free_of, jacobian
+from solvers.diagnose.engine import Candidate, Problem, jacobian
 from solvers.errors import NotFinite, TooFewPositions
 from solvers.frames import OMEGA_EARTH_RAD_S
 from solvers.models import Conditions, temperature_rate
@@ -1105,7 +1105,8 @@ def set_mounting_bias_noise(prob: Problem) -> None:
     cols = [jacobian(prob, base, prob.free)[0]]
     for c in prob.candidates:
         if c.reason is None and c.blocks and c.scan is None:
-            cols.append(jacobian(prob, {**base, **as_params(c.blocks)}, _free_of(c))[0])
+            free = dict(c.free) if c.free is not None else dict.fromkeys(c.blocks, True)  # no scan here
+            cols.append(jacobian(prob, {**base, **as_params(c.blocks)}, free)[0])
     X = np.hstack(cols)
     X = X[:, np.linalg.norm(X, axis=0) > 0]
     r = np.asarray(prob.residual(base), float) / np.asarray(prob.sigma, float)
