@@ -40,9 +40,14 @@ def rot_z(angle_rad: float) -> np.ndarray:
 
 
 def skew(v) -> np.ndarray:
-    """Cross-product matrix: ``skew(a) @ b == np.cross(a, b)``."""
-    x, y, z = np.asarray(v, dtype=float)
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    """Cross-product matrix ``[v]×``: ``skew(a) @ b == np.cross(a, b)``. Batched: vectors
+    (..., 3) → (..., 3, 3)."""
+    v = np.asarray(v, dtype=float)
+    K = np.zeros((*v.shape[:-1], 3, 3))
+    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
+    return K
 
 
 def rotvec_to_matrix(rotvec) -> np.ndarray:

@@ -36,7 +36,7 @@ import numpy as np
 
 from solvers.errors import NotIdentifiable, TooFewPositions
 from solvers.fit import FitResult, fit
-from solvers.frames import OMEGA_EARTH_RAD_S
+from solvers.frames import OMEGA_EARTH_RAD_S, skew
 from solvers.models import Conditions, gyro
 
 MIN_MOTIONS = 5  # rotations needed for 9 scale/misalignment parameters (2 rows each)
@@ -258,7 +258,7 @@ def calibrate(
         w = b.rates(model(p))
         R, Q = gyro.integrate_rates(w, b.t, with_jacobian=True)
         v = np.einsum("mji,mj->mi", R, u0)
-        Ev = np.einsum("mci,mij->mcj", E, gyro.skew(v))  # E [v]×  (m, 2, 3)
+        Ev = np.einsum("mci,mij->mcj", E, skew(v))  # E [v]×  (m, 2, 3)
         Bj = b.dt[..., None, None] * (Q @ A)  # (m, n-1, 3, 3)
         wm = 0.5 * (w[:, 1:] + w[:, :-1])
         fm = 0.5 * (b.f[:, 1:] + b.f[:, :-1])

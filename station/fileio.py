@@ -84,6 +84,30 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
     _sync_folder(folder)
 
 
+@contextmanager
+def scratch_file(folder, name: str, text: str = "", *, encoding: str = "utf-8") -> Iterator[str]:
+    """A new hidden file in ``folder`` holding ``text`` (``.<name>.<pid>-<random>.tmp``), for a
+    check that needs a path; removed when the block ends, on an exception too. Its name is
+    chosen before it is made, so a SIGTERM at any point leaves nothing behind."""
+    tmp = None
+    try:
+        for tmp in _names_beside(os.fspath(folder), name):
+            try:
+                fd = os.open(tmp, _CREATE_FLAGS, 0o666)
+                break
+            except FileExistsError:
+                tmp = None
+        with os.fdopen(fd, "w", encoding=encoding) as f:
+            f.write(text)
+        yield tmp
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
+
+
 def atomic_write_text(path, text: str, *, encoding: str = "utf-8", newline: str | None = None) -> None:
     """Write ``text`` to ``path`` atomically (see :func:`atomic_open`)."""
     with atomic_open(path, "w", encoding=encoding, newline=newline) as f:

@@ -165,3 +165,33 @@ def test_cli_output_through_a_link_to_a_pipe_is_refused_as_the_pipe(tmp_path):
     res = run_station("simulate", "--procedure", "accel-centrifuge", "--out", link, subprocess_run=True)
     assert_one_line_refusal(res, "named pipe")
     assert link.is_symlink() and fifo.exists() and not fifo.is_file()
+
+
+def test_a_scratch_file_holds_its_text_and_is_gone_after_the_block_even_on_an_interrupt(tmp_path):
+    from station.fileio import scratch_file
+
+    with scratch_file(tmp_path, "check", "# a: 1\n") as p:
+        assert os.path.dirname(p) == str(tmp_path) and os.path.basename(p).startswith(".check.")
+        assert open(p, encoding="utf-8").read() == "# a: 1\n"
+    assert os.listdir(tmp_path) == []
+    with pytest.raises(KeyboardInterrupt):
+        with scratch_file(tmp_path, "check", "x") as p:
+            raise KeyboardInterrupt
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_scratch_file_a_killed_process_left_is_removed_by_the_next(tmp_path):
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    left = tmp_path / f".check.{int(dead.stdout)}-0badc0de.tmp"
+    left.write_text("left by a SIGKILL", encoding="utf-8")
+    from station.fileio import STALE_TMP_S, scratch_file
+
+    old = os.stat(left).st_mtime - STALE_TMP_S - 60
+    os.utime(left, (old, old))
+
+    with scratch_file(tmp_path, "check") as p:
+        assert os.listdir(tmp_path) == [os.path.basename(p)]
+    assert os.listdir(tmp_path) == []

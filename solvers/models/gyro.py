@@ -138,16 +138,6 @@ def _one_minus_cos_over_th2(th, ths, small):
     return np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
 
 
-def skew(v: np.ndarray) -> np.ndarray:
-    """``[v]×`` for vectors (..., 3) → (..., 3, 3)."""
-    v = np.asarray(v, dtype=float)
-    K = np.zeros((*v.shape[:-1], 3, 3))
-    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
-    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
-    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
-    return K
-
-
 def integrate_rates(omega_rad_s, t_s, *, with_jacobian: bool = False):
     """Body rotation over a stretch of body rates: ``R = Π_j exp([φ_j]×)``, ``φ_j`` the
     trapezoid ``(ω_j + ω_{j+1}) (t_{j+1} − t_j) / 2``.

@@ -32,7 +32,6 @@ import datetime as _dt
 import math
 import os
 import re
-import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -47,7 +46,7 @@ except ImportError:  # pragma: no cover - not on POSIX
 from station.device.protocol import Header
 from station.device.reader import Batch, GapEvent, Reader, ReaderStats
 from station.errors import InputError, StationError
-from station.fileio import atomic_open, open_input, same_file
+from station.fileio import atomic_open, open_input, same_file, scratch_file
 
 SENSOR_GROUPS = {"accel_unit": ("ax", "ay", "az"), "gyro_unit": ("gx", "gy", "gz"), "mag_unit": ("mx", "my", "mz")}
 PARTIAL_SUFFIX = ".partial"
@@ -532,16 +531,11 @@ def _check_extra_meta(directory: str, procedure: str | None, extra: dict[str, st
             raise InputError(None, None, f"--meta {k!r}: not a usable key")
         if k.lower() in _OWN_KEYS or re.fullmatch(r"gap_\d+", k.lower()):
             raise InputError(None, None, f"--meta {k}: the recording writes it (what it saw of the device), not --meta")
-    fd, tmp = tempfile.mkstemp(prefix=".station-record.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(_head_text(meta, ["t"]))
+    with scratch_file(directory, "station-record-meta", _head_text(meta, ["t"])) as tmp:
         try:
             iter_capture_chunks(tmp)
         except InputError as exc:
             raise InputError(None, None, f"--meta: {exc.message}") from None
-    finally:
-        os.unlink(tmp)
 
 
 def _start_meta(header, procedure, recorded_at, port, protocol, baud, extra, warn) -> dict[str, str]:
