@@ -34,13 +34,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from solvers.errors import NotIdentifiable, TooFewPositions
+from solvers.errors import NotIdentifiable, SolverError, TooFewPositions
 from solvers.fit import FitResult, fit
 from solvers.frames import OMEGA_EARTH_RAD_S, skew
 from solvers.models import Conditions, gyro
 
 MIN_MOTIONS = 5  # rotations needed for 9 scale/misalignment parameters (2 rows each)
 G_MIN_ORIENTATIONS = 6  # distinct hold directions before g-sensitivity is fitted
+# the fitted rotations carry gravity from hold to hold within a fraction of a degree (simulated
+# < 0.1°, imu_tk's Xsens session 0.2°): a fit that misses by this much RMS describes no gyro
+MAX_DIRECTION_RMS_DEG = 10.0
+# evaluations per free parameter (+1) before a fit still that far off is given up: well-posed
+# fits converge in under one (solvers.fit); a gyro record that is not this accelerometer's ran
+# to the full bound (20 (p + 1), ten seconds) and stopped at a degenerate K
+FIRST_NFEV_PER_PARAM = 5
 
 
 @dataclass
@@ -281,7 +288,18 @@ def calibrate(
                 cols.append(col)
         return np.hstack(cols)
 
-    res = fit(resid, init, free=free, sigma=sigma, jac=jac)
+    n_free = sum(int(np.size(v)) for k, v in init.items() if free[k])
+    res = fit(resid, init, free=free, sigma=sigma, jac=jac, max_nfev=FIRST_NFEV_PER_PARAM * (n_free + 1))
+    if res.status == 0 and _misses(res.params, holds, motions, model) <= MAX_DIRECTION_RMS_DEG:
+        res = fit(resid, res.params, free=free, sigma=sigma, jac=jac)  # slow but on its way: the full bound
+    miss_deg = _misses(res.params, holds, motions, model)
+    if not miss_deg <= MAX_DIRECTION_RMS_DEG:
+        raise SolverError(
+            f"the rotations the gyro integrates do not carry gravity from one hold to the next: the best "
+            f"fit misses by {miss_deg:.0f}° RMS over {len(motions)} rotations (a calibration misses by well "
+            "under 1°); check that the gyro columns are this unit's, recorded with the accelerometer, in "
+            "the stated unit and at the stated sample times"
+        )
     if res.unidentifiable and fit_g and any(n.startswith("G") for n in res.unidentifiable):
         out = calibrate(holds, motions, K0, noise_raw=noise_raw, latitude_deg=latitude_deg, fit_g=False)
         out.warnings[:0] = ["g-sensitivity not identifiable from these holds: not fitted"]
@@ -325,6 +343,12 @@ def calibrate(
         latitude_deg=latitude_deg,
         warnings=warnings,
     )
+
+
+def _misses(params: dict, holds: list[Hold], motions: list[Motion], model) -> float:
+    """RMS (degrees) of the gravity direction carried across each rotation by ``params``."""
+    d = direction_residuals(model(params), holds, motions)
+    return math.degrees(float(np.sqrt(np.mean(d**2)))) if d.size else 0.0
 
 
 def _distinct(U: np.ndarray, max_angle_deg: float = 7.0) -> int:
