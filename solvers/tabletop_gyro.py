@@ -290,9 +290,11 @@ def calibrate(
 
     n_free = sum(int(np.size(v)) for k, v in init.items() if free[k])
     res = fit(resid, init, free=free, sigma=sigma, jac=jac, max_nfev=FIRST_NFEV_PER_PARAM * (n_free + 1))
-    if res.status == 0 and _misses(res.params, holds, motions, model) <= MAX_DIRECTION_RMS_DEG:
+    if res.status == 0 and _rms_deg(direction_residuals(model(res.params), holds, motions)) <= MAX_DIRECTION_RMS_DEG:
         res = fit(resid, res.params, free=free, sigma=sigma, jac=jac)  # slow but on its way: the full bound
-    miss_deg = _misses(res.params, holds, motions, model)
+    p = res.params
+    dres = direction_residuals(model(p), holds, motions)
+    miss_deg = _rms_deg(dres)
     if not miss_deg <= MAX_DIRECTION_RMS_DEG:
         raise SolverError(
             f"the rotations the gyro integrates do not carry gravity from one hold to the next: the best "
@@ -309,8 +311,6 @@ def calibrate(
             f"the rotations between the holds cannot determine {', '.join(res.unidentifiable)} "
             "(turn the unit about all three axes between holds)"
         )
-    p = res.params
-    dres = direction_residuals(model(p), holds, motions)
     hold_r = res.residuals[: 3 * nh].reshape(nh, 3)
     if res.misfit_scaled:
         warnings.append(
@@ -345,9 +345,9 @@ def calibrate(
     )
 
 
-def _misses(params: dict, holds: list[Hold], motions: list[Motion], model) -> float:
-    """RMS (degrees) of the gravity direction carried across each rotation by ``params``."""
-    d = direction_residuals(model(params), holds, motions)
+def _rms_deg(direction_residual_rad: np.ndarray) -> float:
+    """RMS in degrees of the per-rotation direction residuals (``direction_residuals``)."""
+    d = direction_residual_rad
     return math.degrees(float(np.sqrt(np.mean(d**2)))) if d.size else 0.0
 
 

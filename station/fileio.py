@@ -52,17 +52,7 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
         path = os.path.realpath(path)
     folder = os.path.dirname(os.path.abspath(path))
     old_mode = stat.S_IMODE(st.st_mode) if st is not None and stat.S_ISREG(st.st_mode) else None
-    tmp = None
-    try:
-        # the name is known before the file is made: a SIGTERM (raised as an exception) that
-        # lands just after the file is created still finds it to remove (it left it behind when
-        # it landed between the creation and this block, seen under load)
-        for tmp in _names_beside(folder, os.path.basename(path)):
-            try:
-                fd = os.open(tmp, _CREATE_FLAGS, 0o666)
-                break
-            except FileExistsError:
-                tmp = None
+    with _new_beside(folder, os.path.basename(path)) as (fd, tmp):
         if old_mode is not None:
             os.chmod(tmp, old_mode)
         if mode == "wb":
@@ -74,13 +64,6 @@ def atomic_open(path, mode: str = "w", *, encoding: str = "utf-8", newline: str 
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except FileNotFoundError:
-                pass
-        raise
     _sync_folder(folder)
 
 
@@ -89,23 +72,13 @@ def scratch_file(folder, name: str, text: str = "", *, encoding: str = "utf-8") 
     """A new hidden file in ``folder`` holding ``text`` (``.<name>.<pid>-<random>.tmp``), for a
     check that needs a path; removed when the block ends, on an exception too. Its name is
     chosen before it is made, so a SIGTERM at any point leaves nothing behind."""
-    tmp = None
-    try:
-        for tmp in _names_beside(os.fspath(folder), name):
-            try:
-                fd = os.open(tmp, _CREATE_FLAGS, 0o666)
-                break
-            except FileExistsError:
-                tmp = None
-        with os.fdopen(fd, "w", encoding=encoding) as f:
-            f.write(text)
-        yield tmp
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except FileNotFoundError:
-                pass
+    with _new_beside(os.fspath(folder), name) as (fd, tmp):
+        try:
+            with os.fdopen(fd, "w", encoding=encoding) as f:
+                f.write(text)
+            yield tmp
+        finally:
+            _remove_quietly(tmp)
 
 
 def atomic_write_text(path, text: str, *, encoding: str = "utf-8", newline: str | None = None) -> None:
@@ -303,6 +276,35 @@ def remove_stale_temporaries(folder: str, name: str) -> list[str]:
 
 # a new file only (never one another writer made), mode 0o666 so that the umask applies as to open()
 _CREATE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+@contextmanager
+def _new_beside(folder: str, name: str) -> Iterator[tuple[int, str]]:
+    """A new hidden file beside ``name`` in ``folder`` (``_names_beside``, ``O_EXCL``): yields
+    (descriptor, path); the file is removed if the block raises anything (``KeyboardInterrupt``, a
+    SIGTERM raised as an exception). Its name is chosen before the file is made, inside the
+    block that removes it: a SIGTERM that landed between the creation and that block left it."""
+    tmp = None
+    try:
+        for tmp in _names_beside(folder, name):
+            try:
+                fd = os.open(tmp, _CREATE_FLAGS, 0o666)
+                break
+            except FileExistsError:
+                tmp = None
+        yield fd, tmp
+    except BaseException:
+        _remove_quietly(tmp)
+        raise
+
+
+def _remove_quietly(path: str | None) -> None:
+    """Remove ``path`` if it is there."""
+    if path is not None:
+        try:
+            os.unlink(path)
+        except FileNotFoundError:
+            pass
 
 
 def _names_beside(folder: str, name: str) -> Iterator[str]:

@@ -33,7 +33,7 @@ from solvers.models import accel as accel_model
 from solvers.models import gyro as gyro_model
 from solvers.models import ldv as ldv_model
 from solvers.models import mag as mag_model
-from solvers.params import as_params
+from solvers.params import as_params, element_names
 from solvers.tabletop import NORM_NOISE_FLOOR_G, perp_basis
 
 # Deviance-test scales F from null simulations (bench_diagnose.py --null-only --trials 200).
@@ -1097,12 +1097,16 @@ def set_mounting_bias_noise(prob: Problem) -> None:
     if not np.any(cnt >= 2):
         return
     base = dict(prob.baseline)
-    Jb, _, _ = jacobian(prob, base, {"b": True})
-    if Jb.shape[1] != 3 or not np.all(np.isfinite(Jb)):
+    J0, names0, _ = jacobian(prob, base, prob.free)
+    b_names = element_names("b", np.shape(base["b"]))
+    if len(b_names) != 3 or not set(b_names) <= set(names0):
+        return
+    Jb = J0[:, [names0.index(nm) for nm in b_names]]  # the bias block's columns of the baseline's Jacobian
+    if not np.all(np.isfinite(Jb)):
         return
     same = inv[:, None] == inv[None, :]
     Bw = same * (Jb @ Jb.T)  # weighted rows, per unit of bias variance
-    cols = [jacobian(prob, base, prob.free)[0]]
+    cols = [J0]
     for c in prob.candidates:
         if c.reason is None and c.blocks and c.scan is None:
             free = dict(c.free) if c.free is not None else dict.fromkeys(c.blocks, True)  # no scan here
