@@ -468,6 +468,10 @@ def generate_compass(seed, effect, target_z):
         field_nT=field_nT,
         two_axis_gyro=bool(two_axis),
     )
+    if effect in ("time_varying_hard_iron", "bias_step"):  # where the step (and a pulse's end) is, in t
+        truth["t_on_s"] = float(t_out[0] + t_on)
+        if effect == "bias_step":
+            truth["t_off_s"] = float(t_out[0] + t_off)
     return meta, cols, data, fmts, truth
 
 

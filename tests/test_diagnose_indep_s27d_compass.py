@@ -59,3 +59,25 @@ def test_a_bent_field_is_named_on_the_pauses_of_a_tumble(tmp_path, capsys):
     went unnamed (s743003 of the generator's QA run). The same tumble without it names nothing."""
     assert _verdict(tmp_path, capsys, G.generate_compass(743003, "field_anomaly", 10.0), "bent") == ["field_anomaly"]
     assert _verdict(tmp_path, capsys, G.generate_compass(743003, "none", 0.0), "null") == []
+
+
+def test_a_hard_iron_switched_on_and_off_again_is_named_with_both_places(tmp_path, capsys):
+    """A current switched on for about a fifth of a capture, then off (an LIS3MDL tumbled at 20 Hz,
+    s761060 of the generator's run of 2026-12-01): a pulse at 10σ of its true extension. A step
+    alone left a third to half of it unexplained and the verdict was [] in 15 of 16 such
+    captures. It is named outside the library with the places it came on and went off, each
+    within 3 s of the generator's (on 839.5 s, off 868.3 s, a record of 120 s); the same tumble
+    without it names nothing."""
+    from station.cli import main
+
+    meta, cols, data, fmts, truth = G.generate_compass(761060, "bias_step", 10.0)
+    path = tmp_path / "pulse.csv"
+    G._write_capture(path, meta, cols, data, fmts)
+    assert main(["diagnose", str(path), "--json", "--no-plots"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["verdict"] == ["residual:time"], (res["verdict"], res["candidates"])
+    (eff,) = res["effects"]
+    assert eff["shape"] == "step" and eff["gain"] > 0
+    assert abs(eff["params"]["at"] - truth["t_on_s"]) < 3.0, (eff["params"], truth)
+    assert abs(eff["params"]["until"] - truth["t_off_s"]) < 3.0, (eff["params"], truth)
+    assert _verdict(tmp_path, capsys, G.generate_compass(761060, "none", 0.0), "null") == []

@@ -131,6 +131,12 @@ class Problem:
     # switched current during a hold): the grid is moved to the nearest of them as well, those
     # members counted as tests too, and the refinement runs over them
     step_places_within: dict = field(default_factory=dict)
+    # whether a pulse in time (a bias on between two places) is among the generic shapes: in a
+    # continuous series (compass, LDV), not where the unit rests in holds (P1, P4), where a bias on
+    # for a hold or two is what a knock does to them, which the quality screen reports by line (a
+    # pulse over P1 holds 7 and 8 took a 0.02 m/s² knock on hold 7), and where P4 bias steps at 10σ
+    # were named 8 times in 10 with it, 9 without (seeds 763000+)
+    pulses: bool = False
     generic_scale: float = 2.0  # the generic extension's margin over the canonical test (nulls)
     fold_sets: dict = field(default_factory=dict)  # other CV groupings by name (e.g. "time": blocks within holds)
     dead_rtol: float = DEAD_RTOL  # a candidate column less outside the baseline's span than this: dead
@@ -774,10 +780,12 @@ def _fold_for(driver: str) -> str | None:
     return "input" if driver in ("input", "input_axis") else None
 
 
-def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
+def generic_candidates(problem: Problem, pulses: bool = True) -> list[tuple[Candidate, dict]]:
     """The ``residual:<driver>`` candidates: (candidate, description) per driver and shape.
     Each candidate's block ``bR`` (p × width) multiplies a basis of the driver that its
-    ``setup`` writes into every condition set of ``problem.generic`` (solvers.models.additive_terms)."""
+    ``setup`` writes into every condition set of ``problem.generic`` (solvers.models.additive_terms).
+    ``pulses``: whether a bias on between two places in time (78 pairs, the dearest family) is
+    among them."""
     out = []
     if not problem.generic:
         return out
@@ -882,6 +890,29 @@ def generic_candidates(problem: Problem) -> list[tuple[Candidate, dict]]:
                 return [step(at) for at in np.union1d(np.linspace(d["at"] - dx, d["at"] + dx, GENERIC_REFINE), near)]
 
             out.append(("scan", [step(at) for at in grid], refine))
+
+            def pulse(a, b, make=make):  # on at a, off again at b (a current switched on, then off)
+                return make(
+                    lambda x, a=a, b=b: ((x >= a) & (x < b)).astype(float)[:, None] - 0.5,
+                    1,
+                    {"shape": "step", "at": a, "until": b},
+                )
+
+            pairs = [(a, b) for i, a in enumerate(grid) for b in grid[i + 1 :]]
+
+            def refine_pulse(d, pulse=pulse, dx=dx, places=places):
+                a, b = d["at"], d["until"]
+                out_ = []
+                for v in np.union1d(np.linspace(a - dx, a + dx, GENERIC_REFINE), places[np.abs(places - a) <= dx]):
+                    if v < b:
+                        out_.append(pulse(v, b))
+                for v in np.union1d(np.linspace(b - dx, b + dx, GENERIC_REFINE), places[np.abs(places - b) <= dx]):
+                    if v > a:
+                        out_.append(pulse(a, v))
+                return out_
+
+            if pairs and pulses and problem.pulses:
+                out.append(("scan", [pulse(a, b) for a, b in pairs], refine_pulse))
 
             def periodic(c, make=make, span=span):  # c cycles over the span
                 P = span / c
@@ -1272,9 +1303,9 @@ def within_groups_deviance(problem: Problem, A: np.ndarray, J: np.ndarray, r: np
     return ss / max((float(rw @ rw) - ss) / dof, 1e-300)
 
 
-def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: bool, r: np.ndarray | None = None) -> _Eval:
-    """Set a generic term's ``groups_left`` (``independent_groups``, its scanned place or period
-    counted as one more parameter) where the problem says which rows share their noise; where
+def _count_groups(problem: Problem, ev: _Eval, A: np.ndarray, scanned: int, r: np.ndarray | None = None) -> _Eval:
+    """Set a generic term's ``groups_left`` (``independent_groups``, its ``scanned`` places or period
+    counted as parameters) where the problem says which rows share their noise; where
     too few are left and the residual ``r`` is given, its deviance within groups (``within``)."""
     if problem.shared_noise is not None:
         ev.groups_left = independent_groups(problem, A, ev.cc.J) - int(scanned)
@@ -1633,10 +1664,13 @@ def _rival_margin(a: _Eval, b: _Eval, n: int) -> float:
     return (a.k - b.k) * math.log(n) - (a.D - b.D) / infl
 
 
-def _scanned(desc: dict | None) -> bool:
-    """Whether a generic candidate is the best member of a scanned family: its place (a step's
-    ``at``) or ``period`` was searched for, one parameter more than its columns."""
-    return bool(desc) and ("at" in desc or "period" in desc)
+def _scanned(desc: dict | None) -> int:
+    """How many scalars of a generic candidate were searched for (the best member of a scanned
+    family), each a parameter more than its columns: a step's place ``at`` or a ``period`` (1),
+    a pulse's two places ``at`` and ``until`` (2); 0 for a fixed basis."""
+    if not desc:
+        return 0
+    return int("at" in desc or "period" in desc) + int("until" in desc)
 
 
 def _single_basis(desc: dict | None) -> bool:
@@ -1934,7 +1968,14 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         picked, cur_fit, state, free = prune(picked, cur_fit)
 
     # effects outside the library: a smooth function of one driver (residual:<driver>)
-    gens = [] if below_noise_floor(problem, cur_fit.weighted_residuals, sigma, primary) else generic_candidates(problem)
+    # (a pulse, the dearest family, only where the residual is not noise-like: a pulse at 10σ leaves
+    # its whole signature there; a null's residual mostly is noise-like, and the search cost a
+    # fifth more time per capture)
+    gens = (
+        []
+        if below_noise_floor(problem, cur_fit.weighted_residuals, sigma, primary)
+        else generic_candidates(problem, pulses=not _residual_test(problem, cur_fit).get("white", False))
+    )
     # every basis tried is a test (a scan: its grid members, or the independent ones it says)
     m_gen = sum((item[3] if len(item) > 3 else len(item[1])) if item[0] == "scan" else 1 for item in gens)
 
@@ -1985,10 +2026,9 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     problem, cc, rounds.get(cand.folds), term_cur, types, n, floor, shared=problem.shared_first
                 )
                 ev.desc = desc
-                if item[0] == "scan":
-                    ev.k += 1  # the scanned location or period
+                ev.k += _scanned(desc)  # the scanned places or period
                 if groups:
-                    _count_groups(problem, ev, J0, item[0] == "scan", r0)
+                    _count_groups(problem, ev, J0, _scanned(desc), r0)
                 if chosen is None:
                     chosen = ev
                 if not _significant(problem, ev, m_gen, rank_cur, n, problem.generic_scale):
@@ -2094,7 +2134,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
         fr = {k: v for k, v in free_.items() if k not in ev_.cc.params}
         Jm, _, _ = jacobian(problem, {k: v for k, v in fit_.params.items() if k not in ev_.cc.params}, fr)
         scanned = _scanned(ev_.desc)
-        if independent_groups(problem, Jm, ev_.cc.J) - int(scanned) >= problem.min_groups - GROUPS_TOL:
+        if independent_groups(problem, Jm, ev_.cc.J) - scanned >= problem.min_groups - GROUPS_TOL:
             return True
         # too few groups: the term tested within them, beside that model (its own block at zero)
         wo = {**fit_.params, **{k: np.zeros_like(np.asarray(v, float)) for k, v in ev_.cc.params.items()}}
@@ -2156,7 +2196,7 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                 if cand.reason is None:
                     rr = _Rounds(J0, r0, sigma, fold_map, primary, problem.cv_max_leverage)
                     ev = _evaluate(problem, cand, rr.get(cand.cand.folds), fit_term(r0), types, n, floor)
-                    ev.k += int(_scanned(res0[0].desc))
+                    ev.k += _scanned(res0[0].desc)
                     _count_groups(problem, ev, J0, _scanned(res0[0].desc), r0)
                     ok = _passes(
                         problem, ev, m_gen, rr.cv0(cand.cand.folds), _gram_rank(J0.T @ J0), n, problem.generic_scale
@@ -2208,11 +2248,11 @@ def diagnose(problem: Problem, baseline_fit: FitResult | None = None) -> Diagnos
                     # data cannot tell the two apart (a drift with slow wander against a step), and the
                     # library effects it displaced are named with it (head to head, as for two candidates)
                     scanned = _scanned(res0[0].desc)
-                    kx = math.log(n) if scanned else 0.0
+                    kx = scanned * math.log(n)
                     # the margin of the larger of the two parts the models do not share (as for two
                     # candidates: each fits the noise along its own other directions)
                     n_wo = len(Packer.build(st_wo, fr_wo).names)
-                    k_gen = len(Packer.build(fit2.params, fr2).names) - n_wo + int(scanned)
+                    k_gen = len(Packer.build(fit2.params, fr2).names) - n_wo + scanned
                     k_lib = len(Packer.build(cur_fit.params, free).names) - n_wo
                     if gain - kx <= decisive_margin(problem, max(k_gen, k_lib)):
                         for _, e in _displaced(picked, picked2):

@@ -593,6 +593,7 @@ def ldv_problem(
     if T is not None:
         prob.drivers["temperature [°C]"] = np.repeat(T, 3)
     prob.series = np.tile(np.arange(3), len(v))
+    prob.pulses = True  # a drive is a continuous series: a bias on for a while and off (engine.Problem.pulses)
     if t is not None:
         prob.wander_t_s = np.repeat(t, 3)
     prob.series_names = {0: "beam 1", 1: "beam 2", 2: "beam 3"}
@@ -1403,6 +1404,7 @@ def compass_problem(
     prob.series = np.concatenate([np.zeros(len(y), int), np.full(len(s_dip), 1 if dip_kind == "run" else -1)])
     if table:  # positions in the order written: no serial correlation to allow for
         prob.series = np.full(len(y) + len(s_dip), -1)
+    prob.pulses = True  # a sweep by hand is a continuous series (engine.Problem.pulses)
     # F is already raised for the wandering hard iron, which a smooth function of time fits as
     # well as a drift does: the generic extension's margin is 0.75 of it (3.6·q at F = 4.8)
     prob.generic_scale = GENERIC_SCALES["compass"]

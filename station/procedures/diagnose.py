@@ -350,6 +350,7 @@ def format_text(
             corr = ", ".join(f"{k} {v:.2f}" for k, v in e.get("correlation", {}).items())
             L.append(
                 f"            outside the library: a {e.get('shape')} function of {e.get('driver')}"
+                f"{' that steps back (a pulse: on at `at`, off at `until`)' if 'until' in e['params'] else ''}"
                 f"{' acting on the scale' if e['params'].get('acts_on') == 'scale' else ''}; "
                 f"correlation with the library's signatures: {corr or 'none resolvable'}"
             )
@@ -422,7 +423,7 @@ def _g(x: np.ndarray, fmt: str) -> str:
     return format(float(x), fmt) if x.ndim == 0 else "[" + ", ".join(format(float(a), fmt) for a in x.ravel()) + "]"
 
 
-# the unit a residual term's place (a step's "at") or period is measured in, by its driver
+# the unit a residual term's place (a step's "at", a pulse's "until") or period is measured in, by its driver
 DRIVER_UNITS = {"time": "s", "temperature": "°C", "speed": "rad/s", "rate": "rad/s"}
 
 
@@ -437,7 +438,7 @@ def _described(v):
 
 def _driver_unit(e: dict, key: str) -> str:
     """The unit of a residual term's place or period: its driver's (time in s, …)."""
-    if key not in ("at", "period") or not isinstance(e["params"].get(key), (int, float)):
+    if key not in ("at", "until", "period") or not isinstance(e["params"].get(key), (int, float)):
         return ""
     unit = DRIVER_UNITS.get(str(e.get("driver")))
     return f" {unit}" if unit else ""
