@@ -529,29 +529,47 @@ def test_a_stated_rate_the_time_column_contradicts_is_refused(tmp_path, stated_h
         assert a["heading_true_deg"] == pytest.approx(b["heading_true_deg"], abs=1e-9)
 
 
-def test_the_white_noise_of_a_tumble_read_slowly_is_taken_from_its_magnitude():
-    """A unit tumbled by hand at about 2 rad/s and read at 10 Hz, white noise 15 nT per axis: the
-    field turns by 0.2 rad between samples, so the raw axes' second differences hold the turn
-    (several times the noise) while the calibrated magnitude, which a turn leaves alone, gives the
-    white noise back. Soft iron of a few percent and a hard iron of 20 µT, known here."""
-    rng = np.random.default_rng(36)
+def _slow_tumble(seed: int, sigma_nT: float = 15.0):
+    """A unit tumbled by hand at about 2 rad/s, read at 10 Hz for 120 s (scipy's rotations): the
+    field turns by 0.2 rad between samples. Soft iron of a few percent, hard iron of 20 µT.
+    Returns (y, W, h, field)."""
+    rng = np.random.default_rng(seed)
     t_s = np.arange(0.0, 120.0, 0.1)
-    rate_rps = 2.0 + 0.5 * np.sin(t_s / 7.0)
+    rate_rps = 2.0 + 0.5 * np.sin(t_s / 7.0 + rng.uniform(0, 6))
     axis = np.column_stack([np.sin(t_s / 5.0), np.cos(t_s / 3.0), np.full(t_s.size, 0.6)])
     axis /= np.linalg.norm(axis, axis=1)[:, None]
     angle = np.cumsum(rate_rps) * 0.1
     b_nT = np.array([20000.0, 1000.0, 45000.0])
-    m_body = Rotation.from_rotvec(axis * angle[:, None]).apply(b_nT)  # scipy's rotations
+    m_body = Rotation.from_rotvec(axis * angle[:, None]).apply(b_nT)
     A = np.array([[1.03, 0.01, 0.0], [0.0, 0.97, -0.02], [0.0, 0.0, 1.01]])
     h_nT = np.array([20000.0, -8000.0, 5000.0])
-    y = m_body @ A.T + h_nT + rng.normal(scale=15.0, size=m_body.shape)
-    W = np.linalg.inv(A)
+    y = m_body @ A.T + h_nT + rng.normal(scale=sigma_nT, size=m_body.shape)
+    return y, np.linalg.inv(A), h_nT, float(np.linalg.norm(b_nT))
+
+
+def test_the_white_noise_of_a_tumble_read_slowly_is_taken_from_its_magnitude():
+    """The raw axes' second differences hold the turn between samples (several times the noise);
+    the calibrated magnitude, which a turn leaves alone, gives the white noise back. At rest the
+    two agree."""
+    y, W, h_nT, _ = _slow_tumble(36)
     raw = C.noise_from_second_differences(y)
     radial = C.radial_noise_from_second_differences(y, W, h_nT)
     assert raw > 3 * 15.0  # the turn counted as noise
     assert radial == pytest.approx(15.0, rel=0.1)
-    # at rest the two agree
-    still = b_nT @ A.T + h_nT + rng.normal(scale=15.0, size=(1200, 3))
+    rng = np.random.default_rng(37)
+    still = np.array([20000.0, 1000.0, 45000.0]) @ np.linalg.inv(W).T + h_nT + rng.normal(scale=15.0, size=(1200, 3))
     assert C.radial_noise_from_second_differences(still, W, h_nT) == pytest.approx(
         C.noise_from_second_differences(still), rel=0.15
     )
+
+
+@pytest.mark.parametrize("seed", [40, 41, 42])
+def test_a_tumble_read_slowly_reports_the_uncertainty_its_noise_gives(seed):
+    """Calibrated from the same slow tumble, given the raw axes' noise as the station gives it:
+    the noise is taken from the magnitude (15 nT, not the turn's tens of times more), and the
+    hard iron lands within 4 of the σ it reports, which is within a few nT, not ten times that."""
+    y, W, h_nT, F = _slow_tumble(seed)
+    cal = C.calibrate_mag(y, F, noise_raw=C.noise_from_second_differences(y))
+    assert cal.noise_raw == pytest.approx(15.0, rel=0.15)
+    assert np.all(np.abs(cal.h - h_nT) < 4 * cal.h_sigma), (cal.h - h_nT, cal.h_sigma)
+    assert np.all(cal.h_sigma < 5.0), cal.h_sigma

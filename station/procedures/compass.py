@@ -60,9 +60,6 @@ DISPLAY_UNITS = {"soft_iron": ("{mag_unit}/{mag_unit}", _soft_iron_ratio)}
 LIMIT_EXAMPLE = "e.g. hard_iron[0]=-5:5  soft_iron[0][0]=0.9:1.1"  # the limits box's example, as shown
 REF_KEYS = ("north_nT", "east_nT", "down_nT", "total_nT", "inclination_deg", "declination_deg")
 METHODS = ("rls", "batch", "ellipsoid")
-# the raw axes' noise is taken as the white noise unless it exceeds the magnitude's by this
-# factor (a turn between samples): on holds and fast reads the two agree within 0.93–1.2
-RADIAL_NOISE_RATIO = 1.5
 # what scales with the sample rate: a stated rate that t contradicts is refused (calibrate, inspect)
 RATE_CONSEQUENCE = "the filters' cut-offs and the Kalman filter's step scale with the rate"
 
@@ -459,7 +456,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     # times the white noise, which weighted the magnitude rows 300 times too little beside the
     # dip rows, and a fit of a candidate traded the one for the other); the magnitude does not turn
     radial = C.radial_noise_from_second_differences(y[good], W0, h0) if good.sum() >= 12 else math.nan
-    if math.isfinite(radial) and radial > 0 and not noise <= RADIAL_NOISE_RATIO * radial:
+    if math.isfinite(radial) and radial > 0 and not noise <= C.RADIAL_NOISE_RATIO * radial:
         noise = radial
     if not (math.isfinite(noise) and noise > 0):
         noise = base.get("noise_raw") or 1.0
