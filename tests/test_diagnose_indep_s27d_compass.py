@@ -61,6 +61,24 @@ def test_a_bent_field_is_named_on_the_pauses_of_a_tumble(tmp_path, capsys):
     assert _verdict(tmp_path, capsys, G.generate_compass(743003, "none", 0.0), "null") == []
 
 
+def _pulse(tmp_path, capsys, seed: int, within_s: float) -> dict:
+    """The generator's compass pulse of ``seed`` at 10σ through ``station diagnose --json``: named
+    ``residual:time`` alone, its on and off places each within ``within_s`` of the generator's.
+    Returns the effect."""
+    from station.cli import main
+
+    meta, cols, data, fmts, truth = G.generate_compass(seed, "bias_step", 10.0)
+    path = tmp_path / "pulse.csv"
+    G._write_capture(path, meta, cols, data, fmts)
+    assert main(["diagnose", str(path), "--json", "--no-plots"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["verdict"] == ["residual:time"], (res["verdict"], res["candidates"])
+    (eff,) = res["effects"]
+    assert abs(eff["params"]["at"] - truth["t_on_s"]) < within_s, (eff["params"], truth)
+    assert abs(eff["params"]["until"] - truth["t_off_s"]) < within_s, (eff["params"], truth)
+    return eff
+
+
 def test_a_hard_iron_switched_on_and_off_again_is_named_with_both_places(tmp_path, capsys):
     """A current switched on for about a fifth of a capture, then off (an LIS3MDL tumbled at 20 Hz,
     s761060 of the generator's run of 2026-12-01): a pulse at 10σ of its true extension. A step
@@ -68,18 +86,8 @@ def test_a_hard_iron_switched_on_and_off_again_is_named_with_both_places(tmp_pat
     captures. It is named outside the library with the places it came on and went off, each
     within 3 s of the generator's (on 839.5 s, off 868.3 s, a record of 120 s); the same tumble
     without it names nothing."""
-    from station.cli import main
-
-    meta, cols, data, fmts, truth = G.generate_compass(761060, "bias_step", 10.0)
-    path = tmp_path / "pulse.csv"
-    G._write_capture(path, meta, cols, data, fmts)
-    assert main(["diagnose", str(path), "--json", "--no-plots"]) == 0
-    res = json.loads(capsys.readouterr().out)
-    assert res["verdict"] == ["residual:time"], (res["verdict"], res["candidates"])
-    (eff,) = res["effects"]
+    eff = _pulse(tmp_path, capsys, 761060, 3.0)
     assert eff["shape"] == "step" and eff["gain"] > 0
-    assert abs(eff["params"]["at"] - truth["t_on_s"]) < 3.0, (eff["params"], truth)
-    assert abs(eff["params"]["until"] - truth["t_off_s"]) < 3.0, (eff["params"], truth)
     assert _verdict(tmp_path, capsys, G.generate_compass(761060, "none", 0.0), "null") == []
 
 
@@ -90,14 +98,4 @@ def test_a_pulse_on_a_tumble_read_slowly_is_found_with_the_white_noise_of_its_ma
     the dip rows, the pulse's fit traded one for the other (a deviance below zero while its
     held-out RMS fell 22 %) and the verdict was []. With the noise taken from the magnitude the
     pulse is named, on and off within 5 s of the generator's places."""
-    from station.cli import main
-
-    meta, cols, data, fmts, truth = G.generate_compass(760023, "bias_step", 10.0)
-    path = tmp_path / "tumble.csv"
-    G._write_capture(path, meta, cols, data, fmts)
-    assert main(["diagnose", str(path), "--json", "--no-plots"]) == 0
-    res = json.loads(capsys.readouterr().out)
-    assert res["verdict"] == ["residual:time"], (res["verdict"], res["candidates"])
-    (eff,) = res["effects"]
-    assert abs(eff["params"]["at"] - truth["t_on_s"]) < 5.0, (eff["params"], truth)
-    assert abs(eff["params"]["until"] - truth["t_off_s"]) < 5.0, (eff["params"], truth)
+    _pulse(tmp_path, capsys, 760023, 5.0)
