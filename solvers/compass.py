@@ -518,6 +518,16 @@ def radial_noise_from_second_differences(y, W, h) -> float:
     return s / gain if gain > 0 else math.nan
 
 
+def turn_free_noise(noise_raw: float, y, W, h) -> float:
+    """``noise_raw`` (the raw axes' second differences), or the magnitude's white noise
+    (``radial_noise_from_second_differences``) where ``noise_raw`` exceeds it by more than
+    ``RADIAL_NOISE_RATIO`` or is not a number: a turn between samples read as noise."""
+    radial = radial_noise_from_second_differences(y, W, h)
+    if math.isfinite(radial) and radial > 0 and not noise_raw <= RADIAL_NOISE_RATIO * radial:
+        return radial
+    return noise_raw
+
+
 # a magnetometer read through a quantiser of step q whose white noise σ is below q/2 is not
 # dithered: the rounding error of a still unit is a constant per still stretch (see
 # rounding_shared_var); at σ = q/2 that constant's variance is e^(−π²) ≈ 5e-5 of q²/12
@@ -904,9 +914,7 @@ def calibrate_mag(
     if noise_raw is not None:
         # a turn between samples reads as noise in the raw axes' second differences; the magnitude
         # does not turn (a tumble read at 10 Hz: 18 times the white noise, every σ as many times)
-        radial = radial_noise_from_second_differences(y, W_e, h1)
-        if math.isfinite(radial) and radial > 0 and noise_raw > RADIAL_NOISE_RATIO * radial:
-            noise_raw = radial
+        noise_raw = turn_free_noise(noise_raw, y, W_e, h1)
     if noise_raw is None:
         _, _, gain_e = magnitude_jacobian(y, W_e, h1)
         r_e = (np.linalg.norm(m_e, axis=1) - F) / gain_e

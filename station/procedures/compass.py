@@ -455,9 +455,7 @@ def diagnosis_input(capture, base: dict, prepared: Prepared | None = None) -> Di
     # a turn between samples reads as noise in the raw axes (a tumble read at 10 Hz: up to 18
     # times the white noise, which weighted the magnitude rows 300 times too little beside the
     # dip rows, and a fit of a candidate traded the one for the other); the magnitude does not turn
-    radial = C.radial_noise_from_second_differences(y[good], W0, h0) if good.sum() >= 12 else math.nan
-    if math.isfinite(radial) and radial > 0 and not noise <= C.RADIAL_NOISE_RATIO * radial:
-        noise = radial
+    noise = C.turn_free_noise(noise, y[good], W0, h0)
     if not (math.isfinite(noise) and noise > 0):
         noise = base.get("noise_raw") or 1.0
     temp = fill_missing(capture.columns["temp_c"], t) if "temp_c" in capture.columns else None
